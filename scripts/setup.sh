@@ -1,0 +1,62 @@
+#!/usr/bin/env bash
+# Idempotent set-up for a fresh machine: the .venv at the repository root with
+# the client, the bridge (ROS 2 Jazzy wheels), the dev tools, the custom
+# interfaces under msgs/interfaces built into the venv, and the npm peer client.
+# Sourced by scripts/demo.sh and scripts/test.sh; safe to run again.
+set -euo pipefail
+ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+cd "$ROOT"
+PY="${PYTHON:-python3}"
+
+log() { printf '[setup] %s\n' "$*" >&2; }
+
+if [ ! -x .venv/bin/python ]; then
+  log "creating .venv"
+  "$PY" -m venv .venv
+fi
+# shellcheck disable=SC1091
+. .venv/bin/activate
+export VIRTUAL_ENV="$ROOT/.venv"
+
+stamp_of() { cat "$@" 2>/dev/null | sha256sum | cut -d' ' -f1; }
+
+dep_stamp="$(stamp_of pyproject.toml)"
+if [ "$(cat .venv/.deps-stamp 2>/dev/null)" != "$dep_stamp" ]; then
+  log "installing Python packages (ROS 2 Jazzy wheels, dev tools)"
+  python -m pip install -q --disable-pip-version-check --upgrade pip
+  python -m pip install -q --disable-pip-version-check -e ".[bridge,build-interfaces,cbor,cli,dev]"
+  echo "$dep_stamp" > .venv/.deps-stamp
+fi
+
+# Custom interfaces: CMake into the venv, rebuilt when their sources change.
+for pkg in msgs/interfaces/*/; do
+  [ -f "$pkg/package.xml" ] || continue
+  name="$(basename "$pkg")"
+  src_stamp="$(find "$pkg" -type f | sort | xargs cat | sha256sum | cut -d' ' -f1)"
+  if [ "$(cat ".venv/.iface-$name" 2>/dev/null)" != "$src_stamp" ]; then
+    log "building interface package $name"
+    bdir=".venv/build/$name"
+    rm -rf "$bdir"; mkdir -p "$bdir"
+    (
+      cd "$bdir"
+      AMENT_PREFIX_PATH="$VIRTUAL_ENV" CMAKE_PREFIX_PATH="$VIRTUAL_ENV" \
+        cmake "$ROOT/$pkg" -DPython3_EXECUTABLE="$VIRTUAL_ENV/bin/python" \
+        -DCMAKE_INSTALL_PREFIX="$VIRTUAL_ENV" -DBUILD_TESTING=OFF > build.log 2>&1 \
+        && make -j"$(nproc)" >> build.log 2>&1 && make install >> build.log 2>&1
+    ) || { log "building $name failed; see $bdir/build.log"; tail -30 "$bdir/build.log" >&2; exit 1; }
+    echo "$src_stamp" > ".venv/.iface-$name"
+  fi
+done
+
+# The stock npm client for the peer tests.
+if [ -f tests/peers/node/package.json ] && command -v npm >/dev/null 2>&1; then
+  npm_stamp="$(stamp_of tests/peers/node/package.json tests/peers/node/package-lock.json)"
+  if [ ! -d tests/peers/node/node_modules ] || [ "$(cat .venv/.npm-stamp 2>/dev/null)" != "$npm_stamp" ]; then
+    log "installing the npm peer client (roslib)"
+    (cd tests/peers/node && npm install --no-audit --no-fund --loglevel=error >/dev/null)
+    echo "$npm_stamp" > .venv/.npm-stamp
+  fi
+fi
+
+# DDS stays on loopback for everything started from here.
+export ROS_AUTOMATIC_DISCOVERY_RANGE="${ROS_AUTOMATIC_DISCOVERY_RANGE:-LOCALHOST}"

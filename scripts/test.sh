@@ -1,0 +1,16 @@
+#!/usr/bin/env bash
+# Set up (if needed) and run every check: ruff, mypy --strict, the whole test suite.
+set -euo pipefail
+ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+# shellcheck source=scripts/setup.sh
+. "$ROOT/scripts/setup.sh"
+cd "$ROOT"
+export ROS_AUTOMATIC_DISCOVERY_RANGE="${ROS_AUTOMATIC_DISCOVERY_RANGE:-LOCALHOST}"
+# One DDS domain per run, so concurrent runs on one machine do not meet.
+export ROS_DOMAIN_ID="${ROS_DOMAIN_ID:-$(( $$ % 100 + 1 ))}"
+echo "[test] ruff"
+ruff check roslibpy_lite bridge_server msgs examples bench tests
+echo "[test] mypy --strict"
+mypy roslibpy_lite bridge_server msgs examples
+echo "[test] pytest (ROS_DOMAIN_ID=$ROS_DOMAIN_ID)"
+exec python -m pytest "$@"
