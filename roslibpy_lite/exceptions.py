@@ -1,0 +1,101 @@
+"""Every error roslibpy_lite raises, under one root.
+
+The tree::
+
+    RosLibError                      root: catch this to catch everything
+    ├── ProtocolError                a frame or op that breaks the rosbridge protocol
+    │   ├── LocalProtocolError       we were about to send something invalid (our misuse)
+    │   └── RemoteProtocolError      the peer sent something invalid
+    ├── UsageError                   local misuse of the API (closed handle, bad argument)
+    ├── RemoteError                  the bridge or ROS reported a failure
+    │   ├── ServiceError             a service call answered ``result: false``
+    │   └── StatusError              the bridge sent a ``status`` error about our request
+    ├── RosTimeoutError              no answer in time (also a ``TimeoutError``)
+    └── ConnectionClosed             the connection is gone
+        └── Disconnected             the connection dropped while this request was in flight
+
+Remote failures (the other side said no) are kept apart from local misuse
+(we asked for something invalid), as h11 does. Exceptions from websockets and
+the operating system are translated into this tree at the client's edge only.
+"""
+
+from __future__ import annotations
+
+__all__ = [
+    "ConnectionClosed",
+    "Disconnected",
+    "LocalProtocolError",
+    "ProtocolError",
+    "RemoteError",
+    "RemoteProtocolError",
+    "RosLibError",
+    "RosTimeoutError",
+    "ServiceError",
+    "StatusError",
+    "UsageError",
+]
+
+
+class RosLibError(Exception):
+    """Root of every exception raised by roslibpy_lite."""
+
+
+class ProtocolError(RosLibError):
+    """A frame or op that breaks the rosbridge v2 protocol.
+
+    ``op`` is the op name when it could be read, ``id`` the request id when
+    it could be read, so a server can answer the sender with a ``status``
+    naming the request.
+    """
+
+    def __init__(self, message: str, *, op: str | None = None, id: str | int | None = None) -> None:
+        super().__init__(message)
+        self.message = message
+        self.op = op
+        self.id = id
+
+
+class LocalProtocolError(ProtocolError):
+    """We were about to send an op that the protocol does not allow."""
+
+
+class RemoteProtocolError(ProtocolError):
+    """The peer sent a frame or op that the protocol does not allow."""
+
+
+class UsageError(RosLibError):
+    """The API was used in a way it does not allow (a local mistake)."""
+
+
+class RemoteError(RosLibError):
+    """The bridge, or a ROS node behind it, reported a failure."""
+
+
+class ServiceError(RemoteError):
+    """A service call was answered with ``result: false``; the text says why."""
+
+    def __init__(self, service: str, reason: str) -> None:
+        super().__init__(f"service {service} failed: {reason}")
+        self.service = service
+        self.reason = reason
+
+
+class StatusError(RemoteError):
+    """The bridge answered one of our requests with an error ``status`` op."""
+
+    def __init__(self, message: str, *, level: str = "error", id: str | int | None = None) -> None:
+        super().__init__(message)
+        self.level = level
+        self.id = id
+
+
+class RosTimeoutError(RosLibError, TimeoutError):
+    """No answer arrived within the allowed time."""
+
+
+class ConnectionClosed(RosLibError):
+    """The connection to the bridge is closed."""
+
+
+class Disconnected(ConnectionClosed):
+    """The connection dropped while this request was in flight."""

@@ -1,0 +1,248 @@
+"""The sans-I/O rosbridge core, shared by the client and the bridge.
+
+Frames in, ops out; ops in, text out. Nothing here touches a socket or an
+event loop, so it is tested with plain values::
+
+    proto = Protocol()
+    op = proto.receive('{"op": "publish", "topic": "/a", "msg": {"data": 1}}')
+    assert op == Publish(topic="/a", msg={"data": 1})
+
+What it handles:
+
+- text frames (one JSON object each) and binary frames (one CBOR-encoded op
+  each; RFC 8746 typed arrays become lists, byte strings stay ``bytes``);
+- ``fragment`` ops, reassembled per id into the op they carry, with bounds on
+  how many partial ops and how many bytes may wait;
+- splitting an op's text into ``fragment`` ops for a peer that asked for it.
+
+Every bad frame raises :class:`~roslibpy_lite.exceptions.RemoteProtocolError`
+naming what was wrong and where; the protocol object stays usable.
+"""
+
+from __future__ import annotations
+
+import array
+import json
+import sys
+from collections import OrderedDict
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+from .exceptions import RemoteProtocolError
+from .ops import Fragment, Id, Op, encode, parse_op
+
+__all__ = [
+    "TYPED_ARRAY_TAGS",
+    "Protocol",
+    "decode_frame",
+    "decode_typed_array",
+    "split_fragments",
+]
+
+# RFC 8746 typed-array tags -> array.array type codes (little-endian variants,
+# plus the big-endian ones for completeness). uint8 arrays travel as byte strings.
+TYPED_ARRAY_TAGS: dict[int, tuple[str, bool]] = {
+    64: ("B", False),   # uint8
+    65: ("H", True),    # uint16 big-endian
+    66: ("I", True),    # uint32 big-endian
+    67: ("Q", True),    # uint64 big-endian
+    68: ("B", False),   # uint8 clamped
+    69: ("H", False),   # uint16 little-endian
+    70: ("I", False),   # uint32 little-endian
+    71: ("Q", False),   # uint64 little-endian
+    72: ("b", False),   # int8
+    73: ("h", True),    # int16 big-endian
+    74: ("i", True),    # int32 big-endian
+    75: ("q", True),    # int64 big-endian
+    77: ("h", False),   # int16 little-endian
+    78: ("i", False),   # int32 little-endian
+    79: ("q", False),   # int64 little-endian
+    81: ("f", True),    # float32 big-endian
+    82: ("d", True),    # float64 big-endian
+    85: ("f", False),   # float32 little-endian
+    86: ("d", False),   # float64 little-endian
+}
+_LITTLE = sys.byteorder == "little"
+
+
+def decode_typed_array(tag: int, payload: bytes) -> list[Any]:
+    """Decode the byte string of an RFC 8746 typed array into a list of numbers.
+
+    Raises:
+        RemoteProtocolError: unknown tag, or a payload whose length is not a
+            multiple of the element size.
+    """
+    try:
+        code, big_endian = TYPED_ARRAY_TAGS[tag]
+    except KeyError:
+        raise RemoteProtocolError(f"CBOR: unknown typed-array tag {tag}") from None
+    values = array.array(code)
+    if len(payload) % values.itemsize:
+        raise RemoteProtocolError(
+            f"CBOR: typed array (tag {tag}) of {len(payload)} bytes is not a multiple of "
+            f"{values.itemsize}"
+        )
+    values.frombytes(payload)
+    if big_endian == _LITTLE:
+        values.byteswap()
+    return values.tolist()
+
+
+def _cbor_loads() -> Callable[[bytes], Any]:
+    try:
+        import cbor2
+    except ImportError:  # pragma: no cover - depends on the install
+        raise RemoteProtocolError(
+            "a binary (CBOR) frame arrived but cbor2 is not installed; "
+            "install roslibpy-lite[cbor]"
+        ) from None
+
+    def tag_hook(*args: Any) -> Any:
+        # cbor2 5 calls hook(decoder, tag); cbor2 6 calls hook(tag, immutable).
+        tag = args[1] if isinstance(args[1], cbor2.CBORTag) else args[0]
+        if tag.tag in TYPED_ARRAY_TAGS and isinstance(tag.value, bytes):
+            return decode_typed_array(tag.tag, tag.value)
+        return tag
+
+    def loads(data: bytes) -> Any:
+        return cbor2.loads(data, tag_hook=tag_hook)
+
+    return loads
+
+
+_cbor_loader: Callable[[bytes], Any] | None = None
+
+
+def decode_frame(data: str | bytes) -> Any:
+    """Decode one websocket frame: text as JSON, bytes as CBOR.
+
+    Returns the decoded value (normally a dict; :func:`parse_op` checks that).
+
+    Raises:
+        RemoteProtocolError: the frame is not valid JSON or CBOR; the message
+            says where decoding failed.
+    """
+    global _cbor_loader
+    if isinstance(data, str):
+        try:
+            return json.loads(data)
+        except json.JSONDecodeError as exc:
+            raise RemoteProtocolError(
+                f"malformed JSON at line {exc.lineno} column {exc.colno}: {exc.msg}"
+            ) from None
+        except RecursionError:
+            raise RemoteProtocolError("malformed JSON: nested too deeply") from None
+    if _cbor_loader is None:
+        _cbor_loader = _cbor_loads()
+    try:
+        return _cbor_loader(bytes(data))
+    except RemoteProtocolError:
+        raise
+    except Exception as exc:  # cbor2 raises several kinds for bad input
+        raise RemoteProtocolError(f"malformed CBOR binary frame: {exc}") from None
+
+
+@dataclass
+class _Partial:
+    total: int
+    pieces: dict[int, str] = field(default_factory=dict)
+    size: int = 0
+
+
+class Protocol:
+    """One side of a rosbridge conversation, without I/O.
+
+    Args:
+        max_partial: how many fragmented ops may be incomplete at once; the
+            oldest is dropped past that.
+        max_fragment_bytes: how large a reassembled op may grow.
+    """
+
+    def __init__(self, *, max_partial: int = 64, max_fragment_bytes: int = 256 * 1024 * 1024):
+        self.max_partial = max_partial
+        self.max_fragment_bytes = max_fragment_bytes
+        self._partial: OrderedDict[Id, _Partial] = OrderedDict()
+
+    def receive(self, data: str | bytes) -> Op | None:
+        """Take one frame; return the op it completes, or ``None``.
+
+        ``None`` means the frame was a fragment of an op not yet complete.
+
+        Raises:
+            RemoteProtocolError: the frame, or the op it completes, is invalid.
+        """
+        op = parse_op(decode_frame(data))
+        if isinstance(op, Fragment):
+            return self.receive_fragment(op)
+        return op
+
+    def receive_fragment(self, frag: Fragment) -> Op | None:
+        """Add one fragment; return the reassembled op once all pieces are in."""
+        partial = self._partial.get(frag.id)
+        if partial is None:
+            partial = self._partial[frag.id] = _Partial(frag.total)
+            while len(self._partial) > self.max_partial:
+                self._partial.popitem(last=False)
+        elif partial.total != frag.total:
+            del self._partial[frag.id]
+            raise RemoteProtocolError(
+                f"fragment {frag.id!r}: total changed from {partial.total} to {frag.total}",
+                op="fragment",
+                id=frag.id,
+            )
+        if frag.num not in partial.pieces:
+            partial.size += len(frag.data)
+        partial.pieces[frag.num] = frag.data
+        if partial.size > self.max_fragment_bytes:
+            del self._partial[frag.id]
+            raise RemoteProtocolError(
+                f"fragment {frag.id!r}: reassembled op exceeds {self.max_fragment_bytes} bytes",
+                op="fragment",
+                id=frag.id,
+            )
+        if len(partial.pieces) < partial.total:
+            return None
+        del self._partial[frag.id]
+        text = "".join(partial.pieces[i] for i in range(partial.total))
+        try:
+            inner = parse_op(decode_frame(text))
+        except RemoteProtocolError as exc:
+            raise RemoteProtocolError(
+                f"fragment {frag.id!r}: reassembled op is invalid: {exc.message}",
+                op=exc.op or "fragment",
+                id=exc.id if exc.id is not None else frag.id,
+            ) from None
+        if isinstance(inner, Fragment):
+            raise RemoteProtocolError(
+                f"fragment {frag.id!r}: a fragment may not carry a fragment",
+                op="fragment",
+                id=frag.id,
+            )
+        return inner
+
+    @property
+    def pending_fragments(self) -> int:
+        """How many fragmented ops are waiting for pieces."""
+        return len(self._partial)
+
+    @staticmethod
+    def send(op: Op) -> str:
+        """The text frame for ``op``."""
+        return encode(op)
+
+
+def split_fragments(text: str, size: int, id: Id) -> list[str]:
+    """Split the text of one op into ``fragment`` op texts of at most ``size`` characters of data.
+
+    A text that fits in one piece is returned unchanged, as a single frame.
+    """
+    if size <= 0:
+        raise ValueError("fragment size must be > 0")
+    if len(text) <= size:
+        return [text]
+    total = (len(text) + size - 1) // size
+    return [
+        encode(Fragment(id=id, data=text[i * size : (i + 1) * size], num=i, total=total))
+        for i in range(total)
+    ]
