@@ -1,0 +1,119 @@
+"""Fixtures for the whole suite.
+
+- ``bridge``: one bridge process for the session (``.url``, ``.port``, ``.lines``).
+- ``make_bridge``: a factory for private bridges (stop, kill, restart on the same port).
+- ``ros_node``: an rclpy node in this process, spun by a background executor.
+- ``topic``: a name no other test uses (for topics and services).
+- ``ws_connect``: raw websocket peers for wire-level tests (closed after the test).
+
+DDS stays on loopback and every run gets its own ROS_DOMAIN_ID, set here
+before anything can initialise rclpy.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import itertools
+import os
+import re
+import threading
+from collections.abc import AsyncIterator, Callable, Iterator
+from typing import Any
+
+import pytest
+
+os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+os.environ.setdefault("ROS_DOMAIN_ID", str(os.getpid() % 100 + 1))
+
+from tests.helpers import BridgeProcess, WireClient, open_wire
+
+_names = itertools.count()
+
+
+@pytest.fixture(scope="session")
+def bridge() -> Iterator[BridgeProcess]:
+    """One running bridge shared by the session."""
+    proc = BridgeProcess().start()
+    yield proc
+    proc.stop()
+
+
+@pytest.fixture
+def make_bridge() -> Iterator[Callable[..., BridgeProcess]]:
+    """A factory of private, started bridges; all are stopped after the test."""
+    made: list[BridgeProcess] = []
+
+    def factory(*args: str, port: int = 0) -> BridgeProcess:
+        proc = BridgeProcess(port=port, args=list(args)).start()
+        made.append(proc)
+        return proc
+
+    yield factory
+    for proc in made:
+        proc.kill()
+
+
+class _RosRuntime:
+    """rclpy initialised once per session, with an executor spinning in a thread."""
+
+    def __init__(self) -> None:
+        import rclpy
+        from rclpy.executors import MultiThreadedExecutor
+
+        self.rclpy = rclpy
+        self.context = rclpy.context.Context()
+        rclpy.init(context=self.context)
+        self.executor = MultiThreadedExecutor(num_threads=4, context=self.context)
+        self.thread = threading.Thread(target=self._spin, daemon=True, name="test-ros-spin")
+        self.thread.start()
+
+    def _spin(self) -> None:
+        from rclpy.executors import ExternalShutdownException
+
+        with contextlib.suppress(ExternalShutdownException):
+            self.executor.spin()
+
+    def close(self) -> None:
+        self.executor.shutdown()
+        self.rclpy.shutdown(context=self.context)
+        self.thread.join(5)
+
+
+@pytest.fixture(scope="session")
+def ros_runtime() -> Iterator[_RosRuntime]:
+    """The session's rclpy context and spinning executor."""
+    runtime = _RosRuntime()
+    yield runtime
+    runtime.close()
+
+
+@pytest.fixture
+def ros_node(ros_runtime: _RosRuntime, request: pytest.FixtureRequest) -> Iterator[Any]:
+    """An rclpy node for this test, spun in the background, destroyed afterwards."""
+    name = "test_" + re.sub(r"\W", "_", request.node.name)[:40] + f"_{next(_names)}"
+    node = ros_runtime.rclpy.create_node(name, context=ros_runtime.context)
+    ros_runtime.executor.add_node(node)
+    yield node
+    ros_runtime.executor.remove_node(node)
+    node.destroy_node()
+
+
+@pytest.fixture
+def topic(request: pytest.FixtureRequest) -> str:
+    """A topic or service name unique to this test."""
+    return f"/t{next(_names)}_" + re.sub(r"\W", "_", request.node.name)[:40].strip("_")
+
+
+@pytest.fixture
+async def ws_connect(bridge: BridgeProcess) -> AsyncIterator[Callable[..., Any]]:
+    """Open raw websocket peers to the session bridge (or a given URL); all closed afterwards."""
+    opened: list[WireClient] = []
+
+    async def connect(url: str | None = None) -> WireClient:
+        client = await open_wire(url or bridge.url)
+        opened.append(client)
+        return client
+
+    yield connect
+    for client in opened:
+        await client.close()

@@ -1,0 +1,229 @@
+"""Test helpers shared by every test package: bridge processes, rclpy, raw websockets.
+
+The fixtures in ``tests/conftest.py`` are thin wrappers around these.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import os
+import re
+import signal
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+from websockets.asyncio.client import ClientConnection
+from websockets.asyncio.client import connect as ws_connect
+
+ROOT = Path(__file__).resolve().parent.parent
+READY = re.compile(r"bridge_server listening on ws://([\d.]+):(\d+)")
+
+
+def ros_env(**extra: str) -> dict[str, str]:
+    """The environment for a child process that may start rclpy: loopback DDS, this run's domain."""
+    env = dict(os.environ)
+    env.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    env["PYTHONUNBUFFERED"] = "1"
+    env.update(extra)
+    return env
+
+
+def wait_until(predicate: Callable[[], Any], timeout: float = 10.0, what: str = "condition") -> Any:
+    """Poll ``predicate`` until it is truthy (for ROS graph discovery, which has no event)."""
+    deadline = time.monotonic() + timeout
+    while True:
+        value = predicate()
+        if value:
+            return value
+        if time.monotonic() > deadline:
+            raise AssertionError(f"timed out after {timeout} s waiting for {what}")
+        time.sleep(0.02)
+
+
+async def async_wait_until(
+    predicate: Callable[[], Any], timeout: float = 10.0, what: str = "condition"
+) -> Any:
+    """The asyncio twin of :func:`wait_until`."""
+    deadline = time.monotonic() + timeout
+    while True:
+        value = predicate()
+        if value:
+            return value
+        if time.monotonic() > deadline:
+            raise AssertionError(f"timed out after {timeout} s waiting for {what}")
+        await asyncio.sleep(0.02)
+
+
+class BridgeProcess:
+    """A ``python -m bridge_server`` child process on 127.0.0.1.
+
+    ``start()`` waits for the ready line; ``port`` stays the same across a
+    ``stop()``/``start()`` pair, so clients can reconnect to the same URL.
+    Everything the bridge logs is kept in ``lines`` (and echoed on failure).
+    """
+
+    def __init__(self, port: int = 0, args: list[str] | None = None) -> None:
+        self.port = port
+        self.args = list(args or [])
+        self.proc: subprocess.Popen[str] | None = None
+        self.lines: list[str] = []
+        self._cond = threading.Condition()
+
+    @property
+    def url(self) -> str:
+        """The websocket URL of the running bridge."""
+        return f"ws://127.0.0.1:{self.port}"
+
+    def start(self, timeout: float = 30.0) -> BridgeProcess:
+        """Start the bridge and wait until it listens."""
+        assert self.proc is None or self.proc.poll() is not None, "bridge already running"
+        cmd = [sys.executable, "-m", "bridge_server", "--host", "127.0.0.1",
+               "--port", str(self.port), *self.args]
+        self.proc = subprocess.Popen(
+            cmd, cwd=ROOT, env=ros_env(), stdin=subprocess.DEVNULL,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.STDOUT, text=True, bufsize=1,
+        )
+        first = len(self.lines)
+        threading.Thread(target=self._pump, args=(self.proc,), daemon=True).start()
+        deadline = time.monotonic() + timeout
+        with self._cond:
+            while True:
+                for line in self.lines[first:]:
+                    m = READY.search(line)
+                    if m:
+                        self.port = int(m.group(2))
+                        return self
+                if self.proc.poll() is not None:
+                    raise RuntimeError("bridge exited before it listened:\n" + self.log())
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    self.kill()
+                    raise RuntimeError("bridge did not listen in time:\n" + self.log())
+                self._cond.wait(left)
+
+    def _pump(self, proc: subprocess.Popen[str]) -> None:
+        assert proc.stdout is not None
+        for line in proc.stdout:
+            with self._cond:
+                self.lines.append(line.rstrip("\n"))
+                self._cond.notify_all()
+        with self._cond:
+            self._cond.notify_all()
+
+    def wait_for_line(self, pattern: str, timeout: float = 10.0, start: int = 0) -> str:
+        """Wait until the bridge logs a line matching ``pattern`` (from line ``start`` on)."""
+        rx = re.compile(pattern)
+        deadline = time.monotonic() + timeout
+        with self._cond:
+            while True:
+                for line in self.lines[start:]:
+                    if rx.search(line):
+                        return line
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    raise AssertionError(f"bridge never logged /{pattern}/:\n" + self.log())
+                self._cond.wait(left)
+
+    def log(self) -> str:
+        """Everything the bridge printed so far."""
+        with self._cond:
+            return "\n".join(self.lines[-200:])
+
+    def stop(self, sig: int = signal.SIGTERM, timeout: float = 10.0) -> int:
+        """Signal the bridge and wait for it to exit; returns its exit code."""
+        if self.proc is None or self.proc.poll() is not None:
+            return self.proc.returncode if self.proc else 0
+        self.proc.send_signal(sig)
+        try:
+            return self.proc.wait(timeout)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+            self.proc.wait()
+            raise AssertionError("bridge did not exit on signal:\n" + self.log()) from None
+
+    def kill(self) -> None:
+        """Kill the bridge at once (a crash, for fault tests)."""
+        if self.proc is not None and self.proc.poll() is None:
+            self.proc.kill()
+            self.proc.wait()
+
+
+class WireClient:
+    """A raw websocket peer for wire-level tests: send JSON ops, await matching ops."""
+
+    def __init__(self, ws: ClientConnection) -> None:
+        self.ws = ws
+        self.backlog: list[Any] = []
+
+    async def send(self, op: dict[str, Any]) -> None:
+        """Send one op as a JSON text frame."""
+        await self.ws.send(json.dumps(op))
+
+    async def send_raw(self, data: str | bytes) -> None:
+        """Send one frame exactly as given (for malformed input)."""
+        await self.ws.send(data)
+
+    async def recv(self, timeout: float = 10.0) -> Any:
+        """The next op, decoded (JSON text, or CBOR for binary frames)."""
+        if self.backlog:
+            return self.backlog.pop(0)
+        return self._decode(await asyncio.wait_for(self.ws.recv(), timeout))
+
+    @staticmethod
+    def _decode(frame: str | bytes) -> Any:
+        if isinstance(frame, bytes):
+            import cbor2
+
+            return cbor2.loads(frame)
+        return json.loads(frame)
+
+    async def expect(
+        self, predicate: Callable[[Any], bool] | None = None, timeout: float = 10.0, **fields: Any
+    ) -> Any:
+        """Await the next op for which ``predicate`` holds and whose fields equal ``fields``.
+
+        Ops that do not match are kept, in order, for later ``recv``/``expect`` calls.
+        """
+
+        def ok(op: Any) -> bool:
+            if not isinstance(op, dict):
+                return False
+            if any(op.get(k) != v for k, v in fields.items()):
+                return False
+            return predicate is None or predicate(op)
+
+        for i, op in enumerate(self.backlog):
+            if ok(op):
+                return self.backlog.pop(i)
+        deadline = time.monotonic() + timeout
+        while True:
+            left = deadline - time.monotonic()
+            if left <= 0:
+                raise AssertionError(
+                    f"no op matching {fields} arrived in {timeout} s; got {self.backlog[-5:]}"
+                )
+            try:
+                frame = await asyncio.wait_for(self.ws.recv(), left)
+            except TimeoutError:
+                continue
+            op = self._decode(frame)
+            if ok(op):
+                return op
+            self.backlog.append(op)
+
+    async def close(self) -> None:
+        """Close the connection."""
+        await self.ws.close()
+
+
+async def open_wire(url: str) -> WireClient:
+    """Connect a :class:`WireClient` to ``url``."""
+    ws = await ws_connect(url, max_size=None, open_timeout=10)
+    return WireClient(ws)
