@@ -1,0 +1,135 @@
+"""Frames to ops without I/O: JSON and CBOR frames, typed arrays, fragments both ways."""
+
+from __future__ import annotations
+
+import array
+import json
+from typing import Any
+
+import cbor2
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from roslibpy_lite.exceptions import RemoteProtocolError
+from roslibpy_lite.ops import Fragment, Publish, encode, parse_op
+from roslibpy_lite.protocol import Protocol, decode_frame, decode_typed_array, split_fragments
+
+
+def test_text_frame_gives_an_op() -> None:
+    """A JSON text frame becomes the op it holds."""
+    assert Protocol().receive('{"op":"publish","topic":"/a","msg":{}}') == Publish("/a", {})
+
+
+def test_malformed_json_says_where() -> None:
+    """Malformed JSON is reported with line and column."""
+    with pytest.raises(RemoteProtocolError, match="malformed JSON at line 1 column 2"):
+        Protocol().receive("{oops")
+
+
+def test_cbor_frame_with_typed_arrays_and_bytes() -> None:
+    """A CBOR frame decodes RFC 8746 little-endian typed arrays to lists; byte strings stay bytes."""
+    msg = {
+        "f64": cbor2.CBORTag(86, array.array("d", [1.5, -2.0]).tobytes()),
+        "f32": cbor2.CBORTag(85, array.array("f", [0.5]).tobytes()),
+        "i16": cbor2.CBORTag(77, array.array("h", [-3, 4]).tobytes()),
+        "u32": cbor2.CBORTag(70, array.array("I", [7]).tobytes()),
+        "data": b"\x00\x01\xff",
+    }
+    frame = cbor2.dumps({"op": "publish", "topic": "/img", "msg": msg})
+    op = Protocol().receive(frame)
+    assert op == Publish("/img", {"f64": [1.5, -2.0], "f32": [0.5], "i16": [-3, 4],
+                                  "u32": [7], "data": b"\x00\x01\xff"})
+
+
+def test_big_endian_typed_arrays_are_swapped() -> None:
+    """Big-endian typed-array tags are decoded too."""
+    assert decode_typed_array(66, (1).to_bytes(4, "big") + (2).to_bytes(4, "big")) == [1, 2]
+
+
+def test_typed_array_with_ragged_length_is_an_error() -> None:
+    """A typed array whose byte length is not a multiple of its element size is refused."""
+    with pytest.raises(RemoteProtocolError, match="not a multiple of 8"):
+        decode_typed_array(86, b"123")
+
+
+def test_malformed_cbor_is_an_error() -> None:
+    """A binary frame that is not CBOR is reported as such."""
+    with pytest.raises(RemoteProtocolError, match="malformed CBOR"):
+        decode_frame(b"\xff\xff\xff")
+
+
+def test_fragments_reassemble_in_any_order() -> None:
+    """Fragments of one op, out of order, reassemble into that op; the earlier ones give None."""
+    op = Publish("/a", {"data": "x" * 100})
+    text = encode(op)
+    pieces = split_fragments(text, 30, "big-1")
+    assert len(pieces) == -(-len(text) // 30) > 1
+    proto = Protocol()
+    results = [proto.receive(p) for p in reversed(pieces)]
+    assert results[:-1] == [None, None, None] and results[-1] == op
+    assert proto.pending_fragments == 0
+
+
+def test_small_text_is_not_fragmented() -> None:
+    """A text within the fragment size is sent as it is."""
+    assert split_fragments('{"op":"status"}', 100, 1) == ['{"op":"status"}']
+
+
+def test_fragment_total_must_not_change() -> None:
+    """A fragment whose total disagrees with earlier pieces of the same id is refused."""
+    proto = Protocol()
+    proto.receive_fragment(Fragment("f", "{", 0, 3))
+    with pytest.raises(RemoteProtocolError, match="total changed from 3 to 2"):
+        proto.receive_fragment(Fragment("f", "}", 1, 2))
+
+
+def test_reassembled_garbage_names_the_fragment_id() -> None:
+    """Pieces that join into invalid JSON fail with the fragment id."""
+    proto = Protocol()
+    proto.receive_fragment(Fragment("f9", "{not", 0, 2))
+    with pytest.raises(RemoteProtocolError, match="fragment 'f9': reassembled op is invalid") as info:
+        proto.receive_fragment(Fragment("f9", " json", 1, 2))
+    assert info.value.id == "f9"
+
+
+def test_partial_fragments_are_bounded() -> None:
+    """At most max_partial incomplete ops wait; the oldest is dropped beyond that."""
+    proto = Protocol(max_partial=2)
+    for i in range(5):
+        proto.receive_fragment(Fragment(f"f{i}", "x", 0, 2))
+    assert proto.pending_fragments == 2
+
+
+def test_reassembled_size_is_bounded() -> None:
+    """A fragmented op may not grow past max_fragment_bytes."""
+    proto = Protocol(max_fragment_bytes=10)
+    with pytest.raises(RemoteProtocolError, match="exceeds 10 bytes"):
+        proto.receive_fragment(Fragment("f", "x" * 11, 0, 2))
+
+
+_json = st.recursive(
+    st.none() | st.booleans() | st.integers() | st.floats(allow_nan=False) | st.text(max_size=8),
+    lambda inner: st.lists(inner, max_size=4) | st.dictionaries(st.text(max_size=8), inner, max_size=4),
+    max_leaves=12,
+)
+_op_like = st.fixed_dictionaries(
+    {"op": st.sampled_from(["publish", "subscribe", "call_service", "advertise", "fragment",
+                            "service_response", "unsubscribe", "status", "nope"])},
+    optional={k: _json for k in ["topic", "msg", "id", "type", "args", "service", "result",
+                                 "values", "num", "total", "data", "throttle_rate"]},
+)
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.one_of(st.text(max_size=64), st.binary(max_size=64), _op_like.map(json.dumps),
+                 _op_like.map(cbor2.dumps)))
+def test_any_frame_gives_an_op_or_a_protocol_error(frame: Any) -> None:
+    """Fuzz: whatever arrives, the core returns an op (or None for a fragment) or raises RemoteProtocolError."""
+    proto = Protocol()
+    try:
+        result = proto.receive(frame)
+    except RemoteProtocolError as exc:
+        assert exc.message
+    else:
+        assert result is None or parse_op(json.loads(encode(result))) == result
