@@ -1,0 +1,867 @@
+"""ROS message <-> rosbridge JSON / CBOR conversion, compiled once per message type.
+
+``converter_for(cls)`` walks a message class's ``SLOT_TYPES`` a single time
+and generates specialised Python functions (with ``exec``) for the three hot
+paths. The result is cached per class, so every later call is one dict lookup.
+
+API
+---
+``converter_for(msg_cls) -> Converter``  (cached, thread safe)
+
+``Converter``
+    ``type_name``      canonical ``pkg/msg/Type``
+    ``fields``         field names in declaration order (zip a list of service
+                       ``args`` onto these)
+    ``msg_cls``        the rclpy class
+    ``to_obj(msg)``    JSON-ready plain dict (see rules below)
+    ``to_json(msg)``   compact JSON text of the message object only
+    ``to_cbor_obj(msg)`` dict with ``bytes`` and ``cbor2.CBORTag`` typed arrays,
+                       to embed in ``{"op": "publish", ...}`` before ``cbor2.dumps``
+    ``from_obj(obj, path="")`` build a new message from a decoded JSON object;
+                       raises :class:`ConversionError`. ``path`` prefixes the
+                       field paths in error messages (e.g. ``"msg"``).
+
+``encode_publish_json(topic, msg_json) -> str``
+    ``{"op":"publish","topic":...,"msg":<msg_json>}`` by string concatenation,
+    so one ``to_json`` result is shared by every subscriber.
+``encode_publish_cbor(topic, ros_msg, conv) -> bytes``
+    The whole publish op CBOR-encoded (compression ``"cbor"``).
+``encode_publish_cbor_raw(topic, serialized, stamp_ns) -> bytes``
+    compression ``"cbor-raw"``: msg is ``{"secs", "nsecs", "bytes"}``.
+``serialize(ros_msg) -> bytes`` / ``deserialize(data, msg_cls)``
+    CDR via ``rclpy.serialization`` (for cbor-raw and tests).
+``now_ns``
+    Module attribute, a zero-argument callable giving the time used for
+    ``builtin_interfaces/Time`` fields given as the string ``"now"``
+    (default ``time.time_ns``; the bridge may replace it with its node clock).
+
+Conversion rules, ROS -> JSON (``to_obj``/``to_json``)
+    * ``uint8``/``char`` arrays of any kind (fixed, bounded, unbounded) become
+      a base64 string. ``byte`` (IDL ``octet``) values become ints and
+      ``byte`` arrays lists of ints, as in the reference bridge.
+    * Float NaN, +Inf and -Inf become ``null`` (scalars and array items).
+    * Numeric arrays become lists; ``float32`` items are the exact double value
+      of the float32 (as ``array.tolist()`` gives).
+    * ``builtin_interfaces/Time`` and ``Duration`` are ordinary messages:
+      ``{"sec": int, "nanosec": int}``.
+
+Conversion rules, ROS -> CBOR (``to_cbor_obj``)
+    * ``uint8``/``char`` and ``byte`` arrays become CBOR byte strings.
+    * Other numeric arrays (fixed, bounded, unbounded) become RFC 8746
+      little-endian typed arrays: uint16 69, uint32 70, uint64 71, int8 72,
+      int16 77, int32 78, int64 79, float32 85, float64 86.
+    * Bool and string arrays stay plain arrays; floats stay floats (CBOR can
+      carry NaN and infinities, so no ``null`` there).
+
+Conversion rules, JSON -> ROS (``from_obj``)
+    * A message is a JSON object (any ``Mapping``). Missing fields keep their
+      defaults; a key the type lacks is an error naming it.
+    * ``bool`` fields take only ``true``/``false``.
+    * Integer fields take JSON integers in the type's range (``bool`` is
+      rejected). A float with an integral value (``3.0``, ``1e3``) is accepted
+      and converted; any other float is rejected.
+    * Float fields take numbers, ints included; ``null`` means NaN. ``float32``
+      values beyond the float32 range (other than infinities) are rejected.
+    * String fields take strings; ``string<=N`` bounds count UTF-8 bytes.
+    * ``uint8``/``char`` arrays take a base64 string, a list of ints 0..255,
+      or ``bytes``/``bytearray``. ``byte`` arrays take the same.
+    * Arrays take lists (or tuples). Fixed arrays need exactly N items,
+      bounded ones at most N.
+    * ``builtin_interfaces/Time`` and ``Duration`` also accept the ROS 1 keys
+      ``secs``/``nsecs``; a ``Time`` may be the string ``"now"``.
+
+Every error is a :class:`ConversionError` with ``path`` (``pose.position.x``,
+``points[3].x``), ``expected`` (``float64``, ``array of 3 float64``, ...) and
+a message naming both and a short description of what was received (never
+the whole payload).
+"""
+
+from __future__ import annotations
+
+import array
+import binascii
+import json
+import sys
+import threading
+import time
+from collections.abc import Callable, Mapping
+from typing import Any, Final
+
+import cbor2
+import numpy
+from rosidl_parser import definition as idl
+
+from bridge_server.types import BridgeError, type_name_of
+
+__all__ = [
+    "ConversionError",
+    "Converter",
+    "converter_for",
+    "deserialize",
+    "encode_publish_cbor",
+    "encode_publish_cbor_raw",
+    "encode_publish_json",
+    "now_ns",
+    "serialize",
+]
+
+now_ns: Callable[[], int] = time.time_ns
+
+_MISSING: Final = object()
+_FLT_MAX: Final = 3.4028234663852886e38
+_LITTLE: Final = sys.byteorder == "little"
+
+_INT_RANGES: Final[dict[str, tuple[int, int]]] = {
+    "int8": (-(2**7), 2**7 - 1),
+    "uint8": (0, 2**8 - 1),
+    "int16": (-(2**15), 2**15 - 1),
+    "uint16": (0, 2**16 - 1),
+    "int32": (-(2**31), 2**31 - 1),
+    "uint32": (0, 2**32 - 1),
+    "int64": (-(2**63), 2**63 - 1),
+    "uint64": (0, 2**64 - 1),
+}
+# IDL names of the non-explicit integer types map onto explicit ones.
+_INT_ALIASES: Final = {
+    "short": "int16",
+    "unsigned short": "uint16",
+    "long": "int32",
+    "unsigned long": "uint32",
+    "long long": "int64",
+    "unsigned long long": "uint64",
+}
+_FLOAT_NAMES: Final = {"float": "float32", "double": "float64", "long double": "float64"}
+_TYPECODES: Final = {
+    "int8": "b",
+    "uint8": "B",
+    "int16": "h",
+    "uint16": "H",
+    "int32": "i",
+    "uint32": "I",
+    "int64": "q",
+    "uint64": "Q",
+    "float32": "f",
+    "float64": "d",
+}
+_CBOR_TAGS: Final = {
+    "uint16": 69,
+    "uint32": 70,
+    "uint64": 71,
+    "int8": 72,
+    "int16": 77,
+    "int32": 78,
+    "int64": 79,
+    "float32": 85,
+    "float64": 86,
+}
+
+_b2a = binascii.b2a_base64
+_a2b = binascii.a2b_base64
+_Tag = cbor2.CBORTag
+
+
+class ConversionError(BridgeError, ValueError):
+    """A value could not be converted to (or from) the ROS field it was meant for.
+
+    ``path`` is the full field path (``""`` for the message itself),
+    ``expected`` names the expected type, and the message says what was got.
+    """
+
+    def __init__(self, path: str, expected: str, got: object = _MISSING, detail: str = "") -> None:
+        self.path = path
+        self.expected = expected
+        where = path or "message"
+        if detail:
+            text = f"{where}: {detail}"
+        else:
+            text = f"{where}: expected {expected}, got {_describe(got)}"
+        self.detail = detail
+        super().__init__(text)
+
+
+def _describe(v: object) -> str:
+    """A short description of a received value, never the whole payload."""
+    if v is _MISSING:
+        return "nothing"
+    if v is None:
+        return "null"
+    if v is True:
+        return "true"
+    if v is False:
+        return "false"
+    if isinstance(v, int):
+        s = str(v) if abs(v) < 10**30 else f"{str(v)[:12]}... ({len(str(v))} digits)"
+        return f"integer {s}"
+    if isinstance(v, float):
+        return f"number {v!r}"
+    if isinstance(v, str):
+        shown = v if len(v) <= 40 else v[:37] + "..."
+        return f"string {shown!r}" + (f" ({len(v)} characters)" if len(v) > 40 else "")
+    if isinstance(v, list | tuple):
+        return f"array of {len(v)} items"
+    if isinstance(v, Mapping):
+        return "object"
+    if isinstance(v, bytes | bytearray | memoryview):
+        return f"{len(v)} bytes"
+    return type(v).__name__
+
+
+# --------------------------------------------------------------------------------------------
+# Field model
+
+
+class _Field:
+    """One message field, classified once from its rosidl slot type."""
+
+    __slots__ = ("bound", "container", "elem", "elem_name", "name", "size", "sub", "subclass")
+
+    def __init__(self, name: str, slot_type: Any) -> None:
+        self.name = name
+        self.container: str | None = None  # None, "array", "bseq", "useq"
+        self.size = 0  # fixed size or maximum size
+        t = slot_type
+        if isinstance(t, idl.Array):
+            self.container, self.size, t = "array", t.size, t.value_type
+        elif isinstance(t, idl.BoundedSequence):
+            self.container, self.size, t = "bseq", t.maximum_size, t.value_type
+        elif isinstance(t, idl.UnboundedSequence):
+            self.container, t = "useq", t.value_type
+        self.bound: int | None = None
+        self.subclass: type[Any] | None = None
+        self.sub: Converter | None = None
+        if isinstance(t, idl.BasicType):
+            tn = t.typename
+            if tn == "boolean":
+                self.elem, self.elem_name = "bool", "bool"
+            elif tn == "octet":
+                self.elem, self.elem_name = "octet", "byte"
+            elif tn in ("char", "wchar"):
+                self.elem, self.elem_name = "char", tn
+            elif tn in _FLOAT_NAMES:
+                self.elem = self.elem_name = _FLOAT_NAMES[tn]
+            else:
+                self.elem = self.elem_name = _INT_ALIASES.get(tn, tn)
+                if self.elem not in _INT_RANGES:
+                    raise TypeError(f"unsupported basic type {tn!r} for field {name!r}")
+        elif isinstance(t, idl.AbstractString | idl.AbstractWString):
+            self.elem = "string"
+            self.bound = getattr(t, "maximum_size", None)
+            self.elem_name = f"string<={self.bound}" if self.bound is not None else "string"
+            if isinstance(t, idl.AbstractWString):
+                self.elem_name = "w" + self.elem_name
+        elif isinstance(t, idl.NamespacedType):
+            import importlib
+
+            module = importlib.import_module(".".join(t.namespaces))
+            self.subclass = getattr(module, t.name)
+            self.elem = "msg"
+            self.elem_name = "/".join([*t.namespaces, t.name])
+        else:
+            raise TypeError(f"unsupported slot type {t!r} for field {name!r}")
+
+    @property
+    def binary(self) -> bool:
+        """uint8/char (and byte) arrays: base64 in JSON, byte strings in CBOR."""
+        return self.container is not None and self.elem in ("uint8", "octet")
+
+    def expected(self) -> str:
+        """Human name of the expected JSON value."""
+        if self.container is None:
+            return self.elem_name if self.elem != "msg" else f"object of type {self.elem_name}"
+        item = self.elem_name if self.elem != "msg" else f"{self.elem_name} objects"
+        if self.elem == "uint8":
+            item = "uint8 (base64 string or array of ints)"
+        elif self.elem == "octet":
+            item = "byte (base64 string or array of ints)"
+        if self.container == "array":
+            return f"array of {self.size} {item}"
+        if self.container == "bseq":
+            return f"array of at most {self.size} {item}"
+        return f"array of {item}"
+
+
+# --------------------------------------------------------------------------------------------
+# Inbound scalar validators: (value, path) -> stored value, or raise ConversionError
+
+
+def _int_checker(name: str) -> Callable[[Any, str], int]:
+    lo, hi = _INT_RANGES[name]
+
+    def check(v: Any, path: str) -> int:
+        t = type(v)
+        if t is int or (isinstance(v, int) and t is not bool):
+            if lo <= v <= hi:
+                return int(v)
+            raise ConversionError(path, name, v, f"value {v} out of range for {name} [{lo}, {hi}]")
+        if t is float and v.is_integer():
+            iv = int(v)
+            if lo <= iv <= hi:
+                return iv
+            raise ConversionError(
+                path, name, v, f"value {v!r} out of range for {name} [{lo}, {hi}]"
+            )
+        raise ConversionError(path, name, v)
+
+    return check
+
+
+def _float_checker(name: str) -> Callable[[Any, str], float]:
+    f32 = name == "float32"
+
+    def check(v: Any, path: str) -> float:
+        t = type(v)
+        f: float
+        if t is float:
+            f = v
+        elif v is None:
+            return float("nan")
+        elif (t is int or isinstance(v, int | float)) and t is not bool:
+            try:
+                f = float(v)
+            except OverflowError:
+                raise ConversionError(
+                    path, name, v, f"value {_describe(v)} out of range for {name}"
+                ) from None
+        else:
+            raise ConversionError(path, name, v)
+        if f32 and abs(f) > _FLT_MAX and f not in (float("inf"), float("-inf")):
+            raise ConversionError(path, name, v, f"value {f!r} out of range for float32")
+        return f
+
+    return check
+
+
+def _bool_check(v: Any, path: str) -> bool:
+    if v is True or v is False:
+        return v
+    raise ConversionError(path, "bool", v)
+
+
+def _octet_check(v: Any, path: str) -> bytes:
+    if type(v) is int and 0 <= v <= 255:
+        return bytes((v,))
+    if isinstance(v, bytes) and len(v) == 1:
+        return v
+    if type(v) is float and v.is_integer() and 0 <= v <= 255:
+        return bytes((int(v),))
+    raise ConversionError(path, "byte (integer 0..255)", v)
+
+
+def _char_check(v: Any, path: str) -> str:
+    if type(v) is str and len(v) == 1:
+        return v
+    if type(v) is int and 0 <= v <= 255:
+        return chr(v)
+    raise ConversionError(path, "char (string of one character)", v)
+
+
+def _string_checker(bound: int | None, expected: str) -> Callable[[Any, str], str]:
+    def check(v: Any, path: str) -> str:
+        if not isinstance(v, str):
+            raise ConversionError(path, expected, v)
+        s = str(v)
+        if bound is not None and len(s) > bound // 4 and len(s.encode("utf-8")) > bound:
+            raise ConversionError(
+                path,
+                expected,
+                v,
+                f"string of {len(s.encode('utf-8'))} bytes exceeds the bound {expected}",
+            )
+        return s
+
+    return check
+
+
+def _scalar_checker(f: _Field) -> Callable[[Any, str], Any]:
+    e = f.elem
+    if e == "bool":
+        return _bool_check
+    if e == "octet":
+        return _octet_check
+    if e == "char":
+        return _char_check
+    if e == "string":
+        return _string_checker(f.bound, f.elem_name)
+    if e in ("float32", "float64"):
+        return _float_checker(e)
+    return _int_checker(e)
+
+
+# --------------------------------------------------------------------------------------------
+# Inbound array validators
+
+
+def _elem_path(path: str, i: int) -> str:
+    return f"{path}[{i}]"
+
+
+def _check_len(f: _Field, n: int, path: str, v: object) -> None:
+    if f.container == "array" and n != f.size:
+        raise ConversionError(
+            path, f.expected(), v, f"expected {f.expected()}, got {n} items"
+        )
+    if f.container == "bseq" and n > f.size:
+        raise ConversionError(
+            path, f.expected(), v, f"expected {f.expected()}, got {n} items"
+        )
+
+
+def _decode_binary(f: _Field, v: Any, path: str) -> bytes:
+    """uint8/byte arrays: base64 text, list of ints, or bytes -> bytes."""
+    t = type(v)
+    if t is str:
+        try:
+            data = _a2b(v, strict_mode=True)
+        except (binascii.Error, ValueError):
+            try:
+                data = _a2b("".join(v.split()), strict_mode=True)
+            except (binascii.Error, ValueError) as exc:
+                raise ConversionError(
+                    path, f.expected(), v, f"expected {f.expected()}, got invalid base64 ({exc})"
+                ) from None
+    elif t is list or t is tuple:
+        try:
+            data = bytes(v)
+            ok = not data or set(map(type, v)) == {int}
+        except (TypeError, ValueError):
+            ok = False
+        if not ok:
+            for i, x in enumerate(v):
+                if type(x) is not int or not 0 <= x <= 255:
+                    raise ConversionError(_elem_path(path, i), "uint8 (integer 0..255)", x)
+            data = bytes(v)  # pragma: no cover - unreachable: some item was bad
+    elif isinstance(v, bytes | bytearray | memoryview):
+        data = bytes(v)
+    else:
+        raise ConversionError(path, f.expected(), v)
+    _check_len(f, len(data), path, v)
+    return data
+
+
+def _array_checker(f: _Field) -> Callable[[Any, str], Any]:
+    """Validator for an array field: (value, path_of_field) -> stored value."""
+    e = f.elem
+    fixed = f.container == "array"
+    expected = f.expected()
+
+    if e == "uint8":
+        if fixed:
+
+            def conv_u8_fixed(v: Any, path: str) -> Any:
+                return numpy.frombuffer(_decode_binary(f, v, path), dtype=numpy.uint8).copy()
+
+            return conv_u8_fixed
+
+        def conv_u8(v: Any, path: str) -> Any:
+            return array.array("B", _decode_binary(f, v, path))
+
+        return conv_u8
+
+    if e == "octet":
+
+        def conv_octet(v: Any, path: str) -> Any:
+            data = _decode_binary(f, v, path)
+            return [data[i : i + 1] for i in range(len(data))]
+
+        return conv_octet
+
+    def as_list(v: Any, path: str) -> list[Any]:
+        t = type(v)
+        if t is list:
+            lst: list[Any] = v
+        elif t is tuple:
+            lst = list(v)
+        else:
+            raise ConversionError(path, expected, v)
+        _check_len(f, len(lst), path, v)
+        return lst
+
+    if e in _INT_RANGES:
+        code = _TYPECODES[e]
+        check = _int_checker(e)
+        dtype = numpy.dtype(code)
+
+        def conv_int(v: Any, path: str) -> Any:
+            lst = as_list(v, path)
+            arr = None
+            if set(map(type, lst)) <= {int}:
+                try:
+                    arr = array.array(code, lst)
+                except OverflowError:
+                    arr = None
+            if arr is None:
+                arr = array.array(code, [check(x, _elem_path(path, i)) for i, x in enumerate(lst)])
+            if fixed:
+                return numpy.frombuffer(arr, dtype=dtype).copy()
+            return arr
+
+        return conv_int
+
+    if e in ("float32", "float64"):
+        code = _TYPECODES[e]
+        fcheck = _float_checker(e)
+        dtype = numpy.dtype(code)
+        f32 = e == "float32"
+
+        def conv_float(v: Any, path: str) -> Any:
+            lst = as_list(v, path)
+            arr = None
+            if set(map(type, lst)) <= {float, int}:
+                try:
+                    arr = array.array(code, lst)
+                except (OverflowError, TypeError):
+                    arr = None
+                if arr is not None and f32:
+                    s = sum(arr)
+                    if s - s != 0.0:  # some item is inf or nan: check the source values
+                        arr = None
+            if arr is None:
+                arr = array.array(code, [fcheck(x, _elem_path(path, i)) for i, x in enumerate(lst)])
+            if fixed:
+                return numpy.frombuffer(arr, dtype=dtype).copy()
+            return arr
+
+        return conv_float
+
+    if e == "bool":
+
+        def conv_bool(v: Any, path: str) -> Any:
+            lst = as_list(v, path)
+            if set(map(type, lst)) <= {bool}:
+                return lst if lst is not v else list(lst)
+            for i, x in enumerate(lst):
+                _bool_check(x, _elem_path(path, i))
+            raise AssertionError("unreachable")  # pragma: no cover
+
+        return conv_bool
+
+    if e in ("string", "char"):
+        scheck = _scalar_checker(f)
+        simple = e == "string" and f.bound is None
+
+        def conv_str(v: Any, path: str) -> Any:
+            lst = as_list(v, path)
+            if simple and set(map(type, lst)) <= {str}:
+                return lst if lst is not v else list(lst)
+            return [scheck(x, _elem_path(path, i)) for i, x in enumerate(lst)]
+
+        return conv_str
+
+    if e == "msg":
+
+        def conv_msg(v: Any, path: str) -> Any:
+            lst = as_list(v, path)
+            sub = f.sub
+            assert sub is not None
+            fo = sub.from_obj
+            return [fo(x, f"{path}[{i}]") for i, x in enumerate(lst)]
+
+        return conv_msg
+
+    raise TypeError(f"unsupported array element {e!r}")  # pragma: no cover
+
+
+# --------------------------------------------------------------------------------------------
+# Outbound helpers used by generated code
+
+
+def _floats(lst: list[Any]) -> list[Any]:
+    """NaN/Inf -> None in a list of floats (fast when all are finite)."""
+    try:
+        s = sum(lst)
+    except OverflowError:  # pragma: no cover - sum of floats does not raise
+        s = float("nan")
+    if s - s == 0.0:
+        return lst
+    return [x if x - x == 0.0 else None for x in lst]
+
+
+def _octets(v: Any) -> list[int]:
+    return list(b"".join(v))
+
+
+def _le_bytes(v: Any) -> bytes:
+    """Little-endian bytes of an array.array or numpy array."""
+    if isinstance(v, array.array):
+        a = array.array(v.typecode, v)
+        a.byteswap()
+        return a.tobytes()
+    return bytes(numpy.asarray(v).byteswap())
+
+
+def _mapping(o: Any, path: str, type_name: str) -> Mapping[str, Any]:
+    if isinstance(o, Mapping):
+        return o
+    raise ConversionError(path, f"object of type {type_name}", o)
+
+
+def _unknown(o: Mapping[str, Any], fields: frozenset[str], prefix: str, type_name: str) -> None:
+    for k in o:
+        if k not in fields:
+            shown = k if isinstance(k, str) else repr(k)
+            names = ", ".join(sorted(fields)) or "none"
+            raise ConversionError(
+                prefix + shown,
+                f"a field of {type_name}",
+                detail=f"{type_name} has no field {shown!r} (its fields: {names})",
+            )
+
+
+# --------------------------------------------------------------------------------------------
+# The converter
+
+
+class Converter:
+    """Compiled conversions for one rclpy message class. Get one with :func:`converter_for`."""
+
+    to_obj: Callable[[Any], dict[str, Any]]
+    """ROS message -> JSON-ready dict (base64 for uint8 arrays, None for NaN/Inf)."""
+
+    to_cbor_obj: Callable[[Any], dict[str, Any]]
+    """ROS message -> dict for cbor2 (bytes and CBORTag typed arrays)."""
+
+    from_obj: Callable[..., Any]
+    """``from_obj(obj, path="")``: decoded JSON object -> new ROS message; ConversionError."""
+
+    def __init__(self, msg_cls: type[Any]) -> None:
+        self.msg_cls = msg_cls
+        self.type_name = type_name_of(msg_cls)
+        names = list(msg_cls.get_fields_and_field_types().keys())
+        self._fields = [_Field(n, st) for n, st in zip(names, msg_cls.SLOT_TYPES, strict=True)]
+        self.fields: tuple[str, ...] = tuple(names)
+
+    def to_json(self, ros_msg: Any) -> str:
+        """Compact JSON text of ``ros_msg`` (the msg object only, no op envelope)."""
+        return _json_encode(self.to_obj(ros_msg))
+
+    def _compile(self) -> None:
+        for f in self._fields:
+            if f.subclass is not None:
+                f.sub = converter_for(f.subclass)
+        ns: dict[str, Any] = {
+            "cls": self.msg_cls,
+            "MISSING": _MISSING,
+            "b64": _b2a,
+            "Tag": _Tag,
+            "floats": _floats,
+            "octets": _octets,
+            "le": _le_bytes,
+            "mapping": _mapping,
+            "unknown": _unknown,
+            "FIELDS": frozenset(self.fields),
+            "TYPE": self.type_name,
+            "list": list,
+            "map": map,
+            "bytes": bytes,
+        }
+        json_items: list[str] = []
+        cbor_items: list[str] = []
+        in_lines: list[str] = []
+        for i, f in enumerate(self._fields):
+            a = f"m._{f.name}"
+            key = repr(f.name)
+            j, c = self._out_exprs(f, a, i, ns)
+            json_items.append(f"{key}: {j}")
+            cbor_items.append(f"{key}: {c}")
+            in_lines.extend(self._in_lines(f, i, ns))
+
+        src = [
+            "def to_obj(m):",
+            "    return {" + ", ".join(json_items) + "}",
+            "def to_cbor_obj(m):",
+            "    return {" + ", ".join(cbor_items) + "}",
+            'def from_obj(o, p=""):',
+            "    if type(o) is not dict:",
+            "        o = mapping(o, p, TYPE)",
+            "    m = cls()",
+            "    n = len(o)",
+            "    if not n:",
+            "        return m",
+            '    pp = p + "." if p else ""',
+            "    k = 0",
+            "    g = o.get",
+            *in_lines,
+            "    if k != n:",
+            "        unknown(o, FIELDS, pp, TYPE)",
+            "    return m",
+        ]
+        code = "\n".join(src)
+        exec(compile(code, f"<converter {self.type_name}>", "exec"), ns)
+        self.to_obj = ns["to_obj"]
+        self.to_cbor_obj = ns["to_cbor_obj"]
+        from_obj = ns["from_obj"]
+        if self.type_name in ("builtin_interfaces/msg/Time", "builtin_interfaces/msg/Duration"):
+            from_obj = _time_wrapper(from_obj, self.msg_cls, self.type_name.endswith("/Time"))
+        self.from_obj = from_obj
+        self._source = code
+
+    @staticmethod
+    def _out_exprs(f: _Field, a: str, i: int, ns: dict[str, Any]) -> tuple[str, str]:
+        """(JSON expression, CBOR expression) reading attribute expression ``a``."""
+        e = f.elem
+        if f.container is None:
+            if e in ("float32", "float64"):
+                return f"(x if (x := {a}) - x == 0.0 else None)", a
+            if e == "octet":
+                return f"{a}[0]", f"{a}[0]"
+            if e == "msg":
+                assert f.sub is not None
+                ns[f"j{i}"] = f.sub.to_obj
+                ns[f"c{i}"] = f.sub.to_cbor_obj
+                return f"j{i}({a})", f"c{i}({a})"
+            return a, a
+        # arrays
+        if e == "uint8":
+            return f"b64({a}, newline=False).decode()", f"bytes({a})"
+        if e == "octet":
+            return f"octets({a})", f'b"".join({a})'
+        if e in _CBOR_TAGS:
+            tag = _CBOR_TAGS[e]
+            # big-endian hosts swap to little-endian first
+            c = f"Tag({tag}, bytes({a}))" if e == "int8" or _LITTLE else f"Tag({tag}, le({a}))"
+            if e in ("float32", "float64"):
+                return f"floats({a}.tolist())", c
+            return f"{a}.tolist()", c
+        if e == "msg":
+            assert f.sub is not None
+            ns[f"j{i}"] = f.sub.to_obj
+            ns[f"c{i}"] = f.sub.to_cbor_obj
+            return f"list(map(j{i}, {a}))", f"list(map(c{i}, {a}))"
+        # bool, string, char arrays
+        return f"list({a})", f"list({a})"
+
+    @staticmethod
+    def _in_lines(f: _Field, i: int, ns: dict[str, Any]) -> list[str]:
+        name = f.name
+        key = repr(name)
+        slot = f"m._{name}"
+        lines = [
+            f"    v = g({key}, MISSING)",
+            "    if v is not MISSING:",
+            "        k += 1",
+        ]
+        e = f.elem
+        if f.container is None and e == "msg":
+            assert f.sub is not None
+            ns[f"s{i}"] = f.sub.from_obj
+            lines.append(f"        {slot} = s{i}(v, pp + {key})")
+            return lines
+        if f.container is None:
+            ns[f"v{i}"] = _scalar_checker(f)
+            if e in _INT_RANGES:
+                lo, hi = _INT_RANGES[e]
+                cond = f"type(v) is int and {lo} <= v <= {hi}"
+            elif e == "float64":
+                cond = "type(v) is float"
+            elif e == "float32":
+                cond = f"type(v) is float and -{_FLT_MAX!r} <= v <= {_FLT_MAX!r}"
+            elif e == "bool":
+                cond = "v is True or v is False"
+            elif e == "string" and f.bound is None:
+                cond = "type(v) is str"
+            else:
+                cond = ""
+            if cond:
+                lines += [
+                    f"        if {cond}:",
+                    f"            {slot} = v",
+                    "        else:",
+                    f"            {slot} = v{i}(v, pp + {key})",
+                ]
+            else:
+                lines.append(f"        {slot} = v{i}(v, pp + {key})")
+            return lines
+        ns[f"v{i}"] = _array_checker(f)
+        lines.append(f"        {slot} = v{i}(v, pp + {key})")
+        return lines
+
+
+def _time_wrapper(
+    gen: Callable[[Any, str], Any], cls: type[Any], is_time: bool
+) -> Callable[..., Any]:
+    """Time/Duration: accept ROS 1 ``secs``/``nsecs`` keys, and ``"now"`` for Time."""
+
+    def from_obj(o: Any, p: str = "") -> Any:
+        if type(o) is dict and ("secs" in o or "nsecs" in o):
+            o = dict(o)
+            if "secs" in o:
+                v = o.pop("secs")
+                o.setdefault("sec", v)
+            if "nsecs" in o:
+                v = o.pop("nsecs")
+                o.setdefault("nanosec", v)
+        elif is_time and o == "now":
+            t = now_ns()
+            m = cls()
+            m.sec, m.nanosec = divmod(t, 1_000_000_000)
+            return m
+        return gen(o, p)
+
+    return from_obj
+
+
+_converters: dict[type[Any], Converter] = {}
+_lock = threading.RLock()
+
+
+def converter_for(msg_cls: type[Any]) -> Converter:
+    """The compiled :class:`Converter` for an rclpy message class (built once, cached)."""
+    conv = _converters.get(msg_cls)
+    if conv is not None:
+        return conv
+    with _lock:
+        conv = _converters.get(msg_cls)
+        if conv is None:
+            conv = Converter(msg_cls)
+            conv._compile()
+            _converters[msg_cls] = conv
+    return conv
+
+
+# --------------------------------------------------------------------------------------------
+# Whole-op encoders
+
+_json_encode = json.JSONEncoder(
+    separators=(",", ":"), allow_nan=False, check_circular=False, ensure_ascii=False
+).encode
+
+
+def encode_publish_json(topic: str, msg_json: str) -> str:
+    """The JSON text of a server-to-client publish op around an already encoded msg."""
+    return '{"op":"publish","topic":' + _json_encode(topic) + ',"msg":' + msg_json + "}"
+
+
+def encode_publish_cbor(topic: str, ros_msg: Any, conv: Converter) -> bytes:
+    """The CBOR bytes of a whole publish op (compression ``"cbor"``)."""
+    return cbor2.dumps({"op": "publish", "topic": topic, "msg": conv.to_cbor_obj(ros_msg)})
+
+
+def encode_publish_cbor_raw(topic: str, serialized: bytes, stamp_ns: int) -> bytes:
+    """The CBOR bytes of a publish op for compression ``"cbor-raw"``.
+
+    ``serialized`` is the CDR of the message (:func:`serialize`, or what an
+    rclpy ``raw=True`` subscription delivers); ``stamp_ns`` the receive time.
+    """
+    secs, nsecs = divmod(stamp_ns, 1_000_000_000)
+    return cbor2.dumps(
+        {
+            "op": "publish",
+            "topic": topic,
+            "msg": {"secs": secs, "nsecs": nsecs, "bytes": bytes(serialized)},
+        }
+    )
+
+
+def serialize(ros_msg: Any) -> bytes:
+    """CDR bytes of an rclpy message (``rclpy.serialization.serialize_message``)."""
+    from rclpy.serialization import serialize_message
+
+    data: bytes = serialize_message(ros_msg)
+    return data
+
+
+def deserialize(data: bytes, msg_cls: type[Any]) -> Any:
+    """An rclpy message from CDR bytes (``rclpy.serialization.deserialize_message``)."""
+    from rclpy.serialization import deserialize_message
+
+    return deserialize_message(data, msg_cls)

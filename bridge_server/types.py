@@ -1,0 +1,238 @@
+"""ROS interface type names: parsing, resolution to rclpy classes, and the bridge's error roots.
+
+Type strings arrive from clients in two spellings, ``pkg/Type`` and
+``pkg/<kind>/Type`` with kind one of ``msg``, ``srv``, ``action``. Both are
+accepted everywhere; the canonical spelling the bridge answers with is
+``pkg/<kind>/Type``.
+
+API
+---
+``parse_type_name(name, kind) -> TypeName``
+    Split and validate a type string (no import). ``kind`` is the kind the
+    caller expects (``"msg"``, ``"srv"`` or ``"action"``); a name that spells a
+    different kind is a :class:`TypeNameError`.
+``resolve_message(name) -> type``
+    The rclpy message class for ``std_msgs/String`` or ``std_msgs/msg/String``.
+``resolve_service(name) -> type``
+    The rclpy service class (it has ``.Request`` and ``.Response``).
+``resolve_action(name) -> type``
+    The rclpy action class (``.Goal``, ``.Result``, ``.Feedback``, ``.Impl``).
+``type_name_of(cls) -> str``
+    Canonical name of a message, service or action class, e.g.
+    ``"std_msgs/msg/String"``, ``"std_srvs/srv/SetBool"``; for the request
+    class of a service ``"std_srvs/srv/SetBool_Request"``.
+``canonical_name(name, kind) -> str``
+    The canonical spelling of a valid type string, without importing it.
+
+Resolution only imports packages that the ament index lists as providing
+that interface (``share/ament_index/resource_index/rosidl_interfaces/<pkg>``
+under ``$AMENT_PREFIX_PATH`` and the interpreter prefix), so a client can
+never make the bridge import an arbitrary Python module. Successful lookups
+are cached; the cache is thread safe (a race only costs a second import).
+
+Errors
+------
+::
+
+    BridgeError                 root of the bridge's own errors
+     +-- TypeNameError          malformed type string ("std_msgs", "a/b/c/d")
+     +-- UnknownTypeError       well-formed name that names no installed type
+     +-- (convert.ConversionError lives in bridge_server.convert)
+
+Each error's message quotes the offending string.
+"""
+
+from __future__ import annotations
+
+import importlib
+import os
+import re
+import sys
+from pathlib import Path
+from typing import Any, Final, Literal, NamedTuple
+
+__all__ = [
+    "BridgeError",
+    "Kind",
+    "TypeName",
+    "TypeNameError",
+    "UnknownTypeError",
+    "canonical_name",
+    "parse_type_name",
+    "resolve_action",
+    "resolve_message",
+    "resolve_service",
+    "type_name_of",
+]
+
+Kind = Literal["msg", "srv", "action"]
+_KINDS: Final = ("msg", "srv", "action")
+
+_PKG_RE: Final = re.compile(r"[A-Za-z][A-Za-z0-9_]*\Z")
+_TYPE_RE: Final = re.compile(r"[A-Za-z][A-Za-z0-9_]*\Z")
+
+
+class BridgeError(Exception):
+    """Root of the errors raised by the bridge's own code."""
+
+
+class TypeNameError(BridgeError, ValueError):
+    """A type string is malformed (wrong number of parts, bad characters, wrong kind)."""
+
+    def __init__(self, name: object, reason: str) -> None:
+        self.name = name
+        self.reason = reason
+        super().__init__(f"invalid type name {name!r}: {reason}")
+
+
+class UnknownTypeError(BridgeError, LookupError):
+    """A well-formed type string names no installed ROS interface."""
+
+    def __init__(self, name: str, reason: str = "") -> None:
+        self.name = name
+        self.reason = reason
+        text = f"unknown type {name!r}"
+        if reason:
+            text += f": {reason}"
+        super().__init__(text)
+
+
+class TypeName(NamedTuple):
+    """A parsed type string: package, kind and type."""
+
+    package: str
+    kind: Kind
+    type: str
+
+    def __str__(self) -> str:
+        return f"{self.package}/{self.kind}/{self.type}"
+
+
+def parse_type_name(name: object, kind: Kind) -> TypeName:
+    """Parse ``pkg/Type`` or ``pkg/<kind>/Type`` expecting interfaces of ``kind``.
+
+    Raises :class:`TypeNameError` if ``name`` is not a string of that shape, or
+    if it spells a different kind than ``kind`` (``std_srvs/srv/Empty`` given
+    where a message is expected).
+    """
+    if not isinstance(name, str):
+        raise TypeNameError(name, f"expected a string like 'pkg/{kind}/Type'")
+    parts = name.split("/")
+    if len(parts) == 2:
+        pkg, typ = parts
+    elif len(parts) == 3:
+        pkg, got_kind, typ = parts
+        if got_kind not in _KINDS:
+            raise TypeNameError(
+                name, f"middle part must be one of msg, srv, action, got {got_kind!r}"
+            )
+        if got_kind != kind:
+            raise TypeNameError(name, f"names a {got_kind} type where a {kind} type is expected")
+    else:
+        raise TypeNameError(name, f"expected 'pkg/Type' or 'pkg/{kind}/Type'")
+    if not _PKG_RE.match(pkg):
+        raise TypeNameError(name, f"bad package name {pkg!r}")
+    if not _TYPE_RE.match(typ):
+        raise TypeNameError(name, f"bad type name {typ!r}")
+    return TypeName(pkg, kind, typ)
+
+
+def canonical_name(name: object, kind: Kind) -> str:
+    """Return the canonical ``pkg/<kind>/Type`` spelling of a type string (no import)."""
+    return str(parse_type_name(name, kind))
+
+
+def _index_dirs() -> list[Path]:
+    """Directories that hold ``rosidl_interfaces`` ament index entries."""
+    prefixes: list[str] = []
+    env = os.environ.get("AMENT_PREFIX_PATH", "")
+    prefixes.extend(p for p in env.split(os.pathsep) if p)
+    for p in (sys.prefix, sys.base_prefix):
+        if p not in prefixes:
+            prefixes.append(p)
+    dirs = []
+    for p in prefixes:
+        d = Path(p) / "share" / "ament_index" / "resource_index" / "rosidl_interfaces"
+        if d.is_dir():
+            dirs.append(d)
+    return dirs
+
+
+def _index_lists(tn: TypeName) -> bool | None:
+    """Whether the ament index lists ``tn``; ``None`` if no index is present at all."""
+    dirs = _index_dirs()
+    if not dirs:
+        return None
+    wanted = {f"{tn.kind}/{tn.type}.idl", f"{tn.kind}/{tn.type}.{tn.kind}"}
+    for d in dirs:
+        entry = d / tn.package
+        if entry.is_file():
+            try:
+                lines = entry.read_text(encoding="utf-8").splitlines()
+            except OSError:
+                continue
+            if wanted.intersection(line.strip() for line in lines):
+                return True
+    return False
+
+
+_cache: dict[TypeName, type[Any]] = {}
+
+
+def _resolve(name: object, kind: Kind) -> type[Any]:
+    tn = parse_type_name(name, kind)
+    cls = _cache.get(tn)
+    if cls is not None:
+        return cls
+    listed = _index_lists(tn)
+    shown = name if isinstance(name, str) else str(tn)
+    if listed is False:
+        raise UnknownTypeError(shown, f"no installed package provides {tn}")
+    try:
+        module = importlib.import_module(f"{tn.package}.{kind}")
+    except ImportError as exc:
+        raise UnknownTypeError(shown, f"cannot import {tn.package}.{kind} ({exc})") from None
+    found = getattr(module, tn.type, None)
+    if not isinstance(found, type) or not _looks_like(found, kind):
+        raise UnknownTypeError(shown, f"{tn.package}.{kind} has no {kind} type {tn.type!r}")
+    _cache[tn] = found
+    return found
+
+
+def _looks_like(cls: type[Any], kind: Kind) -> bool:
+    if kind == "msg":
+        return hasattr(cls, "get_fields_and_field_types") and hasattr(cls, "SLOT_TYPES")
+    if kind == "srv":
+        return hasattr(cls, "Request") and hasattr(cls, "Response")
+    return hasattr(cls, "Goal") and hasattr(cls, "Result") and hasattr(cls, "Feedback")
+
+
+def resolve_message(name: object) -> type[Any]:
+    """Return the rclpy message class for ``pkg/Type`` or ``pkg/msg/Type``.
+
+    Raises :class:`TypeNameError` for a malformed string and
+    :class:`UnknownTypeError` for a well-formed name that is not installed.
+    """
+    return _resolve(name, "msg")
+
+
+def resolve_service(name: object) -> type[Any]:
+    """Return the rclpy service class (with ``.Request``/``.Response``) for ``pkg/[srv/]Type``."""
+    return _resolve(name, "srv")
+
+
+def resolve_action(name: object) -> type[Any]:
+    """Return the rclpy action class (``.Goal``, ``.Result``, ``.Feedback``) for an action name."""
+    return _resolve(name, "action")
+
+
+def type_name_of(cls: type[Any]) -> str:
+    """Canonical ``pkg/<kind>/Type`` name of an rclpy message, service or action class.
+
+    Nested classes keep their rclpy names, e.g. ``std_srvs/srv/SetBool_Request``
+    and ``test_msgs/action/Fibonacci_Goal``.
+    """
+    parts = getattr(cls, "__module__", "").split(".")
+    if len(parts) < 2 or parts[1] not in _KINDS:
+        raise TypeError(f"{cls!r} is not an rclpy interface class")
+    return f"{parts[0]}/{parts[1]}/{cls.__name__}"
