@@ -1,0 +1,544 @@
+"""The base of the generated message classes, and type lookup by name.
+
+Contract (what the client relies on):
+
+* :class:`Message` is the base of every generated message class. The classes are
+  mutable, slotted, keyword-only dataclasses (``String(data="hi")``; like rclpy, fields
+  may be reassigned). Class attributes:
+
+  - ``_type``: ``"pkg/msg/Name"``; service parts ``"pkg/srv/Name_Request"`` /
+    ``"pkg/srv/Name_Response"``; action parts ``"pkg/action/Name_Goal"``,
+    ``"_Result"``, ``"_Feedback"``.
+  - ``_definition``: the definition text of the type (of this part, for services and
+    actions).
+  - ``_fields_and_types``: field name -> type string, in rclpy's
+    ``get_fields_and_field_types()`` spelling: ``boolean``, ``octet``, ``uint8``, ``float``
+    (float32), ``double`` (float64), ``int32``, ``string``, ``string<10>`` (bounded),
+    ``wstring``, ``std_msgs/Header`` (nested), ``int32[3]`` (fixed array),
+    ``sequence<int32, 5>`` (bounded), ``sequence<int32>`` (unbounded).
+
+  Python-side field values: ``uint8``/``char`` arrays (fixed or not) are ``bytes``;
+  every other array is a ``list``; strings ``str``; integers (``byte`` too) ``int``;
+  floats ``float``; nested messages instances of their class.
+
+* ``msg.to_json()`` gives the rosbridge JSON form: ``uint8[]``/``char[]`` as a base64
+  string, NaN and +-Inf floats as ``None``, nested messages as dicts (Time and Duration
+  are plain ``{"sec", "nanosec"}`` messages). It does not validate; call
+  ``msg.validate()`` first when the values may be wrong.
+* ``Cls.from_json(data)`` accepts the wire form from JSON or CBOR: ``uint8[]`` as base64
+  string, bytes-like or list of ints; numeric arrays as list, tuple, ``array.array`` or
+  memoryview; ``None`` for a float means NaN. Missing fields keep their defaults. An
+  unknown field, a value of the wrong kind or out of range raises
+  :class:`ValidationError`, whose message names the field path (``pose.position.x``)
+  and the expected type.
+* :class:`Service` (``Request``, ``Response``) and :class:`Action` (``Goal``,
+  ``Result``, ``Feedback``) are namespaces, not instantiable.
+* :func:`lookup` finds a type by name in either spelling (``std_msgs/String`` or
+  ``std_msgs/msg/String``), importing its generated module on first use.
+"""
+
+from __future__ import annotations
+
+import array
+import base64
+import binascii
+import importlib
+import math
+import re
+from collections.abc import Callable, Mapping
+from typing import Any, ClassVar, Self
+
+__all__ = [
+    "Action",
+    "Message",
+    "Service",
+    "UnknownTypeError",
+    "ValidationError",
+    "lookup",
+    "lookup_action",
+    "lookup_message",
+    "lookup_service",
+]
+
+_INT_RANGES: dict[str, tuple[int, int]] = {
+    "octet": (0, 255),
+    "int8": (-(2**7), 2**7 - 1),
+    "uint8": (0, 2**8 - 1),
+    "int16": (-(2**15), 2**15 - 1),
+    "uint16": (0, 2**16 - 1),
+    "int32": (-(2**31), 2**31 - 1),
+    "uint32": (0, 2**32 - 1),
+    "int64": (-(2**63), 2**63 - 1),
+    "uint64": (0, 2**64 - 1),
+}
+# The .msg spelling of rclpy's type names, for error messages.
+_MSG_NAMES = {"boolean": "bool", "octet": "byte", "float": "float32", "double": "float64"}
+_FLOAT32_MAX = 3.4028234663852886e38
+_REPR_LIMIT = 40
+
+
+class ValidationError(ValueError):
+    """A value does not fit its field: names the field ``path`` and the ``expected`` type."""
+
+    def __init__(self, path: str, expected: str, problem: str) -> None:
+        self.path = path
+        self.expected = expected
+        self.problem = problem
+        where = path or "<message>"
+        super().__init__(f"{where}: expected {expected}, {problem}")
+
+
+class UnknownTypeError(LookupError):
+    """No generated interface type has this name."""
+
+    def __init__(self, type_name: str, reason: str) -> None:
+        self.type_name = type_name
+        super().__init__(f"unknown interface type {type_name!r}: {reason}")
+
+    def __str__(self) -> str:
+        return str(self.args[0])
+
+
+def _describe(value: object) -> str:
+    """A short description of a bad value for error messages (type and a clipped repr)."""
+    text = repr(value)
+    if len(text) > _REPR_LIMIT:
+        text = text[: _REPR_LIMIT - 3] + "..."
+    return f"got {type(value).__name__} {text}"
+
+
+def _join(path: str, name: str) -> str:
+    return f"{path}.{name}" if path else name
+
+
+# A converter takes (value, path) and returns the Python-side value or raises.
+_Conv = Callable[[Any, str], Any]
+# An encoder turns a Python-side value into its JSON form.
+_Enc = Callable[[Any], Any]
+
+
+def _bool_conv(value: Any, path: str) -> bool:
+    if isinstance(value, bool):
+        return value
+    raise ValidationError(path, "bool", _describe(value))
+
+
+def _int_conv(idl: str) -> _Conv:
+    low, high = _INT_RANGES[idl]
+    expected = _MSG_NAMES.get(idl, idl)
+
+    def conv(value: Any, path: str) -> int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            if isinstance(value, float) and value.is_integer():
+                value = int(value)
+            else:
+                raise ValidationError(path, expected, _describe(value))
+        if not low <= value <= high:
+            raise ValidationError(path, expected, f"{value} is out of range [{low}, {high}]")
+        return int(value)
+
+    return conv
+
+
+def _float_conv(idl: str, wire: bool) -> _Conv:
+    expected = _MSG_NAMES[idl]
+    single = idl == "float"
+
+    def conv(value: Any, path: str) -> float:
+        if value is None and wire:
+            return math.nan
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise ValidationError(path, expected, _describe(value))
+        try:
+            result = float(value)
+        except OverflowError:
+            raise ValidationError(path, expected, f"{value} is out of range") from None
+        if single and math.isfinite(result) and abs(result) > _FLOAT32_MAX:
+            raise ValidationError(path, expected, f"{value} is out of the float32 range")
+        return result
+
+    return conv
+
+
+def _string_conv(base: str, bound: int | None) -> _Conv:
+    expected = base if bound is None else f"{base}<={bound}"
+
+    def conv(value: Any, path: str) -> str:
+        if not isinstance(value, str):
+            raise ValidationError(path, expected, _describe(value))
+        if bound is not None and len(value) > bound:
+            raise ValidationError(path, expected, f"got a string of length {len(value)}")
+        return value
+
+    return conv
+
+
+def _nested_conv(type_name: str, wire: bool) -> _Conv:
+    cls_box: list[type[Message]] = []
+
+    def conv(value: Any, path: str) -> Message:
+        if not cls_box:
+            cls_box.append(lookup_message(type_name))
+        cls = cls_box[0]
+        if isinstance(value, cls):
+            if not wire:
+                value._check(path)
+            return value
+        if wire and isinstance(value, Mapping):
+            return cls._from_json_at(value, path)
+        raise ValidationError(
+            path, type_name if wire else f"{type_name} instance", _describe(value)
+        )
+
+    return conv
+
+
+def _bytes_conv(expected: str, fixed: int | None, bound: int | None, wire: bool) -> _Conv:
+    def conv(value: Any, path: str) -> bytes:
+        if isinstance(value, bytes):
+            result = value
+        elif isinstance(value, (bytearray, memoryview)):
+            result = bytes(value)
+        elif wire and isinstance(value, str):
+            try:
+                result = base64.b64decode(value, validate=True)
+            except (binascii.Error, ValueError):
+                raise ValidationError(path, expected, "got a string that is not base64") from None
+        elif wire and isinstance(value, (list, tuple, array.array)):
+            for i, item in enumerate(value):
+                if isinstance(item, bool) or not isinstance(item, int) or not 0 <= item <= 255:
+                    raise ValidationError(f"{path}[{i}]", "uint8", _describe(item))
+            result = bytes(value)
+        else:
+            raise ValidationError(path, expected, _describe(value))
+        _check_length(len(result), fixed, bound, path, expected)
+        return result
+
+    return conv
+
+
+def _check_length(
+    length: int, fixed: int | None, bound: int | None, path: str, expected: str
+) -> None:
+    if fixed is not None and length != fixed:
+        raise ValidationError(path, expected, f"got {length} elements")
+    if bound is not None and length > bound:
+        raise ValidationError(path, expected, f"got {length} elements")
+
+
+def _list_conv(
+    element: _Conv, expected: str, fixed: int | None, bound: int | None, octets: bool, wire: bool
+) -> _Conv:
+    def conv(value: Any, path: str) -> list[Any]:
+        if wire and octets and isinstance(value, (str, bytes, bytearray)):
+            value = _bytes_conv(expected, fixed, bound, wire)(value, path)
+        if isinstance(value, memoryview):
+            value = value.tolist()
+        if not isinstance(value, (list, tuple, array.array, bytes)) or (
+            not wire and not isinstance(value, list)
+        ):
+            raise ValidationError(path, expected, _describe(value))
+        _check_length(len(value), fixed, bound, path, expected)
+        return [element(item, f"{path}[{i}]") for i, item in enumerate(value)]
+
+    return conv
+
+
+_SEQUENCE_RE = re.compile(r"^sequence<(?P<elem>.+?)(?:, (?P<bound>\d+))?>$")
+_FIXED_RE = re.compile(r"^(?P<elem>.+)\[(?P<size>\d+)\]$")
+_STRING_RE = re.compile(r"^(?P<base>w?string)(?:<(?P<bound>\d+)>)?$")
+
+
+def _scalar_conv(idl: str, wire: bool) -> _Conv:
+    if idl == "boolean":
+        return _bool_conv
+    if idl in _INT_RANGES:
+        return _int_conv(idl)
+    if idl in ("float", "double"):
+        return _float_conv(idl, wire)
+    match = _STRING_RE.match(idl)
+    if match is not None:
+        bound = match["bound"]
+        return _string_conv(match["base"], int(bound) if bound else None)
+    if "/" in idl:
+        return _nested_conv(idl, wire)
+    raise ValueError(f"unsupported field type {idl!r}")
+
+
+def _expected_name(idl: str) -> str:
+    """The .msg spelling of an rclpy type string, for error messages."""
+    match = _SEQUENCE_RE.match(idl)
+    if match is not None:
+        elem = _expected_name(match["elem"])
+        return f"{elem}[<={match['bound']}]" if match["bound"] else f"{elem}[]"
+    match = _FIXED_RE.match(idl)
+    if match is not None:
+        return f"{_expected_name(match['elem'])}[{match['size']}]"
+    match = _STRING_RE.match(idl)
+    if match is not None and match["bound"]:
+        return f"{match['base']}<={match['bound']}"
+    return _MSG_NAMES.get(idl, idl)
+
+
+def _field_conv(idl: str, wire: bool) -> _Conv:
+    fixed: int | None = None
+    bound: int | None = None
+    elem: str | None = None
+    match = _SEQUENCE_RE.match(idl)
+    if match is not None:
+        elem = match["elem"]
+        bound = int(match["bound"]) if match["bound"] else None
+    else:
+        match = _FIXED_RE.match(idl)
+        if match is not None:
+            elem = match["elem"]
+            fixed = int(match["size"])
+    if elem is None:
+        return _scalar_conv(idl, wire)
+    expected = _expected_name(idl)
+    if elem == "uint8":
+        return _bytes_conv(expected, fixed, bound, wire)
+    return _list_conv(_scalar_conv(elem, wire), expected, fixed, bound, elem == "octet", wire)
+
+
+def _float_enc(value: Any) -> Any:
+    return value if math.isfinite(value) else None
+
+
+def _floats_enc(value: Any) -> Any:
+    isfinite = math.isfinite
+    return [x if isfinite(x) else None for x in value]
+
+
+def _message_enc(value: Any) -> Any:
+    return value.to_json()
+
+
+def _messages_enc(value: Any) -> Any:
+    return [x.to_json() for x in value]
+
+
+def _bytes_enc(value: Any) -> Any:
+    return base64.b64encode(value).decode("ascii")
+
+
+def _field_enc(idl: str) -> _Enc | None:
+    """The JSON encoder of a field, or None when the value is its own JSON form."""
+    elem = idl
+    is_array = False
+    match = _SEQUENCE_RE.match(idl) or _FIXED_RE.match(idl)
+    if match is not None:
+        elem = match["elem"]
+        is_array = True
+    if is_array:
+        if elem == "uint8":
+            return _bytes_enc
+        if elem in ("float", "double"):
+            return _floats_enc
+        if "/" in elem:
+            return _messages_enc
+        return list
+    if elem in ("float", "double"):
+        return _float_enc
+    if "/" in elem:
+        return _message_enc
+    return None
+
+
+class _Codec:
+    """The converters of one message class, built once from ``_fields_and_types``."""
+
+    __slots__ = ("check", "decode", "encode")
+
+    def __init__(self, fields_and_types: Mapping[str, str]) -> None:
+        self.decode: dict[str, _Conv] = {
+            name: _field_conv(idl, True) for name, idl in fields_and_types.items()
+        }
+        self.check: tuple[tuple[str, _Conv], ...] = tuple(
+            (name, _field_conv(idl, False)) for name, idl in fields_and_types.items()
+        )
+        self.encode: tuple[tuple[str, _Enc | None], ...] = tuple(
+            (name, _field_enc(idl)) for name, idl in fields_and_types.items()
+        )
+
+
+_CODECS: dict[type[Message], _Codec] = {}
+
+
+def _codec(cls: type[Message]) -> _Codec:
+    codec = _CODECS.get(cls)
+    if codec is None:
+        codec = _Codec(cls._fields_and_types)
+        _CODECS[cls] = codec
+    return codec
+
+
+class Message:
+    """Base of every generated message class (see the module docstring for the contract)."""
+
+    __slots__ = ()
+
+    _type: ClassVar[str]
+    _definition: ClassVar[str]
+    _fields_and_types: ClassVar[dict[str, str]]
+
+    @classmethod
+    def get_fields_and_field_types(cls) -> dict[str, str]:
+        """Field name -> type string, as rclpy spells it (a copy)."""
+        return dict(cls._fields_and_types)
+
+    def to_json(self) -> dict[str, Any]:
+        """The rosbridge JSON form of this message (a new dict, safe to mutate)."""
+        out: dict[str, Any] = {}
+        for name, enc in _codec(type(self)).encode:
+            value = getattr(self, name)
+            out[name] = value if enc is None else enc(value)
+        return out
+
+    @classmethod
+    def from_json(cls, data: Mapping[str, Any]) -> Self:
+        """Build a message from its wire form (JSON or CBOR decoded); see the module doc.
+
+        Raises :class:`ValidationError` naming the field path and the expected type.
+        """
+        return cls._from_json_at(data, "")
+
+    @classmethod
+    def _from_json_at(cls, data: Mapping[str, Any], path: str) -> Self:
+        if not isinstance(data, Mapping):
+            raise ValidationError(path, f"{cls._type} object", _describe(data))
+        decode = _codec(cls).decode
+        kwargs: dict[str, Any] = {}
+        for key, value in data.items():
+            conv = decode.get(key)
+            if conv is None:
+                fields = ", ".join(cls._fields_and_types) or "none"
+                raise ValidationError(
+                    _join(path, str(key)),
+                    f"a field of {cls._type} ({fields})",
+                    "got an unknown field",
+                )
+            kwargs[key] = conv(value, _join(path, key))
+        factory: Callable[..., Self] = cls
+        return factory(**kwargs)
+
+    def validate(self) -> None:
+        """Check every field's Python-side value (kind, range, length, nesting).
+
+        Raises :class:`ValidationError` naming the field path and the expected type.
+        """
+        self._check("")
+
+    def _check(self, path: str) -> None:
+        for name, conv in _codec(type(self)).check:
+            conv(getattr(self, name), _join(path, name))
+
+
+class Service:
+    """Base of the generated service types: a namespace holding ``Request`` and ``Response``."""
+
+    _type: ClassVar[str]
+    _definition: ClassVar[str]
+    Request: ClassVar[type[Message]]
+    Response: ClassVar[type[Message]]
+
+    def __init__(self) -> None:
+        """Services are not messages: build ``Request``/``Response`` instead."""
+        raise TypeError(
+            f"{type(self).__name__} is a service type; instantiate .Request or .Response"
+        )
+
+
+class Action:
+    """Base of the generated action types: a namespace of ``Goal``, ``Result``, ``Feedback``."""
+
+    _type: ClassVar[str]
+    _definition: ClassVar[str]
+    Goal: ClassVar[type[Message]]
+    Result: ClassVar[type[Message]]
+    Feedback: ClassVar[type[Message]]
+
+    def __init__(self) -> None:
+        """Actions are not messages: build ``Goal``/``Result``/``Feedback`` instead."""
+        raise TypeError(
+            f"{type(self).__name__} is an action type; instantiate .Goal, .Result or .Feedback"
+        )
+
+
+_KINDS = ("msg", "srv", "action")
+_NAME_RE = re.compile(
+    r"^(?P<pkg>[a-z][a-z0-9_]*)/(?:(?P<kind>msg|srv|action)/)?(?P<name>[A-Z][A-Za-z0-9_]*)$"
+)
+_RESERVED = frozenset({"runtime", "parser", "generator", "interfaces"})
+_CACHE: dict[str, type[Message] | type[Service] | type[Action]] = {}
+
+
+def _find(
+    package: str, kind: str, name: str
+) -> type[Message] | type[Service] | type[Action] | None:
+    module_name = f"msgs.{package}.{kind}"
+    try:
+        module = importlib.import_module(module_name)
+    except ModuleNotFoundError as exc:
+        if exc.name is not None and module_name.startswith(exc.name):
+            return None
+        raise
+    if name not in getattr(module, "__all__", ()):
+        return None
+    found: type[Message] | type[Service] | type[Action] = getattr(module, name)
+    return found
+
+
+def lookup(type_name: str) -> type[Message] | type[Service] | type[Action]:
+    """The generated class for ``pkg/Name`` or ``pkg/{msg,srv,action}/Name``.
+
+    ``pkg/Name`` is searched as a message, then a service, then an action. Service and
+    action parts are found too (``pkg/srv/Name_Request``, ``pkg/action/Name_Goal``).
+    Raises :class:`UnknownTypeError` (a LookupError) for unknown or malformed names.
+    """
+    cached = _CACHE.get(type_name)
+    if cached is not None:
+        return cached
+    match = _NAME_RE.match(type_name) if isinstance(type_name, str) else None
+    if match is None:
+        raise UnknownTypeError(
+            str(type_name), "expected 'package/Name' or 'package/msg|srv|action/Name'"
+        )
+    package, kind, name = match["pkg"], match["kind"], match["name"]
+    if package in _RESERVED:
+        raise UnknownTypeError(type_name, f"no generated package {package!r}")
+    for candidate in (kind,) if kind else _KINDS:
+        found = _find(package, candidate, name)
+        if found is not None:
+            _CACHE[type_name] = found
+            return found
+    where = f"{package}/{kind}" if kind else package
+    raise UnknownTypeError(type_name, f"no type {name!r} in {where} among the generated types")
+
+
+def lookup_message(type_name: str) -> type[Message]:
+    """Like :func:`lookup`, for message types (including service and action parts)."""
+    found = lookup(type_name)
+    if not (isinstance(found, type) and issubclass(found, Message)):
+        raise UnknownTypeError(type_name, f"{found._type} is not a message type")
+    return found
+
+
+def lookup_service(type_name: str) -> type[Service]:
+    """Like :func:`lookup`, for service types."""
+    if _NAME_RE.match(type_name) and type_name.count("/") == 1:
+        type_name = type_name.replace("/", "/srv/")
+    found = lookup(type_name)
+    if not (isinstance(found, type) and issubclass(found, Service)):
+        raise UnknownTypeError(type_name, f"{found._type} is not a service type")
+    return found
+
+
+def lookup_action(type_name: str) -> type[Action]:
+    """Like :func:`lookup`, for action types."""
+    if _NAME_RE.match(type_name) and type_name.count("/") == 1:
+        type_name = type_name.replace("/", "/action/")
+    found = lookup(type_name)
+    if not (isinstance(found, type) and issubclass(found, Action)):
+        raise UnknownTypeError(type_name, f"{found._type} is not an action type")
+    return found
