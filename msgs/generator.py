@@ -5,7 +5,7 @@ Usage (regenerates everything that is committed)::
     python -m msgs.generator
 
 Upstream definitions are read as text from ``<share>/<pkg>/{msg,srv,action}/`` (``--share``;
-by default ``$AMENT_PREFIX_PATH``'s first entry or ``sys.prefix``, plus ``/share``); our
+by default each ``$AMENT_PREFIX_PATH`` entry, then ``sys.prefix``, plus ``/share``); our
 own packages from ``msgs/interfaces/<pkg>/``. No ROS import. Output is deterministic:
 sorted, no timestamps, so a test can regenerate and compare byte for byte.
 """
@@ -38,7 +38,7 @@ __all__ = [
     "OUTPUT_DIR",
     "PackageSources",
     "collect",
-    "default_share_dir",
+    "default_share_dirs",
     "generate",
     "main",
     "render_package",
@@ -89,10 +89,28 @@ class PackageSources:
     actions: list[ActionSpec] = field(default_factory=list)
 
 
-def default_share_dir() -> Path:
-    """``$AMENT_PREFIX_PATH``'s first entry plus ``/share``, else ``sys.prefix/share``."""
-    prefix = os.environ.get("AMENT_PREFIX_PATH", "").split(os.pathsep)[0]
-    return Path(prefix or sys.prefix) / "share"
+def default_share_dirs() -> list[Path]:
+    """The share directories searched by default, in order.
+
+    Each entry of ``$AMENT_PREFIX_PATH`` plus ``/share``, then ``sys.prefix/share`` (the
+    venv the ROS wheels are installed into).
+    """
+    prefixes = [p for p in os.environ.get("AMENT_PREFIX_PATH", "").split(os.pathsep) if p]
+    prefixes.append(sys.prefix)
+    dirs: list[Path] = []
+    for prefix in prefixes:
+        path = Path(prefix) / "share"
+        if path not in dirs:
+            dirs.append(path)
+    return dirs
+
+
+def _package_root(name: str, shares: Sequence[Path]) -> Path:
+    for share in shares:
+        if (share / name).is_dir():
+            return share / name
+    searched = ", ".join(str(s) for s in shares)
+    raise FileNotFoundError(f"package {name!r} not found in {searched}")
 
 
 def _read_package(name: str, root: Path) -> PackageSources:
@@ -117,17 +135,22 @@ def _read_package(name: str, root: Path) -> PackageSources:
 
 
 def collect(
-    share: Path, packages: Iterable[str] = DEFAULT_PACKAGES, interfaces: Path = INTERFACES_DIR
+    share: Path | Sequence[Path],
+    packages: Iterable[str] = DEFAULT_PACKAGES,
+    interfaces: Path = INTERFACES_DIR,
 ) -> dict[str, PackageSources]:
     """Parse the given upstream packages from ``share`` and every package in ``interfaces``.
+
+    ``share`` is one share directory or several searched in order.
 
     A package in ``interfaces`` wins over the same name in ``share``. Every nested type
     must resolve to a collected message, else :class:`DefinitionError` names the use.
     """
+    shares = [share] if isinstance(share, Path) else list(share)
     result: dict[str, PackageSources] = {}
     own = sorted(p.name for p in interfaces.iterdir() if p.is_dir()) if interfaces.is_dir() else []
     for name in sorted(set(packages) - set(own)):
-        result[name] = _read_package(name, share / name)
+        result[name] = _read_package(name, _package_root(name, shares))
     for name in own:
         result[name] = _read_package(name, interfaces / name)
     for name in result:
@@ -496,7 +519,7 @@ def generate(
     Stale generated modules (``msg.py``/``srv.py``/``action.py`` that a package no longer
     has) are removed; nothing else in ``output`` is touched.
     """
-    collected = collect(share if share is not None else default_share_dir(), packages, interfaces)
+    collected = collect(share if share is not None else default_share_dirs(), packages, interfaces)
     written: list[Path] = []
     for name, pkg in collected.items():
         directory = output / name
