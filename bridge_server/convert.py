@@ -155,6 +155,10 @@ _CBOR_TAGS: Final = {
     "float64": 86,
 }
 
+_json_encode: Callable[[Any], str] = json.JSONEncoder(
+    separators=(",", ":"), allow_nan=False, check_circular=False, ensure_ascii=False
+).encode
+_encode_str: Callable[[str], str] = json.encoder.encode_basestring
 _b2a = binascii.b2a_base64
 _a2b = binascii.a2b_base64
 _Tag = cbor2.CBORTag
@@ -589,6 +593,27 @@ def _le_bytes(v: Any) -> bytes:
     return bytes(numpy.asarray(v).byteswap())
 
 
+
+def _float_text(x: Any) -> str:
+    """JSON text of a float field value that is not a finite float (slow path)."""
+    if isinstance(x, float):
+        return "null"  # NaN or an infinity
+    if isinstance(x, int) and not isinstance(x, bool):
+        return int.__repr__(x)
+    raise TypeError(f"float field holds a {type(x).__name__}")
+
+
+def _merge_literals(parts: list[tuple[bool, str]]) -> list[str]:
+    """Source fragments for ``(is_literal, text)`` pieces, adjacent literals merged."""
+    out: list[tuple[bool, str]] = []
+    for lit, text in parts:
+        if lit and out and out[-1][0]:
+            out[-1] = (True, out[-1][1] + text)
+        else:
+            out.append((lit, text))
+    return [repr(text) if lit else text for lit, text in out]
+
+
 def _mapping(o: Any, path: str, type_name: str) -> Mapping[str, Any]:
     if isinstance(o, Mapping):
         return o
@@ -632,14 +657,20 @@ class Converter:
 
     def to_json(self, ros_msg: Any) -> str:
         """Compact JSON text of ``ros_msg`` (the msg object only, no op envelope)."""
-        return _json_encode(self.to_obj(ros_msg))
+        try:
+            return self._to_json_text(ros_msg)
+        except ValueError:  # a NaN/Inf inside a numeric array: take the careful path
+            return _json_encode(self.to_obj(ros_msg))
 
     def _compile(self) -> None:
         for f in self._fields:
             if f.subclass is not None:
                 f.sub = converter_for(f.subclass)
+        proto = self.msg_cls()
         ns: dict[str, Any] = {
             "cls": self.msg_cls,
+            "new": object.__new__,
+            "CF": getattr(proto, "_check_fields", False),
             "MISSING": _MISSING,
             "b64": _b2a,
             "Tag": _Tag,
@@ -648,14 +679,21 @@ class Converter:
             "le": _le_bytes,
             "mapping": _mapping,
             "unknown": _unknown,
+            "enc": _json_encode,
+            "es": _encode_str,
+            "ir": int.__repr__,
+            "fr": float.__repr__,
+            "fz": _float_text,
             "FIELDS": frozenset(self.fields),
             "TYPE": self.type_name,
             "list": list,
             "map": map,
             "bytes": bytes,
+            "range": range,
         }
         json_items: list[str] = []
         cbor_items: list[str] = []
+        text_parts: list[tuple[bool, str]] = []
         in_lines: list[str] = []
         for i, f in enumerate(self._fields):
             a = f"m._{f.name}"
@@ -663,20 +701,28 @@ class Converter:
             j, c = self._out_exprs(f, a, i, ns)
             json_items.append(f"{key}: {j}")
             cbor_items.append(f"{key}: {c}")
-            in_lines.extend(self._in_lines(f, i, ns))
+            text_parts.append((True, ("," if i else "{") + f'"{f.name}":'))
+            text_parts.extend(self._text_parts(f, a, i, ns))
+            in_lines.extend(self._in_lines(f, i, ns, proto))
+        if not self._fields:
+            text_parts.append((True, "{"))
+        text_parts.append((True, "}"))
 
         src = [
             "def to_obj(m):",
             "    return {" + ", ".join(json_items) + "}",
             "def to_cbor_obj(m):",
             "    return {" + ", ".join(cbor_items) + "}",
+            "def to_json_text(m):",
+            "    return ''.join((" + ", ".join(_merge_literals(text_parts)) + ",))",
             'def from_obj(o, p=""):',
             "    if type(o) is not dict:",
             "        o = mapping(o, p, TYPE)",
-            "    m = cls()",
             "    n = len(o)",
             "    if not n:",
-            "        return m",
+            "        return cls()",
+            "    m = new(cls)",
+            "    m._check_fields = CF",
             '    pp = p + "." if p else ""',
             "    k = 0",
             "    g = o.get",
@@ -689,11 +735,42 @@ class Converter:
         exec(compile(code, f"<converter {self.type_name}>", "exec"), ns)
         self.to_obj = ns["to_obj"]
         self.to_cbor_obj = ns["to_cbor_obj"]
+        self._to_json_text: Callable[[Any], str] = ns["to_json_text"]
         from_obj = ns["from_obj"]
         if self.type_name in ("builtin_interfaces/msg/Time", "builtin_interfaces/msg/Duration"):
             from_obj = _time_wrapper(from_obj, self.msg_cls, self.type_name.endswith("/Time"))
         self.from_obj = from_obj
         self._source = code
+
+    @staticmethod
+    def _text_parts(f: _Field, a: str, i: int, ns: dict[str, Any]) -> list[tuple[bool, str]]:
+        """(is_literal, text) pieces whose concatenation is the JSON text of field value ``a``."""
+        e = f.elem
+        if f.container is None:
+            if e == "bool":
+                return [(False, f'("true" if {a} else "false")')]
+            if e in _INT_RANGES:
+                return [(False, f"ir({a})")]
+            if e in ("float32", "float64"):
+                return [(False, f"(fr(x) if type(x := {a}) is float and x - x == 0.0 else fz(x))")]
+            if e == "octet":
+                return [(False, f"ir({a}[0])")]
+            if e == "msg":
+                assert f.sub is not None
+                ns[f"t{i}"] = f.sub._to_json_text
+                return [(False, f"t{i}({a})")]
+            return [(False, f"es({a})")]  # string, char
+        if e == "uint8":
+            return [(True, '"'), (False, f'b64({a}, newline=False).decode("ascii")'), (True, '"')]
+        if e == "octet":
+            return [(False, f"enc(octets({a}))")]
+        if e in _CBOR_TAGS:
+            return [(False, f"enc({a}.tolist())")]
+        if e == "msg":
+            assert f.sub is not None
+            ns[f"t{i}"] = f.sub._to_json_text
+            return [(True, "["), (False, f'",".join(map(t{i}, {a}))'), (True, "]")]
+        return [(False, f"enc({a})")]  # bool, string, char arrays (lists)
 
     @staticmethod
     def _out_exprs(f: _Field, a: str, i: int, ns: dict[str, Any]) -> tuple[str, str]:
@@ -731,13 +808,32 @@ class Converter:
         return f"list({a})", f"list({a})"
 
     @staticmethod
-    def _in_lines(f: _Field, i: int, ns: dict[str, Any]) -> list[str]:
+    def _default_expr(f: _Field, i: int, ns: dict[str, Any], proto: Any) -> str:
+        """Expression giving a fresh default value for field ``f`` (like the constructor)."""
+        d = getattr(proto, "_" + f.name)
+        ns[f"D{i}"] = d
+        if f.container is None:
+            if f.elem == "msg":
+                ns[f"N{i}"] = f.subclass
+                return f"N{i}()"
+            return f"D{i}"  # immutable
+        if isinstance(d, numpy.ndarray):
+            return f"D{i}.copy()"
+        if f.elem == "msg":
+            ns[f"N{i}"] = f.subclass
+            return f"[N{i}() for _ in range({len(d)})]"
+        return f"D{i}[:]"  # array.array or list of immutable items
+
+    @staticmethod
+    def _in_lines(f: _Field, i: int, ns: dict[str, Any], proto: Any) -> list[str]:
         name = f.name
         key = repr(name)
         slot = f"m._{name}"
         lines = [
             f"    v = g({key}, MISSING)",
-            "    if v is not MISSING:",
+            "    if v is MISSING:",
+            f"        {slot} = {Converter._default_expr(f, i, ns, proto)}",
+            "    else:",
             "        k += 1",
         ]
         e = f.elem
@@ -821,14 +917,11 @@ def converter_for(msg_cls: type[Any]) -> Converter:
 # --------------------------------------------------------------------------------------------
 # Whole-op encoders
 
-_json_encode = json.JSONEncoder(
-    separators=(",", ":"), allow_nan=False, check_circular=False, ensure_ascii=False
-).encode
 
 
 def encode_publish_json(topic: str, msg_json: str) -> str:
     """The JSON text of a server-to-client publish op around an already encoded msg."""
-    return '{"op":"publish","topic":' + _json_encode(topic) + ',"msg":' + msg_json + "}"
+    return "".join(('{"op":"publish","topic":', _encode_str(topic), ',"msg":', msg_json, "}"))
 
 
 def encode_publish_cbor(topic: str, ros_msg: Any, conv: Converter) -> bytes:
