@@ -1,0 +1,142 @@
+"""``python -m bridge_server``: run the rosbridge-protocol server.
+
+It logs ``bridge_server listening on ws://HOST:PORT`` to stderr once it is
+ready, one line per client connection and disconnection, and exits with
+status 0 within about a second of SIGINT or SIGTERM.
+
+DDS discovery is kept on this machine (``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST``)
+unless the environment already sets the variable.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import logging
+import os
+import signal
+import sys
+
+from .session import DEFAULT_QUEUE_LENGTH, SessionConfig
+
+__all__ = ["main", "parse_args"]
+
+log = logging.getLogger("bridge_server")
+
+
+def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
+    """The command line."""
+    p = argparse.ArgumentParser(
+        prog="roslibpy-lite-bridge",
+        description="A rosbridge v2 protocol server on rclpy (ROS 2 Jazzy).",
+    )
+    p.add_argument("--host", default="127.0.0.1", help="address to bind (default 127.0.0.1)")
+    p.add_argument("--port", type=int, default=9090, help="port (0: any free port)")
+    p.add_argument(
+        "--max-message-size",
+        type=int,
+        default=64 * 1024 * 1024,
+        help="largest inbound frame in bytes (default 64 MiB)",
+    )
+    p.add_argument(
+        "--send-queue",
+        type=int,
+        default=DEFAULT_QUEUE_LENGTH,
+        help="messages kept per subscription for a slow client when it asks for "
+        f"queue_length 0 (default {DEFAULT_QUEUE_LENGTH}); the oldest are dropped",
+    )
+    p.add_argument(
+        "--write-limit",
+        type=int,
+        default=256 * 1024,
+        help="socket write buffer high-water mark per client in bytes (default 256 KiB)",
+    )
+    p.add_argument(
+        "--publisher-grace",
+        type=float,
+        default=2.0,
+        help="seconds a disconnected client's publishers live on (default 2)",
+    )
+    p.add_argument(
+        "--call-timeout",
+        type=float,
+        default=5.0,
+        help="default call_service timeout in seconds (default 5)",
+    )
+    p.add_argument(
+        "--served-call-timeout",
+        type=float,
+        default=10.0,
+        help="seconds a ROS caller waits for a client-served service (default 10)",
+    )
+    p.add_argument(
+        "--executor",
+        choices=("single", "multi", "events"),
+        default="single",
+        help="rclpy executor (default single)",
+    )
+    p.add_argument(
+        "--compression",
+        choices=("none", "deflate"),
+        default="none",
+        help="websocket permessage-deflate (default none: it costs CPU)",
+    )
+    p.add_argument(
+        "--log-level",
+        default="INFO",
+        choices=("DEBUG", "INFO", "WARNING", "ERROR"),
+        help="logging level (default INFO)",
+    )
+    return p.parse_args(argv)
+
+
+async def _run(args: argparse.Namespace) -> int:
+    from .server import Bridge, BridgeConfig
+
+    config = BridgeConfig(
+        host=args.host,
+        port=args.port,
+        max_message_size=args.max_message_size,
+        write_limit=args.write_limit,
+        compression=args.compression == "deflate",
+        publisher_grace=args.publisher_grace,
+        executor=args.executor,
+        session=SessionConfig(
+            default_queue_length=args.send_queue,
+            call_timeout=args.call_timeout,
+            served_call_timeout=args.served_call_timeout,
+        ),
+    )
+    stop = asyncio.Event()
+    loop = asyncio.get_running_loop()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        loop.add_signal_handler(sig, stop.set)
+    bridge = Bridge(config)
+    await bridge.start()
+    log.info("bridge_server listening on ws://%s:%d", args.host, bridge.port)
+    await stop.wait()
+    log.info("bridge_server shutting down")
+    await bridge.close()
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point of ``python -m bridge_server`` and ``roslibpy-lite-bridge``."""
+    args = parse_args(argv)
+    os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    logging.basicConfig(
+        level=getattr(logging, args.log_level),
+        stream=sys.stderr,
+        format="%(asctime)s %(levelname)s %(name)s: %(message)s",
+    )
+    if args.log_level != "DEBUG":
+        logging.getLogger("websockets").setLevel(logging.WARNING)
+    try:
+        return asyncio.run(_run(args))
+    except OSError as exc:
+        log.error("cannot start: %s", exc)
+        return 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,575 @@
+"""The ROS side of the bridge: the only module (with convert/types) that imports rclpy.
+
+One rclpy node lives in its own context; an executor spins it in a thread of
+its own. Everything the executor thread learns (a message on a subscribed
+topic, a ROS caller reaching a client-served service, a service response)
+crosses to the asyncio loop with ``loop.call_soon_threadsafe``; hand-offs are
+batched, so a burst of messages costs one wake-up of the loop, not one each.
+The loop never waits on the executor.
+
+Sharing
+-------
+* :class:`SharedSubscription`: one rclpy subscription per topic for every
+  client. Each message becomes one :class:`Incoming`, which converts itself
+  lazily and at most once per encoding (JSON text, CBOR, CBOR-raw); every
+  subscribed session is handed the same ``str``/``bytes``.
+* :class:`SharedPublisher`: one rclpy publisher per (topic, type, latch),
+  reference counted across sessions.
+* Service clients are cached per (service, type).
+
+QoS
+---
+A shared subscription follows the publishers it sees
+(``get_publishers_info_by_topic``): best effort if any publisher is best
+effort (a reliable reader would not match it), transient local if every
+publisher is transient local (a transient-local reader does not match a
+volatile writer). :meth:`RosNode.refresh` re-checks this periodically and
+replaces a subscription whose profile no longer fits, and resolves the type of
+subscriptions made before any publisher existed ("late publishers"). The last
+message of a transient-local topic is kept and handed to each client that
+subscribes later.
+
+Served services
+---------------
+A client-served service is a real rclpy service whose response is deferred:
+the rclpy callback returns at once (the executor is never blocked), and the
+response is sent from the loop when the client answers, fails, times out or
+goes away (see :class:`PendingRosCall`).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+import threading
+import time
+from collections import deque
+from collections.abc import Callable
+from typing import Any
+
+import rclpy
+from rclpy.context import Context
+from rclpy.executors import (
+    ExternalShutdownException,
+    MultiThreadedExecutor,
+    SingleThreadedExecutor,
+)
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+
+from . import convert
+from .types import resolve_message, resolve_service
+
+__all__ = [
+    "Incoming",
+    "PendingRosCall",
+    "RosNode",
+    "ServedService",
+    "SharedPublisher",
+    "SharedSubscription",
+]
+
+log = logging.getLogger("bridge_server.ros")
+
+Listener = Callable[["Incoming"], None]
+
+SUBSCRIPTION_DEPTH = 50
+"""History depth of the bridge's shared ROS subscriptions."""
+
+
+class Incoming:
+    """One ROS message received on a topic, encoded lazily and once per encoding."""
+
+    __slots__ = ("_cbor", "_cbor_raw", "_json", "conv", "msg", "stamp_ns", "topic")
+
+    def __init__(self, topic: str, msg: Any, conv: convert.Converter, stamp_ns: int) -> None:
+        self.topic = topic
+        self.msg = msg
+        self.conv = conv
+        self.stamp_ns = stamp_ns
+        self._json: str | None = None
+        self._cbor: bytes | None = None
+        self._cbor_raw: bytes | None = None
+
+    def json_text(self) -> str:
+        """The whole ``publish`` op as JSON text (built on first use, then shared)."""
+        text = self._json
+        if text is None:
+            text = self._json = convert.encode_publish_json(self.topic, self.conv.to_json(self.msg))
+        return text
+
+    def cbor(self) -> bytes:
+        """The whole ``publish`` op as CBOR (compression ``cbor``)."""
+        data = self._cbor
+        if data is None:
+            data = self._cbor = convert.encode_publish_cbor(self.topic, self.msg, self.conv)
+        return data
+
+    def cbor_raw(self) -> bytes:
+        """The ``publish`` op with the serialized CDR message (compression ``cbor-raw``)."""
+        data = self._cbor_raw
+        if data is None:
+            data = self._cbor_raw = convert.encode_publish_cbor_raw(
+                self.topic, convert.serialize(self.msg), self.stamp_ns
+            )
+        return data
+
+
+def _qos(reliable: bool, transient_local: bool, depth: int) -> Any:
+    return QoSProfile(  # type: ignore[no-untyped-call]
+        history=HistoryPolicy.KEEP_LAST,
+        depth=depth,
+        reliability=ReliabilityPolicy.RELIABLE if reliable else ReliabilityPolicy.BEST_EFFORT,
+        durability=(
+            DurabilityPolicy.TRANSIENT_LOCAL if transient_local else DurabilityPolicy.VOLATILE
+        ),
+    )
+
+
+class SharedSubscription:
+    """The bridge's one ROS subscription to a topic, shared by every listening session.
+
+    ``msg_cls`` is ``None`` while the type is not known yet (subscribed without
+    a type before any publisher appeared); :meth:`RosNode.refresh` fills it in.
+    """
+
+    def __init__(self, ros: RosNode, topic: str, msg_cls: type[Any] | None) -> None:
+        self.ros = ros
+        self.topic = topic
+        self.msg_cls = msg_cls
+        self.conv: convert.Converter | None = None
+        self.listeners: list[Listener] = []
+        self.latched: Incoming | None = None
+        self.reliable = True
+        self.transient_local = False
+        self._sub: Any = None
+        self.received = 0
+
+    @property
+    def type_name(self) -> str | None:
+        """Canonical type of the topic, once known."""
+        return self.conv.type_name if self.conv is not None else None
+
+    def _wanted_qos(self) -> tuple[bool, bool]:
+        infos = self.ros.node.get_publishers_info_by_topic(self.topic)
+        if not infos:
+            return self.reliable, self.transient_local
+        reliable = all(i.qos_profile.reliability != ReliabilityPolicy.BEST_EFFORT for i in infos)
+        transient = all(
+            i.qos_profile.durability == DurabilityPolicy.TRANSIENT_LOCAL for i in infos
+        )
+        return reliable, transient
+
+    def _create(self) -> None:
+        assert self.msg_cls is not None
+        self.conv = convert.converter_for(self.msg_cls)
+        self.reliable, self.transient_local = self._wanted_qos()
+        qos = _qos(self.reliable, self.transient_local, SUBSCRIPTION_DEPTH)
+        post = self.ros.post
+        deliver = self._deliver
+        topic = self.topic
+
+        def callback(msg: Any) -> None:
+            post(deliver, msg, time.time_ns())
+
+        self._sub = self.ros.node.create_subscription(self.msg_cls, topic, callback, qos)
+        log.debug(
+            "subscribed to %s (%s, %s, %s)",
+            topic,
+            self.conv.type_name,
+            "reliable" if self.reliable else "best effort",
+            "transient local" if self.transient_local else "volatile",
+        )
+
+    def _destroy(self) -> None:
+        if self._sub is not None:
+            sub, self._sub = self._sub, None
+            with contextlib.suppress(Exception):
+                self.ros.node.destroy_subscription(sub)
+
+    def _deliver(self, msg: Any, stamp_ns: int) -> None:
+        conv = self.conv
+        if conv is None or not isinstance(msg, conv.msg_cls):
+            return  # a message from a subscription that was replaced meanwhile
+        self.received += 1
+        inc = Incoming(self.topic, msg, conv, stamp_ns)
+        if self.transient_local:
+            self.latched = inc
+        for listener in self.listeners:
+            try:
+                listener(inc)
+            except Exception:
+                log.exception("listener failed on %s", self.topic)
+
+    def refresh(self) -> None:
+        """Resolve a pending type, or replace the subscription if the publishers' QoS changed."""
+        if self.msg_cls is None:
+            types = self.ros.topic_types(self.topic)
+            if not types:
+                return
+            try:
+                self.msg_cls = resolve_message(types[0])
+            except Exception as exc:
+                log.warning("cannot subscribe to %s: %s", self.topic, exc)
+                return
+            self._create()
+            return
+        if self._sub is None:
+            return
+        reliable, transient = self._wanted_qos()
+        if (reliable, transient) != (self.reliable, self.transient_local):
+            log.info("QoS of %s changed: re-subscribing", self.topic)
+            self._destroy()
+            self._create()
+
+
+class SharedPublisher:
+    """A ROS publisher shared (reference counted) by the sessions that advertised it."""
+
+    def __init__(self, ros: RosNode, topic: str, msg_cls: type[Any], latch: bool, depth: int):
+        self.ros = ros
+        self.topic = topic
+        self.msg_cls = msg_cls
+        self.conv = convert.converter_for(msg_cls)
+        self.latch = latch
+        self.refs = 0
+        self.pub = ros.node.create_publisher(msg_cls, topic, _qos(True, latch, max(depth, 1)))
+
+    @property
+    def type_name(self) -> str:
+        """Canonical message type."""
+        return self.conv.type_name
+
+    def publish(self, msg: Any) -> None:
+        """Publish one message (callable from the loop thread; rcl publish is thread safe)."""
+        self.pub.publish(msg)
+
+
+class PendingRosCall:
+    """A ROS caller waiting for a client-served service's answer.
+
+    The rclpy callback returns this object at once; rclpy then hands it with
+    the request header to the service's ``send_response``, which the bridge
+    intercepts. Whichever of (header, answer) arrives second sends the real
+    response, from whichever thread that is.
+    """
+
+    def __init__(self, served: ServedService, request: Any) -> None:
+        self.served = served
+        self.request = request
+        self._lock = threading.Lock()
+        self._header: Any = None
+        self._response: Any = None
+        self.done = False
+
+    def _attach(self, header: Any) -> None:
+        with self._lock:
+            self._header = header
+            response = self._response
+        if response is not None:
+            self.served._send(response, header)
+
+    def complete(self, response: Any | None = None) -> bool:
+        """Answer the ROS caller (``None``: a default response). False if already answered."""
+        if self.done:
+            return False
+        self.done = True
+        if response is None:
+            response = self.served.srv_cls.Response()
+        with self._lock:
+            self._response = response
+            header = self._header
+        if header is not None:
+            self.served._send(response, header)
+        return True
+
+
+class ServedService:
+    """A ROS service whose requests are answered by a websocket client."""
+
+    def __init__(
+        self,
+        ros: RosNode,
+        name: str,
+        srv_cls: type[Any],
+        on_request: Callable[[PendingRosCall], None],
+    ) -> None:
+        self.ros = ros
+        self.name = name
+        self.srv_cls = srv_cls
+        self.request_conv = convert.converter_for(srv_cls.Request)
+        self.response_conv = convert.converter_for(srv_cls.Response)
+        self.on_request = on_request
+        post = ros.post
+
+        def callback(request: Any, _response: Any) -> Any:
+            pending = PendingRosCall(self, request)
+            post(self.on_request, pending)
+            return pending
+
+        self.srv: Any = ros.node.create_service(srv_cls, name, callback)
+        self._real_send = self.srv.send_response
+
+        def send_response(response: Any, header: Any) -> None:
+            if isinstance(response, PendingRosCall):
+                response._attach(header)
+            else:
+                self._real_send(response, header)
+
+        self.srv.send_response = send_response
+
+    def _send(self, response: Any, header: Any) -> None:
+        try:
+            self._real_send(response, header)
+        except Exception as exc:  # destroyed meanwhile, or the caller went away
+            log.debug("could not answer a ROS caller of %s: %s", self.name, exc)
+
+    def destroy(self) -> None:
+        """Remove the ROS service."""
+        with contextlib.suppress(Exception):
+            self.ros.node.destroy_service(self.srv)
+
+
+class RosNode:
+    """The bridge's rclpy node, its executor thread and the shared ROS entities.
+
+    All public methods are called from the asyncio loop thread.
+    """
+
+    def __init__(
+        self,
+        loop: asyncio.AbstractEventLoop,
+        *,
+        name: str = "roslibpy_lite_bridge",
+        executor: str = "single",
+    ) -> None:
+        self.loop = loop
+        self.name = name
+        self.executor_kind = executor
+        self.context = Context()
+        self._inbox: deque[tuple[Callable[..., None], tuple[Any, ...]]] = deque()
+        self._scheduled = False
+        self.subscriptions: dict[str, SharedSubscription] = {}
+        self.publishers: dict[tuple[str, str, bool], SharedPublisher] = {}
+        self._clients: dict[tuple[str, type[Any]], Any] = {}
+        self._thread: threading.Thread | None = None
+        self.node: Any = None
+        self.executor: Any = None
+
+    # -- life cycle --------------------------------------------------------------------------
+
+    def start(self) -> None:
+        """Initialise rclpy (own context, no signal handlers) and start spinning."""
+        rclpy.init(
+            context=self.context,
+            signal_handler_options=rclpy.signals.SignalHandlerOptions.NO,
+        )
+        self.node = rclpy.create_node(self.name, context=self.context)
+        if self.executor_kind == "multi":
+            self.executor = MultiThreadedExecutor(context=self.context)
+        elif self.executor_kind == "events":
+            from rclpy.experimental.events_executor import EventsExecutor
+
+            self.executor = EventsExecutor(context=self.context)
+        else:
+            self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.node)
+        self._thread = threading.Thread(target=self._spin, name="bridge-ros-spin", daemon=True)
+        self._thread.start()
+
+    def _spin(self) -> None:
+        try:
+            self.executor.spin()
+        except ExternalShutdownException:
+            pass
+        except Exception:
+            log.exception("ROS executor stopped")
+
+    def close(self) -> None:
+        """Stop spinning, destroy the node and shut this context down."""
+        if self.node is None:
+            return
+        with contextlib.suppress(Exception):
+            self.executor.shutdown(timeout_sec=0.5)
+        with contextlib.suppress(Exception):
+            self.context.try_shutdown()
+        if self._thread is not None:
+            self._thread.join(2.0)
+        with contextlib.suppress(Exception):
+            self.node.destroy_node()
+        self.node = None
+
+    # -- hand-off to the loop ------------------------------------------------------------------
+
+    def post(self, fn: Callable[..., None], *args: Any) -> None:
+        """Run ``fn(*args)`` on the loop thread soon (callable from any thread, batched)."""
+        self._inbox.append((fn, args))
+        if not self._scheduled:
+            self._scheduled = True
+            with contextlib.suppress(RuntimeError):  # the loop closed while shutting down
+                self.loop.call_soon_threadsafe(self._drain)
+
+    def _drain(self) -> None:
+        self._scheduled = False
+        inbox = self._inbox
+        while inbox:
+            fn, args = inbox.popleft()
+            try:
+                fn(*args)
+            except Exception:
+                log.exception("hand-off callback failed")
+
+    # -- graph ---------------------------------------------------------------------------------
+
+    def topic_types(self, topic: str) -> list[str]:
+        """Types the ROS graph lists for ``topic`` (empty if unknown)."""
+        for name, types in self.node.get_topic_names_and_types():
+            if name == topic:
+                return list(types)
+        return []
+
+    def service_types(self, service: str) -> list[str]:
+        """Types the ROS graph lists for ``service`` (empty if unknown)."""
+        for name, types in self.node.get_service_names_and_types():
+            if name == service:
+                return list(types)
+        return []
+
+    def now(self) -> tuple[int, int]:
+        """The node clock's time as (sec, nanosec)."""
+        t = self.node.get_clock().now().seconds_nanoseconds()
+        return int(t[0]), int(t[1])
+
+    # -- subscriptions -------------------------------------------------------------------------
+
+    def subscribe(
+        self, topic: str, msg_cls: type[Any] | None, listener: Listener
+    ) -> SharedSubscription:
+        """Add ``listener`` to the topic's shared subscription (created if needed).
+
+        ``msg_cls`` may be ``None`` when the type is to be learned from the graph.
+        Raises ``ValueError`` if the topic is already subscribed with another type.
+        """
+        shared = self.subscriptions.get(topic)
+        if shared is None:
+            shared = SharedSubscription(self, topic, msg_cls)
+            if msg_cls is None:
+                shared.refresh()
+            else:
+                shared._create()
+            self.subscriptions[topic] = shared
+        elif msg_cls is not None:
+            if shared.msg_cls is None:
+                shared.msg_cls = msg_cls
+                shared._create()
+            elif shared.msg_cls is not msg_cls:
+                raise ValueError(
+                    f"topic {topic} is already subscribed with type {shared.type_name}"
+                )
+        shared.listeners.append(listener)
+        return shared
+
+    def unsubscribe(self, shared: SharedSubscription, listener: Listener) -> None:
+        """Remove ``listener``; the ROS subscription goes when its last listener does."""
+        with contextlib.suppress(ValueError):
+            shared.listeners.remove(listener)
+        if not shared.listeners and self.subscriptions.get(shared.topic) is shared:
+            del self.subscriptions[shared.topic]
+            shared._destroy()
+
+    def refresh(self) -> None:
+        """Resolve late types and re-check QoS of every shared subscription."""
+        if self.node is None:
+            return
+        for shared in list(self.subscriptions.values()):
+            try:
+                shared.refresh()
+            except Exception:
+                log.exception("refreshing %s failed", shared.topic)
+
+    # -- publishers ----------------------------------------------------------------------------
+
+    def acquire_publisher(
+        self, topic: str, msg_cls: type[Any], latch: bool, depth: int
+    ) -> SharedPublisher:
+        """A shared publisher for (topic, type, latch), its reference count raised by one."""
+        key = (topic, convert.converter_for(msg_cls).type_name, latch)
+        pub = self.publishers.get(key)
+        if pub is None:
+            pub = self.publishers[key] = SharedPublisher(self, topic, msg_cls, latch, depth)
+        pub.refs += 1
+        return pub
+
+    def release_publisher(self, pub: SharedPublisher) -> None:
+        """Lower the reference count; the ROS publisher goes with the last reference."""
+        pub.refs -= 1
+        if pub.refs > 0:
+            return
+        key = (pub.topic, pub.type_name, pub.latch)
+        if self.publishers.get(key) is pub:
+            del self.publishers[key]
+        if self.node is not None:
+            with contextlib.suppress(Exception):
+                self.node.destroy_publisher(pub.pub)
+
+    def publisher_types(self, topic: str) -> set[str]:
+        """Types of this bridge's own publishers on ``topic``."""
+        return {k[1] for k in self.publishers if k[0] == topic}
+
+    # -- services ------------------------------------------------------------------------------
+
+    def client_for(self, service: str, srv_cls: type[Any]) -> Any:
+        """A cached rclpy client for ``service`` of ``srv_cls``."""
+        key = (service, srv_cls)
+        client = self._clients.get(key)
+        if client is None:
+            client = self._clients[key] = self.node.create_client(srv_cls, service)
+        return client
+
+    def call(self, client: Any, request: Any) -> asyncio.Future[Any]:
+        """Send ``request`` now; the returned asyncio future gets the response.
+
+        Cancelling the returned future forgets the pending request.
+        """
+        loop = self.loop
+        result: asyncio.Future[Any] = loop.create_future()
+        rfuture = client.call_async(request)
+
+        def done(f: Any) -> None:
+            exc = f.exception()
+            self.post(_settle, result, exc, None if exc is not None else f.result())
+
+        rfuture.add_done_callback(done)
+
+        def forget(f: asyncio.Future[Any]) -> None:
+            if f.cancelled():
+                with contextlib.suppress(Exception):
+                    client.remove_pending_request(rfuture)
+
+        result.add_done_callback(forget)
+        return result
+
+    def serve(
+        self, name: str, srv_cls: type[Any], on_request: Callable[[PendingRosCall], None]
+    ) -> ServedService:
+        """Create a ROS service answered through ``on_request`` (see :class:`PendingRosCall`)."""
+        return ServedService(self, name, srv_cls, on_request)
+
+    @staticmethod
+    def resolve_message(name: str) -> type[Any]:
+        """The message class for a type string (both spellings)."""
+        return resolve_message(name)
+
+    @staticmethod
+    def resolve_service(name: str) -> type[Any]:
+        """The service class for a type string (both spellings)."""
+        return resolve_service(name)
+
+
+def _settle(fut: asyncio.Future[Any], exc: BaseException | None, value: Any) -> None:
+    if fut.done():
+        return
+    if exc is not None:
+        fut.set_exception(exc)
+    else:
+        fut.set_result(value)

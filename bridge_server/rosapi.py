@@ -1,0 +1,250 @@
+"""The ``/rosapi/*`` introspection services, answered by the bridge itself.
+
+rosapi_msgs is not on PyPI, so these services are not ROS services: a client's
+``call_service`` to one of the names below is answered in the bridge from the
+ROS graph, with the response fields stock clients (roslibpy, roslib) read.
+They are listed by ``/rosapi/services`` like any other service, with their
+rosapi_msgs types. Node names are fully qualified (``/ns/name``); type names
+use the ``pkg/msg/Type`` spelling.
+
+=================================  ===============  ===========================================
+service                            request          response
+=================================  ===============  ===========================================
+/rosapi/topics                     (none)           topics, types
+/rosapi/topics_for_type            type             topics
+/rosapi/topic_type                 topic            type ("" if unknown)
+/rosapi/services                   (none)           services
+/rosapi/services_for_type          type             services
+/rosapi/service_type               service          type ("" if unknown)
+/rosapi/service_node               service          node ("" if unknown)
+/rosapi/nodes                      (none)           nodes
+/rosapi/node_details               node             subscribing, publishing, services
+/rosapi/publishers                 topic            publishers
+/rosapi/subscribers                topic            subscribers
+/rosapi/action_servers             (none)           action_servers
+/rosapi/get_time                   (none)           time {sec, nanosec} (and ROS 1 secs, nsecs)
+/rosapi/get_ros_version            (none)           version 2, distro "jazzy"
+=================================  ===============  ===========================================
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from typing import TYPE_CHECKING, Any
+
+from .types import BridgeError, canonical_name
+
+if TYPE_CHECKING:
+    from .server import Bridge
+
+__all__ = ["FIELDS", "HANDLERS", "TYPES", "RosapiError"]
+
+DISTRO = "jazzy"
+
+
+class RosapiError(BridgeError):
+    """A rosapi request was invalid (the text says which field and why)."""
+
+
+Handler = Callable[["Bridge", Mapping[str, Any]], dict[str, Any]]
+
+
+def _str_field(args: Mapping[str, Any], name: str) -> str:
+    if not isinstance(args, Mapping):
+        raise RosapiError("args must be an object")
+    value = args.get(name)
+    if not isinstance(value, str):
+        raise RosapiError(f"args: field {name!r} must be a string")
+    return value
+
+
+def _full(name: str, namespace: str) -> str:
+    ns = namespace.rstrip("/")
+    return f"{ns}/{name}"
+
+
+def _split(full: str) -> tuple[str, str]:
+    full = full if full.startswith("/") else "/" + full
+    ns, _, name = full.rpartition("/")
+    return name, ns or "/"
+
+
+def _own_services() -> list[tuple[str, str]]:
+    return sorted((name, TYPES[name]) for name in HANDLERS)
+
+
+def _all_services(bridge: Bridge) -> list[tuple[str, str]]:
+    found = [(n, t[0] if t else "") for n, t in bridge.ros.node.get_service_names_and_types()]
+    return sorted(set(found) | set(_own_services()))
+
+
+def _msg_type(name: str) -> str:
+    try:
+        return canonical_name(name, "msg")
+    except BridgeError as exc:
+        raise RosapiError(str(exc)) from None
+
+
+def _srv_type(name: str) -> str:
+    try:
+        return canonical_name(name, "srv")
+    except BridgeError as exc:
+        raise RosapiError(str(exc)) from None
+
+
+def topics(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, Any]:
+    """Every topic in the graph and its (first) type."""
+    pairs = sorted(bridge.ros.node.get_topic_names_and_types())
+    return {"topics": [n for n, _ in pairs], "types": [t[0] if t else "" for _, t in pairs]}
+
+
+def topics_for_type(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, Any]:
+    """Topics whose type is the given one (either spelling)."""
+    wanted = _msg_type(_str_field(args, "type"))
+    pairs = sorted(bridge.ros.node.get_topic_names_and_types())
+    return {"topics": [n for n, types in pairs if wanted in types]}
+
+
+def topic_type(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, Any]:
+    """The type of one topic, "" if the graph does not know it."""
+    types = bridge.ros.topic_types(_str_field(args, "topic"))
+    return {"type": types[0] if types else ""}
+
+
+def services(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, Any]:
+    """Every service in the graph, plus the bridge's own rosapi services."""
+    return {"services": [n for n, _ in _all_services(bridge)]}
+
+
+def services_for_type(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, Any]:
+    """Services whose type is the given one (either spelling)."""
+    wanted = _srv_type(_str_field(args, "type"))
+    return {"services": [n for n, t in _all_services(bridge) if t == wanted]}
+
+
+def service_type(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, Any]:
+    """The type of one service, "" if unknown."""
+    name = _str_field(args, "service")
+    for n, t in _all_services(bridge):
+        if n == name:
+            return {"type": t}
+    return {"type": ""}
+
+
+def _node_names(bridge: Bridge) -> list[tuple[str, str]]:
+    return sorted(set(bridge.ros.node.get_node_names_and_namespaces()))
+
+
+def nodes(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, Any]:
+    """Every node, fully qualified."""
+    return {"nodes": [_full(n, ns) for n, ns in _node_names(bridge)]}
+
+
+def service_node(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, Any]:
+    """The node serving a service, "" if unknown."""
+    name = _str_field(args, "service")
+    if name in HANDLERS:
+        return {"node": _full(bridge.ros.node.get_name(), bridge.ros.node.get_namespace())}
+    node = bridge.ros.node
+    for n, ns in _node_names(bridge):
+        try:
+            found = node.get_service_names_and_types_by_node(n, ns)
+        except Exception:
+            continue
+        if any(s == name for s, _ in found):
+            return {"node": _full(n, ns)}
+    return {"node": ""}
+
+
+def node_details(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, Any]:
+    """Topics a node subscribes to and publishes, and the services it offers."""
+    full = _str_field(args, "node")
+    name, ns = _split(full)
+    if (name, ns) not in _node_names(bridge):
+        raise RosapiError(f"node {full} is not in the ROS graph")
+    node = bridge.ros.node
+    subs = [t for t, _ in node.get_subscriber_names_and_types_by_node(name, ns)]
+    pubs = [t for t, _ in node.get_publisher_names_and_types_by_node(name, ns)]
+    srvs = [s for s, _ in node.get_service_names_and_types_by_node(name, ns)]
+    if name == node.get_name() and ns == node.get_namespace():
+        srvs += [n for n, _ in _own_services()]
+    return {"subscribing": sorted(subs), "publishing": sorted(pubs), "services": sorted(srvs)}
+
+
+def publishers(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, Any]:
+    """Nodes publishing on a topic."""
+    infos = bridge.ros.node.get_publishers_info_by_topic(_str_field(args, "topic"))
+    return {"publishers": sorted({_full(i.node_name, i.node_namespace) for i in infos})}
+
+
+def subscribers(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, Any]:
+    """Nodes subscribed to a topic."""
+    infos = bridge.ros.node.get_subscriptions_info_by_topic(_str_field(args, "topic"))
+    return {"subscribers": sorted({_full(i.node_name, i.node_namespace) for i in infos})}
+
+
+def action_servers(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, Any]:
+    """Actions that have a goal service in the graph."""
+    suffix = "/_action/send_goal"
+    names = [n[: -len(suffix)] for n, _ in _all_services(bridge) if n.endswith(suffix)]
+    return {"action_servers": sorted(names)}
+
+
+def get_time(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, Any]:
+    """The bridge node's clock; ROS 1 key names are added for older clients."""
+    sec, nanosec = bridge.ros.now()
+    return {"time": {"sec": sec, "nanosec": nanosec, "secs": sec, "nsecs": nanosec}}
+
+
+def get_ros_version(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, Any]:
+    """ROS 2, Jazzy."""
+    return {"version": 2, "distro": DISTRO}
+
+
+HANDLERS: dict[str, Handler] = {
+    "/rosapi/topics": topics,
+    "/rosapi/topics_for_type": topics_for_type,
+    "/rosapi/topic_type": topic_type,
+    "/rosapi/services": services,
+    "/rosapi/services_for_type": services_for_type,
+    "/rosapi/service_type": service_type,
+    "/rosapi/service_node": service_node,
+    "/rosapi/nodes": nodes,
+    "/rosapi/node_details": node_details,
+    "/rosapi/publishers": publishers,
+    "/rosapi/subscribers": subscribers,
+    "/rosapi/action_servers": action_servers,
+    "/rosapi/get_time": get_time,
+    "/rosapi/get_ros_version": get_ros_version,
+}
+"""Service name -> handler."""
+
+TYPES: dict[str, str] = {
+    "/rosapi/topics": "rosapi_msgs/srv/Topics",
+    "/rosapi/topics_for_type": "rosapi_msgs/srv/TopicsForType",
+    "/rosapi/topic_type": "rosapi_msgs/srv/TopicType",
+    "/rosapi/services": "rosapi_msgs/srv/Services",
+    "/rosapi/services_for_type": "rosapi_msgs/srv/ServicesForType",
+    "/rosapi/service_type": "rosapi_msgs/srv/ServiceType",
+    "/rosapi/service_node": "rosapi_msgs/srv/ServiceNode",
+    "/rosapi/nodes": "rosapi_msgs/srv/Nodes",
+    "/rosapi/node_details": "rosapi_msgs/srv/NodeDetails",
+    "/rosapi/publishers": "rosapi_msgs/srv/Publishers",
+    "/rosapi/subscribers": "rosapi_msgs/srv/Subscribers",
+    "/rosapi/action_servers": "rosapi_msgs/srv/GetActionServers",
+    "/rosapi/get_time": "rosapi_msgs/srv/GetTime",
+    "/rosapi/get_ros_version": "rosapi_msgs/srv/GetROSVersion",
+}
+"""Service name -> the rosapi_msgs type it is listed with."""
+
+FIELDS: dict[str, tuple[str, ...]] = {
+    "/rosapi/topics_for_type": ("type",),
+    "/rosapi/topic_type": ("topic",),
+    "/rosapi/services_for_type": ("type",),
+    "/rosapi/service_type": ("service",),
+    "/rosapi/service_node": ("service",),
+    "/rosapi/node_details": ("node",),
+    "/rosapi/publishers": ("topic",),
+    "/rosapi/subscribers": ("topic",),
+}
+"""Request field order, for ``args`` given as a list."""

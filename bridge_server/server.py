@@ -1,0 +1,138 @@
+"""The websocket server: one :class:`~bridge_server.session.Session` per connection.
+
+Frames: text frames carry JSON ops, binary frames CBOR-encoded ops. Inbound
+frames larger than ``max_message_size`` close the connection with code 1009
+("message too big", websockets' own close reason names the limit).
+
+Compression (permessage-deflate) is off by default: deflating every message
+costs far more CPU than loopback or LAN bandwidth saves, and the bridge's
+throughput is CPU bound. ``--compression deflate`` turns it on for slow links.
+
+Each connection's socket write buffer is bounded by ``write_limit`` (high
+water mark); a session's writer task waits on it, and only that session's
+writer, so a client that stops reading never slows the others.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import itertools
+import logging
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
+
+from websockets.asyncio.server import Server, ServerConnection, serve
+
+from .ros import RosNode
+from .session import Session, SessionConfig
+
+if TYPE_CHECKING:
+    from collections.abc import Awaitable
+
+__all__ = ["Bridge", "BridgeConfig"]
+
+log = logging.getLogger("bridge_server")
+
+
+@dataclass
+class BridgeConfig:
+    """Everything the command line can set."""
+
+    host: str = "127.0.0.1"
+    port: int = 9090
+    max_message_size: int = 64 * 1024 * 1024
+    write_limit: int = 256 * 1024
+    compression: bool = False
+    publisher_grace: float = 2.0
+    executor: str = "single"
+    node_name: str = "roslibpy_lite_bridge"
+    refresh_interval: float = 0.25
+    session: SessionConfig = field(default_factory=SessionConfig)
+
+
+class Bridge:
+    """The running bridge: the ROS node, the websocket server and the live sessions."""
+
+    def __init__(self, config: BridgeConfig) -> None:
+        self.config = config
+        self.session_config = config.session
+        self.publisher_grace = config.publisher_grace
+        self.sessions: set[Session] = set()
+        self.service_owners: dict[str, Session] = {}
+        self._ids = itertools.count(1)
+        self._server: Server | None = None
+        self._refresher: asyncio.Task[None] | None = None
+        self._graph_event = asyncio.Event()
+        self.ros = RosNode(
+            asyncio.get_running_loop(), name=config.node_name, executor=config.executor
+        )
+
+    @property
+    def port(self) -> int:
+        """The port actually bound (useful with port 0)."""
+        assert self._server is not None
+        sock = next(iter(self._server.sockets))
+        return int(sock.getsockname()[1])
+
+    async def start(self) -> None:
+        """Start ROS and listen."""
+        self.ros.start()
+        self._server = await serve(
+            self._handle,
+            self.config.host,
+            self.config.port,
+            max_size=self.config.max_message_size,
+            write_limit=self.config.write_limit,
+            compression="deflate" if self.config.compression else None,
+            max_queue=64,
+        )
+        self._refresher = asyncio.create_task(self._refresh_loop(), name="bridge-refresh")
+
+    def graph_changed(self) -> None:
+        """Something needs the periodic graph check (a new subscription): run it soon."""
+        self._graph_event.set()
+
+    async def _refresh_loop(self) -> None:
+        """Resolve late publishers' types, follow QoS changes; idle while nothing is subscribed."""
+        interval = self.config.refresh_interval
+        while True:
+            if not self.ros.subscriptions:
+                self._graph_event.clear()
+                await self._graph_event.wait()
+            with contextlib.suppress(TimeoutError):
+                await asyncio.wait_for(self._graph_event.wait(), interval)
+            self._graph_event.clear()
+            self.ros.refresh()
+
+    async def _handle(self, ws: ServerConnection) -> None:
+        sid = next(self._ids)
+        peer = _peer(ws)
+        log.info("client %d connected from %s", sid, peer)
+        session = Session(self, ws, sid)
+        self.sessions.add(session)
+        try:
+            await session.run()
+        finally:
+            self.sessions.discard(session)
+            log.info("client %d (%s) disconnected", sid, peer)
+
+    async def close(self) -> None:
+        """Stop listening, close every connection, release ROS."""
+        if self._refresher is not None:
+            self._refresher.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await self._refresher
+        if self._server is not None:
+            self._server.close(close_connections=True)
+            waiter: Awaitable[Any] = self._server.wait_closed()
+            with contextlib.suppress(TimeoutError):
+                await asyncio.wait_for(waiter, 1.0)
+        self.ros.close()
+
+
+def _peer(ws: ServerConnection) -> str:
+    addr = ws.remote_address
+    if isinstance(addr, tuple) and len(addr) >= 2:
+        return f"{addr[0]}:{addr[1]}"
+    return str(addr)

@@ -1,0 +1,730 @@
+"""What one websocket client owns, and how its ops are carried out.
+
+A :class:`Session` holds the client's publishers (advertise), its
+subscriptions (merged per topic, any number of ids each), the services it
+serves, its service calls in flight (concurrent asyncio tasks, each with a
+timeout) and its outgoing queues.
+
+Outgoing queues and the drop policy
+-----------------------------------
+Every subscription (one per topic, whatever the number of ids) has its own
+bounded queue of ``queue_length`` messages (0 means :data:`DEFAULT_QUEUE_LENGTH`);
+when it is full the OLDEST message of that subscription is dropped. Replies
+(service responses, status ops, ROS calls to client-served services) go to a
+separate control queue, bounded by ``control_limit`` (oldest dropped, logged).
+The per-ROS-message fan-out only appends to these queues and sets an event;
+one writer task per session drains them into the socket, so a client that
+stops reading holds at most its queues plus the socket's write buffer, and
+never delays anyone else. Dropped messages are counted per subscription and
+reported to the client as a ``status`` warning (``dropped N messages on
+/topic ...``) at most once per ``drop_report_interval`` seconds.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import itertools
+import logging
+import time
+from collections import deque
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
+
+from websockets.exceptions import ConnectionClosed
+
+from roslibpy_lite import ops
+from roslibpy_lite.exceptions import ProtocolError
+from roslibpy_lite.protocol import Protocol, split_fragments
+
+from . import convert, rosapi
+from .types import BridgeError, canonical_name
+
+if TYPE_CHECKING:
+    from websockets.asyncio.server import ServerConnection
+
+    from .ros import Incoming, PendingRosCall, RosNode, ServedService, SharedPublisher
+    from .ros import SharedSubscription as _Shared
+    from .server import Bridge
+
+__all__ = ["DEFAULT_QUEUE_LENGTH", "Session", "SessionConfig"]
+
+log = logging.getLogger("bridge_server.session")
+
+DEFAULT_QUEUE_LENGTH = 100
+"""Bound of a subscription's queue when the client asked for ``queue_length`` 0."""
+
+_LEVELS = {"none": 0, "error": 1, "warning": 2, "info": 3}
+
+_ACTION_OPS = (
+    ops.SendActionGoal,
+    ops.CancelActionGoal,
+    ops.ActionFeedback,
+    ops.ActionResult,
+    ops.AdvertiseAction,
+    ops.UnadvertiseAction,
+)
+
+
+@dataclass
+class SessionConfig:
+    """Per-session limits and defaults (set from the command line)."""
+
+    default_queue_length: int = DEFAULT_QUEUE_LENGTH
+    control_limit: int = 10_000
+    call_timeout: float = 5.0
+    served_call_timeout: float = 10.0
+    drop_report_interval: float = 5.0
+    discovery_wait: float = 1.0
+
+
+class _Sub:
+    """One client's (merged) subscription to one topic."""
+
+    def __init__(self, session: Session, topic: str) -> None:
+        self.session = session
+        self.topic = topic
+        self.ids: dict[ops.Id | None, ops.Subscribe] = {}
+        self.shared: _Shared | None = None
+        self.queue: deque[Incoming] = deque()
+        self.maxlen = DEFAULT_QUEUE_LENGTH
+        self.throttle = 0.0
+        self.fragment_size: int | None = None
+        self.compression = "none"
+        self.last_sent = 0.0
+        self.pending: Incoming | None = None
+        self.timer: asyncio.TimerHandle | None = None
+        self.dropped = 0
+        self.dropped_total = 0
+        self.last_report = 0.0
+        self.active = True
+
+    def configure(self, default_len: int) -> None:
+        """Merge the options of every id: least throttle, largest queue, least fragment size."""
+        subs = list(self.ids.values())
+        self.throttle = min(s.throttle_rate for s in subs) / 1000.0
+        lens = [s.queue_length or default_len for s in subs]
+        self.maxlen = max(lens)
+        sizes = [s.fragment_size for s in subs if s.fragment_size]
+        self.fragment_size = min(sizes) if sizes else None
+        self.compression = subs[-1].compression
+        while len(self.queue) > self.maxlen:
+            self.queue.popleft()
+
+    def on_message(self, inc: Incoming) -> None:
+        """Called on the loop for each message of the topic: throttle, then queue."""
+        if self.throttle > 0:
+            now = time.monotonic()
+            wait = self.last_sent + self.throttle - now
+            if wait > 0:
+                self.pending = inc
+                if self.timer is None:
+                    self.timer = self.session.loop.call_later(wait, self._flush)
+                return
+            self.last_sent = now
+        self.push(inc)
+
+    def _flush(self) -> None:
+        self.timer = None
+        inc, self.pending = self.pending, None
+        if inc is not None and self.active:
+            self.last_sent = time.monotonic()
+            self.push(inc)
+
+    def push(self, inc: Incoming) -> None:
+        """Queue one message, dropping this subscription's oldest when full."""
+        q = self.queue
+        s = self.session
+        if len(q) >= self.maxlen:
+            q.popleft()
+            self.dropped += 1
+            self.dropped_total += 1
+            s._note_drop(self)
+        else:
+            s._order.append(self)
+        q.append(inc)
+        s._wake.set()
+
+    def close(self) -> None:
+        """Stop delivering: clear the queue and any throttle timer."""
+        self.active = False
+        self.queue.clear()
+        self.pending = None
+        if self.timer is not None:
+            self.timer.cancel()
+            self.timer = None
+
+
+class _Served:
+    """A service this client serves, with the ROS callers waiting on it."""
+
+    def __init__(self, name: str, type_name: str) -> None:
+        self.name = name
+        self.type_name = type_name
+        self.ros: ServedService | None = None
+        self.pending: dict[str, tuple[PendingRosCall, asyncio.TimerHandle]] = {}
+
+
+class Session:
+    """One websocket client of the bridge."""
+
+    def __init__(self, bridge: Bridge, ws: ServerConnection, sid: int) -> None:
+        self.bridge = bridge
+        self.ros: RosNode = bridge.ros
+        self.ws = ws
+        self.sid = sid
+        self.config: SessionConfig = bridge.session_config
+        self.loop = asyncio.get_running_loop()
+        self.protocol = Protocol()
+        self.publishers: dict[str, SharedPublisher] = {}
+        self.subs: dict[str, _Sub] = {}
+        self.served: dict[str, _Served] = {}
+        self.calls: set[asyncio.Task[None]] = set()
+        self.level = _LEVELS["warning"]
+        self._control: deque[str | bytes] = deque()
+        self._order: deque[_Sub] = deque()
+        self._wake = asyncio.Event()
+        self._closed = False
+        self._frag_ids = itertools.count()
+        self._request_ids = itertools.count()
+        self.control_dropped = 0
+
+    # -- running -------------------------------------------------------------------------------
+
+    async def run(self) -> None:
+        """Serve the client until it disconnects; then release everything it owned."""
+        writer = asyncio.create_task(self._writer(), name=f"session-{self.sid}-writer")
+        try:
+            async for frame in self.ws:
+                self.handle_frame(frame)
+        except ConnectionClosed:
+            pass
+        finally:
+            self._closed = True
+            self._wake.set()
+            writer.cancel()
+            with contextlib.suppress(asyncio.CancelledError, ConnectionClosed):
+                await writer
+            await self.cleanup()
+
+    async def _writer(self) -> None:
+        ws = self.ws
+        control = self._control
+        order = self._order
+        wake = self._wake
+        try:
+            while not self._closed:
+                if control:
+                    await ws.send(control.popleft())
+                    continue
+                if order:
+                    sub = order.popleft()
+                    if not sub.queue:
+                        continue
+                    inc = sub.queue.popleft()
+                    for frame in self._frames(sub, inc):
+                        await ws.send(frame)
+                    continue
+                wake.clear()
+                await wake.wait()
+        except ConnectionClosed:
+            pass
+
+    def _frames(self, sub: _Sub, inc: Incoming) -> list[str | bytes]:
+        comp = sub.compression
+        if comp == "cbor":
+            return [inc.cbor()]
+        if comp == "cbor-raw":
+            return [inc.cbor_raw()]
+        text = inc.json_text()
+        size = sub.fragment_size
+        if size is not None and len(text) > size:
+            return list(split_fragments(text, size, f"{sub.topic}:{next(self._frag_ids)}"))
+        return [text]
+
+    async def cleanup(self) -> None:
+        """Release what this client owned (subscriptions and services at once, publishers later)."""
+        for sub in list(self.subs.values()):
+            self._drop_sub(sub)
+        self.subs.clear()
+        for served in list(self.served.values()):
+            self._remove_served(served, "the client that served it disconnected")
+        self.served.clear()
+        for task in list(self.calls):
+            task.cancel()
+        if self.calls:
+            await asyncio.gather(*self.calls, return_exceptions=True)
+        grace = self.bridge.publisher_grace
+        for pub in self.publishers.values():
+            if grace > 0:
+                self.loop.call_later(grace, self.ros.release_publisher, pub)
+            else:
+                self.ros.release_publisher(pub)
+        self.publishers.clear()
+
+    # -- sending -------------------------------------------------------------------------------
+
+    def send_text(self, text: str | bytes) -> None:
+        """Queue one control frame (replies and status) for the writer."""
+        if self._closed:
+            return
+        control = self._control
+        if len(control) >= self.config.control_limit:
+            control.popleft()
+            self.control_dropped += 1
+            if self.control_dropped in (1, 10, 100) or self.control_dropped % 1000 == 0:
+                log.warning(
+                    "session %d: dropped %d replies: the client does not read",
+                    self.sid,
+                    self.control_dropped,
+                )
+        control.append(text)
+        self._wake.set()
+
+    def send_op(self, op: ops.Op) -> None:
+        """Queue one op as JSON text."""
+        self.send_text(ops.encode(op))
+
+    def status(self, level: str, msg: str, id: ops.Id | None = None) -> None:
+        """Send a ``status`` op if the client's level admits it."""
+        if _LEVELS.get(level, 1) > self.level:
+            return
+        self.send_op(ops.Status(level=level, msg=msg, id=id))
+
+    def error(self, msg: str, id: ops.Id | None = None) -> None:
+        """Report a failed request to the client (``status`` level error)."""
+        log.info("session %d: %s", self.sid, msg)
+        self.status("error", msg, id)
+
+    def _note_drop(self, sub: _Sub) -> None:
+        now = time.monotonic()
+        if now - sub.last_report < self.config.drop_report_interval:
+            return
+        sub.last_report = now
+        n, sub.dropped = sub.dropped, 0
+        self.status(
+            "warning",
+            f"dropped {n} messages on {sub.topic} (queue_length {sub.maxlen}, "
+            f"{sub.dropped_total} in all): the client reads slower than messages arrive",
+        )
+
+    # -- receiving -----------------------------------------------------------------------------
+
+    def handle_frame(self, frame: str | bytes) -> None:
+        """Decode one frame and carry out the op it completes; errors go back as ``status``."""
+        try:
+            op = self.protocol.receive(frame)
+        except ProtocolError as exc:
+            self.error(exc.message, exc.id)
+            return
+        if op is not None:
+            self.handle_op(op)
+
+    def handle_op(self, op: ops.Op) -> None:
+        """Carry out one parsed op."""
+        try:
+            if isinstance(op, ops.Publish):
+                self.publish(op)
+            elif isinstance(op, ops.Subscribe):
+                self.subscribe(op)
+            elif isinstance(op, ops.Unsubscribe):
+                self.unsubscribe(op)
+            elif isinstance(op, ops.Advertise):
+                self.advertise(op)
+            elif isinstance(op, ops.Unadvertise):
+                self.unadvertise(op)
+            elif isinstance(op, ops.CallService):
+                task = self.loop.create_task(self.call_service(op))
+                self.calls.add(task)
+                task.add_done_callback(self.calls.discard)
+            elif isinstance(op, ops.ServiceResponse):
+                self.service_response(op)
+            elif isinstance(op, ops.AdvertiseService):
+                self.advertise_service(op)
+            elif isinstance(op, ops.UnadvertiseService):
+                self.unadvertise_service(op)
+            elif isinstance(op, ops.SetLevel):
+                self.set_level(op)
+            elif isinstance(op, _ACTION_OPS):
+                self.error(f"{op.OP}: actions are not supported yet", getattr(op, "id", None))
+            else:
+                self.error(f"{op.OP}: a client may not send this op", getattr(op, "id", None))
+        except BridgeError as exc:
+            self.error(f"{op.OP}: {exc}", getattr(op, "id", None))
+        except Exception as exc:
+            log.exception("session %d: %s failed", self.sid, op.OP)
+            self.error(f"{op.OP}: internal error: {type(exc).__name__}", getattr(op, "id", None))
+
+    # -- topics --------------------------------------------------------------------------------
+
+    def advertise(self, op: ops.Advertise) -> None:
+        """Create (or share) a ROS publisher for the topic."""
+        topic = _topic_name(op.topic)
+        cls = self.ros.resolve_message(op.type)
+        type_name = canonical_name(op.type, "msg")
+        current = self.publishers.get(topic)
+        if current is not None:
+            if current.type_name == type_name:
+                return
+            self.error(
+                f"advertise: topic {topic} is already advertised by this client with type "
+                f"{current.type_name}, not {type_name}",
+                op.id,
+            )
+            return
+        existing = [t for t in self.ros.topic_types(topic) if t != type_name]
+        existing += [t for t in self.ros.publisher_types(topic) if t != type_name]
+        if existing:
+            self.error(
+                f"advertise: topic {topic} already has type {existing[0]}; "
+                f"cannot advertise it as {type_name}",
+                op.id,
+            )
+            return
+        self.publishers[topic] = self.ros.acquire_publisher(
+            topic, cls, bool(op.latch), op.queue_size or 1
+        )
+
+    def unadvertise(self, op: ops.Unadvertise) -> None:
+        """Release this client's publisher for the topic."""
+        topic = _topic_name(op.topic)
+        pub = self.publishers.pop(topic, None)
+        if pub is None:
+            self.error(f"unadvertise: topic {topic} is not advertised by this client", op.id)
+            return
+        self.ros.release_publisher(pub)
+
+    def publish(self, op: ops.Publish) -> None:
+        """Convert the message and publish it (auto-advertising a topic the graph knows)."""
+        topic = _topic_name(op.topic)
+        pub = self.publishers.get(topic)
+        if pub is None:
+            types = self.ros.topic_types(topic)
+            if not types:
+                self.error(
+                    f"publish: topic {topic} is not advertised and the ROS graph has no type "
+                    "for it; send advertise first",
+                    op.id,
+                )
+                return
+            cls = self.ros.resolve_message(types[0])
+            pub = self.publishers[topic] = self.ros.acquire_publisher(
+                topic, cls, bool(op.latch), op.queue_size or 10
+            )
+        try:
+            msg = pub.conv.from_obj(op.msg, "msg")
+        except convert.ConversionError as exc:
+            self.error(f"publish to {topic} ({pub.type_name}): {exc}", op.id)
+            return
+        pub.publish(msg)
+
+    def subscribe(self, op: ops.Subscribe) -> None:
+        """Add this id to the client's subscription of the topic."""
+        topic = _topic_name(op.topic)
+        if op.compression == "png":
+            self.error("subscribe: compression 'png' is unsupported (use cbor or cbor-raw)", op.id)
+            return
+        cls: type[Any] | None = None
+        if op.type is not None:
+            cls = self.ros.resolve_message(op.type)
+            type_name = canonical_name(op.type, "msg")
+            graph = self.ros.topic_types(topic)
+            if graph and type_name not in graph:
+                self.error(
+                    f"subscribe: topic {topic} has type {graph[0]} in the ROS graph, "
+                    f"not {type_name}",
+                    op.id,
+                )
+                return
+        sub = self.subs.get(topic)
+        if sub is None:
+            sub = _Sub(self, topic)
+            sub.ids[op.id] = op
+            sub.configure(self.config.default_queue_length)
+            try:
+                sub.shared = self.ros.subscribe(topic, cls, sub.on_message)
+            except ValueError as exc:
+                self.error(f"subscribe: {exc}", op.id)
+                return
+            self.subs[topic] = sub
+            self.bridge.graph_changed()
+            latched = sub.shared.latched
+            if latched is not None:
+                sub.push(latched)
+            return
+        shared = sub.shared
+        if cls is not None and shared is not None:
+            if shared.msg_cls is None:
+                try:
+                    self.ros.subscribe(topic, cls, sub.on_message)
+                finally:
+                    self.ros.unsubscribe(shared, sub.on_message)
+            elif shared.msg_cls is not cls:
+                self.error(
+                    f"subscribe: topic {topic} is already subscribed with type "
+                    f"{shared.type_name}",
+                    op.id,
+                )
+                return
+        sub.ids[op.id] = op
+        sub.configure(self.config.default_queue_length)
+
+    def unsubscribe(self, op: ops.Unsubscribe) -> None:
+        """Remove one id (or, without id, every id) of the client's subscription."""
+        topic = _topic_name(op.topic)
+        sub = self.subs.get(topic)
+        if sub is None:
+            self.status("warning", f"unsubscribe: not subscribed to {topic}", op.id)
+            return
+        if op.id is not None and op.id in sub.ids:
+            del sub.ids[op.id]
+        elif op.id is not None:
+            self.status("warning", f"unsubscribe: no subscription {op.id!r} on {topic}", op.id)
+            return
+        else:
+            sub.ids.clear()
+        if sub.ids:
+            sub.configure(self.config.default_queue_length)
+            return
+        del self.subs[topic]
+        self._drop_sub(sub)
+
+    def _drop_sub(self, sub: _Sub) -> None:
+        sub.close()
+        if sub.shared is not None:
+            self.ros.unsubscribe(sub.shared, sub.on_message)
+            sub.shared = None
+
+    # -- services ------------------------------------------------------------------------------
+
+    async def call_service(self, op: ops.CallService) -> None:
+        """Call a ROS service (or a rosapi one) and answer with ``service_response``."""
+        service = _topic_name(op.service)
+        timeout = op.timeout if op.timeout is not None else self.config.call_timeout
+        values: Mapping[str, Any]
+        try:
+            handler = rosapi.HANDLERS.get(service)
+            if handler is not None:
+                values = handler(self.bridge, _args_obj(op.args, rosapi.FIELDS.get(service, ())))
+            else:
+                values = await self._call_ros(service, op, timeout)
+        except _CallFailed as exc:
+            self._respond(service, op.id, False, str(exc))
+            return
+        except (BridgeError, rosapi.RosapiError) as exc:
+            self._respond(service, op.id, False, f"{service}: {exc}")
+            return
+        self._respond(service, op.id, True, values)
+
+    def _respond(
+        self, service: str, id: ops.Id | None, result: bool, values: Mapping[str, Any] | str
+    ) -> None:
+        if not result:
+            log.info("session %d: call to %s failed: %s", self.sid, service, values)
+        self.send_op(ops.ServiceResponse(service=service, result=result, values=values, id=id))
+
+    async def _call_ros(
+        self, service: str, op: ops.CallService, timeout: float
+    ) -> Mapping[str, Any]:
+        ros = self.ros
+        loop = self.loop
+        deadline = loop.time() + timeout
+        if op.type is not None:
+            srv_cls = ros.resolve_service(op.type)
+        else:
+            types = ros.service_types(service)
+            if not types:
+                wait_until = min(deadline, loop.time() + self.config.discovery_wait)
+                while not types and loop.time() < wait_until:
+                    await asyncio.sleep(0.02)
+                    types = ros.service_types(service)
+            if not types:
+                raise _CallFailed(f"service {service} does not exist (not in the ROS graph)")
+            srv_cls = ros.resolve_service(types[0])
+        req_conv = convert.converter_for(srv_cls.Request)
+        try:
+            request = req_conv.from_obj(_args_obj(op.args, req_conv.fields), "args")
+        except convert.ConversionError as exc:
+            raise _CallFailed(f"{service}: bad request: {exc}") from None
+        client = ros.client_for(service, srv_cls)
+        if not client.service_is_ready():
+            in_graph = bool(ros.service_types(service))
+            wait_until = deadline if in_graph else min(
+                deadline, loop.time() + self.config.discovery_wait
+            )
+            delay = 0.002
+            while not client.service_is_ready() and loop.time() < wait_until:
+                await asyncio.sleep(delay)
+                delay = min(delay * 2, 0.05)
+            if not client.service_is_ready():
+                if not ros.service_types(service):
+                    raise _CallFailed(f"service {service} does not exist (not in the ROS graph)")
+                raise _CallFailed(f"service {service} did not become available in {timeout} s")
+        left = max(deadline - loop.time(), 0.001)
+        try:
+            response = await asyncio.wait_for(ros.call(client, request), left)
+        except TimeoutError:
+            raise _CallFailed(f"service {service} timed out after {timeout} s") from None
+        obj: Mapping[str, Any] = convert.converter_for(srv_cls.Response).to_obj(response)
+        return obj
+
+    def advertise_service(self, op: ops.AdvertiseService) -> None:
+        """Serve a ROS service from this client."""
+        name = _topic_name(op.service)
+        srv_cls = self.ros.resolve_service(op.type)
+        type_name = canonical_name(op.type, "srv")
+        if name in rosapi.HANDLERS:
+            self.error(f"advertise_service: {name} is answered by the bridge itself", op.id)
+            return
+        mine = self.served.get(name)
+        if mine is not None:
+            if mine.type_name == type_name:
+                return
+            self._remove_served(mine, "the client advertised it again with another type")
+            del self.served[name]
+        owner = self.bridge.service_owners.get(name)
+        if owner is not None and owner is not self:
+            owner.drop_served(name, f"taken over by client {self.sid}")
+        elif owner is None and self.ros.service_types(name):
+            self.status(
+                "warning",
+                f"advertise_service: another ROS node already serves {name}; "
+                "callers may reach either",
+                op.id,
+            )
+        served = _Served(name, type_name)
+        served.ros = self.ros.serve(
+            name, srv_cls, lambda pending: self._on_ros_request(served, pending)
+        )
+        self.served[name] = served
+        self.bridge.service_owners[name] = self
+
+    def _on_ros_request(self, served: _Served, pending: PendingRosCall) -> None:
+        if self.served.get(served.name) is not served:
+            pending.complete()
+            return
+        rid = f"service_request:{served.name}:{next(self._request_ids)}"
+        try:
+            args = served.ros.request_conv.to_obj(pending.request) if served.ros else {}
+        except Exception:
+            log.exception("cannot convert a request to %s", served.name)
+            pending.complete()
+            return
+        timer = self.loop.call_later(
+            self.config.served_call_timeout, self._served_timeout, served, rid
+        )
+        served.pending[rid] = (pending, timer)
+        self.send_op(ops.CallService(service=served.name, args=args, id=rid))
+
+    def _served_timeout(self, served: _Served, rid: str) -> None:
+        entry = served.pending.pop(rid, None)
+        if entry is not None:
+            log.error(
+                "session %d: no answer for %s within %s s; the ROS caller gets a default response",
+                self.sid,
+                rid,
+                self.config.served_call_timeout,
+            )
+            entry[0].complete()
+
+    def service_response(self, op: ops.ServiceResponse) -> None:
+        """The client answers a ROS caller of a service it serves."""
+        name = _topic_name(op.service)
+        served = self.served.get(name)
+        entry = None
+        if served is not None and op.id is not None:
+            entry = served.pending.pop(str(op.id), None)
+        if entry is None:
+            for s in self.served.values():
+                if op.id is not None and str(op.id) in s.pending:
+                    served = s
+                    entry = s.pending.pop(str(op.id))
+                    break
+        if entry is None or served is None or served.ros is None:
+            self.error(
+                f"service_response: no ROS call {op.id!r} is waiting on {name}", op.id
+            )
+            return
+        pending, timer = entry
+        timer.cancel()
+        if not op.result:
+            log.error(
+                "session %d: the client failed %s (%s); the ROS caller gets a default response",
+                self.sid,
+                op.id,
+                op.values if isinstance(op.values, str) else "no reason given",
+            )
+            pending.complete()
+            return
+        values = op.values if isinstance(op.values, Mapping) else {}
+        try:
+            response = served.ros.response_conv.from_obj(values, "values")
+        except convert.ConversionError as exc:
+            self.error(f"service_response for {name}: {exc}", op.id)
+            pending.complete()
+            return
+        pending.complete(response)
+
+    def unadvertise_service(self, op: ops.UnadvertiseService) -> None:
+        """Stop serving a service; its waiting ROS callers get a default response at once."""
+        name = _topic_name(op.service)
+        served = self.served.pop(name, None)
+        if served is None:
+            self.error(f"unadvertise_service: {name} is not served by this client", op.id)
+            return
+        self._remove_served(served, "the client unadvertised it")
+
+    def _remove_served(self, served: _Served, why: str) -> None:
+        for rid, (pending, timer) in list(served.pending.items()):
+            timer.cancel()
+            log.error("ROS call %s failed: %s; sending a default response", rid, why)
+            pending.complete()
+        served.pending.clear()
+        if served.ros is not None:
+            served.ros.destroy()
+            served.ros = None
+        if self.bridge.service_owners.get(served.name) is self:
+            del self.bridge.service_owners[served.name]
+
+    def drop_served(self, name: str, why: str) -> None:
+        """Another client took the service over: forget it here."""
+        served = self.served.pop(name, None)
+        if served is not None:
+            self._remove_served(served, why)
+            self.status("warning", f"service {name}: {why}")
+
+    # -- misc ----------------------------------------------------------------------------------
+
+    def set_level(self, op: ops.SetLevel) -> None:
+        """Set the least status level this client hears."""
+        level = op.level.lower()
+        if level not in _LEVELS:
+            self.error(
+                f"set_level: level must be one of none, error, warning, info, got {op.level!r}",
+                op.id,
+            )
+            return
+        self.level = _LEVELS[level]
+
+
+class _CallFailed(Exception):
+    """A service call failed; the text is sent as the ``service_response`` values."""
+
+
+def _topic_name(name: str) -> str:
+    return name if name.startswith("/") else "/" + name
+
+
+def _args_obj(args: Mapping[str, Any] | list[Any] | None, fields: tuple[str, ...] | Any) -> Any:
+    if args is None:
+        return {}
+    if isinstance(args, list):
+        names = tuple(fields)
+        if len(args) > len(names):
+            raise _CallFailed(
+                f"args: {len(args)} values given but the request has {len(names)} fields"
+                + (f" ({', '.join(names)})" if names else "")
+            )
+        return dict(zip(names, args, strict=False))
+    return args
