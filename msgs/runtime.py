@@ -186,9 +186,8 @@ def _nested_conv(type_name: str, wire: bool) -> _Conv:
             return value
         if wire and isinstance(value, Mapping):
             return cls._from_json_at(value, path)
-        raise ValidationError(
-            path, type_name if wire else f"{type_name} instance", _describe(value)
-        )
+        expected = f"{type_name} object" if wire else f"{type_name} instance"
+        raise ValidationError(path, expected, _describe(value))
 
     return conv
 
