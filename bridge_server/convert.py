@@ -80,6 +80,7 @@ from __future__ import annotations
 
 import array
 import binascii
+import importlib
 import json
 import sys
 import threading
@@ -219,7 +220,7 @@ class _Field:
 
     __slots__ = ("bound", "container", "elem", "elem_name", "name", "size", "sub", "subclass")
 
-    def __init__(self, name: str, slot_type: Any) -> None:
+    def __init__(self, name: str, slot_type: Any, owner: type[Any]) -> None:
         self.name = name
         self.container: str | None = None  # None, "array", "bseq", "useq"
         self.size = 0  # fixed size or maximum size
@@ -254,10 +255,7 @@ class _Field:
             if isinstance(t, idl.AbstractWString):
                 self.elem_name = "w" + self.elem_name
         elif isinstance(t, idl.NamespacedType):
-            import importlib
-
-            module = importlib.import_module(".".join(t.namespaces))
-            self.subclass = getattr(module, t.name)
+            self.subclass = _nested_class(t, owner)
             self.elem = "msg"
             self.elem_name = "/".join([*t.namespaces, t.name])
         else:
@@ -282,6 +280,22 @@ class _Field:
         if self.container == "bseq":
             return f"array of at most {self.size} {item}"
         return f"array of {item}"
+
+
+def _nested_class(t: Any, owner: type[Any]) -> type[Any]:
+    """The rclpy class of a nested field type.
+
+    Action parts such as ``Fibonacci_Goal`` are not attributes of the
+    ``pkg.action`` package, only of the private module that also defines the
+    owning class, so look there second.
+    """
+    module = importlib.import_module(".".join(t.namespaces))
+    found = getattr(module, t.name, None)
+    if found is None:
+        found = getattr(sys.modules[owner.__module__], t.name, None)
+    if not isinstance(found, type):
+        raise TypeError(f"cannot find the class of nested type {'/'.join([*t.namespaces, t.name])}")
+    return found
 
 
 # --------------------------------------------------------------------------------------------
@@ -652,7 +666,9 @@ class Converter:
         self.msg_cls = msg_cls
         self.type_name = type_name_of(msg_cls)
         names = list(msg_cls.get_fields_and_field_types().keys())
-        self._fields = [_Field(n, st) for n, st in zip(names, msg_cls.SLOT_TYPES, strict=True)]
+        self._fields = [
+            _Field(n, st, msg_cls) for n, st in zip(names, msg_cls.SLOT_TYPES, strict=True)
+        ]
         self.fields: tuple[str, ...] = tuple(names)
 
     def to_json(self, ros_msg: Any) -> str:
