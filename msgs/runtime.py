@@ -87,6 +87,16 @@ class ValidationError(ValueError):
         where = path or "<message>"
         super().__init__(f"{where}: expected {expected}, {problem}")
 
+    def _under(self, step: str) -> ValidationError:
+        """The same error seen from one level up: ``step`` is ``name`` or ``[i]``."""
+        if not self.path:
+            path = step
+        elif self.path.startswith("["):
+            path = step + self.path
+        else:
+            path = f"{step}.{self.path}"
+        return ValidationError(path, self.expected, self.problem)
+
 
 class UnknownTypeError(LookupError):
     """No generated interface type has this name."""
@@ -107,34 +117,34 @@ def _describe(value: object) -> str:
     return f"got {type(value).__name__} {text}"
 
 
-def _join(path: str, name: str) -> str:
-    return f"{path}.{name}" if path else name
-
-
-# A converter takes (value, path) and returns the Python-side value or raises.
-_Conv = Callable[[Any, str], Any]
+# A converter checks one value and returns its Python-side form. It raises
+# ValidationError with a path relative to the value; callers prefix their step
+# when the error passes through them, so no path is built unless there is an error.
+_Conv = Callable[[Any], Any]
 # An encoder turns a Python-side value into its JSON form.
 _Enc = Callable[[Any], Any]
 
 
-def _bool_conv(value: Any, path: str) -> bool:
-    if isinstance(value, bool):
-        return value
-    raise ValidationError(path, "bool", _describe(value))
+def _bool_conv(value: Any) -> bool:
+    if value is True or value is False:
+        return bool(value)
+    raise ValidationError("", "bool", _describe(value))
 
 
 def _int_conv(idl: str) -> _Conv:
     low, high = _INT_RANGES[idl]
     expected = _MSG_NAMES.get(idl, idl)
 
-    def conv(value: Any, path: str) -> int:
-        if isinstance(value, bool) or not isinstance(value, int):
-            if isinstance(value, float) and value.is_integer():
+    def conv(value: Any) -> int:
+        if type(value) is not int:
+            if (isinstance(value, float) and value.is_integer()) or (
+                isinstance(value, int) and not isinstance(value, bool)
+            ):
                 value = int(value)
             else:
-                raise ValidationError(path, expected, _describe(value))
+                raise ValidationError("", expected, _describe(value))
         if not low <= value <= high:
-            raise ValidationError(path, expected, f"{value} is out of range [{low}, {high}]")
+            raise ValidationError("", expected, f"{value} is out of range [{low}, {high}]")
         return int(value)
 
     return conv
@@ -144,17 +154,19 @@ def _float_conv(idl: str, wire: bool) -> _Conv:
     expected = _MSG_NAMES[idl]
     single = idl == "float"
 
-    def conv(value: Any, path: str) -> float:
+    def conv(value: Any) -> float:
+        if type(value) is float and not single:
+            return value
         if value is None and wire:
             return math.nan
         if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise ValidationError(path, expected, _describe(value))
+            raise ValidationError("", expected, _describe(value))
         try:
             result = float(value)
         except OverflowError:
-            raise ValidationError(path, expected, f"{value} is out of range") from None
+            raise ValidationError("", expected, f"{value} is out of range") from None
         if single and math.isfinite(result) and abs(result) > _FLOAT32_MAX:
-            raise ValidationError(path, expected, f"{value} is out of the float32 range")
+            raise ValidationError("", expected, f"{value} is out of the float32 range")
         return result
 
     return conv
@@ -163,11 +175,11 @@ def _float_conv(idl: str, wire: bool) -> _Conv:
 def _string_conv(base: str, bound: int | None) -> _Conv:
     expected = base if bound is None else f"{base}<={bound}"
 
-    def conv(value: Any, path: str) -> str:
+    def conv(value: Any) -> str:
         if not isinstance(value, str):
-            raise ValidationError(path, expected, _describe(value))
+            raise ValidationError("", expected, _describe(value))
         if bound is not None and len(value) > bound:
-            raise ValidationError(path, expected, f"got a string of length {len(value)}")
+            raise ValidationError("", expected, f"got a string of length {len(value)}")
         return value
 
     return conv
@@ -176,69 +188,116 @@ def _string_conv(base: str, bound: int | None) -> _Conv:
 def _nested_conv(type_name: str, wire: bool) -> _Conv:
     cls_box: list[type[Message]] = []
 
-    def conv(value: Any, path: str) -> Message:
+    def conv(value: Any) -> Message:
         if not cls_box:
             cls_box.append(lookup_message(type_name))
         cls = cls_box[0]
         if isinstance(value, cls):
             if not wire:
-                value._check(path)
+                value.validate()
             return value
         if wire and isinstance(value, Mapping):
-            return cls._from_json_at(value, path)
+            return cls.from_json(value)
         expected = f"{type_name} object" if wire else f"{type_name} instance"
-        raise ValidationError(path, expected, _describe(value))
+        raise ValidationError("", expected, _describe(value))
 
     return conv
 
 
 def _bytes_conv(expected: str, fixed: int | None, bound: int | None, wire: bool) -> _Conv:
-    def conv(value: Any, path: str) -> bytes:
+    def conv(value: Any) -> bytes:
         if isinstance(value, bytes):
             result = value
-        elif isinstance(value, (bytearray, memoryview)):
+        elif isinstance(value, bytearray) or (
+            isinstance(value, memoryview) and value.format in ("B", "c")
+        ):
             result = bytes(value)
         elif wire and isinstance(value, str):
             try:
                 result = base64.b64decode(value, validate=True)
             except (binascii.Error, ValueError):
-                raise ValidationError(path, expected, "got a string that is not base64") from None
-        elif wire and isinstance(value, (list, tuple, array.array)):
-            for i, item in enumerate(value):
-                if isinstance(item, bool) or not isinstance(item, int) or not 0 <= item <= 255:
-                    raise ValidationError(f"{path}[{i}]", "uint8", _describe(item))
-            result = bytes(value)
+                raise ValidationError("", expected, "got a string that is not base64") from None
+        elif wire and isinstance(value, (list, tuple, array.array, memoryview)):
+            if isinstance(value, (array.array, memoryview)):
+                value = value.tolist()
+            try:
+                if not all(type(x) is int for x in value):
+                    raise ValueError
+                result = bytes(value)
+            except ValueError:
+                for i, item in enumerate(value):
+                    if type(item) is not int or not 0 <= item <= 255:
+                        raise ValidationError(f"[{i}]", "uint8", _describe(item)) from None
+                raise
         else:
-            raise ValidationError(path, expected, _describe(value))
-        _check_length(len(result), fixed, bound, path, expected)
+            raise ValidationError("", expected, _describe(value))
+        _check_length(len(result), fixed, bound, expected)
         return result
 
     return conv
 
 
-def _check_length(
-    length: int, fixed: int | None, bound: int | None, path: str, expected: str
-) -> None:
+def _check_length(length: int, fixed: int | None, bound: int | None, expected: str) -> None:
     if fixed is not None and length != fixed:
-        raise ValidationError(path, expected, f"got {length} elements")
+        raise ValidationError("", expected, f"got {length} elements")
     if bound is not None and length > bound:
-        raise ValidationError(path, expected, f"got {length} elements")
+        raise ValidationError("", expected, f"got {length} elements")
+
+
+def _fast_float(values: list[Any] | tuple[Any, ...], single: bool) -> bool:
+    """True if every item is a float (no NaN stand-ins, in range for float32)."""
+    if not all(type(x) is float for x in values):
+        return False
+    if single and values:
+        top = max(map(abs, values))
+        return not (math.isfinite(top) and top > _FLOAT32_MAX)
+    return True
 
 
 def _list_conv(
-    element: _Conv, expected: str, fixed: int | None, bound: int | None, octets: bool, wire: bool
+    element: _Conv,
+    elem_idl: str,
+    expected: str,
+    fixed: int | None,
+    bound: int | None,
+    wire: bool,
 ) -> _Conv:
-    def conv(value: Any, path: str) -> list[Any]:
-        if wire and octets and isinstance(value, (str, bytes, bytearray)):
-            value = _bytes_conv(expected, fixed, bound, wire)(value, path)
-        if isinstance(value, memoryview):
-            value = value.tolist()
-        if not isinstance(value, (list, tuple, array.array, bytes)) or (
-            not wire and not isinstance(value, list)
+    """A list converter with a fast path for homogeneous primitive lists."""
+    octets = elem_idl == "octet"
+    int_range = _INT_RANGES.get(elem_idl)
+    is_float = elem_idl in ("float", "double")
+    single = elem_idl == "float"
+    plain_string = elem_idl in ("string", "wstring")
+
+    def conv(value: Any) -> list[Any]:
+        if type(value) is not list:
+            if not wire:
+                raise ValidationError("", f"{expected} (a list)", _describe(value))
+            if octets and isinstance(value, (str, bytes, bytearray)):
+                value = list(_bytes_conv(expected, fixed, bound, wire)(value))
+            elif isinstance(value, (memoryview, array.array)):
+                value = value.tolist()
+            elif not isinstance(value, tuple):
+                raise ValidationError("", expected, _describe(value))
+        _check_length(len(value), fixed, bound, expected)
+        if int_range is not None:
+            low, high = int_range
+            if all(type(x) is int for x in value) and (
+                not value or (low <= min(value) and max(value) <= high)
+            ):
+                return list(value)
+        elif (is_float and _fast_float(value, single)) or (
+            plain_string and all(type(x) is str for x in value)
         ):
-            raise ValidationError(path, expected, _describe(value))
-        _check_length(len(value), fixed, bound, path, expected)
-        return [element(item, f"{path}[{i}]") for i, item in enumerate(value)]
+            return list(value)
+        out: list[Any] = []
+        append = out.append
+        for i, item in enumerate(value):
+            try:
+                append(element(item))
+            except ValidationError as exc:
+                raise exc._under(f"[{i}]") from None
+        return out
 
     return conv
 
@@ -297,7 +356,7 @@ def _field_conv(idl: str, wire: bool) -> _Conv:
     expected = _expected_name(idl)
     if elem == "uint8":
         return _bytes_conv(expected, fixed, bound, wire)
-    return _list_conv(_scalar_conv(elem, wire), expected, fixed, bound, elem == "octet", wire)
+    return _list_conv(_scalar_conv(elem, wire), elem, expected, fixed, bound, wire)
 
 
 def _float_enc(value: Any) -> Any:
@@ -306,6 +365,8 @@ def _float_enc(value: Any) -> Any:
 
 def _floats_enc(value: Any) -> Any:
     isfinite = math.isfinite
+    if all(map(isfinite, value)):
+        return list(value)
     return [x if isfinite(x) else None for x in value]
 
 
@@ -400,12 +461,8 @@ class Message:
 
         Raises :class:`ValidationError` naming the field path and the expected type.
         """
-        return cls._from_json_at(data, "")
-
-    @classmethod
-    def _from_json_at(cls, data: Mapping[str, Any], path: str) -> Self:
         if not isinstance(data, Mapping):
-            raise ValidationError(path, f"{cls._type} object", _describe(data))
+            raise ValidationError("", f"{cls._type} object", _describe(data))
         decode = _codec(cls).decode
         kwargs: dict[str, Any] = {}
         for key, value in data.items():
@@ -413,11 +470,12 @@ class Message:
             if conv is None:
                 fields = ", ".join(cls._fields_and_types) or "none"
                 raise ValidationError(
-                    _join(path, str(key)),
-                    f"a field of {cls._type} ({fields})",
-                    "got an unknown field",
+                    str(key), f"a field of {cls._type} ({fields})", "got an unknown field"
                 )
-            kwargs[key] = conv(value, _join(path, key))
+            try:
+                kwargs[key] = conv(value)
+            except ValidationError as exc:
+                raise exc._under(key) from None
         factory: Callable[..., Self] = cls
         return factory(**kwargs)
 
@@ -426,11 +484,11 @@ class Message:
 
         Raises :class:`ValidationError` naming the field path and the expected type.
         """
-        self._check("")
-
-    def _check(self, path: str) -> None:
         for name, conv in _codec(type(self)).check:
-            conv(getattr(self, name), _join(path, name))
+            try:
+                conv(getattr(self, name))
+            except ValidationError as exc:
+                raise exc._under(name) from None
 
 
 class Service:

@@ -252,6 +252,17 @@ def test_error_unknown_field_names_path() -> None:
         (UInt8MultiArray, {"data": "not base64!"}, "data", "uint8[]"),
         (UInt8MultiArray, {"data": [1, 256]}, "data[1]", "uint8"),
         (UInt8MultiArray, {"data": 5}, "data", "uint8[]"),
+        (UInt8MultiArray, {"data": [1, True]}, "data[1]", "uint8"),
+        (UInt8MultiArray, {"data": array.array("d", [1.5])}, "data[0]", "uint8"),
+        (UInt8MultiArray, {"data": memoryview(array.array("d", [1.0]))}, "data[0]", "uint8"),
+        (JointState, {"position": [1.0, "x"]}, "position[1]", "float64"),
+        (JointState, {"position": [1.0, True]}, "position[1]", "float64"),
+        (BoundedSequences, {"float32_values": [1.0, 1e39]}, "float32_values[1]", "float32"),
+        (BoundedSequences, {"bool_values": [True, 0]}, "bool_values[1]", "bool"),
+        (BoundedSequences, {"int8_values": [1, -129]}, "int8_values[1]", "int8"),
+        (BoundedSequences, {"string_values": ["a", None]}, "string_values[1]", "string"),
+        (Arrays, {"byte_values": [0, 1, 256]}, "byte_values[2]", "byte"),
+        (Arrays, {"byte_values": "AAAAAA=="}, "byte_values", "byte[3]"),
         (JointState, {"name": "abc"}, "name", "string[]"),
         (JointState, {"header": 5}, "header", "std_msgs/Header object"),
         (
@@ -302,6 +313,11 @@ def test_validate_checks_python_side_values() -> None:
         wrong_nested.validate()
     with pytest.raises(ValidationError, match="data: expected int16, 32768 is out of range"):
         Int16(data=2**15).validate()
+    with pytest.raises(ValidationError, match=r"^position: expected float64\[\] \(a list\)"):
+        JointState(position=(1.0,)).validate()  # type: ignore[arg-type]
+    nested_bad = BoundedSequences(basic_types_values=[BasicTypes(), BasicTypes(int8_value=999)])
+    with pytest.raises(ValidationError, match=r"^basic_types_values\[1\]\.int8_value: "):
+        nested_bad.validate()
 
 
 def test_lookup_accepts_both_spellings() -> None:
