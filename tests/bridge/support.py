@@ -1,0 +1,94 @@
+"""Small helpers for the bridge's integration tests: rclpy callbacks into asyncio."""
+
+from __future__ import annotations
+
+import asyncio
+from typing import Any
+
+from tests.helpers import async_wait_until
+
+
+class Inbox:
+    """Collects values pushed from rclpy threads; ``get`` awaits the next one."""
+
+    def __init__(self) -> None:
+        self.loop = asyncio.get_running_loop()
+        self.queue: asyncio.Queue[Any] = asyncio.Queue()
+
+    def __call__(self, value: Any) -> None:
+        """Push one value (from any thread)."""
+        self.loop.call_soon_threadsafe(self.queue.put_nowait, value)
+
+    async def get(self, timeout: float = 10.0) -> Any:
+        """The next value, waiting at most ``timeout`` seconds."""
+        return await asyncio.wait_for(self.queue.get(), timeout)
+
+
+async def ros_future(future: Any, timeout: float = 10.0) -> Any:
+    """Await an rclpy future (completed on an executor thread) from asyncio."""
+    loop = asyncio.get_running_loop()
+    done: asyncio.Future[Any] = loop.create_future()
+
+    def settle(f: Any) -> None:
+        def set_it() -> None:
+            if not done.done():
+                exc = f.exception()
+                if exc is not None:
+                    done.set_exception(exc)
+                else:
+                    done.set_result(f.result())
+
+        loop.call_soon_threadsafe(set_it)
+
+    future.add_done_callback(settle)
+    return await asyncio.wait_for(done, timeout)
+
+
+async def wait_subscribers(pub: Any, n: int = 1, timeout: float = 10.0) -> None:
+    """Wait until an rclpy publisher is matched by at least ``n`` subscriptions."""
+    await async_wait_until(
+        lambda: pub.get_subscription_count() >= n, timeout, f"{n} subscriber(s) on {pub.topic}"
+    )
+
+
+async def wait_publishers(sub: Any, n: int = 1, timeout: float = 10.0) -> None:
+    """Wait until an rclpy subscription is matched by at least ``n`` publishers."""
+    await async_wait_until(
+        lambda: sub.get_publisher_count() >= n, timeout, f"{n} publisher(s) on {sub.topic_name}"
+    )
+
+
+async def wait_service(client: Any, timeout: float = 10.0) -> None:
+    """Wait until an rclpy client sees its service."""
+    await async_wait_until(client.service_is_ready, timeout, f"service {client.srv_name}")
+
+
+async def roundtrip(ws: Any, id: str = "sync") -> None:
+    """Send a cheap request and await its answer: everything sent before it has been handled."""
+    await ws.send({"op": "call_service", "service": "/rosapi/get_ros_version", "id": id})
+    await ws.expect(op="service_response", id=id)
+
+
+async def bridge_sees_topic(ws: Any, topic: str, timeout: float = 10.0) -> str:
+    """Poll ``/rosapi/topic_type`` until the bridge's graph lists ``topic``; returns its type."""
+    n = 0
+
+    async def known() -> str:
+        nonlocal n
+        n += 1
+        rid = f"tt{n}"
+        await ws.send(
+            {"op": "call_service", "service": "/rosapi/topic_type", "args": {"topic": topic},
+             "id": rid}
+        )
+        reply = await ws.expect(op="service_response", id=rid)
+        return str(reply["values"]["type"])
+
+    deadline = asyncio.get_running_loop().time() + timeout
+    while True:
+        found = await known()
+        if found:
+            return found
+        if asyncio.get_running_loop().time() > deadline:
+            raise AssertionError(f"the bridge never saw {topic}")
+        await asyncio.sleep(0.02)

@@ -1,0 +1,337 @@
+"""Topic ops on the wire: advertise, publish, subscribe, unsubscribe and their options."""
+
+from __future__ import annotations
+
+import json
+import struct
+from typing import Any
+
+import pytest
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.serialization import deserialize_message
+from std_msgs.msg import Int32MultiArray, String, UInt8MultiArray
+
+from tests.bridge.support import (
+    Inbox,
+    bridge_sees_topic,
+    roundtrip,
+    wait_publishers,
+    wait_subscribers,
+)
+from tests.helpers import async_wait_until
+
+pytestmark = pytest.mark.asyncio
+
+
+def _latched() -> QoSProfile:
+    return QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+
+
+async def test_advertise_publish_reaches_ros_subscriber(ws_connect: Any, ros_node: Any, topic: str):
+    """A client's advertise + publish arrives at an rclpy subscriber."""
+    inbox = Inbox()
+    sub = ros_node.create_subscription(String, topic, inbox, 10)
+    ws = await ws_connect()
+    await ws.send({"op": "advertise", "topic": topic, "type": "std_msgs/String"})
+    await wait_publishers(sub)
+    await ws.send({"op": "publish", "topic": topic, "msg": {"data": "hello"}})
+    msg = await inbox.get()
+    assert msg.data == "hello"
+
+
+async def test_publish_without_advertise_uses_graph_type(
+    ws_connect: Any, ros_node: Any, topic: str
+):
+    """Publishing to a topic the graph knows works without advertise (the graph gives the type)."""
+    inbox = Inbox()
+    sub = ros_node.create_subscription(String, topic, inbox, 10)
+    ws = await ws_connect()
+    assert await bridge_sees_topic(ws, topic) == "std_msgs/msg/String"
+    await ws.send({"op": "publish", "topic": topic, "msg": {"data": "auto"}})
+    await wait_publishers(sub)
+    await ws.send({"op": "publish", "topic": topic, "msg": {"data": "auto2"}})
+    got = {(await inbox.get()).data}
+    while "auto2" not in got:
+        got.add((await inbox.get()).data)
+
+
+def _bridge_knows(node: Any, topic: str) -> bool:
+    return any(name == topic for name, _ in node.get_topic_names_and_types())
+
+
+async def test_ros_publisher_reaches_subscriber(ws_connect: Any, ros_node: Any, topic: str):
+    """An rclpy publisher's messages reach a client that subscribed with a type."""
+    pub = ros_node.create_publisher(String, topic, 10)
+    ws = await ws_connect()
+    await ws.send({"op": "subscribe", "topic": topic, "type": "std_msgs/msg/String", "id": "s"})
+    await wait_subscribers(pub)
+    pub.publish(String(data="from ros"))
+    op = await ws.expect(op="publish", topic=topic)
+    assert op == {"op": "publish", "topic": topic, "msg": {"data": "from ros"}}
+
+
+async def test_subscribe_infers_type_from_graph(ws_connect: Any, ros_node: Any, topic: str):
+    """A subscribe without a type uses the type the ROS graph lists for the topic."""
+    pub = ros_node.create_publisher(String, topic, 10)
+    ws = await ws_connect()
+    await bridge_sees_topic(ws, topic)
+    await ws.send({"op": "subscribe", "topic": topic})
+    await wait_subscribers(pub)
+    pub.publish(String(data="typed by graph"))
+    op = await ws.expect(op="publish", topic=topic)
+    assert op["msg"] == {"data": "typed by graph"}
+
+
+async def test_late_publisher_is_heard(ws_connect: Any, ros_node: Any, topic: str):
+    """A subscribe without a type made before any publisher exists works once one appears."""
+    ws = await ws_connect()
+    await ws.send({"op": "subscribe", "topic": topic, "id": "late"})
+    await roundtrip(ws)
+    pub = ros_node.create_publisher(String, topic, 10)
+    await wait_subscribers(pub)
+    pub.publish(String(data="finally"))
+    op = await ws.expect(op="publish", topic=topic)
+    assert op["msg"] == {"data": "finally"}
+
+
+async def test_both_type_spellings(ws_connect: Any, topic: str):
+    """``std_msgs/String`` and ``std_msgs/msg/String`` name the same type on advertise and subscribe."""
+    ws = await ws_connect()
+    await ws.send({"op": "advertise", "topic": topic, "type": "std_msgs/String"})
+    await ws.send({"op": "subscribe", "topic": topic, "type": "std_msgs/msg/String"})
+    await roundtrip(ws)
+    other = await ws_connect()
+    await other.send({"op": "subscribe", "topic": topic, "type": "std_msgs/String"})
+    await roundtrip(other)
+    n = 0
+    while True:  # discovery between the bridge's own publisher and subscription takes a moment
+        n += 1
+        await ws.send({"op": "publish", "topic": topic, "msg": {"data": f"m{n}"}})
+        try:
+            op = await ws.expect(op="publish", topic=topic, timeout=0.3)
+            break
+        except AssertionError:
+            assert n < 30, "the bridge never heard its own publisher"
+    assert op["msg"]["data"].startswith("m")
+    op2 = await other.expect(op="publish", topic=topic)
+    assert op2["msg"]["data"].startswith("m")
+    statuses = [o for o in ws.backlog + other.backlog if o.get("op") == "status"]
+    assert statuses == []
+
+
+async def test_throttle_rate_keeps_latest(ws_connect: Any, ros_node: Any, topic: str):
+    """With throttle_rate, a burst is thinned out and its last message still arrives."""
+    pub = ros_node.create_publisher(String, topic, 100)
+    ws = await ws_connect()
+    await ws.send(
+        {"op": "subscribe", "topic": topic, "type": "std_msgs/String", "throttle_rate": 2000}
+    )
+    await wait_subscribers(pub)
+    for i in range(20):
+        pub.publish(String(data=str(i)))
+    seen = []
+    while not seen or seen[-1] != "19":
+        seen.append((await ws.expect(op="publish", topic=topic))["msg"]["data"])
+    assert len(seen) < 20
+    assert seen[0] == "0"
+
+
+async def test_queue_length_drops_oldest_for_slow_reader(
+    ws_connect: Any, ros_node: Any, topic: str
+):
+    """A client that does not read loses the oldest messages (newest kept) and is told so."""
+    pub = ros_node.create_publisher(String, topic, 100)
+    ws = await ws_connect()
+    await ws.send(
+        {"op": "subscribe", "topic": topic, "type": "std_msgs/String", "queue_length": 2}
+    )
+    await wait_subscribers(pub)
+    # The test client does not read while ~24 MB are published: the socket buffers fill,
+    # then the bridge's two-message queue drops the oldest ones.
+    big = "x" * 400_000
+    count = 60
+    for i in range(count):
+        pub.publish(String(data=f"{i}:{big}"))
+    last = f"{count - 1}:"
+    received: list[int] = []
+    while True:
+        op = await ws.expect(op="publish", topic=topic)
+        received.append(int(op["msg"]["data"].split(":")[0]))
+        if op["msg"]["data"].startswith(last):
+            break
+    assert received == sorted(received)
+    assert len(received) < count
+    warning = await ws.expect(op="status", level="warning")
+    assert topic in warning["msg"] and "dropped" in warning["msg"]
+
+
+async def test_fragment_size_splits_outgoing(ws_connect: Any, ros_node: Any, topic: str):
+    """With fragment_size, a large publish arrives as fragment ops that reassemble into it."""
+    pub = ros_node.create_publisher(String, topic, 10)
+    ws = await ws_connect()
+    await ws.send(
+        {"op": "subscribe", "topic": topic, "type": "std_msgs/String", "fragment_size": 16}
+    )
+    await wait_subscribers(pub)
+    pub.publish(String(data="abcdefghij" * 10))
+    first = await ws.expect(op="fragment")
+    pieces = {first["num"]: first["data"]}
+    while len(pieces) < first["total"]:
+        frag = await ws.expect(op="fragment", id=first["id"])
+        assert len(frag["data"]) <= 16
+        pieces[frag["num"]] = frag["data"]
+    text = "".join(pieces[i] for i in range(first["total"]))
+    assert json.loads(text) == {"op": "publish", "topic": topic, "msg": {"data": "abcdefghij" * 10}}
+
+
+async def test_compression_cbor(ws_connect: Any, ros_node: Any, topic: str):
+    """compression=cbor sends a binary CBOR publish op; int32[] is a typed array (tag 78)."""
+    pub = ros_node.create_publisher(Int32MultiArray, topic, 10)
+    ws = await ws_connect()
+    await ws.send(
+        {"op": "subscribe", "topic": topic, "type": "std_msgs/Int32MultiArray",
+         "compression": "cbor"}
+    )
+    await wait_subscribers(pub)
+    pub.publish(Int32MultiArray(data=[1, -2, 300000]))
+    op = await ws.expect(op="publish", topic=topic)
+    data = op["msg"]["data"]
+    assert data.tag == 78
+    assert list(struct.unpack("<3i", data.value)) == [1, -2, 300000]
+
+
+async def test_compression_cbor_uint8_as_bytes(ws_connect: Any, ros_node: Any, topic: str):
+    """compression=cbor carries uint8[] as a CBOR byte string."""
+    pub = ros_node.create_publisher(UInt8MultiArray, topic, 10)
+    ws = await ws_connect()
+    await ws.send(
+        {"op": "subscribe", "topic": topic, "type": "std_msgs/msg/UInt8MultiArray",
+         "compression": "cbor"}
+    )
+    await wait_subscribers(pub)
+    pub.publish(UInt8MultiArray(data=b"\x00\x01\xff"))
+    op = await ws.expect(op="publish", topic=topic)
+    assert op["msg"]["data"] == b"\x00\x01\xff"
+
+
+async def test_compression_cbor_raw(ws_connect: Any, ros_node: Any, topic: str):
+    """compression=cbor-raw sends the CDR bytes with a receive stamp."""
+    pub = ros_node.create_publisher(String, topic, 10)
+    ws = await ws_connect()
+    await ws.send(
+        {"op": "subscribe", "topic": topic, "type": "std_msgs/String", "compression": "cbor-raw"}
+    )
+    await wait_subscribers(pub)
+    pub.publish(String(data="raw"))
+    op = await ws.expect(op="publish", topic=topic)
+    msg = op["msg"]
+    assert set(msg) == {"secs", "nsecs", "bytes"}
+    assert msg["secs"] > 0 and 0 <= msg["nsecs"] < 1_000_000_000
+    assert deserialize_message(msg["bytes"], String).data == "raw"
+
+
+async def test_merged_subscriptions_deliver_once(ws_connect: Any, ros_node: Any, topic: str):
+    """Several ids on one topic merge: each message arrives once; each id unsubscribes alone."""
+    pub = ros_node.create_publisher(String, topic, 10)
+    ws = await ws_connect()
+    for sid in ("a", "b", "c"):
+        await ws.send({"op": "subscribe", "topic": topic, "type": "std_msgs/String", "id": sid})
+    await wait_subscribers(pub)
+    pub.publish(String(data="one"))
+    pub.publish(String(data="two"))
+    assert (await ws.expect(op="publish"))["msg"]["data"] == "one"
+    assert (await ws.expect(op="publish"))["msg"]["data"] == "two"
+    await ws.send({"op": "unsubscribe", "topic": topic, "id": "a"})
+    await ws.send({"op": "unsubscribe", "topic": topic, "id": "b"})
+    await roundtrip(ws)
+    pub.publish(String(data="three"))
+    assert (await ws.expect(op="publish"))["msg"]["data"] == "three"
+    await ws.send({"op": "unsubscribe", "topic": topic, "id": "c"})
+    await async_wait_until(lambda: pub.get_subscription_count() == 0, what="subscription gone")
+
+
+async def test_unsubscribe_without_id_removes_all(ws_connect: Any, ros_node: Any, topic: str):
+    """An unsubscribe without id ends every subscription of that client to the topic."""
+    pub = ros_node.create_publisher(String, topic, 10)
+    ws = await ws_connect()
+    await ws.send({"op": "subscribe", "topic": topic, "type": "std_msgs/String", "id": 1})
+    await ws.send({"op": "subscribe", "topic": topic, "type": "std_msgs/String", "id": 2})
+    await wait_subscribers(pub)
+    await ws.send({"op": "unsubscribe", "topic": topic})
+    await async_wait_until(lambda: pub.get_subscription_count() == 0, what="subscription gone")
+    await roundtrip(ws)
+    assert [o for o in ws.backlog if o.get("op") == "status"] == []
+
+
+async def test_one_ros_subscription_shared_by_clients(
+    ws_connect: Any, ros_node: Any, topic: str
+):
+    """Two clients on one topic share one ROS subscription and both get every message."""
+    pub = ros_node.create_publisher(String, topic, 10)
+    a = await ws_connect()
+    b = await ws_connect()
+    await a.send({"op": "subscribe", "topic": topic, "type": "std_msgs/String"})
+    await b.send({"op": "subscribe", "topic": topic, "type": "std_msgs/String"})
+    await roundtrip(a)
+    await roundtrip(b)
+    await wait_subscribers(pub)
+    assert pub.get_subscription_count() == 1
+    pub.publish(String(data="both"))
+    assert (await a.expect(op="publish"))["msg"]["data"] == "both"
+    assert (await b.expect(op="publish"))["msg"]["data"] == "both"
+
+
+async def test_latched_topic_reaches_late_subscribers(
+    ws_connect: Any, ros_node: Any, topic: str
+):
+    """A transient-local (latched) message reaches clients that subscribe after it was sent."""
+    pub = ros_node.create_publisher(String, topic, _latched())
+    pub.publish(String(data="map"))
+    first = await ws_connect()
+    await async_wait_until(lambda: _bridge_knows(ros_node, topic), what="topic in the graph")
+    await first.send({"op": "subscribe", "topic": topic, "type": "std_msgs/String"})
+    assert (await first.expect(op="publish", topic=topic))["msg"]["data"] == "map"
+    second = await ws_connect()
+    await second.send({"op": "subscribe", "topic": topic, "type": "std_msgs/String"})
+    assert (await second.expect(op="publish", topic=topic))["msg"]["data"] == "map"
+
+
+async def test_client_latched_advertise(ws_connect: Any, ros_node: Any, topic: str):
+    """advertise with latch=true makes a transient-local publisher a late rclpy subscriber hears."""
+    ws = await ws_connect()
+    await ws.send({"op": "advertise", "topic": topic, "type": "std_msgs/String", "latch": True})
+    await ws.send({"op": "publish", "topic": topic, "msg": {"data": "kept"}})
+    await roundtrip(ws)
+    inbox = Inbox()
+    ros_node.create_subscription(String, topic, inbox, _latched())
+    assert (await inbox.get()).data == "kept"
+
+
+async def test_best_effort_publisher_is_heard(ws_connect: Any, ros_node: Any, topic: str):
+    """A best-effort publisher (sensor style) is matched: the bridge subscribes best effort."""
+    qos = QoSProfile(depth=5, reliability=ReliabilityPolicy.BEST_EFFORT)
+    pub = ros_node.create_publisher(String, topic, qos)
+    ws = await ws_connect()
+    await async_wait_until(lambda: _bridge_knows(ros_node, topic), what="topic in the graph")
+    await ws.send({"op": "subscribe", "topic": topic, "type": "std_msgs/String"})
+    await wait_subscribers(pub)
+    n = 0
+    while True:  # best effort may lose the first messages while matching settles
+        n += 1
+        pub.publish(String(data=f"be{n}"))
+        try:
+            op = await ws.expect(op="publish", topic=topic, timeout=0.5)
+            break
+        except AssertionError:
+            assert n < 20
+    assert op["msg"]["data"].startswith("be")
+
+
+async def test_unadvertise_removes_publisher(ws_connect: Any, ros_node: Any, topic: str):
+    """unadvertise removes the bridge's ROS publisher for the topic."""
+    sub = ros_node.create_subscription(String, topic, lambda m: None, 10)
+    ws = await ws_connect()
+    await ws.send({"op": "advertise", "topic": topic, "type": "std_msgs/String", "id": "adv"})
+    await wait_publishers(sub)
+    await ws.send({"op": "unadvertise", "topic": topic, "id": "adv"})
+    await async_wait_until(lambda: sub.get_publisher_count() == 0, what="publisher gone")
