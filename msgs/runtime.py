@@ -46,6 +46,7 @@ import importlib
 import math
 import re
 from collections.abc import Callable, Mapping
+from pathlib import Path
 from typing import Any, ClassVar, Self
 
 __all__ = [
@@ -54,6 +55,8 @@ __all__ = [
     "Service",
     "UnknownTypeError",
     "ValidationError",
+    "available_packages",
+    "available_types",
     "lookup",
     "lookup_action",
     "lookup_message",
@@ -599,3 +602,37 @@ def lookup_action(type_name: str) -> type[Action]:
     if not (isinstance(found, type) and issubclass(found, Action)):
         raise UnknownTypeError(type_name, f"{found._type} is not an action type")
     return found
+
+
+_MSGS_DIR = Path(__file__).resolve().parent
+
+
+def available_packages() -> list[str]:
+    """The packages with generated types, sorted (no module is imported)."""
+    return sorted(
+        d.name
+        for d in _MSGS_DIR.iterdir()
+        if d.name not in _RESERVED
+        and _NAME_RE.match(f"{d.name}/X")
+        and any((d / f"{kind}.py").is_file() for kind in _KINDS)
+    )
+
+
+def available_types(package: str | None = None) -> list[str]:
+    """Every generated type as ``pkg/kind/Name``, sorted; imports the modules it lists.
+
+    Messages, services and actions are listed; the parts of services and actions
+    (``Name_Request``, ``Name_Goal``, ...) are reached through their namespace.
+    """
+    packages = available_packages() if package is None else [package]
+    names: list[str] = []
+    for pkg in packages:
+        for kind in _KINDS:
+            if not (_MSGS_DIR / pkg / f"{kind}.py").is_file():
+                continue
+            module = importlib.import_module(f"msgs.{pkg}.{kind}")
+            for name in module.__all__:
+                cls = getattr(module, name)
+                if kind == "msg" or issubclass(cls, (Service, Action)):
+                    names.append(cls._type)
+    return sorted(names)

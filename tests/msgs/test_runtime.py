@@ -22,6 +22,8 @@ from msgs.runtime import (
     Service,
     UnknownTypeError,
     ValidationError,
+    available_packages,
+    available_types,
     lookup,
     lookup_action,
     lookup_message,
@@ -380,3 +382,17 @@ def test_generated_packages_import_lazily() -> None:
         [sys.executable, "-c", code], capture_output=True, text=True, check=True, timeout=60
     )
     assert out.stdout.strip() == "['msgs.builtin_interfaces.msg', 'msgs.std_msgs.msg']"
+
+
+def test_available_packages_and_types() -> None:
+    """The listing names every generated package and type, each resolvable by lookup."""
+    packages = available_packages()
+    assert {"std_msgs", "mult_msgs", "test_msgs", "builtin_interfaces"} <= set(packages)
+    assert "interfaces" not in packages and "runtime" not in packages
+    types = available_types("test_msgs")
+    assert "test_msgs/action/Fibonacci" in types and "test_msgs/srv/BasicTypes" in types
+    assert "test_msgs/msg/BasicTypes" in types
+    assert not any(t.endswith(("_Request", "_Goal")) for t in types)
+    assert all(lookup(t)._type == t for t in types)
+    assert available_types("mult_msgs") == ["mult_msgs/srv/MultFloats"]
+    assert len(available_types()) > 150 and "sensor_msgs/msg/Image" in available_types()
