@@ -847,3 +847,24 @@ def test_sweep_covers_the_required_packages() -> None:
     }
     assert required <= pkgs, required - pkgs
     assert len(ALL_CLASSES) > 200
+
+
+def test_cbor_envelope_matches_plain_encoding() -> None:
+    """The cached CBOR envelope gives exactly the bytes of encoding the whole op dict."""
+    from std_msgs.msg import String
+
+    conv = converter_for(String)
+    for topic in ("/a", "/b", "/a"):
+        msg = String(data=f"on {topic}")
+        expected = cbor2.dumps({"op": "publish", "topic": topic, "msg": {"data": f"on {topic}"}})
+        assert encode_publish_cbor(topic, msg, conv) == expected
+
+
+def test_tune_allocator_applies_on_glibc_linux() -> None:
+    """tune_allocator reports success where glibc's mallopt exists (this Linux), else False."""
+    import platform
+
+    result = convert_mod.tune_allocator()
+    assert isinstance(result, bool)
+    if sys.platform.startswith("linux") and platform.libc_ver()[0] == "glibc":
+        assert result is True
