@@ -133,3 +133,27 @@ def test_generated_own_package_imports(tmp_path: Path, monkeypatch: pytest.Monke
     assert response.box.items[0].to_json() == {"name": "x", "v": [0.0, 0.0]}
     assert action.Fill.Feedback(pct=0.5).to_json() == {"pct": 0.5}
     assert action.Fill._type == "demo_pkg/action/Fill"
+
+
+def test_generator_refuses_reserved_package_and_shadowing_field(tmp_path: Path) -> None:
+    """A package named like a msgs module, or a field named like a builtin type, is refused."""
+    (tmp_path / "a" / "runtime" / "msg").mkdir(parents=True)
+    (tmp_path / "a" / "runtime" / "msg" / "T.msg").write_text("int32 x\n")
+    with pytest.raises(ValueError, match="'runtime' clashes"):
+        generator.collect(tmp_path / "share", packages=(), interfaces=tmp_path / "a")
+    (tmp_path / "b" / "ok_pkg" / "msg").mkdir(parents=True)
+    shadow = tmp_path / "b" / "ok_pkg" / "msg" / "T.msg"
+    shadow.write_text("int32 x\nfloat64 float\n")
+    with pytest.raises(DefinitionError, match="field name 'float' is not supported") as info:
+        generator.collect(tmp_path / "share", packages=(), interfaces=tmp_path / "b")
+    assert (info.value.file, info.value.line) == (str(shadow), 2)
+
+
+def test_share_dirs_follow_ament_prefix_path(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """AMENT_PREFIX_PATH entries are searched first, then sys.prefix."""
+    monkeypatch.setenv("AMENT_PREFIX_PATH", f"{tmp_path / 'one'}:{tmp_path / 'two'}")
+    dirs = generator.default_share_dirs()
+    assert dirs[:2] == [tmp_path / "one" / "share", tmp_path / "two" / "share"]
+    assert dirs[-1] == Path(sys.prefix) / "share"
