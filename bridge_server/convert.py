@@ -65,7 +65,8 @@ Conversion rules, JSON -> ROS (``from_obj``)
       and converted; any other float is rejected.
     * Float fields take numbers, ints included; ``null`` means NaN. ``float32``
       values beyond the float32 range (other than infinities) are rejected.
-    * String fields take strings; ``string<=N`` bounds count UTF-8 bytes.
+    * String fields take strings; ``string<=N`` bounds count UTF-8 bytes
+      (``wstring<=N`` bounds count characters).
     * ``uint8``/``char`` arrays take a base64 string, a list of ints 0..255,
       or ``bytes``/``bytearray``. ``byte`` arrays take the same.
     * Arrays take lists (or tuples). Fixed arrays need exactly N items,
@@ -223,7 +224,17 @@ def _describe(v: object) -> str:
 class _Field:
     """One message field, classified once from its rosidl slot type."""
 
-    __slots__ = ("bound", "container", "elem", "elem_name", "name", "size", "sub", "subclass")
+    __slots__ = (
+        "bound",
+        "container",
+        "elem",
+        "elem_name",
+        "name",
+        "size",
+        "sub",
+        "subclass",
+        "wide",
+    )
 
     def __init__(self, name: str, slot_type: Any, owner: type[Any]) -> None:
         self.name = name
@@ -237,6 +248,7 @@ class _Field:
         elif isinstance(t, idl.UnboundedSequence):
             self.container, t = "useq", t.value_type
         self.bound: int | None = None
+        self.wide = False
         self.subclass: type[Any] | None = None
         self.sub: Converter | None = None
         if isinstance(t, idl.BasicType):
@@ -255,6 +267,7 @@ class _Field:
                     raise TypeError(f"unsupported basic type {tn!r} for field {name!r}")
         elif isinstance(t, idl.AbstractString | idl.AbstractWString):
             self.elem = "string"
+            self.wide = isinstance(t, idl.AbstractWString)
             self.bound = getattr(t, "maximum_size", None)
             self.elem_name = f"string<={self.bound}" if self.bound is not None else "string"
             if isinstance(t, idl.AbstractWString):
@@ -378,17 +391,20 @@ def _char_check(v: Any, path: str) -> str:
     raise ConversionError(path, "char (string of one character)", v)
 
 
-def _string_checker(bound: int | None, expected: str) -> Callable[[Any, str], str]:
+def _string_checker(bound: int | None, expected: str, wide: bool) -> Callable[[Any, str], str]:
+    """Strings; ``string<=N`` counts UTF-8 bytes, ``wstring<=N`` counts characters."""
+
     def check(v: Any, path: str) -> str:
         if not isinstance(v, str):
             raise ConversionError(path, expected, v)
         s = str(v)
-        if bound is not None and len(s) > bound // 4 and len(s.encode("utf-8")) > bound:
+        if bound is None or len(s) <= (bound if wide else bound // 4):
+            return s
+        size = len(s) if wide else len(s.encode("utf-8"))
+        if size > bound:
+            unit = "characters" if wide else "bytes"
             raise ConversionError(
-                path,
-                expected,
-                v,
-                f"string of {len(s.encode('utf-8'))} bytes exceeds the bound {expected}",
+                path, expected, v, f"string of {size} {unit} exceeds the bound {expected}"
             )
         return s
 
@@ -404,7 +420,7 @@ def _scalar_checker(f: _Field) -> Callable[[Any, str], Any]:
     if e == "char":
         return _char_check
     if e == "string":
-        return _string_checker(f.bound, f.elem_name)
+        return _string_checker(f.bound, f.elem_name, f.wide)
     if e in ("float32", "float64"):
         return _float_checker(e)
     return _int_checker(e)
@@ -590,10 +606,7 @@ def _array_checker(f: _Field) -> Callable[[Any, str], Any]:
 
 def _floats(lst: list[Any]) -> list[Any]:
     """NaN/Inf -> None in a list of floats (fast when all are finite)."""
-    try:
-        s = sum(lst)
-    except OverflowError:  # pragma: no cover - sum of floats does not raise
-        s = float("nan")
+    s = sum(lst)  # finite unless some item is NaN/Inf (or the sum overflows: then check each)
     if s - s == 0.0:
         return lst
     return [x if x - x == 0.0 else None for x in lst]

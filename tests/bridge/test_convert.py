@@ -291,6 +291,17 @@ def test_bounded_string_limits_count_utf8_bytes() -> None:
         assert "exceeds" in str(err)
 
 
+def test_bounded_wstring_limit_counts_characters() -> None:
+    """wstring<=N bounds count characters, string<=N bounds count UTF-8 bytes."""
+    wcheck = convert_mod._string_checker(3, "wstring<=3", True)
+    assert wcheck("ééé", "w") == "ééé"
+    with pytest.raises(ConversionError, match="4 characters exceeds the bound wstring<=3"):
+        wcheck("abcd", "w")
+    check = convert_mod._string_checker(3, "string<=3", False)
+    with pytest.raises(ConversionError, match="4 bytes exceeds the bound string<=3"):
+        check("éé", "s")
+
+
 def test_string_rejects_other_kinds() -> None:
     """String fields reject numbers, null and arrays."""
     from test_msgs.msg import Strings
@@ -822,6 +833,14 @@ def test_sweep_every_installed_type_round_trips(name: str, cls: type[Any]) -> No
         assert via_cbor(conv, msg) == msg
         assert deserialize(serialize(back), cls) == msg
     assert conv.from_obj({}) == cls()
+    # each field given alone: every other field must come out at its default
+    filled_obj = strict_loads(conv.to_json(_filled(cls)))
+    for field in conv.fields:
+        partial = conv.from_obj({field: filled_obj[field]})
+        expected = cls()
+        setattr(expected, field, getattr(_filled(cls), field))
+        assert partial == expected, field
+        assert deserialize(serialize(partial), cls) == expected
 
 
 def test_sweep_covers_the_required_packages() -> None:
