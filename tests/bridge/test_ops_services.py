@@ -1,0 +1,223 @@
+"""Service ops on the wire: call_service to ROS, client-served services, fragments."""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import threading
+from typing import Any
+
+import pytest
+from mult_msgs.srv import MultFloats
+from rclpy.callback_groups import ReentrantCallbackGroup
+from std_srvs.srv import SetBool
+
+from roslibpy_lite.protocol import split_fragments
+from tests.bridge.support import ros_future, wait_service
+from tests.helpers import async_wait_until
+
+pytestmark = pytest.mark.asyncio
+
+
+def _mult(ros_node: Any, name: str) -> Any:
+    def handle(req: Any, resp: Any) -> Any:
+        resp.result = req.x * req.y
+        return resp
+
+    return ros_node.create_service(MultFloats, name, handle)
+
+
+async def _bridge_sees_service(ws: Any, name: str) -> None:
+    n = 0
+    while True:
+        n += 1
+        await ws.send(
+            {"op": "call_service", "service": "/rosapi/service_type", "args": {"service": name},
+             "id": f"st{n}"}
+        )
+        reply = await ws.expect(op="service_response", id=f"st{n}")
+        if reply["values"]["type"]:
+            return
+        assert n < 500, f"the bridge never saw {name}"
+        await asyncio.sleep(0.02)
+
+
+async def test_call_service_args_object_with_type(ws_connect: Any, ros_node: Any, topic: str):
+    """call_service with an args object and a type reaches an rclpy service and returns its answer."""
+    _mult(ros_node, topic)
+    ws = await ws_connect()
+    await ws.send({"op": "call_service", "service": topic, "type": "mult_msgs/srv/MultFloats",
+                   "args": {"x": 3.0, "y": 4.5}, "id": "c1"})
+    reply = await ws.expect(op="service_response", id="c1")
+    assert reply == {"op": "service_response", "service": topic, "result": True,
+                     "values": {"result": 13.5}, "id": "c1"}
+
+
+async def test_call_service_args_list_without_type(ws_connect: Any, ros_node: Any, topic: str):
+    """call_service with args as a list (zipped onto the request fields) and the type from the graph."""
+    _mult(ros_node, topic)
+    ws = await ws_connect()
+    await _bridge_sees_service(ws, topic)
+    await ws.send({"op": "call_service", "service": topic, "args": [2, 5], "id": 7})
+    reply = await ws.expect(op="service_response", id=7)
+    assert reply["result"] is True
+    assert reply["values"] == {"result": 10.0}
+
+
+async def test_call_service_short_type_spelling(ws_connect: Any, ros_node: Any, topic: str):
+    """The ``pkg/Type`` spelling of a service type works too."""
+    ros_node.create_service(SetBool, topic, lambda req, resp: _set_bool(req, resp))
+    ws = await ws_connect()
+    await ws.send({"op": "call_service", "service": topic, "type": "std_srvs/SetBool",
+                   "args": {"data": True}, "id": "sb"})
+    reply = await ws.expect(op="service_response", id="sb")
+    assert reply["values"] == {"success": True, "message": "was True"}
+
+
+def _set_bool(req: Any, resp: Any) -> Any:
+    resp.success = req.data
+    resp.message = f"was {req.data}"
+    return resp
+
+
+async def test_call_service_timeout(ws_connect: Any, ros_node: Any, topic: str):
+    """A service that does not answer in time fails with result false naming the timeout."""
+    release = threading.Event()
+
+    def slow(req: Any, resp: Any) -> Any:
+        if req.data:  # the first call (data false) answers at once: the bridge has found it
+            release.wait(30)
+        return resp
+
+    ros_node.create_service(SetBool, topic, slow, callback_group=ReentrantCallbackGroup())
+    ws = await ws_connect()
+    try:
+        await ws.send({"op": "call_service", "service": topic, "type": "std_srvs/srv/SetBool",
+                       "args": {"data": False}, "timeout": 30, "id": "warm"})
+        assert (await ws.expect(op="service_response", id="warm"))["result"] is True
+        await ws.send({"op": "call_service", "service": topic, "type": "std_srvs/srv/SetBool",
+                       "args": {"data": True}, "timeout": 0.5, "id": "slow"})
+        reply = await ws.expect(op="service_response", id="slow")
+    finally:
+        release.set()
+    assert reply["result"] is False
+    assert isinstance(reply["values"], str)
+    assert "timed out" in reply["values"] and "0.5" in reply["values"]
+    assert topic in reply["values"]
+
+
+async def test_slow_call_does_not_block_connection(ws_connect: Any, ros_node: Any, topic: str):
+    """A slow call runs concurrently: a later fast call on the same connection answers first."""
+    release = threading.Event()
+
+    def slow(req: Any, resp: Any) -> Any:
+        release.wait(30)
+        resp.success = True
+        return resp
+
+    group = ReentrantCallbackGroup()
+    ros_node.create_service(SetBool, topic + "_slow", slow, callback_group=group)
+    _mult(ros_node, topic + "_fast")
+    ws = await ws_connect()
+    try:
+        await ws.send({"op": "call_service", "service": topic + "_slow",
+                       "type": "std_srvs/SetBool", "id": "slow"})
+        await ws.send({"op": "call_service", "service": topic + "_fast",
+                       "type": "mult_msgs/MultFloats", "args": {"x": 1, "y": 2}, "id": "fast"})
+        first = await ws.recv()
+        assert first["id"] == "fast" and first["values"] == {"result": 2.0}
+    finally:
+        release.set()
+    last = await ws.expect(op="service_response", id="slow")
+    assert last["result"] is True
+
+
+async def test_advertise_service_answers_ros_caller(ws_connect: Any, ros_node: Any, topic: str):
+    """After advertise_service, an rclpy client's call reaches the client and gets its answer."""
+    ws = await ws_connect()
+    await ws.send({"op": "advertise_service", "service": topic, "type": "mult_msgs/MultFloats"})
+    client = ros_node.create_client(MultFloats, topic)
+    await wait_service(client)
+    future = client.call_async(MultFloats.Request(x=6.0, y=7.0))
+    request = await ws.expect(op="call_service", service=topic)
+    assert request["args"] == {"x": 6.0, "y": 7.0}
+    assert request["id"].startswith(f"service_request:{topic}:")
+    await ws.send({"op": "service_response", "service": topic, "id": request["id"],
+                   "result": True, "values": {"result": request["args"]["x"] * 7}})
+    response = await ros_future(future)
+    assert response.result == 42.0
+
+
+async def test_served_service_failure_gives_default_response(
+    ws_connect: Any, ros_node: Any, topic: str
+):
+    """A client answering result false gives the ROS caller a default response (and no hang)."""
+    ws = await ws_connect()
+    await ws.send({"op": "advertise_service", "service": topic, "type": "std_srvs/srv/SetBool"})
+    client = ros_node.create_client(SetBool, topic)
+    await wait_service(client)
+    future = client.call_async(SetBool.Request(data=True))
+    request = await ws.expect(op="call_service", service=topic)
+    await ws.send({"op": "service_response", "service": topic, "id": request["id"],
+                   "result": False, "values": "cannot do that"})
+    response = await ros_future(future)
+    assert response.success is False and response.message == ""
+
+
+async def test_unadvertise_service(ws_connect: Any, ros_node: Any, topic: str):
+    """unadvertise_service fails waiting ROS callers at once and removes the ROS service."""
+    ws = await ws_connect()
+    await ws.send({"op": "advertise_service", "service": topic, "type": "std_srvs/SetBool"})
+    client = ros_node.create_client(SetBool, topic)
+    await wait_service(client)
+    future = client.call_async(SetBool.Request(data=True))
+    await ws.expect(op="call_service", service=topic)
+    await ws.send({"op": "unadvertise_service", "service": topic})
+    response = await ros_future(future)
+    assert response.success is False
+    await async_wait_until(lambda: not client.service_is_ready(), what="service gone")
+
+
+async def test_disconnect_fails_pending_ros_callers(ws_connect: Any, ros_node: Any, topic: str):
+    """When the serving client disconnects, pending ROS callers are answered at once."""
+    ws = await ws_connect()
+    await ws.send({"op": "advertise_service", "service": topic, "type": "std_srvs/SetBool"})
+    client = ros_node.create_client(SetBool, topic)
+    await wait_service(client)
+    future = client.call_async(SetBool.Request(data=True))
+    await ws.expect(op="call_service", service=topic)
+    await ws.close()
+    response = await ros_future(future)
+    assert response.success is False
+    await async_wait_until(lambda: not client.service_is_ready(), what="service gone")
+
+
+async def test_another_client_takes_over_service(ws_connect: Any, ros_node: Any, topic: str):
+    """A second client advertising the same service takes it over; the first is told."""
+    first = await ws_connect()
+    await first.send({"op": "advertise_service", "service": topic, "type": "std_srvs/SetBool"})
+    second = await ws_connect()
+    await second.send({"op": "advertise_service", "service": topic, "type": "std_srvs/SetBool"})
+    note = await first.expect(op="status", level="warning")
+    assert topic in note["msg"]
+    client = ros_node.create_client(SetBool, topic)
+    await wait_service(client)
+    future = client.call_async(SetBool.Request(data=True))
+    request = await second.expect(op="call_service", service=topic)
+    await second.send({"op": "service_response", "service": topic, "id": request["id"],
+                       "result": True, "values": {"success": True, "message": "second"}})
+    assert (await ros_future(future)).message == "second"
+
+
+async def test_fragmented_call_service(ws_connect: Any, ros_node: Any, topic: str):
+    """A call_service op sent as fragment ops is reassembled and carried out."""
+    _mult(ros_node, topic)
+    ws = await ws_connect()
+    text = json.dumps({"op": "call_service", "service": topic, "type": "mult_msgs/MultFloats",
+                       "args": {"x": 1.5, "y": 2.0}, "id": "frag"})
+    pieces = split_fragments(text, 10, "f1")
+    assert len(pieces) > 3
+    for piece in reversed(pieces):  # any order
+        await ws.send_raw(piece)
+    reply = await ws.expect(op="service_response", id="frag")
+    assert reply["values"] == {"result": 3.0}
