@@ -201,8 +201,9 @@ def _describe(v: object) -> str:
     if v is False:
         return "false"
     if isinstance(v, int):
-        s = str(v) if abs(v) < 10**30 else f"{str(v)[:12]}... ({len(str(v))} digits)"
-        return f"integer {s}"
+        if abs(v) < 10**30:
+            return f"integer {v}"
+        return f"integer of {v.bit_length()} bits"
     if isinstance(v, float):
         return f"number {v!r}"
     if isinstance(v, str):
@@ -278,11 +279,6 @@ class _Field:
             self.elem_name = "/".join([*t.namespaces, t.name])
         else:
             raise TypeError(f"unsupported slot type {t!r} for field {name!r}")
-
-    @property
-    def binary(self) -> bool:
-        """uint8/char (and byte) arrays: base64 in JSON, byte strings in CBOR."""
-        return self.container is not None and self.elem in ("uint8", "octet")
 
     def expected(self) -> str:
         """Human name of the expected JSON value."""
@@ -435,14 +431,9 @@ def _elem_path(path: str, i: int) -> str:
 
 
 def _check_len(f: _Field, n: int, path: str, v: object) -> None:
-    if f.container == "array" and n != f.size:
-        raise ConversionError(
-            path, f.expected(), v, f"expected {f.expected()}, got {n} items"
-        )
-    if f.container == "bseq" and n > f.size:
-        raise ConversionError(
-            path, f.expected(), v, f"expected {f.expected()}, got {n} items"
-        )
+    """Fixed arrays need exactly ``size`` items, bounded sequences at most ``size``."""
+    if (f.container == "array" and n != f.size) or (f.container == "bseq" and n > f.size):
+        raise ConversionError(path, f.expected(), v, f"expected {f.expected()}, got {n} items")
 
 
 def _decode_binary(f: _Field, v: Any, path: str) -> bytes:
@@ -467,7 +458,9 @@ def _decode_binary(f: _Field, v: Any, path: str) -> bytes:
         if not ok:
             for i, x in enumerate(v):
                 if type(x) is not int or not 0 <= x <= 255:
-                    raise ConversionError(_elem_path(path, i), "uint8 (integer 0..255)", x)
+                    raise ConversionError(
+                        _elem_path(path, i), f"{f.elem_name} (integer 0..255)", x
+                    )
             data = bytes(v)  # pragma: no cover - unreachable: some item was bad
     elif isinstance(v, bytes | bytearray | memoryview):
         data = bytes(v)
