@@ -83,10 +83,12 @@ def _set_bool(req: Any, resp: Any) -> Any:
 async def test_call_service_timeout(ws_connect: Any, ros_node: Any, topic: str):
     """A service that does not answer in time fails with result false naming the timeout."""
     release = threading.Event()
+    finished = threading.Event()
 
     def slow(req: Any, resp: Any) -> Any:
         if req.data:  # the first call (data false) answers at once: the bridge has found it
             release.wait(30)
+            finished.set()
         return resp
 
     ros_node.create_service(SetBool, topic, slow, callback_group=ReentrantCallbackGroup())
@@ -100,6 +102,7 @@ async def test_call_service_timeout(ws_connect: Any, ros_node: Any, topic: str):
         reply = await ws.expect(op="service_response", id="slow")
     finally:
         release.set()
+        await asyncio.to_thread(finished.wait, 10)  # let the callback answer before teardown
     assert reply["result"] is False
     assert isinstance(reply["values"], str)
     assert "timed out" in reply["values"] and "0.5" in reply["values"]
@@ -109,9 +112,11 @@ async def test_call_service_timeout(ws_connect: Any, ros_node: Any, topic: str):
 async def test_slow_call_does_not_block_connection(ws_connect: Any, ros_node: Any, topic: str):
     """A slow call runs concurrently: a later fast call on the same connection answers first."""
     release = threading.Event()
+    finished = threading.Event()
 
     def slow(req: Any, resp: Any) -> Any:
         release.wait(30)
+        finished.set()
         resp.success = True
         return resp
 
@@ -128,6 +133,7 @@ async def test_slow_call_does_not_block_connection(ws_connect: Any, ros_node: An
         assert first["id"] == "fast" and first["values"] == {"result": 2.0}
     finally:
         release.set()
+        await asyncio.to_thread(finished.wait, 10)  # let the callback answer before teardown
     last = await ws.expect(op="service_response", id="slow")
     assert last["result"] is True
 

@@ -1,0 +1,223 @@
+"""Bad input of every kind: the sender is told what was wrong and where; everyone keeps working.
+
+Each test sends one kind of bad input, checks the error reply, then checks that
+the same connection still works and that a second client was not disturbed.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import threading
+from typing import Any
+
+import pytest
+from rclpy.callback_groups import ReentrantCallbackGroup
+from std_msgs.msg import String
+from std_srvs.srv import SetBool
+
+from tests.bridge.support import bridge_sees_topic, roundtrip
+
+pytestmark = pytest.mark.asyncio
+
+
+async def _pair(ws_connect: Any) -> tuple[Any, Any]:
+    ws = await ws_connect()
+    other = await ws_connect()
+    await roundtrip(other, "before")
+    return ws, other
+
+
+async def _still_working(ws: Any, other: Any, topic: str) -> None:
+    """The sender's connection and a bystander's both still work (a publish/subscribe round trip)."""
+    await roundtrip(ws, "after")
+    await roundtrip(other, "after-other")
+    probe = topic + "_probe"
+    await other.send({"op": "subscribe", "topic": probe, "type": "std_msgs/String"})
+    await ws.send({"op": "advertise", "topic": probe, "type": "std_msgs/String"})
+    await roundtrip(other, "subscribed")
+    for n in range(200):  # until the bridge's publisher and subscription have matched
+        await ws.send({"op": "publish", "topic": probe, "msg": {"data": f"ok{n}"}})
+        try:
+            op = await other.expect(op="publish", topic=probe, timeout=0.2)
+            break
+        except AssertionError:
+            continue
+    else:
+        raise AssertionError("publish/subscribe did not work after the bad input")
+    assert op["msg"]["data"].startswith("ok")
+    assert [o for o in other.backlog if o.get("op") == "status"] == []
+
+
+async def _error(ws: Any, **fields: Any) -> str:
+    status = await ws.expect(op="status", level="error", **fields)
+    return str(status["msg"])
+
+
+async def test_malformed_json(ws_connect: Any, topic: str):
+    """A text frame that is not JSON gets an error naming the position of the fault."""
+    ws, other = await _pair(ws_connect)
+    await ws.send_raw('{"op": "publish", "topic": ')
+    msg = await _error(ws)
+    assert "malformed JSON" in msg and "column" in msg
+    await _still_working(ws, other, topic)
+
+
+async def test_invalid_binary_frame(ws_connect: Any, topic: str):
+    """A binary frame that is not valid CBOR gets an error saying so."""
+    ws, other = await _pair(ws_connect)
+    await ws.send_raw(b"\xff\xff\x00\x1c")
+    msg = await _error(ws)
+    assert "CBOR" in msg
+    await _still_working(ws, other, topic)
+
+
+async def test_unknown_op(ws_connect: Any, topic: str):
+    """An unknown op is named in the error, which carries the request id."""
+    ws, other = await _pair(ws_connect)
+    await ws.send({"op": "frobnicate", "id": "u1"})
+    msg = await _error(ws, id="u1")
+    assert "unknown op 'frobnicate'" in msg
+    await _still_working(ws, other, topic)
+
+
+async def test_missing_field(ws_connect: Any, topic: str):
+    """An op without a required field gets an error naming the op and the field."""
+    ws, other = await _pair(ws_connect)
+    await ws.send({"op": "subscribe", "id": "m1"})
+    msg = await _error(ws, id="m1")
+    assert "subscribe" in msg and "'topic'" in msg
+    await _still_working(ws, other, topic)
+
+
+async def test_ill_typed_field(ws_connect: Any, topic: str):
+    """A field of the wrong kind is named with what was expected."""
+    ws, other = await _pair(ws_connect)
+    await ws.send({"op": "subscribe", "topic": topic, "throttle_rate": "fast", "id": "i1"})
+    msg = await _error(ws, id="i1")
+    assert "throttle_rate" in msg and "milliseconds" in msg
+    await _still_working(ws, other, topic)
+
+
+async def test_unknown_type(ws_connect: Any, topic: str):
+    """Advertising a type no installed package provides names the type."""
+    ws, other = await _pair(ws_connect)
+    await ws.send({"op": "advertise", "topic": topic, "type": "no_such_pkg/Thing", "id": "t1"})
+    msg = await _error(ws, id="t1")
+    assert "advertise" in msg and "unknown type" in msg and "no_such_pkg/Thing" in msg
+    await _still_working(ws, other, topic)
+
+
+async def test_malformed_type_string(ws_connect: Any, topic: str):
+    """A type string of the wrong shape is quoted in the error."""
+    ws, other = await _pair(ws_connect)
+    await ws.send({"op": "advertise", "topic": topic, "type": "std_msgs", "id": "t2"})
+    msg = await _error(ws, id="t2")
+    assert "invalid type name 'std_msgs'" in msg
+    await _still_working(ws, other, topic)
+
+
+async def test_publish_field_the_type_lacks(ws_connect: Any, topic: str):
+    """A published message with a field its type lacks names the field path."""
+    ws, other = await _pair(ws_connect)
+    await ws.send({"op": "advertise", "topic": topic, "type": "geometry_msgs/Pose"})
+    await ws.send({"op": "publish", "topic": topic, "id": "p1",
+                   "msg": {"position": {"x": 1.0, "w": 2.0}}})
+    msg = await _error(ws, id="p1")
+    assert "msg.position.w" in msg
+    await _still_working(ws, other, topic)
+
+
+async def test_publish_wrong_value_kind(ws_connect: Any, topic: str):
+    """A value of the wrong kind names the field path and the expected type."""
+    ws, other = await _pair(ws_connect)
+    await ws.send({"op": "advertise", "topic": topic, "type": "std_msgs/String"})
+    await ws.send({"op": "publish", "topic": topic, "id": "p2", "msg": {"data": 5}})
+    msg = await _error(ws, id="p2")
+    assert "msg.data" in msg and "string" in msg
+    await _still_working(ws, other, topic)
+
+
+async def test_publish_out_of_range_value(ws_connect: Any, topic: str):
+    """An integer outside its field's range names the field path and the type."""
+    ws, other = await _pair(ws_connect)
+    await ws.send({"op": "advertise", "topic": topic, "type": "std_msgs/msg/UInt8"})
+    await ws.send({"op": "publish", "topic": topic, "id": "p3", "msg": {"data": 300}})
+    msg = await _error(ws, id="p3")
+    assert "msg.data" in msg and "uint8" in msg
+    await _still_working(ws, other, topic)
+
+
+async def test_advertise_conflicting_type(ws_connect: Any, ros_node: Any, topic: str):
+    """Advertising a topic with another type than the graph's names both types."""
+    ros_node.create_publisher(String, topic, 10)
+    ws, other = await _pair(ws_connect)
+    await bridge_sees_topic(ws, topic)
+    await ws.send({"op": "advertise", "topic": topic, "type": "std_msgs/Int32", "id": "a1"})
+    msg = await _error(ws, id="a1")
+    assert "std_msgs/msg/String" in msg and "std_msgs/msg/Int32" in msg and topic in msg
+    await _still_working(ws, other, topic)
+
+
+async def test_call_missing_service(ws_connect: Any, topic: str):
+    """A call to a service that does not exist fails with result false naming the service."""
+    ws, other = await _pair(ws_connect)
+    await ws.send({"op": "call_service", "service": topic, "id": "c1"})
+    reply = await ws.expect(op="service_response", id="c1")
+    assert reply["result"] is False
+    assert topic in reply["values"] and "does not exist" in reply["values"]
+    await _still_working(ws, other, topic)
+
+
+async def test_service_timeout(ws_connect: Any, ros_node: Any, topic: str):
+    """A service that never answers fails after the timeout, saying how long was waited."""
+    release = threading.Event()
+    finished = threading.Event()
+
+    def stuck(req: Any, resp: Any) -> Any:
+        if req.data:
+            release.wait(30)
+            finished.set()
+        return resp
+
+    ros_node.create_service(SetBool, topic, stuck, callback_group=ReentrantCallbackGroup())
+    ws, other = await _pair(ws_connect)
+    try:
+        await ws.send({"op": "call_service", "service": topic, "type": "std_srvs/SetBool",
+                       "args": {"data": False}, "timeout": 30, "id": "warm"})
+        await ws.expect(op="service_response", id="warm")
+        await ws.send({"op": "call_service", "service": topic, "type": "std_srvs/SetBool",
+                       "args": {"data": True}, "timeout": 0.3, "id": "c2"})
+        reply = await ws.expect(op="service_response", id="c2")
+        await _still_working(ws, other, topic)
+    finally:
+        release.set()
+        await asyncio.to_thread(finished.wait, 10)  # let the callback answer before teardown
+    assert reply["result"] is False and "timed out after 0.3 s" in reply["values"]
+
+
+async def test_subscribe_unknown_type(ws_connect: Any, topic: str):
+    """A subscribe that cannot be made (unknown type) is answered with an error and its id."""
+    ws, other = await _pair(ws_connect)
+    await ws.send({"op": "subscribe", "topic": topic, "type": "std_msgs/NoSuchThing", "id": "s1"})
+    msg = await _error(ws, id="s1")
+    assert "subscribe" in msg and "std_msgs/NoSuchThing" in msg
+    await _still_working(ws, other, topic)
+
+
+async def test_fragment_bad_num_total(ws_connect: Any, topic: str):
+    """A fragment whose num is not below total names both fields."""
+    ws, other = await _pair(ws_connect)
+    await ws.send({"op": "fragment", "id": "f1", "data": "{}", "num": 5, "total": 2})
+    msg = await _error(ws, id="f1")
+    assert "'num'" in msg and "'total'" in msg
+    await _still_working(ws, other, topic)
+
+
+async def test_action_ops_not_supported(ws_connect: Any, topic: str):
+    """Action ops are answered with an error naming the op (actions come later)."""
+    ws, other = await _pair(ws_connect)
+    await ws.send({"op": "send_action_goal", "action": topic, "id": "g1",
+                   "action_type": "test_msgs/action/Fibonacci", "args": {"order": 3}})
+    msg = await _error(ws, id="g1")
+    assert "send_action_goal" in msg and "not supported" in msg
+    await _still_working(ws, other, topic)
