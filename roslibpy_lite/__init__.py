@@ -1,8 +1,60 @@
 """roslibpy_lite: a fast, dependable asyncio client for ROS 2 over rosbridge v2.
 
-Needs only ``websockets``; no ROS installation.
+Needs only ``websockets``; no ROS installation::
+
+    import roslibpy_lite
+
+    async with roslibpy_lite.connect("ws://robot:9090") as ros:
+        pub = await ros.advertise("/chatter", "std_msgs/msg/String")
+        await pub.publish({"data": "hello"})
+
+:class:`~roslibpy_lite.mock.MockRos` offers the same API in memory for tests;
+both satisfy the :class:`~roslibpy_lite.api.Ros` protocol.
 """
 
 from __future__ import annotations
 
+from ._backoff import Backoff
+from .api import ConnectionState, Ros
+from .client import Client, Connector, connect
+from .exceptions import (
+    ConnectError,
+    ConnectionClosed,
+    Disconnected,
+    InvalidMessageError,
+    RemoteError,
+    RosLibError,
+    RosTimeoutError,
+    ServiceError,
+    StatusError,
+    UsageError,
+)
+from .handles import Publisher, ServiceServer, StateWatcher, Subscription
+from .mock import MockRos
+
 __version__ = "0.1.0"
+
+__all__ = [
+    "Backoff",
+    "Client",
+    "ConnectError",
+    "ConnectionClosed",
+    "ConnectionState",
+    "Connector",
+    "Disconnected",
+    "InvalidMessageError",
+    "MockRos",
+    "Publisher",
+    "RemoteError",
+    "Ros",
+    "RosLibError",
+    "RosTimeoutError",
+    "ServiceError",
+    "ServiceServer",
+    "StateWatcher",
+    "StatusError",
+    "Subscription",
+    "UsageError",
+    "__version__",
+    "connect",
+]

@@ -7,12 +7,15 @@ The tree::
     │   ├── LocalProtocolError       we were about to send something invalid (our misuse)
     │   └── RemoteProtocolError      the peer sent something invalid
     ├── UsageError                   local misuse of the API (closed handle, bad argument)
+    │   └── InvalidMessageError      a message does not fit its type (names the field path)
     ├── RemoteError                  the bridge or ROS reported a failure
     │   ├── ServiceError             a service call answered ``result: false``
     │   └── StatusError              the bridge sent a ``status`` error about our request
     ├── RosTimeoutError              no answer in time (also a ``TimeoutError``)
-    └── ConnectionClosed             the connection is gone
-        └── Disconnected             the connection dropped while this request was in flight
+    └── ConnectionClosed             the connection is gone (the client was closed)
+        ├── ConnectError             the connection could not be opened
+        └── Disconnected             the connection dropped while this request was in flight,
+                                     or a publish found it down and buffering is off
 
 Remote failures (the other side said no) are kept apart from local misuse
 (we asked for something invalid), as h11 does. Exceptions from websockets and
@@ -22,8 +25,10 @@ the operating system are translated into this tree at the client's edge only.
 from __future__ import annotations
 
 __all__ = [
+    "ConnectError",
     "ConnectionClosed",
     "Disconnected",
+    "InvalidMessageError",
     "LocalProtocolError",
     "ProtocolError",
     "RemoteError",
@@ -67,6 +72,18 @@ class UsageError(RosLibError):
     """The API was used in a way it does not allow (a local mistake)."""
 
 
+class InvalidMessageError(UsageError, ValueError):
+    """A message (or service request/response) does not fit its type.
+
+    ``path`` names the field (``pose.position.x``; empty for the message
+    itself) when it is known.
+    """
+
+    def __init__(self, message: str, *, path: str = "") -> None:
+        super().__init__(message)
+        self.path = path
+
+
 class RemoteError(RosLibError):
     """The bridge, or a ROS node behind it, reported a failure."""
 
@@ -97,5 +114,13 @@ class ConnectionClosed(RosLibError):
     """The connection to the bridge is closed."""
 
 
+class ConnectError(ConnectionClosed):
+    """The connection could not be opened (refused, unreachable, handshake failed)."""
+
+
 class Disconnected(ConnectionClosed):
-    """The connection dropped while this request was in flight."""
+    """The connection dropped while this request was in flight.
+
+    Also raised by a publish while the connection is down when the client
+    was made with ``offline_buffer=0`` (no buffering).
+    """

@@ -1,0 +1,210 @@
+"""The contract every backend keeps: :class:`Ros`, a ``typing.Protocol``.
+
+Write robot code against :class:`Ros`; run it on the websocket
+:class:`~roslibpy_lite.client.Client` in production and on
+:class:`~roslibpy_lite.mock.MockRos` in unit tests. Both return the same
+handle classes (:class:`~roslibpy_lite.handles.Publisher`,
+:class:`~roslibpy_lite.handles.Subscription`,
+:class:`~roslibpy_lite.handles.ServiceServer`), and one conformance suite
+(``tests/conformance``) runs the same assertions against both.
+
+Message types are given either as a type string (``"std_msgs/msg/String"``
+or ``"std_msgs/String"``; messages are then plain dicts in the rosbridge JSON
+form) or as a generated class from :mod:`msgs` (``String``; messages are then
+instances, validated before they are sent).
+"""
+
+from __future__ import annotations
+
+import enum
+from collections.abc import Awaitable, Callable, Mapping
+from typing import TYPE_CHECKING, Any, Protocol, TypeAlias, TypeVar, overload, runtime_checkable
+
+if TYPE_CHECKING:
+    from types import TracebackType
+
+    from msgs.runtime import Message, Service
+
+    from .handles import Publisher, ServiceServer, StateWatcher, Subscription
+
+__all__ = [
+    "DEFAULT_CALL_TIMEOUT",
+    "ConnectionState",
+    "MessageCallback",
+    "Ros",
+    "ServiceHandler",
+    "StateCallback",
+]
+
+M = TypeVar("M", bound="Message")
+T_contra = TypeVar("T_contra", contravariant=True)
+
+DEFAULT_CALL_TIMEOUT = 10.0
+"""Seconds a service call waits for its answer unless told otherwise."""
+
+
+class ConnectionState(enum.Enum):
+    """Where a connection is in its life.
+
+    ``CONNECTING`` (first attempt) → ``CONNECTED`` ⇄ ``RECONNECTING`` → ``CLOSED``.
+    ``CLOSED`` is final: the client was closed, or the connection dropped and
+    reconnecting is off.
+    """
+
+    CONNECTING = "connecting"
+    CONNECTED = "connected"
+    RECONNECTING = "reconnecting"
+    CLOSED = "closed"
+
+
+MessageCallback: TypeAlias = Callable[[Any], "Awaitable[None] | None"]
+"""A subscription callback: ``fn(msg)``, sync or ``async``."""
+
+ServiceHandler: TypeAlias = Callable[[Any], Any]
+"""A service handler: ``fn(request) -> response``, sync or ``async``.
+
+It receives the request (a dict, or the ``Request`` instance for a typed
+service) and returns the response (a dict, a ``Response`` instance, or
+``None`` for an empty/default response). If it raises, the caller gets
+``result: false`` with the error's text.
+"""
+
+StateCallback: TypeAlias = Callable[[ConnectionState], None]
+"""Called with each new :class:`ConnectionState`."""
+
+
+@runtime_checkable
+class Ros(Protocol):
+    """What user code may rely on, whatever the backend."""
+
+    @property
+    def state(self) -> ConnectionState:
+        """The current connection state."""
+        ...
+
+    async def wait_connected(self, timeout: float | None = None) -> None:
+        """Return once the state is ``CONNECTED``.
+
+        Raises:
+            RosTimeoutError: not connected within ``timeout`` seconds.
+            ConnectionClosed: the state is (or becomes) ``CLOSED``.
+        """
+        ...
+
+    def on_state_change(self, callback: StateCallback) -> Callable[[], None]:
+        """Call ``callback(state)`` on every change; returns a function that removes it."""
+        ...
+
+    def state_changes(self) -> StateWatcher:
+        """An async iterator of the state changes from now on (ends after ``CLOSED``)."""
+        ...
+
+    @overload
+    def advertise(
+        self, topic: str, type: str, *, latch: bool = False, queue_size: int = 100
+    ) -> Publisher[dict[str, Any]]: ...
+
+    @overload
+    def advertise(
+        self, topic: str, type: type[M], *, latch: bool = False, queue_size: int = 100
+    ) -> Publisher[M]: ...
+
+    def advertise(
+        self, topic: str, type: str | type[Message], *, latch: bool = False, queue_size: int = 100
+    ) -> Publisher[Any]:
+        """Announce a publisher; use as ``await ros.advertise(...)`` or ``async with``."""
+        ...
+
+    @overload
+    def subscribe(
+        self,
+        topic: str,
+        type: str,
+        callback: MessageCallback | None = None,
+        *,
+        throttle_rate: int = 0,
+        queue_length: int = 0,
+        compression: str = "none",
+        buffer_size: int = 100,
+    ) -> Subscription[dict[str, Any]]: ...
+
+    @overload
+    def subscribe(
+        self,
+        topic: str,
+        type: type[M],
+        callback: MessageCallback | None = None,
+        *,
+        throttle_rate: int = 0,
+        queue_length: int = 0,
+        compression: str = "none",
+        buffer_size: int = 100,
+    ) -> Subscription[M]: ...
+
+    def subscribe(
+        self,
+        topic: str,
+        type: str | type[Message],
+        callback: MessageCallback | None = None,
+        *,
+        throttle_rate: int = 0,
+        queue_length: int = 0,
+        compression: str = "none",
+        buffer_size: int = 100,
+    ) -> Subscription[Any]:
+        """Subscribe; iterate the handle (``async for``) or pass ``callback``."""
+        ...
+
+    @overload
+    async def call_service(
+        self,
+        service: str,
+        type: str,
+        args: Mapping[str, Any] | None = None,
+        *,
+        timeout: float | None = DEFAULT_CALL_TIMEOUT,
+    ) -> dict[str, Any]: ...
+
+    @overload
+    async def call_service(
+        self,
+        service: str,
+        type: type[Service],
+        args: Mapping[str, Any] | Message | None = None,
+        *,
+        timeout: float | None = DEFAULT_CALL_TIMEOUT,
+    ) -> Any: ...
+
+    async def call_service(
+        self,
+        service: str,
+        type: str | type[Service],
+        args: Mapping[str, Any] | Message | None = None,
+        *,
+        timeout: float | None = DEFAULT_CALL_TIMEOUT,
+    ) -> Any:
+        """Call a service; returns the response (dict, or ``Response`` for a typed service)."""
+        ...
+
+    def advertise_service(
+        self, service: str, type: str | type[Service], handler: ServiceHandler
+    ) -> ServiceServer:
+        """Serve a service with ``handler``; use as ``await`` or ``async with``."""
+        ...
+
+    async def close(self) -> None:
+        """Close everything; the state becomes ``CLOSED``."""
+        ...
+
+    async def __aenter__(self) -> Ros:
+        """Use as ``async with``; closes on exit."""
+        ...
+
+    async def __aexit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        """Close."""
+        ...

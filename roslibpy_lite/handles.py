@@ -1,0 +1,766 @@
+"""The handles a backend returns: publishers, subscriptions, service servers.
+
+The same classes serve the websocket :class:`~roslibpy_lite.client.Client`
+and :class:`~roslibpy_lite.mock.MockRos`; a backend only supplies the hooks
+of :class:`Backend`. Every handle
+
+- is awaitable (``pub = await ros.advertise(...)``: returns once the
+  request has been handed to the connection) and an async context manager
+  (``async with ros.subscribe(...) as sub:``; closes on exit);
+- closes with ``await handle.close()`` (or its specific name:
+  ``unadvertise``, ``unsubscribe``); closing twice is harmless, using a closed
+  handle raises :class:`~roslibpy_lite.exceptions.UsageError`.
+
+Subscriptions deliver to callbacks or to their own bounded buffer:
+
+- sync callbacks run in the receive path, in order, with no task per message;
+- async callbacks run one at a time, in order, in one task per subscription,
+  fed from the buffer;
+- with no callback, messages wait in the buffer for ``async for`` /
+  :meth:`Subscription.get`.
+
+The buffer keeps at most ``buffer_size`` messages: when full, the OLDEST is
+dropped and :attr:`Subscription.dropped` counts it.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import inspect
+import logging
+from collections import deque
+from collections.abc import Awaitable, Callable, Coroutine, Generator, Mapping
+from typing import TYPE_CHECKING, Any, Generic, Protocol, Self, TypeVar, cast
+
+from msgs.runtime import Message, Service, UnknownTypeError, ValidationError
+from msgs.runtime import lookup as _lookup
+
+from .api import ConnectionState, MessageCallback, ServiceHandler, StateCallback
+from .exceptions import (
+    ConnectionClosed,
+    InvalidMessageError,
+    RosLibError,
+    RosTimeoutError,
+    UsageError,
+)
+
+if TYPE_CHECKING:
+    from types import TracebackType
+
+__all__ = [
+    "Backend",
+    "Publisher",
+    "ServiceServer",
+    "StateHub",
+    "StateWatcher",
+    "Subscription",
+    "canonical_type",
+    "message_type",
+    "service_type",
+]
+
+log = logging.getLogger("roslibpy_lite.client")
+
+T = TypeVar("T")
+_SKIP: Any = object()
+
+
+# --- type names ------------------------------------------------------------------------------
+
+def canonical_type(name: str, kind: str) -> str:
+    """``pkg/Name`` → ``pkg/<kind>/Name``; names already in that form are returned as they are."""
+    parts = name.split("/")
+    if len(parts) == 2:
+        return f"{parts[0]}/{kind}/{parts[1]}"
+    return name
+
+
+def _check_type_string(type_: str, kind: str) -> None:
+    parts = type_.split("/")
+    if not (2 <= len(parts) <= 3 and all(parts)) or (len(parts) == 3 and parts[1] != kind):
+        raise UsageError(
+            f"type {type_!r} is not a {kind} type name: expected 'package/Name' or "
+            f"'package/{kind}/Name'"
+        )
+
+
+def message_type(type_: str | type[Message]) -> tuple[str, type[Message] | None]:
+    """The canonical type name and (for a generated class) the class of a message type."""
+    if isinstance(type_, str):
+        _check_type_string(type_, "msg")
+        return canonical_type(type_, "msg"), None
+    if isinstance(type_, type) and issubclass(type_, Message):
+        return type_._type, type_
+    raise UsageError(f"a message type must be a type string or a msgs class, got {type_!r}")
+
+
+def service_type(type_: str | type[Service]) -> tuple[str, type[Service] | None]:
+    """The canonical type name and (for a generated class) the class of a service type."""
+    if isinstance(type_, str):
+        _check_type_string(type_, "srv")
+        return canonical_type(type_, "srv"), None
+    if isinstance(type_, type) and issubclass(type_, Service):
+        return type_._type, type_
+    raise UsageError(f"a service type must be a type string or a msgs service class, got {type_!r}")
+
+
+def lookup_message_class(type_name: str) -> type[Message] | None:
+    """The generated class of a message type name, or None when there is none."""
+    try:
+        found = _lookup(type_name)
+    except UnknownTypeError:
+        return None
+    return found if isinstance(found, type) and issubclass(found, Message) else None
+
+
+def to_wire(
+    msg: Any, type_name: str, cls: type[Message] | None, what: str
+) -> Mapping[str, Any]:
+    """The rosbridge JSON form of ``msg`` (a dict or a message instance) of type ``type_name``.
+
+    A message instance must be of the type (``cls`` when given, else the same
+    type name) and is validated.
+
+    Raises:
+        UsageError: a message of another type, or neither a dict nor a message.
+        InvalidMessageError: a message instance with a field that does not fit.
+    """
+    if isinstance(msg, Message):
+        if cls is not None:
+            if not isinstance(msg, cls):
+                raise UsageError(f"{what}: expected a {cls._type} message, got {msg._type}")
+        elif msg._type != type_name:
+            raise UsageError(f"{what}: expected a {type_name} message, got {msg._type}")
+        try:
+            msg.validate()
+        except ValidationError as exc:
+            raise InvalidMessageError(f"{what}: {exc}", path=exc.path) from None
+        return msg.to_json()
+    if isinstance(msg, Mapping):
+        return msg
+    raise UsageError(
+        f"{what}: a message must be a dict or a {type_name} instance, got {type(msg).__name__}"
+    )
+
+
+def from_wire(raw: Mapping[str, Any], cls: type[Message], what: str) -> Message:
+    """Build a ``cls`` instance from its wire form, as :class:`InvalidMessageError` on failure."""
+    try:
+        return cls.from_json(raw)
+    except ValidationError as exc:
+        raise InvalidMessageError(f"{what}: {exc}", path=exc.path) from None
+
+
+def _is_async_callable(fn: Callable[..., Any]) -> bool:
+    if inspect.iscoroutinefunction(fn):
+        return True
+    call = getattr(fn, "__call__", None)  # noqa: B004 - an object with an async __call__
+    return call is not None and inspect.iscoroutinefunction(call)
+
+
+# --- the backend hooks -----------------------------------------------------------------------
+
+class Backend(Protocol):
+    """What a handle needs from the backend that made it (private hooks)."""
+
+    def _publish(self, pub: Publisher[Any], wire: Mapping[str, Any]) -> Awaitable[None] | None:
+        """Send (or buffer) one message; may return an awaitable for backpressure."""
+        ...
+
+    def _unadvertise(self, pub: Publisher[Any]) -> None:
+        """Forget a publisher."""
+        ...
+
+    def _unsubscribe(self, sub: Subscription[Any]) -> None:
+        """Forget a subscription."""
+        ...
+
+    def _unadvertise_service(self, server: ServiceServer) -> None:
+        """Forget a served service."""
+        ...
+
+    async def _flush(self) -> None:
+        """Return once everything sent so far has been handed to the connection."""
+        ...
+
+
+class _Handle:
+    """What every handle shares: close state, await and ``async with``."""
+
+    _backend: Backend
+    closed: bool
+    error: RosLibError | None
+
+    async def close(self) -> None:  # pragma: no cover - overridden
+        """Close the handle."""
+        raise NotImplementedError
+
+    def _fail(self, error: RosLibError) -> None:
+        """The bridge reported that this handle's request failed."""
+        self.error = error
+
+    async def _ready(self) -> Self:
+        await self._backend._flush()
+        return self
+
+    def __await__(self) -> Generator[Any, None, Self]:
+        return self._ready().__await__()
+
+    async def __aenter__(self) -> Self:
+        return self
+
+    async def __aexit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        await self.close()
+
+
+class Publisher(_Handle, Generic[T]):
+    """A publisher on one topic (made by ``ros.advertise``)."""
+
+    def __init__(
+        self,
+        backend: Backend,
+        topic: str,
+        type_name: str,
+        msg_cls: type[Message] | None,
+        *,
+        latch: bool,
+        queue_size: int,
+        id: str,
+        offline_buffer: int,
+    ) -> None:
+        self._backend = backend
+        self.topic = topic
+        self.type_name = type_name
+        self.msg_cls = msg_cls
+        self.latch = latch
+        self.queue_size = queue_size
+        self.id = id
+        self.closed = False
+        self.error: RosLibError | None = None
+        self.offline: deque[Mapping[str, Any]] = deque()
+        """Messages published while the connection was down, sent after reconnecting."""
+        self.offline_buffer = offline_buffer
+        self.dropped = 0
+        """Messages dropped because the offline buffer was full (oldest first)."""
+        self.published = 0
+        """Messages accepted by :meth:`publish`."""
+
+    def __repr__(self) -> str:
+        return f"<Publisher {self.topic} {self.type_name}{' closed' if self.closed else ''}>"
+
+    def to_wire(self, msg: T | Mapping[str, Any]) -> Mapping[str, Any]:
+        """The wire form of ``msg`` after the type checks (see :func:`to_wire`)."""
+        return to_wire(msg, self.type_name, self.msg_cls, f"publish to {self.topic}")
+
+    async def publish(self, msg: T | Mapping[str, Any]) -> None:
+        """Publish one message (a dict, or an instance of the advertised type).
+
+        Returns once the message is queued for sending; waits only when the
+        send queue is full (backpressure). See the client module for what
+        happens while the connection is down.
+
+        Raises:
+            UsageError: the publisher is closed, or the message has another type.
+            InvalidMessageError: a typed message with a field that does not fit.
+            StatusError: the bridge refused this publisher's ``advertise``.
+            ConnectionClosed: the client is closed (``Disconnected`` while the
+                connection is down and buffering is off).
+        """
+        if self.closed:
+            raise UsageError(f"publisher of {self.topic} is closed")
+        if self.error is not None:
+            raise self.error
+        wire = self.to_wire(msg)
+        waiting = self._backend._publish(self, wire)
+        self.published += 1
+        if waiting is not None:
+            await waiting
+
+    async def unadvertise(self) -> None:
+        """Stop publishing (the bridge drops its ROS publisher once no handle uses it)."""
+        if self.closed:
+            return
+        self.closed = True
+        self.offline.clear()
+        self._backend._unadvertise(self)
+
+    async def close(self) -> None:
+        """Same as :meth:`unadvertise`."""
+        await self.unadvertise()
+
+
+class Subscription(_Handle, Generic[T]):
+    """A subscription to one topic (made by ``ros.subscribe``).
+
+    Iterate it (``async for msg in sub``), await :meth:`get`, or register
+    callbacks (:meth:`on_message`). Counters: :attr:`received`,
+    :attr:`dropped` (buffer overflow), :attr:`decode_errors` (typed messages
+    that did not fit their class; skipped), :attr:`callback_errors`.
+    """
+
+    def __init__(
+        self,
+        backend: Backend,
+        topic: str,
+        type_name: str,
+        msg_cls: type[Message] | None,
+        *,
+        throttle_rate: int,
+        queue_length: int,
+        compression: str,
+        buffer_size: int,
+        id: str,
+    ) -> None:
+        if buffer_size < 1:
+            raise UsageError(f"subscribe {topic}: buffer_size must be >= 1, got {buffer_size}")
+        if throttle_rate < 0 or queue_length < 0:
+            raise UsageError(f"subscribe {topic}: throttle_rate and queue_length must be >= 0")
+        if compression not in ("none", "cbor"):
+            raise UsageError(
+                f"subscribe {topic}: compression must be 'none' or 'cbor', got {compression!r}"
+            )
+        self._backend = backend
+        self.topic = topic
+        self.type_name = type_name
+        self.msg_cls = msg_cls
+        self.throttle_rate = throttle_rate
+        self.queue_length = queue_length
+        self.compression = compression
+        self.buffer_size = buffer_size
+        self.id = id
+        self.closed = False
+        self.error: RosLibError | None = None
+        self.received = 0
+        self.dropped = 0
+        self.decode_errors = 0
+        self.callback_errors = 0
+        self._queue: deque[Mapping[str, Any]] = deque()
+        self._sync_cbs: list[Callable[[Any], Any]] = []
+        self._async_cbs: list[Callable[[Any], Awaitable[Any]]] = []
+        self._buffering = True
+        self._waiter: asyncio.Future[None] | None = None
+        self._consumer: asyncio.Task[None] | None = None
+        self._idle = asyncio.Event()
+        self._idle.set()
+
+    def __repr__(self) -> str:
+        return f"<Subscription {self.topic} {self.type_name}{' closed' if self.closed else ''}>"
+
+    # -- callbacks -------------------------------------------------------------------------
+
+    def on_message(self, callback: MessageCallback) -> None:
+        """Also deliver every message to ``callback`` (sync or async).
+
+        Once a callback is registered, messages no longer wait for ``async
+        for``; sync callbacks run at once in the receive path, async ones in
+        order in this subscription's own task.
+        """
+        if self.closed:
+            raise UsageError(f"subscription to {self.topic} is closed")
+        if not callable(callback):
+            raise UsageError(f"subscribe {self.topic}: callback must be callable")
+        if _is_async_callable(callback):
+            self._async_cbs.append(cast("Callable[[Any], Awaitable[Any]]", callback))
+            if self._consumer is None:
+                self._consumer = asyncio.get_running_loop().create_task(
+                    self._consume(), name=f"roslibpy_lite subscription {self.topic}"
+                )
+        else:
+            self._sync_cbs.append(callback)
+        self._buffering = bool(self._async_cbs)
+
+    # -- the receive path ------------------------------------------------------------------
+
+    def _deliver(self, raw: Mapping[str, Any]) -> None:
+        """Take one message in its wire form (called by the backend, never blocks)."""
+        self.received += 1
+        if self._sync_cbs:
+            msg = self._decode(raw)
+            if msg is not _SKIP:
+                for cb in self._sync_cbs:
+                    try:
+                        result = cb(msg)
+                    except Exception:
+                        self.callback_errors += 1
+                        log.exception("callback for %s raised", self.topic)
+                        continue
+                    if inspect.isawaitable(result):
+                        # A sync-looking callable returned an awaitable: run it anyway.
+                        self._run_stray(result)
+            if not self._buffering:
+                return
+        queue = self._queue
+        if len(queue) >= self.buffer_size:
+            queue.popleft()
+            self.dropped += 1
+        queue.append(raw)
+        self._idle.clear()
+        waiter = self._waiter
+        if waiter is not None and not waiter.done():
+            waiter.set_result(None)
+
+    def _run_stray(self, awaitable: Awaitable[Any]) -> None:
+        async def run() -> None:
+            try:
+                await awaitable
+            except Exception:
+                self.callback_errors += 1
+                log.exception("callback for %s raised", self.topic)
+
+        task = asyncio.get_running_loop().create_task(run())
+        _STRAY.add(task)
+        task.add_done_callback(_STRAY.discard)
+
+    def _decode(self, raw: Mapping[str, Any]) -> Any:
+        cls = self.msg_cls
+        if cls is None:
+            return raw
+        try:
+            return cls.from_json(raw)
+        except ValidationError as exc:
+            self.decode_errors += 1
+            log.warning("a message on %s does not fit %s: %s", self.topic, cls._type, exc)
+            return _SKIP
+
+    def _wake(self) -> None:
+        waiter = self._waiter
+        if waiter is not None and not waiter.done():
+            waiter.set_result(None)
+
+    def _fail(self, error: RosLibError) -> None:
+        self.error = error
+        self._wake()
+
+    async def _wait(self) -> None:
+        if self._waiter is not None:
+            raise UsageError(f"subscription to {self.topic} is already awaited by another task")
+        self._waiter = asyncio.get_running_loop().create_future()
+        try:
+            await self._waiter
+        finally:
+            self._waiter = None
+
+    async def _consume(self) -> None:
+        queue = self._queue
+        while True:
+            while queue:
+                msg = self._decode(queue.popleft())
+                if msg is _SKIP:
+                    continue
+                for cb in self._async_cbs:
+                    try:
+                        await cb(msg)
+                    except Exception:
+                        self.callback_errors += 1
+                        log.exception("callback for %s raised", self.topic)
+            self._idle.set()
+            if self.closed:
+                return
+            await self._wait()
+
+    async def _drained(self) -> None:
+        """Return once async callbacks have taken every buffered message (for MockRos.drain)."""
+        if self._consumer is not None and not self._consumer.done():
+            await self._idle.wait()
+
+    # -- reading ---------------------------------------------------------------------------
+
+    def __aiter__(self) -> Self:
+        return self
+
+    async def __anext__(self) -> T:
+        queue = self._queue
+        while True:
+            if queue:
+                msg = self._decode(queue.popleft())
+                if msg is _SKIP:
+                    continue
+                result: T = msg
+                return result
+            if self.error is not None:
+                raise self.error
+            if self.closed:
+                raise StopAsyncIteration
+            if self._async_cbs:
+                raise UsageError(
+                    f"subscription to {self.topic} delivers to async callbacks; "
+                    "iterate it or give it callbacks, not both"
+                )
+            await self._wait()
+
+    async def get(self, timeout: float | None = None) -> T:
+        """The next message.
+
+        Raises:
+            RosTimeoutError: none arrived within ``timeout`` seconds.
+            UsageError: the subscription is closed.
+            StatusError: the bridge refused this subscription.
+        """
+        try:
+            async with asyncio.timeout(timeout):
+                return await self.__anext__()
+        except StopAsyncIteration:
+            raise UsageError(f"subscription to {self.topic} is closed") from None
+        except TimeoutError:
+            raise RosTimeoutError(
+                f"no message on {self.topic} within {timeout} s"
+            ) from None
+
+    @property
+    def pending(self) -> int:
+        """How many messages wait in the buffer."""
+        return len(self._queue)
+
+    # -- closing ---------------------------------------------------------------------------
+
+    async def unsubscribe(self) -> None:
+        """Stop the subscription; an ``async for`` over it ends after the buffered messages."""
+        if self.closed:
+            return
+        self._end()
+        self._backend._unsubscribe(self)
+        consumer = self._consumer
+        if consumer is not None and consumer is not asyncio.current_task():
+            consumer.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await consumer
+
+    def _end(self) -> None:
+        """Mark closed and wake readers (the backend closes too; no message to the server)."""
+        self.closed = True
+        self._wake()
+
+    async def close(self) -> None:
+        """Same as :meth:`unsubscribe`."""
+        await self.unsubscribe()
+
+
+_STRAY: set[asyncio.Task[None]] = set()
+_Outcome = tuple[bool, Mapping[str, Any] | str]
+
+
+class ServiceServer(_Handle):
+    """A service served by this client (made by ``ros.advertise_service``)."""
+
+    def __init__(
+        self,
+        backend: Backend,
+        service: str,
+        type_name: str,
+        srv_cls: type[Service] | None,
+        handler: ServiceHandler,
+        *,
+        id: str,
+    ) -> None:
+        if not callable(handler):
+            raise UsageError(f"advertise_service {service}: handler must be callable")
+        self._backend = backend
+        self.service = service
+        self.type_name = type_name
+        self.srv_cls = srv_cls
+        self.handler = handler
+        self.id = id
+        self.closed = False
+        self.error: RosLibError | None = None
+        self.calls = 0
+        """Requests handled."""
+        self.failures = 0
+        """Requests whose handler raised (answered ``result: false``)."""
+
+    def __repr__(self) -> str:
+        return f"<ServiceServer {self.service} {self.type_name}{' closed' if self.closed else ''}>"
+
+    def invoke(self, args: Any) -> _Outcome | Coroutine[Any, Any, _Outcome]:
+        """Run the handler on a request's wire form.
+
+        Returns ``(result, values)`` at once for a sync handler, or a
+        coroutine that produces it for an async one. A handler that raises,
+        a request that does not fit the type, or a response that does not fit,
+        gives ``(False, "<text>")``; ``(True, values)`` otherwise.
+        """
+        self.calls += 1
+        try:
+            request = self._request(args)
+            result = self.handler(request)
+        except Exception as exc:
+            return self._failed(exc)
+        if inspect.isawaitable(result):
+            return self._finish(result)
+        return self._response(result)
+
+    async def _finish(self, awaitable: Awaitable[Any]) -> tuple[bool, Mapping[str, Any] | str]:
+        try:
+            result = await awaitable
+        except Exception as exc:
+            return self._failed(exc)
+        return self._response(result)
+
+    def _request(self, args: Any) -> Any:
+        if args is None:
+            args = {}
+        if not isinstance(args, Mapping):
+            raise InvalidMessageError(f"request to {self.service} is not an object")
+        if self.srv_cls is None:
+            return args
+        return from_wire(args, self.srv_cls.Request, f"request to {self.service}")
+
+    def _response(self, result: Any) -> tuple[bool, Mapping[str, Any] | str]:
+        try:
+            if result is None:
+                result = self.srv_cls.Response() if self.srv_cls is not None else {}
+            cls = self.srv_cls.Response if self.srv_cls is not None else None
+            type_name = cls._type if cls is not None else f"{self.type_name}_Response"
+            return True, to_wire(result, type_name, cls, f"response of {self.service}")
+        except Exception as exc:
+            return self._failed(exc)
+
+    def _failed(self, exc: Exception) -> tuple[bool, str]:
+        self.failures += 1
+        log.warning("handler of %s raised %s", self.service, type(exc).__name__)
+        return False, str(exc) or type(exc).__name__
+
+    async def unadvertise(self) -> None:
+        """Stop serving."""
+        if self.closed:
+            return
+        self.closed = True
+        self._backend._unadvertise_service(self)
+
+    async def close(self) -> None:
+        """Same as :meth:`unadvertise`."""
+        await self.unadvertise()
+
+
+# --- connection state ------------------------------------------------------------------------
+
+class StateWatcher:
+    """An async iterator of connection states, from its creation on.
+
+    Ends after yielding ``CLOSED``. Use ``async with`` (or :meth:`close`) to
+    stop watching early.
+    """
+
+    def __init__(self, hub: StateHub) -> None:
+        self._hub = hub
+        self._queue: deque[ConnectionState] = deque()
+        self._waiter: asyncio.Future[None] | None = None
+        self._done = hub.state is ConnectionState.CLOSED
+
+    def _push(self, state: ConnectionState) -> None:
+        self._queue.append(state)
+        if self._waiter is not None and not self._waiter.done():
+            self._waiter.set_result(None)
+
+    def __aiter__(self) -> Self:
+        return self
+
+    async def __anext__(self) -> ConnectionState:
+        while not self._queue:
+            if self._done:
+                raise StopAsyncIteration
+            self._waiter = asyncio.get_running_loop().create_future()
+            try:
+                await self._waiter
+            finally:
+                self._waiter = None
+        state = self._queue.popleft()
+        if state is ConnectionState.CLOSED:
+            self._done = True
+            self.close()
+        return state
+
+    async def next(self, timeout: float | None = None) -> ConnectionState:
+        """The next state change.
+
+        Raises:
+            RosTimeoutError: no change within ``timeout`` seconds.
+            ConnectionClosed: the watcher ended (``CLOSED`` was already yielded).
+        """
+        try:
+            async with asyncio.timeout(timeout):
+                return await self.__anext__()
+        except StopAsyncIteration:
+            raise ConnectionClosed("the connection is closed; no more state changes") from None
+        except TimeoutError:
+            raise RosTimeoutError(f"no connection state change within {timeout} s") from None
+
+    def close(self) -> None:
+        """Stop watching."""
+        self._done = True
+        self._hub._watchers.discard(self)
+        if self._waiter is not None and not self._waiter.done():
+            self._waiter.set_result(None)
+
+    async def __aenter__(self) -> Self:
+        return self
+
+    async def __aexit__(self, *exc: object) -> None:
+        self.close()
+
+
+class StateHub:
+    """The connection state and everyone waiting on it (shared by the backends)."""
+
+    def __init__(self, state: ConnectionState) -> None:
+        self.state = state
+        self._callbacks: list[StateCallback] = []
+        self._watchers: set[StateWatcher] = set()
+        self._connected_waiters: list[asyncio.Future[None]] = []
+
+    def set(self, state: ConnectionState) -> None:
+        """Move to ``state`` and tell every listener (no-op if unchanged)."""
+        if state is self.state:
+            return
+        if log.isEnabledFor(logging.DEBUG):
+            log.debug("state %s -> %s", self.state.value, state.value)
+        self.state = state
+        if state is ConnectionState.CONNECTED or state is ConnectionState.CLOSED:
+            waiters, self._connected_waiters = self._connected_waiters, []
+            for fut in waiters:
+                if not fut.done():
+                    fut.set_result(None)
+        for watcher in list(self._watchers):
+            watcher._push(state)
+        for cb in list(self._callbacks):
+            try:
+                cb(state)
+            except Exception:
+                log.exception("state callback raised")
+
+    def on_change(self, callback: StateCallback) -> Callable[[], None]:
+        """Register ``callback``; returns its remover."""
+        self._callbacks.append(callback)
+
+        def remove() -> None:
+            with contextlib.suppress(ValueError):
+                self._callbacks.remove(callback)
+
+        return remove
+
+    def watch(self) -> StateWatcher:
+        """A new :class:`StateWatcher`."""
+        watcher = StateWatcher(self)
+        if not watcher._done:
+            self._watchers.add(watcher)
+        return watcher
+
+    async def wait_connected(self, timeout: float | None = None) -> None:
+        """Return once connected (see :meth:`roslibpy_lite.api.Ros.wait_connected`)."""
+        try:
+            async with asyncio.timeout(timeout):
+                while self.state is not ConnectionState.CONNECTED:
+                    if self.state is ConnectionState.CLOSED:
+                        raise ConnectionClosed("the connection is closed")
+                    fut = asyncio.get_running_loop().create_future()
+                    self._connected_waiters.append(fut)
+                    await fut
+        except TimeoutError:
+            raise RosTimeoutError(
+                f"not connected within {timeout} s (state {self.state.value})"
+            ) from None
