@@ -54,34 +54,22 @@ def make_bridge() -> Iterator[Callable[..., BridgeProcess]]:
 
 
 class _RosRuntime:
-    """rclpy initialised once per session, with an executor spinning in a thread."""
+    """rclpy initialised once per session, in a context of its own."""
 
     def __init__(self) -> None:
         import rclpy
-        from rclpy.executors import MultiThreadedExecutor
 
         self.rclpy = rclpy
         self.context = rclpy.context.Context()
         rclpy.init(context=self.context)
-        self.executor = MultiThreadedExecutor(num_threads=4, context=self.context)
-        self.thread = threading.Thread(target=self._spin, daemon=True, name="test-ros-spin")
-        self.thread.start()
-
-    def _spin(self) -> None:
-        from rclpy.executors import ExternalShutdownException
-
-        with contextlib.suppress(ExternalShutdownException):
-            self.executor.spin()
 
     def close(self) -> None:
-        self.executor.shutdown()
         self.rclpy.shutdown(context=self.context)
-        self.thread.join(5)
 
 
 @pytest.fixture(scope="session")
 def ros_runtime() -> Iterator[_RosRuntime]:
-    """The session's rclpy context and spinning executor."""
+    """The session's rclpy context."""
     runtime = _RosRuntime()
     yield runtime
     runtime.close()
@@ -89,12 +77,27 @@ def ros_runtime() -> Iterator[_RosRuntime]:
 
 @pytest.fixture
 def ros_node(ros_runtime: _RosRuntime, request: pytest.FixtureRequest) -> Iterator[Any]:
-    """An rclpy node for this test, spun in the background, destroyed afterwards."""
+    """An rclpy node for this test, spun by its own 4-thread executor, destroyed afterwards.
+
+    Callbacks in a ReentrantCallbackGroup may run concurrently (a slow service
+    does not block the node's other callbacks).
+    """
+    from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
+
     name = "test_" + re.sub(r"\W", "_", request.node.name)[:40] + f"_{next(_names)}"
     node = ros_runtime.rclpy.create_node(name, context=ros_runtime.context)
-    ros_runtime.executor.add_node(node)
+    executor = MultiThreadedExecutor(num_threads=4, context=ros_runtime.context)
+    executor.add_node(node)
+
+    def spin() -> None:
+        with contextlib.suppress(ExternalShutdownException):
+            executor.spin()
+
+    thread = threading.Thread(target=spin, daemon=True, name=f"spin-{name}")
+    thread.start()
     yield node
-    ros_runtime.executor.remove_node(node)
+    executor.shutdown()
+    thread.join(10)
     node.destroy_node()
 
 

@@ -74,6 +74,7 @@ class BridgeProcess:
         self.proc: subprocess.Popen[str] | None = None
         self.lines: list[str] = []
         self._cond = threading.Condition()
+        self._pump_thread: threading.Thread | None = None
 
     @property
     def url(self) -> str:
@@ -91,7 +92,8 @@ class BridgeProcess:
             stderr=subprocess.STDOUT, text=True, bufsize=1,
         )
         first = len(self.lines)
-        threading.Thread(target=self._pump, args=(self.proc,), daemon=True).start()
+        self._pump_thread = threading.Thread(target=self._pump, args=(self.proc,), daemon=True)
+        self._pump_thread.start()
         deadline = time.monotonic() + timeout
         with self._cond:
             while True:
@@ -114,8 +116,14 @@ class BridgeProcess:
             with self._cond:
                 self.lines.append(line.rstrip("\n"))
                 self._cond.notify_all()
+        proc.stdout.close()
         with self._cond:
             self._cond.notify_all()
+
+    def _reap(self) -> None:
+        if self._pump_thread is not None:
+            self._pump_thread.join(10)
+            self._pump_thread = None
 
     def wait_for_line(self, pattern: str, timeout: float = 10.0, start: int = 0) -> str:
         """Wait until the bridge logs a line matching ``pattern`` (from line ``start`` on)."""
@@ -147,12 +155,15 @@ class BridgeProcess:
             self.proc.kill()
             self.proc.wait()
             raise AssertionError("bridge did not exit on signal:\n" + self.log()) from None
+        finally:
+            self._reap()
 
     def kill(self) -> None:
         """Kill the bridge at once (a crash, for fault tests)."""
         if self.proc is not None and self.proc.poll() is None:
             self.proc.kill()
             self.proc.wait()
+        self._reap()
 
 
 class WireClient:
