@@ -1,0 +1,176 @@
+// Drive stock roslib (npm, unchanged) from a test, one JSON command per stdin line.
+//
+//   node peer.mjs ws://127.0.0.1:PORT
+//
+// Same line protocol as ../roslibpy_peer.py: prints {"event":"ready",...} once
+// connected, answers each {"seq","cmd",...} with {"seq","ok","value"|"error"},
+// and prints {"event":...} lines for what the bridge pushes (topic messages,
+// requests to served services). Exits on {"cmd":"close"} or end of input.
+//
+// WebSocket: roslib 2.x uses the global WebSocket when there is one (Node 22+,
+// or Node 20 with --experimental-websocket) and its own dependency `ws`
+// otherwise. The ready event says which one this run used.
+
+import * as readline from "node:readline";
+import { readFileSync } from "node:fs";
+import * as ROSLIB from "roslib";
+
+const roslibVersion = JSON.parse(
+  readFileSync(new URL("./node_modules/roslib/package.json", import.meta.url), "utf8"),
+).version;
+const transport = typeof WebSocket === "function" ? "native WebSocket" : "ws package";
+
+function emit(obj) {
+  process.stdout.write(JSON.stringify(obj) + "\n");
+}
+
+const handlers = {
+  // std_srvs/SetBool: succeed with the request's value and say what came in.
+  setbool(args, response) {
+    const data = Boolean(args.data);
+    response.success = data;
+    response.message = `roslibjs got data=${data ? "True" : "False"}`;
+    return true;
+  },
+  // mult_msgs/MultFloats: the product of x and y.
+  mult(args, response) {
+    response.result = Number(args.x) * Number(args.y);
+    return true;
+  },
+  // A handler that reports failure (roslib sends result false).
+  fail() {
+    return false;
+  },
+};
+
+const url = process.argv[2];
+const ros = new ROSLIB.Ros({});
+const topics = new Map();
+const services = new Map();
+
+function topic(name, type) {
+  const key = `${name}\u0000${type}`;
+  if (!topics.has(key)) {
+    topics.set(key, new ROSLIB.Topic({ ros, name, messageType: type }));
+  }
+  return topics.get(key);
+}
+
+// Wrap roslib's callback-style API in a promise; `pick` chooses what to return.
+function viaCallbacks(start) {
+  return new Promise((resolve, reject) => {
+    start(resolve, (err) => reject(new Error(typeof err === "string" ? err : JSON.stringify(err))));
+  });
+}
+
+async function handle(cmd) {
+  switch (cmd.cmd) {
+    case "advertise":
+      topic(cmd.topic, cmd.type).advertise();
+      return null;
+    case "publish":
+      topic(cmd.topic, cmd.type).publish(cmd.msg);
+      return null;
+    case "unadvertise":
+      topic(cmd.topic, cmd.type).unadvertise();
+      return null;
+    case "subscribe": {
+      const name = cmd.topic;
+      topic(name, cmd.type).subscribe((msg) => emit({ event: "message", topic: name, msg }));
+      return null;
+    }
+    case "unsubscribe":
+      topic(cmd.topic, cmd.type).unsubscribe();
+      return null;
+    case "call": {
+      const service = new ROSLIB.Service({ ros, name: cmd.service, serviceType: cmd.type ?? "" });
+      return viaCallbacks((ok, fail) => service.callService(cmd.args ?? {}, ok, fail, cmd.timeout));
+    }
+    case "advertise_service": {
+      const name = cmd.service;
+      const handler = handlers[cmd.handler];
+      if (!handler) throw new Error(`unknown handler ${cmd.handler}`);
+      const service = new ROSLIB.Service({ ros, name, serviceType: cmd.type });
+      await service.advertise((args, response) => {
+        emit({ event: "request", service: name, args });
+        return handler(args, response);
+      });
+      services.set(name, service);
+      return null;
+    }
+    case "unadvertise_service": {
+      const service = services.get(cmd.service);
+      services.delete(cmd.service);
+      await service.unadvertise();
+      return null;
+    }
+    case "get_topics":
+      return viaCallbacks((ok, fail) => ros.getTopics(ok, fail));
+    case "get_topic_type":
+      return viaCallbacks((ok, fail) => ros.getTopicType(cmd.topic, ok, fail));
+    case "get_topics_for_type":
+      return viaCallbacks((ok, fail) => ros.getTopicsForType(cmd.type, ok, fail));
+    case "get_services":
+      return viaCallbacks((ok, fail) => ros.getServices(ok, fail));
+    case "get_service_type":
+      return viaCallbacks((ok, fail) => ros.getServiceType(cmd.service, ok, fail));
+    case "get_services_for_type":
+      return viaCallbacks((ok, fail) => ros.getServicesForType(cmd.type, ok, fail));
+    case "get_nodes":
+      return viaCallbacks((ok, fail) => ros.getNodes(ok, fail));
+    case "get_node_details":
+      return viaCallbacks((ok, fail) => ros.getNodeDetails(cmd.node, ok, fail));
+    case "is_connected":
+      return ros.isConnected;
+    default:
+      throw new Error(`unknown command ${cmd.cmd}`);
+  }
+}
+
+function run(cmd) {
+  handle(cmd).then(
+    (value) => emit({ seq: cmd.seq, ok: true, value: value ?? null }),
+    (err) => emit({ seq: cmd.seq, ok: false, error: String(err?.message ?? err) }),
+  );
+}
+
+let closing = false;
+function shutdown(code) {
+  if (closing) return;
+  closing = true;
+  const bye = () => {
+    emit({ event: "closed" });
+    process.exit(code);
+  };
+  if (!ros.isConnected) bye();
+  ros.on("close", bye);
+  ros.close();
+  setTimeout(bye, 3000).unref();
+}
+
+ros.on("error", (err) => {
+  if (!ros.isConnected && !closing) {
+    emit({ event: "connect_failed", error: String(err?.message ?? err) });
+    process.exit(2);
+  }
+  emit({ event: "error", error: String(err?.message ?? err) });
+});
+ros.on("status", (msg) => emit({ event: "status", msg }));
+ros.on("connection", () => {
+  emit({ event: "ready", client: "roslib", version: roslibVersion, transport });
+  const lines = readline.createInterface({ input: process.stdin });
+  lines.on("line", (line) => {
+    if (!line.trim()) return;
+    const cmd = JSON.parse(line);
+    if (cmd.cmd === "close") shutdown(0);
+    else run(cmd);
+  });
+  lines.on("close", () => shutdown(0));
+});
+ros.on("close", () => {
+  if (!closing) emit({ event: "disconnected" });
+});
+ros.connect(url).catch((err) => {
+  emit({ event: "connect_failed", error: String(err?.message ?? err) });
+  process.exit(2);
+});

@@ -1,0 +1,173 @@
+"""Run a stock client (roslibpy or roslib for Node) as a child process and talk to it.
+
+Both driver programs (``roslibpy_peer.py`` and ``node/peer.mjs``) speak the same
+line protocol: the test writes JSON commands with a ``seq`` number on the
+child's stdin; the child answers each with ``{"seq", "ok", "value"|"error"}``
+and prints ``{"event": ...}`` lines for what the bridge pushes to it. Every
+wait here has a deadline, and the child is killed if it does not leave when
+told, so no test can hang on a stuck peer.
+"""
+
+from __future__ import annotations
+
+import itertools
+import json
+import subprocess
+import threading
+import time
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
+
+from tests.helpers import ros_env
+
+
+class PeerError(AssertionError):
+    """The stock client reported that a command failed (the text is its own error)."""
+
+
+class PeerProcess:
+    """A stock rosbridge client in a child process, obeying JSON line commands."""
+
+    def __init__(self, name: str, argv: Sequence[str], cwd: Path) -> None:
+        self.name = name
+        self.argv = list(argv)
+        self.cwd = cwd
+        self.proc: subprocess.Popen[str] | None = None
+        self.events: list[dict[str, Any]] = []
+        self.replies: dict[int, dict[str, Any]] = {}
+        self.stderr: list[str] = []
+        self.noise: list[str] = []
+        self._cond = threading.Condition()
+        self._seq = itertools.count(1)
+        self._eof = False
+        self._readers: list[threading.Thread] = []
+        self.info: dict[str, Any] = {}
+
+    def start(self, timeout: float = 20.0) -> PeerProcess:
+        """Start the child and wait until it says it is connected."""
+        self.proc = subprocess.Popen(
+            self.argv, cwd=self.cwd, env=ros_env(), stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, bufsize=1,
+        )
+        self._readers = [
+            threading.Thread(target=self._read_stdout, daemon=True),
+            threading.Thread(target=self._read_stderr, daemon=True),
+        ]
+        for reader in self._readers:
+            reader.start()
+        ready = self.wait_event(
+            lambda e: e.get("event") in ("ready", "connect_failed"), timeout, "connection"
+        )
+        if ready["event"] != "ready":
+            raise AssertionError(f"{self.name} could not connect: {ready}\n{self.diagnostics()}")
+        self.info = ready
+        return self
+
+    def _read_stdout(self) -> None:
+        assert self.proc is not None and self.proc.stdout is not None
+        for line in self.proc.stdout:
+            try:
+                obj = json.loads(line)
+            except ValueError:
+                obj = None
+            with self._cond:
+                if not isinstance(obj, dict):
+                    self.noise.append(line.rstrip("\n"))
+                elif "seq" in obj and "event" not in obj:
+                    self.replies[int(obj["seq"])] = obj
+                else:
+                    self.events.append(obj)
+                self._cond.notify_all()
+        with self._cond:
+            self._eof = True
+            self._cond.notify_all()
+
+    def _read_stderr(self) -> None:
+        assert self.proc is not None and self.proc.stderr is not None
+        for line in self.proc.stderr:
+            with self._cond:
+                self.stderr.append(line.rstrip("\n"))
+
+    def diagnostics(self) -> str:
+        """What the child printed besides replies: for failure messages."""
+        with self._cond:
+            err = "\n".join(self.stderr[-40:])
+            noise = "\n".join(self.noise[-20:])
+            events = json.dumps(self.events[-10:], default=str)[:2000]
+        return f"--- {self.name} stderr:\n{err}\n--- stdout noise:\n{noise}\n--- last events: {events}"
+
+    def send(self, cmd: str, **params: Any) -> int:
+        """Send one command without waiting; returns its sequence number."""
+        assert self.proc is not None and self.proc.stdin is not None
+        seq = next(self._seq)
+        self.proc.stdin.write(json.dumps({"seq": seq, "cmd": cmd, **params}) + "\n")
+        self.proc.stdin.flush()
+        return seq
+
+    def reply(self, seq: int, timeout: float = 10.0) -> dict[str, Any]:
+        """Wait for the reply to command ``seq``."""
+        deadline = time.monotonic() + timeout
+        with self._cond:
+            while seq not in self.replies:
+                left = deadline - time.monotonic()
+                if self._eof:
+                    raise AssertionError(f"{self.name} exited before answering\n{self.diagnostics()}")
+                if left <= 0:
+                    raise AssertionError(
+                        f"{self.name} gave no answer to command {seq} in {timeout} s\n"
+                        + self.diagnostics()
+                    )
+                self._cond.wait(left)
+            return self.replies.pop(seq)
+
+    def request(self, cmd: str, timeout: float = 10.0, **params: Any) -> Any:
+        """Run a command and return its value; a failure reported by the client raises PeerError."""
+        answer = self.reply(self.send(cmd, **params), timeout)
+        if not answer.get("ok"):
+            raise PeerError(f"{self.name} {cmd} failed: {answer.get('error')}")
+        return answer.get("value")
+
+    def wait_event(
+        self, predicate: Callable[[dict[str, Any]], bool], timeout: float = 10.0,
+        what: str = "event", start: int = 0,
+    ) -> dict[str, Any]:
+        """Wait for an event line (from index ``start`` on) that satisfies ``predicate``."""
+        deadline = time.monotonic() + timeout
+        with self._cond:
+            while True:
+                for event in self.events[start:]:
+                    if predicate(event):
+                        return event
+                left = deadline - time.monotonic()
+                if left <= 0 or self._eof:
+                    raise AssertionError(
+                        f"{self.name}: no {what} within {timeout} s\n{self.diagnostics()}"
+                    )
+                self._cond.wait(left)
+
+    def close(self, timeout: float = 10.0) -> int:
+        """Tell the child to disconnect and exit; kill it if it does not."""
+        if self.proc is None:
+            return 0
+        if self.proc.poll() is None:
+            try:
+                assert self.proc.stdin is not None
+                self.proc.stdin.write(json.dumps({"cmd": "close"}) + "\n")
+                self.proc.stdin.close()
+            except OSError:
+                pass
+            try:
+                self.proc.wait(timeout)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait()
+        else:
+            assert self.proc.stdin is not None
+            self.proc.stdin.close()
+        for reader in self._readers:
+            reader.join(timeout)
+        for stream in (self.proc.stdout, self.proc.stderr):
+            if stream is not None:
+                stream.close()
+        return self.proc.returncode

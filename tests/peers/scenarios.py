@@ -1,0 +1,300 @@
+"""What a stock client must be able to do through our bridge, with rclpy on the other side.
+
+Each function is one scenario, written once and run against every stock client
+(``test_roslibpy.py``, ``test_roslibjs.py``). ``peer`` is a started
+:class:`~tests.peers.peer.PeerProcess`; ``node`` is the test's rclpy node.
+Waiting on the ROS graph (a publisher or subscriber being discovered) polls
+with a deadline, because discovery has no event; everything else waits on
+events: a queue, a reply line, a future's callback.
+"""
+
+from __future__ import annotations
+
+import base64
+import queue
+import threading
+import time
+from typing import Any
+
+from tests.helpers import wait_until
+from tests.peers.peer import PeerError, PeerProcess
+
+#: How long one attempt waits for a message before publishing the next one
+#: (messages sent before DDS matched the two ends are lost, so we resend).
+ATTEMPT = 0.5
+DEADLINE = 15.0
+
+
+def _publish_until_received(
+    peer: PeerProcess, topic: str, type_name: str, msg: dict[str, Any], inbox: queue.Queue[Any]
+) -> Any:
+    """Publish ``msg`` through the peer until the rclpy subscription's inbox gets one."""
+    for _ in range(int(DEADLINE / ATTEMPT)):
+        peer.request("publish", topic=topic, type=type_name, msg=msg)
+        try:
+            return inbox.get(timeout=ATTEMPT)
+        except queue.Empty:
+            continue
+    raise AssertionError(
+        f"rclpy never received what {peer.name} published on {topic}\n{peer.diagnostics()}"
+    )
+
+
+def _ros_publish_until_delivered(peer: PeerProcess, pub: Any, topic: str, msg: Any) -> Any:
+    """Publish ``msg`` from rclpy until the peer prints a message event for ``topic``."""
+    for _ in range(int(DEADLINE / ATTEMPT)):
+        pub.publish(msg)
+        try:
+            return peer.wait_event(
+                lambda e: e.get("event") == "message" and e.get("topic") == topic,
+                ATTEMPT, f"message on {topic}",
+            )["msg"]
+        except AssertionError:
+            continue
+    raise AssertionError(f"{peer.name} never got a message on {topic}\n{peer.diagnostics()}")
+
+
+def _call_new_service(peer: PeerProcess, service: str, args: dict[str, Any]) -> Any:
+    """Call a service the test has just created, once the bridge has discovered it.
+
+    The bridge waits a moment for a service it does not know yet; on a loaded
+    machine discovery can take longer, and the bridge then answers "does not
+    exist". That is graph discovery, so it is retried (with a deadline); any
+    other failure is reported at once.
+    """
+    deadline = time.monotonic() + DEADLINE
+    while True:
+        try:
+            return peer.request("call", service=service, args=args)
+        except PeerError as exc:
+            if "does not exist" not in str(exc) or time.monotonic() > deadline:
+                raise
+
+
+def _call_from_ros(node: Any, srv_type: Any, name: str, request: Any) -> Any:
+    """Call service ``name`` from an rclpy client and return the response (with deadlines)."""
+    client = node.create_client(srv_type, name)
+    try:
+        assert client.wait_for_service(timeout_sec=DEADLINE), f"{name} never appeared in the graph"
+        done = threading.Event()
+        future = client.call_async(request)
+        future.add_done_callback(lambda _f: done.set())
+        assert done.wait(DEADLINE), f"no response from {name} within {DEADLINE} s"
+        return future.result()
+    finally:
+        node.destroy_client(client)
+
+
+# -- topics -----------------------------------------------------------------------------------
+
+
+def publish_string(peer: PeerProcess, node: Any, topic: str, type_name: str) -> None:
+    """The peer advertises and publishes a std_msgs/String; an rclpy subscriber gets it."""
+    from std_msgs.msg import String
+
+    inbox: queue.Queue[Any] = queue.Queue()
+    node.create_subscription(String, topic, inbox.put, 10)
+    peer.request("advertise", topic=topic, type=type_name)
+    wait_until(lambda: node.count_publishers(topic) >= 1, DEADLINE, f"bridge publisher on {topic}")
+    text = f"hello from {peer.name} \u00e9\u4e16"
+    got = _publish_until_received(peer, topic, type_name, {"data": text}, inbox)
+    assert got.data == text
+
+
+def publish_nested(peer: PeerProcess, node: Any, topic: str) -> None:
+    """The peer publishes a geometry_msgs/Twist (nested float fields); rclpy sees the values."""
+    from geometry_msgs.msg import Twist
+
+    inbox: queue.Queue[Any] = queue.Queue()
+    node.create_subscription(Twist, topic, inbox.put, 10)
+    peer.request("advertise", topic=topic, type="geometry_msgs/Twist")
+    wait_until(lambda: node.count_publishers(topic) >= 1, DEADLINE, f"bridge publisher on {topic}")
+    msg = {"linear": {"x": 0.5, "y": -1.25, "z": 0.0}, "angular": {"x": 0.0, "y": 0.0, "z": 3}}
+    got = _publish_until_received(peer, topic, "geometry_msgs/Twist", msg, inbox)
+    assert (got.linear.x, got.linear.y, got.linear.z) == (0.5, -1.25, 0.0)
+    assert (got.angular.x, got.angular.y, got.angular.z) == (0.0, 0.0, 3.0)
+
+
+def subscribe_string(peer: PeerProcess, node: Any, topic: str, type_name: str) -> None:
+    """The peer subscribes; an rclpy publisher's std_msgs/String reaches it unchanged."""
+    from std_msgs.msg import String
+
+    pub = node.create_publisher(String, topic, 10)
+    peer.request("subscribe", topic=topic, type=type_name)
+    wait_until(lambda: pub.get_subscription_count() >= 1, DEADLINE, f"bridge subscriber on {topic}")
+    text = f"hello to {peer.name} \u00e9\u4e16"
+    got = _ros_publish_until_delivered(peer, pub, topic, String(data=text))
+    assert got == {"data": text}
+
+
+def subscribe_nested(peer: PeerProcess, node: Any, topic: str) -> None:
+    """The peer gets a sensor_msgs/CompressedImage: header stamp as sec/nanosec, uint8[] as base64."""
+    from sensor_msgs.msg import CompressedImage
+
+    pub = node.create_publisher(CompressedImage, topic, 10)
+    peer.request("subscribe", topic=topic, type="sensor_msgs/msg/CompressedImage")
+    wait_until(lambda: pub.get_subscription_count() >= 1, DEADLINE, f"bridge subscriber on {topic}")
+    payload = bytes([0, 1, 2, 127, 128, 254, 255])
+    msg = CompressedImage(format="png", data=payload)
+    msg.header.frame_id = "camera"
+    msg.header.stamp.sec = 1_700_000_000
+    msg.header.stamp.nanosec = 123_456_789
+    got = _ros_publish_until_delivered(peer, pub, topic, msg)
+    assert got == {
+        "header": {"stamp": {"sec": 1_700_000_000, "nanosec": 123_456_789}, "frame_id": "camera"},
+        "format": "png",
+        "data": base64.b64encode(payload).decode("ascii"),
+    }
+
+
+# -- services ---------------------------------------------------------------------------------
+
+
+def call_setbool(peer: PeerProcess, node: Any, topic: str) -> None:
+    """The peer calls an rclpy std_srvs/SetBool service (no type given) and gets its answer."""
+    from std_srvs.srv import SetBool
+
+    seen: list[bool] = []
+
+    def serve(request: Any, response: Any) -> Any:
+        seen.append(request.data)
+        response.success = not request.data
+        response.message = f"rclpy got data={request.data}"
+        return response
+
+    node.create_service(SetBool, topic, serve)
+    assert _call_new_service(peer, topic, {"data": True}) == {
+        "success": False, "message": "rclpy got data=True",
+    }
+    assert peer.request("call", service=topic, args={"data": False}) == {
+        "success": True, "message": "rclpy got data=False",
+    }
+    assert seen == [True, False]
+
+
+def call_mult(peer: PeerProcess, node: Any, topic: str) -> None:
+    """The peer calls an rclpy mult_msgs/MultFloats service and gets the product back."""
+    from mult_msgs.srv import MultFloats
+
+    def serve(request: Any, response: Any) -> Any:
+        response.result = request.x * request.y
+        return response
+
+    node.create_service(MultFloats, topic, serve)
+    assert _call_new_service(peer, topic, {"x": 2.5, "y": -4.0}) == {"result": -10.0}
+
+
+def call_missing(peer: PeerProcess, topic: str) -> None:
+    """Calling a service nobody offers fails promptly through the client's error path."""
+    missing = topic + "_nobody_serves_this"
+    try:
+        value = peer.request("call", service=missing, args={}, timeout=20.0)
+    except PeerError as exc:
+        text = str(exc)
+        assert "Timeout" not in text, f"the client timed out instead of being told: {text}"
+        assert missing in text, f"the error does not name the service: {text}"
+    else:
+        raise AssertionError(f"call to {missing} succeeded with {value!r}")
+
+
+def serve_setbool(peer: PeerProcess, node: Any, topic: str) -> None:
+    """The peer serves std_srvs/SetBool; an rclpy client's calls reach it and get its answers."""
+    from std_srvs.srv import SetBool
+
+    peer.request("advertise_service", service=topic, type="std_srvs/srv/SetBool", handler="setbool")
+    client_name = "roslibjs" if peer.name.startswith("roslib-") else "roslibpy"
+    for data in (True, False):
+        response = _call_from_ros(node, SetBool, topic, SetBool.Request(data=data))
+        assert response.success is data
+        assert response.message == f"{client_name} got data={data}"
+    requests = [e for e in peer.events if e.get("event") == "request" and e["service"] == topic]
+    assert [e["args"] for e in requests] == [{"data": True}, {"data": False}]
+
+
+def serve_mult(peer: PeerProcess, node: Any, topic: str) -> None:
+    """The peer serves mult_msgs/MultFloats (short type spelling); an rclpy client gets x*y."""
+    from mult_msgs.srv import MultFloats
+
+    peer.request("advertise_service", service=topic, type="mult_msgs/MultFloats", handler="mult")
+    response = _call_from_ros(node, MultFloats, topic, MultFloats.Request(x=1.5, y=6.0))
+    assert response.result == 9.0
+
+
+def unadvertise_service(peer: PeerProcess, node: Any, topic: str) -> None:
+    """After the peer unadvertises its service, it leaves the ROS graph."""
+    from std_srvs.srv import SetBool
+
+    peer.request("advertise_service", service=topic, type="std_srvs/srv/SetBool", handler="setbool")
+    response = _call_from_ros(node, SetBool, topic, SetBool.Request(data=True))
+    assert response.success is True
+    peer.request("unadvertise_service", service=topic)
+
+    def gone() -> bool:
+        names = {name for name, _types in node.get_service_names_and_types()}
+        return topic not in names
+
+    wait_until(gone, DEADLINE, f"{topic} to leave the graph")
+
+
+# -- rosapi (introspection) -------------------------------------------------------------------
+
+
+def _topics(value: Any) -> tuple[list[str], list[str] | None]:
+    """roslibpy returns the topic list; roslib returns {topics, types}."""
+    if isinstance(value, dict):
+        return list(value["topics"]), list(value["types"])
+    return list(value), None
+
+
+def get_topics(peer: PeerProcess, node: Any, topic: str) -> None:
+    """The peer's topic list names an rclpy publisher's topic (with its type where given)."""
+    from std_msgs.msg import String
+
+    node.create_publisher(String, topic, 10)
+
+    def listed() -> Any:
+        topics, types = _topics(peer.request("get_topics"))
+        return (topics, types) if topic in topics else None
+
+    topics, types = wait_until(listed, DEADLINE, f"{topic} in get_topics")
+    if types is not None:
+        assert len(types) == len(topics)
+        assert types[topics.index(topic)] == "std_msgs/msg/String"
+
+
+def get_topic_type(peer: PeerProcess, node: Any, topic: str) -> None:
+    """The peer learns an rclpy topic's type, and the topics of that type include it."""
+    from std_msgs.msg import String
+
+    node.create_publisher(String, topic, 10)
+    wait_until(lambda: peer.request("get_topic_type", topic=topic), DEADLINE, f"type of {topic}")
+    assert peer.request("get_topic_type", topic=topic) == "std_msgs/msg/String"
+    assert topic in peer.request("get_topics_for_type", type="std_msgs/msg/String")
+
+
+def get_services(peer: PeerProcess, node: Any, topic: str) -> None:
+    """The peer's service list names an rclpy service; its type and same-type list agree."""
+    from std_srvs.srv import SetBool
+
+    node.create_service(SetBool, topic, lambda _req, resp: resp)
+    wait_until(lambda: topic in peer.request("get_services"), DEADLINE, f"{topic} in get_services")
+    assert peer.request("get_service_type", service=topic) == "std_srvs/srv/SetBool"
+    assert topic in peer.request("get_services_for_type", type="std_srvs/srv/SetBool")
+
+
+def get_nodes(peer: PeerProcess, node: Any, topic: str) -> None:
+    """The peer's node list names the rclpy node; its details list what it publishes and serves."""
+    from std_msgs.msg import String
+    from std_srvs.srv import SetBool
+
+    node.create_publisher(String, topic, 10)
+    node.create_service(SetBool, topic + "_srv", lambda _req, resp: resp)
+    fqn = node.get_fully_qualified_name()
+    wait_until(lambda: fqn in peer.request("get_nodes"), DEADLINE, f"{fqn} in get_nodes")
+
+    def detailed() -> Any:
+        details = peer.request("get_node_details", node=fqn)
+        ok = topic in details["publishing"] and topic + "_srv" in details["services"]
+        return details if ok else None
+
+    wait_until(detailed, DEADLINE, f"{topic} and {topic}_srv in node details of {fqn}")

@@ -1,0 +1,123 @@
+"""Stock roslib 2.1.0 (npm, unchanged) in Node against our bridge, with rclpy on the ROS side.
+
+The Node driver is ``tests/peers/node/peer.mjs``; its npm packages are pinned
+by ``package-lock.json`` and installed by ``scripts/setup.sh``. Node 20 has no
+global WebSocket unless started with ``--experimental-websocket``; roslib then
+falls back to its own ``ws`` dependency. Most tests use that default path; the
+last ones run Node's native WebSocket too.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+import pytest
+
+from tests.peers import scenarios
+from tests.peers.peer import PeerProcess
+
+
+@pytest.fixture
+def peer(start_peer: Callable[..., PeerProcess]) -> PeerProcess:
+    """A connected roslib client (ws package transport) in a Node child process."""
+    return start_peer("roslib")
+
+
+@pytest.fixture
+def native_peer(start_peer: Callable[..., PeerProcess]) -> PeerProcess:
+    """A connected roslib client using Node's native WebSocket (--experimental-websocket)."""
+    return start_peer("roslib", native_websocket=True)
+
+
+def test_connects_and_reports_version(peer: PeerProcess) -> None:
+    """roslib connects through the ws package and is the pinned stock version."""
+    assert peer.info["version"] == "2.1.0"
+    assert peer.info["transport"] == "ws package"
+    assert peer.request("is_connected") is True
+
+
+def test_publish(peer: PeerProcess, ros_node: Any, topic: str) -> None:
+    """roslib publishes std_msgs/String (ROS 1 type spelling); an rclpy subscriber receives it."""
+    scenarios.publish_string(peer, ros_node, topic, "std_msgs/String")
+
+
+def test_publish_nested(peer: PeerProcess, ros_node: Any, topic: str) -> None:
+    """roslib publishes a geometry_msgs/Twist (an integer where a float goes); rclpy gets the numbers."""
+    scenarios.publish_nested(peer, ros_node, topic)
+
+
+def test_subscribe(peer: PeerProcess, ros_node: Any, topic: str) -> None:
+    """roslib subscribes (pkg/msg/Type spelling) and receives an rclpy publisher's message."""
+    scenarios.subscribe_string(peer, ros_node, topic, "std_msgs/msg/String")
+
+
+def test_subscribe_nested(peer: PeerProcess, ros_node: Any, topic: str) -> None:
+    """roslib receives a CompressedImage with header stamp and base64 uint8[] data."""
+    scenarios.subscribe_nested(peer, ros_node, topic)
+
+
+def test_call_service(peer: PeerProcess, ros_node: Any, topic: str) -> None:
+    """roslib's Service.callService reaches an rclpy SetBool service and returns its answer."""
+    scenarios.call_setbool(peer, ros_node, topic)
+
+
+def test_call_custom_service(peer: PeerProcess, ros_node: Any, topic: str) -> None:
+    """roslib calls an rclpy mult_msgs/MultFloats service and gets x*y."""
+    scenarios.call_mult(peer, ros_node, topic)
+
+
+def test_call_missing_service(peer: PeerProcess, topic: str) -> None:
+    """roslib's call to a service nobody offers reaches its failure callback, naming the service."""
+    scenarios.call_missing(peer, topic)
+
+
+def test_serve_service(peer: PeerProcess, ros_node: Any, topic: str) -> None:
+    """roslib serves std_srvs/SetBool; an rclpy client's calls get its answers."""
+    scenarios.serve_setbool(peer, ros_node, topic)
+
+
+def test_serve_custom_service(peer: PeerProcess, ros_node: Any, topic: str) -> None:
+    """roslib serves mult_msgs/MultFloats; an rclpy client gets x*y."""
+    scenarios.serve_mult(peer, ros_node, topic)
+
+
+def test_unadvertise_service(peer: PeerProcess, ros_node: Any, topic: str) -> None:
+    """roslib unadvertises its service and it leaves the ROS graph."""
+    scenarios.unadvertise_service(peer, ros_node, topic)
+
+
+def test_get_topics(peer: PeerProcess, ros_node: Any, topic: str) -> None:
+    """Ros.getTopics() (service name without leading slash) lists the topic with its type."""
+    scenarios.get_topics(peer, ros_node, topic)
+
+
+def test_get_topic_type(peer: PeerProcess, ros_node: Any, topic: str) -> None:
+    """Ros.getTopicType() and getTopicsForType() agree with rclpy's publisher."""
+    scenarios.get_topic_type(peer, ros_node, topic)
+
+
+def test_get_services(peer: PeerProcess, ros_node: Any, topic: str) -> None:
+    """Ros.getServices(), getServiceType() and getServicesForType() see an rclpy service."""
+    scenarios.get_services(peer, ros_node, topic)
+
+
+def test_get_nodes(peer: PeerProcess, ros_node: Any, topic: str) -> None:
+    """Ros.getNodes() and getNodeDetails() see the rclpy node and what it offers."""
+    scenarios.get_nodes(peer, ros_node, topic)
+
+
+def test_native_websocket_publish(native_peer: PeerProcess, ros_node: Any, topic: str) -> None:
+    """With Node's native WebSocket, roslib's published message reaches rclpy."""
+    assert native_peer.info["transport"] == "native WebSocket"
+    scenarios.publish_string(native_peer, ros_node, topic, "std_msgs/msg/String")
+
+
+def test_native_websocket_subscribe(native_peer: PeerProcess, ros_node: Any, topic: str) -> None:
+    """With Node's native WebSocket, roslib receives an rclpy publisher's message."""
+    scenarios.subscribe_string(native_peer, ros_node, topic, "std_msgs/String")
+
+
+def test_native_websocket_call_service(native_peer: PeerProcess, ros_node: Any, topic: str) -> None:
+    """With Node's native WebSocket, roslib calls an rclpy service and gets its answer."""
+    scenarios.call_setbool(native_peer, ros_node, topic)
