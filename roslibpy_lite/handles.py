@@ -616,7 +616,11 @@ class ServiceServer(_Handle):
                 result = self.srv_cls.Response() if self.srv_cls is not None else {}
             cls = self.srv_cls.Response if self.srv_cls is not None else None
             type_name = cls._type if cls is not None else f"{self.type_name}_Response"
-            return True, to_wire(result, type_name, cls, f"response of {self.service}")
+            what = f"response of {self.service}"
+            wire = to_wire(result, type_name, cls, what)
+            if cls is not None and not isinstance(result, Message):
+                from_wire(wire, cls, what)  # a dict answer to a typed service must fit too
+            return True, wire
         except Exception as exc:
             return self._failed(exc)
 

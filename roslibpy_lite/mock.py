@@ -442,8 +442,16 @@ class MockRos:
         response = _wire_copy(
             values if isinstance(values, Mapping) else {}, f"response of {service}"
         )
-        if srv_cls is not None:
-            return from_wire(response, srv_cls.Response, f"response of {service}")
+        response_cls = (
+            srv_cls.Response if srv_cls else lookup_message_class(f"{type_name}_Response")
+        )
+        if response_cls is not None and (self.validate or srv_cls is not None):
+            try:
+                typed = from_wire(response, response_cls, f"response of {service}")
+            except InvalidMessageError as exc:
+                raise ServiceError(service, str(exc)) from None
+            if srv_cls is not None:
+                return typed
         return response
 
     def advertise_service(
