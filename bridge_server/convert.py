@@ -59,7 +59,7 @@ Conversion rules, ROS -> CBOR (``to_cbor_obj``)
 Conversion rules, JSON -> ROS (``from_obj``)
     * A message is a JSON object (any ``Mapping``). Missing fields keep their
       defaults; a key the type lacks is an error naming it.
-    * ``bool`` fields take only ``true``/``false``.
+    * ``bool`` fields take only ``true``/``false``; ``byte`` fields ints 0..255.
     * Integer fields take JSON integers in the type's range (``bool`` is
       rejected). A float with an integral value (``3.0``, ``1e3``) is accepted
       and converted; any other float is rejected.
@@ -73,6 +73,7 @@ Conversion rules, JSON -> ROS (``from_obj``)
       bounded ones at most N.
     * ``builtin_interfaces/Time`` and ``Duration`` also accept the ROS 1 keys
       ``secs``/``nsecs``; a ``Time`` may be the string ``"now"``.
+    * The returned message never shares mutable values with ``obj``.
 
 Every error is a :class:`ConversionError` with ``path`` (``pose.position.x``,
 ``points[3].x``), ``expected`` (``float64``, ``array of 3 float64``, ...) and
