@@ -1,0 +1,1 @@
+"""Example programs on roslibpy_lite: ``robot_app`` (the app), ``imu_sim`` (the robot side)."""
