@@ -68,7 +68,8 @@ def main() -> None:
     tuned = False if args.no_tune else tune_allocator()
 
     from geometry_msgs.msg import PoseStamped, Twist
-    from sensor_msgs.msg import Image
+    from nav_msgs.msg import Odometry
+    from sensor_msgs.msg import Image, LaserScan
     from std_msgs.msg import String
 
     string_msg = String(data="hello world")
@@ -92,6 +93,12 @@ def main() -> None:
         },
     }
     img_json_text = encode_publish_json("/camera", img_conv.to_json(img))
+    odom = Odometry(child_frame_id="base_link")
+    odom.pose.pose.position.x = 1.25
+    odom.pose.covariance[0] = 0.01
+    odom_conv = converter_for(Odometry)
+    scan = LaserScan(ranges=[1.5 + i / 1000 for i in range(720)], angle_increment=0.00872)
+    scan_conv = converter_for(LaserScan)
 
     cases: dict[str, Callable[[], Any]] = {
         "string_to_json": lambda: string_conv.to_json(string_msg),
@@ -108,6 +115,14 @@ def main() -> None:
         "image_640x480_rgb8_to_publish_cbor_raw": lambda: encode_publish_cbor_raw(
             "/camera", img_cdr, 1_700_000_000_123_456_789
         ),
+        "odometry_to_publish_json": lambda: encode_publish_json(
+            "/odom", odom_conv.to_json(odom)
+        ),
+        "odometry_to_publish_cbor": lambda: encode_publish_cbor("/odom", odom, odom_conv),
+        "laserscan_720_to_publish_json": lambda: encode_publish_json(
+            "/scan", scan_conv.to_json(scan)
+        ),
+        "laserscan_720_to_publish_cbor": lambda: encode_publish_cbor("/scan", scan, scan_conv),
         "string_from_obj": lambda: string_conv.from_obj(string_obj),
         "twist_from_obj": lambda: twist_conv.from_obj(twist_obj),
         "pose_stamped_from_obj": lambda: pose_conv.from_obj(pose_obj),
