@@ -86,6 +86,7 @@ class Bridge:
             write_limit=self.config.write_limit,
             compression="deflate" if self.config.compression else None,
             max_queue=64,
+            close_timeout=1.0,
         )
         self._refresher = asyncio.create_task(self._refresh_loop(), name="bridge-refresh")
 
@@ -118,7 +119,7 @@ class Bridge:
             log.info("client %d (%s) disconnected", sid, peer)
 
     async def close(self) -> None:
-        """Stop listening, close every connection, release ROS."""
+        """Stop listening, close every connection (at most ~1 s), release ROS."""
         if self._refresher is not None:
             self._refresher.cancel()
             with contextlib.suppress(asyncio.CancelledError):
@@ -126,8 +127,14 @@ class Bridge:
         if self._server is not None:
             self._server.close(close_connections=True)
             waiter: Awaitable[Any] = self._server.wait_closed()
-            with contextlib.suppress(TimeoutError):
-                await asyncio.wait_for(waiter, 1.0)
+            try:
+                await asyncio.wait_for(waiter, 0.5)
+            except TimeoutError:
+                # Peers that do not answer the closing handshake are cut off.
+                for session in list(self.sessions):
+                    session.ws.transport.abort()
+                with contextlib.suppress(TimeoutError):
+                    await asyncio.wait_for(self._server.wait_closed(), 0.2)
         self.ros.close()
 
 

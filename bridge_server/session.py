@@ -55,6 +55,9 @@ log = logging.getLogger("bridge_server.session")
 DEFAULT_QUEUE_LENGTH = 100
 """Bound of a subscription's queue when the client asked for ``queue_length`` 0."""
 
+SERVICE_LINGER = 0.5
+"""Seconds an unadvertised service stays in ROS, answering callers with a default response."""
+
 _LEVELS = {"none": 0, "error": 1, "warning": 2, "info": 3}
 
 _ACTION_OPS = (
@@ -601,12 +604,13 @@ class Session:
         self.bridge.service_owners[name] = self
 
     def _on_ros_request(self, served: _Served, pending: PendingRosCall) -> None:
-        if self.served.get(served.name) is not served:
+        if self.served.get(served.name) is not served or self._closed:
+            log.error("a ROS call to %s arrived after it was unadvertised", served.name)
             pending.complete()
             return
         rid = f"service_request:{served.name}:{next(self._request_ids)}"
         try:
-            args = served.ros.request_conv.to_obj(pending.request) if served.ros else {}
+            args = pending.served.request_conv.to_obj(pending.request)
         except Exception:
             log.exception("cannot convert a request to %s", served.name)
             pending.complete()
@@ -682,7 +686,10 @@ class Session:
             pending.complete()
         served.pending.clear()
         if served.ros is not None:
-            served.ros.destroy()
+            # Destroying the service at once would also destroy the default responses just
+            # sent (and fail callers whose requests are still crossing to the loop): keep it
+            # a moment; requests arriving meanwhile get a default response at once.
+            self.loop.call_later(SERVICE_LINGER, served.ros.destroy)
             served.ros = None
         if self.bridge.service_owners.get(served.name) is self:
             del self.bridge.service_owners[served.name]

@@ -10,14 +10,11 @@ import asyncio
 import threading
 from typing import Any
 
-import pytest
 from rclpy.callback_groups import ReentrantCallbackGroup
 from std_msgs.msg import String
 from std_srvs.srv import SetBool
 
 from tests.bridge.support import bridge_sees_topic, roundtrip
-
-pytestmark = pytest.mark.asyncio
 
 
 async def _pair(ws_connect: Any) -> tuple[Any, Any]:

@@ -7,7 +7,6 @@ import json
 import threading
 from typing import Any
 
-import pytest
 from mult_msgs.srv import MultFloats
 from rclpy.callback_groups import ReentrantCallbackGroup
 from std_srvs.srv import SetBool
@@ -15,8 +14,6 @@ from std_srvs.srv import SetBool
 from roslibpy_lite.protocol import split_fragments
 from tests.bridge.support import ros_future, wait_service
 from tests.helpers import async_wait_until
-
-pytestmark = pytest.mark.asyncio
 
 
 def _mult(ros_node: Any, name: str) -> Any:

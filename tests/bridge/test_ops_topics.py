@@ -6,7 +6,6 @@ import json
 import struct
 from typing import Any
 
-import pytest
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message
 from std_msgs.msg import Int32MultiArray, String, UInt8MultiArray
@@ -19,8 +18,6 @@ from tests.bridge.support import (
     wait_subscribers,
 )
 from tests.helpers import async_wait_until
-
-pytestmark = pytest.mark.asyncio
 
 
 def _latched() -> QoSProfile:

@@ -1,0 +1,87 @@
+"""``python -m bridge_server``: start-up, logging, limits and clean exit on signals."""
+
+from __future__ import annotations
+
+import json
+import signal
+import subprocess
+import sys
+import time
+from typing import Any
+
+import pytest
+from websockets.asyncio.client import connect
+from websockets.exceptions import ConnectionClosed
+
+from tests.bridge.support import roundtrip
+from tests.helpers import ROOT, ros_env
+
+
+def test_help_lists_options():
+    """``--help`` exits 0 and documents the main options."""
+    out = subprocess.run(
+        [sys.executable, "-m", "bridge_server", "--help"],
+        cwd=ROOT, env=ros_env(), capture_output=True, text=True, timeout=60, check=True,
+    ).stdout
+    for option in ("--host", "--port", "--max-message-size", "--send-queue", "--log-level",
+                   "--publisher-grace"):
+        assert option in out
+
+
+async def test_logs_connect_and_disconnect(make_bridge: Any, ws_connect: Any):
+    """Each connection and disconnection is logged with the peer address and session id."""
+    bridge = make_bridge()
+    start = len(bridge.lines)
+    ws = await ws_connect(bridge.url)
+    await roundtrip(ws)
+    line = bridge.wait_for_line(r"client \d+ connected from 127\.0\.0\.1:\d+", start=start)
+    sid = line.split("client ")[1].split()[0]
+    await ws.close()
+    bridge.wait_for_line(rf"client {sid} \(127\.0\.0\.1:\d+\) disconnected", start=start)
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
+async def test_signal_exits_cleanly(make_bridge: Any, ws_connect: Any, sig: int):
+    """SIGINT and SIGTERM stop the bridge promptly with exit code 0, even with busy clients."""
+    bridge = make_bridge()
+    ws = await ws_connect(bridge.url)
+    await ws.send({"op": "subscribe", "topic": "/exit_test", "type": "std_msgs/String"})
+    await ws.send({"op": "advertise", "topic": "/exit_test", "type": "std_msgs/String"})
+    await ws.send({"op": "advertise_service", "service": "/exit_srv", "type": "std_srvs/SetBool"})
+    await roundtrip(ws)
+    started = time.monotonic()
+    code = bridge.stop(sig, timeout=10)
+    took = time.monotonic() - started
+    assert code == 0, bridge.log()
+    print(f"exit after {sig!r} took {took:.3f} s")  # measured, not asserted (see bench/)
+    with pytest.raises(ConnectionClosed):
+        await ws.recv(timeout=5)
+
+
+async def test_inbound_size_limit(make_bridge: Any):
+    """A frame over --max-message-size closes that connection with code 1009, others live on."""
+    bridge = make_bridge("--max-message-size", "2000")
+    async with connect(bridge.url) as big, connect(bridge.url) as other:
+        await big.send(json.dumps({"op": "publish", "topic": "/x", "msg": {"data": "y" * 5000}}))
+        with pytest.raises(ConnectionClosed) as info:
+            await big.recv()
+        assert info.value.rcvd is not None and info.value.rcvd.code == 1009
+        await other.send(json.dumps({"op": "call_service", "id": "v",
+                                     "service": "/rosapi/get_ros_version"}))
+        reply = json.loads(await other.recv())
+        assert reply["result"] is True
+
+
+async def test_publisher_released_after_disconnect(make_bridge: Any, ros_node: Any, topic: str):
+    """A disconnected client's publisher is removed after the grace period."""
+    from std_msgs.msg import String
+
+    from tests.bridge.support import wait_publishers
+    from tests.helpers import async_wait_until
+
+    bridge = make_bridge("--publisher-grace", "0.2")
+    sub = ros_node.create_subscription(String, topic, lambda m: None, 10)
+    async with connect(bridge.url) as ws:
+        await ws.send(json.dumps({"op": "advertise", "topic": topic, "type": "std_msgs/String"}))
+        await wait_publishers(sub)
+    await async_wait_until(lambda: sub.get_publisher_count() == 0, what="publisher released")

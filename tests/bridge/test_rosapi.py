@@ -1,0 +1,184 @@
+"""The /rosapi/* introspection services, answered by the bridge from the ROS graph."""
+
+from __future__ import annotations
+
+import asyncio
+import itertools
+import time
+from collections.abc import Callable
+from typing import Any
+
+import pytest
+from rclpy.action import ActionServer
+from std_msgs.msg import String
+from std_srvs.srv import SetBool
+from test_msgs.action import Fibonacci
+
+pytestmark = pytest.mark.asyncio
+
+_ids = itertools.count()
+
+
+async def _call(ws: Any, service: str, args: Any = None) -> dict[str, Any]:
+    rid = f"r{next(_ids)}"
+    op: dict[str, Any] = {"op": "call_service", "service": service, "id": rid}
+    if args is not None:
+        op["args"] = args
+    await ws.send(op)
+    reply = await ws.expect(op="service_response", id=rid)
+    assert reply["result"] is True, reply
+    assert reply["service"] == service
+    values: dict[str, Any] = reply["values"]
+    return values
+
+
+async def _until(
+    ws: Any, service: str, args: Any, ok: Callable[[dict[str, Any]], bool], timeout: float = 10.0
+) -> dict[str, Any]:
+    """Call ``service`` until its answer satisfies ``ok`` (the graph takes a moment to settle)."""
+    deadline = time.monotonic() + timeout
+    while True:
+        values = await _call(ws, service, args)
+        if ok(values):
+            return values
+        if time.monotonic() > deadline:
+            raise AssertionError(f"{service} never satisfied the check; last answer {values}")
+        await asyncio.sleep(0.02)
+
+
+def _fq(node: Any) -> str:
+    return node.get_fully_qualified_name()
+
+
+async def test_topics_lists_names_and_types(ws_connect: Any, ros_node: Any, topic: str):
+    """/rosapi/topics lists every topic with its type at the same index."""
+    ros_node.create_publisher(String, topic, 10)
+    ws = await ws_connect()
+    values = await _until(ws, "/rosapi/topics", None, lambda v: topic in v["topics"])
+    assert len(values["topics"]) == len(values["types"])
+    assert values["types"][values["topics"].index(topic)] == "std_msgs/msg/String"
+
+
+async def test_topics_for_type_both_spellings(ws_connect: Any, ros_node: Any, topic: str):
+    """/rosapi/topics_for_type finds topics by type, in either spelling."""
+    ros_node.create_publisher(String, topic, 10)
+    ws = await ws_connect()
+    await _until(ws, "/rosapi/topics_for_type", {"type": "std_msgs/msg/String"},
+                 lambda v: topic in v["topics"])
+    short = await _call(ws, "/rosapi/topics_for_type", {"type": "std_msgs/String"})
+    assert topic in short["topics"]
+
+
+async def test_topic_type(ws_connect: Any, ros_node: Any, topic: str):
+    """/rosapi/topic_type answers the type, or "" for an unknown topic; args may be a list."""
+    ros_node.create_publisher(String, topic, 10)
+    ws = await ws_connect()
+    await _until(ws, "/rosapi/topic_type", {"topic": topic},
+                 lambda v: v["type"] == "std_msgs/msg/String")
+    assert (await _call(ws, "/rosapi/topic_type", [topic]))["type"] == "std_msgs/msg/String"
+    assert await _call(ws, "/rosapi/topic_type", {"topic": topic + "_none"}) == {"type": ""}
+
+
+async def test_services_include_ros_and_rosapi(ws_connect: Any, ros_node: Any, topic: str):
+    """/rosapi/services lists ROS services and the bridge's own rosapi services."""
+    ros_node.create_service(SetBool, topic, lambda req, resp: resp)
+    ws = await ws_connect()
+    values = await _until(ws, "/rosapi/services", None, lambda v: topic in v["services"])
+    for name in ("/rosapi/topics", "/rosapi/services", "/rosapi/nodes", "/rosapi/get_time"):
+        assert name in values["services"]
+
+
+async def test_service_type_and_services_for_type(ws_connect: Any, ros_node: Any, topic: str):
+    """/rosapi/service_type and /rosapi/services_for_type agree on a ROS service's type."""
+    ros_node.create_service(SetBool, topic, lambda req, resp: resp)
+    ws = await ws_connect()
+    await _until(ws, "/rosapi/service_type", {"service": topic},
+                 lambda v: v["type"] == "std_srvs/srv/SetBool")
+    found = await _call(ws, "/rosapi/services_for_type", {"type": "std_srvs/SetBool"})
+    assert topic in found["services"]
+    own = await _call(ws, "/rosapi/service_type", {"service": "/rosapi/topics"})
+    assert own == {"type": "rosapi_msgs/srv/Topics"}
+
+
+async def test_service_node(ws_connect: Any, ros_node: Any, topic: str):
+    """/rosapi/service_node names the node serving a service."""
+    ros_node.create_service(SetBool, topic, lambda req, resp: resp)
+    ws = await ws_connect()
+    await _until(ws, "/rosapi/service_node", {"service": topic},
+                 lambda v: v["node"] == _fq(ros_node))
+
+
+async def test_nodes_fully_qualified(ws_connect: Any, ros_node: Any):
+    """/rosapi/nodes lists fully qualified node names, the bridge's own included."""
+    ws = await ws_connect()
+    values = await _until(ws, "/rosapi/nodes", None, lambda v: _fq(ros_node) in v["nodes"])
+    assert "/roslibpy_lite_bridge" in values["nodes"]
+    assert all(n.startswith("/") for n in values["nodes"])
+
+
+async def test_node_details(ws_connect: Any, ros_node: Any, topic: str):
+    """/rosapi/node_details lists a node's publications, subscriptions and services."""
+    ros_node.create_publisher(String, topic + "_out", 10)
+    ros_node.create_subscription(String, topic + "_in", lambda m: None, 10)
+    ros_node.create_service(SetBool, topic + "_srv", lambda req, resp: resp)
+    ws = await ws_connect()
+    await _until(ws, "/rosapi/nodes", None, lambda v: _fq(ros_node) in v["nodes"])
+    values = await _until(
+        ws, "/rosapi/node_details", {"node": _fq(ros_node)},
+        lambda v: topic + "_srv" in v["services"],
+    )
+    assert topic + "_out" in values["publishing"]
+    assert topic + "_in" in values["subscribing"]
+
+
+async def test_node_details_unknown_node_fails(ws_connect: Any):
+    """/rosapi/node_details for a node not in the graph fails with result false naming it."""
+    ws = await ws_connect()
+    await ws.send({"op": "call_service", "service": "/rosapi/node_details",
+                   "args": {"node": "/no/such_node"}, "id": "nd"})
+    reply = await ws.expect(op="service_response", id="nd")
+    assert reply["result"] is False and "/no/such_node" in reply["values"]
+
+
+async def test_publishers_and_subscribers(ws_connect: Any, ros_node: Any, topic: str):
+    """/rosapi/publishers and /rosapi/subscribers name the nodes on each side of a topic."""
+    ros_node.create_publisher(String, topic, 10)
+    ws = await ws_connect()
+    await _until(ws, "/rosapi/publishers", {"topic": topic},
+                 lambda v: v["publishers"] == [_fq(ros_node)])
+    await ws.send({"op": "subscribe", "topic": topic, "type": "std_msgs/String"})
+    await _until(ws, "/rosapi/subscribers", {"topic": topic},
+                 lambda v: "/roslibpy_lite_bridge" in v["subscribers"])
+
+
+async def test_action_servers(ws_connect: Any, ros_node: Any, topic: str):
+    """/rosapi/action_servers lists actions served in the graph."""
+    server = ActionServer(ros_node, Fibonacci, topic, lambda goal: Fibonacci.Result())
+    try:
+        ws = await ws_connect()
+        await _until(ws, "/rosapi/action_servers", None, lambda v: topic in v["action_servers"])
+    finally:
+        server.destroy()
+
+
+async def test_get_time(ws_connect: Any):
+    """/rosapi/get_time gives the bridge clock as {sec, nanosec} (plus ROS 1 secs, nsecs)."""
+    ws = await ws_connect()
+    t = (await _call(ws, "/rosapi/get_time"))["time"]
+    assert abs(t["sec"] - time.time()) < 60
+    assert 0 <= t["nanosec"] < 1_000_000_000
+    assert (t["secs"], t["nsecs"]) == (t["sec"], t["nanosec"])
+
+
+async def test_get_ros_version(ws_connect: Any):
+    """/rosapi/get_ros_version says ROS 2 Jazzy."""
+    ws = await ws_connect()
+    assert await _call(ws, "/rosapi/get_ros_version") == {"version": 2, "distro": "jazzy"}
+
+
+async def test_rosapi_bad_args(ws_connect: Any):
+    """A rosapi call missing its request field fails with result false naming the field."""
+    ws = await ws_connect()
+    await ws.send({"op": "call_service", "service": "/rosapi/topic_type", "args": {}, "id": "b"})
+    reply = await ws.expect(op="service_response", id="b")
+    assert reply["result"] is False and "'topic'" in reply["values"]
