@@ -91,7 +91,7 @@ import sys
 import threading
 import time
 from collections.abc import Callable, Mapping
-from typing import Any, Final
+from typing import Any, Final, Protocol
 
 import cbor2
 import numpy
@@ -102,6 +102,7 @@ from bridge_server.types import BridgeError, type_name_of
 __all__ = [
     "ConversionError",
     "Converter",
+    "FromObj",
     "converter_for",
     "deserialize",
     "encode_publish_cbor",
@@ -662,6 +663,13 @@ def _unknown(o: Mapping[str, Any], fields: frozenset[str], prefix: str, type_nam
 # The converter
 
 
+class FromObj(Protocol):
+    """Signature of :attr:`Converter.from_obj`."""
+
+    def __call__(self, obj: Any, path: str = "") -> Any:
+        """Build a new message from ``obj``; error paths are prefixed with ``path``."""
+
+
 class Converter:
     """Compiled conversions for one rclpy message class. Get one with :func:`converter_for`."""
 
@@ -671,7 +679,7 @@ class Converter:
     to_cbor_obj: Callable[[Any], dict[str, Any]]
     """ROS message -> dict for cbor2 (bytes and CBORTag typed arrays)."""
 
-    from_obj: Callable[..., Any]
+    from_obj: FromObj
     """``from_obj(obj, path="")``: decoded JSON object -> new ROS message; ConversionError."""
 
     def __init__(self, msg_cls: type[Any]) -> None:
@@ -743,7 +751,9 @@ class Converter:
             "    return {" + ", ".join(cbor_items) + "}",
             "def to_json_text(m):",
             "    return ''.join((" + ", ".join(_merge_literals(text_parts)) + ",))",
-            'def from_obj(o, p=""):',
+            'def from_obj(obj, path=""):',
+            "    o = obj",
+            "    p = path",
             "    if type(o) is not dict:",
             "        o = mapping(o, p, TYPE)",
             "    n = len(o)",
@@ -900,12 +910,11 @@ class Converter:
         return lines
 
 
-def _time_wrapper(
-    gen: Callable[[Any, str], Any], cls: type[Any], is_time: bool
-) -> Callable[..., Any]:
+def _time_wrapper(gen: FromObj, cls: type[Any], is_time: bool) -> FromObj:
     """Time/Duration: accept ROS 1 ``secs``/``nsecs`` keys, and ``"now"`` for Time."""
 
-    def from_obj(o: Any, p: str = "") -> Any:
+    def from_obj(obj: Any, path: str = "") -> Any:
+        o = obj
         if type(o) is dict and ("secs" in o or "nsecs" in o):
             o = dict(o)
             if "secs" in o:
@@ -919,7 +928,7 @@ def _time_wrapper(
             m = cls()
             m.sec, m.nanosec = divmod(t, 1_000_000_000)
             return m
-        return gen(o, p)
+        return gen(o, path)
 
     return from_obj
 

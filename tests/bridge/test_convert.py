@@ -1017,3 +1017,15 @@ def test_fuzz_from_obj_gives_serializable_message_or_conversion_error(
     assert deserialize(serialize(msg), cls) is not None
     strict_loads(conv.to_json(msg))
     cbor2.dumps(conv.to_cbor_obj(msg))
+
+
+def test_from_obj_takes_keyword_arguments() -> None:
+    """from_obj can be called with obj= and path= keywords, as its signature documents."""
+    from builtin_interfaces.msg import Time
+    from geometry_msgs.msg import Point
+
+    assert converter_for(Point).from_obj(obj={"x": 2.0}, path="msg").x == 2.0
+    assert converter_for(Time).from_obj(obj={"secs": 1}, path="t") == Time(sec=1)
+    with pytest.raises(ConversionError) as info:
+        converter_for(Time).from_obj(obj={"sec": "x"}, path="t")
+    assert info.value.path == "t.sec"
