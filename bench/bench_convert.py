@@ -68,7 +68,7 @@ def main() -> None:
     tuned = False if args.no_tune else tune_allocator()
 
     from geometry_msgs.msg import PoseStamped, Twist
-    from nav_msgs.msg import Odometry
+    from nav_msgs.msg import OccupancyGrid, Odometry
     from sensor_msgs.msg import Image, LaserScan
     from std_msgs.msg import String
 
@@ -99,6 +99,10 @@ def main() -> None:
     odom_conv = converter_for(Odometry)
     scan = LaserScan(ranges=[1.5 + i / 1000 for i in range(720)], angle_increment=0.00872)
     scan_conv = converter_for(LaserScan)
+    grid = OccupancyGrid()
+    grid.info.width = grid.info.height = 1000
+    grid.data = [-1, 0, 0, 100, 0, 0, 0] * (1_000_000 // 7) + [0] * (1_000_000 % 7)
+    grid_conv = converter_for(OccupancyGrid)
 
     cases: dict[str, Callable[[], Any]] = {
         "string_to_json": lambda: string_conv.to_json(string_msg),
@@ -123,6 +127,12 @@ def main() -> None:
             "/scan", scan_conv.to_json(scan)
         ),
         "laserscan_720_to_publish_cbor": lambda: encode_publish_cbor("/scan", scan, scan_conv),
+        "occupancy_grid_1000x1000_to_publish_json": lambda: encode_publish_json(
+            "/map", grid_conv.to_json(grid)
+        ),
+        "occupancy_grid_1000x1000_to_publish_cbor": lambda: encode_publish_cbor(
+            "/map", grid, grid_conv
+        ),
         "string_from_obj": lambda: string_conv.from_obj(string_obj),
         "twist_from_obj": lambda: twist_conv.from_obj(twist_obj),
         "pose_stamped_from_obj": lambda: pose_conv.from_obj(pose_obj),

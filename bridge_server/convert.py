@@ -630,6 +630,14 @@ def _float_text(x: Any) -> str:
     raise TypeError(f"float field holds a {type(x).__name__}")
 
 
+_INT8_TEXT: Final = tuple(str(b - 256 if b > 127 else b) for b in range(256))
+
+
+def _int8_text(v: Any) -> str:
+    """JSON text of an int8 array (array.array or numpy) via a byte -> text table."""
+    return "[" + ",".join(map(_INT8_TEXT.__getitem__, bytes(v))) + "]"
+
+
 def _merge_literals(parts: list[tuple[bool, str]]) -> list[str]:
     """Source fragments for ``(is_literal, text)`` pieces, adjacent literals merged."""
     out: list[tuple[bool, str]] = []
@@ -720,6 +728,7 @@ class Converter:
             "ir": int.__repr__,
             "fr": float.__repr__,
             "fz": _float_text,
+            "i8": _int8_text,
             "FIELDS": frozenset(self.fields),
             "TYPE": self.type_name,
             "list": list,
@@ -802,6 +811,8 @@ class Converter:
             return [(True, '"'), (False, f'b64({a}, newline=False).decode("ascii")'), (True, '"')]
         if e == "octet":
             return [(False, f"enc(octets({a}))")]
+        if e == "int8":  # maps (OccupancyGrid) can be huge: a 256-entry text table
+            return [(False, f"i8({a})")]
         if e in _CBOR_TAGS:
             return [(False, f"enc({a}.tolist())")]
         if e == "msg":

@@ -1029,3 +1029,17 @@ def test_from_obj_takes_keyword_arguments() -> None:
     with pytest.raises(ConversionError) as info:
         converter_for(Time).from_obj(obj={"sec": "x"}, path="t")
     assert info.value.path == "t.sec"
+
+
+def test_int8_arrays_text_matches_values() -> None:
+    """int8 arrays (e.g. OccupancyGrid data) go out as the right JSON numbers at every value."""
+    from nav_msgs.msg import OccupancyGrid
+    from test_msgs.msg import Arrays
+
+    conv = converter_for(OccupancyGrid)
+    values = list(range(-128, 128))
+    grid = conv.from_obj({"data": values})
+    assert strict_loads(conv.to_json(grid))["data"] == values
+    assert conv.to_obj(grid)["data"] == values
+    fixed = converter_for(Arrays).from_obj({"int8_values": [-128, -1, 127]})
+    assert strict_loads(converter_for(Arrays).to_json(fixed))["int8_values"] == [-128, -1, 127]
