@@ -159,16 +159,19 @@ async def receive_path(seconds: float) -> dict[str, Any]:
     client.subscribe("/img_typed", Image, callback=got.append)
     typed_cbor = cbor2.dumps({"op": "publish", "topic": "/img_typed", "msg": _image_msg(pixels)})
     typed_json = json_frame.replace('"/img"', '"/img_typed"', 1)
-    for name, frame in (("image_cbor_dict", cbor_frame), ("image_cbor_typed", typed_cbor),
-                        ("image_json_dict", json_frame), ("image_json_typed", typed_json)):
-        def feed_image(n: int, frame: str | bytes = frame) -> None:
+    frames: tuple[tuple[str, str | bytes], ...] = (
+        ("image_cbor_dict", cbor_frame), ("image_cbor_typed", typed_cbor),
+        ("image_json_dict", json_frame), ("image_json_typed", typed_json),
+    )
+    for name, image_frame in frames:
+        def feed_image(n: int, frame: str | bytes = image_frame) -> None:
             for _ in range(n):
                 client._receive(frame)
             got.clear()
 
         r = _timed(feed_image, 5, seconds)
-        r["frame_bytes"] = len(frame)
-        r["MB_per_s"] = round(r["per_s"] * len(frame) / 1e6, 1)
+        r["frame_bytes"] = len(image_frame)
+        r["MB_per_s"] = round(r["per_s"] * len(image_frame) / 1e6, 1)
         results[name] = r
     await client.close()
     return results

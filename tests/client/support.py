@@ -51,7 +51,8 @@ class ScriptedPeer:
         try:
             async for frame in conn:
                 op = json.loads(frame)
-                reply = self.auto.get(op.get("op", ""), lambda _op: None)(op)
+                answer = self.auto.get(op.get("op", ""))
+                reply = answer(op) if answer is not None else None
                 if reply is not None:
                     await conn.send(json.dumps(reply))
                 async with self._changed:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import random
+from typing import Any
 
 import pytest
 
@@ -52,7 +53,7 @@ def test_many_attempts_do_not_overflow() -> None:
     "kwargs",
     [{"initial": 0}, {"initial": 1.0, "maximum": 0.5}, {"factor": 0.5}, {"jitter": 1.5}],
 )
-def test_bad_settings_are_refused(kwargs: dict[str, float]) -> None:
+def test_bad_settings_are_refused(kwargs: dict[str, Any]) -> None:
     """Nonsensical settings raise ValueError naming the setting."""
     with pytest.raises(ValueError, match="backoff"):
         Backoff(**kwargs)

@@ -13,7 +13,7 @@ from typing import Any
 
 import pytest
 
-from msgs.mult_msgs.srv import MultFloats
+from msgs.mult_msgs.srv import MultFloats, MultFloats_Request, MultFloats_Response
 from msgs.std_msgs.msg import Int32, String
 from roslibpy_lite import (
     InvalidMessageError,
@@ -121,7 +121,7 @@ async def test_service_serve_and_call(ros: Ros, topic: str) -> None:
 async def test_typed_async_handler(ros: Ros, topic: str) -> None:
     """An async handler of a typed service gets a Request and may return a Response."""
 
-    async def handler(req: MultFloats.Request) -> MultFloats.Response:  # type: ignore[name-defined]
+    async def handler(req: MultFloats_Request) -> MultFloats_Response:
         await asyncio.sleep(0)
         return MultFloats.Response(result=req.x + req.y)
 
