@@ -451,7 +451,12 @@ class Client:
             handle = self._requests.get(key)
             if handle is not None:
                 log.warning("bridge refused %s: %s", key, op.msg)
-                handle._fail(StatusError(op.msg, level=op.level, id=op.id))
+                error = StatusError(op.msg, level=op.level, id=op.id)
+                if isinstance(handle, Publisher):  # every handle sharing the advertise
+                    for pub in self._publishers.get(handle.topic, [handle]):
+                        pub._fail(error)
+                else:
+                    handle._fail(error)
                 return
         self.status_errors += 1
         log.warning("bridge error: %s", op.msg)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import asyncio
+import json
 from collections.abc import AsyncIterator
 from typing import Any
 
@@ -371,3 +372,31 @@ async def _until_state(ros: Client, state: ConnectionState) -> None:
     async with ros.state_changes() as changes:
         while ros.state is not state:
             await changes.next()
+
+
+async def test_bad_url_is_a_usage_error() -> None:
+    """A URL that is not ws:// or wss:// raises UsageError naming it."""
+    with pytest.raises(UsageError, match="bad URL"):
+        await roslibpy_lite.connect("http://127.0.0.1:1")
+
+
+async def test_publish_backpressure_bounds_the_send_queue(peer: ScriptedPeer) -> None:
+    """With max_pending=2, after every publish at most 2 frames wait; all arrive in order."""
+    async with roslibpy_lite.connect(peer.url, max_pending=2) as ros:
+        pub = await ros.advertise("/bp", "std_msgs/msg/Int32")
+        for i in range(200):
+            await pub.publish({"data": i})
+            assert ros._queued - ros._sent <= 3
+        await peer.expect(op="publish", msg={"data": 199})
+        got = [op["msg"]["data"] for op in peer.received if op["op"] == "publish"]
+        assert got == list(range(200))
+
+
+async def test_status_error_reaches_every_publisher_of_the_topic(ros: Client) -> None:
+    """A refused advertise fails the next publish of every handle sharing it."""
+    a = await ros.advertise("/shared_bad", "nope_msgs/msg/Nope")
+    b = await ros.advertise("/shared_bad", "nope_msgs/msg/Nope")
+    ros._receive(json.dumps({"op": "status", "level": "error", "msg": "unknown type", "id": a.id}))
+    for pub in (a, b):
+        with pytest.raises(StatusError, match="unknown type"):
+            await pub.publish({})
