@@ -4,6 +4,7 @@
 #
 #   bash scripts/demo.sh                 # bridge on ws://127.0.0.1:9090
 #   PORT=9191 bash scripts/demo.sh       # another port (PORT=0: any free port)
+#   IMU_RATE=5 bash scripts/demo.sh      # a calmer IMU (messages per second, default 50)
 #
 # Set-up on a fresh machine (venv, ROS 2 Jazzy wheels, interfaces) is done by
 # scripts/setup.sh, sourced first. DDS stays on loopback
@@ -82,7 +83,8 @@ trap on_signal INT TERM
 start() {
   local name="$1" ready_re="$2"
   shift 2
-  "$@" > >(trap '' INT; prefix "$name" "$ready_re") 2>&1 &
+  # The prefixer ignores Ctrl+C and SIGTERM: it ends at EOF, after the last line.
+  "$@" > >(trap '' INT TERM; prefix "$name" "$ready_re") 2>&1 &
   pids+=("$!")
   names+=("$name")
 }
@@ -92,6 +94,7 @@ if ! IFS= read -r -t 60 -u 3 ready_line || [ "$ready_line" = exited ]; then
   say "the bridge did not start (is port $PORT already in use?)"
   stopping=1
   stop_all
+  wait 2>/dev/null
   exit 1
 fi
 if [[ "$ready_line" =~ ws://[0-9.]+:([0-9]+) ]]; then
@@ -99,7 +102,7 @@ if [[ "$ready_line" =~ ws://[0-9.]+:([0-9]+) ]]; then
 fi
 URL="ws://$HOST:$PORT"
 
-start imu_sim '' "$PY" -m examples.imu_sim --rate 50
+start imu_sim '' "$PY" -m examples.imu_sim --rate "${IMU_RATE:-50}"
 start robot_app '' "$PY" -m examples.robot_app --url "$URL"
 
 url_opt=""

@@ -1,0 +1,100 @@
+"""scripts/demo.sh as a user runs it: comes up, answers the CLI, and stops everything on Ctrl+C."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import socket
+import subprocess
+import sys
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+from tests.examples.support import Program
+from tests.helpers import ROOT, ros_env, wait_until
+
+CLI = str(Path(sys.executable).parent / "roslibpy-lite")
+# The demo sources scripts/setup.sh, which installs packages when pyproject.toml changed.
+pytestmark = pytest.mark.timeout(400)
+
+
+def group_gone(pgid: int) -> bool:
+    """True when no process of the group is left."""
+    try:
+        os.killpg(pgid, 0)
+    except ProcessLookupError:
+        return True
+    return False
+
+
+@pytest.fixture
+def demo() -> Iterator[Program]:
+    """The demo on a free port, in its own process group; killed after the test if still there."""
+    program = Program(["bash", "scripts/demo.sh"], env=ros_env(PORT="0"), group=True)
+    yield program
+    program.kill()
+
+
+def cli(*args: str) -> subprocess.CompletedProcess[str]:
+    """Run the installed console script."""
+    return subprocess.run([CLI, *args], cwd=ROOT, capture_output=True, text=True, timeout=60,
+                          env=ros_env())
+
+
+def test_demo_serves_the_cli_and_stops_on_ctrl_c(demo: Program) -> None:
+    """The demo comes up, the CLI calls /mult_floats and hears the counter, Ctrl+C stops all."""
+    url = demo.wait_for(r"^\[demo\] bridge on (ws://127\.0\.0\.1:\d+);", timeout=360)[1]
+    hint = demo.wait_for(r"^\[demo\]   (\.venv/bin/roslibpy-lite service call .*)$")[1]
+    assert hint == ('.venv/bin/roslibpy-lite service call /mult_floats mult_msgs/srv/MultFloats '
+                    f'"{{x: 2.5, y: 4.0}}" --url {url}')
+    demo.wait_for(r"^robot_app \| \[service\] serving /mult_floats")
+
+    called = cli("service", "call", "/mult_floats", "mult_msgs/srv/MultFloats",
+                 "{x: 2.5, y: 4.0}", "--url", url)
+    assert (called.returncode, called.stdout, called.stderr) == (0, "result: 10.0\n", "")
+
+    echoed = cli("topic", "echo", "/example_counter", "--count", "1", "--json", "--url", url)
+    assert echoed.returncode == 0, echoed.stderr
+    assert isinstance(json.loads(echoed.stdout)["data"], int)
+
+    demo.wait_for(r"^robot_app \| \[imu\] #\d+ angular_velocity\.x=\S+ sum=\S+$")
+    demo.wait_for(r"^robot_app \| \[service\] /mult_floats: 2\.5 \* 4\.0 = 10\.0$")
+
+    assert demo.interrupt(timeout=60) == 0, demo.dump()  # Ctrl+C: SIGINT to the whole group
+    assert demo.out[-1] == "[demo] demo stopped", demo.dump()
+    for pattern in (r"^robot_app \| \[app\] stopped$", r"^imu_sim   \| \[imu_sim\] stopped after",
+                    r"^bridge    \| .*shutting down"):
+        demo.wait_for(pattern, timeout=1)
+    assert not any("Traceback" in line for line in demo.out + demo.err), demo.dump()
+    wait_until(lambda: group_gone(demo.proc.pid), timeout=10, what="every demo process to exit")
+
+
+def test_demo_stops_everything_when_only_the_script_is_signalled(demo: Program) -> None:
+    """SIGINT to the script alone (not its group) still stops the bridge, IMU and program."""
+    demo.wait_for(r"^\[demo\] bridge on ws://", timeout=360)
+    demo.wait_for(r"^robot_app \| \[service\] serving /mult_floats")
+    demo.proc.send_signal(signal.SIGINT)
+    assert demo.proc.wait(60) == 0, demo.dump()
+    wait_until(lambda: group_gone(demo.proc.pid), timeout=10, what="every demo process to exit")
+    demo.kill()  # joins the output readers
+    assert demo.out[-1] == "[demo] demo stopped", demo.dump()
+    demo.wait_for(r"^robot_app \| \[app\] stopped$", timeout=1)
+
+
+def test_demo_reports_a_busy_port() -> None:
+    """With the port taken, the demo says the bridge did not start and exits 1, leaving nothing."""
+    with socket.socket() as busy:
+        busy.bind(("127.0.0.1", 0))
+        busy.listen()
+        port = busy.getsockname()[1]
+        demo = Program(["bash", "scripts/demo.sh"], env=ros_env(PORT=str(port)), group=True)
+        try:
+            code = demo.proc.wait(360)
+            wait_until(lambda: group_gone(demo.proc.pid), timeout=10, what="the demo to clean up")
+        finally:
+            demo.kill()
+    assert code == 1, demo.dump()
+    assert demo.out[-1] == f"[demo] the bridge did not start (is port {port} already in use?)"
