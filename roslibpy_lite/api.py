@@ -82,6 +82,11 @@ class Ros(Protocol):
         """The current connection state."""
         ...
 
+    @property
+    def is_connected(self) -> bool:
+        """True while the state is ``CONNECTED``."""
+        ...
+
     async def wait_connected(self, timeout: float | None = None) -> None:
         """Return once the state is ``CONNECTED``.
 

@@ -425,7 +425,9 @@ class Subscription(_Handle, Generic[T]):
             return cls.from_json(raw)
         except ValidationError as exc:
             self.decode_errors += 1
-            log.warning("a message on %s does not fit %s: %s", self.topic, cls._type, exc)
+            # The field path and expected type only: no payload in the log.
+            log.warning("a message on %s does not fit %s: field %s: expected %s",
+                        self.topic, cls._type, exc.path or "<message>", exc.expected)
             return _SKIP
 
     def _wake(self) -> None:
