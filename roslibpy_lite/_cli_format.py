@@ -72,12 +72,32 @@ def parse_values(text: str | None, what: str = "VALUES") -> dict[str, Any]:
     return {str(k): v for k, v in value.items()}
 
 
-_PLAIN = re.compile(r"^[A-Za-z_./][A-Za-z0-9_./ -]*$")
+_PLAIN = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")  # ROS field names stay plain
 _RESERVED = frozenset({"true", "false", "yes", "no", "on", "off", "null", "~"})
 
 
+_ESCAPES = {"\\": "\\\\", '"': '\\"', "\n": "\\n", "\t": "\\t", "\r": "\\r"}
+
+
+def _double_quoted(text: str) -> str:
+    """A YAML double-quoted string; anything not printable is escaped by code point."""
+    out = []
+    for ch in text:
+        if ch in _ESCAPES:
+            out.append(_ESCAPES[ch])
+        elif ch.isprintable():
+            out.append(ch)
+        elif ord(ch) <= 0xFF:
+            out.append(f"\\x{ord(ch):02x}")
+        elif ord(ch) <= 0xFFFF:
+            out.append(f"\\u{ord(ch):04x}")
+        else:
+            out.append(f"\\U{ord(ch):08x}")
+    return '"' + "".join(out) + '"'
+
+
 def _key(key: str) -> str:
-    return key if _PLAIN.match(key) and key.lower() not in _RESERVED else json.dumps(key)
+    return key if _PLAIN.match(key) and key.lower() not in _RESERVED else _double_quoted(key)
 
 
 def _scalar(value: Any) -> str:
@@ -98,7 +118,7 @@ def _scalar(value: Any) -> str:
     text = str(value)
     if text.isprintable():
         return "'" + text.replace("'", "''") + "'"
-    return json.dumps(text)  # a double-quoted YAML string with escapes
+    return _double_quoted(text)
 
 
 def _emit(value: Any, indent: int, lines: list[str], no_arr: bool) -> None:

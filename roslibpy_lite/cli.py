@@ -441,8 +441,9 @@ async def cmd_topic_pub(args: argparse.Namespace, out: Out) -> int:
             raise CliError(EXIT_REMOTE, f"the bridge refused to advertise {args.topic}: "
                                         f"{pub.error}")
         if len(subscribers) < wait_subs:
-            print(f"Waiting for at least {wait_subs} matching subscription(s)...",
-                  file=sys.stderr, flush=True)
+            if not args.quiet:
+                print(f"Waiting for at least {wait_subs} matching subscription(s)...",
+                      file=sys.stderr, flush=True)
             while len(subscribers) < wait_subs:
                 await asyncio.sleep(0.1)  # ROS graph discovery has no event to await
                 subscribers = (await s.rosapi("subscribers", {"topic": args.topic})).get(
@@ -787,6 +788,8 @@ def main(argv: Sequence[str] | None = None, *, stdout: TextIO | None = None) -> 
         args = build_parser().parse_args(argv)
     except CliError as exc:
         return _fail(exc.code, exc.message)
+    except SystemExit as exc:  # --help
+        return exc.code if isinstance(exc.code, int) else EXIT_OK
     if args.timeout <= 0:
         return _fail(EXIT_USAGE, f"--timeout must be > 0, got {args.timeout}")
     out = Out(stdout)

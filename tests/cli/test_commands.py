@@ -1,0 +1,264 @@
+"""Every CLI subcommand against the real bridge, with rclpy nodes on the ROS side."""
+
+from __future__ import annotations
+
+import json
+import re
+import threading
+from collections.abc import Iterator
+from typing import Any
+
+import pytest
+
+from tests.cli.conftest import Result, Run
+from tests.helpers import wait_until
+
+
+def full_name(node: Any) -> str:
+    """The node's fully qualified name."""
+    ns = node.get_namespace().rstrip("/")
+    return f"{ns}/{node.get_name()}"
+
+
+@pytest.fixture
+def talker(ros_node: Any, topic: str) -> Iterator[list[str]]:
+    """An rclpy publisher of std_msgs/String 'hello N' on ``topic`` at 20 Hz; yields what it sent."""
+    from std_msgs.msg import String
+
+    pub = ros_node.create_publisher(String, topic, 10)
+    sent: list[str] = []
+
+    def tick() -> None:
+        text = f"hello {len(sent)}"
+        sent.append(text)
+        pub.publish(String(data=text))
+
+    timer = ros_node.create_timer(0.05, tick)
+    yield sent
+    ros_node.destroy_timer(timer)
+    ros_node.destroy_publisher(pub)
+
+
+@pytest.fixture
+def multiplier(ros_node: Any, topic: str) -> str:
+    """An rclpy mult_msgs/srv/MultFloats server named ``topic``; returns the service name."""
+    from mult_msgs.srv import MultFloats
+
+    def handle(request: Any, response: Any) -> Any:
+        response.result = request.x * request.y
+        return response
+
+    ros_node.create_service(MultFloats, topic, handle)
+    return topic
+
+
+def until_ok(cli: Run, *argv: str, check: Any = None, timeout: float = 15) -> Result:
+    """Run the CLI until it succeeds (and ``check(result)`` holds): the graph needs discovery."""
+    last: list[Result] = []
+
+    def attempt() -> bool:
+        result = cli(*argv)
+        last[:] = [result]
+        return result.code == 0 and (check is None or bool(check(result)))
+
+    wait_until(attempt, timeout=timeout, what=f"roslibpy-lite {' '.join(argv)}: {last}")
+    return last[0]
+
+
+# -- topic ------------------------------------------------------------------------------------------
+
+
+def test_topic_list_shows_a_ros_publisher(cli: Run, talker: list[str], topic: str) -> None:
+    """topic list names the rclpy topic; -t adds its type; --json gives name/type objects."""
+    until_ok(cli, "topic", "list", check=lambda r: topic in r.lines)
+    typed = cli("topic", "list", "-t")
+    assert f"{topic} [std_msgs/msg/String]" in typed.lines
+    listed = json.loads(cli("topic", "list", "--json").out)
+    assert {"name": topic, "type": "std_msgs/msg/String"} in listed
+
+
+def test_topic_type(cli: Run, talker: list[str], topic: str) -> None:
+    """topic type prints the type of a topic an rclpy node publishes."""
+    result = until_ok(cli, "topic", "type", topic, "--wait", "10")
+    assert result.out == "std_msgs/msg/String\n"
+
+
+def test_topic_info_counts_and_names_nodes(
+    cli: Run, talker: list[str], topic: str, ros_node: Any
+) -> None:
+    """topic info shows the type and the publishing node (-v names it; --json has both lists)."""
+    me = f"  {full_name(ros_node)}"  # the node's name is discovered after its publisher
+    result = until_ok(cli, "topic", "info", topic, "-v", "--wait", "10",
+                      check=lambda r: me in r.lines)
+    assert result.lines == ["Type: std_msgs/msg/String", "Publisher count: 1",
+                            f"  {full_name(ros_node)}", "Subscription count: 0"]
+    info = json.loads(cli("topic", "info", topic, "--json").out)  # (discovered by now)
+    assert info == {"name": topic, "type": "std_msgs/msg/String",
+                    "publishers": [full_name(ros_node)], "subscribers": []}
+
+
+def test_topic_echo_prints_yaml_documents(cli: Run, talker: list[str], topic: str) -> None:
+    """topic echo (type looked up) prints each message as YAML ended by '---', --count stops it."""
+    result = cli("topic", "echo", topic, "--count", "2", "--wait", "10")
+    assert result.code == 0, result
+    docs = result.out.split("---\n")
+    assert docs[-1] == "" and len(docs) == 3
+    matches = [re.fullmatch(r"data: 'hello (\d+)'\n", d) for d in docs[:2]]
+    numbers = [int(m[1]) for m in matches if m]
+    assert len(numbers) == 2 and numbers[1] == numbers[0] + 1, result.out
+    assert f"hello {numbers[1]}" in talker
+
+
+def test_topic_echo_json_lines(cli: Run, talker: list[str], topic: str) -> None:
+    """topic echo --json prints one JSON object per message."""
+    result = cli("topic", "echo", topic, "std_msgs/msg/String", "--count", "3", "--json")
+    assert result.code == 0, result
+    msgs = [json.loads(line) for line in result.lines]
+    assert len(msgs) == 3 and all(m["data"].startswith("hello ") for m in msgs)
+    numbers = [int(m["data"].split()[1]) for m in msgs]
+    assert numbers == sorted(numbers)
+
+
+def test_topic_echo_duration_ends_without_messages(cli: Run, topic: str) -> None:
+    """With a TYPE and no publisher, --duration ends the echo with status 0 and no output."""
+    result = cli("topic", "echo", topic, "std_msgs/msg/String", "--duration", "0.5")
+    assert (result.code, result.out, result.err) == (0, "", "")
+
+
+def test_topic_pub_once_reaches_a_ros_subscriber(cli: Run, ros_node: Any, topic: str) -> None:
+    """topic pub --once waits for the rclpy subscriber, publishes one message and exits 0."""
+    from std_msgs.msg import String
+
+    got: list[str] = []
+    arrived = threading.Event()
+
+    def on_msg(msg: Any) -> None:
+        got.append(msg.data)
+        arrived.set()
+
+    ros_node.create_subscription(String, topic, on_msg, 10)
+    result = cli("topic", "pub", topic, "std_msgs/msg/String", "{data: hi there}", "--once")
+    assert (result.code, result.out) == (0, 'publishing #1: {"data": "hi there"}\n'), result
+    assert arrived.wait(10), "the rclpy subscriber got nothing"
+    assert got == ["hi there"]
+
+
+def test_topic_pub_times_publishes_that_many(cli: Run, ros_node: Any, topic: str) -> None:
+    """topic pub --times 3 -r 20 publishes exactly three messages, in order."""
+    from std_msgs.msg import Int32
+
+    got: list[int] = []
+    ros_node.create_subscription(Int32, topic, lambda m: got.append(m.data), 10)
+    result = cli("topic", "pub", topic, "std_msgs/msg/Int32", '{"data": 7}', "--times", "3",
+                 "-r", "20", "-q")
+    assert (result.code, result.out, result.err) == (0, "", ""), result
+    wait_until(lambda: len(got) >= 3, timeout=10, what="three messages")
+    assert got == [7, 7, 7]
+
+
+def test_topic_hz_reports_rate_statistics(cli: Run, talker: list[str], topic: str) -> None:
+    """topic hz --json reports rate, min, max, std dev and window; the text form is ros2's."""
+    result = cli("topic", "hz", topic, "std_msgs/msg/String", "--count", "25", "--json")
+    assert result.code == 0, result
+    reports = [json.loads(line) for line in result.lines]
+    assert reports and set(reports[-1]) == {"rate", "min", "max", "std_dev", "window"}
+    last = reports[-1]
+    assert last["window"] == 24
+    assert last["rate"] > 0 and 0 <= last["min"] <= last["max"]
+    text = cli("topic", "hz", topic, "std_msgs/msg/String", "--count", "5")
+    assert text.code == 0, text
+    assert re.fullmatch(r"average rate: \d+\.\d{3}", text.lines[-2]), text.out
+    assert re.fullmatch(r"\tmin: \d+\.\d{3}s max: \d+\.\d{3}s std dev: \d+\.\d{5}s window: 4",
+                        text.lines[-1]), text.out
+
+
+# -- service ---------------------------------------------------------------------------------------
+
+
+def test_service_list_and_type(cli: Run, multiplier: str) -> None:
+    """service list (-t, --json) and service type show an rclpy service and its type."""
+    until_ok(cli, "service", "list", check=lambda r: multiplier in r.lines)
+    assert f"{multiplier} [mult_msgs/srv/MultFloats]" in cli("service", "list", "-t").lines
+    listed = json.loads(cli("service", "list", "--json").out)
+    assert {"name": multiplier, "type": "mult_msgs/srv/MultFloats"} in listed
+    assert {"name": "/rosapi/topics", "type": "rosapi_msgs/srv/Topics"} in listed
+    assert cli("service", "type", multiplier).out == "mult_msgs/srv/MultFloats\n"
+
+
+def test_service_call_prints_the_response(cli: Run, multiplier: str) -> None:
+    """service call with YAML values prints the response as YAML; --json as one JSON line."""
+    result = cli("service", "call", multiplier, "mult_msgs/srv/MultFloats", "{x: 2.5, y: 4.0}",
+                 "--wait", "10")
+    assert (result.code, result.out, result.err) == (0, "result: 10.0\n", ""), result
+    as_json = cli("service", "call", multiplier, "mult_msgs/MultFloats", '{"x": 3, "y": -2}',
+                  "--json")
+    assert (as_json.code, json.loads(as_json.out)) == (0, {"result": -6.0}), as_json
+
+
+def test_service_call_without_values_sends_defaults(cli: Run, multiplier: str) -> None:
+    """Omitted VALUES mean the default request (0 * 0)."""
+    result = cli("service", "call", multiplier, "mult_msgs/srv/MultFloats", "--wait", "10")
+    assert (result.code, result.out) == (0, "result: 0.0\n"), result
+
+
+# -- node ------------------------------------------------------------------------------------------
+
+
+def test_node_list_and_info(cli: Run, ros_node: Any, talker: list[str], topic: str) -> None:
+    """node list names the rclpy node and the bridge; node info shows what the node publishes."""
+    me = full_name(ros_node)
+    listed = until_ok(cli, "node", "list", check=lambda r: me in r.lines)
+    assert "/roslibpy_lite_bridge" in listed.lines
+    assert me in json.loads(cli("node", "list", "--json").out)
+    info = until_ok(cli, "node", "info", me, check=lambda r: f"    {topic}" in r.lines)
+    assert info.lines[0] == me and "  Publishers:" in info.lines
+    details = json.loads(cli("node", "info", me, "--json").out)
+    assert topic in details["publishing"] and details["name"] == me
+
+
+# -- interface -------------------------------------------------------------------------------------
+
+
+def test_interface_show_expands_nested_types(cli: Run) -> None:
+    """interface show prints the definition with nested types indented by a tab, like ros2."""
+    result = cli("interface", "show", "std_msgs/msg/Header", url=None)
+    assert result.code == 0, result
+    lines = result.lines
+    stamp = lines.index("builtin_interfaces/Time stamp")
+    assert "\tint32 sec" in lines[stamp:] and "\tuint32 nanosec" in lines[stamp:]
+    assert lines[-1] == "string frame_id"
+    raw = cli("interface", "show", "std_msgs/Header", "--raw", url=None)
+    assert "\tint32 sec" not in raw.lines and "builtin_interfaces/Time stamp" in raw.lines
+
+
+def test_interface_show_service(cli: Run) -> None:
+    """A service shows request, '---', response."""
+    result = cli("interface", "show", "mult_msgs/srv/MultFloats", url=None)
+    assert result.lines == ["# Multiply two floats.", "float64 x", "float64 y", "---",
+                            "float64 result"]
+
+
+def test_interface_list(cli: Run) -> None:
+    """interface list names message, service and action types; a package filter narrows it."""
+    everything = cli("interface", "list", url=None).lines
+    assert {"std_msgs/msg/String", "mult_msgs/srv/MultFloats"} <= set(everything)
+    assert cli("interface", "list", "mult_msgs", url=None).lines == ["mult_msgs/srv/MultFloats"]
+
+
+def test_url_from_the_environment(
+    cli: Run, monkeypatch: pytest.MonkeyPatch, bridge: Any
+) -> None:
+    """Without --url the CLI uses $ROSLIBPY_LITE_URL."""
+    monkeypatch.setenv("ROSLIBPY_LITE_URL", bridge.url)
+    result = cli("node", "list", url=None)
+    assert result.code == 0 and "/roslibpy_lite_bridge" in result.lines, result
+
+
+def test_help_documents_the_exit_codes(cli: Run) -> None:
+    """--help exits 0 and lists every exit status with its meaning."""
+    from roslibpy_lite.cli import EXIT_CODES
+
+    result = cli("--help", url=None)
+    assert result.code == 0
+    for code, meaning in EXIT_CODES.items():
+        assert f"  {code:<4} {meaning}" in result.out
