@@ -3,16 +3,13 @@
 from __future__ import annotations
 
 import importlib
-import shutil
-import sys
 import warnings
 from collections.abc import Callable, Iterator
-from pathlib import Path
 
 import pytest
 
 from tests.helpers import BridgeProcess
-from tests.peers.peer import PeerProcess
+from tests.peers.peer import PeerPool, PeerProcess
 
 # rclpy's type support imports lark, which imports the deprecated sre_parse; with
 # warnings as errors that would fail the first rclpy node made here. Import it once,
@@ -21,27 +18,17 @@ with warnings.catch_warnings():
     warnings.filterwarnings("ignore", "module 'sre_.*' is deprecated", DeprecationWarning)
     importlib.import_module("rosidl_generator_py")
 
-PEERS = Path(__file__).resolve().parent
-NODE_DIR = PEERS / "node"
-
-
-def _node_argv(url: str, native_websocket: bool) -> list[str]:
-    node = shutil.which("node")
-    if node is None:
-        pytest.skip("node is not on PATH: the roslib (npm) peer tests need Node.js 20+")
-    if not (NODE_DIR / "node_modules" / "roslib" / "package.json").is_file():
-        pytest.fail(
-            "tests/peers/node/node_modules has no roslib: run scripts/setup.sh "
-            "(or `npm ci` in tests/peers/node)",
-            pytrace=False,
-        )
-    flags = ["--experimental-websocket"] if native_websocket else []
-    return [node, *flags, str(NODE_DIR / "peer.mjs"), url]
+@pytest.fixture(scope="module")
+def peer_pool(bridge: BridgeProcess) -> Iterator[PeerPool]:
+    """Stock clients shared by the tests of one module; all closed at its end."""
+    pool = PeerPool(bridge)
+    yield pool
+    pool.close()
 
 
 @pytest.fixture
-def start_peer(bridge: BridgeProcess) -> Iterator[Callable[..., PeerProcess]]:
-    """Start stock clients against the session bridge; all are closed after the test.
+def start_peer(peer_pool: PeerPool) -> Iterator[Callable[..., PeerProcess]]:
+    """Start private stock clients for one test; they are closed after it.
 
     ``start_peer("roslibpy")``, ``start_peer("roslib")`` (Node, with the ``ws``
     package) or ``start_peer("roslib", native_websocket=True)`` (Node's own
@@ -50,17 +37,9 @@ def start_peer(bridge: BridgeProcess) -> Iterator[Callable[..., PeerProcess]]:
     started: list[PeerProcess] = []
 
     def start(kind: str, native_websocket: bool = False) -> PeerProcess:
-        if kind == "roslibpy":
-            argv = [sys.executable, str(PEERS / "roslibpy_peer.py"), "127.0.0.1", str(bridge.port)]
-            name = "roslibpy"
-        elif kind == "roslib":
-            argv = _node_argv(bridge.url, native_websocket)
-            name = "roslib-native" if native_websocket else "roslib-ws"
-        else:
-            raise ValueError(kind)
-        peer = PeerProcess(name, argv, PEERS)
+        peer = peer_pool.start(kind, native_websocket)
         started.append(peer)
-        return peer.start()
+        return peer
 
     yield start
     for peer in started:

@@ -12,14 +12,18 @@ from __future__ import annotations
 
 import itertools
 import json
+import shutil
 import subprocess
+import sys
 import threading
 import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
-from tests.helpers import ros_env
+import pytest
+
+from tests.helpers import BridgeProcess, ros_env
 
 
 class PeerError(AssertionError):
@@ -43,6 +47,8 @@ class PeerProcess:
         self._eof = False
         self._readers: list[threading.Thread] = []
         self.info: dict[str, Any] = {}
+        #: Index of the first event that belongs to the current test (a peer may be shared).
+        self.since = 0
 
     def start(self, timeout: float = 20.0) -> PeerProcess:
         """Start the child and wait until it says it is connected."""
@@ -94,7 +100,7 @@ class PeerProcess:
         with self._cond:
             err = "\n".join(self.stderr[-40:])
             noise = "\n".join(self.noise[-20:])
-            events = json.dumps(self.events[-10:], default=str)[:2000]
+            events = json.dumps(self.events[self.since:][-10:], default=str)[:2000]
         return f"--- {self.name} stderr:\n{err}\n--- stdout noise:\n{noise}\n--- last events: {events}"
 
     def send(self, cmd: str, **params: Any) -> int:
@@ -128,15 +134,30 @@ class PeerProcess:
             raise PeerError(f"{self.name} {cmd} failed: {answer.get('error')}")
         return answer.get("value")
 
+    @property
+    def alive(self) -> bool:
+        """Whether the child is still running and connected to its output."""
+        return self.proc is not None and self.proc.poll() is None and not self._eof
+
+    def begin_test(self) -> None:
+        """Start a new test on this peer: earlier events are no longer looked at."""
+        with self._cond:
+            self.since = len(self.events)
+
+    def new_events(self) -> list[dict[str, Any]]:
+        """The events that arrived since the current test began."""
+        with self._cond:
+            return list(self.events[self.since:])
+
     def wait_event(
         self, predicate: Callable[[dict[str, Any]], bool], timeout: float = 10.0,
-        what: str = "event", start: int = 0,
+        what: str = "event",
     ) -> dict[str, Any]:
-        """Wait for an event line (from index ``start`` on) that satisfies ``predicate``."""
+        """Wait for an event of the current test that satisfies ``predicate``."""
         deadline = time.monotonic() + timeout
         with self._cond:
             while True:
-                for event in self.events[start:]:
+                for event in self.events[self.since:]:
                     if predicate(event):
                         return event
                 left = deadline - time.monotonic()
@@ -171,3 +192,71 @@ class PeerProcess:
             if stream is not None:
                 stream.close()
         return self.proc.returncode
+
+
+PEERS = Path(__file__).resolve().parent
+NODE_DIR = PEERS / "node"
+
+
+def _node_argv(url: str, native_websocket: bool) -> list[str]:
+    node = shutil.which("node")
+    if node is None:
+        pytest.skip("node is not on PATH: the roslib (npm) peer tests need Node.js 20+")
+    if not (NODE_DIR / "node_modules" / "roslib" / "package.json").is_file():
+        pytest.fail(
+            "tests/peers/node/node_modules has no roslib: run scripts/setup.sh "
+            "(or `npm ci` in tests/peers/node)",
+            pytrace=False,
+        )
+    flags = ["--experimental-websocket"] if native_websocket else []
+    return [node, *flags, str(NODE_DIR / "peer.mjs"), url]
+
+
+class PeerPool:
+    """Stock-client processes connected to one bridge, started on demand and reused.
+
+    Starting a client costs about half a second (a second on a busy machine);
+    the tests use unique topic and service names, so one process per kind can
+    serve a whole module. A process that died is replaced by a fresh one.
+    """
+
+    def __init__(self, bridge: BridgeProcess) -> None:
+        self.bridge = bridge
+        self.peers: dict[tuple[str, bool], PeerProcess] = {}
+        self.extra: list[PeerProcess] = []
+
+    def start(self, kind: str, native_websocket: bool = False) -> PeerProcess:
+        """A new client process of ``kind`` ("roslibpy" or "roslib")."""
+        if kind == "roslibpy":
+            argv = [sys.executable, str(PEERS / "roslibpy_peer.py"), "127.0.0.1",
+                    str(self.bridge.port)]
+            name = "roslibpy"
+        elif kind == "roslib":
+            argv = _node_argv(self.bridge.url, native_websocket)
+            name = "roslib-native" if native_websocket else "roslib-ws"
+        else:
+            raise ValueError(kind)
+        peer = PeerProcess(name, argv, PEERS)
+        try:
+            return peer.start()
+        except BaseException:
+            peer.close()
+            raise
+
+    def get(self, kind: str, native_websocket: bool = False) -> PeerProcess:
+        """The shared live client of ``kind``, (re)started if needed, ready for a new test."""
+        key = (kind, native_websocket)
+        peer = self.peers.get(key)
+        if peer is None or not peer.alive:
+            if peer is not None:
+                peer.close()
+            peer = self.peers[key] = self.start(kind, native_websocket)
+        peer.begin_test()
+        return peer
+
+    def close(self) -> None:
+        """Close every client this pool started."""
+        for peer in [*self.peers.values(), *self.extra]:
+            peer.close()
+        self.peers.clear()
+        self.extra.clear()

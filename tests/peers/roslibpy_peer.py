@@ -72,12 +72,36 @@ class Peer:
         self.topics: dict[tuple[str, str], Any] = {}
         self.services: dict[str, Any] = {}
 
-    def topic(self, name: str, msg_type: str) -> Any:
-        """The roslibpy Topic for (name, type), made once."""
-        key = (name, msg_type)
+    def topic(self, cmd: dict[str, Any]) -> Any:
+        """The roslibpy Topic for the command's (topic, type), made once with its options."""
+        key = (cmd["topic"], cmd["type"])
         if key not in self.topics:
-            self.topics[key] = roslibpy.Topic(self.ros, name, msg_type)
+            options = {k: cmd[k] for k in ("latch", "queue_size", "compression") if k in cmd}
+            self.topics[key] = roslibpy.Topic(self.ros, cmd["topic"], cmd["type"], **options)
         return self.topics[key]
+
+    def send_goal(self, cmd: dict[str, Any]) -> dict[str, Any]:
+        """Send an action goal with roslibpy.ActionClient; wait for its result."""
+        client = roslibpy.ActionClient(self.ros, cmd["action"], cmd["type"])
+        feedback: list[Any] = []
+        outcome: dict[str, Any] = {}
+
+        def on_result(result: Any) -> None:
+            outcome["result"] = result
+
+        def on_error(error: Any) -> None:
+            outcome["error"] = error
+
+        goal_id = client.send_goal(roslibpy.Goal(cmd["goal"]), on_result, feedback.append, on_error)
+        client.wait_goal(goal_id, timeout=float(cmd.get("goal_timeout", 10.0)))
+        if "error" in outcome:
+            raise RuntimeError(f"goal failed: {outcome['error']}")
+        result = outcome["result"]
+        return {
+            "status": result["status"].value,
+            "values": result["values"],
+            "feedback": [dict(f) for f in feedback],
+        }
 
     def handle(self, cmd: dict[str, Any]) -> Any:
         """Carry out one command with the stock roslibpy API; returns the reply value."""
@@ -85,13 +109,13 @@ class Peer:
         ros = self.ros
         timeout = float(cmd.get("timeout", 5.0))
         if op == "advertise":
-            self.topic(cmd["topic"], cmd["type"]).advertise()
+            self.topic(cmd).advertise()
             return None
         if op == "publish":
-            self.topic(cmd["topic"], cmd["type"]).publish(roslibpy.Message(cmd["msg"]))
+            self.topic(cmd).publish(roslibpy.Message(cmd["msg"]))
             return None
         if op == "unadvertise":
-            self.topic(cmd["topic"], cmd["type"]).unadvertise()
+            self.topic(cmd).unadvertise()
             return None
         if op == "subscribe":
             name = cmd["topic"]
@@ -99,11 +123,13 @@ class Peer:
             def on_message(msg: dict[str, Any], name: str = name) -> None:
                 emit({"event": "message", "topic": name, "msg": msg})
 
-            self.topic(name, cmd["type"]).subscribe(on_message)
+            self.topic(cmd).subscribe(on_message)
             return None
         if op == "unsubscribe":
-            self.topic(cmd["topic"], cmd["type"]).unsubscribe()
+            self.topic(cmd).unsubscribe()
             return None
+        if op == "send_goal":
+            return self.send_goal(cmd)
         if op == "call":
             service = roslibpy.Service(ros, cmd["service"], cmd.get("type", ""))
             request = roslibpy.ServiceRequest(cmd.get("args", {}))
@@ -139,6 +165,15 @@ class Peer:
             return ros.get_nodes()
         if op == "get_node_details":
             return ros.get_node_details(cmd["node"])
+        if op == "get_params":
+            return ros.get_params()
+        if op == "get_param":
+            return ros.get_param(cmd["name"])
+        if op == "set_param":
+            ros.set_param(cmd["name"], cmd["value"])
+            return None
+        if op == "get_message_details":
+            return ros.get_message_details(cmd["type"])
         if op == "is_connected":
             return bool(ros.is_connected)
         raise ValueError(f"unknown command {op!r}")

@@ -11,10 +11,13 @@ events: a queue, a reply line, a future's callback.
 from __future__ import annotations
 
 import base64
+import importlib
 import queue
 import threading
 import time
 from typing import Any
+
+import pytest
 
 from tests.helpers import wait_until
 from tests.peers.peer import PeerError, PeerProcess
@@ -23,6 +26,11 @@ from tests.peers.peer import PeerError, PeerProcess
 #: (messages sent before DDS matched the two ends are lost, so we resend).
 ATTEMPT = 0.5
 DEADLINE = 15.0
+
+
+def _module(name: str) -> Any:
+    """Import an rclpy module whose API is not fully typed, as Any."""
+    return importlib.import_module(name)
 
 
 def _publish_until_received(
@@ -207,7 +215,7 @@ def serve_setbool(peer: PeerProcess, node: Any, topic: str) -> None:
         response = _call_from_ros(node, SetBool, topic, SetBool.Request(data=data))
         assert response.success is data
         assert response.message == f"{client_name} got data={data}"
-    requests = [e for e in peer.events if e.get("event") == "request" and e["service"] == topic]
+    requests = [e for e in peer.new_events() if e.get("event") == "request" and e["service"] == topic]
     assert [e["args"] for e in requests] == [{"data": True}, {"data": False}]
 
 
@@ -298,3 +306,289 @@ def get_nodes(peer: PeerProcess, node: Any, topic: str) -> None:
         return details if ok else None
 
     wait_until(detailed, DEADLINE, f"{topic} and {topic}_srv in node details of {fqn}")
+
+
+# -- more topic behaviour ---------------------------------------------------------------------
+
+
+def unsubscribe(peer: PeerProcess, node: Any, topic: str) -> None:
+    """After the peer unsubscribes, the bridge drops its ROS subscription."""
+    from std_msgs.msg import String
+
+    pub = node.create_publisher(String, topic, 10)
+    peer.request("subscribe", topic=topic, type="std_msgs/msg/String")
+    wait_until(lambda: pub.get_subscription_count() >= 1, DEADLINE, f"bridge subscriber on {topic}")
+    _ros_publish_until_delivered(peer, pub, topic, String(data="before"))
+    peer.request("unsubscribe", topic=topic, type="std_msgs/msg/String")
+    wait_until(lambda: pub.get_subscription_count() == 0, DEADLINE, "the bridge subscription to go")
+
+
+def unadvertise(peer: PeerProcess, node: Any, topic: str) -> None:
+    """After the peer unadvertises, the bridge's ROS publisher leaves the graph."""
+    peer.request("advertise", topic=topic, type="std_msgs/String")
+    wait_until(lambda: node.count_publishers(topic) >= 1, DEADLINE, f"bridge publisher on {topic}")
+    peer.request("unadvertise", topic=topic, type="std_msgs/String")
+    wait_until(lambda: node.count_publishers(topic) == 0, DEADLINE, "the bridge publisher to go")
+
+
+def _latched_qos() -> Any:
+    qos = _module("rclpy.qos")
+    return qos.QoSProfile(
+        depth=1,
+        durability=qos.DurabilityPolicy.TRANSIENT_LOCAL,
+        reliability=qos.ReliabilityPolicy.RELIABLE,
+    )
+
+
+def publish_latched(peer: PeerProcess, node: Any, topic: str) -> None:
+    """A latched publish from the peer reaches a transient-local rclpy subscriber that joins later."""
+    from std_msgs.msg import String
+
+    peer.request("publish", topic=topic, type="std_msgs/String", msg={"data": "latched"}, latch=True)
+    # A round trip on the same connection: the bridge has handled the publish before it answers.
+    peer.request("get_topic_type", topic=topic)
+    inbox: queue.Queue[Any] = queue.Queue()
+    node.create_subscription(String, topic, inbox.put, _latched_qos())
+    try:
+        got = inbox.get(timeout=DEADLINE)
+    except queue.Empty:
+        raise AssertionError(
+            f"a late transient-local subscriber never got the latched message\n{peer.diagnostics()}"
+        ) from None
+    assert got.data == "latched"
+
+
+def subscribe_latched(peer: PeerProcess, node: Any, topic: str) -> None:
+    """A peer subscribing late still gets the last message of a transient-local rclpy publisher."""
+    from std_msgs.msg import String
+
+    pub = node.create_publisher(String, topic, _latched_qos())
+    pub.publish(String(data="the map"))
+    peer.request("subscribe", topic=topic, type="std_msgs/msg/String")
+    got = peer.wait_event(
+        lambda e: e.get("event") == "message" and e.get("topic") == topic, DEADLINE,
+        f"the latched message on {topic}",
+    )
+    assert got["msg"] == {"data": "the map"}
+
+
+def bad_type_then_publish(peer: PeerProcess, node: Any, topic: str, sees_status: bool) -> None:
+    """An unknown type is refused, and the same connection goes on publishing normally."""
+    peer.request("publish", topic=topic + "_bad", type="nope_msgs/Nope", msg={"data": 1})
+    if sees_status:
+        status = peer.wait_event(
+            lambda e: e.get("event") == "status" and e.get("about") == "advertise", DEADLINE,
+            "a status about the refused advertise",
+        )["msg"]
+        assert status["level"] == "error"
+        assert "nope_msgs/Nope" in status["msg"], status
+    publish_string(peer, node, topic, "std_msgs/String")
+
+
+# -- between two stock clients ----------------------------------------------------------------
+
+
+def client_to_client_topic(
+    sender: PeerProcess, receiver: PeerProcess, node: Any, topic: str
+) -> None:
+    """What one stock client publishes, another stock client on the same bridge receives."""
+    type_name = "std_msgs/String"
+    receiver.request("subscribe", topic=topic, type=type_name)
+    wait_until(lambda: node.count_subscribers(topic) >= 1, DEADLINE, f"bridge subscriber on {topic}")
+    sender.request("advertise", topic=topic, type=type_name)
+    wait_until(lambda: node.count_publishers(topic) >= 1, DEADLINE, f"bridge publisher on {topic}")
+    text = f"from {sender.name} to {receiver.name}"
+    for _ in range(int(DEADLINE / ATTEMPT)):
+        sender.request("publish", topic=topic, type=type_name, msg={"data": text})
+        try:
+            got = receiver.wait_event(
+                lambda e: e.get("event") == "message" and e.get("topic") == topic, ATTEMPT
+            )
+        except AssertionError:
+            continue
+        assert got["msg"] == {"data": text}
+        return
+    raise AssertionError(f"{receiver.name} never got {sender.name}'s message\n{receiver.diagnostics()}")
+
+
+def client_to_client_service(
+    server: PeerProcess, caller: PeerProcess, node: Any, topic: str
+) -> None:
+    """A service one stock client serves answers another stock client's call."""
+    server.request("advertise_service", service=topic, type="mult_msgs/srv/MultFloats", handler="mult")
+
+    def listed() -> bool:
+        return topic in {name for name, _types in node.get_service_names_and_types()}
+
+    wait_until(listed, DEADLINE, f"{topic} in the ROS graph")
+    assert _call_new_service(caller, topic, {"x": 3.0, "y": 0.5}) == {"result": 1.5}
+    assert server.wait_event(lambda e: e.get("event") == "request" and e["service"] == topic)[
+        "args"
+    ] == {"x": 3.0, "y": 0.5}
+
+
+# -- CBOR (roslib decodes it) -----------------------------------------------------------------
+
+
+def _plain(value: Any) -> Any:
+    """Undo the driver's tagging of typed arrays, recursively."""
+    if isinstance(value, dict):
+        if set(value) == {"$typed", "values"}:
+            return list(value["values"])
+        return {k: _plain(v) for k, v in value.items()}
+    if isinstance(value, list):
+        return [_plain(v) for v in value]
+    return value
+
+
+def subscribe_cbor(peer: PeerProcess, node: Any, topic: str) -> None:
+    """With compression cbor, float64[] arrive as Float64Array and uint8[] as Uint8Array."""
+    from sensor_msgs.msg import JointState
+
+    pub = node.create_publisher(JointState, topic, 10)
+    peer.request("subscribe", topic=topic, type="sensor_msgs/msg/JointState", compression="cbor")
+    wait_until(lambda: pub.get_subscription_count() >= 1, DEADLINE, f"bridge subscriber on {topic}")
+    msg = JointState(name=["elbow", "wrist"], position=[1.5, -2.25], velocity=[], effort=[0.5, 1e300])
+    msg.header.stamp.sec = 7
+    msg.header.stamp.nanosec = 8
+    msg.header.frame_id = "arm"
+    got = _ros_publish_until_delivered(peer, pub, topic, msg)
+    assert got["position"] == {"$typed": "Float64Array", "values": [1.5, -2.25]}
+    assert got["effort"] == {"$typed": "Float64Array", "values": [0.5, 1e300]}
+    assert _plain(got) == {
+        "header": {"stamp": {"sec": 7, "nanosec": 8}, "frame_id": "arm"},
+        "name": ["elbow", "wrist"],
+        "position": [1.5, -2.25],
+        "velocity": [],
+        "effort": [0.5, 1e300],
+    }
+
+
+def subscribe_cbor_bytes(peer: PeerProcess, node: Any, topic: str) -> None:
+    """With compression cbor, a uint8[] field arrives as a Uint8Array of the same bytes."""
+    from sensor_msgs.msg import CompressedImage
+
+    pub = node.create_publisher(CompressedImage, topic, 10)
+    peer.request(
+        "subscribe", topic=topic, type="sensor_msgs/msg/CompressedImage", compression="cbor"
+    )
+    wait_until(lambda: pub.get_subscription_count() >= 1, DEADLINE, f"bridge subscriber on {topic}")
+    payload = bytes(range(256)) * 4
+    got = _ros_publish_until_delivered(peer, pub, topic, CompressedImage(format="jpeg", data=payload))
+    assert got["data"] == {"$typed": "Uint8Array", "values": list(payload)}
+    assert got["format"] == "jpeg"
+
+
+def subscribe_cbor_raw(peer: PeerProcess, node: Any, topic: str) -> None:
+    """With compression cbor-raw, the client gets the CDR bytes, which rclpy deserializes back."""
+    from rclpy.serialization import deserialize_message
+    from sensor_msgs.msg import JointState
+
+    pub = node.create_publisher(JointState, topic, 10)
+    peer.request(
+        "subscribe", topic=topic, type="sensor_msgs/msg/JointState", compression="cbor-raw"
+    )
+    wait_until(lambda: pub.get_subscription_count() >= 1, DEADLINE, f"bridge subscriber on {topic}")
+    msg = JointState(name=["a"], position=[0.125], velocity=[2.0], effort=[])
+    got = _ros_publish_until_delivered(peer, pub, topic, msg)
+    assert isinstance(got["secs"], int) and isinstance(got["nsecs"], int), got
+    assert got["bytes"]["$typed"] == "Uint8Array"
+    back = deserialize_message(bytes(got["bytes"]["values"]), JointState)
+    assert back == msg
+
+
+# -- parameters and type details through rosapi -----------------------------------------------
+
+
+def params(peer: PeerProcess, node: Any) -> None:
+    """The peer lists, reads and sets an rclpy node's parameter as "node:param"."""
+    node.declare_parameter("speed", 1.5)
+    name = f"{node.get_fully_qualified_name()}:speed"
+    wait_until(lambda: name in peer.request("get_params"), DEADLINE, f"{name} in get_params")
+    assert peer.request("get_param", name=name) == 1.5
+    peer.request("set_param", name=name, value=2.5)
+    assert node.get_parameter("speed").value == 2.5
+    assert peer.request("get_param", name=name) == 2.5
+
+
+def message_details(peer: PeerProcess) -> None:
+    """The peer gets rosapi typedefs for geometry_msgs/Twist, nested Vector3 included."""
+    value = peer.request("get_message_details", type="geometry_msgs/Twist")
+    typedefs = value["typedefs"] if isinstance(value, dict) else value
+    by_type = {td["type"].replace("/msg/", "/"): td for td in typedefs}
+    twist = by_type["geometry_msgs/Twist"]
+    assert twist["fieldnames"] == ["linear", "angular"]
+    assert [t.replace("/msg/", "/") for t in twist["fieldtypes"]] == ["geometry_msgs/Vector3"] * 2
+    vector = by_type["geometry_msgs/Vector3"]
+    assert vector["fieldnames"] == ["x", "y", "z"]
+    assert vector["fieldtypes"] == ["float64"] * 3
+
+
+# -- actions ----------------------------------------------------------------------------------
+
+
+def _wait_future(future: Any, what: str) -> Any:
+    done = threading.Event()
+    future.add_done_callback(lambda _f: done.set())
+    assert done.wait(DEADLINE), f"no {what} within {DEADLINE} s"
+    return future.result()
+
+
+def send_goal(peer: PeerProcess, node: Any, topic: str) -> None:
+    """The peer sends a Fibonacci goal to an rclpy action server and gets the result."""
+    from test_msgs.action import Fibonacci
+
+    def execute(goal_handle: Any) -> Any:
+        sequence = [0, 1]
+        for i in range(1, goal_handle.request.order):
+            sequence.append(sequence[i] + sequence[i - 1])
+            goal_handle.publish_feedback(Fibonacci.Feedback(sequence=sequence))
+        goal_handle.succeed()
+        return Fibonacci.Result(sequence=sequence)
+
+    server = _module("rclpy.action").ActionServer(node, Fibonacci, topic, execute)
+    try:
+        value = peer.request(
+            "send_goal", action=topic, type="test_msgs/action/Fibonacci", goal={"order": 5},
+            goal_timeout=5.0, timeout=DEADLINE,
+        )
+    finally:
+        server.destroy()
+    assert value["status"] == 4  # SUCCEEDED
+    assert value["values"]["sequence"] == [0, 1, 1, 2, 3, 5]
+    for fb in value["feedback"]:
+        assert fb["sequence"] == [0, 1, 1, 2, 3, 5][: len(fb["sequence"])]
+
+
+def serve_action(peer: PeerProcess, node: Any, topic: str) -> None:
+    """The peer serves a Fibonacci action; an rclpy action client gets feedback and the result."""
+    from action_msgs.msg import GoalStatus
+    from test_msgs.action import Fibonacci
+
+    peer.request(
+        "advertise_action", action=topic, type="test_msgs/action/Fibonacci", handler="fibonacci"
+    )
+    client = _module("rclpy.action").ActionClient(node, Fibonacci, topic)
+    try:
+
+        def ready_or_refused() -> Any:
+            refused = [e for e in peer.new_events() if e.get("event") == "status"]
+            return refused or client.server_is_ready()
+
+        outcome = wait_until(ready_or_refused, DEADLINE, f"{topic} action server in the graph")
+        assert outcome is True, f"the bridge refused advertise_action: {outcome}"
+        handle = _wait_future(client.send_goal_async(Fibonacci.Goal(order=5)), "goal acceptance")
+        assert handle.accepted
+        result = _wait_future(handle.get_result_async(), "action result")
+    finally:
+        client.destroy()
+    assert result.status == GoalStatus.STATUS_SUCCEEDED
+    assert list(result.result.sequence) == [0, 1, 1, 2, 3, 5]
+
+
+#: Features the bridge does not have yet (see /work/notes/bridge-bugs.md). Strict, so a
+#: test starts failing (XPASS) the moment the feature lands and the mark must go.
+MISSING_ROSAPI = pytest.mark.xfail(
+    strict=True, reason="bridge: rosapi params / message_details not implemented yet"
+)
+NO_ACTIONS = pytest.mark.xfail(strict=True, reason="bridge: actions not supported yet")

@@ -9,25 +9,24 @@ last ones run Node's native WebSocket too.
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from typing import Any
 
 import pytest
 
 from tests.peers import scenarios
-from tests.peers.peer import PeerProcess
+from tests.peers.peer import PeerPool, PeerProcess
 
 
 @pytest.fixture
-def peer(start_peer: Callable[..., PeerProcess]) -> PeerProcess:
-    """A connected roslib client (ws package transport) in a Node child process."""
-    return start_peer("roslib")
+def peer(peer_pool: PeerPool) -> PeerProcess:
+    """The module's connected roslib client (ws package, in Node), ready for this test."""
+    return peer_pool.get("roslib")
 
 
 @pytest.fixture
-def native_peer(start_peer: Callable[..., PeerProcess]) -> PeerProcess:
-    """A connected roslib client using Node's native WebSocket (--experimental-websocket)."""
-    return start_peer("roslib", native_websocket=True)
+def native_peer(peer_pool: PeerPool) -> PeerProcess:
+    """The module's roslib client on Node's native WebSocket (--experimental-websocket)."""
+    return peer_pool.get("roslib", native_websocket=True)
 
 
 def test_connects_and_reports_version(peer: PeerProcess) -> None:
@@ -105,6 +104,70 @@ def test_get_services(peer: PeerProcess, ros_node: Any, topic: str) -> None:
 def test_get_nodes(peer: PeerProcess, ros_node: Any, topic: str) -> None:
     """Ros.getNodes() and getNodeDetails() see the rclpy node and what it offers."""
     scenarios.get_nodes(peer, ros_node, topic)
+
+
+def test_unsubscribe(peer: PeerProcess, ros_node: Any, topic: str) -> None:
+    """Topic.unsubscribe() makes the bridge drop its ROS subscription."""
+    scenarios.unsubscribe(peer, ros_node, topic)
+
+
+def test_unadvertise(peer: PeerProcess, ros_node: Any, topic: str) -> None:
+    """Topic.unadvertise() makes the bridge's ROS publisher leave the graph."""
+    scenarios.unadvertise(peer, ros_node, topic)
+
+
+def test_publish_latched(peer: PeerProcess, ros_node: Any, topic: str) -> None:
+    """A latched Topic's message reaches a transient-local rclpy subscriber that joins later."""
+    scenarios.publish_latched(peer, ros_node, topic)
+
+
+def test_subscribe_latched(peer: PeerProcess, ros_node: Any, topic: str) -> None:
+    """A late roslib subscription gets the last message of a transient-local rclpy publisher."""
+    scenarios.subscribe_latched(peer, ros_node, topic)
+
+
+def test_bad_type_then_publish(peer: PeerProcess, ros_node: Any, topic: str) -> None:
+    """roslib gets an error status naming an unknown type, and the connection still publishes."""
+    scenarios.bad_type_then_publish(peer, ros_node, topic, sees_status=True)
+
+
+def test_subscribe_cbor(peer: PeerProcess, ros_node: Any, topic: str) -> None:
+    """compression "cbor": roslib decodes float64[] typed arrays and the rest of a JointState."""
+    scenarios.subscribe_cbor(peer, ros_node, topic)
+
+
+def test_subscribe_cbor_bytes(peer: PeerProcess, ros_node: Any, topic: str) -> None:
+    """compression "cbor": roslib gets a uint8[] field as the same bytes in a Uint8Array."""
+    scenarios.subscribe_cbor_bytes(peer, ros_node, topic)
+
+
+def test_subscribe_cbor_raw(peer: PeerProcess, ros_node: Any, topic: str) -> None:
+    """compression "cbor-raw": roslib gets CDR bytes that rclpy deserializes to the same message."""
+    scenarios.subscribe_cbor_raw(peer, ros_node, topic)
+
+
+@scenarios.MISSING_ROSAPI
+def test_params(peer: PeerProcess, ros_node: Any) -> None:
+    """Ros.getParams() and ROSLIB.Param get/set reach an rclpy node's parameter."""
+    scenarios.params(peer, ros_node)
+
+
+@scenarios.MISSING_ROSAPI
+def test_message_details(peer: PeerProcess) -> None:
+    """Ros.getMessageDetails() returns rosapi typedefs for a nested message type."""
+    scenarios.message_details(peer)
+
+
+@scenarios.NO_ACTIONS
+def test_send_action_goal(peer: PeerProcess, ros_node: Any, topic: str) -> None:
+    """ROSLIB.Action.sendGoal reaches an rclpy action server and gets the result."""
+    scenarios.send_goal(peer, ros_node, topic)
+
+
+@scenarios.NO_ACTIONS
+def test_serve_action(peer: PeerProcess, ros_node: Any, topic: str) -> None:
+    """ROSLIB.Action.advertise serves Fibonacci; an rclpy ActionClient gets the result."""
+    scenarios.serve_action(peer, ros_node, topic)
 
 
 def test_native_websocket_publish(native_peer: PeerProcess, ros_node: Any, topic: str) -> None:

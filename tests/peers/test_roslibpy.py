@@ -2,19 +2,18 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from typing import Any
 
 import pytest
 
 from tests.peers import scenarios
-from tests.peers.peer import PeerProcess
+from tests.peers.peer import PeerPool, PeerProcess
 
 
 @pytest.fixture
-def peer(start_peer: Callable[..., PeerProcess]) -> PeerProcess:
-    """A connected roslibpy client in a child process."""
-    return start_peer("roslibpy")
+def peer(peer_pool: PeerPool) -> PeerProcess:
+    """The module's connected roslibpy client (a child process), ready for this test."""
+    return peer_pool.get("roslibpy")
 
 
 def test_connects_and_reports_version(peer: PeerProcess) -> None:
@@ -91,3 +90,46 @@ def test_get_services(peer: PeerProcess, ros_node: Any, topic: str) -> None:
 def test_get_nodes(peer: PeerProcess, ros_node: Any, topic: str) -> None:
     """Ros.get_nodes() and get_node_details() see the rclpy node and what it offers."""
     scenarios.get_nodes(peer, ros_node, topic)
+
+
+def test_unsubscribe(peer: PeerProcess, ros_node: Any, topic: str) -> None:
+    """Topic.unsubscribe() makes the bridge drop its ROS subscription."""
+    scenarios.unsubscribe(peer, ros_node, topic)
+
+
+def test_unadvertise(peer: PeerProcess, ros_node: Any, topic: str) -> None:
+    """Topic.unadvertise() makes the bridge's ROS publisher leave the graph."""
+    scenarios.unadvertise(peer, ros_node, topic)
+
+
+def test_publish_latched(peer: PeerProcess, ros_node: Any, topic: str) -> None:
+    """A Topic(latch=True) message reaches a transient-local rclpy subscriber that joins later."""
+    scenarios.publish_latched(peer, ros_node, topic)
+
+
+def test_subscribe_latched(peer: PeerProcess, ros_node: Any, topic: str) -> None:
+    """A late roslibpy subscription gets the last message of a transient-local rclpy publisher."""
+    scenarios.subscribe_latched(peer, ros_node, topic)
+
+
+def test_bad_type_then_publish(peer: PeerProcess, ros_node: Any, topic: str) -> None:
+    """After the bridge refuses an unknown message type, the connection still publishes."""
+    scenarios.bad_type_then_publish(peer, ros_node, topic, sees_status=False)
+
+
+@scenarios.MISSING_ROSAPI
+def test_params(peer: PeerProcess, ros_node: Any) -> None:
+    """Ros.get_params(), get_param() and set_param() reach an rclpy node's parameter."""
+    scenarios.params(peer, ros_node)
+
+
+@scenarios.MISSING_ROSAPI
+def test_message_details(peer: PeerProcess) -> None:
+    """Ros.get_message_details() returns rosapi typedefs for a nested message type."""
+    scenarios.message_details(peer)
+
+
+@scenarios.NO_ACTIONS
+def test_send_action_goal(peer: PeerProcess, ros_node: Any, topic: str) -> None:
+    """roslibpy.ActionClient sends a goal to an rclpy action server and gets the result."""
+    scenarios.send_goal(peer, ros_node, topic)

@@ -20,8 +20,19 @@ const roslibVersion = JSON.parse(
 ).version;
 const transport = typeof WebSocket === "function" ? "native WebSocket" : "ws package";
 
+// Typed arrays (what roslib's CBOR decoder makes of RFC 8746 arrays and byte
+// strings) and bigints have no JSON form of their own: tag them so the test
+// can see exactly what the client decoded.
+function jsonValue(_key, value) {
+  if (typeof value === "bigint") return { $bigint: value.toString() };
+  if (ArrayBuffer.isView(value) && !(value instanceof DataView)) {
+    return { $typed: value.constructor.name, values: Array.from(value, (v) => (typeof v === "bigint" ? v.toString() : v)) };
+  }
+  return value;
+}
+
 function emit(obj) {
-  process.stdout.write(JSON.stringify(obj) + "\n");
+  process.stdout.write(JSON.stringify(obj, jsonValue) + "\n");
 }
 
 const handlers = {
@@ -48,13 +59,35 @@ const ros = new ROSLIB.Ros({});
 const topics = new Map();
 const services = new Map();
 
-function topic(name, type) {
-  const key = `${name}\u0000${type}`;
+function topic(cmd) {
+  const key = `${cmd.topic}\u0000${cmd.type}`;
   if (!topics.has(key)) {
-    topics.set(key, new ROSLIB.Topic({ ros, name, messageType: type }));
+    const options = { ros, name: cmd.topic, messageType: cmd.type };
+    for (const k of ["latch", "queue_size", "compression", "throttle_rate", "queue_length"]) {
+      if (k in cmd) options[k] = cmd[k];
+    }
+    topics.set(key, new ROSLIB.Topic(options));
   }
   return topics.get(key);
 }
+
+// Report a `status` op the bridge sends about one of our requests (roslib emits
+// them as "status:<id>").
+function watchStatus(id, what) {
+  if (id) ros.on(`status:${id}`, (msg) => emit({ event: "status", about: what, id, msg }));
+}
+
+const actionHandlers = {
+  // test_msgs/action/Fibonacci: feedback with the sequence so far, then the result.
+  fibonacci(action, goal, id) {
+    const sequence = [0, 1];
+    for (let i = 1; i < goal.order; i++) {
+      sequence.push(sequence[i] + sequence[i - 1]);
+      action.sendFeedback(id, { sequence: [...sequence] });
+    }
+    action.setSucceeded(id, { sequence });
+  },
+};
 
 // Wrap roslib's callback-style API in a promise; `pick` chooses what to return.
 function viaCallbacks(start) {
@@ -65,23 +98,71 @@ function viaCallbacks(start) {
 
 async function handle(cmd) {
   switch (cmd.cmd) {
-    case "advertise":
-      topic(cmd.topic, cmd.type).advertise();
+    case "advertise": {
+      const t = topic(cmd);
+      const fresh = !t.isAdvertised;
+      t.advertise();
+      if (fresh) watchStatus(t.advertiseId, "advertise");
       return null;
-    case "publish":
-      topic(cmd.topic, cmd.type).publish(cmd.msg);
+    }
+    case "publish": {
+      const t = topic(cmd);
+      const fresh = !t.isAdvertised;
+      t.publish(cmd.msg);
+      if (fresh) watchStatus(t.advertiseId, "advertise");
       return null;
+    }
     case "unadvertise":
-      topic(cmd.topic, cmd.type).unadvertise();
+      topic(cmd).unadvertise();
       return null;
     case "subscribe": {
       const name = cmd.topic;
-      topic(name, cmd.type).subscribe((msg) => emit({ event: "message", topic: name, msg }));
+      const t = topic(cmd);
+      t.subscribe((msg) => emit({ event: "message", topic: name, msg }));
+      watchStatus(t.subscribeId, "subscribe");
       return null;
     }
     case "unsubscribe":
-      topic(cmd.topic, cmd.type).unsubscribe();
+      topic(cmd).unsubscribe();
       return null;
+    case "send_goal": {
+      const action = new ROSLIB.Action({ ros, name: cmd.action, actionType: cmd.type });
+      const feedback = [];
+      return new Promise((resolve, reject) => {
+        const id = action.sendGoal(
+          cmd.goal,
+          (values) => resolve({ status: 4, values, feedback }),
+          (values) => feedback.push(values),
+          (err) => reject(new Error(String(err))),
+        );
+        // roslib itself ignores a `status` about the goal and would wait forever.
+        ros.on(`status:${id}`, (msg) => {
+          if (msg.level === "error") reject(new Error(`status error: ${msg.msg}`));
+        });
+      });
+    }
+    case "advertise_action": {
+      const handler = actionHandlers[cmd.handler];
+      if (!handler) throw new Error(`unknown action handler ${cmd.handler}`);
+      const action = new ROSLIB.Action({ ros, name: cmd.action, actionType: cmd.type });
+      action.advertise((goal, id) => {
+        emit({ event: "goal", action: cmd.action, goal });
+        handler(action, goal, id);
+      });
+      return null;
+    }
+    case "get_params":
+      return viaCallbacks((ok, fail) => ros.getParams(ok, fail));
+    case "get_param": {
+      const param = new ROSLIB.Param({ ros, name: cmd.name });
+      return viaCallbacks((ok, fail) => param.get(ok, fail));
+    }
+    case "set_param": {
+      const param = new ROSLIB.Param({ ros, name: cmd.name });
+      return viaCallbacks((ok, fail) => param.set(cmd.value, () => ok(null), fail));
+    }
+    case "get_message_details":
+      return viaCallbacks((ok, fail) => ros.getMessageDetails(cmd.type, ok, fail));
     case "call": {
       const service = new ROSLIB.Service({ ros, name: cmd.service, serviceType: cmd.type ?? "" });
       return viaCallbacks((ok, fail) => service.callService(cmd.args ?? {}, ok, fail, cmd.timeout));
