@@ -58,6 +58,9 @@ While the connection is down:
 - requests from ROS callers to our services that were being handled are
   answered into the void (the bridge has already failed them).
 
+Threads: a client belongs to the event loop that connected it; from other
+threads use ``asyncio.run_coroutine_threadsafe``.
+
 After ``close()`` (or a drop with ``reconnect=False``) the state is
 ``CLOSED``: calls raise :class:`~roslibpy_lite.exceptions.ConnectionClosed`,
 ``async for`` over subscriptions ends.

@@ -169,3 +169,41 @@ async def test_close_fails_a_pending_call() -> None:
     await ros.close()
     with pytest.raises(ConnectionClosed):
         await call
+
+
+async def test_injected_latched_message_reaches_late_subscribers() -> None:
+    """inject(..., latch=True) is kept for subscriptions made afterwards."""
+    ros = MockRos()
+    ros.inject("/map", {"data": "grid"}, "std_msgs/msg/String", latch=True)
+    late = ros.subscribe("/map", "std_msgs/msg/String")
+    assert await late.get(1) == {"data": "grid"}
+
+
+async def test_state_watchers_end_after_closed_and_callbacks_can_be_removed() -> None:
+    """state_changes() yields each change and ends after CLOSED; a removed callback hears nothing."""
+    ros = MockRos()
+    heard: list[ConnectionState] = []
+    remove = ros.on_state_change(heard.append)
+    watcher = ros.state_changes()
+    ros.disconnect()
+    remove()
+    ros.reconnect()
+    await ros.close()
+    assert [s async for s in watcher] == [
+        ConnectionState.RECONNECTING, ConnectionState.CONNECTED, ConnectionState.CLOSED
+    ]
+    assert heard == [ConnectionState.RECONNECTING]
+    with pytest.raises(ConnectionClosed):
+        await ros.state_changes().next(1)
+
+
+async def test_one_reader_per_subscription() -> None:
+    """A second task waiting on the same subscription gets a UsageError, not a lost message."""
+    ros = MockRos()
+    sub = ros.subscribe("/one", "std_msgs/msg/Int32")
+    first = asyncio.create_task(sub.get(5))
+    await asyncio.sleep(0)
+    with pytest.raises(UsageError, match="already awaited"):
+        await sub.get(1)
+    ros.inject("/one", {"data": 3})
+    assert await first == {"data": 3}
