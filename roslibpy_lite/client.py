@@ -34,9 +34,12 @@ error, that handle's ``error`` is set: the next ``publish`` raises it, an
 
 Reconnects
 ----------
-With ``reconnect=True`` (the default), a dropped connection is reopened with
-exponential backoff and jitter (:class:`~roslibpy_lite._backoff.Backoff`,
-0.1 s doubling to 5 s by default), for as long as the client is open. The
+With ``reconnect=True`` (the default), a dropped connection is reopened at
+once, then with exponential backoff and jitter while attempts fail
+(:class:`~roslibpy_lite._backoff.Backoff`, 0.1 s doubling to 5 s by default),
+for as long as the client is open. A connection that drops within
+``stable_after`` (1 s) of opening counts as a failed attempt, so a peer that
+accepts and drops at once is not hammered. The
 state goes ``CONNECTED → RECONNECTING → CONNECTED``. After each reconnect,
 in this order: every open publisher is advertised again, every open
 subscription is subscribed again with the same options, every served service
@@ -177,6 +180,8 @@ class Client:
             raise UsageError(f"max_pending must be >= 1, got {max_pending}")
         self.url = url
         self.reconnect = reconnect
+        self.stable_after = 1.0
+        """A connection that lived this long (seconds) resets the backoff when it drops."""
         self.backoff = backoff or Backoff()
         self.open_timeout = open_timeout
         self.offline_buffer = offline_buffer
@@ -261,8 +266,8 @@ class Client:
                         self._first.set_exception(UsageError(f"bad URL {self.url!r}: {exc}"))
                     self._hub.set(ConnectionState.CLOSED)
                     return
-                self.backoff.reset()
                 self.connects += 1
+                opened = loop.time()
                 await self._session(ws)
                 if self._closing:
                     return
@@ -273,6 +278,10 @@ class Client:
                 log.warning("connection to %s lost; reconnecting", self.url)
                 self._hub.set(ConnectionState.RECONNECTING)
                 self._lost()
+                if loop.time() - opened >= self.stable_after:
+                    self.backoff.reset()  # it was a good connection: try again at once
+                else:  # a peer that accepts and drops at once: back off, do not hammer it
+                    await asyncio.sleep(self.backoff.next())
         finally:
             if self._first is not None and not self._first.done():
                 self._first.set_exception(ConnectionClosed("the client was closed"))

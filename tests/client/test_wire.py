@@ -400,3 +400,18 @@ async def test_status_error_reaches_every_publisher_of_the_topic(ros: Client) ->
     for pub in (a, b):
         with pytest.raises(StatusError, match="unknown type"):
             await pub.publish({})
+
+
+async def test_a_peer_that_drops_at_once_is_backed_off(peer: ScriptedPeer) -> None:
+    """Connections that drop right after opening count as failures: the backoff grows."""
+    async with roslibpy_lite.connect(peer.url, backoff=fast_backoff()) as ros:
+        for n in range(2, 5):
+            await peer.drop()
+            await peer.wait_connections(n)
+        assert ros.backoff.attempts >= 3
+        await ros.wait_connected(10)
+        ros.stable_after = 0.0
+        await peer.drop()
+        await peer.wait_connections(5)
+        await ros.wait_connected(10)
+        assert ros.backoff.attempts == 0
