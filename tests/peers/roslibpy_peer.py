@@ -26,6 +26,7 @@ from collections.abc import Callable
 from typing import Any
 
 import roslibpy
+from roslibpy.ros2 import Header
 
 _out_lock = threading.Lock()
 
@@ -112,7 +113,12 @@ class Peer:
             self.topic(cmd).advertise()
             return None
         if op == "publish":
-            self.topic(cmd).publish(roslibpy.Message(cmd["msg"]))
+            msg = dict(cmd["msg"])
+            if cmd.get("ros2_header"):
+                # What a roslibpy user writes: the stock ROS 2 Header helper (ROS 1 time keys).
+                header = msg["header"]
+                msg["header"] = Header(stamp=header["stamp"], frame_id=header["frame_id"])
+            self.topic(cmd).publish(roslibpy.Message(msg))
             return None
         if op == "unadvertise":
             self.topic(cmd).unadvertise()

@@ -592,3 +592,137 @@ MISSING_ROSAPI = pytest.mark.xfail(
     strict=True, reason="bridge: rosapi params / message_details not implemented yet"
 )
 NO_ACTIONS = pytest.mark.xfail(strict=True, reason="bridge: actions not supported yet")
+
+
+# -- robustness through stock clients ---------------------------------------------------------
+
+
+def publish_ros1_time_keys(peer: PeerProcess, node: Any, topic: str) -> None:
+    """roslibpy.ros2.Header writes the stamp as secs/nsecs; rclpy gets the same time."""
+    from geometry_msgs.msg import PoseStamped
+
+    inbox: queue.Queue[Any] = queue.Queue()
+    node.create_subscription(PoseStamped, topic, inbox.put, 10)
+    peer.request("advertise", topic=topic, type="geometry_msgs/PoseStamped")
+    wait_until(lambda: node.count_publishers(topic) >= 1, DEADLINE, f"bridge publisher on {topic}")
+    msg = {
+        "header": {"stamp": {"secs": 1_700_000_001, "nsecs": 5}, "frame_id": "map"},
+        "pose": {"position": {"x": 1.0, "y": 2.0, "z": 0.0}, "orientation": {"w": 1.0}},
+    }
+    for _ in range(int(DEADLINE / ATTEMPT)):
+        peer.request("publish", topic=topic, type="geometry_msgs/PoseStamped", msg=msg,
+                     ros2_header=True)
+        try:
+            got = inbox.get(timeout=ATTEMPT)
+            break
+        except queue.Empty:
+            continue
+    else:
+        raise AssertionError(f"rclpy never received the PoseStamped\n{peer.diagnostics()}")
+    assert (got.header.stamp.sec, got.header.stamp.nanosec) == (1_700_000_001, 5)
+    assert got.header.frame_id == "map"
+    assert (got.pose.position.x, got.pose.position.y, got.pose.orientation.w) == (1.0, 2.0, 1.0)
+
+
+def burst_in_order(peer: PeerProcess, node: Any, topic: str) -> None:
+    """100 messages published back to back reach a reliable rclpy subscriber, all and in order."""
+    from std_msgs.msg import Int32
+
+    inbox: queue.Queue[Any] = queue.Queue()
+    node.create_subscription(Int32, topic, inbox.put, _module("rclpy.qos").QoSProfile(depth=1000))
+    peer.request("advertise", topic=topic, type="std_msgs/Int32", queue_size=100)
+    wait_until(lambda: node.count_publishers(topic) >= 1, DEADLINE, f"bridge publisher on {topic}")
+    _publish_until_received(peer, topic, "std_msgs/Int32", {"data": -1}, inbox)
+    while not inbox.empty():  # later copies of the warm-up message
+        inbox.get_nowait()
+    seqs = [peer.send("publish", topic=topic, type="std_msgs/Int32", msg={"data": i})
+            for i in range(100)]
+    for seq in seqs:
+        assert peer.reply(seq)["ok"]
+    got: list[int] = []
+    while len(got) < 100:
+        try:
+            data = inbox.get(timeout=DEADLINE).data
+        except queue.Empty:
+            raise AssertionError(f"only {len(got)} of 100 arrived: {got[-5:]}") from None
+        if data != -1:
+            got.append(data)
+    assert got == list(range(100))
+
+
+def killed_client_service_goes(peer: PeerProcess, node: Any, topic: str) -> None:
+    """When a client serving a service is killed, its service leaves the ROS graph."""
+    peer.request("advertise_service", service=topic, type="std_srvs/srv/SetBool", handler="setbool")
+
+    def listed() -> bool:
+        return topic in {name for name, _types in node.get_service_names_and_types()}
+
+    wait_until(listed, DEADLINE, f"{topic} in the ROS graph")
+    assert peer.proc is not None
+    peer.proc.kill()
+    peer.proc.wait(DEADLINE)
+    wait_until(lambda: not listed(), DEADLINE, f"{topic} to leave the graph after the kill")
+
+
+def failing_handler(peer: PeerProcess, node: Any, topic: str) -> None:
+    """When the client's service handler reports failure, the rclpy caller still gets an answer."""
+    from std_srvs.srv import SetBool
+
+    peer.request("advertise_service", service=topic, type="std_srvs/srv/SetBool", handler="fail")
+    response = _call_from_ros(node, SetBool, topic, SetBool.Request(data=True))
+    assert response.success is False  # the bridge's documented choice: a default response
+
+
+def publish_large(peer: PeerProcess, node: Any, topic: str) -> None:
+    """A 1.5 MB sensor_msgs/Image (base64 data) published by the client reaches rclpy intact."""
+    from sensor_msgs.msg import Image
+
+    inbox: queue.Queue[Any] = queue.Queue()
+    node.create_subscription(Image, topic, inbox.put, 10)
+    peer.request("advertise", topic=topic, type="sensor_msgs/msg/Image")
+    wait_until(lambda: node.count_publishers(topic) >= 1, DEADLINE, f"bridge publisher on {topic}")
+    width, height = 800, 640
+    pixels = bytes((i * 7) % 251 for i in range(width * height * 3))
+    msg = {"height": height, "width": width, "encoding": "rgb8", "step": width * 3,
+           "data": base64.b64encode(pixels).decode("ascii")}
+    got = _publish_until_received(peer, topic, "sensor_msgs/msg/Image", msg, inbox)
+    assert (got.width, got.height, got.encoding) == (width, height, "rgb8")
+    assert bytes(got.data) == pixels
+
+
+def subscribe_large(peer: PeerProcess, node: Any, topic: str) -> None:
+    """A 1.5 MB sensor_msgs/Image from rclpy reaches the client, data as base64."""
+    from sensor_msgs.msg import Image
+
+    pub = node.create_publisher(Image, topic, 10)
+    peer.request("subscribe", topic=topic, type="sensor_msgs/msg/Image")
+    wait_until(lambda: pub.get_subscription_count() >= 1, DEADLINE, f"bridge subscriber on {topic}")
+    width, height = 800, 640
+    pixels = bytes((i * 13) % 251 for i in range(width * height * 3))
+    msg = Image(height=height, width=width, encoding="rgb8", step=width * 3, data=pixels)
+    got = _ros_publish_until_delivered(peer, pub, topic, msg)
+    assert (got["width"], got["height"], got["encoding"]) == (width, height, "rgb8")
+    assert base64.b64decode(got["data"]) == pixels
+
+
+def call_timeout(peer: PeerProcess, node: Any, topic: str) -> None:
+    """A call with roslib's timeout argument fails promptly when the rclpy service is too slow."""
+    from std_srvs.srv import SetBool
+
+    release = threading.Event()
+
+    def slow(request: Any, response: Any) -> Any:
+        release.wait(DEADLINE)  # held until the test has seen the client give up
+        response.success = True
+        return response
+
+    node.create_service(SetBool, topic, slow)
+    wait_until(lambda: topic in peer.request("get_services"), DEADLINE, f"{topic} in get_services")
+    try:
+        value = peer.request("call", service=topic, args={"data": True}, call_timeout=0.5)
+    except PeerError as exc:
+        assert "time" in str(exc).lower(), f"the failure does not say it timed out: {exc}"
+    else:
+        raise AssertionError(f"the slow call succeeded: {value!r}")
+    finally:
+        release.set()

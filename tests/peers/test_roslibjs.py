@@ -9,6 +9,7 @@ last ones run Node's native WebSocket too.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any
 
 import pytest
@@ -168,6 +169,38 @@ def test_send_action_goal(peer: PeerProcess, ros_node: Any, topic: str) -> None:
 def test_serve_action(peer: PeerProcess, ros_node: Any, topic: str) -> None:
     """ROSLIB.Action.advertise serves Fibonacci; an rclpy ActionClient gets the result."""
     scenarios.serve_action(peer, ros_node, topic)
+
+
+def test_burst_in_order(peer: PeerProcess, ros_node: Any, topic: str) -> None:
+    """100 messages roslib publishes back to back all reach rclpy, in order."""
+    scenarios.burst_in_order(peer, ros_node, topic)
+
+
+def test_failing_handler(peer: PeerProcess, ros_node: Any, topic: str) -> None:
+    """A roslib service handler returning false still gets the rclpy caller an answer."""
+    scenarios.failing_handler(peer, ros_node, topic)
+
+
+def test_call_timeout(peer: PeerProcess, ros_node: Any, topic: str) -> None:
+    """callService's timeout argument makes a too-slow rclpy service fail promptly."""
+    scenarios.call_timeout(peer, ros_node, topic)
+
+
+def test_publish_large(peer: PeerProcess, ros_node: Any, topic: str) -> None:
+    """roslib publishes a 1.5 MB Image; rclpy gets every byte."""
+    scenarios.publish_large(peer, ros_node, topic)
+
+
+def test_subscribe_large(peer: PeerProcess, ros_node: Any, topic: str) -> None:
+    """roslib receives a 1.5 MB Image from rclpy with every byte."""
+    scenarios.subscribe_large(peer, ros_node, topic)
+
+
+def test_killed_client_service_goes(
+    start_peer: Callable[..., PeerProcess], ros_node: Any, topic: str
+) -> None:
+    """Killing a Node process that serves a service removes the service from the graph."""
+    scenarios.killed_client_service_goes(start_peer("roslib"), ros_node, topic)
 
 
 def test_native_websocket_publish(native_peer: PeerProcess, ros_node: Any, topic: str) -> None:

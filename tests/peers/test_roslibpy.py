@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any
 
 import pytest
@@ -133,3 +134,35 @@ def test_message_details(peer: PeerProcess) -> None:
 def test_send_action_goal(peer: PeerProcess, ros_node: Any, topic: str) -> None:
     """roslibpy.ActionClient sends a goal to an rclpy action server and gets the result."""
     scenarios.send_goal(peer, ros_node, topic)
+
+
+def test_publish_ros2_header_helper(peer: PeerProcess, ros_node: Any, topic: str) -> None:
+    """A PoseStamped built with roslibpy.ros2.Header (secs/nsecs stamp) reaches rclpy with its time."""
+    scenarios.publish_ros1_time_keys(peer, ros_node, topic)
+
+
+def test_burst_in_order(peer: PeerProcess, ros_node: Any, topic: str) -> None:
+    """100 messages roslibpy publishes back to back all reach rclpy, in order."""
+    scenarios.burst_in_order(peer, ros_node, topic)
+
+
+def test_failing_handler(peer: PeerProcess, ros_node: Any, topic: str) -> None:
+    """A roslibpy service handler returning False still gets the rclpy caller an answer."""
+    scenarios.failing_handler(peer, ros_node, topic)
+
+
+def test_publish_large(peer: PeerProcess, ros_node: Any, topic: str) -> None:
+    """roslibpy publishes a 1.5 MB Image; rclpy gets every byte."""
+    scenarios.publish_large(peer, ros_node, topic)
+
+
+def test_subscribe_large(peer: PeerProcess, ros_node: Any, topic: str) -> None:
+    """roslibpy receives a 1.5 MB Image from rclpy with every byte."""
+    scenarios.subscribe_large(peer, ros_node, topic)
+
+
+def test_killed_client_service_goes(
+    start_peer: Callable[..., PeerProcess], ros_node: Any, topic: str
+) -> None:
+    """Killing a roslibpy process that serves a service removes the service from the graph."""
+    scenarios.killed_client_service_goes(start_peer("roslibpy"), ros_node, topic)

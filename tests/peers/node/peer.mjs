@@ -165,7 +165,7 @@ async function handle(cmd) {
       return viaCallbacks((ok, fail) => ros.getMessageDetails(cmd.type, ok, fail));
     case "call": {
       const service = new ROSLIB.Service({ ros, name: cmd.service, serviceType: cmd.type ?? "" });
-      return viaCallbacks((ok, fail) => service.callService(cmd.args ?? {}, ok, fail, cmd.timeout));
+      return viaCallbacks((ok, fail) => service.callService(cmd.args ?? {}, ok, fail, cmd.call_timeout));
     }
     case "advertise_service": {
       const name = cmd.service;
