@@ -289,6 +289,8 @@ def _stop_after(args: argparse.Namespace) -> float | None:
         raise CliError(EXIT_USAGE, f"--duration must be > 0, got {args.duration}")
     if getattr(args, "count", None) is not None and args.count < 1:
         raise CliError(EXIT_USAGE, f"--count must be >= 1, got {args.count}")
+    if args.type:
+        _type_parts(args.type, "msg")
     duration: float | None = args.duration
     return duration
 

@@ -1,0 +1,189 @@
+"""Every kind of CLI failure: one line on stderr, nothing on stdout, a distinct exit status."""
+
+from __future__ import annotations
+
+import sys
+import threading
+from collections.abc import Callable
+from typing import Any
+
+import pytest
+
+from roslibpy_lite.cli import (
+    EXIT_CONNECT,
+    EXIT_NOT_FOUND,
+    EXIT_REMOTE,
+    EXIT_TIMEOUT,
+    EXIT_USAGE,
+    main,
+)
+from tests.cli.conftest import Result, Run, closed_port, one_error_line
+from tests.helpers import BridgeProcess, wait_until
+
+
+@pytest.fixture
+def multiplier(ros_node: Any, topic: str) -> str:
+    """An rclpy /mult-like MultFloats server named ``topic``."""
+    from mult_msgs.srv import MultFloats
+
+    def handle(request: Any, response: Any) -> Any:
+        response.result = request.x * request.y
+        return response
+
+    ros_node.create_service(MultFloats, topic, handle)
+    return topic
+
+
+# -- the bridge cannot be reached ----------------------------------------------------------------
+
+
+def test_no_bridge(cli: Run) -> None:
+    """Nothing listening at --url: status 3, naming the URL and the reason."""
+    url = f"ws://127.0.0.1:{closed_port()}"
+    one_error_line(cli("topic", "list", url=url), EXIT_CONNECT, f"cannot connect to {url}",
+                   "is the bridge running?")
+
+
+def test_malformed_url(cli: Run) -> None:
+    """A --url that is not a websocket URL is a usage error."""
+    one_error_line(cli("node", "list", url="http//nonsense"), EXIT_USAGE, "bad URL")
+
+
+def test_connection_lost_during_echo(
+    make_bridge: Callable[..., BridgeProcess], capsys: pytest.CaptureFixture[str], topic: str
+) -> None:
+    """If the bridge dies while echoing, the echo ends with status 3 and says the link was lost."""
+    private = make_bridge()
+    outcome: list[int] = []
+    worker = threading.Thread(target=lambda: outcome.append(main(
+        ["topic", "echo", topic, "std_msgs/msg/String", "--url", private.url])))
+    worker.start()
+    private.wait_for_line(r"client \d+ connected")
+    private.kill()
+    worker.join(30)
+    assert outcome == [EXIT_CONNECT]
+    err = capsys.readouterr().err.splitlines()
+    assert err == [f"roslibpy-lite: echo {topic}: the connection to {private.url} was lost"]
+
+
+# -- unknown names ---------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("argv", [
+    ("topic", "echo"), ("topic", "type"), ("topic", "info"), ("topic", "hz"),
+])
+def test_unknown_topic(cli: Run, topic: str, argv: tuple[str, str]) -> None:
+    """echo/type/info/hz of a topic nobody has: status 4 naming the topic."""
+    one_error_line(cli(*argv, topic, "--wait", "0.2"), EXIT_NOT_FOUND, f"unknown topic {topic}")
+
+
+@pytest.mark.parametrize("argv", [
+    ("service", "type", "{s}"),
+    ("service", "call", "{s}", "mult_msgs/srv/MultFloats", "{x: 1.0}"),
+])
+def test_unknown_service(cli: Run, topic: str, argv: tuple[str, ...]) -> None:
+    """type/call of a service nobody serves: status 4 naming the service."""
+    args = [topic if a == "{s}" else a for a in argv]
+    one_error_line(cli(*args, "--wait", "0.2"), EXIT_NOT_FOUND, f"unknown service {topic}")
+
+
+def test_unknown_node(cli: Run) -> None:
+    """node info of a node not in the graph: status 4."""
+    one_error_line(cli("node", "info", "/no_such_node"), EXIT_NOT_FOUND,
+                   "unknown node /no_such_node")
+
+
+def test_unknown_interface(cli: Run) -> None:
+    """interface show/list of unknown types or packages: status 4."""
+    one_error_line(cli("interface", "show", "nopkg/msg/Nothing", url=None), EXIT_NOT_FOUND,
+                   "unknown interface type 'nopkg/msg/Nothing'")
+    one_error_line(cli("interface", "list", "nopkg", url=None), EXIT_NOT_FOUND,
+                   "unknown interface package nopkg")
+
+
+# -- bad arguments ---------------------------------------------------------------------------------
+
+
+CALL = ("service", "call", "/mult_floats", "mult_msgs/srv/MultFloats")
+
+
+@pytest.mark.parametrize(("argv", "fragment"), [
+    ((*CALL, "{x: [1"), "VALUES is not valid YAML at line 1"),
+    ((*CALL, "[2.5, 4.0]"), "VALUES must be a mapping"),
+    ((*CALL, "{x: abc}"), "bad VALUES for mult_msgs/srv/MultFloats_Request: x: expected float64"),
+    ((*CALL, "{z: 1.0}"), "z: expected a field of mult_msgs/srv/MultFloats_Request (x, y)"),
+    (("service", "call", "/mult_floats", "MultFloats", "{}"), "'MultFloats' is not a srv type"),
+    (("topic", "pub", "/t", "std_msgs/msg/String", "{data: 5}"),
+     "bad VALUES for std_msgs/msg/String: data: expected string"),
+    (("topic", "pub", "/t", "std_msgs/msg/String", "--rate", "0"), "--rate must be > 0"),
+    (("topic", "pub", "/t", "std_msgs/msg/String", "--times", "0"), "--times must be >= 1"),
+    (("topic", "pub", "/t", "std_msgs/msg/String", "--once", "--times", "2"),
+     "not allowed with argument"),
+    (("topic", "echo", "/t", "--count", "0"), "--count must be >= 1"),
+    (("topic", "echo", "/t", "--duration", "-1"), "--duration must be > 0"),
+    (("topic", "echo", "/t", "std_msgs/Str/ing"), "is not a msg type"),
+    (("topic", "hz", "/t", "--window", "0"), "--window must be >= 1"),
+    (("topic", "list", "--timeout", "0"), "--timeout must be > 0"),
+    (("topic",), "the following arguments are required"),
+    (("bogus",), "invalid choice: 'bogus'"),
+    (("topic", "list", "--bogus"), "unrecognized arguments: --bogus"),
+])
+def test_bad_arguments(cli: Run, argv: tuple[str, ...], fragment: str) -> None:
+    """Bad command lines, values and fields: status 2, naming what was wrong (no bridge needed)."""
+    one_error_line(cli(*argv, url=None), EXIT_USAGE, fragment)
+
+
+def test_json_only_without_pyyaml(
+    cli: Run, monkeypatch: pytest.MonkeyPatch, multiplier: str
+) -> None:
+    """Without PyYAML, JSON values work and YAML ones get a message saying to install it."""
+    monkeypatch.setitem(sys.modules, "yaml", None)
+    ok = cli("service", "call", multiplier, "mult_msgs/srv/MultFloats", '{"x": 2.5, "y": 4.0}',
+             "--wait", "10")
+    assert (ok.code, ok.out) == (0, "result: 10.0\n"), ok
+    one_error_line(cli("service", "call", multiplier, "mult_msgs/srv/MultFloats", "{x: 2.5}"),
+                   EXIT_USAGE, "not valid JSON", "roslibpy-lite[cli]")
+
+
+# -- the other side said no ------------------------------------------------------------------------
+
+
+def test_publish_with_a_type_the_bridge_lacks(cli: Run, topic: str) -> None:
+    """pub with a type no installed package has: the bridge refuses, status 6 with its reason."""
+    one_error_line(cli("topic", "pub", topic, "nopkg/msg/Nothing", "{}", "--once"), EXIT_REMOTE,
+                   f"the bridge refused to advertise {topic}", "nopkg/msg/Nothing")
+
+
+def test_call_with_a_type_the_bridge_lacks(cli: Run, multiplier: str) -> None:
+    """call of a real service with an unknown type: the call fails, status 6 with the reason."""
+    result = cli("service", "call", multiplier, "nopkg/srv/Nothing", "{}", "--wait", "10")
+    one_error_line(result, EXIT_REMOTE, f"service {multiplier} failed", "nopkg/srv/Nothing")
+
+
+def test_call_timeout(cli: Run, ros_node: Any, topic: str) -> None:
+    """A service slower than --call-timeout: status 5 saying no answer came in time."""
+    from mult_msgs.srv import MultFloats
+    from rclpy.callback_groups import ReentrantCallbackGroup
+
+    release = threading.Event()
+
+    def slow(request: Any, response: Any) -> Any:
+        release.wait(10)
+        return response
+
+    ros_node.create_service(MultFloats, topic, slow, callback_group=ReentrantCallbackGroup())
+    try:
+        result = cli("service", "call", topic, "mult_msgs/srv/MultFloats", "{}",
+                     "--call-timeout", "0.5", "--wait", "10")
+    finally:
+        release.set()
+    one_error_line(result, EXIT_TIMEOUT, f"call {topic}: no answer within 0.5 s")
+
+
+def test_errors_do_not_disturb_the_bridge(cli: Run, multiplier: str) -> None:
+    """After all of the above, the bridge still answers a good call."""
+    result: list[Result] = []
+    wait_until(lambda: result.append(cli("service", "call", multiplier,
+                                         "mult_msgs/srv/MultFloats", "{x: 3.0, y: 3.0}"))
+               or result[-1].code == 0, timeout=15, what="a good call")
+    assert result[-1].out == "result: 9.0\n"
