@@ -266,6 +266,16 @@ class Client:
                         self._first.set_exception(UsageError(f"bad URL {self.url!r}: {exc}"))
                     self._hub.set(ConnectionState.CLOSED)
                     return
+                except Exception as exc:  # anything else websockets may raise: a failed attempt
+                    if self._first is not None and not self._first.done():
+                        self._first.set_exception(
+                            ConnectError(f"cannot connect to {self.url}: {_why(exc)}")
+                        )
+                        self._hub.set(ConnectionState.CLOSED)
+                        return
+                    log.warning("connect to %s failed: %s", self.url, _why(exc))
+                    await asyncio.sleep(self.backoff.next())
+                    continue
                 self.connects += 1
                 opened = loop.time()
                 await self._session(ws)
@@ -336,8 +346,8 @@ class Client:
         for pubs in self._publishers.values():
             for pub in pubs:
                 pub.error = None
-                while pub.offline:
-                    self._send_publish(pub, pub.offline.popleft())
+                while pub._offline:
+                    self._send_text(pub._offline.popleft())
 
     # -- sending -------------------------------------------------------------------------------
 
@@ -397,9 +407,6 @@ class Client:
             sub.topic, sub.type_name, id=sub.id, throttle_rate=sub.throttle_rate,
             queue_length=sub.queue_length, compression=sub.compression,
         ))
-
-    def _send_publish(self, pub: Publisher[Any], wire: Mapping[str, Any]) -> None:
-        self._send_text(ops.encode(ops.Publish(pub.topic, wire)))
 
     # -- the receive path ----------------------------------------------------------------------
 
@@ -596,10 +603,11 @@ class Client:
         self._check_open()
         if self.offline_buffer == 0:
             raise Disconnected(f"publish to {pub.topic}: the connection to {self.url} is down")
-        if len(pub.offline) >= self.offline_buffer:
-            pub.offline.popleft()
+        text = ops.encode(ops.Publish(pub.topic, wire))  # a copy, checked now
+        if len(pub._offline) >= self.offline_buffer:
+            pub._offline.popleft()
             pub.dropped += 1
-        pub.offline.append(wire)
+        pub._offline.append(text)
         return None
 
     def _unadvertise(self, pub: Publisher[Any]) -> None:
@@ -829,7 +837,7 @@ class Client:
             sub._end()
         for pubs in self._publishers.values():
             for pub in pubs:
-                pub.offline.clear()
+                pub._offline.clear()
 
     async def close(self) -> None:
         """Close the connection; the state becomes ``CLOSED``. Closing twice is harmless."""

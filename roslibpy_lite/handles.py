@@ -243,8 +243,7 @@ class Publisher(_Handle, Generic[T]):
         self.id = id
         self.closed = False
         self.error: RosLibError | None = None
-        self.offline: deque[Mapping[str, Any]] = deque()
-        """Messages published while the connection was down, sent after reconnecting."""
+        self._offline: deque[Any] = deque()  # backend-specific form (encoded frame, copy)
         self.offline_buffer = offline_buffer
         self.dropped = 0
         """Messages dropped because the offline buffer was full (oldest first)."""
@@ -253,6 +252,11 @@ class Publisher(_Handle, Generic[T]):
 
     def __repr__(self) -> str:
         return f"<Publisher {self.topic} {self.type_name}{' closed' if self.closed else ''}>"
+
+    @property
+    def offline_pending(self) -> int:
+        """Messages published while the connection was down, waiting to be sent."""
+        return len(self._offline)
 
     def to_wire(self, msg: T | Mapping[str, Any]) -> Mapping[str, Any]:
         """The wire form of ``msg`` after the type checks (see :func:`to_wire`)."""
@@ -287,7 +291,7 @@ class Publisher(_Handle, Generic[T]):
         if self.closed:
             return
         self.closed = True
-        self.offline.clear()
+        self._offline.clear()
         self._backend._unadvertise(self)
 
     async def close(self) -> None:

@@ -173,8 +173,8 @@ class MockRos:
         self._check_open()
         self._hub.set(ConnectionState.CONNECTED)
         for pub in list(self._publishers):
-            while pub.offline:
-                self._deliver(pub.topic, pub.offline.popleft(), record=True, latch=pub.latch)
+            while pub._offline:
+                self._deliver(pub.topic, pub._offline.popleft(), record=True, latch=pub.latch)
 
     def _check_open(self) -> None:
         if self._hub.state is ConnectionState.CLOSED:
@@ -286,10 +286,10 @@ class MockRos:
         if self._hub.state is not ConnectionState.CONNECTED:
             if self.offline_buffer == 0:
                 raise Disconnected(f"publish to {pub.topic}: the connection is down")
-            if len(pub.offline) >= self.offline_buffer:
-                pub.offline.popleft()
+            if len(pub._offline) >= self.offline_buffer:
+                pub._offline.popleft()
                 pub.dropped += 1
-            pub.offline.append(copy)
+            pub._offline.append(copy)
             return None
         self._deliver(pub.topic, copy, record=True, latch=pub.latch)
         return None

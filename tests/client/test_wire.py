@@ -291,7 +291,7 @@ async def test_publishes_while_down_are_buffered_and_flushed(peer: ScriptedPeer)
         await asyncio.wait_for(_until_state(ros, ConnectionState.RECONNECTING), 5)
         for i in range(5):
             await pub.publish({"data": i})
-        assert pub.dropped == 3 and len(pub.offline) == 2
+        assert pub.dropped == 3 and pub.offline_pending == 2
         mark = len(peer.received)
         peer.port = url_port
         await peer.start()
@@ -415,3 +415,23 @@ async def test_a_peer_that_drops_at_once_is_backed_off(peer: ScriptedPeer) -> No
         await peer.wait_connections(5)
         await ros.wait_connected(10)
         assert ros.backoff.attempts == 0
+
+
+async def test_offline_publish_is_a_snapshot_and_checked_at_once(peer: ScriptedPeer) -> None:
+    """A message buffered while down is copied at publish time; one JSON cannot carry fails then."""
+    async with roslibpy_lite.connect(peer.url, backoff=fast_backoff()) as ros:
+        pub = await ros.advertise("/snap", "std_msgs/msg/String")
+        port = peer.port
+        await peer.stop()
+        await asyncio.wait_for(_until_state(ros, ConnectionState.RECONNECTING), 5)
+        msg = {"data": "first"}
+        await pub.publish(msg)
+        msg["data"] = "mutated later"
+        with pytest.raises(roslibpy_lite.RosLibError, match="JSON"):
+            await pub.publish({"data": {1, 2}})
+        mark = len(peer.received)
+        peer.port = port
+        await peer.start()
+        await peer.expect(op="publish", start=mark, topic="/snap")
+        assert peer.count(start=mark, op="publish", msg={"data": "first"}) == 1
+        assert pub.offline_pending == 0
