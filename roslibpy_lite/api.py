@@ -130,6 +130,7 @@ class Ros(Protocol):
         throttle_rate: int = 0,
         queue_length: int = 0,
         compression: str = "none",
+        fragment_size: int | None = None,
         buffer_size: int = 100,
     ) -> Subscription[dict[str, Any]]: ...
 
@@ -143,6 +144,7 @@ class Ros(Protocol):
         throttle_rate: int = 0,
         queue_length: int = 0,
         compression: str = "none",
+        fragment_size: int | None = None,
         buffer_size: int = 100,
     ) -> Subscription[M]: ...
 
@@ -155,6 +157,7 @@ class Ros(Protocol):
         throttle_rate: int = 0,
         queue_length: int = 0,
         compression: str = "none",
+        fragment_size: int | None = None,
         buffer_size: int = 100,
     ) -> Subscription[Any]:
         """Subscribe; iterate the handle (``async for``) or pass ``callback``."""

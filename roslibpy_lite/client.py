@@ -406,6 +406,7 @@ class Client:
         self._send(ops.Subscribe(
             sub.topic, sub.type_name, id=sub.id, throttle_rate=sub.throttle_rate,
             queue_length=sub.queue_length, compression=sub.compression,
+            fragment_size=sub.fragment_size,
         ))
 
     # -- the receive path ----------------------------------------------------------------------
@@ -638,6 +639,7 @@ class Client:
         throttle_rate: int = 0,
         queue_length: int = 0,
         compression: str = "none",
+        fragment_size: int | None = None,
         buffer_size: int = 100,
     ) -> Subscription[dict[str, Any]]: ...
 
@@ -651,6 +653,7 @@ class Client:
         throttle_rate: int = 0,
         queue_length: int = 0,
         compression: str = "none",
+        fragment_size: int | None = None,
         buffer_size: int = 100,
     ) -> Subscription[M]: ...
 
@@ -663,6 +666,7 @@ class Client:
         throttle_rate: int = 0,
         queue_length: int = 0,
         compression: str = "none",
+        fragment_size: int | None = None,
         buffer_size: int = 100,
     ) -> Subscription[Any]:
         """Subscribe to ``topic``.
@@ -671,6 +675,8 @@ class Client:
         Options: ``throttle_rate`` (ms between messages, at the bridge),
         ``queue_length`` (the bridge's queue for us; 0: its default),
         ``compression`` (``"none"`` or ``"cbor"``, which needs cbor2),
+        ``fragment_size`` (the bridge splits larger messages into fragments of
+        this many characters; they are reassembled here),
         ``buffer_size`` (this side's buffer; the oldest message is dropped
         when full). Iterate the handle, ``await sub.get()``, or pass
         ``callback`` (sync or async). Use as ``async with`` or ``await``.
@@ -686,7 +692,8 @@ class Client:
             _need_cbor()
         sub: Subscription[Any] = Subscription(
             self, topic, type_name, cls, throttle_rate=throttle_rate, queue_length=queue_length,
-            compression=compression, buffer_size=buffer_size, id=self._new_id("subscribe", topic),
+            compression=compression, fragment_size=fragment_size, buffer_size=buffer_size,
+            id=self._new_id("subscribe", topic),
         )
         if callback is not None:
             sub.on_message(callback)

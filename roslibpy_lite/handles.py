@@ -318,6 +318,7 @@ class Subscription(_Handle, Generic[T]):
         throttle_rate: int,
         queue_length: int,
         compression: str,
+        fragment_size: int | None = None,
         buffer_size: int,
         id: str,
     ) -> None:
@@ -325,6 +326,8 @@ class Subscription(_Handle, Generic[T]):
             raise UsageError(f"subscribe {topic}: buffer_size must be >= 1, got {buffer_size}")
         if throttle_rate < 0 or queue_length < 0:
             raise UsageError(f"subscribe {topic}: throttle_rate and queue_length must be >= 0")
+        if fragment_size is not None and fragment_size < 1:
+            raise UsageError(f"subscribe {topic}: fragment_size must be >= 1, got {fragment_size}")
         if compression not in ("none", "cbor"):
             raise UsageError(
                 f"subscribe {topic}: compression must be 'none' or 'cbor', got {compression!r}"
@@ -336,6 +339,7 @@ class Subscription(_Handle, Generic[T]):
         self.throttle_rate = throttle_rate
         self.queue_length = queue_length
         self.compression = compression
+        self.fragment_size = fragment_size
         self.buffer_size = buffer_size
         self.id = id
         self.closed = False

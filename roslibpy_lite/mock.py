@@ -320,6 +320,7 @@ class MockRos:
         throttle_rate: int = 0,
         queue_length: int = 0,
         compression: str = "none",
+        fragment_size: int | None = None,
         buffer_size: int = 100,
     ) -> Subscription[dict[str, Any]]: ...
 
@@ -333,6 +334,7 @@ class MockRos:
         throttle_rate: int = 0,
         queue_length: int = 0,
         compression: str = "none",
+        fragment_size: int | None = None,
         buffer_size: int = 100,
     ) -> Subscription[M]: ...
 
@@ -345,15 +347,16 @@ class MockRos:
         throttle_rate: int = 0,
         queue_length: int = 0,
         compression: str = "none",
+        fragment_size: int | None = None,
         buffer_size: int = 100,
     ) -> Subscription[Any]:
-        """Subscribe (``throttle_rate`` and ``queue_length`` are accepted and not simulated)."""
+        """Subscribe (``throttle_rate``, ``queue_length``, ``fragment_size`` are not simulated)."""
         self._check_open()
         type_name, cls = message_type(type)
         entry = self._topic(topic, type_name, "subscribe")
         sub: Subscription[Any] = Subscription(
             self, topic, type_name, cls, throttle_rate=throttle_rate, queue_length=queue_length,
-            compression=compression, buffer_size=buffer_size,
+            compression=compression, fragment_size=fragment_size, buffer_size=buffer_size,
             id=f"subscribe:{topic}:{next(self._ids)}",
         )
         if callback is not None:

@@ -87,3 +87,12 @@ async def test_float_array_over_cbor_typed_arrays(client: Client, ros_node: Any,
     async with client.subscribe(topic, Float32MultiArray, compression="cbor") as sub:
         msg = await first_message(lambda: pub.publish(RosFloats(data=values)), sub)
     assert msg.data == pytest.approx(values)
+
+
+async def test_fragmented_messages_are_reassembled(client: Client, ros_node: Any, topic: str) -> None:
+    """With fragment_size the bridge splits each image into fragments; the client reassembles them."""
+    pub = ros_node.create_publisher(RosImage, topic, 10)
+    async with client.subscribe(topic, Image, fragment_size=1000) as sub:
+        msg = await first_message(lambda: pub.publish(_image()), sub)
+    assert msg.data == PIXELS
+    assert client._protocol.pending_fragments == 0

@@ -70,7 +70,7 @@ async def test_topic_ops_on_the_wire(ros: Client, peer: ScriptedPeer) -> None:
     pub = await ros.advertise("/chatter", "std_msgs/String", latch=True)
     await pub.publish({"data": "hi"})
     sub = await ros.subscribe("/imu", "sensor_msgs/msg/Imu", throttle_rate=50, queue_length=2,
-                              compression="cbor")
+                              compression="cbor", fragment_size=500)
     await sub.unsubscribe()
     await pub.unadvertise()
     adv = await peer.expect(op="advertise", topic="/chatter")
@@ -79,6 +79,7 @@ async def test_topic_ops_on_the_wire(ros: Client, peer: ScriptedPeer) -> None:
     s = await peer.expect(op="subscribe", topic="/imu")
     assert (s["type"], s["throttle_rate"], s["queue_length"], s["compression"], s["id"]) == (
         "sensor_msgs/msg/Imu", 50, 2, "cbor", sub.id)
+    assert s["fragment_size"] == 500
     await peer.expect(op="unsubscribe", topic="/imu", id=sub.id)
     await peer.expect(op="unadvertise", topic="/chatter")
     ops = [op["op"] for op in peer.received]
