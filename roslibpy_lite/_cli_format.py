@@ -97,7 +97,7 @@ def _double_quoted(text: str) -> str:
 
 
 def _key(key: str) -> str:
-    return key if _PLAIN.match(key) and key.lower() not in _RESERVED else _double_quoted(key)
+    return key if _PLAIN.fullmatch(key) and key.lower() not in _RESERVED else _double_quoted(key)
 
 
 def _scalar(value: Any) -> str:
@@ -114,7 +114,11 @@ def _scalar(value: Any) -> str:
             return ".nan"
         if math.isinf(value):
             return ".inf" if value > 0 else "-.inf"
-        return repr(value)
+        text = repr(value)
+        if "." not in text:  # YAML 1.1 floats need a dot: 1e+20 -> 1.0e+20
+            mantissa, _, exponent = text.partition("e")
+            text = f"{mantissa}.0e{exponent}" if exponent else f"{mantissa}.0"
+        return text
     text = str(value)
     if text.isprintable():
         return "'" + text.replace("'", "''") + "'"
