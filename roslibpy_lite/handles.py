@@ -374,6 +374,11 @@ class Subscription(_Handle, Generic[T]):
         if not callable(callback):
             raise UsageError(f"subscribe {self.topic}: callback must be callable")
         if _is_async_callable(callback):
+            if self._waiter is not None:
+                raise UsageError(
+                    f"subscription to {self.topic} is being iterated; "
+                    "iterate it or give it async callbacks, not both"
+                )
             self._async_cbs.append(cast("Callable[[Any], Awaitable[Any]]", callback))
             if self._consumer is None:
                 self._consumer = asyncio.get_running_loop().create_task(

@@ -207,3 +207,19 @@ async def test_one_reader_per_subscription() -> None:
         await sub.get(1)
     ros.inject("/one", {"data": 3})
     assert await first == {"data": 3}
+
+
+async def test_async_callback_cannot_join_a_running_iteration() -> None:
+    """Adding an async callback while a task iterates the subscription raises UsageError."""
+    ros = MockRos()
+    sub = ros.subscribe("/mix", "std_msgs/msg/Int32")
+    reader = asyncio.create_task(sub.get(5))
+    await asyncio.sleep(0)
+
+    async def cb(msg: Any) -> None:
+        pass
+
+    with pytest.raises(UsageError, match="iterate it or give it async callbacks"):
+        sub.on_message(cb)
+    ros.inject("/mix", {"data": 1})
+    assert await reader == {"data": 1}
