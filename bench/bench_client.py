@@ -16,8 +16,9 @@ websocket frame:
 
 With ``--e2e`` it also starts a bridge (``python -m bridge_server``) and an
 rclpy publisher process, and measures what arrives over the real websocket:
-small messages as fast as the publisher can send them, and 640x480 rgb8
-images with ``compression="cbor"``.
+small messages as fast as the publisher can send them, 640x480 rgb8
+images with ``compression="cbor"``, and one client publishing small
+messages as fast as it can to another client through the bridge.
 """
 
 from __future__ import annotations
@@ -25,6 +26,7 @@ from __future__ import annotations
 import argparse
 import asyncio
 import base64
+import contextlib
 import json
 import os
 import platform
@@ -308,12 +310,56 @@ async def end_to_end(seconds: float) -> dict[str, Any]:
                     "received_per_s": round((n - 1) / span, 1) if n > 1 else 0.0,
                     "not_delivered": sent - n,
                 }
+            results["e2e_client_to_client"] = await _client_loop(ros, url, seconds)
         return results
     finally:
         bridge.terminate()
         bridge.wait(10)
         if bridge.stderr is not None:
             bridge.stderr.close()
+
+
+async def _client_loop(ros: Client, url: str, seconds: float) -> dict[str, Any]:
+    """One client publishes small messages as fast as it can; another receives them via ROS."""
+    topic = "/bench_loop"
+    count = [0]
+    done = asyncio.Event()
+    total = [0]
+
+    def on_msg(msg: Any) -> None:
+        count[0] += 1
+        if msg["data"] == -1:
+            done.set()
+
+    async with roslibpy_lite.connect(url) as sender:
+        pub = await sender.advertise(topic, "std_msgs/msg/Int32")
+        sub = ros.subscribe(topic, "std_msgs/msg/Int32", callback=on_msg, queue_length=1000)
+        probe = asyncio.get_running_loop().time() + 15
+        while count[0] == 0 and asyncio.get_running_loop().time() < probe:
+            await pub.publish({"data": 0})
+            await asyncio.sleep(0.05)  # bench only: wait for ROS discovery
+        count[0] = 0
+        start = time.perf_counter()
+        end = start + seconds
+        n = 0
+        while time.perf_counter() < end:
+            for _ in range(100):
+                await pub.publish({"data": n})
+                n += 1
+            await asyncio.sleep(0)
+        publish_time = time.perf_counter() - start
+        await pub.publish({"data": -1})
+        with contextlib.suppress(TimeoutError):
+            await asyncio.wait_for(done.wait(), 10)
+        elapsed = time.perf_counter() - start
+        total[0] = n
+        await sub.close()
+    return {
+        "published": total[0],
+        "publish_per_s": round(total[0] / publish_time, 1),
+        "received": count[0],
+        "received_per_s": round(count[0] / elapsed, 1),
+    }
 
 
 async def main() -> None:
