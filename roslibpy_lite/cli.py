@@ -46,7 +46,7 @@ from .exceptions import (
     UsageError,
 )
 
-__all__ = ["EXIT_CODES", "main"]
+__all__ = ["EXAMPLES", "EXIT_CODES", "build_parser", "main"]
 
 DEFAULT_URL = "ws://127.0.0.1:9090"
 
@@ -632,21 +632,24 @@ async def cmd_interface_list(args: argparse.Namespace, out: Out) -> int:
 # -- the command line ----------------------------------------------------------------------------
 
 
+EXAMPLES: tuple[str, ...] = (
+    "topic list -t",
+    "topic echo /example_counter --count 3",
+    'topic pub /chatter std_msgs/msg/String "{data: hello}" --once',
+    "topic hz /imu --duration 3",
+    'service call /mult_floats mult_msgs/srv/MultFloats "{x: 2.5, y: 4.0}"',
+    "node list",
+    "interface show sensor_msgs/msg/Imu",
+)
+"""The examples ``--help`` shows (tests/cli/test_examples.py runs each against the demo's parts)."""
+
+
 def _epilog() -> str:
     codes = "\n".join(f"  {code:<4} {text}" for code, text in EXIT_CODES.items())
     yaml_note = ("VALUES are YAML or JSON" if have_yaml()
                  else "VALUES are JSON (install 'roslibpy-lite[cli]' for YAML)")
-    return (
-        "examples:\n"
-        "  roslibpy-lite topic list -t\n"
-        "  roslibpy-lite topic echo /example_counter --count 3\n"
-        "  roslibpy-lite topic pub /chatter std_msgs/msg/String \"{data: hello}\" --once\n"
-        "  roslibpy-lite topic hz /imu --duration 5\n"
-        "  roslibpy-lite service call /mult_floats mult_msgs/srv/MultFloats "
-        "\"{x: 2.5, y: 4.0}\"\n"
-        "  roslibpy-lite interface show sensor_msgs/msg/Imu\n\n"
-        f"{yaml_note}.\n\nexit status:\n{codes}"
-    )
+    examples = "\n".join(f"  roslibpy-lite {e}" for e in EXAMPLES)
+    return f"examples:\n{examples}\n\n{yaml_note}.\n\nexit status:\n{codes}"
 
 
 class _Parser(argparse.ArgumentParser):
