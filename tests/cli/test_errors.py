@@ -154,6 +154,12 @@ def test_publish_with_a_type_the_bridge_lacks(cli: Run, topic: str) -> None:
                    f"the bridge refused to advertise {topic}", "nopkg/msg/Nothing")
 
 
+def test_echo_with_a_type_the_bridge_lacks(cli: Run, topic: str) -> None:
+    """echo with a TYPE no installed package has: the bridge refuses the subscription, status 6."""
+    one_error_line(cli("topic", "echo", topic, "nopkg/msg/Nothing", "--duration", "10"),
+                   EXIT_REMOTE, "nopkg/msg/Nothing")
+
+
 def test_call_with_a_type_the_bridge_lacks(cli: Run, multiplier: str) -> None:
     """call of a real service with an unknown type: the call fails, status 6 with the reason."""
     result = cli("service", "call", multiplier, "nopkg/srv/Nothing", "{}", "--wait", "10")
