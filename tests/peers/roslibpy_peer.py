@@ -70,14 +70,15 @@ class Peer:
 
     def __init__(self, host: str, port: int) -> None:
         self.ros = roslibpy.Ros(host, port)
-        self.topics: dict[tuple[str, str], Any] = {}
+        self.topics: dict[tuple[str, str, str | None], Any] = {}
         self.services: dict[str, Any] = {}
 
     def topic(self, cmd: dict[str, Any]) -> Any:
         """The roslibpy Topic for the command's (topic, type), made once with its options."""
-        key = (cmd["topic"], cmd["type"])
+        key = (cmd["topic"], cmd["type"], cmd.get("handle"))
         if key not in self.topics:
-            options = {k: cmd[k] for k in ("latch", "queue_size", "compression") if k in cmd}
+            names = ("latch", "queue_size", "compression", "throttle_rate", "queue_length")
+            options = {k: cmd[k] for k in names if k in cmd}
             self.topics[key] = roslibpy.Topic(self.ros, cmd["topic"], cmd["type"], **options)
         return self.topics[key]
 
@@ -124,10 +125,10 @@ class Peer:
             self.topic(cmd).unadvertise()
             return None
         if op == "subscribe":
-            name = cmd["topic"]
+            name, tag = cmd["topic"], cmd.get("handle")
 
-            def on_message(msg: dict[str, Any], name: str = name) -> None:
-                emit({"event": "message", "topic": name, "msg": msg})
+            def on_message(msg: dict[str, Any], name: str = name, tag: Any = tag) -> None:
+                emit({"event": "message", "topic": name, "handle": tag, "msg": msg})
 
             self.topic(cmd).subscribe(on_message)
             return None

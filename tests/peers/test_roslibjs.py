@@ -203,6 +203,37 @@ def test_killed_client_service_goes(
     scenarios.killed_client_service_goes(start_peer("roslib"), ros_node, topic)
 
 
+def test_two_subscriptions(peer: PeerProcess, ros_node: Any, topic: str) -> None:
+    """Two roslib Topics on one topic each get every message once; either can unsubscribe alone."""
+    scenarios.two_subscriptions(peer, ros_node, topic)
+
+
+def test_subscription_options(peer: PeerProcess, ros_node: Any, topic: str) -> None:
+    """A roslib subscription with throttle_rate and queue_length still delivers."""
+    scenarios.subscription_options(peer, ros_node, topic)
+
+
+def test_call_bad_args(peer: PeerProcess, ros_node: Any, topic: str) -> None:
+    """A roslib call with a bad value or unknown field fails naming the field."""
+    scenarios.call_bad_args(peer, ros_node, topic)
+
+
+@scenarios.NO_PNG
+def test_subscribe_png_compression(peer: PeerProcess, ros_node: Any, topic: str) -> None:
+    """A roslib Topic with compression "png" still receives messages."""
+    scenarios.subscribe_png(peer, ros_node, topic)
+
+
+def test_bad_fields_named(peer: PeerProcess, ros_node: Any, topic: str) -> None:
+    """roslib gets error statuses naming an unknown field and a mistyped one; publishing goes on."""
+    scenarios.bad_fields_named(peer, ros_node, topic)
+
+
+def test_subscribe_wrong_type(peer: PeerProcess, ros_node: Any, topic: str) -> None:
+    """roslib subscribing with the wrong type gets an error status naming both types."""
+    scenarios.subscribe_wrong_type(peer, ros_node, topic)
+
+
 def test_native_websocket_publish(native_peer: PeerProcess, ros_node: Any, topic: str) -> None:
     """With Node's native WebSocket, roslib's published message reaches rclpy."""
     assert native_peer.info["transport"] == "native WebSocket"

@@ -166,3 +166,18 @@ def test_killed_client_service_goes(
 ) -> None:
     """Killing a roslibpy process that serves a service removes the service from the graph."""
     scenarios.killed_client_service_goes(start_peer("roslibpy"), ros_node, topic)
+
+
+def test_two_subscriptions(peer: PeerProcess, ros_node: Any, topic: str) -> None:
+    """Two roslibpy Topics on one topic (two subscribe ids) each get every message once."""
+    scenarios.two_subscriptions(peer, ros_node, topic, unsubscribe_one=False)
+
+
+def test_subscription_options(peer: PeerProcess, ros_node: Any, topic: str) -> None:
+    """A roslibpy subscription with throttle_rate and queue_length still delivers."""
+    scenarios.subscription_options(peer, ros_node, topic)
+
+
+def test_call_bad_args(peer: PeerProcess, ros_node: Any, topic: str) -> None:
+    """A roslibpy call with a bad value or unknown field fails naming the field."""
+    scenarios.call_bad_args(peer, ros_node, topic)

@@ -60,7 +60,7 @@ const topics = new Map();
 const services = new Map();
 
 function topic(cmd) {
-  const key = `${cmd.topic}\u0000${cmd.type}`;
+  const key = `${cmd.topic}\u0000${cmd.type}\u0000${cmd.handle ?? ""}`;
   if (!topics.has(key)) {
     const options = { ros, name: cmd.topic, messageType: cmd.type };
     for (const k of ["latch", "queue_size", "compression", "throttle_rate", "queue_length"]) {
@@ -71,10 +71,15 @@ function topic(cmd) {
   return topics.get(key);
 }
 
-// Report a `status` op the bridge sends about one of our requests (roslib emits
-// them as "status:<id>").
-function watchStatus(id, what) {
-  if (id) ros.on(`status:${id}`, (msg) => emit({ event: "status", about: what, id, msg }));
+// Report every `status` op the bridge sends. roslib itself only re-emits them as
+// "status:<id>" events that nothing listens to; listening on the transport's
+// parsed messages observes them without changing the library.
+function watchStatuses(transport) {
+  transport.on("message", (msg) => {
+    if (msg?.op !== "status") return;
+    const id = typeof msg.id === "string" ? msg.id : null;
+    emit({ event: "status", about: id ? id.split(":")[0] : null, id, msg });
+  });
 }
 
 const actionHandlers = {
@@ -100,16 +105,12 @@ async function handle(cmd) {
   switch (cmd.cmd) {
     case "advertise": {
       const t = topic(cmd);
-      const fresh = !t.isAdvertised;
       t.advertise();
-      if (fresh) watchStatus(t.advertiseId, "advertise");
       return null;
     }
     case "publish": {
       const t = topic(cmd);
-      const fresh = !t.isAdvertised;
       t.publish(cmd.msg);
-      if (fresh) watchStatus(t.advertiseId, "advertise");
       return null;
     }
     case "unadvertise":
@@ -118,8 +119,8 @@ async function handle(cmd) {
     case "subscribe": {
       const name = cmd.topic;
       const t = topic(cmd);
-      t.subscribe((msg) => emit({ event: "message", topic: name, msg }));
-      watchStatus(t.subscribeId, "subscribe");
+      const tag = cmd.handle ?? null;
+      t.subscribe((msg) => emit({ event: "message", topic: name, handle: tag, msg }));
       return null;
     }
     case "unsubscribe":
@@ -236,8 +237,8 @@ ros.on("error", (err) => {
   }
   emit({ event: "error", error: String(err?.message ?? err) });
 });
-ros.on("status", (msg) => emit({ event: "status", msg }));
 ros.on("connection", () => {
+  watchStatuses(ros.transport);
   emit({ event: "ready", client: "roslib", version: roslibVersion, transport });
   const lines = readline.createInterface({ input: process.stdin });
   lines.on("line", (line) => {
