@@ -71,7 +71,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     )
     p.add_argument(
         "--executor",
-        choices=("single", "multi", "events"),
+        choices=("single", "multi"),
         default="single",
         help="rclpy executor (default single)",
     )

@@ -73,8 +73,11 @@ log = logging.getLogger("bridge_server.ros")
 
 Listener = Callable[["Incoming"], None]
 
-SUBSCRIPTION_DEPTH = 50
+SUBSCRIPTION_DEPTH = 100
 """History depth of the bridge's shared ROS subscriptions."""
+
+MAX_BATCH = 256
+"""Most messages taken from one subscription per executor callback."""
 
 
 class Incoming:
@@ -166,13 +169,29 @@ class SharedSubscription:
         self.reliable, self.transient_local = self._wanted_qos()
         qos = _qos(self.reliable, self.transient_local, SUBSCRIPTION_DEPTH)
         post = self.ros.post
-        deliver = self._deliver
+        deliver = self._deliver_batch
         topic = self.topic
+        msg_cls = self.msg_cls
+        holder: list[Any] = []
 
         def callback(msg: Any) -> None:
-            post(deliver, msg, time.time_ns())
+            # rclpy's executor rebuilds its wait set for every message it takes; under load,
+            # take what else is queued on this subscription right here, and cross to the loop
+            # once for the whole batch.
+            batch = [msg]
+            sub = holder[0] if holder else None
+            if sub is not None:
+                with contextlib.suppress(Exception), sub.handle:
+                    take = sub.handle.take_message
+                    while len(batch) < MAX_BATCH:
+                        taken = take(msg_cls, False)
+                        if taken is None:
+                            break
+                        batch.append(taken[0])
+            post(deliver, batch, time.time_ns())
 
         self._sub = self.ros.node.create_subscription(self.msg_cls, topic, callback, qos)
+        holder.append(self._sub)
         log.debug(
             "subscribed to %s (%s, %s, %s)",
             topic,
@@ -187,19 +206,22 @@ class SharedSubscription:
             with contextlib.suppress(Exception):
                 self.ros.node.destroy_subscription(sub)
 
-    def _deliver(self, msg: Any, stamp_ns: int) -> None:
+    def _deliver_batch(self, msgs: list[Any], stamp_ns: int) -> None:
         conv = self.conv
-        if conv is None or not isinstance(msg, conv.msg_cls):
-            return  # a message from a subscription that was replaced meanwhile
-        self.received += 1
-        inc = Incoming(self.topic, msg, conv, stamp_ns)
-        if self.transient_local:
-            self.latched = inc
-        for listener in self.listeners:
-            try:
-                listener(inc)
-            except Exception:
-                log.exception("listener failed on %s", self.topic)
+        if conv is None or self.ros.subscriptions.get(self.topic) is not self:
+            return  # the subscription was removed meanwhile
+        topic = self.topic
+        listeners = self.listeners
+        for msg in msgs:
+            self.received += 1
+            inc = Incoming(topic, msg, conv, stamp_ns)
+            if self.transient_local:
+                self.latched = inc
+            for listener in listeners:
+                try:
+                    listener(inc)
+                except Exception:
+                    log.exception("listener failed on %s", topic)
 
     def refresh(self) -> None:
         """Resolve a pending type, or replace the subscription if the publishers' QoS changed."""
@@ -364,13 +386,13 @@ class RosNode:
             context=self.context,
             signal_handler_options=rclpy.signals.SignalHandlerOptions.NO,
         )
-        self.node = rclpy.create_node(self.name, context=self.context)
+        # No parameter services: fewer entities in the executor's wait set (it is rebuilt on
+        # every spin), and the bridge has no parameters to offer.
+        self.node = rclpy.create_node(
+            self.name, context=self.context, start_parameter_services=False
+        )
         if self.executor_kind == "multi":
             self.executor = MultiThreadedExecutor(context=self.context)
-        elif self.executor_kind == "events":
-            from rclpy.experimental.events_executor import EventsExecutor
-
-            self.executor = EventsExecutor(context=self.context)
         else:
             self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)

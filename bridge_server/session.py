@@ -55,6 +55,12 @@ log = logging.getLogger("bridge_server.session")
 DEFAULT_QUEUE_LENGTH = 100
 """Bound of a subscription's queue when the client asked for ``queue_length`` 0."""
 
+BATCH_FRAMES = 128
+"""Most frames the writer sends with one socket write."""
+
+BATCH_BYTES = 256 * 1024
+"""Most bytes the writer gathers for one socket write (a large frame goes alone)."""
+
 SERVICE_LINGER = 0.5
 """Seconds an unadvertised service stays in ROS, answering callers with a default response."""
 
@@ -213,26 +219,65 @@ class Session:
 
     async def _writer(self) -> None:
         ws = self.ws
-        control = self._control
-        order = self._order
         wake = self._wake
+        batched = hasattr(ws, "send_context") and hasattr(ws, "protocol")
         try:
             while not self._closed:
-                if control:
-                    await ws.send(control.popleft())
+                frames = self._collect()
+                if not frames:
+                    wake.clear()
+                    await wake.wait()
                     continue
-                if order:
-                    sub = order.popleft()
-                    if not sub.queue:
-                        continue
-                    inc = sub.queue.popleft()
-                    for frame in self._frames(sub, inc):
+                if batched:
+                    await self._send_batch(frames)
+                else:  # pragma: no cover - websockets without send_context
+                    for frame in frames:
                         await ws.send(frame)
-                    continue
-                wake.clear()
-                await wake.wait()
         except ConnectionClosed:
             pass
+
+    def _collect(self) -> list[str | bytes]:
+        """Take the frames ready to go: replies first, then messages in arrival order."""
+        frames: list[str | bytes] = []
+        size = 0
+        control = self._control
+        order = self._order
+        while control and len(frames) < BATCH_FRAMES and size < BATCH_BYTES:
+            frame = control.popleft()
+            frames.append(frame)
+            size += len(frame)
+        while order and len(frames) < BATCH_FRAMES and size < BATCH_BYTES:
+            sub = order.popleft()
+            if not sub.queue:
+                continue
+            for frame in self._frames(sub, sub.queue.popleft()):
+                frames.append(frame)
+                size += len(frame)
+        return frames
+
+    async def _send_batch(self, frames: list[str | bytes]) -> None:
+        """Write several frames with one socket write (one system call, not one per frame).
+
+        Uses websockets' own send context, so its state checks, flow control
+        (``write_limit``) and closing rules apply as for ``send``.
+        """
+        ws = self.ws
+        async with ws.send_context():
+            protocol = ws.protocol
+            for frame in frames:
+                if isinstance(frame, str):
+                    protocol.send_text(frame.encode())
+                else:
+                    protocol.send_binary(frame)
+            chunks = protocol.data_to_send()
+            if all(chunks):
+                ws.transport.write(b"".join(chunks))
+            else:  # an end-of-stream marker: let websockets handle these chunks itself
+                for chunk in chunks:
+                    if chunk:
+                        ws.transport.write(chunk)
+                    elif ws.transport.can_write_eof():
+                        ws.transport.write_eof()
 
     def _frames(self, sub: _Sub, inc: Incoming) -> list[str | bytes]:
         comp = sub.compression
@@ -584,7 +629,7 @@ class Session:
         if mine is not None:
             if mine.type_name == type_name:
                 return
-            self._remove_served(mine, "the client advertised it again with another type")
+            self._remove_served(mine, "the client advertised it again with another type", False)
             del self.served[name]
         owner = self.bridge.service_owners.get(name)
         if owner is not None and owner is not self:
@@ -679,7 +724,7 @@ class Session:
             return
         self._remove_served(served, "the client unadvertised it")
 
-    def _remove_served(self, served: _Served, why: str) -> None:
+    def _remove_served(self, served: _Served, why: str, linger: bool = True) -> None:
         for rid, (pending, timer) in list(served.pending.items()):
             timer.cancel()
             log.error("ROS call %s failed: %s; sending a default response", rid, why)
@@ -689,7 +734,10 @@ class Session:
             # Destroying the service at once would also destroy the default responses just
             # sent (and fail callers whose requests are still crossing to the loop): keep it
             # a moment; requests arriving meanwhile get a default response at once.
-            self.loop.call_later(SERVICE_LINGER, served.ros.destroy)
+            if linger:
+                self.loop.call_later(SERVICE_LINGER, served.ros.destroy)
+            else:  # taken over: callers must reach the new server only
+                served.ros.destroy()
             served.ros = None
         if self.bridge.service_owners.get(served.name) is self:
             del self.bridge.service_owners[served.name]
@@ -698,7 +746,7 @@ class Session:
         """Another client took the service over: forget it here."""
         served = self.served.pop(name, None)
         if served is not None:
-            self._remove_served(served, why)
+            self._remove_served(served, why, linger=False)
             self.status("warning", f"service {name}: {why}")
 
     # -- misc ----------------------------------------------------------------------------------
