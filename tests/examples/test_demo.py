@@ -38,6 +38,14 @@ def demo() -> Iterator[Program]:
     program.kill()
 
 
+def stock_roslibpy_snippet(demo: Program) -> str:
+    """The stock-roslibpy lines the demo prints, as a Python program."""
+    demo.wait_for(r"^\[demo\] Press Ctrl\+C")
+    start = demo.out.index("[demo] or connect with stock roslibpy (pip install roslibpy):")
+    end = demo.out.index("[demo] Press Ctrl+C to stop everything.")
+    return "\n".join(line.removeprefix("[demo]   ") for line in demo.out[start + 1:end])
+
+
 def cli(*args: str) -> subprocess.CompletedProcess[str]:
     """Run the installed console script."""
     return subprocess.run([CLI, *args], cwd=ROOT, capture_output=True, text=True, timeout=60,
@@ -45,7 +53,7 @@ def cli(*args: str) -> subprocess.CompletedProcess[str]:
 
 
 def test_demo_serves_the_cli_and_stops_on_ctrl_c(demo: Program) -> None:
-    """The demo comes up, the CLI calls /mult_floats and hears the counter, Ctrl+C stops all."""
+    """The demo comes up, the CLI and stock roslibpy call /mult_floats, Ctrl+C stops all."""
     url = demo.wait_for(r"^\[demo\] bridge on (ws://127\.0\.0\.1:\d+);", timeout=360)[1]
     hint = demo.wait_for(r"^\[demo\]   (\.venv/bin/roslibpy-lite service call .*)$")[1]
     assert hint == ('.venv/bin/roslibpy-lite service call /mult_floats mult_msgs/srv/MultFloats '
@@ -59,6 +67,11 @@ def test_demo_serves_the_cli_and_stops_on_ctrl_c(demo: Program) -> None:
     echoed = cli("topic", "echo", "/example_counter", "--count", "1", "--json", "--url", url)
     assert echoed.returncode == 0, echoed.stderr
     assert isinstance(json.loads(echoed.stdout)["data"], int)
+
+    snippet = stock_roslibpy_snippet(demo)
+    stock = subprocess.run([sys.executable, "-c", snippet], cwd=ROOT, capture_output=True,
+                           text=True, timeout=60, env=ros_env())
+    assert (stock.returncode, stock.stdout) == (0, "{'result': 10.0}\n"), (snippet, stock)
 
     demo.wait_for(r"^robot_app \| \[imu\] #\d+ angular_velocity\.x=\S+ sum=\S+$")
     demo.wait_for(r"^robot_app \| \[service\] /mult_floats: 2\.5 \* 4\.0 = 10\.0$")
