@@ -59,3 +59,26 @@ def test_robot_app_against_ros(bridge: BridgeProcess, ros_node: Any) -> None:
     assert code == 0, app.dump()
     assert app.out[-1] == "[app] stopped"
     assert app.err == [], app.dump()
+
+
+def test_imu_sim_publishes_a_changing_angular_velocity(ros_node: Any) -> None:
+    """examples.imu_sim publishes sensor_msgs/Imu on /imu whose angular velocity changes, then exits 0."""
+    from sensor_msgs.msg import Imu
+
+    xs: list[float] = []
+    lock = threading.Lock()
+
+    def on_imu(msg: Any) -> None:
+        with lock:
+            xs.append(msg.angular_velocity.x)
+
+    ros_node.create_subscription(Imu, "/imu", on_imu, 50)
+    sim = Program([sys.executable, "-m", "examples.imu_sim", "--rate", "50", "--count", "100"])
+    try:
+        sim.wait_for(r"^\[imu_sim\] publishing sensor_msgs/msg/Imu on /imu at 50 Hz$")
+        wait_until(lambda: len(set(xs)) >= 3, timeout=15, what="three different readings")
+        assert sim.proc.wait(30) == 0, sim.dump()
+    finally:
+        sim.kill()
+    assert sim.out[-1] == "[imu_sim] stopped after 100 messages"
+    assert all(-0.5 <= x <= 0.5 for x in xs)
