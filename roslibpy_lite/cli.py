@@ -20,12 +20,14 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import base64
 import contextlib
 import itertools
 import json
 import logging
 import math
 import os
+import re
 import statistics
 import sys
 import time
@@ -164,6 +166,44 @@ def _values(text: str | None, what: str) -> dict[str, Any]:
         return parse_values(text, what)
     except ArgumentError as exc:
         raise CliError(EXIT_USAGE, str(exc)) from None
+
+
+_ARRAY = re.compile(r"^(?:sequence<([^,>]+)(?:,\s*\d+)?>|(.+)\[\d+\])$")
+
+
+def _for_display(value: Any, cls: type[Message] | None) -> Any:
+    """A message's wire form as ``ros2 topic echo`` shows it, when its class is known here.
+
+    Floats that the wire carries as null (NaN) become NaN again, and ``uint8``/``char``
+    arrays (base64 on the wire) become lists of integers. Unknown types pass unchanged.
+    """
+    if cls is None or not isinstance(value, dict):
+        return value
+    shown = dict(value)
+    for name, type_ in cls._fields_and_types.items():
+        if name in shown:
+            with contextlib.suppress(Exception):  # display only: never fail on odd data
+                shown[name] = _show_field(shown[name], type_)
+    return shown
+
+
+def _show_field(value: Any, type_: str) -> Any:
+    m = _ARRAY.match(type_)
+    base = (m[1] or m[2]).strip() if m else type_
+    if base in ("float", "double"):
+        if m and isinstance(value, list):
+            return [math.nan if v is None else v for v in value]
+        return math.nan if value is None else value
+    if m and base in ("uint8", "char") and isinstance(value, str):
+        return list(base64.b64decode(value, validate=True))
+    if "/" in base:
+        pkg, _, name = base.partition("/")
+        nested = lookup(f"{pkg}/msg/{name.rpartition('/')[2]}")
+        if isinstance(nested, type) and issubclass(nested, Message):
+            if m and isinstance(value, list):
+                return [_for_display(v, nested) for v in value]
+            return _for_display(value, nested)
+    return value
 
 
 # -- the connection ------------------------------------------------------------------------------
@@ -319,6 +359,7 @@ async def cmd_topic_echo(args: argparse.Namespace, out: Out) -> int:
 
     async def body(s: Session) -> int:
         type_ = await _resolve_topic_type(s, args)
+        cls = None if args.json else _local_class(type_, "msg")
         seen = 0
 
         async def work() -> None:
@@ -326,7 +367,7 @@ async def cmd_topic_echo(args: argparse.Namespace, out: Out) -> int:
             async with s.ros.subscribe(args.topic, type_, throttle_rate=args.throttle_ms,
                                        queue_length=args.queue_length) as sub:
                 async for msg in sub:
-                    out.record(msg, args.json, args.no_arr)
+                    out.record(_for_display(msg, cls), args.json, args.no_arr)
                     seen += 1
                     if args.count is not None and seen >= args.count:
                         return

@@ -262,3 +262,39 @@ def test_help_documents_the_exit_codes(cli: Run) -> None:
     assert result.code == 0
     for code, meaning in EXIT_CODES.items():
         assert f"  {code:<4} {meaning}" in result.out
+
+
+def test_topic_echo_shows_byte_arrays_as_integers(cli: Run, ros_node: Any, topic: str) -> None:
+    """uint8[] (base64 on the wire) prints as a list of integers, like ros2; --json keeps base64."""
+    from sensor_msgs.msg import Image
+
+    pub = ros_node.create_publisher(Image, topic, 10)
+
+    def tick() -> None:
+        msg = Image(height=1, width=3, encoding="mono8", step=3, data=[1, 2, 255])
+        pub.publish(msg)
+
+    timer = ros_node.create_timer(0.05, tick)
+    try:
+        image = cli("topic", "echo", topic, "sensor_msgs/msg/Image", "--count", "1")
+        wire = cli("topic", "echo", topic, "sensor_msgs/msg/Image", "--count", "1", "--json")
+    finally:
+        ros_node.destroy_timer(timer)
+    assert image.code == 0, image
+    assert "data:\n- 1\n- 2\n- 255\n---\n" in image.out and "encoding: 'mono8'" in image.out
+    assert json.loads(wire.out)["data"] == "AQL/"  # --json keeps the wire form (base64)
+
+
+def test_topic_echo_shows_nan(cli: Run, ros_node: Any, topic: str) -> None:
+    """A NaN float field prints as .nan in YAML and null in --json."""
+    from std_msgs.msg import Float64
+
+    pub = ros_node.create_publisher(Float64, topic, 10)
+    timer = ros_node.create_timer(0.05, lambda: pub.publish(Float64(data=float("nan"))))
+    try:
+        shown = cli("topic", "echo", topic, "std_msgs/msg/Float64", "--count", "1")
+        wire = cli("topic", "echo", topic, "std_msgs/msg/Float64", "--count", "1", "--json")
+    finally:
+        ros_node.destroy_timer(timer)
+    assert (shown.code, shown.out) == (0, "data: .nan\n---\n"), shown
+    assert (wire.code, wire.out) == (0, '{"data":null}\n'), wire
