@@ -1,0 +1,1 @@
+"""End-to-end benchmarks of the bridge (``python -m bench``); see ``bench/run.py``."""

@@ -1,0 +1,233 @@
+"""Benchmark plumbing: the bridge as a subprocess, ROS-side helper processes, raw websocket peers.
+
+Every process gets ``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`` and the
+benchmark's private ``ROS_DOMAIN_ID``; the bridge binds 127.0.0.1 on an
+ephemeral port.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import base64
+import contextlib
+import json
+import os
+import re
+import socket
+import struct
+import sys
+from collections import deque
+from pathlib import Path
+from typing import Any
+
+ROOT = Path(__file__).resolve().parent.parent
+ROS_SIDE = str(Path(__file__).resolve().parent / "ros_side.py")
+READY = re.compile(r"bridge_server listening on ws://([\d.]+):(\d+)")
+
+
+def child_env(domain: int) -> dict[str, str]:
+    """Environment of every child: loopback DDS, the benchmark's ROS domain, unbuffered output."""
+    env = dict(os.environ)
+    env["ROS_AUTOMATIC_DISCOVERY_RANGE"] = env.get("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    env["ROS_DOMAIN_ID"] = str(domain)
+    env["PYTHONUNBUFFERED"] = "1"
+    return env
+
+
+class Bridge:
+    """``python -m bridge_server`` on 127.0.0.1, port 0; ``url`` and ``pid`` once started."""
+
+    def __init__(self, domain: int, args: list[str] | None = None) -> None:
+        self.domain = domain
+        self.args = list(args or [])
+        self.proc: asyncio.subprocess.Process | None = None
+        self.port = 0
+        self.lines: deque[str] = deque(maxlen=200)
+        self._drain: asyncio.Task[None] | None = None
+
+    @property
+    def url(self) -> str:
+        """The websocket URL."""
+        return f"ws://127.0.0.1:{self.port}"
+
+    @property
+    def pid(self) -> int:
+        """The bridge's process id (for psutil and py-spy)."""
+        assert self.proc is not None
+        return self.proc.pid
+
+    async def start(self, timeout: float = 30.0) -> Bridge:
+        """Start the bridge and wait for its ready line."""
+        self.proc = await asyncio.create_subprocess_exec(
+            sys.executable, "-m", "bridge_server", "--host", "127.0.0.1", "--port", "0",
+            *self.args,
+            cwd=ROOT, env=child_env(self.domain), stdin=asyncio.subprocess.DEVNULL,
+            stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.STDOUT,
+        )
+        assert self.proc.stdout is not None
+
+        async def first_line() -> None:
+            assert self.proc is not None and self.proc.stdout is not None
+            while True:
+                raw = await self.proc.stdout.readline()
+                if not raw:
+                    raise RuntimeError("bridge exited before listening:\n" + "\n".join(self.lines))
+                line = raw.decode(errors="replace").rstrip()
+                self.lines.append(line)
+                m = READY.search(line)
+                if m:
+                    self.port = int(m.group(2))
+                    return
+
+        await asyncio.wait_for(first_line(), timeout)
+        self._drain = asyncio.create_task(self._pump())
+        return self
+
+    async def _pump(self) -> None:
+        assert self.proc is not None and self.proc.stdout is not None
+        while True:
+            raw = await self.proc.stdout.readline()
+            if not raw:
+                return
+            self.lines.append(raw.decode(errors="replace").rstrip())
+
+    async def stop(self) -> None:
+        """SIGTERM, then kill if it lingers."""
+        if self.proc is None:
+            return
+        if self.proc.returncode is None:
+            self.proc.terminate()
+            try:
+                await asyncio.wait_for(self.proc.wait(), 5)
+            except TimeoutError:
+                self.proc.kill()
+                await self.proc.wait()
+        if self._drain is not None:
+            self._drain.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await self._drain
+
+
+class RosSide:
+    """A ``bench/ros_side.py`` process; its JSON event lines are read as they come."""
+
+    def __init__(self, domain: int, *args: str) -> None:
+        self.domain = domain
+        self.args = list(args)
+        self.proc: asyncio.subprocess.Process | None = None
+        self.events: asyncio.Queue[dict[str, Any]] = asyncio.Queue()
+        self.other: deque[str] = deque(maxlen=50)
+        self._reader: asyncio.Task[None] | None = None
+
+    async def start(self) -> RosSide:
+        """Start the process (keep stdin open: ``serve`` stops when it closes)."""
+        self.proc = await asyncio.create_subprocess_exec(
+            sys.executable, ROS_SIDE, *self.args, cwd=ROOT, env=child_env(self.domain),
+            stdin=asyncio.subprocess.PIPE, stdout=asyncio.subprocess.PIPE,
+            stderr=asyncio.subprocess.STDOUT,
+        )
+        self._reader = asyncio.create_task(self._read())
+        return self
+
+    async def _read(self) -> None:
+        assert self.proc is not None and self.proc.stdout is not None
+        while True:
+            raw = await self.proc.stdout.readline()
+            if not raw:
+                await self.events.put({"event": "exit"})
+                return
+            line = raw.decode(errors="replace").strip()
+            if line.startswith("{"):
+                with contextlib.suppress(ValueError):
+                    await self.events.put(json.loads(line))
+                    continue
+            self.other.append(line)
+
+    async def event(self, name: str, timeout: float = 30.0) -> dict[str, Any]:
+        """Await the next event called ``name`` (an ``error`` or exit raises)."""
+        async def get() -> dict[str, Any]:
+            while True:
+                ev = await self.events.get()
+                if ev.get("event") == name:
+                    return ev
+                if ev.get("event") in ("error", "exit"):
+                    raise RuntimeError(
+                        f"ros_side {self.args[0]} failed waiting for {name}: {ev}\n"
+                        + "\n".join(self.other)
+                    )
+
+        return await asyncio.wait_for(get(), timeout)
+
+    async def close(self) -> None:
+        """Close stdin, wait a moment, then kill."""
+        if self.proc is None:
+            return
+        if self.proc.stdin is not None:
+            with contextlib.suppress(Exception):
+                self.proc.stdin.close()
+        try:
+            await asyncio.wait_for(self.proc.wait(), 5)
+        except TimeoutError:
+            self.proc.kill()
+            await self.proc.wait()
+        if self._reader is not None:
+            self._reader.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await self._reader
+
+
+def percentile(values: list[float], q: float) -> float:
+    """The ``q`` quantile (0..1) by nearest rank; NaN for no values."""
+    if not values:
+        return float("nan")
+    s = sorted(values)
+    k = min(len(s) - 1, max(0, round(q * (len(s) - 1))))
+    return s[k]
+
+
+class StalledClient:
+    """A raw TCP websocket client: handshake, send ops, then never read again.
+
+    Its receive buffer is made small, so the bridge's socket fills quickly.
+    """
+
+    def __init__(self, port: int) -> None:
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+        self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
+        self.sock.settimeout(10)
+        self.sock.connect(("127.0.0.1", port))
+        key = base64.b64encode(os.urandom(16)).decode()
+        self.sock.sendall(
+            (
+                "GET / HTTP/1.1\r\nHost: 127.0.0.1\r\nUpgrade: websocket\r\n"
+                f"Connection: Upgrade\r\nSec-WebSocket-Key: {key}\r\n"
+                "Sec-WebSocket-Version: 13\r\n\r\n"
+            ).encode()
+        )
+        reply = b""
+        while b"\r\n\r\n" not in reply:
+            chunk = self.sock.recv(1)
+            if not chunk:
+                raise ConnectionError("bridge closed during the handshake")
+            reply += chunk
+        if b" 101 " not in reply.split(b"\r\n", 1)[0]:
+            raise ConnectionError(f"handshake refused: {reply[:80]!r}")
+
+    def send(self, op: dict[str, Any]) -> None:
+        """Send one op as a masked text frame."""
+        payload = json.dumps(op).encode()
+        mask = os.urandom(4)
+        n = len(payload)
+        if n < 126:
+            head = struct.pack("!BB", 0x81, 0x80 | n)
+        elif n < 65536:
+            head = struct.pack("!BBH", 0x81, 0x80 | 126, n)
+        else:
+            head = struct.pack("!BBQ", 0x81, 0x80 | 127, n)
+        masked = bytes(b ^ mask[i % 4] for i, b in enumerate(payload))
+        self.sock.sendall(head + mask + masked)
+
+    def close(self) -> None:
+        """Drop the connection without a closing handshake."""
+        with contextlib.suppress(OSError):
+            self.sock.close()

@@ -1,0 +1,282 @@
+"""The ROS side of a benchmark scenario, run in its own process (so figures measure the bridge).
+
+Sub-commands (each prints JSON lines on stdout: ``{"event": ...}``):
+
+``publish``    publish numbered messages in a tight timed loop
+               (``--kind string|stamp|image``, ``--rate`` msg/s, 0 = as fast as it can)
+``subscribe``  count numbered messages on a topic (std_msgs/String, raw CDR, no deserialising)
+``serve``      serve ``std_srvs/srv/SetBool`` (answers ``success = data``) until stdin closes
+
+Examples::
+
+    python bench/ros_side.py publish --topic /x --rate 8000 --duration 3
+    python bench/ros_side.py subscribe --topic /x --idle 1.0 --duration 20
+    python bench/ros_side.py serve --service /svc
+
+Message formats: ``string`` data is the decimal sequence number; ``stamp`` data
+is ``"<seq> <time.monotonic_ns()>"`` taken just before publishing; ``image`` is a
+640x480 rgb8 ``sensor_msgs/Image`` whose ``header.frame_id`` is the sequence
+number. Every run waits for ``--wait-subs`` matched subscriptions first and
+reports ``{"event": "matched"}`` when they are there.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import threading
+import time
+from typing import Any
+
+os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+
+
+def emit(event: str, **fields: Any) -> None:
+    """Print one JSON event line and flush."""
+    print(json.dumps({"event": event, **fields}), flush=True)
+
+
+def _qos(args: argparse.Namespace) -> Any:
+    from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+
+    return QoSProfile(
+        history=HistoryPolicy.KEEP_LAST,
+        depth=args.depth,
+        reliability=(
+            ReliabilityPolicy.BEST_EFFORT if args.best_effort else ReliabilityPolicy.RELIABLE
+        ),
+        durability=(
+            DurabilityPolicy.TRANSIENT_LOCAL if args.latched else DurabilityPolicy.VOLATILE
+        ),
+    )
+
+
+def _wait(cond: Any, timeout: float) -> bool:
+    deadline = time.monotonic() + timeout
+    while not cond():
+        if time.monotonic() > deadline:
+            return False
+        time.sleep(0.005)
+    return True
+
+
+def cmd_publish(args: argparse.Namespace) -> int:
+    """Publish ``--count`` messages or for ``--duration`` seconds at ``--rate`` msg/s."""
+    import rclpy
+
+    rclpy.init()
+    node = rclpy.create_node(f"bench_pub_{os.getpid()}")
+    if args.kind == "image":
+        from sensor_msgs.msg import Image
+
+        msg: Any = Image()
+        msg.height, msg.width, msg.encoding, msg.step = 480, 640, "rgb8", 640 * 3
+        msg.data = bytes(range(256)) * (640 * 480 * 3 // 256)
+        pub = node.create_publisher(Image, args.topic, _qos(args))
+    else:
+        from std_msgs.msg import String
+
+        msg = String()
+        pub = node.create_publisher(String, args.topic, _qos(args))
+    if args.wait_subs and not _wait(
+        lambda: pub.get_subscription_count() >= args.wait_subs, args.match_timeout
+    ):
+        emit("error", error=f"no {args.wait_subs} subscriber(s) on {args.topic}")
+        node.destroy_node()
+        rclpy.shutdown()
+        return 1
+    emit("matched", subscribers=pub.get_subscription_count())
+    if args.settle > 0:
+        time.sleep(args.settle)
+    rate = args.rate
+    period_ns = int(1e9 / rate) if rate > 0 else 0
+    count = args.count
+    kind = args.kind
+    stop_ns = time.monotonic_ns() + int(args.duration * 1e9)
+    t0 = time.monotonic_ns()
+    i = 0
+    publish = pub.publish
+    mono = time.monotonic_ns
+    while True:
+        now = mono()
+        if (count and i >= count) or (not count and now >= stop_ns):
+            break
+        if period_ns:
+            due = t0 + i * period_ns
+            if now < due:
+                gap = due - now
+                if gap > 300_000:
+                    time.sleep((gap - 200_000) / 1e9)
+                continue
+        if kind == "string":
+            msg.data = str(i)
+        elif kind == "stamp":
+            msg.data = f"{i} {mono()}"
+        else:
+            msg.header.frame_id = str(i)
+        publish(msg)
+        i += 1
+    elapsed = (mono() - t0) / 1e9
+    emit("done", sent=i, elapsed=elapsed, rate=i / elapsed if elapsed else 0.0)
+    if args.linger > 0:  # keep the writer alive so reliable readers can catch up
+        time.sleep(args.linger)
+    node.destroy_node()
+    rclpy.shutdown()
+    return 0
+
+
+def cmd_subscribe(args: argparse.Namespace) -> int:
+    """Count numbered std_msgs/String messages (raw CDR, parsed by hand)."""
+    import rclpy
+    from std_msgs.msg import String
+
+    rclpy.init()
+    node = rclpy.create_node(f"bench_sub_{os.getpid()}")
+    state = {"n": 0, "first": -1, "last": -1, "t_first": 0.0, "t_last": 0.0, "seen": 0}
+    seen = bytearray(args.expect) if args.expect else None
+
+    def on_raw(data: bytes) -> None:
+        # CDR: 4-byte encapsulation header, uint32 length (incl. NUL), chars, NUL.
+        n = int.from_bytes(data[4:8], "little")
+        seq = int(data[8 : 8 + n - 1])
+        now = time.monotonic()
+        if state["n"] == 0:
+            state["first"] = seq
+            state["t_first"] = now
+        state["n"] += 1
+        state["last"] = seq
+        state["t_last"] = now
+        if seen is not None and 0 <= seq < len(seen) and not seen[seq]:
+            seen[seq] = 1
+            state["seen"] += 1
+
+    sub = node.create_subscription(String, args.topic, on_raw, _qos(args), raw=True)
+    if args.executor == "events":
+        from rclpy.experimental.events_executor import EventsExecutor
+
+        executor: Any = EventsExecutor()
+    else:
+        from rclpy.executors import SingleThreadedExecutor
+
+        executor = SingleThreadedExecutor()
+    executor.add_node(node)
+    spin_once = executor.spin_once
+    deadline = time.monotonic() + args.match_timeout
+    while sub.get_publisher_count() < args.wait_pubs and time.monotonic() < deadline:
+        spin_once(timeout_sec=0.01)
+    if sub.get_publisher_count() < args.wait_pubs:
+        emit("error", error=f"no publisher on {args.topic}")
+    else:
+        emit("matched", publishers=sub.get_publisher_count())
+    # spin in this thread (rclpy's EventsExecutor hears nothing when spun in another thread)
+    deadline = time.monotonic() + args.duration
+    while True:
+        spin_once(timeout_sec=0.05)
+        now = time.monotonic()
+        if now > deadline:
+            break
+        if state["n"] and now - float(state["t_last"]) > args.idle:
+            break
+        if args.expect and state["seen"] >= args.expect:
+            break
+    span = float(state["t_last"]) - float(state["t_first"])
+    emit(
+        "done",
+        received=state["n"],
+        unique=state["seen"] if seen is not None else None,
+        first=state["first"],
+        last=state["last"],
+        span=span,
+        rate=(int(state["n"]) - 1) / span if span > 0 else 0.0,
+    )
+    executor.shutdown(timeout_sec=1.0)
+    node.destroy_node()
+    rclpy.shutdown()
+    return 0
+
+
+def cmd_serve(args: argparse.Namespace) -> int:
+    """Serve std_srvs/srv/SetBool until stdin closes (or ``--duration`` passes)."""
+    import rclpy
+    from std_srvs.srv import SetBool
+
+    rclpy.init()
+    node = rclpy.create_node(f"bench_srv_{os.getpid()}")
+    calls = [0]
+
+    def handle(request: Any, response: Any) -> Any:
+        calls[0] += 1
+        response.success = bool(request.data)
+        response.message = "ok"
+        return response
+
+    # the default service QoS keeps only 10 requests: more in flight would be lost
+    node.create_service(SetBool, args.service, handle, qos_profile=_qos(args))
+    if args.executor == "events":
+        from rclpy.experimental.events_executor import EventsExecutor
+
+        executor: Any = EventsExecutor()
+    else:
+        from rclpy.executors import SingleThreadedExecutor
+
+        executor = SingleThreadedExecutor()
+    executor.add_node(node)
+    emit("ready", service=args.service)
+    stdin_closed = threading.Event()
+
+    def watch_stdin() -> None:
+        sys.stdin.read()
+        stdin_closed.set()
+
+    threading.Thread(target=watch_stdin, daemon=True).start()
+    deadline = time.monotonic() + args.duration
+    while not stdin_closed.is_set() and time.monotonic() < deadline:
+        executor.spin_once(timeout_sec=0.05)
+    emit("done", calls=calls[0])
+    executor.shutdown(timeout_sec=1.0)
+    node.destroy_node()
+    rclpy.shutdown()
+    return 0
+
+
+def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
+    """The command line."""
+    p = argparse.ArgumentParser(description=__doc__.split("\n", 1)[0])
+    sub = p.add_subparsers(dest="cmd", required=True)
+    for name in ("publish", "subscribe", "serve"):
+        s = sub.add_parser(name)
+        s.add_argument("--duration", type=float, default=3.0)
+        s.add_argument("--match-timeout", type=float, default=15.0)
+        s.add_argument("--depth", type=int, default=1000)
+        s.add_argument("--best-effort", action="store_true")
+        s.add_argument("--latched", action="store_true")
+        s.add_argument("--executor", choices=("single", "events"), default="events")
+        if name == "publish":
+            s.add_argument("--topic", required=True)
+            s.add_argument("--kind", choices=("string", "stamp", "image"), default="string")
+            s.add_argument("--rate", type=float, default=0.0, help="msg/s, 0: as fast as possible")
+            s.add_argument("--count", type=int, default=0, help="stop after N (0: use duration)")
+            s.add_argument("--wait-subs", type=int, default=1)
+            s.add_argument("--settle", type=float, default=0.0)
+            s.add_argument("--linger", type=float, default=1.0)
+        elif name == "subscribe":
+            s.add_argument("--topic", required=True)
+            s.add_argument("--wait-pubs", type=int, default=1)
+            s.add_argument("--idle", type=float, default=1.0)
+            s.add_argument("--expect", type=int, default=0)
+        else:
+            s.add_argument("--service", required=True)
+    return p.parse_args(argv)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point."""
+    args = parse_args(argv)
+    handler = {"publish": cmd_publish, "subscribe": cmd_subscribe, "serve": cmd_serve}[args.cmd]
+    return handler(args)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

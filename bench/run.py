@@ -1,0 +1,671 @@
+"""End-to-end benchmarks of the bridge, printed as JSON (one object per scenario, then a summary).
+
+Run: ``python bench/run.py [--scenario all|NAME ...] [--duration S] [--quick] [--profile]``
+or ``python -m bench ...``. Nothing here asserts anything about time.
+
+Each scenario starts its own bridge (``python -m bridge_server`` on
+127.0.0.1, ephemeral port, a private ``ROS_DOMAIN_ID``); the ROS side of each
+scenario runs in its own process (``bench/ros_side.py``), so the figures
+measure the bridge. Clients are raw ``websockets`` connections (not our client
+library), and they count frames without decoding big payloads.
+
+Scenarios (targets; rosbridge_suite's figures in brackets):
+
+- ``rclpy_ceiling``: one rclpy publisher process -> one rclpy subscriber process,
+  no bridge: what the ROS side alone can carry.
+- ``ros_to_client``: highest rate of small std_msgs/String (step search) where
+  >= 99 % reach a websocket client. Target 8,000 msg/s [500].
+- ``client_to_ros``: the same from a websocket client to an rclpy subscriber.
+  Target 10,000 msg/s [5,000].
+- ``service``: call_service round trip to an rclpy SetBool service: p50 of
+  sequential calls (target <= 1 ms) and calls/s with 16 in flight (target
+  >= 1,000) [3.7 ms; 74 calls/s].
+- ``latency``: one-way ROS -> client latency at 200 Hz, p50/p99 (target p99 <= 1 ms) [1.6 ms].
+- ``image``: 640x480 rgb8 sensor_msgs/Image to one client, frames/s as JSON
+  (target 60) and as CBOR (target 400) [14; 360].
+- ``idle_cpu``: the bridge's CPU with one connected client (target < 1 % of a core) [~5 %].
+- ``memory_stall``: the bridge's RSS while one client stalls under an image
+  flood: start, peak, end [rosbridge grew 400 MB in 6 s].
+
+``--profile`` runs py-spy on the bridge during ``ros_to_client`` and
+``image`` and adds the top functions (self and inclusive samples) to their results.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import contextlib
+import json
+import os
+import platform
+import shutil
+import sys
+import tempfile
+import time
+from collections import Counter
+from collections.abc import Awaitable, Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
+from websockets.asyncio.client import ClientConnection, connect
+
+from bench.harness import Bridge, RosSide, StalledClient, percentile
+
+TARGETS: dict[str, str] = {
+    "rclpy_ceiling": "reference only",
+    "ros_to_client": ">= 8,000 msg/s at >= 99 % (no less than 5,000) [rosbridge 500]",
+    "client_to_ros": ">= 10,000 msg/s at >= 99 % [rosbridge 5,000]",
+    "service": "p50 <= 1 ms, >= 1,000 calls/s with 16 in flight [rosbridge 3.7 ms, 74/s]",
+    "latency": "p99 <= 1 ms at 200 Hz [rosbridge 1.6 ms]",
+    "image": "JSON >= 60 frames/s, CBOR >= 400 frames/s [rosbridge 14; 360]",
+    "idle_cpu": "< 1 % of a core [rosbridge ~5 %]",
+    "memory_stall": "bounded [rosbridge +400 MB in 6 s]",
+}
+
+
+@dataclass
+class Ctx:
+    """Options shared by the scenarios."""
+
+    duration: float
+    quick: bool
+    domain: int
+    profile: bool
+    ros_executor: str = "events"
+    bridge_args: list[str] = field(default_factory=list)
+
+    def bridge(self) -> Bridge:
+        """A new (not yet started) bridge for one scenario."""
+        return Bridge(self.domain, self.bridge_args)
+
+    def ros(self, *args: str) -> RosSide:
+        """A new (not yet started) ROS-side process."""
+        return RosSide(self.domain, *args, "--executor", self.ros_executor)
+
+
+async def ws_open(url: str) -> ClientConnection:
+    """A raw websockets client, no compression, no size limit."""
+    return await connect(url, max_size=None, compression=None, open_timeout=10, max_queue=1024)
+
+
+def send_op(ws: ClientConnection, op: dict[str, Any]) -> Awaitable[None]:
+    """Send one op as JSON text."""
+    return ws.send(json.dumps(op))
+
+
+class Profiler:
+    """py-spy on the bridge for a while, reduced to the top functions."""
+
+    def __init__(self, pid: int, seconds: float) -> None:
+        self.pid = pid
+        self.seconds = seconds
+        self.out = Path(tempfile.mkdtemp(prefix="bench-pyspy-")) / "stacks.txt"
+        self.proc: asyncio.subprocess.Process | None = None
+
+    async def start(self) -> None:
+        """Start sampling (nothing happens if py-spy is not installed)."""
+        exe = shutil.which("py-spy")
+        if exe is None:
+            return
+        self.proc = await asyncio.create_subprocess_exec(
+            exe, "record", "--pid", str(self.pid), "--duration", str(max(1, round(self.seconds))),
+            "--rate", "250", "--format", "raw", "--output", str(self.out), "--nonblocking",
+            stdout=asyncio.subprocess.DEVNULL, stderr=asyncio.subprocess.DEVNULL,
+        )
+
+    async def result(self, top: int = 15) -> dict[str, Any]:
+        """Wait for py-spy and summarise: top functions by self and by inclusive samples."""
+        if self.proc is None:
+            return {"error": "py-spy not installed"}
+        try:
+            await asyncio.wait_for(self.proc.wait(), self.seconds + 20)
+        except TimeoutError:
+            self.proc.kill()
+            await self.proc.wait()
+        if not self.out.exists():
+            return {"error": "py-spy wrote nothing (permissions?)"}
+        own: Counter[str] = Counter()
+        incl: Counter[str] = Counter()
+        total = 0
+        for line in self.out.read_text().splitlines():
+            stack, _, n = line.rpartition(" ")
+            if not stack or not n.isdigit():
+                continue
+            count = int(n)
+            total += count
+            frames = [_short(f) for f in stack.split(";")]
+            own[frames[-1]] += count
+            for f in set(frames):
+                incl[f] += count
+        shutil.rmtree(self.out.parent, ignore_errors=True)
+
+        def pct(c: Counter[str]) -> list[tuple[str, float]]:
+            return [(f, round(100.0 * n / total, 1)) for f, n in c.most_common(top)] if total else []
+
+        return {"samples": total, "self_pct": pct(own), "inclusive_pct": pct(incl)}
+
+
+def _short(frame: str) -> str:
+    """``func (path/to/file.py:123)`` -> ``func (file.py:123)``."""
+    name, sep, where = frame.partition(" (")
+    if not sep:
+        return frame
+    return f"{name} ({os.path.basename(where.rstrip(')'))})"
+
+
+# -- scenarios ---------------------------------------------------------------------------------
+
+
+async def rclpy_ceiling(ctx: Ctx) -> dict[str, Any]:
+    """One rclpy publisher process to one rclpy subscriber process, no bridge, as fast as possible."""
+    topic = "/bench/ceiling"
+    d = ctx.duration
+    out: dict[str, Any] = {}
+    for label, rate in (("max", 0.0), ("at_10k", 10_000.0)):
+        sub = await ctx.ros("subscribe", "--topic", topic, "--duration", str(d + 20),
+                            "--idle", "1.0").start()
+        pub = await ctx.ros("publish", "--topic", topic, "--rate", str(rate), "--duration", str(d),
+                            "--settle", "0.3").start()
+        done = await pub.event("done", d + 40)
+        got = await sub.event("done", 40)
+        await pub.close()
+        await sub.close()
+        out[label] = {
+            "published": done["sent"],
+            "publish_rate": round(done["rate"]),
+            "received": got["received"],
+            "receive_rate": round(got["rate"]),
+            "delivered_pct": round(100.0 * got["received"] / max(done["sent"], 1), 2),
+        }
+    return out
+
+
+class Sink:
+    """Counts numbered std_msgs/String frames of one step (``"data": "<seq>"``)."""
+
+    def __init__(self, size: int) -> None:
+        self.seen = bytearray(size)
+        self.unique = 0
+        self.frames = 0
+        self.t_last = time.monotonic()
+
+    def feed(self, frame: str | bytes) -> None:
+        """Count one frame."""
+        self.frames += 1
+        self.t_last = time.monotonic()
+        op = json.loads(frame)
+        msg = op.get("msg")
+        if op.get("op") != "publish" or not isinstance(msg, dict):
+            return
+        seq = int(msg["data"].split(" ", 1)[0])
+        if 0 <= seq < len(self.seen) and not self.seen[seq]:
+            self.seen[seq] = 1
+            self.unique += 1
+
+
+async def _drain_until(
+    sink: Any, want: int, idle: float = 1.0, limit: float = 15.0
+) -> None:
+    """Wait until ``sink.unique`` reaches ``want`` or nothing arrived for ``idle`` seconds."""
+    deadline = time.monotonic() + limit
+    while sink.unique < want and time.monotonic() < deadline:
+        if time.monotonic() - sink.t_last > idle:
+            return
+        await asyncio.sleep(0.02)
+
+
+def _rates(ctx: Ctx, full: list[int], quick: list[int]) -> list[int]:
+    return quick if ctx.quick else full
+
+
+async def ros_to_client(ctx: Ctx) -> dict[str, Any]:
+    """Step search: highest ROS -> client rate of small strings with >= 99 % delivered."""
+    topic = "/bench/r2c"
+    bridge = await ctx.bridge().start()
+    ws = await ws_open(bridge.url)
+    queue_length = 1000
+    await send_op(ws, {"op": "subscribe", "topic": topic, "type": "std_msgs/msg/String",
+                       "queue_length": queue_length, "id": "r2c"})
+    current: list[Sink] = [Sink(1)]
+
+    async def reader() -> None:
+        with contextlib.suppress(Exception):
+            async for frame in ws:
+                current[0].feed(frame)
+
+    rtask = asyncio.create_task(reader())
+    steps: list[dict[str, Any]] = []
+    best = 0
+    profile: dict[str, Any] | None = None
+    d = ctx.duration
+    try:
+        for rate in _rates(ctx, [2000, 4000, 6000, 8000, 10000, 12000, 15000],
+                           [2000, 5000, 8000, 10000, 12000]):
+            current[0] = sink = Sink(int(rate * d * 1.5) + 100)
+            pub = await ctx.ros("publish", "--topic", topic, "--rate", str(rate), "--duration",
+                                str(d), "--settle", "0.3", "--linger", "3").start()
+            await pub.event("matched")
+            prof = None
+            if ctx.profile and profile is None and rate >= 8000:
+                prof = Profiler(bridge.pid, d)
+                await prof.start()
+            done = await pub.event("done", d + 30)
+            await _drain_until(sink, done["sent"])
+            await pub.close()
+            if prof is not None:
+                profile = {"at_rate": rate, **(await prof.result())}
+            pct = 100.0 * sink.unique / max(done["sent"], 1)
+            steps.append({"target_rate": rate, "publisher_rate": round(done["rate"]),
+                          "sent": done["sent"], "received": sink.unique,
+                          "delivered_pct": round(pct, 2)})
+            if pct >= 99.0:
+                best = max(best, round(done["rate"]))
+            else:
+                break
+    finally:
+        await ws.close()
+        rtask.cancel()
+        with contextlib.suppress(asyncio.CancelledError):
+            await rtask
+        await bridge.stop()
+    out: dict[str, Any] = {"best_rate_99pct": best, "queue_length": queue_length, "steps": steps}
+    if profile is not None:
+        out["profile"] = profile
+    return out
+
+
+async def client_to_ros(ctx: Ctx) -> dict[str, Any]:
+    """Step search: highest client -> ROS rate of small strings with >= 99 % delivered."""
+    topic = "/bench/c2r"
+    bridge = await ctx.bridge().start()
+    ws = await ws_open(bridge.url)
+    await send_op(ws, {"op": "advertise", "topic": topic, "type": "std_msgs/msg/String",
+                       "queue_size": 1000})
+    steps: list[dict[str, Any]] = []
+    best = 0
+    d = ctx.duration
+    loop = asyncio.get_running_loop()
+    try:
+        for rate in _rates(ctx, [2000, 5000, 8000, 10000, 12000, 15000],
+                           [2000, 5000, 10000, 12000]):
+            n = int(rate * d)
+            sub = await ctx.ros("subscribe", "--topic", topic, "--expect", str(n), "--idle", "1.0",
+                                "--duration", str(d + 20)).start()
+            await sub.event("matched")
+            await asyncio.sleep(0.3)  # let discovery settle both ways (reliable, volatile)
+            t0 = loop.time()
+            for i in range(n):
+                due = t0 + i / rate
+                ahead = due - loop.time()
+                if ahead > 0.001:
+                    await asyncio.sleep(ahead)
+                await ws.send(f'{{"op":"publish","topic":"{topic}","msg":{{"data":"{i}"}}}}')
+            sent_rate = n / (loop.time() - t0)
+            got = await sub.event("done", d + 40)
+            await sub.close()
+            pct = 100.0 * int(got["unique"]) / n
+            steps.append({"target_rate": rate, "client_send_rate": round(sent_rate), "sent": n,
+                          "received": got["unique"], "ros_receive_rate": round(got["rate"]),
+                          "delivered_pct": round(pct, 2)})
+            if pct >= 99.0:
+                best = max(best, round(min(sent_rate, rate)))
+            else:
+                break
+    finally:
+        await ws.close()
+        await bridge.stop()
+    return {"best_rate_99pct": best, "steps": steps}
+
+
+async def service(ctx: Ctx) -> dict[str, Any]:
+    """call_service round trips to an rclpy SetBool service: sequential latency, 16 in flight."""
+    name = "/bench/srv"
+    bridge = await ctx.bridge().start()
+    srv = await ctx.ros("serve", "--service", name, "--duration", "300").start()
+    await srv.event("ready")
+    ws = await ws_open(bridge.url)
+    waiting: dict[str, asyncio.Future[dict[str, Any]]] = {}
+
+    async def reader() -> None:
+        with contextlib.suppress(Exception):
+            async for frame in ws:
+                op = json.loads(frame)
+                fut = waiting.pop(str(op.get("id")), None)
+                if fut is not None and not fut.done():
+                    fut.set_result(op)
+
+    rtask = asyncio.create_task(reader())
+    loop = asyncio.get_running_loop()
+    counter = iter(range(10**9))
+
+    errors: Counter[str] = Counter()
+
+    async def call() -> dict[str, Any]:
+        rid = f"c{next(counter)}"
+        fut: asyncio.Future[dict[str, Any]] = loop.create_future()
+        waiting[rid] = fut
+        await send_op(ws, {"op": "call_service", "service": name, "type": "std_srvs/srv/SetBool",
+                           "args": {"data": True}, "id": rid})
+        reply = await fut
+        if reply.get("result") is not True:
+            errors[str(reply.get("values"))[:120]] += 1
+        return reply
+
+    try:
+        deadline = time.monotonic() + 20
+        while True:  # the first call waits for discovery
+            reply = await asyncio.wait_for(call(), 25)
+            if reply.get("result") is True:
+                break
+            if time.monotonic() > deadline:
+                raise RuntimeError(f"service never answered: {reply}")
+        for _ in range(50):
+            await call()
+        n_seq = 300 if ctx.quick else 1000
+        lat: list[float] = []
+        failures = 0
+        for _ in range(n_seq):
+            t = time.perf_counter_ns()
+            reply = await call()
+            lat.append((time.perf_counter_ns() - t) / 1e6)
+            failures += reply.get("result") is not True
+        in_flight = 16
+        done = 0
+        stop = time.monotonic() + ctx.duration
+        t0 = time.monotonic()
+
+        async def worker() -> None:
+            nonlocal done, failures
+            while time.monotonic() < stop:
+                reply = await call()
+                done += 1
+                failures += reply.get("result") is not True
+
+        await asyncio.gather(*(worker() for _ in range(in_flight)))
+        elapsed = time.monotonic() - t0
+    finally:
+        await ws.close()
+        rtask.cancel()
+        with contextlib.suppress(asyncio.CancelledError):
+            await rtask
+        await srv.close()
+        await bridge.stop()
+    return {
+        "sequential_calls": n_seq,
+        "p50_ms": round(percentile(lat, 0.5), 3),
+        "p90_ms": round(percentile(lat, 0.9), 3),
+        "p99_ms": round(percentile(lat, 0.99), 3),
+        "in_flight": in_flight,
+        "calls_per_s": round(done / elapsed),
+        "failures": failures,
+        "failure_reasons": dict(errors),
+    }
+
+
+async def latency(ctx: Ctx) -> dict[str, Any]:
+    """One-way ROS -> client latency at 200 Hz (monotonic stamp in the message, same machine)."""
+    topic = "/bench/latency"
+    bridge = await ctx.bridge().start()
+    ws = await ws_open(bridge.url)
+    await send_op(ws, {"op": "subscribe", "topic": topic, "type": "std_msgs/msg/String"})
+    lat: list[float] = []
+
+    async def reader() -> None:
+        with contextlib.suppress(Exception):
+            async for frame in ws:
+                now = time.monotonic_ns()
+                op = json.loads(frame)
+                if op.get("op") == "publish":
+                    seq, stamp = op["msg"]["data"].split(" ")
+                    if int(seq) >= 20:  # skip warm-up
+                        lat.append((now - int(stamp)) / 1e6)
+
+    rtask = asyncio.create_task(reader())
+    try:
+        pub = await ctx.ros("publish", "--topic", topic, "--kind", "stamp", "--rate", "200",
+                            "--duration", str(ctx.duration), "--settle", "0.3").start()
+        done = await pub.event("done", ctx.duration + 30)
+        await asyncio.sleep(0.2)
+        await pub.close()
+    finally:
+        await ws.close()
+        rtask.cancel()
+        with contextlib.suppress(asyncio.CancelledError):
+            await rtask
+        await bridge.stop()
+    return {
+        "rate_hz": 200,
+        "sent": done["sent"],
+        "measured": len(lat),
+        "p50_ms": round(percentile(lat, 0.5), 3),
+        "p90_ms": round(percentile(lat, 0.9), 3),
+        "p99_ms": round(percentile(lat, 0.99), 3),
+        "max_ms": round(max(lat), 3) if lat else None,
+    }
+
+
+async def image(ctx: Ctx) -> dict[str, Any]:
+    """640x480 rgb8 Images from a fast rclpy publisher to one client: frames/s, JSON and CBOR."""
+    out: dict[str, Any] = {}
+    for compression, cap in (("none", 200), ("cbor", 600)):
+        topic = f"/bench/image_{compression}"
+        bridge = await ctx.bridge().start()
+        ws = await ws_open(bridge.url)
+        await send_op(ws, {"op": "subscribe", "topic": topic, "type": "sensor_msgs/msg/Image",
+                           "compression": compression, "queue_length": 5})
+        frames: list[float] = []
+        sizes: list[int] = []
+
+        async def reader(ws: ClientConnection = ws, frames: list[float] = frames,
+                         sizes: list[int] = sizes) -> None:
+            with contextlib.suppress(Exception):
+                async for frame in ws:
+                    frames.append(time.monotonic())
+                    if len(sizes) < 3:
+                        sizes.append(len(frame))
+
+        rtask = asyncio.create_task(reader())
+        profile = None
+        try:
+            pub = await ctx.ros("publish", "--topic", topic, "--kind", "image", "--rate",
+                                str(cap), "--duration", str(ctx.duration), "--depth", "5",
+                                "--settle", "0.3", "--linger", "0.5").start()
+            await pub.event("matched")
+            prof = None
+            if ctx.profile:
+                prof = Profiler(bridge.pid, ctx.duration)
+                await prof.start()
+            done = await pub.event("done", ctx.duration + 30)
+            t_end = time.monotonic()
+            await pub.close()
+            if prof is not None:
+                profile = await prof.result()
+        finally:
+            await ws.close()
+            rtask.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await rtask
+            await bridge.stop()
+        inside = [t for t in frames if t <= t_end]
+        fps = (len(inside) - 1) / (inside[-1] - inside[0]) if len(inside) > 2 else 0.0
+        key = "json" if compression == "none" else "cbor"
+        out[key] = {"frames_per_s": round(fps, 1), "frames": len(frames),
+                    "publisher_rate": round(done["rate"], 1), "publisher_cap": cap,
+                    "frame_bytes": sizes[0] if sizes else None}
+        if profile is not None:
+            out[key]["profile"] = profile
+    return out
+
+
+async def idle_cpu(ctx: Ctx) -> dict[str, Any]:
+    """The bridge's CPU over a few seconds with one connected (and then subscribed) client."""
+    import psutil
+
+    bridge = await ctx.bridge().start()
+    proc = psutil.Process(bridge.pid)
+    window = 3.0 if ctx.quick else 5.0
+    ws = await ws_open(bridge.url)
+    out: dict[str, Any] = {"window_s": window}
+    try:
+        await asyncio.sleep(1.0)
+        proc.cpu_percent(None)
+        await asyncio.sleep(window)
+        out["connected_pct_of_core"] = round(proc.cpu_percent(None), 2)
+        await send_op(ws, {"op": "subscribe", "topic": "/bench/idle",
+                           "type": "std_msgs/msg/String"})
+        await asyncio.sleep(1.0)
+        proc.cpu_percent(None)
+        await asyncio.sleep(window)
+        out["subscribed_pct_of_core"] = round(proc.cpu_percent(None), 2)
+        out["threads"] = proc.num_threads()
+    finally:
+        await ws.close()
+        await bridge.stop()
+    return out
+
+
+async def memory_stall(ctx: Ctx) -> dict[str, Any]:
+    """The bridge's RSS while a client that never reads is subscribed to an image flood."""
+    import psutil
+
+    topic = "/bench/stall"
+    bridge = await ctx.bridge().start()
+    proc = psutil.Process(bridge.pid)
+    stalled = await asyncio.to_thread(StalledClient, bridge.port)
+    stalled.send({"op": "subscribe", "topic": topic, "type": "sensor_msgs/msg/Image"})
+    duration = max(ctx.duration, 4.0)
+    samples: list[int] = []
+    try:
+        pub = await ctx.ros("publish", "--topic", topic, "--kind", "image", "--rate", "100",
+                            "--duration", str(duration), "--depth", "5", "--linger", "0").start()
+        await pub.event("matched")
+        start = proc.memory_info().rss
+        waiter = asyncio.ensure_future(pub.event("done", duration + 30))
+        while not waiter.done():
+            samples.append(proc.memory_info().rss)
+            await asyncio.sleep(0.05)
+        done = waiter.result()
+        await pub.close()
+        await asyncio.sleep(1.0)
+        end = proc.memory_info().rss
+        # the bridge still answers another client promptly
+        ws = await ws_open(bridge.url)
+        t = time.perf_counter()
+        await send_op(ws, {"op": "call_service", "service": "/rosapi/get_ros_version", "id": "v"})
+        reply = json.loads(await asyncio.wait_for(ws.recv(), 10))
+        answer_ms = (time.perf_counter() - t) * 1e3
+        await ws.close()
+    finally:
+        stalled.close()
+        await bridge.stop()
+    mb = 1024 * 1024
+    return {
+        "images_published": done["sent"],
+        "publisher_rate": round(done["rate"], 1),
+        "rss_start_mb": round(start / mb, 1),
+        "rss_peak_mb": round(max(samples, default=start) / mb, 1),
+        "rss_end_mb": round(end / mb, 1),
+        "growth_peak_mb": round((max(samples, default=start) - start) / mb, 1),
+        "other_client_answer_ms": round(answer_ms, 2),
+        "other_client_reply_ok": reply.get("result") is True,
+    }
+
+
+SCENARIOS: dict[str, Callable[[Ctx], Awaitable[dict[str, Any]]]] = {
+    "rclpy_ceiling": rclpy_ceiling,
+    "idle_cpu": idle_cpu,
+    "ros_to_client": ros_to_client,
+    "client_to_ros": client_to_ros,
+    "service": service,
+    "latency": latency,
+    "image": image,
+    "memory_stall": memory_stall,
+}
+
+
+def _headline(name: str, r: dict[str, Any]) -> Any:
+    if "error" in r:
+        return "error"
+    if name == "rclpy_ceiling":
+        return {"publish_rate": r["max"]["publish_rate"], "receive_rate": r["max"]["receive_rate"]}
+    if name in ("ros_to_client", "client_to_ros"):
+        return r["best_rate_99pct"]
+    if name == "service":
+        return {"p50_ms": r["p50_ms"], "calls_per_s": r["calls_per_s"]}
+    if name == "latency":
+        return {"p50_ms": r["p50_ms"], "p99_ms": r["p99_ms"]}
+    if name == "image":
+        return {k: r[k]["frames_per_s"] for k in ("json", "cbor") if k in r}
+    if name == "idle_cpu":
+        return r["connected_pct_of_core"]
+    if name == "memory_stall":
+        return {k: r[k] for k in ("rss_start_mb", "rss_peak_mb", "rss_end_mb")}
+    return None
+
+
+async def run(names: list[str], ctx: Ctx) -> int:
+    """Run the scenarios in order, printing one JSON object each and a summary."""
+    summary: dict[str, Any] = {}
+    failed = 0
+    t_all = time.monotonic()
+    for name in names:
+        t0 = time.monotonic()
+        try:
+            result = await SCENARIOS[name](ctx)
+        except Exception as exc:  # report and go on with the next scenario
+            result = {"error": f"{type(exc).__name__}: {exc}"}
+            failed += 1
+        result = {"scenario": name, "target": TARGETS[name], **result,
+                  "wall_s": round(time.monotonic() - t0, 1)}
+        print(json.dumps(result), flush=True)
+        summary[name] = _headline(name, result)
+    print(json.dumps({
+        "summary": summary,
+        "duration_per_step_s": ctx.duration,
+        "quick": ctx.quick,
+        "wall_s": round(time.monotonic() - t_all, 1),
+        "machine": {"cpus": os.cpu_count(), "python": platform.python_version()},
+    }), flush=True)
+    return 1 if failed else 0
+
+
+def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
+    """The command line."""
+    p = argparse.ArgumentParser(description="End-to-end benchmarks of the bridge (JSON output).")
+    p.add_argument("--scenario", nargs="+", default=["all"],
+                   help=f"all, or some of: {', '.join(SCENARIOS)}")
+    p.add_argument("--duration", type=float, default=None,
+                   help="seconds per measurement step (default 3, --quick 1.5)")
+    p.add_argument("--quick", action="store_true", help="short steps, fewer rates (~2 minutes)")
+    p.add_argument("--profile", action="store_true",
+                   help="py-spy the bridge during ros_to_client and image")
+    p.add_argument("--domain", type=int, default=int(os.environ.get("BENCH_ROS_DOMAIN_ID", "42")),
+                   help="ROS_DOMAIN_ID for the bridge and ROS side (default 42)")
+    p.add_argument("--ros-executor", choices=("events", "single"), default="events",
+                   help="rclpy executor of the ROS-side processes (default events: much faster)")
+    p.add_argument("--bridge-arg", action="append", default=[],
+                   help="extra bridge command-line argument (repeatable), e.g. --bridge-arg=--executor=events")
+    return p.parse_args(argv)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point."""
+    args = parse_args(argv)
+    names = list(SCENARIOS) if "all" in args.scenario else args.scenario
+    unknown = [n for n in names if n not in SCENARIOS]
+    if unknown:
+        print(f"unknown scenario(s): {', '.join(unknown)}; known: {', '.join(SCENARIOS)}",
+              file=sys.stderr)
+        return 2
+    duration = args.duration if args.duration is not None else (1.5 if args.quick else 3.0)
+    ctx = Ctx(duration=duration, quick=args.quick, domain=args.domain, profile=args.profile,
+              ros_executor=args.ros_executor, bridge_args=list(args.bridge_arg))
+    return asyncio.run(run(names, ctx))
+
+
+if __name__ == "__main__":
+    sys.exit(main())
