@@ -2,9 +2,13 @@
 
 from __future__ import annotations
 
+import contextlib
 import importlib
+import re
+import threading
 import warnings
 from collections.abc import Callable, Iterator
+from typing import Any
 
 import pytest
 
@@ -44,3 +48,53 @@ def start_peer(peer_pool: PeerPool) -> Iterator[Callable[..., PeerProcess]]:
     yield start
     for peer in started:
         peer.close()
+
+
+@pytest.fixture(scope="module")
+def module_node(ros_runtime: Any, request: pytest.FixtureRequest) -> Iterator[Any]:
+    """One rclpy node for the whole module, spun by its own executor thread.
+
+    Destroying an rclpy node delays the process's discovery of new remote
+    endpoints by up to ~3 s (Fast DDS, reproduced with two plain rclpy
+    processes, no bridge involved); destroying publishers, subscriptions and
+    services does not. So the peer tests keep one node and clean up entities.
+    """
+    from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
+
+    name = "peers_" + re.sub(r"\W", "_", request.module.__name__.rsplit(".", 1)[-1])
+    node = ros_runtime.rclpy.create_node(name, context=ros_runtime.context)
+    executor = MultiThreadedExecutor(num_threads=4, context=ros_runtime.context)
+    executor.add_node(node)
+
+    def spin() -> None:
+        with contextlib.suppress(ExternalShutdownException):
+            executor.spin()
+
+    thread = threading.Thread(target=spin, daemon=True, name=f"spin-{name}")
+    thread.start()
+    yield node
+    executor.shutdown()
+    thread.join(10)
+    node.destroy_node()
+
+
+@pytest.fixture
+def ros_node(module_node: Any) -> Iterator[Any]:
+    """The module's rclpy node; what a test creates on it is destroyed after the test.
+
+    Overrides the suite-wide ``ros_node`` (a fresh node per test) for the reason
+    given in :func:`module_node`.
+    """
+    node = module_node
+    kinds = (
+        ("publishers", node.destroy_publisher),
+        ("subscriptions", node.destroy_subscription),
+        ("services", node.destroy_service),
+        ("clients", node.destroy_client),
+        ("timers", node.destroy_timer),
+    )
+    before = {kind: set(getattr(node, kind)) for kind, _ in kinds}
+    yield node
+    for kind, destroy in kinds:
+        for entity in set(getattr(node, kind)) - before[kind]:
+            destroy(entity)

@@ -33,11 +33,20 @@ def _module(name: str) -> Any:
     return importlib.import_module(name)
 
 
+def _refusal(peer: PeerProcess, topic: str) -> None:
+    """Fail at once if the bridge sent an error status about ``topic`` (clients that show them)."""
+    for e in peer.new_events():
+        about_topic = str(e.get("id") or "").split(":")[1:2] == [topic]  # "op:topic:n"
+        if e.get("event") == "status" and about_topic and e["msg"].get("level") == "error":
+            raise AssertionError(f"the bridge refused a request about {topic}: {e['msg']}")
+
+
 def _publish_until_received(
     peer: PeerProcess, topic: str, type_name: str, msg: dict[str, Any], inbox: queue.Queue[Any]
 ) -> Any:
     """Publish ``msg`` through the peer until the rclpy subscription's inbox gets one."""
     for _ in range(int(DEADLINE / ATTEMPT)):
+        _refusal(peer, topic)
         peer.request("publish", topic=topic, type=type_name, msg=msg)
         try:
             return inbox.get(timeout=ATTEMPT)
@@ -51,6 +60,7 @@ def _publish_until_received(
 def _ros_publish_until_delivered(peer: PeerProcess, pub: Any, topic: str, msg: Any) -> Any:
     """Publish ``msg`` from rclpy until the peer prints a message event for ``topic``."""
     for _ in range(int(DEADLINE / ATTEMPT)):
+        _refusal(peer, topic)
         pub.publish(msg)
         try:
             return peer.wait_event(
@@ -502,12 +512,13 @@ def subscribe_cbor_raw(peer: PeerProcess, node: Any, topic: str) -> None:
 
 def params(peer: PeerProcess, node: Any) -> None:
     """The peer lists, reads and sets an rclpy node's parameter as "node:param"."""
-    node.declare_parameter("speed", 1.5)
-    name = f"{node.get_fully_qualified_name()}:speed"
+    param = f"speed_{peer.name.replace('-', '_')}"  # the node is shared by a module's tests
+    node.declare_parameter(param, 1.5)
+    name = f"{node.get_fully_qualified_name()}:{param}"
     wait_until(lambda: name in peer.request("get_params"), DEADLINE, f"{name} in get_params")
     assert peer.request("get_param", name=name) == 1.5
     peer.request("set_param", name=name, value=2.5)
-    assert node.get_parameter("speed").value == 2.5
+    assert node.get_parameter(param).value == 2.5
     assert peer.request("get_param", name=name) == 2.5
 
 
