@@ -172,6 +172,21 @@ class Peer:
             return ros.get_nodes()
         if op == "get_node_details":
             return ros.get_node_details(cmd["node"])
+        if op == "get_time":
+            stamp = ros.get_time()
+            return {"secs": stamp.secs, "nsecs": stamp.nsecs}
+        if op == "get_action_servers":
+            done = threading.Event()
+            found: list[Any] = []
+
+            def on_servers(servers: Any) -> None:
+                found.append(servers)
+                done.set()
+
+            ros.get_action_servers(on_servers)  # roslibpy offers only the callback form
+            if not done.wait(timeout):
+                raise TimeoutError("no answer to get_action_servers")
+            return found[0]
         if op == "get_params":
             return ros.get_params()
         if op == "get_param":

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import base64
 import importlib
+import math
 import queue
 import threading
 import time
@@ -863,3 +864,69 @@ def call_bad_args(peer: PeerProcess, node: Any, topic: str) -> None:
 NO_PNG = pytest.mark.xfail(
     strict=True, reason="bridge: refuses compression png instead of falling back to JSON"
 )
+
+
+# -- more rosapi, and values JSON cannot carry as such ---------------------------------------
+
+
+def get_action_servers(peer: PeerProcess, node: Any, topic: str) -> None:
+    """The peer's action server list names an rclpy action server."""
+    from test_msgs.action import Fibonacci
+
+    server = _module("rclpy.action").ActionServer(node, Fibonacci, topic, lambda gh: None)
+    try:
+        wait_until(lambda: topic in peer.request("get_action_servers"), DEADLINE,
+                   f"{topic} in get_action_servers")
+    finally:
+        server.destroy()
+
+
+def get_publishers(peer: PeerProcess, node: Any, topic: str) -> None:
+    """Topic.getPublishers() names the rclpy node that publishes the topic."""
+    from std_msgs.msg import String
+
+    node.create_publisher(String, topic, 10)
+    fqn = node.get_fully_qualified_name()
+    wait_until(lambda: fqn in peer.request("get_publishers", topic=topic, type="std_msgs/String"),
+               DEADLINE, f"{fqn} among the publishers of {topic}")
+
+
+def get_time(peer: PeerProcess) -> None:
+    """Ros.get_time() returns the bridge's clock as a roslibpy Time (secs/nsecs)."""
+    value = peer.request("get_time")
+    assert isinstance(value["secs"], int) and 0 <= value["nsecs"] < 1_000_000_000
+    assert abs(value["secs"] - time.time()) < 600, f"not the system clock: {value}"
+
+
+def serve_async(peer: PeerProcess, node: Any, topic: str) -> None:
+    """A service served with roslib's advertiseAsync answers an rclpy caller."""
+    from mult_msgs.srv import MultFloats
+
+    peer.request("advertise_service", service=topic, type="mult_msgs/srv/MultFloats",
+                 handler="mult", **{"async": True})
+    response = _call_from_ros(node, MultFloats, topic, MultFloats.Request(x=-2.0, y=0.25))
+    assert response.result == -0.5
+
+
+def non_finite_floats(peer: PeerProcess, node: Any, topic: str) -> None:
+    """NaN and infinities reach the client as null, and the finite values around them intact."""
+    from std_msgs.msg import Float64MultiArray
+
+    pub = node.create_publisher(Float64MultiArray, topic, 10)
+    peer.request("subscribe", topic=topic, type="std_msgs/msg/Float64MultiArray")
+    msg = Float64MultiArray(data=[1.5, math.nan, math.inf, -math.inf, -0.25])
+    got = _ros_publish_until_delivered(peer, pub, topic, msg)
+    assert got["data"] == [1.5, None, None, None, -0.25]
+
+
+def big_integers(peer: PeerProcess, node: Any, topic: str) -> None:
+    """int64 and uint64 extremes reach a Python client exactly (JSON numbers, no rounding)."""
+    from test_msgs.msg import BasicTypes
+
+    pub = node.create_publisher(BasicTypes, topic, 10)
+    peer.request("subscribe", topic=topic, type="test_msgs/msg/BasicTypes")
+    msg = BasicTypes(int64_value=-(2**63), uint64_value=2**64 - 1, int32_value=2**31 - 1)
+    got = _ros_publish_until_delivered(peer, pub, topic, msg)
+    assert (got["int64_value"], got["uint64_value"], got["int32_value"]) == (
+        -(2**63), 2**64 - 1, 2**31 - 1,
+    )

@@ -234,6 +234,26 @@ def test_subscribe_wrong_type(peer: PeerProcess, ros_node: Any, topic: str) -> N
     scenarios.subscribe_wrong_type(peer, ros_node, topic)
 
 
+def test_get_action_servers(peer: PeerProcess, ros_node: Any, topic: str) -> None:
+    """Ros.getActionServers() names an rclpy action server."""
+    scenarios.get_action_servers(peer, ros_node, topic)
+
+
+def test_get_publishers(peer: PeerProcess, ros_node: Any, topic: str) -> None:
+    """Topic.getPublishers() names the rclpy node publishing the topic."""
+    scenarios.get_publishers(peer, ros_node, topic)
+
+
+def test_serve_async(peer: PeerProcess, ros_node: Any, topic: str) -> None:
+    """Service.advertiseAsync serves mult_msgs/MultFloats to an rclpy client."""
+    scenarios.serve_async(peer, ros_node, topic)
+
+
+def test_non_finite_floats(peer: PeerProcess, ros_node: Any, topic: str) -> None:
+    """roslib (JSON.parse, which has no NaN) receives NaN and infinities as null."""
+    scenarios.non_finite_floats(peer, ros_node, topic)
+
+
 def test_native_websocket_publish(native_peer: PeerProcess, ros_node: Any, topic: str) -> None:
     """With Node's native WebSocket, roslib's published message reaches rclpy."""
     assert native_peer.info["transport"] == "native WebSocket"

@@ -181,3 +181,23 @@ def test_subscription_options(peer: PeerProcess, ros_node: Any, topic: str) -> N
 def test_call_bad_args(peer: PeerProcess, ros_node: Any, topic: str) -> None:
     """A roslibpy call with a bad value or unknown field fails naming the field."""
     scenarios.call_bad_args(peer, ros_node, topic)
+
+
+def test_get_action_servers(peer: PeerProcess, ros_node: Any, topic: str) -> None:
+    """Ros.get_action_servers() names an rclpy action server."""
+    scenarios.get_action_servers(peer, ros_node, topic)
+
+
+def test_get_time(peer: PeerProcess) -> None:
+    """Ros.get_time() gets the bridge clock in the secs/nsecs shape roslibpy reads."""
+    scenarios.get_time(peer)
+
+
+def test_non_finite_floats(peer: PeerProcess, ros_node: Any, topic: str) -> None:
+    """roslibpy receives NaN and infinities as None, finite values intact."""
+    scenarios.non_finite_floats(peer, ros_node, topic)
+
+
+def test_big_integers(peer: PeerProcess, ros_node: Any, topic: str) -> None:
+    """roslibpy receives int64/uint64 extremes exactly."""
+    scenarios.big_integers(peer, ros_node, topic)

@@ -152,6 +152,12 @@ async function handle(cmd) {
       });
       return null;
     }
+    case "get_action_servers":
+      return viaCallbacks((ok, fail) => ros.getActionServers(ok, fail));
+    case "get_publishers": {
+      const t = topic(cmd);
+      return viaCallbacks((ok, fail) => t.getPublishers(ok, fail));
+    }
     case "get_params":
       return viaCallbacks((ok, fail) => ros.getParams(ok, fail));
     case "get_param": {
@@ -173,10 +179,20 @@ async function handle(cmd) {
       const handler = handlers[cmd.handler];
       if (!handler) throw new Error(`unknown handler ${cmd.handler}`);
       const service = new ROSLIB.Service({ ros, name, serviceType: cmd.type });
-      await service.advertise((args, response) => {
-        emit({ event: "request", service: name, args });
-        return handler(args, response);
-      });
+      if (cmd.async) {
+        // The promise-based form: the handler returns the response values.
+        await service.advertiseAsync(async (args) => {
+          emit({ event: "request", service: name, args });
+          const response = {};
+          if (!handler(args, response)) throw new Error("handler failed");
+          return response;
+        });
+      } else {
+        await service.advertise((args, response) => {
+          emit({ event: "request", service: name, args });
+          return handler(args, response);
+        });
+      }
       services.set(name, service);
       return null;
     }
