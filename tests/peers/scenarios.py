@@ -930,3 +930,62 @@ def big_integers(peer: PeerProcess, node: Any, topic: str) -> None:
     assert (got["int64_value"], got["uint64_value"], got["int32_value"]) == (
         -(2**63), 2**64 - 1, 2**31 - 1,
     )
+
+
+# -- QoS the bridge must adapt to, and concurrent calls ---------------------------------------
+
+
+def _sensor_qos() -> Any:
+    return _module("rclpy.qos").qos_profile_sensor_data
+
+
+def subscribe_best_effort(peer: PeerProcess, node: Any, topic: str, publisher_first: bool) -> None:
+    """A best-effort (sensor data QoS) rclpy publisher is heard, whether it came before or after."""
+    from sensor_msgs.msg import Temperature
+
+    pub = None
+    if publisher_first:
+        pub = node.create_publisher(Temperature, topic, _sensor_qos())
+        wait_until(lambda: topic in _topics(peer.request("get_topics"))[0], DEADLINE,
+                   f"{topic} known to the bridge")
+    peer.request("subscribe", topic=topic, type="sensor_msgs/msg/Temperature")
+    if pub is None:
+        wait_until(lambda: node.count_subscribers(topic) >= 1, DEADLINE, "the bridge subscription")
+        pub = node.create_publisher(Temperature, topic, _sensor_qos())
+    got = _ros_publish_until_delivered(peer, pub, topic, Temperature(temperature=21.5, variance=0.5))
+    assert (got["temperature"], got["variance"]) == (21.5, 0.5)
+
+
+def concurrent_calls(peer: PeerProcess, node: Any, topic: str) -> None:
+    """While one call waits on a slow rclpy service, another call on the same connection completes."""
+    from std_srvs.srv import SetBool
+
+    release = threading.Event()
+
+    def slow(request: Any, response: Any) -> Any:
+        release.wait(DEADLINE)
+        response.success, response.message = True, "slow done"
+        return response
+
+    def fast(request: Any, response: Any) -> Any:
+        response.success, response.message = True, "fast done"
+        return response
+
+    group = _module("rclpy.callback_groups").ReentrantCallbackGroup()
+    node.create_service(SetBool, topic + "_slow", slow, callback_group=group)
+    node.create_service(SetBool, topic + "_fast", fast, callback_group=group)
+
+    def both_listed() -> bool:
+        services = peer.request("get_services")
+        return topic + "_slow" in services and topic + "_fast" in services
+
+    wait_until(both_listed, DEADLINE, "both services in get_services")
+    try:
+        slow_seq = peer.send("call", service=topic + "_slow", args={"data": True})
+        answer = peer.request("call", service=topic + "_fast", args={"data": True})
+        assert answer == {"success": True, "message": "fast done"}
+        assert slow_seq not in peer.replies, "the slow call finished before it was released"
+    finally:
+        release.set()
+    slow_reply = peer.reply(slow_seq, DEADLINE)
+    assert slow_reply["ok"] and slow_reply["value"]["message"] == "slow done", slow_reply

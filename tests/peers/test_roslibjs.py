@@ -254,6 +254,21 @@ def test_non_finite_floats(peer: PeerProcess, ros_node: Any, topic: str) -> None
     scenarios.non_finite_floats(peer, ros_node, topic)
 
 
+def test_subscribe_best_effort_publisher_first(peer: PeerProcess, ros_node: Any, topic: str) -> None:
+    """roslib hears a best-effort (sensor QoS) rclpy publisher that existed before it subscribed."""
+    scenarios.subscribe_best_effort(peer, ros_node, topic, publisher_first=True)
+
+
+def test_subscribe_best_effort_publisher_later(peer: PeerProcess, ros_node: Any, topic: str) -> None:
+    """roslib hears a best-effort (sensor QoS) rclpy publisher that appeared after it subscribed."""
+    scenarios.subscribe_best_effort(peer, ros_node, topic, publisher_first=False)
+
+
+def test_concurrent_calls(peer: PeerProcess, ros_node: Any, topic: str) -> None:
+    """A roslib call completes while another call on the same connection waits on a slow service."""
+    scenarios.concurrent_calls(peer, ros_node, topic)
+
+
 def test_native_websocket_publish(native_peer: PeerProcess, ros_node: Any, topic: str) -> None:
     """With Node's native WebSocket, roslib's published message reaches rclpy."""
     assert native_peer.info["transport"] == "native WebSocket"

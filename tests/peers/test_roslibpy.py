@@ -201,3 +201,18 @@ def test_non_finite_floats(peer: PeerProcess, ros_node: Any, topic: str) -> None
 def test_big_integers(peer: PeerProcess, ros_node: Any, topic: str) -> None:
     """roslibpy receives int64/uint64 extremes exactly."""
     scenarios.big_integers(peer, ros_node, topic)
+
+
+def test_subscribe_best_effort_publisher_first(peer: PeerProcess, ros_node: Any, topic: str) -> None:
+    """roslibpy hears a best-effort (sensor QoS) rclpy publisher that existed before it subscribed."""
+    scenarios.subscribe_best_effort(peer, ros_node, topic, publisher_first=True)
+
+
+def test_subscribe_best_effort_publisher_later(peer: PeerProcess, ros_node: Any, topic: str) -> None:
+    """roslibpy hears a best-effort (sensor QoS) rclpy publisher that appeared after it subscribed."""
+    scenarios.subscribe_best_effort(peer, ros_node, topic, publisher_first=False)
+
+
+def test_concurrent_calls(peer: PeerProcess, ros_node: Any, topic: str) -> None:
+    """A roslibpy call completes while another call on the same connection waits on a slow service."""
+    scenarios.concurrent_calls(peer, ros_node, topic)
