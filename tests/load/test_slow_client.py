@@ -1,0 +1,142 @@
+"""A client that stops reading costs the bridge bounded memory and delays nobody else."""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import json
+from typing import Any
+
+import cbor2
+import psutil
+import pytest
+from sensor_msgs.msg import Image
+from std_msgs.msg import String
+
+from tests.bridge.support import roundtrip, wait_subscribers
+from tests.load.support import StalledClient, qos
+
+pytestmark = pytest.mark.asyncio
+
+IMAGES = 500
+RATE_HZ = 100
+MB = 1024 * 1024
+BOUND_MB = 300  # 500 images of 0.9 MB kept for the stalled client would be ~440 MB
+
+
+def _image() -> Image:
+    msg = Image()
+    msg.height, msg.width, msg.encoding, msg.step = 480, 640, "rgb8", 640 * 3
+    msg.data = bytes(range(256)) * (640 * 480 * 3 // 256)
+    return msg
+
+
+class Flood:
+    """What one image flood with a stalled client showed: RSS growth and what the others got."""
+
+    def __init__(self) -> None:
+        self.growth_mb = 0.0
+        self.frames: set[int] = set()
+        self.numbers: list[int] = []
+        self.notes: list[Any] = []
+
+
+async def _flood(make_bridge: Any, ws_connect: Any, ros_node: Any, topic: str) -> Flood:
+    """Stall one client on an image topic, flood it at 100 Hz with a string topic alongside."""
+    bridge = make_bridge()
+    assert bridge.proc is not None
+    rss = psutil.Process(bridge.proc.pid).memory_info
+    images, strings = f"{topic}/image", f"{topic}/other"
+    out = Flood()
+    stalled = await asyncio.to_thread(StalledClient, bridge.port)
+    try:
+        stalled.send({"op": "subscribe", "topic": images, "type": "sensor_msgs/msg/Image"})
+        early = await asyncio.to_thread(stalled.sync)  # from here on it never reads again
+        assert early == []
+        reader = await ws_connect(bridge.url)
+        await reader.send({"op": "subscribe", "topic": images, "type": "sensor_msgs/msg/Image",
+                           "compression": "cbor", "queue_length": IMAGES})
+        other = await ws_connect(bridge.url)
+        await other.send({"op": "subscribe", "topic": strings, "type": "std_msgs/msg/String",
+                          "queue_length": IMAGES})
+        await roundtrip(reader)
+        await roundtrip(other)
+        image_pub = ros_node.create_publisher(Image, images, qos(depth=IMAGES))
+        string_pub = ros_node.create_publisher(String, strings, qos(depth=IMAGES))
+        await wait_subscribers(image_pub)
+        await wait_subscribers(string_pub)
+        loop = asyncio.get_running_loop()
+        last = [loop.time()]
+
+        async def read_images() -> None:
+            with contextlib.suppress(Exception):
+                async for frame in reader.ws:
+                    op = cbor2.loads(frame) if isinstance(frame, bytes) else json.loads(frame)
+                    if op.get("op") == "publish":
+                        out.frames.add(int(op["msg"]["header"]["frame_id"]))
+                        last[0] = loop.time()
+                    else:
+                        out.notes.append(op)
+
+        async def read_strings() -> None:
+            with contextlib.suppress(Exception):
+                async for frame in other.ws:
+                    op = json.loads(frame)
+                    if op.get("op") == "publish":
+                        out.numbers.append(int(op["msg"]["data"]))
+                        last[0] = loop.time()
+                    else:
+                        out.notes.append(op)
+
+        tasks = [asyncio.create_task(read_images()), asyncio.create_task(read_strings())]
+        msg = _image()
+        start = peak = rss().rss
+        try:
+            for i in range(IMAGES):
+                msg.header.frame_id = str(i)
+                image_pub.publish(msg)
+                string_pub.publish(String(data=str(i)))
+                peak = max(peak, rss().rss)
+                await asyncio.sleep(1 / RATE_HZ)  # pacing the flood, not synchronisation
+            # drain: until both readers have everything, or nothing came for 2 s
+            deadline = loop.time() + 10
+            while (len(out.numbers) < IMAGES or len(out.frames) < IMAGES) and (
+                loop.time() < deadline and loop.time() - last[0] < 2.0
+            ):
+                peak = max(peak, rss().rss)
+                await asyncio.sleep(0.05)
+        finally:
+            for task in tasks:
+                task.cancel()
+            await asyncio.gather(*tasks, return_exceptions=True)
+    finally:
+        stalled.close()
+    out.growth_mb = (peak - start) / MB
+    return out
+
+
+async def test_stalled_client_bounded_memory_and_same_topic_reader_served(
+    make_bridge: Any, ws_connect: Any, ros_node: Any, topic: str
+):
+    """Under a 640x480 image flood a client that never reads grows the bridge by < 300 MB, and a reading client on the same topic still gets nearly every frame."""
+    flood = await _flood(make_bridge, ws_connect, ros_node, topic)
+    assert flood.growth_mb < BOUND_MB, f"bridge RSS grew {flood.growth_mb:.0f} MB"
+    assert len(flood.frames) >= 0.95 * IMAGES, (
+        f"reader on the same topic got {len(flood.frames)} of {IMAGES}; statuses {flood.notes[:3]}"
+    )
+
+
+@pytest.mark.xfail(
+    strict=False,
+    reason="the bridge's ROS subscriptions keep 100 samples; under an image flood Fast DDS "
+    "repairs a lost sample late and the reader history overflows (notes/bridge-bugs.md 06:10)",
+)
+async def test_stalled_client_and_flood_cost_another_topic_nothing(
+    make_bridge: Any, ws_connect: Any, ros_node: Any, topic: str
+):
+    """During the same flood a client subscribed to another 100 Hz topic receives every message, in order."""
+    flood = await _flood(make_bridge, ws_connect, ros_node, topic)
+    assert flood.numbers == list(range(IMAGES)), (
+        f"other topic: got {len(flood.numbers)} of {IMAGES}, missing "
+        f"{sorted(set(range(IMAGES)) - set(flood.numbers))[:20]}; statuses {flood.notes[:3]}"
+    )
