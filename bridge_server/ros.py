@@ -76,6 +76,10 @@ Listener = Callable[["Incoming"], None]
 SUBSCRIPTION_DEPTH = 100
 """History depth of the bridge's shared ROS subscriptions."""
 
+SERVICE_DEPTH = 1000
+"""History depth of the bridge's service clients and servers: the ROS default of 10 loses
+requests and responses when more than 10 calls are in flight."""
+
 MAX_BATCH = 256
 """Most messages taken from one subscription per executor callback."""
 
@@ -329,7 +333,9 @@ class ServedService:
             post(self.on_request, pending)
             return pending
 
-        self.srv: Any = ros.node.create_service(srv_cls, name, callback)
+        self.srv: Any = ros.node.create_service(
+            srv_cls, name, callback, qos_profile=_qos(True, False, SERVICE_DEPTH)
+        )
         self._real_send = self.srv.send_response
 
         def send_response(response: Any, header: Any) -> None:
@@ -545,13 +551,17 @@ class RosNode:
         key = (service, srv_cls)
         client = self._clients.get(key)
         if client is None:
-            client = self._clients[key] = self.node.create_client(srv_cls, service)
+            client = self._clients[key] = self.node.create_client(
+                srv_cls, service, qos_profile=_qos(True, False, SERVICE_DEPTH)
+            )
+            _inline_done_callbacks(client)
         return client
 
     def call(self, client: Any, request: Any) -> asyncio.Future[Any]:
         """Send ``request`` now; the returned asyncio future gets the response.
 
-        Cancelling the returned future forgets the pending request.
+        Cancelling the returned future (or failing it, e.g. on a timeout) forgets the
+        pending request.
         """
         loop = self.loop
         result: asyncio.Future[Any] = loop.create_future()
@@ -564,7 +574,7 @@ class RosNode:
         rfuture.add_done_callback(done)
 
         def forget(f: asyncio.Future[Any]) -> None:
-            if f.cancelled():
+            if f.cancelled() or f.exception() is not None:
                 with contextlib.suppress(Exception):
                     client.remove_pending_request(rfuture)
 
@@ -586,6 +596,38 @@ class RosNode:
     def resolve_service(name: str) -> type[Any]:
         """The service class for a type string (both spellings)."""
         return resolve_service(name)
+
+
+class _InlineFuture:
+    """What the executor gets for a pending request: completing it runs the done callbacks
+    right there, instead of scheduling each as an executor task (two more wait-set rounds
+    per call)."""
+
+    __slots__ = ("_future",)
+
+    def __init__(self, future: Any) -> None:
+        self._future = future
+
+    def _set_executor(self, executor: Any) -> None:
+        pass
+
+    def set_result(self, result: Any) -> None:
+        self._future.set_result(result)
+
+    def set_exception(self, exc: BaseException) -> None:
+        self._future.set_exception(exc)
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._future, name)
+
+
+def _inline_done_callbacks(client: Any) -> None:
+    get = client.get_pending_request
+
+    def get_pending_request(sequence_number: int) -> Any:
+        return _InlineFuture(get(sequence_number))
+
+    client.get_pending_request = get_pending_request
 
 
 def _settle(fut: asyncio.Future[Any], exc: BaseException | None, value: Any) -> None:
