@@ -47,7 +47,7 @@ class BridgeConfig:
     publisher_grace: float = 2.0
     executor: str = "single"
     node_name: str = "roslibpy_lite_bridge"
-    refresh_interval: float = 0.25
+    refresh_interval: float = 0.5
     session: SessionConfig = field(default_factory=SessionConfig)
 
 

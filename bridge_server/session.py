@@ -17,7 +17,37 @@ one writer task per session drains them into the socket, so a client that
 stops reading holds at most its queues plus the socket's write buffer, and
 never delays anyone else. Dropped messages are counted per subscription and
 reported to the client as a ``status`` warning (``dropped N messages on
-/topic ...``) at most once per ``drop_report_interval`` seconds.
+/topic ...``) at most once per ``drop_report_interval`` seconds (5 s); drops
+inside that interval are summed into the next report. ``set_level`` ``error``
+silences these warnings.
+
+The writer gathers whatever is ready (up to :data:`BATCH_FRAMES` frames or
+:data:`BATCH_BYTES` bytes) and writes it with one socket write.
+
+Merged subscriptions
+--------------------
+Several subscribe ops of one client to one topic (different ids) share one
+queue, and each message is sent once. The merged options are: the least
+``throttle_rate``, the largest ``queue_length``, the least ``fragment_size``,
+and the ``compression`` of the latest subscribe. ``throttle_rate`` keeps the
+newest message of a burst and sends it when the interval is over.
+
+Service calls
+-------------
+Each ``call_service`` runs as its own task (at most ``max_calls_in_flight``,
+1024, per connection; more fail at once), with ``timeout`` seconds (default
+5). Without a type, the type comes from the ROS graph; a service that is not
+in the graph within ``discovery_wait`` (1 s) fails with "does not exist".
+``fragment_size`` on a call splits its ``service_response``.
+
+Client-served services
+----------------------
+A ROS caller of a service advertised by the client reaches it as
+``call_service`` with id ``service_request:<service>:<n>``. If the client
+answers ``result: false``, does not answer within ``served_call_timeout``
+(10 s), unadvertises the service or disconnects, the ROS caller gets a
+default (all-zero) response at once and the bridge logs an error: an rclpy
+service cannot reply with an error.
 """
 
 from __future__ import annotations
@@ -86,6 +116,7 @@ class SessionConfig:
     served_call_timeout: float = 10.0
     drop_report_interval: float = 5.0
     discovery_wait: float = 1.0
+    max_calls_in_flight: int = 1024
 
 
 class _Sub:
@@ -106,7 +137,8 @@ class _Sub:
         self.timer: asyncio.TimerHandle | None = None
         self.dropped = 0
         self.dropped_total = 0
-        self.last_report = 0.0
+        self.last_report = -1e9
+        self.report_timer: asyncio.TimerHandle | None = None
         self.active = True
 
     def configure(self, default_len: int) -> None:
@@ -159,6 +191,9 @@ class _Sub:
         """Stop delivering: clear the queue and any throttle timer."""
         self.active = False
         self.queue.clear()
+        if self.report_timer is not None:
+            self.report_timer.cancel()
+            self.report_timer = None
         self.pending = None
         if self.timer is not None:
             self.timer.cancel()
@@ -346,11 +381,21 @@ class Session:
         self.status("error", msg, id)
 
     def _note_drop(self, sub: _Sub) -> None:
-        now = time.monotonic()
-        if now - sub.last_report < self.config.drop_report_interval:
-            return
-        sub.last_report = now
+        if sub.report_timer is not None:
+            return  # a report is already scheduled
+        wait = sub.last_report + self.config.drop_report_interval - time.monotonic()
+        if wait > 0:
+            sub.report_timer = self.loop.call_later(wait, self._report_drops, sub)
+        else:
+            self._report_drops(sub)
+
+    def _report_drops(self, sub: _Sub) -> None:
+        sub.report_timer = None
         n, sub.dropped = sub.dropped, 0
+        if n == 0 or not sub.active:
+            return
+        sub.last_report = time.monotonic()
+        log.info("session %d: dropped %d messages on %s", self.sid, n, sub.topic)
         self.status(
             "warning",
             f"dropped {n} messages on {sub.topic} (queue_length {sub.maxlen}, "
@@ -383,6 +428,15 @@ class Session:
             elif isinstance(op, ops.Unadvertise):
                 self.unadvertise(op)
             elif isinstance(op, ops.CallService):
+                if len(self.calls) >= self.config.max_calls_in_flight:
+                    self._respond(
+                        _topic_name(op.service),
+                        op.id,
+                        False,
+                        f"too many calls in flight on this connection "
+                        f"(at most {self.config.max_calls_in_flight})",
+                    )
+                    return
                 task = self.loop.create_task(self.call_service(op))
                 self.calls.add(task)
                 task.add_done_callback(self.calls.discard)
@@ -558,19 +612,30 @@ class Session:
             else:
                 values = await self._call_ros(service, op, timeout)
         except _CallFailed as exc:
-            self._respond(service, op.id, False, str(exc))
+            self._respond(service, op.id, False, str(exc), op.fragment_size)
             return
         except (BridgeError, rosapi.RosapiError) as exc:
-            self._respond(service, op.id, False, f"{service}: {exc}")
+            self._respond(service, op.id, False, f"{service}: {exc}", op.fragment_size)
             return
-        self._respond(service, op.id, True, values)
+        self._respond(service, op.id, True, values, op.fragment_size)
 
     def _respond(
-        self, service: str, id: ops.Id | None, result: bool, values: Mapping[str, Any] | str
+        self,
+        service: str,
+        id: ops.Id | None,
+        result: bool,
+        values: Mapping[str, Any] | str,
+        fragment_size: int | None = None,
     ) -> None:
         if not result:
             log.info("session %d: call to %s failed: %s", self.sid, service, values)
-        self.send_op(ops.ServiceResponse(service=service, result=result, values=values, id=id))
+        text = ops.encode(ops.ServiceResponse(service=service, result=result, values=values, id=id))
+        if fragment_size is not None and len(text) > fragment_size:
+            frag_id = id if id is not None else f"{service}:{next(self._frag_ids)}"
+            for piece in split_fragments(text, fragment_size, frag_id):
+                self.send_text(piece)
+        else:
+            self.send_text(text)
 
     async def _call_ros(
         self, service: str, op: ops.CallService, timeout: float

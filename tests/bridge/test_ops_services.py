@@ -224,3 +224,19 @@ async def test_fragmented_call_service(ws_connect: Any, ros_node: Any, topic: st
         await ws.send_raw(piece)
     reply = await ws.expect(op="service_response", id="frag")
     assert reply["values"] == {"result": 3.0}
+
+
+async def test_call_service_fragment_size(ws_connect: Any, ros_node: Any, topic: str):
+    """A call_service with fragment_size gets its service_response as fragment ops."""
+    _mult(ros_node, topic)
+    ws = await ws_connect()
+    await ws.send({"op": "call_service", "service": topic, "type": "mult_msgs/MultFloats",
+                   "args": {"x": 2.0, "y": 2.0}, "id": "fr", "fragment_size": 20})
+    first = await ws.expect(op="fragment", id="fr")
+    pieces = {first["num"]: first["data"]}
+    while len(pieces) < first["total"]:
+        frag = await ws.expect(op="fragment", id="fr")
+        pieces[frag["num"]] = frag["data"]
+    reply = json.loads("".join(pieces[i] for i in range(first["total"])))
+    assert reply == {"op": "service_response", "service": topic, "result": True,
+                     "values": {"result": 4.0}, "id": "fr"}
