@@ -270,6 +270,9 @@ class Session:
                         await ws.send(frame)
         except ConnectionClosed:
             pass
+        except Exception:
+            log.exception("session %d: the writer failed; closing the connection", self.sid)
+            await ws.close(1011, "internal error")
 
     def _collect(self) -> list[str | bytes]:
         """Take the frames ready to go: replies first, then messages in arrival order."""
@@ -285,7 +288,13 @@ class Session:
             sub = order.popleft()
             if not sub.queue:
                 continue
-            for frame in self._frames(sub, sub.queue.popleft()):
+            inc = sub.queue.popleft()
+            try:
+                encoded = self._frames(sub, inc)
+            except Exception:
+                log.exception("session %d: cannot encode a message of %s", self.sid, sub.topic)
+                continue
+            for frame in encoded:
                 frames.append(frame)
                 size += len(frame)
         return frames
@@ -410,6 +419,10 @@ class Session:
             op = self.protocol.receive(frame)
         except ProtocolError as exc:
             self.error(exc.message, exc.id)
+            return
+        except Exception as exc:  # the core promises ProtocolError; stay up regardless
+            log.exception("session %d: decoding a frame failed", self.sid)
+            self.error(f"cannot decode the frame: {type(exc).__name__}")
             return
         if op is not None:
             self.handle_op(op)

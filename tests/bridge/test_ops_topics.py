@@ -332,3 +332,36 @@ async def test_unadvertise_removes_publisher(ws_connect: Any, ros_node: Any, top
     await wait_publishers(sub)
     await ws.send({"op": "unadvertise", "topic": topic, "id": "adv"})
     await async_wait_until(lambda: sub.get_publisher_count() == 0, what="publisher gone")
+
+
+async def test_late_best_effort_publisher_is_matched(ws_connect: Any, ros_node: Any, topic: str):
+    """A best-effort publisher appearing after the subscribe is matched (the bridge re-subscribes)."""
+    ws = await ws_connect()
+    await ws.send({"op": "subscribe", "topic": topic, "type": "std_msgs/String"})
+    await roundtrip(ws)
+    qos = QoSProfile(depth=5, reliability=ReliabilityPolicy.BEST_EFFORT)
+    pub = ros_node.create_publisher(String, topic, qos)
+    await wait_subscribers(pub)
+    n = 0
+    while True:
+        n += 1
+        pub.publish(String(data=f"late{n}"))
+        try:
+            op = await ws.expect(op="publish", topic=topic, timeout=0.5)
+            break
+        except AssertionError:
+            assert n < 20
+    assert op["msg"]["data"].startswith("late")
+
+
+async def test_late_latched_publisher_reaches_subscriber(
+    ws_connect: Any, ros_node: Any, topic: str
+):
+    """A latched message from a publisher appearing after the subscribe still arrives."""
+    ws = await ws_connect()
+    await ws.send({"op": "subscribe", "topic": topic, "type": "std_msgs/String"})
+    await roundtrip(ws)
+    pub = ros_node.create_publisher(String, topic, _latched())
+    pub.publish(String(data="latched late"))
+    op = await ws.expect(op="publish", topic=topic)
+    assert op["msg"]["data"] == "latched late"
