@@ -150,6 +150,7 @@ class SharedSubscription:
         self.reliable = True
         self.transient_local = False
         self._sub: Any = None
+        self._warned = False
         self.received = 0
 
     @property
@@ -236,7 +237,9 @@ class SharedSubscription:
             try:
                 self.msg_cls = resolve_message(types[0])
             except Exception as exc:
-                log.warning("cannot subscribe to %s: %s", self.topic, exc)
+                if not self._warned:
+                    self._warned = True
+                    log.warning("cannot subscribe to %s: %s", self.topic, exc)
                 return
             self._create()
             return

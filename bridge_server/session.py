@@ -541,7 +541,11 @@ class Session:
             self.error("subscribe: compression 'png' is unsupported (use cbor or cbor-raw)", op.id)
             return
         cls: type[Any] | None = None
-        if op.type is not None:
+        if op.type is None:
+            graph = self.ros.topic_types(topic)
+            if graph:  # known now: an uninstalled type is an error the client should hear
+                cls = self.ros.resolve_message(graph[0])
+        else:
             cls = self.ros.resolve_message(op.type)
             type_name = canonical_name(op.type, "msg")
             graph = self.ros.topic_types(topic)
