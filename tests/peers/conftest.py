@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import contextlib
 import importlib
 import re
 import threading
@@ -61,20 +60,30 @@ def module_node(ros_runtime: Any, request: pytest.FixtureRequest) -> Iterator[An
     """
     from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
 
+    invalid_handle = importlib.import_module("rclpy._rclpy_pybind11").InvalidHandle
     name = "peers_" + re.sub(r"\W", "_", request.module.__name__.rsplit(".", 1)[-1])
     node = ros_runtime.rclpy.create_node(name, context=ros_runtime.context)
     executor = MultiThreadedExecutor(num_threads=4, context=ros_runtime.context)
     executor.add_node(node)
+    stop = threading.Event()
 
     def spin() -> None:
-        with contextlib.suppress(ExternalShutdownException):
-            executor.spin()
+        while not stop.is_set():
+            try:
+                executor.spin_once(timeout_sec=0.1)
+            except ExternalShutdownException:
+                return
+            except invalid_handle:
+                # A service a test's teardown destroyed while its callback was still
+                # answering; the node itself is fine, so keep spinning.
+                continue
 
     thread = threading.Thread(target=spin, daemon=True, name=f"spin-{name}")
     thread.start()
     yield node
-    executor.shutdown()
+    stop.set()
     thread.join(10)
+    executor.shutdown()
     node.destroy_node()
 
 

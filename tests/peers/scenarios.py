@@ -721,11 +721,12 @@ def call_timeout(peer: PeerProcess, node: Any, topic: str) -> None:
     """A call with roslib's timeout argument fails promptly when the rclpy service is too slow."""
     from std_srvs.srv import SetBool
 
-    release = threading.Event()
+    release, answered = threading.Event(), threading.Event()
 
     def slow(request: Any, response: Any) -> Any:
         release.wait(DEADLINE)  # held until the test has seen the client give up
         response.success = True
+        answered.set()
         return response
 
     node.create_service(SetBool, topic, slow)
@@ -738,6 +739,7 @@ def call_timeout(peer: PeerProcess, node: Any, topic: str) -> None:
         raise AssertionError(f"the slow call succeeded: {value!r}")
     finally:
         release.set()
+        answered.wait(DEADLINE)
 
 
 # -- subscriptions in detail, and refused input ----------------------------------------------
