@@ -33,10 +33,13 @@ class PeerError(AssertionError):
 class PeerProcess:
     """A stock rosbridge client in a child process, obeying JSON line commands."""
 
-    def __init__(self, name: str, argv: Sequence[str], cwd: Path) -> None:
+    def __init__(
+        self, name: str, argv: Sequence[str], cwd: Path, env: dict[str, str] | None = None
+    ) -> None:
         self.name = name
         self.argv = list(argv)
         self.cwd = cwd
+        self.env = dict(env or {})
         self.proc: subprocess.Popen[str] | None = None
         self.events: list[dict[str, Any]] = []
         self.replies: dict[int, dict[str, Any]] = {}
@@ -53,7 +56,7 @@ class PeerProcess:
     def start(self, timeout: float = 20.0) -> PeerProcess:
         """Start the child and wait until it says it is connected."""
         self.proc = subprocess.Popen(
-            self.argv, cwd=self.cwd, env=ros_env(), stdin=subprocess.PIPE,
+            self.argv, cwd=self.cwd, env=ros_env(**self.env), stdin=subprocess.PIPE,
             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, bufsize=1,
         )
         self._readers = [
@@ -226,17 +229,20 @@ class PeerPool:
         self.extra: list[PeerProcess] = []
 
     def start(self, kind: str, native_websocket: bool = False) -> PeerProcess:
-        """A new client process of ``kind`` ("roslibpy" or "roslib")."""
-        if kind == "roslibpy":
+        """A new client process of ``kind``: "roslibpy" (its default Twisted transport),
+        "roslibpy-asyncio" (its opt-in asyncio transport) or "roslib" (Node)."""
+        env: dict[str, str] = {}
+        if kind in ("roslibpy", "roslibpy-asyncio"):
             argv = [sys.executable, str(PEERS / "roslibpy_peer.py"), "127.0.0.1",
                     str(self.bridge.port)]
-            name = "roslibpy"
+            name = kind
+            env["ROSLIBPY_TRANSPORT"] = "asyncio" if kind == "roslibpy-asyncio" else "twisted"
         elif kind == "roslib":
             argv = _node_argv(self.bridge.url, native_websocket)
             name = "roslib-native" if native_websocket else "roslib-ws"
         else:
             raise ValueError(kind)
-        peer = PeerProcess(name, argv, PEERS)
+        peer = PeerProcess(name, argv, PEERS, env)
         try:
             return peer.start()
         except BaseException:

@@ -221,7 +221,10 @@ def main() -> int:
     except Exception as exc:
         emit({"event": "connect_failed", "error": f"{type(exc).__name__}: {exc}"})
         return 2
-    emit({"event": "ready", "client": "roslibpy", "version": roslibpy.__version__})
+    emit({
+        "event": "ready", "client": "roslibpy", "version": roslibpy.__version__,
+        "transport": type(peer.ros.factory).__name__,
+    })
     for line in sys.stdin:
         if not line.strip():
             continue

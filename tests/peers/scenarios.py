@@ -221,7 +221,7 @@ def serve_setbool(peer: PeerProcess, node: Any, topic: str) -> None:
     from std_srvs.srv import SetBool
 
     peer.request("advertise_service", service=topic, type="std_srvs/srv/SetBool", handler="setbool")
-    client_name = "roslibjs" if peer.name.startswith("roslib-") else "roslibpy"
+    client_name = "roslibpy" if peer.name.startswith("roslibpy") else "roslibjs"
     for data in (True, False):
         response = _call_from_ros(node, SetBool, topic, SetBool.Request(data=data))
         assert response.success is data

@@ -17,9 +17,16 @@ def peer(peer_pool: PeerPool) -> PeerProcess:
     return peer_pool.get("roslibpy")
 
 
+@pytest.fixture
+def asyncio_peer(peer_pool: PeerPool) -> PeerProcess:
+    """The module's roslibpy client on its opt-in asyncio transport (ROSLIBPY_TRANSPORT)."""
+    return peer_pool.get("roslibpy-asyncio")
+
+
 def test_connects_and_reports_version(peer: PeerProcess) -> None:
-    """roslibpy connects to the bridge and is the pinned stock version."""
+    """roslibpy connects (default Twisted transport) and is the pinned stock version."""
     assert peer.info["version"] == "2.1.0"
+    assert peer.info["transport"] == "AutobahnRosBridgeClientFactory"
     assert peer.request("is_connected") is True
 
 
@@ -216,3 +223,28 @@ def test_subscribe_best_effort_publisher_later(peer: PeerProcess, ros_node: Any,
 def test_concurrent_calls(peer: PeerProcess, ros_node: Any, topic: str) -> None:
     """A roslibpy call completes while another call on the same connection waits on a slow service."""
     scenarios.concurrent_calls(peer, ros_node, topic)
+
+
+def test_asyncio_transport_publish(asyncio_peer: PeerProcess, ros_node: Any, topic: str) -> None:
+    """On roslibpy's asyncio transport, a published message reaches rclpy."""
+    assert asyncio_peer.info["transport"] != "AutobahnRosBridgeClientFactory"
+    scenarios.publish_string(asyncio_peer, ros_node, topic, "std_msgs/msg/String")
+
+
+def test_asyncio_transport_subscribe(asyncio_peer: PeerProcess, ros_node: Any, topic: str) -> None:
+    """On roslibpy's asyncio transport, an rclpy publisher's message arrives."""
+    scenarios.subscribe_string(asyncio_peer, ros_node, topic, "std_msgs/String")
+
+
+def test_asyncio_transport_call_service(
+    asyncio_peer: PeerProcess, ros_node: Any, topic: str
+) -> None:
+    """On roslibpy's asyncio transport, a blocking Service.call gets the rclpy service's answer."""
+    scenarios.call_setbool(asyncio_peer, ros_node, topic)
+
+
+def test_asyncio_transport_serve_service(
+    asyncio_peer: PeerProcess, ros_node: Any, topic: str
+) -> None:
+    """On roslibpy's asyncio transport, a served service answers an rclpy client."""
+    scenarios.serve_setbool(asyncio_peer, ros_node, topic)
