@@ -41,6 +41,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import importlib
 import logging
 import threading
 import time
@@ -73,8 +74,17 @@ log = logging.getLogger("bridge_server.ros")
 
 Listener = Callable[["Incoming"], None]
 
-SUBSCRIPTION_DEPTH = 100
-"""History depth of the bridge's shared ROS subscriptions."""
+SUBSCRIPTION_DEPTH = 1000
+"""History depth of the bridge's shared ROS subscriptions for ordinary messages.
+
+History holds only samples the executor has not taken yet, so a deep one costs
+nothing while the bridge keeps up; it bridges the moments when Fast DDS holds a
+reliable stream back to repair a lost sample (under load, a depth of 100 lost
+messages that way)."""
+
+BULK_SUBSCRIPTION_DEPTH = 50
+"""History depth for bulk types (a numeric or byte sequence: images, point clouds,
+maps), where a deep history could hold gigabytes while the bridge lags."""
 
 SERVICE_DEPTH = 1000
 """History depth of the bridge's service clients and servers: the ROS default of 10 loses
@@ -133,6 +143,25 @@ def _qos(reliable: bool, transient_local: bool, depth: int) -> Any:
     )
 
 
+def _is_bulky(msg_cls: type[Any], depth: int = 0) -> bool:
+    """Whether a message type carries a numeric/byte sequence (or array of > 1024 items)."""
+    from rosidl_parser.definition import AbstractSequence, Array, BasicType, NamespacedType
+
+    if depth > 8:
+        return False
+    for slot in getattr(msg_cls, "SLOT_TYPES", ()):
+        if isinstance(slot, AbstractSequence | Array):
+            if isinstance(slot.value_type, BasicType) and (
+                not isinstance(slot, Array) or slot.size > 1024
+            ):
+                return True
+        elif isinstance(slot, NamespacedType):
+            module = importlib.import_module(".".join(slot.namespaces))
+            if _is_bulky(getattr(module, slot.name), depth + 1):
+                return True
+    return False
+
+
 class SharedSubscription:
     """The bridge's one ROS subscription to a topic, shared by every listening session.
 
@@ -172,7 +201,8 @@ class SharedSubscription:
         assert self.msg_cls is not None
         self.conv = convert.converter_for(self.msg_cls)
         self.reliable, self.transient_local = self._wanted_qos()
-        qos = _qos(self.reliable, self.transient_local, SUBSCRIPTION_DEPTH)
+        depth = BULK_SUBSCRIPTION_DEPTH if _is_bulky(self.msg_cls) else SUBSCRIPTION_DEPTH
+        qos = _qos(self.reliable, self.transient_local, depth)
         post = self.ros.post
         deliver = self._deliver_batch
         topic = self.topic

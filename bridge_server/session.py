@@ -54,6 +54,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import dataclasses
 import itertools
 import logging
 import time
@@ -463,6 +464,17 @@ class Session:
                 self.set_level(op)
             elif isinstance(op, _ACTION_OPS):
                 self.error(f"{op.OP}: actions are not supported yet", getattr(op, "id", None))
+                if isinstance(op, ops.SendActionGoal) and op.id is not None:
+                    # Stock clients wait for the goal's own result, not for a status op.
+                    self.send_op(
+                        ops.ActionResult(
+                            id=op.id,
+                            action=op.action,
+                            values="actions are not supported yet",
+                            result=False,
+                            status=6,  # GoalStatus ABORTED
+                        )
+                    )
             else:
                 self.error(f"{op.OP}: a client may not send this op", getattr(op, "id", None))
         except BridgeError as exc:
@@ -538,8 +550,14 @@ class Session:
         """Add this id to the client's subscription of the topic."""
         topic = _topic_name(op.topic)
         if op.compression == "png":
-            self.error("subscribe: compression 'png' is unsupported (use cbor or cbor-raw)", op.id)
-            return
+            # Stock clients still offer png; they all read plain JSON publish ops too.
+            self.status(
+                "warning",
+                f"subscribe to {topic}: compression 'png' is not supported; "
+                "sending plain JSON instead (use cbor or cbor-raw for compact messages)",
+                op.id,
+            )
+            op = dataclasses.replace(op, compression="none")
         cls: type[Any] | None = None
         if op.type is None:
             graph = self.ros.topic_types(topic)

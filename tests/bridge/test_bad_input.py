@@ -217,4 +217,6 @@ async def test_action_ops_not_supported(ws_connect: Any, topic: str):
                    "action_type": "test_msgs/action/Fibonacci", "args": {"order": 3}})
     msg = await _error(ws, id="g1")
     assert "send_action_goal" in msg and "not supported" in msg
+    result = await ws.expect(op="action_result", id="g1")  # what stock clients wait for
+    assert result["result"] is False and result["status"] == 6
     await _still_working(ws, other, topic)

@@ -365,3 +365,17 @@ async def test_late_latched_publisher_reaches_subscriber(
     pub.publish(String(data="latched late"))
     op = await ws.expect(op="publish", topic=topic)
     assert op["msg"]["data"] == "latched late"
+
+
+async def test_png_compression_falls_back_to_json(ws_connect: Any, ros_node: Any, topic: str):
+    """compression=png (legacy, offered by stock clients) subscribes with plain JSON and a warning."""
+    pub = ros_node.create_publisher(String, topic, 10)
+    ws = await ws_connect()
+    await ws.send({"op": "subscribe", "topic": topic, "type": "std_msgs/String",
+                   "compression": "png", "id": "png"})
+    note = await ws.expect(op="status", level="warning", id="png")
+    assert "png" in note["msg"]
+    await wait_subscribers(pub)
+    pub.publish(String(data="plain"))
+    op = await ws.expect(op="publish", topic=topic)
+    assert op["msg"] == {"data": "plain"}
