@@ -863,9 +863,6 @@ def call_bad_args(peer: PeerProcess, node: Any, topic: str) -> None:
             assert field in str(exc), f"the error does not name {field!r}: {exc}"
         else:
             raise AssertionError(f"a call with {args} succeeded: {value!r}")
-NO_PNG = pytest.mark.xfail(
-    strict=True, reason="bridge: refuses compression png instead of falling back to JSON"
-)
 
 
 # -- more rosapi, and values JSON cannot carry as such ---------------------------------------
@@ -991,3 +988,27 @@ def concurrent_calls(peer: PeerProcess, node: Any, topic: str) -> None:
         release.set()
     slow_reply = peer.reply(slow_seq, DEADLINE)
     assert slow_reply["ok"] and slow_reply["value"]["message"] == "slow done", slow_reply
+
+
+# -- the bridge restarting under a connected stock client -------------------------------------
+
+
+def reconnect_after_bridge_restart(peer: PeerProcess, bridge: Any, node: Any, topic: str) -> None:
+    """After the bridge crashes and comes back on its port, roslibpy's own reconnection
+    restores its subscription and its served service."""
+    from std_msgs.msg import String
+    from std_srvs.srv import SetBool
+
+    service = topic + "_srv"
+    pub = node.create_publisher(String, topic, 10)
+    peer.request("subscribe", topic=topic, type="std_msgs/msg/String")
+    peer.request("advertise_service", service=service, type="std_srvs/srv/SetBool",
+                 handler="setbool")
+    _ros_publish_until_delivered(peer, pub, topic, String(data="before"))
+    bridge.kill()
+    bridge.start()
+    peer.begin_test()
+    got = _ros_publish_until_delivered(peer, pub, topic, String(data="after"))
+    assert got == {"data": "after"}
+    response = _call_from_ros(node, SetBool, service, SetBool.Request(data=True))
+    assert response.message == "roslibpy got data=True"

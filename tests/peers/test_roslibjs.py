@@ -218,7 +218,6 @@ def test_call_bad_args(peer: PeerProcess, ros_node: Any, topic: str) -> None:
     scenarios.call_bad_args(peer, ros_node, topic)
 
 
-@scenarios.NO_PNG
 def test_subscribe_png_compression(peer: PeerProcess, ros_node: Any, topic: str) -> None:
     """A roslib Topic with compression "png" still receives messages."""
     scenarios.subscribe_png(peer, ros_node, topic)

@@ -248,3 +248,15 @@ def test_asyncio_transport_serve_service(
 ) -> None:
     """On roslibpy's asyncio transport, a served service answers an rclpy client."""
     scenarios.serve_setbool(asyncio_peer, ros_node, topic)
+
+
+def test_reconnect_after_bridge_restart(
+    make_bridge: Callable[..., Any], ros_node: Any, topic: str
+) -> None:
+    """roslibpy reconnects by itself to a restarted bridge; its subscription and service come back."""
+    private = make_bridge()
+    pool = PeerPool(private)
+    try:
+        scenarios.reconnect_after_bridge_restart(pool.get("roslibpy"), private, ros_node, topic)
+    finally:
+        pool.close()
