@@ -196,6 +196,10 @@ class Peer:
             return None
         if op == "get_message_details":
             return ros.get_message_details(cmd["type"])
+        if op == "get_service_request_details":
+            return ros.get_service_request_details(cmd["type"])
+        if op == "get_service_response_details":
+            return ros.get_service_response_details(cmd["type"])
         if op == "is_connected":
             return bool(ros.is_connected)
         raise ValueError(f"unknown command {op!r}")

@@ -526,7 +526,12 @@ def params(peer: PeerProcess, node: Any) -> None:
 def message_details(peer: PeerProcess) -> None:
     """The peer gets rosapi typedefs for geometry_msgs/Twist, nested Vector3 included."""
     value = peer.request("get_message_details", type="geometry_msgs/Twist")
-    typedefs = value["typedefs"] if isinstance(value, dict) else value
+    typedefs = value["typedefs"]
+    assert typedefs[0]["type"].replace("/msg/", "/") == "geometry_msgs/Twist", "root type first"
+    if "decoded" in value:  # roslib's Ros.decodeTypeDefs walked them
+        vector = {"x": "float64", "y": "float64", "z": "float64"}
+        assert value["problems"] == []
+        assert value["decoded"] == {"linear": vector, "angular": vector}
     by_type = {td["type"].replace("/msg/", "/"): td for td in typedefs}
     twist = by_type["geometry_msgs/Twist"]
     assert twist["fieldnames"] == ["linear", "angular"]
@@ -534,6 +539,34 @@ def message_details(peer: PeerProcess) -> None:
     vector = by_type["geometry_msgs/Vector3"]
     assert vector["fieldnames"] == ["x", "y", "z"]
     assert vector["fieldtypes"] == ["float64"] * 3
+
+
+def service_details(peer: PeerProcess) -> None:
+    """The peer gets typedefs for the request and the response part of std_srvs/SetBool."""
+    request = peer.request("get_service_request_details", type="std_srvs/srv/SetBool")
+    response = peer.request("get_service_response_details", type="std_srvs/srv/SetBool")
+    req_def, resp_def = request["typedefs"][0], response["typedefs"][0]
+    assert (req_def["fieldnames"], req_def["fieldtypes"]) == (["data"], ["bool"])
+    assert (resp_def["fieldnames"], resp_def["fieldtypes"]) == (
+        ["success", "message"], ["bool", "string"],
+    )
+
+
+def topics_and_raw_types(peer: PeerProcess, node: Any, topic: str) -> None:
+    """The peer gets each topic with its type and the type's full definition text."""
+    from std_msgs.msg import String
+
+    node.create_publisher(String, topic, 10)
+
+    def listed() -> Any:
+        value = peer.request("get_topics_and_raw_types")
+        return value if topic in value["topics"] else None
+
+    value = wait_until(listed, DEADLINE, f"{topic} in topics_and_raw_types")
+    i = value["topics"].index(topic)
+    assert len(value["topics"]) == len(value["types"]) == len(value["typedefs_full_text"])
+    assert value["types"][i] == "std_msgs/msg/String"
+    assert "string data" in value["typedefs_full_text"][i]
 
 
 # -- actions ----------------------------------------------------------------------------------

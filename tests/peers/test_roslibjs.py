@@ -155,8 +155,20 @@ def test_params(peer: PeerProcess, ros_node: Any) -> None:
 
 @scenarios.MISSING_ROSAPI
 def test_message_details(peer: PeerProcess) -> None:
-    """Ros.getMessageDetails() returns rosapi typedefs for a nested message type."""
+    """Ros.getMessageDetails() typedefs for a nested type decode with Ros.decodeTypeDefs()."""
     scenarios.message_details(peer)
+
+
+@scenarios.MISSING_ROSAPI
+def test_service_details(peer: PeerProcess) -> None:
+    """Ros.getServiceRequestDetails()/getServiceResponseDetails() return typedefs."""
+    scenarios.service_details(peer)
+
+
+@scenarios.MISSING_ROSAPI
+def test_topics_and_raw_types(peer: PeerProcess, ros_node: Any, topic: str) -> None:
+    """Ros.getTopicsAndRawTypes() lists the topic with its type and definition text."""
+    scenarios.topics_and_raw_types(peer, ros_node, topic)
 
 
 @scenarios.NO_ACTIONS

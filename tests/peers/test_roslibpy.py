@@ -137,6 +137,12 @@ def test_message_details(peer: PeerProcess) -> None:
     scenarios.message_details(peer)
 
 
+@scenarios.MISSING_ROSAPI
+def test_service_details(peer: PeerProcess) -> None:
+    """Ros.get_service_request_details()/get_service_response_details() return typedefs."""
+    scenarios.service_details(peer)
+
+
 @scenarios.NO_ACTIONS
 def test_send_action_goal(peer: PeerProcess, ros_node: Any, topic: str) -> None:
     """roslibpy.ActionClient sends a goal to an rclpy action server and gets the result."""

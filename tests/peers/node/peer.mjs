@@ -168,8 +168,26 @@ async function handle(cmd) {
       const param = new ROSLIB.Param({ ros, name: cmd.name });
       return viaCallbacks((ok, fail) => param.set(cmd.value, () => ok(null), fail));
     }
-    case "get_message_details":
-      return viaCallbacks((ok, fail) => ros.getMessageDetails(cmd.type, ok, fail));
+    case "get_message_details": {
+      const typedefs = await viaCallbacks((ok, fail) => ros.getMessageDetails(cmd.type, ok, fail));
+      // What a roslib app does with them next: decode into a nested field -> type object.
+      const problems = [];
+      const onError = (e) => problems.push(String(e));
+      ros.on("error", onError);
+      let decoded;
+      try {
+        decoded = ros.decodeTypeDefs(typedefs);
+      } finally {
+        ros.off("error", onError);
+      }
+      return { typedefs, decoded, problems };
+    }
+    case "get_service_request_details":
+      return viaCallbacks((ok, fail) => ros.getServiceRequestDetails(cmd.type, ok, fail));
+    case "get_service_response_details":
+      return viaCallbacks((ok, fail) => ros.getServiceResponseDetails(cmd.type, ok, fail));
+    case "get_topics_and_raw_types":
+      return viaCallbacks((ok, fail) => ros.getTopicsAndRawTypes(ok, fail));
     case "call": {
       const service = new ROSLIB.Service({ ros, name: cmd.service, serviceType: cmd.type ?? "" });
       return viaCallbacks((ok, fail) => service.callService(cmd.args ?? {}, ok, fail, cmd.call_timeout));
