@@ -23,8 +23,14 @@ stamp_of() { cat "$@" 2>/dev/null | sha256sum | cut -d' ' -f1; }
 dep_stamp="$(stamp_of pyproject.toml)"
 if [ "$(cat .venv/.deps-stamp 2>/dev/null)" != "$dep_stamp" ]; then
   log "installing Python packages (ROS 2 Jazzy wheels, dev tools)"
-  python -m pip install -q --disable-pip-version-check --upgrade pip
-  python -m pip install -q --disable-pip-version-check -e ".[bridge,build-interfaces,cbor,cli,dev]"
+  # (grep drops pip's notes about this machine's missing local index folders)
+  if ! { python -m pip install -q --disable-pip-version-check --upgrade pip \
+      && python -m pip install -q --disable-pip-version-check \
+        -e ".[bridge,build-interfaces,cbor,cli,dev]"; } 2>&1 \
+    | { grep -v "^WARNING: Location .* is ignored" || true; }; then
+    log "pip install failed"
+    exit 1
+  fi
   echo "$dep_stamp" > .venv/.deps-stamp
 fi
 
