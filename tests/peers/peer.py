@@ -25,6 +25,9 @@ import pytest
 
 from tests.helpers import BridgeProcess, ros_env
 
+PEERS = Path(__file__).resolve().parent
+NODE_DIR = PEERS / "node"
+
 
 class PeerError(AssertionError):
     """The stock client reported that a command failed (the text is its own error)."""
@@ -197,11 +200,8 @@ class PeerProcess:
         return self.proc.returncode
 
 
-PEERS = Path(__file__).resolve().parent
-NODE_DIR = PEERS / "node"
-
-
 def _node_argv(url: str, native_websocket: bool) -> list[str]:
+    """The command line of the Node driver; skips without node, fails without its modules."""
     node = shutil.which("node")
     if node is None:
         pytest.skip("node is not on PATH: the roslib (npm) peer tests need Node.js 20+")
@@ -226,11 +226,14 @@ class PeerPool:
     def __init__(self, bridge: BridgeProcess) -> None:
         self.bridge = bridge
         self.peers: dict[tuple[str, bool], PeerProcess] = {}
-        self.extra: list[PeerProcess] = []
 
     def start(self, kind: str, native_websocket: bool = False) -> PeerProcess:
-        """A new client process of ``kind``: "roslibpy" (its default Twisted transport),
-        "roslibpy-asyncio" (its opt-in asyncio transport) or "roslib" (Node)."""
+        """Start a new client process of ``kind`` (not shared; the caller closes it).
+
+        Kinds: "roslibpy" (its default Twisted transport), "roslibpy-asyncio" (its
+        opt-in asyncio transport), "roslib" (Node; ``native_websocket`` picks Node's
+        own WebSocket instead of the ``ws`` package).
+        """
         env: dict[str, str] = {}
         if kind in ("roslibpy", "roslibpy-asyncio"):
             argv = [sys.executable, str(PEERS / "roslibpy_peer.py"), "127.0.0.1",
@@ -262,7 +265,6 @@ class PeerPool:
 
     def close(self) -> None:
         """Close every client this pool started."""
-        for peer in [*self.peers.values(), *self.extra]:
+        for peer in self.peers.values():
             peer.close()
         self.peers.clear()
-        self.extra.clear()

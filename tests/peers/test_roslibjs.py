@@ -137,6 +137,14 @@ def test_subscribe_cbor(peer: PeerProcess, ros_node: Any, topic: str) -> None:
     scenarios.subscribe_cbor(peer, ros_node, topic)
 
 
+@pytest.mark.parametrize(("type_name", "values", "typed"), scenarios.CBOR_ARRAYS)
+def test_subscribe_cbor_typed_arrays(
+    peer: PeerProcess, ros_node: Any, topic: str, type_name: str, values: list[Any], typed: str
+) -> None:
+    """compression "cbor": each numeric array type decodes to its JavaScript typed array."""
+    scenarios.subscribe_cbor_typed_array(peer, ros_node, topic, type_name, values, typed)
+
+
 def test_subscribe_cbor_bytes(peer: PeerProcess, ros_node: Any, topic: str) -> None:
     """compression "cbor": roslib gets a uint8[] field as the same bytes in a Uint8Array."""
     scenarios.subscribe_cbor_bytes(peer, ros_node, topic)

@@ -94,7 +94,7 @@ const actionHandlers = {
   },
 };
 
-// Wrap roslib's callback-style API in a promise; `pick` chooses what to return.
+// Wrap roslib's callback-style API in a promise (success value, or an Error with the text).
 function viaCallbacks(start) {
   return new Promise((resolve, reject) => {
     start(resolve, (err) => reject(new Error(typeof err === "string" ? err : JSON.stringify(err))));
