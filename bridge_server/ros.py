@@ -590,6 +590,17 @@ class RosNode:
             _inline_done_callbacks(client)
         return client
 
+    def drop_client(self, service: str, srv_cls: type[Any]) -> None:
+        """Destroy the cached client (after a call found no server)."""
+        client = self._clients.pop((service, srv_cls), None)
+        if client is not None:
+            with contextlib.suppress(Exception):
+                self.node.destroy_client(client)
+
+    def server_count(self, service: str) -> int:
+        """How many servers of ``service`` the graph knows."""
+        return int(self.node.count_services(service))
+
     def call(self, client: Any, request: Any) -> asyncio.Future[Any]:
         """Send ``request`` now; the returned asyncio future gets the response.
 

@@ -37,7 +37,7 @@ from .types import BridgeError, canonical_name
 if TYPE_CHECKING:
     from .server import Bridge
 
-__all__ = ["FIELDS", "HANDLERS", "TYPES", "RosapiError"]
+__all__ = ["FIELDS", "HANDLERS", "TYPES", "RosapiError", "request_args"]
 
 DISTRO = "jazzy"
 
@@ -74,8 +74,16 @@ def _own_services() -> list[tuple[str, str]]:
 
 
 def _all_services(bridge: Bridge) -> list[tuple[str, str]]:
-    found = [(n, t[0] if t else "") for n, t in bridge.ros.node.get_service_names_and_types()]
-    return sorted(set(found) | set(_own_services()))
+    """Services that have a server (the graph also lists names that only have clients)."""
+    node = bridge.ros.node
+    found: set[tuple[str, str]] = set()
+    for n, ns in _node_names(bridge):
+        try:
+            served = node.get_service_names_and_types_by_node(n, ns)
+        except Exception:  # the node went away meanwhile
+            continue
+        found.update((name, types[0] if types else "") for name, types in served)
+    return sorted(found | set(_own_services()))
 
 
 def _msg_type(name: str) -> str:
@@ -131,8 +139,16 @@ def service_type(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, Any]:
     return {"type": ""}
 
 
+_UNKNOWN = "_NODE_NAME_UNKNOWN_"
+
+
 def _node_names(bridge: Bridge) -> list[tuple[str, str]]:
-    return sorted(set(bridge.ros.node.get_node_names_and_namespaces()))
+    names = bridge.ros.node.get_node_names_and_namespaces()
+    return sorted({(n, ns) for n, ns in names if n != _UNKNOWN})
+
+
+def _endpoint_nodes(infos: Any) -> list[str]:
+    return sorted({_full(i.node_name, i.node_namespace) for i in infos if i.node_name != _UNKNOWN})
 
 
 def nodes(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, Any]:
@@ -174,13 +190,13 @@ def node_details(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, Any]:
 def publishers(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, Any]:
     """Nodes publishing on a topic."""
     infos = bridge.ros.node.get_publishers_info_by_topic(_str_field(args, "topic"))
-    return {"publishers": sorted({_full(i.node_name, i.node_namespace) for i in infos})}
+    return {"publishers": _endpoint_nodes(infos)}
 
 
 def subscribers(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, Any]:
     """Nodes subscribed to a topic."""
     infos = bridge.ros.node.get_subscriptions_info_by_topic(_str_field(args, "topic"))
-    return {"subscribers": sorted({_full(i.node_name, i.node_namespace) for i in infos})}
+    return {"subscribers": _endpoint_nodes(infos)}
 
 
 def action_servers(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, Any]:
@@ -248,3 +264,26 @@ FIELDS: dict[str, tuple[str, ...]] = {
     "/rosapi/subscribers": ("topic",),
 }
 """Request field order, for ``args`` given as a list."""
+
+
+def request_args(service: str, args: Mapping[str, Any] | list[Any] | None) -> dict[str, Any]:
+    """The request of a rosapi call as an object: a list is zipped onto the fields in
+    order; a field the request lacks is an error naming it."""
+    fields = FIELDS.get(service, ())
+    where = f"{TYPES[service]} request"
+    if args is None:
+        return {}
+    if isinstance(args, list):
+        if len(args) > len(fields):
+            raise RosapiError(
+                f"args: {len(args)} values given but the {where} has {len(fields)} fields"
+                + (f" ({', '.join(fields)})" if fields else "")
+            )
+        return dict(zip(fields, args, strict=False))
+    for key in args:
+        if key not in fields:
+            raise RosapiError(
+                f"args.{key}: the {where} has no field {key!r}"
+                + (f" (its fields: {', '.join(fields)})" if fields else " (it has no fields)")
+            )
+    return dict(args)

@@ -37,7 +37,8 @@ Service calls
 Each ``call_service`` runs as its own task (at most ``max_calls_in_flight``,
 1024, per connection; more fail at once), with ``timeout`` seconds (default
 5). Without a type, the type comes from the ROS graph; a service that is not
-in the graph within ``discovery_wait`` (1 s) fails with "does not exist".
+in the graph within ``discovery_wait`` (2 s) fails with "does not exist". With
+a type, the call waits up to its timeout for a server to appear.
 ``fragment_size`` on a call splits its ``service_response``.
 
 Client-served services
@@ -116,7 +117,7 @@ class SessionConfig:
     call_timeout: float = 5.0
     served_call_timeout: float = 10.0
     drop_report_interval: float = 5.0
-    discovery_wait: float = 1.0
+    discovery_wait: float = 2.0
     max_calls_in_flight: int = 1024
 
 
@@ -643,7 +644,7 @@ class Session:
         try:
             handler = rosapi.HANDLERS.get(service)
             if handler is not None:
-                values = handler(self.bridge, _args_obj(op.args, rosapi.FIELDS.get(service, ())))
+                values = handler(self.bridge, rosapi.request_args(service, op.args))
             else:
                 values = await self._call_ros(service, op, timeout)
         except _CallFailed as exc:
@@ -697,18 +698,21 @@ class Session:
             raise _CallFailed(f"{service}: bad request: {exc}") from None
         client = ros.client_for(service, srv_cls)
         if not client.service_is_ready():
-            in_graph = bool(ros.service_types(service))
-            wait_until = deadline if in_graph else min(
-                deadline, loop.time() + self.config.discovery_wait
-            )
+            # Wait (at most the call's timeout) for a server to be discovered and matched.
             delay = 0.002
-            while not client.service_is_ready() and loop.time() < wait_until:
+            while not client.service_is_ready():
+                if loop.time() >= deadline:
+                    ros.drop_client(service, srv_cls)  # so the graph forgets the name
+                    if ros.server_count(service) == 0:
+                        raise _CallFailed(
+                            f"service {service} does not exist (no server appeared within "
+                            f"{timeout} s)"
+                        )
+                    raise _CallFailed(
+                        f"service {service} did not become available in {timeout} s"
+                    )
                 await asyncio.sleep(delay)
                 delay = min(delay * 2, 0.05)
-            if not client.service_is_ready():
-                if not ros.service_types(service):
-                    raise _CallFailed(f"service {service} does not exist (not in the ROS graph)")
-                raise _CallFailed(f"service {service} did not become available in {timeout} s")
         # A timer that fails the future is cheaper than asyncio.wait_for (no extra task).
         future = ros.call(client, request)
         timer = loop.call_at(deadline, _expire, future)

@@ -44,7 +44,7 @@ async def test_call_service_args_object_with_type(ws_connect: Any, ros_node: Any
     _mult(ros_node, topic)
     ws = await ws_connect()
     await ws.send({"op": "call_service", "service": topic, "type": "mult_msgs/srv/MultFloats",
-                   "args": {"x": 3.0, "y": 4.5}, "id": "c1"})
+                   "args": {"x": 3.0, "y": 4.5}, "id": "c1", "timeout": 30})
     reply = await ws.expect(op="service_response", id="c1")
     assert reply == {"op": "service_response", "service": topic, "result": True,
                      "values": {"result": 13.5}, "id": "c1"}
@@ -55,7 +55,8 @@ async def test_call_service_args_list_without_type(ws_connect: Any, ros_node: An
     _mult(ros_node, topic)
     ws = await ws_connect()
     await _bridge_sees_service(ws, topic)
-    await ws.send({"op": "call_service", "service": topic, "args": [2, 5], "id": 7})
+    await ws.send({"op": "call_service", "service": topic, "args": [2, 5], "id": 7,
+                   "timeout": 30})
     reply = await ws.expect(op="service_response", id=7)
     assert reply["result"] is True
     assert reply["values"] == {"result": 10.0}
@@ -66,7 +67,7 @@ async def test_call_service_short_type_spelling(ws_connect: Any, ros_node: Any, 
     ros_node.create_service(SetBool, topic, lambda req, resp: _set_bool(req, resp))
     ws = await ws_connect()
     await ws.send({"op": "call_service", "service": topic, "type": "std_srvs/SetBool",
-                   "args": {"data": True}, "id": "sb"})
+                   "args": {"data": True}, "id": "sb", "timeout": 30})
     reply = await ws.expect(op="service_response", id="sb")
     assert reply["values"] == {"success": True, "message": "was True"}
 
@@ -125,7 +126,7 @@ async def test_slow_call_does_not_block_connection(ws_connect: Any, ros_node: An
         await ws.send({"op": "call_service", "service": topic + "_slow",
                        "type": "std_srvs/SetBool", "id": "slow"})
         await ws.send({"op": "call_service", "service": topic + "_fast",
-                       "type": "mult_msgs/MultFloats", "args": {"x": 1, "y": 2}, "id": "fast"})
+                       "type": "mult_msgs/MultFloats", "args": {"x": 1, "y": 2}, "id": "fast", "timeout": 30})
         first = await ws.recv()
         assert first["id"] == "fast" and first["values"] == {"result": 2.0}
     finally:
@@ -217,7 +218,7 @@ async def test_fragmented_call_service(ws_connect: Any, ros_node: Any, topic: st
     _mult(ros_node, topic)
     ws = await ws_connect()
     text = json.dumps({"op": "call_service", "service": topic, "type": "mult_msgs/MultFloats",
-                       "args": {"x": 1.5, "y": 2.0}, "id": "frag"})
+                       "args": {"x": 1.5, "y": 2.0}, "id": "frag", "timeout": 30})
     pieces = split_fragments(text, 10, "f1")
     assert len(pieces) > 3
     for piece in reversed(pieces):  # any order
@@ -231,7 +232,8 @@ async def test_call_service_fragment_size(ws_connect: Any, ros_node: Any, topic:
     _mult(ros_node, topic)
     ws = await ws_connect()
     await ws.send({"op": "call_service", "service": topic, "type": "mult_msgs/MultFloats",
-                   "args": {"x": 2.0, "y": 2.0}, "id": "fr", "fragment_size": 20})
+                   "args": {"x": 2.0, "y": 2.0}, "id": "fr", "fragment_size": 20,
+                   "timeout": 30})
     first = await ws.expect(op="fragment", id="fr")
     pieces = {first["num"]: first["data"]}
     while len(pieces) < first["total"]:

@@ -182,3 +182,24 @@ async def test_rosapi_bad_args(ws_connect: Any):
     await ws.send({"op": "call_service", "service": "/rosapi/topic_type", "args": {}, "id": "b"})
     reply = await ws.expect(op="service_response", id="b")
     assert reply["result"] is False and "'topic'" in reply["values"]
+
+
+async def test_rosapi_unknown_field_named(ws_connect: Any):
+    """A rosapi call with a field its request lacks names that field and the real ones."""
+    ws = await ws_connect()
+    await ws.send({"op": "call_service", "service": "/rosapi/topic_type",
+                   "args": {"topik": "/a"}, "id": "u"})
+    reply = await ws.expect(op="service_response", id="u")
+    assert reply["result"] is False
+    assert "args.topik" in reply["values"] and "topic" in reply["values"]
+
+
+async def test_services_lists_only_served_names(ws_connect: Any, topic: str):
+    """A call to a service nobody serves does not make /rosapi/services list it."""
+    ws = await ws_connect()
+    await ws.send({"op": "call_service", "service": topic, "type": "std_srvs/SetBool",
+                   "id": "nobody", "timeout": 0.5})
+    reply = await ws.expect(op="service_response", id="nobody")
+    assert reply["result"] is False and "does not exist" in reply["values"]
+    assert topic not in (await _call(ws, "/rosapi/services"))["services"]
+    assert await _call(ws, "/rosapi/service_type", {"service": topic}) == {"type": ""}
