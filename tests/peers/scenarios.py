@@ -28,6 +28,14 @@ from tests.peers.peer import PeerError, PeerProcess
 ATTEMPT = 0.5
 DEADLINE = 15.0
 
+#: Features the bridge does not have yet (reported to its engineer). Strict, so a test
+#: starts failing (XPASS) the moment the feature lands, and the mark must go.
+MISSING_ROSAPI = pytest.mark.xfail(
+    strict=True,
+    reason="bridge: rosapi params / message, service details / raw types not implemented yet",
+)
+NO_ACTIONS = pytest.mark.xfail(strict=True, reason="bridge: actions not supported yet")
+
 
 def _module(name: str) -> Any:
     """Import an rclpy module whose API is not fully typed, as Any."""
@@ -508,6 +516,31 @@ def subscribe_cbor_raw(peer: PeerProcess, node: Any, topic: str) -> None:
     assert back == msg
 
 
+#: (message type, values, the typed array a CBOR decoder must make of them)
+CBOR_ARRAYS = [
+    ("std_msgs/msg/Float32MultiArray", [0.5, -1.25, 2.0**100], "Float32Array"),  # exact in f32
+    ("std_msgs/msg/Int8MultiArray", [-128, 0, 127], "Int8Array"),
+    ("std_msgs/msg/UInt16MultiArray", [0, 1, 65535], "Uint16Array"),
+    ("std_msgs/msg/Int32MultiArray", [-(2**31), 7, 2**31 - 1], "Int32Array"),
+    ("std_msgs/msg/UInt32MultiArray", [0, 2**32 - 1], "Uint32Array"),
+    ("std_msgs/msg/Int64MultiArray", [-(2**63), 0, 2**63 - 1], "BigInt64Array"),
+    ("std_msgs/msg/UInt64MultiArray", [0, 2**64 - 1], "BigUint64Array"),
+]
+
+
+def subscribe_cbor_typed_array(
+    peer: PeerProcess, node: Any, topic: str, type_name: str, values: list[Any], typed: str
+) -> None:
+    """With compression cbor, a numeric array arrives as the matching JavaScript typed array."""
+    pkg, _, name = type_name.split("/")
+    msg_cls = getattr(importlib.import_module(f"{pkg}.msg"), name)
+    pub = node.create_publisher(msg_cls, topic, 10)
+    peer.request("subscribe", topic=topic, type=type_name, compression="cbor")
+    got = _ros_publish_until_delivered(peer, pub, topic, msg_cls(data=values))
+    expected = [str(v) for v in values] if typed.startswith("Big") else values
+    assert got["data"] == {"$typed": typed, "values": expected}
+
+
 # -- parameters and type details through rosapi -----------------------------------------------
 
 
@@ -629,14 +662,6 @@ def serve_action(peer: PeerProcess, node: Any, topic: str) -> None:
         client.destroy()
     assert result.status == GoalStatus.STATUS_SUCCEEDED
     assert list(result.result.sequence) == [0, 1, 1, 2, 3, 5]
-
-
-#: Features the bridge does not have yet (see /work/notes/bridge-bugs.md). Strict, so a
-#: test starts failing (XPASS) the moment the feature lands and the mark must go.
-MISSING_ROSAPI = pytest.mark.xfail(
-    strict=True, reason="bridge: rosapi params / message_details not implemented yet"
-)
-NO_ACTIONS = pytest.mark.xfail(strict=True, reason="bridge: actions not supported yet")
 
 
 # -- robustness through stock clients ---------------------------------------------------------
@@ -1045,28 +1070,3 @@ def reconnect_after_bridge_restart(peer: PeerProcess, bridge: Any, node: Any, to
     assert got == {"data": "after"}
     response = _call_from_ros(node, SetBool, service, SetBool.Request(data=True))
     assert response.message == "roslibpy got data=True"
-
-
-#: (message type, values, the typed array a CBOR decoder must make of them)
-CBOR_ARRAYS = [
-    ("std_msgs/msg/Float32MultiArray", [0.5, -1.25, 2.0**100], "Float32Array"),  # exact in f32
-    ("std_msgs/msg/Int8MultiArray", [-128, 0, 127], "Int8Array"),
-    ("std_msgs/msg/UInt16MultiArray", [0, 1, 65535], "Uint16Array"),
-    ("std_msgs/msg/Int32MultiArray", [-(2**31), 7, 2**31 - 1], "Int32Array"),
-    ("std_msgs/msg/UInt32MultiArray", [0, 2**32 - 1], "Uint32Array"),
-    ("std_msgs/msg/Int64MultiArray", [-(2**63), 0, 2**63 - 1], "BigInt64Array"),
-    ("std_msgs/msg/UInt64MultiArray", [0, 2**64 - 1], "BigUint64Array"),
-]
-
-
-def subscribe_cbor_typed_array(
-    peer: PeerProcess, node: Any, topic: str, type_name: str, values: list[Any], typed: str
-) -> None:
-    """With compression cbor, a numeric array arrives as the matching JavaScript typed array."""
-    pkg, _, name = type_name.split("/")
-    msg_cls = getattr(importlib.import_module(f"{pkg}.msg"), name)
-    pub = node.create_publisher(msg_cls, topic, 10)
-    peer.request("subscribe", topic=topic, type=type_name, compression="cbor")
-    got = _ros_publish_until_delivered(peer, pub, topic, msg_cls(data=values))
-    expected = [str(v) for v in values] if typed.startswith("Big") else values
-    assert got["data"] == {"$typed": typed, "values": expected}
