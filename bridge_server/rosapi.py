@@ -24,11 +24,16 @@ service                            request          response
 /rosapi/action_servers             (none)           action_servers
 /rosapi/get_time                   (none)           time {sec, nanosec} (and ROS 1 secs, nsecs)
 /rosapi/get_ros_version            (none)           version 2, distro "jazzy"
+/rosapi/message_details            type             typedefs (the type's, then nested types')
+/rosapi/service_request_details    type             typedefs of the request
+/rosapi/service_response_details   type             typedefs of the response
+/rosapi/topics_and_raw_types       (none)           topics, types, typedefs_full_text ("")
 =================================  ===============  ===========================================
 """
 
 from __future__ import annotations
 
+import re
 from collections.abc import Callable, Mapping
 from typing import TYPE_CHECKING, Any
 
@@ -264,6 +269,158 @@ FIELDS: dict[str, tuple[str, ...]] = {
     "/rosapi/subscribers": ("topic",),
 }
 """Request field order, for ``args`` given as a list."""
+
+
+# -- type definitions (message_details and friends) ----------------------------------------
+
+_SEQ = re.compile(r"sequence<([^,>]+)(?:,\s*(\d+))?>\Z")
+_ARR = re.compile(r"(.+)\[(\d+)\]\Z")
+_EXAMPLES = {"boolean": "False", "string": "", "wstring": "", "float": "0.0", "double": "0.0"}
+
+
+def _split_field_type(spec: str) -> tuple[str, int]:
+    """Base type and array length: ``sequence<double>`` -> (double, 0), ``double[36]`` ->
+    (double, 36), ``int32`` -> (int32, -1)."""
+    m = _SEQ.match(spec)
+    if m:
+        return m.group(1).strip(), 0
+    m = _ARR.match(spec)
+    if m:
+        return m.group(1), int(m.group(2))
+    return spec, -1
+
+
+def _full_type(base: str) -> str:
+    if "/" in base:
+        pkg, _, name = base.rpartition("/")
+        return f"{pkg.split('/')[0]}/msg/{name}"
+    if base.startswith(("string<", "wstring<")):
+        return base.split("<")[0]
+    return base
+
+
+def _typedef(cls: type[Any], name: str) -> tuple[dict[str, Any], list[type[Any]]]:
+    meta = type(cls)
+    constants = getattr(meta, f"_{meta.__name__}__constants", {}) or {}
+    fieldnames, fieldtypes, arraylens, examples = [], [], [], []
+    nested: list[type[Any]] = []
+    for field_name, spec in cls.get_fields_and_field_types().items():
+        base, arraylen = _split_field_type(spec)
+        full = _full_type(base)
+        fieldnames.append(field_name)
+        fieldtypes.append(full)
+        arraylens.append(arraylen)
+        if arraylen >= 0:
+            examples.append("[]")
+        elif "/" in full:
+            examples.append("{}")
+        else:
+            examples.append(_EXAMPLES.get(full, "0"))
+        if "/" in full:
+            nested.append(_message_class(full))
+    return (
+        {
+            "type": name,
+            "fieldnames": fieldnames,
+            "fieldtypes": fieldtypes,
+            "fieldarraylen": arraylens,
+            "examples": examples,
+            "constnames": list(constants),
+            "constvalues": [str(v) for v in constants.values()],
+        },
+        nested,
+    )
+
+
+def _message_class(name: str) -> type[Any]:
+    from .types import resolve_message
+
+    try:
+        return resolve_message(name)
+    except BridgeError as exc:
+        raise RosapiError(str(exc)) from None
+
+
+def _typedefs(cls: type[Any], name: str) -> list[dict[str, Any]]:
+    """The typedef of ``cls`` then those of every nested type, each once."""
+    from .types import type_name_of
+
+    out: list[dict[str, Any]] = []
+    seen: set[type[Any]] = set()
+    todo: list[tuple[type[Any], str]] = [(cls, name)]
+    while todo:
+        current, current_name = todo.pop(0)
+        if current in seen:
+            continue
+        seen.add(current)
+        typedef, nested = _typedef(current, current_name)
+        out.append(typedef)
+        todo.extend((n, type_name_of(n)) for n in nested if n not in seen)
+    return out
+
+
+def message_details(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, Any]:
+    """Field names, types, array lengths and constants of a message type and its parts."""
+    name = _str_field(args, "type")
+    cls = _message_class(name)
+    return {"typedefs": _typedefs(cls, _msg_type(name))}
+
+
+def _service_part(args: Mapping[str, Any], part: str) -> dict[str, Any]:
+    from .types import resolve_service
+
+    name = _str_field(args, "type")
+    try:
+        srv = resolve_service(name)
+    except BridgeError as exc:
+        raise RosapiError(str(exc)) from None
+    cls = getattr(srv, part)
+    return {"typedefs": _typedefs(cls, f"{_srv_type(name)}_{part}")}
+
+
+def service_request_details(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, Any]:
+    """Typedefs of a service type's request."""
+    return _service_part(args, "Request")
+
+
+def service_response_details(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, Any]:
+    """Typedefs of a service type's response."""
+    return _service_part(args, "Response")
+
+
+def topics_and_raw_types(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, Any]:
+    """Topics, their types, and each type's definition text (empty: .msg sources are not kept)."""
+    pairs = sorted(bridge.ros.node.get_topic_names_and_types())
+    return {
+        "topics": [n for n, _ in pairs],
+        "types": [t[0] if t else "" for _, t in pairs],
+        "typedefs_full_text": ["" for _ in pairs],
+    }
+
+
+HANDLERS.update(
+    {
+        "/rosapi/message_details": message_details,
+        "/rosapi/service_request_details": service_request_details,
+        "/rosapi/service_response_details": service_response_details,
+        "/rosapi/topics_and_raw_types": topics_and_raw_types,
+    }
+)
+TYPES.update(
+    {
+        "/rosapi/message_details": "rosapi_msgs/srv/MessageDetails",
+        "/rosapi/service_request_details": "rosapi_msgs/srv/ServiceRequestDetails",
+        "/rosapi/service_response_details": "rosapi_msgs/srv/ServiceResponseDetails",
+        "/rosapi/topics_and_raw_types": "rosapi_msgs/srv/TopicsAndRawTypes",
+    }
+)
+FIELDS.update(
+    {
+        "/rosapi/message_details": ("type",),
+        "/rosapi/service_request_details": ("type",),
+        "/rosapi/service_response_details": ("type",),
+    }
+)
 
 
 def request_args(service: str, args: Mapping[str, Any] | list[Any] | None) -> dict[str, Any]:

@@ -203,3 +203,38 @@ async def test_services_lists_only_served_names(ws_connect: Any, topic: str):
     assert reply["result"] is False and "does not exist" in reply["values"]
     assert topic not in (await _call(ws, "/rosapi/services"))["services"]
     assert await _call(ws, "/rosapi/service_type", {"service": topic}) == {"type": ""}
+
+
+async def test_message_details(ws_connect: Any):
+    """/rosapi/message_details gives the typedef of a type, then of its nested types."""
+    ws = await ws_connect()
+    values = await _call(ws, "/rosapi/message_details", {"type": "geometry_msgs/PoseWithCovariance"})
+    typedefs = {t["type"]: t for t in values["typedefs"]}
+    top = values["typedefs"][0]
+    assert top["type"] == "geometry_msgs/msg/PoseWithCovariance"
+    assert top["fieldnames"] == ["pose", "covariance"]
+    assert top["fieldtypes"] == ["geometry_msgs/msg/Pose", "double"]
+    assert top["fieldarraylen"] == [-1, 36]
+    assert typedefs["geometry_msgs/msg/Point"]["fieldnames"] == ["x", "y", "z"]
+    status = await _call(ws, "/rosapi/message_details", {"type": "action_msgs/msg/GoalStatus"})
+    first = status["typedefs"][0]
+    assert first["constvalues"][first["constnames"].index("STATUS_SUCCEEDED")] == "4"
+
+
+async def test_service_request_and_response_details(ws_connect: Any):
+    """/rosapi/service_request_details and _response_details describe the two halves."""
+    ws = await ws_connect()
+    req = await _call(ws, "/rosapi/service_request_details", {"type": "std_srvs/srv/SetBool"})
+    assert req["typedefs"][0]["fieldnames"] == ["data"]
+    resp = await _call(ws, "/rosapi/service_response_details", {"type": "std_srvs/SetBool"})
+    assert resp["typedefs"][0]["fieldnames"] == ["success", "message"]
+    assert resp["typedefs"][0]["fieldtypes"] == ["boolean", "string"]
+
+
+async def test_message_details_unknown_type(ws_connect: Any):
+    """/rosapi/message_details of an unknown type fails naming it."""
+    ws = await ws_connect()
+    await ws.send({"op": "call_service", "service": "/rosapi/message_details",
+                   "args": {"type": "nope_msgs/Nothing"}, "id": "md"})
+    reply = await ws.expect(op="service_response", id="md")
+    assert reply["result"] is False and "nope_msgs/Nothing" in reply["values"]
