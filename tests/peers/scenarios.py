@@ -1070,3 +1070,14 @@ def reconnect_after_bridge_restart(peer: PeerProcess, bridge: Any, node: Any, to
     assert got == {"data": "after"}
     response = _call_from_ros(node, SetBool, service, SetBool.Request(data=True))
     assert response.message == "roslibpy got data=True"
+
+
+def subscribe_without_type(peer: PeerProcess, node: Any, topic: str) -> None:
+    """A subscription that names no type (roslib: none sent; roslibpy: null) takes the graph's."""
+    from std_msgs.msg import String
+
+    pub = node.create_publisher(String, topic, 10)
+    wait_until(lambda: peer.request("get_topic_type", topic=topic), DEADLINE, "the topic's type")
+    peer.request("subscribe", topic=topic, type=None)
+    got = _ros_publish_until_delivered(peer, pub, topic, String(data="typeless"))
+    assert got == {"data": "typeless"}

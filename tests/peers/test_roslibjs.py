@@ -288,6 +288,11 @@ def test_concurrent_calls(peer: PeerProcess, ros_node: Any, topic: str) -> None:
     scenarios.concurrent_calls(peer, ros_node, topic)
 
 
+def test_subscribe_without_type(peer: PeerProcess, ros_node: Any, topic: str) -> None:
+    """A roslib Topic created without a message type subscribes with the topic's graph type."""
+    scenarios.subscribe_without_type(peer, ros_node, topic)
+
+
 def test_native_websocket_publish(native_peer: PeerProcess, ros_node: Any, topic: str) -> None:
     """With Node's native WebSocket, roslib's published message reaches rclpy."""
     assert native_peer.info["transport"] == "native WebSocket"

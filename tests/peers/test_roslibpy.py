@@ -266,3 +266,8 @@ def test_reconnect_after_bridge_restart(
         scenarios.reconnect_after_bridge_restart(pool.get("roslibpy"), private, ros_node, topic)
     finally:
         pool.close()
+
+
+def test_subscribe_without_type(peer: PeerProcess, ros_node: Any, topic: str) -> None:
+    """A roslibpy Topic created without a message type subscribes with the topic's graph type."""
+    scenarios.subscribe_without_type(peer, ros_node, topic)

@@ -62,7 +62,8 @@ const services = new Map();
 function topic(cmd) {
   const key = `${cmd.topic}\u0000${cmd.type}\u0000${cmd.handle ?? ""}`;
   if (!topics.has(key)) {
-    const options = { ros, name: cmd.topic, messageType: cmd.type };
+    // A null type means the user left messageType out (roslib then sends no "type").
+    const options = { ros, name: cmd.topic, messageType: cmd.type ?? undefined };
     for (const k of ["latch", "queue_size", "compression", "throttle_rate", "queue_length"]) {
       if (k in cmd) options[k] = cmd[k];
     }
