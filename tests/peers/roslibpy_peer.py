@@ -22,7 +22,7 @@ from __future__ import annotations
 import json
 import sys
 import threading
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from typing import Any
 
 import roslibpy
@@ -140,7 +140,7 @@ class Peer:
         if op == "call":
             service = roslibpy.Service(ros, cmd["service"], cmd.get("type", ""))
             request = roslibpy.ServiceRequest(cmd.get("args", {}))
-            return dict(service.call(request, timeout=timeout))
+            return service.call(request, timeout=timeout)
         if op == "advertise_service":
             name = cmd["service"]
             handler = HANDLERS[cmd["handler"]]
@@ -205,11 +205,20 @@ class Peer:
         raise ValueError(f"unknown command {op!r}")
 
 
+def plain(value: Any) -> Any:
+    """roslibpy's UserDict results (ServiceResponse, Message...) as plain JSON values."""
+    if isinstance(value, Mapping):
+        return {str(k): plain(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [plain(v) for v in value]
+    return value
+
+
 def run_command(peer: Peer, cmd: dict[str, Any]) -> None:
     """Run one command and print its reply, whatever happens."""
     seq = cmd.get("seq")
     try:
-        value = peer.handle(cmd)
+        value = plain(peer.handle(cmd))
     except Exception as exc:  # every failure goes back to the test as text
         emit({"seq": seq, "ok": False, "error": f"{type(exc).__name__}: {exc}"})
     else:

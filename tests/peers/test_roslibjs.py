@@ -155,25 +155,23 @@ def test_subscribe_cbor_raw(peer: PeerProcess, ros_node: Any, topic: str) -> Non
     scenarios.subscribe_cbor_raw(peer, ros_node, topic)
 
 
-@scenarios.MISSING_ROSAPI
+@scenarios.MISSING_PARAMS
 def test_params(peer: PeerProcess, ros_node: Any) -> None:
     """Ros.getParams() and ROSLIB.Param get/set reach an rclpy node's parameter."""
     scenarios.params(peer, ros_node)
 
 
-@scenarios.MISSING_ROSAPI
 def test_message_details(peer: PeerProcess) -> None:
     """Ros.getMessageDetails() typedefs for a nested type decode with Ros.decodeTypeDefs()."""
     scenarios.message_details(peer)
 
 
-@scenarios.MISSING_ROSAPI
 def test_service_details(peer: PeerProcess) -> None:
     """Ros.getServiceRequestDetails()/getServiceResponseDetails() return typedefs."""
     scenarios.service_details(peer)
 
 
-@scenarios.MISSING_ROSAPI
+@scenarios.NO_RAW_TEXT
 def test_topics_and_raw_types(peer: PeerProcess, ros_node: Any, topic: str) -> None:
     """Ros.getTopicsAndRawTypes() lists the topic with its type and definition text."""
     scenarios.topics_and_raw_types(peer, ros_node, topic)

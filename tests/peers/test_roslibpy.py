@@ -125,19 +125,17 @@ def test_bad_type_then_publish(peer: PeerProcess, ros_node: Any, topic: str) -> 
     scenarios.bad_type_then_publish(peer, ros_node, topic, sees_status=False)
 
 
-@scenarios.MISSING_ROSAPI
+@scenarios.MISSING_PARAMS
 def test_params(peer: PeerProcess, ros_node: Any) -> None:
     """Ros.get_params(), get_param() and set_param() reach an rclpy node's parameter."""
     scenarios.params(peer, ros_node)
 
 
-@scenarios.MISSING_ROSAPI
 def test_message_details(peer: PeerProcess) -> None:
     """Ros.get_message_details() returns rosapi typedefs for a nested message type."""
     scenarios.message_details(peer)
 
 
-@scenarios.MISSING_ROSAPI
 def test_service_details(peer: PeerProcess) -> None:
     """Ros.get_service_request_details()/get_service_response_details() return typedefs."""
     scenarios.service_details(peer)
