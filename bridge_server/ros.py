@@ -590,6 +590,26 @@ class RosNode:
             _inline_done_callbacks(client)
         return client
 
+    async def call_when_ready(
+        self, service: str, srv_cls: type[Any], request: Any, timeout: float
+    ) -> Any:
+        """Call ``service`` once a server is matched; ``TimeoutError`` after ``timeout`` s."""
+        loop = self.loop
+        deadline = loop.time() + timeout
+        client = self.client_for(service, srv_cls)
+        delay = 0.002
+        while not client.service_is_ready():
+            if loop.time() >= deadline:
+                raise TimeoutError(f"service {service} is not available")
+            await asyncio.sleep(delay)
+            delay = min(delay * 2, 0.05)
+        future = self.call(client, request)
+        timer = loop.call_at(deadline, _fail_timeout, future)
+        try:
+            return await future
+        finally:
+            timer.cancel()
+
     def drop_client(self, service: str, srv_cls: type[Any]) -> None:
         """Destroy the cached client (after a call found no server)."""
         client = self._clients.pop((service, srv_cls), None)
@@ -672,6 +692,11 @@ def _inline_done_callbacks(client: Any) -> None:
         return _InlineFuture(get(sequence_number))
 
     client.get_pending_request = get_pending_request
+
+
+def _fail_timeout(fut: asyncio.Future[Any]) -> None:
+    if not fut.done():
+        fut.set_exception(TimeoutError("the service did not answer in time"))
 
 
 def _settle(fut: asyncio.Future[Any], exc: BaseException | None, value: Any) -> None:

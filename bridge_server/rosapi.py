@@ -28,13 +28,25 @@ service                            request          response
 /rosapi/service_request_details    type             typedefs of the request
 /rosapi/service_response_details   type             typedefs of the response
 /rosapi/topics_and_raw_types       (none)           topics, types, typedefs_full_text ("")
+/rosapi/get_param_names            (none)           names (``/node:param``)
+/rosapi/get_param                  name, default_   value (JSON text), successful, reason
+                                   value
+/rosapi/has_param                  name             exists
+/rosapi/set_param                  name, value      (empty; result false if the node refuses)
+/rosapi/delete_param               name             (empty; result false if the node refuses)
 =================================  ===============  ===========================================
+
+Parameters are ROS 2 node parameters named ``/node:param``, read and written
+through the node's own parameter services (``rcl_interfaces``); values travel
+as JSON text, as in rosapi.
 """
 
 from __future__ import annotations
 
+import asyncio
+import json
 import re
-from collections.abc import Callable, Mapping
+from collections.abc import Awaitable, Callable, Mapping
 from typing import TYPE_CHECKING, Any
 
 from .types import BridgeError, canonical_name
@@ -42,7 +54,7 @@ from .types import BridgeError, canonical_name
 if TYPE_CHECKING:
     from .server import Bridge
 
-__all__ = ["FIELDS", "HANDLERS", "TYPES", "RosapiError", "request_args"]
+__all__ = ["ASYNC_HANDLERS", "FIELDS", "HANDLERS", "TYPES", "RosapiError", "request_args"]
 
 DISTRO = "jazzy"
 
@@ -75,7 +87,7 @@ def _split(full: str) -> tuple[str, str]:
 
 
 def _own_services() -> list[tuple[str, str]]:
-    return sorted((name, TYPES[name]) for name in HANDLERS)
+    return sorted((name, TYPES[name]) for name in (*HANDLERS, *ASYNC_HANDLERS))
 
 
 def _all_services(bridge: Bridge) -> list[tuple[str, str]]:
@@ -419,6 +431,206 @@ FIELDS.update(
         "/rosapi/message_details": ("type",),
         "/rosapi/service_request_details": ("type",),
         "/rosapi/service_response_details": ("type",),
+    }
+)
+
+
+# -- parameters (``/node:param`` names, through each node's parameter services) ------------
+
+PARAM_TIMEOUT = 2.0
+"""Seconds to wait for a node's parameter service."""
+
+AsyncHandler = Callable[["Bridge", Mapping[str, Any]], Awaitable[dict[str, Any]]]
+
+
+def _param_name(args: Mapping[str, Any]) -> tuple[str, str, str]:
+    full = _str_field(args, "name")
+    node, sep, param = full.partition(":")
+    if not sep or not node or not param:
+        raise RosapiError(f"args.name: expected 'node_name:param_name', got {full!r}")
+    node = node if node.startswith("/") else "/" + node
+    return node, param, f"{node}:{param}"
+
+
+def _from_parameter_value(value: Any) -> Any:
+    kind = value.type
+    if kind == 1:
+        return bool(value.bool_value)
+    if kind == 2:
+        return int(value.integer_value)
+    if kind == 3:
+        return float(value.double_value)
+    if kind == 4:
+        return str(value.string_value)
+    if kind == 5:
+        return [int(b) if isinstance(b, int) else b[0] for b in value.byte_array_value]
+    if kind == 6:
+        return [bool(v) for v in value.bool_array_value]
+    if kind == 7:
+        return [int(v) for v in value.integer_array_value]
+    if kind == 8:
+        return [float(v) for v in value.double_array_value]
+    if kind == 9:
+        return [str(v) for v in value.string_array_value]
+    return None
+
+
+def _to_parameter_value(value: Any) -> Any:
+    from rcl_interfaces.msg import ParameterValue
+
+    pv = ParameterValue()
+    if value is None:
+        pv.type = 0
+    elif isinstance(value, bool):
+        pv.type, pv.bool_value = 1, value
+    elif isinstance(value, int):
+        pv.type, pv.integer_value = 2, value
+    elif isinstance(value, float):
+        pv.type, pv.double_value = 3, value
+    elif isinstance(value, str):
+        pv.type, pv.string_value = 4, value
+    elif isinstance(value, list) and all(isinstance(v, bool) for v in value):
+        pv.type, pv.bool_array_value = 6, value
+    elif isinstance(value, list) and all(isinstance(v, int) for v in value):
+        pv.type, pv.integer_array_value = 7, value
+    elif isinstance(value, list) and all(isinstance(v, int | float) for v in value):
+        pv.type, pv.double_array_value = 8, [float(v) for v in value]
+    elif isinstance(value, list) and all(isinstance(v, str) for v in value):
+        pv.type, pv.string_array_value = 9, value
+    else:
+        raise RosapiError(
+            "args.value: a ROS 2 parameter is a bool, int, float, string or a list of one of "
+            f"those, got {type(value).__name__}"
+        )
+    return pv
+
+
+def _json_arg(args: Mapping[str, Any], name: str) -> Any:
+    text = args.get(name)
+    if text is None or text == "":
+        return None
+    if not isinstance(text, str):
+        raise RosapiError(f"args.{name}: must be a JSON text (a string)")
+    try:
+        return json.loads(text)
+    except ValueError as exc:
+        raise RosapiError(f"args.{name}: not valid JSON ({exc})") from None
+
+
+async def _get_values(bridge: Bridge, node: str, names: list[str]) -> list[Any]:
+    from rcl_interfaces.srv import GetParameters
+
+    try:
+        response = await bridge.ros.call_when_ready(
+            f"{node}/get_parameters", GetParameters, GetParameters.Request(names=names),
+            PARAM_TIMEOUT,
+        )
+    except TimeoutError:
+        raise RosapiError(f"node {node} does not answer parameter requests") from None
+    return list(response.values)
+
+
+async def _set_value(bridge: Bridge, node: str, param: str, value: Any) -> tuple[bool, str]:
+    from rcl_interfaces.msg import Parameter
+    from rcl_interfaces.srv import SetParameters
+
+    request = SetParameters.Request(parameters=[Parameter(name=param, value=value)])
+    try:
+        response = await bridge.ros.call_when_ready(
+            f"{node}/set_parameters", SetParameters, request, PARAM_TIMEOUT
+        )
+    except TimeoutError:
+        raise RosapiError(f"node {node} does not answer parameter requests") from None
+    result = response.results[0]
+    return bool(result.successful), str(result.reason)
+
+
+async def get_param_names(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, Any]:
+    """Every parameter of every node that offers parameter services, as ``/node:param``."""
+    from rcl_interfaces.srv import ListParameters
+
+    own = _full(bridge.ros.node.get_name(), bridge.ros.node.get_namespace())
+    nodes = [_full(n, ns) for n, ns in _node_names(bridge)]
+
+    async def one(node: str) -> list[str]:
+        if node == own:
+            return []
+        try:
+            response = await bridge.ros.call_when_ready(
+                f"{node}/list_parameters", ListParameters, ListParameters.Request(),
+                PARAM_TIMEOUT,
+            )
+        except Exception:
+            return []
+        return [f"{node}:{name}" for name in response.result.names]
+
+    found = await asyncio.gather(*(one(n) for n in nodes))
+    return {"names": sorted(name for names in found for name in names)}
+
+
+async def get_param(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, Any]:
+    """A parameter's value as JSON text (``default_value`` if it is not set)."""
+    node, param, full = _param_name(args)
+    default = args.get("default_value", "")
+    values = await _get_values(bridge, node, [param])
+    if not values or values[0].type == 0:
+        return {"value": default if isinstance(default, str) else "", "successful": True,
+                "reason": f"{full} is not set"}
+    return {"value": json.dumps(_from_parameter_value(values[0])), "successful": True,
+            "reason": ""}
+
+
+async def has_param(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, Any]:
+    """Whether a parameter is set."""
+    node, param, _ = _param_name(args)
+    values = await _get_values(bridge, node, [param])
+    return {"exists": bool(values) and values[0].type != 0}
+
+
+async def set_param(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, Any]:
+    """Set a parameter from JSON text; fails (result false) if the node refuses."""
+    node, param, full = _param_name(args)
+    value = _to_parameter_value(_json_arg(args, "value"))
+    ok, reason = await _set_value(bridge, node, param, value)
+    if not ok:
+        raise RosapiError(f"{full}: the node refused the value" + (f": {reason}" * bool(reason)))
+    return {}
+
+
+async def delete_param(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, Any]:
+    """Unset (undeclare) a parameter; fails if the node does not allow it."""
+    node, param, full = _param_name(args)
+    ok, reason = await _set_value(bridge, node, param, _to_parameter_value(None))
+    if not ok:
+        raise RosapiError(f"{full}: the node refused to unset it" + (f": {reason}" * bool(reason)))
+    return {}
+
+
+ASYNC_HANDLERS: dict[str, AsyncHandler] = {
+    "/rosapi/get_param_names": get_param_names,
+    "/rosapi/get_param": get_param,
+    "/rosapi/has_param": has_param,
+    "/rosapi/set_param": set_param,
+    "/rosapi/delete_param": delete_param,
+}
+"""Service name -> handler that has to ask ROS nodes (awaited)."""
+
+TYPES.update(
+    {
+        "/rosapi/get_param_names": "rosapi_msgs/srv/GetParamNames",
+        "/rosapi/get_param": "rosapi_msgs/srv/GetParam",
+        "/rosapi/has_param": "rosapi_msgs/srv/HasParam",
+        "/rosapi/set_param": "rosapi_msgs/srv/SetParam",
+        "/rosapi/delete_param": "rosapi_msgs/srv/DeleteParam",
+    }
+)
+FIELDS.update(
+    {
+        "/rosapi/get_param_names": (),
+        "/rosapi/get_param": ("name", "default_value"),
+        "/rosapi/has_param": ("name",),
+        "/rosapi/set_param": ("name", "value"),
+        "/rosapi/delete_param": ("name",),
     }
 )
 

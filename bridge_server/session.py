@@ -643,8 +643,11 @@ class Session:
         values: Mapping[str, Any]
         try:
             handler = rosapi.HANDLERS.get(service)
+            ahandler = rosapi.ASYNC_HANDLERS.get(service)
             if handler is not None:
                 values = handler(self.bridge, rosapi.request_args(service, op.args))
+            elif ahandler is not None:
+                values = await ahandler(self.bridge, rosapi.request_args(service, op.args))
             else:
                 values = await self._call_ros(service, op, timeout)
         except _CallFailed as exc:
@@ -732,7 +735,7 @@ class Session:
         name = _topic_name(op.service)
         srv_cls = self.ros.resolve_service(op.type)
         type_name = canonical_name(op.type, "srv")
-        if name in rosapi.HANDLERS:
+        if name in rosapi.HANDLERS or name in rosapi.ASYNC_HANDLERS:
             self.error(f"advertise_service: {name} is answered by the bridge itself", op.id)
             return
         mine = self.served.get(name)

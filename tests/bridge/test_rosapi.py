@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import asyncio
 import itertools
+import json
 import time
 from collections.abc import Callable
 from typing import Any
@@ -238,3 +239,36 @@ async def test_message_details_unknown_type(ws_connect: Any):
                    "args": {"type": "nope_msgs/Nothing"}, "id": "md"})
     reply = await ws.expect(op="service_response", id="md")
     assert reply["result"] is False and "nope_msgs/Nothing" in reply["values"]
+
+
+async def test_params_get_set_names(ws_connect: Any, ros_node: Any):
+    """Node parameters are listed, read and written as /node:param with JSON text values."""
+    ros_node.declare_parameter("speed", 1.5)
+    ros_node.declare_parameter("names", ["a", "b"])
+    full = _fq(ros_node)
+    ws = await ws_connect()
+    await _until(ws, "/rosapi/get_param_names", None,
+                 lambda v: f"{full}:speed" in v["names"], timeout=20)
+    got = await _call(ws, "/rosapi/get_param", {"name": f"{full}:speed"})
+    assert json.loads(got["value"]) == 1.5 and got["successful"] is True
+    names = await _call(ws, "/rosapi/get_param", {"name": f"{full}:names"})
+    assert json.loads(names["value"]) == ["a", "b"]
+    await _call(ws, "/rosapi/set_param", {"name": f"{full}:speed", "value": "2.25"})
+    assert ros_node.get_parameter("speed").value == 2.25
+    assert (await _call(ws, "/rosapi/has_param", {"name": f"{full}:speed"}))["exists"] is True
+    assert (await _call(ws, "/rosapi/has_param", {"name": f"{full}:nope"}))["exists"] is False
+    missing = await _call(ws, "/rosapi/get_param", {"name": f"{full}:nope", "default_value": "7"})
+    assert missing["value"] == "7"
+
+
+async def test_set_param_refused_names_param(ws_connect: Any, ros_node: Any):
+    """A value of the wrong type is refused by the node; the failure names the parameter."""
+    ros_node.declare_parameter("count", 3)
+    full = _fq(ros_node)
+    ws = await ws_connect()
+    await _until(ws, "/rosapi/get_param_names", None,
+                 lambda v: f"{full}:count" in v["names"], timeout=20)
+    await ws.send({"op": "call_service", "service": "/rosapi/set_param", "id": "sp",
+                   "args": {"name": f"{full}:count", "value": '"text"'}})
+    reply = await ws.expect(op="service_response", id="sp")
+    assert reply["result"] is False and f"{full}:count" in reply["values"]
