@@ -209,7 +209,26 @@ class _Served:
         self.name = name
         self.type_name = type_name
         self.ros: ServedService | None = None
-        self.pending: dict[str, tuple[PendingRosCall, asyncio.TimerHandle]] = {}
+        self.pending: dict[str, tuple[PendingRosCall | _DirectCall, asyncio.TimerHandle]] = {}
+
+
+class _DirectCall:
+    """A call from another client of this bridge to a service this client serves.
+
+    It goes from session to session without a ROS hop, so a failure keeps its
+    ``result: false`` and text (a ROS service has no way to report one).
+    """
+
+    def __init__(self, future: asyncio.Future[tuple[bool, Any]]) -> None:
+        self.future = future
+
+    def fail(self, reason: str) -> None:
+        if not self.future.done():
+            self.future.set_result((False, reason))
+
+    def succeed(self, values: Mapping[str, Any]) -> None:
+        if not self.future.done():
+            self.future.set_result((True, values))
 
 
 class Session:
@@ -648,6 +667,10 @@ class Session:
                 values = handler(self.bridge, rosapi.request_args(service, op.args))
             elif ahandler is not None:
                 values = await ahandler(self.bridge, rosapi.request_args(service, op.args))
+            elif (owner := self.bridge.service_owners.get(service)) is not None:
+                result, direct = await owner.call_direct(service, op, timeout)
+                self._respond(service, op.id, result, direct, op.fragment_size)
+                return
             else:
                 values = await self._call_ros(service, op, timeout)
         except _CallFailed as exc:
@@ -779,16 +802,21 @@ class Session:
         served.pending[rid] = (pending, timer)
         self.send_op(ops.CallService(service=served.name, args=args, id=rid))
 
-    def _served_timeout(self, served: _Served, rid: str) -> None:
+    def _served_timeout(self, served: _Served, rid: str, timeout: float | None = None) -> None:
         entry = served.pending.pop(rid, None)
-        if entry is not None:
-            log.error(
-                "session %d: no answer for %s within %s s; the ROS caller gets a default response",
-                self.sid,
-                rid,
-                self.config.served_call_timeout,
-            )
-            entry[0].complete()
+        if entry is None:
+            return
+        pending = entry[0]
+        if isinstance(pending, _DirectCall):
+            pending.fail(f"service {served.name} timed out after {timeout} s")
+            return
+        log.error(
+            "session %d: no answer for %s within %s s; the ROS caller gets a default response",
+            self.sid,
+            rid,
+            self.config.served_call_timeout,
+        )
+        pending.complete()
 
     def service_response(self, op: ops.ServiceResponse) -> None:
         """The client answers a ROS caller of a service it serves."""
@@ -810,6 +838,20 @@ class Session:
             return
         pending, timer = entry
         timer.cancel()
+        if isinstance(pending, _DirectCall):
+            if not op.result:
+                reason = op.values if isinstance(op.values, str) else "the serving client failed"
+                pending.fail(f"service {name} failed: {reason}")
+                return
+            conv = served.ros.response_conv
+            try:
+                obj = conv.to_obj(conv.from_obj(op.values or {}, "values"))
+            except convert.ConversionError as exc:
+                self.error(f"service_response for {name}: {exc}", op.id)
+                pending.fail(f"service {name} answered with a bad response: {exc}")
+                return
+            pending.succeed(obj)
+            return
         if not op.result:
             log.error(
                 "session %d: the client failed %s (%s); the ROS caller gets a default response",
@@ -828,6 +870,34 @@ class Session:
             return
         pending.complete(response)
 
+    async def call_direct(
+        self, name: str, op: ops.CallService, timeout: float
+    ) -> tuple[bool, Any]:
+        """Carry out another client's call to a service this client serves (no ROS hop)."""
+        served = self.served.get(name)
+        if served is None or served.ros is None:
+            raise _CallFailed(f"service {name} is no longer served")
+        if op.type is not None and canonical_name(op.type, "srv") != served.type_name:
+            raise _CallFailed(
+                f"service {name} has type {served.type_name}, not {canonical_name(op.type, 'srv')}"
+            )
+        conv = served.ros.request_conv
+        try:
+            args = conv.to_obj(conv.from_obj(_args_obj(op.args, conv.fields), "args"))
+        except convert.ConversionError as exc:
+            raise _CallFailed(f"{name}: bad request: {exc}") from None
+        rid = f"service_request:{name}:{next(self._request_ids)}"
+        future: asyncio.Future[tuple[bool, Any]] = self.loop.create_future()
+        timer = self.loop.call_later(timeout, self._served_timeout, served, rid, timeout)
+        served.pending[rid] = (_DirectCall(future), timer)
+        self.send_op(ops.CallService(service=name, args=args, id=rid))
+        try:
+            return await future
+        finally:
+            entry = served.pending.pop(rid, None)
+            if entry is not None:  # the caller went away first
+                entry[1].cancel()
+
     def unadvertise_service(self, op: ops.UnadvertiseService) -> None:
         """Stop serving a service; its waiting ROS callers get a default response at once."""
         name = _topic_name(op.service)
@@ -840,6 +910,9 @@ class Session:
     def _remove_served(self, served: _Served, why: str, linger: bool = True) -> None:
         for rid, (pending, timer) in list(served.pending.items()):
             timer.cancel()
+            if isinstance(pending, _DirectCall):
+                pending.fail(f"service {served.name} failed: {why}")
+                continue
             log.error("ROS call %s failed: %s; sending a default response", rid, why)
             pending.complete()
         served.pending.clear()

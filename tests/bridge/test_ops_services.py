@@ -12,7 +12,7 @@ from rclpy.callback_groups import ReentrantCallbackGroup
 from std_srvs.srv import SetBool
 
 from roslibpy_lite.protocol import split_fragments
-from tests.bridge.support import ros_future, wait_service
+from tests.bridge.support import ros_future, roundtrip, wait_service
 from tests.helpers import async_wait_until
 
 
@@ -242,3 +242,31 @@ async def test_call_service_fragment_size(ws_connect: Any, ros_node: Any, topic:
     reply = json.loads("".join(pieces[i] for i in range(first["total"])))
     assert reply == {"op": "service_response", "service": topic, "result": True,
                      "values": {"result": 4.0}, "id": "fr"}
+
+
+async def test_client_to_client_call_keeps_failure(ws_connect: Any, topic: str):
+    """A call to a service another client of the bridge serves gets its answer, failures included."""
+    server = await ws_connect()
+    await server.send({"op": "advertise_service", "service": topic, "type": "std_srvs/SetBool"})
+    await roundtrip(server)
+    caller = await ws_connect()
+    await caller.send({"op": "call_service", "service": topic, "args": {"data": True},
+                       "id": "ok"})
+    request = await server.expect(op="call_service", service=topic)
+    assert request["args"] == {"data": True}
+    await server.send({"op": "service_response", "service": topic, "id": request["id"],
+                       "result": True, "values": {"success": True, "message": "fine"}})
+    reply = await caller.expect(op="service_response", id="ok")
+    assert reply["result"] is True and reply["values"] == {"success": True, "message": "fine"}
+    await caller.send({"op": "call_service", "service": topic, "args": {"data": False},
+                       "id": "bad"})
+    request = await server.expect(op="call_service", service=topic)
+    await server.send({"op": "service_response", "service": topic, "id": request["id"],
+                       "result": False, "values": "handler raised ValueError"})
+    reply = await caller.expect(op="service_response", id="bad")
+    assert reply["result"] is False and "handler raised ValueError" in reply["values"]
+    await caller.send({"op": "call_service", "service": topic, "id": "gone", "timeout": 30})
+    await server.expect(op="call_service", service=topic)
+    await server.close()
+    reply = await caller.expect(op="service_response", id="gone")
+    assert reply["result"] is False and topic in reply["values"]
