@@ -186,7 +186,7 @@ class Peer:
             ros.get_action_servers(on_servers)  # roslibpy offers only the callback form
             if not done.wait(timeout):
                 raise TimeoutError("no answer to get_action_servers")
-            return found[0]
+            return found[0]["action_servers"]  # the callback gets the whole response
         if op == "get_params":
             return ros.get_params()
         if op == "get_param":

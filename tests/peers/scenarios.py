@@ -30,9 +30,6 @@ DEADLINE = 15.0
 
 #: Features the bridge does not have yet (reported to its engineer). Strict, so a test
 #: starts failing (XPASS) the moment the feature lands, and the mark must go.
-MISSING_PARAMS = pytest.mark.xfail(
-    strict=True, reason="bridge: rosapi get_param_names / get_param / set_param not there yet"
-)
 NO_RAW_TEXT = pytest.mark.xfail(
     strict=True, reason="bridge: topics_and_raw_types gives empty typedefs_full_text"
 )

@@ -155,7 +155,6 @@ def test_subscribe_cbor_raw(peer: PeerProcess, ros_node: Any, topic: str) -> Non
     scenarios.subscribe_cbor_raw(peer, ros_node, topic)
 
 
-@scenarios.MISSING_PARAMS
 def test_params(peer: PeerProcess, ros_node: Any) -> None:
     """Ros.getParams() and ROSLIB.Param get/set reach an rclpy node's parameter."""
     scenarios.params(peer, ros_node)

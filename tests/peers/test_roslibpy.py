@@ -125,7 +125,6 @@ def test_bad_type_then_publish(peer: PeerProcess, ros_node: Any, topic: str) -> 
     scenarios.bad_type_then_publish(peer, ros_node, topic, sees_status=False)
 
 
-@scenarios.MISSING_PARAMS
 def test_params(peer: PeerProcess, ros_node: Any) -> None:
     """Ros.get_params(), get_param() and set_param() reach an rclpy node's parameter."""
     scenarios.params(peer, ros_node)
