@@ -914,14 +914,19 @@ def subscribe_wrong_type(peer: PeerProcess, node: Any, topic: str) -> None:
 
 
 def call_bad_args(peer: PeerProcess, node: Any, topic: str) -> None:
-    """A call with a wrong value type or an unknown field fails with the field's name."""
+    """A call with a wrong value type or an unknown field fails with the field's name (rosapi too)."""
     from std_srvs.srv import SetBool
 
     node.create_service(SetBool, topic, lambda _req, resp: resp)
     wait_until(lambda: topic in peer.request("get_services"), DEADLINE, f"{topic} in get_services")
-    for args, field in (({"data": "yes"}, "data"), ({"dta": True}, "dta")):
+    cases = (
+        (topic, {"data": "yes"}, "data"),
+        (topic, {"dta": True}, "dta"),
+        ("/rosapi/topic_type", {"topik": topic}, "topik"),  # the bridge's own services too
+    )
+    for service, args, field in cases:
         try:
-            value = peer.request("call", service=topic, args=args)
+            value = peer.request("call", service=service, args=args)
         except PeerError as exc:
             assert field in str(exc), f"the error does not name {field!r}: {exc}"
         else:
