@@ -1091,3 +1091,23 @@ def subscribe_without_type(peer: PeerProcess, node: Any, topic: str) -> None:
     peer.request("subscribe", topic=topic, type=None)
     got = _ros_publish_until_delivered(peer, pub, topic, String(data="typeless"))
     assert got == {"data": "typeless"}
+
+
+def client_to_client_action(server: PeerProcess, caller: PeerProcess, node: Any, topic: str) -> None:
+    """A Fibonacci action roslib serves answers a goal another stock client sends."""
+    server.request(
+        "advertise_action", action=topic, type="test_msgs/action/Fibonacci", handler="fibonacci"
+    )
+
+    def listed() -> bool:
+        refused = [e for e in server.new_events() if e.get("event") == "status"]
+        assert not refused, f"the bridge refused advertise_action: {refused}"
+        return topic in caller.request("get_action_servers")
+
+    wait_until(listed, DEADLINE, f"{topic} in get_action_servers")
+    value = caller.request(
+        "send_goal", action=topic, type="test_msgs/action/Fibonacci", goal={"order": 5},
+        goal_timeout=5.0, timeout=DEADLINE,
+    )
+    assert value["status"] == 4
+    assert value["values"]["sequence"] == [0, 1, 1, 2, 3, 5]

@@ -35,3 +35,11 @@ def test_roslibpy_serves_roslib(
 ) -> None:
     """roslib calls a service that roslibpy serves, and gets roslibpy's answer."""
     scenarios.client_to_client_service(start_peer("roslibpy"), start_peer("roslib"), ros_node, topic)
+
+
+@scenarios.NO_ACTIONS
+def test_roslib_action_serves_roslibpy(
+    start_peer: Callable[..., PeerProcess], ros_node: Any, topic: str
+) -> None:
+    """roslibpy sends a goal to an action roslib serves, and gets roslib's result."""
+    scenarios.client_to_client_action(start_peer("roslib"), start_peer("roslibpy"), ros_node, topic)
