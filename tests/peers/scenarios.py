@@ -1111,3 +1111,33 @@ def client_to_client_action(server: PeerProcess, caller: PeerProcess, node: Any,
     )
     assert value["status"] == 4
     assert value["values"]["sequence"] == [0, 1, 1, 2, 3, 5]
+
+
+def latched_to_second_client(first: PeerProcess, second: PeerProcess, node: Any, topic: str) -> None:
+    """A latched message reaches a second client that subscribes after the first already has it."""
+    from std_msgs.msg import String
+
+    pub = node.create_publisher(String, topic, _latched_qos())
+    pub.publish(String(data="the map"))
+    for peer in (first, second):  # the second subscribes when the bridge already listens
+        peer.request("subscribe", topic=topic, type="std_msgs/msg/String")
+        got = peer.wait_event(
+            lambda e: e.get("event") == "message" and e.get("topic") == topic, DEADLINE,
+            f"the latched message on {topic}",
+        )
+        assert got["msg"] == {"data": "the map"}
+
+
+def mixed_encodings(json_peer: PeerProcess, cbor_peer: PeerProcess, node: Any, topic: str) -> None:
+    """One topic, one client on JSON and one on CBOR: each gets the message in its own form."""
+    from std_msgs.msg import Float64MultiArray
+
+    pub = node.create_publisher(Float64MultiArray, topic, 10)
+    json_peer.request("subscribe", topic=topic, type="std_msgs/msg/Float64MultiArray")
+    cbor_peer.request("subscribe", topic=topic, type="std_msgs/msg/Float64MultiArray",
+                      compression="cbor")
+    msg = Float64MultiArray(data=[0.5, 2.0])
+    got_json = _ros_publish_until_delivered(json_peer, pub, topic, msg)
+    got_cbor = _ros_publish_until_delivered(cbor_peer, pub, topic, msg)
+    assert got_json["data"] == [0.5, 2.0]
+    assert got_cbor["data"] == {"$typed": "Float64Array", "values": [0.5, 2.0]}

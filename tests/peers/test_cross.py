@@ -43,3 +43,17 @@ def test_roslib_action_serves_roslibpy(
 ) -> None:
     """roslibpy sends a goal to an action roslib serves, and gets roslib's result."""
     scenarios.client_to_client_action(start_peer("roslib"), start_peer("roslibpy"), ros_node, topic)
+
+
+def test_latched_reaches_second_client(
+    start_peer: Callable[..., PeerProcess], ros_node: Any, topic: str
+) -> None:
+    """A latched message reaches roslib after roslibpy, subscribed later to the same topic, got it."""
+    scenarios.latched_to_second_client(start_peer("roslibpy"), start_peer("roslib"), ros_node, topic)
+
+
+def test_mixed_encodings(
+    start_peer: Callable[..., PeerProcess], ros_node: Any, topic: str
+) -> None:
+    """roslibpy (JSON) and roslib (CBOR) on one topic each get the message in their encoding."""
+    scenarios.mixed_encodings(start_peer("roslibpy"), start_peer("roslib"), ros_node, topic)
