@@ -27,7 +27,7 @@ service                            request          response
 /rosapi/message_details            type             typedefs (the type's, then nested types')
 /rosapi/service_request_details    type             typedefs of the request
 /rosapi/service_response_details   type             typedefs of the response
-/rosapi/topics_and_raw_types       (none)           topics, types, typedefs_full_text ("")
+/rosapi/topics_and_raw_types       (none)           topics, types, typedefs_full_text
 /rosapi/get_param_names            (none)           names (``/node:param``)
 /rosapi/get_param                  name, default_   value (JSON text), successful, reason
                                    value
@@ -400,13 +400,52 @@ def service_response_details(bridge: Bridge, args: Mapping[str, Any]) -> dict[st
     return _service_part(args, "Response")
 
 
+def _msg_source(type_name: str) -> str:
+    """The installed ``.msg`` text of ``pkg/msg/Type`` ("" if not found)."""
+    import os
+    import sys
+    from pathlib import Path
+
+    pkg, _, name = type_name.split("/")
+    prefixes = [p for p in os.environ.get("AMENT_PREFIX_PATH", "").split(os.pathsep) if p]
+    prefixes += [sys.prefix, sys.base_prefix]
+    for prefix in prefixes:
+        path = Path(prefix) / "share" / pkg / "msg" / f"{name}.msg"
+        if path.is_file():
+            try:
+                return path.read_text(encoding="utf-8")
+            except OSError:
+                return ""
+    return ""
+
+
+_full_texts: dict[str, str] = {}
+
+
+def _full_text(type_name: str) -> str:
+    """A type's definition followed by its dependencies' (ROS's ``MSG: pkg/Type`` layout)."""
+    text = _full_texts.get(type_name)
+    if text is not None:
+        return text
+    try:
+        typedefs = _typedefs(_message_class(type_name), type_name)
+    except Exception:
+        return ""
+    parts = [_msg_source(type_name).rstrip("\n")]
+    for typedef in typedefs[1:]:
+        parts.append("=" * 80 + f"\nMSG: {typedef['type']}\n" + _msg_source(typedef["type"]))
+    text = _full_texts[type_name] = "\n".join(parts).rstrip("\n") + "\n"
+    return text
+
+
 def topics_and_raw_types(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, Any]:
-    """Topics, their types, and each type's definition text (empty: .msg sources are not kept)."""
+    """Topics, their types, and each type's full definition text (with its dependencies)."""
     pairs = sorted(bridge.ros.node.get_topic_names_and_types())
+    types = [t[0] if t else "" for _, t in pairs]
     return {
         "topics": [n for n, _ in pairs],
-        "types": [t[0] if t else "" for _, t in pairs],
-        "typedefs_full_text": ["" for _ in pairs],
+        "types": types,
+        "typedefs_full_text": [_full_text(t) if t else "" for t in types],
     }
 
 

@@ -272,3 +272,17 @@ async def test_set_param_refused_names_param(ws_connect: Any, ros_node: Any):
                    "args": {"name": f"{full}:count", "value": '"text"'}})
     reply = await ws.expect(op="service_response", id="sp")
     assert reply["result"] is False and f"{full}:count" in reply["values"]
+
+
+async def test_topics_and_raw_types(ws_connect: Any, ros_node: Any, topic: str):
+    """/rosapi/topics_and_raw_types gives each topic's full definition text, dependencies too."""
+    from geometry_msgs.msg import PoseStamped
+
+    ros_node.create_publisher(PoseStamped, topic, 10)
+    ws = await ws_connect()
+    values = await _until(ws, "/rosapi/topics_and_raw_types", None,
+                          lambda v: topic in v["topics"])
+    assert len(values["topics"]) == len(values["types"]) == len(values["typedefs_full_text"])
+    text = values["typedefs_full_text"][values["topics"].index(topic)]
+    assert "std_msgs/Header header" in text
+    assert "MSG: geometry_msgs/msg/Point" in text and "float64 x" in text
