@@ -1141,3 +1141,23 @@ def mixed_encodings(json_peer: PeerProcess, cbor_peer: PeerProcess, node: Any, t
     got_cbor = _ros_publish_until_delivered(cbor_peer, pub, topic, msg)
     assert got_json["data"] == [0.5, 2.0]
     assert got_cbor["data"] == {"$typed": "Float64Array", "values": [0.5, 2.0]}
+
+
+def hears_itself(peer: PeerProcess, node: Any, topic: str) -> None:
+    """A client subscribed to a topic it also publishes gets its own messages back (as ROS does)."""
+    peer.request("subscribe", topic=topic, type="std_msgs/msg/String")
+    peer.request("advertise", topic=topic, type="std_msgs/msg/String")
+    wait_until(lambda: node.count_publishers(topic) >= 1 and node.count_subscribers(topic) >= 1,
+               DEADLINE, f"the bridge's publisher and subscriber on {topic}")
+    for _ in range(int(DEADLINE / ATTEMPT)):
+        _refusal(peer, topic)
+        peer.request("publish", topic=topic, type="std_msgs/msg/String", msg={"data": "echo"})
+        try:
+            got = peer.wait_event(
+                lambda e: e.get("event") == "message" and e.get("topic") == topic, ATTEMPT
+            )
+        except AssertionError:
+            continue
+        assert got["msg"] == {"data": "echo"}
+        return
+    raise AssertionError(f"{peer.name} never heard its own message\n{peer.diagnostics()}")

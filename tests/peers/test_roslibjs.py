@@ -290,6 +290,11 @@ def test_subscribe_without_type(peer: PeerProcess, ros_node: Any, topic: str) ->
     scenarios.subscribe_without_type(peer, ros_node, topic)
 
 
+def test_hears_itself(peer: PeerProcess, ros_node: Any, topic: str) -> None:
+    """A roslib client subscribed to the topic it publishes receives its own messages."""
+    scenarios.hears_itself(peer, ros_node, topic)
+
+
 def test_native_websocket_publish(native_peer: PeerProcess, ros_node: Any, topic: str) -> None:
     """With Node's native WebSocket, roslib's published message reaches rclpy."""
     assert native_peer.info["transport"] == "native WebSocket"

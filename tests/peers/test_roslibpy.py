@@ -268,3 +268,8 @@ def test_reconnect_after_bridge_restart(
 def test_subscribe_without_type(peer: PeerProcess, ros_node: Any, topic: str) -> None:
     """A roslibpy Topic created without a message type subscribes with the topic's graph type."""
     scenarios.subscribe_without_type(peer, ros_node, topic)
+
+
+def test_hears_itself(peer: PeerProcess, ros_node: Any, topic: str) -> None:
+    """A roslibpy client subscribed to the topic it publishes receives its own messages."""
+    scenarios.hears_itself(peer, ros_node, topic)
