@@ -250,7 +250,7 @@ async def ros_to_client(ctx: Ctx) -> dict[str, Any]:
                                 str(d), "--settle", "0.3", "--linger", "3").start()
             await pub.event("matched")
             prof = None
-            if ctx.profile and profile is None and rate >= 8000:
+            if ctx.profile and rate >= 4000:  # keep the profile of the last step run
                 prof = Profiler(bridge.pid, d)
                 await prof.start()
             done = await pub.event("done", d + 30)
@@ -552,6 +552,9 @@ async def memory_stall(ctx: Ctx) -> dict[str, Any]:
         await pub.close()
         await asyncio.sleep(1.0)
         end = proc.memory_info().rss
+        stalled.close()
+        await asyncio.sleep(1.0)
+        after_close = proc.memory_info().rss
         # the bridge still answers another client promptly
         ws = await ws_open(bridge.url)
         t = time.perf_counter()
@@ -569,6 +572,7 @@ async def memory_stall(ctx: Ctx) -> dict[str, Any]:
         "rss_start_mb": round(start / mb, 1),
         "rss_peak_mb": round(max(samples, default=start) / mb, 1),
         "rss_end_mb": round(end / mb, 1),
+        "rss_after_stalled_client_left_mb": round(after_close / mb, 1),
         "growth_peak_mb": round((max(samples, default=start) - start) / mb, 1),
         "other_client_answer_ms": round(answer_ms, 2),
         "other_client_reply_ok": reply.get("result") is True,

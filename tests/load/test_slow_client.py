@@ -126,11 +126,6 @@ async def test_stalled_client_bounded_memory_and_same_topic_reader_served(
     )
 
 
-@pytest.mark.xfail(
-    strict=False,
-    reason="the bridge's ROS subscriptions keep 100 samples; under an image flood Fast DDS "
-    "repairs a lost sample late and the reader history overflows (notes/bridge-bugs.md 06:10)",
-)
 async def test_stalled_client_and_flood_cost_another_topic_nothing(
     make_bridge: Any, ws_connect: Any, ros_node: Any, topic: str
 ):
