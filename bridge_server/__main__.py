@@ -70,12 +70,6 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         help="seconds a ROS caller waits for a client-served service (default 10)",
     )
     p.add_argument(
-        "--executor",
-        choices=("single", "multi"),
-        default="single",
-        help="rclpy executor (default single)",
-    )
-    p.add_argument(
         "--compression",
         choices=("none", "deflate"),
         default="none",
@@ -100,7 +94,6 @@ async def _run(args: argparse.Namespace) -> int:
         write_limit=args.write_limit,
         compression=args.compression == "deflate",
         publisher_grace=args.publisher_grace,
-        executor=args.executor,
         session=SessionConfig(
             default_queue_length=args.send_queue,
             call_timeout=args.call_timeout,

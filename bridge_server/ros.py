@@ -51,11 +51,7 @@ from typing import Any
 
 import rclpy
 from rclpy.context import Context
-from rclpy.executors import (
-    ExternalShutdownException,
-    MultiThreadedExecutor,
-    SingleThreadedExecutor,
-)
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from . import convert
@@ -402,11 +398,9 @@ class RosNode:
         loop: asyncio.AbstractEventLoop,
         *,
         name: str = "roslibpy_lite_bridge",
-        executor: str = "single",
     ) -> None:
         self.loop = loop
         self.name = name
-        self.executor_kind = executor
         self.context = Context()
         self._inbox: deque[tuple[Callable[..., None], tuple[Any, ...]]] = deque()
         self._scheduled = False
@@ -430,10 +424,9 @@ class RosNode:
         self.node = rclpy.create_node(
             self.name, context=self.context, start_parameter_services=False
         )
-        if self.executor_kind == "multi":
-            self.executor = MultiThreadedExecutor(context=self.context)
-        else:
-            self.executor = SingleThreadedExecutor(context=self.context)
+        # One thread: measured faster than MultiThreadedExecutor here (the GIL serialises
+        # the callbacks anyway), and no callback of the bridge ever blocks.
+        self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
         self._thread = threading.Thread(target=self._spin, name="bridge-ros-spin", daemon=True)
         self._thread.start()

@@ -45,7 +45,6 @@ class BridgeConfig:
     write_limit: int = 256 * 1024
     compression: bool = False
     publisher_grace: float = 2.0
-    executor: str = "single"
     node_name: str = "roslibpy_lite_bridge"
     refresh_interval: float = 0.5
     session: SessionConfig = field(default_factory=SessionConfig)
@@ -64,9 +63,7 @@ class Bridge:
         self._server: Server | None = None
         self._refresher: asyncio.Task[None] | None = None
         self._graph_event = asyncio.Event()
-        self.ros = RosNode(
-            asyncio.get_running_loop(), name=config.node_name, executor=config.executor
-        )
+        self.ros = RosNode(asyncio.get_running_loop(), name=config.node_name)
 
     @property
     def port(self) -> int:
