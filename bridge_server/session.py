@@ -241,7 +241,10 @@ class Session:
         self.sid = sid
         self.config: SessionConfig = bridge.session_config
         self.loop = asyncio.get_running_loop()
-        self.protocol = Protocol()
+        # Reassembled fragments are held to the same bound as a single frame.
+        self.protocol = Protocol(
+            max_partial=16, max_fragment_bytes=bridge.config.max_message_size
+        )
         self.publishers: dict[str, SharedPublisher] = {}
         self.subs: dict[str, _Sub] = {}
         self.served: dict[str, _Served] = {}

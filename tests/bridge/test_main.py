@@ -85,3 +85,19 @@ async def test_publisher_released_after_disconnect(make_bridge: Any, ros_node: A
         await ws.send(json.dumps({"op": "advertise", "topic": topic, "type": "std_msgs/String"}))
         await wait_publishers(sub)
     await async_wait_until(lambda: sub.get_publisher_count() == 0, what="publisher released")
+
+
+async def test_fragments_bounded_by_max_message_size(make_bridge: Any):
+    """Fragments cannot build an op larger than --max-message-size: the sender is told."""
+    bridge = make_bridge("--max-message-size", "2000")
+    async with connect(bridge.url) as ws:
+        piece = "x" * 500
+        for num in range(6):
+            await ws.send(json.dumps({"op": "fragment", "id": "big", "data": piece,
+                                      "num": num, "total": 10}))
+        status = json.loads(await ws.recv())
+        assert status["op"] == "status" and status["level"] == "error"
+        assert status["id"] == "big" and "2000" in status["msg"]
+        await ws.send(json.dumps({"op": "call_service", "id": "v",
+                                  "service": "/rosapi/get_ros_version"}))
+        assert json.loads(await ws.recv())["result"] is True
