@@ -698,6 +698,22 @@ class _Parser(argparse.ArgumentParser):
         raise CliError(EXIT_USAGE, f"{message} (see '{self.prog} --help')")
 
 
+class _RootParser(_Parser):
+    """Fills ``--url``/``--timeout`` defaults after parsing, so the options may stand
+    before or after the subcommand (argparse would let a subcommand's defaults
+    overwrite a value given before it)."""
+
+    def parse_known_args(  # type: ignore[override]
+        self, args: Sequence[str] | None = None, namespace: argparse.Namespace | None = None
+    ) -> tuple[argparse.Namespace, list[str]]:
+        parsed, rest = super().parse_known_args(args, namespace)
+        if getattr(parsed, "url", None) is None:
+            parsed.url = os.environ.get("ROSLIBPY_LITE_URL") or DEFAULT_URL
+        if getattr(parsed, "timeout", None) is None:
+            parsed.timeout = 5.0
+        return parsed, rest
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser (exposed for tests and documentation)."""
     common = _Parser(add_help=False)
@@ -717,14 +733,13 @@ def build_parser() -> argparse.ArgumentParser:
                        help="seconds to wait for the service to appear in the ROS graph "
                             "(default 2)")
 
-    root = _Parser(
+    root = _RootParser(
         prog="roslibpy-lite",
         description="Talk to a ROS 2 robot through a rosbridge server; no ROS needed here.",
         epilog=_epilog(),
         formatter_class=argparse.RawDescriptionHelpFormatter,
         parents=[common],
     )
-    root.set_defaults(url=os.environ.get("ROSLIBPY_LITE_URL") or DEFAULT_URL, timeout=5.0)
     groups = root.add_subparsers(dest="group", metavar="{topic,service,node,interface}",
                                  parser_class=_Parser)
     groups.required = True
