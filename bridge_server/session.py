@@ -31,6 +31,8 @@ queue, and each message is sent once. The merged options are: the least
 ``throttle_rate``, the largest ``queue_length``, the least ``fragment_size``,
 and the ``compression`` of the latest subscribe. ``throttle_rate`` keeps the
 newest message of a burst and sends it when the interval is over.
+``fragment_size`` applies to JSON text only (binary CBOR frames are never
+split); ``compression: png`` (legacy) falls back to plain JSON with a warning.
 
 Service calls
 -------------
