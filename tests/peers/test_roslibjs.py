@@ -170,7 +170,6 @@ def test_service_details(peer: PeerProcess) -> None:
     scenarios.service_details(peer)
 
 
-@scenarios.NO_RAW_TEXT
 def test_topics_and_raw_types(peer: PeerProcess, ros_node: Any, topic: str) -> None:
     """Ros.getTopicsAndRawTypes() lists the topic with its type and definition text."""
     scenarios.topics_and_raw_types(peer, ros_node, topic)
@@ -293,6 +292,18 @@ def test_subscribe_without_type(peer: PeerProcess, ros_node: Any, topic: str) ->
 def test_hears_itself(peer: PeerProcess, ros_node: Any, topic: str) -> None:
     """A roslib client subscribed to the topic it publishes receives its own messages."""
     scenarios.hears_itself(peer, ros_node, topic)
+
+
+@scenarios.NAMES_NOT_ECHOED
+def test_relative_names(peer: PeerProcess, ros_node: Any, topic: str) -> None:
+    """roslib topics named without the leading slash reach the absolute ROS topics, both ways."""
+    scenarios.relative_names(peer, ros_node, topic)
+
+
+@scenarios.NAMES_NOT_ECHOED
+def test_serve_relative_name(peer: PeerProcess, ros_node: Any, topic: str) -> None:
+    """A roslib service advertised without the leading slash answers an rclpy caller."""
+    scenarios.serve_relative_name(peer, ros_node, topic)
 
 
 def test_native_websocket_publish(native_peer: PeerProcess, ros_node: Any, topic: str) -> None:
