@@ -41,7 +41,7 @@ def emit(event: str, **fields: Any) -> None:
 def _qos(args: argparse.Namespace) -> Any:
     from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
-    return QoSProfile(
+    return QoSProfile(  # type: ignore[no-untyped-call]
         history=HistoryPolicy.KEEP_LAST,
         depth=args.depth,
         reliability=(
@@ -84,7 +84,7 @@ def cmd_publish(args: argparse.Namespace) -> int:
         lambda: pub.get_subscription_count() >= args.wait_subs, args.match_timeout
     ):
         emit("error", error=f"no {args.wait_subs} subscriber(s) on {args.topic}")
-        node.destroy_node()
+        node.destroy_node()  # type: ignore[no-untyped-call]
         rclpy.shutdown()
         return 1
     emit("matched", subscribers=pub.get_subscription_count())
@@ -122,7 +122,7 @@ def cmd_publish(args: argparse.Namespace) -> int:
     emit("done", sent=i, elapsed=elapsed, rate=i / elapsed if elapsed else 0.0)
     if args.linger > 0:  # keep the writer alive so reliable readers can catch up
         time.sleep(args.linger)
-    node.destroy_node()
+    node.destroy_node()  # type: ignore[no-untyped-call]
     rclpy.shutdown()
     return 0
 
@@ -192,7 +192,7 @@ def cmd_subscribe(args: argparse.Namespace) -> int:
         rate=(int(state["n"]) - 1) / span if span > 0 else 0.0,
     )
     executor.shutdown(timeout_sec=1.0)
-    node.destroy_node()
+    node.destroy_node()  # type: ignore[no-untyped-call]
     rclpy.shutdown()
     return 0
 
@@ -236,7 +236,7 @@ def cmd_serve(args: argparse.Namespace) -> int:
         executor.spin_once(timeout_sec=0.05)
     emit("done", calls=calls[0])
     executor.shutdown(timeout_sec=1.0)
-    node.destroy_node()
+    node.destroy_node()  # type: ignore[no-untyped-call]
     rclpy.shutdown()
     return 0
 

@@ -290,7 +290,7 @@ async def client_to_ros(ctx: Ctx) -> dict[str, Any]:
     d = ctx.duration
     loop = asyncio.get_running_loop()
     try:
-        for rate in _rates(ctx, [2000, 5000, 8000, 10000, 12000, 15000],
+        for rate in _rates(ctx, [2000, 5000, 8000, 10000, 12000, 15000, 20000],
                            [2000, 5000, 10000, 12000]):
             n = int(rate * d)
             sub = await ctx.ros("subscribe", "--topic", topic, "--expect", str(n), "--idle", "1.0",

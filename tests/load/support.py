@@ -17,7 +17,7 @@ from tests.helpers import async_wait_until
 
 def qos(*, depth: int = 10, best_effort: bool = False, latched: bool = False) -> QoSProfile:
     """A KEEP_LAST profile with the given depth, reliability and durability."""
-    return QoSProfile(
+    return QoSProfile(  # type: ignore[no-untyped-call]
         history=HistoryPolicy.KEEP_LAST,
         depth=depth,
         reliability=ReliabilityPolicy.BEST_EFFORT if best_effort else ReliabilityPolicy.RELIABLE,

@@ -24,7 +24,7 @@ async def _disconnected(bridge: Any, start: int) -> None:
 
 async def test_subscription_goes_at_once_publisher_stays_during_grace(
     make_bridge: Any, ws_connect: Any, ros_node: Any, topic: str
-):
+) -> None:
     """On disconnect the client's subscription leaves the graph while its publisher lives on (grace 30 s)."""
     bridge = make_bridge("--publisher-grace", "30")
     pub_topic, sub_topic = f"{topic}/out", f"{topic}/in"
@@ -42,15 +42,19 @@ async def test_subscription_goes_at_once_publisher_stays_during_grace(
 
 async def test_publisher_released_after_grace_kept_by_quick_readvertise(
     make_bridge: Any, ws_connect: Any, ros_node: Any, topic: str
-):
+) -> None:
     """After a disconnect the publishers outlive a short grace; one re-advertised by a quick reconnect never goes away."""
     bridge = make_bridge("--publisher-grace", "1.0")
     kept, dropped = f"{topic}/kept", f"{topic}/dropped"
     matched: list[int] = []
     inbox = Inbox()
+
+    def on_matched(status: Any) -> None:
+        matched.append(int(status.current_count))
+
     sub = ros_node.create_subscription(
         String, kept, inbox, 10,
-        event_callbacks=SubscriptionEventCallbacks(matched=lambda s: matched.append(s.current_count)),
+        event_callbacks=SubscriptionEventCallbacks(matched=on_matched),
     )
     first = await ws_connect(bridge.url)
     for t in (kept, dropped):
@@ -75,7 +79,7 @@ async def test_publisher_released_after_grace_kept_by_quick_readvertise(
 
 async def test_served_service_goes_at_once_and_waiting_caller_is_released(
     ws_connect: Any, ros_node: Any, topic: str
-):
+) -> None:
     """A client-served service leaves the graph when the client goes, and a ROS caller waiting on it gets an answer."""
     ws = await ws_connect()
     await ws.send({"op": "advertise_service", "service": topic, "type": "std_srvs/srv/SetBool"})

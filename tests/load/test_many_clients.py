@@ -39,7 +39,7 @@ class _Counter:
             self.other.append(op)
 
 
-async def test_fifty_clients_each_get_every_message(ws_connect: Any, ros_node: Any, topic: str):
+async def test_fifty_clients_each_get_every_message(ws_connect: Any, ros_node: Any, topic: str) -> None:
     """50 clients subscribed to one 100 Hz topic each receive all 200 numbered messages, in order."""
     pub = ros_node.create_publisher(String, topic, qos(depth=MESSAGES))
     clients = [await ws_connect() for _ in range(CLIENTS)]

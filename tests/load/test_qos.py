@@ -20,7 +20,7 @@ async def _subscribe(ws: Any, topic: str, id: str = "s") -> None:
     await roundtrip(ws)
 
 
-async def test_latched_message_reaches_every_late_client(ws_connect: Any, ros_node: Any, topic: str):
+async def test_latched_message_reaches_every_late_client(ws_connect: Any, ros_node: Any, topic: str) -> None:
     """A transient-local publisher's last message reaches clients that subscribe after it was published, one after another."""
     pub = ros_node.create_publisher(String, topic, qos(depth=1, latched=True))
     pub.publish(String(data="old"))
@@ -43,7 +43,7 @@ async def test_latched_message_reaches_every_late_client(ws_connect: Any, ros_no
     assert extra == [], "only the last latched message is delivered"
 
 
-async def test_best_effort_publisher_is_heard(ws_connect: Any, ros_node: Any, topic: str):
+async def test_best_effort_publisher_is_heard(ws_connect: Any, ros_node: Any, topic: str) -> None:
     """A best-effort rclpy publisher's messages reach a subscribed client."""
     pub = ros_node.create_publisher(String, topic, qos(best_effort=True))
     ws = await ws_connect()
@@ -66,7 +66,7 @@ async def _publish_until_heard(ws: Any, pub: Any, topic: str, tries: int = 100) 
 @pytest.mark.parametrize("kind", ["best_effort", "transient_local"])
 async def test_publisher_appearing_after_subscription_with_other_qos_is_matched(
     ws_connect: Any, ros_node: Any, topic: str, kind: str
-):
+) -> None:
     """A publisher with other QoS that appears after the client subscribed is matched and heard."""
     ws = await ws_connect()
     await _subscribe(ws, topic)

@@ -65,7 +65,7 @@ async def _until_answered(ws: Any, service: str, tries: int = 8) -> None:
     raise AssertionError(f"{service} never answered through the bridge: {reply}")
 
 
-async def test_slow_call_does_not_block_other_traffic(ws_connect: Any, ros_node: Any, topic: str):
+async def test_slow_call_does_not_block_other_traffic(ws_connect: Any, ros_node: Any, topic: str) -> None:
     """While a slow service call is pending, the same client's fast call and a publish->subscribe round trip complete."""
     slow, fast = f"{topic}/slow", f"{topic}/fast"
     ping, pong = f"{topic}/ping", f"{topic}/pong"
@@ -102,7 +102,7 @@ async def test_slow_call_does_not_block_other_traffic(ws_connect: Any, ros_node:
     assert reply["result"] is True and reply["values"] == {"success": True, "message": "slow"}
 
 
-async def test_fifty_calls_in_flight_all_answered(ws_connect: Any, ros_node: Any, topic: str):
+async def test_fifty_calls_in_flight_all_answered(ws_connect: Any, ros_node: Any, topic: str) -> None:
     """50 service calls sent at once by one client are all answered, each under its own id."""
     _fast_service(ros_node, topic)
     ws = await ws_connect()
@@ -110,7 +110,7 @@ async def test_fifty_calls_in_flight_all_answered(ws_connect: Any, ros_node: Any
     n = 50
     for i in range(n):
         await ws.send(_call(topic, f"c{i}", data=i % 2 == 0))
-    replies = {}
+    replies: dict[str, Any] = {}
     while len(replies) < n:
         op = await ws.expect(lambda o: str(o.get("id", "")).startswith("c"),
                              op="service_response", timeout=15)
@@ -121,7 +121,7 @@ async def test_fifty_calls_in_flight_all_answered(ws_connect: Any, ros_node: Any
         assert replies[f"c{i}"]["values"]["success"] is (i % 2 == 0)
 
 
-async def test_call_timeout_names_the_timeout(ws_connect: Any, ros_node: Any, topic: str):
+async def test_call_timeout_names_the_timeout(ws_connect: Any, ros_node: Any, topic: str) -> None:
     """A call with timeout 0.5 to a service that never answers fails with a message naming the timeout."""
     started = Inbox()
     release = threading.Event()

@@ -117,7 +117,7 @@ async def _flood(make_bridge: Any, ws_connect: Any, ros_node: Any, topic: str) -
 
 async def test_stalled_client_bounded_memory_and_same_topic_reader_served(
     make_bridge: Any, ws_connect: Any, ros_node: Any, topic: str
-):
+) -> None:
     """Under a 640x480 image flood a client that never reads grows the bridge by < 300 MB, and a reading client on the same topic still gets nearly every frame."""
     flood = await _flood(make_bridge, ws_connect, ros_node, topic)
     assert flood.growth_mb < BOUND_MB, f"bridge RSS grew {flood.growth_mb:.0f} MB"
@@ -128,7 +128,7 @@ async def test_stalled_client_bounded_memory_and_same_topic_reader_served(
 
 async def test_stalled_client_and_flood_cost_another_topic_nothing(
     make_bridge: Any, ws_connect: Any, ros_node: Any, topic: str
-):
+) -> None:
     """During the same flood a client subscribed to another 100 Hz topic receives every message, in order."""
     flood = await _flood(make_bridge, ws_connect, ros_node, topic)
     assert flood.numbers == list(range(IMAGES)), (
