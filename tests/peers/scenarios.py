@@ -283,9 +283,11 @@ def get_topics(peer: PeerProcess, node: Any, topic: str) -> None:
         return (topics, types) if topic in topics else None
 
     topics, types = wait_until(listed, DEADLINE, f"{topic} in get_topics")
-    if types is not None:
+    if types is not None:  # roslib: the rosapi answer as is, types alongside
         assert len(types) == len(topics)
         assert types[topics.index(topic)] == "std_msgs/msg/String"
+    else:  # roslibpy returns the names only; its way to the type is get_topic_type
+        assert peer.request("get_topic_type", topic=topic) == "std_msgs/msg/String"
 
 
 def get_topic_type(peer: PeerProcess, node: Any, topic: str) -> None:

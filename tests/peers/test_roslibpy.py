@@ -81,7 +81,7 @@ def test_unadvertise_service(peer: PeerProcess, ros_node: Any, topic: str) -> No
 
 
 def test_get_topics(peer: PeerProcess, ros_node: Any, topic: str) -> None:
-    """Ros.get_topics() lists an rclpy publisher's topic."""
+    """Ros.get_topics() lists an rclpy publisher's topic; get_topic_type() gives its type."""
     scenarios.get_topics(peer, ros_node, topic)
 
 
