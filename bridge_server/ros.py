@@ -93,7 +93,7 @@ MAX_BATCH = 256
 class Incoming:
     """One ROS message received on a topic, encoded lazily and once per encoding."""
 
-    __slots__ = ("_cbor", "_cbor_raw", "_json", "conv", "msg", "stamp_ns", "topic")
+    __slots__ = ("_cbor", "_cbor_raw", "_json", "_msg_json", "conv", "msg", "stamp_ns", "topic")
 
     def __init__(self, topic: str, msg: Any, conv: convert.Converter, stamp_ns: int) -> None:
         self.topic = topic
@@ -101,25 +101,42 @@ class Incoming:
         self.conv = conv
         self.stamp_ns = stamp_ns
         self._json: str | None = None
+        self._msg_json: str | None = None
         self._cbor: bytes | None = None
         self._cbor_raw: bytes | None = None
 
-    def json_text(self) -> str:
-        """The whole ``publish`` op as JSON text (built on first use, then shared)."""
-        text = self._json
-        if text is None:
-            text = self._json = convert.encode_publish_json(self.topic, self.conv.to_json(self.msg))
-        return text
+    def json_text(self, name: str | None = None) -> str:
+        """The whole ``publish`` op as JSON text (built on first use, then shared).
 
-    def cbor(self) -> bytes:
+        ``name`` is the topic as the client spelled it (``chatter`` for ``/chatter``);
+        the message itself is still encoded once.
+        """
+        if name is None or name == self.topic:
+            text = self._json
+            if text is None:
+                text = self._json = convert.encode_publish_json(self.topic, self._msg())
+            return text
+        return convert.encode_publish_json(name, self._msg())
+
+    def _msg(self) -> str:
+        msg_json = self._msg_json
+        if msg_json is None:
+            msg_json = self._msg_json = self.conv.to_json(self.msg)
+        return msg_json
+
+    def cbor(self, name: str | None = None) -> bytes:
         """The whole ``publish`` op as CBOR (compression ``cbor``)."""
+        if name is not None and name != self.topic:
+            return convert.encode_publish_cbor(name, self.msg, self.conv)
         data = self._cbor
         if data is None:
             data = self._cbor = convert.encode_publish_cbor(self.topic, self.msg, self.conv)
         return data
 
-    def cbor_raw(self) -> bytes:
+    def cbor_raw(self, name: str | None = None) -> bytes:
         """The ``publish`` op with the serialized CDR message (compression ``cbor-raw``)."""
+        if name is not None and name != self.topic:
+            return convert.encode_publish_cbor_raw(name, convert.serialize(self.msg), self.stamp_ns)
         data = self._cbor_raw
         if data is None:
             data = self._cbor_raw = convert.encode_publish_cbor_raw(

@@ -126,9 +126,10 @@ class SessionConfig:
 class _Sub:
     """One client's (merged) subscription to one topic."""
 
-    def __init__(self, session: Session, topic: str) -> None:
+    def __init__(self, session: Session, topic: str, wire: str) -> None:
         self.session = session
         self.topic = topic
+        self.wire = None if wire == topic else wire  # the client's spelling, if different
         self.ids: dict[ops.Id | None, ops.Subscribe] = {}
         self.shared: _Shared | None = None
         self.queue: deque[Incoming] = deque()
@@ -207,8 +208,9 @@ class _Sub:
 class _Served:
     """A service this client serves, with the ROS callers waiting on it."""
 
-    def __init__(self, name: str, type_name: str) -> None:
+    def __init__(self, name: str, type_name: str, wire: str | None = None) -> None:
         self.name = name
+        self.wire = wire or name  # the name as the client spelled it
         self.type_name = type_name
         self.ros: ServedService | None = None
         self.pending: dict[str, tuple[PendingRosCall | _DirectCall, asyncio.TimerHandle]] = {}
@@ -352,10 +354,10 @@ class Session:
     def _frames(self, sub: _Sub, inc: Incoming) -> list[str | bytes]:
         comp = sub.compression
         if comp == "cbor":
-            return [inc.cbor()]
+            return [inc.cbor(sub.wire)]
         if comp == "cbor-raw":
-            return [inc.cbor_raw()]
-        text = inc.json_text()
+            return [inc.cbor_raw(sub.wire)]
+        text = inc.json_text(sub.wire)
         size = sub.fragment_size
         if size is not None and len(text) > size:
             return list(split_fragments(text, size, f"{sub.topic}:{next(self._frag_ids)}"))
@@ -469,7 +471,7 @@ class Session:
             elif isinstance(op, ops.CallService):
                 if len(self.calls) >= self.config.max_calls_in_flight:
                     self._respond(
-                        _topic_name(op.service),
+                        op.service,
                         op.id,
                         False,
                         f"too many calls in flight on this connection "
@@ -601,7 +603,7 @@ class Session:
                 return
         sub = self.subs.get(topic)
         if sub is None:
-            sub = _Sub(self, topic)
+            sub = _Sub(self, topic, op.topic)
             sub.ids[op.id] = op
             sub.configure(self.config.default_queue_length)
             try:
@@ -663,6 +665,7 @@ class Session:
     async def call_service(self, op: ops.CallService) -> None:
         """Call a ROS service (or a rosapi one) and answer with ``service_response``."""
         service = _topic_name(op.service)
+        wire = op.service  # answer with the name as the client spelled it
         timeout = op.timeout if op.timeout is not None else self.config.call_timeout
         values: Mapping[str, Any]
         try:
@@ -674,17 +677,17 @@ class Session:
                 values = await ahandler(self.bridge, rosapi.request_args(service, op.args))
             elif (owner := self.bridge.service_owners.get(service)) is not None:
                 result, direct = await owner.call_direct(service, op, timeout)
-                self._respond(service, op.id, result, direct, op.fragment_size)
+                self._respond(wire, op.id, result, direct, op.fragment_size)
                 return
             else:
                 values = await self._call_ros(service, op, timeout)
         except _CallFailed as exc:
-            self._respond(service, op.id, False, str(exc), op.fragment_size)
+            self._respond(wire, op.id, False, str(exc), op.fragment_size)
             return
         except (BridgeError, rosapi.RosapiError) as exc:
-            self._respond(service, op.id, False, f"{service}: {exc}", op.fragment_size)
+            self._respond(wire, op.id, False, f"{service}: {exc}", op.fragment_size)
             return
-        self._respond(service, op.id, True, values, op.fragment_size)
+        self._respond(wire, op.id, True, values, op.fragment_size)
 
     def _respond(
         self,
@@ -782,7 +785,7 @@ class Session:
                 "callers may reach either",
                 op.id,
             )
-        served = _Served(name, type_name)
+        served = _Served(name, type_name, op.service)
         served.ros = self.ros.serve(
             name, srv_cls, lambda pending: self._on_ros_request(served, pending)
         )
@@ -805,7 +808,7 @@ class Session:
             self.config.served_call_timeout, self._served_timeout, served, rid
         )
         served.pending[rid] = (pending, timer)
-        self.send_op(ops.CallService(service=served.name, args=args, id=rid))
+        self.send_op(ops.CallService(service=served.wire, args=args, id=rid))
 
     def _served_timeout(self, served: _Served, rid: str, timeout: float | None = None) -> None:
         entry = served.pending.pop(rid, None)
@@ -895,7 +898,7 @@ class Session:
         future: asyncio.Future[tuple[bool, Any]] = self.loop.create_future()
         timer = self.loop.call_later(timeout, self._served_timeout, served, rid, timeout)
         served.pending[rid] = (_DirectCall(future), timer)
-        self.send_op(ops.CallService(service=name, args=args, id=rid))
+        self.send_op(ops.CallService(service=served.wire, args=args, id=rid))
         try:
             return await future
         finally:

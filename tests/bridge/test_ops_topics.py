@@ -379,3 +379,18 @@ async def test_png_compression_falls_back_to_json(ws_connect: Any, ros_node: Any
     pub.publish(String(data="plain"))
     op = await ws.expect(op="publish", topic=topic)
     assert op["msg"] == {"data": "plain"}
+
+
+async def test_relative_names_are_echoed(ws_connect: Any, ros_node: Any, topic: str):
+    """A name without the leading slash means the absolute one, and replies use the client's spelling."""
+    pub = ros_node.create_publisher(String, topic, 10)
+    ws = await ws_connect()
+    relative = topic.lstrip("/")
+    await ws.send({"op": "subscribe", "topic": relative, "type": "std_msgs/String"})
+    await wait_subscribers(pub)
+    pub.publish(String(data="rel"))
+    op = await ws.expect(op="publish")
+    assert op == {"op": "publish", "topic": relative, "msg": {"data": "rel"}}
+    await ws.send({"op": "call_service", "service": "rosapi/get_ros_version", "id": "r"})
+    reply = await ws.expect(op="service_response", id="r")
+    assert reply["service"] == "rosapi/get_ros_version" and reply["result"] is True
