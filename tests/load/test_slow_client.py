@@ -118,10 +118,10 @@ async def _flood(make_bridge: Any, ws_connect: Any, ros_node: Any, topic: str) -
 async def test_stalled_client_bounded_memory_and_same_topic_reader_served(
     make_bridge: Any, ws_connect: Any, ros_node: Any, topic: str
 ) -> None:
-    """Under a 640x480 image flood a client that never reads grows the bridge by < 300 MB, and a reading client on the same topic still gets nearly every frame."""
+    """Under a 640x480 image flood a client that never reads grows the bridge by < 300 MB, and a reading client on the same topic still gets most frames (>= 80 %; a bridge blocked by the stalled socket would deliver only a handful)."""
     flood = await _flood(make_bridge, ws_connect, ros_node, topic)
     assert flood.growth_mb < BOUND_MB, f"bridge RSS grew {flood.growth_mb:.0f} MB"
-    assert len(flood.frames) >= 0.95 * IMAGES, (
+    assert len(flood.frames) >= 0.8 * IMAGES, (
         f"reader on the same topic got {len(flood.frames)} of {IMAGES}; statuses {flood.notes[:3]}"
     )
 
