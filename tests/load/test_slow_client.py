@@ -98,10 +98,12 @@ async def _flood(make_bridge: Any, ws_connect: Any, ros_node: Any, topic: str) -
                 string_pub.publish(String(data=str(i)))
                 peak = max(peak, rss().rss)
                 await asyncio.sleep(1 / RATE_HZ)  # pacing the flood, not synchronisation
-            # drain: until both readers have everything, or nothing came for 2 s
-            deadline = loop.time() + 10
+            # drain: until both readers have everything, or nothing came for 4 s (a sample
+            # lost in transport at the end of a burst is repaired only at the writer's next
+            # heartbeat, 3 s by default in Fast DDS)
+            deadline = loop.time() + 12
             while (len(out.numbers) < IMAGES or len(out.frames) < IMAGES) and (
-                loop.time() < deadline and loop.time() - last[0] < 2.0
+                loop.time() < deadline and loop.time() - last[0] < 4.0
             ):
                 peak = max(peak, rss().rss)
                 await asyncio.sleep(0.05)
