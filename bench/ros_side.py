@@ -136,11 +136,21 @@ def cmd_subscribe(args: argparse.Namespace) -> int:
     node = rclpy.create_node(f"bench_sub_{os.getpid()}")
     state = {"n": 0, "first": -1, "last": -1, "t_first": 0.0, "t_last": 0.0, "seen": 0}
     seen = bytearray(args.expect) if args.expect else None
+    stamped = args.stamped
+    latencies: list[float] = []
 
     def on_raw(data: bytes) -> None:
         # CDR: 4-byte encapsulation header, uint32 length (incl. NUL), chars, NUL.
         n = int.from_bytes(data[4:8], "little")
-        seq = int(data[8 : 8 + n - 1])
+        text = data[8 : 8 + n - 1]
+        if stamped:  # "<seq> <monotonic_ns>"
+            recv_ns = time.monotonic_ns()
+            head, _, stamp = text.partition(b" ")
+            seq = int(head)
+            if seq >= 20:  # skip warm-up
+                latencies.append((recv_ns - int(stamp)) / 1e6)
+        else:
+            seq = int(text)
         now = time.monotonic()
         if state["n"] == 0:
             state["first"] = seq
@@ -190,11 +200,23 @@ def cmd_subscribe(args: argparse.Namespace) -> int:
         last=state["last"],
         span=span,
         rate=(int(state["n"]) - 1) / span if span > 0 else 0.0,
+        latency_ms=_quantiles(latencies) if stamped else None,
     )
     executor.shutdown(timeout_sec=1.0)
     node.destroy_node()  # type: ignore[no-untyped-call]
     rclpy.shutdown()
     return 0
+
+
+def _quantiles(values: list[float]) -> dict[str, float] | None:
+    if not values:
+        return None
+    v = sorted(values)
+
+    def q(p: float) -> float:
+        return round(v[min(len(v) - 1, round(p * (len(v) - 1)))], 3)
+
+    return {"n": len(v), "p50": q(0.5), "p90": q(0.9), "p99": q(0.99), "max": round(v[-1], 3)}
 
 
 def cmd_serve(args: argparse.Namespace) -> int:
@@ -266,6 +288,8 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
             s.add_argument("--wait-pubs", type=int, default=1)
             s.add_argument("--idle", type=float, default=1.0)
             s.add_argument("--expect", type=int, default=0)
+            s.add_argument("--stamped", action="store_true",
+                           help='data is "<seq> <monotonic_ns>": report one-way latency')
         else:
             s.add_argument("--service", required=True)
     return p.parse_args(argv)

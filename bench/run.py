@@ -425,6 +425,16 @@ async def latency(ctx: Ctx) -> dict[str, Any]:
                         lat.append((now - int(stamp)) / 1e6)
 
     rtask = asyncio.create_task(reader())
+    # the same stream straight to an rclpy subscriber process first: the ROS side's own share
+    base = await ctx.ros("subscribe", "--topic", "/bench/latency_base", "--stamped", "--idle",
+                         "1.0", "--duration", str(ctx.duration + 20)).start()
+    bpub = await ctx.ros("publish", "--topic", "/bench/latency_base", "--kind", "stamp",
+                         "--rate", "200", "--duration", str(ctx.duration), "--settle",
+                         "0.3").start()
+    await bpub.event("done", ctx.duration + 30)
+    baseline = (await base.event("done", 30)).get("latency_ms")
+    await bpub.close()
+    await base.close()
     try:
         pub = await ctx.ros("publish", "--topic", topic, "--kind", "stamp", "--rate", "200",
                             "--duration", str(ctx.duration), "--settle", "0.3").start()
@@ -445,6 +455,7 @@ async def latency(ctx: Ctx) -> dict[str, Any]:
         "p90_ms": round(percentile(lat, 0.9), 3),
         "p99_ms": round(percentile(lat, 0.99), 3),
         "max_ms": round(max(lat), 3) if lat else None,
+        "rclpy_to_rclpy_ms": baseline,
     }
 
 
