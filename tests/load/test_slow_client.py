@@ -137,3 +137,50 @@ async def test_stalled_client_and_flood_cost_another_topic_nothing(
         f"other topic: got {len(flood.numbers)} of {IMAGES}, missing "
         f"{sorted(set(range(IMAGES)) - set(flood.numbers))[:20]}; statuses {flood.notes[:3]}"
     )
+
+
+async def test_queue_length_keeps_the_newest_for_a_stalled_client(
+    bridge: Any, ws_connect: Any, ros_node: Any, topic: str
+) -> None:
+    """A client that stops reading, then resumes, loses the oldest messages beyond its queue_length, keeps the newest, in order, and is warned about the drops."""
+    total, queue_length, pad = 100, 5, "x" * 200_000  # 20 MB in all: far beyond socket buffers
+    stalled = await asyncio.to_thread(StalledClient, bridge.port)
+    try:
+        stalled.send({"op": "subscribe", "topic": topic, "type": "std_msgs/msg/String",
+                      "queue_length": queue_length})
+        assert await asyncio.to_thread(stalled.sync) == []  # subscribed; now it stops reading
+        witness = await ws_connect()
+        await witness.send({"op": "subscribe", "topic": topic, "type": "std_msgs/msg/String",
+                            "queue_length": total})
+        await roundtrip(witness)
+        pub = ros_node.create_publisher(String, topic, qos(depth=total))
+        await wait_subscribers(pub)
+        for i in range(total):
+            pub.publish(String(data=f"{i}:{pad}"))
+        # the bridge fans each message out to both clients at once: when the witness has the
+        # last one, the stalled client's queue has seen every message too
+        await witness.expect(lambda op: op["msg"]["data"].startswith(f"{total - 1}:"),
+                             op="publish", timeout=15)
+
+        def read_until_last() -> tuple[list[int], list[Any]]:
+            seqs: list[int] = []
+            others: list[Any] = []
+            while not seqs or seqs[-1] != total - 1:
+                op = stalled.read_op()
+                if op.get("op") == "publish":
+                    seqs.append(int(op["msg"]["data"].split(":", 1)[0]))
+                else:
+                    others.append(op)
+            return seqs, others
+
+        seqs, others = await asyncio.to_thread(read_until_last)
+    finally:
+        stalled.close()
+    tail = list(range(total - queue_length, total))
+    assert seqs[-queue_length:] == tail, f"the newest {queue_length} must survive: {seqs}"
+    assert seqs == sorted(set(seqs)), f"in order, no repeats: {seqs}"
+    assert len(seqs) < total, "nothing was dropped: the stall did not fill the buffers"
+    drops = [op for op in others if op.get("op") == "status" and "dropped" in op.get("msg", "")]
+    assert drops, f"no drop warning among {others}"
+    assert drops[0]["level"] == "warning"
+    assert topic in drops[0]["msg"] and f"queue_length {queue_length}" in drops[0]["msg"]
