@@ -31,9 +31,6 @@ DEADLINE = 15.0
 #: Features the bridge does not have yet (reported to its engineer). Strict, so a test
 #: starts failing (XPASS) the moment the feature lands, and the mark must go.
 NO_ACTIONS = pytest.mark.xfail(strict=True, reason="bridge: actions not supported yet")
-NAMES_NOT_ECHOED = pytest.mark.xfail(
-    strict=True, reason="bridge: answers a relative topic/service name with the absolute one"
-)
 
 
 def _module(name: str) -> Any:

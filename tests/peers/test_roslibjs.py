@@ -294,13 +294,11 @@ def test_hears_itself(peer: PeerProcess, ros_node: Any, topic: str) -> None:
     scenarios.hears_itself(peer, ros_node, topic)
 
 
-@scenarios.NAMES_NOT_ECHOED
 def test_relative_names(peer: PeerProcess, ros_node: Any, topic: str) -> None:
     """roslib topics named without the leading slash reach the absolute ROS topics, both ways."""
     scenarios.relative_names(peer, ros_node, topic)
 
 
-@scenarios.NAMES_NOT_ECHOED
 def test_serve_relative_name(peer: PeerProcess, ros_node: Any, topic: str) -> None:
     """A roslib service advertised without the leading slash answers an rclpy caller."""
     scenarios.serve_relative_name(peer, ros_node, topic)
