@@ -1216,3 +1216,19 @@ def serve_relative_name(peer: PeerProcess, node: Any, topic: str) -> None:
     assert response.success is True
     assert response.message.endswith("got data=True")
 
+
+
+def client_to_client_failure(server: PeerProcess, caller: PeerProcess, node: Any, topic: str) -> None:
+    """When one client's service handler reports failure, another client's call fails too."""
+    server.request("advertise_service", service=topic, type="std_srvs/srv/SetBool", handler="fail")
+
+    def listed() -> bool:
+        return topic in {name for name, _types in node.get_service_names_and_types()}
+
+    wait_until(listed, DEADLINE, f"{topic} in the ROS graph")
+    try:
+        value = _call_new_service(caller, topic, {"data": True})
+    except PeerError as exc:
+        assert "Timeout" not in str(exc), f"the caller timed out instead of being told: {exc}"
+    else:
+        raise AssertionError(f"the call succeeded although the handler failed: {value!r}")

@@ -57,3 +57,10 @@ def test_mixed_encodings(
 ) -> None:
     """roslibpy (JSON) and roslib (CBOR) on one topic each get the message in their encoding."""
     scenarios.mixed_encodings(start_peer("roslibpy"), start_peer("roslib"), ros_node, topic)
+
+
+def test_failing_handler_fails_other_client(
+    start_peer: Callable[..., PeerProcess], ros_node: Any, topic: str
+) -> None:
+    """roslibpy's call to a roslib service whose handler returns false fails (not a default answer)."""
+    scenarios.client_to_client_failure(start_peer("roslib"), start_peer("roslibpy"), ros_node, topic)
