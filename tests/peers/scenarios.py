@@ -1232,3 +1232,44 @@ def client_to_client_failure(server: PeerProcess, caller: PeerProcess, node: Any
         assert "Timeout" not in str(exc), f"the caller timed out instead of being told: {exc}"
     else:
         raise AssertionError(f"the call succeeded although the handler failed: {value!r}")
+
+
+def cancel_goal(peer: PeerProcess, node: Any, topic: str) -> None:
+    """A goal the client cancels after its first feedback ends canceled, through the client's error path."""
+    from test_msgs.action import Fibonacci
+
+    action = _module("rclpy.action")
+    canceled, finished = threading.Event(), threading.Event()
+
+    def execute(goal_handle: Any) -> Any:
+        sequence = [0, 1]
+        deadline = time.monotonic() + DEADLINE
+        while time.monotonic() < deadline and not finished.is_set():  # a long, cancellable job
+            if goal_handle.is_cancel_requested:
+                goal_handle.canceled()
+                canceled.set()
+                return Fibonacci.Result(sequence=sequence)
+            goal_handle.publish_feedback(Fibonacci.Feedback(sequence=sequence))
+            time.sleep(0.05)
+        goal_handle.abort()
+        return Fibonacci.Result(sequence=sequence)
+
+    server = action.ActionServer(
+        node, Fibonacci, topic, execute,
+        cancel_callback=lambda _request: action.CancelResponse.ACCEPT,
+        callback_group=_module("rclpy.callback_groups").ReentrantCallbackGroup(),
+    )
+    try:
+        try:
+            value = peer.request(
+                "send_goal", action=topic, type="test_msgs/action/Fibonacci", goal={"order": 50},
+                cancel_after_feedback=True, timeout=DEADLINE,
+            )
+        except PeerError as exc:
+            assert "cancel" in str(exc).lower(), exc
+        else:
+            raise AssertionError(f"the canceled goal succeeded: {value!r}")
+        assert canceled.is_set(), "the rclpy action server never saw the cancel request"
+    finally:
+        finished.set()
+        server.destroy()

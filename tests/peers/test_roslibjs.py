@@ -182,6 +182,12 @@ def test_send_action_goal(peer: PeerProcess, ros_node: Any, topic: str) -> None:
 
 
 @scenarios.NO_ACTIONS
+def test_cancel_action_goal(peer: PeerProcess, ros_node: Any, topic: str) -> None:
+    """Action.cancelGoal after the first feedback cancels the rclpy goal; roslib reports it."""
+    scenarios.cancel_goal(peer, ros_node, topic)
+
+
+@scenarios.NO_ACTIONS
 def test_serve_action(peer: PeerProcess, ros_node: Any, topic: str) -> None:
     """ROSLIB.Action.advertise serves Fibonacci; an rclpy ActionClient gets the result."""
     scenarios.serve_action(peer, ros_node, topic)

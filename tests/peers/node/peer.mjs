@@ -134,7 +134,10 @@ async function handle(cmd) {
         const id = action.sendGoal(
           cmd.goal,
           (values) => resolve({ status: 4, values, feedback }),
-          (values) => feedback.push(values),
+          (values) => {
+            feedback.push(values);
+            if (cmd.cancel_after_feedback && feedback.length === 1) action.cancelGoal(id);
+          },
           (err) => reject(new Error(String(err))),
         );
         // roslib itself ignores a `status` about the goal and would wait forever.
