@@ -37,9 +37,12 @@ def child_env(domain: int) -> dict[str, str]:
 class Bridge:
     """``python -m bridge_server`` on 127.0.0.1, port 0; ``url`` and ``pid`` once started."""
 
-    def __init__(self, domain: int, args: list[str] | None = None) -> None:
+    def __init__(
+        self, domain: int, args: list[str] | None = None, root: str | None = None
+    ) -> None:
         self.domain = domain
         self.args = list(args or [])
+        self.root = Path(root).resolve() if root else ROOT
         self.proc: asyncio.subprocess.Process | None = None
         self.port = 0
         self.lines: deque[str] = deque(maxlen=200)
@@ -61,7 +64,7 @@ class Bridge:
         self.proc = await asyncio.create_subprocess_exec(
             sys.executable, "-m", "bridge_server", "--host", "127.0.0.1", "--port", "0",
             *self.args,
-            cwd=ROOT, env=child_env(self.domain), stdin=asyncio.subprocess.DEVNULL,
+            cwd=self.root, env=self._env(), stdin=asyncio.subprocess.DEVNULL,
             stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.STDOUT,
         )
         assert self.proc.stdout is not None
@@ -82,6 +85,14 @@ class Bridge:
         await asyncio.wait_for(first_line(), timeout)
         self._drain = asyncio.create_task(self._pump())
         return self
+
+    def _env(self) -> dict[str, str]:
+        env = child_env(self.domain)
+        if self.root != ROOT:  # import bridge_server (and its siblings) from that checkout
+            env["PYTHONPATH"] = os.pathsep.join(
+                p for p in (str(self.root), env.get("PYTHONPATH", "")) if p
+            )
+        return env
 
     async def _pump(self) -> None:
         assert self.proc is not None and self.proc.stdout is not None

@@ -139,6 +139,14 @@ def cmd_subscribe(args: argparse.Namespace) -> int:
     stamped = args.stamped
     latencies: list[float] = []
 
+    def on_image(data: bytes) -> None:
+        # count only (raw CDR, nothing deserialised): frames/s the ROS side can carry
+        now = time.monotonic()
+        if state["n"] == 0:
+            state["t_first"] = now
+        state["n"] += 1
+        state["t_last"] = now
+
     def on_raw(data: bytes) -> None:
         # CDR: 4-byte encapsulation header, uint32 length (incl. NUL), chars, NUL.
         n = int.from_bytes(data[4:8], "little")
@@ -162,7 +170,12 @@ def cmd_subscribe(args: argparse.Namespace) -> int:
             seen[seq] = 1
             state["seen"] += 1
 
-    sub = node.create_subscription(String, args.topic, on_raw, _qos(args), raw=True)
+    if args.kind == "image":
+        from sensor_msgs.msg import Image
+
+        sub = node.create_subscription(Image, args.topic, on_image, _qos(args), raw=True)
+    else:
+        sub = node.create_subscription(String, args.topic, on_raw, _qos(args), raw=True)
     if args.executor == "events":
         from rclpy.experimental.events_executor import EventsExecutor
 
@@ -288,6 +301,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
             s.add_argument("--wait-pubs", type=int, default=1)
             s.add_argument("--idle", type=float, default=1.0)
             s.add_argument("--expect", type=int, default=0)
+            s.add_argument("--kind", choices=("string", "image"), default="string")
             s.add_argument("--stamped", action="store_true",
                            help='data is "<seq> <monotonic_ns>": report one-way latency')
         else:

@@ -12,7 +12,8 @@ library), and they count frames without decoding big payloads.
 Scenarios (targets; rosbridge_suite's figures in brackets):
 
 - ``rclpy_ceiling``: one rclpy publisher process -> one rclpy subscriber process,
-  no bridge: what the ROS side alone can carry.
+  no bridge: what the ROS side alone can carry (small strings, and 640x480 images
+  into a raw subscriber that deserialises nothing).
 - ``ros_to_client``: highest rate of small std_msgs/String (step search) where
   >= 99 % reach a websocket client. Target 8,000 msg/s [500].
 - ``client_to_ros``: the same from a websocket client to an rclpy subscriber.
@@ -76,11 +77,12 @@ class Ctx:
     domain: int
     profile: bool
     ros_executor: str = "events"
+    bridge_root: str | None = None
     bridge_args: list[str] = field(default_factory=list)
 
     def bridge(self) -> Bridge:
         """A new (not yet started) bridge for one scenario."""
-        return Bridge(self.domain, self.bridge_args)
+        return Bridge(self.domain, self.bridge_args, self.bridge_root)
 
     def ros(self, *args: str) -> RosSide:
         """A new (not yet started) ROS-side process."""
@@ -149,6 +151,14 @@ class Profiler:
         return {"samples": total, "self_pct": pct(own), "inclusive_pct": pct(incl)}
 
 
+def cpu_seconds(pid: int) -> float:
+    """User + system CPU seconds used so far by process ``pid`` (all its threads)."""
+    import psutil
+
+    t = psutil.Process(pid).cpu_times()
+    return float(t.user + t.system)
+
+
 def _short(frame: str) -> str:
     """``func (path/to/file.py:123)`` -> ``func (file.py:123)``."""
     name, sep, where = frame.partition(" (")
@@ -181,6 +191,18 @@ async def rclpy_ceiling(ctx: Ctx) -> dict[str, Any]:
             "receive_rate": round(got["rate"]),
             "delivered_pct": round(100.0 * got["received"] / max(done["sent"], 1), 2),
         }
+    # 640x480 rgb8 images, publisher capped at 600/s, raw subscriber (nothing deserialised)
+    sub = await ctx.ros("subscribe", "--kind", "image", "--topic", "/bench/ceiling_image",
+                        "--depth", "50", "--duration", str(d + 20), "--idle", "1.0").start()
+    pub = await ctx.ros("publish", "--kind", "image", "--topic", "/bench/ceiling_image",
+                        "--rate", "600", "--depth", "5", "--duration", str(d),
+                        "--settle", "0.3").start()
+    done = await pub.event("done", d + 40)
+    got = await sub.event("done", 40)
+    await pub.close()
+    await sub.close()
+    out["image_640x480"] = {"publish_rate": round(done["rate"], 1),
+                            "receive_fps": round(got["rate"], 1), "received": got["received"]}
     return out
 
 
@@ -246,6 +268,7 @@ async def ros_to_client(ctx: Ctx) -> dict[str, Any]:
         for rate in _rates(ctx, [2000, 4000, 6000, 8000, 10000, 12000, 15000],
                            [2000, 5000, 8000, 10000, 12000]):
             current[0] = sink = Sink(int(rate * d * 1.5) + 100)
+            cpu0 = cpu_seconds(bridge.pid)
             pub = await ctx.ros("publish", "--topic", topic, "--rate", str(rate), "--duration",
                                 str(d), "--settle", "0.3", "--linger", "3").start()
             await pub.event("matched")
@@ -255,13 +278,15 @@ async def ros_to_client(ctx: Ctx) -> dict[str, Any]:
                 await prof.start()
             done = await pub.event("done", d + 30)
             await _drain_until(sink, done["sent"])
+            cpu = cpu_seconds(bridge.pid) - cpu0
             await pub.close()
             if prof is not None:
                 profile = {"at_rate": rate, **(await prof.result())}
             pct = 100.0 * sink.unique / max(done["sent"], 1)
             steps.append({"target_rate": rate, "publisher_rate": round(done["rate"]),
                           "sent": done["sent"], "received": sink.unique,
-                          "delivered_pct": round(pct, 2)})
+                          "delivered_pct": round(pct, 2),
+                          "bridge_cpu_us_per_msg": round(1e6 * cpu / max(sink.unique, 1), 1)})
             if pct >= 99.0:
                 best = max(best, round(done["rate"]))
             else:
@@ -297,6 +322,7 @@ async def client_to_ros(ctx: Ctx) -> dict[str, Any]:
                                 "--duration", str(d + 20)).start()
             await sub.event("matched")
             await asyncio.sleep(0.3)  # let discovery settle both ways (reliable, volatile)
+            cpu0 = cpu_seconds(bridge.pid)
             t0 = loop.time()
             for i in range(n):
                 due = t0 + i / rate
@@ -306,11 +332,14 @@ async def client_to_ros(ctx: Ctx) -> dict[str, Any]:
                 await ws.send(f'{{"op":"publish","topic":"{topic}","msg":{{"data":"{i}"}}}}')
             sent_rate = n / (loop.time() - t0)
             got = await sub.event("done", d + 40)
+            cpu = cpu_seconds(bridge.pid) - cpu0
             await sub.close()
             pct = 100.0 * int(got["unique"]) / n
             steps.append({"target_rate": rate, "client_send_rate": round(sent_rate), "sent": n,
                           "received": got["unique"], "ros_receive_rate": round(got["rate"]),
-                          "delivered_pct": round(pct, 2)})
+                          "delivered_pct": round(pct, 2),
+                          "bridge_cpu_us_per_msg": round(1e6 * cpu / max(int(got["unique"]), 1),
+                                                         1)})
             if pct >= 99.0:
                 best = max(best, round(min(sent_rate, rate)))
             else:
@@ -486,12 +515,14 @@ async def image(ctx: Ctx) -> dict[str, Any]:
                                 str(cap), "--duration", str(ctx.duration), "--depth", "5",
                                 "--settle", "0.3", "--linger", "0.5").start()
             await pub.event("matched")
+            cpu0 = cpu_seconds(bridge.pid)
             prof = None
             if ctx.profile:
                 prof = Profiler(bridge.pid, ctx.duration)
                 await prof.start()
             done = await pub.event("done", ctx.duration + 30)
             t_end = time.monotonic()
+            cpu = cpu_seconds(bridge.pid) - cpu0
             await pub.close()
             if prof is not None:
                 profile = await prof.result()
@@ -505,6 +536,7 @@ async def image(ctx: Ctx) -> dict[str, Any]:
         fps = (len(inside) - 1) / (inside[-1] - inside[0]) if len(inside) > 2 else 0.0
         key = "json" if compression == "none" else "cbor"
         out[key] = {"frames_per_s": round(fps, 1), "frames": len(frames),
+                    "bridge_cpu_ms_per_frame": round(1e3 * cpu / max(len(frames), 1), 2),
                     "publisher_rate": round(done["rate"], 1), "publisher_cap": cap,
                     "frame_bytes": sizes[0] if sizes else None}
         if profile is not None:
@@ -606,7 +638,8 @@ def _headline(name: str, r: dict[str, Any]) -> Any:
     if "error" in r:
         return "error"
     if name == "rclpy_ceiling":
-        return {"publish_rate": r["max"]["publish_rate"], "receive_rate": r["max"]["receive_rate"]}
+        return {"publish_rate": r["max"]["publish_rate"], "receive_rate": r["max"]["receive_rate"],
+                "image_fps": r["image_640x480"]["receive_fps"]}
     if name in ("ros_to_client", "client_to_ros"):
         return r["best_rate_99pct"]
     if name == "service":
@@ -662,6 +695,8 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                    help="ROS_DOMAIN_ID for the bridge and ROS side (default 42)")
     p.add_argument("--ros-executor", choices=("events", "single"), default="events",
                    help="rclpy executor of the ROS-side processes (default events: much faster)")
+    p.add_argument("--bridge-root", default=None,
+                   help="run the bridge from another checkout (A/B comparisons); default: this one")
     p.add_argument("--bridge-arg", action="append", default=[],
                    help="extra bridge command-line argument (repeatable), e.g. --bridge-arg=--executor=events")
     return p.parse_args(argv)
@@ -678,7 +713,8 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     duration = args.duration if args.duration is not None else (1.5 if args.quick else 3.0)
     ctx = Ctx(duration=duration, quick=args.quick, domain=args.domain, profile=args.profile,
-              ros_executor=args.ros_executor, bridge_args=list(args.bridge_arg))
+              ros_executor=args.ros_executor, bridge_args=list(args.bridge_arg),
+              bridge_root=args.bridge_root)
     return asyncio.run(run(names, ctx))
 
 
