@@ -265,8 +265,8 @@ async def ros_to_client(ctx: Ctx) -> dict[str, Any]:
     profile: dict[str, Any] | None = None
     d = ctx.duration
     try:
-        for rate in _rates(ctx, [2000, 4000, 6000, 8000, 10000, 12000, 15000],
-                           [2000, 5000, 8000, 10000, 12000]):
+        for rate in _rates(ctx, [2000, 4000, 6000, 8000, 10000, 12000, 15000, 20000],
+                           [2000, 5000, 8000, 10000, 12000, 15000]):
             current[0] = sink = Sink(int(rate * d * 1.5) + 100)
             cpu0 = cpu_seconds(bridge.pid)
             pub = await ctx.ros("publish", "--topic", topic, "--rate", str(rate), "--duration",
@@ -316,7 +316,7 @@ async def client_to_ros(ctx: Ctx) -> dict[str, Any]:
     loop = asyncio.get_running_loop()
     try:
         for rate in _rates(ctx, [2000, 5000, 8000, 10000, 12000, 15000, 20000],
-                           [2000, 5000, 10000, 12000]):
+                           [2000, 5000, 10000, 15000]):
             n = int(rate * d)
             sub = await ctx.ros("subscribe", "--topic", topic, "--expect", str(n), "--idle", "1.0",
                                 "--duration", str(d + 20)).start()
