@@ -44,7 +44,7 @@ async def test_publisher_released_after_grace_kept_by_quick_readvertise(
     make_bridge: Any, ws_connect: Any, ros_node: Any, topic: str
 ) -> None:
     """After a disconnect the publishers outlive a short grace; one re-advertised by a quick reconnect never goes away."""
-    bridge = make_bridge("--publisher-grace", "1.0")
+    bridge = make_bridge("--publisher-grace", "2.5")
     kept, dropped = f"{topic}/kept", f"{topic}/dropped"
     matched: list[int] = []
     inbox = Inbox()
