@@ -131,16 +131,8 @@ async def test_typed_async_handler(ros: Ros, topic: str) -> None:
         }
 
 
-async def test_handler_exception_gives_service_error(
-    ros: Ros, topic: str, backend: str, request: pytest.FixtureRequest
-) -> None:
+async def test_handler_exception_gives_service_error(ros: Ros, topic: str) -> None:
     """A handler that raises fails the caller's call with ServiceError carrying its text."""
-    if backend == "bridge":
-        request.applymarker(pytest.mark.xfail(
-            strict=True,
-            reason="the call goes through ROS, which has no failure reply: the bridge gives the "
-            "ROS caller a default response (reported to the lead)",
-        ))
 
     def handler(req: Any) -> Any:
         raise ValueError("no multiplying on Sundays")
