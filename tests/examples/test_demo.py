@@ -60,8 +60,9 @@ def test_demo_serves_the_cli_and_stops_on_ctrl_c(demo: Program) -> None:
                     f'"{{x: 2.5, y: 4.0}}" --url {url}')
     demo.wait_for(r"^robot_app \| \[service\] serving /mult_floats")
 
+    # --wait: on a loaded CI machine the graph may list the service later than 2 s.
     called = cli("service", "call", "/mult_floats", "mult_msgs/srv/MultFloats",
-                 "{x: 2.5, y: 4.0}", "--url", url)
+                 "{x: 2.5, y: 4.0}", "--url", url, "--wait", "15")
     assert (called.returncode, called.stdout, called.stderr) == (0, "result: 10.0\n", "")
 
     echoed = cli("topic", "echo", "/example_counter", "--count", "1", "--json", "--url", url)
