@@ -1,0 +1,135 @@
+"""The blocking client in the places scripts run: many threads, a notebook's loop, Ctrl+C, exit."""
+
+from __future__ import annotations
+
+import asyncio
+import signal
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
+from typing import Any
+
+import psutil
+import pytest
+
+from roslibpy_lite import ConnectError, ConnectionState, sync
+from tests.helpers import ROOT, BridgeProcess, ros_env, wait_until
+
+MULT = "mult_msgs/srv/MultFloats"
+
+
+def _sockets() -> int:
+    return len(psutil.Process().net_connections(kind="inet"))
+
+
+def test_many_threads_share_one_client(bridge: BridgeProcess, topic: str) -> None:
+    """Eight threads call, publish and read through one client at once; every answer is right."""
+    with sync.connect(bridge.url) as ros:
+        ros.advertise_service(topic, MULT, lambda req: {"result": req["x"] * req["y"]})
+        pub = ros.advertise(topic + "_t", "std_msgs/msg/Int32")
+
+        def work(i: int) -> list[float]:
+            answers = []
+            for j in range(20):
+                pub.publish({"data": i})
+                reply = ros.call_service(topic, MULT, {"x": float(i), "y": float(j)}, timeout=30)
+                answers.append(reply["result"])
+            return answers
+
+        with ThreadPoolExecutor(8) as pool:
+            results = list(pool.map(work, range(8)))
+        assert results == [[float(i * j) for j in range(20)] for i in range(8)]
+        assert pub.handle.published == 160
+
+
+def test_works_inside_a_running_event_loop(bridge: BridgeProcess, topic: str) -> None:
+    """Called by plain code on a thread whose asyncio loop is running (a notebook cell), it works."""
+
+    def cell() -> Any:  # what a user types in a Jupyter cell: no await
+        with sync.connect(bridge.url) as ros, \
+                ros.advertise_service(topic, MULT, lambda req: {"result": req["x"] + req["y"]}):
+            return ros.call_service(topic, MULT, {"x": 1.0, "y": 2.0}, timeout=15)
+
+    async def notebook() -> Any:
+        asyncio.get_running_loop()  # the kernel's loop is running on this thread
+        return cell()
+
+    assert asyncio.run(notebook()) == {"result": 3.0}
+
+
+def test_close_leaves_no_thread_or_socket(bridge: BridgeProcess, topic: str) -> None:
+    """After close, the threads and sockets the client used (loop, handlers, resolver) are gone."""
+    threads, sockets = threading.active_count(), _sockets()
+    with sync.connect(bridge.url) as ros:
+        ros.advertise_service(topic, MULT, lambda req: {"result": 1.0})
+        assert ros.call_service(topic, MULT, {}, timeout=15) == {"result": 1.0}
+        sub = ros.subscribe(topic + "_t", "std_msgs/msg/Int32")
+        assert threading.active_count() > threads and _sockets() > sockets
+    assert sub.closed
+    assert threading.active_count() == threads, [t.name for t in threading.enumerate()]
+    wait_until(lambda: _sockets() == sockets, 5, "the client's socket to close")
+    with sync.MockRos() as mock:
+        mock.advertise_service("/s", MULT, lambda req: {"result": 1.0})
+        mock.call_service("/s", MULT, {})
+    assert threading.active_count() == threads
+
+
+def test_connect_failure_leaves_no_thread() -> None:
+    """A refused connection raises ConnectError and stops the loop thread it started."""
+    threads = threading.active_count()
+    with pytest.raises(ConnectError, match=r"127\.0\.0\.1:9"):
+        sync.connect("ws://127.0.0.1:9", reconnect=False, open_timeout=2)
+    assert threading.active_count() == threads
+
+
+def test_reconnects_and_restores(make_bridge: Callable[..., BridgeProcess], topic: str) -> None:
+    """After the bridge restarts, the blocking client reconnects and its subscription resumes."""
+    first = make_bridge()
+    with sync.connect(first.url) as ros:
+        changes = ros.state_changes()
+        pub = ros.advertise(topic, "std_msgs/msg/Int32")
+        sub = ros.subscribe(topic, "std_msgs/msg/Int32")
+        pub.publish({"data": 1})
+        wait_until(lambda: sub.handle.pending, 15, "the first message")
+        first.kill()
+        assert changes.next(10) is ConnectionState.RECONNECTING
+        make_bridge(port=first.port)
+        assert changes.next(30) is ConnectionState.CONNECTED
+        deadline = time.monotonic() + 15
+        while sub.get(10)["data"] != 2:
+            assert time.monotonic() < deadline
+            pub.publish({"data": 2})
+
+
+CTRL_C = """
+import sys, threading
+from roslibpy_lite import sync, RosTimeoutError
+
+with sync.connect(sys.argv[1]) as ros:
+    sub = ros.subscribe("/nobody_publishes_here", "std_msgs/msg/Int32")
+    print("waiting", flush=True)
+    try:
+        sub.get()                      # blocks until Ctrl+C
+    except KeyboardInterrupt:
+        print("interrupted", flush=True)
+    try:                               # the pending get was cancelled: a new one may wait
+        sub.get(0.2)
+    except RosTimeoutError:
+        print("still usable", flush=True)
+print("threads", threading.active_count(), flush=True)
+"""
+
+
+def test_ctrl_c_interrupts_a_blocking_call(bridge: BridgeProcess) -> None:
+    """SIGINT during a blocking get raises KeyboardInterrupt there; the client stays usable and closes."""
+    proc = subprocess.Popen([sys.executable, "-c", CTRL_C, bridge.url], cwd=ROOT, env=ros_env(),
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    assert proc.stdout is not None
+    assert proc.stdout.readline().strip() == "waiting"
+    proc.send_signal(signal.SIGINT)
+    out, err = proc.communicate(timeout=30)
+    assert proc.returncode == 0, err
+    assert out.split("\n")[:3] == ["interrupted", "still usable", "threads 1"], out + err
