@@ -1,0 +1,362 @@
+"""Prometheus metrics of the bridge, counted cheaply and exported at scrape time.
+
+The hot paths never call prometheus_client. Per-message work only raises plain
+``int`` attributes that already sit on the objects involved (a subscription's
+``sent``/``sent_bytes``/``dropped_total``, a shared ROS subscription's
+``received``). Rarer events (connections, refusals, errors, service calls,
+publishes from clients) go to a :class:`Recorder` of plain dicts. At scrape
+time :func:`bridge_server.snapshot.take` turns the live state plus the
+recorder into a JSON-able snapshot, snapshots of all workers are merged, and
+:func:`render` builds the metric families with prometheus_client's own
+``*MetricFamily`` classes and exposition code.
+
+Metric names and labels (all prefixed ``roslibpy_bridge_``)
+------------------------------------------------------------
+================================================  =========  ==========================
+name                                              type       labels
+================================================  =========  ==========================
+``info``                                          gauge      version
+``workers``                                       gauge
+``start_time_seconds``                            gauge      (earliest worker start)
+``clients``                                       gauge      (connected now)
+``connections_total``                             counter    (accepted websocket clients)
+``connections_refused_total``                     counter    reason
+``topic_subscribers``                             gauge      topic
+``ros_messages_received_total``                   counter    topic (from ROS, once each)
+``messages_total``                                counter    topic, direction
+``bytes_total``                                   counter    topic, direction
+``queue_drops_total``                             counter    topic (all clients)
+``client_queue_drops_total``                      counter    client, topic (connected)
+``client_queued_messages``                        gauge      client (waiting to be sent)
+``service_calls_total``                           counter    service, outcome
+``service_call_duration_seconds``                 histogram  service
+``action_goals_total``                            counter    action, outcome
+``action_goal_duration_seconds``                  histogram  action
+``errors_total``                                  counter    kind
+================================================  =========  ==========================
+
+``direction`` is ``ros_to_client`` (frames written to clients, counted per
+client) or ``client_to_ros`` (messages clients published). ``outcome`` of a
+service call is ``ok``, ``failed``, ``timeout`` or ``unavailable``. ``kind``
+of an error is ``protocol`` (a frame that does not decode), ``request`` (a
+request the bridge refused, answered with a status error) or ``internal``.
+``client`` is ``<worker>-<session id>``.
+
+Bounded labels
+--------------
+Every name-valued label (topic, service, action, reason, kind) admits at most
+:data:`LABEL_LIMIT` distinct values, first come first served for the life of
+the process; later values are folded into ``"other"``, so a client flooding
+new topic names cannot grow the series without limit. ``client`` labels show
+at most :data:`CLIENT_LIMIT` connected clients (lowest ids); the rest fold
+into ``"other"``.
+
+Actions: the action ops call :meth:`Recorder.action_goal` (the hook is here
+and exported even while no action exists).
+"""
+
+from __future__ import annotations
+
+import bisect
+import time
+from collections.abc import Iterator, Mapping
+from typing import Any
+
+from prometheus_client.core import (
+    CounterMetricFamily,
+    GaugeMetricFamily,
+    HistogramMetricFamily,
+    Metric,
+)
+from prometheus_client.exposition import CONTENT_TYPE_LATEST, generate_latest
+
+__all__ = [
+    "CLIENT_LIMIT",
+    "CONTENT_TYPE",
+    "LABEL_LIMIT",
+    "LATENCY_BUCKETS",
+    "OTHER",
+    "LabelCap",
+    "Recorder",
+    "outcome",
+    "render",
+]
+
+PREFIX = "roslibpy_bridge_"
+LABEL_LIMIT = 200
+"""Most distinct values of one name-valued label; the rest are ``"other"``."""
+CLIENT_LIMIT = 100
+"""Most clients shown one by one in the per-client metrics."""
+OTHER = "other"
+LATENCY_BUCKETS = (0.0005, 0.001, 0.0025, 0.005, 0.01, 0.025, 0.05, 0.1, 0.25, 0.5, 1.0,
+                   2.5, 5.0, 10.0)
+"""Upper bounds (seconds) of the call duration histograms (``+Inf`` added)."""
+CONTENT_TYPE = CONTENT_TYPE_LATEST
+
+
+class LabelCap:
+    """Admits at most ``limit`` distinct label values; later ones become ``"other"``."""
+
+    def __init__(self, limit: int = LABEL_LIMIT) -> None:
+        self.limit = limit
+        self.admitted: set[str] = set()
+
+    def __call__(self, value: str) -> str:
+        admitted = self.admitted
+        if value in admitted:
+            return value
+        if len(admitted) < self.limit:
+            admitted.add(value)
+            return value
+        return OTHER
+
+
+def _bump(counts: dict[str, int], cap: LabelCap, key: str, n: int = 1) -> None:
+    key = cap(key)
+    counts[key] = counts.get(key, 0) + n
+
+
+class _Timings:
+    """Outcome counts and a duration histogram per name (services, or actions)."""
+
+    def __init__(self) -> None:
+        self.cap = LabelCap()
+        self.data: dict[str, dict[str, Any]] = {}
+
+    def observe(self, name: str, outcome: str, seconds: float) -> None:
+        entry = self.data.get(name)
+        if entry is None:
+            name = self.cap(name)
+            entry = self.data.get(name)
+            if entry is None:
+                entry = self.data[name] = {
+                    "outcomes": {},
+                    "buckets": [0] * (len(LATENCY_BUCKETS) + 1),
+                    "sum": 0.0,
+                }
+        outcomes = entry["outcomes"]
+        outcomes[outcome] = outcomes.get(outcome, 0) + 1
+        entry["buckets"][bisect.bisect_left(LATENCY_BUCKETS, seconds)] += 1
+        entry["sum"] += seconds
+
+
+class Recorder:
+    """One process's event counters (plain dicts), plus what closed objects counted.
+
+    Every method is called on the loop thread.
+    """
+
+    def __init__(self) -> None:
+        self.started = time.time()
+        self.connections = 0
+        self.refused: dict[str, int] = {}
+        self.errors: dict[str, int] = {}
+        self.services = _Timings()
+        self.actions = _Timings()
+        self._refused_cap = LabelCap(32)
+        self._error_cap = LabelCap(32)
+        self.topic_cap = LabelCap()
+        # per topic: counts of closed subscriptions / publishes (never shrink)
+        self.retired: dict[str, dict[str, int]] = {}
+
+    # -- events --------------------------------------------------------------------------------
+
+    def connection_refused(self, reason: str) -> None:
+        """A connection was turned away (called by the security checks: auth, origin, limits)."""
+        _bump(self.refused, self._refused_cap, reason)
+
+    def error(self, kind: str) -> None:
+        """An error of ``kind`` (``protocol``, ``request``, ``internal``, ...) happened."""
+        _bump(self.errors, self._error_cap, kind)
+
+    def service_call(self, service: str, outcome: str, seconds: float) -> None:
+        """A client's ``call_service`` finished with ``outcome`` after ``seconds``."""
+        self.services.observe(service, outcome, seconds)
+
+    def action_goal(self, action: str, outcome: str, seconds: float) -> None:
+        """Hook for actions: a goal sent through the bridge ended with ``outcome``
+        (``succeeded``, ``aborted``, ``canceled``, ``failed``) after ``seconds``."""
+        self.actions.observe(action, outcome, seconds)
+
+    def _topic(self, topic: str) -> dict[str, int]:
+        entry = self.retired.get(topic)
+        if entry is None:
+            entry = self.retired.setdefault(self.topic_cap(topic), {})
+        return entry
+
+    def topic_count(self, topic: str, field: str, n: int = 1) -> None:
+        """Add ``n`` to a per-topic counter (``published``, ``published_bytes``, ``sent``, ...)."""
+        entry = self._topic(topic)
+        entry[field] = entry.get(field, 0) + n
+
+    def published(self, topic: str, nbytes: int) -> None:
+        """A client published one message of ``nbytes`` (its frame) to ``topic``."""
+        entry = self._topic(topic)
+        entry["published"] = entry.get("published", 0) + 1
+        entry["published_bytes"] = entry.get("published_bytes", 0) + nbytes
+
+    def retire_subscription(self, topic: str, sent: int, sent_bytes: int, drops: int) -> None:
+        """A client's subscription closed: keep what it counted."""
+        for field, n in (("sent", sent), ("sent_bytes", sent_bytes), ("drops", drops)):
+            if n:
+                self.topic_count(topic, field, n)
+
+    def retire_ros_subscription(self, topic: str, received: int) -> None:
+        """The bridge's ROS subscription to ``topic`` went away: keep its count."""
+        if received:
+            self.topic_count(topic, "ros_received", received)
+
+
+# -- exposition ---------------------------------------------------------------------------------
+
+
+class _Families:
+    """A collector over one merged snapshot (what ``generate_latest`` asks for)."""
+
+    def __init__(self, snap: Mapping[str, Any], caps: Mapping[str, LabelCap]) -> None:
+        self.snap = snap
+        self.caps = caps
+
+    def collect(self) -> Iterator[Metric]:
+        s = self.snap
+        topic = self.caps["topic"]
+
+        def g(name: str, doc: str, labels: list[str] | None = None) -> GaugeMetricFamily:
+            return GaugeMetricFamily(PREFIX + name, doc, labels=labels)
+
+        def c(name: str, doc: str, labels: list[str] | None = None) -> CounterMetricFamily:
+            return CounterMetricFamily(PREFIX + name, doc, labels=labels)
+
+        info = g("info", "The bridge's version.", ["version"])
+        info.add_metric([str(s.get("version", ""))], 1)
+        yield info
+        yield GaugeMetricFamily(PREFIX + "workers", "Worker processes answering this port.",
+                                value=len(s.get("workers", [])) or 1)
+        yield GaugeMetricFamily(PREFIX + "start_time_seconds",
+                                "Unix time the earliest running worker started.",
+                                value=float(s.get("started", 0.0)))
+        clients = s.get("clients", [])
+        yield GaugeMetricFamily(PREFIX + "clients", "Connected websocket clients.",
+                                value=len(clients))
+        yield CounterMetricFamily(PREFIX + "connections", "Websocket clients accepted.",
+                                  value=int(s.get("connections", 0)))
+        refused = c("connections_refused", "Connections turned away, by reason.", ["reason"])
+        for reason, n in _folded(s.get("refused", {}), self.caps["reason"]):
+            refused.add_metric([reason], n)
+        yield refused
+        errors = c("errors", "Errors, by kind (protocol, request, internal).", ["kind"])
+        for kind, n in _folded(s.get("errors", {}), self.caps["kind"]):
+            errors.add_metric([kind], n)
+        yield errors
+
+        topics: dict[str, dict[str, float]] = {}
+        for name, t in s.get("topics", {}).items():
+            acc = topics.setdefault(topic(name), {})
+            for field, v in t.items():
+                if isinstance(v, int | float) and not isinstance(v, bool):
+                    acc[field] = acc.get(field, 0) + v
+        subs = g("topic_subscribers", "Client subscriptions per topic.", ["topic"])
+        ros_in = c("ros_messages_received", "Messages the bridge took from ROS per topic.",
+                   ["topic"])
+        msgs = c("messages", "Messages per topic and direction.", ["topic", "direction"])
+        nbytes = c("bytes", "Bytes of frames per topic and direction.", ["topic", "direction"])
+        drops = c("queue_drops", "Messages dropped from full client queues, per topic.",
+                  ["topic"])
+        for name in sorted(topics):
+            t = topics[name]
+            subs.add_metric([name], t.get("subscribers", 0))
+            ros_in.add_metric([name], t.get("ros_received", 0))
+            msgs.add_metric([name, "ros_to_client"], t.get("sent", 0))
+            msgs.add_metric([name, "client_to_ros"], t.get("published", 0))
+            nbytes.add_metric([name, "ros_to_client"], t.get("sent_bytes", 0))
+            nbytes.add_metric([name, "client_to_ros"], t.get("published_bytes", 0))
+            drops.add_metric([name], t.get("drops", 0))
+        yield from (subs, ros_in, msgs, nbytes, drops)
+
+        cdrops = c("client_queue_drops", "Messages dropped per connected client and topic.",
+                   ["client", "topic"])
+        queued = g("client_queued_messages", "Messages waiting to be sent, per client.",
+                   ["client"])
+        per_drop: dict[tuple[str, str], int] = {}
+        per_queued: dict[str, int] = {}
+        shown = sorted(clients, key=lambda cl: (cl.get("worker", 0), cl.get("sid", 0)))
+        for i, cl in enumerate(shown):
+            cid = str(cl["id"]) if i < CLIENT_LIMIT else OTHER
+            per_queued[cid] = per_queued.get(cid, 0) + int(cl.get("queued", 0))
+            for sub in cl.get("subscriptions", []):
+                key = (cid, topic(sub["topic"]))
+                per_drop[key] = per_drop.get(key, 0) + int(sub.get("dropped", 0))
+        for (cid, tname), n in sorted(per_drop.items()):
+            cdrops.add_metric([cid, tname], n)
+        for cid, n in sorted(per_queued.items()):
+            queued.add_metric([cid], n)
+        yield cdrops
+        yield queued
+
+        for kind, label in (("service_calls", "service"), ("action_goals", "action")):
+            what = kind[:-1]
+            total = c(f"{what}s", f"{label.capitalize()} calls by outcome.",
+                      [label, "outcome"])
+            hist = HistogramMetricFamily(
+                PREFIX + f"{what}_duration_seconds", f"{label.capitalize()} call durations.",
+                labels=[label],
+            )
+            merged: dict[str, dict[str, Any]] = {}
+            for name, entry in s.get(kind, {}).items():
+                add_timing(merged, self.caps[label](name), entry)
+            for name in sorted(merged):
+                entry = merged[name]
+                for result, n in sorted(entry["outcomes"].items()):
+                    total.add_metric([name, result], n)
+                cumulative = 0
+                buckets: list[tuple[str, float]] = []
+                for bound, n in zip((*LATENCY_BUCKETS, float("inf")), entry["buckets"],
+                                    strict=True):
+                    cumulative += n
+                    buckets.append(("+Inf" if bound == float("inf") else repr(bound),
+                                    cumulative))
+                hist.add_metric([name], buckets, entry["sum"])
+            yield total
+            yield hist
+
+
+def add_timing(into: dict[str, dict[str, Any]], name: str, entry: Mapping[str, Any]) -> None:
+    """Add one name's outcome counts and histogram (``entry``) to ``into[name]``."""
+    acc = into.get(name)
+    if acc is None:
+        acc = into[name] = {"outcomes": {}, "buckets": [0] * len(entry["buckets"]), "sum": 0.0}
+    outcomes = acc["outcomes"]
+    for result, n in entry["outcomes"].items():
+        outcomes[result] = outcomes.get(result, 0) + n
+    acc["buckets"] = [a + b for a, b in zip(acc["buckets"], entry["buckets"], strict=True)]
+    acc["sum"] += entry["sum"]
+
+
+def _folded(counts: Mapping[str, int], cap: LabelCap) -> list[tuple[str, int]]:
+    out: dict[str, int] = {}
+    for key, n in counts.items():
+        k = cap(key)
+        out[k] = out.get(k, 0) + n
+    return sorted(out.items())
+
+
+def new_caps() -> dict[str, LabelCap]:
+    """The exporting process's label caps (kept for its lifetime, so series stay stable)."""
+    return {name: LabelCap() for name in ("topic", "service", "action", "reason", "kind")}
+
+
+def render(snap: Mapping[str, Any], caps: Mapping[str, LabelCap]) -> bytes:
+    """The Prometheus text exposition of a (merged) snapshot."""
+    return generate_latest(_Families(snap, caps))
+
+
+def outcome(result: bool, values: object) -> str:
+    """The ``outcome`` label of a finished service call from its ``service_response``."""
+    if result:
+        return "ok"
+    text = values if isinstance(values, str) else ""
+    if "timed out" in text:
+        return "timeout"
+    if "does not exist" in text or "not become available" in text or "no longer served" in text:
+        return "unavailable"
+    return "failed"

@@ -1,0 +1,204 @@
+"""What one bridge process is doing right now, as JSON-able data, and how workers' merge.
+
+:func:`take` reads the live state (sessions, their subscriptions and queues,
+the shared ROS subscriptions, served services) plus the process's
+:class:`~bridge_server.metrics.Recorder`. It runs on the loop thread, at most
+once per request of ``/metrics`` or ``/status.json`` (and a per-topic subset
+once a second for the rates), never per message. :func:`merge` combines the
+snapshots of several workers into one view of the whole bridge.
+
+Actions: a bridge with actions may set ``bridge.actions_status`` to a callable
+returning ``[{"name", "type", "served_by", "goals"}, ...]``; the list appears
+as ``actions`` in the snapshot and on the status page.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from collections.abc import Iterable, Mapping
+from typing import TYPE_CHECKING, Any
+
+from .metrics import add_timing
+
+if TYPE_CHECKING:
+    from .server import Bridge
+
+__all__ = ["RateMeter", "merge", "take", "topic_totals"]
+
+RATE_FIELDS = ("ros_received", "sent", "published")
+
+
+def topic_totals(bridge: Bridge) -> dict[str, dict[str, Any]]:
+    """Per-topic counters of this process (closed objects' counts included)."""
+    topics: dict[str, dict[str, Any]] = {}
+    for name, counts in bridge.metrics.retired.items():
+        topics[name] = dict(counts)
+    for name, shared in bridge.ros.subscriptions.items():
+        t = topics.setdefault(name, {})
+        t["ros_received"] = t.get("ros_received", 0) + shared.received
+        if shared.type_name is not None:
+            t["type"] = shared.type_name
+    for name, _type, _latch in bridge.ros.publishers:
+        t = topics.setdefault(name, {})
+        t.setdefault("type", _type)
+        t["bridge_publishers"] = t.get("bridge_publishers", 0) + 1
+    for session in bridge.sessions:
+        for sub in session.subs.values():
+            t = topics.setdefault(sub.topic, {})
+            t["subscribers"] = t.get("subscribers", 0) + 1
+            t["sent"] = t.get("sent", 0) + sub.sent
+            t["sent_bytes"] = t.get("sent_bytes", 0) + sub.sent_bytes
+            t["drops"] = t.get("drops", 0) + sub.dropped_total
+    return topics
+
+
+class RateMeter:
+    """Messages per second per topic over the last tick (called about once a second)."""
+
+    def __init__(self) -> None:
+        self.rates: dict[str, dict[str, float]] = {}
+        self._last: dict[str, tuple[float, ...]] = {}
+        self._t = time.monotonic()
+
+    def tick(self, totals: Mapping[str, Mapping[str, Any]]) -> None:
+        """Take new totals; rates are the differences over the time since the last tick."""
+        now = time.monotonic()
+        dt = max(now - self._t, 1e-3)
+        self._t = now
+        rates: dict[str, dict[str, float]] = {}
+        last: dict[str, tuple[float, ...]] = {}
+        for name, t in totals.items():
+            values = tuple(float(t.get(f, 0)) for f in RATE_FIELDS)
+            last[name] = values
+            before = self._last.get(name)
+            if before is not None and any(values):
+                rates[name] = {
+                    f"{f}_per_s": round(max(v - b, 0.0) / dt, 1)
+                    for f, v, b in zip(RATE_FIELDS, values, before, strict=True)
+                }
+        self._last = last
+        self.rates = rates
+
+
+def take(bridge: Bridge, rates: Mapping[str, Mapping[str, float]]) -> dict[str, Any]:
+    """This process's snapshot (see the module docstring)."""
+    from roslibpy_lite import __version__
+
+    rec = bridge.metrics
+    worker = bridge.config.worker_index
+    topics = topic_totals(bridge)
+    for name, r in rates.items():
+        if name in topics:
+            topics[name].update(r)
+    clients = []
+    for session in sorted(bridge.sessions, key=lambda s: s.sid):
+        subs = [
+            {
+                "topic": sub.topic,
+                "type": sub.shared.type_name if sub.shared is not None else None,
+                "queued": len(sub.queue),
+                "queue_length": sub.maxlen,
+                "dropped": sub.dropped_total,
+                "sent": sub.sent,
+            }
+            for sub in session.subs.values()
+        ]
+        queued = sum(len(sub.queue) for sub in session.subs.values())
+        dropped = sum(sub.dropped_total for sub in session.subs.values())
+        clients.append(
+            {
+                "id": f"{worker}-{session.sid}",
+                "sid": session.sid,
+                "worker": worker,
+                "address": getattr(session, "peer", ""),
+                "connected_at": getattr(session, "connected_at", 0.0),
+                "subscriptions": subs,
+                "publishes": sorted(session.publishers),
+                "serves": sorted(session.served),
+                "calls_in_flight": len(session.calls),
+                "queued": queued + len(session._control),
+                "dropped": dropped + session.control_dropped,
+            }
+        )
+    services = [
+        {"name": name, "type": served.type_name, "served_by": f"{worker}-{owner.sid}"}
+        for name, owner in sorted(bridge.service_owners.items())
+        if (served := owner.served.get(name)) is not None
+    ]
+    actions_status = getattr(bridge, "actions_status", None)
+    return {
+        "version": __version__,
+        "worker": worker,
+        "workers": [
+            {
+                "index": worker,
+                "pid": os.getpid(),
+                "node": bridge.ros.name,
+                "started": rec.started,
+                "clients": len(clients),
+            }
+        ],
+        "started": rec.started,
+        "connections": rec.connections,
+        "refused": dict(rec.refused),
+        "errors": dict(rec.errors),
+        "service_calls": rec.services.data,
+        "action_goals": rec.actions.data,
+        "topics": topics,
+        "clients": clients,
+        "services": services,
+        "actions": list(actions_status()) if callable(actions_status) else [],
+    }
+
+
+_MAX_FIELDS = ("ros_received_per_s",)  # each worker receives the same ROS stream
+
+
+def merge(snaps: Iterable[Mapping[str, Any]]) -> dict[str, Any]:
+    """One view of several workers: counts add up, lists join, ROS input rates take the max."""
+    snaps = list(snaps)
+    if len(snaps) == 1:
+        return dict(snaps[0])
+    out: dict[str, Any] = {
+        "version": snaps[0]["version"],
+        "worker": snaps[0]["worker"],
+        "workers": [],
+        "started": min(s["started"] for s in snaps),
+        "connections": 0,
+        "refused": {},
+        "errors": {},
+        "service_calls": {},
+        "action_goals": {},
+        "topics": {},
+        "clients": [],
+        "services": [],
+        "actions": [],
+    }
+    for s in snaps:
+        out["connections"] += s["connections"]
+        for key in ("workers", "clients", "services", "actions"):
+            out[key].extend(s[key])
+        for key in ("refused", "errors"):
+            _add(out[key], s[key])
+        for key in ("service_calls", "action_goals"):
+            for name, entry in s[key].items():
+                add_timing(out[key], name, entry)
+        for name, t in s["topics"].items():
+            acc = out["topics"].setdefault(name, {})
+            for field, v in t.items():
+                if field == "type":
+                    acc.setdefault("type", v)
+                elif field in _MAX_FIELDS:
+                    acc[field] = max(acc.get(field, 0), v)
+                else:
+                    acc[field] = acc.get(field, 0) + v
+    out["workers"].sort(key=lambda w: w["index"])
+    out["clients"].sort(key=lambda c: (c["worker"], c["sid"]))
+    out["services"].sort(key=lambda sv: sv["name"])
+    return out
+
+
+def _add(into: dict[str, Any], more: Mapping[str, Any]) -> None:
+    for k, v in more.items():
+        into[k] = into.get(k, 0) + v

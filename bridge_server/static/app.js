@@ -1,0 +1,122 @@
+// The live status page: polls /status.json once a second and redraws the tables.
+"use strict";
+(function () {
+  const POLL_MS = 1000;
+
+  function el(tag, text, cls) {
+    const e = document.createElement(tag);
+    if (text !== undefined) e.textContent = String(text);
+    if (cls) e.className = cls;
+    return e;
+  }
+
+  function duration(seconds) {
+    seconds = Math.max(0, Math.floor(seconds));
+    const d = Math.floor(seconds / 86400), h = Math.floor(seconds / 3600) % 24;
+    const m = Math.floor(seconds / 60) % 60, s = seconds % 60;
+    if (d) return d + "d " + h + "h";
+    if (h) return h + "h " + m + "m";
+    if (m) return m + "m " + s + "s";
+    return s + "s";
+  }
+
+  function fill(id, rows, empty) {
+    const table = document.getElementById(id);
+    const labels = Array.from(table.querySelectorAll("thead th")).map((th) => th.textContent);
+    const body = table.tBodies[0];
+    const fresh = document.createElement("tbody");
+    if (!rows.length) {
+      const tr = el("tr");
+      const td = el("td", empty, "empty");
+      td.colSpan = labels.length;
+      tr.appendChild(td);
+      fresh.appendChild(tr);
+    }
+    for (const row of rows) {
+      const tr = el("tr");
+      row.forEach((cell, i) => {
+        const td = cell instanceof Node ? wrap(cell) : el("td", cell);
+        if (typeof cell === "number") td.className = "num";
+        td.dataset.label = labels[i] || "";
+        tr.appendChild(td);
+      });
+      fresh.appendChild(tr);
+    }
+    table.replaceChild(fresh, body);
+  }
+
+  function wrap(node) { const td = el("td"); td.appendChild(node); return td; }
+
+  function list(items) {
+    if (!items.length) return el("span", "–");
+    const span = el("span");
+    items.forEach((item, i) => {
+      if (i) span.appendChild(document.createTextNode(", "));
+      span.appendChild(el("code", item));
+    });
+    return span;
+  }
+
+  function queue(c) {
+    const span = el("span");
+    let fill = 0;
+    for (const s of c.subscriptions) fill = Math.max(fill, s.queue_length ? s.queued / s.queue_length : 0);
+    span.appendChild(document.createTextNode(String(c.queued)));
+    const bar = el("span", undefined, "bar");
+    const inner = el("i");
+    inner.style.width = Math.round(100 * Math.min(fill, 1)) + "%";
+    bar.appendChild(inner);
+    bar.title = Math.round(100 * fill) + "% of the fullest queue";
+    span.appendChild(bar);
+    return span;
+  }
+
+  function rate(v) { return v === undefined ? "–" : Number(v).toFixed(1); }
+
+  function render(s) {
+    document.getElementById("version").textContent = s.version;
+    document.getElementById("uptime").textContent = duration(s.now - s.started);
+    document.getElementById("client-count").textContent = s.clients.length;
+    document.getElementById("worker-count").textContent = s.workers.length;
+    fill("clients", s.clients.map((c) => [
+      c.id, c.address, new Date(c.connected_at * 1000).toLocaleTimeString(),
+      list(c.subscriptions.map((x) => x.topic)), list(c.publishes), list(c.serves),
+      queue(c), c.dropped ? el("span", c.dropped, "warn") : 0,
+    ]), "no clients connected");
+    const topics = Object.keys(s.topics).sort();
+    fill("topics", topics.map((name) => {
+      const t = s.topics[name];
+      return [name, t.type || "?", t.subscribers || 0, rate(t.ros_received_per_s),
+        rate(t.sent_per_s), rate(t.published_per_s), t.drops || 0];
+    }), "no topics in use");
+    fill("services", s.services.map((sv) => {
+      const calls = s.service_calls[sv.name];
+      let n = 0;
+      if (calls) for (const k in calls.outcomes) n += calls.outcomes[k];
+      return [sv.name, sv.type, sv.served_by, n];
+    }), "no services served by clients");
+    fill("actions", s.actions.map((a) => [a.name, a.type || "?", a.served_by || "ROS", a.goals || 0]),
+      "no actions");
+    fill("workers", s.workers.map((w) => [w.index, w.pid, w.node, duration(s.now - w.started), w.clients]),
+      "none");
+    const updated = document.getElementById("updated");
+    updated.textContent = "live · " + new Date().toLocaleTimeString();
+    updated.className = "";
+    document.body.dataset.updates = String(Number(document.body.dataset.updates || 0) + 1);
+  }
+
+  async function poll() {
+    try {
+      const r = await fetch("/status.json", { cache: "no-store" });
+      if (!r.ok) throw new Error(r.status + " " + r.statusText);
+      render(await r.json());
+    } catch (err) {
+      const updated = document.getElementById("updated");
+      updated.textContent = "not updating: " + err.message;
+      updated.className = "stale";
+    }
+    setTimeout(poll, POLL_MS);
+  }
+
+  poll();
+})();

@@ -1,0 +1,289 @@
+"""The bridge's plain-HTTP routes, answered on its websocket port before any upgrade.
+
+======================  =================================================================
+``GET /``               the live status page (``static/index.html``; it polls
+                        ``/status.json`` once a second)
+``GET /static/<file>``  the page's own CSS and JavaScript (no CDN, nothing external)
+``GET /status.json``    the whole bridge (every worker) as JSON, filtered for the viewer
+``GET /metrics``        Prometheus text exposition (:mod:`bridge_server.metrics`)
+``GET /healthz``        200 while the process runs (liveness)
+``GET /readyz``         200 once rclpy is up and the port is listening, else 503
+======================  =================================================================
+
+A websocket upgrade request on any path goes on to the websocket handshake
+(and to the security checks that run after these routes). Every response
+carries ``X-Bridge-Worker: <index>``, as do websocket handshake responses.
+
+Who sees what
+-------------
+:class:`Access` decides. The default shows everything (authentication off).
+The security layer plugs in by replacing ``bridge.web.access`` with a subclass:
+``principal(request)`` returns who is asking (or raises :class:`Denied`, e.g.
+401 without a valid token) and ``may_see(principal, kind, name)`` says whether
+that viewer may see a ``route`` (``/metrics``, ``/status.json``, ...), a
+``topic``, a ``service``, an ``action`` or a ``client``. :func:`visible`
+applies it to the status data, so the page never shows what the role may not.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import json
+import logging
+import time
+from collections.abc import Awaitable, Callable, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from . import metrics, snapshot
+
+if TYPE_CHECKING:
+    from websockets.asyncio.server import ServerConnection
+    from websockets.http11 import Request, Response
+
+    from .server import Bridge
+
+__all__ = ["Access", "Denied", "Reply", "Web", "visible"]
+
+log = logging.getLogger("bridge_server.web")
+
+STATIC = Path(__file__).resolve().parent / "static"
+_TYPES = {
+    ".html": "text/html; charset=utf-8",
+    ".css": "text/css; charset=utf-8",
+    ".js": "text/javascript; charset=utf-8",
+    ".svg": "image/svg+xml",
+    ".png": "image/png",
+    ".ico": "image/x-icon",
+}
+RATE_INTERVAL = 1.0
+"""Seconds between rate measurements (the status page's ``/s`` figures)."""
+PEER_TIMEOUT = 1.0
+"""Seconds to wait for another worker's snapshot."""
+
+
+class Denied(Exception):
+    """Raised by :meth:`Access.principal` to refuse a request (e.g. 401, 403)."""
+
+    def __init__(self, status: int, reason: str) -> None:
+        super().__init__(reason)
+        self.status = status
+        self.reason = reason
+
+
+class Access:
+    """Who is asking, and what they may see. This default: anyone, everything."""
+
+    def principal(self, request: Request) -> Any:
+        """The viewer of ``request`` (``None``: anonymous); raise :class:`Denied` to refuse."""
+        return None
+
+    def may_see(self, principal: Any, kind: str, name: str) -> bool:
+        """Whether ``principal`` may see ``name`` of ``kind`` (route, topic, service, action,
+        client)."""
+        return True
+
+
+def visible(status: Mapping[str, Any], principal: Any, access: Access) -> dict[str, Any]:
+    """The status data with everything ``principal`` may not see left out."""
+    def ok(kind: str, name: str) -> bool:
+        return access.may_see(principal, kind, name)
+
+    out = dict(status)
+    out["topics"] = {k: v for k, v in status.get("topics", {}).items() if ok("topic", k)}
+    out["services"] = [s for s in status.get("services", []) if ok("service", s["name"])]
+    out["actions"] = [a for a in status.get("actions", []) if ok("action", a["name"])]
+    clients = []
+    for c in status.get("clients", []):
+        if not ok("client", c["id"]):
+            continue
+        c = dict(c)
+        c["subscriptions"] = [s for s in c["subscriptions"] if ok("topic", s["topic"])]
+        c["publishes"] = [t for t in c["publishes"] if ok("topic", t)]
+        c["serves"] = [s for s in c["serves"] if ok("service", s)]
+        clients.append(c)
+    out["clients"] = clients
+    for key in ("service_calls", "action_goals"):
+        kind = "service" if key == "service_calls" else "action"
+        out[key] = {k: v for k, v in status.get(key, {}).items() if ok(kind, k)}
+    return out
+
+
+@dataclass
+class Reply:
+    """A plain HTTP response."""
+
+    status: int
+    body: bytes
+    content_type: str = "text/plain; charset=utf-8"
+    headers: list[tuple[str, str]] = field(default_factory=list)
+
+
+class Web:
+    """The routes, the rate meter, and (with workers) the view of the other workers."""
+
+    def __init__(self, bridge: Bridge) -> None:
+        self.bridge = bridge
+        self.access = Access()
+        self.caps = metrics.new_caps()
+        self.meter = snapshot.RateMeter()
+        self.peers: Callable[[], Awaitable[list[dict[str, Any]]]] | None = None
+        """Set by the worker machinery: fetches the other workers' snapshots."""
+        self._ticker: asyncio.Task[None] | None = None
+        self._servers: list[asyncio.Server] = []
+        self._static = {p.name: p for p in STATIC.iterdir() if p.is_file()}
+        self.metrics_port: int | None = None
+
+    async def start(self) -> None:
+        """Measure rates; serve ``--metrics-port`` and (as a worker) the peer socket."""
+        from . import workers
+
+        cfg = self.bridge.config
+        self._ticker = asyncio.create_task(self._tick(), name="bridge-rates")
+        if cfg.metrics_port is not None:
+            server = await serve_metrics_port(self, cfg.host, cfg.metrics_port)
+            self._servers.append(server)
+            self.metrics_port = int(next(iter(server.sockets)).getsockname()[1])
+            log.info("metrics on http://%s:%d/metrics", cfg.host, self.metrics_port)
+        if cfg.worker_dir is not None:
+            self._servers.append(
+                await workers.serve_peer_socket(self, cfg.worker_dir, cfg.worker_index)
+            )
+
+    async def close(self) -> None:
+        """Stop measuring and serving."""
+        if self._ticker is not None:
+            self._ticker.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await self._ticker
+        for server in self._servers:
+            server.close()
+
+    async def _tick(self) -> None:
+        while True:
+            await asyncio.sleep(RATE_INTERVAL)
+            try:
+                self.meter.tick(snapshot.topic_totals(self.bridge))
+            except Exception:  # never let the meter take the bridge down
+                log.exception("measuring rates failed")
+
+    def local(self) -> dict[str, Any]:
+        """This process's snapshot."""
+        return snapshot.take(self.bridge, self.meter.rates)
+
+    async def whole(self) -> dict[str, Any]:
+        """The merged snapshot of every worker."""
+        snaps = [self.local()]
+        if self.peers is not None:
+            snaps += await self.peers()
+        return snapshot.merge(snaps)
+
+    def ready(self) -> str | None:
+        """Why the bridge is not ready (``None``: ready)."""
+        ros = self.bridge.ros
+        if ros.node is None or not ros.context.ok():
+            return "rclpy is not running"
+        if ros._thread is None or not ros._thread.is_alive():
+            return "the ROS executor thread is not running"
+        server = self.bridge._server
+        if server is None or not server.is_serving():
+            return "not listening"
+        return None
+
+    # -- routing -------------------------------------------------------------------------------
+
+    async def process_request(
+        self, connection: ServerConnection, request: Request
+    ) -> Response | None:
+        """websockets' ``process_request``: answer a plain-HTTP route, or ``None`` to go on."""
+        if "upgrade" in request.headers.get("Connection", "").lower():
+            return None
+        reply = await self.answer(request)
+        if reply is None:
+            return None
+        response = connection.respond(reply.status, "")
+        response.body = reply.body
+        headers = response.headers
+        del headers["Content-Length"], headers["Content-Type"]
+        headers["Content-Length"] = str(len(reply.body))
+        headers["Content-Type"] = reply.content_type
+        for name, value in reply.headers:
+            headers[name] = value
+        return response
+
+    def process_response(
+        self, connection: ServerConnection, request: Request, response: Response
+    ) -> None:
+        """websockets' ``process_response``: name the worker on every response."""
+        if "X-Bridge-Worker" not in response.headers:
+            response.headers["X-Bridge-Worker"] = str(self.bridge.config.worker_index)
+
+    async def answer(self, request: Request) -> Reply | None:
+        """The reply to a plain GET of one of the routes (``None``: not one of them)."""
+        path = request.path.split("?", 1)[0]
+        if path == "/":
+            path = "/static/index.html"
+        if path not in ("/status.json", "/metrics", "/healthz", "/readyz") and not (
+            path.startswith("/static/") and path[8:] in self._static
+        ):
+            return None
+        if path == "/healthz":
+            return Reply(200, b"ok\n")
+        if path == "/readyz":
+            why = self.ready()
+            return Reply(200, b"ready\n") if why is None else Reply(503, f"{why}\n".encode())
+        try:
+            principal = self.access.principal(request)
+        except Denied as exc:
+            return Reply(exc.status, f"{exc.reason}\n".encode())
+        route = "/" if path == "/static/index.html" else path
+        if not self.access.may_see(principal, "route", route):
+            return Reply(403, b"forbidden\n")
+        nocache = [("Cache-Control", "no-store")]
+        if path == "/status.json":
+            data = visible(await self.whole(), principal, self.access)
+            data["now"] = time.time()
+            data["answered_by"] = self.bridge.config.worker_index
+            body = json.dumps(data, separators=(",", ":")).encode()
+            return Reply(200, body, "application/json", nocache)
+        if path == "/metrics":
+            body = metrics.render(await self.whole(), self.caps)
+            return Reply(200, body, metrics.CONTENT_TYPE, nocache)
+        file = self._static[path[8:]]
+        return Reply(200, file.read_bytes(), _TYPES.get(file.suffix, "application/octet-stream"),
+                     [("Cache-Control", "no-cache")])
+
+
+async def serve_metrics_port(web: Web, host: str, port: int) -> asyncio.Server:
+    """A plain HTTP server for ``--metrics-port`` answering the same routes (GET only)."""
+    from websockets.datastructures import Headers
+    from websockets.http11 import Request
+
+    async def handle(reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+        try:
+            head = await asyncio.wait_for(reader.readuntil(b"\r\n\r\n"), 10)
+            line, *rest = head.decode("latin-1").split("\r\n")
+            method, target, _ = [*line.split(" "), "", ""][:3]
+            headers = Headers()
+            for h in rest:
+                if ":" in h:
+                    k, v = h.split(":", 1)
+                    headers[k.strip()] = v.strip()
+            reply = (
+                await web.answer(Request(target, headers)) if method == "GET" else None
+            ) or Reply(404, b"not found\n")
+            writer.write(
+                f"HTTP/1.1 {reply.status} {'OK' if reply.status == 200 else 'Error'}\r\n"
+                f"Content-Type: {reply.content_type}\r\nContent-Length: {len(reply.body)}\r\n"
+                f"X-Bridge-Worker: {web.bridge.config.worker_index}\r\n"
+                "Connection: close\r\n\r\n".encode() + reply.body
+            )
+            await writer.drain()
+        except (OSError, asyncio.IncompleteReadError, asyncio.LimitOverrunError, TimeoutError):
+            pass
+        finally:
+            writer.close()
+
+    return await asyncio.start_server(handle, host, port, reuse_port=True)

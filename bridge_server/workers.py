@@ -1,0 +1,228 @@
+"""``--workers N``: N bridge processes on one port, and how they see each other.
+
+The supervisor (this process, no rclpy) reserves the port with
+``SO_REUSEPORT`` (bound, not listening, so the kernel hands it no
+connection), then starts N workers: ``python -m bridge_server`` with the same
+options plus ``--worker-index i --worker-dir D``. Each worker listens on the
+same port with ``SO_REUSEPORT`` (the kernel spreads new connections across
+them) and joins the ROS graph as its own node (``<node name>_w<i>``), so DDS
+carries messages, latched topics and service calls between workers like
+between any two nodes.
+
+The whole bridge in one view: each worker also listens on a unix socket
+``D/worker-<i>.sock`` that answers with its snapshot
+(:func:`bridge_server.snapshot.take`) as JSON. Whichever worker answers
+``/metrics`` or ``/status.json`` asks the others and merges
+(:func:`bridge_server.snapshot.merge`). A counter of a restarted worker starts
+again from zero (Prometheus sees a counter reset).
+
+The supervisor relays the workers' logs, prints the ready line once every
+worker listens, restarts a worker that dies (at most once a second each),
+and on SIGINT/SIGTERM stops them all: SIGTERM, then SIGKILL after
+:data:`STOP_GRACE` seconds.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import json
+import logging
+import os
+import re
+import shutil
+import signal
+import socket
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from pathlib import Path
+from typing import IO, TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from .web import Web
+
+__all__ = ["STOP_GRACE", "Supervisor", "serve_peer_socket"]
+
+log = logging.getLogger("bridge_server.workers")
+
+STOP_GRACE = 0.8
+"""Seconds workers get to stop after SIGTERM before they are killed."""
+
+_WORKER_READY = re.compile(r"bridge_server worker (\d+) listening")
+
+
+def _sock_path(directory: str, index: int) -> str:
+    return os.path.join(directory, f"worker-{index}.sock")
+
+
+async def serve_peer_socket(web: Web, directory: str, index: int) -> asyncio.Server:
+    """Answer other workers' requests for this worker's snapshot; set ``web.peers``."""
+    path = _sock_path(directory, index)
+    with contextlib.suppress(FileNotFoundError):
+        os.unlink(path)  # left by a worker of this index that died
+
+    async def handle(_reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+        try:
+            writer.write(json.dumps(web.local(), separators=(",", ":")).encode())
+            await writer.drain()
+        except OSError:
+            pass
+        finally:
+            writer.close()
+
+    server = await asyncio.start_unix_server(handle, path)
+
+    async def peers() -> list[dict[str, Any]]:
+        others = [
+            str(p) for p in Path(directory).glob("worker-*.sock") if str(p) != path
+        ]
+        got = await asyncio.gather(*(_fetch(p) for p in others))
+        return [g for g in got if g is not None]
+
+    web.peers = peers
+    return server
+
+
+async def _fetch(path: str) -> dict[str, Any] | None:
+    from .web import PEER_TIMEOUT
+
+    try:
+        reader, writer = await asyncio.wait_for(asyncio.open_unix_connection(path), PEER_TIMEOUT)
+        try:
+            data = await asyncio.wait_for(reader.read(), PEER_TIMEOUT)
+        finally:
+            writer.close()
+        snap: dict[str, Any] = json.loads(data)
+        return snap
+    except (OSError, TimeoutError, ValueError):
+        return None  # a worker that is restarting: left out of this view
+
+
+def reserve(host: str, port: int) -> socket.socket:
+    """Bind (without listening) ``host:port`` with SO_REUSEPORT: holds the port for workers."""
+    sock = socket.socket(socket.AF_INET6 if ":" in host else socket.AF_INET, socket.SOCK_STREAM)
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEPORT, 1)
+    sock.bind((host, port))
+    return sock
+
+
+class Supervisor:
+    """Starts, watches, restarts and stops the worker processes."""
+
+    def __init__(self, argv: list[str], workers: int, host: str, port: int,
+                 metrics_port: int | None) -> None:
+        self.argv = _without_workers(argv)
+        self.n = workers
+        self.host = host
+        self.reserved = [reserve(host, port)]
+        self.port = self.reserved[0].getsockname()[1]
+        self.metrics_port = metrics_port
+        if metrics_port is not None:
+            self.reserved.append(reserve(host, metrics_port))
+            self.metrics_port = self.reserved[-1].getsockname()[1]
+        self.dir = tempfile.mkdtemp(prefix="roslibpy-bridge-workers-")
+        self.procs: list[subprocess.Popen[bytes] | None] = [None] * workers
+        self.started_at = [0.0] * workers
+        self.ready = [threading.Event() for _ in range(workers)]
+        self.stop = threading.Event()
+
+    def _spawn(self, i: int) -> None:
+        extra = ["--port", str(self.port), "--worker-index", str(i), "--worker-dir", self.dir]
+        if self.metrics_port is not None:
+            extra += ["--metrics-port", str(self.metrics_port)]
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "bridge_server", *self.argv, *extra],
+            stdin=subprocess.DEVNULL,
+            stderr=subprocess.PIPE,
+            process_group=0,  # terminal signals reach the supervisor only
+        )
+        self.procs[i] = proc
+        self.started_at[i] = time.monotonic()
+        assert proc.stderr is not None
+        threading.Thread(target=self._relay, args=(i, proc.stderr), daemon=True,
+                         name=f"worker-{i}-log").start()
+
+    def _relay(self, i: int, stream: IO[bytes]) -> None:
+        for raw in stream:
+            line = raw.decode(errors="replace").rstrip()
+            if _WORKER_READY.search(line):
+                self.ready[i].set()
+            sys.stderr.write(f"[w{i}] {line}\n")
+            sys.stderr.flush()
+
+    def run(self) -> int:
+        """Run until SIGINT/SIGTERM; the exit status."""
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            signal.signal(sig, lambda *_: self.stop.set())
+        try:
+            for i in range(self.n):
+                self._spawn(i)
+            deadline = time.monotonic() + 60
+            while not all(e.is_set() for e in self.ready):
+                if self.stop.wait(0.05) or time.monotonic() > deadline:
+                    break
+                procs = enumerate(self.procs)
+                dead = [i for i, p in procs if p is not None and p.poll() is not None]
+                if dead:
+                    log.error("worker %d exited before listening", dead[0])
+                    return 1
+            if self.stop.is_set():
+                return 0
+            if not all(e.is_set() for e in self.ready):
+                log.error("workers did not start within 60 s")
+                return 1
+            log.info("bridge_server listening on ws://%s:%d (%d workers)", self.host, self.port,
+                     self.n)
+            while not self.stop.wait(0.1):
+                self._restart_dead()
+            log.info("bridge_server shutting down")
+            return 0
+        finally:
+            self._stop_all()
+
+    def _restart_dead(self) -> None:
+        for i, proc in enumerate(self.procs):
+            if proc is None or proc.poll() is None:
+                continue
+            if time.monotonic() - self.started_at[i] < 1.0:
+                continue  # crashing at once: retry at most once a second
+            log.error("worker %d (pid %d) exited with status %s; restarting it", i, proc.pid,
+                      proc.returncode)
+            self._spawn(i)
+
+    def _stop_all(self) -> None:
+        procs = [p for p in self.procs if p is not None and p.poll() is None]
+        for p in procs:
+            with contextlib.suppress(ProcessLookupError):
+                p.send_signal(signal.SIGTERM)
+        deadline = time.monotonic() + STOP_GRACE
+        for p in procs:
+            try:
+                p.wait(max(deadline - time.monotonic(), 0.01))
+            except subprocess.TimeoutExpired:
+                log.warning("worker pid %d did not stop in %.1f s; killing it", p.pid, STOP_GRACE)
+                p.kill()
+                p.wait()
+        for s in self.reserved:
+            s.close()
+        shutil.rmtree(self.dir, ignore_errors=True)
+
+
+def _without_workers(argv: list[str]) -> list[str]:
+    out: list[str] = []
+    skip = False
+    for a in argv:
+        if skip:
+            skip = False
+            continue
+        if a == "--workers":
+            skip = True
+            continue
+        if a.startswith("--workers="):
+            continue
+        out.append(a)
+    return out
