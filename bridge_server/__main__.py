@@ -17,7 +17,9 @@ import os
 import signal
 import sys
 
+from . import security
 from .session import DEFAULT_QUEUE_LENGTH, SessionConfig
+from .types import BridgeError
 
 __all__ = ["main", "parse_args"]
 
@@ -35,8 +37,9 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p.add_argument(
         "--max-message-size",
         type=int,
-        default=64 * 1024 * 1024,
-        help="largest inbound frame in bytes (default 64 MiB)",
+        default=16 * 1024 * 1024,
+        help="largest inbound frame in bytes (default 16 MiB; raise it for large point "
+        "clouds or maps)",
     )
     p.add_argument(
         "--send-queue",
@@ -70,17 +73,41 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         help="seconds a ROS caller waits for a client-served service (default 10)",
     )
     p.add_argument(
+        "--goal-timeout",
+        type=float,
+        default=0.0,
+        help="seconds an action goal may run through the bridge before it is canceled "
+        "(goals clients send) or aborted (goals clients serve); default 0: no limit",
+    )
+    p.add_argument(
         "--compression",
         choices=("none", "deflate"),
         default="none",
         help="websocket permessage-deflate (default none: it costs CPU)",
     )
     p.add_argument(
+        "--metrics-port",
+        type=int,
+        default=None,
+        help="also answer /metrics (and /healthz, /readyz, the status page) on this port; "
+        "they are always on the main port too",
+    )
+    p.add_argument(
+        "--workers",
+        type=int,
+        default=1,
+        help="bridge processes sharing the port (SO_REUSEPORT), each its own ROS node "
+        "(default 1)",
+    )
+    p.add_argument("--worker-index", type=int, default=None, help=argparse.SUPPRESS)
+    p.add_argument("--worker-dir", default=None, help=argparse.SUPPRESS)
+    p.add_argument(
         "--log-level",
         default="INFO",
         choices=("DEBUG", "INFO", "WARNING", "ERROR"),
         help="logging level (default INFO)",
     )
+    security.add_arguments(p)
     return p.parse_args(argv)
 
 
@@ -94,19 +121,31 @@ async def _run(args: argparse.Namespace) -> int:
         write_limit=args.write_limit,
         compression=args.compression == "deflate",
         publisher_grace=args.publisher_grace,
+        metrics_port=args.metrics_port,
+        worker_index=args.worker_index or 0,
+        worker_dir=args.worker_dir,
         session=SessionConfig(
             default_queue_length=args.send_queue,
             call_timeout=args.call_timeout,
             served_call_timeout=args.served_call_timeout,
+            goal_timeout=args.goal_timeout,
         ),
+        security=security.config_from_args(args),
     )
     stop = asyncio.Event()
     loop = asyncio.get_running_loop()
     for sig in (signal.SIGINT, signal.SIGTERM):
         loop.add_signal_handler(sig, stop.set)
+    if args.worker_index is not None:
+        config.node_name = f"{config.node_name}_w{args.worker_index}"
     bridge = Bridge(config)
     await bridge.start()
-    log.info("bridge_server listening on ws://%s:%d", args.host, bridge.port)
+    if args.worker_index is not None:  # the supervisor prints the bridge's ready line
+        log.info("bridge_server worker %d listening", args.worker_index)
+    else:
+        scheme = "wss" if args.certfile else "ws"
+        log.info("bridge_server listening on %s://%s:%d", scheme, args.host, bridge.port)
+    bridge.security.startup_warnings(args.host)
     await stop.wait()
     log.info("bridge_server shutting down")
     await bridge.close()
@@ -115,6 +154,10 @@ async def _run(args: argparse.Namespace) -> int:
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point of ``python -m bridge_server`` and ``roslibpy-lite-bridge``."""
+    if (sys.argv[1:] if argv is None else argv)[:1] == ["add-principal"]:
+        from .auth import main as add_principal
+
+        return add_principal((sys.argv[1:] if argv is None else argv)[1:])
     args = parse_args(argv)
     os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
     logging.basicConfig(
@@ -122,11 +165,17 @@ def main(argv: list[str] | None = None) -> int:
         stream=sys.stderr,
         format="%(asctime)s %(levelname)s %(name)s: %(message)s",
     )
+    security.install_log_redaction()  # tokens never reach the log, whoever logs them
     if args.log_level != "DEBUG":
         logging.getLogger("websockets").setLevel(logging.WARNING)
     try:
+        if args.workers > 1 and args.worker_index is None:
+            from .workers import Supervisor
+
+            argv = sys.argv[1:] if argv is None else argv
+            return Supervisor(argv, args.workers, args.host, args.port, args.metrics_port).run()
         return asyncio.run(_run(args))
-    except OSError as exc:
+    except (OSError, BridgeError) as exc:  # a port in use, an unreadable auth/cert file, ...
         log.error("cannot start: %s", exc)
         return 1
 

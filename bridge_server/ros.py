@@ -427,6 +427,8 @@ class RosNode:
         self._thread: threading.Thread | None = None
         self.node: Any = None
         self.executor: Any = None
+        self._calls: deque[tuple[Callable[..., None], tuple[Any, ...]]] = deque()
+        self._calls_gc: Any = None
 
     # -- life cycle --------------------------------------------------------------------------
 
@@ -445,6 +447,7 @@ class RosNode:
         # the callbacks anyway), and no callback of the bridge ever blocks.
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
+        self._calls_gc = self.node.create_guard_condition(self._run_calls)
         self._thread = threading.Thread(target=self._spin, name="bridge-ros-spin", daemon=True)
         self._thread.start()
 
@@ -489,6 +492,27 @@ class RosNode:
                 fn(*args)
             except Exception:
                 log.exception("hand-off callback failed")
+
+    def in_executor(self, fn: Callable[..., None], *args: Any) -> None:
+        """Run ``fn(*args)`` on the executor thread soon (callable from any thread, batched).
+
+        For rclpy APIs that are not thread safe (action clients and servers): the
+        loop hands the work over and never waits for it.
+        """
+        self._calls.append((fn, args))
+        gc = self._calls_gc
+        if gc is not None:
+            with contextlib.suppress(Exception):  # destroyed while shutting down
+                gc.trigger()
+
+    def _run_calls(self) -> None:
+        calls = self._calls
+        while calls:
+            fn, args = calls.popleft()
+            try:
+                fn(*args)
+            except Exception:
+                log.exception("executor hand-off failed")
 
     # -- graph ---------------------------------------------------------------------------------
 

@@ -19,16 +19,23 @@ import asyncio
 import contextlib
 import itertools
 import logging
+import time
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 from websockets.asyncio.server import Server, ServerConnection, serve
 
+from .actions import ActionClients, SessionActions
+from .metrics import Recorder
 from .ros import RosNode
+from .security import Security, SecurityConfig
 from .session import Session, SessionConfig
+from .web import Web
 
 if TYPE_CHECKING:
     from collections.abc import Awaitable
+
+    from websockets.http11 import Request
 
 __all__ = ["Bridge", "BridgeConfig"]
 
@@ -41,13 +48,17 @@ class BridgeConfig:
 
     host: str = "127.0.0.1"
     port: int = 9090
-    max_message_size: int = 64 * 1024 * 1024
+    max_message_size: int = 16 * 1024 * 1024
     write_limit: int = 256 * 1024
     compression: bool = False
     publisher_grace: float = 2.0
     node_name: str = "roslibpy_lite_bridge"
     refresh_interval: float = 0.5
     session: SessionConfig = field(default_factory=SessionConfig)
+    security: SecurityConfig = field(default_factory=SecurityConfig)  # TLS, auth, limits
+    metrics_port: int | None = None  # /metrics (and the other plain routes) on another port
+    worker_index: int = 0  # with --workers: this process's index, and the peers' socket dir
+    worker_dir: str | None = None
 
 
 class Bridge:
@@ -59,11 +70,16 @@ class Bridge:
         self.publisher_grace = config.publisher_grace
         self.sessions: set[Session] = set()
         self.service_owners: dict[str, Session] = {}
+        self.action_owners: dict[str, SessionActions] = {}
+        self.action_clients = ActionClients()
         self._ids = itertools.count(1)
         self._server: Server | None = None
         self._refresher: asyncio.Task[None] | None = None
         self._graph_event = asyncio.Event()
         self.ros = RosNode(asyncio.get_running_loop(), name=config.node_name)
+        self.metrics = Recorder()
+        self.web = Web(self)  # plain-HTTP routes: status page, /metrics, health (web.py)
+        self.security = Security(config.security)  # TLS, auth, origins, limits (security.py)
 
     @property
     def port(self) -> int:
@@ -84,8 +100,20 @@ class Bridge:
             compression="deflate" if self.config.compression else None,
             max_queue=64,
             close_timeout=1.0,
+            process_request=self._process_request,
+            process_response=self.web.process_response,
+            reuse_port=self.config.worker_dir is not None,
+            **self.security.serve_kwargs(),
         )
+        await self.web.start()
         self._refresher = asyncio.create_task(self._refresh_loop(), name="bridge-refresh")
+
+    async def _process_request(self, connection: ServerConnection, request: Request) -> Any:
+        """Before the handshake: plain-HTTP routes first (web.py), then the security checks."""
+        response = await self.web.process_request(connection, request)
+        if response is not None:
+            return response
+        return await self.security.process_request(connection, request)
 
     def graph_changed(self) -> None:
         """Something needs the periodic graph check (a new subscription): run it soon."""
@@ -108,6 +136,8 @@ class Bridge:
         peer = _peer(ws)
         log.info("client %d connected from %s", sid, peer)
         session = Session(self, ws, sid)
+        session.peer, session.connected_at = peer, time.time()
+        self.metrics.connections += 1
         self.sessions.add(session)
         try:
             await session.run()
@@ -121,6 +151,7 @@ class Bridge:
             self._refresher.cancel()
             with contextlib.suppress(asyncio.CancelledError):
                 await self._refresher
+        await self.web.close()
         if self._server is not None:
             self._server.close(close_connections=True)
             waiter: Awaitable[Any] = self._server.wait_closed()

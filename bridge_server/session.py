@@ -48,9 +48,16 @@ Client-served services
 A ROS caller of a service advertised by the client reaches it as
 ``call_service`` with id ``service_request:<service>:<n>``. If the client
 answers ``result: false``, does not answer within ``served_call_timeout``
-(10 s), unadvertises the service or disconnects, the ROS caller gets a
-default (all-zero) response at once and the bridge logs an error: an rclpy
-service cannot reply with an error.
+(10 s) or answers with a response that does not convert, the ROS caller is
+not answered (an rclpy service cannot reply with an error, and the bridge
+never invents a default response): the caller's own timeout ends its wait.
+When the client unadvertises the service or disconnects, the ROS service is
+destroyed at once; rclpy callers then see ``service_is_ready()`` turn false,
+and requests in flight stay unanswered until the caller's timeout.
+
+A name another client serves stays with its first owner: advertising it
+again fails, unless the same principal asks (a reconnect) or the role has
+``take_over`` on the name (:mod:`bridge_server.security`).
 """
 
 from __future__ import annotations
@@ -73,6 +80,8 @@ from roslibpy_lite.exceptions import ProtocolError
 from roslibpy_lite.protocol import Protocol, split_fragments
 
 from . import convert, rosapi
+from .actions import SessionActions
+from .metrics import outcome
 from .types import BridgeError, canonical_name
 
 if TYPE_CHECKING:
@@ -95,8 +104,6 @@ BATCH_FRAMES = 128
 BATCH_BYTES = 256 * 1024
 """Most bytes the writer gathers for one socket write (a large frame goes alone)."""
 
-SERVICE_LINGER = 0.5
-"""Seconds an unadvertised service stays in ROS, answering callers with a default response."""
 
 _LEVELS = {"none": 0, "error": 1, "warning": 2, "info": 3}
 
@@ -121,6 +128,7 @@ class SessionConfig:
     drop_report_interval: float = 5.0
     discovery_wait: float = 2.0
     max_calls_in_flight: int = 1024
+    goal_timeout: float = 0.0  # action goals: seconds before one is canceled/aborted, 0 = never
 
 
 class _Sub:
@@ -142,6 +150,8 @@ class _Sub:
         self.timer: asyncio.TimerHandle | None = None
         self.dropped = 0
         self.dropped_total = 0
+        self.sent = 0  # frames of this subscription written, and their bytes (for /metrics)
+        self.sent_bytes = 0
         self.last_report = -1e9
         self.report_timer: asyncio.TimerHandle | None = None
         self.active = True
@@ -261,6 +271,11 @@ class Session:
         self._frag_ids = itertools.count()
         self._request_ids = itertools.count()
         self.control_dropped = 0
+        self.peer = ""  # the client's address, and since when (for the status page)
+        self.connected_at = time.time()
+        self._frame_len = 0
+        self.actions = SessionActions(self)
+        self.gate = bridge.security.gate(self)  # auth, rate, names, permissions (security.py)
 
     # -- running -------------------------------------------------------------------------------
 
@@ -322,9 +337,12 @@ class Session:
             except Exception:
                 log.exception("session %d: cannot encode a message of %s", self.sid, sub.topic)
                 continue
+            before = size
             for frame in encoded:
                 frames.append(frame)
                 size += len(frame)
+            sub.sent += 1
+            sub.sent_bytes += size - before
         return frames
 
     async def _send_batch(self, frames: list[str | bytes]) -> None:
@@ -371,6 +389,7 @@ class Session:
         for served in list(self.served.values()):
             self._remove_served(served, "the client that served it disconnected")
         self.served.clear()
+        await self.actions.close()
         for task in list(self.calls):
             task.cancel()
         if self.calls:
@@ -412,9 +431,10 @@ class Session:
             return
         self.send_op(ops.Status(level=level, msg=msg, id=id))
 
-    def error(self, msg: str, id: ops.Id | None = None) -> None:
-        """Report a failed request to the client (``status`` level error)."""
+    def error(self, msg: str, id: ops.Id | None = None, kind: str = "request") -> None:
+        """Report a failed request to the client (``status`` level error); count it by kind."""
         log.info("session %d: %s", self.sid, msg)
+        self.bridge.metrics.error(kind)
         self.status("error", msg, id)
 
     def _note_drop(self, sub: _Sub) -> None:
@@ -443,20 +463,27 @@ class Session:
 
     def handle_frame(self, frame: str | bytes) -> None:
         """Decode one frame and carry out the op it completes; errors go back as ``status``."""
+        self._frame_len = len(frame)
+        if not self.gate.admit_frame():
+            return
         try:
             op = self.protocol.receive(frame)
         except ProtocolError as exc:
-            self.error(exc.message, exc.id)
+            self.error(exc.message, exc.id, "protocol")
             return
         except Exception as exc:  # the core promises ProtocolError; stay up regardless
             log.exception("session %d: decoding a frame failed", self.sid)
-            self.error(f"cannot decode the frame: {type(exc).__name__}")
+            self.error(f"cannot decode the frame: {type(exc).__name__}", kind="internal")
             return
+        if self.protocol.evicted:
+            self._report_evicted()
         if op is not None:
             self.handle_op(op)
 
     def handle_op(self, op: ops.Op) -> None:
         """Carry out one parsed op."""
+        if not self.gate.check(op):
+            return
         try:
             if isinstance(op, ops.Publish):
                 self.publish(op)
@@ -490,25 +517,34 @@ class Session:
             elif isinstance(op, ops.SetLevel):
                 self.set_level(op)
             elif isinstance(op, _ACTION_OPS):
-                self.error(f"{op.OP}: actions are not supported yet", getattr(op, "id", None))
-                if isinstance(op, ops.SendActionGoal) and op.id is not None:
-                    # Stock clients wait for the goal's own result, not for a status op.
-                    self.send_op(
-                        ops.ActionResult(
-                            id=op.id,
-                            action=op.action,
-                            values="actions are not supported yet",
-                            result=False,
-                            status=6,  # GoalStatus ABORTED
-                        )
-                    )
+                self.actions.handle(op)
             else:
                 self.error(f"{op.OP}: a client may not send this op", getattr(op, "id", None))
         except BridgeError as exc:
             self.error(f"{op.OP}: {exc}", getattr(op, "id", None))
-        except Exception as exc:
+        except UnicodeError:  # a JSON string with a lone surrogate ("\ud800") reached rclpy
+            self.error(
+                f"{op.OP}: a string in the op is not valid Unicode text (a lone surrogate "
+                "such as \\ud800?); ROS strings must be UTF-8",
+                getattr(op, "id", None),
+            )
+        except Exception:
             log.exception("session %d: %s failed", self.sid, op.OP)
-            self.error(f"{op.OP}: internal error: {type(exc).__name__}", getattr(op, "id", None))
+            self.error(
+                f"{op.OP}: internal error (the bridge log has the details)",
+                getattr(op, "id", None), "internal",
+            )
+
+    def _report_evicted(self) -> None:
+        """Tell the sender which incomplete fragmented ops were dropped to make room."""
+        limit = self.protocol.max_partial
+        for frag_id, have, total in self.protocol.evicted:
+            self.error(
+                f"fragment {frag_id!r}: dropped with {have} of {total} pieces: more than "
+                f"{limit} fragmented ops were incomplete at once on this connection",
+                frag_id,
+            )
+        self.protocol.evicted.clear()
 
     # -- topics --------------------------------------------------------------------------------
 
@@ -572,6 +608,7 @@ class Session:
             self.error(f"publish to {topic} ({pub.type_name}): {exc}", op.id)
             return
         pub.publish(msg)
+        self.bridge.metrics.published(topic, self._frame_len)
 
     def subscribe(self, op: ops.Subscribe) -> None:
         """Add this id to the client's subscription of the topic."""
@@ -656,9 +693,13 @@ class Session:
 
     def _drop_sub(self, sub: _Sub) -> None:
         sub.close()
+        metrics = self.bridge.metrics
+        metrics.retire_subscription(sub.topic, sub.sent, sub.sent_bytes, sub.dropped_total)
         if sub.shared is not None:
-            self.ros.unsubscribe(sub.shared, sub.on_message)
-            sub.shared = None
+            shared, sub.shared = sub.shared, None
+            self.ros.unsubscribe(shared, sub.on_message)
+            if self.ros.subscriptions.get(shared.topic) is not shared:  # it went: keep its count
+                metrics.retire_ros_subscription(shared.topic, shared.received)
 
     # -- services ------------------------------------------------------------------------------
 
@@ -668,26 +709,29 @@ class Session:
         wire = op.service  # answer with the name as the client spelled it
         timeout = op.timeout if op.timeout is not None else self.config.call_timeout
         values: Mapping[str, Any]
+        t0 = time.perf_counter()
         try:
             handler = rosapi.HANDLERS.get(service)
             ahandler = rosapi.ASYNC_HANDLERS.get(service)
             if handler is not None:
                 values = handler(self.bridge, rosapi.request_args(service, op.args))
+                values = self.gate.filter_rosapi(service, values)  # what the role may see
             elif ahandler is not None:
                 values = await ahandler(self.bridge, rosapi.request_args(service, op.args))
+                values = self.gate.filter_rosapi(service, values)
             elif (owner := self.bridge.service_owners.get(service)) is not None:
                 result, direct = await owner.call_direct(service, op, timeout)
-                self._respond(wire, op.id, result, direct, op.fragment_size)
+                self._respond(wire, op.id, result, direct, op.fragment_size, t0)
                 return
             else:
                 values = await self._call_ros(service, op, timeout)
         except _CallFailed as exc:
-            self._respond(wire, op.id, False, str(exc), op.fragment_size)
+            self._respond(wire, op.id, False, str(exc), op.fragment_size, t0)
             return
         except (BridgeError, rosapi.RosapiError) as exc:
-            self._respond(wire, op.id, False, f"{service}: {exc}", op.fragment_size)
+            self._respond(wire, op.id, False, f"{service}: {exc}", op.fragment_size, t0)
             return
-        self._respond(wire, op.id, True, values, op.fragment_size)
+        self._respond(wire, op.id, True, values, op.fragment_size, t0)
 
     def _respond(
         self,
@@ -696,7 +740,12 @@ class Session:
         result: bool,
         values: Mapping[str, Any] | str,
         fragment_size: int | None = None,
+        started: float | None = None,
     ) -> None:
+        if started is not None:  # a call_service: count it for /metrics
+            self.bridge.metrics.service_call(
+                _topic_name(service), outcome(result, values), time.perf_counter() - started
+            )
         if not result:
             log.info("session %d: call to %s failed: %s", self.sid, service, values)
         text = ops.encode(ops.ServiceResponse(service=service, result=result, values=values, id=id))
@@ -773,10 +822,17 @@ class Session:
         if mine is not None:
             if mine.type_name == type_name:
                 return
-            self._remove_served(mine, "the client advertised it again with another type", False)
+            self._remove_served(mine, "the client advertised it again with another type")
             del self.served[name]
         owner = self.bridge.service_owners.get(name)
         if owner is not None and owner is not self:
+            if not self.gate.may_take_over(name, owner.gate):
+                self.error(
+                    f"advertise_service: {name} is already served by client {owner.sid}; "
+                    "the first owner keeps it (a role with take_over may take it over)",
+                    op.id,
+                )
+                return
             owner.drop_served(name, f"taken over by client {self.sid}")
         elif owner is None and self.ros.service_types(name):
             self.status(
@@ -794,15 +850,14 @@ class Session:
 
     def _on_ros_request(self, served: _Served, pending: PendingRosCall) -> None:
         if self.served.get(served.name) is not served or self._closed:
-            log.error("a ROS call to %s arrived after it was unadvertised", served.name)
-            pending.complete()
+            log.warning("a ROS call to %s arrived after it was unadvertised: not answered",
+                        served.name)
             return
         rid = f"service_request:{served.name}:{next(self._request_ids)}"
         try:
             args = pending.served.request_conv.to_obj(pending.request)
         except Exception:
             log.exception("cannot convert a request to %s", served.name)
-            pending.complete()
             return
         timer = self.loop.call_later(
             self.config.served_call_timeout, self._served_timeout, served, rid
@@ -818,13 +873,13 @@ class Session:
         if isinstance(pending, _DirectCall):
             pending.fail(f"service {served.name} timed out after {timeout} s")
             return
-        log.error(
-            "session %d: no answer for %s within %s s; the ROS caller gets a default response",
+        log.warning(
+            "session %d: no answer for %s within %s s; the ROS caller is not answered "
+            "(a ROS service cannot send an error, and the bridge never invents a response)",
             self.sid,
             rid,
             self.config.served_call_timeout,
         )
-        pending.complete()
 
     def service_response(self, op: ops.ServiceResponse) -> None:
         """The client answers a ROS caller of a service it serves."""
@@ -861,20 +916,20 @@ class Session:
             pending.succeed(obj)
             return
         if not op.result:
-            log.error(
-                "session %d: the client failed %s (%s); the ROS caller gets a default response",
+            log.warning(
+                "session %d: the client failed %s (%.200s); the ROS caller is not answered "
+                "(a ROS service cannot send an error, and the bridge never invents a response)",
                 self.sid,
                 op.id,
                 op.values if isinstance(op.values, str) else "no reason given",
             )
-            pending.complete()
             return
         values = op.values if isinstance(op.values, Mapping) else {}
         try:
             response = served.ros.response_conv.from_obj(values, "values")
         except convert.ConversionError as exc:
-            self.error(f"service_response for {name}: {exc}", op.id)
-            pending.complete()
+            self.error(f"service_response for {name}: {exc}; the ROS caller is not answered",
+                       op.id)
             return
         pending.complete(response)
 
@@ -907,7 +962,7 @@ class Session:
                 entry[1].cancel()
 
     def unadvertise_service(self, op: ops.UnadvertiseService) -> None:
-        """Stop serving a service; its waiting ROS callers get a default response at once."""
+        """Stop serving a service; it leaves ROS at once (waiting ROS callers are not answered)."""
         name = _topic_name(op.service)
         served = self.served.pop(name, None)
         if served is None:
@@ -915,23 +970,22 @@ class Session:
             return
         self._remove_served(served, "the client unadvertised it")
 
-    def _remove_served(self, served: _Served, why: str, linger: bool = True) -> None:
-        for rid, (pending, timer) in list(served.pending.items()):
+    def _remove_served(self, served: _Served, why: str) -> None:
+        unanswered = 0
+        for _rid, (pending, timer) in list(served.pending.items()):
             timer.cancel()
             if isinstance(pending, _DirectCall):
                 pending.fail(f"service {served.name} failed: {why}")
-                continue
-            log.error("ROS call %s failed: %s; sending a default response", rid, why)
-            pending.complete()
+            else:
+                unanswered += 1
         served.pending.clear()
+        if unanswered:
+            log.warning("service %s went (%s): %d ROS caller(s) not answered", served.name, why,
+                        unanswered)
         if served.ros is not None:
-            # Destroying the service at once would also destroy the default responses just
-            # sent (and fail callers whose requests are still crossing to the loop): keep it
-            # a moment; requests arriving meanwhile get a default response at once.
-            if linger:
-                self.loop.call_later(SERVICE_LINGER, served.ros.destroy)
-            else:  # taken over: callers must reach the new server only
-                served.ros.destroy()
+            # At once: ROS callers see the server leave the graph; nobody gets an invented
+            # default response (an rclpy service has no way to send an error).
+            served.ros.destroy()
             served.ros = None
         if self.bridge.service_owners.get(served.name) is self:
             del self.bridge.service_owners[served.name]
@@ -940,7 +994,7 @@ class Session:
         """Another client took the service over: forget it here."""
         served = self.served.pop(name, None)
         if served is not None:
-            self._remove_served(served, why, linger=False)
+            self._remove_served(served, why)
             self.status("warning", f"service {name}: {why}")
 
     # -- misc ----------------------------------------------------------------------------------

@@ -26,6 +26,7 @@ __all__ = [
     "Advertise",
     "AdvertiseAction",
     "AdvertiseService",
+    "Auth",
     "CallService",
     "CancelActionGoal",
     "Fragment",
@@ -172,12 +173,13 @@ class UnadvertiseService:
 
 @dataclass(frozen=True, slots=True)
 class SendActionGoal:
-    """Both ways: send a goal to an action server."""
+    """Both ways: send a goal to an action server (``args`` an object, or a list zipped onto
+    the goal's fields)."""
 
     OP: ClassVar[str] = "send_action_goal"
     action: str
     action_type: str
-    args: Mapping[str, Any] | None = None
+    args: Mapping[str, Any] | list[Any] | None = None
     id: Id | None = None
     feedback: bool | None = None
     fragment_size: int | None = None
@@ -264,6 +266,26 @@ class SetLevel:
     id: Id | None = None
 
 
+@dataclass(frozen=True, slots=True)
+class Auth:
+    """C→S: rosauth's shape, sent first by roslib's ``authenticate()``; ``mac`` carries a token.
+
+    Never print or log an ``Auth`` op whole: its ``mac`` is a secret.
+    """
+
+    OP: ClassVar[str] = "auth"
+    mac: str
+    client: Any = None
+    dest: Any = None
+    rand: Any = None
+    t: Any = None
+    level: Any = None
+    end: Any = None
+
+    def __repr__(self) -> str:
+        return "Auth(mac=<hidden>)"
+
+
 Op: TypeAlias = (
     Advertise
     | Unadvertise
@@ -283,6 +305,7 @@ Op: TypeAlias = (
     | Fragment
     | Status
     | SetLevel
+    | Auth
 )
 
 
@@ -354,7 +377,7 @@ _rule(ServiceResponse, service=(_NAME, REQ), result=(_BOOL, REQ), values=(_VALUE
       id=(_ID, OPT))
 _rule(AdvertiseService, service=(_NAME, REQ), type=(_NAME, REQ), id=(_ID, OPT))
 _rule(UnadvertiseService, service=(_NAME, REQ), id=(_ID, OPT))
-_rule(SendActionGoal, action=(_NAME, REQ), action_type=(_NAME, REQ), args=(_OBJECT, OPT),
+_rule(SendActionGoal, action=(_NAME, REQ), action_type=(_NAME, REQ), args=(_ARGS, OPT),
       id=(_ID, OPT), feedback=(_BOOL, OPT), fragment_size=(_SIZE, OPT),
       compression=(_COMPRESSION, OPT))
 _rule(CancelActionGoal, id=(_ID, REQ), action=(_NAME, REQ))
@@ -366,6 +389,9 @@ _rule(UnadvertiseAction, action=(_NAME, REQ), id=(_ID, OPT))
 _rule(Fragment, id=(_ID, REQ), data=(_STR, REQ), num=(_COUNT, REQ), total=(_SIZE, REQ))
 _rule(Status, level=(_STR, REQ), msg=(_STR, REQ), id=(_ID, OPT))
 _rule(SetLevel, level=(_STR, REQ), id=(_ID, OPT))
+_ANY: _Kind = ("anything", lambda v: True, _same)
+_rule(Auth, mac=(_STR, REQ), client=(_ANY, OPT), dest=(_ANY, OPT), rand=(_ANY, OPT),
+      t=(_ANY, OPT), level=(_ANY, OPT), end=(_ANY, OPT))
 
 OP_NAMES: frozenset[str] = frozenset(_RULES)
 """Every op name this module parses."""

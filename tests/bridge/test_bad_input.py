@@ -208,15 +208,3 @@ async def test_fragment_bad_num_total(ws_connect: Any, topic: str):
     msg = await _error(ws, id="f1")
     assert "'num'" in msg and "'total'" in msg
     await _still_working(ws, other, topic)
-
-
-async def test_action_ops_not_supported(ws_connect: Any, topic: str):
-    """Action ops are answered with an error naming the op (actions come later)."""
-    ws, other = await _pair(ws_connect)
-    await ws.send({"op": "send_action_goal", "action": topic, "id": "g1",
-                   "action_type": "test_msgs/action/Fibonacci", "args": {"order": 3}})
-    msg = await _error(ws, id="g1")
-    assert "send_action_goal" in msg and "not supported" in msg
-    result = await ws.expect(op="action_result", id="g1")  # what stock clients wait for
-    assert result["result"] is False and result["status"] == 6
-    await _still_working(ws, other, topic)

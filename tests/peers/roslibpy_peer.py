@@ -94,7 +94,19 @@ class Peer:
         def on_error(error: Any) -> None:
             outcome["error"] = error
 
-        goal_id = client.send_goal(roslibpy.Goal(cmd["goal"]), on_result, feedback.append, on_error)
+        sent: list[str] = []
+        cancel_after_feedback = bool(cmd.get("cancel_after_feedback"))
+        lock = threading.Lock()
+
+        def on_feedback(values: Any) -> None:
+            with lock:
+                feedback.append(values)
+                if cancel_after_feedback and len(feedback) == 1 and sent:
+                    client.cancel_goal(sent[0])
+
+        with lock:  # feedback waits until the goal id is known
+            goal_id = client.send_goal(roslibpy.Goal(cmd["goal"]), on_result, on_feedback, on_error)
+            sent.append(goal_id)
         client.wait_goal(goal_id, timeout=float(cmd.get("goal_timeout", 10.0)))
         if "error" in outcome:
             raise RuntimeError(f"goal failed: {outcome['error']}")

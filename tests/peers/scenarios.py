@@ -18,8 +18,6 @@ import threading
 import time
 from typing import Any
 
-import pytest
-
 from tests.helpers import wait_until
 from tests.peers.peer import PeerError, PeerProcess
 
@@ -27,11 +25,6 @@ from tests.peers.peer import PeerError, PeerProcess
 #: (messages sent before DDS matched the two ends are lost, so we resend).
 ATTEMPT = 0.5
 DEADLINE = 15.0
-
-#: Features the bridge does not have yet (reported to its engineer). Strict, so a test
-#: starts failing (XPASS) the moment the feature lands, and the mark must go.
-NO_ACTIONS = pytest.mark.xfail(strict=True, reason="bridge: actions not supported yet")
-
 
 def _module(name: str) -> Any:
     """Import an rclpy module whose API is not fully typed, as Any."""
@@ -739,12 +732,22 @@ def killed_client_service_goes(peer: PeerProcess, node: Any, topic: str) -> None
 
 
 def failing_handler(peer: PeerProcess, node: Any, topic: str) -> None:
-    """When the client's service handler reports failure, the rclpy caller still gets an answer."""
+    """When the client's service handler reports failure, the rclpy caller gets no invented answer."""
     from std_srvs.srv import SetBool
 
     peer.request("advertise_service", service=topic, type="std_srvs/srv/SetBool", handler="fail")
-    response = _call_from_ros(node, SetBool, topic, SetBool.Request(data=True))
-    assert response.success is False  # the bridge's documented choice: a default response
+    client = node.create_client(SetBool, topic)
+    try:
+        assert client.wait_for_service(timeout_sec=DEADLINE), f"{topic} never appeared"
+        future = client.call_async(SetBool.Request(data=True))
+        peer.wait_event(lambda e: e.get("event") == "request" and e.get("service") == topic,
+                        DEADLINE, "the request")
+        # The peer answered result false before it handles this command, and the bridge
+        # handles the peer's ops in order: the failure has been dealt with by now.
+        peer.request("get_topic_type", topic="/rosout")
+        assert not future.done()  # a ROS service cannot send an error; no default either
+    finally:
+        node.destroy_client(client)
 
 
 def publish_large(peer: PeerProcess, node: Any, topic: str) -> None:

@@ -37,7 +37,6 @@ def test_roslibpy_serves_roslib(
     scenarios.client_to_client_service(start_peer("roslibpy"), start_peer("roslib"), ros_node, topic)
 
 
-@scenarios.NO_ACTIONS
 def test_roslib_action_serves_roslibpy(
     start_peer: Callable[..., PeerProcess], ros_node: Any, topic: str
 ) -> None:

@@ -175,19 +175,16 @@ def test_topics_and_raw_types(peer: PeerProcess, ros_node: Any, topic: str) -> N
     scenarios.topics_and_raw_types(peer, ros_node, topic)
 
 
-@scenarios.NO_ACTIONS
 def test_send_action_goal(peer: PeerProcess, ros_node: Any, topic: str) -> None:
     """ROSLIB.Action.sendGoal reaches an rclpy action server and gets the result."""
     scenarios.send_goal(peer, ros_node, topic)
 
 
-@scenarios.NO_ACTIONS
 def test_cancel_action_goal(peer: PeerProcess, ros_node: Any, topic: str) -> None:
     """Action.cancelGoal after the first feedback cancels the rclpy goal; roslib reports it."""
     scenarios.cancel_goal(peer, ros_node, topic)
 
 
-@scenarios.NO_ACTIONS
 def test_serve_action(peer: PeerProcess, ros_node: Any, topic: str) -> None:
     """ROSLIB.Action.advertise serves Fibonacci; an rclpy ActionClient gets the result."""
     scenarios.serve_action(peer, ros_node, topic)

@@ -140,10 +140,14 @@ def test_service_details(peer: PeerProcess) -> None:
     scenarios.service_details(peer)
 
 
-@scenarios.NO_ACTIONS
 def test_send_action_goal(peer: PeerProcess, ros_node: Any, topic: str) -> None:
     """roslibpy.ActionClient sends a goal to an rclpy action server and gets the result."""
     scenarios.send_goal(peer, ros_node, topic)
+
+
+def test_cancel_action_goal(peer: PeerProcess, ros_node: Any, topic: str) -> None:
+    """ActionClient.cancel_goal after the first feedback cancels the rclpy goal; errback hears it."""
+    scenarios.cancel_goal(peer, ros_node, topic)
 
 
 def test_publish_ros2_header_helper(peer: PeerProcess, ros_node: Any, topic: str) -> None:
@@ -251,6 +255,20 @@ def test_asyncio_transport_serve_service(
 ) -> None:
     """On roslibpy's asyncio transport, a served service answers an rclpy client."""
     scenarios.serve_setbool(asyncio_peer, ros_node, topic)
+
+
+def test_asyncio_transport_send_action_goal(
+    asyncio_peer: PeerProcess, ros_node: Any, topic: str
+) -> None:
+    """On roslibpy's asyncio transport, an action goal gets the rclpy server's feedback and result."""
+    scenarios.send_goal(asyncio_peer, ros_node, topic)
+
+
+def test_asyncio_transport_cancel_action_goal(
+    asyncio_peer: PeerProcess, ros_node: Any, topic: str
+) -> None:
+    """On roslibpy's asyncio transport, canceling a goal after its first feedback cancels it."""
+    scenarios.cancel_goal(asyncio_peer, ros_node, topic)
 
 
 def test_reconnect_after_bridge_restart(

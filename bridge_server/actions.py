@@ -1,0 +1,556 @@
+"""What one session does with actions: goals it sends, and actions it serves.
+
+A :class:`SessionActions` belongs to one :class:`~bridge_server.session.Session`
+(``session.actions``), which hands it every action op (:meth:`SessionActions.handle`)
+and calls :meth:`SessionActions.close` when the client goes away. The rclpy
+side lives in :mod:`bridge_server.ros_actions`.
+
+Sending goals
+-------------
+``send_action_goal`` (``args`` an object, or a list zipped onto the goal's
+fields) converts the goal, waits for an action server (at most
+``call_timeout`` s; ``discovery_wait`` s if the ROS graph does not list the
+action at all) and sends it. With ``feedback: true`` each feedback goes back
+as ``action_feedback`` {id, action, values}. The end is one ``action_result``
+{id, action, values, status, result}: ``status`` is the GoalStatus number,
+``result`` is true only for SUCCEEDED, ``values`` the action's result. A goal
+that never ran (no server, rejected, bad goal, timed out, canceled before it
+left the bridge) ends with ``result: false``, ``values`` a text saying why and
+status ABORTED (6), or CANCELED (5) for the last case. Bad input also gets a
+``status`` error. ``compression: cbor`` sends feedback and result as CBOR
+binary frames; ``fragment_size`` splits JSON ones.
+``cancel_action_goal`` with the goal's id cancels it, before or after the
+server accepted it; the result (usually CANCELED) follows. A refused cancel
+is reported as a ``status`` warning. When the client disconnects, its goals
+are canceled on the ROS side. ``goal_timeout`` (s, 0 = none) cancels goals
+that run longer, and fails them with a text.
+
+Serving actions
+---------------
+``advertise_action`` creates an rclpy action server. Every ROS goal is
+accepted, set EXECUTING and handed to the client as ``send_action_goal`` with
+id ``action_goal:<action>:<n>`` and ``feedback: true``; a ROS cancel request
+arrives as ``cancel_action_goal`` with that id. The client answers with
+``action_feedback`` (published) and one ``action_result``: ``status`` 4, 5
+or 6 ends the goal that way; without a status, ``result`` true means
+SUCCEEDED and false ABORTED. A result that does not fit the type, an
+unadvertise, a disconnect or ``goal_timeout`` abort the goal at once. A
+second client advertising the same action takes it over (the first one's
+goals are aborted and it gets a warning).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import itertools
+import json
+import logging
+from collections.abc import Mapping
+from typing import TYPE_CHECKING, Any
+
+import cbor2
+
+from roslibpy_lite import ops
+from roslibpy_lite.protocol import split_fragments
+
+from . import convert
+from .ros_actions import (
+    ACTIVE,
+    CANCEL_ANSWERS,
+    SentGoal,
+    ServedAction,
+    ServedGoal,
+    SharedActionClient,
+    Status,
+)
+from .types import BridgeError, canonical_name, resolve_action
+
+if TYPE_CHECKING:
+    from .session import Session
+
+__all__ = ["ActionClients", "SessionActions"]
+
+log = logging.getLogger("bridge_server.actions")
+
+ACTION_LINGER = 1.0
+"""Seconds an unadvertised action server stays in ROS, so callers fetch the aborted results."""
+
+_GOAL_SUFFIX = "/_action/send_goal"
+
+
+class ActionClients:
+    """The bridge's shared rclpy action clients, one per (action, type)."""
+
+    def __init__(self) -> None:
+        self.clients: dict[tuple[str, type[Any]], SharedActionClient] = {}
+
+    def get(self, session: Session, name: str, action_cls: type[Any]) -> SharedActionClient:
+        """The shared client for ``name`` of ``action_cls`` (created on first use)."""
+        key = (name, action_cls)
+        client = self.clients.get(key)
+        if client is None:
+            client = self.clients[key] = SharedActionClient(session.ros, name, action_cls)
+        return client
+
+
+class _Failed(Exception):
+    """A goal cannot be sent; the text goes back as the ``action_result`` values."""
+
+
+class _Goal:
+    """A goal this client sent, from ``send_action_goal`` to ``action_result``."""
+
+    def __init__(self, owner: SessionActions, op: ops.SendActionGoal, id: ops.Id,
+                 name: str, type_name: str) -> None:
+        self.owner = owner
+        self.id = id
+        self.name = name
+        self.wire = op.action
+        self.type_name = type_name
+        self.feedback = bool(op.feedback)
+        self.cbor = op.compression == "cbor"
+        self.fragment_size = op.fragment_size
+        self.sent: SentGoal | None = None
+        self.task: asyncio.Task[None] | None = None
+        self.timer: asyncio.TimerHandle | None = None
+        self.cancel_wanted = False
+
+    # -- what the ROS side reports (loop thread) -----------------------------------------------
+
+    def _live(self) -> bool:
+        return self.owner.goals.get(str(self.id)) is self
+
+    def on_accepted(self) -> None:
+        log.debug("goal %s on %s accepted", self.id, self.name)
+
+    def on_rejected(self) -> None:
+        if self._live():
+            self.owner.fail(self, "the action server rejected the goal")
+
+    def on_feedback(self, feedback: Any) -> None:
+        if self._live() and self.sent is not None:
+            conv = self.sent.shared.feedback_conv
+            self.owner.emit(self, "action_feedback", feedback, conv)
+
+    def on_cancel_answer(self, code: int) -> None:
+        if self._live() and code in CANCEL_ANSWERS:
+            self.owner.session.status(
+                "warning",
+                f"cancel_action_goal: goal {self.id!r} of {self.name} was not canceled: "
+                f"{CANCEL_ANSWERS[code]}",
+                self.id,
+            )
+
+    def on_result(self, status: int, result: Any) -> None:
+        if not self._live():
+            return
+        if result is None or self.sent is None:
+            if status == Status.CANCELED:
+                self.owner.fail(self, "the goal was canceled before it was sent", status)
+            else:
+                self.owner.fail(self, "the action server did not answer the goal")
+            return
+        self.owner.finish(self)
+        self.owner.emit(self, "action_result", result, self.sent.shared.result_conv, status)
+
+
+class _Served:
+    """An action this client serves, and the ROS goals it is carrying out."""
+
+    def __init__(self, name: str, wire: str, type_name: str) -> None:
+        self.name = name
+        self.wire = wire
+        self.type_name = type_name
+        self.ros: ServedAction | None = None
+        self.goals: dict[str, tuple[ServedGoal, asyncio.TimerHandle | None]] = {}
+        self.ids: dict[int, str] = {}  # id(ServedGoal) -> goal id, for ROS cancel requests
+
+
+class SessionActions:
+    """One client's goals in flight and served actions."""
+
+    def __init__(self, session: Session) -> None:
+        self.session = session
+        self.goals: dict[str, _Goal] = {}
+        self.served: dict[str, _Served] = {}
+        self._goal_ids = itertools.count()
+        self._frag_ids = itertools.count()
+
+    @property
+    def _owners(self) -> dict[str, SessionActions]:
+        owners: dict[str, SessionActions] = self.session.bridge.action_owners
+        return owners
+
+    def handle(self, op: ops.Op) -> None:
+        """Carry out one action op."""
+        if isinstance(op, ops.SendActionGoal):
+            self.send_goal(op)
+        elif isinstance(op, ops.CancelActionGoal):
+            self.cancel_goal(op)
+        elif isinstance(op, ops.ActionFeedback):
+            self.feedback(op)
+        elif isinstance(op, ops.ActionResult):
+            self.result(op)
+        elif isinstance(op, ops.AdvertiseAction):
+            self.advertise(op)
+        elif isinstance(op, ops.UnadvertiseAction):
+            self.unadvertise(op)
+
+    async def close(self) -> None:
+        """The client went away: cancel its goals on the ROS side, abort the goals it served."""
+        for goal in list(self.goals.values()):
+            self.finish(goal)
+            if goal.task is not None:
+                goal.task.cancel()
+            if goal.sent is not None:
+                goal.sent.cancel()
+        for served in list(self.served.values()):
+            self._remove_served(served, "the client that served it disconnected")
+        self.served.clear()
+
+    # -- sending goals -------------------------------------------------------------------------
+
+    def send_goal(self, op: ops.SendActionGoal) -> None:
+        """Start a goal: convert it, then wait for a server and send it (a task)."""
+        name = _name(op.action)
+        id: ops.Id = op.id if op.id is not None else (
+            f"send_action_goal:{op.action}:{next(self._goal_ids)}"
+        )
+        if str(id) in self.goals:
+            self.session.error(f"send_action_goal: goal {id!r} is already in flight", id)
+            return
+        try:
+            action_cls = resolve_action(op.action_type)
+            type_name = canonical_name(op.action_type, "action")
+        except BridgeError as exc:
+            self._refuse(op, id, f"send_action_goal to {name}: {exc}")
+            return
+        conv = convert.converter_for(action_cls.Goal)
+        try:
+            goal_msg = conv.from_obj(_args_obj(op.args, conv.fields), "args")
+        except (convert.ConversionError, _Failed) as exc:
+            self._refuse(op, id, f"send_action_goal to {name} ({type_name}): {exc}")
+            return
+        goal = _Goal(self, op, id, name, type_name)
+        self.goals[str(id)] = goal
+        timeout = self.session.config.goal_timeout
+        if timeout > 0:
+            goal.timer = self.session.loop.call_later(timeout, self._expired, goal, timeout)
+        goal.task = self.session.loop.create_task(self._start(goal, action_cls, goal_msg))
+
+    def _refuse(self, op: ops.SendActionGoal, id: ops.Id, text: str) -> None:
+        """Bad input: a status error, and the failed result stock clients wait for."""
+        self.session.error(text, id)
+        self.session.send_op(
+            ops.ActionResult(id=id, action=op.action, values=text, result=False,
+                             status=Status.ABORTED)
+        )
+
+    async def _start(self, goal: _Goal, action_cls: type[Any], goal_msg: Any) -> None:
+        try:
+            client = await self._server_for(goal, action_cls)
+        except _Failed as exc:
+            self.fail(goal, str(exc))
+            self.session.error(f"send_action_goal: {exc}", goal.id)
+            return
+        finally:
+            goal.task = None
+        if goal.cancel_wanted:
+            self.fail(goal, "the goal was canceled before it was sent", Status.CANCELED)
+            return
+        goal.sent = client.send(goal_msg, goal, goal.feedback)
+
+    async def _server_for(self, goal: _Goal, action_cls: type[Any]) -> SharedActionClient:
+        session = self.session
+        ros = session.ros
+        loop = session.loop
+        name = goal.name
+        wanted = goal.type_name + "_SendGoal"
+        config = session.config
+        deadline = loop.time() + config.call_timeout
+        listed_by = loop.time() + min(config.discovery_wait, config.call_timeout)
+        client = session.bridge.action_clients.get(session, name, action_cls)
+        delay = 0.002
+        while not client.ready():
+            types = ros.service_types(name + _GOAL_SUFFIX)
+            if types and wanted not in types:
+                raise _Failed(
+                    f"action {name} has type {types[0].removesuffix('_SendGoal')}, "
+                    f"not {goal.type_name}"
+                )
+            now = loop.time()
+            if not types and now >= listed_by:
+                raise _Failed(f"action {name} does not exist (no action server in the ROS graph)")
+            if now >= deadline:
+                raise _Failed(
+                    f"action {name} has no action server ready within {config.call_timeout} s"
+                )
+            await asyncio.sleep(delay)
+            delay = min(delay * 2, 0.05)
+        return client
+
+    def cancel_goal(self, op: ops.CancelActionGoal) -> None:
+        """Cancel a goal this client sent (its result follows)."""
+        goal = self.goals.get(str(op.id))
+        if goal is None:
+            self.session.error(
+                f"cancel_action_goal: no goal {op.id!r} of {_name(op.action)} is in flight "
+                "on this connection",
+                op.id,
+            )
+            return
+        goal.cancel_wanted = True
+        if goal.sent is not None:
+            goal.sent.cancel()
+        # else: _start sees cancel_wanted once the server wait is over
+
+    def _expired(self, goal: _Goal, timeout: float) -> None:
+        goal.timer = None
+        if self.goals.get(str(goal.id)) is not goal:
+            return
+        if goal.sent is not None:
+            goal.sent.cancel()
+        if goal.task is not None:
+            goal.task.cancel()
+        self.fail(goal, f"the goal timed out after {timeout} s (canceled on the action server)")
+
+    def finish(self, goal: _Goal) -> None:
+        """Forget a goal (its result was sent, or is about to be)."""
+        if self.goals.get(str(goal.id)) is goal:
+            del self.goals[str(goal.id)]
+        if goal.timer is not None:
+            goal.timer.cancel()
+            goal.timer = None
+
+    def fail(self, goal: _Goal, why: str, status: int = Status.ABORTED) -> None:
+        """End a goal that did not run to a result: ``result: false`` with a text."""
+        if self.goals.get(str(goal.id)) is not goal:
+            return
+        self.finish(goal)
+        log.info("session %d: goal %s on %s failed: %s", self.session.sid, goal.id, goal.name, why)
+        self.session.send_op(
+            ops.ActionResult(id=goal.id, action=goal.wire, values=f"{goal.name}: {why}",
+                             result=False, status=status)
+        )
+
+    def emit(self, goal: _Goal, op: str, msg: Any, conv: convert.Converter,
+             status: int | None = None) -> None:
+        """Send ``action_feedback`` or ``action_result`` with ``msg`` as values (JSON or CBOR)."""
+        session = self.session
+        if goal.cbor:
+            obj: dict[str, Any] = {"op": op, "id": goal.id, "action": goal.wire,
+                                   "values": conv.to_cbor_obj(msg)}
+            if status is not None:
+                obj["status"] = status
+                obj["result"] = status == Status.SUCCEEDED
+            session.send_text(cbor2.dumps(obj))
+            return
+        head = json.dumps({"op": op, "id": goal.id, "action": goal.wire})[:-1]
+        tail = "}"
+        if status is not None:
+            ok = "true" if status == Status.SUCCEEDED else "false"
+            tail = f',"status":{status},"result":{ok}}}'
+        text = f'{head},"values":{conv.to_json(msg)}{tail}'
+        size = goal.fragment_size
+        if size is not None and len(text) > size:
+            frag_id = f"{goal.id}:{next(self._frag_ids)}"
+            for piece in split_fragments(text, size, frag_id):
+                session.send_text(piece)
+        else:
+            session.send_text(text)
+
+    # -- serving actions -----------------------------------------------------------------------
+
+    def advertise(self, op: ops.AdvertiseAction) -> None:
+        """Serve an action from this client (an rclpy action server in the bridge)."""
+        session = self.session
+        name = _name(op.action)
+        action_cls = resolve_action(op.type)
+        type_name = canonical_name(op.type, "action")
+        mine = self.served.get(name)
+        if mine is not None:
+            if mine.type_name == type_name:
+                return
+            self._remove_served(mine, "the client advertised it again with another type", False)
+            del self.served[name]
+        owner = self._owners.get(name)
+        if owner is not None and owner is not self:
+            owner.drop_served(name, f"taken over by client {session.sid}")
+        elif owner is None and session.ros.service_types(name + _GOAL_SUFFIX):
+            session.status(
+                "warning",
+                f"advertise_action: another ROS node already serves {name}; "
+                "goals may reach either",
+                op.id,
+            )
+        served = _Served(name, op.action, type_name)
+        served.ros = ServedAction(
+            session.ros, name, action_cls,
+            lambda goal: self._on_ros_goal(served, goal),
+            lambda goal: self._on_ros_cancel(served, goal),
+        )
+        self.served[name] = served
+        self._owners[name] = self
+
+    def _on_ros_goal(self, served: _Served, goal: ServedGoal) -> None:
+        session = self.session
+        if self.served.get(served.name) is not served or session._closed:
+            goal.finish(Status.ABORTED)
+            return
+        gid = f"action_goal:{served.wire}:{next(self._goal_ids)}"
+        try:
+            args = goal.served.goal_conv.to_obj(goal.request)
+        except Exception:
+            log.exception("cannot convert a goal of %s", served.name)
+            goal.finish(Status.ABORTED)
+            return
+        timer = None
+        timeout = session.config.goal_timeout
+        if timeout > 0:
+            timer = session.loop.call_later(timeout, self._served_expired, served, gid, timeout)
+        served.goals[gid] = (goal, timer)
+        served.ids[id(goal)] = gid
+        session.send_op(
+            ops.SendActionGoal(action=served.wire, action_type=served.type_name, args=args,
+                               id=gid, feedback=True)
+        )
+
+    def _on_ros_cancel(self, served: _Served, goal: ServedGoal) -> None:
+        gid = served.ids.get(id(goal))
+        if gid is not None and gid in served.goals:
+            self.session.send_op(ops.CancelActionGoal(id=gid, action=served.wire))
+
+    def _served_expired(self, served: _Served, gid: str, timeout: float) -> None:
+        entry = self._pop_goal(served, gid)
+        if entry is None:
+            return
+        log.error("session %d: goal %s not finished within %s s; aborting it",
+                  self.session.sid, gid, timeout)
+        entry.finish(Status.ABORTED)
+        self.session.send_op(ops.CancelActionGoal(id=gid, action=served.wire))
+        self.session.status("error", f"goal {gid} timed out after {timeout} s and was aborted",
+                            gid)
+
+    def _pop_goal(self, served: _Served, gid: str) -> ServedGoal | None:
+        entry = served.goals.pop(gid, None)
+        if entry is None:
+            return None
+        goal, timer = entry
+        served.ids.pop(id(goal), None)
+        if timer is not None:
+            timer.cancel()
+        return goal
+
+    def _find(self, op: ops.ActionFeedback | ops.ActionResult) -> tuple[_Served, str] | None:
+        gid = str(op.id)
+        served = self.served.get(_name(op.action))
+        if served is not None and gid in served.goals:
+            return served, gid
+        for s in self.served.values():
+            if gid in s.goals:
+                return s, gid
+        self.session.error(
+            f"{op.OP}: no goal {op.id!r} of {_name(op.action)} is waiting on this client", op.id
+        )
+        return None
+
+    def feedback(self, op: ops.ActionFeedback) -> None:
+        """The serving client's feedback for a ROS goal: publish it."""
+        found = self._find(op)
+        if found is None:
+            return
+        served, gid = found
+        goal = served.goals[gid][0]
+        try:
+            msg = goal.served.feedback_conv.from_obj(op.values, "values")
+        except convert.ConversionError as exc:
+            self.session.error(f"action_feedback for {served.name}: {exc}", op.id)
+            return
+        goal.feedback(msg)
+
+    def result(self, op: ops.ActionResult) -> None:
+        """The serving client ends a ROS goal."""
+        found = self._find(op)
+        if found is None:
+            return
+        served, gid = found
+        goal = self._pop_goal(served, gid)
+        assert goal is not None
+        status = op.status
+        if status is None:
+            status = Status.SUCCEEDED if op.result else Status.ABORTED
+        elif status in ACTIVE or status not in (Status.SUCCEEDED, Status.CANCELED,
+                                                Status.ABORTED):
+            self.session.error(
+                f"action_result for {served.name}: status {status} is not a final status "
+                "(4 succeeded, 5 canceled, 6 aborted); the goal was aborted",
+                op.id,
+            )
+            status = Status.ABORTED
+        elif not op.result and status == Status.SUCCEEDED:
+            status = Status.ABORTED
+        result = None
+        if isinstance(op.values, Mapping):
+            try:
+                result = goal.served.result_conv.from_obj(op.values, "values")
+            except convert.ConversionError as exc:
+                self.session.error(
+                    f"action_result for {served.name}: {exc}; the goal was aborted", op.id
+                )
+                status, result = Status.ABORTED, None
+        elif op.values is not None and status != Status.SUCCEEDED:
+            log.info("session %d: goal %s ended (status %d): %s", self.session.sid, gid, status,
+                     op.values)
+        goal.finish(status, result)
+
+    def unadvertise(self, op: ops.UnadvertiseAction) -> None:
+        """Stop serving an action; its goals are aborted at once."""
+        name = _name(op.action)
+        served = self.served.pop(name, None)
+        if served is None:
+            self.session.error(
+                f"unadvertise_action: {name} is not served by this client", op.id
+            )
+            return
+        self._remove_served(served, "the client unadvertised it")
+
+    def drop_served(self, name: str, why: str) -> None:
+        """Another client took the action over: forget it here."""
+        served = self.served.pop(name, None)
+        if served is not None:
+            self._remove_served(served, why, linger=False)
+            self.session.status("warning", f"action {name}: {why}")
+
+    def _remove_served(self, served: _Served, why: str, linger: bool = True) -> None:
+        for gid in list(served.goals):
+            goal = self._pop_goal(served, gid)
+            if goal is not None:
+                log.error("goal %s aborted: %s", gid, why)
+                goal.finish(Status.ABORTED)
+        ros = served.ros
+        served.ros = None
+        if ros is not None:
+            ros.alive = False  # new goals are rejected while it lingers
+            if linger:
+                self.session.loop.call_later(ACTION_LINGER, ros.destroy)
+            else:
+                ros.destroy()
+        if self._owners.get(served.name) is self:
+            del self._owners[served.name]
+
+
+def _name(name: str) -> str:
+    return name if name.startswith("/") else "/" + name
+
+
+def _args_obj(args: Mapping[str, Any] | list[Any] | None, fields: tuple[str, ...]) -> Any:
+    if args is None:
+        return {}
+    if isinstance(args, list):
+        if len(args) > len(fields):
+            raise _Failed(
+                f"args: {len(args)} values given but the goal has {len(fields)} fields"
+                + (f" ({', '.join(fields)})" if fields else "")
+            )
+        return dict(zip(fields, args, strict=False))
+    return args

@@ -1,0 +1,358 @@
+"""The ROS side of actions: rclpy action clients and servers, driven from the asyncio loop.
+
+rclpy's action classes are not thread safe, so every call into them runs on
+the executor thread (:meth:`RosNode.in_executor`); everything they report
+crosses back to the loop with :meth:`RosNode.post`. The loop never waits on
+the executor.
+
+* :class:`SharedActionClient`: one rclpy ``ActionClient`` per (action, type)
+  for every session. :meth:`SharedActionClient.send` returns a
+  :class:`SentGoal`; its :class:`GoalListener` hears, on the loop, whether the
+  goal was accepted, each feedback, the cancel answer and the final
+  (status, result).
+* :class:`ServedAction`: an rclpy ``ActionServer`` whose goals are carried
+  out by a websocket client. rclpy would run an execute callback as an
+  executor task, and a pending coroutine task makes rclpy's executor spin
+  without waiting; so goals are never "executed" in rclpy's sense: the goal
+  is moved to EXECUTING when accepted, and its terminal state and result are
+  set when the client answers (:meth:`ServedGoal.finish`).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import importlib
+import logging
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any, Protocol
+
+from action_msgs.msg import GoalStatus
+from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
+
+from . import convert
+from .ros import SERVICE_DEPTH, _qos
+
+if TYPE_CHECKING:
+    from .ros import RosNode
+
+__all__ = [
+    "ACTIVE",
+    "GoalListener",
+    "SentGoal",
+    "ServedAction",
+    "ServedGoal",
+    "SharedActionClient",
+    "Status",
+]
+
+log = logging.getLogger("bridge_server.ros_actions")
+
+_action: Any = importlib.import_module("rclpy.action")  # untyped API, used as Any
+
+FEEDBACK_DEPTH = 1000
+"""History depth of the bridge's feedback publishers and subscriptions (bursts of feedback)."""
+
+RESULT_TIMEOUT = 60
+"""Seconds a finished served goal's result stays available to ROS callers."""
+
+
+class Status:
+    """``action_msgs/msg/GoalStatus`` numbers."""
+
+    UNKNOWN = GoalStatus.STATUS_UNKNOWN
+    ACCEPTED = GoalStatus.STATUS_ACCEPTED
+    EXECUTING = GoalStatus.STATUS_EXECUTING
+    CANCELING = GoalStatus.STATUS_CANCELING
+    SUCCEEDED = GoalStatus.STATUS_SUCCEEDED
+    CANCELED = GoalStatus.STATUS_CANCELED
+    ABORTED = GoalStatus.STATUS_ABORTED
+
+
+ACTIVE = frozenset({Status.ACCEPTED, Status.EXECUTING, Status.CANCELING})
+"""Statuses of a goal that is not finished."""
+
+CANCEL_ANSWERS = {
+    1: "the action server refused to cancel it",
+    2: "the action server does not know it",
+    3: "it had already finished",
+}
+"""``CancelGoal`` return codes other than 0 (ERROR_NONE), as text."""
+
+
+def _action_qos() -> dict[str, Any]:
+    services = _qos(True, False, SERVICE_DEPTH)
+    return {
+        "goal_service_qos_profile": services,
+        "result_service_qos_profile": services,
+        "cancel_service_qos_profile": services,
+    }
+
+
+class GoalListener(Protocol):
+    """What a :class:`SentGoal` reports, on the loop thread."""
+
+    def on_accepted(self) -> None:
+        """The action server accepted the goal."""
+
+    def on_rejected(self) -> None:
+        """The action server rejected the goal."""
+
+    def on_feedback(self, feedback: Any) -> None:
+        """One feedback message (the action's ``Feedback``)."""
+
+    def on_cancel_answer(self, code: int) -> None:
+        """The server's answer to a cancel request (0: canceling)."""
+
+    def on_result(self, status: int, result: Any) -> None:
+        """The goal finished (``status`` is terminal) or the request failed (``result`` None)."""
+
+
+class SentGoal:
+    """A goal the bridge sent to a ROS action server; ``cancel()`` may come at any time."""
+
+    def __init__(self, shared: SharedActionClient, goal: Any, listener: GoalListener,
+                 feedback: bool) -> None:
+        self.shared = shared
+        self.goal = goal
+        self.listener = listener
+        self.feedback = feedback
+        self.handle: Any = None  # the rclpy ClientGoalHandle, once accepted (executor thread)
+        self.cancel_wanted = False
+        self.finished = False
+
+    def cancel(self) -> None:
+        """Ask the action server to cancel the goal (before or after it was accepted)."""
+        self.shared.ros.in_executor(self.shared._cancel, self)
+
+
+class _ActionEnd:
+    """What both ends of an action know: its name, class and converters (built once)."""
+
+    def __init__(self, ros: RosNode, name: str, action_cls: type[Any]) -> None:
+        self.ros = ros
+        self.name = name
+        self.action_cls = action_cls
+        self.goal_conv = convert.converter_for(action_cls.Goal)
+        self.feedback_conv = convert.converter_for(action_cls.Feedback)
+        self.result_conv = convert.converter_for(action_cls.Result)
+
+
+class SharedActionClient(_ActionEnd):
+    """The bridge's rclpy action client for one action name and type."""
+
+    def __init__(self, ros: RosNode, name: str, action_cls: type[Any]) -> None:
+        super().__init__(ros, name, action_cls)
+        self.client = _action.ActionClient(
+            ros.node, action_cls, name,
+            feedback_sub_qos_profile=_qos(True, False, FEEDBACK_DEPTH), **_action_qos(),
+        )
+
+    def ready(self) -> bool:
+        """Whether an action server is matched (callable from the loop)."""
+        try:
+            return bool(self.client.server_is_ready())
+        except Exception:
+            return False
+
+    def send(self, goal: Any, listener: GoalListener, feedback: bool) -> SentGoal:
+        """Send ``goal`` (an instance of the action's ``Goal``) now; ``listener`` hears the rest."""
+        sent = SentGoal(self, goal, listener, feedback)
+        self.ros.in_executor(self._send, sent)
+        return sent
+
+    # -- executor thread ---------------------------------------------------------------------
+
+    def _send(self, sent: SentGoal) -> None:
+        post = self.ros.post
+        if sent.cancel_wanted:  # canceled before it left the bridge
+            sent.finished = True
+            post(sent.listener.on_result, Status.CANCELED, None)
+            return
+        listener = sent.listener
+        callback: Callable[[Any], None] | None = None
+        if sent.feedback:
+
+            def callback(msg: Any) -> None:
+                post(listener.on_feedback, msg.feedback)
+
+        try:
+            future = self.client.send_goal_async(sent.goal, feedback_callback=callback)
+        except Exception as exc:
+            log.warning("sending a goal to %s failed: %s", self.name, exc)
+            sent.finished = True
+            post(listener.on_result, Status.ABORTED, None)
+            return
+        future.add_done_callback(lambda f: self._answered(sent, f))
+
+    def _answered(self, sent: SentGoal, future: Any) -> None:
+        post = self.ros.post
+        handle = None if future.exception() is not None else future.result()
+        if handle is None or not handle.accepted:
+            sent.finished = True
+            post(sent.listener.on_rejected)
+            return
+        sent.handle = handle
+        post(sent.listener.on_accepted)
+        result_future = handle.get_result_async()
+        result_future.add_done_callback(lambda f: self._result(sent, f))
+        if sent.cancel_wanted:
+            self._cancel(sent)
+
+    def _result(self, sent: SentGoal, future: Any) -> None:
+        sent.finished = True
+        if future.exception() is not None:
+            self.ros.post(sent.listener.on_result, Status.ABORTED, None)
+            return
+        response = future.result()
+        self.ros.post(sent.listener.on_result, int(response.status), response.result)
+
+    def _cancel(self, sent: SentGoal) -> None:
+        sent.cancel_wanted = True
+        if sent.handle is None or sent.finished:
+            return  # sent on acceptance (or moot)
+        try:
+            future = sent.handle.cancel_goal_async()
+        except Exception as exc:
+            log.debug("cancel request for a goal of %s failed: %s", self.name, exc)
+            return
+
+        def answered(f: Any) -> None:
+            if f.exception() is None and f.result() is not None:
+                self.ros.post(sent.listener.on_cancel_answer, int(f.result().return_code))
+
+        future.add_done_callback(answered)
+
+    def destroy(self) -> None:
+        """Remove the rclpy action client (executor thread)."""
+        self.ros.in_executor(self._destroy)
+
+    def _destroy(self) -> None:
+        with contextlib.suppress(Exception):
+            self.client.destroy()
+
+
+class ServedGoal:
+    """A ROS caller's goal to an action a websocket client serves."""
+
+    def __init__(self, served: ServedAction, handle: Any) -> None:
+        self.served = served
+        self.handle = handle
+        self.request = handle.request
+        self.done = False
+
+    def feedback(self, msg: Any) -> None:
+        """Publish one feedback message (an instance of the action's ``Feedback``)."""
+        if not self.done:
+            self.served.ros.in_executor(self._feedback, msg)
+
+    def _feedback(self, msg: Any) -> None:
+        with contextlib.suppress(Exception):  # the goal may have finished meanwhile
+            self.handle.publish_feedback(msg)
+
+    def finish(self, status: int, result: Any | None = None) -> bool:
+        """End the goal with a terminal ``status`` and ``result`` (``None``: default values).
+
+        False if it had already finished.
+        """
+        if self.done:
+            return False
+        self.done = True
+        self.served.ros.in_executor(self.served._finish, self, status, result)
+        return True
+
+
+class ServedAction(_ActionEnd):
+    """An rclpy action server whose goals a websocket client carries out.
+
+    ``on_goal`` and ``on_cancel`` are called on the loop with the
+    :class:`ServedGoal`. Every goal is accepted while the action is served,
+    every cancel request is accepted (the client decides how the goal ends).
+    """
+
+    def __init__(
+        self,
+        ros: RosNode,
+        name: str,
+        action_cls: type[Any],
+        on_goal: Callable[[ServedGoal], None],
+        on_cancel: Callable[[ServedGoal], None],
+    ) -> None:
+        super().__init__(ros, name, action_cls)
+        self.on_goal = on_goal
+        self.on_cancel = on_cancel
+        self.alive = True
+        self._goals: dict[bytes, ServedGoal] = {}
+        self.server = _action.ActionServer(
+            ros.node, action_cls, name, _never_executed,
+            goal_callback=self._goal_callback,
+            handle_accepted_callback=self._accepted,
+            cancel_callback=self._cancel_callback,
+            feedback_pub_qos_profile=_qos(True, False, FEEDBACK_DEPTH),
+            result_timeout=RESULT_TIMEOUT,
+            **_action_qos(),
+        )
+
+    # -- executor thread ---------------------------------------------------------------------
+
+    def _goal_callback(self, _goal: Any) -> Any:
+        return _action.GoalResponse.ACCEPT if self.alive else _action.GoalResponse.REJECT
+
+    def _accepted(self, handle: Any) -> None:
+        goal = ServedGoal(self, handle)
+        self._goals[bytes(handle.goal_id.uuid)] = goal
+        if not handle.is_cancel_requested:
+            handle._update_state(_rclpy.GoalEvent.EXECUTE)
+        if not self.alive:
+            goal.done = True
+            self._finish(goal, Status.ABORTED, None)
+            return
+        self.ros.post(self.on_goal, goal)
+
+    def _cancel_callback(self, handle: Any) -> Any:
+        goal = self._goals.get(bytes(handle.goal_id.uuid))
+        if goal is not None and not goal.done:
+            self.ros.post(self.on_cancel, goal)
+        return _action.CancelResponse.ACCEPT
+
+    def _finish(self, goal: ServedGoal, status: int, result: Any | None) -> None:
+        handle = goal.handle
+        self._goals.pop(bytes(handle.goal_id.uuid), None)
+        if not handle.is_active:
+            return
+        try:
+            if status == Status.SUCCEEDED:
+                handle.succeed()
+            elif status == Status.CANCELED:
+                if not handle.is_cancel_requested:
+                    handle._update_state(_rclpy.GoalEvent.CANCEL_GOAL)
+                handle.canceled()
+            else:
+                handle.abort()
+        except Exception as exc:  # an invalid transition: end it as aborted
+            log.debug("goal of %s: %s; aborting it", self.name, exc)
+            with contextlib.suppress(Exception):
+                handle.abort()
+        response = self.action_cls.Impl.GetResultService.Response()
+        response.status = handle.status
+        response.result = result if result is not None else self.action_cls.Result()
+        future = self.server._result_futures.get(bytes(handle.goal_id.uuid))
+        if future is not None and not future.done():
+            future.set_result(response)
+
+    # -- loop thread -------------------------------------------------------------------------
+
+    def destroy(self) -> None:
+        """Remove the rclpy action server (goals still open are aborted first)."""
+        self.alive = False
+        self.ros.in_executor(self._destroy)
+
+    def _destroy(self) -> None:
+        for goal in list(self._goals.values()):
+            goal.done = True
+            self._finish(goal, Status.ABORTED, None)
+        with contextlib.suppress(Exception):
+            self.server.destroy()
+
+
+def _never_executed(_handle: Any) -> Any:  # pragma: no cover - goals are finished directly
+    raise RuntimeError("served goals are not executed by rclpy")
