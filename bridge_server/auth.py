@@ -1,0 +1,257 @@
+"""Principals and tokens: the ``--auth-file``, token checks, and the add-principal helper.
+
+The auth file is TOML, written by hand or by the helper::
+
+    [roles.viewer]                 # see bridge_server.permissions for the keys
+    subscribe = ["*"]
+    introspection = ["*"]
+
+    [principals.alice]
+    role = "viewer"
+    token_hash = "sha256$<salt hex>$<digest hex>"
+
+Tokens are 256-bit random strings made by the helper
+(``roslibpy-lite-bridge add-principal alice --role viewer --auth-file auth.toml``
+or ``python -m bridge_server.auth alice --role viewer --auth-file auth.toml``),
+printed once and stored only as a salted SHA-256 digest. A fast hash is the
+right tool for a random token of that length (a slow KDF protects guessable
+passwords, and a token is not one); every principal is compared with
+``hmac.compare_digest``, with no early exit, so timing tells nothing about
+which digest came close. The token itself never reaches a log line or an
+error text.
+
+Failed attempts are counted per client address (:class:`FailureTracker`):
+after :data:`FREE_FAILURES` failures in a row, that address is refused with
+HTTP 429 (``Retry-After``) for 1 s, then 2, 4, ... up to :data:`MAX_LOCKOUT`
+seconds; a success resets the count.
+"""
+
+from __future__ import annotations
+
+import argparse
+import hashlib
+import hmac
+import secrets
+import sys
+import time
+import tomllib
+from collections import OrderedDict
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from .permissions import Role, RoleError
+from .types import BridgeError
+
+__all__ = [
+    "AuthConfig",
+    "AuthFileError",
+    "FailureTracker",
+    "Principal",
+    "hash_token",
+    "load_auth_file",
+    "main",
+    "new_token",
+]
+
+FREE_FAILURES = 5
+"""Failed attempts from one address before it is locked out for a while."""
+
+MAX_LOCKOUT = 60.0
+"""Longest lock-out of an address, in seconds."""
+
+EXAMPLE_ROLES = """\
+# Roles: capabilities on name patterns (fnmatch globs); deny wins over allow.
+# Capabilities: subscribe, publish, call_service, serve_service, send_action_goal,
+# serve_action, params, introspection, take_over; "all" grants every one.
+
+[roles.viewer]
+subscribe = ["*"]
+introspection = ["*"]
+
+[roles.operator]
+subscribe = ["*"]
+introspection = ["*"]
+publish = ["/cmd_vel"]
+call_service = ["/reset", "/dock", "/undock"]
+send_action_goal = ["/navigate_to_pose"]
+deny.publish = ["/rosout", "/parameter_events"]
+
+[roles.admin]
+all = ["*"]
+"""
+
+
+class AuthFileError(BridgeError):
+    """The auth file cannot be used (the text names the file and what is wrong)."""
+
+
+@dataclass(frozen=True)
+class Principal:
+    """A named holder of a token, with a role."""
+
+    name: str
+    role: Role
+    salt: bytes
+    digest: bytes
+
+
+@dataclass
+class AuthConfig:
+    """What the auth file defines."""
+
+    roles: dict[str, Role]
+    principals: list[Principal]
+
+    def verify(self, token: str) -> Principal | None:
+        """The principal whose token this is, or ``None`` (compares with every principal)."""
+        data = token.encode("utf-8", "surrogatepass")
+        found: Principal | None = None
+        for p in self.principals:
+            if hmac.compare_digest(hashlib.sha256(p.salt + data).digest(), p.digest):
+                found = p
+        return found
+
+
+def new_token() -> str:
+    """A fresh random token (256 bits, URL safe, so it fits in a query string)."""
+    return secrets.token_urlsafe(32)
+
+
+def hash_token(token: str, salt: bytes | None = None) -> str:
+    """The ``token_hash`` text stored for ``token``: ``sha256$<salt hex>$<digest hex>``."""
+    salt = salt if salt is not None else secrets.token_bytes(16)
+    digest = hashlib.sha256(salt + token.encode()).hexdigest()
+    return f"sha256${salt.hex()}${digest}"
+
+
+def _parse_hash(text: Any, where: str) -> tuple[bytes, bytes]:
+    parts = text.split("$") if isinstance(text, str) else []
+    if len(parts) != 3 or parts[0] != "sha256":
+        raise AuthFileError(f"{where}: token_hash must look like 'sha256$<salt hex>$<digest hex>'")
+    try:
+        salt, digest = bytes.fromhex(parts[1]), bytes.fromhex(parts[2])
+    except ValueError:
+        raise AuthFileError(f"{where}: token_hash holds something that is not hex") from None
+    if len(digest) != 32:
+        raise AuthFileError(f"{where}: the digest of token_hash must be 32 bytes")
+    return salt, digest
+
+
+def load_auth_file(path: str | Path) -> AuthConfig:
+    """Read and check an auth file; every problem names the file and the key."""
+    path = Path(path)
+    try:
+        data = tomllib.loads(path.read_text(encoding="utf-8"))
+    except OSError as exc:
+        raise AuthFileError(f"{path}: cannot read: {exc.strerror}") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise AuthFileError(f"{path}: not valid TOML: {exc}") from None
+    unknown = set(data) - {"roles", "principals"}
+    if unknown:
+        raise AuthFileError(f"{path}: unknown top-level key(s) {sorted(unknown)}")
+    roles: dict[str, Role] = {}
+    for name, table in data.get("roles", {}).items():
+        if not isinstance(table, dict):
+            raise AuthFileError(f"{path}: roles.{name} must be a table")
+        try:
+            roles[name] = Role.from_table(name, table)
+        except RoleError as exc:
+            raise AuthFileError(f"{path}: {exc}") from None
+    principals: list[Principal] = []
+    for name, table in data.get("principals", {}).items():
+        where = f"{path}: principals.{name}"
+        if not isinstance(table, dict):
+            raise AuthFileError(f"{where} must be a table")
+        role_name = table.get("role")
+        if role_name not in roles:
+            raise AuthFileError(
+                f"{where}: role {role_name!r} is not defined (roles: {', '.join(roles) or 'none'})"
+            )
+        salt, digest = _parse_hash(table.get("token_hash"), where)
+        principals.append(Principal(name, roles[role_name], salt, digest))
+    return AuthConfig(roles, principals)
+
+
+class FailureTracker:
+    """Failed authentication attempts per address, and the lock-out they earn."""
+
+    def __init__(self, free: int = FREE_FAILURES, max_lockout: float = MAX_LOCKOUT) -> None:
+        self.free = free
+        self.max_lockout = max_lockout
+        self._seen: OrderedDict[str, tuple[int, float]] = OrderedDict()
+
+    def locked_for(self, address: str) -> float:
+        """Seconds ``address`` must still wait (0: it may try now)."""
+        entry = self._seen.get(address)
+        if entry is None:
+            return 0.0
+        count, last = entry
+        if count < self.free:
+            return 0.0
+        wait = min(2.0 ** (count - self.free), self.max_lockout)
+        return max(0.0, last + wait - time.monotonic())
+
+    def failed(self, address: str) -> int:
+        """Count one failure; returns the count so far."""
+        count = self._seen.pop(address, (0, 0.0))[0] + 1
+        self._seen[address] = (count, time.monotonic())
+        while len(self._seen) > 10_000:
+            self._seen.popitem(last=False)
+        return count
+
+    def succeeded(self, address: str) -> None:
+        """Forget the address's failures."""
+        self._seen.pop(address, None)
+
+
+# -- the helper command ----------------------------------------------------------------------
+
+
+def add_principal(path: Path, name: str, role: str) -> str:
+    """Add principal ``name`` with ``role`` to the auth file (made with example roles if new).
+
+    Returns the new token; only its hash is written.
+    """
+    if not name.replace("_", "").replace("-", "").isalnum():
+        raise AuthFileError(f"principal name {name!r}: use letters, digits, '-' and '_'")
+    if not path.exists():
+        path.write_text(EXAMPLE_ROLES, encoding="utf-8")
+        path.chmod(0o600)
+    config = load_auth_file(path)
+    if role not in config.roles:
+        known = ", ".join(config.roles)
+        raise AuthFileError(f"{path}: role {role!r} is not defined (roles: {known})")
+    if any(p.name == name for p in config.principals):
+        raise AuthFileError(f"{path}: principal {name!r} exists already; remove it first")
+    token = new_token()
+    with path.open("a", encoding="utf-8") as f:
+        f.write(f'\n[principals.{name}]\nrole = "{role}"\ntoken_hash = "{hash_token(token)}"\n')
+    load_auth_file(path)  # what was written must load
+    return token
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``roslibpy-lite-bridge add-principal NAME --role ROLE --auth-file FILE``."""
+    p = argparse.ArgumentParser(
+        prog="roslibpy-lite-bridge add-principal",
+        description="Add a principal to an auth file and print its new token (once).",
+    )
+    p.add_argument("name", help="principal name (letters, digits, '-', '_')")
+    p.add_argument("--role", required=True, help="a role defined in the file")
+    p.add_argument("--auth-file", required=True, type=Path,
+                   help="the TOML auth file (created with example roles if missing)")
+    args = p.parse_args(argv)
+    try:
+        token = add_principal(args.auth_file, args.name, args.role)
+    except AuthFileError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 1
+    print(token)
+    print(f"principal {args.name} ({args.role}) added to {args.auth_file}; "
+          "this token is shown only now", file=sys.stderr)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,215 @@
+"""Roles: capabilities granted on name patterns, and what each op needs.
+
+A role grants capabilities on ``fnmatch`` globs (``*`` also matches ``/``)::
+
+    [roles.operator]
+    subscribe = ["*"]
+    introspection = ["*"]
+    publish = ["/cmd_vel"]
+    call_service = ["/reset", "/dock/*"]
+    deny.publish = ["/rosout"]
+
+Capabilities (:data:`CAPABILITIES`): ``subscribe``, ``publish`` (also
+advertise), ``call_service``, ``serve_service`` (advertise_service),
+``send_action_goal`` (and cancel), ``serve_action`` (advertise_action and
+the feedback/result of served goals), ``params`` (the ``/node:param`` names
+of rosapi's get/set/has/delete_param and get_param_names), ``introspection``
+(the rosapi lists and lookups; answers list only the names it matches) and
+``take_over`` (advertise a service another client serves; without it the
+first owner keeps the name). ``all`` grants every capability. Deny wins over
+allow.
+
+:func:`requirement` maps an op to the (capability, name) it needs, keyed by
+op type in one table, so new op classes are covered by adding a line.
+"""
+
+from __future__ import annotations
+
+import fnmatch
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+from roslibpy_lite import ops
+
+from .types import BridgeError
+
+__all__ = [
+    "CAPABILITIES",
+    "Role",
+    "RoleError",
+    "filter_rosapi",
+    "requirement",
+    "rosapi_requirement",
+]
+
+CAPABILITIES = (
+    "subscribe",
+    "publish",
+    "call_service",
+    "serve_service",
+    "send_action_goal",
+    "serve_action",
+    "params",
+    "introspection",
+    "take_over",
+)
+
+
+class RoleError(BridgeError):
+    """A role definition is malformed (the text names the role and the key)."""
+
+
+@dataclass
+class Role:
+    """A named set of allowed and denied name patterns per capability."""
+
+    name: str
+    allow: dict[str, tuple[str, ...]] = field(default_factory=dict)
+    deny: dict[str, tuple[str, ...]] = field(default_factory=dict)
+    _cache: dict[tuple[str, str], bool] = field(default_factory=dict, repr=False)
+
+    @classmethod
+    def from_table(cls, name: str, table: Mapping[str, Any]) -> Role:
+        """Build a role from its TOML table (see the module docstring)."""
+        role = cls(name)
+        for key, value in table.items():
+            if key == "deny":
+                if not isinstance(value, Mapping):
+                    raise RoleError(f"role {name}: 'deny' must be a table of capabilities")
+                for dkey, dvalue in value.items():
+                    role._add(role.deny, dkey, dvalue, f"deny.{dkey}")
+            else:
+                role._add(role.allow, key, value, key)
+        return role
+
+    def _add(self, into: dict[str, tuple[str, ...]], key: str, value: Any, where: str) -> None:
+        if not isinstance(value, list) or not all(isinstance(v, str) for v in value):
+            raise RoleError(f"role {self.name}: {where} must be a list of name patterns")
+        caps = CAPABILITIES if key == "all" else (key,)
+        if key != "all" and key not in CAPABILITIES:
+            raise RoleError(
+                f"role {self.name}: unknown capability {key!r} "
+                f"(known: all, {', '.join(CAPABILITIES)})"
+            )
+        for cap in caps:
+            into[cap] = into.get(cap, ()) + tuple(value)
+
+    def allows(self, capability: str, name: str) -> bool:
+        """Whether the role may use ``capability`` on ``name`` (deny wins)."""
+        key = (capability, name)
+        found = self._cache.get(key)
+        if found is None:
+            found = _matches(self.allow.get(capability, ()), name) and not _matches(
+                self.deny.get(capability, ()), name
+            )
+            if len(self._cache) < 50_000:
+                self._cache[key] = found
+        return found
+
+    def has(self, capability: str) -> bool:
+        """Whether the role grants ``capability`` on any name at all."""
+        return bool(self.allow.get(capability))
+
+
+def _matches(patterns: tuple[str, ...], name: str) -> bool:
+    return any(fnmatch.fnmatchcase(name, p) for p in patterns)
+
+
+def _abs(name: str) -> str:
+    return name if name.startswith("/") else "/" + name
+
+
+# op class -> (capability, function giving the name it acts on)
+_NEEDS: dict[type[Any], tuple[str, Callable[[Any], str]]] = {
+    ops.Subscribe: ("subscribe", lambda op: _abs(op.topic)),
+    ops.Advertise: ("publish", lambda op: _abs(op.topic)),
+    ops.Publish: ("publish", lambda op: _abs(op.topic)),
+    ops.CallService: ("call_service", lambda op: _abs(op.service)),
+    ops.AdvertiseService: ("serve_service", lambda op: _abs(op.service)),
+    ops.SendActionGoal: ("send_action_goal", lambda op: _abs(op.action)),
+    ops.CancelActionGoal: ("send_action_goal", lambda op: _abs(op.action)),
+    ops.AdvertiseAction: ("serve_action", lambda op: _abs(op.action)),
+    ops.ActionFeedback: ("serve_action", lambda op: _abs(op.action)),
+    ops.ActionResult: ("serve_action", lambda op: _abs(op.action)),
+}
+"""Ops not listed (unsubscribe, unadvertise*, service_response, set_level, ...) only touch
+what the client already owns, so they need no capability of their own."""
+
+
+def requirement(op: Any) -> tuple[str, str] | None:
+    """The (capability, name) an op needs, or ``None`` if it needs none."""
+    entry = _NEEDS.get(type(op))
+    if entry is None:
+        return None
+    return entry[0], entry[1](op)
+
+
+# -- rosapi: which capability a call needs, and filtering of the lists it answers ------------
+
+_PARAM_SERVICES = {"/rosapi/get_param", "/rosapi/has_param", "/rosapi/set_param",
+                   "/rosapi/delete_param"}
+_NAME_ARGS = {"topic", "service", "node"}
+
+
+def rosapi_requirement(service: str, args: Mapping[str, Any]) -> tuple[str, str]:
+    """The (capability, name) a call to a rosapi service needs.
+
+    Parameter services need ``params`` on ``/node:param``; lookups of one
+    topic/service/node need ``introspection`` on that name; the rest (lists,
+    type definitions, time) need ``introspection`` on anything (``*`` is
+    checked as "any pattern at all", see :meth:`Role.has`).
+    """
+    if service in _PARAM_SERVICES:
+        name = args.get("name")
+        if isinstance(name, str):
+            node, _, param = name.partition(":")
+            return "params", f"{_abs(node)}:{param}"
+        return "params", "*"
+    if service == "/rosapi/get_param_names":
+        return "params", "*"
+    for key in _NAME_ARGS:
+        value = args.get(key)
+        if isinstance(value, str):
+            return "introspection", _abs(value)
+    return "introspection", "*"
+
+
+# service -> (capability, list fields filtered by the first one's names, parallel fields)
+_LISTS: dict[str, tuple[str, tuple[str, ...]]] = {
+    "/rosapi/topics": ("introspection", ("topics", "types")),
+    "/rosapi/topics_and_raw_types": ("introspection", ("topics", "types", "typedefs_full_text")),
+    "/rosapi/topics_for_type": ("introspection", ("topics",)),
+    "/rosapi/services": ("introspection", ("services",)),
+    "/rosapi/services_for_type": ("introspection", ("services",)),
+    "/rosapi/nodes": ("introspection", ("nodes",)),
+    "/rosapi/publishers": ("introspection", ("publishers",)),
+    "/rosapi/subscribers": ("introspection", ("subscribers",)),
+    "/rosapi/action_servers": ("introspection", ("action_servers",)),
+    "/rosapi/get_param_names": ("params", ("names",)),
+}
+_INDEPENDENT = {"/rosapi/node_details": ("subscribing", "publishing", "services")}
+
+
+def filter_rosapi(role: Role, service: str, values: dict[str, Any]) -> dict[str, Any]:
+    """A rosapi answer with only the names ``role`` may see."""
+    entry = _LISTS.get(service)
+    if entry is not None:
+        capability, fields = entry
+        names = values.get(fields[0])
+        if isinstance(names, list):
+            keep = [i for i, n in enumerate(names) if role.allows(capability, str(n))]
+            values = dict(values)
+            for f in fields:
+                column = values.get(f)
+                if isinstance(column, list) and len(column) == len(names):
+                    values[f] = [column[i] for i in keep]
+        return values
+    independent = _INDEPENDENT.get(service)
+    if independent is not None:
+        values = dict(values)
+        for f in independent:
+            column = values.get(f)
+            if isinstance(column, list):
+                values[f] = [n for n in column if role.allows("introspection", str(n))]
+    return values
