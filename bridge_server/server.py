@@ -113,7 +113,11 @@ class Bridge:
         response = await self.web.process_request(connection, request)
         if response is not None:
             return response
-        return await self.security.process_request(connection, request)
+        refusal = await self.security.process_request(connection, request)
+        if refusal is not None:  # counted by reason for /metrics
+            code = refusal.status_code
+            self.metrics.connection_refused(_REFUSALS.get(code, f"http_{code}"))
+        return refusal
 
     def graph_changed(self) -> None:
         """Something needs the periodic graph check (a new subscription): run it soon."""
@@ -164,6 +168,10 @@ class Bridge:
                 with contextlib.suppress(TimeoutError):
                     await asyncio.wait_for(self._server.wait_closed(), 0.2)
         self.ros.close()
+
+
+_REFUSALS = {401: "auth", 403: "origin", 429: "too_many", 503: "max_clients"}
+"""``connections_refused_total`` reasons, by the HTTP status of the refusal."""
 
 
 def _peer(ws: ServerConnection) -> str:

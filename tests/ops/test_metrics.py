@@ -102,3 +102,19 @@ async def test_metrics_port_serves_the_same_metrics(make_bridge: Any) -> None:
         assert (code, body) == (200, b"ok\n")
     finally:
         await ws.close()
+
+
+async def test_refused_connections_are_counted_by_reason(make_bridge: Any) -> None:
+    """A handshake the security checks refuse (a foreign Origin) counts as refused, reason origin."""
+    from websockets.asyncio.client import connect
+    from websockets.exceptions import InvalidStatus
+
+    b: BridgeProcess = make_bridge("--allowed-origins", "http://robot.example")
+    try:
+        async with connect(b.url, origin="http://elsewhere.example"):  # type: ignore[arg-type]
+            raise AssertionError("the handshake should have been refused")
+    except InvalidStatus as exc:
+        assert exc.response.status_code == 403
+    m = await scrape(b.port)
+    assert value(m, P + "connections_refused_total", reason="origin") == 1
+    assert value(m, P + "connections_total") == 0
