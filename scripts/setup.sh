@@ -64,5 +64,16 @@ if [ -f tests/peers/node/package.json ] && command -v npm >/dev/null 2>&1; then
   fi
 fi
 
+# Chromium and its driver (Debian packages) for the status page's browser test.
+if command -v apt-get >/dev/null 2>&1 \
+    && ! { command -v chromium && command -v chromedriver; } >/dev/null 2>&1; then
+  log "installing chromium and chromium-driver (apt-get)"
+  SUDO=""; [ "$(id -u)" = 0 ] || SUDO="sudo -n"
+  if ! { $SUDO apt-get update -qq && DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq \
+      --no-install-recommends chromium chromium-driver; } > .venv/apt-chromium.log 2>&1; then
+    log "could not install chromium (the browser test will be skipped); see .venv/apt-chromium.log"
+  fi
+fi
+
 # DDS stays on loopback for everything started from here.
 export ROS_AUTOMATIC_DISCOVERY_RANGE="${ROS_AUTOMATIC_DISCOVERY_RANGE:-LOCALHOST}"
