@@ -394,5 +394,7 @@ def test_available_packages_and_types() -> None:
     assert "test_msgs/msg/BasicTypes" in types
     assert not any(t.endswith(("_Request", "_Goal")) for t in types)
     assert all(lookup(t)._type == t for t in types)
-    assert available_types("mult_msgs") == ["mult_msgs/srv/MultFloats"]
+    assert available_types("mult_msgs") == [
+        "mult_msgs/action/IntegrateImu", "mult_msgs/srv/MultFloats"
+    ]
     assert len(available_types()) > 150 and "sensor_msgs/msg/Image" in available_types()
