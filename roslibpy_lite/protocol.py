@@ -155,7 +155,8 @@ class Protocol:
 
     Args:
         max_partial: how many fragmented ops may be incomplete at once; the
-            oldest is dropped past that.
+            oldest is dropped past that, and recorded in :attr:`evicted` as
+            ``(id, pieces received, total)`` so the caller can tell the sender.
         max_fragment_bytes: how large a reassembled op may grow.
     """
 
@@ -163,6 +164,7 @@ class Protocol:
         self.max_partial = max_partial
         self.max_fragment_bytes = max_fragment_bytes
         self._partial: OrderedDict[Id, _Partial] = OrderedDict()
+        self.evicted: list[tuple[Id, int, int]] = []
 
     def receive(self, data: str | bytes) -> Op | None:
         """Take one frame; return the op it completes, or ``None``.
@@ -183,7 +185,8 @@ class Protocol:
         if partial is None:
             partial = self._partial[frag.id] = _Partial(frag.total)
             while len(self._partial) > self.max_partial:
-                self._partial.popitem(last=False)
+                old_id, old = self._partial.popitem(last=False)
+                self.evicted.append((old_id, len(old.pieces), old.total))
         elif partial.total != frag.total:
             del self._partial[frag.id]
             raise RemoteProtocolError(

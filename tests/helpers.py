@@ -22,7 +22,7 @@ from websockets.asyncio.client import ClientConnection
 from websockets.asyncio.client import connect as ws_connect
 
 ROOT = Path(__file__).resolve().parent.parent
-READY = re.compile(r"bridge_server listening on ws://([\d.]+):(\d+)")
+READY = re.compile(r"bridge_server listening on wss?://([\d.]+):(\d+)")
 
 
 def ros_env(**extra: str) -> dict[str, str]:

@@ -152,24 +152,28 @@ async def test_advertise_service_answers_ros_caller(ws_connect: Any, ros_node: A
     assert response.result == 42.0
 
 
-async def test_served_service_failure_gives_default_response(
+async def test_served_service_failure_is_not_answered_with_a_default(
     ws_connect: Any, ros_node: Any, topic: str
 ):
-    """A client answering result false gives the ROS caller a default response (and no hang)."""
+    """A client answering result false leaves the ROS caller unanswered (no invented default)."""
     ws = await ws_connect()
     await ws.send({"op": "advertise_service", "service": topic, "type": "std_srvs/srv/SetBool"})
     client = ros_node.create_client(SetBool, topic)
     await wait_service(client)
-    future = client.call_async(SetBool.Request(data=True))
+    failed = client.call_async(SetBool.Request(data=True))
     request = await ws.expect(op="call_service", service=topic)
     await ws.send({"op": "service_response", "service": topic, "id": request["id"],
                    "result": False, "values": "cannot do that"})
-    response = await ros_future(future)
-    assert response.success is False and response.message == ""
+    later = client.call_async(SetBool.Request(data=False))
+    request = await ws.expect(op="call_service", service=topic)
+    await ws.send({"op": "service_response", "service": topic, "id": request["id"],
+                   "result": True, "values": {"success": True, "message": "second"}})
+    assert (await ros_future(later)).message == "second"
+    assert not failed.done()
 
 
 async def test_unadvertise_service(ws_connect: Any, ros_node: Any, topic: str):
-    """unadvertise_service fails waiting ROS callers at once and removes the ROS service."""
+    """unadvertise_service removes the ROS service at once; waiting callers get no default."""
     ws = await ws_connect()
     await ws.send({"op": "advertise_service", "service": topic, "type": "std_srvs/SetBool"})
     client = ros_node.create_client(SetBool, topic)
@@ -177,13 +181,12 @@ async def test_unadvertise_service(ws_connect: Any, ros_node: Any, topic: str):
     future = client.call_async(SetBool.Request(data=True))
     await ws.expect(op="call_service", service=topic)
     await ws.send({"op": "unadvertise_service", "service": topic})
-    response = await ros_future(future)
-    assert response.success is False
     await async_wait_until(lambda: not client.service_is_ready(), what="service gone")
+    assert not future.done()
 
 
 async def test_disconnect_fails_pending_ros_callers(ws_connect: Any, ros_node: Any, topic: str):
-    """When the serving client disconnects, pending ROS callers are answered at once."""
+    """When the serving client disconnects, its service leaves ROS; callers get no default."""
     ws = await ws_connect()
     await ws.send({"op": "advertise_service", "service": topic, "type": "std_srvs/SetBool"})
     client = ros_node.create_client(SetBool, topic)
@@ -191,26 +194,27 @@ async def test_disconnect_fails_pending_ros_callers(ws_connect: Any, ros_node: A
     future = client.call_async(SetBool.Request(data=True))
     await ws.expect(op="call_service", service=topic)
     await ws.close()
-    response = await ros_future(future)
-    assert response.success is False
     await async_wait_until(lambda: not client.service_is_ready(), what="service gone")
+    assert not future.done()
 
 
-async def test_another_client_takes_over_service(ws_connect: Any, ros_node: Any, topic: str):
-    """A second client advertising the same service takes it over; the first is told."""
+async def test_first_owner_keeps_a_served_service(ws_connect: Any, ros_node: Any, topic: str):
+    """A second client advertising a service another client serves is refused; the first keeps it."""
     first = await ws_connect()
     await first.send({"op": "advertise_service", "service": topic, "type": "std_srvs/SetBool"})
+    await roundtrip(first)
     second = await ws_connect()
-    await second.send({"op": "advertise_service", "service": topic, "type": "std_srvs/SetBool"})
-    note = await first.expect(op="status", level="warning")
-    assert topic in note["msg"]
+    await second.send({"op": "advertise_service", "service": topic, "type": "std_srvs/SetBool",
+                       "id": "again"})
+    refused = await second.expect(op="status", id="again")
+    assert refused["level"] == "error" and "already served" in refused["msg"]
     client = ros_node.create_client(SetBool, topic)
     await wait_service(client)
     future = client.call_async(SetBool.Request(data=True))
-    request = await second.expect(op="call_service", service=topic)
-    await second.send({"op": "service_response", "service": topic, "id": request["id"],
-                       "result": True, "values": {"success": True, "message": "second"}})
-    assert (await ros_future(future)).message == "second"
+    request = await first.expect(op="call_service", service=topic)
+    await first.send({"op": "service_response", "service": topic, "id": request["id"],
+                      "result": True, "values": {"success": True, "message": "first"}})
+    assert (await ros_future(future)).message == "first"
 
 
 async def test_fragmented_call_service(ws_connect: Any, ros_node: Any, topic: str):

@@ -195,7 +195,7 @@ async def test_handles_clean_up_on_exit(ros: Ros, topic: str) -> None:
         assert await ros.call_service(service, MULT, {}, timeout=15) == {"result": 1.0}
     assert server.closed
     # The ROS graph forgets a service with a delay (no event); until then a call may still
-    # reach the bridge's closing service, which answers with a default response.
+    # find the name in the graph and wait for a server that is gone.
     deadline = asyncio.get_running_loop().time() + 30
     with pytest.raises(ServiceError, match=service):
         while asyncio.get_running_loop().time() < deadline:

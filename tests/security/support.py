@@ -1,0 +1,114 @@
+"""Helpers for the security tests: certificates, auth files, connections with tokens."""
+
+from __future__ import annotations
+
+import ssl
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from websockets.asyncio.client import connect
+
+from bridge_server.auth import hash_token, new_token
+from tests.helpers import WireClient
+
+ROLES = """
+[roles.viewer]
+subscribe = ["*"]
+introspection = ["*"]
+
+[roles.operator]
+subscribe = ["*"]
+introspection = ["*"]
+publish = ["/op/*", "/cmd_vel"]
+call_service = ["/op/*"]
+deny.publish = ["/op/forbidden"]
+
+[roles.admin]
+all = ["*"]
+
+[roles.nothing]
+
+[roles.narrow]
+introspection = ["/seen*"]
+params = ["/seen_node:*"]
+
+[roles.server]
+serve_service = ["*"]
+"""
+"""Roles of the test auth file; one principal per role, named after it."""
+
+
+@dataclass
+class Certs:
+    """Files made by trustme for one test session."""
+
+    ca: Path
+    server: Path
+    client_ca: Path
+    client: Path
+    other_ca: Path
+
+    def context(self, client_cert: bool = False, ca: Path | None = None) -> ssl.SSLContext:
+        """A client TLS context trusting our CA (and presenting a client certificate)."""
+        ctx = ssl.create_default_context(cafile=str(ca or self.ca))
+        if client_cert:
+            ctx.load_cert_chain(str(self.client))
+        return ctx
+
+
+def make_certs(tmp: Path) -> Certs:
+    """A CA, a server certificate for 127.0.0.1, and a client CA with one client certificate."""
+    import trustme
+
+    ca = trustme.CA()
+    client_ca = trustme.CA()
+    other = trustme.CA()
+    certs = Certs(tmp / "ca.pem", tmp / "server.pem", tmp / "client_ca.pem", tmp / "client.pem",
+                  tmp / "other_ca.pem")
+    ca.cert_pem.write_to_path(str(certs.ca))
+    ca.issue_cert("127.0.0.1", "localhost").private_key_and_cert_chain_pem.write_to_path(
+        str(certs.server))
+    client_ca.cert_pem.write_to_path(str(certs.client_ca))
+    client_ca.issue_cert("robot-ui@example.com").private_key_and_cert_chain_pem.write_to_path(
+        str(certs.client))
+    other.cert_pem.write_to_path(str(certs.other_ca))
+    return certs
+
+
+@dataclass
+class AuthFile:
+    """An auth file with the roles above and a principal (and its token) per role."""
+
+    path: Path
+    tokens: dict[str, str] = field(default_factory=dict)
+
+
+def make_auth_file(tmp: Path) -> AuthFile:
+    """Write the test auth file; tokens are made now and kept only in memory."""
+    auth = AuthFile(tmp / "auth.toml")
+    text = ROLES
+    principals = [(r, r) for r in ("viewer", "operator", "admin", "nothing", "narrow", "server")]
+    principals.append(("server_b", "server"))  # a second principal with the same role
+    for name, role in principals:
+        token = auth.tokens[name] = new_token()
+        text += f'\n[principals.{name}_user]\nrole = "{role}"\ntoken_hash = "{hash_token(token)}"\n'
+    auth.path.write_text(text)
+    return auth
+
+
+async def wire(
+    url: str,
+    token: str | None = None,
+    *,
+    ssl_context: ssl.SSLContext | None = None,
+    headers: dict[str, str] | None = None,
+    **kwargs: Any,
+) -> WireClient:
+    """A raw websocket peer; ``token`` goes into an ``Authorization: Bearer`` header."""
+    extra = dict(headers or {})
+    if token is not None:
+        extra["Authorization"] = f"Bearer {token}"
+    ws = await connect(url, additional_headers=extra, ssl=ssl_context, max_size=None,
+                       open_timeout=10, **kwargs)
+    return WireClient(ws)

@@ -1,0 +1,251 @@
+"""Authentication: every way a token can arrive, refusals, the lock-out, and no token in logs."""
+
+from __future__ import annotations
+
+import logging
+import subprocess
+import sys
+from pathlib import Path
+from typing import Any
+
+import pytest
+from websockets.asyncio.client import connect
+from websockets.exceptions import ConnectionClosed, InvalidStatus
+
+from bridge_server.auth import AuthFileError, FailureTracker, load_auth_file
+from bridge_server.security import Security, SecurityConfig, redact
+from tests.bridge.support import roundtrip
+from tests.helpers import ROOT, BridgeProcess, ros_env
+from tests.security.support import AuthFile, wire
+
+
+async def test_bearer_header_authenticates(auth_bridge: BridgeProcess, auth: AuthFile):
+    """A valid token in an Authorization: Bearer header opens a working session."""
+    ws = await wire(auth_bridge.url, auth.tokens["viewer"])
+    await roundtrip(ws)
+    await ws.close()
+
+
+async def test_query_token_authenticates(auth_bridge: BridgeProcess, auth: AuthFile):
+    """A valid token in the ?token= query parameter (what browsers can send) works."""
+    ws = await wire(f"{auth_bridge.url}/?token={auth.tokens['viewer']}")
+    await roundtrip(ws)
+    await ws.close()
+
+
+async def test_auth_op_authenticates(auth_bridge: BridgeProcess, auth: AuthFile):
+    """An auth op as the first message (roslib's authenticate()) with the token as mac works."""
+    ws = await wire(auth_bridge.url)
+    await ws.send({"op": "auth", "mac": auth.tokens["viewer"], "client": "c", "dest": "d",
+                   "rand": "r", "t": 0, "level": "user", "end": 0})
+    await roundtrip(ws)
+    await ws.close()
+
+
+@pytest.mark.parametrize("where", ["header", "query"])
+async def test_wrong_token_is_http_401(auth_bridge: BridgeProcess, where: str):
+    """A wrong token in the header or the query is refused at the handshake with HTTP 401."""
+    url, headers = auth_bridge.url, {}
+    if where == "header":
+        headers["Authorization"] = "Bearer not-a-valid-token"
+    else:
+        url += "/?token=not-a-valid-token"
+    with pytest.raises(InvalidStatus) as info:
+        await connect(url, additional_headers=headers, open_timeout=10)
+    response = info.value.response
+    assert response.status_code == 401
+    assert b"authentication failed" in response.body and b"not-a-valid" not in response.body
+    assert response.headers["WWW-Authenticate"].startswith("Bearer")
+
+
+async def test_wrong_auth_op_closes_with_1008(auth_bridge: BridgeProcess):
+    """A failed auth op closes the connection with code 1008 (policy violation)."""
+    ws = await wire(auth_bridge.url)
+    await ws.send({"op": "auth", "mac": "wrong-token"})
+    with pytest.raises(ConnectionClosed) as info:
+        await ws.recv()
+    assert info.value.rcvd is not None and info.value.rcvd.code == 1008
+    assert "authentication failed" in info.value.rcvd.reason
+
+
+async def test_ops_before_auth_are_refused(
+    auth_bridge: BridgeProcess, auth: AuthFile, ros_node: Any, topic: str
+):
+    """Without a token, an op other than auth closes the connection (1008) and is not carried out."""
+    ws = await wire(auth_bridge.url)
+    await ws.send({"op": "advertise_service", "service": topic, "type": "std_srvs/srv/SetBool"})
+    with pytest.raises(ConnectionClosed) as info:
+        await ws.recv()
+    assert info.value.rcvd is not None and info.value.rcvd.code == 1008
+    assert "authentication required" in info.value.rcvd.reason
+    admin = await wire(auth_bridge.url, auth.tokens["admin"])
+    await admin.send({"op": "call_service", "service": "/rosapi/services", "id": "s"})
+    listed = await admin.expect(op="service_response", id="s")
+    assert topic not in listed["values"]["services"]
+    await admin.close()
+
+
+async def test_no_token_times_out(make_bridge: Any, auth: AuthFile):
+    """A connection that never authenticates is closed (1008) after the handshake timeout."""
+    bridge = make_bridge("--auth-file", str(auth.path), "--handshake-timeout", "1")
+    ws = await wire(bridge.url)
+    with pytest.raises(ConnectionClosed) as info:
+        await ws.recv(timeout=20)
+    assert info.value.rcvd is not None and info.value.rcvd.code == 1008
+    assert "authentication required" in info.value.rcvd.reason
+
+
+async def test_repeated_failures_lock_the_address_out(make_bridge: Any, auth: AuthFile):
+    """After 5 failures from one address even a valid token gets 429 with Retry-After."""
+    bridge = make_bridge("--auth-file", str(auth.path))
+    for _ in range(5):
+        with pytest.raises(InvalidStatus) as info:
+            await connect(f"{bridge.url}/?token=guess", open_timeout=10)
+        assert info.value.response.status_code == 401
+    with pytest.raises(InvalidStatus) as info:
+        await wire(bridge.url, auth.tokens["admin"])
+    assert info.value.response.status_code == 429
+    assert int(info.value.response.headers["Retry-After"]) >= 1
+    assert b"too many failed authentication attempts" in info.value.response.body
+
+
+def test_failure_tracker_backs_off_and_forgets():
+    """The lock-out grows with each failure past the free ones, and a success resets it."""
+    tracker = FailureTracker(free=2, max_lockout=60)
+    tracker.failed("a")
+    assert tracker.locked_for("a") == 0
+    tracker.failed("a")
+    first = tracker.locked_for("a")
+    tracker.failed("a")
+    assert 0 < first <= 1 < tracker.locked_for("a") <= 2
+    assert tracker.locked_for("b") == 0
+    tracker.succeeded("a")
+    assert tracker.locked_for("a") == 0
+
+
+async def test_tokens_never_reach_the_log(make_bridge: Any, auth: AuthFile):
+    """With DEBUG logging, no token (valid or wrong, header, query or auth op) is in the log."""
+    bridge = make_bridge("--auth-file", str(auth.path), "--log-level", "DEBUG")
+    wrong = "wrong-secret-token-123456"
+    good = auth.tokens["viewer"]
+    ws = await wire(bridge.url, good)
+    await roundtrip(ws)
+    await ws.close()
+    ws = await wire(f"{bridge.url}/?token={good}")
+    await roundtrip(ws)
+    await ws.close()
+    ws = await wire(bridge.url)
+    await ws.send({"op": "auth", "mac": good})
+    await roundtrip(ws)
+    await ws.close()
+    for url in (f"{bridge.url}/?token={wrong}",):
+        with pytest.raises(InvalidStatus):
+            await connect(url, open_timeout=10)
+    ws = await wire(bridge.url)
+    await ws.send({"op": "auth", "mac": wrong})
+    with pytest.raises(ConnectionClosed):
+        await ws.recv()
+    bridge.wait_for_line("auth op from .* wrong token")
+    log = bridge.log()
+    assert "authenticated as viewer_user" in log
+    assert good not in log and wrong not in log
+
+
+def test_redact_scrubs_every_carrier():
+    """The log filter hides bearer headers, query tokens and auth-op macs."""
+    text = "Authorization: Bearer abc123 GET /?token=xyz&x=1 {'mac': 'm1'} {\"mac\": \"m2\"}"
+    clean = redact(text)
+    for secret in ("abc123", "xyz", "m1", "m2"):
+        assert secret not in clean
+    assert "x=1" in clean
+
+
+def test_add_principal_prints_a_token_once_and_stores_a_hash(tmp_path: Path):
+    """The helper command adds a principal; the file holds only a hash that verifies the token."""
+    path = tmp_path / "auth.toml"
+    out = subprocess.run(
+        [sys.executable, "-m", "bridge_server", "add-principal", "alice", "--role", "viewer",
+         "--auth-file", str(path)],
+        cwd=ROOT, env=ros_env(), capture_output=True, text=True, timeout=60, check=True,
+    )
+    token = out.stdout.strip()
+    assert len(token) >= 40 and token not in path.read_text()
+    config = load_auth_file(path)
+    principal = config.verify(token)
+    assert principal is not None and principal.name == "alice" and principal.role.name == "viewer"
+    assert config.verify(token + "x") is None
+    again = subprocess.run(
+        [sys.executable, "-m", "bridge_server.auth", "alice", "--role", "viewer",
+         "--auth-file", str(path)],
+        cwd=ROOT, env=ros_env(), capture_output=True, text=True, timeout=60,
+    )
+    assert again.returncode == 1 and "exists already" in again.stderr
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        ("[principals.a]\nrole = 'x'\ntoken_hash = 'sha256$00$00'\n", "role 'x' is not defined"),
+        ("[roles.r]\nfly = ['*']\n", "unknown capability 'fly'"),
+        ("[roles.r]\n[principals.a]\nrole = 'r'\ntoken_hash = 'md5$1'\n", "token_hash must"),
+        ("[roles.r\n", "not valid TOML"),
+    ],
+)
+def test_bad_auth_file_names_the_problem(tmp_path: Path, text: str, message: str):
+    """A malformed auth file is refused with a message naming the file and the key."""
+    path = tmp_path / "auth.toml"
+    path.write_text(text)
+    with pytest.raises(AuthFileError, match=message) as info:
+        load_auth_file(path)
+    assert str(path) in str(info.value)
+
+
+def test_bridge_refuses_to_start_with_a_bad_auth_file(tmp_path: Path):
+    """The bridge exits 1 with one clear line when the auth file cannot be used."""
+    path = tmp_path / "auth.toml"
+    path.write_text("[roles.r]\nfly = ['*']\n")
+    out = subprocess.run(
+        [sys.executable, "-m", "bridge_server", "--port", "0", "--auth-file", str(path)],
+        cwd=ROOT, env=ros_env(), capture_output=True, text=True, timeout=60,
+    )
+    assert out.returncode == 1
+    assert "cannot start" in out.stderr and "unknown capability 'fly'" in out.stderr
+    assert "Traceback" not in out.stderr
+
+
+@pytest.mark.parametrize(
+    ("host", "auth_file", "cert", "expected"),
+    [
+        ("0.0.0.0", False, False, "neither authentication"),
+        ("0.0.0.0", True, False, "tokens travel in clear text"),
+        ("192.168.1.5", False, True, "no --auth-file"),
+        ("127.0.0.1", False, False, None),
+        ("::1", False, False, None),
+    ],
+)
+def test_startup_warning_for_exposed_ports(
+    caplog: pytest.LogCaptureFixture, auth: AuthFile, host: str, auth_file: bool, cert: bool,
+    expected: str | None,
+):
+    """Binding a non-loopback address without auth or TLS logs a loud warning; loopback does not."""
+    config = SecurityConfig(auth_file=str(auth.path) if auth_file else None,
+                            certfile="unused.pem" if cert else None)
+    with caplog.at_level(logging.WARNING, logger="bridge_server.security"):
+        Security(config).startup_warnings(host)
+    if expected is None:
+        assert not caplog.records
+    else:
+        assert len(caplog.records) == 1 and expected in caplog.records[0].getMessage()
+
+
+def test_help_lists_security_options():
+    """--help documents every security option."""
+    out = subprocess.run(
+        [sys.executable, "-m", "bridge_server", "--help"],
+        cwd=ROOT, env=ros_env(), capture_output=True, text=True, timeout=60, check=True,
+    ).stdout
+    for option in ("--certfile", "--keyfile", "--client-ca", "--auth-file", "--allowed-origins",
+                   "--max-clients", "--max-clients-per-address", "--handshake-timeout",
+                   "--max-op-rate", "--max-subscriptions", "--max-publishers", "--max-services",
+                   "--inbound-budget", "--inbound-budget-total"):
+        assert option in out

@@ -1,0 +1,179 @@
+"""Roles: each capability denied for a role that lacks it, with nothing reaching ROS."""
+
+from __future__ import annotations
+
+import asyncio
+import threading
+from collections.abc import Callable
+from typing import Any
+
+from std_msgs.msg import String
+from std_srvs.srv import SetBool
+
+from bridge_server.permissions import Role
+from tests.bridge.support import Inbox, roundtrip, wait_publishers
+
+Connect = Callable[..., Any]
+
+
+async def _forbidden(ws: Any, id: str, role: str, capability: str, name: str) -> dict[str, Any]:
+    status = await ws.expect(op="status", id=id)
+    assert status["level"] == "error"
+    assert "forbidden" in status["msg"] and role in status["msg"]
+    assert capability in status["msg"] and name in status["msg"]
+    return status
+
+
+async def test_viewer_publish_is_forbidden_and_reaches_no_ros_node(
+    connect_as: Connect, ros_node: Any, topic: str
+):
+    """A viewer's advertise and publish are refused; an rclpy subscriber only gets what others send."""
+    inbox = Inbox()
+    sub = ros_node.create_subscription(String, topic, lambda m: inbox(m.data), 10)
+    admin = await connect_as("admin")
+    await admin.send({"op": "advertise", "topic": topic, "type": "std_msgs/msg/String"})
+    await wait_publishers(sub)
+    viewer = await connect_as("viewer")
+    await viewer.send({"op": "advertise", "topic": topic, "type": "std_msgs/msg/String",
+                       "id": "adv"})
+    await _forbidden(viewer, "adv", "viewer", "publish", topic)
+    await viewer.send({"op": "publish", "topic": topic, "msg": {"data": "viewer"}, "id": "pub"})
+    await _forbidden(viewer, "pub", "viewer", "publish", topic)
+    await admin.send({"op": "publish", "topic": topic, "msg": {"data": "marker"}})
+    assert await inbox.get() == "marker"
+
+
+async def test_call_service_forbidden_never_reaches_the_service(
+    connect_as: Connect, ros_node: Any, topic: str
+):
+    """A viewer's call_service fails (status and service_response) and the ROS service never runs."""
+    seen: list[bool] = []
+    lock = threading.Lock()
+
+    def serve(req: Any, resp: Any) -> Any:
+        with lock:
+            seen.append(req.data)
+        resp.success = True
+        return resp
+
+    ros_node.create_service(SetBool, topic, serve)
+    viewer = await connect_as("viewer")
+    await viewer.send({"op": "call_service", "service": topic, "type": "std_srvs/srv/SetBool",
+                       "args": {"data": False}, "id": "c1"})
+    await _forbidden(viewer, "c1", "viewer", "call_service", topic)
+    reply = await viewer.expect(op="service_response", id="c1")
+    assert reply["result"] is False and "forbidden" in reply["values"]
+    admin = await connect_as("admin")
+    await admin.send({"op": "call_service", "service": topic, "type": "std_srvs/srv/SetBool",
+                      "args": {"data": True}, "id": "c2", "timeout": 30})
+    assert (await admin.expect(op="service_response", id="c2"))["result"] is True
+    assert seen == [True]
+
+
+async def test_each_capability_is_denied_without_it(connect_as: Connect, topic: str):
+    """Subscribe, advertise_service, action goals, serving actions and params each need their grant."""
+    nobody = await connect_as("nothing")
+    await nobody.send({"op": "subscribe", "topic": topic, "type": "std_msgs/msg/String",
+                       "id": "s"})
+    await _forbidden(nobody, "s", "nothing", "subscribe", topic)
+    viewer = await connect_as("viewer")
+    await viewer.send({"op": "advertise_service", "service": topic,
+                       "type": "std_srvs/srv/SetBool", "id": "as"})
+    await _forbidden(viewer, "as", "viewer", "serve_service", topic)
+    await viewer.send({"op": "send_action_goal", "action": topic,
+                       "action_type": "test_msgs/action/Fibonacci", "args": {"order": 3},
+                       "id": "goal"})
+    await _forbidden(viewer, "goal", "viewer", "send_action_goal", topic)
+    result = await viewer.expect(op="action_result", id="goal")
+    assert result["result"] is False
+    await viewer.send({"op": "advertise_action", "action": topic,
+                       "type": "test_msgs/action/Fibonacci", "id": "aa"})
+    await _forbidden(viewer, "aa", "viewer", "serve_action", topic)
+    await viewer.send({"op": "call_service", "service": "/rosapi/get_param", "id": "p",
+                       "args": {"name": "/some_node:speed"}})
+    await _forbidden(viewer, "p", "viewer", "params", "/some_node:speed")
+    await nobody.send({"op": "call_service", "service": "/rosapi/topics", "id": "t"})
+    await _forbidden(nobody, "t", "nothing", "introspection", "any name")
+
+
+async def test_deny_wins_over_allow(connect_as: Connect, topic: str):
+    """The operator may publish on /op/* but not on /op/forbidden, which its role denies."""
+    operator = await connect_as("operator")
+    await operator.send({"op": "advertise", "topic": "/op/forbidden",
+                         "type": "std_msgs/msg/String", "id": "no"})
+    await _forbidden(operator, "no", "operator", "publish", "/op/forbidden")
+    await operator.send({"op": "advertise", "topic": "/op" + topic,
+                         "type": "std_msgs/msg/String", "id": "yes"})
+    await roundtrip(operator)
+    assert not any(op.get("id") == "yes" for op in operator.backlog)
+
+
+async def test_introspection_lists_only_what_the_role_may_see(
+    connect_as: Connect, ros_node: Any, topic: str
+):
+    """rosapi topics, services and nodes answers hold only names the role's patterns match."""
+    seen, hidden = "/seen" + topic.replace("/", "_"), "/hidden" + topic.replace("/", "_")
+    ros_node.create_publisher(String, seen, 10)
+    ros_node.create_publisher(String, hidden, 10)
+    ros_node.create_service(SetBool, seen + "_srv", lambda q, r: r)
+    ros_node.create_service(SetBool, hidden + "_srv", lambda q, r: r)
+    admin = await connect_as("admin")
+    n = 0
+
+    async def ask(ws: Any, service: str) -> dict[str, Any]:
+        nonlocal n
+        n += 1
+        await ws.send({"op": "call_service", "service": service, "id": f"q{n}"})
+        reply = await ws.expect(op="service_response", id=f"q{n}")
+        values: dict[str, Any] = reply["values"]
+        return values
+
+    async def admin_sees_all() -> bool:
+        topics = (await ask(admin, "/rosapi/topics"))["topics"]
+        services = (await ask(admin, "/rosapi/services"))["services"]
+        return {seen, hidden} <= set(topics) and {seen + "_srv", hidden + "_srv"} <= set(services)
+
+    for _ in range(200):  # graph discovery has no event: poll, as tests.helpers does
+        if await admin_sees_all():
+            break
+        await asyncio.sleep(0.1)
+    else:
+        raise AssertionError("the graph never listed the test topics")
+    narrow = await connect_as("narrow")
+    topics = await ask(narrow, "/rosapi/topics")
+    assert seen in topics["topics"] and hidden not in topics["topics"]
+    assert len(topics["types"]) == len(topics["topics"])
+    services = (await ask(narrow, "/rosapi/services"))["services"]
+    assert seen + "_srv" in services and hidden + "_srv" not in services
+    nodes = (await ask(narrow, "/rosapi/nodes"))["nodes"]
+    assert all(node.startswith("/seen") for node in nodes)
+    await narrow.send({"op": "call_service", "service": "/rosapi/topic_type", "id": "tt",
+                       "args": {"topic": hidden}})
+    await _forbidden(narrow, "tt", "narrow", "introspection", hidden)
+
+
+async def test_first_owner_keeps_a_service_unless_the_role_takes_over(
+    connect_as: Connect, topic: str
+):
+    """Another principal cannot take a served name; the same principal or take_over can."""
+    first = await connect_as("server")
+    await first.send({"op": "advertise_service", "service": topic, "type": "std_srvs/srv/SetBool"})
+    await roundtrip(first)
+    other = await connect_as("server_b")
+    await other.send({"op": "advertise_service", "service": topic,
+                      "type": "std_srvs/srv/SetBool", "id": "steal"})
+    refused = await other.expect(op="status", id="steal")
+    assert refused["level"] == "error" and "already served" in refused["msg"]
+    admin = await connect_as("admin")  # admin's role has take_over
+    await admin.send({"op": "advertise_service", "service": topic,
+                      "type": "std_srvs/srv/SetBool", "id": "take"})
+    note = await first.expect(op="status", level="warning")
+    assert "taken over" in note["msg"] and topic in note["msg"]
+
+
+def test_role_patterns_and_all():
+    """Globs match whole names, 'all' grants every capability, deny beats allow."""
+    role = Role.from_table("r", {"all": ["/robot/*"], "deny": {"publish": ["/robot/estop"]}})
+    assert role.allows("subscribe", "/robot/camera") and role.allows("take_over", "/robot/x")
+    assert not role.allows("subscribe", "/other")
+    assert not role.allows("publish", "/robot/estop") and role.allows("publish", "/robot/cmd")
