@@ -160,6 +160,15 @@ class LoopThread:
         """
         return self.run(_call_async(fn, args, kwargs), what)
 
+    def off_loop(self, fn: Callable[[Any], T]) -> Callable[[Any], Coroutine[Any, Any, T]]:
+        """An ``async`` function that runs the plain ``fn(arg)`` on the worker pool."""
+        pool, loop = self.handlers, self.loop
+
+        async def run(arg: Any) -> T:
+            return await loop.run_in_executor(pool, fn, arg)
+
+        return run
+
     def stop(self) -> None:
         """Cancel what is left on the loop, stop the worker pool and the thread. Idempotent."""
         if self.closed:
@@ -463,13 +472,7 @@ class _Front:
         """
         if not callable(handler):
             raise UsageError(f"advertise_service {service}: handler must be callable")
-        serve = handler
-        if not _is_async(handler):
-            pool, loop = self._loop.handlers, self._loop.loop
-
-            async def serve(request: Any) -> Any:
-                return await loop.run_in_executor(pool, handler, request)
-
+        serve = handler if _is_async(handler) else self._loop.off_loop(handler)
         handle = self._loop.call(f"advertise_service {service}", self.aio.advertise_service,
                                  service, type, serve)
         return ServiceServer(self._loop, handle)

@@ -1,0 +1,422 @@
+"""roslibpy's core classes over roslibpy_lite: messages, ``Topic``, ``Service``, ``Param``.
+
+Same names, signatures and behaviour as ``roslibpy.core`` 2.1.0 (see the
+package docstring for what differs). Messages are dict-like
+(``collections.UserDict``); what goes on the wire is converted to plain dicts.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import enum
+import json
+import logging
+import time
+from collections import UserDict
+from collections.abc import Callable, Mapping
+from typing import TYPE_CHECKING, Any
+
+from ..exceptions import RosTimeoutError
+
+if TYPE_CHECKING:
+    from ..api import Ros as AioRos
+    from ..handles import Publisher, ServiceServer, Subscription
+    from .ros import Ros
+
+__all__ = [
+    "ActionClient",
+    "Feedback",
+    "Goal",
+    "GoalStatus",
+    "Header",
+    "Message",
+    "Param",
+    "Result",
+    "RosTimeoutError",
+    "Service",
+    "ServiceException",
+    "ServiceRequest",
+    "ServiceResponse",
+    "Time",
+    "Topic",
+]
+
+log = logging.getLogger("roslibpy_lite.compat")
+
+Callback = Callable[..., Any]
+
+
+class _Values(UserDict[str, Any]):
+    def __init__(self, values: Mapping[str, Any] | None = None) -> None:
+        super().__init__()
+        if values is not None:
+            self.update(values)
+
+
+class Message(_Values):
+    """A message: a dict."""
+
+
+class ServiceRequest(_Values):
+    """The request of a service call: a dict."""
+
+
+class ServiceResponse(_Values):
+    """The response of a service call: a dict."""
+
+
+class Goal(_Values):
+    """An action goal: a dict."""
+
+
+class Feedback(_Values):
+    """Action feedback: a dict."""
+
+
+class Result(_Values):
+    """An action result: a dict."""
+
+
+class GoalStatus(enum.Enum):
+    """ROS 2 goal states (action_msgs/msg/GoalStatus)."""
+
+    UNKNOWN = 0
+    ACCEPTED = 1
+    EXECUTING = 2
+    CANCELING = 3
+    SUCCEEDED = 4
+    CANCELED = 5
+    ABORTED = 6
+
+
+class Time(UserDict[str, int]):
+    """ROS time as two integers: seconds since the epoch and nanoseconds since that second."""
+
+    def __init__(self, secs: float, nsecs: float) -> None:
+        super().__init__()
+        self.data["secs"] = _int(secs)
+        self.data["nsecs"] = _int(nsecs)
+
+    @property
+    def secs(self) -> int:
+        """Seconds since the epoch."""
+        return self.data["secs"]
+
+    @property
+    def nsecs(self) -> int:
+        """Nanoseconds since :attr:`secs`."""
+        return self.data["nsecs"]
+
+    def is_zero(self) -> bool:
+        """True when both parts are 0."""
+        return self.secs == 0 and self.nsecs == 0
+
+    def to_nsec(self) -> int:
+        """Nanoseconds since the epoch."""
+        return self.secs * 1_000_000_000 + self.nsecs
+
+    def to_sec(self) -> float:
+        """Seconds since the epoch, as a float (like ``time.time()``)."""
+        return self.secs + self.nsecs / 1e9
+
+    @staticmethod
+    def from_sec(float_secs: float) -> Time:
+        """The Time of a float number of seconds."""
+        secs = int(float_secs)
+        return Time(secs, int((float_secs - secs) * 1_000_000_000))
+
+    @staticmethod
+    def now() -> Time:
+        """The system clock's time now (not ROS time)."""
+        return Time.from_sec(time.time())
+
+
+def _int(n: float) -> int:
+    if isinstance(n, int):
+        return n
+    if isinstance(n, float) and n.is_integer():
+        return int(n)
+    raise ValueError("argument must be an integer")
+
+
+class Header(UserDict[str, Any]):
+    """A ROS 1 ``std_msgs/Header`` (seq, stamp, frame_id); ROS 2's is ``compat.ros2.Header``."""
+
+    def __init__(
+        self, seq: int | None = None, stamp: Mapping[str, int] | None = None,
+        frame_id: str | None = None,
+    ) -> None:
+        super().__init__()
+        self.data["seq"] = seq
+        self.data["stamp"] = Time(stamp["secs"], stamp["nsecs"]) if stamp else None
+        self.data["frame_id"] = frame_id
+
+
+class ServiceException(Exception):
+    """A service call failed (the service answered ``result: false``)."""
+
+
+def plain(value: Any) -> Any:
+    """``value`` with every dict-like (Message, Time, Header ...) turned into a plain dict."""
+    if isinstance(value, UserDict | Mapping):
+        return {k: plain(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [plain(v) for v in value]
+    return value
+
+
+class Topic:
+    """Publish and/or subscribe to a topic, as ``roslibpy.Topic``.
+
+    Args:
+        ros: the :class:`~roslibpy_lite.compat.Ros` connection.
+        name: the topic name, e.g. ``/cmd_vel``.
+        message_type: e.g. ``std_msgs/String``.
+        compression: ``"none"``; ``"png"`` is accepted and sent as plain JSON.
+        latch: latch published messages (late subscribers get the last one).
+        throttle_rate: milliseconds between messages, at the bridge.
+        queue_size: the bridge's publisher queue.
+        queue_length: the bridge's queue for this subscription.
+        reconnect_on_close: accepted; roslibpy_lite always restores after a reconnect.
+    """
+
+    SUPPORTED_COMPRESSION_TYPES = ("png", "none")
+
+    def __init__(
+        self,
+        ros: Ros,
+        name: str,
+        message_type: str,
+        compression: str | None = None,
+        latch: bool = False,
+        throttle_rate: int = 0,
+        queue_size: int = 100,
+        queue_length: int = 0,
+        reconnect_on_close: bool = True,
+    ) -> None:
+        self.ros = ros
+        self.name = name
+        self.message_type = message_type
+        self.compression = compression or "none"
+        if self.compression not in self.SUPPORTED_COMPRESSION_TYPES:
+            raise ValueError("Unsupported compression type. Must be one of: "
+                             + str(self.SUPPORTED_COMPRESSION_TYPES))
+        self.latch = latch
+        self.throttle_rate = throttle_rate
+        self.queue_size = queue_size
+        self.queue_length = queue_length
+        self.reconnect_on_close = reconnect_on_close
+        self._advertised = False
+        self._subscribed = False
+        self._pub: Publisher[Any] | None = None
+        self._sub: Subscription[Any] | None = None
+
+    @property
+    def is_advertised(self) -> bool:
+        """True while advertised as a publisher of this topic."""
+        return self._advertised
+
+    @property
+    def is_subscribed(self) -> bool:
+        """True while subscribed."""
+        return self._subscribed
+
+    def subscribe(self, callback: Callable[[dict[str, Any]], Any]) -> None:
+        """Call ``callback(message)`` (on the callback thread) for every message on the topic."""
+        if self._subscribed:
+            return
+        self._subscribed = True
+        ros = self.ros
+
+        async def deliver(msg: dict[str, Any]) -> None:
+            future = ros._dispatch(callback, msg)
+            if future is not None:  # one message at a time; the bridge's and our buffers bound it
+                with contextlib.suppress(Exception):
+                    await asyncio.wrap_future(future)
+
+        def open_(client: AioRos) -> Subscription[Any]:
+            self._sub = client.subscribe(self.name, self.message_type, deliver,
+                                         throttle_rate=self.throttle_rate,
+                                         queue_length=self.queue_length)
+            return self._sub
+
+        ros._do_later(open_)
+
+    def unsubscribe(self) -> None:
+        """Stop the subscription."""
+        if not self._subscribed:
+            return
+        self._subscribed = False
+        self.ros._do_later(lambda client: self._sub.unsubscribe() if self._sub else None)
+
+    def advertise(self) -> None:
+        """Announce this client as a publisher of the topic."""
+        if self._advertised:
+            return
+        self._advertised = True
+
+        def open_(client: AioRos) -> Publisher[Any]:
+            self._pub = client.advertise(self.name, self.message_type, latch=self.latch,
+                                         queue_size=self.queue_size)
+            return self._pub
+
+        self.ros._do_later(open_)
+
+    def publish(self, message: Mapping[str, Any]) -> None:
+        """Publish ``message`` (advertising first if needed).
+
+        While connected it returns once the message is handed to the
+        connection and raises what went wrong; before the first connection
+        it is queued, as roslibpy does.
+        """
+        if not self._advertised:
+            self.advertise()
+        msg = plain(message)
+
+        def send(client: AioRos) -> Any:
+            assert self._pub is not None
+            return self._pub.publish(msg)
+
+        if self.ros.is_connected:
+            self.ros._do(f"publish {self.name}", send)
+        else:
+            self.ros._do_later(send)
+
+    def unadvertise(self) -> None:
+        """Stop publishing."""
+        if not self._advertised:
+            return
+        self._advertised = False
+        self.ros._do_later(lambda client: self._pub.unadvertise() if self._pub else None)
+
+
+class Service:
+    """Call a service or serve one, as ``roslibpy.Service``.
+
+    Args:
+        ros: the :class:`~roslibpy_lite.compat.Ros` connection.
+        name: the service name, e.g. ``/add_two_ints``.
+        service_type: e.g. ``std_srvs/SetBool``.
+        reconnect_on_close: accepted; roslibpy_lite always restores after a reconnect.
+    """
+
+    def __init__(
+        self, ros: Ros, name: str, service_type: str, reconnect_on_close: bool = True
+    ) -> None:
+        self.ros = ros
+        self.name = name
+        self.service_type = service_type
+        self.reconnect_on_close = reconnect_on_close
+        self._is_advertised = False
+        self._server: ServiceServer | None = None
+
+    @property
+    def is_advertised(self) -> bool:
+        """True while this instance serves the service."""
+        return self._is_advertised
+
+    def call(
+        self,
+        request: Mapping[str, Any],
+        callback: Callback | None = None,
+        errback: Callback | None = None,
+        timeout: float | None = None,
+    ) -> ServiceResponse | None:
+        """Call the service.
+
+        Without ``callback`` it blocks and returns the :class:`ServiceResponse`
+        (raises :class:`ServiceException` when the call fails, RosTimeoutError
+        after ``timeout`` seconds). With ``callback`` it returns at once;
+        ``callback(response)`` or ``errback(reason)`` runs on the callback thread.
+        """
+        if self._is_advertised:
+            return None
+        return self.ros._call(self.name, self.service_type, plain(request), callback, errback,
+                              timeout)
+
+    def advertise(self, callback: Callable[[Any, ServiceResponse], bool]) -> None:
+        """Serve the service with ``callback(request, response) -> bool``.
+
+        The handler fills ``response`` and returns True; returning False (or
+        raising) fails the caller's call. Handlers run on a worker thread.
+        """
+        if self._is_advertised:
+            return
+        if not callable(callback):
+            raise ValueError("Callback is not a valid callable")
+        name = self.name
+
+        def handler(request: Any) -> dict[str, Any]:
+            response = ServiceResponse()
+            if not callback(request, response):
+                raise ServiceException(f"the handler of {name} did not succeed")
+            result: dict[str, Any] = plain(response)
+            return result
+
+        serve = self.ros._loop.off_loop(handler)
+        self._is_advertised = True
+
+        def open_(client: AioRos) -> ServiceServer:
+            self._server = client.advertise_service(self.name, self.service_type, serve)
+            return self._server
+
+        self.ros._do_later(open_)
+
+    def unadvertise(self) -> None:
+        """Stop serving."""
+        if not self._is_advertised:
+            return
+        self._is_advertised = False
+        self.ros._do_later(lambda client: self._server.unadvertise() if self._server else None)
+
+
+class Param:
+    """A ROS parameter (``/node:name`` in ROS 2), as ``roslibpy.Param``."""
+
+    def __init__(self, ros: Ros, name: str) -> None:
+        self.ros = ros
+        self.name = name
+
+    def get(
+        self, callback: Callback | None = None, errback: Callback | None = None,
+        timeout: float | None = None,
+    ) -> Any:
+        """The value (blocking unless ``callback`` is given, which then gets the value)."""
+        on_result = None if callback is None else (
+            lambda result: callback(json.loads(result["value"])))
+        result = self.ros._call("/rosapi/get_param", "rosapi_msgs/srv/GetParam",
+                                {"name": self.name}, on_result, errback, timeout)
+        return None if result is None else json.loads(result["value"])
+
+    def set(
+        self, value: Any, callback: Callback | None = None, errback: Callback | None = None,
+        timeout: float | None = None,
+    ) -> None:
+        """Set the value."""
+        self.ros._call("/rosapi/set_param", "rosapi_msgs/srv/SetParam",
+                       {"name": self.name, "value": json.dumps(value)}, callback, errback,
+                       timeout)
+
+    def delete(
+        self, callback: Callback | None = None, errback: Callback | None = None,
+        timeout: float | None = None,
+    ) -> None:
+        """Delete the parameter."""
+        self.ros._call("/rosapi/delete_param", "rosapi_msgs/srv/DeleteParam",
+                       {"name": self.name}, callback, errback, timeout)
+
+
+class ActionClient:
+    """Not available yet: roslibpy_lite's client has no actions so far.
+
+    This is the place for the action client over the client's actions
+    (``send_goal``, ``cancel_goal``, ``wait_goal``) once they exist.
+    """
+
+    def __init__(self, ros: Ros, name: str, action_type: str,
+                 reconnect_on_close: bool = True) -> None:
+        raise NotImplementedError(
+            "roslibpy_lite.compat.ActionClient is not available yet: the roslibpy_lite client "
+            "has no actions so far (see docs/compat.md)"
+        )

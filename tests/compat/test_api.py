@@ -1,0 +1,91 @@
+"""The compat layer has roslibpy's names and signatures, and refuses what it does not cover clearly."""
+
+from __future__ import annotations
+
+import inspect
+import threading
+from typing import Any
+
+import pytest
+import roslibpy
+import roslibpy.ros2
+
+import roslibpy_lite.compat as compat
+from tests.helpers import BridgeProcess
+
+NOT_COVERED = {"set_default_transport"}
+"""roslibpy names the compat layer does not offer (docs/compat.md lists them)."""
+
+
+def parameters(fn: Any) -> list[tuple[str, Any]]:
+    """The names and defaults of a callable's parameters (annotations aside)."""
+    return [(p.name, p.default) for p in inspect.signature(fn).parameters.values()]
+
+
+def test_exports_roslibpys_names() -> None:
+    """Every public name of roslibpy (but the listed exceptions) exists in roslibpy_lite.compat."""
+    wanted = {n for n in roslibpy.__all__ if not n.startswith("__")} - NOT_COVERED
+    assert wanted <= set(compat.__all__)
+
+
+@pytest.mark.parametrize("name", ["Ros", "Topic", "Service", "Param", "Time", "Header",
+                                  "Message", "ServiceRequest", "ServiceResponse"])
+def test_signatures_match_roslibpy(name: str) -> None:
+    """Constructors and public methods take the same parameters, with the same defaults."""
+    ours, theirs = getattr(compat, name), getattr(roslibpy, name)
+    for attr, member in vars(theirs).items():
+        if (attr.startswith("_") and attr != "__init__") or not callable(member):
+            continue
+        if not hasattr(ours, attr):
+            assert name == "Ros" and attr in {"send_on_ready", "blocking_call_from_thread",
+                                              "get_service_request_callback", "call_sync_service",
+                                              "call_async_service", "call_async_action",
+                                              "set_status_level", "authenticate"}, attr
+            continue
+        assert parameters(getattr(ours, attr)) == parameters(member), f"{name}.{attr}"
+
+
+def test_values_behave_like_roslibpys() -> None:
+    """Time, Header and ros2.Header hold the same values as roslibpy's."""
+    assert dict(compat.Time(3, 500)) == dict(roslibpy.Time(3, 500))
+    assert compat.Time.from_sec(1.5).to_nsec() == roslibpy.Time.from_sec(1.5).to_nsec()
+    stamp = {"secs": 1, "nsecs": 2}
+    assert dict(compat.Header(7, stamp, "map")) == dict(roslibpy.Header(7, stamp, "map"))
+    assert dict(compat.ros2.Header(stamp, "map")) == dict(roslibpy.ros2.Header(stamp, "map"))
+    with pytest.raises(ValueError, match="integer"):
+        compat.Time(1.5, 0)
+
+
+def test_uncovered_parts_say_so(bridge: BridgeProcess) -> None:
+    """ActionClient and headers= raise NotImplementedError naming what is missing."""
+    assert parameters(compat.ActionClient) == parameters(roslibpy.ActionClient)
+    with pytest.raises(NotImplementedError, match="headers"):
+        compat.Ros("127.0.0.1", bridge.port, headers={"Authorization": "x"})
+    ros = compat.Ros(bridge.url)
+    try:
+        with pytest.raises(NotImplementedError, match="ActionClient"):
+            compat.ActionClient(ros, "/fibonacci", "example_interfaces/action/Fibonacci")
+    finally:
+        ros.terminate()
+
+
+def test_blocking_call_inside_a_callback_and_clean_terminate(bridge: BridgeProcess, topic: str) -> None:
+    """A topic callback may make a blocking call; terminate stops every thread the Ros started."""
+    threads = threading.active_count()
+    ros = compat.Ros(bridge.url)  # a URL works as the host, as in roslibpy
+    ros.run()
+    got: list[Any] = []
+    done = threading.Event()
+
+    def on_message(message: dict[str, Any]) -> None:
+        got.append(ros.get_topic_type(topic))
+        done.set()
+
+    compat.Topic(ros, topic, "std_msgs/String").subscribe(on_message)
+    talker = compat.Topic(ros, topic, "std_msgs/String")
+    while not done.wait(0.2):
+        talker.publish(compat.Message({"data": "hi"}))
+    assert got == ["std_msgs/msg/String"]
+    ros.terminate()
+    assert not ros.is_connected
+    assert threading.active_count() == threads, [t.name for t in threading.enumerate()]
