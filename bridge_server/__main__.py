@@ -17,9 +17,14 @@ import os
 import signal
 import sys
 
-from . import security
-from .session import DEFAULT_QUEUE_LENGTH, SessionConfig
-from .types import BridgeError
+try:
+    from . import security
+    from .session import DEFAULT_QUEUE_LENGTH, SessionConfig
+    from .types import BridgeError
+except ModuleNotFoundError as _missing:  # a client-only install: say which extra to add
+    from ._requires import missing_dependency
+
+    missing_dependency(_missing)
 
 __all__ = ["main", "parse_args"]
 

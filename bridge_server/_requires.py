@@ -1,0 +1,30 @@
+"""One clear line instead of a traceback when the bridge's dependencies are not installed.
+
+A client-only install (``pip install roslibpy-lite``) carries the
+``bridge_server`` package but not ROS 2, numpy or cbor2; starting the bridge
+there must say what to install.
+"""
+
+from __future__ import annotations
+
+import sys
+from typing import NoReturn
+
+__all__ = ["INSTALL_HINT", "missing_dependency"]
+
+INSTALL_HINT = "pip install 'roslibpy-lite[bridge]'"
+
+_OURS = ("bridge_server", "roslibpy_lite", "msgs")
+
+
+def missing_dependency(exc: ModuleNotFoundError) -> NoReturn:
+    """Exit with status 2 and one line naming the missing module and the extra to install.
+
+    A missing module of our own packages is a bug, not a missing extra: it is re-raised.
+    """
+    name = exc.name or "?"
+    if name.split(".")[0] in _OURS:
+        raise exc
+    print(f"roslibpy-lite-bridge: the bridge's dependencies are not installed (no module "
+          f"named {name!r}); install them with: {INSTALL_HINT}", file=sys.stderr)
+    raise SystemExit(2)

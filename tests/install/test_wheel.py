@@ -1,0 +1,107 @@
+"""The client installs from a wheel on a machine without ROS, and works there.
+
+The wheel is built with the documented command (``pip wheel --no-deps``)
+from a copy of the sources, installed into a clean virtual environment
+(``python -m venv``; websockets comes from PyPI or pip's cache), and then the
+CLI, a blocking script and an unchanged roslibpy script run against the real
+bridge. The repository is not on that environment's path.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+import pytest
+
+from tests.helpers import ROOT, BridgeProcess
+
+SOURCES = ["pyproject.toml", "README.md", "roslibpy_lite", "bridge_server", "msgs"]
+
+SYNC_SCRIPT = """
+import sys
+from roslibpy_lite import sync
+
+with sync.connect(sys.argv[1]) as ros:
+    topics = ros.call_service("/rosapi/topics", "rosapi_msgs/srv/Topics", timeout=10)
+    print("topics via a blocking call:", "/rosout" in topics["topics"])
+"""
+
+
+@dataclass
+class Venv:
+    """A clean virtual environment with the wheel installed."""
+
+    root: Path
+    work: Path
+
+    def bin(self, name: str) -> str:
+        """The path of an executable in the environment."""
+        return str(self.root / "bin" / name)
+
+    def run(self, *args: str, check: bool = True, **extra: str) -> subprocess.CompletedProcess[str]:
+        """Run a command of the environment, from a directory outside the repository."""
+        env = {k: v for k, v in os.environ.items()
+               if k not in ("PYTHONPATH", "VIRTUAL_ENV", "PYTHONHOME")}
+        env.update(PYTHONUNBUFFERED="1", **extra)
+        done = subprocess.run(list(args), cwd=self.work, env=env, capture_output=True, text=True,
+                              timeout=60)
+        if check:
+            assert done.returncode == 0, done.stdout + done.stderr
+        return done
+
+
+@pytest.fixture(scope="module")
+def venv(tmp_path_factory: pytest.TempPathFactory) -> Venv:
+    """Build the wheel from a copy of the sources and install it into a fresh venv."""
+    tmp = tmp_path_factory.mktemp("wheel")
+    src = tmp / "src"
+    src.mkdir()
+    ignore = shutil.ignore_patterns("__pycache__", "*.egg-info", "build")
+    for name in SOURCES:
+        path = ROOT / name
+        if path.is_dir():
+            shutil.copytree(path, src / name, ignore=ignore)
+        else:
+            shutil.copy2(path, src / name)
+    subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps", "-q", "-w",
+                    str(tmp / "dist"), str(src)], check=True, capture_output=True, timeout=120)
+    wheel = next((tmp / "dist").glob("roslibpy_lite-*.whl"))
+    subprocess.run([sys.executable, "-m", "venv", str(tmp / "venv")], check=True, timeout=120)
+    env = Venv(tmp / "venv", tmp)
+    env.run(env.bin("pip"), "install", "-q", str(wheel))
+    return env
+
+
+def test_only_websockets_comes_in(venv: Venv) -> None:
+    """Installing the wheel brings websockets and nothing else (no ROS, numpy, cbor2, yaml)."""
+    listed = json.loads(venv.run(venv.bin("pip"), "list", "--format=json").stdout)
+    names = {p["name"].lower() for p in listed} - {"pip", "setuptools"}
+    assert names == {"roslibpy-lite", "websockets"}
+
+
+def test_cli_and_scripts_work_against_the_bridge(venv: Venv, bridge: BridgeProcess) -> None:
+    """The CLI lists topics, a blocking script calls a service, a roslibpy script connects."""
+    cli = venv.run(venv.bin("roslibpy-lite"), "--url", bridge.url, "topic", "list")
+    assert "/rosout" in cli.stdout
+    blocking = venv.run(venv.bin("python"), "-c", SYNC_SCRIPT, bridge.url)
+    assert "topics via a blocking call: True" in blocking.stdout
+    script = ROOT / "tests" / "compat" / "scripts" / "hello_world.py"
+    roslibpy_script = venv.run(venv.bin("python"), str(script), ROSBRIDGE_PORT=str(bridge.port))
+    assert "Is ROS connected? True" in roslibpy_script.stdout
+    imported = venv.run(venv.bin("python"), "-c", "import roslibpy_lite; print(roslibpy_lite.__file__)")
+    assert str(venv.root) in imported.stdout  # the wheel's copy, not the repository's
+
+
+def test_bridge_without_its_extra_says_what_to_install(venv: Venv) -> None:
+    """Starting the bridge in a client-only install fails with one line naming the extra."""
+    done = venv.run(venv.bin("roslibpy-lite-bridge"), "--port", "0", check=False)
+    assert done.returncode == 2
+    assert "Traceback" not in done.stderr
+    lines = done.stderr.strip().splitlines()
+    assert len(lines) == 1 and "pip install 'roslibpy-lite[bridge]'" in lines[0], done.stderr
