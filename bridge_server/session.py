@@ -731,6 +731,10 @@ class Session:
         except (BridgeError, rosapi.RosapiError) as exc:
             self._respond(wire, op.id, False, f"{service}: {exc}", op.fragment_size, t0)
             return
+        except UnicodeError:  # a lone surrogate ("\ud800") in a string reached rclpy
+            why = f"{service}: a string in args is not valid Unicode text (a lone surrogate?)"
+            self._respond(wire, op.id, False, why, op.fragment_size, t0)
+            return
         self._respond(wire, op.id, True, values, op.fragment_size, t0)
 
     def _respond(
