@@ -31,6 +31,7 @@ from .exceptions import (
 )
 from .handles import Publisher, ServiceServer, StateWatcher, Subscription
 from .mock import MockRos
+from .ros import RosFront
 
 __version__ = "0.1.0"
 
@@ -47,6 +48,7 @@ __all__ = [
     "Publisher",
     "RemoteError",
     "Ros",
+    "RosFront",
     "RosLibError",
     "RosTimeoutError",
     "ServiceError",

@@ -1,11 +1,12 @@
 """The handles a backend returns: publishers, subscriptions, service servers.
 
-The same classes serve the websocket :class:`~roslibpy_lite.client.Client`
-and :class:`~roslibpy_lite.mock.MockRos`; a backend only supplies the hooks
-of :class:`Backend`. Every handle
+The front (:class:`~roslibpy_lite.ros.RosFront`, under both
+:class:`~roslibpy_lite.client.Client` and :class:`~roslibpy_lite.mock.MockRos`)
+makes them and supplies the hooks of :class:`Backend`. Every handle
 
 - is awaitable (``pub = await ros.advertise(...)``: returns once the
-  request has been handed to the connection) and an async context manager
+  request has been handed to the connection and, when the bridge confirms
+  requests, accepted; a refusal raises there) and an async context manager
   (``async with ros.subscribe(...) as sub:``; closes on exit);
 - closes with ``await handle.close()`` (or its specific name:
   ``unadvertise``, ``unsubscribe``); closing twice is harmless, using a closed
@@ -27,15 +28,25 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import difflib
 import inspect
 import logging
 from collections import deque
 from collections.abc import Awaitable, Callable, Coroutine, Generator, Mapping
 from typing import TYPE_CHECKING, Any, Generic, Protocol, Self, TypeVar, cast
 
-from msgs.runtime import Message, Service, UnknownTypeError, ValidationError
+from msgs.runtime import (
+    Action,
+    Message,
+    Service,
+    UnknownTypeError,
+    ValidationError,
+    available_packages,
+    available_types,
+)
 from msgs.runtime import lookup as _lookup
 
+from . import ops
 from .api import ConnectionState, MessageCallback, ServiceHandler, StateCallback
 from .exceptions import (
     ConnectionClosed,
@@ -51,6 +62,7 @@ if TYPE_CHECKING:
 __all__ = [
     "Backend",
     "Publisher",
+    "ServiceCall",
     "ServiceServer",
     "StateHub",
     "StateWatcher",
@@ -63,6 +75,7 @@ __all__ = [
 log = logging.getLogger("roslibpy_lite.client")
 
 T = TypeVar("T")
+_running_loop = asyncio._get_running_loop
 _SKIP: Any = object()
 
 
@@ -85,24 +98,85 @@ def _check_type_string(type_: str, kind: str) -> None:
         )
 
 
+def _check_known(name: str, kind: str) -> None:
+    """Refuse a type ``msgs`` should know but does not (its package is there, the name is not).
+
+    Types of packages ``msgs`` does not generate are left to the bridge.
+    """
+    package = name.split("/", 1)[0]
+    if package not in _packages():
+        return
+    try:
+        found = _lookup(name)
+    except UnknownTypeError:
+        found = None
+    wanted = Message if kind == "msg" else Service
+    if isinstance(found, type) and issubclass(found, wanted):
+        return
+    known = [t for t in available_types(package) if t.split("/")[1] == kind]
+    close = difflib.get_close_matches(name, known, n=3, cutoff=0.6)
+    hint = f"; did you mean {' or '.join(repr(c) for c in close)}?" if close else (
+        f"; {package} has: {', '.join(t.rsplit('/', 1)[1] for t in known[:12])}"
+        + (", ..." if len(known) > 12 else "") if known else ""
+    )
+    raise UsageError(f"unknown {kind} type {name!r}: {package} has no such {kind}{hint}")
+
+
+_PACKAGES: list[frozenset[str]] = []
+
+
+def _packages() -> frozenset[str]:
+    if not _PACKAGES:
+        _PACKAGES.append(frozenset(available_packages()))
+    return _PACKAGES[0]
+
+
+def _wrong_class(type_: object, kind: str) -> UsageError:
+    what = "a message" if kind == "msg" else "a service"
+    if isinstance(type_, type) and issubclass(type_, Message | Service | Action):
+        actual = (
+            "a message" if issubclass(type_, Message)
+            else "a service" if issubclass(type_, Service) else "an action"
+        )
+        return UsageError(
+            f"{type_._type} is {actual} type, but {what} type is needed here"
+            + ("; for a service pass the service class (e.g. AddTwoInts), not its Request"
+               if kind == "srv" and actual == "a message" else "")
+        )
+    return UsageError(f"{what} type must be a type string or a msgs class, got {type_!r}")
+
+
 def message_type(type_: str | type[Message]) -> tuple[str, type[Message] | None]:
-    """The canonical type name and (for a generated class) the class of a message type."""
+    """The canonical type name and (for a generated class) the class of a message type.
+
+    Raises:
+        UsageError: a malformed name, a name ``msgs`` should know but does not
+            (with "did you mean"), or a class of another kind.
+    """
     if isinstance(type_, str):
         _check_type_string(type_, "msg")
-        return canonical_type(type_, "msg"), None
+        name = canonical_type(type_, "msg")
+        _check_known(name, "msg")
+        return name, None
     if isinstance(type_, type) and issubclass(type_, Message):
         return type_._type, type_
-    raise UsageError(f"a message type must be a type string or a msgs class, got {type_!r}")
+    raise _wrong_class(type_, "msg")
 
 
 def service_type(type_: str | type[Service]) -> tuple[str, type[Service] | None]:
-    """The canonical type name and (for a generated class) the class of a service type."""
+    """The canonical type name and (for a generated class) the class of a service type.
+
+    Raises:
+        UsageError: as for :func:`message_type`.
+    """
     if isinstance(type_, str):
         _check_type_string(type_, "srv")
-        return canonical_type(type_, "srv"), None
+        name = canonical_type(type_, "srv")
+        _check_known(name, "srv")
+        return name, None
     if isinstance(type_, type) and issubclass(type_, Service):
         return type_._type, type_
-    raise UsageError(f"a service type must be a type string or a msgs service class, got {type_!r}")
+    raise _wrong_class(type_, "srv")
 
 
 def lookup_message_class(type_name: str) -> type[Message] | None:
@@ -144,6 +218,12 @@ def to_wire(
     )
 
 
+def check_dict(wire: Mapping[str, Any], cls: type[Message] | None, what: str) -> None:
+    """Check a dict against ``cls`` (if given), as :class:`InvalidMessageError` naming the field."""
+    if cls is not None and not isinstance(wire, Message):
+        from_wire(wire, cls, what)
+
+
 def from_wire(raw: Mapping[str, Any], cls: type[Message], what: str) -> Message:
     """Build a ``cls`` instance from its wire form, as :class:`InvalidMessageError` on failure."""
     try:
@@ -162,10 +242,12 @@ def _is_async_callable(fn: Callable[..., Any]) -> bool:
 # --- the backend hooks -----------------------------------------------------------------------
 
 class Backend(Protocol):
-    """What a handle needs from the backend that made it (private hooks)."""
+    """What a handle needs from the front that made it (private hooks)."""
 
-    def _publish(self, pub: Publisher[Any], wire: Mapping[str, Any]) -> Awaitable[None] | None:
-        """Send (or buffer) one message; may return an awaitable for backpressure."""
+    def _publish(
+        self, pub: Publisher[Any], wire: Mapping[str, Any]
+    ) -> Coroutine[Any, Any, None] | None:
+        """Send (or buffer) one message; may return a coroutine to await for backpressure."""
         ...
 
     def _unadvertise(self, pub: Publisher[Any]) -> None:
@@ -182,6 +264,10 @@ class Backend(Protocol):
 
     async def _flush(self) -> None:
         """Return once everything sent so far has been handed to the connection."""
+        ...
+
+    async def _settle(self, handle: Any) -> None:
+        """Return once the handle's request was sent and (if the bridge says so) accepted."""
         ...
 
 
@@ -201,7 +287,7 @@ class _Handle:
         self.error = error
 
     async def _ready(self) -> Self:
-        await self._backend._flush()
+        await self._backend._settle(self)
         return self
 
     def __await__(self) -> Generator[Any, None, Self]:
@@ -233,6 +319,7 @@ class Publisher(_Handle, Generic[T]):
         queue_size: int,
         id: str,
         offline_buffer: int,
+        check_cls: type[Message] | None = None,
     ) -> None:
         self._backend = backend
         self.topic = topic
@@ -249,6 +336,8 @@ class Publisher(_Handle, Generic[T]):
         """Messages dropped because the offline buffer was full (oldest first)."""
         self.published = 0
         """Messages accepted by :meth:`publish`."""
+        self._check_cls = check_cls if msg_cls is None else msg_cls
+        self._error_once: RosLibError | None = None
 
     def __repr__(self) -> str:
         return f"<Publisher {self.topic} {self.type_name}{' closed' if self.closed else ''}>"
@@ -258,33 +347,65 @@ class Publisher(_Handle, Generic[T]):
         """Messages published while the connection was down, waiting to be sent."""
         return len(self._offline)
 
-    def to_wire(self, msg: T | Mapping[str, Any]) -> Mapping[str, Any]:
-        """The wire form of ``msg`` after the type checks (see :func:`to_wire`)."""
-        return to_wire(msg, self.type_name, self.msg_cls, f"publish to {self.topic}")
+    def request_op(self) -> ops.Advertise:
+        """The ``advertise`` op this publisher stands for."""
+        return ops.Advertise(self.topic, self.type_name, id=self.id, latch=self.latch,
+                             queue_size=self.queue_size)
 
-    async def publish(self, msg: T | Mapping[str, Any]) -> None:
+    def to_wire(self, msg: T | Mapping[str, Any]) -> Mapping[str, Any]:
+        """The wire form of ``msg`` after the type checks (see :func:`to_wire`).
+
+        A dict is checked against the type's ``msgs`` class when there is one.
+        """
+        what = f"publish to {self.topic}"
+        wire = to_wire(msg, self.type_name, self.msg_cls, what)
+        if wire is msg and self._check_cls is not None:
+            from_wire(wire, self._check_cls, what)
+        return wire
+
+    def _fail_once(self, error: RosLibError) -> None:
+        """The bridge could not publish a message: the next :meth:`publish` raises ``error``."""
+        self._error_once = error
+
+    def publish(self, msg: T | Mapping[str, Any]) -> Coroutine[Any, Any, None]:
         """Publish one message (a dict, or an instance of the advertised type).
 
-        Returns once the message is queued for sending; waits only when the
-        send queue is full (backpressure). See the client module for what
-        happens while the connection is down.
+        Called on the client's event loop, the message is checked and sent
+        (or buffered while offline) at the call, so a forgotten ``await``
+        loses no message (a plain coroutine would send nothing, silently but
+        for Python's warning); awaiting the result waits only when the send
+        queue is full (backpressure), and a result that needed waiting but
+        was never awaited logs "did you forget await?". Called from another
+        thread (no running loop), the work happens when the result is run on
+        the client's loop (``asyncio.run_coroutine_threadsafe``).
+        See the client module for what happens while the connection is down.
 
-        Raises:
+        Raises (at the call):
             UsageError: the publisher is closed, or the message has another type.
-            InvalidMessageError: a typed message with a field that does not fit.
-            StatusError: the bridge refused this publisher's ``advertise``.
+            InvalidMessageError: a field the type lacks or a value that does not fit.
+            StatusError: the bridge refused this publisher's ``advertise``, or
+                could not publish an earlier message (raised once).
             ConnectionClosed: the client is closed (``Disconnected`` while the
                 connection is down and buffering is off).
         """
-        if self.closed:
-            raise UsageError(f"publisher of {self.topic} is closed")
+        if _running_loop() is None:  # another thread: run it later, on the client's loop
+            return _Pending(self._publish_later(msg), f"publish to {self.topic}")
         if self.error is not None:
             raise self.error
+        if self._error_once is not None:
+            error, self._error_once = self._error_once, None
+            raise error
+        if self.closed:
+            raise UsageError(f"publisher of {self.topic} is closed")
         wire = self.to_wire(msg)
         waiting = self._backend._publish(self, wire)
         self.published += 1
-        if waiting is not None:
-            await waiting
+        if waiting is None:
+            return _DONE
+        return _Pending(waiting, f"publish to {self.topic} (waiting for queue space)")
+
+    async def _publish_later(self, msg: T | Mapping[str, Any]) -> None:
+        await self.publish(msg)
 
     async def unadvertise(self) -> None:
         """Stop publishing (the bridge drops its ROS publisher once no handle uses it)."""
@@ -359,6 +480,14 @@ class Subscription(_Handle, Generic[T]):
 
     def __repr__(self) -> str:
         return f"<Subscription {self.topic} {self.type_name}{' closed' if self.closed else ''}>"
+
+    def request_op(self) -> ops.Subscribe:
+        """The ``subscribe`` op this subscription stands for."""
+        return ops.Subscribe(
+            self.topic, self.type_name, id=self.id, throttle_rate=self.throttle_rate,
+            queue_length=self.queue_length, compression=self.compression,
+            fragment_size=self.fragment_size,
+        )
 
     # -- callbacks -------------------------------------------------------------------------
 
@@ -591,6 +720,10 @@ class ServiceServer(_Handle):
     def __repr__(self) -> str:
         return f"<ServiceServer {self.service} {self.type_name}{' closed' if self.closed else ''}>"
 
+    def request_op(self) -> ops.AdvertiseService:
+        """The ``advertise_service`` op this server stands for."""
+        return ops.AdvertiseService(self.service, self.type_name, id=self.id)
+
     def invoke(self, args: Any) -> _Outcome | Coroutine[Any, Any, _Outcome]:
         """Run the handler on a request's wire form.
 
@@ -641,7 +774,8 @@ class ServiceServer(_Handle):
 
     def _failed(self, exc: Exception) -> tuple[bool, str]:
         self.failures += 1
-        log.warning("handler of %s raised %s", self.service, type(exc).__name__)
+        # The class and text say what went wrong; the request itself is not logged.
+        log.warning("handler of %s raised %s: %s", self.service, type(exc).__name__, exc)
         return False, str(exc) or type(exc).__name__
 
     async def unadvertise(self) -> None:
@@ -654,6 +788,119 @@ class ServiceServer(_Handle):
     async def close(self) -> None:
         """Same as :meth:`unadvertise`."""
         await self.unadvertise()
+
+
+# --- awaitables that refuse to be used un-awaited ----------------------------------------------
+
+class _Done(Coroutine[Any, None, None]):
+    """The result of a publish that needs no waiting: a finished coroutine (stateless)."""
+
+    __slots__ = ()
+
+    def __await__(self) -> Generator[Any, None, None]:
+        return
+        yield  # pragma: no cover - makes this a generator
+
+    def send(self, value: Any) -> Any:
+        """Finish at once."""
+        raise StopIteration
+
+    def throw(self, *args: Any) -> Any:
+        """Raise the given exception."""
+        exc = args[1] if len(args) > 1 and args[1] is not None else args[0]
+        raise exc
+
+    def close(self) -> None:
+        """Nothing to close."""
+
+
+_DONE = _Done()
+
+
+class _Pending(Coroutine[Any, Any, T]):
+    """A coroutine wrapper that says "did you forget await?" if it is dropped unstarted.
+
+    It is a real :class:`collections.abc.Coroutine`, so ``asyncio.create_task``
+    and ``gather`` take it like the coroutine it wraps.
+    """
+
+    __slots__ = ("_coro", "_started", "_what")
+
+    def __init__(self, coro: Coroutine[Any, Any, T], what: str) -> None:
+        self._coro = coro
+        self._what = what
+        self._started = False
+
+    def __await__(self) -> Generator[Any, None, T]:
+        self._started = True
+        return self._coro.__await__()
+
+    def send(self, value: Any) -> Any:
+        """Advance the wrapped coroutine (what a Task does)."""
+        self._started = True
+        return self._coro.send(value)
+
+    def throw(self, *args: Any) -> Any:
+        """Raise inside the wrapped coroutine."""
+        self._started = True
+        return self._coro.throw(*args)
+
+    def close(self) -> None:
+        """Close the wrapped coroutine."""
+        self._started = True
+        self._coro.close()
+
+    def __del__(self) -> None:
+        if not self._started:
+            self._coro.close()
+            log.error("%s was never awaited: did you forget await?", self._what)
+
+
+class _NotAwaited(UsageError, AttributeError):
+    """An awaitable used as its result (an AttributeError too, so ``getattr(x, n, d)`` works)."""
+
+
+class ServiceCall(_Pending[T]):
+    """What ``ros.call_service(...)`` returns: ``await`` it for the response.
+
+    Used without ``await`` (indexed, its attributes read, iterated, or
+    dropped) it raises (or logs) :class:`~roslibpy_lite.exceptions.UsageError`
+    saying "did you forget await?".
+    """
+
+    __slots__ = ()
+
+    def __init__(self, coro: Coroutine[Any, Any, T], service: str) -> None:
+        super().__init__(coro, f"call_service({service!r})")
+
+    def _unawaited(self) -> UsageError:
+        return _NotAwaited(
+            f"{self._what} returns an awaitable, not the response: did you forget await? "
+            f"(reply = await ros.call_service(...))"
+        )
+
+    def __getattr__(self, name: str) -> Any:
+        raise self._unawaited()
+
+    def __getitem__(self, key: Any) -> Any:
+        raise self._unawaited()
+
+    def __iter__(self) -> Any:
+        raise self._unawaited()
+
+    def __bool__(self) -> bool:
+        raise self._unawaited()
+
+
+def add_callback(callbacks: list[Any], callback: Any) -> Callable[[], None]:
+    """Append ``callback`` to ``callbacks``; returns a function that removes it again."""
+    callbacks.append(callback)
+
+    def remove() -> None:
+        with contextlib.suppress(ValueError):
+            callbacks.remove(callback)
+
+    return remove
 
 
 # --- connection state ------------------------------------------------------------------------
@@ -754,13 +1001,7 @@ class StateHub:
 
     def on_change(self, callback: StateCallback) -> Callable[[], None]:
         """Register ``callback``; returns its remover."""
-        self._callbacks.append(callback)
-
-        def remove() -> None:
-            with contextlib.suppress(ValueError):
-                self._callbacks.remove(callback)
-
-        return remove
+        return add_callback(self._callbacks, callback)
 
     def watch(self) -> StateWatcher:
         """A new :class:`StateWatcher`."""

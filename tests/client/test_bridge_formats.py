@@ -95,4 +95,4 @@ async def test_fragmented_messages_are_reassembled(client: Client, ros_node: Any
     async with client.subscribe(topic, Image, fragment_size=1000) as sub:
         msg = await first_message(lambda: pub.publish(_image()), sub)
     assert msg.data == PIXELS
-    assert client._protocol.pending_fragments == 0
+    assert client._ws._protocol.pending_fragments == 0

@@ -16,6 +16,7 @@ from roslibpy_lite import (
     InvalidMessageError,
     MockRos,
     ServiceError,
+    StatusError,
     UsageError,
 )
 
@@ -23,12 +24,12 @@ MULT = "mult_msgs/srv/MultFloats"
 
 
 async def test_a_topic_has_one_type() -> None:
-    """Advertising or subscribing with another type than the topic's raises UsageError."""
+    """Another type on a topic: advertising it here is a UsageError, subscribing the bridge's StatusError."""
     ros = MockRos()
     ros.advertise("/t", "std_msgs/msg/String")
     with pytest.raises(UsageError, match="std_msgs/msg/String"):
         ros.advertise("/t", "std_msgs/msg/Int16")
-    with pytest.raises(UsageError, match="std_msgs/msg/String"):
+    with pytest.raises(StatusError, match="std_msgs/msg/String"):
         ros.subscribe("/t", Int16)
     ros.subscribe("/t", "std_msgs/String")  # the other spelling of the same type is fine
 
