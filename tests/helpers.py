@@ -60,6 +60,26 @@ async def async_wait_until(
         await asyncio.sleep(0.02)
 
 
+def marked_blocks(path: Path, tag: str) -> list[tuple[str, str]]:
+    """The fenced Python blocks of a Markdown file marked ``<!-- TAG: KIND -->``, as (kind, code)."""
+    marked = re.compile(rf"<!-- {tag}: (\w+) -->\n```python\n(.*?)```", re.S)
+    return marked.findall(path.read_text())
+
+
+def run_snippet(code: str, bridge: BridgeProcess | None = None, timeout: float = 60) -> str:
+    """Run a documentation example as a user would; returns its output (fails on an error).
+
+    With ``bridge``, the example's ``ws://127.0.0.1:9090`` (or ``port=9090``) points at it.
+    """
+    if bridge is not None:
+        code = code.replace("ws://127.0.0.1:9090", bridge.url)
+        code = code.replace("port=9090", f"port={bridge.port}")
+    done = subprocess.run([sys.executable, "-c", code], cwd=ROOT, env=ros_env(),
+                          capture_output=True, text=True, timeout=timeout)
+    assert done.returncode == 0, done.stdout + done.stderr
+    return done.stdout
+
+
 class BridgeProcess:
     """A ``python -m bridge_server`` child process on 127.0.0.1.
 

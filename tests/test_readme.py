@@ -2,37 +2,30 @@
 
 from __future__ import annotations
 
-import re
-import subprocess
-import sys
+from tests.helpers import ROOT, BridgeProcess, marked_blocks, run_snippet
 
-from tests.helpers import ROOT, BridgeProcess, ros_env
-
-BLOCK = re.compile(r"<!-- readme-test: (\w+) -->\n```python\n(.*?)```", re.S)
-BLOCKS = {kind: code for kind, code in BLOCK.findall((ROOT / "README.md").read_text())}
-
-
-def _run(code: str) -> str:
-    done = subprocess.run(
-        [sys.executable, "-c", code], cwd=ROOT, env=ros_env(), capture_output=True, text=True,
-        timeout=60,
-    )
-    assert done.returncode == 0, done.stdout + done.stderr
-    return done.stdout
+BLOCKS = dict(marked_blocks(ROOT / "README.md", "readme-test"))
 
 
 def test_readme_has_its_examples() -> None:
-    """The README carries both tested examples."""
-    assert set(BLOCKS) == {"bridge", "mock"}
+    """The README carries its tested examples: asyncio, MockRos and the blocking client."""
+    assert set(BLOCKS) == {"bridge", "mock", "sync"}
 
 
 def test_client_example_runs_against_the_bridge(bridge: BridgeProcess) -> None:
     """The client example serves and calls a service and gets a latched typed message."""
-    out = _run(BLOCKS["bridge"].replace("ws://127.0.0.1:9090", bridge.url))
+    out = run_snippet(BLOCKS["bridge"], bridge)
     assert "2.5 * 4.0 = 10.0" in out
     assert "got Int16(data=3)" in out
 
 
 def test_mock_example_runs() -> None:
     """The MockRos example passes its own assertion."""
-    assert "MockRos test passed" in _run(BLOCKS["mock"])
+    assert "MockRos test passed" in run_snippet(BLOCKS["mock"])
+
+
+def test_blocking_example_runs_against_the_bridge(bridge: BridgeProcess) -> None:
+    """The blocking-client example serves, calls and hears a message without async/await."""
+    out = run_snippet(BLOCKS["sync"], bridge)
+    assert "6 * 7 = 42.0" in out
+    assert "heard {'data': 'hello'}" in out
