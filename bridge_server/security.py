@@ -49,6 +49,7 @@ from . import rosapi
 from .auth import AuthConfig, FailureTracker, Principal, load_auth_file
 from .names import InvalidNameError, check_name
 from .permissions import Role, filter_rosapi, requirement, rosapi_requirement
+from .web import Access, Denied
 
 if TYPE_CHECKING:
     from .session import Session
@@ -59,6 +60,7 @@ __all__ = [
     "RedactTokens",
     "Security",
     "SecurityConfig",
+    "WebAccess",
     "add_arguments",
     "config_from_args",
     "install_log_redaction",
@@ -370,6 +372,10 @@ class Security:
         else:
             self.per_address.pop(address, None)
 
+    def web_access(self) -> WebAccess:
+        """The access rules of the plain-HTTP routes (web.py) under this configuration."""
+        return WebAccess(self)
+
     def gate(self, session: Session) -> Gate:
         """The gate for a new session."""
         principal = getattr(session.ws, "principal", None)
@@ -654,3 +660,42 @@ def install_log_redaction() -> None:
     """Scrub tokens from every line the root logger's handlers write."""
     for handler in logging.getLogger().handlers:
         handler.addFilter(RedactTokens())
+
+
+class WebAccess(Access):
+    """Who may see the plain-HTTP routes (status page, ``/status.json``, ``/metrics``).
+
+    With an auth file, these need a token too (``Authorization: Bearer`` or
+    ``?token=``), and a role sees the routes only with ``introspection`` and,
+    in the status data, only the names its ``introspection`` patterns match.
+    The page's own static files and ``/healthz``/``/readyz`` stay open.
+    """
+
+    def __init__(self, security: Security) -> None:
+        self.security = security
+
+    def principal(self, request: Request) -> Any:
+        """The principal of the request's token; 401 without a valid one."""
+        auth = self.security.auth
+        if auth is None or request.path.startswith("/static/"):
+            return None
+        token, where = _token_of(request)
+        if token is None:
+            raise Denied(401, "authentication required: send a token (Authorization: Bearer "
+                         "or ?token=)")
+        principal = auth.verify(token)
+        if principal is None:
+            log.warning("refused a plain-HTTP request: wrong token in the %s", where)
+            raise Denied(401, f"authentication failed: the token in the {where} is not valid")
+        return principal
+
+    def may_see(self, principal: Any, kind: str, name: str) -> bool:
+        """Routes need introspection; names need introspection on them."""
+        if self.security.auth is None:
+            return True
+        if not isinstance(principal, Principal):
+            return kind == "route" and name.startswith("/static/")
+        role = principal.role
+        if kind in ("route", "client"):
+            return role.has("introspection")
+        return role.allows("introspection", name)

@@ -80,6 +80,7 @@ class Bridge:
         self.metrics = Recorder()
         self.web = Web(self)  # plain-HTTP routes: status page, /metrics, health (web.py)
         self.security = Security(config.security)  # TLS, auth, origins, limits (security.py)
+        self.web.access = self.security.web_access()  # who sees the plain-HTTP routes
 
     @property
     def port(self) -> int:

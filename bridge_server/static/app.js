@@ -107,7 +107,7 @@
 
   async function poll() {
     try {
-      const r = await fetch("/status.json", { cache: "no-store" });
+      const r = await fetch("/status.json" + location.search, { cache: "no-store" });  // ?token=
       if (!r.ok) throw new Error(r.status + " " + r.statusText);
       render(await r.json());
     } catch (err) {

@@ -249,3 +249,12 @@ def test_help_lists_security_options():
                    "--max-op-rate", "--max-subscriptions", "--max-publishers", "--max-services",
                    "--inbound-budget", "--inbound-budget-total"):
         assert option in out
+
+
+def test_example_auth_file_loads():
+    """examples/auth.example.toml (the roles SECURITY.md documents) is a valid auth file."""
+    config = load_auth_file(ROOT / "examples" / "auth.example.toml")
+    viewer, operator, admin = (config.roles[n] for n in ("viewer", "operator", "admin"))
+    assert viewer.allows("subscribe", "/camera/image") and not viewer.allows("publish", "/cmd_vel")
+    assert operator.allows("publish", "/cmd_vel") and not operator.allows("publish", "/rosout")
+    assert admin.allows("params", "/node:speed") and not operator.has("params")

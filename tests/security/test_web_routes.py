@@ -1,0 +1,45 @@
+"""The plain-HTTP routes (status page, /status.json, /metrics) under an auth file."""
+
+from __future__ import annotations
+
+import json
+
+from tests.bridge.support import roundtrip
+from tests.helpers import BridgeProcess
+from tests.ops.support import aget
+from tests.security.support import AuthFile, wire
+
+
+async def test_routes_need_a_token_and_introspection(auth_bridge: BridgeProcess, auth: AuthFile):
+    """Without a token /metrics and /status.json are 401; a role without introspection gets 403."""
+    base = f"http://127.0.0.1:{auth_bridge.port}"
+    for route in ("/metrics", "/status.json", "/"):
+        code, _, body = await aget(base + route)
+        assert code == 401 and b"authentication required" in body
+    code, _, body = await aget(f"{base}/metrics?token=wrong")
+    assert code == 401 and b"wrong" not in body
+    code, _, _ = await aget(f"{base}/metrics?token={auth.tokens['nothing']}")
+    assert code == 403
+    code, _, _ = await aget(f"{base}/metrics?token={auth.tokens['viewer']}")
+    assert code == 200
+    code, _, _ = await aget(base + "/healthz")  # liveness probes carry no token
+    assert code == 200
+
+
+async def test_status_lists_only_what_the_role_may_see(
+    auth_bridge: BridgeProcess, auth: AuthFile, topic: str
+):
+    """/status.json for a narrow role leaves out topics its introspection patterns do not match."""
+    seen, hidden = "/seen" + topic.replace("/", "_"), "/hidden" + topic.replace("/", "_")
+    admin = await wire(auth_bridge.url, auth.tokens["admin"])
+    for name in (seen, hidden):
+        await admin.send({"op": "subscribe", "topic": name, "type": "std_msgs/msg/String"})
+    await roundtrip(admin)
+    base = f"http://127.0.0.1:{auth_bridge.port}/status.json?token="
+    code, _, body = await aget(base + auth.tokens["admin"])
+    assert code == 200 and {seen, hidden} <= set(json.loads(body)["topics"])
+    code, _, body = await aget(base + auth.tokens["narrow"])
+    assert code == 200
+    topics = set(json.loads(body)["topics"])
+    assert seen in topics and hidden not in topics
+    await admin.close()
