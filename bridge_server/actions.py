@@ -19,6 +19,8 @@ left the bridge) ends with ``result: false``, ``values`` a text saying why and
 status ABORTED (6), or CANCELED (5) for the last case. Bad input also gets a
 ``status`` error. ``compression: cbor`` sends feedback and result as CBOR
 binary frames; ``fragment_size`` splits JSON ones.
+A goal the server neither accepts nor rejects within ``call_timeout`` s (a
+lost request: rclpy servers keep only 10 requests by default) fails too.
 ``cancel_action_goal`` with the goal's id cancels it, before or after the
 server accepted it; the result (usually CANCELED) follows. A refused cancel
 is reported as a ``status`` warning. When the client disconnects, its goals
@@ -113,6 +115,7 @@ class _Goal:
         self.sent: SentGoal | None = None
         self.task: asyncio.Task[None] | None = None
         self.timer: asyncio.TimerHandle | None = None
+        self.answer_timer: asyncio.TimerHandle | None = None
         self.cancel_wanted = False
 
     # -- what the ROS side reports (loop thread) -----------------------------------------------
@@ -121,11 +124,28 @@ class _Goal:
         return self.owner.goals.get(str(self.id)) is self
 
     def on_accepted(self) -> None:
+        self._answered()
         log.debug("goal %s on %s accepted", self.id, self.name)
 
     def on_rejected(self) -> None:
+        self._answered()
         if self._live():
             self.owner.fail(self, "the action server rejected the goal")
+
+    def _answered(self) -> None:
+        if self.answer_timer is not None:
+            self.answer_timer.cancel()
+            self.answer_timer = None
+
+    def no_answer(self, timeout: float) -> None:
+        """The action server did not accept or reject the goal in time (its request was lost)."""
+        self.answer_timer = None
+        if self._live():
+            if self.sent is not None:
+                self.sent.cancel()  # in case it is accepted after all
+            self.owner.fail(
+                self, f"the action server did not answer the goal request within {timeout} s"
+            )
 
     def on_feedback(self, feedback: Any) -> None:
         if self._live() and self.sent is not None:
@@ -259,6 +279,8 @@ class SessionActions:
             self.fail(goal, "the goal was canceled before it was sent", Status.CANCELED)
             return
         goal.sent = client.send(goal_msg, goal, goal.feedback)
+        wait = self.session.config.call_timeout
+        goal.answer_timer = self.session.loop.call_later(wait, goal.no_answer, wait)
 
     async def _server_for(self, goal: _Goal, action_cls: type[Any]) -> SharedActionClient:
         session = self.session
@@ -321,6 +343,7 @@ class SessionActions:
         if goal.timer is not None:
             goal.timer.cancel()
             goal.timer = None
+        goal._answered()
 
     def fail(self, goal: _Goal, why: str, status: int = Status.ABORTED) -> None:
         """End a goal that did not run to a result: ``result: false`` with a text."""

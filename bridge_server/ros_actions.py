@@ -200,11 +200,29 @@ class SharedActionClient(_ActionEnd):
 
     def _result(self, sent: SentGoal, future: Any) -> None:
         sent.finished = True
+        self._drain_feedback()
         if future.exception() is not None:
             self.ros.post(sent.listener.on_result, Status.ABORTED, None)
             return
         response = future.result()
         self.ros.post(sent.listener.on_result, int(response.status), response.result)
+
+    def _drain_feedback(self) -> None:
+        """Deliver feedback that is already waiting, so it goes out before the result.
+
+        Feedback (a topic) and the result (a service response) travel apart; rclpy takes
+        one feedback per executor round, so a burst would otherwise follow the result.
+        """
+        client = self.client
+        feedback_cls = self.action_cls.Impl.FeedbackMessage
+        with contextlib.suppress(Exception):
+            for _ in range(FEEDBACK_DEPTH):
+                msg = client._client_handle.take_feedback(feedback_cls)
+                if msg is None:
+                    break
+                callback = client._feedback_callbacks.get(bytes(msg.goal_id.uuid))
+                if callback is not None:
+                    callback(msg)
 
     def _cancel(self, sent: SentGoal) -> None:
         sent.cancel_wanted = True
@@ -350,6 +368,11 @@ class ServedAction(_ActionEnd):
         for goal in list(self._goals.values()):
             goal.done = True
             self._finish(goal, Status.ABORTED, None)
+        # The result responses just scheduled go out first (executor tasks run before
+        # the next hand-off), then the server goes.
+        self.ros.in_executor(self._destroy_server)
+
+    def _destroy_server(self) -> None:
         with contextlib.suppress(Exception):
             self.server.destroy()
 

@@ -212,8 +212,8 @@ class ActionResult:
     OP: ClassVar[str] = "action_result"
     id: Id
     action: str
-    values: Mapping[str, Any] | str | None
     result: bool
+    values: Mapping[str, Any] | str | None = None  # roslib's setFailed sends none
     status: int | None = None
 
 

@@ -1,0 +1,157 @@
+"""rclpy action peers and wire helpers for the bridge's action tests."""
+
+from __future__ import annotations
+
+import asyncio
+import importlib
+import itertools
+import threading
+import time
+from typing import Any
+
+from test_msgs.action import Fibonacci
+
+from tests.bridge.support import ros_future
+
+_action: Any = importlib.import_module("rclpy.action")
+_groups: Any = importlib.import_module("rclpy.callback_groups")
+_ids = itertools.count()
+
+FIB = "test_msgs/action/Fibonacci"
+LONG = 15.0
+"""Seconds a "long" goal runs unless canceled (tests end it much sooner)."""
+
+
+class FibServer:
+    """An rclpy Fibonacci action server that records goals and cancel requests.
+
+    ``slow=True`` goals publish feedback every 50 ms until canceled (or ``LONG`` s);
+    otherwise each goal computes its sequence at once, with one feedback per step.
+    ``accept`` decides acceptance; ``gate``, if given, is awaited (in the goal
+    callback) before answering.
+    """
+
+    def __init__(self, node: Any, name: str, *, slow: bool = False, accept: bool = True,
+                 gate: threading.Event | None = None, abort: bool = False) -> None:
+        self.slow = slow
+        self.accept = accept
+        self.gate = gate
+        self.abort = abort
+        self.goals: list[int] = []
+        self.cancel_requests = threading.Event()
+        self.finished = threading.Event()
+        self.server = _action.ActionServer(
+            node, Fibonacci, name, self._execute,
+            goal_callback=self._goal,
+            cancel_callback=self._cancel,
+            callback_group=_groups.ReentrantCallbackGroup(),
+            # rclpy's default depth of 10 loses goal requests when more arrive at once
+            goal_service_qos_profile=_deep_services(),
+            result_service_qos_profile=_deep_services(),
+        )
+
+    def _goal(self, goal: Any) -> Any:
+        self.goals.append(goal.order)
+        if self.gate is not None:
+            self.gate.wait(LONG)
+        return _action.GoalResponse.ACCEPT if self.accept else _action.GoalResponse.REJECT
+
+    def _cancel(self, _handle: Any) -> Any:
+        self.cancel_requests.set()
+        return _action.CancelResponse.ACCEPT
+
+    def _execute(self, handle: Any) -> Any:
+        sequence = [0, 1]
+        if self.slow:
+            deadline = time.monotonic() + LONG
+            while time.monotonic() < deadline and not self.finished.is_set():
+                if handle.is_cancel_requested:
+                    handle.canceled()
+                    return Fibonacci.Result(sequence=sequence)
+                handle.publish_feedback(Fibonacci.Feedback(sequence=sequence))
+                time.sleep(0.05)
+            handle.abort()
+            return Fibonacci.Result(sequence=sequence)
+        for i in range(1, handle.request.order):
+            sequence.append(sequence[i] + sequence[i - 1])
+            handle.publish_feedback(Fibonacci.Feedback(sequence=sequence))
+        if self.abort:
+            handle.abort()
+        else:
+            handle.succeed()
+        return Fibonacci.Result(sequence=sequence)
+
+    def destroy(self) -> None:
+        """End slow goals and remove the server."""
+        self.finished.set()
+        self.server.destroy()
+
+
+def _deep_services() -> Any:
+    from rclpy.qos import QoSProfile
+
+    return QoSProfile(depth=1000)  # type: ignore[no-untyped-call]
+
+
+def fib(order: int) -> list[int]:
+    """The Fibonacci sequence test_msgs' examples compute for ``order``."""
+    sequence = [0, 1]
+    for i in range(1, order):
+        sequence.append(sequence[i] + sequence[i - 1])
+    return sequence
+
+
+async def bridge_sees_action(ws: Any, name: str, timeout: float = 10.0) -> None:
+    """Poll ``/rosapi/action_servers`` until the bridge's graph lists ``name``."""
+    deadline = time.monotonic() + timeout
+    while True:
+        rid = f"as{next(_ids)}"
+        await ws.send({"op": "call_service", "service": "/rosapi/action_servers", "id": rid})
+        reply = await ws.expect(op="service_response", id=rid)
+        if name in reply["values"]["action_servers"]:
+            return
+        if time.monotonic() > deadline:
+            raise AssertionError(f"the bridge never listed the action {name}")
+        await asyncio.sleep(0.02)
+
+
+async def send_goal(ws: Any, name: str, args: Any, id: str, **extra: Any) -> None:
+    """Send a Fibonacci goal over the wire."""
+    await ws.send({"op": "send_action_goal", "action": name, "action_type": FIB, "args": args,
+                   "id": id, **extra})
+
+
+class RosCaller:
+    """An rclpy action client of a (client-served) Fibonacci action, awaited from asyncio."""
+
+    def __init__(self, node: Any, name: str) -> None:
+        self.client = _action.ActionClient(node, Fibonacci, name)
+        self.feedback: asyncio.Queue[list[int]] = asyncio.Queue()
+        self.loop = asyncio.get_running_loop()
+
+    async def ready(self, timeout: float = 10.0) -> None:
+        """Wait until the action server is matched."""
+        deadline = time.monotonic() + timeout
+        while not self.client.server_is_ready():
+            if time.monotonic() > deadline:
+                raise AssertionError("the action server never became ready")
+            await asyncio.sleep(0.02)
+
+    def _on_feedback(self, msg: Any) -> None:
+        self.loop.call_soon_threadsafe(self.feedback.put_nowait, list(msg.feedback.sequence))
+
+    async def send(self, order: int) -> Any:
+        """Send a goal; returns the (accepted) rclpy goal handle."""
+        future = self.client.send_goal_async(Fibonacci.Goal(order=order),
+                                             feedback_callback=self._on_feedback)
+        handle = await ros_future(future)
+        assert handle.accepted
+        return handle
+
+    async def result(self, handle: Any, timeout: float = 10.0) -> Any:
+        """The goal's result response (``.status``, ``.result``)."""
+        return await ros_future(handle.get_result_async(), timeout)
+
+    def destroy(self) -> None:
+        """Remove the action client."""
+        self.client.destroy()
