@@ -9,8 +9,12 @@ export ROS_AUTOMATIC_DISCOVERY_RANGE="${ROS_AUTOMATIC_DISCOVERY_RANGE:-LOCALHOST
 # One DDS domain per run, so concurrent runs on one machine do not meet.
 export ROS_DOMAIN_ID="${ROS_DOMAIN_ID:-$(( $$ % 100 + 1 ))}"
 echo "[test] ruff"
-ruff check roslibpy_lite bridge_server msgs examples bench tests
+ruff check roslibpy_lite bridge_server msgs examples bench tests docs/_hooks
 echo "[test] mypy --strict"
 mypy roslibpy_lite bridge_server msgs examples
+echo "[test] mkdocs build --strict"
+SITE="$(mktemp -d)"
+NO_MKDOCS_2_WARNING=1 mkdocs build --strict --quiet --site-dir "$SITE"
+rm -rf "$SITE"
 echo "[test] pytest (ROS_DOMAIN_ID=$ROS_DOMAIN_ID)"
 exec python -m pytest "$@"
