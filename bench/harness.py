@@ -22,7 +22,7 @@ from typing import Any
 
 ROOT = Path(__file__).resolve().parent.parent
 ROS_SIDE = str(Path(__file__).resolve().parent / "ros_side.py")
-READY = re.compile(r"bridge_server listening on ws://([\d.]+):(\d+)")
+READY = re.compile(r"bridge_server listening on wss?://([\d.]+):(\d+)")
 
 
 def child_env(domain: int) -> dict[str, str]:
@@ -50,8 +50,9 @@ class Bridge:
 
     @property
     def url(self) -> str:
-        """The websocket URL."""
-        return f"ws://127.0.0.1:{self.port}"
+        """The websocket URL (wss:// when the bridge serves TLS)."""
+        scheme = "wss" if "--certfile" in self.args else "ws"
+        return f"{scheme}://127.0.0.1:{self.port}"
 
     @property
     def pid(self) -> int:

@@ -55,6 +55,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from websockets.asyncio.client import ClientConnection, connect
 
 from bench.harness import Bridge, RosSide, StalledClient, percentile
+from bench.tls import client_ssl, tls
 
 TARGETS: dict[str, str] = {
     "rclpy_ceiling": "reference only",
@@ -65,6 +66,7 @@ TARGETS: dict[str, str] = {
     "image": "JSON >= 60 frames/s, CBOR >= 400 frames/s [rosbridge 14; 360]",
     "idle_cpu": "< 1 % of a core [rosbridge ~5 %]",
     "memory_stall": "bounded [rosbridge +400 MB in 6 s]",
+    "tls": "reference only: the cost of wss:// against ws://",
 }
 
 
@@ -91,7 +93,8 @@ class Ctx:
 
 async def ws_open(url: str) -> ClientConnection:
     """A raw websockets client, no compression, no size limit."""
-    return await connect(url, max_size=None, compression=None, open_timeout=10, max_queue=1024)
+    return await connect(url, max_size=None, compression=None, open_timeout=10, max_queue=1024,
+                         ssl=client_ssl(url))
 
 
 def send_op(ws: ClientConnection, op: dict[str, Any]) -> Awaitable[None]:
@@ -631,6 +634,7 @@ SCENARIOS: dict[str, Callable[[Ctx], Awaitable[dict[str, Any]]]] = {
     "latency": latency,
     "image": image,
     "memory_stall": memory_stall,
+    "tls": tls,
 }
 
 
@@ -652,6 +656,9 @@ def _headline(name: str, r: dict[str, Any]) -> Any:
         return r["connected_pct_of_core"]
     if name == "memory_stall":
         return {k: r[k] for k in ("rss_start_mb", "rss_peak_mb", "rss_end_mb")}
+    if name == "tls":
+        keys = ("ros_to_client_best_rate_99pct", "service_p50_ms", "image_cbor_frames_per_s")
+        return {scheme: {k: r[scheme][k] for k in keys} for scheme in ("ws", "wss")}
     return None
 
 
