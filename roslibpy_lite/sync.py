@@ -115,6 +115,7 @@ class LoopThread:
             max_workers=HANDLER_THREADS, thread_name_prefix=f"{name} handler"
         )
         self.closed = False
+        self._stopping = False
         self._thread = threading.Thread(target=self._main, name=name, daemon=True)
         self._thread.start()
 
@@ -147,6 +148,10 @@ class LoopThread:
         future = asyncio.run_coroutine_threadsafe(_tracked(coro, done), self.loop)
         try:
             return future.result()
+        except concurrent.futures.CancelledError:
+            if self._stopping:  # cancelled by close(), not by this caller
+                raise ConnectionClosed(f"{what}: the client was closed") from None
+            raise
         except BaseException:
             if not future.done():  # interrupted while waiting (Ctrl+C): cancel it there
                 future.cancel()
@@ -175,9 +180,12 @@ class LoopThread:
             return
         if self.in_loop():
             raise UsageError("close: cannot close the client from one of its own callbacks")
+        self._stopping = True
         self.run(self._finish(), "close")
         self.closed = True
-        self.handlers.shutdown(wait=True)
+        # From a handler's own thread, joining the pool would wait for itself.
+        self.handlers.shutdown(wait=not threading.current_thread().name.startswith(
+            f"{self.name} handler"))
         self.loop.call_soon_threadsafe(self.loop.stop)
         self._thread.join()
         self.loop.close()

@@ -15,7 +15,7 @@ from typing import Any
 import psutil
 import pytest
 
-from roslibpy_lite import ConnectError, ConnectionState, sync
+from roslibpy_lite import ConnectError, ConnectionClosed, ConnectionState, sync
 from tests.helpers import ROOT, BridgeProcess, ros_env, wait_until
 
 MULT = "mult_msgs/srv/MultFloats"
@@ -133,3 +133,14 @@ def test_ctrl_c_interrupts_a_blocking_call(bridge: BridgeProcess) -> None:
     out, err = proc.communicate(timeout=30)
     assert proc.returncode == 0, err
     assert out.split("\n")[:3] == ["interrupted", "still usable", "threads 1"], out + err
+
+
+def test_handler_may_close_the_client() -> None:
+    """A handler that closes its own client (on a worker thread) ends the pending call cleanly."""
+    threads = threading.active_count()
+    ros = sync.MockRos()
+    ros.advertise_service("/shutdown", "std_srvs/srv/Empty", lambda req: ros.close())
+    with pytest.raises(ConnectionClosed, match="closed"):
+        ros.call_service("/shutdown", "std_srvs/srv/Empty", {}, timeout=5)
+    assert ros.state is ConnectionState.CLOSED
+    wait_until(lambda: threading.active_count() == threads, 5, "the worker thread to end")
