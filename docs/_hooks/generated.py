@@ -1,8 +1,11 @@
-"""mkdocs hook: pages carry the real ``--help`` of the tools, generated at build time.
+"""mkdocs hook: pages carry the tools' real ``--help`` and the repository's own documents.
 
-A line ``<!-- help: roslibpy-lite-bridge -->`` (any console script of this
-environment, with arguments) becomes a text block holding that command's
-``--help`` output, so the option lists in the docs cannot drift from the code.
+- A line ``<!-- help: roslibpy-lite-bridge -->`` (any console script of this
+  environment, with arguments) becomes a text block holding that command's
+  ``--help`` output, so the option lists in the docs cannot drift from the code.
+- A line ``<!-- include: SECURITY.md -->`` becomes that file of the repository
+  (its title dropped; links to repository files shown as paths, since the
+  site does not carry them).
 """
 
 from __future__ import annotations
@@ -15,6 +18,8 @@ from pathlib import Path
 from typing import Any
 
 HELP = re.compile(r"^<!-- help: (.+?) -->$", re.M)
+INCLUDE = re.compile(r"^<!-- include: (.+?) -->$", re.M)
+REPO_LINK = re.compile(r"\[([^\]]+)\]\((?!https?://|#|mailto:)([^)\s]+)\)")
 
 
 def _help(command: str) -> str:
@@ -27,6 +32,17 @@ def _help(command: str) -> str:
     return f"```text\n$ {command} --help\n{done.stdout.rstrip()}\n```"
 
 
+def _include(root: Path, name: str) -> str:
+    path = root / name
+    if not path.is_file():
+        return f"*({name} is not in this checkout.)*"
+    text = re.sub(r"\A# .*\n", "", path.read_text())
+    return REPO_LINK.sub(lambda m: f"{m.group(1)} (`{m.group(2)}` in the repository)", text)
+
+
 def on_page_markdown(markdown: str, **kwargs: Any) -> str:
-    """Replace each help marker with the command's ``--help`` output."""
+    """Replace each help marker with the command's ``--help``, each include with the file."""
+    config = kwargs.get("config")
+    root = Path(config["docs_dir"]).parent if config else Path.cwd()
+    markdown = INCLUDE.sub(lambda m: _include(root, m.group(1)), markdown)
     return HELP.sub(lambda m: _help(m.group(1)), markdown)
