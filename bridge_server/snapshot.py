@@ -7,9 +7,8 @@ once per request of ``/metrics`` or ``/status.json`` (and a per-topic subset
 once a second for the rates), never per message. :func:`merge` combines the
 snapshots of several workers into one view of the whole bridge.
 
-Actions: a bridge with actions may set ``bridge.actions_status`` to a callable
-returning ``[{"name", "type", "served_by", "goals"}, ...]``; the list appears
-as ``actions`` in the snapshot and on the status page.
+Actions: ``actions`` lists the actions clients serve (``served_by`` a client
+id) or send goals to (``served_by`` ``ROS``), with the goals in flight.
 """
 
 from __future__ import annotations
@@ -126,7 +125,6 @@ def take(bridge: Bridge, rates: Mapping[str, Mapping[str, float]]) -> dict[str, 
         for name, owner in sorted(bridge.service_owners.items())
         if (served := owner.served.get(name)) is not None
     ]
-    actions_status = getattr(bridge, "actions_status", None)
     return {
         "version": __version__,
         "worker": worker,
@@ -148,8 +146,25 @@ def take(bridge: Bridge, rates: Mapping[str, Mapping[str, float]]) -> dict[str, 
         "topics": topics,
         "clients": clients,
         "services": services,
-        "actions": list(actions_status()) if callable(actions_status) else [],
+        "actions": _actions(bridge),
     }
+
+
+def _actions(bridge: Bridge) -> list[dict[str, Any]]:
+    """Actions in use through this process: served by a client, or called by one."""
+    worker = bridge.config.worker_index
+    found: dict[str, dict[str, Any]] = {}
+    for session in bridge.sessions:
+        acts = getattr(session, "actions", None)
+        for name, served in getattr(acts, "served", {}).items():
+            a = found.setdefault(name, {"name": name, "type": served.type_name, "goals": 0})
+            a["served_by"] = f"{worker}-{session.sid}"
+            a["goals"] += len(served.goals)
+        for goal in getattr(acts, "goals", {}).values():
+            a = found.setdefault(goal.name, {"name": goal.name, "type": goal.type_name,
+                                             "served_by": "ROS", "goals": 0})
+            a["goals"] += 1
+    return [found[k] for k in sorted(found)]
 
 
 _MAX_FIELDS = ("ros_received_per_s",)  # each worker receives the same ROS stream
