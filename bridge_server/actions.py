@@ -284,22 +284,28 @@ class SessionActions:
 
     async def _server_for(self, goal: _Goal, action_cls: type[Any]) -> SharedActionClient:
         session = self.session
-        ros = session.ros
         loop = session.loop
         name = goal.name
         wanted = goal.type_name + "_SendGoal"
         config = session.config
+        clients = session.bridge.action_clients
         deadline = loop.time() + config.call_timeout
         listed_by = loop.time() + min(config.discovery_wait, config.call_timeout)
-        client = session.bridge.action_clients.get(session, name, action_cls)
         delay = 0.002
-        while not client.ready():
-            types = ros.service_types(name + _GOAL_SUFFIX)
+        while True:
+            client = clients.clients.get((name, action_cls))
+            if client is not None and client.ready():
+                return client
+            types = _server_types(session, name + _GOAL_SUFFIX)
             if types and wanted not in types:
                 raise _Failed(
                     f"action {name} has type {types[0].removesuffix('_SendGoal')}, "
                     f"not {goal.type_name}"
                 )
+            if types:
+                client = clients.get(session, name, action_cls)
+                if client.ready():
+                    return client
             now = loop.time()
             if not types and now >= listed_by:
                 raise _Failed(f"action {name} does not exist (no action server in the ROS graph)")
@@ -309,7 +315,6 @@ class SessionActions:
                 )
             await asyncio.sleep(delay)
             delay = min(delay * 2, 0.05)
-        return client
 
     def cancel_goal(self, op: ops.CancelActionGoal) -> None:
         """Cancel a goal this client sent (its result follows)."""
@@ -399,7 +404,7 @@ class SessionActions:
         owner = self._owners.get(name)
         if owner is not None and owner is not self:
             owner.drop_served(name, f"taken over by client {session.sid}")
-        elif owner is None and session.ros.service_types(name + _GOAL_SUFFIX):
+        elif owner is None and _server_types(session, name + _GOAL_SUFFIX):
             session.status(
                 "warning",
                 f"advertise_action: another ROS node already serves {name}; "
@@ -560,6 +565,19 @@ class SessionActions:
                 ros.destroy()
         if self._owners.get(served.name) is self:
             del self._owners[served.name]
+
+
+def _server_types(session: Session, service: str) -> list[str]:
+    """Types of ``service`` as its servers offer it (the graph's own list has clients' too)."""
+    node = session.ros.node
+    found: list[str] = []
+    for n, ns in node.get_node_names_and_namespaces():
+        try:
+            served = node.get_service_names_and_types_by_node(n, ns)
+        except Exception:  # the node went away meanwhile
+            continue
+        found += [t for s, types in served if s == service for t in types if t not in found]
+    return found
 
 
 def _name(name: str) -> str:

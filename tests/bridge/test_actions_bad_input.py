@@ -1,0 +1,177 @@
+"""Bad action input: the sender is told what was wrong; the connection and a bystander keep working."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import pytest
+
+from tests.bridge.action_support import FIB, FibServer, RosCaller, bridge_sees_action, send_goal
+from tests.bridge.test_bad_input import _error, _pair, _still_working
+
+
+async def _failed_goal(ws: Any, id: str) -> tuple[str, dict[str, Any]]:
+    """The status error and the failed action_result a refused goal gets."""
+    msg = await _error(ws, id=id)
+    result = await ws.expect(op="action_result", id=id)
+    assert result["result"] is False and result["status"] == 6
+    return msg, result
+
+
+@pytest.mark.parametrize(
+    ("action_type", "named"),
+    [
+        ("test_msgs/action/NoSuchAction", "test_msgs/action/NoSuchAction"),
+        ("nosuch_pkg/Thing", "nosuch_pkg/Thing"),
+        ("test_msgs/srv/Fibonacci", "srv"),
+        ("Fibonacci", "Fibonacci"),
+    ],
+)
+async def test_unknown_action_type(ws_connect: Any, topic: str, action_type: str, named: str):
+    """An action type that is malformed or not installed is named in the error and the result."""
+    ws, other = await _pair(ws_connect)
+    await ws.send({"op": "send_action_goal", "action": topic, "action_type": action_type,
+                   "args": {}, "id": "u1"})
+    msg, result = await _failed_goal(ws, "u1")
+    assert named in msg and topic in msg
+    assert named in result["values"]
+    await _still_working(ws, other, topic)
+
+
+async def test_no_such_action_server(ws_connect: Any, topic: str):
+    """A goal to an action nobody serves fails with "does not exist", naming the action."""
+    ws, other = await _pair(ws_connect)
+    await send_goal(ws, topic, {"order": 3}, "n1")
+    msg, result = await _failed_goal(ws, "n1")
+    assert topic in msg and "does not exist" in msg
+    assert "does not exist" in result["values"]
+    await _still_working(ws, other, topic)
+
+
+async def test_action_type_differs_from_graph(ws_connect: Any, ros_node: Any, topic: str):
+    """A goal whose type differs from the served action's names both types."""
+    server = FibServer(ros_node, topic)
+    ws, other = await _pair(ws_connect)
+    await bridge_sees_action(ws, topic)
+    await ws.send({"op": "send_action_goal", "action": topic, "id": "x1",
+                   "action_type": "mult_msgs/action/IntegrateImu", "args": {"seconds": 1.0}})
+    msg, _ = await _failed_goal(ws, "x1")
+    assert "test_msgs/action/Fibonacci" in msg and "mult_msgs/action/IntegrateImu" in msg
+    await _still_working(ws, other, topic)
+    server.destroy()
+
+
+@pytest.mark.parametrize(
+    ("args", "named"),
+    [
+        ({"order": "five"}, "args.order"),
+        ({"order": 3, "speed": 1}, "speed"),
+        ({"order": 2**40}, "args.order"),
+        ([1, 2, 3], "3 values"),
+    ],
+)
+async def test_goal_does_not_fit_the_type(ws_connect: Any, topic: str, args: Any, named: str):
+    """A goal that does not fit the type names the field path (or the count of list args)."""
+    ws, other = await _pair(ws_connect)
+    await send_goal(ws, topic, args, "f1")
+    msg, result = await _failed_goal(ws, "f1")
+    assert named in msg and FIB in msg
+    assert named in result["values"]
+    await _still_working(ws, other, topic)
+
+
+async def test_args_of_the_wrong_kind(ws_connect: Any, topic: str):
+    """args that is neither an object nor a list is refused, naming the field."""
+    ws, other = await _pair(ws_connect)
+    await send_goal(ws, topic, "order=3", "k1")
+    msg = await _error(ws, id="k1")
+    assert "'args'" in msg and "an object or a list" in msg
+    await _still_working(ws, other, topic)
+
+
+@pytest.mark.parametrize("op", ["cancel_action_goal", "action_feedback", "action_result"])
+async def test_unknown_goal_id(ws_connect: Any, topic: str, op: str):
+    """cancel, feedback or result for a goal id nobody knows is an error naming the id."""
+    ws, other = await _pair(ws_connect)
+    frame: dict[str, Any] = {"op": op, "id": "ghost", "action": topic}
+    if op == "action_feedback":
+        frame["values"] = {"sequence": [1]}
+    if op == "action_result":
+        frame.update(values={"sequence": [1]}, result=True, status=4)
+    await ws.send(frame)
+    msg = await _error(ws, id="ghost")
+    assert op in msg and "'ghost'" in msg and topic in msg
+    await _still_working(ws, other, topic)
+
+
+async def test_duplicate_goal_id(ws_connect: Any, ros_node: Any, topic: str):
+    """A second goal with the id of one still in flight is refused; the first goes on."""
+    server = FibServer(ros_node, topic, slow=True)
+    ws, other = await _pair(ws_connect)
+    await bridge_sees_action(ws, topic)
+    await send_goal(ws, topic, {"order": 1}, "dup", feedback=True)
+    await ws.expect(op="action_feedback", id="dup")
+    await send_goal(ws, topic, {"order": 1}, "dup")
+    msg = await _error(ws, id="dup")
+    assert "already in flight" in msg
+    await ws.send({"op": "cancel_action_goal", "id": "dup", "action": topic})
+    result = await ws.expect(op="action_result", id="dup")
+    assert result["status"] == 5
+    await _still_working(ws, other, topic)
+    server.destroy()
+
+
+async def test_advertise_unknown_action_type(ws_connect: Any, topic: str):
+    """advertise_action with a type that is not installed names the type."""
+    ws, other = await _pair(ws_connect)
+    await ws.send({"op": "advertise_action", "action": topic, "type": "test_msgs/Nope", "id": "a1"})
+    msg = await _error(ws, id="a1")
+    assert "advertise_action" in msg and "test_msgs/Nope" in msg
+    await _still_working(ws, other, topic)
+
+
+async def test_unadvertise_not_served(ws_connect: Any, topic: str):
+    """unadvertise_action of an action this client does not serve is an error naming it."""
+    ws, other = await _pair(ws_connect)
+    await ws.send({"op": "unadvertise_action", "action": topic, "id": "ua"})
+    msg = await _error(ws, id="ua")
+    assert "unadvertise_action" in msg and topic in msg
+    await _still_working(ws, other, topic)
+
+
+async def test_served_feedback_that_does_not_fit(ws_connect: Any, ros_node: Any, topic: str):
+    """Feedback that does not fit the type names the field; the goal goes on and can succeed."""
+    ws, other = await _pair(ws_connect)
+    await ws.send({"op": "advertise_action", "action": topic, "type": FIB})
+    caller = RosCaller(ros_node, topic)
+    await caller.ready()
+    handle = await caller.send(2)
+    goal = await ws.expect(op="send_action_goal")
+    await ws.send({"op": "action_feedback", "id": goal["id"], "action": topic,
+                   "values": {"sequence": [0.5]}})
+    msg = await _error(ws, id=goal["id"])
+    assert "values.sequence[0]" in msg and "int32" in msg
+    await ws.send({"op": "action_result", "id": goal["id"], "action": topic,
+                   "values": {"sequence": [0, 1, 1]}, "result": True})
+    assert (await caller.result(handle)).status == 4
+    await _still_working(ws, other, topic)
+    caller.destroy()
+
+
+async def test_served_result_with_a_status_that_is_not_final(
+    ws_connect: Any, ros_node: Any, topic: str
+):
+    """A result whose status is not final (2 executing) is an error, and the goal is aborted."""
+    ws, other = await _pair(ws_connect)
+    await ws.send({"op": "advertise_action", "action": topic, "type": FIB})
+    caller = RosCaller(ros_node, topic)
+    await caller.ready()
+    handle = await caller.send(2)
+    goal = await ws.expect(op="send_action_goal")
+    await ws.send({"op": "action_result", "id": goal["id"], "action": topic,
+                   "values": {"sequence": []}, "result": True, "status": 2})
+    msg = await _error(ws, id=goal["id"])
+    assert "status 2" in msg and "aborted" in msg
+    assert (await caller.result(handle)).status == 6
+    await _still_working(ws, other, topic)
+    caller.destroy()
