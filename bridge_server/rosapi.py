@@ -22,6 +22,10 @@ service                            request          response
 /rosapi/publishers                 topic            publishers
 /rosapi/subscribers                topic            subscribers
 /rosapi/action_servers             (none)           action_servers
+/rosapi/action_type                action           type ("" if no server offers it)
+/rosapi/action_goal_details        type             typedefs of the goal
+/rosapi/action_result_details      type             typedefs of the result
+/rosapi/action_feedback_details    type             typedefs of the feedback
 /rosapi/get_time                   (none)           time {sec, nanosec} (and ROS 1 secs, nsecs)
 /rosapi/get_ros_version            (none)           version 2, distro "jazzy"
 /rosapi/message_details            type             typedefs (the type's, then nested types')
@@ -472,6 +476,59 @@ FIELDS.update(
         "/rosapi/service_response_details": ("type",),
     }
 )
+
+
+# -- actions ---------------------------------------------------------------------------------
+
+
+def action_type(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, Any]:
+    """The type of one action (``pkg/action/Type``), "" if no server offers it."""
+    goal_service = _str_field(args, "action").rstrip("/") + "/_action/send_goal"
+    if not goal_service.startswith("/"):
+        goal_service = "/" + goal_service
+    for n, t in _all_services(bridge):
+        if n == goal_service:
+            return {"type": t.removesuffix("_SendGoal")}
+    return {"type": ""}
+
+
+def _action_part(args: Mapping[str, Any], part: str) -> dict[str, Any]:
+    from .types import resolve_action
+
+    name = _str_field(args, "type")
+    try:
+        action = resolve_action(name)
+        canonical = canonical_name(name, "action")
+    except BridgeError as exc:
+        raise RosapiError(str(exc)) from None
+    return {"typedefs": _typedefs(getattr(action, part), f"{canonical}_{part}")}
+
+
+def action_goal_details(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, Any]:
+    """Typedefs of an action type's goal."""
+    return _action_part(args, "Goal")
+
+
+def action_result_details(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, Any]:
+    """Typedefs of an action type's result."""
+    return _action_part(args, "Result")
+
+
+def action_feedback_details(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, Any]:
+    """Typedefs of an action type's feedback."""
+    return _action_part(args, "Feedback")
+
+
+_ACTION_CALLS = {
+    "/rosapi/action_type": (action_type, "ActionType", "action"),
+    "/rosapi/action_goal_details": (action_goal_details, "ActionGoalDetails", "type"),
+    "/rosapi/action_result_details": (action_result_details, "ActionResultDetails", "type"),
+    "/rosapi/action_feedback_details": (action_feedback_details, "ActionFeedbackDetails", "type"),
+}
+for _service, (_handler, _srv, _field) in _ACTION_CALLS.items():
+    HANDLERS[_service] = _handler
+    TYPES[_service] = f"rosapi_msgs/srv/{_srv}"
+    FIELDS[_service] = (_field,)
 
 
 # -- parameters (``/node:param`` names, through each node's parameter services) ------------

@@ -404,3 +404,47 @@ def test_every_action_type_converts(package: str):
             obj = conv.to_obj(part())
             assert conv.to_obj(conv.from_obj(json.loads(json.dumps(obj)))) == obj
             cbor2.dumps(conv.to_cbor_obj(part()))
+
+
+# -- introspection ---------------------------------------------------------------------------
+
+
+async def _rosapi(ws: Any, service: str, args: Any = None) -> dict[str, Any]:
+    rid = f"{service}:{id(args)}"
+    await ws.send({"op": "call_service", "service": service, "args": args or {}, "id": rid})
+    reply = await ws.expect(op="service_response", id=rid)
+    assert reply["result"] is True, reply
+    values: dict[str, Any] = reply["values"]
+    return values
+
+
+async def test_rosapi_action_calls(ws_connect: Any, ros_node: Any, topic: str):
+    """action_servers lists ROS- and client-served actions; action_type and *_details answer."""
+    server = FibServer(ros_node, topic)
+    ws = await ws_connect()
+    served = topic + "_served"
+    await ws.send({"op": "advertise_action", "action": served, "type": "mult_msgs/IntegrateImu"})
+    await bridge_sees_action(ws, topic)
+    await bridge_sees_action(ws, served)
+    assert await _rosapi(ws, "/rosapi/action_type", {"action": topic}) == {"type": FIB}
+    assert await _rosapi(ws, "/rosapi/action_type", [served]) == {
+        "type": "mult_msgs/action/IntegrateImu"}
+    assert await _rosapi(ws, "/rosapi/action_type", {"action": topic + "_none"}) == {"type": ""}
+    goal = await _rosapi(ws, "/rosapi/action_goal_details", {"type": "mult_msgs/IntegrateImu"})
+    assert goal["typedefs"][0]["type"] == "mult_msgs/action/IntegrateImu_Goal"
+    assert goal["typedefs"][0]["fieldnames"] == ["seconds"]
+    result = await _rosapi(ws, "/rosapi/action_result_details", {"type": FIB})
+    assert result["typedefs"][0]["fieldnames"] == ["sequence"]
+    assert result["typedefs"][0]["fieldarraylen"] == [0]
+    feedback = await _rosapi(ws, "/rosapi/action_feedback_details",
+                             {"type": "mult_msgs/action/IntegrateImu"})
+    assert [t["type"] for t in feedback["typedefs"]] == [
+        "mult_msgs/action/IntegrateImu_Feedback", "geometry_msgs/msg/Vector3"]
+    assert feedback["typedefs"][0]["fieldnames"] == ["sum", "elapsed"]
+    services = await _rosapi(ws, "/rosapi/services")
+    assert "/rosapi/action_goal_details" in services["services"]
+    await ws.send({"op": "call_service", "service": "/rosapi/action_goal_details",
+                   "args": {"type": "test_msgs/action/Nope"}, "id": "bad"})
+    reply = await ws.expect(op="service_response", id="bad")
+    assert reply["result"] is False and "test_msgs/action/Nope" in reply["values"]
+    server.destroy()
