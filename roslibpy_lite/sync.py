@@ -51,6 +51,7 @@ import concurrent.futures
 import inspect
 import logging
 import threading
+from collections import deque
 from collections.abc import Callable, Coroutine, Iterator, Mapping
 from typing import TYPE_CHECKING, Any, Generic, Self, TypeVar, overload
 
@@ -84,6 +85,9 @@ log = logging.getLogger("roslibpy_lite.sync")
 
 HANDLER_THREADS = 8
 """Service requests a blocking client handles at once (one worker thread each)."""
+
+PUBLISH_WINDOW = 64
+"""Messages a blocking publisher has in flight before ``publish`` waits."""
 
 
 async def _tracked(coro: Coroutine[Any, Any, T], done: threading.Event) -> T:
@@ -146,6 +150,16 @@ class LoopThread:
             raise ConnectionClosed(f"{what}: the client is closed")
         done = threading.Event()
         future = asyncio.run_coroutine_threadsafe(_tracked(coro, done), self.loop)
+        return self.wait(future, what, done)
+
+    def wait(
+        self, future: concurrent.futures.Future[T], what: str,
+        done: threading.Event | None = None,
+    ) -> T:
+        """The result of ``future`` (running on the loop); cancels it if the wait is interrupted.
+
+        ``done`` is set once the cancelled work has really ended there.
+        """
         try:
             return future.result()
         except concurrent.futures.CancelledError:
@@ -155,7 +169,8 @@ class LoopThread:
         except BaseException:
             if not future.done():  # interrupted while waiting (Ctrl+C): cancel it there
                 future.cancel()
-                done.wait(5.0)
+                if done is not None:
+                    done.wait(5.0)
             raise
 
     def call(self, what: str, fn: Callable[..., Any], *args: Any, **kwargs: Any) -> Any:
@@ -228,7 +243,20 @@ class _Handle(Generic[H]):
 
 
 class Publisher(_Handle["handles.Publisher[Any]"], Generic[T]):
-    """A blocking publisher (made by :meth:`Client.advertise`); a context manager."""
+    """A blocking publisher (made by :meth:`Client.advertise`); a context manager.
+
+    ``publish`` checks the message on your thread (a bad one raises at once)
+    and hands it to the loop thread without waiting for each one: at most
+    :data:`PUBLISH_WINDOW` messages are in flight per publisher, then it waits
+    (backpressure). Order is kept. A failure found on the loop thread (the
+    connection closed meanwhile) is raised by the next ``publish`` or
+    :meth:`flush`.
+    """
+
+    def __init__(self, loop: LoopThread, handle: handles.Publisher[Any]) -> None:
+        super().__init__(loop, handle)
+        self._pending: deque[concurrent.futures.Future[None]] = deque()
+        self._lock = threading.Lock()
 
     @property
     def topic(self) -> str:
@@ -236,21 +264,55 @@ class Publisher(_Handle["handles.Publisher[Any]"], Generic[T]):
         return self.handle.topic
 
     def publish(self, msg: T | Mapping[str, Any]) -> None:
-        """Publish ``msg``; returns once it is handed to the connection (or buffered offline).
+        """Publish ``msg``.
 
-        From a callback on the loop thread it is queued without waiting;
-        an error is then logged instead of raised. Raises what
-        :meth:`roslibpy_lite.handles.Publisher.publish` raises.
+        From a callback on the loop thread it is queued too; a failure is
+        then logged. Raises what :meth:`roslibpy_lite.handles.Publisher.publish`
+        raises (UsageError, InvalidMessageError, StatusError, ConnectionClosed).
         """
+        handle = self.handle
+        if handle.closed:
+            raise UsageError(f"publisher of {self.topic} is closed")
+        if handle.error is not None:
+            raise handle.error
+        wire = handle.to_wire(msg)
         if self._loop.in_loop():
-            task = self._loop.loop.create_task(self.handle.publish(msg))
+            task = self._loop.loop.create_task(handle.publish(wire))
             task.add_done_callback(_log_failure)
             return
-        self._loop.run(self.handle.publish(msg), f"publish {self.topic}")
+        if self._loop.closed:
+            raise ConnectionClosed(f"publish {self.topic}: the client is closed")
+        future = asyncio.run_coroutine_threadsafe(handle.publish(wire), self._loop.loop)
+        with self._lock:
+            self._pending.append(future)
+            finished = []
+            while self._pending and self._pending[0].done():
+                finished.append(self._pending.popleft())
+            oldest = self._pending.popleft() if len(self._pending) > PUBLISH_WINDOW else None
+        for done in finished:
+            self._loop.wait(done, f"publish {self.topic}")
+        if oldest is not None:
+            self._loop.wait(oldest, f"publish {self.topic}")
+
+    def flush(self) -> None:
+        """Return once every message published so far is handed to the connection."""
+        while True:
+            with self._lock:
+                if not self._pending:
+                    return
+                future = self._pending.popleft()
+            self._loop.wait(future, f"publish {self.topic}")
 
     def unadvertise(self) -> None:
-        """Stop publishing."""
+        """Stop publishing (after the messages published so far)."""
         self.close()
+
+    def close(self) -> None:
+        """Same as :meth:`unadvertise`."""
+        try:
+            self.flush()
+        finally:
+            super().close()
 
 
 def _log_failure(task: asyncio.Task[None]) -> None:

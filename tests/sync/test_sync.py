@@ -218,3 +218,18 @@ def test_mock_conveniences() -> None:
         mock.advertise_service("/s", MULT, lambda req: {"result": 0.0})
         assert mock.served() == ["/s"]
         mock.drain()
+
+
+def test_many_publishes_keep_their_order(ros: Ros, topic: str) -> None:
+    """Publishes handed over without waiting for each still arrive all and in order."""
+    pub = ros.advertise(topic, "std_msgs/msg/Int32")
+    with ros.subscribe(topic, "std_msgs/msg/Int32", buffer_size=1000) as sub:
+        heard(pub, sub, {"data": -1})
+        for i in range(300):
+            pub.publish({"data": i})
+        pub.flush()
+        first = skip_repeats(sub, {"data": -1})["data"]
+        assert [first] + [sub.get(10)["data"] for _ in range(299)] == list(range(300))
+    pub.close()
+    with pytest.raises(UsageError, match="closed"):
+        pub.publish({"data": 1})
