@@ -89,3 +89,22 @@ def test_blocking_call_inside_a_callback_and_clean_terminate(bridge: BridgeProce
     ros.terminate()
     assert not ros.is_connected
     assert threading.active_count() == threads, [t.name for t in threading.enumerate()]
+
+
+def test_close_then_run_reconnects(bridge: BridgeProcess) -> None:
+    """After close() the Ros is disconnected and emits 'closing'; run() connects it again."""
+    events: list[str] = []
+    closed = threading.Event()
+    ros = compat.Ros("127.0.0.1", bridge.port)
+    ros.on("closing", lambda *args: events.append("closing"))
+    ros.on("close", lambda *args: closed.set())
+    try:
+        ros.run()
+        assert ros.is_connected
+        ros.close()
+        assert not ros.is_connected and closed.wait(10)
+        assert events == ["closing"]
+        ros.run()
+        assert ros.is_connected and "/rosapi/topics" in ros.get_services()
+    finally:
+        ros.terminate()
