@@ -625,14 +625,26 @@ class RosNode:
         return client
 
     async def call_when_ready(
-        self, service: str, srv_cls: type[Any], request: Any, timeout: float
+        self,
+        service: str,
+        srv_cls: type[Any],
+        request: Any,
+        timeout: float,
+        discovery_wait: float | None = None,
     ) -> Any:
-        """Call ``service`` once a server is matched; ``TimeoutError`` after ``timeout`` s."""
+        """Call ``service`` once a server is matched; ``TimeoutError`` after ``timeout`` s.
+
+        With ``discovery_wait``, a service the ROS graph still does not list after that
+        many seconds fails then (``LookupError``), not after the whole timeout.
+        """
         loop = self.loop
         deadline = loop.time() + timeout
+        unlisted_by = loop.time() + (discovery_wait if discovery_wait is not None else timeout)
         client = self.client_for(service, srv_cls)
         delay = 0.002
         while not client.service_is_ready():
+            if loop.time() >= unlisted_by and not self.service_types(service):
+                raise LookupError(f"service {service} does not exist (not in the ROS graph)")
             if loop.time() >= deadline:
                 raise TimeoutError(f"service {service} is not available")
             await asyncio.sleep(delay)

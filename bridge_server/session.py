@@ -38,9 +38,9 @@ Service calls
 -------------
 Each ``call_service`` runs as its own task (at most ``max_calls_in_flight``,
 1024, per connection; more fail at once), with ``timeout`` seconds (default
-5). Without a type, the type comes from the ROS graph; a service that is not
-in the graph within ``discovery_wait`` (2 s) fails with "does not exist". With
-a type, the call waits up to its timeout for a server to appear.
+5). A service that is not in the ROS graph within ``discovery_wait`` (2 s)
+fails with "does not exist", with or without a type in the call; one the graph
+lists is waited for (its server to match) up to the call's timeout.
 ``fragment_size`` on a call splits its ``service_response``.
 
 Client-served services
@@ -78,6 +78,7 @@ from websockets.exceptions import ConnectionClosed
 from roslibpy_lite import ops
 from roslibpy_lite.exceptions import ProtocolError
 from roslibpy_lite.protocol import Protocol, split_fragments
+from roslibpy_lite.transports.base import ACKS_HEADER
 
 from . import convert, rosapi
 from .actions import SessionActions
@@ -107,6 +108,7 @@ BATCH_BYTES = 256 * 1024
 
 _LEVELS = {"none": 0, "error": 1, "warning": 2, "info": 3}
 
+_ACKED = (ops.Advertise, ops.Subscribe, ops.AdvertiseService)
 _ACTION_OPS = (
     ops.SendActionGoal,
     ops.CancelActionGoal,
@@ -264,6 +266,9 @@ class Session:
         self.served: dict[str, _Served] = {}
         self.calls: set[asyncio.Task[None]] = set()
         self.level = _LEVELS["warning"]
+        request = getattr(ws, "request", None)
+        self.acks = request is not None and request.headers.get(ACKS_HEADER) == "1"
+        self.errors_sent = 0
         self._control: deque[str | bytes] = deque()
         self._order: deque[_Sub] = deque()
         self._wake = asyncio.Event()
@@ -434,6 +439,7 @@ class Session:
     def error(self, msg: str, id: ops.Id | None = None, kind: str = "request") -> None:
         """Report a failed request to the client (``status`` level error); count it by kind."""
         log.info("session %d: %s", self.sid, msg)
+        self.errors_sent += 1
         self.bridge.metrics.error(kind)
         self.status("error", msg, id)
 
@@ -484,6 +490,7 @@ class Session:
         """Carry out one parsed op."""
         if not self.gate.check(op):
             return
+        errors = self.errors_sent
         try:
             if isinstance(op, ops.Publish):
                 self.publish(op)
@@ -534,6 +541,10 @@ class Session:
                 f"{op.OP}: internal error (the bridge log has the details)",
                 getattr(op, "id", None), "internal",
             )
+        if self.acks and isinstance(op, _ACKED) and self.errors_sent == errors:
+            # The client asked for verdicts (ACKS_HEADER): no error means accepted.
+            name = op.service if isinstance(op, ops.AdvertiseService) else op.topic
+            self.send_op(ops.Status(level="info", msg=f"ok: {op.OP} {name}", id=op.id))
 
     def _report_evicted(self) -> None:
         """Tell the sender which incomplete fragmented ops were dropped to make room."""
@@ -735,6 +746,11 @@ class Session:
             why = f"{service}: a string in args is not valid Unicode text (a lone surrogate?)"
             self._respond(wire, op.id, False, why, op.fragment_size, t0)
             return
+        except Exception as exc:  # answered, never left as an unretrieved task exception
+            log.exception("session %d: call to %s failed", self.sid, service)
+            why = f"{service}: internal error: {type(exc).__name__}"
+            self._respond(wire, op.id, False, why, op.fragment_size, t0)
+            return
         self._respond(wire, op.id, True, values, op.fragment_size, t0)
 
     def _respond(
@@ -785,9 +801,18 @@ class Session:
             raise _CallFailed(f"{service}: bad request: {exc}") from None
         client = ros.client_for(service, srv_cls)
         if not client.service_is_ready():
-            # Wait (at most the call's timeout) for a server to be discovered and matched.
+            # Wait for a server to be discovered and matched: at most discovery_wait while
+            # the graph lists no server at all, at most the call's timeout once it does.
+            unlisted_by = loop.time() + self.config.discovery_wait
             delay = 0.002
-            while not client.service_is_ready():
+            while not _ready(client):
+                if loop.time() >= unlisted_by and not ros.service_types(service):
+                    raise _CallFailed(
+                        f"service {service} does not exist (not in the ROS graph after "
+                        f"{self.config.discovery_wait:g} s)"
+                    )
+                if _ready(client) is None:  # another call dropped the cached client
+                    client = ros.client_for(service, srv_cls)
                 if loop.time() >= deadline:
                     ros.drop_client(service, srv_cls)  # so the graph forgets the name
                     if ros.server_count(service) == 0:
@@ -1026,6 +1051,14 @@ def _expire(future: asyncio.Future[Any]) -> None:
 
 class _CallFailed(Exception):
     """A service call failed; the text is sent as the ``service_response`` values."""
+
+
+def _ready(client: Any) -> bool | None:
+    """Whether ``client`` has a matched server; None once the client was destroyed."""
+    try:
+        return bool(client.service_is_ready())
+    except Exception:  # rclpy's InvalidHandle: dropped by another call in the meantime
+        return None
 
 
 def _topic_name(name: str) -> str:

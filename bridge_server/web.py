@@ -37,6 +37,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from roslibpy_lite.transports.base import ACKS_HEADER
+
 from . import metrics, snapshot
 
 if TYPE_CHECKING:
@@ -219,6 +221,8 @@ class Web:
         """websockets' ``process_response``: name the worker on every response."""
         if "X-Bridge-Worker" not in response.headers:
             response.headers["X-Bridge-Worker"] = str(self.bridge.config.worker_index)
+        if request.headers.get(ACKS_HEADER) == "1":  # we confirm requests (session.py)
+            response.headers[ACKS_HEADER] = "1"
 
     async def answer(self, request: Request) -> Reply | None:
         """The reply to a plain GET of one of the routes (``None``: not one of them)."""

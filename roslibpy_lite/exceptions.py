@@ -11,9 +11,12 @@ The tree::
     ├── RemoteError                  the bridge or ROS reported a failure
     │   ├── ServiceError             a service call answered ``result: false``
     │   └── StatusError              the bridge sent a ``status`` error about our request
+    │       └── Forbidden            ... because our role may not do that (on that name)
     ├── RosTimeoutError              no answer in time (also a ``TimeoutError``)
     └── ConnectionClosed             the connection is gone (the client was closed)
         ├── ConnectError             the connection could not be opened
+        │   ├── NotAuthenticated     the bridge refused our token (HTTP 401, or close 1008)
+        │   └── TLSError             the TLS handshake failed (a certificate problem)
         └── Disconnected             the connection dropped while this request was in flight,
                                      or a publish found it down and buffering is off
 
@@ -28,8 +31,10 @@ __all__ = [
     "ConnectError",
     "ConnectionClosed",
     "Disconnected",
+    "Forbidden",
     "InvalidMessageError",
     "LocalProtocolError",
+    "NotAuthenticated",
     "ProtocolError",
     "RemoteError",
     "RemoteProtocolError",
@@ -37,6 +42,7 @@ __all__ = [
     "RosTimeoutError",
     "ServiceError",
     "StatusError",
+    "TLSError",
     "UsageError",
 ]
 
@@ -89,10 +95,19 @@ class RemoteError(RosLibError):
 
 
 class ServiceError(RemoteError):
-    """A service call was answered with ``result: false``; the text says why."""
+    """A service call was answered with ``result: false``; the text says why.
+
+    ``reason`` is the answer's text without the ``service <name> failed:``
+    prefixes a bridge in between may have added; the message says it once.
+    """
 
     def __init__(self, service: str, reason: str) -> None:
-        super().__init__(f"service {service} failed: {reason}")
+        names = {service, "/" + service.lstrip("/")}
+        prefixes = tuple(f"service {name} failed: " for name in names)
+        while reason.startswith(prefixes):
+            reason = reason.split(": ", 1)[1]
+        mentioned = any(f"service {name} " in reason + " " for name in names)
+        super().__init__(reason if mentioned else f"service {service} failed: {reason}")
         self.service = service
         self.reason = reason
 
@@ -106,6 +121,20 @@ class StatusError(RemoteError):
         self.id = id
 
 
+class Forbidden(StatusError):
+    """The bridge refused an op because our role may not do it on that name.
+
+    The message names the op, the name and the role (``publish: forbidden:
+    role viewer may not publish on /cmd_vel``).
+    """
+
+
+def status_error(message: str, *, level: str = "error", id: str | int | None = None) -> StatusError:
+    """The exception for a ``status`` error from the bridge: :class:`Forbidden` when it says so."""
+    cls = Forbidden if ": forbidden: " in message else StatusError
+    return cls(message, level=level, id=id)
+
+
 class RosTimeoutError(RosLibError, TimeoutError):
     """No answer arrived within the allowed time."""
 
@@ -116,6 +145,17 @@ class ConnectionClosed(RosLibError):
 
 class ConnectError(ConnectionClosed):
     """The connection could not be opened (refused, unreachable, handshake failed)."""
+
+
+class NotAuthenticated(ConnectError):
+    """The bridge refused our token: HTTP 401 at the handshake, or a close with code 1008
+    (policy violation) because of authentication. Retrying with the same token cannot help,
+    so the client does not reconnect."""
+
+
+class TLSError(ConnectError):
+    """The TLS handshake failed: the bridge's certificate could not be verified, or it wants
+    a client certificate. The message names the problem in one line."""
 
 
 class Disconnected(ConnectionClosed):

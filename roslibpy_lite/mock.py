@@ -20,9 +20,11 @@ written against :class:`~roslibpy_lite.api.Ros` runs unchanged on it::
 
 What it checks, like a real bridge would:
 
-- a topic has one type: advertising or subscribing with another type raises
-  :class:`~roslibpy_lite.exceptions.StatusError` (the bridge's refusal; here
-  at the call, since the in-memory bridge answers at once);
+- a topic has one type: advertising it here with another type raises
+  :class:`~roslibpy_lite.exceptions.UsageError`; subscribing with another type
+  is refused as the bridge refuses it: ``await ros.subscribe(...)`` raises
+  :class:`~roslibpy_lite.exceptions.StatusError`, and without ``await`` the
+  error hooks (:meth:`~roslibpy_lite.ros.RosFront.on_error`) get it;
 - a published message must fit its type: typed messages are checked against
   their class, dicts against the generated class of the type when there is
   one (:class:`~roslibpy_lite.exceptions.InvalidMessageError` names the field);
@@ -69,13 +71,15 @@ class MockRos(RosFront):
     Args:
         offline_buffer: messages kept per publisher while :meth:`disconnect`-ed
             (0: publishing then raises Disconnected), as on the real client.
-        validate: check dict messages against the generated class of their
-            type when there is one (default on), in the front and in the
-            in-memory bridge.
+        validate: check dict messages at the call against the generated class
+            of their type when there is one (default on), as the real client
+            does. The in-memory bridge checks them anyway, as the real bridge
+            does, and reports a misfit later, through the error hooks and the
+            next ``publish``.
     """
 
     def __init__(self, *, offline_buffer: int = 100, validate: bool = True) -> None:
-        self._bridge = MemoryTransport(validate=validate)
+        self._bridge = MemoryTransport()
         super().__init__(self._bridge, offline_buffer=offline_buffer, validate=validate)
         self._bridge.open()
 

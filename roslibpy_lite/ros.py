@@ -67,6 +67,7 @@ from .exceptions import (
     ServiceError,
     StatusError,
     UsageError,
+    status_error,
 )
 from .handles import (
     Publisher,
@@ -152,6 +153,7 @@ class RosFront:
         self._calls: dict[str, _Call] = {}
         self._verdicts: dict[str, asyncio.Event] = {}
         self._awaited: set[str] = set()
+        self._reports: dict[str, asyncio.Handle] = {}
         self._handler_tasks: set[asyncio.Task[None]] = set()
         self._status_callbacks: list[Callable[[ops.Status], None]] = []
         self._error_callbacks: list[ErrorCallback] = []
@@ -276,7 +278,7 @@ class RosFront:
                     return  # an acknowledgement after a reconnect
             log.info("bridge status %s: %s", op.level, op.msg)
             return
-        error = StatusError(op.msg, level=op.level, id=op.id)
+        error = status_error(op.msg, level=op.level, id=op.id)  # Forbidden when it says so
         if key is not None:
             call = self._calls.pop(key, None)
             if call is not None:
@@ -303,8 +305,15 @@ class RosFront:
         event = self._verdicts.pop(key, None)
         if event is not None:
             event.set()
-        if key not in self._awaited:
+        if key in self._awaited:
+            return  # the caller awaiting the handle raises it
+        # Reported a moment later unless the handle is awaited first: an in-memory bridge
+        # refuses during the call itself, and ``await ros.subscribe(...)`` must raise then too.
+        loop = asyncio._get_running_loop()
+        if loop is None:
             self._report(error, f"bridge refused {key}")
+        else:
+            self._reports[key] = loop.call_soon(self._report, error, f"bridge refused {key}")
 
     def _publishers_named_in(self, text: str) -> list[Publisher[Any]]:
         """Publishers of the topic a bridge's ``publish to <topic> ...`` error names."""
@@ -316,6 +325,8 @@ class RosFront:
 
     def _report(self, error: RosLibError, what: str) -> None:
         """Tell the error hooks (and the log) about an error nobody awaits."""
+        if isinstance(error, StatusError):
+            self._reports.pop(str(error.id), None)
         log.warning("%s: %s", what, error)
         for cb in list(self._error_callbacks):
             try:
@@ -364,25 +375,13 @@ class RosFront:
         return f"{kind}:{name}:{next(self._ids)}"
 
     def _request(self, handle: _Handle, op: ops.Op) -> None:
-        """Send a handle's request; with a confirming bridge, expect its verdict.
-
-        A verdict that arrives at once (an in-memory bridge) raises here.
-        """
-        key = handle.id
-        self._requests[key] = handle
+        """Send a handle's request; with a confirming bridge, expect its verdict."""
+        self._requests[handle.id] = handle
         t = self._transport
-        if not t.connected:
-            return
-        if t.acks:
-            self._verdicts[key] = asyncio.Event()
-        self._awaited.add(key)
-        try:
+        if t.connected:
+            if t.acks:
+                self._verdicts[handle.id] = asyncio.Event()
             t.write(t.encode(op))
-        finally:
-            self._awaited.discard(key)
-        if handle.error is not None:
-            self._forget(handle)
-            raise handle.error
 
     async def _settle(self, handle: _Handle) -> None:
         """``await handle``: written, and (with a confirming bridge) accepted."""
@@ -400,6 +399,9 @@ class RosFront:
                 self._awaited.discard(key)
                 self._verdicts.pop(key, None)
         if handle.error is not None and self._requests.get(key) is handle:
+            report = self._reports.pop(key, None)
+            if report is not None:
+                report.cancel()
             self._forget(handle)
             raise handle.error
 
@@ -484,7 +486,7 @@ class RosFront:
 
         Raises:
             UsageError: a bad topic or type (an unknown type says "did you mean").
-            StatusError: the bridge refused (at ``await``, or here for MockRos).
+            StatusError: the bridge refused (raised at ``await``; else see :meth:`on_error`).
             ConnectionClosed: the client is closed.
         """
         self._check_open()
@@ -608,7 +610,7 @@ class RosFront:
 
         Raises:
             UsageError: a bad topic, type or option (or cbor2 missing).
-            StatusError: the bridge refused (at ``await``, or here for MockRos).
+            StatusError: the bridge refused (raised at ``await``; else see :meth:`on_error`).
             ConnectionClosed: the client is closed.
         """
         self._check_open()
@@ -748,7 +750,7 @@ class RosFront:
 
         Raises:
             UsageError: a bad name or type, or the service is already served here.
-            StatusError: the bridge refused (at ``await``, or here for MockRos).
+            StatusError: the bridge refused (raised at ``await``; else see :meth:`on_error`).
             ConnectionClosed: the client is closed.
         """
         self._check_open()

@@ -13,6 +13,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
+import ssl
 from collections import deque
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
@@ -20,12 +21,21 @@ from typing import TYPE_CHECKING, Any
 from websockets.asyncio.client import ClientConnection
 from websockets.asyncio.client import connect as ws_connect
 from websockets.exceptions import ConnectionClosed as WsConnectionClosed
-from websockets.exceptions import InvalidHandshake, InvalidURI
+from websockets.exceptions import InvalidHandshake, InvalidMessage, InvalidStatus, InvalidURI
 
 from .. import ops
 from .._backoff import Backoff
-from ..exceptions import ConnectError, ConnectionClosed, Disconnected, ProtocolError, UsageError
+from ..exceptions import (
+    ConnectError,
+    ConnectionClosed,
+    Disconnected,
+    NotAuthenticated,
+    ProtocolError,
+    TLSError,
+    UsageError,
+)
 from ..protocol import Protocol
+from .base import ACKS_HEADER
 
 if TYPE_CHECKING:
     from .base import Link
@@ -50,6 +60,8 @@ class WebSocketTransport:
         ping_timeout: float | None = 20.0,
         ws_compression: str | None = None,
         proxy: str | None = None,
+        token: str | None = None,
+        ssl_context: ssl.SSLContext | None = None,
     ) -> None:
         self.url = url
         self.reconnect = reconnect
@@ -64,8 +76,12 @@ class WebSocketTransport:
             "ping_timeout": ping_timeout,
             "compression": ws_compression,
             "proxy": proxy,
-            "open_timeout": open_timeout,
+            "additional_headers": {ACKS_HEADER: "1"},
         }
+        if token is not None:  # never logged: it is only ever in this header
+            self._ws_options["additional_headers"]["Authorization"] = f"Bearer {token}"
+        if ssl_context is not None:
+            self._ws_options["ssl"] = ssl_context
         self._link: Link | None = None
         self._on_op: Callable[[ops.Op], None] = _unbound
         self._protocol = Protocol()
@@ -109,24 +125,55 @@ class WebSocketTransport:
         self._link._shutdown(ConnectionClosed(str(error)))
         return True
 
+    def _attempt_timeout(self, deadline: float) -> float:
+        """How long the next attempt may take: the first connection keeps to ``open_timeout``."""
+        if self._first is not None and not self._first.done():
+            return max(0.05, deadline - asyncio.get_running_loop().time())
+        return self.open_timeout
+
+    def _failed_attempt(self, exc: BaseException, attempts: int, started: float) -> str:
+        """The text of a failed first connection: what was tried, what went wrong, what to check."""
+        took = asyncio.get_running_loop().time() - started
+        tried = f"{attempts} attempt{'s' if attempts != 1 else ''} in {took:.1f} s"
+        return f"cannot connect to {self.url} ({tried}): {_why(exc)}; {_hint(self.url, exc)}"
+
     async def _run(self) -> None:
         assert self._link is not None
         link = self._link
         loop = asyncio.get_running_loop()
-        deadline = loop.time() + self.open_timeout
+        started = loop.time()
+        deadline = started + self.open_timeout
+        attempts = 0
+        next_note = started
         try:
             while not self._closing:
+                attempts += 1
                 try:
-                    ws = await ws_connect(self.url, **self._ws_options)
+                    ws = await ws_connect(self.url, open_timeout=self._attempt_timeout(deadline),
+                                          **self._ws_options)
                 except (OSError, InvalidHandshake, TimeoutError) as exc:
-                    if (not self.reconnect or loop.time() >= deadline) and self._fail_first(
-                        ConnectError(f"cannot connect to {self.url}: {_why(exc)}")
+                    refused = _refusal(self.url, exc)
+                    if refused is not None:  # a refused token or certificate: retrying cannot help
+                        if not self._fail_first(refused):
+                            log.error("%s", refused)
+                            link._shutdown(refused)
+                        return
+                    now = loop.time()
+                    give_up = not self.reconnect or now >= deadline or _tls_mismatch(self.url, exc)
+                    if give_up and self._fail_first(
+                        ConnectError(self._failed_attempt(exc, attempts, started))
                     ):
                         return
                     delay = self.backoff.next()
-                    if log.isEnabledFor(logging.DEBUG):
-                        log.debug("connect to %s failed (%s); retry in %.2f s",
-                                  self.url, _why(exc), delay)
+                    first = self._first is not None and not self._first.done()
+                    if first:  # never sleep past the deadline: one last attempt at it
+                        delay = min(delay, max(0.0, deadline - now))
+                    if now >= next_note:  # not silent, not noisy: a line every 5 s or so
+                        next_note = now + 5.0
+                        log.log(logging.INFO if first else logging.WARNING,
+                                "cannot connect to %s yet (%s); retrying%s",
+                                self.url, _why(exc),
+                                f" until {self.open_timeout} s are up" if first else "")
                     await asyncio.sleep(delay)
                     continue
                 except InvalidURI as exc:
@@ -134,15 +181,21 @@ class WebSocketTransport:
                         link._shutdown(ConnectionClosed(f"bad URL {self.url!r}"))
                     return
                 except Exception as exc:  # anything else websockets may raise: a failed attempt
-                    if self._fail_first(ConnectError(f"cannot connect to {self.url}: {_why(exc)}")):
+                    if self._fail_first(ConnectError(self._failed_attempt(exc, attempts, started))):
                         return
                     log.warning("connect to %s failed: %s", self.url, _why(exc))
                     await asyncio.sleep(self.backoff.next())
                     continue
                 self.connects += 1
+                self.acks = ws.response is not None and ws.response.headers.get(ACKS_HEADER) == "1"
                 opened = loop.time()
                 await self._session(ws)
                 if self._closing:
+                    return
+                closed = _closed_by_policy(self.url, ws)
+                if closed is not None:  # the bridge refused us (our token, our op rate)
+                    log.error("%s", closed)
+                    link._shutdown(closed)
                     return
                 if not self.reconnect:
                     log.warning("connection to %s lost; reconnect is off", self.url)
@@ -274,6 +327,62 @@ class WebSocketTransport:
 
 def _unbound(op: ops.Op) -> None:
     raise RuntimeError("the transport has no front yet")
+
+
+def _refusal(url: str, exc: BaseException) -> ConnectError | None:
+    """A refusal that another attempt would only repeat: a token, an origin, a certificate."""
+    if isinstance(exc, InvalidStatus):
+        code = exc.response.status_code
+        text = bytes(exc.response.body or b"").decode(errors="replace").strip()
+        if code == 401 or (code == 429 and "authentication" in text):
+            return NotAuthenticated(f"the bridge at {url} refused our token (HTTP {code}): {text}")
+        if code == 403:
+            return ConnectError(f"the bridge at {url} refused the connection (HTTP 403): {text}")
+        return None
+    if isinstance(exc, ssl.SSLCertVerificationError):
+        return TLSError(
+            f"TLS: cannot verify the certificate of {url}: {exc.verify_message}; give the CA "
+            "that signed it (ssl= an SSLContext or a CA file; --cafile on the command line)"
+        )
+    cause: BaseException | None = exc  # TLS 1.3 reports a missing client certificate late,
+    while cause is not None and not isinstance(cause, ssl.SSLError):  # inside InvalidMessage
+        cause = cause.__cause__ or cause.__context__
+    if cause is not None and "CERTIFICATE_REQUIRED" in str(cause).upper():
+        return TLSError(f"TLS: the bridge at {url} requires a client certificate (mutual TLS); "
+                        "load one into the ssl context (SSLContext.load_cert_chain)")
+    if url.startswith("wss://") and isinstance(exc, InvalidMessage) and isinstance(
+        exc.__cause__, EOFError
+    ):  # the server ended TLS right after the handshake: how TLS 1.3 refuses a client
+        return TLSError(f"TLS: the bridge at {url} closed the connection before answering: it "
+                        "probably requires a client certificate (mutual TLS); load one into "
+                        "the ssl context (SSLContext.load_cert_chain)")
+    return None
+
+
+def _closed_by_policy(url: str, ws: ClientConnection) -> ConnectionClosed | None:
+    """The bridge closed with 1008 (policy violation): reconnecting would be refused again."""
+    if ws.close_code != 1008:
+        return None
+    reason = ws.close_reason or "no reason given"
+    if "authentication" in reason:
+        return NotAuthenticated(f"the bridge at {url} closed the connection: {reason}")
+    return ConnectionClosed(f"the bridge at {url} closed the connection (policy violation): "
+                            f"{reason}")
+
+
+def _tls_mismatch(url: str, exc: BaseException) -> bool:
+    """A TLS handshake that failed: ``wss://`` to a plain server (retrying will not help)."""
+    return url.startswith("wss://") and isinstance(exc, ssl.SSLError | ConnectionResetError)
+
+
+def _hint(url: str, exc: BaseException) -> str:
+    """What to check after a failed connection attempt."""
+    if _tls_mismatch(url, exc):
+        return ("the TLS handshake failed: if the bridge serves plain websockets, use "
+                f"ws://{url.split('://', 1)[1]}")
+    if isinstance(exc, InvalidHandshake):
+        return "something answers there, but not as a websocket server: is the port right?"
+    return "check that a rosbridge server is running there and the host and port are right"
 
 
 def _why(exc: BaseException) -> str:

@@ -30,7 +30,7 @@ async def test_a_topic_has_one_type() -> None:
     with pytest.raises(UsageError, match="std_msgs/msg/String"):
         ros.advertise("/t", "std_msgs/msg/Int16")
     with pytest.raises(StatusError, match="std_msgs/msg/String"):
-        ros.subscribe("/t", Int16)
+        await ros.subscribe("/t", Int16)
     ros.subscribe("/t", "std_msgs/String")  # the other spelling of the same type is fine
 
 
