@@ -6,7 +6,6 @@ These mirror tests/conformance: same operations, same exceptions, without async/
 from __future__ import annotations
 
 import queue
-import time
 from typing import Any
 
 import pytest
@@ -22,28 +21,12 @@ from roslibpy_lite import (
     UsageError,
     sync,
 )
+from tests.sync.support import heard, skip_repeats
 
 MULT = "mult_msgs/srv/MultFloats"
 Ros = sync.Client | sync.MockRos
 
 
-def heard(pub: sync.Publisher[Any], sub: sync.Subscription[Any], msg: Any, timeout: float = 15.0) -> Any:
-    """Publish ``msg`` until ``sub`` hears it (ROS discovery has no event); returns what arrived."""
-    deadline = time.monotonic() + timeout
-    while True:
-        pub.publish(msg)
-        try:
-            return sub.get(0.25)
-        except RosTimeoutError:
-            if time.monotonic() > deadline:
-                raise
-
-
-def skip_repeats(sub: sync.Subscription[Any], value: Any) -> Any:
-    """The first message that is not a repeat of ``value`` (left over by :func:`heard`)."""
-    while (msg := sub.get(10)) == value:
-        pass
-    return msg
 
 
 def test_publish_subscribe_round_trip(ros: Ros, topic: str) -> None:
