@@ -23,8 +23,9 @@ from typing import TYPE_CHECKING, Any, Protocol, TypeAlias, TypeVar, overload, r
 if TYPE_CHECKING:
     from types import TracebackType
 
-    from msgs.runtime import Message, Service
+    from msgs.runtime import Action, Message, Service
 
+    from .actions import ActionHandler, ActionServer, FeedbackCallback, GoalHandle
     from .handles import Publisher, ServiceServer, StateWatcher, Subscription
 
 __all__ = [
@@ -198,6 +199,25 @@ class Ros(Protocol):
         self, service: str, type: str | type[Service], handler: ServiceHandler
     ) -> ServiceServer:
         """Serve a service with ``handler``; use as ``await`` or ``async with``."""
+        ...
+
+    async def send_goal(
+        self,
+        action: str,
+        type: str | type[Action],
+        goal: Mapping[str, Any] | Message | None = None,
+        *,
+        feedback: bool = True,
+        on_feedback: FeedbackCallback | None = None,
+        buffer_size: int = 100,
+    ) -> GoalHandle:
+        """Send a goal to an action server; iterate the handle for feedback, await its result."""
+        ...
+
+    def advertise_action(
+        self, action: str, type: str | type[Action], handler: ActionHandler
+    ) -> ActionServer:
+        """Serve an action with ``handler(goal, ctx)``; use as ``await`` or ``async with``."""
         ...
 
     async def close(self) -> None:

@@ -51,6 +51,7 @@ from collections.abc import Callable, Coroutine, Mapping
 from typing import TYPE_CHECKING, Any, Self, overload
 
 from . import ops
+from .actions import ActionServer, ActionsMixin, GoalHandle
 from .api import (
     DEFAULT_CALL_TIMEOUT,
     ConnectionState,
@@ -98,7 +99,7 @@ __all__ = ["ErrorCallback", "RosFront"]
 log = logging.getLogger("roslibpy_lite.client")
 
 _Values = Mapping[str, Any] | str
-_Handle = Publisher[Any] | Subscription[Any] | ServiceServer
+_Handle = Publisher[Any] | Subscription[Any] | ServiceServer | ActionServer | GoalHandle
 ErrorCallback = Callable[[RosLibError], None]
 """An error hook: ``fn(error)`` for a bridge error nobody awaits (see :meth:`RosFront.on_error`)."""
 
@@ -111,7 +112,7 @@ class _Call:
         self.future = future
 
 
-class RosFront:
+class RosFront(ActionsMixin):
     """The user API over a transport (see the module docstring).
 
     Args:
@@ -164,6 +165,7 @@ class RosFront:
             ops.CallService: self._serve_request,
             ops.Status: self._on_status,
         }
+        self._init_actions()  # send_goal / advertise_action (roslibpy_lite.actions)
         self.status_errors = 0
         """``status`` errors from the bridge that named none of our pending requests."""
         transport.bind(self)
@@ -414,7 +416,7 @@ class RosFront:
                 self._requests.pop(pub.id, None)
         elif isinstance(handle, Subscription):
             self._drop_sub(handle)
-        elif self._servers.get(handle.service) is handle:
+        elif isinstance(handle, ServiceServer) and self._servers.get(handle.service) is handle:
             del self._servers[handle.service]
 
     async def _flush(self) -> None:

@@ -26,6 +26,7 @@ from typing import TYPE_CHECKING, Any
 from .. import ops
 from ..exceptions import InvalidMessageError, UsageError
 from ..handles import canonical_type, from_wire, lookup_message_class
+from .memory_actions import ACTION_OPS, MemoryActions
 
 if TYPE_CHECKING:
     from .base import Link
@@ -62,6 +63,8 @@ class MemoryTransport:
         self.services: dict[str, str] = {}
         self._forwarded: dict[str, _Forwarded] = {}
         self._request_ids = 0
+        self.actions = MemoryActions(self)
+        """Served actions and goals in flight (:mod:`.memory_actions`)."""
         self._up = False
         self._link: Link | None = None
 
@@ -93,6 +96,7 @@ class MemoryTransport:
             entry.advertised = False
         self.services.clear()
         self._forwarded.clear()
+        self.actions.drop()
         self._link._disconnected()
 
     def encode(self, op: ops.Op) -> ops.Op:
@@ -286,6 +290,9 @@ class MemoryTransport:
     def _set_level(self, op: ops.SetLevel) -> None:
         pass
 
+    def _action(self, op: ops.Op) -> None:
+        self.actions.handle(op)
+
 
 _HANDLERS: dict[type[Any], Any] = {
     ops.Advertise: MemoryTransport._advertise,
@@ -298,4 +305,5 @@ _HANDLERS: dict[type[Any], Any] = {
     ops.CallService: MemoryTransport._call_service,
     ops.ServiceResponse: MemoryTransport._service_response,
     ops.SetLevel: MemoryTransport._set_level,
+    **{op: MemoryTransport._action for op in ACTION_OPS},
 }

@@ -1,0 +1,755 @@
+"""ROS 2 actions on the client: send goals to action servers, and serve actions.
+
+Sending a goal::
+
+    goal = await ros.send_goal("/integrate_imu", "mult_msgs/action/IntegrateImu",
+                               {"seconds": 2.0})
+    async for fb in goal:                 # feedback until the goal ends
+        print(fb["sum"])
+    outcome = await goal.result(timeout=10)
+    print(outcome.status, outcome.values)  # GoalStatus.SUCCEEDED {'total': ..., ...}
+
+The outcome rules
+-----------------
+- :meth:`GoalHandle.result` returns an :class:`ActionResult` (``status``, a
+  :class:`GoalStatus`, and ``values``: the result as a dict, or the
+  ``Result`` instance of a typed action) for every goal the action server
+  ran to an end: succeeded, canceled, or aborted by the server.
+  ``result(raise_on_failure=True)`` raises :class:`ActionError` unless it
+  succeeded.
+- A goal that never ran raises :class:`ActionError` (status ``ABORTED``)
+  naming why: no such action server, an unknown action type, a goal that does
+  not fit the type (also caught here before sending, as
+  :class:`~roslibpy_lite.exceptions.InvalidMessageError`), the server rejected
+  it, or the bridge's goal timeout.
+- A dropped connection fails every goal in flight at once with
+  :class:`~roslibpy_lite.exceptions.Disconnected` (the bridge cancels them on
+  the ROS side); closing the client with
+  :class:`~roslibpy_lite.exceptions.ConnectionClosed`.
+- ``result(timeout=...)`` raises :class:`~roslibpy_lite.exceptions.RosTimeoutError`
+  when the goal has not ended in time; the goal goes on (``await goal.cancel()``
+  to stop it).
+
+``goal.status`` is ``UNKNOWN`` until the server shows the goal runs (its first
+feedback: ``EXECUTING``), ``CANCELING`` after :meth:`GoalHandle.cancel`, and
+the final status once the result came.
+
+Serving an action::
+
+    async def integrate(goal, ctx):
+        total = 0.0
+        for _ in range(int(goal["seconds"] * 10)):
+            if ctx.cancel_requested:
+                break                     # returning after a cancel: CANCELED
+            total += 0.1
+            ctx.publish_feedback({"sum": {"x": total}, "elapsed": ...})
+            await asyncio.sleep(0.1)
+        return {"total": {"x": total}, "samples": 10}
+
+    server = await ros.advertise_action("/integrate_imu", "mult_msgs/action/IntegrateImu",
+                                        integrate)
+
+The handler gets the goal (a dict, or the ``Goal`` instance of a typed
+action) and a :class:`GoalContext`, and returns the result (dict, ``Result``
+instance, or None for the default). An async handler runs as a task on the
+loop; a sync one runs in a worker thread (``ctx.publish_feedback`` and
+``ctx.cancel_requested`` work from there). A handler that raises aborts the
+goal, and the error's text is logged and sent to the bridge. A handler that
+returns after a cancel request ends the goal ``CANCELED``. Served actions are
+advertised again after every reconnect; goals being served when the
+connection drops are aborted by the bridge, and their handlers are cancelled
+(async) or see ``cancel_requested`` (sync).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import collections
+import contextlib
+import enum
+import inspect
+import logging
+from collections.abc import AsyncIterator, Awaitable, Callable, Generator, Mapping
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any, Self, cast
+
+from msgs.runtime import Action, Message, UnknownTypeError, lookup_action
+
+from . import ops
+from .api import DEFAULT_CALL_TIMEOUT
+from .exceptions import (
+    ConnectionClosed,
+    Disconnected,
+    InvalidMessageError,
+    ProtocolError,
+    RemoteError,
+    RosLibError,
+    RosTimeoutError,
+    UsageError,
+)
+from .handles import _check_type_string, _packages, canonical_type, check_dict, from_wire, to_wire
+
+if TYPE_CHECKING:
+    from types import TracebackType
+
+    from .ros import RosFront
+
+__all__ = [
+    "ActionError",
+    "ActionHandler",
+    "ActionResult",
+    "ActionServer",
+    "FeedbackCallback",
+    "GoalContext",
+    "GoalHandle",
+    "GoalStatus",
+    "action_type",
+]
+
+log = logging.getLogger("roslibpy_lite.client")
+
+ActionHandler = Callable[[Any, "GoalContext"], Any]
+"""An action handler: ``fn(goal, ctx) -> result``, sync (run in a thread) or ``async``."""
+
+FeedbackCallback = Callable[[Any], "Awaitable[None] | None"]
+"""Called with each feedback of a goal: ``fn(feedback)``, sync or ``async``."""
+
+_RECENT_FAILED = 64  # failed goals whose late status errors are still recognised
+
+
+class GoalStatus(enum.IntEnum):
+    """The status of a goal: the numbers of ``action_msgs/msg/GoalStatus``."""
+
+    UNKNOWN = 0
+    ACCEPTED = 1
+    EXECUTING = 2
+    CANCELING = 3
+    SUCCEEDED = 4
+    CANCELED = 5
+    ABORTED = 6
+
+    @property
+    def final(self) -> bool:
+        """True for SUCCEEDED, CANCELED and ABORTED."""
+        return self >= GoalStatus.SUCCEEDED
+
+
+@dataclass(frozen=True, slots=True)
+class ActionResult:
+    """How a goal ended: its final ``status`` and the result ``values``.
+
+    ``values`` is a dict (or the ``Result`` instance of a typed action); it
+    is None only when the bridge had no result to give (``text`` then says why).
+    """
+
+    status: GoalStatus
+    values: Any
+    text: str | None = None
+
+    @property
+    def succeeded(self) -> bool:
+        """True when the status is SUCCEEDED."""
+        return self.status is GoalStatus.SUCCEEDED
+
+
+class ActionError(RemoteError):
+    """A goal failed: it never ran (the text says why), or with ``raise_on_failure``
+    it ended CANCELED or ABORTED. ``status`` is the final :class:`GoalStatus`,
+    ``values`` the result values when there were any."""
+
+    def __init__(self, action: str, reason: str, status: GoalStatus = GoalStatus.ABORTED,
+                 values: Any = None) -> None:
+        mentioned = action in reason or "/" + action.lstrip("/") in reason
+        super().__init__(reason if mentioned else f"goal to {action}: {reason}")
+        self.action = action
+        self.reason = reason
+        self.status = status
+        self.values = values
+
+
+def action_type(type_: str | type[Action]) -> tuple[str, type[Action] | None]:
+    """The canonical type name and (for a generated class) the class of an action type.
+
+    Raises:
+        UsageError: a malformed name, a name ``msgs`` should know but does not,
+            or a class that is not an action.
+    """
+    if isinstance(type_, str):
+        _check_type_string(type_, "action")
+        name = canonical_type(type_, "action")
+        if name.split("/", 1)[0] in _packages():
+            try:
+                lookup_action(name)
+            except UnknownTypeError as exc:
+                raise UsageError(f"unknown action type {name!r}: {exc}") from None
+        return name, None
+    if isinstance(type_, type) and issubclass(type_, Action):
+        return type_._type, type_
+    raise UsageError(f"an action type must be a type string or a msgs action class, got {type_!r}")
+
+
+def _action_class(type_name: str) -> type[Action] | None:
+    try:
+        return lookup_action(type_name)
+    except UnknownTypeError:
+        return None
+
+
+def _part(cls: type[Action] | None, part: str) -> type[Message] | None:
+    return cast("type[Message]", getattr(cls, part)) if cls is not None else None
+
+
+def _is_async(fn: Callable[..., Any]) -> bool:
+    return inspect.iscoroutinefunction(fn) or inspect.iscoroutinefunction(
+        getattr(fn, "__call__", None)  # noqa: B004 - an object with an async __call__
+    )
+
+
+# --- sending goals ---------------------------------------------------------------------------
+
+class GoalHandle:
+    """A goal this client sent (made by ``await ros.send_goal(...)``; module doc).
+
+    Iterate it (``async for fb in goal``) or :meth:`feedback` for its
+    feedback until it ends; ``await`` :meth:`result`; :meth:`cancel` it.
+    """
+
+    def __init__(self, front: RosFront, action: str, type_name: str,
+                 action_cls: type[Action] | None, id: str, *, buffer_size: int,
+                 on_feedback: FeedbackCallback | None) -> None:
+        self._front = front
+        self.action = action
+        self.type_name = type_name
+        self.action_cls = action_cls
+        self.id = id
+        self.status = GoalStatus.UNKNOWN
+        self.error: RosLibError | None = None
+        self.closed = False
+        self.last_feedback: Any = None
+        """The newest feedback (None before the first)."""
+        self.dropped = 0
+        """Feedback dropped because the buffer was full (the oldest goes first)."""
+        self._buffer: collections.deque[Any] = collections.deque(maxlen=max(buffer_size, 1))
+        self._wake = asyncio.Event()
+        self._done: asyncio.Future[ActionResult] = asyncio.get_running_loop().create_future()
+        self._done.add_done_callback(_consume)
+        self._on_feedback = on_feedback
+
+    def __repr__(self) -> str:
+        return f"<GoalHandle {self.action} {self.id} {self.status.name}>"
+
+    def done(self) -> bool:
+        """True once the goal has ended (or failed)."""
+        return self._done.done()
+
+    # -- from the front --
+
+    def _feedback(self, values: Any) -> None:
+        if self.done():
+            return
+        if self.status is GoalStatus.UNKNOWN or self.status is GoalStatus.ACCEPTED:
+            self.status = GoalStatus.EXECUTING
+        fb = values
+        cls = _part(self.action_cls, "Feedback")
+        if cls is not None and isinstance(values, Mapping):
+            try:
+                fb = from_wire(values, cls, f"feedback of {self.action}")
+            except InvalidMessageError as exc:
+                log.warning("%s", exc)
+                return
+        self.last_feedback = fb
+        if len(self._buffer) == self._buffer.maxlen:
+            self.dropped += 1
+        self._buffer.append(fb)
+        self._wake.set()
+        cb = self._on_feedback
+        if cb is not None:
+            try:
+                out = cb(fb)
+                if inspect.isawaitable(out):
+                    self._front._spawn(_awaited_callback(out, self.action))
+            except Exception:
+                log.exception("feedback callback of %s raised", self.action)
+
+    def _result(self, op: ops.ActionResult) -> None:
+        if self.done():
+            return
+        try:
+            status = GoalStatus(op.status) if op.status is not None else None
+        except ValueError:
+            status = None
+        if status is None or not status.final:
+            status = GoalStatus.SUCCEEDED if op.result else GoalStatus.ABORTED
+        if not op.result and status is GoalStatus.SUCCEEDED:
+            status = GoalStatus.ABORTED
+        values: Any = op.values
+        if isinstance(values, str) or values is None:
+            text = values or "the action server gave no result"
+            if status is GoalStatus.CANCELED:
+                self._end(ActionResult(status, None, text))
+            else:
+                self._fail(ActionError(self.action, text, status))
+            return
+        cls = _part(self.action_cls, "Result")
+        if cls is not None:
+            try:
+                values = from_wire(values, cls, f"result of {self.action}")
+            except InvalidMessageError as exc:
+                self._fail(ActionError(self.action, str(exc), GoalStatus.ABORTED))
+                return
+        else:
+            values = dict(values)
+        self._end(ActionResult(status, values))
+
+    def _end(self, outcome: ActionResult) -> None:
+        self.status = outcome.status
+        self._done.set_result(outcome)
+        self._finished()
+
+    def _fail(self, error: RosLibError) -> None:
+        """The goal failed (a status error naming it, a failed result, a dropped connection)."""
+        if self.done():
+            return
+        if not isinstance(error, ActionError | ConnectionClosed):
+            error = ActionError(self.action, str(error))
+        self.error = error
+        self.status = error.status if isinstance(error, ActionError) else GoalStatus.ABORTED
+        self._done.set_exception(error)
+        self._finished()
+
+    def _finished(self) -> None:
+        self.closed = True
+        self._wake.set()
+        self._front._goal_ended(self)
+
+    # -- the user's side --
+
+    async def result(self, timeout: float | None = None, *,
+                     raise_on_failure: bool = False) -> ActionResult:
+        """Wait for the goal to end and return how it ended (module doc: the outcome rules).
+
+        Raises:
+            ActionError: the goal never ran; or (``raise_on_failure``) it did not succeed.
+            RosTimeoutError: not ended within ``timeout`` seconds (the goal goes on).
+            Disconnected: the connection dropped while the goal was in flight.
+            ConnectionClosed: the client was closed.
+        """
+        try:
+            async with asyncio.timeout(timeout):
+                outcome = await asyncio.shield(self._done)
+        except TimeoutError:
+            raise RosTimeoutError(
+                f"goal to {self.action}: no result within {timeout} s "
+                f"(status {self.status.name}; the goal goes on)"
+            ) from None
+        if raise_on_failure and not outcome.succeeded:
+            raise ActionError(self.action, f"the goal ended {outcome.status.name}"
+                              + (f": {outcome.text}" if outcome.text else ""),
+                              outcome.status, outcome.values)
+        return outcome
+
+    async def cancel(self) -> None:
+        """Ask the action server to cancel the goal (its result follows); harmless once ended."""
+        if self.done():
+            return
+        self.status = GoalStatus.CANCELING
+        self._front._send(ops.CancelActionGoal(id=self.id, action=self.action))
+        await self._front._flush()
+
+    async def feedback(self) -> AsyncIterator[Any]:
+        """Each feedback (dict, or ``Feedback`` instance) until the goal ends."""
+        while True:
+            while self._buffer:
+                yield self._buffer.popleft()
+            if self.done():
+                return
+            self._wake.clear()
+            await self._wake.wait()
+
+    def __aiter__(self) -> AsyncIterator[Any]:
+        return self.feedback()
+
+
+def _consume(future: asyncio.Future[Any]) -> None:
+    """Mark a goal's exception as seen (a goal nobody awaits must not log "never retrieved")."""
+    if not future.cancelled():
+        future.exception()
+
+
+async def _awaited_callback(awaitable: Awaitable[Any], action: str) -> None:
+    try:
+        await awaitable
+    except Exception:
+        log.exception("feedback callback of %s raised", action)
+
+
+# --- serving actions -------------------------------------------------------------------------
+
+class GoalContext:
+    """What an action handler gets next to the goal: feedback out, cancel requests in."""
+
+    def __init__(self, server: ActionServer, id: str, loop: asyncio.AbstractEventLoop) -> None:
+        self.server = server
+        self.id = id
+        """The bridge's id of this goal (opaque)."""
+        self.action = server.action
+        self.cancel_requested = False
+        """True once a ROS caller asked to cancel (or the connection dropped)."""
+        self._loop = loop
+        self._cancel = asyncio.Event()
+        self.lost = False
+
+    def publish_feedback(self, feedback: Mapping[str, Any] | Message) -> None:
+        """Send feedback to the caller (a dict or ``Feedback`` instance; any thread).
+
+        Raises:
+            InvalidMessageError / UsageError: feedback that does not fit the type.
+        """
+        server = self.server
+        cls = _part(server.action_cls, "Feedback")
+        what = f"feedback of {server.action}"
+        wire = to_wire(feedback, f"{server.type_name}_Feedback", cls, what)
+        if cls is None and server._front.validate:
+            check_dict(wire, _part(_action_class(server.type_name), "Feedback"), what)
+        op = ops.ActionFeedback(id=self.id, action=server.action, values=wire)
+        if _on_loop(self._loop):
+            self._send(op)
+        else:
+            self._loop.call_soon_threadsafe(self._send, op)
+
+    def _send(self, op: ops.Op) -> None:
+        if not self.lost:
+            self.server._front._send(op)
+
+    async def wait_cancel(self) -> None:
+        """Return once a cancel was requested (async handlers)."""
+        await self._cancel.wait()
+
+    def _request_cancel(self) -> None:
+        self.cancel_requested = True
+        self._cancel.set()
+
+
+def _on_loop(loop: asyncio.AbstractEventLoop) -> bool:
+    return asyncio._get_running_loop() is loop
+
+
+class ActionServer:
+    """An action served by this client (made by ``ros.advertise_action``; module doc).
+
+    Use as ``await`` or ``async with``; :meth:`unadvertise` (or ``close``) stops serving.
+    """
+
+    def __init__(self, front: RosFront, action: str, type_name: str,
+                 action_cls: type[Action] | None, handler: ActionHandler, *, id: str) -> None:
+        if not callable(handler):
+            raise UsageError(f"advertise_action {action}: handler must be callable")
+        self._front = front
+        self.action = action
+        self.type_name = type_name
+        self.action_cls = action_cls
+        self.handler = handler
+        self.id = id
+        self.closed = False
+        self.error: RosLibError | None = None
+        self.goals = 0
+        """Goals handled."""
+        self.failures = 0
+        """Goals whose handler raised (aborted)."""
+        self.active: dict[str, GoalContext] = {}
+        """The goals being served now, by id."""
+
+    def __repr__(self) -> str:
+        return f"<ActionServer {self.action} {self.type_name}{' closed' if self.closed else ''}>"
+
+    def request_op(self) -> ops.AdvertiseAction:
+        """The ``advertise_action`` op this server stands for."""
+        return ops.AdvertiseAction(self.action, self.type_name, id=self.id)
+
+    def _fail(self, error: RosLibError) -> None:
+        self.error = error
+
+    async def _ready(self) -> Self:
+        await self._front._flush()
+        if self.error is not None and not self.closed:
+            report = getattr(self._front, "_reports", {}).pop(self.id, None)
+            if report is not None:
+                report.cancel()  # raised here instead
+            self.closed = True
+            self._front._drop_action_server(self)
+            raise self.error
+        return self
+
+    def __await__(self) -> Generator[Any, None, Self]:
+        return self._ready().__await__()
+
+    async def __aenter__(self) -> Self:
+        return self
+
+    async def __aexit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
+                        tb: TracebackType | None) -> None:
+        await self.close()
+
+    async def unadvertise(self) -> None:
+        """Stop serving (goals being served are aborted by the bridge)."""
+        if self.closed:
+            return
+        self.closed = True
+        self._front._drop_action_server(self)
+        self._front._send(ops.UnadvertiseAction(self.action, id=self.id))
+        for ctx in self.active.values():
+            ctx.lost = True
+            ctx._request_cancel()
+
+    async def close(self) -> None:
+        """Same as :meth:`unadvertise`."""
+        await self.unadvertise()
+
+    # -- running one goal --
+
+    async def _run(self, ctx: GoalContext, args: Any) -> None:
+        front = self._front
+        self.goals += 1
+        self.active[ctx.id] = ctx
+        try:
+            goal: Any = dict(args) if isinstance(args, Mapping) else {}
+            cls = _part(self.action_cls, "Goal")
+            if cls is not None:
+                goal = from_wire(goal, cls, f"goal of {self.action}")
+            if _is_async(self.handler):
+                result = await self.handler(goal, ctx)
+            else:
+                result = await asyncio.to_thread(self.handler, goal, ctx)
+                if inspect.isawaitable(result):
+                    result = await result
+            status = GoalStatus.CANCELED if ctx.cancel_requested else GoalStatus.SUCCEEDED
+            op = ops.ActionResult(id=ctx.id, action=self.action, result=True,
+                                  values=self._result_wire(result), status=int(status))
+        except asyncio.CancelledError:
+            if not ctx.lost:
+                raise
+            return
+        except Exception as exc:
+            self.failures += 1
+            log.warning("action handler of %s raised %s: %s", self.action,
+                        type(exc).__name__, exc)
+            op = ops.ActionResult(id=ctx.id, action=self.action, result=False,
+                                  values=str(exc) or type(exc).__name__,
+                                  status=int(GoalStatus.ABORTED))
+        finally:
+            self.active.pop(ctx.id, None)
+            front._served_goals.pop(ctx.id, None)
+        if not ctx.lost:
+            front._send_checked(op)
+
+    def _result_wire(self, result: Any) -> Mapping[str, Any]:
+        cls = _part(self.action_cls, "Result")
+        if result is None:
+            return cls().to_json() if cls is not None else {}
+        what = f"result of {self.action}"
+        wire = to_wire(result, f"{self.type_name}_Result", cls, what)
+        check = cls if cls is not None else (
+            _part(_action_class(self.type_name), "Result") if self._front.validate else None)
+        if check is not None and not isinstance(result, Message):
+            from_wire(wire, check, what)
+        return wire
+
+
+# --- the front's part ------------------------------------------------------------------------
+
+class ActionsMixin:
+    """The action part of :class:`~roslibpy_lite.ros.RosFront` (it inherits this)."""
+
+    _goals: dict[str, GoalHandle]
+    _action_servers: dict[str, ActionServer]
+    _served_goals: dict[str, tuple[GoalContext, asyncio.Task[None]]]
+    _failed_goals: collections.deque[str]
+
+    @property
+    def _me(self) -> RosFront:
+        return cast("RosFront", self)
+
+    def _init_actions(self) -> None:
+        """Set up the action state and hook it into the front (called by its ``__init__``)."""
+        me = self._me
+        self._goals = {}
+        self._action_servers = {}
+        self._served_goals = {}
+        self._failed_goals = collections.deque()
+        me._routes[ops.ActionFeedback] = self._on_action_feedback
+        me._routes[ops.ActionResult] = self._on_action_result
+        me._routes[ops.SendActionGoal] = self._serve_goal
+        me._routes[ops.CancelActionGoal] = self._on_cancel_goal
+        me._restorers.append(self._restore_actions)
+        me._on_drop.append(self._drop_actions)
+
+    def _action_args(self, action: str, type: Any) -> tuple[str, type[Action] | None]:
+        self._me._check_open()
+        if not isinstance(action, str) or not action:
+            raise UsageError(f"an action name must be a non-empty string, got {action!r}")
+        return action_type(type)
+
+    # -- sending goals --
+
+    async def send_goal(
+        self,
+        action: str,
+        type: str | type[Action],
+        goal: Mapping[str, Any] | Message | None = None,
+        *,
+        feedback: bool = True,
+        on_feedback: FeedbackCallback | None = None,
+        buffer_size: int = 100,
+    ) -> GoalHandle:
+        """Send a goal to the action server of ``action``; returns its :class:`GoalHandle`.
+
+        ``type`` is an action type string (``pkg/action/Name`` or ``pkg/Name``)
+        or a msgs action class; ``goal`` a dict or its ``Goal`` instance
+        (checked here against the type). ``feedback``: ask for feedback
+        (iterate the handle, or pass ``on_feedback``, sync or async);
+        ``buffer_size``: feedback kept for iteration (the oldest is dropped).
+        Waits for the connection when it is down (at most 10 s).
+
+        Raises:
+            UsageError / InvalidMessageError: a bad name, type or goal.
+            RosTimeoutError: the connection did not come back in time.
+            ConnectionClosed: the client is closed.
+        """
+        me = self._me
+        type_name, cls = self._action_args(action, type)
+        what = f"goal to {action}"
+        goal_cls = _part(cls, "Goal")
+        wire = to_wire({} if goal is None else goal, f"{type_name}_Goal", goal_cls, what)
+        if goal_cls is None and me.validate:
+            check_dict(wire, _part(_action_class(type_name), "Goal"), what)
+        if not me._transport.connected:
+            await me._hub.wait_connected(DEFAULT_CALL_TIMEOUT)
+        id = me._new_id("send_action_goal", action)
+        handle = GoalHandle(me, action, type_name, cls, id, buffer_size=buffer_size,
+                            on_feedback=on_feedback)
+        self._goals[id] = handle
+        me._requests[id] = handle  # status errors naming the goal fail it
+        me._awaited.add(id)
+        me._send(ops.SendActionGoal(action=action, action_type=type_name, args=wire, id=id,
+                                    feedback=feedback))
+        await me._flush()
+        return handle
+
+    def _goal_ended(self, goal: GoalHandle) -> None:
+        self._goals.pop(goal.id, None)
+        me = self._me
+        if goal.error is None or isinstance(goal.error, ConnectionClosed):
+            me._requests.pop(goal.id, None)
+            me._awaited.discard(goal.id)
+            return
+        # A failed goal's status error may come after its result: keep recognising its id.
+        self._failed_goals.append(goal.id)
+        while len(self._failed_goals) > _RECENT_FAILED:
+            old = self._failed_goals.popleft()
+            me._requests.pop(old, None)
+            me._awaited.discard(old)
+
+    def _on_action_feedback(self, op: ops.ActionFeedback) -> None:
+        goal = self._goals.get(str(op.id))
+        if goal is not None:
+            goal._feedback(op.values)
+
+    def _on_action_result(self, op: ops.ActionResult) -> None:
+        goal = self._goals.get(str(op.id))
+        if goal is not None:
+            goal._result(op)
+        else:
+            log.debug("action_result for an unknown goal %r", op.id)
+
+    # -- serving actions --
+
+    def advertise_action(
+        self, action: str, type: str | type[Action], handler: ActionHandler
+    ) -> ActionServer:
+        """Serve ``action`` to ROS callers with ``handler`` (module doc); ``await`` it.
+
+        Raises:
+            UsageError: a bad name or type, or the action is already served here.
+            StatusError: the bridge refused (at ``await`` when it came by then; else
+                see :meth:`~roslibpy_lite.ros.RosFront.on_error`).
+            ConnectionClosed: the client is closed.
+        """
+        me = self._me
+        type_name, cls = self._action_args(action, type)
+        if action in self._action_servers:
+            raise UsageError(f"advertise_action {action}: already served by this client")
+        server = ActionServer(me, action, type_name, cls, handler,
+                              id=me._new_id("advertise_action", action))
+        self._action_servers[action] = server
+        me._requests[server.id] = server
+        me._send(server.request_op())
+        return server
+
+    def _drop_action_server(self, server: ActionServer) -> None:
+        if self._action_servers.get(server.action) is server:
+            del self._action_servers[server.action]
+        self._me._requests.pop(server.id, None)
+
+    def _serve_goal(self, op: ops.SendActionGoal) -> None:
+        me = self._me
+        server = self._action_servers.get(op.action)
+        if server is None or op.id is None:
+            if op.id is not None:
+                me._send(ops.ActionResult(id=op.id, action=op.action, result=False,
+                                          values=f"{op.action} is not served here",
+                                          status=int(GoalStatus.ABORTED)))
+            return
+        ctx = GoalContext(server, str(op.id), asyncio.get_running_loop())
+        task = self._spawn(server._run(ctx, op.args))
+        self._served_goals[ctx.id] = (ctx, task)
+
+    def _on_cancel_goal(self, op: ops.CancelActionGoal) -> None:
+        entry = self._served_goals.get(str(op.id))
+        if entry is not None:
+            entry[0]._request_cancel()
+
+    def _spawn(self, coro: Any) -> asyncio.Task[None]:
+        task: asyncio.Task[None] = asyncio.get_running_loop().create_task(coro)
+        tasks = self._me._handler_tasks
+        tasks.add(task)
+        task.add_done_callback(tasks.discard)
+        return task
+
+    def _send_checked(self, op: ops.ActionResult) -> None:
+        """Send a served goal's result; one that cannot be encoded aborts it with the reason."""
+        me = self._me
+        t = me._transport
+        if not t.connected:
+            return
+        try:
+            frame = t.encode(op)
+        except ProtocolError as exc:
+            frame = t.encode(ops.ActionResult(id=op.id, action=op.action, result=False,
+                                              values=exc.message,
+                                              status=int(GoalStatus.ABORTED)))
+        t.write(frame)
+
+    # -- the connection --
+
+    def _restore_actions(self) -> None:
+        me = self._me
+        for server in self._action_servers.values():
+            server.error = None
+            me._send(server.request_op())
+
+    def _drop_actions(self, error: ConnectionClosed) -> None:
+        goals, self._goals = self._goals, {}
+        for goal in goals.values():
+            if isinstance(error, Disconnected):
+                goal._fail(Disconnected(f"{error} while goal {goal.id} to {goal.action} "
+                                        "was in flight"))
+            else:
+                goal._fail(error)
+        served, self._served_goals = self._served_goals, {}
+        for ctx, task in served.values():
+            ctx.lost = True
+            ctx._request_cancel()
+            if not task.done():
+                with contextlib.suppress(RuntimeError):
+                    task.cancel()
+
