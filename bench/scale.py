@@ -163,8 +163,10 @@ async def run_config(args: argparse.Namespace, workers: int) -> dict[str, Any]:
             await pub.close()
             lat = [x for c in clients for x in c.latencies]
             spread: dict[str, int] = {}
+            by_worker: dict[str, list[float]] = {}
             for c in clients:
                 spread[c.worker] = spread.get(c.worker, 0) + 1
+                by_worker.setdefault(c.worker, []).extend(c.latencies)
             steps.append({
                 "clients": n,
                 "sent_per_client": want,
@@ -179,6 +181,8 @@ async def run_config(args: argparse.Namespace, workers: int) -> dict[str, Any]:
                                                  - (mine0.user + mine0.system)) / wall, 1),
                 "msgs_out_per_s": round(want * n / args.duration),
                 "per_worker_clients": dict(sorted(spread.items())),
+                "per_worker_p99_ms": {w: round(percentile(v, 0.99), 2)
+                                      for w, v in sorted(by_worker.items())},
             })
             print(json.dumps({"workers": workers, **steps[-1]}), file=sys.stderr, flush=True)
         for c in clients:
