@@ -584,15 +584,16 @@ class Client(_Front):
 def connect(url: str, **options: Any) -> Client:
     """Connect to the rosbridge server at ``url`` and return a blocking :class:`Client`.
 
-    Takes the keyword options of :func:`roslibpy_lite.connect`
-    (``reconnect``, ``backoff``, ``open_timeout``, ``offline_buffer``,
-    ``max_pending``, ``max_size``, ``ping_interval``, ``ping_timeout``,
-    ``ws_compression``, ``proxy``). Returns once the first connection is
-    open; use as ``with sync.connect(url) as ros:`` or call ``ros.close()``.
+    Takes every keyword option of :func:`roslibpy_lite.connect` (``reconnect``,
+    ``backoff``, ``open_timeout``, ``offline_buffer``, ``max_pending``,
+    ``token``, ``ssl``, ...), passed through unchanged. Returns once the
+    first connection is open; use as ``with sync.connect(url) as ros:`` or
+    call ``ros.close()``.
 
     Raises:
-        ConnectError: no connection within ``open_timeout`` seconds.
-        UsageError: a malformed URL or option.
+        what :func:`roslibpy_lite.connect` raises: ConnectError (no connection
+        within ``open_timeout`` seconds; NotAuthenticated, TLSError),
+        UsageError (a malformed URL or option).
     """
     loop = LoopThread(f"roslibpy_lite.sync {url}")
     try:

@@ -23,7 +23,8 @@ the action value classes (:class:`Goal`, :class:`GoalStatus`,
 :class:`Feedback`, :class:`Result`).
 
 Not covered: :class:`ActionClient` (raises NotImplementedError until the
-client has actions), ``headers=`` (raises), ``transport=`` (ignored),
+client has actions), ``headers=`` other than ``Authorization: Bearer``
+(raises), ``transport=`` (ignored),
 ``compression="png"`` (sent as plain JSON), ``authenticate``,
 ``send_on_ready``, ``blocking_call_from_thread``, ``set_status_level``,
 ``set_default_transport``, ``roslibpy.tf``, ``roslibpy.actionlib`` (ROS 1).

@@ -28,7 +28,13 @@ import roslibpy_lite
 
 from .._backoff import Backoff
 from ..api import ConnectionState
-from ..exceptions import ConnectError, ConnectionClosed, ServiceError
+from ..exceptions import (
+    ConnectError,
+    ConnectionClosed,
+    NotAuthenticated,
+    ServiceError,
+    TLSError,
+)
 from ..sync import LoopThread
 from .core import (
     Param,
@@ -57,6 +63,20 @@ def set_rosapi_timeout(timeout: float) -> None:
     ROSAPI_TIMEOUT = timeout
 
 
+def _options(headers: dict[str, str] | None) -> dict[str, Any]:
+    """The client options for roslibpy's ``headers``: only ``Authorization: Bearer`` is known."""
+    options: dict[str, Any] = {}
+    for name, value in (headers or {}).items():
+        if name.lower() == "authorization" and value.startswith("Bearer "):
+            options["token"] = value.removeprefix("Bearer ")
+        else:  # the value may be a secret: never in the text
+            raise NotImplementedError(
+                f"roslibpy_lite.compat.Ros sends no websocket header {name!r}; "
+                "only 'Authorization: Bearer <token>' is supported"
+            )
+    return options
+
+
 def _url(host: str, port: int | None, is_secure: bool) -> str:
     if port is None:
         return host
@@ -72,7 +92,8 @@ class Ros:
             (then leave ``port`` out).
         port: the bridge's port, e.g. 9090.
         is_secure: use ``wss://``.
-        headers: not supported (raises NotImplementedError when given).
+        headers: ``{"Authorization": "Bearer <token>"}`` sends the token to a
+            bridge that requires one; other headers raise NotImplementedError.
         transport: accepted and ignored (roslibpy_lite has one transport).
     """
 
@@ -84,10 +105,7 @@ class Ros:
         headers: dict[str, str] | None = None,
         transport: str | None = None,
     ) -> None:
-        if headers:
-            raise NotImplementedError(
-                "roslibpy_lite.compat.Ros does not send extra websocket headers (headers=)"
-            )
+        self._options = _options(headers)
         self.url = _url(host, port, is_secure)
         self._loop = LoopThread(f"roslibpy_lite.compat {self.url}")
         self._callbacks = concurrent.futures.ThreadPoolExecutor(
@@ -131,7 +149,15 @@ class Ros:
         backoff = Backoff()
         while True:
             try:
-                client = await roslibpy_lite.connect(self.url, open_timeout=CONNECTION_TIMEOUT)
+                client = await roslibpy_lite.connect(self.url, open_timeout=CONNECTION_TIMEOUT,
+                                                     **self._options)
+            except (NotAuthenticated, TLSError) as exc:  # another attempt would only repeat it
+                log.error("%s", exc)
+                self.emit("error", exc)
+                self.is_connecting = False
+                if self._ready is not None and not self._ready.done():
+                    self._ready.set_exception(exc)  # run() and every operation raise it
+                return
             except ConnectError as exc:
                 log.warning("%s", exc)
                 self.emit("error", exc)

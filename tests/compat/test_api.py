@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import inspect
 import threading
+from pathlib import Path
 from typing import Any
 
 import pytest
@@ -11,7 +12,9 @@ import roslibpy
 import roslibpy.ros2
 
 import roslibpy_lite.compat as compat
+from roslibpy_lite import NotAuthenticated
 from tests.helpers import BridgeProcess
+from tests.security.support import make_auth_file
 
 NOT_COVERED = {"set_default_transport"}
 """roslibpy names the compat layer does not offer (docs/compat.md lists them)."""
@@ -57,10 +60,11 @@ def test_values_behave_like_roslibpys() -> None:
 
 
 def test_uncovered_parts_say_so(bridge: BridgeProcess) -> None:
-    """ActionClient and headers= raise NotImplementedError naming what is missing."""
+    """ActionClient and headers other than a bearer token raise NotImplementedError naming them."""
     assert parameters(compat.ActionClient) == parameters(roslibpy.ActionClient)
-    with pytest.raises(NotImplementedError, match="headers"):
-        compat.Ros("127.0.0.1", bridge.port, headers={"Authorization": "x"})
+    with pytest.raises(NotImplementedError, match="X-Robot") as caught:
+        compat.Ros("127.0.0.1", bridge.port, headers={"X-Robot": "secret-value"})
+    assert "secret-value" not in str(caught.value)
     ros = compat.Ros(bridge.url)
     try:
         with pytest.raises(NotImplementedError, match="ActionClient"):
@@ -108,3 +112,26 @@ def test_close_then_run_reconnects(bridge: BridgeProcess) -> None:
         assert ros.is_connected and "/rosapi/topics" in ros.get_services()
     finally:
         ros.terminate()
+
+
+def test_bearer_header_is_the_token(make_bridge: Any, tmp_path: Path) -> None:
+    """headers={'Authorization': 'Bearer ...'} authenticates; a refused token fails run() at once."""
+    auth = make_auth_file(tmp_path)
+    bridge = make_bridge("--auth-file", str(auth.path))
+    ros = compat.Ros("127.0.0.1", bridge.port,
+                     headers={"Authorization": f"Bearer {auth.tokens['admin']}"})
+    try:
+        ros.run()
+        assert "/rosapi/topics" in ros.get_services()
+    finally:
+        ros.terminate()
+    errors: list[Exception] = []
+    refused = compat.Ros("127.0.0.1", bridge.port, headers={"Authorization": "Bearer wrong-token"})
+    refused.on("error", errors.append)
+    try:
+        with pytest.raises(NotAuthenticated) as caught:
+            refused.run()
+        assert "wrong-token" not in str(caught.value)
+    finally:
+        refused.terminate()
+    assert len(errors) == 1

@@ -27,8 +27,6 @@ MULT = "mult_msgs/srv/MultFloats"
 Ros = sync.Client | sync.MockRos
 
 
-
-
 def test_publish_subscribe_round_trip(ros: Ros, topic: str) -> None:
     """Dicts published on a topic arrive at a blocking subscription, in order."""
     pub = ros.advertise(topic, "std_msgs/msg/Int32")

@@ -142,3 +142,16 @@ def test_handler_may_close_the_client() -> None:
         ros.call_service("/shutdown", "std_srvs/srv/Empty", {}, timeout=5)
     assert ros.state is ConnectionState.CLOSED
     wait_until(lambda: threading.active_count() == threads, 5, "the worker thread to end")
+
+
+def test_client_options_are_forwarded(make_bridge: Callable[..., BridgeProcess], tmp_path: Any) -> None:
+    """sync.connect takes the asyncio client's options: a token opens a bridge that requires one."""
+    from roslibpy_lite import NotAuthenticated
+    from tests.security.support import make_auth_file
+
+    auth = make_auth_file(tmp_path)
+    bridge = make_bridge("--auth-file", str(auth.path))
+    with sync.connect(bridge.url, token=auth.tokens["admin"], reconnect=False) as ros:
+        assert ros.is_connected
+    with pytest.raises(NotAuthenticated):
+        sync.connect(bridge.url, token="wrong", open_timeout=5)
