@@ -16,17 +16,20 @@ from __future__ import annotations
 
 from ._backoff import Backoff
 from .api import ConnectionState, Ros
-from .client import Client, Connector, connect
+from .client import Client, Connector, connect, run
 from .exceptions import (
     ConnectError,
     ConnectionClosed,
     Disconnected,
+    Forbidden,
     InvalidMessageError,
+    NotAuthenticated,
     RemoteError,
     RosLibError,
     RosTimeoutError,
     ServiceError,
     StatusError,
+    TLSError,
     UsageError,
 )
 from .handles import Publisher, ServiceServer, StateWatcher, Subscription
@@ -43,8 +46,10 @@ __all__ = [
     "ConnectionState",
     "Connector",
     "Disconnected",
+    "Forbidden",
     "InvalidMessageError",
     "MockRos",
+    "NotAuthenticated",
     "Publisher",
     "RemoteError",
     "Ros",
@@ -56,7 +61,9 @@ __all__ = [
     "StateWatcher",
     "StatusError",
     "Subscription",
+    "TLSError",
     "UsageError",
     "__version__",
     "connect",
+    "run",
 ]

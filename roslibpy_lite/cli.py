@@ -11,7 +11,9 @@ Examples::
     roslibpy-lite interface show sensor_msgs/msg/Imu
 
 The bridge is ``--url`` (default ``$ROSLIBPY_LITE_URL``, else
-``ws://127.0.0.1:9090``). Introspection goes through the bridge's
+``ws://127.0.0.1:9090``); a bridge that requires a token gets ``--token``
+(``$ROSLIBPY_LITE_TOKEN``), a ``wss://`` bridge with a private CA ``--cafile``
+(``$ROSLIBPY_LITE_CAFILE``). Introspection goes through the bridge's
 ``/rosapi/*`` services. Errors print one line on stderr and exit with a
 distinct status (see :data:`EXIT_CODES`).
 """
@@ -42,9 +44,11 @@ from .client import Client, connect
 from .exceptions import (
     ConnectError,
     ConnectionClosed,
+    NotAuthenticated,
     RemoteError,
     RosTimeoutError,
     ServiceError,
+    TLSError,
     UsageError,
 )
 
@@ -260,8 +264,14 @@ Command = Callable[[argparse.Namespace, Out], Coroutine[Any, Any, int]]
 
 
 async def _with_session(args: argparse.Namespace, body: Callable[[Session], Awaitable[int]]) -> int:
+    secure = args.url.startswith("wss://")
     try:
-        ros = await connect(args.url, reconnect=False, open_timeout=args.timeout)
+        ros = await connect(args.url, reconnect=False, open_timeout=args.timeout,
+                            token=args.token, ssl=args.cafile if secure else None)
+    except NotAuthenticated as exc:
+        raise CliError(EXIT_CONNECT, f"{exc} (set --token or $ROSLIBPY_LITE_TOKEN)") from None
+    except TLSError as exc:
+        raise CliError(EXIT_CONNECT, f"{exc} (--cafile or $ROSLIBPY_LITE_CAFILE)") from None
     except ConnectError as exc:
         raise CliError(EXIT_CONNECT, f"{exc} (is the bridge running? set --url or "
                                      "$ROSLIBPY_LITE_URL)") from None
@@ -711,6 +721,10 @@ class _RootParser(_Parser):
             parsed.url = os.environ.get("ROSLIBPY_LITE_URL") or DEFAULT_URL
         if getattr(parsed, "timeout", None) is None:
             parsed.timeout = 5.0
+        if getattr(parsed, "token", None) is None:
+            parsed.token = os.environ.get("ROSLIBPY_LITE_TOKEN") or None
+        if getattr(parsed, "cafile", None) is None:
+            parsed.cafile = os.environ.get("ROSLIBPY_LITE_CAFILE") or None
         return parsed, rest
 
 
@@ -722,6 +736,12 @@ def build_parser() -> argparse.ArgumentParser:
     common.add_argument("--timeout", type=float, default=argparse.SUPPRESS,
                         help="seconds to wait for the bridge: connecting and each "
                              "introspection call (default 5)")
+    common.add_argument("--token", default=argparse.SUPPRESS,
+                        help="token for a bridge that requires one (default "
+                             "$ROSLIBPY_LITE_TOKEN); sent as an Authorization header")
+    common.add_argument("--cafile", default=argparse.SUPPRESS,
+                        help="CA file (PEM) that signed a wss:// bridge's certificate "
+                             "(default $ROSLIBPY_LITE_CAFILE, else the system's CAs)")
     fmt = _Parser(add_help=False)
     fmt.add_argument("--json", action="store_true", help="JSON output (one object per line)")
     wait = _Parser(add_help=False)

@@ -66,8 +66,10 @@ After ``close()`` (or a drop with ``reconnect=False``) the state is
 
 from __future__ import annotations
 
-from collections.abc import Callable, Generator
-from typing import TYPE_CHECKING, Any
+import asyncio
+import ssl as _ssl
+from collections.abc import Callable, Coroutine, Generator
+from typing import TYPE_CHECKING, Any, TypeVar
 
 from ._backoff import Backoff
 from .exceptions import UsageError
@@ -77,7 +79,11 @@ from .transports.websocket import WebSocketTransport
 if TYPE_CHECKING:
     from types import TracebackType
 
-__all__ = ["Client", "Connector", "connect"]
+__all__ = ["Client", "Connector", "connect", "run"]
+
+T = TypeVar("T")
+EXIT_INTERRUPTED = 130
+"""The exit status of a script stopped with Ctrl+C (128 + SIGINT), as shells report it."""
 
 
 class Client(RosFront):
@@ -99,6 +105,13 @@ class Client(RosFront):
         ws_compression: websocket per-message compression (``"deflate"`` or
             None, the default: off, cheaper on a LAN).
         proxy: passed to websockets (None: connect directly).
+        token: sent as ``Authorization: Bearer <token>`` to a bridge that requires
+            one (``--auth-file``); a refused token raises
+            :class:`~roslibpy_lite.exceptions.NotAuthenticated` and is never retried.
+        ssl: for ``wss://`` URLs, an :class:`ssl.SSLContext` or the path of a CA
+            file (PEM) that signed the bridge's certificate (default: the system's
+            trusted CAs). A certificate problem raises
+            :class:`~roslibpy_lite.exceptions.TLSError` in one line.
         validate: check dict messages against their ``msgs`` class (see
             :class:`~roslibpy_lite.ros.RosFront`).
     """
@@ -120,11 +133,14 @@ class Client(RosFront):
         ws_compression: str | None = None,
         proxy: str | None = None,
         validate: bool = True,
+        token: str | None = None,
+        ssl: _ssl.SSLContext | str | None = None,
     ) -> None:
         self._ws = WebSocketTransport(
             url, reconnect=reconnect, backoff=backoff, open_timeout=open_timeout,
             max_size=max_size, ping_interval=ping_interval, ping_timeout=ping_timeout,
-            ws_compression=ws_compression, proxy=proxy,
+            ws_compression=ws_compression, proxy=proxy, token=token,
+            ssl_context=_ssl_context(url, ssl),
         )
         super().__init__(self._ws, offline_buffer=offline_buffer, max_pending=max_pending,
                          validate=validate)
@@ -233,6 +249,8 @@ def connect(
     ws_compression: str | None = None,
     proxy: str | None = None,
     validate: bool = True,
+    token: str | None = None,
+    ssl: _ssl.SSLContext | str | None = None,
 ) -> Connector:
     """Connect to a rosbridge server at ``url`` (``ws://host:9090``).
 
@@ -243,11 +261,55 @@ def connect(
     Raises (when awaited):
         ConnectError: no connection within ``open_timeout`` seconds (with
             ``reconnect`` on, attempts are retried with backoff until then).
-        UsageError: a malformed URL or option.
+        NotAuthenticated: the bridge refused ``token`` (not retried).
+        TLSError: the bridge's certificate could not be verified, or it wants a
+            client certificate (not retried).
+        UsageError: a malformed URL or option (``ssl=`` with ``ws://``, an
+            unreadable CA file).
     """
     return Connector(Client(
         url, reconnect=reconnect, backoff=backoff, open_timeout=open_timeout,
         offline_buffer=offline_buffer, max_pending=max_pending, max_size=max_size,
         ping_interval=ping_interval, ping_timeout=ping_timeout, ws_compression=ws_compression,
-        proxy=proxy, validate=validate,
+        proxy=proxy, validate=validate, token=token, ssl=ssl,
     ))
+
+
+def _ssl_context(url: str, ssl: _ssl.SSLContext | str | None) -> _ssl.SSLContext | None:
+    """The TLS context for ``url``: as given, or one trusting the CA file ``ssl`` names."""
+    if ssl is None:
+        return None
+    if not url.startswith("wss://"):
+        raise UsageError(f"ssl= is for wss:// URLs, not {url!r}")
+    if isinstance(ssl, _ssl.SSLContext):
+        return ssl
+    try:
+        return _ssl.create_default_context(cafile=ssl)
+    except (OSError, _ssl.SSLError) as exc:
+        raise UsageError(f"ssl={ssl!r}: cannot load it as a CA file: {exc}") from None
+
+
+def run(main: Coroutine[Any, Any, T], *, debug: bool | None = None) -> T:
+    """Run a script's ``main()`` coroutine; Ctrl+C ends it cleanly, with no traceback.
+
+    Like :func:`asyncio.run` (which it calls): on Ctrl+C the ``main`` task is
+    cancelled, so ``async with connect(...)`` blocks close their connection,
+    and then the program exits with status 130 instead of printing
+    asyncio's traceback::
+
+        async def main() -> None:
+            async with roslibpy_lite.connect("ws://robot:9090") as ros:
+                ...
+
+        if __name__ == "__main__":
+            roslibpy_lite.run(main())
+
+    Returns what ``main`` returns.
+
+    Raises:
+        SystemExit: with status 130 after Ctrl+C (KeyboardInterrupt).
+    """
+    try:
+        return asyncio.run(main, debug=debug)
+    except KeyboardInterrupt:
+        raise SystemExit(EXIT_INTERRUPTED) from None
