@@ -591,9 +591,9 @@ def connect(url: str, **options: Any) -> Client:
     call ``ros.close()``.
 
     Raises:
-        what :func:`roslibpy_lite.connect` raises: ConnectError (no connection
-        within ``open_timeout`` seconds; NotAuthenticated, TLSError),
-        UsageError (a malformed URL or option).
+        ConnectError: no connection within ``open_timeout`` seconds (also its
+            subclasses NotAuthenticated and TLSError, as :func:`roslibpy_lite.connect`).
+        UsageError: a malformed URL or option.
     """
     loop = LoopThread(f"roslibpy_lite.sync {url}")
     try:
