@@ -18,7 +18,7 @@ from tests.ops.support import http_get, scrape, status, value
 @pytest.fixture(scope="module")
 def workers() -> Iterator[BridgeProcess]:
     """One bridge with two workers for this module."""
-    proc = BridgeProcess(args=["--workers", "2"]).start()
+    proc = BridgeProcess(args=["--workers", "2", "--metrics-port", "0"]).start()
     yield proc
     proc.stop()
 
@@ -52,10 +52,13 @@ async def test_both_workers_take_clients_and_the_view_covers_both(
                 if any(sub["topic"].startswith(topic) for sub in c["subscriptions"])}
         assert set(mine) == {0, 1}
         assert {topic + "_a", topic + "_b"} <= set(s["topics"])
-        m = await scrape(workers.port)
-        assert value(m, "roslibpy_bridge_workers") == 2
-        assert value(m, "roslibpy_bridge_topic_subscribers", topic=topic + "_a") == 1
-        assert value(m, "roslibpy_bridge_topic_subscribers", topic=topic + "_b") == 1
+        line = workers.wait_for_line(r"metrics on http://127\.0\.0\.1:\d+/metrics")
+        metrics_port = int(line.rsplit(":", 1)[1].split("/")[0])
+        for port in (workers.port, metrics_port):  # the bridge's port, and --metrics-port
+            m = await scrape(port)
+            assert value(m, "roslibpy_bridge_workers") == 2
+            assert value(m, "roslibpy_bridge_topic_subscribers", topic=topic + "_a") == 1
+            assert value(m, "roslibpy_bridge_topic_subscribers", topic=topic + "_b") == 1
     finally:
         await a.close()
         await b.close()
