@@ -32,6 +32,16 @@ with sync.connect(sys.argv[1]) as ros:
     print("topics via a blocking call:", "/rosout" in topics["topics"])
 """
 
+CBOR_SCRIPT = """
+import sys
+from roslibpy_lite import sync
+
+with sync.connect(sys.argv[1]) as ros:
+    ros.advertise("/wheel_cbor", "std_msgs/msg/String", latch=True).publish({"data": "packed"})
+    with ros.subscribe("/wheel_cbor", "std_msgs/msg/String", compression="cbor") as sub:
+        print("cbor:", sub.get(timeout=15))
+"""
+
 
 @dataclass
 class Venv:
@@ -57,8 +67,8 @@ class Venv:
 
 
 @pytest.fixture(scope="module")
-def venv(tmp_path_factory: pytest.TempPathFactory) -> Venv:
-    """Build the wheel from a copy of the sources and install it into a fresh venv."""
+def wheel(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The wheel, built with the documented command from a copy of the sources."""
     tmp = tmp_path_factory.mktemp("wheel")
     src = tmp / "src"
     src.mkdir()
@@ -71,18 +81,43 @@ def venv(tmp_path_factory: pytest.TempPathFactory) -> Venv:
             shutil.copy2(path, src / name)
     subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps", "-q", "-w",
                     str(tmp / "dist"), str(src)], check=True, capture_output=True, timeout=120)
-    wheel = next((tmp / "dist").glob("roslibpy_lite-*.whl"))
+    return next((tmp / "dist").glob("roslibpy_lite-*.whl"))
+
+
+def make_venv(tmp: Path, requirement: str) -> Venv:
+    """A fresh venv in ``tmp`` with ``requirement`` (the wheel, maybe with extras) installed."""
     subprocess.run([sys.executable, "-m", "venv", str(tmp / "venv")], check=True, timeout=120)
     env = Venv(tmp / "venv", tmp)
-    env.run(env.bin("pip"), "install", "-q", str(wheel))
+    env.run(env.bin("pip"), "install", "-q", requirement)
     return env
+
+
+def installed(venv: Venv) -> set[str]:
+    """The distributions in ``venv`` besides pip and setuptools."""
+    listed = json.loads(venv.run(venv.bin("pip"), "list", "--format=json").stdout)
+    return {p["name"].lower() for p in listed} - {"pip", "setuptools"}
+
+
+@pytest.fixture(scope="module")
+def venv(wheel: Path, tmp_path_factory: pytest.TempPathFactory) -> Venv:
+    """A clean venv with the wheel alone installed."""
+    return make_venv(tmp_path_factory.mktemp("venv"), str(wheel))
 
 
 def test_only_websockets_comes_in(venv: Venv) -> None:
     """Installing the wheel brings websockets and nothing else (no ROS, numpy, cbor2, yaml)."""
-    listed = json.loads(venv.run(venv.bin("pip"), "list", "--format=json").stdout)
-    names = {p["name"].lower() for p in listed} - {"pip", "setuptools"}
-    assert names == {"roslibpy-lite", "websockets"}
+    assert installed(venv) == {"roslibpy-lite", "websockets"}
+
+
+def test_extras_bring_only_their_packages(wheel: Path, tmp_path: Path, bridge: BridgeProcess) -> None:
+    """With [cli,cbor] only pyyaml and cbor2 come in too; YAML values and CBOR then work."""
+    venv = make_venv(tmp_path, f"{wheel}[cli,cbor]")
+    assert installed(venv) == {"roslibpy-lite", "websockets", "pyyaml", "cbor2"}
+    typed = venv.run(venv.bin("roslibpy-lite"), "--url", bridge.url, "service", "call",
+                     "/rosapi/topic_type", "rosapi_msgs/srv/TopicType", "{topic: /rosout}")
+    assert "rcl_interfaces/msg/Log" in typed.stdout
+    cbor = venv.run(venv.bin("python"), "-c", CBOR_SCRIPT, bridge.url)
+    assert "cbor: {'data': 'packed'}" in cbor.stdout
 
 
 def test_cli_and_scripts_work_against_the_bridge(venv: Venv, bridge: BridgeProcess) -> None:
