@@ -71,6 +71,9 @@ __all__ = [
 
 log = logging.getLogger("bridge_server.security")
 
+PRE_AUTH_FRAME_LIMIT = 16 * 1024
+"""Largest frame read from a connection that has not authenticated yet."""
+
 POLICY_VIOLATION = 1008
 """Close code for a failed ``auth`` op, ops before authentication and op floods."""
 
@@ -426,9 +429,17 @@ class Gate:
 
     # -- frames --------------------------------------------------------------------------------
 
-    def admit_frame(self) -> bool:
-        """Whether to handle the next frame (the op rate, and nothing after a close)."""
+    def admit_frame(self, size: int = 0) -> bool:
+        """Whether to handle the next frame (the op rate, and nothing after a close).
+
+        Before authentication only small frames are read (an ``auth`` op is
+        small), so an unauthenticated client cannot make the bridge hold large
+        fragments while it has not proved who it is.
+        """
         if self.closing:
+            return False
+        if not self.authenticated and size > PRE_AUTH_FRAME_LIMIT:
+            self.close(f"authentication required before a frame of {size} bytes")
             return False
         if not self.rate:
             return True

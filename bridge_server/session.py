@@ -470,7 +470,7 @@ class Session:
     def handle_frame(self, frame: str | bytes) -> None:
         """Decode one frame and carry out the op it completes; errors go back as ``status``."""
         self._frame_len = len(frame)
-        if not self.gate.admit_frame():
+        if not self.gate.admit_frame(len(frame)):
             return
         try:
             op = self.protocol.receive(frame)
@@ -806,7 +806,7 @@ class Session:
             unlisted_by = loop.time() + self.config.discovery_wait
             delay = 0.002
             while not _ready(client):
-                if loop.time() >= unlisted_by and not ros.service_types(service):
+                if loop.time() >= unlisted_by and ros.server_count(service) == 0:
                     raise _CallFailed(
                         f"service {service} does not exist (not in the ROS graph after "
                         f"{self.config.discovery_wait:g} s)"

@@ -258,3 +258,13 @@ def test_example_auth_file_loads():
     assert viewer.allows("subscribe", "/camera/image") and not viewer.allows("publish", "/cmd_vel")
     assert operator.allows("publish", "/cmd_vel") and not operator.allows("publish", "/rosout")
     assert admin.allows("params", "/node:speed") and not operator.has("params")
+
+
+async def test_large_frames_before_auth_close_the_connection(auth_bridge: BridgeProcess):
+    """Before authenticating, a frame larger than an auth op closes the connection (1008)."""
+    ws = await wire(auth_bridge.url)
+    await ws.send({"op": "fragment", "id": "f", "data": "x" * 100_000, "num": 0, "total": 2})
+    with pytest.raises(ConnectionClosed) as info:
+        await ws.recv()
+    assert info.value.rcvd is not None and info.value.rcvd.code == 1008
+    assert "authentication required" in info.value.rcvd.reason
