@@ -55,6 +55,13 @@ def test_hello_world(flavour: str, bridge: BridgeProcess) -> None:
 
 
 @pytest.mark.parametrize("flavour", FLAVOURS)
+def test_run_forever_until_terminate(flavour: str, bridge: BridgeProcess) -> None:
+    """on_ready runs once connected; terminate() from call_later ends run_forever()."""
+    out = run(flavour, "run_forever.py", bridge)
+    assert "topics via callback: True" in out and "run_forever returned" in out
+
+
+@pytest.mark.parametrize("flavour", FLAVOURS)
 def test_pubsub_with_threads(flavour: str, bridge: BridgeProcess, topic: str) -> None:
     """A talker thread's messages reach a listener callback, in order; unsubscribe works."""
     out = run(flavour, "pubsub.py", bridge, CHATTER=topic)
