@@ -149,7 +149,7 @@ def requirement(op: Any) -> tuple[str, str] | None:
 
 _PARAM_SERVICES = {"/rosapi/get_param", "/rosapi/has_param", "/rosapi/set_param",
                    "/rosapi/delete_param"}
-_NAME_ARGS = {"topic", "service", "node"}
+_NAME_ARGS = ("topic", "service", "node", "action")
 
 
 def rosapi_requirement(service: str, args: Mapping[str, Any]) -> tuple[str, str]:
