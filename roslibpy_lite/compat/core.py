@@ -7,8 +7,6 @@ package docstring for what differs). Messages are dict-like
 
 from __future__ import annotations
 
-import asyncio
-import contextlib
 import enum
 import json
 import logging
@@ -230,10 +228,8 @@ class Topic:
         ros = self.ros
 
         async def deliver(msg: dict[str, Any]) -> None:
-            future = ros._dispatch(callback, msg)
-            if future is not None:  # one message at a time; the bridge's and our buffers bound it
-                with contextlib.suppress(Exception):
-                    await asyncio.wrap_future(future)
+            # One message at a time; the bridge's queue and our buffer bound the backlog.
+            await ros._dispatch_and_wait(callback, msg)
 
         def open_(client: AioRos) -> Subscription[Any]:
             self._sub = client.subscribe(self.name, self.message_type, deliver,

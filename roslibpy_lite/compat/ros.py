@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import asyncio
 import concurrent.futures
+import contextlib
 import inspect
 import logging
 import threading
@@ -275,6 +276,21 @@ class Ros:
         future.add_done_callback(_log_raised)
         return future
 
+    async def _dispatch_and_wait(self, callback: Callback, *args: Any) -> None:
+        """Run ``callback(*args)`` on the callback thread; return (on the loop) once it ran."""
+        future = self._dispatch(callback, *args)
+        if future is None:
+            return
+        loop = asyncio.get_running_loop()
+        waiter: asyncio.Future[None] = loop.create_future()
+
+        def wake(_: concurrent.futures.Future[Any]) -> None:
+            with contextlib.suppress(RuntimeError):  # the loop was stopped meanwhile
+                loop.call_soon_threadsafe(_finish, waiter)
+
+        future.add_done_callback(wake)
+        await waiter
+
     def on_ready(self, callback: Callable[[], Any], run_in_thread: bool = True) -> None:
         """Call ``callback()`` once connected (at once if connected already).
 
@@ -489,6 +505,11 @@ class Ros:
 
 _ROSAPI_TYPES = {"action_servers": "rosapi_msgs/srv/GetActionServers"}
 """The rosapi types whose name is not the service name in CamelCase."""
+
+
+def _finish(waiter: asyncio.Future[None]) -> None:
+    if not waiter.done():
+        waiter.set_result(None)
 
 
 def _log_raised(future: concurrent.futures.Future[Any]) -> None:
