@@ -16,13 +16,16 @@ carries ``X-Bridge-Worker: <index>``, as do websocket handshake responses.
 
 Who sees what
 -------------
-:class:`Access` decides. The default shows everything (authentication off).
-The security layer plugs in by replacing ``bridge.web.access`` with a subclass:
-``principal(request)`` returns who is asking (or raises :class:`Denied`, e.g.
-401 without a valid token) and ``may_see(principal, kind, name)`` says whether
-that viewer may see a ``route`` (``/metrics``, ``/status.json``, ...), a
-``topic``, a ``service``, an ``action`` or a ``client``. :func:`visible`
-applies it to the status data, so the page never shows what the role may not.
+An :class:`Access` decides, for the data routes (``/status.json`` and
+``/metrics``; the page and its assets hold no data): ``principal(request)``
+says who is asking (or raises :class:`Denied`, e.g. 401 without a valid
+token) and ``may_see(principal, kind, name)`` whether that viewer may see a
+``route``, a ``topic``, a ``service``, an ``action`` or a ``client``.
+:func:`visible` applies it to the status data and to the metrics, so neither
+shows what the role may not. This plain :class:`Access` shows everything
+(authentication off); the bridge sets ``bridge.web.access`` to
+:class:`bridge_server.security.WebAccess` (tokens, roles' ``introspection``
+patterns). The page passes its own ``?token=`` on to ``/status.json``.
 """
 
 from __future__ import annotations
@@ -238,13 +241,17 @@ class Web:
         if path == "/readyz":
             why = self.ready()
             return Reply(200, b"ready\n") if why is None else Reply(503, f"{why}\n".encode())
+        if path.startswith("/static/"):  # the page and its assets: no data in them
+            file = self._static[path[8:]]
+            return Reply(200, file.read_bytes(),
+                         _TYPES.get(file.suffix, "application/octet-stream"),
+                         [("Cache-Control", "no-cache")])
         try:
             principal = self.access.principal(request)
         except Denied as exc:
             return Reply(exc.status, f"{exc.reason}\n".encode())
-        route = "/" if path == "/static/index.html" else path
-        if not self.access.may_see(principal, "route", route):
-            return Reply(403, b"forbidden\n")
+        if not self.access.may_see(principal, "route", path):
+            return Reply(403, f"{path}: this role may not see it\n".encode())
         nocache = [("Cache-Control", "no-store")]
         if path == "/status.json":
             data = visible(await self.whole(), principal, self.access)
@@ -252,12 +259,8 @@ class Web:
             data["answered_by"] = self.bridge.config.worker_index
             body = json.dumps(data, separators=(",", ":")).encode()
             return Reply(200, body, "application/json", nocache)
-        if path == "/metrics":
-            body = metrics.render(await self.whole(), self.caps)
-            return Reply(200, body, metrics.CONTENT_TYPE, nocache)
-        file = self._static[path[8:]]
-        return Reply(200, file.read_bytes(), _TYPES.get(file.suffix, "application/octet-stream"),
-                     [("Cache-Control", "no-cache")])
+        body = metrics.render(visible(await self.whole(), principal, self.access), self.caps)
+        return Reply(200, body, metrics.CONTENT_TYPE, nocache)
 
 
 async def serve_metrics_port(web: Web, host: str, port: int) -> asyncio.Server:
