@@ -175,8 +175,9 @@ class Supervisor:
             if not all(e.is_set() for e in self.ready):
                 log.error("workers did not start within 60 s")
                 return 1
-            log.info("bridge_server listening on ws://%s:%d (%d workers)", self.host, self.port,
-                     self.n)
+            scheme = "wss" if any(a.startswith("--certfile") for a in self.argv) else "ws"
+            log.info("bridge_server listening on %s://%s:%d (%d workers)", scheme, self.host,
+                     self.port, self.n)
             while not self.stop.wait(0.1):
                 self._restart_dead()
             log.info("bridge_server shutting down")

@@ -68,3 +68,14 @@ async def test_mutual_tls_requires_a_client_certificate(make_bridge: Any, certs:
     with pytest.raises((ssl.SSLError, OSError, InvalidHandshake, ConnectionClosed)):
         ws = await wire(wss(bridge), ssl_context=certs.context(client_cert=False))
         await roundtrip(ws)  # TLS 1.3 reports the missing certificate on the first read
+
+
+async def test_workers_serve_wss(make_bridge: Any, certs: Certs, auth: AuthFile):
+    """With --workers, every worker serves TLS and checks tokens; the ready line says wss."""
+    bridge = make_bridge("--workers", "2", "--certfile", str(certs.server),
+                         "--auth-file", str(auth.path))
+    assert any("listening on wss://" in line and "workers" in line for line in bridge.lines)
+    for _ in range(4):  # the kernel spreads connections over the workers
+        ws = await wire(wss(bridge), auth.tokens["viewer"], ssl_context=certs.context())
+        await roundtrip(ws)
+        await ws.close()
