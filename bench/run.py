@@ -27,6 +27,9 @@ Scenarios (targets; rosbridge_suite's figures in brackets):
 - ``idle_cpu``: the bridge's CPU with one connected client (target < 1 % of a core) [~5 %].
 - ``memory_stall``: the bridge's RSS while one client stalls under an image
   flood: start, peak, end [rosbridge grew 400 MB in 6 s].
+- ``action_ros_server`` / ``action_client_served`` (``bench/actions.py``): goal
+  round trip p50/p99 and feedback throughput, to an rclpy action server and to a
+  client-served action driven by an rclpy action client.
 
 ``--profile`` runs py-spy on the bridge during ``ros_to_client`` and
 ``image`` and adds the top functions (self and inclusive samples) to their results.
@@ -54,6 +57,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from websockets.asyncio.client import ClientConnection, connect
 
+from bench.actions import action_client_served, action_ros_server
 from bench.harness import Bridge, RosSide, StalledClient, percentile
 from bench.tls import client_ssl, tls
 
@@ -67,6 +71,8 @@ TARGETS: dict[str, str] = {
     "idle_cpu": "< 1 % of a core [rosbridge ~5 %]",
     "memory_stall": "bounded [rosbridge +400 MB in 6 s]",
     "tls": "reference only: the cost of wss:// against ws://",
+    "action_ros_server": "reference: goal round trip p50/p99, feedback msg/s at >= 99 %",
+    "action_client_served": "reference: goal round trip p50/p99, feedback msg/s at >= 99 %",
 }
 
 
@@ -635,6 +641,8 @@ SCENARIOS: dict[str, Callable[[Ctx], Awaitable[dict[str, Any]]]] = {
     "image": image,
     "memory_stall": memory_stall,
     "tls": tls,
+    "action_ros_server": action_ros_server,
+    "action_client_served": action_client_served,
 }
 
 
@@ -656,6 +664,9 @@ def _headline(name: str, r: dict[str, Any]) -> Any:
         return r["connected_pct_of_core"]
     if name == "memory_stall":
         return {k: r[k] for k in ("rss_start_mb", "rss_peak_mb", "rss_end_mb")}
+    if name.startswith("action_"):
+        return {"p50_ms": r["round_trip"]["p50_ms"], "p99_ms": r["round_trip"]["p99_ms"],
+                "feedback_rate_99pct": r["feedback_best_rate_99pct"]}
     if name == "tls":
         keys = ("ros_to_client_best_rate_99pct", "service_p50_ms", "image_cbor_frames_per_s")
         return {scheme: {k: r[scheme][k] for k in keys} for scheme in ("ws", "wss")}

@@ -447,7 +447,6 @@ class RosNode:
         # the callbacks anyway), and no callback of the bridge ever blocks.
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
-        self._calls_gc = self.node.create_guard_condition(self._run_calls)
         self._thread = threading.Thread(target=self._spin, name="bridge-ros-spin", daemon=True)
         self._thread.start()
 
@@ -501,9 +500,13 @@ class RosNode:
         """
         self._calls.append((fn, args))
         gc = self._calls_gc
-        if gc is not None:
-            with contextlib.suppress(Exception):  # destroyed while shutting down
-                gc.trigger()
+        if gc is None:
+            if self.node is None:
+                return
+            # Made on first use: one more entity in every wait set of the executor.
+            gc = self._calls_gc = self.node.create_guard_condition(self._run_calls)
+        with contextlib.suppress(Exception):  # destroyed while shutting down
+            gc.trigger()
 
     def _run_calls(self) -> None:
         calls = self._calls
@@ -643,7 +646,7 @@ class RosNode:
         client = self.client_for(service, srv_cls)
         delay = 0.002
         while not client.service_is_ready():
-            if loop.time() >= unlisted_by and not self.service_types(service):
+            if loop.time() >= unlisted_by and self.server_count(service) == 0:
                 raise LookupError(f"service {service} does not exist (not in the ROS graph)")
             if loop.time() >= deadline:
                 raise TimeoutError(f"service {service} is not available")

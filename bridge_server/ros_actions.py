@@ -259,11 +259,13 @@ class ServedGoal:
         self.done = False
 
     def feedback(self, msg: Any) -> None:
-        """Publish one feedback message (an instance of the action's ``Feedback``)."""
-        if not self.done:
-            self.served.ros.in_executor(self._feedback, msg)
+        """Publish one feedback message (an instance of the action's ``Feedback``).
 
-    def _feedback(self, msg: Any) -> None:
+        Published from the calling thread: a publish is thread safe in rcl, and a hop
+        through the executor per message would hold feedback back under load.
+        """
+        if self.done:
+            return
         with contextlib.suppress(Exception):  # the goal may have finished meanwhile
             self.handle.publish_feedback(msg)
 
