@@ -109,13 +109,16 @@ def test_introspection(flavour: str, bridge: BridgeProcess, ros_node: Any, topic
 
 @pytest.mark.parametrize("flavour", FLAVOURS)
 def test_params(flavour: str, bridge: BridgeProcess, ros_node: Any) -> None:
-    """A script lists, reads and sets an rclpy node's parameter."""
+    """A script lists, reads, sets and deletes an rclpy node's parameter."""
+    from rcl_interfaces.msg import ParameterDescriptor
+
     param = f"compat_speed_{flavour}"
-    ros_node.declare_parameter(param, 1.5)
+    ros_node.declare_parameter(param, 1.5, ParameterDescriptor(dynamic_typing=True))
     name = f"{ros_node.get_fully_qualified_name()}:{param}"
     out = run(flavour, "params.py", bridge, PARAM=name)
     assert "listed: True" in out and "value: 1.5" in out and "after set: 2.5" in out
-    assert ros_node.get_parameter(param).value == 2.5
+    assert "deleted: True" in out, out
+    assert not ros_node.has_parameter(param)
 
 
 @pytest.mark.parametrize("flavour", FLAVOURS)

@@ -16,4 +16,9 @@ print("value:", client.get_param(name))
 param = roslibpy.Param(client, name)
 param.set(2.5)
 print("after set:", param.get(timeout=10))
+try:
+    param.delete(timeout=10)
+    print("deleted:", name not in client.get_params())
+except Exception as error:
+    print("delete refused:", type(error).__name__, error)
 client.terminate()
