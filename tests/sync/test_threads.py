@@ -108,8 +108,8 @@ from roslibpy_lite import sync, RosTimeoutError
 
 with sync.connect(sys.argv[1]) as ros:
     sub = ros.subscribe("/nobody_publishes_here", "std_msgs/msg/Int32")
-    print("waiting", flush=True)
     try:
+        print("waiting", flush=True)
         sub.get()                      # blocks until Ctrl+C
     except KeyboardInterrupt:
         print("interrupted", flush=True)
