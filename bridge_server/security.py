@@ -466,7 +466,7 @@ class Gate:
 
     def close(self, reason: str) -> None:
         """Close the connection with code 1008 and ``reason``; handle nothing more."""
-        if self.closing:
+        if self.closing or self.session._closed:
             return
         self.closing = True
         if self._timer is not None:
@@ -543,7 +543,7 @@ class Gate:
             return  # no auth file: everyone is welcome, the op changes nothing
         address = _address(self.session.ws)
         principal = auth.verify(op.mac)
-        if principal is None or (self.principal is not None and principal != self.principal):
+        if principal is None or (self.principal is not None and principal is not self.principal):
             count = self.security.failures.failed(address)
             log.warning("session %d: auth op from %s with a wrong token (failure %d)",
                         self.session.sid, address, count)
@@ -567,7 +567,7 @@ class Gate:
         connection go); otherwise only a role with ``take_over`` on the name.
         """
         if self.principal is not None and owner_gate is not None \
-                and owner_gate.principal == self.principal:
+                and owner_gate.principal is self.principal:
             return True
         return self.role is not None and self.role.allows("take_over", name)
 
