@@ -31,6 +31,15 @@ def auth_bridge(auth: AuthFile) -> Iterator[BridgeProcess]:
     proc.stop()
 
 
+@pytest.fixture(scope="module")
+def tls_bridge(certs: Certs, auth: AuthFile) -> Iterator[BridgeProcess]:
+    """A bridge serving wss:// and requiring tokens, shared by a test module."""
+    proc = BridgeProcess(args=["--certfile", str(certs.server), "--auth-file", str(auth.path)])
+    proc.start()
+    yield proc
+    proc.stop()
+
+
 @pytest.fixture
 async def connect_as(
     auth_bridge: BridgeProcess, auth: AuthFile

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import subprocess
 import sys
-from collections.abc import Iterator
 from typing import Any
 
 import pytest
@@ -14,15 +13,6 @@ from roslibpy_lite import ConnectionClosed, Forbidden, NotAuthenticated, TLSErro
 from roslibpy_lite.api import ConnectionState
 from tests.helpers import ROOT, BridgeProcess, ros_env
 from tests.security.support import AuthFile, Certs
-
-
-@pytest.fixture(scope="module")
-def tls_bridge(certs: Certs, auth: AuthFile) -> Iterator[BridgeProcess]:
-    """A bridge serving wss:// and requiring tokens."""
-    proc = BridgeProcess(args=["--certfile", str(certs.server), "--auth-file", str(auth.path)])
-    proc.start()
-    yield proc
-    proc.stop()
 
 
 def _url(bridge: BridgeProcess) -> str:

@@ -11,7 +11,6 @@ import json
 import shutil
 import subprocess
 import sys
-from collections.abc import Iterator
 from typing import Any
 
 import pytest
@@ -52,15 +51,6 @@ const url = process.env.MODE === "query" ? `${process.env.URL}/?token=${process.
                                          : process.env.URL;
 ros.connect(url);
 """
-
-
-@pytest.fixture(scope="module")
-def tls_bridge(certs: Certs, auth: AuthFile) -> Iterator[BridgeProcess]:
-    """A bridge serving wss:// and requiring tokens."""
-    proc = BridgeProcess(args=["--certfile", str(certs.server), "--auth-file", str(auth.path)])
-    proc.start()
-    yield proc
-    proc.stop()
 
 
 def _run(argv: list[str], cwd: Any, **env: str) -> dict[str, Any]:

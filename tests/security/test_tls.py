@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import ssl
-from collections.abc import Iterator
 from typing import Any
 
 import pytest
@@ -17,15 +16,6 @@ from tests.security.support import AuthFile, Certs, wire
 def wss(bridge: BridgeProcess) -> str:
     """The wss:// URL of a TLS bridge."""
     return f"wss://127.0.0.1:{bridge.port}"
-
-
-@pytest.fixture(scope="module")
-def tls_bridge(certs: Certs, auth: AuthFile) -> Iterator[BridgeProcess]:
-    """A bridge serving wss:// and requiring tokens."""
-    proc = BridgeProcess(args=["--certfile", str(certs.server), "--auth-file", str(auth.path)])
-    proc.start()
-    yield proc
-    proc.stop()
 
 
 async def test_wss_with_a_token(tls_bridge: BridgeProcess, certs: Certs, auth: AuthFile):
