@@ -242,7 +242,8 @@ def test_interface_list(cli: Run) -> None:
     """interface list names message, service and action types; a package filter narrows it."""
     everything = cli("interface", "list", url=None).lines
     assert {"std_msgs/msg/String", "mult_msgs/srv/MultFloats"} <= set(everything)
-    assert cli("interface", "list", "mult_msgs", url=None).lines == ["mult_msgs/srv/MultFloats"]
+    assert cli("interface", "list", "mult_msgs", url=None).lines == [
+        "mult_msgs/action/IntegrateImu", "mult_msgs/srv/MultFloats"]
 
 
 def test_url_from_the_environment(

@@ -1,0 +1,293 @@
+"""What every ``roslibpy-lite`` command shares: exit codes, output, types and values,
+the connection, and the pieces of the argument parser."""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import base64
+import contextlib
+import json
+import math
+import re
+import sys
+import time
+from collections.abc import Awaitable, Callable, Coroutine
+from dataclasses import dataclass
+from typing import Any, NoReturn, TextIO
+
+from msgs.runtime import Message, UnknownTypeError, ValidationError, lookup
+
+from .._cli_format import ArgumentError, parse_values, to_yaml
+from ..client import Client, connect
+from ..exceptions import (
+    ConnectError,
+    NotAuthenticated,
+    TLSError,
+    UsageError,
+)
+
+DEFAULT_URL = "ws://127.0.0.1:9090"
+
+EXIT_OK = 0
+EXIT_ERROR = 1
+EXIT_USAGE = 2
+EXIT_CONNECT = 3
+EXIT_NOT_FOUND = 4
+EXIT_TIMEOUT = 5
+EXIT_REMOTE = 6
+EXIT_INTERRUPTED = 130
+
+EXIT_CODES: dict[int, str] = {
+    EXIT_OK: "success (also echo/hz/pub stopped with Ctrl+C)",
+    EXIT_ERROR: "unexpected error",
+    EXIT_USAGE: "bad arguments (command line, YAML/JSON values, message fields)",
+    EXIT_CONNECT: "cannot connect to the bridge, or the connection was lost",
+    EXIT_NOT_FOUND: "unknown topic, service, node or interface type",
+    EXIT_TIMEOUT: "no answer in time",
+    EXIT_REMOTE: "the service failed or the bridge refused the request",
+    EXIT_INTERRUPTED: "interrupted (Ctrl+C) during a one-shot command",
+}
+"""Exit status -> meaning (also printed by ``--help``)."""
+
+PRIMITIVES = frozenset({
+    "bool", "byte", "char", "float32", "float64", "int8", "uint8", "int16", "uint16",
+    "int32", "uint32", "int64", "uint64", "string", "wstring",
+})
+
+
+class CliError(Exception):
+    """A failure to report as one line on stderr with exit status ``code``."""
+
+    def __init__(self, code: int, message: str) -> None:
+        super().__init__(message)
+        self.code = code
+        self.message = message
+
+
+# -- output ---------------------------------------------------------------------------------------
+
+
+class Out:
+    """Where a command writes (stdout unless a test says otherwise), flushed per record."""
+
+    def __init__(self, stream: TextIO | None = None) -> None:
+        self.stream = stream
+
+    def line(self, text: str = "") -> None:
+        """Write one line and flush (so pipes see records as they come)."""
+        stream = self.stream or sys.stdout
+        stream.write(text + "\n")
+        stream.flush()
+
+    def record(self, value: Any, as_json: bool, no_arr: bool = False) -> None:
+        """One record: a JSON line, or a YAML document ended by ``---``."""
+        if as_json:
+            self.line(json.dumps(value, separators=(",", ":"), allow_nan=False,
+                                 default=_json_default))
+        else:
+            self.line(to_yaml(value, no_arr=no_arr))
+            self.line("---")
+
+
+def _json_default(value: Any) -> Any:
+    if isinstance(value, bytes | bytearray | memoryview):
+        return list(bytes(value))
+    raise TypeError(f"{type(value).__name__} is not JSON serializable")
+
+
+def nan_to_none(value: Any) -> Any:
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    if isinstance(value, dict):
+        return {k: nan_to_none(v) for k, v in value.items()}
+    if isinstance(value, list):
+        return [nan_to_none(v) for v in value]
+    return value
+
+
+# -- types and values -----------------------------------------------------------------------------
+
+
+def type_parts(type_name: str, kind: str) -> tuple[str, str]:
+    parts = type_name.split("/")
+    if len(parts) == 2 and all(parts):
+        return parts[0], parts[1]
+    if len(parts) == 3 and all(parts) and parts[1] == kind:
+        return parts[0], parts[2]
+    raise CliError(EXIT_USAGE, f"{type_name!r} is not a {kind} type: expected "
+                               f"'package/Name' or 'package/{kind}/Name'")
+
+
+def local_class(type_name: str, kind: str) -> Any:
+    """The generated class of a type, or None when this installation does not know it."""
+    pkg, name = type_parts(type_name, kind)
+    try:
+        return lookup(f"{pkg}/{kind}/{name}")
+    except UnknownTypeError:
+        return None
+
+
+def check_values(values: dict[str, Any], cls: type[Message] | None, what: str) -> dict[str, Any]:
+    """Check ``values`` against ``cls`` (when known) and return their wire form."""
+    if cls is None:
+        return values
+    try:
+        return cls.from_json(values).to_json()
+    except ValidationError as exc:
+        raise CliError(EXIT_USAGE, f"bad {what} for {cls._type}: {exc}") from None
+
+
+def cli_values(text: str | None, what: str) -> dict[str, Any]:
+    try:
+        return parse_values(text, what)
+    except ArgumentError as exc:
+        raise CliError(EXIT_USAGE, str(exc)) from None
+
+
+_ARRAY = re.compile(r"^(?:sequence<([^,>]+)(?:,\s*\d+)?>|(.+)\[\d+\])$")
+
+
+def for_display(value: Any, cls: type[Message] | None) -> Any:
+    """A message's wire form as ``ros2 topic echo`` shows it, when its class is known here.
+
+    Floats that the wire carries as null (NaN) become NaN again, and ``uint8``/``char``
+    arrays (base64 on the wire) become lists of integers. Unknown types pass unchanged.
+    """
+    if cls is None or not isinstance(value, dict):
+        return value
+    shown = dict(value)
+    for name, type_ in cls._fields_and_types.items():
+        if name in shown:
+            with contextlib.suppress(Exception):  # display only: never fail on odd data
+                shown[name] = _show_field(shown[name], type_)
+    return shown
+
+
+def _show_field(value: Any, type_: str) -> Any:
+    m = _ARRAY.match(type_)
+    base = (m[1] or m[2]).strip() if m else type_
+    if base in ("float", "double"):
+        if m and isinstance(value, list):
+            return [math.nan if v is None else v for v in value]
+        return math.nan if value is None else value
+    if m and base in ("uint8", "char") and isinstance(value, str):
+        return list(base64.b64decode(value, validate=True))
+    if "/" in base:
+        pkg, _, name = base.partition("/")
+        nested = lookup(f"{pkg}/msg/{name.rpartition('/')[2]}")
+        if isinstance(nested, type) and issubclass(nested, Message):
+            if m and isinstance(value, list):
+                return [for_display(v, nested) for v in value]
+            return for_display(value, nested)
+    return value
+
+
+# -- the connection ------------------------------------------------------------------------------
+
+
+class Session:
+    """A connected client plus the rosapi helpers the commands share."""
+
+    def __init__(self, ros: Client, timeout: float) -> None:
+        self.ros = ros
+        self.timeout = timeout
+
+    async def rosapi(self, name: str, args: dict[str, Any] | None = None) -> dict[str, Any]:
+        """Call ``/rosapi/<name>`` and return its response."""
+        return await self.ros.call_service(f"/rosapi/{name}", f"rosapi_msgs/srv/{_rosapi(name)}",
+                                           args or {}, timeout=self.timeout)
+
+    async def topic_type(self, topic: str, wait: float) -> str:
+        """The topic's type from the ROS graph; polls up to ``wait`` s (discovery takes time)."""
+        deadline = time.monotonic() + wait
+        while True:
+            found = str((await self.rosapi("topic_type", {"topic": topic})).get("type", ""))
+            if found:
+                return found
+            if time.monotonic() >= deadline:
+                raise CliError(EXIT_NOT_FOUND,
+                               f"unknown topic {topic} (not in the ROS graph; give its TYPE "
+                               "to wait for it)")
+            await asyncio.sleep(0.1)
+
+    async def service_server(self, service: str, wait: float) -> str:
+        """The node serving ``service``; polls up to ``wait`` s (discovery takes time).
+
+        Asks ``/rosapi/service_node``: a service that only has clients (the
+        graph lists those too) does not count.
+        """
+        deadline = time.monotonic() + wait
+        while True:
+            node = str((await self.rosapi("service_node", {"service": service})).get("node", ""))
+            if node:
+                return node
+            if time.monotonic() >= deadline:
+                raise CliError(EXIT_NOT_FOUND, f"unknown service {service} (no node serves it)")
+            await asyncio.sleep(0.1)
+
+
+def _rosapi(name: str) -> str:
+    special = {"get_time": "GetTime", "get_ros_version": "GetROSVersion",
+               "action_servers": "GetActionServers"}
+    return special.get(name, "".join(p.capitalize() for p in name.split("_")))
+
+
+Command = Callable[[argparse.Namespace, Out], Coroutine[Any, Any, int]]
+
+
+async def with_session(args: argparse.Namespace, body: Callable[[Session], Awaitable[int]]) -> int:
+    secure = args.url.startswith("wss://")
+    try:
+        ros = await connect(args.url, reconnect=False, open_timeout=args.timeout,
+                            token=args.token, ssl=args.cafile if secure else None)
+    except NotAuthenticated as exc:
+        raise CliError(EXIT_CONNECT, f"{exc} (set --token or $ROSLIBPY_LITE_TOKEN)") from None
+    except TLSError as exc:
+        raise CliError(EXIT_CONNECT, f"{exc} (--cafile or $ROSLIBPY_LITE_CAFILE)") from None
+    except ConnectError as exc:
+        raise CliError(EXIT_CONNECT, f"{exc} (is the bridge running? set --url or "
+                                     "$ROSLIBPY_LITE_URL)") from None
+    except UsageError as exc:
+        raise CliError(EXIT_USAGE, str(exc)) from None
+    try:
+        return await body(Session(ros, args.timeout))
+    finally:
+        await ros.close()
+
+
+async def until(duration: float | None, work: Awaitable[None]) -> None:
+    """Run ``work`` until it ends or ``duration`` seconds pass (None: no limit)."""
+    with contextlib.suppress(TimeoutError):
+        async with asyncio.timeout(duration):
+            await work
+
+
+def lost(s: Session, what: str) -> CliError:
+    return CliError(EXIT_CONNECT, f"{what}: the connection to {s.ros.url} was lost")
+
+
+# -- the parser's pieces ---------------------------------------------------------------------------
+
+
+class Parser(argparse.ArgumentParser):
+    def error(self, message: str) -> NoReturn:
+        raise CliError(EXIT_USAGE, f"{message} (see '{self.prog} --help')")
+
+
+@dataclass
+class Kit:
+    """What a noun module needs to add its commands to the parser."""
+
+    common: argparse.ArgumentParser
+    fmt: argparse.ArgumentParser
+    wait: argparse.ArgumentParser
+    swait: argparse.ArgumentParser
+
+    def leaf(self, sub: Any, name: str, fn: Command, help_: str,
+             *parents: argparse.ArgumentParser) -> argparse.ArgumentParser:
+        """Add the command ``name`` running ``fn`` to the subparsers ``sub``."""
+        p: argparse.ArgumentParser = sub.add_parser(
+            name, help=help_, description=help_, parents=[self.common, *parents])
+        p.set_defaults(func=fn)
+        return p

@@ -1,0 +1,61 @@
+"""``roslibpy-lite node list|info``."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from typing import Any
+
+from .common import (
+    EXIT_NOT_FOUND,
+    EXIT_OK,
+    CliError,
+    Kit,
+    Out,
+    Parser,
+    Session,
+    with_session,
+)
+
+
+async def cmd_node_list(args: argparse.Namespace, out: Out) -> int:
+    """``node list``."""
+    async def body(s: Session) -> int:
+        names = sorted((await s.rosapi("nodes")).get("nodes", []))
+        if args.json:
+            out.line(json.dumps(names))
+        for name in names if not args.json else ():
+            out.line(name)
+        return EXIT_OK
+    return await with_session(args, body)
+
+
+async def cmd_node_info(args: argparse.Namespace, out: Out) -> int:
+    """``node info NODE``: what a node publishes, subscribes to and serves."""
+    async def body(s: Session) -> int:
+        name = args.node if args.node.startswith("/") else "/" + args.node
+        if name not in (await s.rosapi("nodes")).get("nodes", []):
+            raise CliError(EXIT_NOT_FOUND, f"unknown node {name}")
+        details = await s.rosapi("node_details", {"node": name})
+        if args.json:
+            out.line(json.dumps({"name": name, **details}))
+            return EXIT_OK
+        out.line(name)
+        for title, key in (("Subscribers", "subscribing"), ("Publishers", "publishing"),
+                           ("Service Servers", "services")):
+            out.line(f"  {title}:")
+            for item in details.get(key, []):
+                out.line(f"    {item}")
+        return EXIT_OK
+    return await with_session(args, body)
+
+
+def add_parsers(groups: Any, kit: Kit) -> None:
+    """Add ``node`` and its commands."""
+    node = groups.add_parser("node", help="nodes: list, info")
+    nsub = node.add_subparsers(dest="command", metavar="{list,info}", parser_class=Parser)
+    nsub.required = True
+    kit.leaf(nsub, "list", cmd_node_list, "list the nodes", kit.fmt)
+    p = kit.leaf(nsub, "info", cmd_node_info, "what a node publishes, subscribes to and serves",
+                 kit.fmt)
+    p.add_argument("node")

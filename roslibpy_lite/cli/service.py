@@ -1,0 +1,106 @@
+"""``roslibpy-lite service list|type|call``."""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import json
+from typing import Any
+
+from msgs.runtime import Service
+
+from .._cli_format import to_yaml
+from ..exceptions import (
+    ServiceError,
+)
+from .common import (
+    EXIT_NOT_FOUND,
+    EXIT_OK,
+    EXIT_REMOTE,
+    EXIT_USAGE,
+    CliError,
+    Kit,
+    Out,
+    Parser,
+    Session,
+    check_values,
+    cli_values,
+    local_class,
+    type_parts,
+    with_session,
+)
+
+
+async def cmd_service_list(args: argparse.Namespace, out: Out) -> int:
+    """``service list [-t]``."""
+    async def body(s: Session) -> int:
+        names = sorted((await s.rosapi("services")).get("services", []))
+        types: list[str] = []
+        if args.show_types or args.json:
+            replies = await asyncio.gather(*(s.rosapi("service_type", {"service": n})
+                                             for n in names))
+            types = [str(r.get("type", "")) for r in replies]
+        if args.json:
+            out.line(json.dumps([{"name": n, "type": t} for n, t in zip(names, types,
+                                                                         strict=True)]))
+            return EXIT_OK
+        for i, name in enumerate(names):
+            out.line(f"{name} [{types[i]}]" if args.show_types else name)
+        return EXIT_OK
+    return await with_session(args, body)
+
+
+async def cmd_service_type(args: argparse.Namespace, out: Out) -> int:
+    """``service type SERVICE``."""
+    async def body(s: Session) -> int:
+        await s.service_server(args.service, args.wait)
+        found = str((await s.rosapi("service_type", {"service": args.service})).get("type", ""))
+        if not found:
+            raise CliError(EXIT_NOT_FOUND, f"unknown service {args.service}")
+        out.line(found)
+        return EXIT_OK
+    return await with_session(args, body)
+
+
+async def cmd_service_call(args: argparse.Namespace, out: Out) -> int:
+    """``service call SERVICE TYPE [VALUES]``: print the response."""
+    type_parts(args.type, "srv")
+    srv = local_class(args.type, "srv")
+    request_cls = srv.Request if isinstance(srv, type) and issubclass(srv, Service) else None
+    values = check_values(cli_values(args.values, "VALUES"), request_cls, "VALUES")
+    if args.call_timeout is not None and args.call_timeout <= 0:
+        raise CliError(EXIT_USAGE, f"--call-timeout must be > 0, got {args.call_timeout}")
+
+    async def body(s: Session) -> int:
+        await s.service_server(args.service, args.wait)
+        try:
+            response = await s.ros.call_service(args.service, args.type, values,
+                                                timeout=args.call_timeout)
+        except ServiceError as exc:
+            raise CliError(EXIT_REMOTE, str(exc)) from None
+        if args.json:
+            out.line(json.dumps(response, separators=(",", ":")))
+        else:
+            out.line(to_yaml(response))
+        return EXIT_OK
+    return await with_session(args, body)
+
+
+def add_parsers(groups: Any, kit: Kit) -> None:
+    """Add ``service`` and its commands."""
+    service = groups.add_parser("service", help="services: list, type, call")
+    ssub = service.add_subparsers(dest="command", metavar="{list,type,call}",
+                                  parser_class=Parser)
+    ssub.required = True
+    p = kit.leaf(ssub, "list", cmd_service_list, "list the services", kit.fmt)
+    p.add_argument("-t", "--show-types", action="store_true", help="show each service's type")
+    p = kit.leaf(ssub, "type", cmd_service_type, "print a service's type", kit.swait)
+    p.add_argument("service")
+    p = kit.leaf(ssub, "call", cmd_service_call, "call a service and print the response", kit.fmt,
+             kit.swait)
+    p.add_argument("service")
+    p.add_argument("type", help="service type, e.g. mult_msgs/srv/MultFloats")
+    p.add_argument("values", nargs="?", default=None,
+                   help="the request in YAML or JSON, e.g. \"{x: 2.5, y: 4.0}\" (default: {})")
+    p.add_argument("--call-timeout", type=float, default=10.0,
+                   help="seconds to wait for the response (default 10)")
