@@ -118,8 +118,6 @@ async def cmd_action_send_goal(args: argparse.Namespace, out: Out) -> int:
         raise CliError(EXIT_USAGE, f"--cancel-wait must be > 0, got {args.cancel_wait}")
 
     async def body(s: Session) -> int:
-        if not args.json:
-            out.line("Waiting for an action server to become available...")
         await _action_type(s, args.action, args.wait)
         if not args.json:
             out.line("Sending goal:")

@@ -115,7 +115,8 @@ def type_parts(type_name: str, kind: str) -> tuple[str, str]:
         return parts[0], parts[1]
     if len(parts) == 3 and all(parts) and parts[1] == kind:
         return parts[0], parts[2]
-    raise CliError(EXIT_USAGE, f"{type_name!r} is not a {kind} type: expected "
+    article = "an" if kind == "action" else "a"
+    raise CliError(EXIT_USAGE, f"{type_name!r} is not {article} {kind} type: expected "
                                f"'package/Name' or 'package/{kind}/Name'")
 
 
