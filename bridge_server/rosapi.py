@@ -53,6 +53,7 @@ import re
 from collections.abc import Awaitable, Callable, Mapping
 from typing import TYPE_CHECKING, Any
 
+from .names import InvalidNameError, check_name
 from .types import BridgeError, canonical_name
 
 if TYPE_CHECKING:
@@ -545,6 +546,10 @@ def _param_name(args: Mapping[str, Any]) -> tuple[str, str, str]:
     if not sep or not node or not param:
         raise RosapiError(f"args.name: expected 'node_name:param_name', got {full!r}")
     node = node if node.startswith("/") else "/" + node
+    try:  # before rclpy sees it: a bad node name is the caller's mistake, not ours
+        check_name(node, "node")
+    except InvalidNameError as exc:
+        raise RosapiError(f"args.name: {exc}") from None
     return node, param, f"{node}:{param}"
 
 

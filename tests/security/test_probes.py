@@ -112,3 +112,15 @@ async def test_fragments_dropped_for_room_are_reported(ws_connect: Any):
     status = await ws.expect(op="status", id="f0")
     assert status["level"] == "error"
     assert "dropped with 1 of 2 pieces" in status["msg"] and "16" in status["msg"]
+
+
+@pytest.mark.parametrize("name", ["/bad node:x", "/n\ud800:x", "//n:x"])
+async def test_invalid_node_in_a_parameter_name(ws_connect: Any, bridge: BridgeProcess, name: str):
+    """A bad node in a rosapi parameter name fails the call naming it, with no traceback."""
+    ws = await ws_connect()
+    start = len(bridge.lines)
+    await ws.send_raw(json.dumps({"op": "call_service", "service": "/rosapi/get_param",
+                                  "args": {"name": name}, "id": "p"}))
+    reply = await ws.expect(op="service_response", id="p")
+    assert reply["result"] is False and "invalid node name" in reply["values"]
+    await _no_traceback_since(bridge, start, ws)
