@@ -118,3 +118,48 @@ async def test_refused_connections_are_counted_by_reason(make_bridge: Any) -> No
     m = await scrape(b.port)
     assert value(m, P + "connections_refused_total", reason="origin") == 1
     assert value(m, P + "connections_total") == 0
+
+
+async def test_queue_drops_are_counted_per_client_and_topic(
+    make_bridge: Any, ros_node: Any, topic: str
+) -> None:
+    """A client that stops reading drops messages: counted per topic and per client, and shown
+    on the status data; a reading client on the same topic drops nothing."""
+    import asyncio
+
+    from std_msgs.msg import String
+
+    from tests.load.support import StalledClient, qos
+    from tests.ops.support import status
+
+    b: BridgeProcess = make_bridge()
+    total, pad = 60, "x" * 200_000  # 12 MB: far beyond the socket buffers
+    stalled = await asyncio.to_thread(StalledClient, b.port)
+    witness = await open_wire(b.url)
+    try:
+        stalled.send({"op": "subscribe", "topic": topic, "type": "std_msgs/msg/String",
+                      "queue_length": 2})
+        await asyncio.to_thread(stalled.sync)  # subscribed; from now on it never reads
+        await witness.send({"op": "subscribe", "topic": topic, "type": "std_msgs/msg/String",
+                            "queue_length": total})
+        await witness.send({"op": "call_service", "service": "/rosapi/topics", "id": "sync"})
+        await witness.expect(op="service_response", id="sync")
+        pub = ros_node.create_publisher(String, topic, qos(depth=total))
+        await wait_subscribers(pub)
+        for i in range(total):
+            pub.publish(String(data=f"{i}:{pad}"))
+        await witness.expect(lambda op: op["msg"]["data"].startswith(f"{total - 1}:"),
+                             op="publish", timeout=20)
+        m = await scrape(b.port)
+        s = await status(b.port)
+    finally:
+        stalled.close()
+        await witness.close()
+    dropped = value(m, P + "queue_drops_total", topic=topic)
+    assert dropped > 0
+    assert value(m, P + "client_queue_drops_total", client="0-1", topic=topic) == dropped
+    assert value(m, P + "client_queue_drops_total", client="0-2", topic=topic) == 0
+    assert value(m, P + "client_queued_messages", client="0-1") <= 2
+    by_id = {c["id"]: c for c in s["clients"]}
+    assert by_id["0-1"]["dropped"] == dropped and by_id["0-2"]["dropped"] == 0
+    assert s["topics"][topic]["drops"] == dropped
