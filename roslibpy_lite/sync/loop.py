@@ -1,0 +1,148 @@
+"""The loop thread under a blocking client: an asyncio loop on a thread of its own.
+
+:class:`LoopThread` hands coroutines to its loop and blocks the calling
+thread for their results (cancelling them if the wait is interrupted), and
+owns the worker pool that runs blocking service handlers.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import concurrent.futures
+import inspect
+import threading
+from collections.abc import Callable, Coroutine
+from typing import Any, TypeVar
+
+from ..exceptions import ConnectionClosed, UsageError
+
+__all__ = ["HANDLER_THREADS", "LoopThread"]
+
+T = TypeVar("T")
+
+HANDLER_THREADS = 8
+"""Service requests a blocking client handles at once (one worker thread each)."""
+
+
+async def _tracked(coro: Coroutine[Any, Any, T], done: threading.Event) -> T:
+    try:
+        return await coro
+    finally:
+        done.set()
+
+
+async def _call_async(fn: Callable[..., Any], args: tuple[Any, ...], kwargs: dict[str, Any]) -> Any:
+    result = fn(*args, **kwargs)
+    if inspect.isawaitable(result):
+        result = await result
+    return result
+
+
+class LoopThread:
+    """An asyncio event loop on a daemon thread of its own, plus a worker pool.
+
+    :meth:`run` hands a coroutine to the loop and blocks the calling thread
+    until it finishes; if the wait is interrupted (Ctrl+C), the coroutine is
+    cancelled on the loop before the interruption propagates.
+    """
+
+    def __init__(self, name: str) -> None:
+        self.name = name
+        self.loop = asyncio.new_event_loop()
+        self.handlers = concurrent.futures.ThreadPoolExecutor(
+            max_workers=HANDLER_THREADS, thread_name_prefix=f"{name} handler"
+        )
+        self.closed = False
+        self._stopping = False
+        self._thread = threading.Thread(target=self._main, name=name, daemon=True)
+        self._thread.start()
+
+    def _main(self) -> None:
+        asyncio.set_event_loop(self.loop)
+        self.loop.run_forever()
+
+    def in_loop(self) -> bool:
+        """True when called from the loop thread itself (from a callback)."""
+        return threading.get_ident() == self._thread.ident
+
+    def run(self, coro: Coroutine[Any, Any, T], what: str) -> T:
+        """Run ``coro`` on the loop and return its result (``what`` names it in errors).
+
+        Raises:
+            UsageError: called from the loop thread (it would wait for ever).
+            ConnectionClosed: the loop was stopped.
+            KeyboardInterrupt: the wait was interrupted; ``coro`` was cancelled.
+        """
+        if self.in_loop():
+            coro.close()
+            raise UsageError(
+                f"{what}: a blocking call from a callback (on the client's loop thread) "
+                "would wait for ever; publish from callbacks, or hand the work to another thread"
+            )
+        if self.closed:
+            coro.close()
+            raise ConnectionClosed(f"{what}: the client is closed")
+        done = threading.Event()
+        future = asyncio.run_coroutine_threadsafe(_tracked(coro, done), self.loop)
+        return self.wait(future, what, done)
+
+    def wait(
+        self, future: concurrent.futures.Future[T], what: str,
+        done: threading.Event | None = None,
+    ) -> T:
+        """The result of ``future`` (running on the loop); cancels it if the wait is interrupted.
+
+        ``done`` is set once the cancelled work has really ended there.
+        """
+        try:
+            return future.result()
+        except concurrent.futures.CancelledError:
+            if self._stopping:  # cancelled by close(), not by this caller
+                raise ConnectionClosed(f"{what}: the client was closed") from None
+            raise
+        except BaseException:
+            if not future.done():  # interrupted while waiting (Ctrl+C): cancel it there
+                future.cancel()
+                if done is not None:
+                    done.wait(5.0)
+            raise
+
+    def call(self, what: str, fn: Callable[..., Any], *args: Any, **kwargs: Any) -> Any:
+        """Run ``fn(*args, **kwargs)`` on the loop (awaiting its result if it is awaitable).
+
+        ``what`` names the operation in errors.
+        """
+        return self.run(_call_async(fn, args, kwargs), what)
+
+    def off_loop(self, fn: Callable[[Any], T]) -> Callable[[Any], Coroutine[Any, Any, T]]:
+        """An ``async`` function that runs the plain ``fn(arg)`` on the worker pool."""
+        pool, loop = self.handlers, self.loop
+
+        async def run(arg: Any) -> T:
+            return await loop.run_in_executor(pool, fn, arg)
+
+        return run
+
+    def stop(self) -> None:
+        """Cancel what is left on the loop, stop the worker pool and the thread. Idempotent."""
+        if self.closed:
+            return
+        if self.in_loop():
+            raise UsageError("close: cannot close the client from one of its own callbacks")
+        self._stopping = True
+        self.run(self._finish(), "close")
+        self.closed = True
+        # From a handler's own thread, joining the pool would wait for itself.
+        self.handlers.shutdown(wait=not threading.current_thread().name.startswith(
+            f"{self.name} handler"))
+        self.loop.call_soon_threadsafe(self.loop.stop)
+        self._thread.join()
+        self.loop.close()
+
+    async def _finish(self) -> None:
+        tasks = [t for t in asyncio.all_tasks() if t is not asyncio.current_task()]
+        for task in tasks:
+            task.cancel()
+        await asyncio.gather(*tasks, return_exceptions=True)
+        await self.loop.shutdown_asyncgens()
+        await self.loop.shutdown_default_executor()  # getaddrinfo's threads
