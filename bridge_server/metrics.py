@@ -49,7 +49,8 @@ Every name-valued label (topic, service, action, reason, kind) admits at most
 the process; later values are folded into ``"other"``, so a client flooding
 new topic names cannot grow the series without limit. ``client`` labels show
 at most :data:`CLIENT_LIMIT` connected clients (lowest ids); the rest fold
-into ``"other"``.
+into ``"other"``. With ``--workers`` each worker keeps its own admission list
+for the scrapes it answers, so past the limit two scrapes may fold differently.
 
 Actions: the action ops call :meth:`Recorder.action_goal` (the hook is here
 and exported even while no action exists).

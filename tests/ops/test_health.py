@@ -25,8 +25,9 @@ async def test_page_and_assets_are_served_by_the_bridge(bridge: BridgeProcess) -
     assert 'name="viewport"' in text
     assert "http://" not in text and "https://" not in text  # nothing external
     for asset, ctype in (("/static/app.js", "text/javascript"), ("/static/style.css", "text/css")):
-        code, headers, _ = await aget(f"http://127.0.0.1:{bridge.port}{asset}")
+        code, headers, body = await aget(f"http://127.0.0.1:{bridge.port}{asset}")
         assert code == 200 and headers["content-type"].startswith(ctype), asset
+        assert b"http://" not in body and b"https://" not in body and b"@import" not in body
     code, _, _ = await aget(f"http://127.0.0.1:{bridge.port}/static/../server.py")
     assert code != 200
 
