@@ -38,9 +38,11 @@ Service calls
 -------------
 Each ``call_service`` runs as its own task (at most ``max_calls_in_flight``,
 1024, per connection; more fail at once), with ``timeout`` seconds (default
-5). A service that is not in the ROS graph within ``discovery_wait`` (2 s)
-fails with "does not exist", with or without a type in the call; one the graph
-lists is waited for (its server to match) up to the call's timeout.
+5). Without a type, a service that is not in the ROS graph within
+``discovery_wait`` (2 s) fails with "does not exist"; with a type, one the graph
+still lists no server of after twice that fails so too (a server started just
+before the call can take ~3 s to appear on a loaded machine). A listed service
+is waited for (its server to match) up to the call's timeout.
 ``fragment_size`` on a call splits its ``service_response``.
 
 Client-served services
@@ -801,15 +803,17 @@ class Session:
             raise _CallFailed(f"{service}: bad request: {exc}") from None
         client = ros.client_for(service, srv_cls)
         if not client.service_is_ready():
-            # Wait for a server to be discovered and matched: at most discovery_wait while
-            # the graph lists no server at all, at most the call's timeout once it does.
-            unlisted_by = loop.time() + self.config.discovery_wait
+            # Wait for a server to be discovered and matched: while the graph lists no
+            # server, at most twice discovery_wait (a server that was just started can take
+            # ~3 s to show on a loaded machine); once it does, up to the call's timeout.
+            unlisted_wait = 2 * self.config.discovery_wait
+            unlisted_by = loop.time() + unlisted_wait
             delay = 0.002
             while not _ready(client):
                 if loop.time() >= unlisted_by and ros.server_count(service) == 0:
                     raise _CallFailed(
                         f"service {service} does not exist (not in the ROS graph after "
-                        f"{self.config.discovery_wait:g} s)"
+                        f"{unlisted_wait:g} s)"
                     )
                 if _ready(client) is None:  # another call dropped the cached client
                     client = ros.client_for(service, srv_cls)

@@ -437,13 +437,22 @@ def _codec(cls: type[Message]) -> _Codec:
 
 
 class Message:
-    """Base of every generated message class (see the module docstring for the contract)."""
+    """Base of every generated message class (see the module docstring for the contract).
+
+    ``repr()`` stays short for large fields: long byte strings, lists and texts are
+    summarised (``data=<921600 bytes>``), so logging or printing an image is safe.
+    """
 
     __slots__ = ()
 
     _type: ClassVar[str]
     _definition: ClassVar[str]
     _fields_and_types: ClassVar[dict[str, str]]
+
+    def __init_subclass__(cls, **kwargs: Any) -> None:
+        super().__init_subclass__(**kwargs)
+        if "__repr__" not in cls.__dict__:  # set before @dataclass, which then keeps it
+            cls.__repr__ = _message_repr  # type: ignore[method-assign, assignment]
 
     @classmethod
     def get_fields_and_field_types(cls) -> dict[str, str]:
@@ -492,6 +501,31 @@ class Message:
                 conv(getattr(self, name))
             except ValidationError as exc:
                 raise exc._under(name) from None
+
+
+_SHORT_ITEMS = 16
+_SHORT_BYTES = 32
+_SHORT_TEXT = 200
+
+
+def _short_repr(value: Any) -> str:
+    """``repr(value)``, summarised when it is a long byte string, list or text."""
+    if isinstance(value, bytes | bytearray | memoryview) and len(value) > _SHORT_BYTES:
+        return f"<{len(value)} bytes>"
+    if isinstance(value, list | tuple | array.array) and len(value) > _SHORT_ITEMS:
+        head = ", ".join(_short_repr(v) for v in value[:3])
+        return f"[{head}, ... <{len(value)} items>]"
+    if isinstance(value, list):
+        return "[" + ", ".join(_short_repr(v) for v in value) + "]"
+    if isinstance(value, str) and len(value) > _SHORT_TEXT:
+        return f"{value[:40]!r}... <{len(value)} chars>"
+    return repr(value)
+
+
+def _message_repr(self: Message) -> str:
+    fields = ", ".join(f"{name}={_short_repr(getattr(self, name))}"
+                       for name in self._fields_and_types)
+    return f"{type(self).__name__}({fields})"
 
 
 class Service:
