@@ -80,6 +80,17 @@ def _str_field(args: Mapping[str, Any], name: str) -> str:
     return value
 
 
+def _topic_field(args: Mapping[str, Any]) -> str:
+    """``args.topic`` as a full, valid topic name (relative names are made absolute)."""
+    topic = _str_field(args, "topic")
+    topic = topic if topic.startswith("/") else "/" + topic
+    try:
+        check_name(topic)
+    except InvalidNameError as exc:
+        raise RosapiError(f"args.topic: {exc}") from None
+    return topic
+
+
 def _full(name: str, namespace: str) -> str:
     ns = namespace.rstrip("/")
     return f"{ns}/{name}"
@@ -211,13 +222,13 @@ def node_details(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, Any]:
 
 def publishers(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, Any]:
     """Nodes publishing on a topic."""
-    infos = bridge.ros.node.get_publishers_info_by_topic(_str_field(args, "topic"))
+    infos = bridge.ros.node.get_publishers_info_by_topic(_topic_field(args))
     return {"publishers": _endpoint_nodes(infos)}
 
 
 def subscribers(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, Any]:
     """Nodes subscribed to a topic."""
-    infos = bridge.ros.node.get_subscriptions_info_by_topic(_str_field(args, "topic"))
+    infos = bridge.ros.node.get_subscriptions_info_by_topic(_topic_field(args))
     return {"subscribers": _endpoint_nodes(infos)}
 
 
@@ -626,7 +637,7 @@ async def _get_values(bridge: Bridge, node: str, names: list[str]) -> list[Any]:
             f"{node}/get_parameters", GetParameters, GetParameters.Request(names=names),
             PARAM_TIMEOUT,
         )
-    except TimeoutError:
+    except (TimeoutError, LookupError):
         raise RosapiError(f"node {node} does not answer parameter requests") from None
     return list(response.values)
 
@@ -640,7 +651,7 @@ async def _set_value(bridge: Bridge, node: str, param: str, value: Any) -> tuple
         response = await bridge.ros.call_when_ready(
             f"{node}/set_parameters", SetParameters, request, PARAM_TIMEOUT
         )
-    except TimeoutError:
+    except (TimeoutError, LookupError):
         raise RosapiError(f"node {node} does not answer parameter requests") from None
     result = response.results[0]
     return bool(result.successful), str(result.reason)

@@ -124,3 +124,25 @@ async def test_invalid_node_in_a_parameter_name(ws_connect: Any, bridge: BridgeP
     reply = await ws.expect(op="service_response", id="p")
     assert reply["result"] is False and "invalid node name" in reply["values"]
     await _no_traceback_since(bridge, start, ws)
+
+
+@pytest.mark.parametrize(
+    ("service", "args", "expected"),
+    [
+        ("publishers", {"topic": "/bad name"}, "invalid topic name"),
+        ("subscribers", {"topic": "//x"}, "invalid topic name"),
+        ("subscribers", {"topic": "\ud800"}, "invalid topic name"),
+        ("has_param", {"name": "/no_such_node_here:x"}, "does not answer"),
+    ],
+)
+async def test_rosapi_lookups_with_bad_names(
+    ws_connect: Any, bridge: BridgeProcess, service: str, args: dict[str, Any], expected: str
+):
+    """rosapi lookups with invalid or unknown names fail with a reason, no traceback."""
+    ws = await ws_connect()
+    start = len(bridge.lines)
+    await ws.send_raw(json.dumps({"op": "call_service", "service": f"/rosapi/{service}",
+                                  "args": args, "id": "r"}))
+    reply = await ws.expect(op="service_response", id="r")
+    assert reply["result"] is False and expected in reply["values"]
+    await _no_traceback_since(bridge, start, ws)
