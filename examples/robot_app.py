@@ -5,7 +5,11 @@
 - an **IMU summer** subscribed to ``sensor_msgs/msg/Imu`` on ``/imu``, adding
   up ``angular_velocity.x`` and printing each value and the running sum;
 - a **service** ``/mult_floats`` (``mult_msgs/srv/MultFloats``) answering
-  ``x * y``.
+  ``x * y``;
+- an **action** ``/integrate_imu`` (``mult_msgs/action/IntegrateImu``):
+  integrates the IMU's angular velocity over the goal's ``seconds``, with
+  feedback (the running integral and the time so far) after each IMU sample,
+  and the total and the number of samples as the result.
 
 Run it against a bridge::
 
@@ -14,8 +18,13 @@ Run it against a bridge::
 Ctrl+C (or SIGTERM) stops it cleanly with exit status 0.
 
 Each part takes the :class:`~roslibpy_lite.api.Ros` it runs on, so unit
-tests hand it a :class:`~roslibpy_lite.mock.MockRos`; the counter also takes
-a :class:`Clock`, so a test can play a second in no time.
+tests hand it a :class:`~roslibpy_lite.mock.MockRos`; the counter and the
+integrator also take a :class:`Clock`, so a test can play a second in no time.
+
+Send the action a goal from the shell (``--feedback`` prints the running sum)::
+
+    roslibpy-lite action send_goal /integrate_imu mult_msgs/action/IntegrateImu \
+        "{seconds: 2.0}" --feedback
 """
 
 from __future__ import annotations
@@ -23,6 +32,7 @@ from __future__ import annotations
 import argparse
 import asyncio
 import contextlib
+import math
 import os
 import signal
 import sys
@@ -30,23 +40,29 @@ from collections.abc import Callable, Sequence
 from typing import Protocol
 
 import roslibpy_lite
+from msgs.geometry_msgs.msg import Vector3
+from msgs.mult_msgs.action import IntegrateImu, IntegrateImu_Goal, IntegrateImu_Result
 from msgs.mult_msgs.srv import MultFloats, MultFloats_Request, MultFloats_Response
 from msgs.sensor_msgs.msg import Imu
 from msgs.std_msgs.msg import Int16
+from roslibpy_lite.actions import GoalContext
 from roslibpy_lite.api import Ros
 
 __all__ = [
     "COUNTER_TOPIC",
     "DEFAULT_URL",
     "IMU_TOPIC",
+    "INTEGRATE_ACTION",
     "MULT_SERVICE",
     "Clock",
+    "ImuIntegrator",
     "ImuSummer",
     "LoopClock",
     "main",
     "mult_floats",
     "run_app",
     "run_counter",
+    "serve_integrate_imu",
     "serve_mult_floats",
 ]
 
@@ -54,6 +70,7 @@ DEFAULT_URL = "ws://127.0.0.1:9090"
 COUNTER_TOPIC = "/example_counter"
 IMU_TOPIC = "/imu"
 MULT_SERVICE = "/mult_floats"
+INTEGRATE_ACTION = "/integrate_imu"
 
 Output = Callable[[str], None]
 
@@ -197,6 +214,116 @@ async def serve_mult_floats(
         await asyncio.Event().wait()
 
 
+# -- the action ---------------------------------------------------------------------------------
+
+
+class _Window:
+    """One goal's integration: the running sums since ``start``."""
+
+    def __init__(self, ctx: GoalContext, start: float) -> None:
+        self.ctx = ctx
+        self.start = start
+        self.last = start
+        self.sum = [0.0, 0.0, 0.0]
+        self.samples = 0
+        self.wake = asyncio.Event()
+
+    def add(self, msg: Imu, now: float) -> None:
+        w = msg.angular_velocity
+        dt = now - self.last
+        self.last = now
+        for i, value in enumerate((w.x, w.y, w.z)):
+            self.sum[i] += value * dt
+        self.samples += 1
+        self.ctx.publish_feedback(IntegrateImu.Feedback(sum=self.vector(),
+                                                        elapsed=now - self.start))
+        self.wake.set()
+
+    def vector(self) -> Vector3:
+        return Vector3(x=self.sum[0], y=self.sum[1], z=self.sum[2])
+
+
+class ImuIntegrator:
+    """Integrates the IMU's angular velocity for the goals of ``/integrate_imu``.
+
+    Feed it every Imu message (:meth:`add`); :meth:`integrate` is the action
+    handler. Each sample adds ``angular_velocity * dt`` (``dt``: the time since
+    the previous sample of the goal, or since its start), and sends feedback.
+    A goal ends after ``seconds`` on the clock, or early when canceled (its
+    partial result then ends it CANCELED). Several goals may run at once.
+    """
+
+    def __init__(self, clock: Clock | None = None, out: Output | None = None) -> None:
+        self._clock = clock or LoopClock()
+        self._out = out
+        self._windows: list[_Window] = []
+
+    @property
+    def active(self) -> int:
+        """Goals being integrated now."""
+        return len(self._windows)
+
+    def add(self, msg: Imu) -> None:
+        """One IMU sample, for every goal running now."""
+        now = self._clock.time()
+        for window in list(self._windows):
+            window.add(msg, now)
+
+    async def integrate(self, goal: IntegrateImu_Goal, ctx: GoalContext) -> IntegrateImu_Result:
+        """The action handler: integrate for ``goal.seconds``; the total and the sample count."""
+        if not (math.isfinite(goal.seconds) and goal.seconds >= 0):
+            raise ValueError(f"seconds must be a finite number >= 0, got {goal.seconds}")
+        clock = self._clock
+        window = _Window(ctx, clock.time())
+        end = window.start + goal.seconds
+        self._windows.append(window)
+        if self._out is not None:
+            self._out(f"[action] {ctx.action}: integrating for {goal.seconds} s")
+        try:
+            while not ctx.cancel_requested:
+                remaining = end - clock.time()
+                if remaining <= 0:
+                    break
+                window.wake.clear()
+                waits = [asyncio.ensure_future(w) for w in
+                         (clock.sleep(remaining), window.wake.wait(), ctx.wait_cancel())]
+                try:
+                    await asyncio.wait(waits, return_when=asyncio.FIRST_COMPLETED)
+                finally:
+                    for w in waits:
+                        w.cancel()
+        finally:
+            self._windows.remove(window)
+        result = IntegrateImu_Result(total=window.vector(), samples=window.samples)
+        if self._out is not None:
+            t = result.total
+            ended = "canceled" if ctx.cancel_requested else "done"
+            self._out(f"[action] {ctx.action}: {ended}: total=({t.x:+.4f}, {t.y:+.4f}, "
+                      f"{t.z:+.4f}) samples={result.samples}")
+        return result
+
+
+async def serve_integrate_imu(
+    ros: Ros,
+    integrator: ImuIntegrator,
+    *,
+    action: str = INTEGRATE_ACTION,
+    topic: str = IMU_TOPIC,
+    out: Output | None = None,
+    ready: asyncio.Event | None = None,
+) -> None:
+    """Serve ``action`` with ``integrator`` fed from ``topic``, until cancelled."""
+    async with (
+        ros.subscribe(topic, Imu, integrator.add, queue_length=10),
+        ros.advertise_action(action, IntegrateImu, integrator.integrate),
+    ):
+        if out is not None:
+            out(f"[action] serving {action} (mult_msgs/action/IntegrateImu)")
+        if ready is not None:
+            ready.set()
+        await asyncio.Event().wait()
+
+
 # -- the program --------------------------------------------------------------------------------
 
 
@@ -208,21 +335,25 @@ async def run_app(
     out: Output = _say,
     clock: Clock | None = None,
 ) -> None:
-    """Run the three parts on ``ros`` until ``stop`` is set; a failing part ends them all.
+    """Run the four parts on ``ros`` until ``stop`` is set; a failing part ends them all.
 
-    ``ready`` is set once the subscription and the service are in place.
+    ``ready`` is set once the subscription, the service and the action are in place.
     """
     stop = stop or asyncio.Event()
     summer = ImuSummer(out)
-    subscribed, served = asyncio.Event(), asyncio.Event()
+    integrator = ImuIntegrator(clock, out)
+    subscribed, served, acting = asyncio.Event(), asyncio.Event(), asyncio.Event()
     async with asyncio.TaskGroup() as tg:
         parts = [
             tg.create_task(run_counter(ros, clock=clock, out=out), name="counter"),
             tg.create_task(summer.run(ros, ready=subscribed), name="imu summer"),
             tg.create_task(serve_mult_floats(ros, out=out, ready=served), name="mult_floats"),
+            tg.create_task(serve_integrate_imu(ros, integrator, out=out, ready=acting),
+                           name="integrate_imu"),
         ]
         await subscribed.wait()
         await served.wait()
+        await acting.wait()
         if ready is not None:
             ready.set()
         await stop.wait()
@@ -234,7 +365,8 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
     """The command line."""
     p = argparse.ArgumentParser(
         prog="python -m examples.robot_app",
-        description="Counter, IMU summer and /mult_floats service on roslibpy_lite.",
+        description="Counter, IMU summer, /mult_floats service and /integrate_imu action "
+                    "on roslibpy_lite.",
     )
     p.add_argument(
         "--url",

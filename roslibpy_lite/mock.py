@@ -41,6 +41,10 @@ a bridge; a handler that raises fails the call with
 :class:`~roslibpy_lite.exceptions.ServiceError` carrying its text, an unknown
 service fails the same way at once, a slow one raises
 :class:`~roslibpy_lite.exceptions.RosTimeoutError`.
+Actions likewise (:mod:`roslibpy_lite.actions`): a goal reaches the handler
+served here by ``advertise_action``, and its feedback and result come back; a
+goal to an action nobody serves, of an unknown type, or that does not fit the
+type fails as on the bridge.
 
 Connection trouble can be played too: :meth:`MockRos.disconnect` and
 :meth:`MockRos.reconnect` move the state like a real drop does (calls in
@@ -141,6 +145,10 @@ class MockRos(RosFront):
     def served(self) -> list[str]:
         """The names of the services served through this mock."""
         return sorted(self._servers)
+
+    def served_actions(self) -> list[str]:
+        """The names of the actions served through this mock."""
+        return sorted(self._action_servers)
 
     async def drain(self) -> None:
         """Return once every async callback has taken every message delivered so far."""
