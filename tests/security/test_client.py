@@ -124,3 +124,15 @@ def test_cli_refused_token_and_bad_certificate(tls_bridge: BridgeProcess, certs:
     out = _cli("--url", url, "--token", "x", "--cafile", str(certs.other_ca), "topic", "list")
     assert out.returncode == 3 and "certificate" in out.stderr
     assert len(out.stderr.strip().splitlines()) == 1
+
+
+def test_cli_viewer_is_refused_when_it_publishes(
+    tls_bridge: BridgeProcess, certs: Certs, auth: AuthFile, topic: str
+):
+    """`topic pub` as a viewer over wss fails with one line saying the role may not publish."""
+    out = _cli("--url", _url(tls_bridge), "--token", auth.tokens["viewer"], "--cafile",
+               str(certs.ca), "topic", "pub", topic, "std_msgs/msg/String", "{data: hi}",
+               "--once")
+    assert out.returncode == 6, out
+    assert "forbidden" in out.stderr and "viewer" in out.stderr
+    assert len(out.stderr.strip().splitlines()) == 1
