@@ -78,6 +78,8 @@ ACTION_LINGER = 1.0
 """Seconds an unadvertised action server stays in ROS, so callers fetch the aborted results."""
 
 _GOAL_SUFFIX = "/_action/send_goal"
+_OUTCOMES = {Status.SUCCEEDED: "succeeded", Status.CANCELED: "canceled",
+             Status.ABORTED: "aborted"}
 
 
 class ActionClients:
@@ -117,6 +119,7 @@ class _Goal:
         self.timer: asyncio.TimerHandle | None = None
         self.answer_timer: asyncio.TimerHandle | None = None
         self.cancel_wanted = False
+        self.t0 = owner.session.loop.time()
 
     # -- what the ROS side reports (loop thread) -----------------------------------------------
 
@@ -170,7 +173,7 @@ class _Goal:
             else:
                 self.owner.fail(self, "the action server did not answer the goal")
             return
-        self.owner.finish(self)
+        self.owner.finish(self, _OUTCOMES.get(status, "failed"))
         self.owner.emit(self, "action_result", result, self.sent.shared.result_conv, status)
 
 
@@ -219,7 +222,7 @@ class SessionActions:
     async def close(self) -> None:
         """The client went away: cancel its goals on the ROS side, abort the goals it served."""
         for goal in list(self.goals.values()):
-            self.finish(goal)
+            self.finish(goal, "canceled")
             if goal.task is not None:
                 goal.task.cancel()
             if goal.sent is not None:
@@ -341,10 +344,12 @@ class SessionActions:
             goal.task.cancel()
         self.fail(goal, f"the goal timed out after {timeout} s (canceled on the action server)")
 
-    def finish(self, goal: _Goal) -> None:
-        """Forget a goal (its result was sent, or is about to be)."""
+    def finish(self, goal: _Goal, outcome: str) -> None:
+        """Forget a goal (its result was sent, or is about to be) and count its ``outcome``."""
         if self.goals.get(str(goal.id)) is goal:
             del self.goals[str(goal.id)]
+            seconds = self.session.loop.time() - goal.t0
+            self.session.bridge.metrics.action_goal(goal.name, outcome, seconds)
         if goal.timer is not None:
             goal.timer.cancel()
             goal.timer = None
@@ -354,7 +359,7 @@ class SessionActions:
         """End a goal that did not run to a result: ``result: false`` with a text."""
         if self.goals.get(str(goal.id)) is not goal:
             return
-        self.finish(goal)
+        self.finish(goal, "canceled" if status == Status.CANCELED else "failed")
         log.info("session %d: goal %s on %s failed: %s", self.session.sid, goal.id, goal.name, why)
         self.session.send_op(
             ops.ActionResult(id=goal.id, action=goal.wire, values=f"{goal.name}: {why}",

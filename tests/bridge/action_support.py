@@ -101,7 +101,7 @@ def fib(order: int) -> list[int]:
     return sequence
 
 
-async def bridge_sees_action(ws: Any, name: str, timeout: float = 10.0) -> None:
+async def bridge_sees_action(ws: Any, name: str, timeout: float = 20.0) -> None:
     """Poll ``/rosapi/action_servers`` until the bridge's graph lists ``name``."""
     deadline = time.monotonic() + timeout
     while True:
