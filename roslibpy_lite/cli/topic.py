@@ -102,7 +102,12 @@ async def _resolve_topic_type(s: Session, args: argparse.Namespace) -> str:
 
 
 async def cmd_topic_echo(args: argparse.Namespace, out: Out) -> int:
-    """``topic echo TOPIC [TYPE]``: print messages until Ctrl+C, --count or --duration."""
+    """``topic echo TOPIC [TYPE]``: print messages until Ctrl+C, --count, --once or --duration.
+
+    ``--field a.b`` prints only that field of each message, as ``ros2 topic echo`` does.
+    """
+    if args.once:
+        args.count = 1
     duration = _stop_after(args)
 
     async def body(s: Session) -> int:
@@ -115,7 +120,10 @@ async def cmd_topic_echo(args: argparse.Namespace, out: Out) -> int:
             async with s.ros.subscribe(args.topic, type_, throttle_rate=args.throttle_ms,
                                        queue_length=args.queue_length) as sub:
                 async for msg in sub:
-                    out.record(for_display(msg, cls), args.json, args.no_arr)
+                    shown = for_display(msg, cls)
+                    if args.field:
+                        shown = _field(shown, args.field, type_)
+                    out.record(shown, args.json, args.no_arr)
                     seen += 1
                     if args.count is not None and seen >= args.count:
                         return
@@ -124,6 +132,19 @@ async def cmd_topic_echo(args: argparse.Namespace, out: Out) -> int:
         await until(duration, work())
         return EXIT_OK
     return await with_session(args, body)
+
+
+def _field(msg: Any, path: str, type_: str) -> Any:
+    """The field ``path`` (``a.b``) of a displayed message; a CliError names a wrong step."""
+    value = msg
+    for i, step in enumerate(path.split(".")):
+        if not isinstance(value, dict) or step not in value:
+            where = ".".join(path.split(".")[:i]) or type_
+            fields = ", ".join(value) if isinstance(value, dict) else "none: not a message"
+            raise CliError(EXIT_USAGE, f"--field {path}: {where} has no field {step!r} "
+                                       f"(fields: {fields})")
+        value = value[step]
+    return value
 
 
 class RateStats:
@@ -277,6 +298,8 @@ def add_parsers(groups: Any, kit: Kit) -> None:
     p.add_argument("topic")
     p.add_argument("type", nargs="?", help="message type (default: looked up in the graph)")
     p.add_argument("--count", "-n", type=int, help="stop after this many messages")
+    p.add_argument("--once", action="store_true", help="print one message and exit (--count 1)")
+    p.add_argument("--field", help="print only this field (a.b for nested ones), as ros2 does")
     p.add_argument("--duration", type=float, help="stop after this many seconds")
     p.add_argument("--no-arr", action="store_true", help="print sequences as their length")
     p.add_argument("--throttle-ms", type=int, default=0, help="minimum ms between messages")
