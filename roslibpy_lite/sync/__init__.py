@@ -40,8 +40,13 @@ Threads
 Jupyter notebooks already run an event loop on their main thread; this
 client never touches it, so it works there unchanged.
 
-Actions: the blocking front of actions goes into :class:`_Front` next to
-:meth:`_Front.call_service` once the asyncio client has them.
+Actions: :meth:`Client.send_goal` returns a blocking
+:class:`~roslibpy_lite.sync.actions.GoalHandle` (iterate its feedback, wait
+for its ``result(timeout)``, ``cancel()``); :meth:`Client.advertise_action`
+serves an action with ``handler(goal, ctx)``: a plain function runs in a
+worker thread (it may block, check ``ctx.cancel_requested`` and call the
+client), an ``async def`` on the loop thread. ``on_feedback`` callbacks run on
+the loop thread, like subscription callbacks.
 """
 
 from __future__ import annotations
@@ -54,21 +59,25 @@ from .. import MockRos as _AioMockRos
 from .. import connect as _aio_connect
 from ..api import DEFAULT_CALL_TIMEOUT, ConnectionState, StateCallback
 from ..exceptions import UsageError
+from .actions import ActionServer, GoalHandle
 from .handles import PUBLISH_WINDOW, Publisher, ServiceServer, StateChanges, Subscription
 from .loop import HANDLER_THREADS, LoopThread
 
 if TYPE_CHECKING:
     from types import TracebackType
 
-    from msgs.runtime import Message, Service
+    from msgs.runtime import Action, Message, Service
 
     from .. import handles
+    from ..actions import ActionHandler, FeedbackCallback
     from ..api import M, Ros
 
 __all__ = [
     "HANDLER_THREADS",
     "PUBLISH_WINDOW",
+    "ActionServer",
     "Client",
+    "GoalHandle",
     "LoopThread",
     "MockRos",
     "Publisher",
@@ -205,7 +214,35 @@ class _Front:
                                  service, type, serve)
         return ServiceServer(self._loop, handle)
 
-    # Actions: add send_goal / action servers here once the asyncio client has them.
+    # -- actions -----------------------------------------------------------------------------
+
+    def send_goal(
+        self,
+        action: str,
+        type: str | type[Action],
+        goal: Mapping[str, Any] | Message | None = None,
+        *,
+        feedback: bool = True,
+        on_feedback: FeedbackCallback | None = None,
+        buffer_size: int = 100,
+    ) -> GoalHandle:
+        """Send a goal; returns its blocking handle (see :meth:`roslibpy_lite.api.Ros.send_goal`).
+
+        ``on_feedback(fb)`` runs ON THE LOOP THREAD.
+        """
+        handle = self._loop.run(
+            self.aio.send_goal(action, type, goal, feedback=feedback, on_feedback=on_feedback,
+                               buffer_size=buffer_size), f"send_goal {action}")
+        return GoalHandle(self._loop, handle)
+
+    def advertise_action(
+        self, action: str, type: str | type[Action], handler: ActionHandler
+    ) -> ActionServer:
+        """Serve ``action`` with ``handler(goal, ctx) -> result`` (a plain function runs in a
+        worker thread; see :mod:`roslibpy_lite.actions` for the rules)."""
+        handle = self._loop.call(f"advertise_action {action}", self.aio.advertise_action,
+                                 action, type, handler)
+        return ActionServer(self._loop, handle)
 
     # -- closing -----------------------------------------------------------------------------
 

@@ -1,0 +1,121 @@
+"""Blocking action handles: a goal sent (:class:`GoalHandle`) and an action served.
+
+Made by :meth:`roslibpy_lite.sync.Client.send_goal` and
+:meth:`~roslibpy_lite.sync.Client.advertise_action`; the rules are those of
+:mod:`roslibpy_lite.actions` (outcomes, errors, cancel), without ``await``.
+"""
+
+from __future__ import annotations
+
+import asyncio
+from collections.abc import Iterator
+from typing import TYPE_CHECKING, Any, Self
+
+from .. import actions
+from ..exceptions import RosTimeoutError
+
+if TYPE_CHECKING:
+    from .loop import LoopThread
+
+__all__ = ["ActionServer", "GoalHandle"]
+
+
+class GoalHandle:
+    """A goal this client sent: iterate its feedback, :meth:`result`, :meth:`cancel`."""
+
+    def __init__(self, loop: LoopThread, handle: actions.GoalHandle) -> None:
+        self._loop = loop
+        self.handle = handle
+        """The asyncio goal handle underneath."""
+        self._feedback = handle.feedback()
+
+    def __repr__(self) -> str:
+        return f"<sync {self.handle!r}>"
+
+    @property
+    def id(self) -> str:
+        """The goal's request id."""
+        return self.handle.id
+
+    @property
+    def status(self) -> actions.GoalStatus:
+        """The goal's status as known here (see :mod:`roslibpy_lite.actions`)."""
+        return self.handle.status
+
+    def done(self) -> bool:
+        """True once the goal has ended."""
+        return self.handle.done()
+
+    def result(self, timeout: float | None = None, *,
+               raise_on_failure: bool = False) -> actions.ActionResult:
+        """Wait for the goal to end; its :class:`~roslibpy_lite.actions.ActionResult`.
+
+        Raises ActionError, RosTimeoutError (the goal goes on), Disconnected,
+        ConnectionClosed, as :meth:`roslibpy_lite.actions.GoalHandle.result` does.
+        """
+        return self._loop.run(self.handle.result(timeout, raise_on_failure=raise_on_failure),
+                              f"result of {self.handle.action}")
+
+    def cancel(self) -> None:
+        """Ask the action server to cancel the goal (its result follows)."""
+        self._loop.run(self.handle.cancel(), f"cancel goal to {self.handle.action}")
+
+    def feedback(self, timeout: float | None = None) -> Iterator[Any]:
+        """Each feedback until the goal ends.
+
+        Raises:
+            RosTimeoutError: none within ``timeout`` seconds of the previous one.
+        """
+        while True:
+            try:
+                yield self._loop.run(self._next(timeout), f"feedback of {self.handle.action}")
+            except StopAsyncIteration:
+                return
+
+    async def _next(self, timeout: float | None) -> Any:
+        try:
+            async with asyncio.timeout(timeout):
+                return await anext(self._feedback)
+        except TimeoutError:
+            raise RosTimeoutError(
+                f"no feedback from {self.handle.action} within {timeout} s") from None
+
+    def __iter__(self) -> Iterator[Any]:
+        return self.feedback()
+
+
+class ActionServer:
+    """A blocking action server: ``with`` it, or :meth:`unadvertise`."""
+
+    def __init__(self, loop: LoopThread, handle: actions.ActionServer) -> None:
+        self._loop = loop
+        self.handle = handle
+        """The asyncio action server underneath."""
+
+    def __repr__(self) -> str:
+        return f"<sync {self.handle!r}>"
+
+    @property
+    def closed(self) -> bool:
+        """True once unadvertised."""
+        return self.handle.closed
+
+    def close(self) -> None:
+        """Stop serving."""
+        self._loop.run(self.handle.close(), f"close {self.handle!r}")
+
+    def __enter__(self) -> Self:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        if not self._loop.closed:
+            self.close()
+
+    @property
+    def action(self) -> str:
+        """The action name."""
+        return self.handle.action
+
+    def unadvertise(self) -> None:
+        """Stop serving."""
+        self.close()

@@ -1,0 +1,56 @@
+"""The blocking client's actions, on sync.MockRos and on the real bridge."""
+
+from __future__ import annotations
+
+import threading
+from typing import Any
+
+import pytest
+
+from msgs.mult_msgs.action import IntegrateImu
+from roslibpy_lite import sync
+from roslibpy_lite.actions import ActionError, GoalContext, GoalStatus
+
+IMU = "mult_msgs/action/IntegrateImu"
+
+
+def test_goal_feedback_result(ros: sync.Client, topic: str) -> None:
+    """A blocking handler (in a worker thread) serves; the sender iterates feedback, gets the result."""
+    def handler(goal: Any, ctx: GoalContext) -> dict[str, Any]:
+        assert threading.current_thread() is not threading.main_thread()
+        for i in range(3):
+            ctx.publish_feedback({"elapsed": float(i)})
+        return {"samples": int(goal["seconds"])}
+
+    with ros.advertise_action(topic, IMU, handler):
+        goal = ros.send_goal(topic, IMU, {"seconds": 4.0})
+        assert [fb["elapsed"] for fb in goal.feedback(timeout=10)] == [0.0, 1.0, 2.0]
+        outcome = goal.result(timeout=10)
+        assert outcome.status is GoalStatus.SUCCEEDED and outcome.values["samples"] == 4
+        assert goal.done() and goal.status is GoalStatus.SUCCEEDED
+
+
+def test_cancel_and_typed(ros: sync.Client, topic: str) -> None:
+    """cancel() from the caller's thread reaches a blocking handler; typed Result comes back."""
+    started = threading.Event()
+
+    def handler(goal: Any, ctx: GoalContext) -> Any:
+        started.set()
+        while not ctx.cancel_requested:
+            threading.Event().wait(0.01)
+        return IntegrateImu.Result(samples=1)
+
+    with ros.advertise_action(topic, IntegrateImu, handler):
+        goal = ros.send_goal(topic, IntegrateImu, IntegrateImu.Goal(seconds=9.0))
+        assert started.wait(10)
+        goal.cancel()
+        outcome = goal.result(timeout=10)
+        assert outcome.status is GoalStatus.CANCELED
+        assert outcome.values == IntegrateImu.Result(samples=1)
+
+
+def test_no_such_action(ros: sync.Client, topic: str) -> None:
+    """A goal to an action nobody serves raises ActionError from result()."""
+    goal = ros.send_goal(topic, IMU, {})
+    with pytest.raises(ActionError, match="does not exist"):
+        goal.result(timeout=15)
