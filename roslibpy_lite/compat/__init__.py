@@ -19,11 +19,11 @@ with the ``ready``/``close``/``closing``/``error`` events, ``on_ready``,
 :class:`Topic`, :class:`Message`, :class:`Service`, :class:`ServiceRequest`,
 :class:`ServiceResponse`, :class:`ServiceException`, :class:`Param`,
 :class:`Time`, :class:`Header` (and ``ros2.Header``), :func:`set_rosapi_timeout`,
-the action value classes (:class:`Goal`, :class:`GoalStatus`,
-:class:`Feedback`, :class:`Result`).
+:class:`ActionClient` (``send_goal``, ``cancel_goal``, ``wait_goal``) and the
+action value classes (:class:`Goal`, :class:`GoalStatus`, :class:`Feedback`,
+:class:`Result`).
 
-Not covered: :class:`ActionClient` (raises NotImplementedError until the
-client has actions), ``headers=`` other than ``Authorization: Bearer``
+Not covered: ``headers=`` other than ``Authorization: Bearer``
 (raises), ``transport=`` (ignored),
 ``compression="png"`` (sent as plain JSON), ``authenticate``,
 ``send_on_ready``, ``blocking_call_from_thread``, ``set_status_level``,

@@ -8,13 +8,16 @@ package docstring for what differs). Messages are dict-like
 from __future__ import annotations
 
 import enum
+import itertools
 import json
 import logging
+import threading
 import time
 from collections import UserDict
 from collections.abc import Callable, Mapping
 from typing import TYPE_CHECKING, Any
 
+from ..actions import ActionError
 from ..exceptions import RosTimeoutError
 
 if TYPE_CHECKING:
@@ -404,15 +407,99 @@ class Param:
 
 
 class ActionClient:
-    """Not available yet: roslibpy_lite's client has no actions so far.
+    """Send goals to a ROS 2 action server, as ``roslibpy.ActionClient``.
 
-    This is the place for the action client over the client's actions
-    (``send_goal``, ``cancel_goal``, ``wait_goal``) once they exist.
+    Args:
+        ros: the :class:`~roslibpy_lite.compat.Ros` connection.
+        name: the action name, e.g. ``/fibonacci``.
+        action_type: e.g. ``example_interfaces/action/Fibonacci``.
+        reconnect_on_close: accepted (roslibpy ignores it too).
+
+    Callbacks run on the callback thread, feedback before the result. As in
+    roslibpy, a goal that does not succeed (canceled, aborted, rejected, no
+    such action server) goes to ``errback`` with ``{"status": GoalStatus,
+    "values": ...}``; a succeeded one to ``resultback`` with a :class:`Result`
+    ``{"status": GoalStatus.SUCCEEDED, "values": {...}}``.
     """
 
     def __init__(self, ros: Ros, name: str, action_type: str,
                  reconnect_on_close: bool = True) -> None:
-        raise NotImplementedError(
-            "roslibpy_lite.compat.ActionClient is not available yet: the roslibpy_lite client "
-            "has no actions so far (see docs/compat.md)"
-        )
+        self.ros = ros
+        self.name = name
+        self.action_type = action_type
+        self.reconnect_on_close = reconnect_on_close
+        self._is_advertised = False
+        self.wait_results: dict[str, threading.Event] = {}
+        self._goals: dict[str, Any] = {}  # goal id -> asyncio GoalHandle (on the loop)
+        self._cancel_wanted: set[str] = set()
+        self._ids = itertools.count(1)
+
+    def send_goal(self, goal: Mapping[str, Any], resultback: Callback | None,
+                  feedback: Callback | None, errback: Callback | None) -> str | None:
+        """Send ``goal``; returns its id at once (callbacks report the rest)."""
+        if self._is_advertised:
+            return None
+        goal_id = f"send_action_goal:{self.name}:{next(self._ids)}"
+        finished = self.wait_results[goal_id] = threading.Event()
+        ros, args = self.ros, plain(goal)
+
+        def on_feedback(values: Any) -> None:
+            if feedback is not None:
+                ros._dispatch(feedback, Feedback(values))
+
+        def report(callback: Callback | None, value: Any) -> None:
+            try:
+                if callback is not None:
+                    callback(value)
+            finally:
+                finished.set()
+
+        async def run(client: AioRos) -> None:
+            try:
+                handle = await client.send_goal(self.name, self.action_type, args,
+                                                on_feedback=on_feedback)
+                self._goals[goal_id] = handle
+                if goal_id in self._cancel_wanted:
+                    await handle.cancel()
+                outcome = await handle.result()
+            except ActionError as exc:
+                ros._dispatch(report, errback, {"status": GoalStatus(int(exc.status)),
+                                                "values": exc.reason})
+            except Exception as exc:
+                ros._dispatch(report, errback, {"status": GoalStatus.UNKNOWN,
+                                                "values": str(exc)})
+            else:
+                status = GoalStatus(int(outcome.status))
+                values = outcome.values if outcome.values is not None else outcome.text
+                if outcome.succeeded:
+                    ros._dispatch(report, resultback, Result({"status": status,
+                                                              "values": values}))
+                else:
+                    ros._dispatch(report, errback, {"status": status, "values": values})
+            finally:
+                self._goals.pop(goal_id, None)
+                self._cancel_wanted.discard(goal_id)
+
+        self.ros._do_later(run)
+        return goal_id
+
+    def cancel_goal(self, goal_id: str) -> None:
+        """Ask the action server to cancel the goal ``goal_id`` (its errback follows)."""
+
+        async def cancel(client: AioRos) -> None:
+            handle = self._goals.get(goal_id)
+            if handle is None:
+                self._cancel_wanted.add(goal_id)  # not sent yet: cancelled once it is
+            else:
+                await handle.cancel()
+
+        self.ros._do_later(cancel)
+
+    def wait_goal(self, goal_id: str, timeout: float | None = None) -> None:
+        """Block until the goal's callback has run (raises RosTimeoutError after ``timeout``)."""
+        event = self.wait_results.get(goal_id)
+        if event is None:
+            raise ValueError("Unknown goal ID")
+        if not event.wait(timeout):
+            raise RosTimeoutError("Goal failed to receive result")
+        self.wait_results.pop(goal_id, None)

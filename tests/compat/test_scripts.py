@@ -143,3 +143,21 @@ def test_reconnect_events(flavour: str, make_bridge: Callable[..., BridgeProcess
         proc.kill()
     assert proc.returncode == 0, err
     assert "ready 2" in out and "resumed after reconnect: True" in out, out + err
+
+
+@pytest.mark.parametrize("flavour", FLAVOURS)
+def test_action_client(flavour: str, bridge: BridgeProcess, ros_node: Any, topic: str) -> None:
+    """ActionClient: feedback then the result of an rclpy action server; cancel_goal cancels."""
+    from tests.bridge.action_support import FibServer, fib
+
+    servers = [FibServer(ros_node, topic), FibServer(ros_node, topic + "_slow", slow=True)]
+    try:
+        wait_seen(bridge, "action_servers", topic + "_slow")
+        out = run(flavour, "actions.py", bridge, ACTION=topic)
+    finally:
+        for server in servers:
+            server.destroy()
+    assert f"Feedback: {fib(5)}" in out
+    assert f"Result: {fib(5)} GoalStatus.SUCCEEDED" in out
+    assert "Goal ended: GoalStatus.CANCELED" in out and "Canceled in time: True" in out
+    assert servers[1].cancel_requests.is_set()
