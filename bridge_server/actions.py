@@ -77,16 +77,25 @@ log = logging.getLogger("bridge_server.actions")
 ACTION_LINGER = 1.0
 """Seconds an unadvertised action server stays in ROS, so callers fetch the aborted results."""
 
+CLIENT_IDLE = 30.0
+"""Seconds an action client nobody uses is kept (it stays matched for the next goal)."""
+
 _GOAL_SUFFIX = "/_action/send_goal"
 _OUTCOMES = {Status.SUCCEEDED: "succeeded", Status.CANCELED: "canceled",
              Status.ABORTED: "aborted"}
 
 
 class ActionClients:
-    """The bridge's shared rclpy action clients, one per (action, type)."""
+    """The bridge's shared rclpy action clients, one per (action, type).
+
+    A client no goal has used for :data:`CLIENT_IDLE` seconds is destroyed: each one
+    adds entities to every wait set of the executor.
+    """
 
     def __init__(self) -> None:
         self.clients: dict[tuple[str, type[Any]], SharedActionClient] = {}
+        self._used: dict[tuple[str, type[Any]], float] = {}
+        self._sweeper: asyncio.TimerHandle | None = None
 
     def get(self, session: Session, name: str, action_cls: type[Any]) -> SharedActionClient:
         """The shared client for ``name`` of ``action_cls`` (created on first use)."""
@@ -94,7 +103,30 @@ class ActionClients:
         client = self.clients.get(key)
         if client is None:
             client = self.clients[key] = SharedActionClient(session.ros, name, action_cls)
+        self.touch(session, client)
         return client
+
+    def touch(self, session: Session, client: SharedActionClient) -> None:
+        """``client`` is in use now."""
+        loop = session.loop
+        self._used[(client.name, client.action_cls)] = loop.time()
+        if self._sweeper is None:
+            self._sweeper = loop.call_later(CLIENT_IDLE, self._sweep, session)
+
+    def _sweep(self, session: Session) -> None:
+        self._sweeper = None
+        now = session.loop.time()
+        busy = {id(g.sent.shared) for s in session.bridge.sessions
+                for g in s.actions.goals.values() if g.sent is not None}
+        for key, used in list(self._used.items()):
+            client = self.clients.get(key)
+            if client is None or (now - used >= CLIENT_IDLE and id(client) not in busy):
+                self._used.pop(key, None)
+                if client is not None:
+                    del self.clients[key]
+                    client.destroy()
+        if self._used:
+            self._sweeper = session.loop.call_later(CLIENT_IDLE, self._sweep, session)
 
 
 class _Failed(Exception):
@@ -298,6 +330,7 @@ class SessionActions:
         while True:
             client = clients.clients.get((name, action_cls))
             if client is not None and client.ready():
+                clients.touch(session, client)
                 return client
             types = _server_types(session, name + _GOAL_SUFFIX)
             if types and wanted not in types:
