@@ -27,10 +27,10 @@ EXAMPLES = [
 
 
 def test_the_guides_have_examples() -> None:
-    """Every task guide carries at least one tested example (actions: none until the client has them)."""
+    """Every task guide carries at least one tested example."""
     pages = {Path(p.id.split(":")[0]) for p in EXAMPLES}  # type: ignore[union-attr]
     for guide in ["getting-started.md", "compat.md", "guides/pubsub.md", "guides/services.md",
-                  "guides/blocking.md", "guides/testing.md"]:
+                  "guides/blocking.md", "guides/testing.md", "guides/actions.md"]:
         assert Path(guide) in pages, guide
     assert {p.values[0] for p in EXAMPLES} == {"bridge", "mock"}
 
