@@ -114,6 +114,13 @@ cat <<EOF
 [demo]   .venv/bin/roslibpy-lite service call /mult_floats mult_msgs/srv/MultFloats "{x: 2.5, y: 4.0}"$url_opt
 [demo] watch the counter:
 [demo]   .venv/bin/roslibpy-lite topic echo /example_counter --count 3$url_opt
+[demo] send the IMU integrator a goal (Ctrl+C cancels it):
+[demo]   .venv/bin/roslibpy-lite action send_goal /integrate_imu mult_msgs/action/IntegrateImu "{seconds: 2.0}" --feedback$url_opt
+[demo] or from Python (.venv/bin/python):
+[demo]   from roslibpy_lite import sync
+[demo]   with sync.connect("$URL") as ros:
+[demo]       goal = ros.send_goal("/integrate_imu", "mult_msgs/action/IntegrateImu", {"seconds": 2.0})
+[demo]       print(goal.result(timeout=10).values)
 [demo] or connect with stock roslibpy (pip install roslibpy):
 [demo]   import roslibpy
 [demo]   ros = roslibpy.Ros(host="$HOST", port=$PORT); ros.run()

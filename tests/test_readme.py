@@ -4,7 +4,9 @@ from __future__ import annotations
 
 from tests.helpers import ROOT, BridgeProcess, marked_blocks, run_snippet
 
-BLOCKS = dict(marked_blocks(ROOT / "README.md", "readme-test"))
+MARKED = marked_blocks(ROOT / "README.md", "readme-test")
+BLOCKS = dict(reversed(MARKED))  # the first block of each kind
+ACTIONS = next(code for kind, code in MARKED if kind == "bridge" and "send_goal" in code)
 
 
 def test_readme_has_its_examples() -> None:
@@ -29,3 +31,10 @@ def test_blocking_example_runs_against_the_bridge(bridge: BridgeProcess) -> None
     out = run_snippet(BLOCKS["sync"], bridge)
     assert "6 * 7 = 42.0" in out
     assert "heard {'data': 'hello'}" in out
+
+
+def test_actions_example_runs_against_the_bridge(bridge: BridgeProcess) -> None:
+    """The actions example serves /readme_integrate_imu, sends it a goal, hears feedback and result."""
+    out = run_snippet(ACTIONS, bridge)
+    assert out.count("running sum:") == 5
+    assert out.splitlines()[-1] == "SUCCEEDED 1.0 5"

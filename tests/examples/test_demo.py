@@ -46,6 +46,14 @@ def stock_roslibpy_snippet(demo: Program) -> str:
     return "\n".join(line.removeprefix("[demo]   ") for line in demo.out[start + 1:end])
 
 
+def python_action_snippet(demo: Program) -> str:
+    """The Python lines the demo prints for sending /integrate_imu a goal."""
+    demo.wait_for(r"^\[demo\] Press Ctrl\+C")
+    start = demo.out.index("[demo] or from Python (.venv/bin/python):")
+    end = demo.out.index("[demo] or connect with stock roslibpy (pip install roslibpy):")
+    return "\n".join(line.removeprefix("[demo]   ") for line in demo.out[start + 1:end])
+
+
 def cli(*args: str) -> subprocess.CompletedProcess[str]:
     """Run the installed console script."""
     return subprocess.run([CLI, *args], cwd=ROOT, capture_output=True, text=True, timeout=60,
@@ -73,6 +81,20 @@ def test_demo_serves_the_cli_and_stops_on_ctrl_c(demo: Program) -> None:
     stock = subprocess.run([sys.executable, "-c", snippet], cwd=ROOT, capture_output=True,
                            text=True, timeout=60, env=ros_env())
     assert (stock.returncode, stock.stdout) == (0, "{'result': 10.0}\n"), (snippet, stock)
+
+    hint = demo.wait_for(r"^\[demo\]   (\.venv/bin/roslibpy-lite action send_goal .*)$")[1]
+    assert hint == (".venv/bin/roslibpy-lite action send_goal /integrate_imu "
+                    f'mult_msgs/action/IntegrateImu "{{seconds: 2.0}}" --feedback --url {url}')
+    sent = cli("action", "send_goal", "/integrate_imu", "mult_msgs/action/IntegrateImu",
+               "{seconds: 0.5}", "--feedback", "--url", url, "--wait", "15")
+    assert sent.returncode == 0, sent.stdout + sent.stderr
+    assert "Feedback:" in sent.stdout
+    assert sent.stdout.rstrip().endswith("Goal finished with status: SUCCEEDED"), sent.stdout
+    snippet = python_action_snippet(demo)
+    goal = subprocess.run([sys.executable, "-c", snippet], cwd=ROOT, capture_output=True,
+                          text=True, timeout=60, env=ros_env())
+    assert goal.returncode == 0 and "samples" in goal.stdout, (snippet, goal)
+    demo.wait_for(r"^robot_app \| \[action\] /integrate_imu: done: total=")
 
     demo.wait_for(r"^robot_app \| \[imu\] #\d+ angular_velocity\.x=\S+ sum=\S+$")
     demo.wait_for(r"^robot_app \| \[service\] /mult_floats: 2\.5 \* 4\.0 = 10\.0$")
