@@ -40,6 +40,7 @@ from urllib.parse import parse_qs, urlsplit
 
 from websockets.asyncio.messages import Assembler, SimpleQueue
 from websockets.asyncio.server import ServerConnection
+from websockets.exceptions import ConnectionClosed
 from websockets.frames import Frame
 from websockets.http11 import Request, Response
 
@@ -73,6 +74,9 @@ log = logging.getLogger("bridge_server.security")
 
 PRE_AUTH_FRAME_LIMIT = 16 * 1024
 """Largest frame read from a connection that has not authenticated yet."""
+
+OWNER_PING_TIMEOUT = 2.0
+"""Seconds the client serving a name has to answer a ping before another client may take it."""
 
 POLICY_VIOLATION = 1008
 """Close code for a failed ``auth`` op, ops before authentication and op floods."""
@@ -409,6 +413,7 @@ class Gate:
         self.role: Role | None = principal.role if principal is not None else None
         self.authenticated = security.auth is None or principal is not None
         self.closing = False
+        self.unresponsive = False  # set when this client failed to answer a ping in time
         c = security.config
         self.rate = c.max_op_rate
         self.burst = float(c.op_burst or max(1, int(c.max_op_rate)))
@@ -564,12 +569,52 @@ class Gate:
         """Whether this client may take ``name`` from the client that serves it now.
 
         The same principal may (it reconnected before the bridge saw the old
-        connection go); otherwise only a role with ``take_over`` on the name.
+        connection go), and anyone may once the owner's connection failed to
+        answer a ping; otherwise only a role with ``take_over`` on the name.
         """
-        if self.principal is not None and owner_gate is not None \
-                and owner_gate.principal is self.principal:
+        if owner_gate is not None and (owner_gate.unresponsive or (
+                self.principal is not None and owner_gate.principal is self.principal)):
             return True
         return self.role is not None and self.role.allows("take_over", name)
+
+    def claim_if_owner_gone(self, op: ops.AdvertiseService, owner: Session) -> None:
+        """Advertise a service another client serves only if that client is gone.
+
+        The first owner keeps a name; but a connection whose client vanished
+        (a network drop the bridge has not noticed yet) should not hold it until
+        the keepalive gives up, or the client could never serve it again after
+        it reconnects. So the owner is pinged: no pong within
+        :data:`OWNER_PING_TIMEOUT` seconds and the name is freed for this client.
+        """
+        session = self.session
+        task = session.loop.create_task(self._claim(op, owner))
+        session.calls.add(task)  # cancelled with the session's calls
+        task.add_done_callback(session.calls.discard)
+
+    async def _claim(self, op: ops.AdvertiseService, owner: Session) -> None:
+        name = op.service if op.service.startswith("/") else "/" + op.service
+        try:
+            pong = await owner.ws.ping()
+            await asyncio.wait_for(pong, OWNER_PING_TIMEOUT)
+            alive = True
+        except (TimeoutError, ConnectionClosed):
+            alive = False
+        session = self.session
+        if session._closed or session.bridge.service_owners.get(name) is not owner:
+            if not session._closed:
+                session.handle_op(op)  # the name changed hands meanwhile: decide again
+            return
+        if alive:
+            session.error(
+                f"advertise_service: {name} is already served by client {owner.sid}; the "
+                "first owner keeps it (a role with take_over may take it over)",
+                op.id,
+            )
+            return
+        log.warning("client %d serves %s but did not answer a ping in %s s: client %d takes "
+                    "the service", owner.sid, name, OWNER_PING_TIMEOUT, session.sid)
+        owner.gate.unresponsive = True  # its names may be taken now (see may_take_over)
+        session.handle_op(op)
 
     def filter_rosapi(self, service: str, values: dict[str, Any]) -> dict[str, Any]:
         """A rosapi answer reduced to what the role may see."""

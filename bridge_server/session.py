@@ -860,11 +860,8 @@ class Session:
         owner = self.bridge.service_owners.get(name)
         if owner is not None and owner is not self:
             if not self.gate.may_take_over(name, owner.gate):
-                self.error(
-                    f"advertise_service: {name} is already served by client {owner.sid}; "
-                    "the first owner keeps it (a role with take_over may take it over)",
-                    op.id,
-                )
+                # The first owner keeps it while it answers a ping (security.py).
+                self.gate.claim_if_owner_gone(op, owner)
                 return
             owner.drop_served(name, f"taken over by client {self.sid}")
         elif owner is None and self.ros.service_types(name):

@@ -12,6 +12,7 @@ from std_srvs.srv import SetBool
 
 from bridge_server.permissions import Role
 from tests.bridge.support import Inbox, roundtrip, wait_publishers
+from tests.helpers import BridgeProcess
 
 Connect = Callable[..., Any]
 
@@ -177,3 +178,29 @@ def test_role_patterns_and_all():
     assert role.allows("subscribe", "/robot/camera") and role.allows("take_over", "/robot/x")
     assert not role.allows("subscribe", "/other")
     assert not role.allows("publish", "/robot/estop") and role.allows("publish", "/robot/cmd")
+
+
+async def test_a_vanished_owner_loses_its_service(
+    ws_connect: Any, bridge: BridgeProcess, topic: str
+):
+    """An owner that no longer answers pings (a network drop) gives the name to a new client."""
+    owner = await ws_connect()
+    await owner.send({"op": "advertise_service", "service": topic, "type": "std_srvs/srv/SetBool"})
+    await roundtrip(owner)
+    owner.ws.transport.pause_reading()  # like a peer gone without a FIN: no pong comes back
+    start = len(bridge.lines)
+    newcomer = await ws_connect()
+    await newcomer.send({"op": "advertise_service", "service": topic,
+                         "type": "std_srvs/srv/SetBool", "id": "mine"})
+    await asyncio.to_thread(bridge.wait_for_line, f"serves {topic} but did not answer a ping",
+                            10, start)
+    caller = await ws_connect()  # a call between clients goes by the bridge's owner table
+    await caller.send({"op": "call_service", "service": topic, "args": {"data": True},
+                       "type": "std_srvs/srv/SetBool", "id": "c", "timeout": 10})
+    request = await newcomer.expect(op="call_service", service=topic)
+    await newcomer.send({"op": "service_response", "service": topic, "id": request["id"],
+                         "result": True, "values": {"success": True, "message": "newcomer"}})
+    reply = await caller.expect(op="service_response", id="c")
+    assert reply["values"] == {"success": True, "message": "newcomer"}
+    assert not [op for op in newcomer.backlog if op.get("id") == "mine"]
+    owner.ws.transport.resume_reading()
