@@ -58,8 +58,10 @@ destroyed at once; rclpy callers then see ``service_is_ready()`` turn false,
 and requests in flight stay unanswered until the caller's timeout.
 
 A name another client serves stays with its first owner: advertising it
-again fails, unless the same principal asks (a reconnect) or the role has
-``take_over`` on the name (:mod:`bridge_server.security`).
+again fails, unless the same principal asks (a reconnect), the role has
+``take_over`` on the name, or the owner's connection does not answer a ping
+within 2 s (a network drop the bridge has not noticed yet)
+(:mod:`bridge_server.security`).
 """
 
 from __future__ import annotations
