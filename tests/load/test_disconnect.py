@@ -80,8 +80,7 @@ async def test_publisher_released_after_grace_kept_by_quick_readvertise(
 async def test_served_service_goes_at_once_and_no_default_is_invented(
     ws_connect: Any, ros_node: Any, topic: str
 ) -> None:
-    """A client-served service leaves the graph when the client goes; a waiting ROS caller is
-    not answered with an invented default (it sees the server vanish)."""
+    """A served service leaves the graph when its client goes; a waiting ROS caller gets no default."""
     ws = await ws_connect()
     await ws.send({"op": "advertise_service", "service": topic, "type": "std_srvs/srv/SetBool"})
     client = ros_node.create_client(SetBool, topic)
