@@ -12,6 +12,7 @@ import sys
 from collections import deque
 from typing import Any
 
+from ..exceptions import RemoteError
 from .common import (
     EXIT_OK,
     EXIT_REMOTE,
@@ -246,7 +247,11 @@ async def cmd_topic_pub(args: argparse.Namespace, out: Out) -> int:
         raise CliError(EXIT_USAGE, "--wait-matching-subscriptions must be >= 0")
 
     async def body(s: Session) -> int:
-        pub = await s.ros.advertise(args.topic, args.type, latch=args.latch)
+        pub = s.ros.advertise(args.topic, args.type, latch=args.latch)
+        try:  # our bridge confirms or refuses at once; a stock one is asked below
+            await pub
+        except RemoteError as exc:
+            pub.error = exc
         # A rosapi round trip: the bridge has handled our advertise when it answers.
         subscribers = (await s.rosapi("subscribers", {"topic": args.topic})).get("subscribers", [])
         if pub.error is not None:
