@@ -182,6 +182,7 @@ class SharedActionClient(_ActionEnd):
             sent.finished = True
             post(listener.on_result, Status.ABORTED, None)
             return
+        self._inline(future)
         future.add_done_callback(lambda f: self._answered(sent, f))
 
     def _answered(self, sent: SentGoal, future: Any) -> None:
@@ -194,6 +195,7 @@ class SharedActionClient(_ActionEnd):
         sent.handle = handle
         post(sent.listener.on_accepted)
         result_future = handle.get_result_async()
+        self._inline(result_future)
         result_future.add_done_callback(lambda f: self._result(sent, f))
         if sent.cancel_wanted:
             self._cancel(sent)
@@ -206,6 +208,15 @@ class SharedActionClient(_ActionEnd):
             return
         response = future.result()
         self.ros.post(sent.listener.on_result, int(response.status), response.result)
+
+    def _inline(self, future: Any) -> None:
+        """Run ``future``'s done callbacks right where rclpy completes it (executor thread).
+
+        rclpy would schedule each as an executor task: one more wait-set round each,
+        per goal answer, result and cancel answer.
+        """
+        with contextlib.suppress(ValueError):
+            self.client.remove_future(future)
 
     def _drain_feedback(self) -> None:
         """Deliver feedback that is already waiting, so it goes out before the result.
@@ -233,6 +244,8 @@ class SharedActionClient(_ActionEnd):
         except Exception as exc:
             log.debug("cancel request for a goal of %s failed: %s", self.name, exc)
             return
+
+        self._inline(future)
 
         def answered(f: Any) -> None:
             if f.exception() is None and f.result() is not None:
