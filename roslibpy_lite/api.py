@@ -26,6 +26,7 @@ if TYPE_CHECKING:
     from msgs.runtime import Action, Message, Service
 
     from .actions import ActionHandler, ActionServer, FeedbackCallback, GoalHandle
+    from .exceptions import RosLibError
     from .handles import Publisher, ServiceServer, StateWatcher, Subscription
 
 __all__ = [
@@ -103,6 +104,14 @@ class Ros(Protocol):
 
     def state_changes(self) -> StateWatcher:
         """An async iterator of the state changes from now on (ends after ``CLOSED``)."""
+        ...
+
+    def on_error(self, callback: Callable[[RosLibError], None]) -> Callable[[], None]:
+        """Call ``callback(error)`` for each bridge error no caller awaits; returns its remover.
+
+        A refused request that was not awaited, a message the bridge could not
+        publish, an error naming no request (each is logged too).
+        """
         ...
 
     @overload

@@ -114,7 +114,9 @@ def _check_known(name: str, kind: str) -> None:
     if isinstance(found, type) and issubclass(found, wanted):
         return
     known = [t for t in available_types(package) if t.split("/")[1] == kind]
-    close = difflib.get_close_matches(name, known, n=3, cutoff=0.6)
+    by_name = {t.rsplit("/", 1)[1]: t for t in known}
+    close = [by_name[n] for n in difflib.get_close_matches(name.rsplit("/", 1)[1], by_name,
+                                                              n=3, cutoff=0.6)]
     hint = f"; did you mean {' or '.join(repr(c) for c in close)}?" if close else (
         f"; {package} has: {', '.join(t.rsplit('/', 1)[1] for t in known[:12])}"
         + (", ..." if len(known) > 12 else "") if known else ""
