@@ -661,6 +661,34 @@ def serve_action(peer: PeerProcess, node: Any, topic: str) -> None:
     assert list(result.result.sequence) == [0, 1, 1, 2, 3, 5]
 
 
+def serve_action_canceled(peer: PeerProcess, node: Any, topic: str) -> None:
+    """An rclpy client cancels a goal the peer serves; the peer's cancel handler ends it canceled."""
+    from action_msgs.msg import GoalStatus
+    from test_msgs.action import Fibonacci
+
+    peer.request(
+        "advertise_action", action=topic, type="test_msgs/action/Fibonacci",
+        handler="until_canceled",
+    )
+    client = _module("rclpy.action").ActionClient(node, Fibonacci, topic)
+    first_feedback = threading.Event()
+    try:
+        wait_until(client.server_is_ready, DEADLINE, f"{topic} action server in the graph")
+        goal = client.send_goal_async(
+            Fibonacci.Goal(order=3), feedback_callback=lambda _msg: first_feedback.set()
+        )
+        handle = _wait_future(goal, "goal acceptance")
+        assert handle.accepted
+        result_future = handle.get_result_async()
+        assert first_feedback.wait(DEADLINE), "no feedback from the peer"
+        _wait_future(handle.cancel_goal_async(), "cancel answer")
+        result = _wait_future(result_future, "action result")
+    finally:
+        client.destroy()
+    assert result.status == GoalStatus.STATUS_CANCELED
+    assert list(result.result.sequence) == [0, 1]
+
+
 # -- robustness through stock clients ---------------------------------------------------------
 
 

@@ -190,6 +190,11 @@ def test_serve_action(peer: PeerProcess, ros_node: Any, topic: str) -> None:
     scenarios.serve_action(peer, ros_node, topic)
 
 
+def test_serve_action_canceled(peer: PeerProcess, ros_node: Any, topic: str) -> None:
+    """An rclpy cancel reaches roslib's Action cancel callback; its setCanceled ends the goal."""
+    scenarios.serve_action_canceled(peer, ros_node, topic)
+
+
 def test_burst_in_order(peer: PeerProcess, ros_node: Any, topic: str) -> None:
     """100 messages roslib publishes back to back all reach rclpy, in order."""
     scenarios.burst_in_order(peer, ros_node, topic)

@@ -93,7 +93,22 @@ const actionHandlers = {
     }
     action.setSucceeded(id, { sequence });
   },
+  // Feedback every 50 ms until ROS cancels the goal (see stopGoal).
+  until_canceled(action, goal, id) {
+    const sequence = [0, 1];
+    runningGoals.set(id, setInterval(() => action.sendFeedback(id, { sequence }), 50));
+  },
 };
+
+const runningGoals = new Map();
+
+// roslib's cancel callback for served actions: end a running goal as canceled.
+function stopGoal(action, id) {
+  clearInterval(runningGoals.get(id));
+  runningGoals.delete(id);
+  emit({ event: "canceled", id });
+  action.setCanceled(id, { sequence: [0, 1] });
+}
 
 // Wrap roslib's callback-style API in a promise (success value, or an Error with the text).
 function viaCallbacks(start) {
@@ -150,10 +165,13 @@ async function handle(cmd) {
       const handler = actionHandlers[cmd.handler];
       if (!handler) throw new Error(`unknown action handler ${cmd.handler}`);
       const action = new ROSLIB.Action({ ros, name: cmd.action, actionType: cmd.type });
-      action.advertise((goal, id) => {
-        emit({ event: "goal", action: cmd.action, goal });
-        handler(action, goal, id);
-      });
+      action.advertise(
+        (goal, id) => {
+          emit({ event: "goal", action: cmd.action, goal });
+          handler(action, goal, id);
+        },
+        (id) => stopGoal(action, id),
+      );
       return null;
     }
     case "get_action_servers":
