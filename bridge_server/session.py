@@ -813,6 +813,7 @@ class Session:
             delay = 0.002
             while not _ready(client):
                 if loop.time() >= unlisted_by and ros.server_count(service) == 0:
+                    ros.drop_client(service, srv_cls)  # so the graph forgets the name
                     raise _CallFailed(
                         f"service {service} does not exist (not in the ROS graph after "
                         f"{unlisted_wait:g} s)"

@@ -90,3 +90,31 @@ async def test_a_service_that_appears_late_is_found(bridge: Any, topic: str) -> 
         assert not call.done()
         await server.advertise_service(topic, MULT, lambda req: {"result": req["x"] * req["y"]})
         assert await call == {"result": 6.0}
+
+
+async def test_unawaited_publish_that_needed_waiting_says_so(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    """A publish past max_pending that is never awaited logs 'did you forget await?' (still sent)."""
+    peer = await ScriptedPeer().start()
+    try:
+        async with roslibpy_lite.connect(peer.url, max_pending=1) as ros:
+            pub = await ros.advertise("/backpressure", "std_msgs/msg/Int32")
+            with caplog.at_level(logging.ERROR, "roslibpy_lite.client"):
+                for i in range(3):
+                    pub.publish({"data": i})  # type: ignore[unused-coroutine]
+            assert "never awaited: did you forget await?" in caplog.text
+            await peer.expect(op="publish", msg={"data": 2})
+    finally:
+        await peer.stop()
+
+
+async def test_concurrent_calls_to_a_missing_service_leave_no_task_errors(
+    bridge: Any, topic: str
+) -> None:
+    """Typed calls racing on one missing service all fail cleanly; the bridge logs no stray errors."""
+    async with roslibpy_lite.connect(bridge.url) as ros:
+        calls = [ros.call_service(topic, MULT, {}, timeout=20) for _ in range(4)]
+        results = await asyncio.gather(*calls, return_exceptions=True)
+    assert all("does not exist" in str(r) for r in results), results
+    assert not [line for line in bridge.lines if "never retrieved" in line]
