@@ -15,6 +15,14 @@ both satisfy the :class:`~roslibpy_lite.api.Ros` protocol.
 from __future__ import annotations
 
 from ._backoff import Backoff
+from .actions import (
+    ActionError,
+    ActionResult,
+    ActionServer,
+    GoalContext,
+    GoalHandle,
+    GoalStatus,
+)
 from .api import ConnectionState, Ros
 from .client import Client, Connector, connect, run
 from .exceptions import (
@@ -39,6 +47,9 @@ from .ros import RosFront
 __version__ = "0.1.0"
 
 __all__ = [
+    "ActionError",
+    "ActionResult",
+    "ActionServer",
     "Backoff",
     "Client",
     "ConnectError",
@@ -47,6 +58,9 @@ __all__ = [
     "Connector",
     "Disconnected",
     "Forbidden",
+    "GoalContext",
+    "GoalHandle",
+    "GoalStatus",
     "InvalidMessageError",
     "MockRos",
     "NotAuthenticated",

@@ -10,6 +10,7 @@ The tree::
     │   └── InvalidMessageError      a message does not fit its type (names the field path)
     ├── RemoteError                  the bridge or ROS reported a failure
     │   ├── ServiceError             a service call answered ``result: false``
+    │   ├── ActionError              a goal failed or never ran (in roslibpy_lite.actions)
     │   └── StatusError              the bridge sent a ``status`` error about our request
     │       └── Forbidden            ... because our role may not do that (on that name)
     ├── RosTimeoutError              no answer in time (also a ``TimeoutError``)

@@ -7,6 +7,7 @@ Examples::
     roslibpy-lite topic pub /chatter std_msgs/msg/String "{data: hello}" --once
     roslibpy-lite topic hz /imu --duration 5
     roslibpy-lite service call /mult_floats mult_msgs/srv/MultFloats "{x: 2.5, y: 4.0}"
+    roslibpy-lite action send_goal /integrate_imu mult_msgs/action/IntegrateImu "{seconds: 2}" -f
     roslibpy-lite node list
     roslibpy-lite interface show sensor_msgs/msg/Imu
 
@@ -80,6 +81,7 @@ EXAMPLES: tuple[str, ...] = (
     'topic pub /chatter std_msgs/msg/String "{data: hello}" --once',
     "topic hz /imu --duration 3",
     'service call /mult_floats mult_msgs/srv/MultFloats "{x: 2.5, y: 4.0}"',
+    'action send_goal /integrate_imu mult_msgs/action/IntegrateImu "{seconds: 0.5}" --feedback',
     "node list",
     "interface show sensor_msgs/msg/Imu",
 )

@@ -21,6 +21,9 @@ EXPECT = {
         r'\Apublishing #1: \{"data": "hello"\}\n\Z',
     "topic hz /imu --duration 3": r"(?m)^average rate: \d+\.\d{3}\n\tmin: .* window: \d+$",
     'service call /mult_floats mult_msgs/srv/MultFloats "{x: 2.5, y: 4.0}"': r"\Aresult: 10\.0\n\Z",
+    'action send_goal /integrate_imu mult_msgs/action/IntegrateImu "{seconds: 0.5}" --feedback':
+        r"(?s)\ASending goal:\n  seconds: 0\.5\n.*Feedback:\n.*Result:\n  total:\n.*samples: \d+\n"
+        r"\nGoal finished with status: SUCCEEDED\n\Z",
     "node list": r"(?m)^/roslibpy_lite_bridge$",
     "interface show sensor_msgs/msg/Imu":
         r"(?m)^geometry_msgs/Vector3 angular_velocity\n(\t#.*\n|\n)*\tfloat64 x$",
@@ -40,6 +43,7 @@ def test_every_help_example_works(cli: Run, bridge: BridgeProcess, ros_node: Any
     app = Program([sys.executable, "-m", "examples.robot_app", "--url", bridge.url])
     try:
         app.wait_for(r"^\[service\] serving /mult_floats")
+        app.wait_for(r"^\[action\] serving /integrate_imu")
         wait_until(lambda: "/example_counter" in cli("topic", "list").out, timeout=15,
                    what="the counter topic in the graph")
         for example in EXAMPLES:
