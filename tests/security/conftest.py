@@ -19,7 +19,7 @@ def certs(tmp_path_factory: pytest.TempPathFactory) -> Certs:
 
 @pytest.fixture(scope="session")
 def auth(tmp_path_factory: pytest.TempPathFactory) -> AuthFile:
-    """The test auth file (roles viewer, operator, admin, nothing, narrow; one token each)."""
+    """The test auth file (see support.ROLES; one token per role)."""
     return make_auth_file(tmp_path_factory.mktemp("auth"))
 
 

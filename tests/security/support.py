@@ -9,23 +9,15 @@ from typing import Any
 
 from websockets.asyncio.client import connect
 
-from bridge_server.auth import hash_token, new_token
+from bridge_server.auth import EXAMPLE_ROLES, hash_token, new_token
 from tests.helpers import WireClient
 
-ROLES = """
-[roles.viewer]
+ROLES = EXAMPLE_ROLES + """
+[roles.tester]
 subscribe = ["*"]
-introspection = ["*"]
-
-[roles.operator]
-subscribe = ["*"]
-introspection = ["*"]
 publish = ["/op/*", "/cmd_vel"]
 call_service = ["/op/*"]
 deny.publish = ["/op/forbidden"]
-
-[roles.admin]
-all = ["*"]
 
 [roles.nothing]
 
@@ -36,7 +28,7 @@ params = ["/seen_node:*"]
 [roles.server]
 serve_service = ["*"]
 """
-"""Roles of the test auth file; one principal per role, named after it."""
+"""The example roles (viewer, operator, admin) and the tests' own; a principal per role."""
 
 
 @dataclass
@@ -88,7 +80,7 @@ def make_auth_file(tmp: Path) -> AuthFile:
     """Write the test auth file; tokens are made now and kept only in memory."""
     auth = AuthFile(tmp / "auth.toml")
     text = ROLES
-    principals = [(r, r) for r in ("viewer", "operator", "admin", "nothing", "narrow", "server")]
+    principals = [(r, r) for r in ("viewer", "tester", "admin", "nothing", "narrow", "server")]
     principals.append(("server_b", "server"))  # a second principal with the same role
     for name, role in principals:
         token = auth.tokens[name] = new_token()

@@ -98,11 +98,11 @@ async def test_each_capability_is_denied_without_it(connect_as: Connect, topic: 
 
 
 async def test_deny_wins_over_allow(connect_as: Connect, topic: str):
-    """The operator may publish on /op/* but not on /op/forbidden, which its role denies."""
-    operator = await connect_as("operator")
+    """The tester may publish on /op/* but not on /op/forbidden, which its role denies."""
+    operator = await connect_as("tester")
     await operator.send({"op": "advertise", "topic": "/op/forbidden",
                          "type": "std_msgs/msg/String", "id": "no"})
-    await _forbidden(operator, "no", "operator", "publish", "/op/forbidden")
+    await _forbidden(operator, "no", "tester", "publish", "/op/forbidden")
     await operator.send({"op": "advertise", "topic": "/op" + topic,
                          "type": "std_msgs/msg/String", "id": "yes"})
     await roundtrip(operator)
