@@ -220,10 +220,42 @@ def to_wire(
     )
 
 
+_BULK = 1024
+
+
+def _outline(value: Any) -> Any:
+    """``value`` with bulky strings, byte strings and lists emptied (their kind kept).
+
+    Returns ``value`` itself when nothing in it is bulky (no copy).
+    """
+    if isinstance(value, Mapping):
+        out: dict[str, Any] | None = None
+        for k, v in value.items():
+            if isinstance(v, int | float):
+                continue
+            w = _outline(v)
+            if w is not v:
+                if out is None:
+                    out = dict(value)
+                out[k] = w
+        return value if out is None else out
+    if isinstance(value, str | bytes | list) and len(value) > _BULK:
+        return value[:0]
+    if isinstance(value, list) and value and isinstance(value[0], Mapping):
+        items = [_outline(v) for v in value]
+        return value if all(a is b for a, b in zip(items, value, strict=True)) else items
+    return value
+
+
 def check_dict(wire: Mapping[str, Any], cls: type[Message] | None, what: str) -> None:
-    """Check a dict against ``cls`` (if given), as :class:`InvalidMessageError` naming the field."""
+    """Check a dict against ``cls`` (if given), as :class:`InvalidMessageError` naming the field.
+
+    Field names and the kind of every value are checked; the contents of bulky values
+    (more than 1024 items or characters: image data, point clouds) are left to the
+    bridge, so publishing an image as a dict costs no second decode here.
+    """
     if cls is not None and not isinstance(wire, Message):
-        from_wire(wire, cls, what)
+        from_wire(_outline(wire), cls, what)
 
 
 def from_wire(raw: Mapping[str, Any], cls: type[Message], what: str) -> Message:
@@ -361,8 +393,8 @@ class Publisher(_Handle, Generic[T]):
         """
         what = f"publish to {self.topic}"
         wire = to_wire(msg, self.type_name, self.msg_cls, what)
-        if wire is msg and self._check_cls is not None:
-            from_wire(wire, self._check_cls, what)
+        if wire is msg:
+            check_dict(wire, self._check_cls, what)
         return wire
 
     def _fail_once(self, error: RosLibError) -> None:

@@ -187,3 +187,17 @@ async def test_handler_failure_reason_appears_once(
     assert str(failed.value) == f"service {topic} failed: y must not be zero"
     assert failed.value.reason == "y must not be zero"
     assert f"handler of {topic} raised ZeroDivisionError: y must not be zero" in caplog.text
+
+
+async def test_bulky_dicts_are_checked_by_shape(ros: Ros, topic: str) -> None:
+    """An image dict's field names and kinds are checked; its pixel data is left to the bridge."""
+    import base64
+
+    pub = await ros.advertise(topic, "sensor_msgs/msg/Image")
+    image = {"height": 480, "width": 640, "encoding": "rgb8", "step": 1920,
+             "data": base64.b64encode(bytes(640 * 480 * 3)).decode()}
+    await pub.publish(image)
+    with pytest.raises(InvalidMessageError, match="width"):
+        await pub.publish({**image, "width": "640"})
+    with pytest.raises(InvalidMessageError, match="data"):
+        await pub.publish({**image, "data": 7})
