@@ -14,7 +14,6 @@ import asyncio
 import contextlib
 import json
 import sys
-import time
 from typing import Any
 
 from msgs.runtime import Action
@@ -45,18 +44,6 @@ async def _servers(s: Session) -> list[str]:
     return sorted((await s.rosapi("action_servers")).get("action_servers", []))
 
 
-async def _action_type(s: Session, action: str, wait: float) -> str:
-    """The action's type from the bridge; polls up to ``wait`` s (discovery takes time)."""
-    deadline = time.monotonic() + wait
-    while True:
-        found = str((await s.rosapi("action_type", {"action": action})).get("type", ""))
-        if found:
-            return found
-        if time.monotonic() >= deadline:
-            raise CliError(EXIT_NOT_FOUND, f"unknown action {action} (no action server serves it)")
-        await asyncio.sleep(0.1)
-
-
 async def cmd_action_list(args: argparse.Namespace, out: Out) -> int:
     """``action list [-t]``."""
     async def body(s: Session) -> int:
@@ -79,7 +66,7 @@ async def cmd_action_list(args: argparse.Namespace, out: Out) -> int:
 async def cmd_action_type(args: argparse.Namespace, out: Out) -> int:
     """``action type ACTION``."""
     async def body(s: Session) -> int:
-        out.line(await _action_type(s, args.action, args.wait))
+        out.line(await s.action_type(args.action, args.wait))
         return EXIT_OK
     return await with_session(args, body)
 
@@ -87,7 +74,7 @@ async def cmd_action_type(args: argparse.Namespace, out: Out) -> int:
 async def cmd_action_info(args: argparse.Namespace, out: Out) -> int:
     """``action info ACTION``: its type and the nodes serving it."""
     async def body(s: Session) -> int:
-        type_ = await _action_type(s, args.action, args.wait)
+        type_ = await s.action_type(args.action, args.wait)
         nodes = (await s.rosapi("nodes")).get("nodes", [])
         details = await asyncio.gather(*(s.rosapi("node_details", {"node": n}) for n in nodes))
         goal_service = args.action.rstrip("/") + "/_action/send_goal"
@@ -118,7 +105,7 @@ async def cmd_action_send_goal(args: argparse.Namespace, out: Out) -> int:
         raise CliError(EXIT_USAGE, f"--cancel-wait must be > 0, got {args.cancel_wait}")
 
     async def body(s: Session) -> int:
-        await _action_type(s, args.action, args.wait)
+        await s.action_type(args.action, args.wait)
         if not args.json:
             out.line("Sending goal:")
             out.line(_indent(to_yaml(goal_values)))

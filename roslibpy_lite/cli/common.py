@@ -199,33 +199,38 @@ class Session:
         return await self.ros.call_service(f"/rosapi/{name}", f"rosapi_msgs/srv/{_rosapi(name)}",
                                            args or {}, timeout=self.timeout)
 
-    async def topic_type(self, topic: str, wait: float) -> str:
-        """The topic's type from the ROS graph; polls up to ``wait`` s (discovery takes time)."""
+    async def polled(self, name: str, args: dict[str, Any], key: str, wait: float,
+                     missing: str) -> str:
+        """``/rosapi/<name>``'s ``key``, asked again up to ``wait`` s while it is empty
+        (graph discovery takes time); then ``CliError(EXIT_NOT_FOUND, missing)``."""
         deadline = time.monotonic() + wait
         while True:
-            found = str((await self.rosapi("topic_type", {"topic": topic})).get("type", ""))
+            found = str((await self.rosapi(name, args)).get(key, ""))
             if found:
                 return found
             if time.monotonic() >= deadline:
-                raise CliError(EXIT_NOT_FOUND,
-                               f"unknown topic {topic} (not in the ROS graph; give its TYPE "
-                               "to wait for it)")
+                raise CliError(EXIT_NOT_FOUND, missing)
             await asyncio.sleep(0.1)
 
+    async def topic_type(self, topic: str, wait: float) -> str:
+        """The topic's type from the ROS graph; polls up to ``wait`` s."""
+        return await self.polled("topic_type", {"topic": topic}, "type", wait,
+                                 f"unknown topic {topic} (not in the ROS graph; give its TYPE "
+                                 "to wait for it)")
+
     async def service_server(self, service: str, wait: float) -> str:
-        """The node serving ``service``; polls up to ``wait`` s (discovery takes time).
+        """The node serving ``service``; polls up to ``wait`` s.
 
         Asks ``/rosapi/service_node``: a service that only has clients (the
         graph lists those too) does not count.
         """
-        deadline = time.monotonic() + wait
-        while True:
-            node = str((await self.rosapi("service_node", {"service": service})).get("node", ""))
-            if node:
-                return node
-            if time.monotonic() >= deadline:
-                raise CliError(EXIT_NOT_FOUND, f"unknown service {service} (no node serves it)")
-            await asyncio.sleep(0.1)
+        return await self.polled("service_node", {"service": service}, "node", wait,
+                                 f"unknown service {service} (no node serves it)")
+
+    async def action_type(self, action: str, wait: float) -> str:
+        """The type of the action ``action`` serves; polls up to ``wait`` s."""
+        return await self.polled("action_type", {"action": action}, "type", wait,
+                                 f"unknown action {action} (no action server serves it)")
 
 
 def _rosapi(name: str) -> str:

