@@ -38,13 +38,15 @@ accepts and drops at once is not hammered. The
 state goes ``CONNECTED → RECONNECTING → CONNECTED``. After each reconnect,
 in this order: every open publisher is advertised again, every open
 subscription is subscribed again with the same options, every served service
-is advertised again, and then the messages buffered while offline are sent.
+and served action is advertised again, and then the messages buffered while
+offline are sent.
 
 While the connection is down:
 
-- service calls in flight fail at once with
-  :class:`~roslibpy_lite.exceptions.Disconnected`; a call started while
-  reconnecting waits for the connection within its own timeout;
+- service calls and action goals in flight fail at once with
+  :class:`~roslibpy_lite.exceptions.Disconnected` (the bridge cancels such
+  goals on the ROS side); a call started while reconnecting waits for the
+  connection within its own timeout;
 - ``publish`` keeps the latest ``offline_buffer`` messages PER PUBLISHER
   (default 100; older ones are dropped and counted in ``pub.dropped``) and
   sends them after the publisher is re-advertised. With ``offline_buffer=0``
@@ -54,7 +56,9 @@ While the connection is down:
 - subscriptions keep their buffered messages and resume when the bridge
   sends again; an ``async for`` simply waits;
 - requests from ROS callers to our services that were being handled are
-  answered into the void (the bridge has already failed them).
+  answered into the void (the bridge has already failed them); handlers of
+  goals we were serving are cancelled (async) or see ``cancel_requested``
+  (sync), since the bridge has aborted those goals.
 
 Threads: a client belongs to the event loop that connected it; from other
 threads use ``asyncio.run_coroutine_threadsafe``.

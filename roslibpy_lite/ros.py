@@ -1,7 +1,8 @@
 """The front: the whole user API once, over any transport.
 
 :class:`RosFront` owns what a user touches: ``advertise``/``subscribe``/
-``call_service``/``advertise_service``, the connection state, validation, the
+``call_service``/``advertise_service`` (and ``send_goal``/``advertise_action``,
+from :class:`~roslibpy_lite.actions.ActionsMixin`), the connection state, validation, the
 handles, request ids, restoring everything after a reconnect, and the error
 rules. Under it a transport (:mod:`roslibpy_lite.transports`) only moves ops:
 :class:`~roslibpy_lite.client.Client` is the front over a websocket,

@@ -7,7 +7,8 @@ refused one gets the bridge's ``status`` error (a topic used with another
 type); a publish reaches the subscriptions of its topic; a service call
 reaches the served handler as a ``call_service`` and its ``service_response``
 goes back to the caller; a call to a service nobody serves fails at once with
-the bridge's "does not exist" text. With ``validate`` on, messages, requests
+the bridge's "does not exist" text. Actions go through the bridge's action
+part, played by :mod:`.memory_actions`. With ``validate`` on, messages, requests
 and responses are checked against the ``msgs`` class of their type, as the
 bridge checks them against the ROS type.
 
