@@ -36,9 +36,12 @@ arrives as ``cancel_action_goal`` with that id. The client answers with
 ``action_feedback`` (published) and one ``action_result``: ``status`` 4, 5
 or 6 ends the goal that way; without a status, ``result`` true means
 SUCCEEDED and false ABORTED. A result that does not fit the type, an
-unadvertise, a disconnect or ``goal_timeout`` abort the goal at once. A
-second client advertising the same action takes it over (the first one's
-goals are aborted and it gets a warning).
+unadvertise, a disconnect or ``goal_timeout`` abort the goal at once. A name
+another client serves stays with its first owner, as for services: a second
+advertise fails unless the same principal asks (a reconnect), its role has
+``take_over`` on the name, or the owner does not answer a ping within
+``OWNER_PING_TIMEOUT`` s; a taken-over owner's goals are aborted and it gets a
+warning.
 """
 
 from __future__ import annotations
@@ -51,6 +54,7 @@ from collections.abc import Mapping
 from typing import TYPE_CHECKING, Any
 
 import cbor2
+from websockets.exceptions import ConnectionClosed
 
 from roslibpy_lite import ops
 from roslibpy_lite.protocol import split_fragments
@@ -65,6 +69,7 @@ from .ros_actions import (
     SharedActionClient,
     Status,
 )
+from .security import OWNER_PING_TIMEOUT
 from .types import BridgeError, canonical_name, resolve_action
 
 if TYPE_CHECKING:
@@ -94,6 +99,7 @@ class ActionClients:
 
     def __init__(self) -> None:
         self.clients: dict[tuple[str, type[Any]], SharedActionClient] = {}
+        self.lingering: dict[str, ServedAction] = {}  # unadvertised, still answering callers
         self._used: dict[tuple[str, type[Any]], float] = {}
         self._sweeper: asyncio.TimerHandle | None = None
 
@@ -333,6 +339,10 @@ class SessionActions:
                 clients.touch(session, client)
                 return client
             types = _server_types(session, name + _GOAL_SUFFIX)
+            owner = self._owners.get(name)
+            if not types and owner is not None and name in owner.served:
+                # served by a client of this bridge: it exists even while the graph lags
+                types = [owner.served[name].type_name + "_SendGoal"]
             if types and wanted not in types:
                 raise _Failed(
                     f"action {name} has type {types[0].removesuffix('_SendGoal')}, "
@@ -439,10 +449,19 @@ class SessionActions:
                 return
             self._remove_served(mine, "the client advertised it again with another type", False)
             del self.served[name]
+        old = session.bridge.action_clients.lingering.pop(name, None)
+        if old is not None:  # two servers of one name would both answer each goal
+            old.destroy()
         owner = self._owners.get(name)
         if owner is not None and owner is not self:
+            if not session.gate.may_take_over(name, owner.session.gate):
+                # The first owner keeps it while it answers a ping, as for services.
+                task = session.loop.create_task(self._claim(op, owner))
+                session.calls.add(task)  # cancelled with the session's calls
+                task.add_done_callback(session.calls.discard)
+                return
             owner.drop_served(name, f"taken over by client {session.sid}")
-        elif owner is None and _server_types(session, name + _GOAL_SUFFIX):
+        elif owner is None and old is None and _server_types(session, name + _GOAL_SUFFIX):
             session.status(
                 "warning",
                 f"advertise_action: another ROS node already serves {name}; "
@@ -457,6 +476,32 @@ class SessionActions:
         )
         self.served[name] = served
         self._owners[name] = self
+
+    async def _claim(self, op: ops.AdvertiseAction, owner: SessionActions) -> None:
+        """Advertise an action another client serves only if that client is gone (no pong)."""
+        name = _name(op.action)
+        try:
+            pong = await owner.session.ws.ping()
+            await asyncio.wait_for(pong, OWNER_PING_TIMEOUT)
+            alive = True
+        except (TimeoutError, ConnectionClosed):
+            alive = False
+        session = self.session
+        if session._closed:
+            return
+        if alive and self._owners.get(name) is owner:
+            session.error(
+                f"advertise_action: {name} is already served by client {owner.session.sid}; "
+                "the first owner keeps it (a role with take_over may take it over)",
+                op.id,
+            )
+            return
+        if not alive:
+            log.warning("client %d serves %s but did not answer a ping in %s s: client %d "
+                        "takes the action", owner.session.sid, name, OWNER_PING_TIMEOUT,
+                        session.sid)
+            owner.session.gate.unresponsive = True  # its names may be taken now
+        session.handle_op(op)  # decide again
 
     def _on_ros_goal(self, served: _Served, goal: ServedGoal) -> None:
         session = self.session
@@ -598,11 +643,20 @@ class SessionActions:
         if ros is not None:
             ros.alive = False  # new goals are rejected while it lingers
             if linger:
-                self.session.loop.call_later(ACTION_LINGER, ros.destroy)
+                lingering = self.session.bridge.action_clients.lingering
+                lingering[served.name] = ros
+                self.session.loop.call_later(ACTION_LINGER, _end_linger, lingering, served.name,
+                                             ros)
             else:
                 ros.destroy()
         if self._owners.get(served.name) is self:
             del self._owners[served.name]
+
+
+def _end_linger(lingering: dict[str, ServedAction], name: str, ros: ServedAction) -> None:
+    if lingering.get(name) is ros:
+        del lingering[name]
+        ros.destroy()
 
 
 def _server_types(session: Session, service: str) -> list[str]:

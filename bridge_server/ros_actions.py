@@ -55,6 +55,10 @@ FEEDBACK_DEPTH = 1000
 RESULT_TIMEOUT = 60
 """Seconds a finished served goal's result stays available to ROS callers."""
 
+FEEDBACK_GRACE = 0.005
+"""Seconds a goal's feedback is still heard after its result (only goals that asked for
+feedback wait this long for their result)."""
+
 
 class Status:
     """``action_msgs/msg/GoalStatus`` numbers."""
@@ -117,6 +121,7 @@ class SentGoal:
         self.listener = listener
         self.feedback = feedback
         self.handle: Any = None  # the rclpy ClientGoalHandle, once accepted (executor thread)
+        self.callback: Callable[[Any], None] | None = None  # feedback, if asked for
         self.cancel_wanted = False
         self.finished = False
 
@@ -175,6 +180,7 @@ class SharedActionClient(_ActionEnd):
             def callback(msg: Any) -> None:
                 post(listener.on_feedback, msg.feedback)
 
+        sent.callback = callback
         try:
             future = self.client.send_goal_async(sent.goal, feedback_callback=callback)
         except Exception as exc:
@@ -202,12 +208,34 @@ class SharedActionClient(_ActionEnd):
 
     def _result(self, sent: SentGoal, future: Any) -> None:
         sent.finished = True
-        self._drain_feedback()
         if future.exception() is not None:
             self.ros.post(sent.listener.on_result, Status.ABORTED, None)
             return
         response = future.result()
-        self.ros.post(sent.listener.on_result, int(response.status), response.result)
+        if sent.callback is not None:
+            # rclpy forgot the goal's feedback callback with the result, but feedback it
+            # took in this same round is delivered after this; keep hearing it.
+            self.client._feedback_callbacks[bytes(sent.handle.goal_id.uuid)] = sent.callback
+        self.ros.in_executor(self._report, sent, int(response.status), response.result)
+
+    def _report(self, sent: SentGoal, status: int, result: Any) -> None:
+        """Next executor round: deliver waiting feedback, then the result."""
+        self._drain_feedback()
+        if sent.callback is None:
+            self.ros.post(sent.listener.on_result, status, result)
+            return
+        # Feedback still in transit (a topic, while the result is a service reply) is
+        # heard a moment longer.
+        self.ros.post(self._after_grace, sent, bytes(sent.handle.goal_id.uuid), status, result)
+
+    def _after_grace(self, sent: SentGoal, uuid: bytes, status: int, result: Any) -> None:
+        """On the loop: report the result once late feedback had ``FEEDBACK_GRACE`` s."""
+
+        def report() -> None:
+            self.ros.in_executor(self.client._feedback_callbacks.pop, uuid, None)
+            sent.listener.on_result(status, result)
+
+        self.ros.loop.call_later(FEEDBACK_GRACE, report)
 
     def _inline(self, future: Any) -> None:
         """Run ``future``'s done callbacks right where rclpy completes it (executor thread).

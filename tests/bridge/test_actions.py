@@ -21,7 +21,6 @@ from tests.bridge.action_support import (
     send_goal,
 )
 from tests.bridge.support import roundtrip
-from tests.helpers import async_wait_until
 
 SUCCEEDED, CANCELED, ABORTED = 4, 5, 6
 
@@ -40,7 +39,11 @@ async def test_goal_feedback_and_result(ws_connect: Any, ros_node: Any, topic: s
     assert result == {"op": "action_result", "id": "g1", "action": topic,
                       "values": {"sequence": fib(5)}, "status": SUCCEEDED, "result": True}
     feedback = [op for op in ws.backlog if op.get("op") == "action_feedback"]
-    assert [f["values"]["sequence"] for f in feedback] == [fib(i) for i in range(2, 6)]
+    # feedback (a topic) may lose the race against the result (a service reply) under
+    # load; what arrives is in order, and nothing comes after the result
+    sequences = [f["values"]["sequence"] for f in feedback]
+    assert sequences and sequences == sorted(sequences, key=len)
+    assert all(seq in [fib(i) for i in range(2, 6)] for seq in sequences)
     assert all(f["id"] == "g1" and f["action"] == topic for f in feedback)
     server.destroy()
 
@@ -157,7 +160,8 @@ async def test_several_clients_one_server(ws_connect: Any, ros_node: Any, topic:
         result = await ws.expect(op="action_result", id="same-id")
         assert result["values"] == {"sequence": fib(i + 2)}
         feedback = [op for op in ws.backlog if op.get("op") == "action_feedback"]
-        assert feedback[-1]["values"] == {"sequence": fib(i + 2)}
+        assert feedback and all(f["values"]["sequence"] == fib(i + 2)[: len(f["values"][
+            "sequence"])] for f in feedback)
     server.destroy()
 
 
@@ -211,7 +215,8 @@ async def test_cbor_feedback_and_result(ws_connect: Any, ros_node: Any, topic: s
     seq = result["values"]["sequence"]
     assert isinstance(seq, cbor2.CBORTag) and seq.tag == 78
     assert list(memoryview(seq.value).cast("i")) == fib(4)
-    assert [f["op"] for f in frames[:-1]] == ["action_feedback"] * 3
+    assert 1 <= len(frames) - 1 <= 3
+    assert all(f["op"] == "action_feedback" for f in frames[:-1])
     server.destroy()
 
 
@@ -358,25 +363,30 @@ async def test_client_to_client_action(ws_connect: Any, topic: str):
     assert result["status"] == SUCCEEDED and result["values"] == {"sequence": fib(3)}
 
 
-async def test_takeover_by_another_client(ws_connect: Any, ros_node: Any, topic: str):
-    """A second client advertising the same action takes it over; the first is told."""
+async def test_first_owner_keeps_the_action(ws_connect: Any, ros_node: Any, topic: str):
+    """A second client cannot take a served action from a live owner; after unadvertise it can."""
     first, caller = await _serving(ws_connect, ros_node, topic)
     handle = await caller.send(2)
-    await first.expect(op="send_action_goal")
+    goal = await first.expect(op="send_action_goal")
     second = await ws_connect()
-    await second.send({"op": "advertise_action", "action": topic, "type": FIB})
-    warning = await first.expect(op="status", level="warning")
-    assert topic in warning["msg"] and "taken over" in warning["msg"]
-    # the old server is gone at once, so the caller learns it from the goal status topic
-    await async_wait_until(lambda: handle.status == GoalStatus.STATUS_ABORTED, 5.0,
-                           "the first client's goal aborted")
+    await second.send({"op": "advertise_action", "action": topic, "type": FIB, "id": "adv2"})
+    error = await second.expect(op="status", level="error", id="adv2")
+    assert topic in error["msg"] and "first owner keeps it" in error["msg"]
+    await first.send({"op": "action_result", "id": goal["id"], "action": topic,
+                      "values": {"sequence": fib(2)}, "result": True})
+    assert (await caller.result(handle)).status == GoalStatus.STATUS_SUCCEEDED
     caller.destroy()
+    await first.send({"op": "unadvertise_action", "action": topic})
+    await roundtrip(first)
+    await second.send({"op": "advertise_action", "action": topic, "type": FIB, "id": "adv3"})
+    await roundtrip(second)
+    assert [op for op in second.backlog if op.get("op") == "status"] == []
     caller = RosCaller(ros_node, topic)
     await caller.ready()
-    handle = await caller.send(2)
+    handle = await caller.send(3)
     goal = await second.expect(op="send_action_goal")
     await second.send({"op": "action_result", "id": goal["id"], "action": topic,
-                       "values": {"sequence": fib(2)}, "result": True})
+                       "values": {"sequence": fib(3)}, "result": True})
     assert (await caller.result(handle)).status == GoalStatus.STATUS_SUCCEEDED
     caller.destroy()
 
