@@ -17,7 +17,7 @@ CLI = str(Path(sys.executable).parent / "roslibpy-lite")
 
 
 def test_list_type_and_info(cli: Run, ros_node: Any, topic: str) -> None:
-    """list (-t, --json), type and info show an rclpy action server."""
+    """list (-t, --json), type and info (with the serving node) show an rclpy action server."""
     server = FibServer(ros_node, topic)
     try:
         assert cli("action", "type", topic, "--wait", "10").lines == [FIB]
@@ -25,7 +25,8 @@ def test_list_type_and_info(cli: Run, ros_node: Any, topic: str) -> None:
         listed = json.loads(cli("action", "list", "--json").out)
         assert {"name": topic, "type": FIB} in listed
         info = cli("action", "info", topic).lines
-        assert info[:2] == [f"Action: {topic}", f"Type: {FIB}"]
+        assert info[:3] == [f"Action: {topic}", f"Type: {FIB}", "Action servers: 1"]
+        assert info[3].strip() == ros_node.get_fully_qualified_name()
     finally:
         server.destroy()
 
