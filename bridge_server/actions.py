@@ -375,7 +375,9 @@ class SessionActions:
         goal.cancel_wanted = True
         if goal.sent is not None:
             goal.sent.cancel()
-        # else: _start sees cancel_wanted once the server wait is over
+        elif goal.task is not None:  # still waiting for an action server
+            goal.task.cancel()
+            self.fail(goal, "the goal was canceled before it was sent", Status.CANCELED)
 
     def _expired(self, goal: _Goal, timeout: float) -> None:
         goal.timer = None

@@ -128,6 +128,16 @@ async def test_cancel_before_acceptance(ws_connect: Any, ros_node: Any, topic: s
     server.destroy()
 
 
+async def test_cancel_while_waiting_for_a_server(ws_connect: Any, topic: str):
+    """A goal canceled while the bridge still waits for an action server ends canceled at once."""
+    ws = await ws_connect()
+    await send_goal(ws, topic, {"order": 1}, "w1")
+    await ws.send({"op": "cancel_action_goal", "id": "w1", "action": topic})
+    result = await ws.expect(op="action_result", id="w1")
+    assert result["status"] == CANCELED and result["result"] is False
+    assert "canceled before it was sent" in result["values"]
+
+
 def _wait_goal(server: FibServer) -> None:
     for _ in range(500):
         if server.goals:
