@@ -2,7 +2,7 @@
 
 :class:`RosFront` owns what a user touches: ``advertise``/``subscribe``/
 ``call_service``/``advertise_service`` (and ``send_goal``/``advertise_action``,
-from :class:`~roslibpy_lite.actions.ActionsMixin`), the connection state, validation, the
+from :class:`~roslibpy_lite.actions_front.ActionsMixin`), the connection state, validation, the
 handles, request ids, restoring everything after a reconnect, and the error
 rules. Under it a transport (:mod:`roslibpy_lite.transports`) only moves ops:
 :class:`~roslibpy_lite.client.Client` is the front over a websocket,
@@ -52,7 +52,8 @@ from collections.abc import Callable, Coroutine, Mapping
 from typing import TYPE_CHECKING, Any, Self, overload
 
 from . import ops
-from .actions import ActionServer, ActionsMixin, GoalHandle
+from .actions import ActionServer, GoalHandle
+from .actions_front import ActionsMixin
 from .api import (
     DEFAULT_CALL_TIMEOUT,
     ConnectionState,
@@ -166,7 +167,7 @@ class RosFront(ActionsMixin):
             ops.CallService: self._serve_request,
             ops.Status: self._on_status,
         }
-        self._init_actions()  # send_goal / advertise_action (roslibpy_lite.actions)
+        self._init_actions()  # send_goal / advertise_action (roslibpy_lite.actions_front)
         self.status_errors = 0
         """``status`` errors from the bridge that named none of our pending requests."""
         transport.bind(self)
