@@ -38,11 +38,16 @@ from bench.ros_side import _quantiles, emit
 
 def _node(name: str) -> tuple[Any, Any]:
     import rclpy
-    from rclpy.executors import MultiThreadedExecutor
+    from rclpy.executors import MultiThreadedExecutor, SingleThreadedExecutor
 
     rclpy.init()
     node = rclpy.create_node(f"{name}_{os.getpid()}")
-    executor: Any = MultiThreadedExecutor(num_threads=4)
+    # the server's execute callbacks block a thread each; a client's single thread keeps
+    # rclpy's action client (not thread safe) to one thread
+    executor: Any = (
+        MultiThreadedExecutor(num_threads=4) if name.endswith("server")
+        else SingleThreadedExecutor()
+    )
     executor.add_node(node)
     if not name.endswith("server"):
         threading.Thread(target=executor.spin, daemon=True).start()
