@@ -100,7 +100,7 @@ async def cmd_action_send_goal(args: argparse.Namespace, out: Out) -> int:
     action_cls = cls if isinstance(cls, type) and issubclass(cls, Action) else None
     goal_values = check_values(cli_values(args.values, "VALUES"),
                                action_cls.Goal if action_cls else None, "VALUES")
-    feedback_cls = action_cls.Feedback if action_cls and not args.json else None
+    shown = action_cls if not args.json else None  # NaN and uint8[] shown as ros2 does
     if args.cancel_wait <= 0:
         raise CliError(EXIT_USAGE, f"--cancel-wait must be > 0, got {args.cancel_wait}")
 
@@ -112,7 +112,7 @@ async def cmd_action_send_goal(args: argparse.Namespace, out: Out) -> int:
         goal = await s.ros.send_goal(args.action, args.type, goal_values,
                                      feedback=args.feedback)
         try:
-            return await _follow(goal, args, out, feedback_cls)
+            return await _follow(goal, args, out, shown)
         except asyncio.CancelledError:  # Ctrl+C: cancel the goal, then exit
             task = asyncio.current_task()
             if task is None or task.uncancel() > 0:
@@ -122,7 +122,7 @@ async def cmd_action_send_goal(args: argparse.Namespace, out: Out) -> int:
 
 
 async def _follow(goal: GoalHandle, args: argparse.Namespace, out: Out,
-                  feedback_cls: Any) -> int:
+                  shown: type[Action] | None) -> int:
     if not args.json:
         out.line(f"Goal accepted with ID: {goal.id}")
         out.line("")
@@ -131,7 +131,7 @@ async def _follow(goal: GoalHandle, args: argparse.Namespace, out: Out,
             out.line(json.dumps({"feedback": fb}, separators=(",", ":")))
         else:
             out.line("Feedback:")
-            out.line(_indent(to_yaml(for_display(fb, feedback_cls))))
+            out.line(_indent(to_yaml(for_display(fb, shown.Feedback if shown else None))))
     try:
         outcome = await goal.result()
     except ActionError as exc:
@@ -142,7 +142,8 @@ async def _follow(goal: GoalHandle, args: argparse.Namespace, out: Out,
                             separators=(",", ":")))
     else:
         out.line("Result:")
-        out.line(_indent(to_yaml(outcome.values if outcome.values is not None else {})))
+        values = outcome.values if outcome.values is not None else {}
+        out.line(_indent(to_yaml(for_display(values, shown.Result if shown else None))))
         out.line("")
         out.line(f"Goal finished with status: {outcome.status.name}")
     if outcome.succeeded:
