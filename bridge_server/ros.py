@@ -509,13 +509,18 @@ class RosNode:
             gc.trigger()
 
     def _run_calls(self) -> None:
+        # Only what was handed over before this round: work handed over from in here runs
+        # in the next round, after the executor tasks this round created.
         calls = self._calls
-        while calls:
+        for _ in range(len(calls)):
             fn, args = calls.popleft()
             try:
                 fn(*args)
             except Exception:
                 log.exception("executor hand-off failed")
+        if calls and self._calls_gc is not None:
+            with contextlib.suppress(Exception):
+                self._calls_gc.trigger()
 
     # -- graph ---------------------------------------------------------------------------------
 
