@@ -21,11 +21,10 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import json
-import sys
 import time
 from typing import TYPE_CHECKING, Any
 
-from bench.harness import ROOT, RosSide, child_env, percentile
+from bench.harness import ROOT, RosSide, percentile
 
 if TYPE_CHECKING:
     from bench.run import Ctx
@@ -37,15 +36,7 @@ ACTION_SIDE = str(ROOT / "bench" / "ros_actions_side.py")
 class ActionSide(RosSide):
     """A ``bench/ros_actions_side.py`` process (events as for :class:`RosSide`)."""
 
-    async def start(self) -> ActionSide:
-        """Start the process; ``serve`` stops when stdin closes."""
-        self.proc = await asyncio.create_subprocess_exec(
-            sys.executable, ACTION_SIDE, *self.args, cwd=ROOT, env=child_env(self.domain),
-            stdin=asyncio.subprocess.PIPE, stdout=asyncio.subprocess.PIPE,
-            stderr=asyncio.subprocess.STDOUT,
-        )
-        self._reader = asyncio.create_task(self._read())
-        return self
+    script = ACTION_SIDE
 
 
 def _rates(ctx: Ctx) -> list[int]:

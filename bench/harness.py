@@ -123,6 +123,9 @@ class Bridge:
 class RosSide:
     """A ``bench/ros_side.py`` process; its JSON event lines are read as they come."""
 
+    script = ROS_SIDE
+    """The ROS-side program (a subclass may run another one)."""
+
     def __init__(self, domain: int, *args: str) -> None:
         self.domain = domain
         self.args = list(args)
@@ -134,7 +137,7 @@ class RosSide:
     async def start(self) -> RosSide:
         """Start the process (keep stdin open: ``serve`` stops when it closes)."""
         self.proc = await asyncio.create_subprocess_exec(
-            sys.executable, ROS_SIDE, *self.args, cwd=ROOT, env=child_env(self.domain),
+            sys.executable, self.script, *self.args, cwd=ROOT, env=child_env(self.domain),
             stdin=asyncio.subprocess.PIPE, stdout=asyncio.subprocess.PIPE,
             stderr=asyncio.subprocess.STDOUT,
         )
