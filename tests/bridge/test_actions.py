@@ -25,6 +25,12 @@ from tests.bridge.support import roundtrip
 SUCCEEDED, CANCELED, ABORTED = 4, 5, 6
 
 
+def _action_types(package: str) -> list[Any]:
+    module = importlib.import_module(f"{package}.action")
+    return [getattr(module, n) for n in dir(module)
+            if not n.startswith("_") and hasattr(getattr(module, n), "Feedback")]
+
+
 # -- a client sends goals to a ROS action server ---------------------------------------------
 
 
@@ -404,12 +410,6 @@ async def test_first_owner_keeps_the_action(ws_connect: Any, ros_node: Any, topi
 # -- every action type converts --------------------------------------------------------------
 
 
-def _action_types(package: str) -> list[Any]:
-    module = importlib.import_module(f"{package}.action")
-    return [getattr(module, n) for n in dir(module)
-            if not n.startswith("_") and hasattr(getattr(module, n), "Feedback")]
-
-
 @pytest.mark.parametrize("package", ["test_msgs", "mult_msgs"])
 def test_every_action_type_converts(package: str):
     """Goal, feedback and result of every action in the package convert both ways, JSON and CBOR."""
@@ -424,6 +424,53 @@ def test_every_action_type_converts(package: str):
             obj = conv.to_obj(part())
             assert conv.to_obj(conv.from_obj(json.loads(json.dumps(obj)))) == obj
             cbor2.dumps(conv.to_cbor_obj(part()))
+
+
+@pytest.mark.parametrize("action", [a for p in ("test_msgs", "mult_msgs") for a in _action_types(p)],
+                         ids=lambda a: a.__name__)
+async def test_every_action_type_through_the_bridge(ws_connect: Any, topic: str, action: Any):
+    """Goal, feedback (CBOR) and result of each action type cross the bridge intact."""
+    from bridge_server import convert
+    from bridge_server.types import type_name_of
+
+    type_name = type_name_of(action)
+    goal_obj, feedback_obj, result_obj = (
+        convert.converter_for(part).to_obj(part()) for part in
+        (action.Goal, action.Feedback, action.Result)
+    )
+    server_ws = await ws_connect()
+    await server_ws.send({"op": "advertise_action", "action": topic, "type": type_name})
+    ws = await ws_connect()
+    await bridge_sees_action(ws, topic)
+    await ws.send({"op": "send_action_goal", "action": topic, "action_type": type_name,
+                   "args": goal_obj, "feedback": True, "compression": "cbor", "id": "all"})
+    goal = await server_ws.expect(op="send_action_goal")
+    assert goal["args"] == goal_obj and goal["action_type"] == type_name
+    await server_ws.send({"op": "action_feedback", "id": goal["id"], "action": topic,
+                          "values": feedback_obj})
+    feedback = await ws.expect(op="action_feedback", id="all")
+    await server_ws.send({"op": "action_result", "id": goal["id"], "action": topic,
+                          "values": result_obj, "result": True})
+    result = await ws.expect(op="action_result", id="all")
+    assert result["status"] == SUCCEEDED
+    for got, want, part in ((feedback, feedback_obj, action.Feedback),
+                            (result, result_obj, action.Result)):
+        conv = convert.converter_for(part)
+        assert conv.to_obj(conv.from_obj(_plain(got["values"]))) == want
+
+
+def _plain(value: Any) -> Any:
+    """A CBOR-decoded value with typed arrays (tags) turned back into lists."""
+    if isinstance(value, cbor2.CBORTag):
+        codes = {69: "H", 70: "I", 71: "Q", 72: "b", 77: "h", 78: "i", 79: "q", 85: "f", 86: "d"}
+        return list(memoryview(value.value).cast(codes[value.tag]))
+    if isinstance(value, dict):
+        return {k: _plain(v) for k, v in value.items()}
+    if isinstance(value, list):
+        return [_plain(v) for v in value]
+    if isinstance(value, bytes):
+        return list(value)
+    return value
 
 
 # -- introspection ---------------------------------------------------------------------------
