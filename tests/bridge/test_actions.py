@@ -35,7 +35,7 @@ def _action_types(package: str) -> list[Any]:
 
 
 async def test_goal_feedback_and_result(ws_connect: Any, ros_node: Any, topic: str):
-    """A goal (args object, ROS 1 type spelling) gets every feedback and a SUCCEEDED result."""
+    """A goal (args object, ROS 1 type spelling) gets its feedback in order and a SUCCEEDED result."""
     server = FibServer(ros_node, topic)
     ws = await ws_connect()
     await bridge_sees_action(ws, topic)
