@@ -5,7 +5,9 @@ its own. Everything the executor thread learns (a message on a subscribed
 topic, a ROS caller reaching a client-served service, a service response)
 crosses to the asyncio loop with ``loop.call_soon_threadsafe``; hand-offs are
 batched, so a burst of messages costs one wake-up of the loop, not one each.
-The loop never waits on the executor.
+The loop never waits on the executor. The other way, :meth:`RosNode.in_executor`
+runs work on the executor thread (a guard condition), for rclpy APIs that are
+not thread safe (actions: :mod:`bridge_server.ros_actions`).
 
 Sharing
 -------
