@@ -62,6 +62,11 @@ again fails, unless the same principal asks (a reconnect), the role has
 ``take_over`` on the name, or the owner's connection does not answer a ping
 within 2 s (a network drop the bridge has not noticed yet)
 (:mod:`bridge_server.security`).
+
+Actions
+-------
+Action ops go to ``self.actions`` (:class:`bridge_server.actions.SessionActions`,
+closed with the session); see :mod:`bridge_server.actions`.
 """
 
 from __future__ import annotations
@@ -112,7 +117,7 @@ BATCH_BYTES = 256 * 1024
 
 _LEVELS = {"none": 0, "error": 1, "warning": 2, "info": 3}
 
-_ACKED = (ops.Advertise, ops.Subscribe, ops.AdvertiseService)
+_ACKED = (ops.Advertise, ops.Subscribe, ops.AdvertiseService, ops.AdvertiseAction)
 _ACTION_OPS = (
     ops.SendActionGoal,
     ops.CancelActionGoal,
@@ -547,7 +552,8 @@ class Session:
             )
         if self.acks and isinstance(op, _ACKED) and self.errors_sent == errors:
             # The client asked for verdicts (ACKS_HEADER): no error means accepted.
-            name = op.service if isinstance(op, ops.AdvertiseService) else op.topic
+            name = (op.service if isinstance(op, ops.AdvertiseService)
+                    else op.action if isinstance(op, ops.AdvertiseAction) else op.topic)
             self.send_op(ops.Status(level="info", msg=f"ok: {op.OP} {name}", id=op.id))
 
     def _report_evicted(self) -> None:
