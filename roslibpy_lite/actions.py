@@ -463,14 +463,12 @@ class ActionServer:
         self.error = error
 
     async def _ready(self) -> Self:
-        await self._front._flush()
-        if self.error is not None and not self.closed:
-            report = getattr(self._front, "_reports", {}).pop(self.id, None)
-            if report is not None:
-                report.cancel()  # raised here instead
+        try:
+            await self._front._settle(self)  # the bridge's verdict, when it sends one
+        except RosLibError:
             self.closed = True
             self._front._drop_action_server(self)
-            raise self.error
+            raise
         return self
 
     def __await__(self) -> Generator[Any, None, Self]:

@@ -154,8 +154,9 @@ class ActionsMixin:
 
         Raises:
             UsageError: a bad name or type, or the action is already served here.
-            StatusError: the bridge refused (at ``await`` when it came by then; else
-                see :meth:`~roslibpy_lite.ros.RosFront.on_error`).
+            StatusError: the bridge refused (raised at ``await``, which waits for the
+                verdict of a confirming bridge; else see
+                :meth:`~roslibpy_lite.ros.RosFront.on_error`).
             ConnectionClosed: the client is closed.
         """
         me = self._me
@@ -165,8 +166,7 @@ class ActionsMixin:
         server = ActionServer(me, action, type_name, cls, handler,
                               id=me._new_id("advertise_action", action))
         self._action_servers[action] = server
-        me._requests[server.id] = server
-        me._send(server.request_op())
+        me._request(server, server.request_op())
         return server
 
     def _drop_action_server(self, server: ActionServer) -> None:

@@ -21,9 +21,9 @@ __all__ = ["ACKS_HEADER", "Link", "Transport"]
 
 ACKS_HEADER = "X-Rosbridge-Acks"
 """Handshake header of our extension: a client that sends it with ``1`` asks the bridge to
-confirm each accepted advertise/subscribe/advertise_service with a ``status`` ``info``
-naming the request's id (``ok: <op> <name>``); a bridge that will do so answers the
-handshake with the same header. Stock servers ignore it, and are then never waited for.
+confirm each accepted advertise/subscribe/advertise_service/advertise_action with a
+``status`` ``info`` naming the request's id (``ok: <op> <name>``); a bridge that will do so
+answers the handshake with the same header. Stock servers ignore it, and are then never waited for.
 """
 
 

@@ -148,6 +148,7 @@ class MemoryActions:
                                "(not installed)", op.id)
             return
         self.served[_name(op.action)] = (op.action, type_name)
+        self.bridge._to_front(ops.Status("info", f"ok: {op.OP} {op.action}", id=op.id))
 
     def _unadvertise(self, op: ops.UnadvertiseAction) -> None:
         name = _name(op.action)

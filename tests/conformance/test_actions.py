@@ -13,7 +13,7 @@ from typing import Any
 import pytest
 
 from msgs.mult_msgs.action import IntegrateImu
-from roslibpy_lite import InvalidMessageError, MockRos, Ros, UsageError
+from roslibpy_lite import InvalidMessageError, MockRos, Ros, StatusError, UsageError
 from roslibpy_lite.actions import ActionError, GoalContext, GoalStatus
 
 IMU = "mult_msgs/action/IntegrateImu"
@@ -142,3 +142,12 @@ async def test_many_goals_in_flight(ros: Ros, topic: str) -> None:
              for n in range(8)]
     results = await asyncio.gather(*(g.result(timeout=15) for g in goals))
     assert [r.values["total"]["x"] for r in results] == [float(n) for n in range(8)]
+
+
+async def test_advertise_action_refused_at_await(ros: Ros, topic: str) -> None:
+    """An action type the bridge cannot serve is refused: ``await advertise_action`` raises."""
+    with pytest.raises(StatusError, match="advertise_action") as err:
+        await ros.advertise_action(topic, "nosuch_pkg/Thing", counting)
+    assert "nosuch_pkg" in str(err.value)
+    server = await ros.advertise_action(topic, IMU, counting)  # the name is free again
+    assert not server.closed
