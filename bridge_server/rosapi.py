@@ -235,7 +235,8 @@ def subscribers(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, Any]:
 def action_servers(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, Any]:
     """Actions that have a goal service in the graph."""
     suffix = "/_action/send_goal"
-    names = [n[: -len(suffix)] for n, _ in _all_services(bridge) if n.endswith(suffix)]
+    names = {n[: -len(suffix)] for n, _ in _all_services(bridge) if n.endswith(suffix)}
+    names.update(bridge.action_owners)  # served by our clients, even while the graph lags
     return {"action_servers": sorted(names)}
 
 
@@ -495,9 +496,12 @@ FIELDS.update(
 
 def action_type(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, Any]:
     """The type of one action (``pkg/action/Type``), "" if no server offers it."""
-    goal_service = _str_field(args, "action").rstrip("/") + "/_action/send_goal"
-    if not goal_service.startswith("/"):
-        goal_service = "/" + goal_service
+    name = _str_field(args, "action").rstrip("/")
+    name = name if name.startswith("/") else "/" + name
+    owner = bridge.action_owners.get(name)  # served by one of our clients
+    if owner is not None and name in owner.served:
+        return {"type": owner.served[name].type_name}
+    goal_service = name + "/_action/send_goal"
     for n, t in _all_services(bridge):
         if n == goal_service:
             return {"type": t.removesuffix("_SendGoal")}
