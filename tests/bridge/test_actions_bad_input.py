@@ -175,3 +175,22 @@ async def test_served_result_with_a_status_that_is_not_final(
     assert (await caller.result(handle)).status == 6
     await _still_working(ws, other, topic)
     caller.destroy()
+
+
+@pytest.mark.parametrize("op", ["send_action_goal", "advertise_action"])
+async def test_invalid_action_name(ws_connect: Any, topic: str, op: str):
+    """An action name ROS cannot carry is refused with an error naming it."""
+    ws, other = await _pair(ws_connect)
+    bad = topic + "/bad name!"
+    frame: dict[str, Any] = {"op": op, "action": bad, "id": "bad"}
+    if op == "send_action_goal":
+        frame.update(action_type=FIB, args={"order": 1})
+    else:
+        frame["type"] = FIB
+    await ws.send(frame)
+    msg = await _error(ws, id="bad")
+    assert "bad name!" in msg and "action" in msg
+    if op == "send_action_goal":
+        result = await ws.expect(op="action_result", id="bad")
+        assert result["result"] is False
+    await _still_working(ws, other, topic)
