@@ -202,8 +202,12 @@ def test_mock_conveniences() -> None:
 
 
 def test_many_publishes_keep_their_order(ros: Ros, topic: str) -> None:
-    """Publishes handed over without waiting for each still arrive all and in order."""
-    pub = ros.advertise(topic, "std_msgs/msg/Int32")
+    """Publishes handed over without waiting for each still arrive all and in order.
+
+    The ROS publisher's history holds the whole burst (queue_size), as KEEP_LAST
+    DDS may overwrite samples a busy subscriber has not acknowledged yet.
+    """
+    pub = ros.advertise(topic, "std_msgs/msg/Int32", queue_size=400)
     with ros.subscribe(topic, "std_msgs/msg/Int32", buffer_size=1000) as sub:
         heard(pub, sub, {"data": -1})
         for i in range(300):
