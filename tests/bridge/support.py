@@ -24,6 +24,26 @@ class Inbox:
         return await asyncio.wait_for(self.queue.get(), timeout)
 
 
+async def publish_until_heard(
+    ws: Any, topic: str, msg: dict[str, Any], inbox: Inbox, timeout: float = 10.0
+) -> Any:
+    """Publish ``msg`` through ``ws`` until ``inbox`` gets a value; returns that value.
+
+    A ROS subscription can see the bridge's publisher before the publisher sees
+    it (DDS matching is not symmetric), so one message sent at once may reach
+    nobody; repeating it until heard is the way to know the path is up.
+    """
+    loop = asyncio.get_running_loop()
+    deadline = loop.time() + timeout
+    while True:
+        await ws.send({"op": "publish", "topic": topic, "msg": msg})
+        try:
+            return await inbox.get(0.25)
+        except TimeoutError:
+            if loop.time() >= deadline:
+                raise
+
+
 async def ros_future(future: Any, timeout: float = 10.0) -> Any:
     """Await an rclpy future (completed on an executor thread) from asyncio."""
     loop = asyncio.get_running_loop()
