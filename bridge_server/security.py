@@ -339,15 +339,11 @@ class Security:
         self, connection: ServerConnection, request: Request, address: str
     ) -> Response | None:
         assert self.auth is not None
-        wait = self.failures.locked_for(address)
-        if wait > 0:
+        locked = self.locked_out(address)
+        if locked is not None:
             log.warning("refused a client from %s: locked out after failed attempts", address)
-            response = connection.respond(
-                429,
-                f"too many failed authentication attempts from {address}; "
-                f"retry in {wait:.0f} s\n",
-            )
-            response.headers["Retry-After"] = str(max(1, round(wait)))
+            response = connection.respond(429, f"{locked[0]}\n")
+            response.headers["Retry-After"] = locked[1]
             return response
         token, where = _token_of(request)
         if token is None:
@@ -366,6 +362,14 @@ class Security:
         if isinstance(connection, BridgeConnection):
             connection.principal = principal
         return None
+
+    def locked_out(self, address: str) -> tuple[str, str] | None:
+        """Why ``address`` may not try a token now, and its ``Retry-After`` (``None``: it may)."""
+        wait = self.failures.locked_for(address)
+        if wait <= 0:
+            return None
+        return (f"too many failed authentication attempts from {address}; retry in {wait:.0f} s",
+                str(max(1, round(wait))))
 
     def release(self, connection: BridgeConnection) -> None:
         """A counted connection ended."""
@@ -730,19 +734,33 @@ class WebAccess(Access):
     def __init__(self, security: Security) -> None:
         self.security = security
 
-    def principal(self, request: Request) -> Any:
-        """The principal of the request's token; 401 without a valid one."""
-        auth = self.security.auth
+    def principal(self, request: Request, address: str) -> Any:
+        """The principal of the request's token; 401 without a valid one.
+
+        A wrong token counts as a failed attempt of ``address`` exactly as at the
+        websocket handshake, and a locked-out address gets 429 here too, so these
+        routes are no way around the lock-out.
+        """
+        sec = self.security
+        auth = sec.auth
         if auth is None or request.path.startswith("/static/"):
             return None
+        locked = sec.locked_out(address)
+        if locked is not None:
+            log.warning("refused a plain-HTTP request from %s: locked out after failed attempts",
+                        address)
+            raise Denied(429, locked[0], [("Retry-After", locked[1])])
         token, where = _token_of(request)
         if token is None:
             raise Denied(401, "authentication required: send a token (Authorization: Bearer "
                          "or ?token=)")
         principal = auth.verify(token)
         if principal is None:
-            log.warning("refused a plain-HTTP request: wrong token in the %s", where)
+            count = sec.failures.failed(address)
+            log.warning("refused a plain-HTTP request from %s: wrong token in the %s "
+                        "(failure %d)", address, where, count)
             raise Denied(401, f"authentication failed: the token in the {where} is not valid")
+        sec.failures.succeeded(address)
         return principal
 
     def may_see(self, principal: Any, kind: str, name: str) -> bool:

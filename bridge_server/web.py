@@ -17,10 +17,11 @@ carries ``X-Bridge-Worker: <index>``, as do websocket handshake responses.
 Who sees what
 -------------
 An :class:`Access` decides, for the data routes (``/status.json`` and
-``/metrics``; the page and its assets hold no data): ``principal(request)``
+``/metrics``; the page and its assets hold no data): ``principal(request, address)``
 says who is asking (or raises :class:`Denied`, e.g. 401 without a valid
-token) and ``may_see(principal, kind, name)`` whether that viewer may see a
-``route``, a ``topic``, a ``service``, an ``action`` or a ``client``.
+token, 429 for an address locked out after failed attempts) and
+``may_see(principal, kind, name)`` whether that viewer may see a ``route``,
+a ``topic``, a ``service``, an ``action`` or a ``client``.
 :func:`visible` applies it to the status data and to the metrics, so neither
 shows what the role may not. This plain :class:`Access` shows everything
 (authentication off); the bridge sets ``bridge.web.access`` to
@@ -72,17 +73,20 @@ PEER_TIMEOUT = 1.0
 class Denied(Exception):
     """Raised by :meth:`Access.principal` to refuse a request (e.g. 401, 403)."""
 
-    def __init__(self, status: int, reason: str) -> None:
+    def __init__(self, status: int, reason: str, headers: list[tuple[str, str]] | None = None
+                 ) -> None:
         super().__init__(reason)
         self.status = status
         self.reason = reason
+        self.headers = headers or []
 
 
 class Access:
     """Who is asking, and what they may see. This default: anyone, everything."""
 
-    def principal(self, request: Request) -> Any:
-        """The viewer of ``request`` (``None``: anonymous); raise :class:`Denied` to refuse."""
+    def principal(self, request: Request, address: str) -> Any:
+        """The viewer of ``request`` from client ``address`` (``None``: anonymous); raise
+        :class:`Denied` to refuse."""
         return None
 
     def may_see(self, principal: Any, kind: str, name: str) -> bool:
@@ -205,7 +209,8 @@ class Web:
         """websockets' ``process_request``: answer a plain-HTTP route, or ``None`` to go on."""
         if "upgrade" in request.headers.get("Connection", "").lower():
             return None
-        reply = await self.answer(request)
+        addr = connection.remote_address
+        reply = await self.answer(request, str(addr[0]) if isinstance(addr, tuple) else str(addr))
         if reply is None:
             return None
         response = connection.respond(reply.status, "")
@@ -227,8 +232,9 @@ class Web:
         if request.headers.get(ACKS_HEADER) == "1":  # we confirm requests (session.py)
             response.headers[ACKS_HEADER] = "1"
 
-    async def answer(self, request: Request) -> Reply | None:
-        """The reply to a plain GET of one of the routes (``None``: not one of them)."""
+    async def answer(self, request: Request, address: str) -> Reply | None:
+        """The reply to a plain GET of one of the routes from client ``address`` (``None``:
+        not one of them)."""
         path = request.path.split("?", 1)[0]
         if path == "/":
             path = "/static/index.html"
@@ -247,9 +253,9 @@ class Web:
                          _TYPES.get(file.suffix, "application/octet-stream"),
                          [("Cache-Control", "no-cache")])
         try:
-            principal = self.access.principal(request)
+            principal = self.access.principal(request, address)
         except Denied as exc:
-            return Reply(exc.status, f"{exc.reason}\n".encode())
+            return Reply(exc.status, f"{exc.reason}\n".encode(), headers=exc.headers)
         if not self.access.may_see(principal, "route", path):
             return Reply(403, f"{path}: this role may not see it\n".encode())
         nocache = [("Cache-Control", "no-store")]
@@ -278,14 +284,18 @@ async def serve_metrics_port(web: Web, host: str, port: int) -> asyncio.Server:
                 if ":" in h:
                     k, v = h.split(":", 1)
                     headers[k.strip()] = v.strip()
+            peer = writer.get_extra_info("peername")
+            address = str(peer[0]) if isinstance(peer, tuple) else str(peer)
             reply = (
-                await web.answer(Request(target, headers)) if method == "GET" else None
+                await web.answer(Request(target, headers), address) if method == "GET" else None
             ) or Reply(404, b"not found\n")
-            writer.write(
+            writer.write((
                 f"HTTP/1.1 {reply.status} {'OK' if reply.status == 200 else 'Error'}\r\n"
                 f"Content-Type: {reply.content_type}\r\nContent-Length: {len(reply.body)}\r\n"
                 f"X-Bridge-Worker: {web.bridge.config.worker_index}\r\n"
-                "Connection: close\r\n\r\n".encode() + reply.body
+                + "".join(f"{k}: {v}\r\n" for k, v in reply.headers)
+                + "Connection: close\r\n\r\n"
+            ).encode() + reply.body
             )
             await writer.drain()
         except (OSError, asyncio.IncompleteReadError, asyncio.LimitOverrunError, TimeoutError):

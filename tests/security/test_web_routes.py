@@ -3,6 +3,10 @@
 from __future__ import annotations
 
 import json
+from typing import Any
+
+import pytest
+from websockets.exceptions import InvalidStatus
 
 from tests.bridge.support import roundtrip
 from tests.helpers import BridgeProcess
@@ -43,3 +47,18 @@ async def test_status_lists_only_what_the_role_may_see(
     topics = set(json.loads(body)["topics"])
     assert seen in topics and hidden not in topics
     await admin.close()
+
+
+async def test_wrong_tokens_on_routes_count_toward_the_lock_out(make_bridge: Any, auth: AuthFile):
+    """Wrong tokens on /metrics lock the address out: then /metrics and websockets get 429."""
+    bridge = make_bridge("--auth-file", str(auth.path))
+    base = f"http://127.0.0.1:{bridge.port}"
+    for _ in range(5):
+        code, _, _ = await aget(f"{base}/metrics?token=guess")
+        assert code == 401
+    code, headers, body = await aget(f"{base}/metrics?token={auth.tokens['admin']}")
+    assert code == 429 and b"too many failed authentication attempts" in body
+    assert int(headers["retry-after"]) >= 1
+    with pytest.raises(InvalidStatus) as info:
+        await wire(bridge.url, auth.tokens["admin"])
+    assert info.value.response.status_code == 429
