@@ -86,7 +86,8 @@ from websockets.exceptions import ConnectionClosed
 
 from roslibpy_lite import ops
 from roslibpy_lite.exceptions import ProtocolError
-from roslibpy_lite.protocol import Protocol, split_fragments
+from roslibpy_lite.ops import parse_op
+from roslibpy_lite.protocol import Protocol, decode_frame, split_fragments
 from roslibpy_lite.transports.base import ACKS_HEADER
 
 from . import convert, rosapi
@@ -482,7 +483,10 @@ class Session:
         if not self.gate.admit_frame(len(frame)):
             return
         try:
-            op = self.protocol.receive(frame)
+            # Before authentication a frame is one op: fragments are not held for reassembly
+            # (the gate refuses a fragment like any op but auth).
+            op = (self.protocol.receive(frame) if self.gate.authenticated
+                  else parse_op(decode_frame(frame)))
         except ProtocolError as exc:
             self.error(exc.message, exc.id, "protocol")
             return

@@ -268,3 +268,13 @@ async def test_large_frames_before_auth_close_the_connection(auth_bridge: Bridge
         await ws.recv()
     assert info.value.rcvd is not None and info.value.rcvd.code == 1008
     assert "authentication required" in info.value.rcvd.reason
+
+
+async def test_fragments_before_auth_are_refused(auth_bridge: BridgeProcess):
+    """Without a token, a fragment is not held for reassembly: the connection closes (1008)."""
+    ws = await wire(auth_bridge.url)
+    await ws.send({"op": "fragment", "id": "f", "data": '{"op": "sub', "num": 0, "total": 2})
+    with pytest.raises(ConnectionClosed) as info:
+        await ws.recv(timeout=20)
+    assert info.value.rcvd is not None and info.value.rcvd.code == 1008
+    assert "authentication required before 'fragment'" in info.value.rcvd.reason
