@@ -142,7 +142,10 @@ async def _run(args: argparse.Namespace) -> int:
     for sig in (signal.SIGINT, signal.SIGTERM):
         loop.add_signal_handler(sig, stop.set)
     if args.worker_index is not None:
+        from .workers import watch_supervisor
+
         config.node_name = f"{config.node_name}_w{args.worker_index}"
+        watch_supervisor(stop)  # a worker stops with its supervisor, even a killed one
     bridge = Bridge(config)
     await bridge.start()
     if args.worker_index is not None:  # the supervisor prints the bridge's ready line

@@ -44,7 +44,7 @@ from typing import IO, TYPE_CHECKING, Any
 if TYPE_CHECKING:
     from .web import Web
 
-__all__ = ["STOP_GRACE", "Supervisor", "serve_peer_socket"]
+__all__ = ["STOP_GRACE", "Supervisor", "serve_peer_socket", "watch_supervisor"]
 
 log = logging.getLogger("bridge_server.workers")
 
@@ -101,6 +101,26 @@ async def _fetch(path: str) -> dict[str, Any] | None:
         return None  # a worker that is restarting: left out of this view
 
 
+def watch_supervisor(stop: asyncio.Event) -> None:
+    """In a worker: set ``stop`` when the supervisor is gone (end-of-file on stdin).
+
+    The supervisor holds the other end of the worker's stdin pipe and never
+    writes to it; the kernel closes it when the supervisor exits however it
+    exits, so a killed supervisor does not leave workers serving its port.
+    """
+    loop = asyncio.get_running_loop()
+    fd = sys.stdin.fileno()
+
+    def readable() -> None:
+        if os.read(fd, 4096):
+            return  # nobody writes here; ignore anything that does
+        loop.remove_reader(fd)
+        log.warning("the supervisor is gone: worker stopping")
+        stop.set()
+
+    loop.add_reader(fd, readable)
+
+
 def reserve(host: str, port: int) -> socket.socket:
     """Bind (without listening) ``host:port`` with SO_REUSEPORT: holds the port for workers."""
     sock = socket.socket(socket.AF_INET6 if ":" in host else socket.AF_INET, socket.SOCK_STREAM)
@@ -136,7 +156,9 @@ class Supervisor:
             extra += ["--metrics-port", str(self.metrics_port)]
         proc = subprocess.Popen(
             [sys.executable, "-m", "bridge_server", *self.argv, *extra],
-            stdin=subprocess.DEVNULL,
+            # Never written: when the supervisor dies, even by SIGKILL, the worker reads
+            # end-of-file here and stops (see watch_supervisor), so no worker is orphaned.
+            stdin=subprocess.PIPE,
             stderr=subprocess.PIPE,
             process_group=0,  # terminal signals reach the supervisor only
         )

@@ -165,3 +165,14 @@ def test_a_signal_stops_every_worker(sig: int) -> None:
                                != psutil.STATUS_ZOMBIE for p in children), 5, "workers gone")
 
 
+
+
+def test_workers_stop_when_the_supervisor_is_killed() -> None:
+    """SIGKILL to the supervisor (no chance to stop anyone): its workers notice and exit."""
+    proc = BridgeProcess(args=["--workers", "2"]).start()
+    assert proc.proc is not None
+    children = psutil.Process(proc.proc.pid).children()
+    assert len(children) == 2
+    proc.kill()
+    _, alive = psutil.wait_procs(children, timeout=10)
+    assert not alive, f"workers still running after their supervisor was killed: {alive}"
