@@ -50,6 +50,7 @@ from . import rosapi
 from .auth import AuthConfig, FailureTracker, Principal, load_auth_file
 from .names import InvalidNameError, check_name
 from .permissions import Role, filter_rosapi, requirement, rosapi_requirement
+from .types import BridgeError
 from .web import Access, Denied
 
 if TYPE_CHECKING:
@@ -244,6 +245,44 @@ class BridgeConnection(ServerConnection):
         self.security.release(self)
 
 
+WEBSOCKETS_TESTED = ">=17,<18"
+"""The websockets versions whose internals :class:`_BudgetAssembler` is tested with."""
+
+
+def check_websockets_internals() -> None:
+    """Fail at start-up, clearly, if websockets' private internals differ from what the byte
+    budget builds on (its ``Assembler``, ``SimpleQueue`` and the connection's queue limits).
+
+    Call with an event loop running. Raises :class:`BridgeError` naming the version.
+    """
+    from importlib.metadata import version
+
+    from websockets.asyncio.connection import Connection
+    from websockets.frames import Opcode
+    from websockets.server import ServerProtocol
+
+    try:
+        totals = _Inbound()
+        asm = _BudgetAssembler(1, 1, totals, high=4, low=1)
+        asm.put(Frame(Opcode.TEXT, b"xy"))
+        held = (totals.bytes, asm.paused, asm.frames is asm.queue)
+        asm.close()
+        conn = Connection(ServerProtocol())
+        limits = (conn.max_queue_high, conn.max_queue_low)
+        problem = None if held == (2, True, True) and totals.bytes == 0 else f"counted {held}"
+        if not hasattr(Connection, "connection_made") or len(limits) != 2:
+            problem = "no connection_made or queue limits"
+    except Exception as exc:
+        problem = f"{type(exc).__name__}: {exc}"
+    if problem is not None:
+        raise BridgeError(
+            f"websockets {version('websockets')} is not supported by the bridge: its inbound "
+            f"byte budget (bridge_server/security.py) builds on websockets' private Assembler "
+            f"internals, tested with websockets{WEBSOCKETS_TESTED} ({problem}); install "
+            f"'websockets{WEBSOCKETS_TESTED}'"
+        )
+
+
 class Security:
     """The bridge's security configuration, and the state it keeps across connections."""
 
@@ -268,6 +307,7 @@ class Security:
         if not c.certfile:
             return None
         ctx = ssl.create_default_context(ssl.Purpose.CLIENT_AUTH)
+        ctx.minimum_version = max(ctx.minimum_version, ssl.TLSVersion.TLSv1_2)
         ctx.load_cert_chain(c.certfile, c.keyfile or None)
         if c.client_ca:
             ctx.verify_mode = ssl.CERT_REQUIRED
@@ -275,7 +315,8 @@ class Security:
         return ctx
 
     def serve_kwargs(self) -> dict[str, Any]:
-        """Keyword arguments for websockets' ``serve``."""
+        """Keyword arguments for websockets' ``serve`` (checks websockets' internals first)."""
+        check_websockets_internals()
         return {
             "ssl": self.ssl_context(),
             "open_timeout": self.config.handshake_timeout or None,

@@ -133,3 +133,14 @@ async def test_inbound_byte_budget_pauses_and_resumes_reading():
     assert calls[-1] != "resume"  # still 600 bytes waiting: more than a quarter of the budget
     assert await asm.get() == "x" * 600
     assert calls[-1] == "resume" and totals.bytes == 400
+
+
+async def test_websockets_internals_are_checked_at_start_up(monkeypatch: pytest.MonkeyPatch):
+    """The budget's websockets internals pass the start-up check; if they change, it says so."""
+    from bridge_server.security import check_websockets_internals
+    from bridge_server.types import BridgeError
+
+    check_websockets_internals()
+    monkeypatch.setattr(_BudgetAssembler, "maybe_pause", lambda self: None)
+    with pytest.raises(BridgeError, match=r"websockets \S+ is not supported by the bridge"):
+        check_websockets_internals()

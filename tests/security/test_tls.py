@@ -69,3 +69,15 @@ async def test_workers_serve_wss(make_bridge: Any, certs: Certs, auth: AuthFile)
         ws = await wire(wss(bridge), auth.tokens["viewer"], ssl_context=certs.context())
         await roundtrip(ws)
         await ws.close()
+
+
+def test_tls_context_requires_tls_1_2_and_client_certificates(certs: Certs):
+    """The server context refuses TLS below 1.2, and --client-ca makes a certificate required."""
+    from bridge_server.security import Security, SecurityConfig
+
+    plain = Security(SecurityConfig(certfile=str(certs.server))).ssl_context()
+    mutual = Security(SecurityConfig(certfile=str(certs.server),
+                                     client_ca=str(certs.client_ca))).ssl_context()
+    assert plain is not None and mutual is not None
+    assert plain.minimum_version >= ssl.TLSVersion.TLSv1_2
+    assert plain.verify_mode == ssl.CERT_NONE and mutual.verify_mode == ssl.CERT_REQUIRED
