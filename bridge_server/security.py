@@ -522,7 +522,15 @@ class Gate:
         if self._timer is not None:
             self._timer.cancel()
         log.warning("session %d: closing: %s", self.session.sid, reason)
-        self.session.loop.create_task(self.session.ws.close(POLICY_VIOLATION, reason[:120]))
+        task = self.session.loop.create_task(self.session.ws.close(POLICY_VIOLATION, reason[:120]))
+        _CLOSING.add(task)  # a strong reference until it is done (the loop keeps only weak ones)
+        task.add_done_callback(_CLOSING.discard)
+
+    def end(self) -> None:
+        """The session ended: stop the authentication timer (it would hold the session)."""
+        if self._timer is not None:
+            self._timer.cancel()
+            self._timer = None
 
     # -- ops -------------------------------------------------------------------------------------
 
@@ -667,6 +675,9 @@ class Gate:
             return values
         return filter_rosapi(self.role, service, values)
 
+
+_CLOSING: set[asyncio.Task[None]] = set()
+"""Close handshakes under way that :meth:`Gate.close` started."""
 
 _WHAT = {
     "subscribe": "topic",

@@ -398,6 +398,7 @@ class Session:
 
     async def cleanup(self) -> None:
         """Release what this client owned (subscriptions and services at once, publishers later)."""
+        self.gate.end()
         for sub in list(self.subs.values()):
             self._drop_sub(sub)
         self.subs.clear()
