@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import asyncio
+import json
 import threading
 from collections.abc import Callable
 from typing import Any
@@ -95,6 +96,25 @@ async def test_each_capability_is_denied_without_it(connect_as: Connect, topic: 
     await _forbidden(viewer, "p", "viewer", "params", "/some_node:speed")
     await nobody.send({"op": "call_service", "service": "/rosapi/topics", "id": "t"})
     await _forbidden(nobody, "t", "nothing", "introspection", "any name")
+
+
+async def test_forbidden_ops_in_fragments_cbor_and_rosapi_params(connect_as: Connect, topic: str):
+    """A publish split into fragments, an advertise as a CBOR frame and set_param are each refused."""
+    import cbor2
+
+    from roslibpy_lite.protocol import split_fragments
+
+    viewer = await connect_as("viewer")
+    text = json.dumps({"op": "publish", "topic": topic, "msg": {"data": "x" * 300}, "id": "fr"})
+    for piece in split_fragments(text, 100, "frag"):
+        await viewer.send_raw(piece)
+    await _forbidden(viewer, "fr", "viewer", "publish", topic)
+    await viewer.send_raw(cbor2.dumps({"op": "advertise", "topic": topic,
+                                       "type": "std_msgs/msg/String", "id": "cb"}))
+    await _forbidden(viewer, "cb", "viewer", "publish", topic)
+    await viewer.send({"op": "call_service", "service": "rosapi/set_param", "id": "sp",
+                       "args": ["/some_node:speed", "1.0"]})
+    await _forbidden(viewer, "sp", "viewer", "params", "/some_node:speed")
 
 
 async def test_deny_wins_over_allow(connect_as: Connect, topic: str):
