@@ -189,6 +189,8 @@ _LISTS: dict[str, tuple[str, tuple[str, ...]]] = {
     "/rosapi/get_param_names": ("params", ("names",)),
 }
 _INDEPENDENT = {"/rosapi/node_details": ("subscribing", "publishing", "services")}
+_LOOKUPS = {"/rosapi/service_node": "node"}
+"""Answers naming one node: blanked (as for an unknown name) if the role may not see it."""
 
 
 def filter_rosapi(role: Role, service: str, values: dict[str, Any]) -> dict[str, Any]:
@@ -204,6 +206,12 @@ def filter_rosapi(role: Role, service: str, values: dict[str, Any]) -> dict[str,
                 column = values.get(f)
                 if isinstance(column, list) and len(column) == len(names):
                     values[f] = [column[i] for i in keep]
+        return values
+    field_name = _LOOKUPS.get(service)
+    if field_name is not None:
+        found = values.get(field_name)
+        if isinstance(found, str) and found and not role.allows("introspection", found):
+            values = {**values, field_name: ""}
         return values
     independent = _INDEPENDENT.get(service)
     if independent is not None:

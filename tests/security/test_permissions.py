@@ -200,6 +200,47 @@ def test_role_patterns_and_all():
     assert not role.allows("publish", "/robot/estop") and role.allows("publish", "/robot/cmd")
 
 
+_SEEN_HIDDEN = {
+    "/rosapi/topics": {"topics": ["/seen", "/hidden"], "types": ["a/msg/A", "b/msg/B"]},
+    "/rosapi/topics_and_raw_types": {"topics": ["/seen", "/hidden"], "types": ["a", "b"],
+                                     "typedefs_full_text": ["ta", "tb"]},
+    "/rosapi/topics_for_type": {"topics": ["/seen", "/hidden"]},
+    "/rosapi/services": {"services": ["/seen", "/hidden"]},
+    "/rosapi/services_for_type": {"services": ["/seen", "/hidden"]},
+    "/rosapi/nodes": {"nodes": ["/seen", "/hidden"]},
+    "/rosapi/publishers": {"publishers": ["/seen", "/hidden"]},
+    "/rosapi/subscribers": {"subscribers": ["/seen", "/hidden"]},
+    "/rosapi/action_servers": {"action_servers": ["/seen", "/hidden"]},
+    "/rosapi/node_details": {"subscribing": ["/seen", "/hidden"],
+                             "publishing": ["/seen", "/hidden"], "services": ["/seen", "/hidden"]},
+    "/rosapi/service_node": {"node": "/hidden"},
+}
+"""An answer of each rosapi service that names things, holding a visible and a hidden name."""
+
+
+def test_every_rosapi_answer_naming_things_is_filtered():
+    """Each rosapi list (and service_node) keeps only names the role's introspection matches."""
+    from bridge_server import rosapi
+    from bridge_server.permissions import filter_rosapi
+
+    role = Role.from_table("r", {"introspection": ["/seen*"], "params": ["/seen*"]})
+    for service, answer in _SEEN_HIDDEN.items():
+        shown = filter_rosapi(role, service, answer)
+        for key, column in shown.items():
+            assert "/hidden" not in column, (service, key)
+            if isinstance(column, list):
+                assert len(column) == 1, (service, key)
+    names = filter_rosapi(role, "/rosapi/get_param_names", {"names": ["/seen:a", "/hidden:b"]})
+    assert names == {"names": ["/seen:a"]}
+    # A new rosapi service must be classified here: it names things (above) or it does not.
+    naming_nothing = {"action_feedback_details", "action_goal_details", "action_result_details",
+                      "get_ros_version", "get_time", "message_details", "service_request_details",
+                      "service_response_details", "service_type", "topic_type", "action_type",
+                      "get_param", "has_param", "set_param", "delete_param", "get_param_names"}
+    every = set(rosapi.HANDLERS) | set(rosapi.ASYNC_HANDLERS)
+    assert every == set(_SEEN_HIDDEN) | {"/rosapi/" + n for n in naming_nothing}
+
+
 async def test_a_vanished_owner_loses_its_service(
     ws_connect: Any, bridge: BridgeProcess, topic: str
 ):
