@@ -108,6 +108,9 @@ _TOKEN_PATTERNS = (
     re.compile(r"(?i)(bearer\s+)[^\s'\",]+"),
     re.compile(r"(?i)([?&]token=)[^&\s'\"]+"),
     re.compile(r"(?i)('mac':\s*'|\"mac\":\s*\")[^'\"]+"),
+    # websockets' DEBUG line of a received data frame shows its start and end, not its keys:
+    # an auth op's token can be there (as hex in a CBOR frame) where the key is elided.
+    re.compile(r"(?m)^(< (?:TEXT|BINARY|CONT) ).+?(?= \[[^\]]*\]$)"),
 )
 
 

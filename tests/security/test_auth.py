@@ -8,6 +8,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
+import cbor2
 import pytest
 from websockets.asyncio.client import connect
 from websockets.exceptions import ConnectionClosed, InvalidStatus
@@ -16,6 +17,7 @@ from bridge_server.auth import AuthFileError, FailureTracker, load_auth_file
 from bridge_server.security import Security, SecurityConfig, redact
 from tests.bridge.support import roundtrip
 from tests.helpers import ROOT, BridgeProcess, ros_env
+from tests.ops.support import aget
 from tests.security.support import AuthFile, wire
 
 
@@ -146,18 +148,31 @@ async def test_tokens_never_reach_the_log(make_bridge: Any, auth: AuthFile):
     with pytest.raises(ConnectionClosed):
         await ws.recv()
     bridge.wait_for_line("auth op from .* wrong token")
+    ws = await wire(bridge.url)
+    await ws.send_raw(cbor2.dumps({"op": "auth", "mac": good}))  # logged as hex at DEBUG
+    await roundtrip(ws)
+    await ws.close()
+    code, _, _ = await aget(f"http://127.0.0.1:{bridge.port}/metrics?token={wrong}")
+    assert code == 401
+    bridge.wait_for_line("plain-HTTP request .* wrong token")
     log = bridge.log()
     assert "authenticated as viewer_user" in log
-    assert good not in log and wrong not in log
+    flat = log.replace(" ", "")
+    for token in (good, wrong):
+        for i in range(len(token) - 5):  # no part of it, as text or as hex
+            part = token[i:i + 6]
+            assert part not in log and part.encode().hex() not in flat
 
 
 def test_redact_scrubs_every_carrier():
-    """The log filter hides bearer headers, query tokens and auth-op macs."""
+    """The log filter hides bearer headers, query tokens, auth-op macs and received frames."""
     text = "Authorization: Bearer abc123 GET /?token=xyz&x=1 {'mac': 'm1'} {\"mac\": \"m2\"}"
     clean = redact(text)
     for secret in ("abc123", "xyz", "m1", "m2"):
         assert secret not in clean
     assert "x=1" in clean
+    frame = redact("< BINARY a2 62 6f 70 ... 42 6b 6d 49 [58 bytes]")
+    assert frame == "< BINARY <redacted> [58 bytes]"
 
 
 def test_add_principal_prints_a_token_once_and_stores_a_hash(tmp_path: Path):
