@@ -36,7 +36,7 @@ import sys
 import time
 import tomllib
 from collections import OrderedDict
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -92,8 +92,8 @@ class Principal:
 
     name: str
     role: Role
-    salt: bytes
-    digest: bytes
+    salt: bytes = field(repr=False)  # kept out of reprs, tracebacks and logs
+    digest: bytes = field(repr=False)
 
 
 @dataclass

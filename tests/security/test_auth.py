@@ -293,3 +293,12 @@ async def test_fragments_before_auth_are_refused(auth_bridge: BridgeProcess):
         await ws.recv(timeout=20)
     assert info.value.rcvd is not None and info.value.rcvd.code == 1008
     assert "authentication required before 'fragment'" in info.value.rcvd.reason
+
+
+def test_principal_repr_holds_no_token_hash(auth: AuthFile):
+    """A principal's repr (in a traceback or a log line) shows neither its salt nor its digest."""
+    for principal in load_auth_file(auth.path).principals:
+        text = repr(principal)
+        assert principal.name in text
+        assert principal.digest.hex() not in text and principal.salt.hex() not in text
+        assert repr(principal.digest) not in text
