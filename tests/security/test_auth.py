@@ -302,3 +302,13 @@ def test_principal_repr_holds_no_token_hash(auth: AuthFile):
         assert principal.name in text
         assert principal.digest.hex() not in text and principal.salt.hex() not in text
         assert repr(principal.digest) not in text
+
+
+async def test_large_frame_before_auth_closes(auth_bridge: BridgeProcess):
+    """Without a token, a frame larger than an auth op needs closes the connection (1008)."""
+    ws = await wire(auth_bridge.url)
+    await ws.send({"op": "publish", "topic": "/x", "msg": {"data": "x" * 100_000}})
+    with pytest.raises(ConnectionClosed) as info:
+        await ws.recv(timeout=20)
+    assert info.value.rcvd is not None and info.value.rcvd.code == 1008
+    assert "authentication required before a frame of" in info.value.rcvd.reason
