@@ -603,6 +603,12 @@ class Gate:
         if auth is None:
             return  # no auth file: everyone is welcome, the op changes nothing
         address = _address(self.session.ws)
+        locked = self.security.locked_out(address)
+        if locked is not None:  # connections opened before the lock-out get no guess either
+            log.warning("session %d: auth op from %s refused: locked out after failed attempts",
+                        self.session.sid, address)
+            self.close(locked[0])
+            return
         principal = auth.verify(op.mac)
         if principal is None or (self.principal is not None and principal is not self.principal):
             count = self.security.failures.failed(address)

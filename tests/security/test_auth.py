@@ -312,3 +312,20 @@ async def test_large_frame_before_auth_closes(auth_bridge: BridgeProcess):
         await ws.recv(timeout=20)
     assert info.value.rcvd is not None and info.value.rcvd.code == 1008
     assert "authentication required before a frame of" in info.value.rcvd.reason
+
+
+async def test_locked_out_address_gets_no_guess_on_open_connections(
+    make_bridge: Any, auth: AuthFile
+):
+    """Connections opened before a lock-out cannot use auth ops to go on guessing."""
+    bridge = make_bridge("--auth-file", str(auth.path))
+    waiting = [await wire(bridge.url) for _ in range(6)]
+    for ws in waiting[:5]:
+        await ws.send({"op": "auth", "mac": "guess"})
+        with pytest.raises(ConnectionClosed):
+            await ws.recv(timeout=20)
+    await waiting[5].send({"op": "auth", "mac": auth.tokens["admin"]})
+    with pytest.raises(ConnectionClosed) as info:
+        await waiting[5].recv(timeout=20)
+    assert info.value.rcvd is not None and info.value.rcvd.code == 1008
+    assert "too many failed authentication attempts" in info.value.rcvd.reason
