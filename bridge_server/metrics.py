@@ -103,6 +103,7 @@ class LabelCap:
         self.admitted: set[str] = set()
 
     def __call__(self, value: str) -> str:
+        """``value`` if it is admitted (or there is room for it), else ``"other"``."""
         admitted = self.admitted
         if value in admitted:
             return value

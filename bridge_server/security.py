@@ -125,6 +125,7 @@ class RedactTokens(logging.Filter):
     """A logging filter that scrubs tokens from every record (install it on handlers)."""
 
     def filter(self, record: logging.LogRecord) -> bool:
+        """Scrub ``record``'s message; never drop the record."""
         try:
             text = record.getMessage()
         except Exception:
@@ -231,6 +232,7 @@ class BridgeConnection(ServerConnection):
     counted: str | None = None
 
     def connection_made(self, transport: asyncio.BaseTransport) -> None:
+        """websockets' hook: read frames through the budgeted assembler."""
         super().connection_made(transport)
         sec = self.security
         self.recv_messages = _BudgetAssembler(
@@ -244,6 +246,7 @@ class BridgeConnection(ServerConnection):
         )
 
     def connection_lost(self, exc: Exception | None) -> None:
+        """websockets' hook: no longer count this connection against the client limits."""
         super().connection_lost(exc)
         self.security.release(self)
 
