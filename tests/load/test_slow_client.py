@@ -117,11 +117,21 @@ async def _flood(make_bridge: Any, ws_connect: Any, ros_node: Any, topic: str) -
     return out
 
 
+_floods: dict[str, Flood] = {}
+
+
+async def _the_flood(make_bridge: Any, ws_connect: Any, ros_node: Any, topic: str) -> Flood:
+    """The module's one flood: both tests below check what the same flood showed (run once)."""
+    if "flood" not in _floods:
+        _floods["flood"] = await _flood(make_bridge, ws_connect, ros_node, topic)
+    return _floods["flood"]
+
+
 async def test_stalled_client_bounded_memory_and_same_topic_reader_served(
     make_bridge: Any, ws_connect: Any, ros_node: Any, topic: str
 ) -> None:
     """Under a 640x480 image flood a client that never reads grows the bridge by < 300 MB, and a reading client on the same topic still gets most frames (>= 80 %; a bridge blocked by the stalled socket would deliver only a handful)."""
-    flood = await _flood(make_bridge, ws_connect, ros_node, topic)
+    flood = await _the_flood(make_bridge, ws_connect, ros_node, topic)
     assert flood.growth_mb < BOUND_MB, f"bridge RSS grew {flood.growth_mb:.0f} MB"
     assert len(flood.frames) >= 0.8 * IMAGES, (
         f"reader on the same topic got {len(flood.frames)} of {IMAGES}; statuses {flood.notes[:3]}"
@@ -132,7 +142,7 @@ async def test_stalled_client_and_flood_cost_another_topic_nothing(
     make_bridge: Any, ws_connect: Any, ros_node: Any, topic: str
 ) -> None:
     """During the same flood a client subscribed to another 100 Hz topic receives every message, in order."""
-    flood = await _flood(make_bridge, ws_connect, ros_node, topic)
+    flood = await _the_flood(make_bridge, ws_connect, ros_node, topic)
     assert flood.numbers == list(range(IMAGES)), (
         f"other topic: got {len(flood.numbers)} of {IMAGES}, missing "
         f"{sorted(set(range(IMAGES)) - set(flood.numbers))[:20]}; statuses {flood.notes[:3]}"

@@ -55,6 +55,8 @@ class PeerProcess:
         self.info: dict[str, Any] = {}
         #: Index of the first event that belongs to the current test (a peer may be shared).
         self.since = 0
+        #: The bridge this client talks to, if known: the end of its log is in diagnostics.
+        self.bridge: BridgeProcess | None = None
 
     def start(self, timeout: float = 20.0) -> PeerProcess:
         """Start the child and wait until it says it is connected."""
@@ -107,7 +109,10 @@ class PeerProcess:
             err = "\n".join(self.stderr[-40:])
             noise = "\n".join(self.noise[-20:])
             events = json.dumps(self.events[self.since:][-10:], default=str)[:2000]
-        return f"--- {self.name} stderr:\n{err}\n--- stdout noise:\n{noise}\n--- last events: {events}"
+        text = f"--- {self.name} stderr:\n{err}\n--- stdout noise:\n{noise}\n--- last events: {events}"
+        if self.bridge is not None:  # what the bridge made of this client's ops
+            text += "\n--- bridge log:\n" + "\n".join(self.bridge.lines[-30:])
+        return text
 
     def send(self, cmd: str, **params: Any) -> int:
         """Send one command without waiting; returns its sequence number."""
@@ -246,6 +251,7 @@ class PeerPool:
         else:
             raise ValueError(kind)
         peer = PeerProcess(name, argv, PEERS, env)
+        peer.bridge = self.bridge  # its log goes into failure messages
         try:
             return peer.start()
         except BaseException:
