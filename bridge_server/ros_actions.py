@@ -31,6 +31,7 @@ from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 
 from . import convert
 from .ros import SERVICE_DEPTH, _qos
+from .types import BridgeError
 
 if TYPE_CHECKING:
     from .ros import RosNode
@@ -58,6 +59,35 @@ RESULT_TIMEOUT = 60
 FEEDBACK_GRACE = 0.005
 """Seconds a goal's feedback is still heard after its result (only goals that asked for
 feedback wait this long for their result)."""
+
+
+def check_rclpy_internals() -> None:
+    """Fail at start-up, clearly, if rclpy's private action internals used here differ
+    (``_feedback_callbacks``, ``_client_handle``, ``_result_futures``, ``_update_state`` and
+    ``GoalEvent``: tested with the rclpy the ``bridge`` extra pins). Raises :class:`BridgeError`.
+    """
+    import inspect
+    from importlib.metadata import PackageNotFoundError, version
+
+    missing = [n for n in ("EXECUTE", "CANCEL_GOAL") if not hasattr(_rclpy.GoalEvent, n)]
+    if not callable(getattr(_action.server.ServerGoalHandle, "_update_state", None)):
+        missing.append("ServerGoalHandle._update_state")
+    for cls, attrs in ((_action.ActionClient, ("_feedback_callbacks", "_client_handle")),
+                       (_action.ActionServer, ("_result_futures",))):
+        try:
+            source = inspect.getsource(cls.__init__)
+        except (OSError, TypeError):
+            source = ""
+        missing += [f"{cls.__name__}.{a}" for a in attrs if f"self.{a}" not in source]
+    if missing:
+        try:
+            installed = version("ros-rclpy")
+        except PackageNotFoundError:
+            installed = "(not from PyPI)"
+        raise BridgeError(
+            f"rclpy {installed} lacks what the bridge's actions build on "
+            f"({', '.join(missing)}); install the rclpy of the 'bridge' extra (pyproject.toml)"
+        )
 
 
 class Status:

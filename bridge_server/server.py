@@ -28,6 +28,7 @@ from websockets.asyncio.server import Server, ServerConnection, serve
 from .actions import ActionClients, SessionActions
 from .metrics import Recorder
 from .ros import RosNode
+from .ros_actions import check_rclpy_internals
 from .security import Security, SecurityConfig
 from .session import Session, SessionConfig
 from .web import Web
@@ -91,6 +92,7 @@ class Bridge:
 
     async def start(self) -> None:
         """Start ROS and listen."""
+        check_rclpy_internals()  # a clear error now, not a crash at the first action goal
         self.ros.start()
         self._server = await serve(
             self._handle,

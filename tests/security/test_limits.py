@@ -144,3 +144,16 @@ async def test_websockets_internals_are_checked_at_start_up(monkeypatch: pytest.
     monkeypatch.setattr(_BudgetAssembler, "maybe_pause", lambda self: None)
     with pytest.raises(BridgeError, match=r"websockets \S+ is not supported by the bridge"):
         check_websockets_internals()
+
+
+def test_rclpy_internals_are_checked_at_start_up(monkeypatch: pytest.MonkeyPatch):
+    """The action code's rclpy internals pass the start-up check; if one is gone, it says so."""
+    from rclpy.action.server import ServerGoalHandle
+
+    from bridge_server.ros_actions import check_rclpy_internals
+    from bridge_server.types import BridgeError
+
+    check_rclpy_internals()
+    monkeypatch.delattr(ServerGoalHandle, "_update_state")
+    with pytest.raises(BridgeError, match=r"ServerGoalHandle\._update_state"):
+        check_rclpy_internals()
