@@ -31,6 +31,7 @@ from __future__ import annotations
 import argparse
 import hashlib
 import hmac
+import re
 import secrets
 import sys
 import time
@@ -213,8 +214,8 @@ def add_principal(path: Path, name: str, role: str) -> str:
 
     Returns the new token; only its hash is written.
     """
-    if not name.replace("_", "").replace("-", "").isalnum():
-        raise AuthFileError(f"principal name {name!r}: use letters, digits, '-' and '_'")
+    if not re.fullmatch(r"[A-Za-z0-9_-]+", name):  # a TOML bare key: 'é' would break the file
+        raise AuthFileError(f"principal name {name!r}: use ASCII letters, digits, '-' and '_'")
     if not path.exists():
         path.write_text(EXAMPLE_ROLES, encoding="utf-8")
         path.chmod(0o600)
@@ -237,7 +238,7 @@ def main(argv: list[str] | None = None) -> int:
         prog="roslibpy-lite-bridge add-principal",
         description="Add a principal to an auth file and print its new token (once).",
     )
-    p.add_argument("name", help="principal name (letters, digits, '-', '_')")
+    p.add_argument("name", help="principal name (ASCII letters, digits, '-', '_')")
     p.add_argument("--role", required=True, help="a role defined in the file")
     p.add_argument("--auth-file", required=True, type=Path,
                    help="the TOML auth file (created with example roles if missing)")

@@ -329,3 +329,15 @@ async def test_locked_out_address_gets_no_guess_on_open_connections(
         await waiting[5].recv(timeout=20)
     assert info.value.rcvd is not None and info.value.rcvd.code == 1008
     assert "too many failed authentication attempts" in info.value.rcvd.reason
+
+
+def test_add_principal_refuses_a_name_toml_cannot_hold(tmp_path: Path):
+    """A non-ASCII principal name is refused before anything is written; the file stays usable."""
+    from bridge_server.auth import add_principal
+
+    path = tmp_path / "auth.toml"
+    add_principal(path, "alice", "viewer")
+    with pytest.raises(AuthFileError, match="ASCII letters"):
+        add_principal(path, "é", "viewer")
+    add_principal(path, "bob", "viewer")
+    assert [p.name for p in load_auth_file(path).principals] == ["alice", "bob"]
