@@ -23,7 +23,8 @@ error text.
 Failed attempts are counted per client address (:class:`FailureTracker`):
 after :data:`FREE_FAILURES` failures in a row, that address is refused with
 HTTP 429 (``Retry-After``) for 1 s, then 2, 4, ... up to :data:`MAX_LOCKOUT`
-seconds; a success resets the count.
+seconds; a success resets the count, and so do :data:`FORGET_AFTER` seconds without
+a failure.
 """
 
 from __future__ import annotations
@@ -37,6 +38,7 @@ import sys
 import time
 import tomllib
 from collections import OrderedDict
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -60,6 +62,9 @@ FREE_FAILURES = 5
 
 MAX_LOCKOUT = 60.0
 """Longest lock-out of an address, in seconds."""
+
+FORGET_AFTER = 600.0
+"""Seconds after its last failure that an address's failures are forgotten."""
 
 EXAMPLE_ROLES = """\
 # Roles: capabilities on name patterns (fnmatch globs); deny wins over allow.
@@ -177,7 +182,9 @@ def load_auth_file(path: str | Path) -> AuthConfig:
 class FailureTracker:
     """Failed authentication attempts per address, and the lock-out they earn."""
 
-    def __init__(self, free: int = FREE_FAILURES, max_lockout: float = MAX_LOCKOUT) -> None:
+    def __init__(self, free: int = FREE_FAILURES, max_lockout: float = MAX_LOCKOUT,
+                 clock: Callable[[], float] = time.monotonic) -> None:
+        self.clock = clock
         self.free = free
         self.max_lockout = max_lockout
         self._seen: OrderedDict[str, tuple[int, float]] = OrderedDict()
@@ -191,12 +198,14 @@ class FailureTracker:
         if count < self.free:
             return 0.0
         wait = min(2.0 ** (count - self.free), self.max_lockout)
-        return max(0.0, last + wait - time.monotonic())
+        return max(0.0, last + wait - self.clock())
 
     def failed(self, address: str) -> int:
-        """Count one failure; returns the count so far."""
-        count = self._seen.pop(address, (0, 0.0))[0] + 1
-        self._seen[address] = (count, time.monotonic())
+        """Count one failure; returns the count so far (failures long past are forgotten)."""
+        now = self.clock()
+        count, last = self._seen.pop(address, (0, now))
+        count = 1 if now - last > FORGET_AFTER else count + 1
+        self._seen[address] = (count, now)
         while len(self._seen) > 10_000:
             self._seen.popitem(last=False)
         return count

@@ -341,3 +341,16 @@ def test_add_principal_refuses_a_name_toml_cannot_hold(tmp_path: Path):
         add_principal(path, "é", "viewer")
     add_principal(path, "bob", "viewer")
     assert [p.name for p in load_auth_file(path).principals] == ["alice", "bob"]
+
+
+def test_failures_long_past_are_forgotten():
+    """A failure long after the last one starts the count afresh instead of extending a lock-out."""
+    from bridge_server import auth as auth_module
+
+    now = [1000.0]
+    tracker = FailureTracker(free=2, max_lockout=60, clock=lambda: now[0])
+    for _ in range(4):
+        tracker.failed("a")
+    assert tracker.locked_for("a") > 0
+    now[0] += auth_module.FORGET_AFTER + 1
+    assert tracker.failed("a") == 1 and tracker.locked_for("a") == 0
