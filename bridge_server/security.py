@@ -583,6 +583,8 @@ class Gate:
             have, cap, what = s.publishers, c.max_publishers, "publishers"
         elif isinstance(op, ops.AdvertiseService):
             have, cap, what = s.served, c.max_services, "served services"
+        elif isinstance(op, ops.AdvertiseAction):  # each is an rclpy action server
+            have, cap, what = s.actions.served, c.max_services, "served actions"
         else:
             return True
         if cap and name not in have and len(have) >= cap:
@@ -750,7 +752,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     g.add_argument("--max-publishers", type=int, default=d.max_publishers,
                    help=f"topics one client may publish on (default {d.max_publishers})")
     g.add_argument("--max-services", type=int, default=d.max_services,
-                   help=f"services one client may serve (default {d.max_services})")
+                   help=f"services one client may serve, and actions likewise "
+                   f"(default {d.max_services})")
     g.add_argument("--inbound-budget", type=int, default=d.inbound_budget,
                    help="bytes of received, not yet handled data per client before the bridge "
                    f"stops reading it (default {d.inbound_budget >> 20} MiB)")

@@ -109,8 +109,12 @@ async def test_caps_on_subscriptions_publishers_and_services(make_bridge: Any, t
     await ws.send({"op": "advertise_service", "service": topic + "_b", "type": setbool,
                    "id": "v2"})
     assert "too many served services" in (await ws.expect(op="status", id="v2"))["msg"]
+    fib = "test_msgs/action/Fibonacci"
+    await ws.send({"op": "advertise_action", "action": topic + "_a", "type": fib, "id": "x1"})
+    await ws.send({"op": "advertise_action", "action": topic + "_b", "type": fib, "id": "x2"})
+    assert "too many served actions" in (await ws.expect(op="status", id="x2"))["msg"]
     await roundtrip(ws)
-    assert not [op for op in ws.backlog if op.get("id") in ("s1", "s2", "a1")]
+    assert not [op for op in ws.backlog if op.get("id") in ("s1", "s2", "a1", "x1")]
     await ws.close()
 
 
