@@ -247,6 +247,8 @@ class Topic:
         if not self._subscribed:
             return
         self._subscribed = False
+        if self.ros._loop.closing:  # terminated: closed with the connection
+            return
         self.ros._do_later(lambda client: self._sub.unsubscribe() if self._sub else None)
 
     def advertise(self) -> None:
@@ -287,6 +289,8 @@ class Topic:
         if not self._advertised:
             return
         self._advertised = False
+        if self.ros._loop.closing:  # terminated: closed with the connection
+            return
         self.ros._do_later(lambda client: self._pub.unadvertise() if self._pub else None)
 
 
@@ -367,6 +371,8 @@ class Service:
         if not self._is_advertised:
             return
         self._is_advertised = False
+        if self.ros._loop.closing:  # terminated: closed with the connection
+            return
         self.ros._do_later(lambda client: self._server.unadvertise() if self._server else None)
 
 

@@ -209,7 +209,7 @@ class Ros:
 
     def close(self, timeout: float = CONNECTION_TIMEOUT) -> None:
         """Disconnect (emits ``"closing"``, then ``"close"``); :meth:`connect` opens again."""
-        if self._loop.closed:
+        if self._loop.closing:
             return
         if self.is_connected:
             self.emit("closing")
@@ -335,8 +335,16 @@ class Ros:
 
         ``done(future)`` runs on the callback thread when it finishes; failures
         without ``done`` are logged.
+
+        Raises:
+            ConnectionClosed: this Ros was terminated.
         """
-        future = asyncio.run_coroutine_threadsafe(self._op(fn), self._loop.loop)
+        try:
+            future = self._loop.submit(self._op(fn), "roslibpy_lite.compat")
+        except ConnectionClosed:
+            raise ConnectionClosed(
+                f"the Ros of {self.url} was terminated; make a new Ros to connect again"
+            ) from None
         if done is None:
             future.add_done_callback(_log_raised)
         else:

@@ -248,7 +248,7 @@ class _Front:
 
     def close(self) -> None:
         """Close the connection and stop the loop thread. Closing twice is harmless."""
-        if self._loop.closed:
+        if self._loop.closing:
             return
         try:
             self._loop.run(self.aio.close(), "close")

@@ -108,7 +108,7 @@ class ActionServer:
         return self
 
     def __exit__(self, *exc: object) -> None:
-        if not self._loop.closed:
+        if not self._loop.closing:
             self.close()
 
     @property

@@ -56,7 +56,7 @@ class _Handle(Generic[H]):
         return self
 
     def __exit__(self, *exc: object) -> None:
-        if not self._loop.closed:
+        if not self._loop.closing:
             self.close()
 
 
@@ -98,9 +98,7 @@ class Publisher(_Handle["handles.Publisher[Any]"], Generic[T]):
             task = self._loop.loop.create_task(handle.publish(wire))
             task.add_done_callback(_log_failure)
             return
-        if self._loop.closed:
-            raise ConnectionClosed(f"publish {self.topic}: the client is closed")
-        future = asyncio.run_coroutine_threadsafe(handle.publish(wire), self._loop.loop)
+        future = self._loop.submit(handle.publish(wire), f"publish {self.topic}")
         with self._lock:
             self._pending.append(future)
             finished = []
@@ -235,5 +233,5 @@ class StateChanges:
 
     def close(self) -> None:
         """Stop watching."""
-        if not self._loop.closed:
+        if not self._loop.closing:
             self._loop.call("state_changes", self._watcher.close)

@@ -54,12 +54,20 @@ class LoopThread:
         )
         self.closed = False
         self._stopping = False
+        # Held while handing work to the loop and while starting to stop it: nothing is
+        # handed over once stop() has begun (it would never run, and its caller never return).
+        self._submit_lock = threading.Lock()
         self._thread = threading.Thread(target=self._main, name=name, daemon=True)
         self._thread.start()
 
     def _main(self) -> None:
         asyncio.set_event_loop(self.loop)
         self.loop.run_forever()
+
+    @property
+    def closing(self) -> bool:
+        """True once :meth:`stop` has begun (no work is handed to the loop any more)."""
+        return self._stopping or self.closed
 
     def in_loop(self) -> bool:
         """True when called from the loop thread itself (from a callback)."""
@@ -79,12 +87,25 @@ class LoopThread:
                 f"{what}: a blocking call from a callback (on the client's loop thread) "
                 "would wait for ever; publish from callbacks, or hand the work to another thread"
             )
-        if self.closed:
-            coro.close()
-            raise ConnectionClosed(f"{what}: the client is closed")
         done = threading.Event()
-        future = asyncio.run_coroutine_threadsafe(_tracked(coro, done), self.loop)
+        try:
+            future = self.submit(_tracked(coro, done), what)
+        except ConnectionClosed:
+            coro.close()  # never started: no "never awaited" warning
+            raise
         return self.wait(future, what, done)
+
+    def submit(self, coro: Coroutine[Any, Any, T], what: str) -> concurrent.futures.Future[T]:
+        """Hand ``coro`` to the loop without waiting; its future (``what`` names it in errors).
+
+        Raises:
+            ConnectionClosed: the loop is stopped or stopping (``coro`` is closed, not run).
+        """
+        with self._submit_lock:
+            if self.closing:
+                coro.close()
+                raise ConnectionClosed(f"{what}: the client is closed")
+            return asyncio.run_coroutine_threadsafe(coro, self.loop)
 
     def wait(
         self, future: concurrent.futures.Future[T], what: str,
@@ -125,12 +146,16 @@ class LoopThread:
 
     def stop(self) -> None:
         """Cancel what is left on the loop, stop the worker pool and the thread. Idempotent."""
-        if self.closed:
-            return
         if self.in_loop():
             raise UsageError("close: cannot close the client from one of its own callbacks")
-        self._stopping = True
-        self.run(self._finish(), "close")
+        with self._submit_lock:
+            if self.closing:
+                return
+            # Submitted under the lock: every task handed over before is on the loop already.
+            done = threading.Event()
+            finish = asyncio.run_coroutine_threadsafe(_tracked(self._finish(), done), self.loop)
+            self._stopping = True
+        self.wait(finish, "close", done)
         self.closed = True
         # From a handler's own thread, joining the pool would wait for itself.
         self.handlers.shutdown(wait=not threading.current_thread().name.startswith(

@@ -12,7 +12,7 @@ import roslibpy
 import roslibpy.ros2
 
 import roslibpy_lite.compat as compat
-from roslibpy_lite import NotAuthenticated
+from roslibpy_lite import ConnectionClosed, NotAuthenticated
 from tests.helpers import BridgeProcess
 from tests.security.support import make_auth_file
 
@@ -136,3 +136,17 @@ def test_bearer_header_is_the_token(make_bridge: Any, tmp_path: Path) -> None:
     finally:
         refused.terminate()
     assert len(errors) == 1
+
+
+def test_operations_after_terminate_raise_connection_closed() -> None:
+    """After terminate, publish/subscribe/call raise ConnectionClosed; unsubscribe is a no-op."""
+    ros = compat.Ros("ws://127.0.0.1:1")  # never connected: nothing is needed to terminate
+    topic = compat.Topic(ros, "/chatter", "std_msgs/String")
+    ros.terminate()
+    with pytest.raises(ConnectionClosed, match="terminated; make a new Ros"):
+        topic.subscribe(lambda msg: None)
+    topic.unsubscribe()  # cleanup after terminate, as scripts do, is harmless
+    with pytest.raises(ConnectionClosed, match="terminated; make a new Ros"):
+        topic.publish(compat.Message({"data": "x"}))
+    with pytest.raises(ConnectionClosed, match="call /add: the client is closed"):
+        compat.Service(ros, "/add", "example_interfaces/AddTwoInts").call({"a": 1, "b": 2})

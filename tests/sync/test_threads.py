@@ -155,3 +155,35 @@ def test_client_options_are_forwarded(make_bridge: Callable[..., BridgeProcess],
         assert ros.is_connected
     with pytest.raises(NotAuthenticated):
         sync.connect(bridge.url, token="wrong", open_timeout=5)
+
+
+
+def _publish_until_closed(pub: sync.Publisher[Any], started: threading.Barrier,
+                          ended: list[str]) -> None:
+    started.wait()
+    try:
+        while True:
+            pub.publish({"data": 1})
+    except ConnectionClosed:
+        ended.append("closed")
+    except BaseException as exc:  # the test reports what else ended it
+        ended.append(repr(exc))
+
+
+def test_close_while_threads_publish() -> None:
+    """The loop stopping while other threads publish: each gets ConnectionClosed, none hangs."""
+    for _ in range(20):
+        ros = sync.MockRos()
+        pub = ros.advertise("/race", "std_msgs/msg/Int32")
+        started = threading.Barrier(5)
+        ended: list[str] = []
+        threads = [threading.Thread(target=_publish_until_closed, args=(pub, started, ended))
+                   for _ in range(4)]
+        for t in threads:
+            t.start()
+        started.wait()
+        ros._loop.stop()  # under the publishers (close() would end the handles first)
+        for t in threads:
+            t.join(10)
+        assert not any(t.is_alive() for t in threads)
+        assert ended == ["closed"] * 4
