@@ -43,7 +43,7 @@ def run(flavour: str, script: str, bridge: BridgeProcess, **env: str) -> str:
 
 
 def wait_seen(bridge: BridgeProcess, what: str, name: str) -> None:
-    """Wait until the bridge's ROS graph lists ``name`` among its ``what`` (topics or services)."""
+    """Wait until the bridge's ROS graph lists ``name`` among its ``what`` (topics, services or nodes)."""
     srv = "rosapi_msgs/srv/" + what.capitalize()
     with sync.connect(bridge.url) as ros:
         wait_until(lambda: name in ros.call_service(f"/rosapi/{what}", srv)[what], 30,
@@ -99,6 +99,7 @@ def test_introspection(flavour: str, bridge: BridgeProcess, ros_node: Any, topic
 
     ros_node.create_publisher(String, topic, 10)
     wait_seen(bridge, "topics", topic)
+    wait_seen(bridge, "nodes", ros_node.get_fully_qualified_name())  # may come after its topic
     out = run(flavour, "introspection.py", bridge, TOPIC=topic,
               NODE=ros_node.get_fully_qualified_name())
     for line in ("topic listed: True", "topic type: std_msgs/msg/String", "typed topics: True",

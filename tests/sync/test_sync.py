@@ -205,10 +205,12 @@ def test_many_publishes_keep_their_order(ros: Ros, topic: str) -> None:
     """Publishes handed over without waiting for each still arrive all and in order.
 
     The ROS publisher's history holds the whole burst (queue_size), as KEEP_LAST
-    DDS may overwrite samples a busy subscriber has not acknowledged yet.
+    DDS may overwrite samples a busy subscriber has not acknowledged yet; so does
+    the bridge's send queue for this subscription (queue_length: its default of
+    100 drops the oldest when the burst outruns the websocket, with a warning).
     """
     pub = ros.advertise(topic, "std_msgs/msg/Int32", queue_size=400)
-    with ros.subscribe(topic, "std_msgs/msg/Int32", buffer_size=1000) as sub:
+    with ros.subscribe(topic, "std_msgs/msg/Int32", buffer_size=1000, queue_length=400) as sub:
         heard(pub, sub, {"data": -1})
         for i in range(300):
             pub.publish({"data": i})
