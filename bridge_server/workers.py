@@ -19,7 +19,9 @@ again from zero (Prometheus sees a counter reset).
 The supervisor relays the workers' logs, prints the ready line once every
 worker listens, restarts a worker that dies (at most once a second each),
 and on SIGINT/SIGTERM stops them all: SIGTERM, then SIGKILL after
-:data:`STOP_GRACE` seconds.
+:data:`STOP_GRACE` seconds. A supervisor that is killed outright cannot do that,
+so each worker also stops when its stdin pipe from the supervisor reaches
+end-of-file (:func:`watch_supervisor`): no orphaned worker keeps the port.
 """
 
 from __future__ import annotations
