@@ -40,9 +40,10 @@ from .exceptions import (
     TLSError,
     UsageError,
 )
-from .handles import Publisher, ServiceServer, StateWatcher, Subscription
+from .handles import Publisher, ServiceServer, Subscription
 from .mock import MockRos
 from .ros import RosFront
+from .state import StateWatcher
 
 __version__ = "0.1.0"
 

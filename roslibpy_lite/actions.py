@@ -83,7 +83,7 @@ from .exceptions import (
     RosTimeoutError,
     UsageError,
 )
-from .handles import _check_type_string, _packages, canonical_type, check_dict, from_wire, to_wire
+from .messages import _check_type_string, _packages, canonical_type, check_dict, from_wire, to_wire
 
 if TYPE_CHECKING:
     from types import TracebackType

@@ -29,7 +29,7 @@ from .actions import (
 )
 from .api import DEFAULT_CALL_TIMEOUT
 from .exceptions import ConnectionClosed, Disconnected, ProtocolError, UsageError
-from .handles import check_dict, to_wire
+from .messages import check_dict, to_wire
 
 if TYPE_CHECKING:
     from .ros import RosFront

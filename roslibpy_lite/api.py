@@ -27,7 +27,8 @@ if TYPE_CHECKING:
 
     from .actions import ActionHandler, ActionServer, FeedbackCallback, GoalHandle
     from .exceptions import RosLibError
-    from .handles import Publisher, ServiceServer, StateWatcher, Subscription
+    from .handles import Publisher, ServiceServer, Subscription
+    from .state import StateWatcher
 
 __all__ = [
     "DEFAULT_CALL_TIMEOUT",

@@ -28,33 +28,23 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import difflib
 import inspect
 import logging
 from collections import deque
 from collections.abc import Awaitable, Callable, Coroutine, Generator, Mapping
 from typing import TYPE_CHECKING, Any, Generic, Protocol, Self, TypeVar, cast
 
-from msgs.runtime import (
-    Action,
-    Message,
-    Service,
-    UnknownTypeError,
-    ValidationError,
-    available_packages,
-    available_types,
-)
-from msgs.runtime import lookup as _lookup
+from msgs.runtime import Message, Service, ValidationError
 
 from . import ops
-from .api import ConnectionState, MessageCallback, ServiceHandler, StateCallback
+from .api import MessageCallback, ServiceHandler
 from .exceptions import (
-    ConnectionClosed,
     InvalidMessageError,
     RosLibError,
     RosTimeoutError,
     UsageError,
 )
+from .messages import check_dict, from_wire, to_wire
 
 if TYPE_CHECKING:
     from types import TracebackType
@@ -64,12 +54,7 @@ __all__ = [
     "Publisher",
     "ServiceCall",
     "ServiceServer",
-    "StateHub",
-    "StateWatcher",
     "Subscription",
-    "canonical_type",
-    "message_type",
-    "service_type",
 ]
 
 log = logging.getLogger("roslibpy_lite.client")
@@ -77,193 +62,6 @@ log = logging.getLogger("roslibpy_lite.client")
 T = TypeVar("T")
 _running_loop = asyncio._get_running_loop
 _SKIP: Any = object()
-
-
-# --- type names ------------------------------------------------------------------------------
-
-def canonical_type(name: str, kind: str) -> str:
-    """``pkg/Name`` → ``pkg/<kind>/Name``; names already in that form are returned as they are."""
-    parts = name.split("/")
-    if len(parts) == 2:
-        return f"{parts[0]}/{kind}/{parts[1]}"
-    return name
-
-
-def _check_type_string(type_: str, kind: str) -> None:
-    parts = type_.split("/")
-    if not (2 <= len(parts) <= 3 and all(parts)) or (len(parts) == 3 and parts[1] != kind):
-        raise UsageError(
-            f"type {type_!r} is not a {kind} type name: expected 'package/Name' or "
-            f"'package/{kind}/Name'"
-        )
-
-
-def _check_known(name: str, kind: str) -> None:
-    """Refuse a type ``msgs`` should know but does not (its package is there, the name is not).
-
-    Types of packages ``msgs`` does not generate are left to the bridge.
-    """
-    package = name.split("/", 1)[0]
-    if package not in _packages():
-        return
-    try:
-        found = _lookup(name)
-    except UnknownTypeError:
-        found = None
-    wanted = Message if kind == "msg" else Service
-    if isinstance(found, type) and issubclass(found, wanted):
-        return
-    known = [t for t in available_types(package) if t.split("/")[1] == kind]
-    by_name = {t.rsplit("/", 1)[1]: t for t in known}
-    close = [by_name[n] for n in difflib.get_close_matches(name.rsplit("/", 1)[1], by_name,
-                                                              n=3, cutoff=0.6)]
-    hint = f"; did you mean {' or '.join(repr(c) for c in close)}?" if close else (
-        f"; {package} has: {', '.join(t.rsplit('/', 1)[1] for t in known[:12])}"
-        + (", ..." if len(known) > 12 else "") if known else ""
-    )
-    raise UsageError(f"unknown {kind} type {name!r}: {package} has no such {kind}{hint}")
-
-
-_PACKAGES: list[frozenset[str]] = []
-
-
-def _packages() -> frozenset[str]:
-    if not _PACKAGES:
-        _PACKAGES.append(frozenset(available_packages()))
-    return _PACKAGES[0]
-
-
-def _wrong_class(type_: object, kind: str) -> UsageError:
-    what = "a message" if kind == "msg" else "a service"
-    if isinstance(type_, type) and issubclass(type_, Message | Service | Action):
-        actual = (
-            "a message" if issubclass(type_, Message)
-            else "a service" if issubclass(type_, Service) else "an action"
-        )
-        return UsageError(
-            f"{type_._type} is {actual} type, but {what} type is needed here"
-            + ("; for a service pass the service class (e.g. AddTwoInts), not its Request"
-               if kind == "srv" and actual == "a message" else "")
-        )
-    return UsageError(f"{what} type must be a type string or a msgs class, got {type_!r}")
-
-
-def message_type(type_: str | type[Message]) -> tuple[str, type[Message] | None]:
-    """The canonical type name and (for a generated class) the class of a message type.
-
-    Raises:
-        UsageError: a malformed name, a name ``msgs`` should know but does not
-            (with "did you mean"), or a class of another kind.
-    """
-    if isinstance(type_, str):
-        _check_type_string(type_, "msg")
-        name = canonical_type(type_, "msg")
-        _check_known(name, "msg")
-        return name, None
-    if isinstance(type_, type) and issubclass(type_, Message):
-        return type_._type, type_
-    raise _wrong_class(type_, "msg")
-
-
-def service_type(type_: str | type[Service]) -> tuple[str, type[Service] | None]:
-    """The canonical type name and (for a generated class) the class of a service type.
-
-    Raises:
-        UsageError: as for :func:`message_type`.
-    """
-    if isinstance(type_, str):
-        _check_type_string(type_, "srv")
-        name = canonical_type(type_, "srv")
-        _check_known(name, "srv")
-        return name, None
-    if isinstance(type_, type) and issubclass(type_, Service):
-        return type_._type, type_
-    raise _wrong_class(type_, "srv")
-
-
-def lookup_message_class(type_name: str) -> type[Message] | None:
-    """The generated class of a message type name, or None when there is none."""
-    try:
-        found = _lookup(type_name)
-    except UnknownTypeError:
-        return None
-    return found if isinstance(found, type) and issubclass(found, Message) else None
-
-
-def to_wire(
-    msg: Any, type_name: str, cls: type[Message] | None, what: str
-) -> Mapping[str, Any]:
-    """The rosbridge JSON form of ``msg`` (a dict or a message instance) of type ``type_name``.
-
-    A message instance must be of the type (``cls`` when given, else the same
-    type name) and is validated.
-
-    Raises:
-        UsageError: a message of another type, or neither a dict nor a message.
-        InvalidMessageError: a message instance with a field that does not fit.
-    """
-    if isinstance(msg, Message):
-        if cls is not None:
-            if not isinstance(msg, cls):
-                raise UsageError(f"{what}: expected a {cls._type} message, got {msg._type}")
-        elif msg._type != type_name:
-            raise UsageError(f"{what}: expected a {type_name} message, got {msg._type}")
-        try:
-            msg.validate()
-        except ValidationError as exc:
-            raise InvalidMessageError(f"{what}: {exc}", path=exc.path) from None
-        return msg.to_json()
-    if isinstance(msg, Mapping):
-        return msg
-    raise UsageError(
-        f"{what}: a message must be a dict or a {type_name} instance, got {type(msg).__name__}"
-    )
-
-
-_BULK = 1024
-
-
-def _outline(value: Any) -> Any:
-    """``value`` with bulky strings, byte strings and lists emptied (their kind kept).
-
-    Returns ``value`` itself when nothing in it is bulky (no copy).
-    """
-    if isinstance(value, Mapping):
-        out: dict[str, Any] | None = None
-        for k, v in value.items():
-            if isinstance(v, int | float):
-                continue
-            w = _outline(v)
-            if w is not v:
-                if out is None:
-                    out = dict(value)
-                out[k] = w
-        return value if out is None else out
-    if isinstance(value, str | bytes | list) and len(value) > _BULK:
-        return value[:0]
-    if isinstance(value, list) and value and isinstance(value[0], Mapping):
-        items = [_outline(v) for v in value]
-        return value if all(a is b for a, b in zip(items, value, strict=True)) else items
-    return value
-
-
-def check_dict(wire: Mapping[str, Any], cls: type[Message] | None, what: str) -> None:
-    """Check a dict against ``cls`` (if given), as :class:`InvalidMessageError` naming the field.
-
-    Field names and the kind of every value are checked; the contents of bulky values
-    (more than 1024 items or characters: image data, point clouds) are left to the
-    bridge, so publishing an image as a dict costs no second decode here.
-    """
-    if cls is not None and not isinstance(wire, Message):
-        from_wire(_outline(wire), cls, what)
-
-
-def from_wire(raw: Mapping[str, Any], cls: type[Message], what: str) -> Message:
-    """Build a ``cls`` instance from its wire form, as :class:`InvalidMessageError` on failure."""
-    try:
-        return cls.from_json(raw)
-    except ValidationError as exc:
-        raise InvalidMessageError(f"{what}: {exc}", path=exc.path) from None
 
 
 def _is_async_callable(fn: Callable[..., Any]) -> bool:
@@ -924,137 +722,3 @@ class ServiceCall(_Pending[T]):
 
     def __bool__(self) -> bool:
         raise self._unawaited()
-
-
-def add_callback(callbacks: list[Any], callback: Any) -> Callable[[], None]:
-    """Append ``callback`` to ``callbacks``; returns a function that removes it again."""
-    callbacks.append(callback)
-
-    def remove() -> None:
-        with contextlib.suppress(ValueError):
-            callbacks.remove(callback)
-
-    return remove
-
-
-# --- connection state ------------------------------------------------------------------------
-
-class StateWatcher:
-    """An async iterator of connection states, from its creation on.
-
-    Ends after yielding ``CLOSED``. Use ``async with`` (or :meth:`close`) to
-    stop watching early.
-    """
-
-    def __init__(self, hub: StateHub) -> None:
-        self._hub = hub
-        self._queue: deque[ConnectionState] = deque()
-        self._waiter: asyncio.Future[None] | None = None
-        self._done = hub.state is ConnectionState.CLOSED
-
-    def _push(self, state: ConnectionState) -> None:
-        self._queue.append(state)
-        if self._waiter is not None and not self._waiter.done():
-            self._waiter.set_result(None)
-
-    def __aiter__(self) -> Self:
-        return self
-
-    async def __anext__(self) -> ConnectionState:
-        while not self._queue:
-            if self._done:
-                raise StopAsyncIteration
-            self._waiter = asyncio.get_running_loop().create_future()
-            try:
-                await self._waiter
-            finally:
-                self._waiter = None
-        state = self._queue.popleft()
-        if state is ConnectionState.CLOSED:
-            self._done = True
-            self.close()
-        return state
-
-    async def next(self, timeout: float | None = None) -> ConnectionState:
-        """The next state change.
-
-        Raises:
-            RosTimeoutError: no change within ``timeout`` seconds.
-            ConnectionClosed: the watcher ended (``CLOSED`` was already yielded).
-        """
-        try:
-            async with asyncio.timeout(timeout):
-                return await self.__anext__()
-        except StopAsyncIteration:
-            raise ConnectionClosed("the connection is closed; no more state changes") from None
-        except TimeoutError:
-            raise RosTimeoutError(f"no connection state change within {timeout} s") from None
-
-    def close(self) -> None:
-        """Stop watching."""
-        self._done = True
-        self._hub._watchers.discard(self)
-        if self._waiter is not None and not self._waiter.done():
-            self._waiter.set_result(None)
-
-    async def __aenter__(self) -> Self:
-        return self
-
-    async def __aexit__(self, *exc: object) -> None:
-        self.close()
-
-
-class StateHub:
-    """The connection state and everyone waiting on it (shared by the backends)."""
-
-    def __init__(self, state: ConnectionState) -> None:
-        self.state = state
-        self._callbacks: list[StateCallback] = []
-        self._watchers: set[StateWatcher] = set()
-        self._connected_waiters: list[asyncio.Future[None]] = []
-
-    def set(self, state: ConnectionState) -> None:
-        """Move to ``state`` and tell every listener (no-op if unchanged)."""
-        if state is self.state:
-            return
-        if log.isEnabledFor(logging.DEBUG):
-            log.debug("state %s -> %s", self.state.value, state.value)
-        self.state = state
-        if state is ConnectionState.CONNECTED or state is ConnectionState.CLOSED:
-            waiters, self._connected_waiters = self._connected_waiters, []
-            for fut in waiters:
-                if not fut.done():
-                    fut.set_result(None)
-        for watcher in list(self._watchers):
-            watcher._push(state)
-        for cb in list(self._callbacks):
-            try:
-                cb(state)
-            except Exception:
-                log.exception("state callback raised")
-
-    def on_change(self, callback: StateCallback) -> Callable[[], None]:
-        """Register ``callback``; returns its remover."""
-        return add_callback(self._callbacks, callback)
-
-    def watch(self) -> StateWatcher:
-        """A new :class:`StateWatcher`."""
-        watcher = StateWatcher(self)
-        if not watcher._done:
-            self._watchers.add(watcher)
-        return watcher
-
-    async def wait_connected(self, timeout: float | None = None) -> None:
-        """Return once connected (see :meth:`roslibpy_lite.api.Ros.wait_connected`)."""
-        try:
-            async with asyncio.timeout(timeout):
-                while self.state is not ConnectionState.CONNECTED:
-                    if self.state is ConnectionState.CLOSED:
-                        raise ConnectionClosed("the connection is closed")
-                    fut = asyncio.get_running_loop().create_future()
-                    self._connected_waiters.append(fut)
-                    await fut
-        except TimeoutError:
-            raise RosTimeoutError(
-                f"not connected within {timeout} s (state {self.state.value})"
-            ) from None

@@ -59,7 +59,7 @@ from collections.abc import Mapping
 from typing import TYPE_CHECKING, Any
 
 from .exceptions import UsageError
-from .handles import check_dict, message_type, to_wire
+from .messages import check_dict, message_type, to_wire
 from .ros import RosFront
 from .transports.memory import MemoryTransport
 

@@ -72,14 +72,8 @@ from .exceptions import (
     UsageError,
     status_error,
 )
-from .handles import (
-    Publisher,
-    ServiceCall,
-    ServiceServer,
-    StateHub,
-    StateWatcher,
-    Subscription,
-    add_callback,
+from .handles import Publisher, ServiceCall, ServiceServer, Subscription
+from .messages import (
     check_dict,
     from_wire,
     lookup_message_class,
@@ -87,6 +81,7 @@ from .handles import (
     service_type,
     to_wire,
 )
+from .state import StateHub, StateWatcher, add_callback
 
 if TYPE_CHECKING:
     from types import TracebackType

@@ -21,6 +21,7 @@ from .loop import LoopThread
 
 if TYPE_CHECKING:
     from .. import handles
+    from ..state import StateWatcher
 
 __all__ = ["PUBLISH_WINDOW", "Publisher", "ServiceServer", "StateChanges", "Subscription"]
 
@@ -216,7 +217,7 @@ class ServiceServer(_Handle["handles.ServiceServer"]):
 class StateChanges:
     """The connection state changes from its creation on (made by :meth:`Client.state_changes`)."""
 
-    def __init__(self, loop: LoopThread, watcher: handles.StateWatcher) -> None:
+    def __init__(self, loop: LoopThread, watcher: StateWatcher) -> None:
         self._loop = loop
         self._watcher = watcher
 

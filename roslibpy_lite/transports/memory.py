@@ -26,7 +26,7 @@ from typing import TYPE_CHECKING, Any
 
 from .. import ops
 from ..exceptions import InvalidMessageError, UsageError
-from ..handles import canonical_type, from_wire, lookup_message_class
+from ..messages import canonical_type, from_wire, lookup_message_class
 from .memory_actions import ACTION_OPS, MemoryActions
 
 if TYPE_CHECKING:

@@ -22,7 +22,7 @@ from typing import TYPE_CHECKING, Any
 from msgs.runtime import UnknownTypeError, lookup_action
 
 from .. import ops
-from ..handles import canonical_type
+from ..messages import canonical_type
 
 if TYPE_CHECKING:
     from msgs.runtime import Action
