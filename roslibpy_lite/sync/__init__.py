@@ -51,6 +51,7 @@ the loop thread, like subscription callbacks.
 
 from __future__ import annotations
 
+import contextlib
 import inspect
 from collections.abc import Callable, Mapping
 from typing import TYPE_CHECKING, Any, Self, overload
@@ -121,7 +122,10 @@ class _Front:
             "on_state_change", self.aio.on_state_change, callback)
 
         def remover() -> None:
-            self._loop.loop.call_soon_threadsafe(remove)
+            if self._loop.closing:
+                return  # closed: the callback is gone with the client
+            with contextlib.suppress(RuntimeError):  # the loop closed just now
+                self._loop.loop.call_soon_threadsafe(remove)
 
         return remover
 

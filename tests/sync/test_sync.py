@@ -173,13 +173,14 @@ def test_state_and_closing(ros: Ros, topic: str) -> None:
     seen: list[ConnectionState] = []
     assert ros.is_connected and ros.state is ConnectionState.CONNECTED
     ros.wait_connected(1)
-    ros.on_state_change(seen.append)
+    remove = ros.on_state_change(seen.append)
     ros.close()
     assert seen == [ConnectionState.CLOSED]
     assert not ros.is_connected and ros.state.value == "closed"
     with pytest.raises(ConnectionClosed):
         ros.advertise(topic, "std_msgs/msg/Int32")
     ros.close()  # harmless
+    remove()  # so is removing a callback afterwards (no "Event loop is closed")
 
 
 def test_mock_conveniences() -> None:
