@@ -316,9 +316,15 @@ class Ros:
                          daemon=True).start()
 
     def call_later(self, delay: float, callback: Callable[[], Any]) -> None:
-        """Run ``callback()`` on the callback thread after ``delay`` seconds."""
+        """Run ``callback()`` on the callback thread after ``delay`` seconds.
+
+        After :meth:`terminate` it never runs (as roslibpy's stopped reactor).
+        """
+        if self._loop.closing:
+            return
         loop = self._loop.loop
-        loop.call_soon_threadsafe(loop.call_later, delay, self._dispatch, callback)
+        with contextlib.suppress(RuntimeError):  # terminated just now
+            loop.call_soon_threadsafe(loop.call_later, delay, self._dispatch, callback)
 
     # -- operations (used by Topic, Service, Param) --------------------------------------------
 

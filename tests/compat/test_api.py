@@ -139,13 +139,14 @@ def test_bearer_header_is_the_token(make_bridge: Any, tmp_path: Path) -> None:
 
 
 def test_operations_after_terminate_raise_connection_closed() -> None:
-    """After terminate, publish/subscribe/call raise ConnectionClosed; unsubscribe is a no-op."""
+    """After terminate, publish/subscribe/call raise ConnectionClosed; cleanups and call_later are no-ops."""
     ros = compat.Ros("ws://127.0.0.1:1")  # never connected: nothing is needed to terminate
     topic = compat.Topic(ros, "/chatter", "std_msgs/String")
     ros.terminate()
     with pytest.raises(ConnectionClosed, match="terminated; make a new Ros"):
         topic.subscribe(lambda msg: None)
     topic.unsubscribe()  # cleanup after terminate, as scripts do, is harmless
+    ros.call_later(0.01, lambda: None)  # never runs, raises nothing (roslibpy's stopped reactor)
     with pytest.raises(ConnectionClosed, match="terminated; make a new Ros"):
         topic.publish(compat.Message({"data": "x"}))
     with pytest.raises(ConnectionClosed, match="call /add: the client is closed"):
