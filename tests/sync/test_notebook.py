@@ -1,4 +1,7 @@
-"""The blocking client in a real Jupyter kernel (whose asyncio loop already runs), through the bridge."""
+"""The blocking client in a real Jupyter kernel (whose asyncio loop already runs), through the bridge.
+
+The kernel is this interpreter (a kernelspec written for the test), so it sees the venv.
+"""
 
 from __future__ import annotations
 
@@ -10,7 +13,7 @@ from typing import Any
 import nbformat
 import pytest
 from jupyter_client.kernelspec import KernelSpecManager
-from jupyter_client.manager import AsyncKernelManager
+from jupyter_client.manager import AsyncKernelManager, KernelManager
 from nbclient import NotebookClient
 
 from tests.helpers import ROOT, BridgeProcess
@@ -50,7 +53,7 @@ CELLS = [
 ]
 
 
-def _kernel_manager(tmp_path: Path) -> AsyncKernelManager:
+def _kernel_manager(tmp_path: Path, cls: type[Any] = AsyncKernelManager) -> Any:
     """A kernel of THIS interpreter (the venv's), whatever kernels the machine has installed."""
     spec_dir = tmp_path / "kernels" / KERNEL
     spec_dir.mkdir(parents=True)
@@ -60,21 +63,26 @@ def _kernel_manager(tmp_path: Path) -> AsyncKernelManager:
         "language": "python",
     }))
     specs = KernelSpecManager(kernel_dirs=[str(tmp_path / "kernels")])
-    return AsyncKernelManager(kernel_name=KERNEL, kernel_spec_manager=specs)
+    return cls(kernel_name=KERNEL, kernel_spec_manager=specs)
 
 
 def _stdout(cell: Any) -> str:
     return "".join(o.get("text", "") for o in cell.outputs if o.get("name") == "stdout")
 
 
-def test_blocking_client_in_a_jupyter_kernel(
-    bridge: BridgeProcess, topic: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
-) -> None:
-    """A notebook connects, serves and calls a service, hears a message and closes cleanly."""
+@pytest.fixture
+def kernel_env(bridge: BridgeProcess, topic: str, tmp_path: Path,
+               monkeypatch: pytest.MonkeyPatch) -> None:
+    """The kernel's environment: the bridge's URL, a name of the test's own, no files in $HOME."""
     monkeypatch.setenv("ROSLIBPY_LITE_NOTEBOOK_URL", bridge.url)
     monkeypatch.setenv("ROSLIBPY_LITE_NOTEBOOK_NAME", topic)
-    monkeypatch.setenv("JUPYTER_RUNTIME_DIR", str(tmp_path / "runtime"))  # nothing in $HOME
+    monkeypatch.setenv("JUPYTER_RUNTIME_DIR", str(tmp_path / "runtime"))
     monkeypatch.setenv("IPYTHONDIR", str(tmp_path / "ipython"))
+
+
+@pytest.mark.usefixtures("kernel_env")
+def test_blocking_client_in_a_jupyter_kernel(tmp_path: Path) -> None:
+    """A notebook connects, serves and calls a service, hears a message and closes cleanly."""
     nb = nbformat.v4.new_notebook(cells=[nbformat.v4.new_code_cell(c) for c in CELLS])
     km = _kernel_manager(tmp_path)
     client = NotebookClient(nb, km=km, timeout=90, resources={"metadata": {"path": str(ROOT)}})
@@ -86,3 +94,48 @@ def test_blocking_client_in_a_jupyter_kernel(
         "heard: hello from a notebook\n",
         "state: closed\nthreads left: 0\n",
     ]
+
+
+def _run(kc: Any, code: str) -> str:
+    """Execute ``code`` in the kernel; its stdout (fails on an error in the cell)."""
+    out: list[str] = []
+
+    def hook(msg: dict[str, Any]) -> None:
+        if msg["msg_type"] == "stream":
+            out.append(msg["content"]["text"])
+
+    reply = kc.execute_interactive(code, timeout=60, output_hook=hook)
+    assert reply["content"]["status"] == "ok", reply["content"]
+    return "".join(out)
+
+
+@pytest.mark.usefixtures("kernel_env")
+def test_interrupting_a_blocking_call_in_a_kernel(tmp_path: Path) -> None:
+    """Interrupting the kernel (Jupyter's stop button) ends a waiting get(); the client still works."""
+    km = _kernel_manager(tmp_path, KernelManager)
+    km.start_kernel(cwd=str(ROOT))
+    kc = km.client()
+    kc.start_channels()
+    try:
+        kc.wait_for_ready(timeout=60)
+        _run(kc, CELLS[0] + "\nfrom roslibpy_lite import sync\nros = sync.connect(URL)\n"
+                 "sub = ros.subscribe(NAME, 'std_msgs/msg/Int32')")
+        msg_id = kc.execute("print('waiting', flush=True)\nsub.get()")  # no timeout: for ever
+        while True:  # the cell is running once its first line printed
+            msg = kc.get_iopub_msg(timeout=30)
+            if msg["parent_header"].get("msg_id") == msg_id and msg["msg_type"] == "stream":
+                break
+        km.interrupt_kernel()
+        reply = kc.get_shell_msg(timeout=30)
+        assert reply["parent_header"]["msg_id"] == msg_id
+        assert (reply["content"]["status"], reply["content"].get("ename")) == (
+            "error", "KeyboardInterrupt")
+        # The interrupted get() was cancelled on the loop thread: a new one may wait again.
+        assert _run(kc, "try:\n    sub.get(timeout=0.2)\nexcept Exception as exc:\n"
+                        "    print(type(exc).__name__)\n"
+                        "print(ros.state.value, ros.call_service('/rosapi/topics', "
+                        "'rosapi_msgs/srv/Topics', timeout=30)['topics'].__class__.__name__)\n"
+                        "ros.close()") == "RosTimeoutError\nconnected list\n"
+    finally:
+        kc.stop_channels()
+        km.shutdown_kernel(now=True)
