@@ -55,6 +55,7 @@ class PeerProcess:
         self.info: dict[str, Any] = {}
         #: Index of the first event that belongs to the current test (a peer may be shared).
         self.since = 0
+        self.stderr_since = 0  # the same for stderr lines
         #: The bridge this client talks to, if known: the end of its log is in diagnostics.
         self.bridge: BridgeProcess | None = None
 
@@ -104,9 +105,14 @@ class PeerProcess:
                 self.stderr.append(line.rstrip("\n"))
 
     def diagnostics(self) -> str:
-        """What the child printed besides replies: for failure messages."""
+        """What the child printed during this test besides replies: for failure messages.
+
+        Only this test's stderr: roslibpy prints a traceback for every ``status``
+        op (it has no handler for them), so a shared peer's earlier tests would
+        otherwise look like refusals of this test's ops.
+        """
         with self._cond:
-            err = "\n".join(self.stderr[-40:])
+            err = "\n".join(self.stderr[self.stderr_since:][-40:])
             noise = "\n".join(self.noise[-20:])
             events = json.dumps(self.events[self.since:][-10:], default=str)[:2000]
         text = f"--- {self.name} stderr:\n{err}\n--- stdout noise:\n{noise}\n--- last events: {events}"
@@ -154,6 +160,7 @@ class PeerProcess:
         """Start a new test on this peer: earlier events are no longer looked at."""
         with self._cond:
             self.since = len(self.events)
+            self.stderr_since = len(self.stderr)
 
     def new_events(self) -> list[dict[str, Any]]:
         """The events that arrived since the current test began."""
