@@ -5,6 +5,7 @@ from __future__ import annotations
 import importlib
 import re
 import threading
+import traceback
 import warnings
 from collections.abc import Callable, Iterator
 from typing import Any
@@ -66,6 +67,7 @@ def module_node(ros_runtime: Any, request: pytest.FixtureRequest) -> Iterator[An
     executor = MultiThreadedExecutor(num_threads=4, context=ros_runtime.context)
     executor.add_node(node)
     stop = threading.Event()
+    errors: list[str] = []
 
     def spin() -> None:
         while not stop.is_set():
@@ -77,9 +79,16 @@ def module_node(ros_runtime: Any, request: pytest.FixtureRequest) -> Iterator[An
                 # A service a test's teardown destroyed while its callback was still
                 # answering; the node itself is fine, so keep spinning.
                 continue
+            except Exception:
+                # Anything else (rclpy's action client, destroyed by a test while the
+                # executor waits on it, can raise RuntimeError from its wait set) must
+                # not stop the spinning that every later test of the module needs:
+                # keep it, and ros_node fails the test during which it happened.
+                errors.append(traceback.format_exc())
 
     thread = threading.Thread(target=spin, daemon=True, name=f"spin-{name}")
     thread.start()
+    node.spin_errors = errors
     yield node
     stop.set()
     thread.join(10)
@@ -103,7 +112,11 @@ def ros_node(module_node: Any) -> Iterator[Any]:
         ("timers", node.destroy_timer),
     )
     before = {kind: set(getattr(node, kind)) for kind, _ in kinds}
+    errors: list[str] = node.spin_errors
+    seen = len(errors)
     yield node
     for kind, destroy in kinds:
         for entity in set(getattr(node, kind)) - before[kind]:
             destroy(entity)
+    if len(errors) > seen:
+        pytest.fail("the module's rclpy executor raised during this test:\n" + errors[-1])
