@@ -91,6 +91,9 @@ requests and responses when more than 10 calls are in flight."""
 MAX_BATCH = 256
 """Most messages taken from one subscription per executor callback."""
 
+SPIN_ERROR_LOG_INTERVAL = 10.0
+"""Seconds between two logged failures of an executor round (the others are counted)."""
+
 
 class Incoming:
     """One ROS message received on a topic, encoded lazily and once per encoding."""
@@ -431,6 +434,8 @@ class RosNode:
         self.executor: Any = None
         self._calls: deque[tuple[Callable[..., None], tuple[Any, ...]]] = deque()
         self._calls_gc: Any = None
+        self.spin_errors = 0
+        """Executor rounds that raised (logged and survived, see :meth:`_spin`)."""
 
     # -- life cycle --------------------------------------------------------------------------
 
@@ -453,12 +458,32 @@ class RosNode:
         self._thread.start()
 
     def _spin(self) -> None:
-        try:
-            self.executor.spin()
-        except ExternalShutdownException:
-            pass
-        except Exception:
-            log.exception("ROS executor stopped")
+        """Spin until shutdown; an exception out of one round never stops the bridge's ROS side.
+
+        A callback that raises, or one of rclpy's known wait-set races (an action
+        client made while the executor waits: ros2/rclpy#1589, #1455), surfaces
+        here as an exception from ``spin``. Spinning goes on after it, or every
+        client would lose ROS for good; the error is logged with its traceback,
+        at most once per :data:`SPIN_ERROR_LOG_INTERVAL` seconds (the rest counted).
+        """
+        last = -SPIN_ERROR_LOG_INTERVAL
+        quiet = 0
+        while True:
+            try:
+                self.executor.spin()  # returns once the context is shut down
+                return
+            except ExternalShutdownException:
+                return
+            except Exception:
+                self.spin_errors += 1
+                now = time.monotonic()
+                if now - last < SPIN_ERROR_LOG_INTERVAL:
+                    quiet += 1
+                    continue
+                last = now
+                more = f" ({quiet} more since the last report)" if quiet else ""
+                quiet = 0
+                log.exception("ROS executor round failed; spinning on%s", more)
 
     def close(self) -> None:
         """Stop spinning, destroy the node and shut this context down."""
