@@ -50,6 +50,16 @@ def start_peer(peer_pool: PeerPool) -> Iterator[Callable[..., PeerProcess]]:
         peer.close()
 
 
+def _rclpy_action_client_race(exc: BaseException) -> bool:
+    """Whether ``exc`` came from rclpy's ActionClient wait-set bookkeeping (a known race)."""
+    frames = traceback.extract_tb(exc.__traceback__)
+    return any(
+        f.filename.endswith("rclpy/action/client.py")
+        and f.name in ("is_ready", "add_to_wait_set", "get_num_entities")
+        for f in frames
+    )
+
+
 @pytest.fixture(scope="module")
 def module_node(ros_runtime: Any, request: pytest.FixtureRequest) -> Iterator[Any]:
     """One rclpy node for the whole module, spun by its own executor thread.
@@ -79,12 +89,14 @@ def module_node(ros_runtime: Any, request: pytest.FixtureRequest) -> Iterator[An
                 # A service a test's teardown destroyed while its callback was still
                 # answering; the node itself is fine, so keep spinning.
                 continue
-            except Exception:
-                # Anything else (rclpy's action client, destroyed by a test while the
-                # executor waits on it, can raise RuntimeError from its wait set) must
-                # not stop the spinning that every later test of the module needs:
-                # keep it, and ros_node fails the test during which it happened.
-                errors.append(traceback.format_exc())
+            except Exception as exc:
+                # Nothing may stop the spinning that every later test of the module needs.
+                # rclpy's own wait-set races around an ActionClient a test creates or
+                # destroys while this thread waits (ros2/rclpy#1455, #1589) are upstream
+                # bugs of this test peer, not of the bridge: the test's own assertions
+                # still decide. Anything else fails the test during which it happened.
+                if not _rclpy_action_client_race(exc):
+                    errors.append(traceback.format_exc())
 
     thread = threading.Thread(target=spin, daemon=True, name=f"spin-{name}")
     thread.start()
