@@ -177,8 +177,15 @@ class SharedActionClient(_ActionEnd):
 
     def __init__(self, ros: RosNode, name: str, action_cls: type[Any]) -> None:
         super().__init__(ros, name, action_cls)
+        self.client: Any = None
+        # Made on the executor thread, like every later use: rclpy's ActionClient joins
+        # the executor's wait set unsafely when made from another thread (ros2/rclpy#1589).
+        # Goals sent before it exists queue behind this hand-off.
+        ros.in_executor(self._create)
+
+    def _create(self) -> None:
         self.client = _action.ActionClient(
-            ros.node, action_cls, name,
+            self.ros.node, self.action_cls, self.name,
             feedback_sub_qos_profile=_qos(True, False, FEEDBACK_DEPTH), **_action_qos(),
         )
 
@@ -373,8 +380,16 @@ class ServedAction(_ActionEnd):
         self.on_cancel = on_cancel
         self.alive = True
         self._goals: dict[bytes, ServedGoal] = {}
+        self.server: Any = None
+        # Made on the executor thread (see SharedActionClient); goals can only arrive after.
+        # Two hand-offs, as destroying takes two (:meth:`_destroy`): a server re-advertised
+        # under the name of one just unadvertised comes after the old one is gone, so ROS
+        # callers never meet two servers answering one goal.
+        ros.in_executor(ros.in_executor, self._create)
+
+    def _create(self) -> None:
         self.server = _action.ActionServer(
-            ros.node, action_cls, name, _never_executed,
+            self.ros.node, self.action_cls, self.name, _never_executed,
             goal_callback=self._goal_callback,
             handle_accepted_callback=self._accepted,
             cancel_callback=self._cancel_callback,
