@@ -12,7 +12,6 @@ before anything can initialise rclpy.
 
 from __future__ import annotations
 
-import contextlib
 import itertools
 import os
 import re
@@ -25,7 +24,7 @@ import pytest
 os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
 os.environ.setdefault("ROS_DOMAIN_ID", str(os.getpid() % 100 + 1))
 
-from tests.helpers import BridgeProcess, WireClient, open_wire
+from tests.helpers import BridgeProcess, WireClient, open_wire, spin_executor
 
 _names = itertools.count()
 
@@ -82,23 +81,24 @@ def ros_node(ros_runtime: _RosRuntime, request: pytest.FixtureRequest) -> Iterat
     Callbacks in a ReentrantCallbackGroup may run concurrently (a slow service
     does not block the node's other callbacks).
     """
-    from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
+    from rclpy.executors import MultiThreadedExecutor
 
     name = "test_" + re.sub(r"\W", "_", request.node.name)[:40] + f"_{next(_names)}"
     node = ros_runtime.rclpy.create_node(name, context=ros_runtime.context)
     executor = MultiThreadedExecutor(num_threads=4, context=ros_runtime.context)
     executor.add_node(node)
-
-    def spin() -> None:
-        with contextlib.suppress(ExternalShutdownException):
-            executor.spin()
-
-    thread = threading.Thread(target=spin, daemon=True, name=f"spin-{name}")
+    stop = threading.Event()
+    errors: list[str] = []
+    thread = threading.Thread(target=spin_executor, args=(executor, stop, errors), daemon=True,
+                              name=f"spin-{name}")
     thread.start()
     yield node
-    executor.shutdown()
+    stop.set()
     thread.join(10)
+    executor.shutdown()
     node.destroy_node()
+    if errors:
+        pytest.fail("this test's rclpy executor raised:\n" + errors[0])
 
 
 @pytest.fixture

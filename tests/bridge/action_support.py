@@ -125,7 +125,10 @@ class RosCaller:
     """An rclpy action client of a (client-served) Fibonacci action, awaited from asyncio."""
 
     def __init__(self, node: Any, name: str) -> None:
-        self.client = _action.ActionClient(node, Fibonacci, name)
+        # A group of its own: a failed take on a destroyed client leaves its group busy.
+        self.client = _action.ActionClient(
+            node, Fibonacci, name, callback_group=_groups.MutuallyExclusiveCallbackGroup()
+        )
         self.feedback: asyncio.Queue[list[int]] = asyncio.Queue()
         self.loop = asyncio.get_running_loop()
 

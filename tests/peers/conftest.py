@@ -5,14 +5,13 @@ from __future__ import annotations
 import importlib
 import re
 import threading
-import traceback
 import warnings
 from collections.abc import Callable, Iterator
 from typing import Any
 
 import pytest
 
-from tests.helpers import BridgeProcess
+from tests.helpers import BridgeProcess, spin_executor
 from tests.peers.peer import PeerPool, PeerProcess
 
 # rclpy's type support imports lark, which imports the deprecated sre_parse; with
@@ -50,16 +49,6 @@ def start_peer(peer_pool: PeerPool) -> Iterator[Callable[..., PeerProcess]]:
         peer.close()
 
 
-def _rclpy_action_client_race(exc: BaseException) -> bool:
-    """Whether ``exc`` came from rclpy's ActionClient wait-set bookkeeping (a known race)."""
-    frames = traceback.extract_tb(exc.__traceback__)
-    return any(
-        f.filename.endswith("rclpy/action/client.py")
-        and f.name in ("is_ready", "add_to_wait_set", "get_num_entities")
-        for f in frames
-    )
-
-
 @pytest.fixture(scope="module")
 def module_node(ros_runtime: Any, request: pytest.FixtureRequest) -> Iterator[Any]:
     """One rclpy node for the whole module, spun by its own executor thread.
@@ -69,36 +58,18 @@ def module_node(ros_runtime: Any, request: pytest.FixtureRequest) -> Iterator[An
     processes, no bridge involved); destroying publishers, subscriptions and
     services does not. So the peer tests keep one node and clean up entities.
     """
-    from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
+    from rclpy.executors import MultiThreadedExecutor
 
-    invalid_handle = importlib.import_module("rclpy._rclpy_pybind11").InvalidHandle
     name = "peers_" + re.sub(r"\W", "_", request.module.__name__.rsplit(".", 1)[-1])
     node = ros_runtime.rclpy.create_node(name, context=ros_runtime.context)
     executor = MultiThreadedExecutor(num_threads=4, context=ros_runtime.context)
     executor.add_node(node)
     stop = threading.Event()
+    # Nothing may stop the spinning that every later test of the module needs; what a
+    # round raises fails the test during which it happened (see ros_node).
     errors: list[str] = []
-
-    def spin() -> None:
-        while not stop.is_set():
-            try:
-                executor.spin_once(timeout_sec=0.1)
-            except ExternalShutdownException:
-                return
-            except invalid_handle:
-                # A service a test's teardown destroyed while its callback was still
-                # answering; the node itself is fine, so keep spinning.
-                continue
-            except Exception as exc:
-                # Nothing may stop the spinning that every later test of the module needs.
-                # rclpy's own wait-set races around an ActionClient a test creates or
-                # destroys while this thread waits (ros2/rclpy#1455, #1589) are upstream
-                # bugs of this test peer, not of the bridge: the test's own assertions
-                # still decide. Anything else fails the test during which it happened.
-                if not _rclpy_action_client_race(exc):
-                    errors.append(traceback.format_exc())
-
-    thread = threading.Thread(target=spin, daemon=True, name=f"spin-{name}")
+    thread = threading.Thread(target=spin_executor, args=(executor, stop, errors), daemon=True,
+                              name=f"spin-{name}")
     thread.start()
     node.spin_errors = errors
     yield node

@@ -31,6 +31,17 @@ def _module(name: str) -> Any:
     return importlib.import_module(name)
 
 
+def _own_group() -> Any:
+    """A callback group for one test's rclpy action end on the module's shared node.
+
+    rclpy leaves a callback group busy for ever when taking from an action client
+    or server fails (one destroyed while the executor waits on it), so each action
+    end gets a group of its own: the node's default group, which every later test
+    uses, is never stuck by it.
+    """
+    return _module("rclpy.callback_groups").MutuallyExclusiveCallbackGroup()
+
+
 def _refusal(peer: PeerProcess, topic: str) -> None:
     """Fail at once if the bridge sent an error status about ``topic`` (clients that show them)."""
     for e in peer.new_events():
@@ -621,7 +632,9 @@ def send_goal(peer: PeerProcess, node: Any, topic: str) -> None:
         goal_handle.succeed()
         return Fibonacci.Result(sequence=sequence)
 
-    server = _module("rclpy.action").ActionServer(node, Fibonacci, topic, execute)
+    server = _module("rclpy.action").ActionServer(
+        node, Fibonacci, topic, execute, callback_group=_own_group()
+    )
     try:
         value = peer.request(
             "send_goal", action=topic, type="test_msgs/action/Fibonacci", goal={"order": 5},
@@ -643,7 +656,9 @@ def serve_action(peer: PeerProcess, node: Any, topic: str) -> None:
     peer.request(
         "advertise_action", action=topic, type="test_msgs/action/Fibonacci", handler="fibonacci"
     )
-    client = _module("rclpy.action").ActionClient(node, Fibonacci, topic)
+    client = _module("rclpy.action").ActionClient(
+        node, Fibonacci, topic, callback_group=_own_group()
+    )
     try:
 
         def ready_or_refused() -> Any:
@@ -670,7 +685,9 @@ def serve_action_canceled(peer: PeerProcess, node: Any, topic: str) -> None:
         "advertise_action", action=topic, type="test_msgs/action/Fibonacci",
         handler="until_canceled",
     )
-    client = _module("rclpy.action").ActionClient(node, Fibonacci, topic)
+    client = _module("rclpy.action").ActionClient(
+        node, Fibonacci, topic, callback_group=_own_group()
+    )
     first_feedback = threading.Event()
     try:
         wait_until(client.server_is_ready, DEADLINE, f"{topic} action server in the graph")
@@ -970,7 +987,9 @@ def get_action_servers(peer: PeerProcess, node: Any, topic: str) -> None:
     """The peer's action server list names an rclpy action server."""
     from test_msgs.action import Fibonacci
 
-    server = _module("rclpy.action").ActionServer(node, Fibonacci, topic, lambda gh: None)
+    server = _module("rclpy.action").ActionServer(
+        node, Fibonacci, topic, lambda gh: None, callback_group=_own_group()
+    )
     try:
         wait_until(lambda: topic in peer.request("get_action_servers"), DEADLINE,
                    f"{topic} in get_action_servers")
