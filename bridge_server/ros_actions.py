@@ -187,6 +187,7 @@ class SharedActionClient(_ActionEnd):
         self.client = _action.ActionClient(
             self.ros.node, self.action_cls, self.name,
             feedback_sub_qos_profile=_qos(True, False, FEEDBACK_DEPTH), **_action_qos(),
+            callback_group=_own_group(),
         )
 
     def ready(self) -> bool:
@@ -390,6 +391,7 @@ class ServedAction(_ActionEnd):
     def _create(self) -> None:
         self.server = _action.ActionServer(
             self.ros.node, self.action_cls, self.name, _never_executed,
+            callback_group=_own_group(),
             goal_callback=self._goal_callback,
             handle_accepted_callback=self._accepted,
             cancel_callback=self._cancel_callback,
@@ -463,6 +465,17 @@ class ServedAction(_ActionEnd):
     def _destroy_server(self) -> None:
         with contextlib.suppress(Exception):
             self.server.destroy()
+
+
+def _own_group() -> Any:
+    """A callback group for one action end.
+
+    rclpy leaves a callback group busy for ever when taking from an action end
+    fails; with a group of its own, such a failure stalls that action only, never
+    the node's default group that every topic and service of the bridge is in.
+    """
+    group: Any = importlib.import_module("rclpy.callback_groups").MutuallyExclusiveCallbackGroup()
+    return group
 
 
 def _never_executed(_handle: Any) -> Any:  # pragma: no cover - goals are finished directly
