@@ -88,12 +88,21 @@ class LoopThread:
                 "would wait for ever; publish from callbacks, or hand the work to another thread"
             )
         done = threading.Event()
+        future: concurrent.futures.Future[T] | None = None
         try:
             future = self.submit(_tracked(coro, done), what)
+            return self.wait(future, what, done)
         except ConnectionClosed:
-            coro.close()  # never started: no "never awaited" warning
+            if future is None:
+                coro.close()  # never started: no "never awaited" warning
             raise
-        return self.wait(future, what, done)
+        except BaseException:
+            # Ctrl+C between handing the work over and waiting for it: cancel it there too,
+            # or it would go on holding what it holds (a subscription's reader, a call).
+            if future is not None and not future.done():
+                future.cancel()
+                done.wait(5.0)
+            raise
 
     def submit(self, coro: Coroutine[Any, Any, T], what: str) -> concurrent.futures.Future[T]:
         """Hand ``coro`` to the loop without waiting; its future (``what`` names it in errors).
