@@ -22,6 +22,9 @@ LONG = 15.0
 """Seconds a "long" goal runs unless canceled (tests end it much sooner)."""
 
 
+WORK_AFTER_FEEDBACK = 0.05
+"""Seconds a FibServer goal works between its last feedback and its result."""
+
 class FibServer:
     """An rclpy Fibonacci action server that records goals and cancel requests.
 
@@ -75,6 +78,11 @@ class FibServer:
         for i in range(1, handle.request.order):
             sequence.append(sequence[i] + sequence[i - 1])
             handle.publish_feedback(Fibonacci.Feedback(sequence=sequence))
+        # The work a real server does after its last feedback. Feedback (a topic) and the
+        # result (a service answer) travel separately in ROS; the bridge relays feedback
+        # heard up to 5 ms after the result, and a loaded machine can delay one topic
+        # sample longer than that, which would make the feedback checks flaky.
+        time.sleep(WORK_AFTER_FEEDBACK)
         if self.abort:
             handle.abort()
         else:
