@@ -192,7 +192,9 @@ def nodes(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, Any]:
 def service_node(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, Any]:
     """The node serving a service, "" if unknown."""
     name = _str_field(args, "service")
-    if name in HANDLERS:
+    if name in HANDLERS or name in bridge.service_owners:
+        # rosapi itself, or served by one of this bridge's clients: this node serves it,
+        # whatever the graph says yet
         return {"node": _full(bridge.ros.node.get_name(), bridge.ros.node.get_namespace())}
     node = bridge.ros.node
     for n, ns in _node_names(bridge):

@@ -262,16 +262,19 @@ async def open_wire(url: str) -> WireClient:
 
 
 def rclpy_action_race(exc: BaseException) -> bool:
-    """Whether ``exc`` came from rclpy's action wait-set bookkeeping (a known upstream race).
+    """Whether ``exc`` is one of rclpy's own known races in a test's peer node.
 
     Made or destroyed by a test while the executor waits, an rclpy action client or
-    server fails in ``is_ready``/``take_data`` (ros2/rclpy#1455, #1589). It stalls
-    nothing but that action end when the end has a callback group of its own.
+    server fails in ``is_ready``/``take_data`` (ros2/rclpy#1455, #1589); it stalls
+    nothing but that action end when the end has a callback group of its own. A
+    service (a node's parameter services too) answering a caller that has gone
+    fails inside rclpy's ``send_response``. Neither says anything about the bridge.
     """
     frames = traceback.extract_tb(exc.__traceback__)
     return any(
-        f.filename.endswith(("rclpy/action/client.py", "rclpy/action/server.py"))
-        and f.name in ("is_ready", "take_data", "add_to_wait_set", "get_num_entities")
+        (f.filename.endswith(("rclpy/action/client.py", "rclpy/action/server.py"))
+         and f.name in ("is_ready", "take_data", "add_to_wait_set", "get_num_entities"))
+        or (f.filename.endswith("rclpy/service.py") and f.name == "send_response")
         for f in frames
     )
 

@@ -15,6 +15,8 @@ from std_msgs.msg import String
 from std_srvs.srv import SetBool
 from test_msgs.action import Fibonacci
 
+from tests.bridge.support import roundtrip
+
 pytestmark = pytest.mark.asyncio
 
 _ids = itertools.count()
@@ -107,6 +109,16 @@ async def test_service_node(ws_connect: Any, ros_node: Any, topic: str):
     ws = await ws_connect()
     await _until(ws, "/rosapi/service_node", {"service": topic},
                  lambda v: v["node"] == _fq(ros_node))
+
+
+async def test_service_node_of_a_client_served_service(ws_connect: Any, topic: str):
+    """/rosapi/service_node names the bridge's node for a service one of its clients serves."""
+    server = await ws_connect()
+    await server.send({"op": "advertise_service", "service": topic, "type": "std_srvs/SetBool"})
+    ws = await ws_connect()
+    await roundtrip(server)  # the advertise has been handled
+    values = await _call(ws, "/rosapi/service_node", {"service": topic})
+    assert values == {"node": "/roslibpy_lite_bridge"}
 
 
 async def test_nodes_fully_qualified(ws_connect: Any, ros_node: Any):
