@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import asyncio
 import concurrent.futures
+import contextlib
 import inspect
 import threading
 from collections.abc import Callable, Coroutine
@@ -29,6 +30,36 @@ async def _tracked(coro: Coroutine[Any, Any, T], done: threading.Event) -> T:
         return await coro
     finally:
         done.set()
+
+
+def _start(
+    loop: asyncio.AbstractEventLoop, coro: Coroutine[Any, Any, T],
+    future: concurrent.futures.Future[T], skipped: Callable[[], Any] | None,
+) -> None:
+    """On the loop: run ``coro`` as a task whose outcome goes to ``future`` (both ways)."""
+    if future.cancelled():  # cancelled during the hand-off: never start it
+        coro.close()
+        if skipped is not None:
+            skipped()
+        return
+    task = loop.create_task(coro)
+
+    def settle(t: asyncio.Task[T]) -> None:
+        with contextlib.suppress(concurrent.futures.InvalidStateError):  # cancelled meanwhile
+            if t.cancelled():
+                future.cancel()
+            elif (exc := t.exception()) is not None:
+                future.set_exception(exc)
+            else:
+                future.set_result(t.result())
+
+    def cancel_task(f: concurrent.futures.Future[T]) -> None:
+        if f.cancelled():
+            with contextlib.suppress(RuntimeError):  # the loop is already closed
+                loop.call_soon_threadsafe(task.cancel)
+
+    task.add_done_callback(settle)
+    future.add_done_callback(cancel_task)
 
 
 async def _call_async(fn: Callable[..., Any], args: tuple[Any, ...], kwargs: dict[str, Any]) -> Any:
@@ -88,24 +119,34 @@ class LoopThread:
                 "would wait for ever; publish from callbacks, or hand the work to another thread"
             )
         done = threading.Event()
-        future: concurrent.futures.Future[T] | None = None
+        # The future is known here before the work reaches the loop, so a Ctrl+C at any
+        # point of the hand-off can still cancel it (else it would go on holding what it
+        # holds there: a subscription's reader, a call).
+        handed: list[concurrent.futures.Future[T]] = []
         try:
-            future = self.submit(_tracked(coro, done), what)
+            future = self.submit(_tracked(coro, done), what, handed.append, done.set)
             return self.wait(future, what, done)
         except ConnectionClosed:
-            if future is None:
+            if not handed:
                 coro.close()  # never started: no "never awaited" warning
             raise
         except BaseException:
-            # Ctrl+C between handing the work over and waiting for it: cancel it there too,
-            # or it would go on holding what it holds (a subscription's reader, a call).
-            if future is not None and not future.done():
-                future.cancel()
+            if handed and not handed[0].done():
+                handed[0].cancel()
                 done.wait(5.0)
             raise
 
-    def submit(self, coro: Coroutine[Any, Any, T], what: str) -> concurrent.futures.Future[T]:
+    def submit(
+        self, coro: Coroutine[Any, Any, T], what: str,
+        keep: Callable[[concurrent.futures.Future[T]], Any] | None = None,
+        skipped: Callable[[], Any] | None = None,
+    ) -> concurrent.futures.Future[T]:
         """Hand ``coro`` to the loop without waiting; its future (``what`` names it in errors).
+
+        ``keep(future)`` is called before the work is scheduled, so a caller
+        interrupted during the hand-off already holds the future to cancel.
+        Cancelling the future cancels the work on the loop, or it never starts
+        and ``skipped()`` is called there.
 
         Raises:
             ConnectionClosed: the loop is stopped or stopping (``coro`` is closed, not run).
@@ -114,7 +155,11 @@ class LoopThread:
             if self.closing:
                 coro.close()
                 raise ConnectionClosed(f"{what}: the client is closed")
-            return asyncio.run_coroutine_threadsafe(coro, self.loop)
+            future: concurrent.futures.Future[T] = concurrent.futures.Future()
+            if keep is not None:
+                keep(future)
+            self.loop.call_soon_threadsafe(_start, self.loop, coro, future, skipped)
+            return future
 
     def wait(
         self, future: concurrent.futures.Future[T], what: str,
