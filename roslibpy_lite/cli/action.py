@@ -35,6 +35,8 @@ from .common import (
     cli_values,
     for_display,
     local_class,
+    named_types,
+    print_listing,
     type_parts,
     with_session,
 )
@@ -47,19 +49,9 @@ async def _servers(s: Session) -> list[str]:
 async def cmd_action_list(args: argparse.Namespace, out: Out) -> int:
     """``action list [-t]``."""
     async def body(s: Session) -> int:
-        names = await _servers(s)
-        types: list[str] = []
-        if args.show_types or args.json:
-            replies = await asyncio.gather(*(s.rosapi("action_type", {"action": n})
-                                             for n in names))
-            types = [str(r.get("type", "")) for r in replies]
-        if args.json:
-            out.line(json.dumps([{"name": n, "type": t}
-                                 for n, t in zip(names, types, strict=True)]))
-            return EXIT_OK
-        for i, name in enumerate(names):
-            out.line(f"{name} [{types[i]}]" if args.show_types else name)
-        return EXIT_OK
+        pairs = await named_types(s, await _servers(s), "action_type", "action",
+                                  args.show_types or args.json)
+        return print_listing(out, args, pairs)
     return await with_session(args, body)
 
 

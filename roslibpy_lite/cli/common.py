@@ -242,6 +242,28 @@ def _rosapi(name: str) -> str:
 Command = Callable[[argparse.Namespace, Out], Coroutine[Any, Any, int]]
 
 
+async def named_types(
+    s: Session, names: list[str], service: str, key: str, wanted: bool
+) -> list[tuple[str, str]]:
+    """``(name, type)`` for each name, asking ``/rosapi/<service>`` (``{key: name}``) only
+    when the types are ``wanted`` (``""`` otherwise)."""
+    if not wanted:
+        return [(n, "") for n in names]
+    replies = await asyncio.gather(*(s.rosapi(service, {key: n}) for n in names))
+    return [(n, str(r.get("type", ""))) for n, r in zip(names, replies, strict=True)]
+
+
+def print_listing(out: Out, args: argparse.Namespace, pairs: list[tuple[str, str]]) -> int:
+    """A ``list`` command's output: JSON objects with ``--json``, else a name a line
+    (``name [type]`` with ``-t``)."""
+    if args.json:
+        out.line(json.dumps([{"name": n, "type": t} for n, t in pairs]))
+        return EXIT_OK
+    for name, type_ in pairs:
+        out.line(f"{name} [{type_}]" if args.show_types else name)
+    return EXIT_OK
+
+
 async def with_session(args: argparse.Namespace, body: Callable[[Session], Awaitable[int]]) -> int:
     secure = args.url.startswith("wss://")
     try:

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import asyncio
 import json
 from typing import Any
 
@@ -26,6 +25,8 @@ from .common import (
     check_values,
     cli_values,
     local_class,
+    named_types,
+    print_listing,
     type_parts,
     with_session,
 )
@@ -35,18 +36,9 @@ async def cmd_service_list(args: argparse.Namespace, out: Out) -> int:
     """``service list [-t]``."""
     async def body(s: Session) -> int:
         names = sorted((await s.rosapi("services")).get("services", []))
-        types: list[str] = []
-        if args.show_types or args.json:
-            replies = await asyncio.gather(*(s.rosapi("service_type", {"service": n})
-                                             for n in names))
-            types = [str(r.get("type", "")) for r in replies]
-        if args.json:
-            out.line(json.dumps([{"name": n, "type": t} for n, t in zip(names, types,
-                                                                         strict=True)]))
-            return EXIT_OK
-        for i, name in enumerate(names):
-            out.line(f"{name} [{types[i]}]" if args.show_types else name)
-        return EXIT_OK
+        pairs = await named_types(s, names, "service_type", "service",
+                                  args.show_types or args.json)
+        return print_listing(out, args, pairs)
     return await with_session(args, body)
 
 

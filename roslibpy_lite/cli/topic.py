@@ -28,6 +28,7 @@ from .common import (
     local_class,
     lost,
     nan_to_none,
+    print_listing,
     type_parts,
     until,
     with_session,
@@ -39,11 +40,7 @@ async def cmd_topic_list(args: argparse.Namespace, out: Out) -> int:
     async def body(s: Session) -> int:
         reply = await s.rosapi("topics")
         pairs = sorted(zip(reply.get("topics", []), reply.get("types", []), strict=False))
-        if args.json:
-            out.line(json.dumps([{"name": n, "type": t} for n, t in pairs]))
-        for name, type_ in pairs if not args.json else ():
-            out.line(f"{name} [{type_}]" if args.show_types else name)
-        return EXIT_OK
+        return print_listing(out, args, pairs)
     return await with_session(args, body)
 
 
