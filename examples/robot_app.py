@@ -401,10 +401,16 @@ async def _amain(args: argparse.Namespace) -> int:
     for sig in (signal.SIGINT, signal.SIGTERM):
         loop.add_signal_handler(sig, stop)
     try:
-        await session
-    except asyncio.CancelledError:
-        if not stopping:
-            raise
+        try:
+            await session
+        except asyncio.CancelledError:
+            if not stopping:
+                raise
+        # Said while our handlers are still installed: a second SIGINT (a terminal's
+        # Ctrl+C reaches the whole process group, and demo.sh then sends its own) must
+        # not become a KeyboardInterrupt that swallows this line.
+        _say("[app] stopped")
+        return 0
     except roslibpy_lite.RosLibError as exc:
         print(f"robot_app: {exc}", file=sys.stderr, flush=True)
         return 1
@@ -415,8 +421,6 @@ async def _amain(args: argparse.Namespace) -> int:
     finally:
         for sig in (signal.SIGINT, signal.SIGTERM):
             loop.remove_signal_handler(sig)
-    _say("[app] stopped")
-    return 0
 
 
 def main(argv: Sequence[str] | None = None) -> int:
