@@ -9,8 +9,12 @@ Sending goals
 -------------
 ``send_action_goal`` (``args`` an object, or a list zipped onto the goal's
 fields) converts the goal, waits for an action server (at most
-``call_timeout`` s; ``discovery_wait`` s if the ROS graph does not list the
-action at all) and sends it. With ``feedback: true`` each feedback goes back
+``call_timeout`` s; twice ``discovery_wait`` s if no server is matched and the ROS
+graph does not list the action at all: one started just before can take ~3 s to
+appear on a loaded machine, as for typed service calls) and sends it. A newly
+matched server is first probed until it answers (see
+:meth:`~bridge_server.ros_actions.SharedActionClient.ready`), so that the goal's
+answer cannot be lost to discovery still under way. With ``feedback: true`` each feedback goes back
 as ``action_feedback`` {id, action, values}. The end is one ``action_result``
 {id, action, values, status, result}: ``status`` is the GoalStatus number,
 ``result`` is true only for SUCCEEDED, ``values`` the action's result. A goal
@@ -331,7 +335,7 @@ class SessionActions:
         config = session.config
         clients = session.bridge.action_clients
         deadline = loop.time() + config.call_timeout
-        listed_by = loop.time() + min(config.discovery_wait, config.call_timeout)
+        listed_by = loop.time() + min(2 * config.discovery_wait, config.call_timeout)
         delay = 0.002
         while True:
             client = clients.clients.get((name, action_cls))
@@ -353,7 +357,9 @@ class SessionActions:
                 if client.ready():
                     return client
             now = loop.time()
-            if not types and now >= listed_by:
+            # A matched server exists, even while the graph does not list it yet.
+            matched = client is not None and client.matched()
+            if not types and not matched and now >= listed_by:
                 raise _Failed(f"action {name} does not exist (no action server in the ROS graph)")
             if now >= deadline:
                 raise _Failed(

@@ -23,11 +23,13 @@ from __future__ import annotations
 import contextlib
 import importlib
 import logging
+import secrets
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any, Protocol
 
 from action_msgs.msg import GoalStatus
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
+from unique_identifier_msgs.msg import UUID
 
 from . import convert
 from .ros import SERVICE_DEPTH, _qos
@@ -56,6 +58,12 @@ FEEDBACK_DEPTH = 1000
 RESULT_TIMEOUT = 60
 """Seconds a finished served goal's result stays available to ROS callers."""
 
+PROBE_INTERVAL = 0.2
+"""Seconds between probes of a new server's reply path (:meth:`SharedActionClient.ready`)."""
+
+PROBE_GIVE_UP = 3.0
+"""Seconds after which a server that never answers the probe is trusted anyway."""
+
 FEEDBACK_GRACE = 0.005
 """Seconds a goal's feedback is still heard after its result (only goals that asked for
 feedback wait this long for their result)."""
@@ -63,8 +71,9 @@ feedback wait this long for their result)."""
 
 def check_rclpy_internals() -> None:
     """Fail at start-up, clearly, if rclpy's private action internals used here differ
-    (``_feedback_callbacks``, ``_client_handle``, ``_result_futures``, ``_update_state`` and
-    ``GoalEvent``: tested with the rclpy the ``bridge`` extra pins). Raises :class:`BridgeError`.
+    (``_feedback_callbacks``, ``_client_handle``, ``_result_futures``, ``_update_state``,
+    ``_get_result_async`` and ``GoalEvent``: tested with the rclpy the ``bridge`` extra pins).
+    Raises :class:`BridgeError`.
     """
     import inspect
     from importlib.metadata import PackageNotFoundError, version
@@ -72,6 +81,8 @@ def check_rclpy_internals() -> None:
     missing = [n for n in ("EXECUTE", "CANCEL_GOAL") if not hasattr(_rclpy.GoalEvent, n)]
     if not callable(getattr(_action.server.ServerGoalHandle, "_update_state", None)):
         missing.append("ServerGoalHandle._update_state")
+    if not callable(getattr(_action.ActionClient, "_get_result_async", None)):
+        missing.append("ActionClient._get_result_async")
     for cls, attrs in ((_action.ActionClient, ("_feedback_callbacks", "_client_handle")),
                        (_action.ActionServer, ("_result_futures",))):
         try:
@@ -178,24 +189,63 @@ class SharedActionClient(_ActionEnd):
     def __init__(self, ros: RosNode, name: str, action_cls: type[Any]) -> None:
         super().__init__(ros, name, action_cls)
         self.client: Any = None
+        self.confirmed = False  # a server answered the probe (loop thread)
+        self._probe_first = 0.0  # loop times of the first and the latest probe
+        self._probe_last = 0.0
+        self._probes: list[Any] = []  # probe futures not answered yet (executor thread)
         # Made on the executor thread, like every later use: rclpy's ActionClient joins
         # the executor's wait set unsafely when made from another thread (ros2/rclpy#1589).
         # Goals sent before it exists queue behind this hand-off.
         ros.in_executor(self._create)
 
     def _create(self) -> None:
-        self.client = _action.ActionClient(
+        self.client = _ActionClient(
             self.ros.node, self.action_cls, self.name,
             feedback_sub_qos_profile=_qos(True, False, FEEDBACK_DEPTH), **_action_qos(),
             callback_group=_own_group(),
         )
 
-    def ready(self) -> bool:
-        """Whether an action server is matched (callable from the loop)."""
+    def matched(self) -> bool:
+        """Whether DDS has matched an action server to this client (loop thread)."""
         try:
             return bool(self.client.server_is_ready())
         except Exception:
             return False
+
+    def ready(self) -> bool:
+        """Whether an action server is matched and its answers reach us (loop thread).
+
+        DDS can match our requests to a new server before that server has matched
+        our reply readers; a goal sent in that window is accepted but its answer is
+        lost. So a newly matched server is first asked, every ``PROBE_INTERVAL`` s
+        until it answers, for the result of a goal that does not exist (harmless,
+        answered at once with STATUS_UNKNOWN). The result service's reply reader is
+        announced after the goal service's, so its answer shows the goal path
+        works too. A server that never answers is trusted after ``PROBE_GIVE_UP`` s.
+        """
+        if not self.matched():
+            self.confirmed = False  # a server that comes (back) is probed again
+            self._probe_first = 0.0
+            return False
+        if self.confirmed:
+            return True
+        now = self.ros.loop.time()
+        if not self._probe_first:
+            self._probe_first = now
+        elif now - self._probe_first >= PROBE_GIVE_UP:
+            log.debug("the action server of %s did not answer a probe; trusting it", self.name)
+            self._confirm()
+            return True
+        if now - self._probe_last >= PROBE_INTERVAL:
+            self._probe_last = now
+            self.ros.in_executor(self._probe)
+        return False
+
+    def _confirm(self) -> None:
+        """On the loop: the reply path works; forget the probes still waiting."""
+        if not self.confirmed:
+            self.confirmed = True
+            self.ros.in_executor(self._forget_probes)
 
     def send(self, goal: Any, listener: GoalListener, feedback: bool) -> SentGoal:
         """Send ``goal`` (an instance of the action's ``Goal``) now; ``listener`` hears the rest."""
@@ -275,11 +325,33 @@ class SharedActionClient(_ActionEnd):
 
         self.ros.loop.call_later(FEEDBACK_GRACE, report)
 
+    def _probe(self) -> None:
+        handle = _action.client.ClientGoalHandle(
+            self.client, UUID(uuid=list(secrets.token_bytes(16))),
+            self.action_cls.Impl.SendGoalService.Response(),
+        )
+        try:
+            future = self.client._get_result_async(handle)
+        except Exception as exc:
+            log.debug("probing the action server of %s failed: %s", self.name, exc)
+            return
+        self._inline(future)
+        self._probes.append(future)
+        future.add_done_callback(lambda _f: self.ros.post(self._confirm))
+
+    def _forget_probes(self) -> None:
+        for future in self._probes:
+            if not future.done():
+                with contextlib.suppress(Exception):
+                    self.client._remove_pending_result_request(future)
+        self._probes.clear()
+
     def _inline(self, future: Any) -> None:
         """Run ``future``'s done callbacks right where rclpy completes it (executor thread).
 
         rclpy would schedule each as an executor task: one more wait-set round each,
-        per goal answer, result and cancel answer.
+        per goal answer, result and cancel answer. (:class:`_ActionClient` lets rclpy's
+        own clean-up callback find the future gone.)
         """
         with contextlib.suppress(ValueError):
             self.client.remove_future(future)
@@ -465,6 +537,23 @@ class ServedAction(_ActionEnd):
     def _destroy_server(self) -> None:
         with contextlib.suppress(Exception):
             self.server.destroy()
+
+
+def _remove_future_if_present(self: Any, future: Any) -> None:
+    with contextlib.suppress(ValueError):
+        self._futures.remove(future)
+
+
+_ActionClient: Any = type("_ActionClient", (_action.ActionClient,), {
+    "__doc__": """rclpy's ``ActionClient``; its ``remove_future`` accepts a future already gone.
+
+    :meth:`SharedActionClient._inline` takes each request's future out of the client's
+    futures; rclpy's own done callback removes it again, and the ``ValueError`` that
+    raises there skipped the rest of rclpy's clean-up, keeping every goal's sequence
+    number entry for ever (and warning once per goal).
+    """,
+    "remove_future": _remove_future_if_present,
+})
 
 
 def _own_group() -> Any:
