@@ -261,6 +261,38 @@ async def open_wire(url: str) -> WireClient:
     return WireClient(ws)
 
 
+def action_server_answers(client: Any, every: float = 0.2) -> Callable[[], bool]:
+    """A predicate for :func:`wait_until`: ``client``'s action server is matched *and* answers.
+
+    rclpy's ``server_is_ready()`` turns true once requests reach the server, which
+    may not have matched the client's reply readers yet; a goal sent then is
+    accepted and its answer lost. So, once matched, the predicate asks (every
+    ``every`` s until one is answered) for the result of a goal that does not exist,
+    which a server answers at once with STATUS_UNKNOWN. (The bridge's own action
+    client does the same: ``SharedActionClient.ready``.)
+    """
+    from rclpy.action.client import ClientGoalHandle
+    from unique_identifier_msgs.msg import UUID
+
+    answered = threading.Event()
+    last = [0.0]
+
+    def check() -> bool:
+        if answered.is_set():
+            return True
+        if not client.server_is_ready():
+            return False
+        now = time.monotonic()
+        if now - last[0] >= every:
+            last[0] = now
+            nobody = ClientGoalHandle(client, UUID(uuid=list(os.urandom(16))),
+                                      client._action_type.Impl.SendGoalService.Response())
+            client._get_result_async(nobody).add_done_callback(lambda _f: answered.set())
+        return False
+
+    return check
+
+
 def rclpy_action_race(exc: BaseException) -> bool:
     """Whether ``exc`` is one of rclpy's own known races in a test's peer node.
 
@@ -268,15 +300,22 @@ def rclpy_action_race(exc: BaseException) -> bool:
     server fails in ``is_ready``/``take_data`` (ros2/rclpy#1455, #1589); it stalls
     nothing but that action end when the end has a callback group of its own. A
     service (a node's parameter services too) answering a caller that has gone
-    fails inside rclpy's ``send_response``. Neither says anything about the bridge.
+    fails inside rclpy's ``send_response``, and so does an action server answering
+    a caller whose reply reader DDS has not matched yet (the bridge probes a new
+    server exactly for that). None of it says anything about the bridge.
     """
     frames = traceback.extract_tb(exc.__traceback__)
     return any(
         (f.filename.endswith(("rclpy/action/client.py", "rclpy/action/server.py"))
          and f.name in ("is_ready", "take_data", "add_to_wait_set", "get_num_entities"))
         or (f.filename.endswith("rclpy/service.py") and f.name == "send_response")
+        or (f.filename.endswith("rclpy/action/server.py") and f.name in _ACTION_ANSWERS)
         for f in frames
     )
+
+
+_ACTION_ANSWERS = ("_execute_goal_request", "_execute_cancel_request",
+                   "_execute_get_result_request", "_send_result_response")
 
 
 def spin_executor(executor: Any, stop: threading.Event, errors: list[str]) -> None:

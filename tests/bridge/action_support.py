@@ -12,6 +12,7 @@ from typing import Any
 from test_msgs.action import Fibonacci
 
 from tests.bridge.support import ros_future
+from tests.helpers import action_server_answers, async_wait_until
 
 _action: Any = importlib.import_module("rclpy.action")
 _groups: Any = importlib.import_module("rclpy.callback_groups")
@@ -137,16 +138,14 @@ class RosCaller:
         self.client = _action.ActionClient(
             node, Fibonacci, name, callback_group=_groups.MutuallyExclusiveCallbackGroup()
         )
+        self.name = name
         self.feedback: asyncio.Queue[list[int]] = asyncio.Queue()
         self.loop = asyncio.get_running_loop()
 
     async def ready(self, timeout: float = 10.0) -> None:
-        """Wait until the action server is matched."""
-        deadline = time.monotonic() + timeout
-        while not self.client.server_is_ready():
-            if time.monotonic() > deadline:
-                raise AssertionError("the action server never became ready")
-            await asyncio.sleep(0.02)
+        """Wait until the action server is matched and answers (see ``action_server_answers``)."""
+        await async_wait_until(action_server_answers(self.client), timeout,
+                               f"the action server {self.name} to answer")
 
     def _on_feedback(self, msg: Any) -> None:
         self.loop.call_soon_threadsafe(self.feedback.put_nowait, list(msg.feedback.sequence))

@@ -9,7 +9,7 @@ import threading
 from typing import Any
 
 from tests.examples.support import Program
-from tests.helpers import BridgeProcess
+from tests.helpers import BridgeProcess, action_server_answers, wait_until
 
 
 def test_integrate_imu_from_rclpy(bridge: BridgeProcess, ros_node: Any) -> None:
@@ -31,7 +31,7 @@ def test_integrate_imu_from_rclpy(bridge: BridgeProcess, ros_node: Any) -> None:
     app = Program([sys.executable, "-m", "examples.robot_app", "--url", bridge.url])
     try:
         app.wait_for(r"^\[action\] serving /integrate_imu \(mult_msgs/action/IntegrateImu\)$")
-        assert client.wait_for_server(timeout_sec=15), "no /integrate_imu in the ROS graph"
+        wait_until(action_server_answers(client), 15, "/integrate_imu to answer")
         sums: list[float] = []
         answered = threading.Event()
         goal_future = client.send_goal_async(

@@ -18,7 +18,7 @@ import threading
 import time
 from typing import Any
 
-from tests.helpers import wait_until
+from tests.helpers import action_server_answers, wait_until
 from tests.peers.peer import PeerError, PeerProcess
 
 #: How long one attempt waits for a message before publishing the next one
@@ -659,11 +659,12 @@ def serve_action(peer: PeerProcess, node: Any, topic: str) -> None:
     client = _module("rclpy.action").ActionClient(
         node, Fibonacci, topic, callback_group=_own_group()
     )
+    answers = action_server_answers(client)
     try:
 
         def ready_or_refused() -> Any:
             refused = [e for e in peer.new_events() if e.get("event") == "status"]
-            return refused or client.server_is_ready()
+            return refused or answers()
 
         outcome = wait_until(ready_or_refused, DEADLINE, f"{topic} action server in the graph")
         assert outcome is True, f"the bridge refused advertise_action: {outcome}"
@@ -690,7 +691,7 @@ def serve_action_canceled(peer: PeerProcess, node: Any, topic: str) -> None:
     )
     first_feedback = threading.Event()
     try:
-        wait_until(client.server_is_ready, DEADLINE, f"{topic} action server in the graph")
+        wait_until(action_server_answers(client), DEADLINE, f"{topic} action server answering")
         goal = client.send_goal_async(
             Fibonacci.Goal(order=3), feedback_callback=lambda _msg: first_feedback.set()
         )
