@@ -29,7 +29,7 @@ from .actions import (
 )
 from .api import DEFAULT_CALL_TIMEOUT
 from .exceptions import ConnectionClosed, Disconnected, ProtocolError, UsageError
-from .messages import check_dict, to_wire
+from .messages import check_dict, check_name, to_wire
 
 if TYPE_CHECKING:
     from .ros import RosFront
@@ -69,8 +69,7 @@ class ActionsMixin:
 
     def _action_args(self, action: str, type: Any) -> tuple[str, type[Action] | None]:
         self._me._check_open()
-        if not isinstance(action, str) or not action:
-            raise UsageError(f"an action name must be a non-empty string, got {action!r}")
+        check_name(action, "action")
         return action_type(type)
 
     # -- sending goals --

@@ -31,6 +31,7 @@ from .exceptions import InvalidMessageError, UsageError
 __all__ = [
     "canonical_type",
     "check_dict",
+    "check_name",
     "from_wire",
     "lookup_message_class",
     "message_type",
@@ -40,6 +41,13 @@ __all__ = [
 
 
 # --- type names ------------------------------------------------------------------------------
+
+def check_name(name: object, what: str) -> None:
+    """Raise UsageError unless ``name`` (of a topic, service, action...) is a non-empty string."""
+    if not isinstance(name, str) or not name:
+        article = "an" if what[:1] in "aeiou" else "a"
+        raise UsageError(f"{article} {what} name must be a non-empty string, got {name!r}")
+
 
 def canonical_type(name: str, kind: str) -> str:
     """``pkg/Name`` → ``pkg/<kind>/Name``; names already in that form are returned as they are."""

@@ -1,8 +1,9 @@
 """The front: the whole user API once, over any transport.
 
 :class:`RosFront` owns what a user touches: ``advertise``/``subscribe``/
-``call_service``/``advertise_service`` (and ``send_goal``/``advertise_action``,
-from :class:`~roslibpy_lite.actions_front.ActionsMixin`), the connection state, validation, the
+``call_service``/``advertise_service`` (from
+:class:`~roslibpy_lite.services_front.ServicesMixin`), ``send_goal``/``advertise_action``
+(from :class:`~roslibpy_lite.actions_front.ActionsMixin`), the connection state, validation, the
 handles, request ids, restoring everything after a reconnect, and the error
 rules. Under it a transport (:mod:`roslibpy_lite.transports`) only moves ops:
 :class:`~roslibpy_lite.client.Client` is the front over a websocket,
@@ -30,8 +31,9 @@ Adding a capability (an action client or server, ...)
 1. Route the ops it receives: ``self._routes[ops.ActionFeedback] = self._on_feedback``
    (every op type not in ``_routes`` is ignored; ``publish`` has its own fast
    path). Replies about one request carry its id: keep the waiting requests in
-   a dict keyed by id, as :meth:`call_service` keeps ``self._calls``; status
-   errors naming an id in ``self._calls`` fail that call's future.
+   a dict keyed by id, as ``call_service`` keeps ``self._calls``
+   (:mod:`roslibpy_lite.services_front`); status errors naming an id in
+   ``self._calls`` fail that call's future.
 2. Send with ``self._send(op)`` (dropped while disconnected) and make ids with
    ``self._new_id(kind, name)``.
 3. A long-lived handle (a served action) registers with ``self._request(handle, op)``:
@@ -54,39 +56,24 @@ from typing import TYPE_CHECKING, Any, Self, overload
 from . import ops
 from .actions import ActionServer, GoalHandle
 from .actions_front import ActionsMixin
-from .api import (
-    DEFAULT_CALL_TIMEOUT,
-    ConnectionState,
-    MessageCallback,
-    ServiceHandler,
-    StateCallback,
-)
+from .api import ConnectionState, MessageCallback, StateCallback
 from .exceptions import (
     ConnectionClosed,
     Disconnected,
-    ProtocolError,
     RosLibError,
-    RosTimeoutError,
-    ServiceError,
     StatusError,
     UsageError,
     status_error,
 )
-from .handles import Publisher, ServiceCall, ServiceServer, Subscription
-from .messages import (
-    check_dict,
-    from_wire,
-    lookup_message_class,
-    message_type,
-    service_type,
-    to_wire,
-)
+from .handles import Publisher, ServiceServer, Subscription
+from .messages import check_name, lookup_message_class, message_type
+from .services_front import ServicesMixin
 from .state import StateHub, StateWatcher, add_callback
 
 if TYPE_CHECKING:
     from types import TracebackType
 
-    from msgs.runtime import Message, Service
+    from msgs.runtime import Message
 
     from .api import M
     from .transports.base import Transport
@@ -95,21 +82,12 @@ __all__ = ["ErrorCallback", "RosFront"]
 
 log = logging.getLogger("roslibpy_lite.client")
 
-_Values = Mapping[str, Any] | str
 _Handle = Publisher[Any] | Subscription[Any] | ServiceServer | ActionServer | GoalHandle
 ErrorCallback = Callable[[RosLibError], None]
 """An error hook: ``fn(error)`` for a bridge error nobody awaits (see :meth:`RosFront.on_error`)."""
 
 
-class _Call:
-    __slots__ = ("future", "service")
-
-    def __init__(self, service: str, future: asyncio.Future[_Values]) -> None:
-        self.service = service
-        self.future = future
-
-
-class RosFront(ActionsMixin):
+class RosFront(ServicesMixin, ActionsMixin):
     """The user API over a transport (see the module docstring).
 
     Args:
@@ -146,9 +124,7 @@ class RosFront(ActionsMixin):
         self._publishers: dict[str, list[Publisher[Any]]] = {}
         self._subs: dict[str, Subscription[Any]] = {}
         self._topic_subs: dict[str, tuple[Subscription[Any], ...]] = {}
-        self._servers: dict[str, ServiceServer] = {}
         self._requests: dict[str, _Handle] = {}
-        self._calls: dict[str, _Call] = {}
         self._verdicts: dict[str, asyncio.Event] = {}
         self._awaited: set[str] = set()
         self._reports: dict[str, asyncio.Handle] = {}
@@ -157,11 +133,8 @@ class RosFront(ActionsMixin):
         self._error_callbacks: list[ErrorCallback] = []
         self._restorers: list[Callable[[], None]] = []
         self._on_drop: list[Callable[[ConnectionClosed], None]] = []
-        self._routes: dict[type[Any], Callable[[Any], None]] = {
-            ops.ServiceResponse: self._on_service_response,
-            ops.CallService: self._serve_request,
-            ops.Status: self._on_status,
-        }
+        self._routes: dict[type[Any], Callable[[Any], None]] = {ops.Status: self._on_status}
+        self._init_services()  # call_service / advertise_service (roslibpy_lite.services_front)
         self._init_actions()  # send_goal / advertise_action (roslibpy_lite.actions_front)
         self.status_errors = 0
         """``status`` errors from the bridge that named none of our pending requests."""
@@ -179,10 +152,7 @@ class RosFront(ActionsMixin):
         for sub in self._subs.values():
             sub.error = None
             self._send(sub.request_op())
-        for server in self._servers.values():
-            server.error = None
-            self._send(server.request_op())
-        for restore in self._restorers:
+        for restore in self._restorers:  # served services, then actions
             restore()
         t = self._transport
         for pubs in self._publishers.values():
@@ -216,12 +186,6 @@ class RosFront(ActionsMixin):
             for pub in pubs:
                 pub._offline.clear()
 
-    def _fail_calls(self, error: Callable[[str, str], Exception]) -> None:
-        calls, self._calls = self._calls, {}
-        for call_id, call in calls.items():
-            if not call.future.done():
-                call.future.set_exception(error(call.service, call_id))
-
     def _release_verdicts(self) -> None:
         verdicts, self._verdicts = self._verdicts, {}
         for event in verdicts.values():
@@ -246,19 +210,6 @@ class RosFront(ActionsMixin):
             route(op)
         except Exception:  # a bug here must not kill the connection
             log.exception("failed to handle a %s op", op.OP)
-
-    def _on_service_response(self, op: ops.ServiceResponse) -> None:
-        call = self._calls.pop(str(op.id), None) if op.id is not None else None
-        if call is None:
-            log.debug("service_response for an unknown call %r", op.id)
-            return
-        if call.future.done():
-            return
-        if op.result:
-            call.future.set_result(op.values if isinstance(op.values, Mapping) else {})
-        else:
-            reason = op.values if isinstance(op.values, str) else _reason(op.values)
-            call.future.set_exception(ServiceError(call.service, reason))
 
     def _on_status(self, op: ops.Status) -> None:
         for cb in list(self._status_callbacks):
@@ -332,35 +283,6 @@ class RosFront(ActionsMixin):
                 cb(error)
             except Exception:
                 log.exception("error callback raised")
-
-    def _serve_request(self, op: ops.CallService) -> None:
-        server = self._servers.get(op.service)
-        if server is None or op.id is None:
-            self._send(ops.ServiceResponse(op.service, False, f"{op.service} is not served here",
-                                           id=op.id))
-            return
-        outcome = server.invoke(op.args)
-        if isinstance(outcome, tuple):
-            self._answer(op, outcome)
-            return
-
-        async def finish() -> None:
-            self._answer(op, await outcome)
-
-        task = asyncio.get_running_loop().create_task(finish())
-        self._handler_tasks.add(task)
-        task.add_done_callback(self._handler_tasks.discard)
-
-    def _answer(self, op: ops.CallService, outcome: tuple[bool, _Values]) -> None:
-        result, values = outcome
-        t = self._transport
-        if not t.connected:
-            return
-        try:
-            frame = t.encode(ops.ServiceResponse(op.service, result, values, id=op.id))
-        except ProtocolError as exc:
-            frame = t.encode(ops.ServiceResponse(op.service, False, exc.message, id=op.id))
-        t.write(frame)
 
     # -- sending -------------------------------------------------------------------------------
 
@@ -489,7 +411,7 @@ class RosFront(ActionsMixin):
             ConnectionClosed: the client is closed.
         """
         self._check_open()
-        _check_name(topic, "topic")
+        check_name(topic, "topic")
         type_name, cls = message_type(type)
         pubs = self._publishers.get(topic)
         if pubs and pubs[0].type_name != type_name:
@@ -613,7 +535,7 @@ class RosFront(ActionsMixin):
             ConnectionClosed: the client is closed.
         """
         self._check_open()
-        _check_name(topic, "topic")
+        check_name(topic, "topic")
         type_name, cls = message_type(type)
         if compression == "cbor":
             _need_cbor()
@@ -643,133 +565,6 @@ class RosFront(ActionsMixin):
     def _unsubscribe(self, sub: Subscription[Any]) -> None:
         if self._drop_sub(sub) and self._hub.state is not ConnectionState.CLOSED:
             self._send(ops.Unsubscribe(sub.topic, id=sub.id))
-
-    # -- services ------------------------------------------------------------------------------
-
-    @overload
-    def call_service(
-        self,
-        service: str,
-        type: str,
-        args: Mapping[str, Any] | None = None,
-        *,
-        timeout: float | None = DEFAULT_CALL_TIMEOUT,
-    ) -> ServiceCall[dict[str, Any]]: ...
-
-    @overload
-    def call_service(
-        self,
-        service: str,
-        type: type[Service],
-        args: Mapping[str, Any] | Message | None = None,
-        *,
-        timeout: float | None = DEFAULT_CALL_TIMEOUT,
-    ) -> ServiceCall[Any]: ...
-
-    def call_service(
-        self,
-        service: str,
-        type: str | type[Service],
-        args: Mapping[str, Any] | Message | None = None,
-        *,
-        timeout: float | None = DEFAULT_CALL_TIMEOUT,
-    ) -> ServiceCall[Any]:
-        """Call ``service``; ``await`` the result for its response.
-
-        ``args`` is a dict (or a ``Request`` instance for a typed service);
-        the response is a dict, or a ``Response`` instance for a typed
-        service. ``timeout`` (seconds, None: wait for ever) covers waiting for
-        the connection too. The arguments are checked here, at the call; the
-        request is sent when the result is awaited.
-
-        Raises:
-            ServiceError: the service answered ``result: false`` (it failed,
-                does not exist, or the bridge could not call it); the text says why.
-            StatusError: the bridge refused the request itself.
-            RosTimeoutError: no answer within ``timeout``.
-            Disconnected: the connection dropped while waiting.
-            ConnectionClosed: the client is closed.
-            UsageError / InvalidMessageError: bad arguments (raised at the call).
-        """
-        self._check_open()
-        _check_name(service, "service")
-        type_name, srv_cls = service_type(type)
-        what = f"call {service}"
-        request_cls = srv_cls.Request if srv_cls else None
-        wire = to_wire({} if args is None else args, f"{type_name}_Request", request_cls, what)
-        if request_cls is None and self.validate:
-            check_dict(wire, lookup_message_class(f"{type_name}_Request"), what)
-        if timeout is not None and not timeout > 0:
-            raise UsageError(f"call {service}: timeout must be > 0 or None, got {timeout!r}")
-        return ServiceCall(self._call(service, type_name, srv_cls, wire, timeout), service)
-
-    async def _call(
-        self,
-        service: str,
-        type_name: str,
-        srv_cls: type[Service] | None,
-        wire: Mapping[str, Any],
-        timeout: float | None,
-    ) -> Any:
-        call_id = self._new_id("call_service", service)
-        loop = asyncio.get_running_loop()
-        try:
-            async with asyncio.timeout(timeout):
-                if not self._transport.connected:
-                    await self._hub.wait_connected()
-                future: asyncio.Future[_Values] = loop.create_future()
-                self._calls[call_id] = _Call(service, future)
-                # The bridge gets a little longer, so our own timeout decides.
-                server_timeout = timeout + 1.0 if timeout is not None else None
-                self._send(ops.CallService(service, wire, type_name, id=call_id,
-                                           timeout=server_timeout))
-                values = await future
-        except TimeoutError:
-            raise RosTimeoutError(
-                f"call {service}: no answer within {timeout} s"
-                + ("" if self.is_connected else f" (state {self.state.value})")
-            ) from None
-        finally:
-            self._calls.pop(call_id, None)
-        if not isinstance(values, Mapping):  # pragma: no cover - failures are exceptions
-            values = {}
-        if srv_cls is not None:
-            return from_wire(values, srv_cls.Response, f"response of {service}")
-        return dict(values)
-
-    def advertise_service(
-        self, service: str, type: str | type[Service], handler: ServiceHandler
-    ) -> ServiceServer:
-        """Serve ``service`` to ROS callers with ``handler`` (sync or async).
-
-        The handler gets the request (dict, or ``Request`` instance for a
-        typed service) and returns the response (dict, ``Response``, or
-        None). If it raises, the caller is answered ``result: false`` with
-        the error's text. Use as ``await`` or ``async with``.
-
-        Raises:
-            UsageError: a bad name or type, or the service is already served here.
-            StatusError: the bridge refused (raised at ``await``; else see :meth:`on_error`).
-            ConnectionClosed: the client is closed.
-        """
-        self._check_open()
-        _check_name(service, "service")
-        type_name, srv_cls = service_type(type)
-        if service in self._servers:
-            raise UsageError(f"advertise_service {service}: already served by this client")
-        server = ServiceServer(self, service, type_name, srv_cls, handler,
-                               id=self._new_id("advertise_service", service))
-        self._servers[service] = server
-        self._request(server, server.request_op())
-        return server
-
-    def _unadvertise_service(self, server: ServiceServer) -> None:
-        if self._servers.get(server.service) is not server:
-            return
-        del self._servers[server.service]
-        self._requests.pop(server.id, None)
-        if self._hub.state is not ConnectionState.CLOSED:
-            self._send(ops.UnadvertiseService(server.service, id=server.id))
 
     # -- closing -------------------------------------------------------------------------------
 
@@ -801,11 +596,6 @@ class RosFront(ActionsMixin):
         await self.close()
 
 
-def _check_name(name: str, what: str) -> None:
-    if not isinstance(name, str) or not name:
-        raise UsageError(f"a {what} name must be a non-empty string, got {name!r}")
-
-
 def _need_cbor() -> None:
     try:
         import cbor2  # noqa: F401
@@ -814,8 +604,3 @@ def _need_cbor() -> None:
             "compression='cbor' needs cbor2: install roslibpy-lite[cbor]"
         ) from None
 
-
-def _reason(values: Any) -> str:
-    if values is None:
-        return "no reason given"
-    return str(values)
