@@ -100,6 +100,7 @@ class SecurityConfig:
     max_subscriptions: int = 1000
     max_publishers: int = 1000
     max_services: int = 1000
+    max_goals: int = 1000
     inbound_budget: int = 32 * 1024 * 1024
     inbound_budget_total: int = 256 * 1024 * 1024
 
@@ -585,6 +586,8 @@ class Gate:
             have, cap, what = s.served, c.max_services, "served services"
         elif isinstance(op, ops.AdvertiseAction):  # each is an rclpy action server
             have, cap, what = s.actions.served, c.max_services, "served actions"
+        elif isinstance(op, ops.SendActionGoal):  # keyed by goal id, so every new goal counts
+            have, cap, what = s.actions.goals, c.max_goals, "goals in flight"
         else:
             return True
         if cap and name not in have and len(have) >= cap:
@@ -754,6 +757,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     g.add_argument("--max-services", type=int, default=d.max_services,
                    help=f"services one client may serve, and actions likewise "
                    f"(default {d.max_services})")
+    g.add_argument("--max-goals", type=int, default=d.max_goals,
+                   help=f"action goals one client may have in flight (default {d.max_goals})")
     g.add_argument("--inbound-budget", type=int, default=d.inbound_budget,
                    help="bytes of received, not yet handled data per client before the bridge "
                    f"stops reading it (default {d.inbound_budget >> 20} MiB)")
@@ -778,6 +783,7 @@ def config_from_args(args: argparse.Namespace) -> SecurityConfig:
         max_subscriptions=args.max_subscriptions,
         max_publishers=args.max_publishers,
         max_services=args.max_services,
+        max_goals=args.max_goals,
         inbound_budget=args.inbound_budget,
         inbound_budget_total=args.inbound_budget_total,
     )

@@ -262,7 +262,7 @@ def test_help_lists_security_options():
     for option in ("--certfile", "--keyfile", "--client-ca", "--auth-file", "--allowed-origins",
                    "--max-clients", "--max-clients-per-address", "--handshake-timeout",
                    "--max-op-rate", "--max-subscriptions", "--max-publishers", "--max-services",
-                   "--inbound-budget", "--inbound-budget-total"):
+                   "--max-goals", "--inbound-budget", "--inbound-budget-total"):
         assert option in out
 
 

@@ -14,6 +14,7 @@ from websockets.exceptions import ConnectionClosed, InvalidStatus
 from websockets.frames import Frame, Opcode
 
 from bridge_server.security import _BudgetAssembler, _Inbound
+from tests.bridge.action_support import FibServer, send_goal
 from tests.bridge.support import roundtrip
 from tests.helpers import open_wire
 
@@ -161,3 +162,25 @@ def test_rclpy_internals_are_checked_at_start_up(monkeypatch: pytest.MonkeyPatch
     monkeypatch.delattr(ServerGoalHandle, "_update_state")
     with pytest.raises(BridgeError, match=r"ServerGoalHandle\._update_state"):
         check_rclpy_internals()
+
+
+async def test_cap_on_goals_in_flight(make_bridge: Any, ros_node: Any, topic: str):
+    """Past --max-goals a goal fails with a status naming the cap; a finished goal frees its place."""
+    bridge = make_bridge("--max-goals", "1")
+    server = FibServer(ros_node, topic, slow=True)
+    ws = await open_wire(bridge.url)
+    await send_goal(ws, topic, {"order": 2}, "g1", feedback=True)
+    await ws.expect(op="action_feedback", id="g1")  # accepted and running
+    await send_goal(ws, topic, {"order": 2}, "g2")
+    assert "too many goals in flight on this connection (at most 1)" in (
+        await ws.expect(op="status", id="g2"))["msg"]
+    refused = await ws.expect(op="action_result", id="g2")
+    assert (refused["result"], refused["status"]) == (False, 6)
+    await ws.send({"op": "cancel_action_goal", "id": "g1", "action": topic})
+    assert (await ws.expect(op="action_result", id="g1"))["status"] == 5  # CANCELED
+    await send_goal(ws, topic, {"order": 2}, "g3", feedback=True)
+    await ws.expect(op="action_feedback", id="g3")
+    await ws.send({"op": "cancel_action_goal", "id": "g3", "action": topic})
+    assert (await ws.expect(op="action_result", id="g3"))["status"] == 5
+    await ws.close()
+    server.destroy()
