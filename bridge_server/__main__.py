@@ -148,6 +148,8 @@ async def _run(args: argparse.Namespace) -> int:
         watch_supervisor(stop)  # a worker stops with its supervisor, even a killed one
     bridge = Bridge(config)
     await bridge.start()
+    # SIGHUP (systemctl reload): certificates and the auth file are read again.
+    loop.add_signal_handler(signal.SIGHUP, bridge.reload)
     if args.worker_index is not None:  # the supervisor prints the bridge's ready line
         log.info("bridge_server worker %d listening", args.worker_index)
     else:
@@ -162,10 +164,10 @@ async def _run(args: argparse.Namespace) -> int:
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point of ``python -m bridge_server`` and ``roslibpy-lite-bridge``."""
-    if (sys.argv[1:] if argv is None else argv)[:1] == ["add-principal"]:
-        from .auth import main as add_principal
+    if (sys.argv[1:] if argv is None else argv)[:1] in (["add-principal"], ["remove-principal"]):
+        from .auth import main as principals
 
-        return add_principal((sys.argv[1:] if argv is None else argv)[1:])
+        return principals(sys.argv[1:] if argv is None else argv)
     args = parse_args(argv)
     os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
     logging.basicConfig(

@@ -241,8 +241,62 @@ def add_principal(path: Path, name: str, role: str) -> str:
     return token
 
 
+def remove_principal(path: Path, name: str) -> None:
+    """Remove principal ``name``'s table from the auth file (comments and the rest stay).
+
+    A bridge running with the file drops the principal's sessions when it
+    reloads it (SIGHUP).
+    """
+    config = load_auth_file(path)
+    if not any(p.name == name for p in config.principals):
+        known = ", ".join(p.name for p in config.principals) or "none"
+        raise AuthFileError(f"{path}: no principal {name!r} (principals: {known})")
+    header = re.compile(rf"\s*\[\s*principals\.(?:{re.escape(name)}|\"{re.escape(name)}\")\s*\]")
+    kept: list[str] = []
+    inside = False
+    for line in path.read_text(encoding="utf-8").splitlines(keepends=True):
+        if line.lstrip().startswith("["):
+            inside = bool(header.match(line))
+        if not inside:
+            kept.append(line)
+    text = "".join(kept)
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(text, encoding="utf-8")
+    tmp.chmod(path.stat().st_mode & 0o777)
+    try:
+        left = load_auth_file(tmp)
+        if any(p.name == name for p in left.principals):  # e.g. written as a dotted key
+            raise AuthFileError(f"{path}: principal {name!r} is not written as a "
+                                f"[principals.{name}] table; remove it by hand")
+    except AuthFileError:
+        tmp.unlink()
+        raise
+    tmp.replace(path)  # atomic: a bridge reloading now reads the old file or the new one
+
+
 def main(argv: list[str] | None = None) -> int:
-    """``roslibpy-lite-bridge add-principal NAME --role ROLE --auth-file FILE``."""
+    """``roslibpy-lite-bridge add-principal|remove-principal NAME ... --auth-file FILE``."""
+    argv = sys.argv[1:] if argv is None else argv
+    command = "add-principal"
+    if argv[:1] in (["add-principal"], ["remove-principal"]):
+        command, argv = argv[0], argv[1:]
+    if command == "remove-principal":
+        p = argparse.ArgumentParser(
+            prog="roslibpy-lite-bridge remove-principal",
+            description="Remove a principal from an auth file (then send the bridge SIGHUP "
+            "to close its sessions).",
+        )
+        p.add_argument("name", help="principal name")
+        p.add_argument("--auth-file", required=True, type=Path, help="the TOML auth file")
+        args = p.parse_args(argv)
+        try:
+            remove_principal(args.auth_file, args.name)
+        except AuthFileError as exc:
+            print(f"error: {exc}", file=sys.stderr)
+            return 1
+        print(f"principal {args.name} removed from {args.auth_file}; a running bridge "
+              "forgets it when it reloads the file (SIGHUP)", file=sys.stderr)
+        return 0
     p = argparse.ArgumentParser(
         prog="roslibpy-lite-bridge add-principal",
         description="Add a principal to an auth file and print its new token (once).",
@@ -259,9 +313,9 @@ def main(argv: list[str] | None = None) -> int:
         return 1
     print(token)
     print(f"principal {args.name} ({args.role}) added to {args.auth_file}; "
-          "this token is shown only now", file=sys.stderr)
+          "this token is shown only now (a running bridge accepts it after SIGHUP)",
+          file=sys.stderr)
     return 0
-
 
 if __name__ == "__main__":
     sys.exit(main())

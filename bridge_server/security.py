@@ -17,6 +17,10 @@ set from the command line) and does three jobs:
   each op): the ``auth`` op, the op rate, name validity, the role's
   permissions and the caps on subscriptions, publishers and services.
 
+:meth:`Security.reload` (SIGHUP) reads the certificate files and the auth file
+again: new handshakes use them, sessions get their principal's role as now
+defined, and sessions of a removed principal are closed.
+
 Refusals answer the offender and nobody else: an HTTP status with a one-line
 text at the handshake, a ``status`` error naming the op, the name and the role
 for a forbidden op, and a close with code 1008 (policy violation) and a reason
@@ -33,7 +37,7 @@ import logging
 import re
 import ssl
 import time
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 from urllib.parse import parse_qs, urlsplit
@@ -47,7 +51,7 @@ from websockets.http11 import Request, Response
 from roslibpy_lite import ops
 
 from . import rosapi
-from .auth import AuthConfig, FailureTracker, Principal, load_auth_file
+from .auth import AuthConfig, AuthFileError, FailureTracker, Principal, load_auth_file
 from .names import InvalidNameError, check_name
 from .permissions import Role, filter_rosapi, requirement, rosapi_requirement
 from .types import BridgeError
@@ -299,6 +303,7 @@ class Security:
             load_auth_file(config.auth_file) if config.auth_file else None
         )
         self.failures = FailureTracker()
+        self._ssl: ssl.SSLContext | None = None  # the live server context (reloaded in place)
         self.inbound = _Inbound()
         self.clients = 0
         self.per_address: dict[str, int] = {}
@@ -310,16 +315,67 @@ class Security:
 
     def ssl_context(self) -> ssl.SSLContext | None:
         """The server TLS context (``None`` without ``--certfile``)."""
-        c = self.config
-        if not c.certfile:
+        if not self.config.certfile:
             return None
-        ctx = ssl.create_default_context(ssl.Purpose.CLIENT_AUTH)
+        self._ssl = self._load_ssl(ssl.create_default_context(ssl.Purpose.CLIENT_AUTH))
+        return self._ssl
+
+    def _load_ssl(self, ctx: ssl.SSLContext) -> ssl.SSLContext:
+        c = self.config
+        assert c.certfile
         ctx.minimum_version = max(ctx.minimum_version, ssl.TLSVersion.TLSv1_2)
         ctx.load_cert_chain(c.certfile, c.keyfile or None)
         if c.client_ca:
             ctx.verify_mode = ssl.CERT_REQUIRED
             ctx.load_verify_locations(c.client_ca)
         return ctx
+
+    # -- reloading (SIGHUP) ----------------------------------------------------------------------
+
+    def reload(self, gates: Iterable[Gate]) -> bool:
+        """Read the certificate files and the auth file again; True if all of them loaded.
+
+        New handshakes use the new certificate (open connections keep theirs; a new
+        client CA is added to the trusted ones). Each session keeps its principal if
+        the new file still has it with the same token, and gets its role as the file
+        now defines it; a session whose principal was removed or got a new token is
+        closed (1008, "credentials revoked"). A file that does not load changes
+        nothing: the error is logged and the running configuration stays.
+        """
+        ok = True
+        c = self.config
+        if self._ssl is not None:
+            try:
+                self._load_ssl(ssl.create_default_context(ssl.Purpose.CLIENT_AUTH))  # a dry run
+                self._load_ssl(self._ssl)
+                log.info("reloaded the TLS certificate %s", c.certfile)
+            except (OSError, ssl.SSLError) as exc:
+                ok = False
+                log.error("reloading the TLS certificate failed, the old one stays: %s", exc)
+        if c.auth_file:
+            try:
+                auth = load_auth_file(c.auth_file)
+            except AuthFileError as exc:
+                log.error("reloading the auth file failed, the old one stays: %s", exc)
+                return False
+            self.auth = auth
+            now = {(p.name, p.salt, p.digest): p for p in auth.principals}
+            revoked = 0
+            for gate in gates:
+                old = gate.principal
+                if old is None:
+                    continue
+                new = now.get((old.name, old.salt, old.digest))
+                if new is None:
+                    revoked += 1
+                    gate.close(f"credentials revoked: principal {old.name} is no longer "
+                               "in the auth file with that token")
+                else:
+                    gate.principal, gate.role = new, new.role
+            log.info("reloaded the auth file %s: %d principal(s), %d role(s); %d session(s) "
+                     "closed as revoked", c.auth_file, len(auth.principals), len(auth.roles),
+                     revoked)
+        return ok
 
     def serve_kwargs(self) -> dict[str, Any]:
         """Keyword arguments for websockets' ``serve`` (checks websockets' internals first)."""

@@ -152,6 +152,10 @@ class Bridge:
             self.sessions.discard(session)
             log.info("client %d (%s) disconnected", sid, peer)
 
+    def reload(self) -> bool:
+        """Read the certificates and the auth file again (SIGHUP; see :meth:`Security.reload`)."""
+        return self.security.reload(session.gate for session in list(self.sessions))
+
     async def close(self) -> None:
         """Stop listening, close every connection (at most ~1 s), release ROS."""
         if self._refresher is not None:

@@ -18,7 +18,8 @@ again from zero (Prometheus sees a counter reset).
 
 The supervisor relays the workers' logs, prints the ready line once every
 worker listens, restarts a worker that dies (at most once a second each),
-and on SIGINT/SIGTERM stops them all: SIGTERM, then SIGKILL after
+passes SIGHUP on to them (each reloads its certificates and auth file), and
+on SIGINT/SIGTERM stops them all: SIGTERM, then SIGKILL after
 :data:`STOP_GRACE` seconds. A supervisor that is killed outright cannot do that,
 so each worker also stops when its stdin pipe from the supervisor reaches
 end-of-file (:func:`watch_supervisor`): no orphaned worker keeps the port.
@@ -153,6 +154,7 @@ class Supervisor:
         self.stop = threading.Event()
 
     def _spawn(self, i: int) -> None:
+        self.ready[i].clear()  # set again by its ready line
         extra = ["--port", str(self.port), "--worker-index", str(i), "--worker-dir", self.dir]
         if self.metrics_port is not None:
             extra += ["--metrics-port", str(self.metrics_port)]
@@ -182,6 +184,7 @@ class Supervisor:
         """Run until SIGINT/SIGTERM; the exit status."""
         for sig in (signal.SIGINT, signal.SIGTERM):
             signal.signal(sig, lambda *_: self.stop.set())
+        signal.signal(signal.SIGHUP, lambda *_: self._forward(signal.SIGHUP))  # reload
         try:
             for i in range(self.n):
                 self._spawn(i)
@@ -208,6 +211,14 @@ class Supervisor:
             return 0
         finally:
             self._stop_all()
+
+    def _forward(self, sig: int) -> None:
+        """Pass ``sig`` on to every listening worker (SIGHUP: each reloads its files; one
+        still starting reads them anyway, and would not survive the signal yet)."""
+        for i, proc in enumerate(self.procs):
+            if proc is not None and proc.poll() is None and self.ready[i].is_set():
+                with contextlib.suppress(ProcessLookupError):
+                    proc.send_signal(sig)
 
     def _restart_dead(self) -> None:
         for i, proc in enumerate(self.procs):
