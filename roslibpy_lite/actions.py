@@ -352,12 +352,24 @@ class GoalHandle:
     async def feedback(self) -> AsyncIterator[Any]:
         """Each feedback (dict, or ``Feedback`` instance) until the goal ends."""
         while True:
-            while self._buffer:
-                yield self._buffer.popleft()
-            if self.done():
+            try:
+                yield await self._next_feedback()
+            except StopAsyncIteration:
                 return
+
+    async def _next_feedback(self) -> Any:
+        """The next feedback; StopAsyncIteration once the goal has ended and none is left.
+
+        Cancelling it (a timeout, Ctrl+C in the blocking client) loses nothing and
+        ends nothing: a later call goes on with the next feedback. Several readers
+        may wait at once; each feedback goes to one of them.
+        """
+        while not self._buffer:
+            if self.done():
+                raise StopAsyncIteration
             self._wake.clear()
             await self._wake.wait()
+        return self._buffer.popleft()
 
     def __aiter__(self) -> AsyncIterator[Any]:
         return self.feedback()

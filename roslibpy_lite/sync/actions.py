@@ -27,7 +27,6 @@ class GoalHandle:
         self._loop = loop
         self.handle = handle
         """The asyncio goal handle underneath."""
-        self._feedback = handle.feedback()
 
     def __repr__(self) -> str:
         return f"<sync {self.handle!r}>"
@@ -63,6 +62,10 @@ class GoalHandle:
     def feedback(self, timeout: float | None = None) -> Iterator[Any]:
         """Each feedback until the goal ends.
 
+        After a ``RosTimeoutError`` (or Ctrl+C) the goal goes on, and calling
+        ``feedback()`` again continues with the next feedback. Several threads may
+        iterate at once; each feedback goes to one of them.
+
         Raises:
             RosTimeoutError: none within ``timeout`` seconds of the previous one.
         """
@@ -75,7 +78,7 @@ class GoalHandle:
     async def _next(self, timeout: float | None) -> Any:
         try:
             async with asyncio.timeout(timeout):
-                return await anext(self._feedback)
+                return await self.handle._next_feedback()
         except TimeoutError:
             raise RosTimeoutError(
                 f"no feedback from {self.handle.action} within {timeout} s") from None

@@ -10,6 +10,7 @@ import pytest
 from msgs.mult_msgs.action import IntegrateImu
 from roslibpy_lite import sync
 from roslibpy_lite.actions import ActionError, GoalContext, GoalStatus
+from roslibpy_lite.exceptions import RosTimeoutError
 
 IMU = "mult_msgs/action/IntegrateImu"
 
@@ -58,3 +59,29 @@ def test_no_such_action(ros: sync.Client, topic: str) -> None:
     goal = ros.send_goal(topic, IMU, {})
     with pytest.raises(ActionError, match="does not exist"):
         goal.result(timeout=15)
+
+
+def test_feedback_goes_on_after_a_timeout(ros: sync.Client, topic: str) -> None:
+    """A feedback timeout leaves the goal running; feedback() again gets what comes next."""
+    go_on, got_it = threading.Event(), threading.Event()
+
+    def handler(goal: Any, ctx: GoalContext) -> dict[str, Any]:
+        ctx.publish_feedback({"elapsed": 1.0})
+        assert go_on.wait(10)
+        ctx.publish_feedback({"elapsed": 2.0})
+        assert got_it.wait(10)  # the result does not overtake the feedback on ROS's side
+        return {"samples": 2}
+
+    with ros.advertise_action(topic, IMU, handler):
+        goal = ros.send_goal(topic, IMU, {"seconds": 1.0})
+        feedback = goal.feedback(timeout=0.3)
+        assert next(feedback)["elapsed"] == 1.0
+        with pytest.raises(RosTimeoutError):
+            next(feedback)
+        assert not goal.done()
+        go_on.set()
+        feedback = goal.feedback(timeout=10)
+        assert next(feedback)["elapsed"] == 2.0
+        got_it.set()
+        assert list(feedback) == []
+        assert goal.result(timeout=10).values["samples"] == 2
