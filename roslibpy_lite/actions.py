@@ -52,8 +52,11 @@ Serving an action::
 The handler gets the goal (a dict, or the ``Goal`` instance of a typed
 action) and a :class:`GoalContext`, and returns the result (dict, ``Result``
 instance, or None for the default). An async handler runs as a task on the
-loop; a sync one runs in a worker thread (``ctx.publish_feedback`` and
-``ctx.cancel_requested`` work from there). A handler that raises aborts the
+loop; a sync one runs in a worker thread of the action server's own (up to
+``ACTION_HANDLER_THREADS`` goals at once, more wait; goals can run for minutes,
+so they never hold the loop's default executor, which name lookups for a
+reconnect need). ``ctx.publish_feedback`` and ``ctx.cancel_requested`` work
+from there. A handler that raises aborts the
 goal, and the error's text is logged and sent to the bridge. A handler that
 returns after a cancel request ends the goal ``CANCELED``. Served actions are
 advertised again after every reconnect; goals being served when the
@@ -65,6 +68,7 @@ from __future__ import annotations
 
 import asyncio
 import collections
+import concurrent.futures
 import enum
 import inspect
 import logging
@@ -103,6 +107,9 @@ __all__ = [
 ]
 
 log = logging.getLogger("roslibpy_lite.client")
+
+ACTION_HANDLER_THREADS = 32
+"""Goals one action server runs at once with a plain (not ``async``) handler; more wait."""
 
 ActionHandler = Callable[[Any, "GoalContext"], Any]
 """An action handler: ``fn(goal, ctx) -> result``, sync (run in a thread) or ``async``."""
@@ -463,6 +470,7 @@ class ActionServer:
         """Goals whose handler raised (aborted)."""
         self.active: dict[str, GoalContext] = {}
         """The goals being served now, by id."""
+        self._threads: concurrent.futures.ThreadPoolExecutor | None = None  # plain handlers
 
     def __repr__(self) -> str:
         return f"<ActionServer {self.action} {self.type_name}{' closed' if self.closed else ''}>"
@@ -503,6 +511,13 @@ class ActionServer:
         for ctx in self.active.values():
             ctx.lost = True
             ctx._request_cancel()
+        self._stop_threads()
+
+    def _stop_threads(self) -> None:
+        """Let the handler threads end once their goals return (they saw the cancel)."""
+        if self._threads is not None:
+            self._threads.shutdown(wait=False)
+            self._threads = None
 
     async def close(self) -> None:
         """Same as :meth:`unadvertise`."""
@@ -522,7 +537,11 @@ class ActionServer:
             if _is_async(self.handler):
                 result = await self.handler(goal, ctx)
             else:
-                result = await asyncio.to_thread(self.handler, goal, ctx)
+                if self._threads is None:
+                    self._threads = concurrent.futures.ThreadPoolExecutor(
+                        ACTION_HANDLER_THREADS, thread_name_prefix=f"action {self.action}")
+                result = await asyncio.get_running_loop().run_in_executor(
+                    self._threads, self.handler, goal, ctx)
                 if inspect.isawaitable(result):
                     result = await result
             status = GoalStatus.CANCELED if ctx.cancel_requested else GoalStatus.SUCCEEDED

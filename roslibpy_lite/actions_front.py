@@ -27,7 +27,7 @@ from .actions import (
     _part,
     action_type,
 )
-from .api import DEFAULT_CALL_TIMEOUT
+from .api import DEFAULT_CALL_TIMEOUT, ConnectionState
 from .exceptions import ConnectionClosed, Disconnected, ProtocolError, UsageError
 from .messages import check_dict, check_name, to_wire
 
@@ -235,4 +235,7 @@ class ActionsMixin:
             if not task.done():
                 with contextlib.suppress(RuntimeError):
                     task.cancel()
+        if self._me.state is ConnectionState.CLOSED:  # for good: no more goals come
+            for server in self._action_servers.values():
+                server._stop_threads()
 

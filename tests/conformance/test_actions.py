@@ -8,6 +8,7 @@ runs the whole path: goal out, goal in, feedback, result, cancel.
 from __future__ import annotations
 
 import asyncio
+import threading
 from typing import Any
 
 import pytest
@@ -151,3 +152,21 @@ async def test_advertise_action_refused_at_await(ros: Ros, topic: str) -> None:
     assert "nosuch_pkg" in str(err.value)
     server = await ros.advertise_action(topic, IMU, counting)  # the name is free again
     assert not server.closed
+
+
+async def test_plain_handlers_run_side_by_side(ros: Ros, topic: str) -> None:
+    """Eight goals with a plain (blocking) handler all run at once, in threads of the server's
+    own: the loop's default executor (6 threads on 2 cores) stays free for others."""
+    together = threading.Barrier(8, timeout=10)
+
+    def blocking(goal: Any, ctx: GoalContext) -> dict[str, Any]:
+        together.wait()  # BrokenBarrierError (the goal aborts) unless all eight run at once
+        return {"samples": int(goal["seconds"])}
+
+    await ros.advertise_action(topic, IMU, blocking)
+    goals = [await ros.send_goal(topic, IMU, {"seconds": float(i)}, feedback=False)
+             for i in range(8)]
+    assert await asyncio.to_thread(lambda: "default executor free") == "default executor free"
+    outcomes = [await goal.result(timeout=20) for goal in goals]
+    assert [o.status for o in outcomes] == [GoalStatus.SUCCEEDED] * 8
+    assert [o.values["samples"] for o in outcomes] == list(range(8))
