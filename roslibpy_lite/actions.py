@@ -514,9 +514,10 @@ class ActionServer:
         self._stop_threads()
 
     def _stop_threads(self) -> None:
-        """Let the handler threads end once their goals return (they saw the cancel)."""
+        """Let the handler threads end once their goals return (they saw the cancel);
+        goals still waiting for a thread never start."""
         if self._threads is not None:
-            self._threads.shutdown(wait=False)
+            self._threads.shutdown(wait=False, cancel_futures=True)
             self._threads = None
 
     async def close(self) -> None:

@@ -24,7 +24,7 @@ import pytest
 os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
 os.environ.setdefault("ROS_DOMAIN_ID", str(os.getpid() % 100 + 1))
 
-from tests.helpers import BridgeProcess, WireClient, open_wire, spin_executor
+from tests.helpers import BridgeProcess, WireClient, open_wire, settle_executor, spin_executor
 
 _names = itertools.count()
 
@@ -95,7 +95,7 @@ def ros_node(ros_runtime: _RosRuntime, request: pytest.FixtureRequest) -> Iterat
     yield node
     stop.set()
     thread.join(10)
-    executor.shutdown()
+    settle_executor(executor)
     node.destroy_node()
     if errors:
         pytest.fail("this test's rclpy executor raised:\n" + errors[0])

@@ -318,6 +318,17 @@ _ACTION_ANSWERS = ("_execute_goal_request", "_execute_cancel_request",
                    "_execute_get_result_request", "_send_result_response")
 
 
+def settle_executor(executor: Any) -> None:
+    """Shut ``executor`` down after its spin loop ended, marking seen the handles that a
+    test destroyed under a running callback (rclpy prints each unseen one at exit)."""
+    from rclpy._rclpy_pybind11 import InvalidHandle
+
+    for future in list(getattr(executor, "_futures", [])):
+        if isinstance(getattr(future, "_exception", None), InvalidHandle):
+            future.exception()  # seen; any other exception is still printed
+    executor.shutdown()
+
+
 def spin_executor(executor: Any, stop: threading.Event, errors: list[str]) -> None:
     """Spin ``executor`` until ``stop`` is set or rclpy shuts down, whatever a round raises.
 

@@ -11,7 +11,7 @@ from typing import Any
 
 import pytest
 
-from tests.helpers import BridgeProcess, spin_executor
+from tests.helpers import BridgeProcess, settle_executor, spin_executor
 from tests.peers.peer import PeerPool, PeerProcess
 
 # rclpy's type support imports lark, which imports the deprecated sre_parse; with
@@ -75,7 +75,7 @@ def module_node(ros_runtime: Any, request: pytest.FixtureRequest) -> Iterator[An
     yield node
     stop.set()
     thread.join(10)
-    executor.shutdown()
+    settle_executor(executor)
     node.destroy_node()
 
 
