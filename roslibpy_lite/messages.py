@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import difflib
 from collections.abc import Mapping
-from typing import Any
+from typing import Any, TypeVar
 
 from msgs.runtime import (
     Action,
@@ -39,6 +39,8 @@ __all__ = [
     "to_wire",
 ]
 
+
+_K = TypeVar("_K", Message, Service)
 
 # --- type names ------------------------------------------------------------------------------
 
@@ -123,14 +125,7 @@ def message_type(type_: str | type[Message]) -> tuple[str, type[Message] | None]
         UsageError: a malformed name, a name ``msgs`` should know but does not
             (with "did you mean"), or a class of another kind.
     """
-    if isinstance(type_, str):
-        _check_type_string(type_, "msg")
-        name = canonical_type(type_, "msg")
-        _check_known(name, "msg")
-        return name, None
-    if isinstance(type_, type) and issubclass(type_, Message):
-        return type_._type, type_
-    raise _wrong_class(type_, "msg")
+    return _name_and_class(type_, "msg", Message)
 
 
 def service_type(type_: str | type[Service]) -> tuple[str, type[Service] | None]:
@@ -139,14 +134,20 @@ def service_type(type_: str | type[Service]) -> tuple[str, type[Service] | None]
     Raises:
         UsageError: as for :func:`message_type`.
     """
+    return _name_and_class(type_, "srv", Service)
+
+
+def _name_and_class(
+    type_: str | type[_K], kind: str, base: type[_K]
+) -> tuple[str, type[_K] | None]:
     if isinstance(type_, str):
-        _check_type_string(type_, "srv")
-        name = canonical_type(type_, "srv")
-        _check_known(name, "srv")
+        _check_type_string(type_, kind)
+        name = canonical_type(type_, kind)
+        _check_known(name, kind)
         return name, None
-    if isinstance(type_, type) and issubclass(type_, Service):
+    if isinstance(type_, type) and issubclass(type_, base):
         return type_._type, type_
-    raise _wrong_class(type_, "srv")
+    raise _wrong_class(type_, kind)
 
 
 def lookup_message_class(type_name: str) -> type[Message] | None:

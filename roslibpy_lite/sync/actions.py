@@ -9,27 +9,17 @@ from __future__ import annotations
 
 import asyncio
 from collections.abc import Iterator
-from typing import TYPE_CHECKING, Any, Self
+from typing import Any
 
 from .. import actions
 from ..exceptions import RosTimeoutError
-
-if TYPE_CHECKING:
-    from .loop import LoopThread
+from .handles import _Handle, _Wrapper
 
 __all__ = ["ActionServer", "GoalHandle"]
 
 
-class GoalHandle:
+class GoalHandle(_Wrapper[actions.GoalHandle]):
     """A goal this client sent: iterate its feedback, :meth:`result`, :meth:`cancel`."""
-
-    def __init__(self, loop: LoopThread, handle: actions.GoalHandle) -> None:
-        self._loop = loop
-        self.handle = handle
-        """The asyncio goal handle underneath."""
-
-    def __repr__(self) -> str:
-        return f"<sync {self.handle!r}>"
 
     @property
     def id(self) -> str:
@@ -87,32 +77,8 @@ class GoalHandle:
         return self.feedback()
 
 
-class ActionServer:
-    """A blocking action server: ``with`` it, or :meth:`unadvertise`."""
-
-    def __init__(self, loop: LoopThread, handle: actions.ActionServer) -> None:
-        self._loop = loop
-        self.handle = handle
-        """The asyncio action server underneath."""
-
-    def __repr__(self) -> str:
-        return f"<sync {self.handle!r}>"
-
-    @property
-    def closed(self) -> bool:
-        """True once unadvertised."""
-        return self.handle.closed
-
-    def close(self) -> None:
-        """Stop serving."""
-        self._loop.run(self.handle.close(), f"close {self.handle!r}")
-
-    def __enter__(self) -> Self:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        if not self._loop.closing:
-            self.close()
+class ActionServer(_Handle[actions.ActionServer]):
+    """A blocking action server: ``with`` it, or :meth:`unadvertise` (``close``)."""
 
     @property
     def action(self) -> str:

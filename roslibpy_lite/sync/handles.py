@@ -13,7 +13,7 @@ import logging
 import threading
 from collections import deque
 from collections.abc import Callable, Iterator, Mapping
-from typing import TYPE_CHECKING, Any, Generic, Self, TypeVar
+from typing import TYPE_CHECKING, Any, Generic, Protocol, Self, TypeVar
 
 from ..api import ConnectionState
 from ..exceptions import ConnectionClosed, RosTimeoutError, UsageError
@@ -26,15 +26,23 @@ if TYPE_CHECKING:
 __all__ = ["PUBLISH_WINDOW", "Publisher", "ServiceServer", "StateChanges", "Subscription"]
 
 T = TypeVar("T")
-H = TypeVar("H", bound="handles.Publisher[Any] | handles.Subscription[Any] | handles.ServiceServer")
+H = TypeVar("H")
+C = TypeVar("C", bound="_Closable")
 log = logging.getLogger("roslibpy_lite.sync")
+
+class _Closable(Protocol):
+    @property
+    def closed(self) -> bool: ...
+
+    async def close(self) -> None: ...
+
 
 PUBLISH_WINDOW = 64
 """Messages a blocking publisher has in flight before ``publish`` waits."""
 
 
-class _Handle(Generic[H]):
-    """What the blocking handles share: the asyncio handle underneath, ``with``, ``closed``."""
+class _Wrapper(Generic[H]):
+    """A blocking object over an asyncio one (``handle``), run on the client's loop thread."""
 
     def __init__(self, loop: LoopThread, handle: H) -> None:
         self._loop = loop
@@ -43,6 +51,10 @@ class _Handle(Generic[H]):
 
     def __repr__(self) -> str:
         return f"<sync {self.handle!r}>"
+
+
+class _Handle(_Wrapper[C]):
+    """What the closable blocking handles share: ``with``, ``closed``, ``close``."""
 
     @property
     def closed(self) -> bool:
