@@ -1,0 +1,255 @@
+"""A fault-injecting TCP proxy on 127.0.0.1: the bad links of Wi-Fi and cellular, in user space.
+
+This kernel has no traffic shaping (no netem), so tests and benchmarks put this proxy
+between a client and the bridge and break the link on purpose::
+
+    with LinkProxy(("127.0.0.1", bridge_port)) as link:
+        url = f"ws://127.0.0.1:{link.port}"
+        ...
+        link.blackhole()            # silence both ways: no FIN, no RST, bytes wait in kernel buffers
+        link.restore()              # the link comes back; TCP delivers what waited
+        link.set_latency(0.1)       # 100 ms each way
+        link.set_bandwidth(250_000) # bytes per second, each way (2 Mbit/s)
+        link.cut()                  # RST on both sides of every connection
+
+The proxy runs its own event loop on a thread of its own, so blocking tests, asyncio tests
+and benchmark processes all drive it the same way; every control is thread-safe.
+
+What each fault does to the two TCP connections it joins:
+
+- **blackhole**: the proxy stops reading. The sender's kernel keeps accepting bytes until its
+  send buffer and the proxy's small receive buffer are full, then its writes block, exactly
+  as when a robot drives out of range and TCP retransmits into the void. Nothing is lost or
+  reordered: after :meth:`restore` the bytes flow on, as TCP would deliver them if the link
+  came back before either side gave up.
+- **latency**: each chunk is forwarded ``latency`` seconds after it was read.
+- **bandwidth**: each direction is paced by a token bucket; the proxy's receive buffers are
+  kept small (``rcvbuf``, 64 KiB by default, about a 2 Mbit/s link's bandwidth-delay product
+  at 250 ms) so the sender, not the proxy, holds what the link cannot carry yet.
+- **cut**: every open connection is reset (``SO_LINGER`` 0), both sides see ECONNRESET.
+- **refuse**: new connections are accepted and reset at once while set (a bridge that is down).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import socket
+import struct
+import threading
+import time
+from collections.abc import Coroutine
+from typing import Any, Self
+
+__all__ = ["LinkProxy"]
+
+_CHUNK = 16384
+
+
+class _Pipe:
+    """One direction of one proxied connection: read, hold for the faults, write."""
+
+    def __init__(self, link: LinkProxy, reader: asyncio.StreamReader, writer: asyncio.StreamWriter):
+        self.link = link
+        self.reader = reader
+        self.writer = writer
+        self.tokens = 0.0
+        self.stamp = time.monotonic()
+        self.bytes = 0
+
+    async def run(self) -> None:
+        link = self.link
+        delayed: asyncio.Queue[tuple[float, bytes] | None] = asyncio.Queue()
+        sender = asyncio.create_task(self._send(delayed))
+        try:
+            while True:
+                await link._open.wait()  # a blackhole stops reading here
+                data = await self.reader.read(_CHUNK)
+                if not data:
+                    break
+                await link._open.wait()  # read just before the hole opened: hold it
+                await self._pace(len(data))
+                delayed.put_nowait((time.monotonic() + link.latency, data))
+        except (ConnectionError, OSError):
+            pass
+        finally:
+            delayed.put_nowait(None)
+            with contextlib.suppress(Exception):
+                await sender
+
+    async def _pace(self, size: int) -> None:
+        """Wait until the token bucket allows ``size`` bytes (no-op without a bandwidth cap)."""
+        rate = self.link.bandwidth
+        if rate is None:
+            return
+        burst = max(float(_CHUNK), rate / 20)
+        while True:
+            now = time.monotonic()
+            self.tokens = min(burst, self.tokens + (now - self.stamp) * rate)
+            self.stamp = now
+            if self.tokens >= size or self.tokens >= burst:
+                self.tokens -= size
+                return
+            await asyncio.sleep((min(size, burst) - self.tokens) / rate)
+
+    async def _send(self, delayed: asyncio.Queue[tuple[float, bytes] | None]) -> None:
+        try:
+            while (item := await delayed.get()) is not None:
+                due, data = item
+                wait = due - time.monotonic()
+                if wait > 0:
+                    await asyncio.sleep(wait)
+                await self.link._open.wait()
+                self.writer.write(data)
+                self.bytes += len(data)
+                await self.writer.drain()
+            if self.writer.can_write_eof():
+                self.writer.write_eof()
+        except (ConnectionError, OSError):
+            pass
+
+
+class LinkProxy:
+    """Forward 127.0.0.1:``port`` to ``target`` with faults switched on and off at will.
+
+    Use as a context manager (or :meth:`start` / :meth:`close`). ``port`` 0 picks a free port;
+    :attr:`port` tells which. ``rcvbuf`` bounds what the proxy itself accepts ahead of the
+    link (see the module docstring).
+    """
+
+    def __init__(self, target: tuple[str, int], port: int = 0, rcvbuf: int = 65536) -> None:
+        self.target = target
+        self.port = port
+        self.rcvbuf = rcvbuf
+        self.latency = 0.0
+        self.bandwidth: float | None = None
+        self.refusing = False
+        self.connections = 0
+        self._loop = asyncio.new_event_loop()
+        self._thread = threading.Thread(target=self._loop.run_forever, name="linkproxy", daemon=True)
+        self._open = asyncio.Event()
+        self._server: asyncio.Server | None = None
+        self._writers: set[asyncio.StreamWriter] = set()
+        self._pipes: list[_Pipe] = []
+
+    # -- life cycle ------------------------------------------------------------------------
+    def start(self) -> Self:
+        """Listen and return self; :attr:`port` is then the proxy's port."""
+        self._thread.start()
+        self._call(self._start())
+        return self
+
+    async def _start(self) -> None:
+        self._open.set()
+        # Buffer sizes must be set before listen/connect: TCP fixes its window scale in the SYN.
+        sock = _socket(self.rcvbuf)
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        sock.bind(("127.0.0.1", self.port))
+        sock.listen(64)
+        sock.setblocking(False)
+        self._server = await asyncio.start_server(self._accept, sock=sock, limit=_CHUNK)
+        self.port = sock.getsockname()[1]
+
+    def close(self) -> None:
+        """Reset every connection, stop listening and end the proxy's thread."""
+        if not self._thread.is_alive():
+            return
+        self._call(self._close())
+        self._loop.call_soon_threadsafe(self._loop.stop)
+        self._thread.join(5)
+        self._loop.close()
+
+    async def _close(self) -> None:
+        self._open.set()
+        self._reset_all()
+        if self._server is not None:
+            self._server.close()
+            await self._server.wait_closed()
+
+    def __enter__(self) -> Self:
+        return self.start()
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    # -- faults ----------------------------------------------------------------------------
+    def blackhole(self) -> None:
+        """Stop carrying bytes both ways, silently: no FIN, no RST (a link out of range)."""
+        self._loop.call_soon_threadsafe(self._open.clear)
+
+    def restore(self) -> None:
+        """End a blackhole or a refusal: bytes flow again, new connections are carried."""
+        self.refusing = False
+        self._loop.call_soon_threadsafe(self._open.set)
+
+    def set_latency(self, seconds: float) -> None:
+        """Delay every chunk by ``seconds`` in each direction."""
+        self.latency = seconds
+
+    def set_bandwidth(self, bytes_per_second: float | None) -> None:
+        """Cap each direction at ``bytes_per_second`` (None: no cap)."""
+        self.bandwidth = bytes_per_second
+
+    def cut(self) -> None:
+        """Reset every open connection (both sides see a RST); new ones are still accepted."""
+        self._call(self._cut())
+
+    async def _cut(self) -> None:
+        self._reset_all()
+
+    def refuse(self) -> None:
+        """Reset new connections at once until :meth:`restore` (the far end is down)."""
+        self.refusing = True
+
+    @property
+    def bytes_forwarded(self) -> int:
+        """Bytes written onwards, both directions, all connections so far."""
+        return sum(p.bytes for p in self._pipes)
+
+    # -- internals -------------------------------------------------------------------------
+    def _call(self, coro: Coroutine[Any, Any, None]) -> None:
+        asyncio.run_coroutine_threadsafe(coro, self._loop).result(10)
+
+    def _reset_all(self) -> None:
+        for w in list(self._writers):
+            _reset(w)
+        self._writers.clear()
+
+    async def _accept(self, c_reader: asyncio.StreamReader, c_writer: asyncio.StreamWriter) -> None:
+        if self.refusing:
+            _reset(c_writer)
+            return
+        upstream = _socket(self.rcvbuf)
+        upstream.setblocking(False)
+        try:
+            await asyncio.get_running_loop().sock_connect(upstream, self.target)
+            s_reader, s_writer = await asyncio.open_connection(sock=upstream, limit=_CHUNK)
+        except OSError:
+            upstream.close()
+            _reset(c_writer)
+            return
+        self.connections += 1
+        self._writers.update((c_writer, s_writer))
+        up, down = _Pipe(self, c_reader, s_writer), _Pipe(self, s_reader, c_writer)
+        self._pipes += [up, down]
+        await asyncio.gather(up.run(), down.run(), return_exceptions=True)
+        for w in (c_writer, s_writer):
+            if w in self._writers:
+                self._writers.discard(w)
+                w.close()
+
+
+def _socket(rcvbuf: int) -> socket.socket:
+    """A TCP socket whose receive buffer (and so its advertised window) stays at ``rcvbuf``."""
+    sock = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, rcvbuf)
+    sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+    return sock
+
+
+def _reset(writer: asyncio.StreamWriter) -> None:
+    sock = writer.get_extra_info("socket")
+    if sock is not None:
+        with contextlib.suppress(OSError):
+            sock.setsockopt(socket.SOL_SOCKET, socket.SO_LINGER, struct.pack("ii", 1, 0))
+    writer.transport.abort()
