@@ -32,6 +32,7 @@ from .ros_actions import check_rclpy_internals
 from .security import Security, SecurityConfig
 from .session import Session, SessionConfig
 from .web import Web
+from .web_access import WebAccess
 
 if TYPE_CHECKING:
     from collections.abc import Awaitable
@@ -80,8 +81,8 @@ class Bridge:
         self.ros = RosNode(asyncio.get_running_loop(), name=config.node_name)
         self.metrics = Recorder()
         self.web = Web(self)  # plain-HTTP routes: status page, /metrics, health (web.py)
-        self.security = Security(config.security)  # TLS, auth, origins, limits (security.py)
-        self.web.access = self.security.web_access()  # who sees the plain-HTTP routes
+        self.security = Security(config.security)  # TLS, auth, origins, limits (security/)
+        self.web.access = WebAccess(self.security)  # who sees the plain-HTTP routes
 
     @property
     def port(self) -> int:

@@ -290,9 +290,14 @@ class Session:
         self.connected_at = time.time()
         self._frame_len = 0
         self.actions = SessionActions(self)
-        self.gate = bridge.security.gate(self)  # auth, rate, names, permissions (security.py)
+        self.gate = bridge.security.gate(self)  # auth, rate, names, permissions (security/gate.py)
 
     # -- running -------------------------------------------------------------------------------
+
+    @property
+    def closed(self) -> bool:
+        """Whether the connection has ended (nothing more is handled or sent)."""
+        return self._closed
 
     async def run(self) -> None:
         """Serve the client until it disconnects; then release everything it owned."""
@@ -874,7 +879,7 @@ class Session:
         owner = self.bridge.service_owners.get(name)
         if owner is not None and owner is not self:
             if not self.gate.may_take_over(name, owner.gate):
-                # The first owner keeps it while it answers a ping (security.py).
+                # The first owner keeps it while it answers a ping (security/gate.py).
                 self.gate.claim_if_owner_gone(op, owner)
                 return
             owner.drop_served(name, f"taken over by client {self.sid}")

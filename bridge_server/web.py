@@ -25,7 +25,7 @@ a ``topic``, a ``service``, an ``action`` or a ``client``.
 :func:`visible` applies it to the status data and to the metrics, so neither
 shows what the role may not. This plain :class:`Access` shows everything
 (authentication off); the bridge sets ``bridge.web.access`` to
-:class:`bridge_server.security.WebAccess` (tokens, roles' ``introspection``
+:class:`bridge_server.web_access.WebAccess` (tokens, roles' ``introspection``
 patterns). The page passes its own ``?token=`` on to ``/status.json``.
 """
 

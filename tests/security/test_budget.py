@@ -12,20 +12,20 @@ import asyncio
 
 from websockets.frames import Frame, Opcode
 
-from bridge_server.security import _BudgetAssembler, _Inbound
+from bridge_server.security.websockets_internals import BudgetAssembler, Inbound
 
 FRAME = 700
 
 
-def _assembler(totals: _Inbound, calls: list[str]) -> _BudgetAssembler:
-    return _BudgetAssembler(1000, 1500, totals, high=64, low=16,
+def _assembler(totals: Inbound, calls: list[str]) -> BudgetAssembler:
+    return BudgetAssembler(1000, 1500, totals, high=64, low=16,
                             pause=lambda: calls.append("pause"),
                             resume=lambda: calls.append("resume"))
 
 
 async def test_total_returns_to_zero_after_reads_and_closes() -> None:
     """Frames read, frames dropped by a close, and frames read after a close: the total ends at 0."""
-    totals, calls = _Inbound(), []
+    totals, calls = Inbound(), []
     read, half, dropped = (_assembler(totals, calls) for _ in range(3))
     for asm in (read, half, dropped):
         for _ in range(5):
@@ -45,7 +45,7 @@ async def test_total_returns_to_zero_after_reads_and_closes() -> None:
 
 async def test_cancelled_read_of_a_fragmented_message_gives_its_bytes_back() -> None:
     """A read cancelled between fragments puts them back, counted once; the whole read empties it."""
-    totals, calls = _Inbound(), []
+    totals, calls = Inbound(), []
     asm = _assembler(totals, calls)
     asm.put(Frame(Opcode.TEXT, b"a" * FRAME, fin=False))
     reader = asyncio.ensure_future(asm.get())

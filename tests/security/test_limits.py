@@ -13,7 +13,7 @@ from websockets.asyncio.client import connect
 from websockets.exceptions import ConnectionClosed, InvalidStatus
 from websockets.frames import Frame, Opcode
 
-from bridge_server.security import _BudgetAssembler, _Inbound
+from bridge_server.security.websockets_internals import BudgetAssembler, Inbound
 from tests.bridge.action_support import FibServer, send_goal
 from tests.bridge.support import roundtrip
 from tests.helpers import open_wire
@@ -122,11 +122,11 @@ async def test_caps_on_subscriptions_publishers_and_services(make_bridge: Any, t
 async def test_inbound_byte_budget_pauses_and_resumes_reading():
     """Frames waiting past the connection's byte budget (or the total) pause reading until read."""
     calls: list[str] = []
-    totals = _Inbound()
-    asm = _BudgetAssembler(1000, 1500, totals, high=64, low=16,
+    totals = Inbound()
+    asm = BudgetAssembler(1000, 1500, totals, high=64, low=16,
                            pause=lambda: calls.append("pause"),
                            resume=lambda: calls.append("resume"))
-    other = _BudgetAssembler(1000, 1500, totals, high=64, low=16,
+    other = BudgetAssembler(1000, 1500, totals, high=64, low=16,
                              pause=lambda: calls.append("other pause"), resume=lambda: None)
     asm.put(Frame(Opcode.TEXT, b"x" * 600))
     assert calls == [] and totals.bytes == 600
@@ -146,7 +146,7 @@ async def test_websockets_internals_are_checked_at_start_up(monkeypatch: pytest.
     from bridge_server.types import BridgeError
 
     check_websockets_internals()
-    monkeypatch.setattr(_BudgetAssembler, "maybe_pause", lambda self: None)
+    monkeypatch.setattr(BudgetAssembler, "maybe_pause", lambda self: None)
     with pytest.raises(BridgeError, match=r"websockets \S+ is not supported by the bridge"):
         check_websockets_internals()
 

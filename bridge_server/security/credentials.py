@@ -1,0 +1,45 @@
+"""Where a client's address and token come from in a handshake request."""
+
+from __future__ import annotations
+
+import ipaddress
+from urllib.parse import parse_qs, urlsplit
+
+from websockets.asyncio.server import ServerConnection
+from websockets.http11 import Request
+
+__all__ = ["client_address", "is_loopback", "token_of"]
+
+
+def client_address(connection: ServerConnection) -> str:
+    """The IP address a connection comes from (the key of per-address limits)."""
+    addr = connection.remote_address
+    if isinstance(addr, tuple) and addr:
+        return str(addr[0])
+    return str(addr)
+
+
+def is_loopback(host: str) -> bool:
+    """Whether binding ``host`` keeps the port on this machine."""
+    if host in ("localhost", ""):
+        return host == "localhost"
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:
+        return False
+
+
+def token_of(request: Request) -> tuple[str | None, str]:
+    """The token a handshake request carries and where (``None``: none at all; ``""``: a
+    malformed ``Authorization`` header, which counts as a wrong token)."""
+    header = request.headers.get("Authorization")
+    if header is not None:
+        scheme, _, value = header.strip().partition(" ")
+        if scheme.lower() == "bearer" and value.strip():
+            return value.strip(), "Authorization header"
+        return "", "Authorization header"  # present but not a bearer token: a failure
+    query = parse_qs(urlsplit(request.path).query)
+    values = query.get("token")
+    if values:
+        return values[0], "?token= query parameter"
+    return None, ""

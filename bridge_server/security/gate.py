@@ -1,0 +1,299 @@
+"""What one session may do: the ``auth`` op, the op rate, names, the role and the caps.
+
+The session consults its :class:`Gate` before each frame (:meth:`Gate.admit_frame`) and
+each op (:meth:`Gate.check`); a refusal answers the offender and nobody else.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import time
+from collections.abc import Mapping
+from typing import TYPE_CHECKING, Any
+
+from websockets.exceptions import ConnectionClosed
+
+from roslibpy_lite import ops
+
+from .. import rosapi
+from ..auth import Principal
+from ..names import InvalidNameError, check_name
+from ..permissions import Role, filter_rosapi, requirement, rosapi_requirement
+from .credentials import client_address
+
+if TYPE_CHECKING:
+    from ..session import Session
+    from .handshake import Security
+
+__all__ = ["OWNER_PING_TIMEOUT", "POLICY_VIOLATION", "PRE_AUTH_FRAME_LIMIT", "Gate"]
+
+log = logging.getLogger("bridge_server.security")
+
+PRE_AUTH_FRAME_LIMIT = 16 * 1024
+"""Largest frame read from a connection that has not authenticated yet."""
+
+OWNER_PING_TIMEOUT = 2.0
+"""Seconds the client serving a name has to answer a ping before another client may take it."""
+
+POLICY_VIOLATION = 1008
+"""Close code for a failed ``auth`` op, ops before authentication and op floods."""
+
+
+class Gate:
+    """What one session may do: consulted for every frame and every op."""
+
+    def __init__(self, security: Security, session: Session, principal: Principal | None):
+        self.security = security
+        self.session = session
+        self.principal = principal
+        self.role: Role | None = principal.role if principal is not None else None
+        self.authenticated = security.auth is None or principal is not None
+        self.closing = False
+        self.unresponsive = False  # set when this client failed to answer a ping in time
+        c = security.config
+        self.rate = c.max_op_rate
+        self.burst = float(c.op_burst or max(1, int(c.max_op_rate)))
+        self.tokens = self.burst
+        self.stamp = time.monotonic()
+        self.warned = False
+        self._timer: asyncio.TimerHandle | None = None
+        if principal is not None:
+            log.info("client %d authenticated as %s (role %s)", session.sid, principal.name,
+                     principal.role.name)
+        elif not self.authenticated:
+            self._timer = session.loop.call_later(
+                c.handshake_timeout or 10.0,
+                self.close,
+                "authentication required: send a token (Authorization: Bearer, ?token= or "
+                "an auth op) within the handshake timeout",
+            )
+
+    # -- frames --------------------------------------------------------------------------------
+
+    def admit_frame(self, size: int = 0) -> bool:
+        """Whether to handle the next frame (the op rate, and nothing after a close).
+
+        Before authentication only small frames are read (an ``auth`` op is
+        small), so an unauthenticated client cannot make the bridge hold large
+        fragments while it has not proved who it is.
+        """
+        if self.closing:
+            return False
+        if not self.authenticated and size > PRE_AUTH_FRAME_LIMIT:
+            self.close(f"authentication required before a frame of {size} bytes")
+            return False
+        if not self.rate:
+            return True
+        now = time.monotonic()
+        self.tokens = min(self.burst, self.tokens + (now - self.stamp) * self.rate)
+        self.stamp = now
+        self.tokens -= 1
+        if self.tokens >= 0:
+            if self.warned and self.tokens > self.burst / 2:
+                self.warned = False
+            return True
+        if self.tokens < -self.burst:
+            self.close(f"too many ops: more than {self.rate:g} per second")
+            return False
+        if not self.warned:
+            self.warned = True
+            log.info("session %d: over the op rate", self.session.sid)
+            self.session.status(
+                "warning",
+                f"op rate limit: at most {self.rate:g} ops per second (burst {self.burst:g}); "
+                "ops over it are dropped, and the connection closes if this goes on",
+            )
+        return False
+
+    def close(self, reason: str) -> None:
+        """Close the connection with code 1008 and ``reason``; handle nothing more."""
+        if self.closing or self.session.closed:
+            return
+        self.closing = True
+        if self._timer is not None:
+            self._timer.cancel()
+        log.warning("session %d: closing: %s", self.session.sid, reason)
+        task = self.session.loop.create_task(self.session.ws.close(POLICY_VIOLATION, reason[:120]))
+        _CLOSING.add(task)  # a strong reference until it is done (the loop keeps only weak ones)
+        task.add_done_callback(_CLOSING.discard)
+
+    def end(self) -> None:
+        """The session ended: stop the authentication timer (it would hold the session)."""
+        if self._timer is not None:
+            self._timer.cancel()
+            self._timer = None
+
+    # -- ops -------------------------------------------------------------------------------------
+
+    def check(self, op: Any) -> bool:
+        """Whether the session may carry out ``op``; if not, the client has been told."""
+        if isinstance(op, ops.Auth):
+            self._auth(op)
+            return False
+        if not self.authenticated:
+            self.close(f"authentication required before {op.OP!r}: send the auth op first")
+            return False
+        need = requirement(op)
+        if need is None:
+            return True
+        capability, name = need
+        try:
+            check_name(name, _WHAT[capability])
+        except InvalidNameError as exc:
+            self.deny(op, str(exc))
+            return False
+        if self.role is not None and not self._allowed(op, capability, name):
+            return False
+        return self._within_caps(op, name)
+
+    def _allowed(self, op: Any, capability: str, name: str) -> bool:
+        role = self.role
+        assert role is not None
+        if isinstance(op, ops.CallService) and (name in rosapi.HANDLERS
+                                                or name in rosapi.ASYNC_HANDLERS):
+            capability, name = rosapi_requirement(name, _rosapi_args(name, op.args))
+        ok = role.has(capability) if name == "*" else role.allows(capability, name)
+        if not ok:
+            what = "any name" if name == "*" else name
+            self.deny(op, f"forbidden: role {role.name} may not {capability} on {what}")
+        return ok
+
+    def _within_caps(self, op: Any, name: str) -> bool:
+        c = self.security.config
+        s = self.session
+        have: Mapping[str, Any]
+        if isinstance(op, ops.Subscribe):
+            have, cap, what = s.subs, c.max_subscriptions, "subscriptions"
+        elif isinstance(op, ops.Advertise | ops.Publish):
+            have, cap, what = s.publishers, c.max_publishers, "publishers"
+        elif isinstance(op, ops.AdvertiseService):
+            have, cap, what = s.served, c.max_services, "served services"
+        elif isinstance(op, ops.AdvertiseAction):  # each is an rclpy action server
+            have, cap, what = s.actions.served, c.max_services, "served actions"
+        elif isinstance(op, ops.SendActionGoal):  # keyed by goal id, so every new goal counts
+            have, cap, what = s.actions.goals, c.max_goals, "goals in flight"
+        else:
+            return True
+        if cap and name not in have and len(have) >= cap:
+            self.deny(op, f"too many {what} on this connection (at most {cap})")
+            return False
+        return True
+
+    def deny(self, op: Any, why: str) -> None:
+        """Refuse ``op``: a status error, plus the failure shape a stock client waits for."""
+        op_id = getattr(op, "id", None)
+        self.session.error(f"{op.OP}: {why}", op_id)
+        if isinstance(op, ops.CallService):
+            self.session.send_op(ops.ServiceResponse(
+                service=op.service, result=False, values=f"{op.OP}: {why}", id=op_id))
+        elif isinstance(op, ops.SendActionGoal) and op_id is not None:
+            self.session.send_op(ops.ActionResult(
+                id=op_id, action=op.action, values=f"{op.OP}: {why}", result=False, status=6))
+
+    def _auth(self, op: ops.Auth) -> None:
+        auth = self.security.auth
+        if auth is None:
+            return  # no auth file: everyone is welcome, the op changes nothing
+        address = client_address(self.session.ws)
+        locked = self.security.locked_out(address)
+        if locked is not None:  # connections opened before the lock-out get no guess either
+            log.warning("session %d: auth op from %s refused: locked out after failed attempts",
+                        self.session.sid, address)
+            self.close(locked[0])
+            return
+        principal = auth.verify(op.mac)
+        if principal is None or (self.principal is not None and principal is not self.principal):
+            count = self.security.failures.failed(address)
+            log.warning("session %d: auth op from %s with a wrong token (failure %d)",
+                        self.session.sid, address, count)
+            self.close("authentication failed: the auth op's token (mac) is not valid")
+            return
+        self.security.failures.succeeded(address)
+        if self.principal is None:
+            self.principal, self.role, self.authenticated = principal, principal.role, True
+            if self._timer is not None:
+                self._timer.cancel()
+                self._timer = None
+            log.info("client %d authenticated as %s (role %s) by an auth op", self.session.sid,
+                     principal.name, principal.role.name)
+
+    # -- what the session asks -------------------------------------------------------------------
+
+    def may_take_over(self, name: str, owner_gate: Gate | None) -> bool:
+        """Whether this client may take ``name`` from the client that serves it now.
+
+        The same principal may (it reconnected before the bridge saw the old
+        connection go), and anyone may once the owner's connection failed to
+        answer a ping; otherwise only a role with ``take_over`` on the name.
+        """
+        if owner_gate is not None and (owner_gate.unresponsive or (
+                self.principal is not None and owner_gate.principal is self.principal)):
+            return True
+        return self.role is not None and self.role.allows("take_over", name)
+
+    def claim_if_owner_gone(self, op: ops.AdvertiseService, owner: Session) -> None:
+        """Advertise a service another client serves only if that client is gone.
+
+        The first owner keeps a name; but a connection whose client vanished
+        (a network drop the bridge has not noticed yet) should not hold it until
+        the keepalive gives up, or the client could never serve it again after
+        it reconnects. So the owner is pinged: no pong within
+        :data:`OWNER_PING_TIMEOUT` seconds and the name is freed for this client.
+        """
+        session = self.session
+        task = session.loop.create_task(self._claim(op, owner))
+        session.calls.add(task)  # cancelled with the session's calls
+        task.add_done_callback(session.calls.discard)
+
+    async def _claim(self, op: ops.AdvertiseService, owner: Session) -> None:
+        name = op.service if op.service.startswith("/") else "/" + op.service
+        try:
+            pong = await owner.ws.ping()
+            await asyncio.wait_for(pong, OWNER_PING_TIMEOUT)
+            alive = True
+        except (TimeoutError, ConnectionClosed):
+            alive = False
+        session = self.session
+        if session.closed or session.bridge.service_owners.get(name) is not owner:
+            if not session.closed:
+                session.handle_op(op)  # the name changed hands meanwhile: decide again
+            return
+        if alive:
+            session.error(
+                f"advertise_service: {name} is already served by client {owner.sid}; the "
+                "first owner keeps it (a role with take_over may take it over)",
+                op.id,
+            )
+            return
+        log.warning("client %d serves %s but did not answer a ping in %s s: client %d takes "
+                    "the service", owner.sid, name, OWNER_PING_TIMEOUT, session.sid)
+        owner.gate.unresponsive = True  # its names may be taken now (see may_take_over)
+        session.handle_op(op)
+
+    def filter_rosapi(self, service: str, values: dict[str, Any]) -> dict[str, Any]:
+        """A rosapi answer reduced to what the role may see."""
+        if self.role is None:
+            return values
+        return filter_rosapi(self.role, service, values)
+
+
+_CLOSING: set[asyncio.Task[None]] = set()
+"""Close handshakes under way that :meth:`Gate.close` started."""
+
+_WHAT = {
+    "subscribe": "topic",
+    "publish": "topic",
+    "call_service": "service",
+    "serve_service": "service",
+    "send_action_goal": "action",
+    "serve_action": "action",
+}
+
+
+def _rosapi_args(service: str, args: Mapping[str, Any] | list[Any] | None) -> Mapping[str, Any]:
+    if isinstance(args, Mapping):
+        return args
+    if isinstance(args, list):
+        return dict(zip(rosapi.FIELDS.get(service, ()), args, strict=False))
+    return {}

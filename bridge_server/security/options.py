@@ -1,0 +1,101 @@
+"""The security options of the command line and the configuration they make."""
+
+from __future__ import annotations
+
+import argparse
+from dataclasses import dataclass
+
+__all__ = ["SecurityConfig", "add_arguments", "config_from_args", "parse_origins"]
+
+
+@dataclass
+class SecurityConfig:
+    """The security options of the command line (0 or None: no limit / off)."""
+
+    certfile: str | None = None
+    keyfile: str | None = None
+    client_ca: str | None = None
+    auth_file: str | None = None
+    allowed_origins: list[str] | None = None
+    max_clients: int = 1000
+    max_clients_per_address: int = 0
+    handshake_timeout: float = 10.0
+    max_op_rate: float = 0.0
+    op_burst: int = 0
+    max_subscriptions: int = 1000
+    max_publishers: int = 1000
+    max_services: int = 1000
+    max_goals: int = 1000
+    inbound_budget: int = 32 * 1024 * 1024
+    inbound_budget_total: int = 256 * 1024 * 1024
+
+
+def parse_origins(text: str | None) -> list[str] | None:
+    """``--allowed-origins`` ("https://a.example,https://b.example") as a list."""
+    if text is None:
+        return None
+    return [o.strip() for o in text.split(",") if o.strip()]
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    """The security options of ``roslibpy-lite-bridge`` (see SECURITY.md)."""
+    g = p.add_argument_group("security (see SECURITY.md)")
+    d = SecurityConfig()
+    g.add_argument("--certfile", help="PEM certificate chain: serve wss:// (TLS)")
+    g.add_argument("--keyfile", help="PEM private key of --certfile (if not in it)")
+    g.add_argument("--client-ca", help="PEM CA bundle: require client certificates (mutual TLS)")
+    g.add_argument("--auth-file", help="TOML file of roles and principals: require a token "
+                   "(make one with: roslibpy-lite-bridge add-principal NAME --role ROLE "
+                   "--auth-file FILE)")
+    g.add_argument("--allowed-origins", help="comma-separated browser origins allowed to "
+                   "connect, e.g. https://ui.example.com (clients without Origin always may)")
+    g.add_argument("--max-clients", type=int, default=d.max_clients,
+                   help=f"most connected clients in all (default {d.max_clients}; 0: no limit)")
+    g.add_argument("--max-clients-per-address", type=int, default=d.max_clients_per_address,
+                   help="most clients from one IP address (default 0: no limit; behind a "
+                   "proxy every client has the proxy's address)")
+    g.add_argument("--handshake-timeout", type=float, default=d.handshake_timeout,
+                   help="seconds to finish TLS, the websocket handshake and (with an auth file) "
+                   f"authentication (default {d.handshake_timeout:g})")
+    g.add_argument("--max-op-rate", type=float, default=d.max_op_rate,
+                   help="ops per second per client; over it: a warning, ops dropped, then a "
+                   "close with 1008 (default 0: no limit)")
+    g.add_argument("--op-burst", type=int, default=d.op_burst,
+                   help="ops a client may send at once above the rate (default: one second's)")
+    g.add_argument("--max-subscriptions", type=int, default=d.max_subscriptions,
+                   help=f"topics one client may subscribe to (default {d.max_subscriptions})")
+    g.add_argument("--max-publishers", type=int, default=d.max_publishers,
+                   help=f"topics one client may publish on (default {d.max_publishers})")
+    g.add_argument("--max-services", type=int, default=d.max_services,
+                   help=f"services one client may serve, and actions likewise "
+                   f"(default {d.max_services})")
+    g.add_argument("--max-goals", type=int, default=d.max_goals,
+                   help=f"action goals one client may have in flight (default {d.max_goals})")
+    g.add_argument("--inbound-budget", type=int, default=d.inbound_budget,
+                   help="bytes of received, not yet handled data per client before the bridge "
+                   f"stops reading it (default {d.inbound_budget >> 20} MiB)")
+    g.add_argument("--inbound-budget-total", type=int, default=d.inbound_budget_total,
+                   help="the same for all clients together "
+                   f"(default {d.inbound_budget_total >> 20} MiB)")
+
+
+def config_from_args(args: argparse.Namespace) -> SecurityConfig:
+    """The :class:`SecurityConfig` of parsed command-line arguments."""
+    return SecurityConfig(
+        certfile=args.certfile,
+        keyfile=args.keyfile,
+        client_ca=args.client_ca,
+        auth_file=args.auth_file,
+        allowed_origins=parse_origins(args.allowed_origins),
+        max_clients=args.max_clients,
+        max_clients_per_address=args.max_clients_per_address,
+        handshake_timeout=args.handshake_timeout,
+        max_op_rate=args.max_op_rate,
+        op_burst=args.op_burst,
+        max_subscriptions=args.max_subscriptions,
+        max_publishers=args.max_publishers,
+        max_services=args.max_services,
+        max_goals=args.max_goals,
+        inbound_budget=args.inbound_budget,
+        inbound_budget_total=args.inbound_budget_total,
+    )

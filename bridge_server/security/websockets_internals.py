@@ -1,0 +1,169 @@
+"""The only code that builds on websockets' private internals: the inbound byte budget.
+
+websockets reads frames into an ``Assembler`` with a frame queue; the bridge replaces both
+on every server connection (:class:`BridgeConnection`) so that the bytes waiting to be
+handled are counted per connection and in all, and reading stops over the budget.
+:func:`check_websockets_internals` fails at start-up, naming the version, if a websockets
+upgrade changed what this relies on: an upgrade touches this file and nothing else.
+"""
+
+from __future__ import annotations
+
+import asyncio
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
+
+from websockets.asyncio.messages import Assembler, SimpleQueue
+from websockets.asyncio.server import ServerConnection
+from websockets.frames import Frame
+
+from ..types import BridgeError
+
+if TYPE_CHECKING:
+    from ..auth import Principal
+    from .handshake import Security
+
+__all__ = [
+    "WEBSOCKETS_TESTED",
+    "BridgeConnection",
+    "BudgetAssembler",
+    "Inbound",
+    "check_websockets_internals",
+]
+
+
+class CountingQueue(SimpleQueue[Frame]):
+    """websockets' frame queue, counting the bytes it holds (per connection and in all)."""
+
+    def __init__(self, totals: Inbound) -> None:
+        super().__init__()
+        self.totals = totals
+        self.bytes = 0
+
+    def put(self, item: Frame) -> None:
+        n = len(item.data)
+        self.bytes += n
+        self.totals.bytes += n
+        super().put(item)
+
+    async def get(self, block: bool = True) -> Frame:
+        item = await super().get(block)
+        n = len(item.data)
+        self.bytes -= n
+        self.totals.bytes -= n
+        return item
+
+    def put_back(self, items: Any) -> None:
+        n = sum(len(i.data) for i in items)
+        self.bytes += n
+        self.totals.bytes += n
+        super().put_back(items)
+
+    def abort(self) -> None:
+        self.totals.bytes -= self.bytes
+        self.bytes = 0
+        self.totals = Inbound()  # what is read after the end is no longer counted in all
+        super().abort()
+
+
+@dataclass
+class Inbound:
+    bytes: int = 0
+
+
+class BudgetAssembler(Assembler):
+    """Pauses reading when a connection holds more than its byte budget (or all do)."""
+
+    def __init__(self, budget: int, total_budget: int, totals: Inbound, **kwargs: Any) -> None:
+        super().__init__(**kwargs)
+        self.frames = self.queue = CountingQueue(totals)
+        self.budget = budget
+        self.total_budget = total_budget
+        self.totals = totals
+
+    def maybe_pause(self) -> None:
+        if self.paused:
+            return
+        q = self.queue
+        if (
+            (self.high is not None and len(q) > self.high)
+            or (self.budget and q.bytes > self.budget)
+            or (self.total_budget and self.totals.bytes > self.total_budget)
+        ):
+            self.paused = True
+            self.pause()
+
+    def maybe_resume(self) -> None:
+        if not self.paused:
+            return
+        q = self.queue
+        if (self.low is None or len(q) <= self.low) and q.bytes <= self.budget // 4:
+            self.paused = False
+            self.resume()
+
+
+class BridgeConnection(ServerConnection):
+    """A server connection with an inbound byte budget and the principal it proved to be."""
+
+    security: Security
+
+    principal: Principal | None = None
+    counted: str | None = None
+
+    def connection_made(self, transport: asyncio.BaseTransport) -> None:
+        """websockets' hook: read frames through the budgeted assembler."""
+        super().connection_made(transport)
+        sec = self.security
+        self.recv_messages = BudgetAssembler(
+            sec.config.inbound_budget,
+            sec.config.inbound_budget_total,
+            sec.inbound,
+            high=self.max_queue_high,
+            low=self.max_queue_low,
+            pause=self.transport.pause_reading,
+            resume=self.transport.resume_reading,
+        )
+
+    def connection_lost(self, exc: Exception | None) -> None:
+        """websockets' hook: no longer count this connection against the client limits."""
+        super().connection_lost(exc)
+        self.security.release(self)
+
+
+WEBSOCKETS_TESTED = ">=17,<18"
+"""The websockets versions whose internals :class:`BudgetAssembler` is tested with."""
+
+
+def check_websockets_internals() -> None:
+    """Fail at start-up, clearly, if websockets' private internals differ from what the byte
+    budget builds on (its ``Assembler``, ``SimpleQueue`` and the connection's queue limits).
+
+    Call with an event loop running. Raises :class:`BridgeError` naming the version.
+    """
+    from importlib.metadata import version
+
+    from websockets.asyncio.connection import Connection
+    from websockets.frames import Opcode
+    from websockets.server import ServerProtocol
+
+    try:
+        totals = Inbound()
+        asm = BudgetAssembler(1, 1, totals, high=4, low=1)
+        asm.put(Frame(Opcode.TEXT, b"xy"))
+        held = (totals.bytes, asm.paused, asm.frames is asm.queue)
+        asm.close()
+        conn = Connection(ServerProtocol())
+        limits = (conn.max_queue_high, conn.max_queue_low)
+        problem = None if held == (2, True, True) and totals.bytes == 0 else f"counted {held}"
+        if not hasattr(Connection, "connection_made") or len(limits) != 2:
+            problem = "no connection_made or queue limits"
+    except Exception as exc:
+        problem = f"{type(exc).__name__}: {exc}"
+    if problem is not None:
+        raise BridgeError(
+            f"websockets {version('websockets')} is not supported by the bridge: its inbound "
+            f"byte budget (bridge_server/security/websockets_internals.py) builds on "
+            f"websockets' private Assembler internals, tested with "
+            f"websockets{WEBSOCKETS_TESTED} ({problem}); install "
+            f"'websockets{WEBSOCKETS_TESTED}'"
+        )
