@@ -24,7 +24,7 @@ import json
 import time
 from typing import TYPE_CHECKING, Any
 
-from bench.harness import ROOT, RosSide, percentile
+from bench.harness import ROOT, RosSide, percentile, ws_open
 
 if TYPE_CHECKING:
     from bench.run import Ctx
@@ -52,8 +52,6 @@ def _summary(lat: list[float], failed: int) -> dict[str, Any]:
 
 async def action_ros_server(ctx: Ctx) -> dict[str, Any]:
     """Client -> rclpy action server: goal round trip and feedback throughput."""
-    from bench.run import ws_open
-
     name = "/bench/action"
     d = ctx.duration
     bridge = await ctx.bridge().start()
@@ -126,8 +124,6 @@ async def action_ros_server(ctx: Ctx) -> dict[str, Any]:
 
 async def action_client_served(ctx: Ctx) -> dict[str, Any]:
     """rclpy action client -> client-served action: goal round trip and feedback throughput."""
-    from bench.run import ws_open
-
     name = "/bench/served_action"
     d = ctx.duration
     bridge = await ctx.bridge().start()

@@ -17,8 +17,13 @@ import socket
 import struct
 import sys
 from collections import deque
+from collections.abc import Awaitable
 from pathlib import Path
 from typing import Any
+
+from websockets.asyncio.client import ClientConnection, connect
+
+from bench.tls import client_ssl
 
 ROOT = Path(__file__).resolve().parent.parent
 ROS_SIDE = str(Path(__file__).resolve().parent / "ros_side.py")
@@ -246,3 +251,14 @@ class StalledClient:
         """Drop the connection without a closing handshake."""
         with contextlib.suppress(OSError):
             self.sock.close()
+
+
+async def ws_open(url: str) -> ClientConnection:
+    """A raw websockets client, no compression, no size limit."""
+    return await connect(url, max_size=None, compression=None, open_timeout=10, max_queue=1024,
+                         ssl=client_ssl(url))
+
+
+def send_op(ws: ClientConnection, op: dict[str, Any]) -> Awaitable[None]:
+    """Send one op as JSON text."""
+    return ws.send(json.dumps(op))

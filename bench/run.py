@@ -55,11 +55,11 @@ from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from websockets.asyncio.client import ClientConnection, connect
+from websockets.asyncio.client import ClientConnection
 
 from bench.actions import action_client_served, action_ros_server
-from bench.harness import Bridge, RosSide, StalledClient, percentile
-from bench.tls import client_ssl, tls
+from bench.harness import Bridge, RosSide, StalledClient, percentile, send_op, ws_open
+from bench.tls import tls_scenario
 
 TARGETS: dict[str, str] = {
     "rclpy_ceiling": "reference only",
@@ -95,17 +95,6 @@ class Ctx:
     def ros(self, *args: str) -> RosSide:
         """A new (not yet started) ROS-side process."""
         return RosSide(self.domain, *args, "--executor", self.ros_executor)
-
-
-async def ws_open(url: str) -> ClientConnection:
-    """A raw websockets client, no compression, no size limit."""
-    return await connect(url, max_size=None, compression=None, open_timeout=10, max_queue=1024,
-                         ssl=client_ssl(url))
-
-
-def send_op(ws: ClientConnection, op: dict[str, Any]) -> Awaitable[None]:
-    """Send one op as JSON text."""
-    return ws.send(json.dumps(op))
 
 
 class Profiler:
@@ -640,7 +629,7 @@ SCENARIOS: dict[str, Callable[[Ctx], Awaitable[dict[str, Any]]]] = {
     "latency": latency,
     "image": image,
     "memory_stall": memory_stall,
-    "tls": tls,
+    "tls": lambda ctx: tls_scenario(ctx, ros_to_client, service, image),
     "action_ros_server": action_ros_server,
     "action_client_served": action_client_served,
 }

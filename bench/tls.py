@@ -12,13 +12,14 @@ from __future__ import annotations
 import dataclasses
 import ssl
 import tempfile
+from collections.abc import Awaitable, Callable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
     from bench.run import Ctx
 
-__all__ = ["client_ssl", "tls"]
+__all__ = ["client_ssl", "tls_scenario"]
 
 _client: ssl.SSLContext | None = None
 
@@ -45,17 +46,20 @@ def _make_certs() -> str:
     return str(path)
 
 
-async def tls(ctx: Ctx) -> dict[str, Any]:
-    """ros_to_client, service and CBOR image over ws:// and over wss://."""
-    from bench import run
+Scenario = Callable[["Ctx"], Awaitable[dict[str, Any]]]
 
+
+async def tls_scenario(
+    ctx: Ctx, ros_to_client: Scenario, service: Scenario, image: Scenario
+) -> dict[str, Any]:
+    """The given ros_to_client, service and image scenarios over ws:// and over wss://."""
     certfile = _make_certs()
     out: dict[str, Any] = {}
     for scheme, extra in (("ws", []), ("wss", ["--certfile", certfile])):
         c = dataclasses.replace(ctx, bridge_args=[*ctx.bridge_args, *extra])
-        r2c = await run.ros_to_client(c)
-        srv = await run.service(c)
-        img = await run.image(c)
+        r2c = await ros_to_client(c)
+        srv = await service(c)
+        img = await image(c)
         out[scheme] = {
             "ros_to_client_best_rate_99pct": r2c["best_rate_99pct"],
             "ros_to_client_cpu_us_per_msg": [s["bridge_cpu_us_per_msg"] for s in r2c["steps"]],

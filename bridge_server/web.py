@@ -41,9 +41,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from roslibpy_lite.transports.base import ACKS_HEADER
+from roslibpy_lite.ops import ACKS_HEADER
 
 from . import metrics, snapshot
+from .peers import serve_peer_socket
 
 if TYPE_CHECKING:
     from websockets.asyncio.server import ServerConnection
@@ -66,8 +67,6 @@ _TYPES = {
 }
 RATE_INTERVAL = 1.0
 """Seconds between rate measurements (the status page's ``/s`` figures)."""
-PEER_TIMEOUT = 1.0
-"""Seconds to wait for another worker's snapshot."""
 
 
 class Denied(Exception):
@@ -147,8 +146,6 @@ class Web:
 
     async def start(self) -> None:
         """Measure rates; serve ``--metrics-port`` and (as a worker) the peer socket."""
-        from . import workers
-
         cfg = self.bridge.config
         self._ticker = asyncio.create_task(self._tick(), name="bridge-rates")
         if cfg.metrics_port is not None:
@@ -158,7 +155,7 @@ class Web:
             log.info("metrics on http://%s:%d/metrics", cfg.host, self.metrics_port)
         if cfg.worker_dir is not None:
             self._servers.append(
-                await workers.serve_peer_socket(self, cfg.worker_dir, cfg.worker_index)
+                await serve_peer_socket(self, cfg.worker_dir, cfg.worker_index)
             )
 
     async def close(self) -> None:

@@ -29,7 +29,6 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import json
 import logging
 import os
 import re
@@ -41,13 +40,9 @@ import sys
 import tempfile
 import threading
 import time
-from pathlib import Path
-from typing import IO, TYPE_CHECKING, Any
+from typing import IO
 
-if TYPE_CHECKING:
-    from .web import Web
-
-__all__ = ["STOP_GRACE", "Supervisor", "serve_peer_socket", "watch_supervisor"]
+__all__ = ["STOP_GRACE", "Supervisor", "watch_supervisor"]
 
 log = logging.getLogger("bridge_server.workers")
 
@@ -55,53 +50,6 @@ STOP_GRACE = 0.8
 """Seconds workers get to stop after SIGTERM before they are killed."""
 
 _WORKER_READY = re.compile(r"bridge_server worker (\d+) listening")
-
-
-def _sock_path(directory: str, index: int) -> str:
-    return os.path.join(directory, f"worker-{index}.sock")
-
-
-async def serve_peer_socket(web: Web, directory: str, index: int) -> asyncio.Server:
-    """Answer other workers' requests for this worker's snapshot; set ``web.peers``."""
-    path = _sock_path(directory, index)
-    with contextlib.suppress(FileNotFoundError):
-        os.unlink(path)  # left by a worker of this index that died
-
-    async def handle(_reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
-        try:
-            writer.write(json.dumps(web.local(), separators=(",", ":")).encode())
-            await writer.drain()
-        except OSError:
-            pass
-        finally:
-            writer.close()
-
-    server = await asyncio.start_unix_server(handle, path)
-
-    async def peers() -> list[dict[str, Any]]:
-        others = [
-            str(p) for p in Path(directory).glob("worker-*.sock") if str(p) != path
-        ]
-        got = await asyncio.gather(*(_fetch(p) for p in others))
-        return [g for g in got if g is not None]
-
-    web.peers = peers
-    return server
-
-
-async def _fetch(path: str) -> dict[str, Any] | None:
-    from .web import PEER_TIMEOUT
-
-    try:
-        reader, writer = await asyncio.wait_for(asyncio.open_unix_connection(path), PEER_TIMEOUT)
-        try:
-            data = await asyncio.wait_for(reader.read(), PEER_TIMEOUT)
-        finally:
-            writer.close()
-        snap: dict[str, Any] = json.loads(data)
-        return snap
-    except (OSError, TimeoutError, ValueError):
-        return None  # a worker that is restarting: left out of this view
 
 
 def watch_supervisor(stop: asyncio.Event) -> None:

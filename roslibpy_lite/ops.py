@@ -21,6 +21,7 @@ from typing import Any, ClassVar, TypeAlias
 from .exceptions import LocalProtocolError, RemoteProtocolError
 
 __all__ = [
+    "ACKS_HEADER",
     "ActionFeedback",
     "ActionResult",
     "Advertise",
@@ -50,6 +51,13 @@ __all__ = [
 
 Id: TypeAlias = str | int
 """An interaction id: the peer chooses it, every reply about it echoes it."""
+
+ACKS_HEADER = "X-Rosbridge-Acks"
+"""Handshake header of our extension: a client that sends it with ``1`` asks the bridge to
+confirm each accepted advertise/subscribe/advertise_service/advertise_action with a
+``status`` ``info`` naming the request's id (``ok: <op> <name>``); a bridge that will do so
+answers the handshake with the same header. Stock servers ignore it, and are then never waited for.
+"""
 
 COMPRESSIONS = ("none", "cbor", "cbor-raw", "png")
 """Compression names a subscribe may ask for (png is legacy and refused by our bridge)."""

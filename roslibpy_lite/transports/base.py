@@ -13,19 +13,13 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any, Protocol
 
+from ..ops import ACKS_HEADER  # re-exported: where transports have always found it
+
 if TYPE_CHECKING:
     from .. import ops
     from ..exceptions import ConnectionClosed
 
 __all__ = ["ACKS_HEADER", "Link", "Transport"]
-
-ACKS_HEADER = "X-Rosbridge-Acks"
-"""Handshake header of our extension: a client that sends it with ``1`` asks the bridge to
-confirm each accepted advertise/subscribe/advertise_service/advertise_action with a
-``status`` ``info`` naming the request's id (``ok: <op> <name>``); a bridge that will do so
-answers the handshake with the same header. Stock servers ignore it, and are then never waited for.
-"""
-
 
 class Link(Protocol):
     """What a transport calls on the front that owns it."""
