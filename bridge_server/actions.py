@@ -470,12 +470,14 @@ class SessionActions:
                 return
             owner.drop_served(name, f"taken over by client {session.sid}")
         elif owner is None and old is None and _server_types(session, name + _GOAL_SUFFIX):
-            session.status(
-                "warning",
-                f"advertise_action: another ROS node already serves {name}; "
-                "goals may reach either",
-                op.id,
-            )
+            others = session.ros.other_servers(name + _GOAL_SUFFIX)
+            if others and not session.gate.may_take_over(name, None):
+                session.error(
+                    f"advertise_action: {name} is already served by the ROS node {others[0]}; "
+                    "a bridge client may serve it too only with the take_over capability",
+                    op.id,
+                )
+                return
         served = _Served(name, op.action, type_name)
         served.ros = ServedAction(
             session.ros, name, action_cls,
@@ -495,7 +497,7 @@ class SessionActions:
         except (TimeoutError, ConnectionClosed):
             alive = False
         session = self.session
-        if session._closed:
+        if session.closed:
             return
         if alive and self._owners.get(name) is owner:
             session.error(
@@ -508,12 +510,12 @@ class SessionActions:
             log.warning("client %d serves %s but did not answer a ping in %s s: client %d "
                         "takes the action", owner.session.sid, name, OWNER_PING_TIMEOUT,
                         session.sid)
-            owner.session.gate.unresponsive = True  # its names may be taken now
+            owner.session.gate.freed.add(name)  # this name, for this claim
         session.handle_op(op)  # decide again
 
     def _on_ros_goal(self, served: _Served, goal: ServedGoal) -> None:
         session = self.session
-        if self.served.get(served.name) is not served or session._closed:
+        if self.served.get(served.name) is not served or session.closed:
             goal.finish(Status.ABORTED)
             return
         gid = f"action_goal:{served.wire}:{next(self._goal_ids)}"

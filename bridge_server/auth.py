@@ -211,8 +211,12 @@ class FailureTracker:
         return count
 
     def succeeded(self, address: str) -> None:
-        """Forget the address's failures."""
-        self._seen.pop(address, None)
+        """A valid token from ``address``: its failures are NOT forgotten.
+
+        Failures are counted per address whatever succeeds in between, so a guesser who
+        also holds one valid token cannot interleave logins to reset the count; they age
+        out after :data:`FORGET_AFTER` seconds without a new failure.
+        """
 
 
 # -- the helper command ----------------------------------------------------------------------

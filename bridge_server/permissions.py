@@ -26,6 +26,7 @@ op type in one table, so new op classes are covered by adding a line.
 from __future__ import annotations
 
 import fnmatch
+import re
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
@@ -38,7 +39,9 @@ __all__ = [
     "CAPABILITIES",
     "Role",
     "RoleError",
+    "UnsafeNameError",
     "filter_rosapi",
+    "hidden_requirement",
     "requirement",
     "rosapi_requirement",
 ]
@@ -108,8 +111,13 @@ class Role:
         return found
 
     def has(self, capability: str) -> bool:
-        """Whether the role grants ``capability`` on any name at all."""
-        return bool(self.allow.get(capability))
+        """Whether the role grants ``capability`` on some name (checks that name none).
+
+        A deny pattern that matches every name (``*``) takes the capability away here too.
+        """
+        return bool(self.allow.get(capability)) and not any(
+            p.strip("*") == "" for p in self.deny.get(capability, ())
+        )
 
 
 def _matches(patterns: tuple[str, ...], name: str) -> bool:
@@ -145,7 +153,65 @@ def requirement(op: Any) -> tuple[str, str] | None:
     return entry[0], entry[1](op)
 
 
+# -- names that belong to another capability --------------------------------------------------
+
+_ACTION_PART = "/_action/"
+_ACTION_SERVICES = ("send_goal", "cancel_goal", "get_result")
+_ACTION_TOPICS = ("feedback", "status")
+PARAMETER_SERVICES = (
+    "describe_parameters",
+    "get_parameter_types",
+    "get_parameters",
+    "list_parameters",
+    "set_parameters",
+    "set_parameters_atomically",
+)
+"""The services every rclpy/rclcpp node offers under its own name for its parameters."""
+PARAMETER_EVENTS = "/parameter_events"
+
+
+def hidden_requirement(capability: str, name: str) -> tuple[str, str]:
+    """What using ``name`` with ``capability`` really needs, when the name is another
+    capability's internals.
+
+    An action ``/a`` is made of services ``/a/_action/send_goal|cancel_goal|get_result`` and
+    topics ``/a/_action/feedback|status``; a node's parameters are reached through its
+    services ``/node/get_parameters``, ``/node/set_parameters``, ... and reported on
+    ``/parameter_events``. Calling, subscribing or publishing those as plain names must need
+    the capability that governs what they do, whatever the role's ``call_service`` or
+    ``subscribe`` globs say:
+
+    - an action's services and topics need ``send_action_goal`` on the action to call or
+      subscribe, ``serve_action`` on it to publish;
+    - a node's parameter services need ``params`` on every parameter of the node
+      (``/node:*`` must match, so ``/node:*_display`` alone is not enough);
+    - ``/parameter_events`` needs ``params`` on every parameter of every node (``*:*``).
+    """
+    head, sep, tail = name.rpartition(_ACTION_PART)
+    if sep and head:
+        if capability == "call_service" and tail in _ACTION_SERVICES:
+            return "send_action_goal", head
+        if capability == "subscribe" and tail in _ACTION_TOPICS:
+            return "send_action_goal", head
+        if capability == "publish" and tail in _ACTION_TOPICS:
+            return "serve_action", head
+    if capability == "call_service":
+        node, _, service = name.rpartition("/")
+        if node and service in PARAMETER_SERVICES:
+            return "params", f"{node}:*"
+    if name == PARAMETER_EVENTS and capability in ("subscribe", "publish"):
+        return "params", "*:*"
+    return capability, name
+
+
 # -- rosapi: which capability a call needs, and filtering of the lists it answers ------------
+
+_CONTROL = re.compile(r"[\x00-\x1f\x7f-\x9f\u2028\u2029]")
+
+
+class UnsafeNameError(BridgeError):
+    """A name in a request holds characters no ROS name has (the text quotes it)."""
+
 
 _PARAM_SERVICES = {"/rosapi/get_param", "/rosapi/has_param", "/rosapi/set_param",
                    "/rosapi/delete_param"}
@@ -160,6 +226,13 @@ def rosapi_requirement(service: str, args: Mapping[str, Any]) -> tuple[str, str]
     type definitions, time) need ``introspection`` on anything (``*`` is
     checked as "any pattern at all", see :meth:`Role.has`).
     """
+    for key in ("name", *_NAME_ARGS):
+        value = args.get(key)
+        if isinstance(value, str) and _CONTROL.search(value):
+            raise UnsafeNameError(
+                f"{service}: {key} {value!r} contains a control character (such as NUL); "
+                "ROS names never do"
+            )
     if service in _PARAM_SERVICES:
         name = args.get("name")
         if isinstance(name, str):

@@ -565,6 +565,22 @@ class RosNode:
                 return list(types)
         return []
 
+    def other_servers(self, service: str) -> list[str]:
+        """Nodes other than the bridge's own that the ROS graph lists as serving ``service``."""
+        node = self.node
+        me = (node.get_name(), node.get_namespace())
+        found = []
+        for name, namespace in node.get_node_names_and_namespaces():
+            if (name, namespace) == me:
+                continue
+            try:
+                served = node.get_service_names_and_types_by_node(name, namespace)
+            except Exception:  # the node left between the two graph queries
+                continue
+            if any(s == service for s, _ in served):
+                found.append(namespace.rstrip("/") + "/" + name)
+        return found
+
     def now(self) -> tuple[int, int]:
         """The node clock's time as (sec, nanosec)."""
         t = self.node.get_clock().now().seconds_nanoseconds()

@@ -168,17 +168,19 @@ class _Sub:
         self.report_timer: asyncio.TimerHandle | None = None
         self.active = True
 
-    def configure(self, default_len: int) -> None:
-        """Merge the options of every id: least throttle, largest queue, least fragment size."""
+    def configure(self, default_len: int, max_len: int = 0, min_fragment: int = 0) -> None:
+        """Merge the options of every id: least throttle, largest queue, least fragment size
+        (the queue at most ``max_len``, fragments at least ``min_fragment`` bytes)."""
         subs = list(self.ids.values())
         self.throttle = min(s.throttle_rate for s in subs) / 1000.0
         lens = [s.queue_length or default_len for s in subs]
-        self.maxlen = max(lens)
+        self.maxlen = min(max(lens), max_len) if max_len else max(lens)
         sizes = [s.fragment_size for s in subs if s.fragment_size]
-        self.fragment_size = min(sizes) if sizes else None
+        self.fragment_size = max(min(sizes), min_fragment) if sizes else None
         self.compression = subs[-1].compression
         while len(self.queue) > self.maxlen:
             self.queue.popleft()
+            self.session.queued -= 1
 
     def on_message(self, inc: Incoming) -> None:
         """Called on the loop for each message of the topic: throttle, then queue."""
@@ -201,22 +203,30 @@ class _Sub:
             self.push(inc)
 
     def push(self, inc: Incoming) -> None:
-        """Queue one message, dropping this subscription's oldest when full."""
+        """Queue one message, dropping this subscription's oldest when full (or when the
+        client's queues hold :attr:`Session.max_queued` messages in all)."""
         q = self.queue
         s = self.session
-        if len(q) >= self.maxlen:
+        if len(q) >= self.maxlen or (s.queued >= s.max_queued and q):
             q.popleft()
             self.dropped += 1
             self.dropped_total += 1
             s._note_drop(self)
+        elif s.queued >= s.max_queued:  # full with other subscriptions' messages: drop this one
+            self.dropped += 1
+            self.dropped_total += 1
+            s._note_drop(self)
+            return
         else:
             s._order.append(self)
+            s.queued += 1
         q.append(inc)
         s._wake.set()
 
     def close(self) -> None:
         """Stop delivering: clear the queue and any throttle timer."""
         self.active = False
+        self.session.queued -= len(self.queue)
         self.queue.clear()
         if self.report_timer is not None:
             self.report_timer.cancel()
@@ -281,6 +291,9 @@ class Session:
         self.errors_sent = 0
         self._control: deque[str | bytes] = deque()
         self._order: deque[_Sub] = deque()
+        limits = bridge.security.config
+        self.queued = 0  # messages in all of this client's subscription queues
+        self.max_queued = limits.max_queued_messages or 1 << 62
         self._wake = asyncio.Event()
         self._closed = False
         self._frag_ids = itertools.count()
@@ -352,6 +365,7 @@ class Session:
             if not sub.queue:
                 continue
             inc = sub.queue.popleft()
+            self.queued -= 1
             try:
                 encoded = self._frames(sub, inc)
             except Exception:
@@ -494,6 +508,10 @@ class Session:
             op = (self.protocol.receive(frame) if self.gate.authenticated
                   else parse_op(decode_frame(frame)))
         except ProtocolError as exc:
+            if not self.gate.authenticated:  # one answer, not one per frame of a flood
+                self.gate.close(f"authentication required: the first op must be auth "
+                                f"({exc.message[:60]})")
+                return
             self.error(exc.message, exc.id, "protocol")
             return
         except Exception as exc:  # the core promises ProtocolError; stay up regardless
@@ -653,6 +671,7 @@ class Session:
                 op.id,
             )
             op = dataclasses.replace(op, compression="none")
+        self._warn_limits(op, topic)
         cls: type[Any] | None = None
         if op.type is None:
             graph = self.ros.topic_types(topic)
@@ -673,7 +692,7 @@ class Session:
         if sub is None:
             sub = _Sub(self, topic, op.topic)
             sub.ids[op.id] = op
-            sub.configure(self.config.default_queue_length)
+            self._configure(sub)
             try:
                 sub.shared = self.ros.subscribe(topic, cls, sub.on_message)
             except ValueError as exc:
@@ -700,7 +719,7 @@ class Session:
                 )
                 return
         sub.ids[op.id] = op
-        sub.configure(self.config.default_queue_length)
+        self._configure(sub)
 
     def unsubscribe(self, op: ops.Unsubscribe) -> None:
         """Remove one id (or, without id, every id) of the client's subscription."""
@@ -717,10 +736,27 @@ class Session:
         else:
             sub.ids.clear()
         if sub.ids:
-            sub.configure(self.config.default_queue_length)
+            self._configure(sub)
             return
         del self.subs[topic]
         self._drop_sub(sub)
+
+    def _configure(self, sub: _Sub) -> None:
+        """Apply the merged options of a subscription's ids, within the bridge's limits."""
+        limits = self.bridge.security.config
+        sub.configure(self.config.default_queue_length, limits.max_queue_length,
+                      limits.min_fragment_size)
+
+    def _warn_limits(self, op: ops.Subscribe, topic: str) -> None:
+        """Say which of a subscribe's options the bridge's limits lower or raise."""
+        limits = self.bridge.security.config
+        if limits.max_queue_length and op.queue_length > limits.max_queue_length:
+            self.status("warning", f"subscribe to {topic}: queue_length {op.queue_length} is "
+                        f"over this bridge's limit; using {limits.max_queue_length}", op.id)
+        size = op.fragment_size
+        if size is not None and 0 < size < limits.min_fragment_size:
+            self.status("warning", f"subscribe to {topic}: fragment_size {size} is under this "
+                        f"bridge's floor; using {limits.min_fragment_size} bytes", op.id)
 
     def _drop_sub(self, sub: _Sub) -> None:
         sub.close()
@@ -884,12 +920,15 @@ class Session:
                 return
             owner.drop_served(name, f"taken over by client {self.sid}")
         elif owner is None and self.ros.service_types(name):
-            self.status(
-                "warning",
-                f"advertise_service: another ROS node already serves {name}; "
-                "callers may reach either",
-                op.id,
-            )
+            others = self.ros.other_servers(name)
+            if others and not self.gate.may_take_over(name, None):
+                self.error(
+                    f"advertise_service: {name} is already served by the ROS node "
+                    f"{others[0]}; a bridge client may serve it too only with the take_over "
+                    "capability",
+                    op.id,
+                )
+                return
         served = _Served(name, type_name, op.service)
         served.ros = self.ros.serve(
             name, srv_cls, lambda pending: self._on_ros_request(served, pending)

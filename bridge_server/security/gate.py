@@ -19,8 +19,16 @@ from roslibpy_lite import ops
 from .. import rosapi
 from ..auth import Principal
 from ..names import InvalidNameError, check_name
-from ..permissions import Role, filter_rosapi, requirement, rosapi_requirement
+from ..permissions import (
+    Role,
+    UnsafeNameError,
+    filter_rosapi,
+    hidden_requirement,
+    requirement,
+    rosapi_requirement,
+)
 from .credentials import client_address
+from .websockets_internals import BridgeConnection
 
 if TYPE_CHECKING:
     from ..session import Session
@@ -50,7 +58,7 @@ class Gate:
         self.role: Role | None = principal.role if principal is not None else None
         self.authenticated = security.auth is None or principal is not None
         self.closing = False
-        self.unresponsive = False  # set when this client failed to answer a ping in time
+        self.freed: set[str] = set()  # names this client failed to defend with a ping
         c = security.config
         self.rate = c.max_op_rate
         self.burst = float(c.op_burst or max(1, int(c.max_op_rate)))
@@ -140,23 +148,34 @@ class Gate:
         capability, name = need
         try:
             check_name(name, _WHAT[capability])
-        except InvalidNameError as exc:
+            if isinstance(op, ops.CallService) and (name in rosapi.HANDLERS
+                                                    or name in rosapi.ASYNC_HANDLERS):
+                governing = rosapi_requirement(name, _rosapi_args(name, op.args))
+            else:
+                governing = hidden_requirement(capability, name)
+        except (InvalidNameError, UnsafeNameError) as exc:
             self.deny(op, str(exc))
             return False
-        if self.role is not None and not self._allowed(op, capability, name):
+        if self.role is not None and not self.allowed(op, *governing, used=name):
             return False
         return self._within_caps(op, name)
 
-    def _allowed(self, op: Any, capability: str, name: str) -> bool:
+    def allowed(self, op: Any, capability: str, name: str, used: str | None = None) -> bool:
+        """Whether the role may use ``capability`` on ``name``; if not, ``op`` is refused.
+
+        ``used`` is the name the op named, when ``name`` is what governs it (an action's
+        internal service, a node's parameter service).
+        """
         role = self.role
-        assert role is not None
-        if isinstance(op, ops.CallService) and (name in rosapi.HANDLERS
-                                                or name in rosapi.ASYNC_HANDLERS):
-            capability, name = rosapi_requirement(name, _rosapi_args(name, op.args))
+        if role is None:
+            return True
         ok = role.has(capability) if name == "*" else role.allows(capability, name)
         if not ok:
             what = "any name" if name == "*" else name
-            self.deny(op, f"forbidden: role {role.name} may not {capability} on {what}")
+            why = f"forbidden: role {role.name} may not {capability} on {what}"
+            if used is not None and used != name and not used.startswith("/rosapi/"):
+                why += f" ({used} is part of it)"
+            self.deny(op, why)
         return ok
 
     def _within_caps(self, op: Any, name: str) -> bool:
@@ -164,6 +183,13 @@ class Gate:
         s = self.session
         have: Mapping[str, Any]
         if isinstance(op, ops.Subscribe):
+            sub = s.subs.get(name)
+            ids = c.max_subscription_ids
+            if sub is not None and ids and op.id not in sub.ids and len(sub.ids) >= ids:
+                # ids of one topic merge into one subscription, but each is work to merge
+                self.deny(op, f"too many subscription ids for {name} on this connection "
+                          f"(at most {ids})")
+                return False
             have, cap, what = s.subs, c.max_subscriptions, "subscriptions"
         elif isinstance(op, ops.Advertise | ops.Publish):
             have, cap, what = s.publishers, c.max_publishers, "publishers"
@@ -203,7 +229,12 @@ class Gate:
             self.close(locked[0])
             return
         principal = auth.verify(op.mac)
-        if principal is None or (self.principal is not None and principal is not self.principal):
+        if principal is not None and self.principal not in (None, principal):
+            log.warning("session %d: auth op for another principal refused", self.session.sid)
+            self.close(f"this connection is authenticated as {self.principal.name} already; "
+                       "open a new connection to use another token")
+            return
+        if principal is None:
             count = self.security.failures.failed(address)
             log.warning("session %d: auth op from %s with a wrong token (failure %d)",
                         self.session.sid, address, count)
@@ -212,6 +243,8 @@ class Gate:
         self.security.failures.succeeded(address)
         if self.principal is None:
             self.principal, self.role, self.authenticated = principal, principal.role, True
+            if isinstance(self.session.ws, BridgeConnection):
+                self.session.ws.limit_frames(None)  # frames up to --max-message-size again
             if self._timer is not None:
                 self._timer.cancel()
                 self._timer = None
@@ -221,15 +254,21 @@ class Gate:
     # -- what the session asks -------------------------------------------------------------------
 
     def may_take_over(self, name: str, owner_gate: Gate | None) -> bool:
-        """Whether this client may take ``name`` from the client that serves it now.
+        """Whether this client may take ``name`` from its current server.
 
-        The same principal may (it reconnected before the bridge saw the old
-        connection go), and anyone may once the owner's connection failed to
-        answer a ping; otherwise only a role with ``take_over`` on the name.
+        ``owner_gate`` is the gate of the bridge client serving it, or ``None`` when a ROS
+        node (or nobody the bridge knows) serves it. The same principal may (it reconnected
+        before the bridge saw the old connection go); a claim may once, for that name only,
+        when the owner failed to answer the claim's ping (:meth:`claim_if_owner_gone`);
+        otherwise only a role with ``take_over`` on the name. Without an auth file there are
+        no roles: only the first two apply.
         """
-        if owner_gate is not None and (owner_gate.unresponsive or (
-                self.principal is not None and owner_gate.principal is self.principal)):
-            return True
+        if owner_gate is not None:
+            if name in owner_gate.freed:
+                owner_gate.freed.discard(name)
+                return True
+            if self.principal is not None and owner_gate.principal is self.principal:
+                return True
         return self.role is not None and self.role.allows("take_over", name)
 
     def claim_if_owner_gone(self, op: ops.AdvertiseService, owner: Session) -> None:
@@ -268,7 +307,7 @@ class Gate:
             return
         log.warning("client %d serves %s but did not answer a ping in %s s: client %d takes "
                     "the service", owner.sid, name, OWNER_PING_TIMEOUT, session.sid)
-        owner.gate.unresponsive = True  # its names may be taken now (see may_take_over)
+        owner.gate.freed.add(name)  # this name, for this claim (see may_take_over)
         session.handle_op(op)
 
     def filter_rosapi(self, service: str, values: dict[str, Any]) -> dict[str, Any]:

@@ -17,7 +17,7 @@ from websockets.http11 import Request, Response
 
 from ..auth import AuthConfig, AuthFileError, FailureTracker, load_auth_file
 from .credentials import client_address, is_loopback, token_of
-from .gate import Gate
+from .gate import PRE_AUTH_FRAME_LIMIT, Gate
 from .options import SecurityConfig
 from .websockets_internals import BridgeConnection, Inbound, check_websockets_internals
 
@@ -185,8 +185,10 @@ class Security:
             response.headers["Retry-After"] = locked[1]
             return response
         token, where = token_of(request)
-        if token is None:
-            return None  # the first op must be auth (browsers, roslib's authenticate())
+        if token is None:  # the first op must be auth (browsers, roslib's authenticate())
+            if isinstance(connection, BridgeConnection):
+                connection.limit_frames(PRE_AUTH_FRAME_LIMIT)
+            return None
         principal = self.auth.verify(token)
         if principal is None:
             count = self.failures.failed(address)

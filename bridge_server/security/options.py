@@ -26,6 +26,10 @@ class SecurityConfig:
     max_publishers: int = 1000
     max_services: int = 1000
     max_goals: int = 1000
+    max_subscription_ids: int = 100
+    max_queue_length: int = 1000
+    max_queued_messages: int = 10_000
+    min_fragment_size: int = 1024
     inbound_budget: int = 32 * 1024 * 1024
     inbound_budget_total: int = 256 * 1024 * 1024
 
@@ -71,6 +75,19 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    f"(default {d.max_services})")
     g.add_argument("--max-goals", type=int, default=d.max_goals,
                    help=f"action goals one client may have in flight (default {d.max_goals})")
+    g.add_argument("--max-subscription-ids", type=int, default=d.max_subscription_ids,
+                   help="subscription ids one client may hold on one topic (they merge into one "
+                   f"subscription; default {d.max_subscription_ids})")
+    g.add_argument("--max-queue-length", type=int, default=d.max_queue_length,
+                   help="largest queue_length a subscription may ask for; larger ones are "
+                   f"lowered to it with a warning (default {d.max_queue_length})")
+    g.add_argument("--max-queued-messages", type=int, default=d.max_queued_messages,
+                   help="messages waiting to be sent to one client over all its subscriptions; "
+                   "over it the oldest of the subscription are dropped "
+                   f"(default {d.max_queued_messages})")
+    g.add_argument("--min-fragment-size", type=int, default=d.min_fragment_size,
+                   help="smallest fragment_size a subscription may ask for; smaller ones are "
+                   f"raised to it with a warning (default {d.min_fragment_size} bytes)")
     g.add_argument("--inbound-budget", type=int, default=d.inbound_budget,
                    help="bytes of received, not yet handled data per client before the bridge "
                    f"stops reading it (default {d.inbound_budget >> 20} MiB)")
@@ -96,6 +113,10 @@ def config_from_args(args: argparse.Namespace) -> SecurityConfig:
         max_publishers=args.max_publishers,
         max_services=args.max_services,
         max_goals=args.max_goals,
+        max_subscription_ids=args.max_subscription_ids,
+        max_queue_length=args.max_queue_length,
+        max_queued_messages=args.max_queued_messages,
+        min_fragment_size=args.min_fragment_size,
         inbound_budget=args.inbound_budget,
         inbound_budget_total=args.inbound_budget_total,
     )

@@ -124,6 +124,16 @@ class BridgeConnection(ServerConnection):
             resume=self.transport.resume_reading,
         )
 
+    def limit_frames(self, size: int | None) -> None:
+        """Refuse frames over ``size`` bytes from the next frame header on (``None``: the
+        configured ``max_size`` again). Set before the handshake response, it covers the
+        first frame too: a client announcing a bigger frame is closed (1009) at its header,
+        before the bridge holds any of it."""
+        protocol = self.protocol
+        if not hasattr(self, "_max_size"):
+            self._max_size = protocol.max_message_size
+        protocol.max_message_size = self._max_size if size is None else size
+
     def connection_lost(self, exc: Exception | None) -> None:
         """websockets' hook: no longer count this connection against the client limits."""
         super().connection_lost(exc)
@@ -157,6 +167,8 @@ def check_websockets_internals() -> None:
         problem = None if held == (2, True, True) and totals.bytes == 0 else f"counted {held}"
         if not hasattr(Connection, "connection_made") or len(limits) != 2:
             problem = "no connection_made or queue limits"
+        elif not isinstance(getattr(ServerProtocol(), "max_message_size", None), int):
+            problem = "no protocol.max_message_size (the pre-authentication frame limit)"
     except Exception as exc:
         problem = f"{type(exc).__name__}: {exc}"
     if problem is not None:

@@ -163,22 +163,28 @@ async def test_queue_length_drops_oldest_for_slow_reader(
 
 
 async def test_fragment_size_splits_outgoing(ws_connect: Any, ros_node: Any, topic: str):
-    """With fragment_size, a large publish arrives as fragment ops that reassemble into it."""
+    """With fragment_size, a large publish arrives as fragment ops that reassemble into it; a
+    size under the bridge's floor (1,024 bytes) is raised to it, with a warning saying so."""
     pub = ros_node.create_publisher(String, topic, 10)
     ws = await ws_connect()
-    await ws.send(
-        {"op": "subscribe", "topic": topic, "type": "std_msgs/String", "fragment_size": 16}
-    )
+    await ws.send({"op": "subscribe", "topic": topic, "type": "std_msgs/String",
+                   "fragment_size": 16, "id": "s"})
+    warning = await ws.expect(op="status", id="s")
+    assert warning["level"] == "warning" and "fragment_size 16" in warning["msg"]
+    assert "1024" in warning["msg"]
     await wait_subscribers(pub)
-    pub.publish(String(data="abcdefghij" * 10))
+    data = "abcdefghij" * 500
+    pub.publish(String(data=data))
     first = await ws.expect(op="fragment")
     pieces = {first["num"]: first["data"]}
+    assert first["total"] == -(-len(json.dumps({"op": "publish", "topic": topic,
+                                                "msg": {"data": data}})) // 1024)
     while len(pieces) < first["total"]:
         frag = await ws.expect(op="fragment", id=first["id"])
-        assert len(frag["data"]) <= 16
+        assert len(frag["data"]) <= 1024
         pieces[frag["num"]] = frag["data"]
     text = "".join(pieces[i] for i in range(first["total"]))
-    assert json.loads(text) == {"op": "publish", "topic": topic, "msg": {"data": "abcdefghij" * 10}}
+    assert json.loads(text) == {"op": "publish", "topic": topic, "msg": {"data": data}}
 
 
 async def test_compression_cbor(ws_connect: Any, ros_node: Any, topic: str):
