@@ -16,7 +16,8 @@ the feedback/result of served goals), ``params`` (the ``/node:param`` names
 of rosapi's get/set/has/delete_param and get_param_names), ``introspection``
 (the rosapi lists and lookups; answers list only the names it matches) and
 ``take_over`` (advertise a service another client serves; without it the
-first owner keeps the name). ``all`` grants every capability. Deny wins over
+first owner keeps the name) and ``clients`` (see where other clients connect
+from, on the status page). ``all`` grants every capability. Deny wins over
 allow.
 
 :func:`requirement` maps an op to the (capability, name) it needs, keyed by
@@ -56,6 +57,7 @@ CAPABILITIES = (
     "params",
     "introspection",
     "take_over",
+    "clients",
 )
 
 

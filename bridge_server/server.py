@@ -24,6 +24,7 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 from websockets.asyncio.server import Server, ServerConnection, serve
+from websockets.datastructures import MultipleValuesError
 
 from .actions import ActionClients, SessionActions
 from .metrics import Recorder
@@ -114,10 +115,15 @@ class Bridge:
 
     async def _process_request(self, connection: ServerConnection, request: Request) -> Any:
         """Before the handshake: plain-HTTP routes first (web.py), then the security checks."""
-        response = await self.web.process_request(connection, request)
-        if response is not None:
-            return response
-        refusal = await self.security.process_request(connection, request)
+        try:
+            response = await self.web.process_request(connection, request)
+            if response is not None:
+                return response
+            refusal = await self.security.process_request(connection, request)
+        except MultipleValuesError as exc:  # a header given twice that must be given once
+            log.warning("refused a request from %s: header %s sent more than once",
+                        _peer(connection), exc)
+            refusal = connection.respond(400, f"header {exc} sent more than once\n")
         if refusal is not None:  # counted by reason for /metrics
             code = refusal.status_code
             self.metrics.connection_refused(_REFUSALS.get(code, f"http_{code}"))

@@ -1085,6 +1085,42 @@ class Session:
             self._remove_served(served, why)
             self.status("warning", f"service {name}: {why}")
 
+    # -- grants --------------------------------------------------------------------------------
+
+    def recheck_grants(self) -> int:
+        """The role changed (SIGHUP): end at once what it no longer allows; how many ended.
+
+        Subscriptions, publishers, served services and served actions are checked against
+        the gate as a new op for them would be; the client hears of each one that ends.
+        """
+        gate = self.gate
+        ended = 0
+        for topic, sub in list(self.subs.items()):
+            why = gate.forbids("subscribe", topic)
+            if why is not None:
+                for op_id in list(sub.ids) or [None]:
+                    self.error(f"subscribe: subscription to {topic} ended: {why}", op_id)
+                del self.subs[topic]
+                self._drop_sub(sub)
+                ended += 1
+        for topic in list(self.publishers):
+            why = gate.forbids("publish", topic)
+            if why is not None:
+                self.ros.release_publisher(self.publishers.pop(topic))
+                self.error(f"advertise: publisher of {topic} ended: {why}")
+                ended += 1
+        for name in list(self.served):
+            why = gate.forbids("serve_service", name)
+            if why is not None:
+                self.drop_served(name, f"no longer served: {why}")
+                ended += 1
+        for name in list(self.actions.served):
+            why = gate.forbids("serve_action", name)
+            if why is not None:
+                self.actions.drop_served(name, f"no longer served: {why}")
+                ended += 1
+        return ended
+
     # -- misc ----------------------------------------------------------------------------------
 
     def set_level(self, op: ops.SetLevel) -> None:

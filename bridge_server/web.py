@@ -108,6 +108,8 @@ def visible(status: Mapping[str, Any], principal: Any, access: Access) -> dict[s
         if not ok("client", c["id"]):
             continue
         c = dict(c)
+        if not ok("address", c["id"]):
+            c["address"] = ""
         c["subscriptions"] = [s for s in c["subscriptions"] if ok("topic", s["topic"])]
         c["publishes"] = [t for t in c["publishes"] if ok("topic", t)]
         c["serves"] = [s for s in c["serves"] if ok("service", s)]
@@ -204,7 +206,7 @@ class Web:
         self, connection: ServerConnection, request: Request
     ) -> Response | None:
         """websockets' ``process_request``: answer a plain-HTTP route, or ``None`` to go on."""
-        if "upgrade" in request.headers.get("Connection", "").lower():
+        if any("upgrade" in v.lower() for v in request.headers.get_all("Connection")):
             return None
         addr = connection.remote_address
         reply = await self.answer(request, str(addr[0]) if isinstance(addr, tuple) else str(addr))
@@ -226,7 +228,7 @@ class Web:
         """websockets' ``process_response``: name the worker on every response."""
         if "X-Bridge-Worker" not in response.headers:
             response.headers["X-Bridge-Worker"] = str(self.bridge.config.worker_index)
-        if request.headers.get(ACKS_HEADER) == "1":  # we confirm requests (session.py)
+        if "1" in request.headers.get_all(ACKS_HEADER):  # we confirm requests (session.py)
             response.headers[ACKS_HEADER] = "1"
 
     async def answer(self, request: Request, address: str) -> Reply | None:

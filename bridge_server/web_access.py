@@ -71,6 +71,8 @@ class WebAccess(Access):
         if not isinstance(principal, Principal):
             return kind == "route" and name.startswith("/static/")
         role = principal.role
+        if kind == "address":  # where other clients connect from
+            return role.has("clients")
         if kind in ("route", "client"):
             return role.has("introspection")
         return role.allows("introspection", name)

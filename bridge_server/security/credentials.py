@@ -32,7 +32,10 @@ def is_loopback(host: str) -> bool:
 def token_of(request: Request) -> tuple[str | None, str]:
     """The token a handshake request carries and where (``None``: none at all; ``""``: a
     malformed ``Authorization`` header, which counts as a wrong token)."""
-    header = request.headers.get("Authorization")
+    headers = request.headers.get_all("Authorization")
+    if len(headers) > 1:
+        return "", "Authorization header (sent more than once)"
+    header = headers[0] if headers else None
     if header is not None:
         scheme, _, value = header.strip().partition(" ")
         if scheme.lower() == "bearer" and value.strip():

@@ -178,6 +178,16 @@ class Gate:
             self.deny(op, why)
         return ok
 
+    def forbids(self, capability: str, name: str) -> str | None:
+        """Why the role may not use ``capability`` on ``name`` now (``None``: it may)."""
+        role = self.role
+        if role is None:
+            return None
+        capability, governing = hidden_requirement(capability, name)
+        if role.allows(capability, governing):
+            return None
+        return f"role {role.name} may not {capability} on {governing}"
+
     def _within_caps(self, op: Any, name: str) -> bool:
         c = self.security.config
         s = self.session

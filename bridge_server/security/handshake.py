@@ -95,7 +95,7 @@ class Security:
                 return False
             self.auth = auth
             now = {(p.name, p.salt, p.digest): p for p in auth.principals}
-            revoked = 0
+            revoked = ended = 0
             for gate in gates:
                 old = gate.principal
                 if old is None:
@@ -107,9 +107,10 @@ class Security:
                                "in the auth file with that token")
                 else:
                     gate.principal, gate.role = new, new.role
+                    ended += gate.session.recheck_grants()
             log.info("reloaded the auth file %s: %d principal(s), %d role(s); %d session(s) "
-                     "closed as revoked", c.auth_file, len(auth.principals), len(auth.roles),
-                     revoked)
+                     "closed as revoked, %d grant(s) the new roles no longer allow ended",
+                     c.auth_file, len(auth.principals), len(auth.roles), revoked, ended)
         return ok
 
     def serve_kwargs(self) -> dict[str, Any]:
@@ -148,7 +149,11 @@ class Security:
         """Origins, client limits, lock-out and token: an HTTP refusal, or ``None`` to go on."""
         c = self.config
         address = client_address(connection)
-        origin = request.headers.get("Origin")
+        origins = request.headers.get_all("Origin")
+        if len(origins) > 1:
+            log.warning("refused a client from %s: %d Origin headers", address, len(origins))
+            return connection.respond(400, "more than one Origin header\n")
+        origin = origins[0] if origins else None
         if c.allowed_origins is not None and origin is not None and origin not in c.allowed_origins:
             log.warning("refused a client from %s: origin %.100r is not allowed", address, origin)
             return connection.respond(403, f"origin {origin[:100]!r} is not allowed here\n")
