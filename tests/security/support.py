@@ -27,6 +27,16 @@ params = ["/seen_node:*"]
 
 [roles.server]
 serve_service = ["*"]
+
+[roles.prober]
+call_service = ["/probe/*"]
+subscribe = ["/probe/*"]
+publish = ["/probe/*"]
+params = ["*_display"]
+
+[roles.blind]
+introspection = ["*"]
+deny.introspection = ["*"]
 """
 """The example roles (viewer, operator, admin) and the tests' own; a principal per role."""
 
@@ -80,7 +90,8 @@ def make_auth_file(tmp: Path) -> AuthFile:
     """Write the test auth file; tokens are made now and kept only in memory."""
     auth = AuthFile(tmp / "auth.toml")
     text = ROLES
-    principals = [(r, r) for r in ("viewer", "tester", "admin", "nothing", "narrow", "server")]
+    principals = [(r, r) for r in ("viewer", "tester", "admin", "nothing", "narrow", "server",
+                                   "prober", "blind")]
     principals.append(("server_b", "server"))  # a second principal with the same role
     for name, role in principals:
         token = auth.tokens[name] = new_token()
