@@ -47,6 +47,12 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         "clouds or maps)",
     )
     p.add_argument(
+        "--node-name",
+        default=None,
+        help="the bridge's ROS node name (default roslibpy_lite_bridge_<process id>, so that "
+        "several bridges on one ROS domain never share one)",
+    )
+    p.add_argument(
         "--send-queue",
         type=int,
         default=DEFAULT_QUEUE_LENGTH,
@@ -129,6 +135,7 @@ async def _run(args: argparse.Namespace) -> int:
         metrics_port=args.metrics_port,
         worker_index=args.worker_index or 0,
         worker_dir=args.worker_dir,
+        **({"node_name": args.node_name} if args.node_name else {}),
         session=SessionConfig(
             default_queue_length=args.send_queue,
             call_timeout=args.call_timeout,
@@ -155,6 +162,8 @@ async def _run(args: argparse.Namespace) -> int:
     else:
         scheme = "wss" if args.certfile else "ws"
         log.info("bridge_server listening on %s://%s:%d", scheme, args.host, bridge.port)
+    log.info("ROS node /%s on ROS_DOMAIN_ID %s", config.node_name,
+             os.environ.get("ROS_DOMAIN_ID", "0"))
     bridge.security.startup_warnings(args.host)
     await stop.wait()
     log.info("bridge_server shutting down")

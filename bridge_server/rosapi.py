@@ -107,15 +107,18 @@ def _own_services() -> list[tuple[str, str]]:
 
 
 def _all_services(bridge: Bridge) -> list[tuple[str, str]]:
-    """Services that have a server (the graph also lists names that only have clients)."""
+    """Services that have a server (the graph also lists names that only have clients).
+
+    Servers are counted by service name, never looked up by node name: several nodes may
+    share a name (two bridges started with the same ``--node-name``, or any two nodes a
+    careless launch file named alike), and a by-node query sees only one of them.
+    """
     node = bridge.ros.node
-    found: set[tuple[str, str]] = set()
-    for n, ns in _node_names(bridge):
-        try:
-            served = node.get_service_names_and_types_by_node(n, ns)
-        except Exception:  # the node went away meanwhile
-            continue
-        found.update((name, types[0] if types else "") for name, types in served)
+    found = {
+        (name, types[0] if types else "")
+        for name, types in node.get_service_names_and_types()
+        if node.count_services(name) > 0
+    }
     return sorted(found | set(_own_services()))
 
 

@@ -19,6 +19,7 @@ import asyncio
 import contextlib
 import itertools
 import logging
+import os
 import time
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
@@ -55,13 +56,26 @@ class BridgeConfig:
     write_limit: int = 256 * 1024
     compression: bool = False
     publisher_grace: float = 2.0
-    node_name: str = "roslibpy_lite_bridge"
+    node_name: str = field(default_factory=lambda: default_node_name())  # see default_node_name
     refresh_interval: float = 0.5
     session: SessionConfig = field(default_factory=SessionConfig)
     security: SecurityConfig = field(default_factory=SecurityConfig)  # TLS, auth, limits
     metrics_port: int | None = None  # /metrics (and the other plain routes) on another port
     worker_index: int = 0  # with --workers: this process's index, and the peers' socket dir
     worker_dir: str | None = None
+
+
+NODE_NAME_PREFIX = "roslibpy_lite_bridge"
+
+
+def default_node_name() -> str:
+    """A ROS node name no other bridge on the domain has: the prefix and this process's id.
+
+    Several bridges on one ROS domain (a loopback one beside a secured one, one per robot
+    on a shared network) must not share a node name: ROS graph queries by node name would
+    mix them up. ``--node-name`` sets a stable name instead.
+    """
+    return f"{NODE_NAME_PREFIX}_{os.getpid()}"
 
 
 class Bridge:

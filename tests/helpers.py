@@ -160,6 +160,14 @@ class BridgeProcess:
                     raise AssertionError(f"bridge never logged /{pattern}/:\n" + self.log())
                 self._cond.wait(left)
 
+    @property
+    def node_name(self) -> str:
+        """The bridge's fully qualified ROS node name (from its start-up line)."""
+        line = self.wait_for_line(r"ROS node /\S+ on ROS_DOMAIN_ID")
+        match = re.search(r"ROS node (/\S+)", line)
+        assert match is not None
+        return match.group(1)
+
     def log(self) -> str:
         """Everything the bridge printed so far."""
         with self._cond:

@@ -16,6 +16,7 @@ from std_srvs.srv import SetBool
 from test_msgs.action import Fibonacci
 
 from tests.bridge.support import roundtrip
+from tests.helpers import BridgeProcess
 
 pytestmark = pytest.mark.asyncio
 
@@ -111,21 +112,23 @@ async def test_service_node(ws_connect: Any, ros_node: Any, topic: str):
                  lambda v: v["node"] == _fq(ros_node))
 
 
-async def test_service_node_of_a_client_served_service(ws_connect: Any, topic: str):
+async def test_service_node_of_a_client_served_service(
+    ws_connect: Any, bridge: BridgeProcess, topic: str
+):
     """/rosapi/service_node names the bridge's node for a service one of its clients serves."""
     server = await ws_connect()
     await server.send({"op": "advertise_service", "service": topic, "type": "std_srvs/SetBool"})
     ws = await ws_connect()
     await roundtrip(server)  # the advertise has been handled
     values = await _call(ws, "/rosapi/service_node", {"service": topic})
-    assert values == {"node": "/roslibpy_lite_bridge"}
+    assert values == {"node": bridge.node_name}
 
 
-async def test_nodes_fully_qualified(ws_connect: Any, ros_node: Any):
+async def test_nodes_fully_qualified(ws_connect: Any, bridge: BridgeProcess, ros_node: Any):
     """/rosapi/nodes lists fully qualified node names, the bridge's own included."""
     ws = await ws_connect()
     values = await _until(ws, "/rosapi/nodes", None, lambda v: _fq(ros_node) in v["nodes"])
-    assert "/roslibpy_lite_bridge" in values["nodes"]
+    assert bridge.node_name in values["nodes"]
     assert all(n.startswith("/") for n in values["nodes"])
 
 
@@ -153,7 +156,7 @@ async def test_node_details_unknown_node_fails(ws_connect: Any):
     assert reply["result"] is False and "/no/such_node" in reply["values"]
 
 
-async def test_publishers_and_subscribers(ws_connect: Any, ros_node: Any, topic: str):
+async def test_publishers_and_subscribers(ws_connect: Any, bridge: BridgeProcess, ros_node: Any, topic: str):
     """/rosapi/publishers and /rosapi/subscribers name the nodes on each side of a topic."""
     ros_node.create_publisher(String, topic, 10)
     ws = await ws_connect()
@@ -161,7 +164,7 @@ async def test_publishers_and_subscribers(ws_connect: Any, ros_node: Any, topic:
                  lambda v: v["publishers"] == [_fq(ros_node)])
     await ws.send({"op": "subscribe", "topic": topic, "type": "std_msgs/String"})
     await _until(ws, "/rosapi/subscribers", {"topic": topic},
-                 lambda v: "/roslibpy_lite_bridge" in v["subscribers"])
+                 lambda v: bridge.node_name in v["subscribers"])
 
 
 async def test_action_servers(ws_connect: Any, ros_node: Any, topic: str):

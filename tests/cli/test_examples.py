@@ -24,7 +24,7 @@ EXPECT = {
     'action send_goal /integrate_imu mult_msgs/action/IntegrateImu "{seconds: 0.5}" --feedback':
         r"(?s)\ASending goal:\n  seconds: 0\.5\n.*Result:\n  total:\n.*samples: \d+\n"
         r"\nGoal finished with status: SUCCEEDED\n\Z",
-    "node list": r"(?m)^/roslibpy_lite_bridge$",
+    "node list": r"(?m)^/roslibpy_lite_bridge_\d+$",
     "interface show sensor_msgs/msg/Imu":
         r"(?m)^geometry_msgs/Vector3 angular_velocity\n(\t#.*\n|\n)*\tfloat64 x$",
 }

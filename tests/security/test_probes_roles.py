@@ -113,7 +113,8 @@ async def test_nul_in_a_rosapi_parameter_name_is_refused(connect_as: Any, ros_no
     await prober.send({"op": "call_service", "service": "/rosapi/set_param", "id": "ok",
                        "args": {"name": f"{node}:brightness_display", "value": "0.7"},
                        "timeout": 30})
-    assert (await prober.expect(op="service_response", id="ok"))["result"] is True
+    reply = await prober.expect(op="service_response", id="ok")
+    assert reply["result"] is True, reply
     assert ros_node.get_parameter("brightness_display").value == pytest.approx(0.7)
     assert ros_node.get_parameter("speed_limit").get_parameter_value().double_value == 1.0
     assert ros_node.get_parameter("speed_limit").type_ == Parameter.Type.DOUBLE
