@@ -22,6 +22,7 @@ from .exceptions import LocalProtocolError, RemoteProtocolError
 
 __all__ = [
     "ACKS_HEADER",
+    "AUTH_HEADER",
     "ActionFeedback",
     "ActionResult",
     "Advertise",
@@ -58,6 +59,11 @@ confirm each accepted advertise/subscribe/advertise_service/advertise_action wit
 ``status`` ``info`` naming the request's id (``ok: <op> <name>``); a bridge that will do so
 answers the handshake with the same header. Stock servers ignore it, and are then never waited for.
 """
+
+AUTH_HEADER = "X-Rosbridge-Auth"
+"""Handshake response header of our bridge: ``required`` when it requires a token and this
+connection brought none (it must then send an ``auth`` op first). A client that has no token
+to send can fail at once, saying so, instead of failing at its first op."""
 
 COMPRESSIONS = ("none", "cbor", "cbor-raw", "png")
 """Compression names a subscribe may ask for (png is legacy and refused by our bridge)."""

@@ -270,9 +270,12 @@ async def with_session(args: argparse.Namespace, body: Callable[[Session], Await
         ros = await connect(args.url, reconnect=False, open_timeout=args.timeout,
                             token=args.token, ssl=args.cafile if secure else None)
     except NotAuthenticated as exc:
-        raise CliError(EXIT_CONNECT, f"{exc} (set --token or $ROSLIBPY_LITE_TOKEN)") from None
+        text = str(exc)
+        if "--token" not in text and "too many failed" not in text:
+            text += " (set --token or $ROSLIBPY_LITE_TOKEN)"
+        raise CliError(EXIT_CONNECT, text) from None
     except TLSError as exc:
-        raise CliError(EXIT_CONNECT, f"{exc} (--cafile or $ROSLIBPY_LITE_CAFILE)") from None
+        raise CliError(EXIT_CONNECT, str(exc)) from None  # its text names --cafile where it helps
     except ConnectError as exc:
         raise CliError(EXIT_CONNECT, f"{exc} (is the bridge running? set --url or "
                                      "$ROSLIBPY_LITE_URL)") from None

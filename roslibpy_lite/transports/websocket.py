@@ -17,6 +17,7 @@ import ssl
 from collections import deque
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
+from urllib.parse import urlsplit
 
 from websockets.asyncio.client import ClientConnection
 from websockets.asyncio.client import connect as ws_connect
@@ -34,8 +35,8 @@ from ..exceptions import (
     TLSError,
     UsageError,
 )
+from ..ops import ACKS_HEADER, AUTH_HEADER
 from ..protocol import Protocol
-from .base import ACKS_HEADER
 
 if TYPE_CHECKING:
     from .base import Link
@@ -63,7 +64,7 @@ class WebSocketTransport:
         token: str | None = None,
         ssl_context: ssl.SSLContext | None = None,
     ) -> None:
-        self.url = url
+        self.url = with_default_port(url)
         self.reconnect = reconnect
         self.backoff = backoff or Backoff()
         self.open_timeout = open_timeout
@@ -78,6 +79,7 @@ class WebSocketTransport:
             "proxy": proxy,
             "additional_headers": {ACKS_HEADER: "1"},
         }
+        self._has_token = token is not None
         if token is not None:  # never logged: it is only ever in this header
             self._ws_options["additional_headers"]["Authorization"] = f"Bearer {token}"
         if ssl_context is not None:
@@ -152,7 +154,7 @@ class WebSocketTransport:
                     ws = await ws_connect(self.url, open_timeout=self._attempt_timeout(deadline),
                                           **self._ws_options)
                 except (OSError, InvalidHandshake, TimeoutError) as exc:
-                    refused = _refusal(self.url, exc)
+                    refused = _refusal(self.url, exc) or await _plain_to_tls(self.url, exc)
                     if refused is not None:  # a refused token or certificate: retrying cannot help
                         if not self._fail_first(refused):
                             log.error("%s", refused)
@@ -186,6 +188,16 @@ class WebSocketTransport:
                     log.warning("connect to %s failed: %s", self.url, _why(exc))
                     await asyncio.sleep(self.backoff.next())
                     continue
+                if (not self._has_token and ws.response is not None
+                        and ws.response.headers.get(AUTH_HEADER) == "required"):
+                    await ws.close()
+                    refused = NotAuthenticated(
+                        f"the bridge at {self.url} requires a token: give one (token=... in "
+                        "Python, --token or $ROSLIBPY_LITE_TOKEN on the command line)")
+                    if not self._fail_first(refused):
+                        log.error("%s", refused)
+                        link._shutdown(refused)
+                    return
                 self.connects += 1
                 self.acks = ws.response is not None and ws.response.headers.get(ACKS_HEADER) == "1"
                 opened = loop.time()
@@ -334,15 +346,30 @@ def _refusal(url: str, exc: BaseException) -> ConnectError | None:
     if isinstance(exc, InvalidStatus):
         code = exc.response.status_code
         text = bytes(exc.response.body or b"").decode(errors="replace").strip()
-        if code == 401 or (code == 429 and "authentication" in text):
+        if code == 429 and "authentication" in text:
+            retry = exc.response.headers.get("Retry-After", "a few")
+            return NotAuthenticated(
+                f"the bridge at {url} refuses this address for now: too many failed "
+                f"authentication attempts came from it; retry after {retry} s (this is no "
+                "verdict on the token given)")
+        if code == 401:
             return NotAuthenticated(f"the bridge at {url} refused our token (HTTP {code}): {text}")
         if code == 403:
             return ConnectError(f"the bridge at {url} refused the connection (HTTP 403): {text}")
         return None
+    if isinstance(exc, ssl.SSLCertVerificationError) and exc.verify_code in _NAME_MISMATCH:
+        host = urlsplit(url).hostname
+        return TLSError(
+            f"TLS: the certificate of {url} is not valid for {host} ({exc.verify_message}): "
+            f"its CA is trusted, but the certificate must list {host} in its subjectAltName; "
+            "reissue it with that name or address (SECURITY.md: a private CA), or connect by "
+            "a name it lists"
+        )
     if isinstance(exc, ssl.SSLCertVerificationError):
         return TLSError(
             f"TLS: cannot verify the certificate of {url}: {exc.verify_message}; give the CA "
-            "that signed it (ssl= an SSLContext or a CA file; --cafile on the command line)"
+            "that signed it (ssl= an SSLContext or a CA file; --cafile or $ROSLIBPY_LITE_CAFILE "
+            "on the command line)"
         )
     cause: BaseException | None = exc  # TLS 1.3 reports a missing client certificate late,
     while cause is not None and not isinstance(cause, ssl.SSLError):  # inside InvalidMessage
@@ -357,6 +384,48 @@ def _refusal(url: str, exc: BaseException) -> ConnectError | None:
                         "probably requires a client certificate (mutual TLS); load one into "
                         "the ssl context (SSLContext.load_cert_chain)")
     return None
+
+
+ROSBRIDGE_PORT = 9090
+"""The port rosbridge servers listen on unless told otherwise."""
+
+
+def with_default_port(url: str) -> str:
+    """``url`` with the rosbridge port when a ``ws://`` URL names none (``ws://robot`` means
+    ``ws://robot:9090``, not port 80). A ``wss://`` URL keeps TLS's 443: that is where a TLS
+    proxy in front of a bridge listens."""
+    try:
+        parts = urlsplit(url)
+        port = parts.port
+    except ValueError:
+        return url  # malformed: websockets names the problem at connect
+    if parts.scheme != "ws" or port is not None or not parts.hostname:
+        return url
+    user, at, hostport = parts.netloc.rpartition("@")
+    return parts._replace(netloc=f"{user}{at}{hostport}:{ROSBRIDGE_PORT}").geturl()
+
+
+_NAME_MISMATCH = (62, 64)
+"""OpenSSL's X509_V_ERR_HOSTNAME_MISMATCH and X509_V_ERR_IP_ADDRESS_MISMATCH."""
+
+
+async def _plain_to_tls(url: str, exc: BaseException) -> ConnectError | None:
+    """``ws://`` to a port that speaks TLS: the server hangs up on our plain request. Say so at
+    once (one TLS handshake to the port tells) instead of retrying until ``open_timeout``."""
+    if not (url.startswith("ws://") and isinstance(exc, InvalidMessage)
+            and isinstance(exc.__cause__, EOFError)):
+        return None
+    parts = urlsplit(url)
+    probe = ssl.create_default_context()
+    probe.check_hostname, probe.verify_mode = False, ssl.CERT_NONE  # only: does it speak TLS?
+    try:
+        _, writer = await asyncio.wait_for(
+            asyncio.open_connection(parts.hostname, parts.port or 80, ssl=probe), 2.0)
+    except (OSError, TimeoutError, ssl.SSLError):
+        return None
+    writer.close()
+    return ConnectError(f"{url}: this port speaks TLS: use wss://{url.split('://', 1)[1]} "
+                        "(with the CA that signed the bridge's certificate)")
 
 
 def _closed_by_policy(url: str, ws: ClientConnection) -> ConnectionClosed | None:

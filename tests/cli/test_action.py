@@ -10,6 +10,7 @@ from typing import Any
 from roslibpy_lite.cli import EXIT_INTERRUPTED, EXIT_NOT_FOUND, EXIT_REMOTE, EXIT_USAGE
 from tests.bridge.action_support import FIB, FibServer, fib
 from tests.cli.conftest import Run, one_error_line
+from tests.cli.test_commands import until_ok
 from tests.examples.support import Program
 from tests.helpers import BridgeProcess
 
@@ -24,7 +25,9 @@ def test_list_type_and_info(cli: Run, ros_node: Any, topic: str) -> None:
         assert f"{topic} [{FIB}]" in cli("action", "list", "-t").lines
         listed = json.loads(cli("action", "list", "--json").out)
         assert {"name": topic, "type": FIB} in listed
-        info = cli("action", "info", topic).lines
+        # The graph names an endpoint's node a little after the endpoint itself.
+        info = until_ok(cli, "action", "info", topic,
+                        check=lambda r: "Action servers: 1" in r.lines).lines
         assert info[:3] == [f"Action: {topic}", f"Type: {FIB}", "Action servers: 1"]
         assert info[3].strip() == ros_node.get_fully_qualified_name()
     finally:
