@@ -115,7 +115,7 @@ def cmd_publish(args: argparse.Namespace) -> int:
         elif kind == "stamp":
             msg.data = f"{i} {mono()}"
         else:
-            msg.header.frame_id = str(i)
+            msg.header.frame_id = f"{i} {mono()}"  # sequence and send time (monotonic ns)
         publish(msg)
         i += 1
     elapsed = (mono() - t0) / 1e9

@@ -59,6 +59,7 @@ from websockets.asyncio.client import ClientConnection
 
 from bench.actions import action_client_served, action_ros_server
 from bench.harness import Bridge, RosSide, StalledClient, percentile, send_op, ws_open
+from bench.links import links
 from bench.tls import tls_scenario
 
 TARGETS: dict[str, str] = {
@@ -71,6 +72,7 @@ TARGETS: dict[str, str] = {
     "idle_cpu": "< 1 % of a core [rosbridge ~5 %]",
     "memory_stall": "bounded [rosbridge +400 MB in 6 s]",
     "tls": "reference only: the cost of wss:// against ws://",
+    "links": "reference: a silent link noticed in seconds; frame age flat over a 2 Mbit/s link",
     "action_ros_server": "reference: goal round trip p50/p99, feedback msg/s at >= 99 %",
     "action_client_served": "reference: goal round trip p50/p99, feedback msg/s at >= 99 %",
 }
@@ -630,6 +632,7 @@ SCENARIOS: dict[str, Callable[[Ctx], Awaitable[dict[str, Any]]]] = {
     "image": image,
     "memory_stall": memory_stall,
     "tls": lambda ctx: tls_scenario(ctx, ros_to_client, service, image),
+    "links": links,
     "action_ros_server": action_ros_server,
     "action_client_served": action_client_served,
 }

@@ -47,6 +47,19 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         "clouds or maps)",
     )
     p.add_argument(
+        "--keepalive-interval",
+        type=float,
+        default=2.0,
+        help="seconds a client may be silent before the bridge pings it (default 2; 0: off)",
+    )
+    p.add_argument(
+        "--keepalive-timeout",
+        type=float,
+        default=3.0,
+        help="further seconds without any sign of a pinged client before its link counts as "
+        "dead and everything it owned is dropped (default 3)",
+    )
+    p.add_argument(
         "--node-name",
         default=None,
         help="the bridge's ROS node name (default roslibpy_lite_bridge_<process id>, so that "
@@ -135,6 +148,8 @@ async def _run(args: argparse.Namespace) -> int:
         metrics_port=args.metrics_port,
         worker_index=args.worker_index or 0,
         worker_dir=args.worker_dir,
+        keepalive_interval=args.keepalive_interval,
+        keepalive_timeout=args.keepalive_timeout,
         **({"node_name": args.node_name} if args.node_name else {}),
         session=SessionConfig(
             default_queue_length=args.send_queue,

@@ -27,6 +27,8 @@ from typing import TYPE_CHECKING, Any
 from websockets.asyncio.server import Server, ServerConnection, serve
 from websockets.datastructures import MultipleValuesError
 
+from roslibpy_lite.transports import keepalive
+
 from .actions import ActionClients, SessionActions
 from .metrics import Recorder
 from .ros import RosNode
@@ -58,6 +60,8 @@ class BridgeConfig:
     publisher_grace: float = 2.0
     node_name: str = field(default_factory=lambda: default_node_name())  # see default_node_name
     refresh_interval: float = 0.5
+    keepalive_interval: float = keepalive.DEFAULT_INTERVAL  # 0: no keepalive of our own
+    keepalive_timeout: float = keepalive.DEFAULT_TIMEOUT
     session: SessionConfig = field(default_factory=SessionConfig)
     security: SecurityConfig = field(default_factory=SecurityConfig)  # TLS, auth, limits
     metrics_port: int | None = None  # /metrics (and the other plain routes) on another port
@@ -110,6 +114,7 @@ class Bridge:
         """Start ROS and listen."""
         check_rclpy_internals()  # a clear error now, not a crash at the first action goal
         self.ros.start()
+        own_keepalive = bool(self.config.keepalive_interval) and keepalive.supported_here()
         self._server = await serve(
             self._handle,
             self.config.host,
@@ -119,6 +124,10 @@ class Bridge:
             compression="deflate" if self.config.compression else None,
             max_queue=64,
             close_timeout=1.0,
+            # Sessions watch their links themselves where TCP can tell (keepalive.py);
+            # elsewhere websockets pings with the same figures.
+            ping_interval=None if own_keepalive else (self.config.keepalive_interval or None),
+            ping_timeout=None if own_keepalive else (self.config.keepalive_timeout or None),
             process_request=self._process_request,
             process_response=self.web.process_response,
             reuse_port=self.config.worker_dir is not None,

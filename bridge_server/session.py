@@ -88,6 +88,7 @@ from roslibpy_lite import ops
 from roslibpy_lite.exceptions import ProtocolError
 from roslibpy_lite.ops import parse_op
 from roslibpy_lite.protocol import Protocol, decode_frame, split_fragments
+from roslibpy_lite.transports import keepalive
 from roslibpy_lite.transports.base import ACKS_HEADER
 
 from . import convert, rosapi
@@ -315,6 +316,13 @@ class Session:
     async def run(self) -> None:
         """Serve the client until it disconnects; then release everything it owned."""
         writer = asyncio.create_task(self._writer(), name=f"session-{self.sid}-writer")
+        cfg = self.bridge.config
+        watcher = None
+        transport = getattr(self.ws, "transport", None)
+        if cfg.keepalive_interval and keepalive.supported_here() and transport is not None:
+            watcher = asyncio.create_task(keepalive.watch(
+                transport, self.ws.ping, self._link_dead, cfg.keepalive_interval,
+                cfg.keepalive_timeout), name=f"session-{self.sid}-keepalive")
         try:
             async for frame in self.ws:
                 self.handle_frame(frame)
@@ -323,10 +331,16 @@ class Session:
         finally:
             self._closed = True
             self._wake.set()
+            if watcher is not None:
+                watcher.cancel()
             writer.cancel()
             with contextlib.suppress(asyncio.CancelledError, ConnectionClosed):
                 await writer
             await self.cleanup()
+
+    def _link_dead(self, silence: float) -> None:
+        log.warning("client %d: no sign of it for %.1f s (a silent link): dropping it and "
+                    "what it owned", self.sid, silence)
 
     async def _writer(self) -> None:
         ws = self.ws

@@ -104,8 +104,14 @@ class Client(RosFront):
         offline_buffer: messages kept per publisher while disconnected (0: raise).
         max_pending: frames queued for sending before ``publish`` waits.
         max_size: largest incoming frame in bytes (None: no limit).
-        ping_interval: seconds between websocket pings that detect a dead
-            peer (None: off); the connection is dropped after ``ping_timeout``.
+        ping_interval: seconds the bridge may be silent before it is pinged
+            (None: no keepalive); after ``ping_timeout`` more seconds without any
+            sign of it the link counts as dead: the connection is closed, the
+            state goes to RECONNECTING and the client reconnects and restores
+            (default 2 + 3: a silent link is noticed in about 5-6 s). On Linux
+            the sign is TCP's own (data or acknowledgements from the bridge), so
+            a pong stuck behind a large frame on a slow link never drops a busy
+            connection; elsewhere it is websockets' ping/pong.
         ws_compression: websocket per-message compression (``"deflate"`` or
             None, the default: off, cheaper on a LAN).
         proxy: passed to websockets (None: connect directly).
@@ -132,8 +138,8 @@ class Client(RosFront):
         offline_buffer: int = 100,
         max_pending: int = 1024,
         max_size: int | None = 256 * 1024 * 1024,
-        ping_interval: float | None = 20.0,
-        ping_timeout: float | None = 20.0,
+        ping_interval: float | None = 2.0,
+        ping_timeout: float | None = 3.0,
         ws_compression: str | None = None,
         proxy: str | None = None,
         validate: bool = True,
@@ -248,8 +254,8 @@ def connect(
     offline_buffer: int = 100,
     max_pending: int = 1024,
     max_size: int | None = 256 * 1024 * 1024,
-    ping_interval: float | None = 20.0,
-    ping_timeout: float | None = 20.0,
+    ping_interval: float | None = 2.0,
+    ping_timeout: float | None = 3.0,
     ws_compression: str | None = None,
     proxy: str | None = None,
     validate: bool = True,

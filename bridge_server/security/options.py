@@ -31,6 +31,7 @@ class SecurityConfig:
     max_queued_messages: int = 10_000
     min_fragment_size: int = 1024
     inbound_budget: int = 32 * 1024 * 1024
+    notsent_lowat: int = 64 * 1024
     inbound_budget_total: int = 256 * 1024 * 1024
 
 
@@ -88,6 +89,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     g.add_argument("--min-fragment-size", type=int, default=d.min_fragment_size,
                    help="smallest fragment_size a subscription may ask for; smaller ones are "
                    f"raised to it with a warning (default {d.min_fragment_size} bytes)")
+    g.add_argument("--notsent-lowat", type=int, default=d.notsent_lowat,
+                   help="bytes the kernel may hold unsent per client (TCP_NOTSENT_LOWAT): "
+                   "what a slow link cannot carry yet waits in the subscription queues, whose "
+                   f"drop policy keeps data fresh (default {d.notsent_lowat >> 10} KiB; 0: the "
+                   "kernel's default)")
     g.add_argument("--inbound-budget", type=int, default=d.inbound_budget,
                    help="bytes of received, not yet handled data per client before the bridge "
                    f"stops reading it (default {d.inbound_budget >> 20} MiB)")
@@ -118,5 +124,6 @@ def config_from_args(args: argparse.Namespace) -> SecurityConfig:
         max_queued_messages=args.max_queued_messages,
         min_fragment_size=args.min_fragment_size,
         inbound_budget=args.inbound_budget,
+        notsent_lowat=args.notsent_lowat,
         inbound_budget_total=args.inbound_budget_total,
     )

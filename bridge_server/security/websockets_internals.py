@@ -10,6 +10,8 @@ upgrade changed what this relies on: an upgrade touches this file and nothing el
 from __future__ import annotations
 
 import asyncio
+import contextlib
+import socket
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
@@ -111,8 +113,10 @@ class BridgeConnection(ServerConnection):
     counted: str | None = None
 
     def connection_made(self, transport: asyncio.BaseTransport) -> None:
-        """websockets' hook: read frames through the budgeted assembler."""
+        """websockets' hook: read frames through the budgeted assembler, and keep the
+        kernel's unsent bytes for this client small (:func:`limit_unsent`)."""
         super().connection_made(transport)
+        limit_unsent(transport, self.security.config.notsent_lowat)
         sec = self.security
         self.recv_messages = BudgetAssembler(
             sec.config.inbound_budget,
@@ -138,6 +142,25 @@ class BridgeConnection(ServerConnection):
         """websockets' hook: no longer count this connection against the client limits."""
         super().connection_lost(exc)
         self.security.release(self)
+
+
+TCP_NOTSENT_LOWAT = getattr(socket, "TCP_NOTSENT_LOWAT", 25)  # Linux's value; 3.11 lacks it
+
+
+def limit_unsent(transport: asyncio.BaseTransport, lowat: int) -> None:
+    """Let the kernel hold at most about ``lowat`` unsent bytes for this connection.
+
+    Without it the send buffer autotunes to megabytes, and on a slow link several camera
+    frames wait in the kernel where no drop policy reaches them: ``queue_length`` and
+    ``throttle_rate`` would drop nothing while the frames delivered grow ever older. With
+    it, what the link cannot carry yet waits in the bridge's own per-subscription queue,
+    which keeps the newest. 0 leaves the kernel's default.
+    """
+    sock = transport.get_extra_info("socket")
+    if not lowat or sock is None or sock.family not in (socket.AF_INET, socket.AF_INET6):
+        return
+    with contextlib.suppress(OSError):  # not Linux, or not TCP: the kernel's default stays
+        sock.setsockopt(socket.IPPROTO_TCP, TCP_NOTSENT_LOWAT, lowat)
 
 
 WEBSOCKETS_TESTED = ">=17,<18"

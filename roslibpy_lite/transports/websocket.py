@@ -37,6 +37,7 @@ from ..exceptions import (
 )
 from ..ops import ACKS_HEADER, AUTH_HEADER
 from ..protocol import Protocol
+from . import keepalive
 
 if TYPE_CHECKING:
     from .base import Link
@@ -57,8 +58,8 @@ class WebSocketTransport:
         backoff: Backoff | None = None,
         open_timeout: float = 10.0,
         max_size: int | None = 256 * 1024 * 1024,
-        ping_interval: float | None = 20.0,
-        ping_timeout: float | None = 20.0,
+        ping_interval: float | None = keepalive.DEFAULT_INTERVAL,
+        ping_timeout: float | None = keepalive.DEFAULT_TIMEOUT,
         ws_compression: str | None = None,
         proxy: str | None = None,
         token: str | None = None,
@@ -71,10 +72,17 @@ class WebSocketTransport:
         self.stable_after = 1.0
         self.acks = False
         self.connects = 0
+        # Where the kernel can tell (Linux), keepalive.watch judges the link by TCP's own
+        # evidence, so a pong late behind a big frame never drops a busy link; elsewhere
+        # websockets' ping/pong does the job with the same figures.
+        self._keepalive = (ping_interval, ping_timeout) if (
+            ping_interval is not None and ping_timeout is not None and keepalive.supported_here()
+        ) else None
+        own_pings = self._keepalive is None
         self._ws_options: dict[str, Any] = {
             "max_size": max_size,
-            "ping_interval": ping_interval,
-            "ping_timeout": ping_timeout,
+            "ping_interval": ping_interval if own_pings else None,
+            "ping_timeout": ping_timeout if own_pings else None,
             "compression": ws_compression,
             "proxy": proxy,
             "additional_headers": {ACKS_HEADER: "1"},
@@ -224,6 +232,11 @@ class WebSocketTransport:
             if self._first is not None and not self._first.done():
                 self._first.set_exception(ConnectionClosed("the client was closed"))
 
+    def _link_dead(self, silence: float) -> None:
+        log.warning("no sign of %s for %.1f s (a silent link: out of range, or the network "
+                    "dropped it): closing it%s", self.url, silence,
+                    "; reconnecting" if self.reconnect else "")
+
     async def _session(self, ws: ClientConnection) -> None:
         """Serve one open connection until it closes."""
         assert self._link is not None
@@ -233,6 +246,11 @@ class WebSocketTransport:
         if self._first is not None and not self._first.done():
             self._first.set_result(None)
         writer = asyncio.get_running_loop().create_task(self._write(ws))
+        watcher = None
+        if self._keepalive is not None:
+            interval, timeout = self._keepalive
+            watcher = asyncio.get_running_loop().create_task(keepalive.watch(
+                ws.transport, ws.ping, self._link_dead, interval, timeout))
         try:
             receive = self.receive
             async for frame in ws:
@@ -241,6 +259,8 @@ class WebSocketTransport:
             pass
         finally:
             self._ws = None
+            if watcher is not None:
+                watcher.cancel()
             writer.cancel()
             with contextlib.suppress(asyncio.CancelledError, WsConnectionClosed):
                 await writer

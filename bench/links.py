@@ -1,0 +1,121 @@
+"""Real links (``--scenario links``): a silent link and a slow one, through bench/linkproxy.py.
+
+- ``blackhole``: a client subscribed through the proxy; the link goes silent (no FIN, no
+  RST). Reported: seconds until the client leaves CONNECTED and until the bridge drops the
+  client's ROS subscription, with this version's keepalive (2 + 3 s) and with the
+  keepalive figures of the previous release (websockets' 20 + 20 s), cut off at 30 s.
+- ``slow_link``: a 640x480 rgb8 camera at 30 Hz to a client over a 2 Mbit/s link,
+  ``queue_length`` 1, CBOR; reported: the age of the frames the client gets (p50 per third
+  of the run), with the kernel's unsent bytes bounded (``--notsent-lowat``, the default) and
+  left to the kernel (``--notsent-lowat 0``, the previous behaviour). A fresh stream keeps
+  the age flat; a stale one grows.
+
+Nothing here asserts anything about time.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import time
+from typing import TYPE_CHECKING, Any
+
+from bench.harness import percentile, send_op, ws_open
+from bench.linkproxy import LinkProxy
+
+if TYPE_CHECKING:
+    from bench.run import Ctx
+
+__all__ = ["links"]
+
+CUTOFF = 30.0
+
+
+async def _blackhole(ctx: Ctx, interval: float, timeout: float) -> dict[str, Any]:
+    """Seconds until the client and the bridge each notice a silent link."""
+    import roslibpy_lite
+    from roslibpy_lite.api import ConnectionState
+
+    bridge = ctx.bridge()
+    bridge.args += ["--keepalive-interval", str(interval), "--keepalive-timeout", str(timeout)]
+    await bridge.start()
+    ros_side = ctx.ros("publish", "--topic", "/bench_link", "--rate", "10", "--duration", "60",
+                       "--wait-subs", "1")
+    try:
+        with LinkProxy(("127.0.0.1", bridge.port)) as proxy:
+            ros = await roslibpy_lite.connect(f"ws://127.0.0.1:{proxy.port}",
+                                              ping_interval=interval, ping_timeout=timeout)
+            await ros.subscribe("/bench_link", "std_msgs/msg/String", lambda m: None)
+            await ros_side.start()
+            await ros_side.event("matched")
+            start = len(bridge.lines)
+            proxy.blackhole()
+            t0 = time.monotonic()
+            client_s = bridge_s = None
+            while time.monotonic() - t0 < CUTOFF and (client_s is None or bridge_s is None):
+                now = time.monotonic() - t0
+                if client_s is None and ros.state is not ConnectionState.CONNECTED:
+                    client_s = round(now, 2)
+                if bridge_s is None and any("no sign of it" in line
+                                            for line in list(bridge.lines)[start:]):
+                    bridge_s = round(now, 2)
+                await asyncio.sleep(0.05)
+            proxy.restore()
+            await ros.close()
+    finally:
+        await ros_side.close()
+        await bridge.stop()
+    return {"keepalive_s": [interval, timeout], "client_noticed_s": client_s,
+            "bridge_noticed_s": bridge_s, "cutoff_s": CUTOFF}
+
+
+async def _slow_link(ctx: Ctx, lowat: int, seconds: float) -> dict[str, Any]:
+    """Ages of 30 Hz camera frames over a 2 Mbit/s link."""
+    import cbor2
+
+    bridge = ctx.bridge()
+    bridge.args += ["--notsent-lowat", str(lowat)]
+    await bridge.start()
+    ros_side = ctx.ros("publish", "--topic", "/bench_cam", "--kind", "image", "--rate", "30",
+                       "--duration", str(seconds + 5), "--wait-subs", "1", "--depth", "1")
+    ages: list[tuple[float, float]] = []
+    try:
+        with LinkProxy(("127.0.0.1", bridge.port)) as proxy:
+            proxy.set_bandwidth(250_000)  # 2 Mbit/s
+            ws = await ws_open(f"ws://127.0.0.1:{proxy.port}")
+            await send_op(ws, {"op": "subscribe", "topic": "/bench_cam", "queue_length": 1,
+                               "type": "sensor_msgs/msg/Image", "compression": "cbor"})
+            await ros_side.start()
+            await ros_side.event("matched")
+            t0 = time.monotonic()
+            while time.monotonic() - t0 < seconds:
+                try:
+                    frame = await asyncio.wait_for(ws.recv(), seconds)
+                except TimeoutError:
+                    break
+                got = time.monotonic_ns()
+                if isinstance(frame, bytes):
+                    msg = cbor2.loads(frame)["msg"]
+                    sent_ns = int(msg["header"]["frame_id"].split()[1])
+                    ages.append((time.monotonic() - t0, (got - sent_ns) / 1e9))
+            await ws.close()
+    finally:
+        await ros_side.close()
+        await bridge.stop()
+    thirds = []
+    for k in range(3):
+        part = [a for t, a in ages if k * seconds / 3 <= t < (k + 1) * seconds / 3]
+        thirds.append(round(percentile(part, 50), 2) if part else None)
+    return {"notsent_lowat": lowat or "kernel default", "frames": len(ages),
+            "age_p50_s_by_third": thirds,
+            "age_max_s": round(max((a for _, a in ages), default=0.0), 2)}
+
+
+async def links(ctx: Ctx) -> dict[str, Any]:
+    """Blackhole detection and slow-link freshness, now and with the previous defaults."""
+    seconds = 20.0 if ctx.quick else 60.0
+    return {
+        "blackhole_now": await _blackhole(ctx, 2.0, 3.0),
+        "blackhole_previous_defaults": await _blackhole(ctx, 20.0, 20.0),
+        "slow_link_now": await _slow_link(ctx, 64 * 1024, seconds),
+        "slow_link_kernel_buffers": await _slow_link(ctx, 0, seconds),
+    }

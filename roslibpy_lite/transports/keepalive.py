@@ -1,0 +1,131 @@
+"""Noticing a dead link in seconds, without being fooled by a busy one (both ends use this).
+
+A link that goes silent without a FIN or RST (a robot driving out of Wi-Fi range) looks
+like an idle one to TCP. websockets' keepalive waits for a pong; but a pong queued behind a
+large frame on a slow link can take longer than any sensible timeout, so a pong timeout
+alone either notices dead links late or drops busy ones.
+
+The evidence used here is the kernel's (``TCP_INFO``): data received from the peer, or our
+own data being acknowledged by it in bulk (at least :data:`PROGRESS_BYTES` per check). A
+peer that is slowly receiving a large frame acknowledges it as it arrives, and a peer that
+sends to us is evidently there; the few bytes of a ping being acknowledged are not counted,
+since whatever sits between us (a NAT box, a proxy, the far kernel of a hung link) may
+acknowledge those. Only when the peer has shown nothing for ``interval`` seconds is it
+pinged (its pong is data); when it has shown nothing for ``interval + timeout`` seconds the
+link is declared dead and the connection aborted, which the usual disconnect path handles
+(reconnect on the client, cleanup on the bridge). So a dead link is noticed within about
+``interval + timeout`` seconds, plus one check period (``interval / 2``).
+
+Where ``TCP_INFO`` is not available (not Linux, not TCP), :func:`watch` returns ``False``
+and the caller keeps websockets' own ping/pong keepalive with the same figures.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import socket
+import struct
+from collections.abc import Callable
+from typing import Any
+
+__all__ = [
+    "DEFAULT_INTERVAL",
+    "DEFAULT_TIMEOUT",
+    "PROGRESS_BYTES",
+    "supported_here",
+    "tcp_state",
+    "watch",
+]
+
+DEFAULT_INTERVAL = 2.0
+"""Seconds without a sign of the peer before it is pinged."""
+DEFAULT_TIMEOUT = 3.0
+"""Further seconds without a sign of it after which the link is dead (so about 5 s in all)."""
+PROGRESS_BYTES = 1024
+"""Bytes of ours the peer must acknowledge between two checks to count as a sign of it."""
+
+_TCP_INFO = getattr(socket, "TCP_INFO", None)
+_INFO_SIZE = 136
+_LAST_DATA_RECV = struct.Struct("=I")  # tcpi_last_data_recv, in milliseconds
+_LAST_DATA_RECV_OFFSET = 52  # after 8 one-byte fields and 11 u32 fields of struct tcp_info
+_BYTES_ACKED = struct.Struct("=Q")  # tcpi_bytes_acked
+_BYTES_ACKED_OFFSET = 120
+
+
+def supported_here() -> bool:
+    """Whether this platform's TCP tells when the peer was last heard (``TCP_INFO``)."""
+    return _TCP_INFO is not None
+
+
+def tcp_state(sock: socket.socket) -> tuple[float, int] | None:
+    """(seconds since the peer last sent us data, bytes of ours it acknowledged in all), or
+    ``None`` where the kernel does not tell."""
+    if _TCP_INFO is None:
+        return None
+    try:
+        info = sock.getsockopt(socket.IPPROTO_TCP, _TCP_INFO, _INFO_SIZE)
+    except OSError:
+        return None
+    if len(info) < _INFO_SIZE:
+        return None
+    (data_ms,) = _LAST_DATA_RECV.unpack_from(info, _LAST_DATA_RECV_OFFSET)
+    (acked,) = _BYTES_ACKED.unpack_from(info, _BYTES_ACKED_OFFSET)
+    return float(data_ms) / 1000.0, int(acked)
+
+
+async def watch(
+    transport: asyncio.Transport,
+    ping: Callable[[], Any],
+    on_dead: Callable[[float], None],
+    interval: float = DEFAULT_INTERVAL,
+    timeout: float = DEFAULT_TIMEOUT,
+) -> bool:
+    """Watch one connection until it dies (``on_dead(silence)`` is called and the transport
+    aborted) or this task is cancelled. ``ping`` sends a websocket ping; its pong is not
+    waited for here: it arrives as data, which :func:`tcp_state` sees.
+
+    Returns ``False`` at once if the transport cannot be judged (see the module docstring).
+    """
+    sock = transport.get_extra_info("socket")
+    state = tcp_state(sock) if sock is not None else None
+    if state is None:
+        return False
+    loop = asyncio.get_running_loop()
+    period = max(0.05, interval / 2)
+    heard = loop.time()
+    acked = state[1]
+    while not transport.is_closing():
+        await asyncio.sleep(period)
+        state = tcp_state(sock)
+        if state is None:
+            return True  # the socket is gone: the connection is ending anyway
+        now = loop.time()
+        data_age, now_acked = state
+        heard = max(heard, now - data_age)
+        if now_acked - acked >= PROGRESS_BYTES:  # the peer is taking our data: busy, alive
+            heard = now
+        acked = now_acked
+        silence = now - heard
+        if silence >= interval + timeout:
+            on_dead(silence)
+            transport.abort()
+            return True
+        if silence >= interval:
+            with contextlib.suppress(Exception):
+                waiter = ping()
+                if asyncio.isfuture(waiter) or asyncio.iscoroutine(waiter):
+                    _retrieve(asyncio.ensure_future(waiter))
+    return True
+
+
+def _retrieve(future: asyncio.Future[Any]) -> None:
+    """Collect a ping's outcome so that a connection closing meanwhile warns nobody."""
+    def done(f: asyncio.Future[Any]) -> None:
+        if f.cancelled() or f.exception() is not None:
+            return
+        inner = f.result()
+        if asyncio.isfuture(inner):  # websockets' ping() gives the pong's future
+            inner.add_done_callback(lambda g: g.cancelled() or g.exception())
+
+    future.add_done_callback(done)
