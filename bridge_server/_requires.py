@@ -1,6 +1,6 @@
 """One clear line instead of a traceback when the bridge's dependencies are not installed.
 
-A client-only install (``pip install roslibpy-lite``) carries the
+A client-only install (the wheel without the ``bridge`` extra) carries the
 ``bridge_server`` package but not ROS 2, numpy or cbor2; starting the bridge
 there must say what to install.
 """
@@ -12,7 +12,10 @@ from typing import NoReturn
 
 __all__ = ["INSTALL_HINT", "missing_dependency"]
 
-INSTALL_HINT = "pip install 'roslibpy-lite[bridge]'"
+INSTALL_HINT = (
+    "python -m pip install '.[bridge]' in a virtual environment, from a checkout of the "
+    "roslibpy-lite repository (the project is not on PyPI; docs/ros-on-pypi.md)"
+)
 
 _OURS = ("bridge_server", "roslibpy_lite", "msgs")
 

@@ -424,15 +424,15 @@ class SessionActions:
         if goal.cbor:
             obj: dict[str, Any] = {"op": op, "id": goal.id, "action": goal.wire,
                                    "values": conv.to_cbor_obj(msg)}
-            if status is not None:
-                obj["status"] = status
-                obj["result"] = status == Status.SUCCEEDED
+            if status is not None:  # a goal that ran to a final status: result true, as
+                obj["status"] = status  # rosbridge sends it (false: it never ran, see fail)
+                obj["result"] = status in _RAN
             session.send_text(cbor2.dumps(obj))
             return
         head = json.dumps({"op": op, "id": goal.id, "action": goal.wire})[:-1]
         tail = "}"
         if status is not None:
-            ok = "true" if status == Status.SUCCEEDED else "false"
+            ok = "true" if status in _RAN else "false"
             tail = f',"status":{status},"result":{ok}}}'
         text = f'{head},"values":{conv.to_json(msg)}{tail}'
         size = goal.fragment_size
@@ -685,6 +685,10 @@ def _server_types(session: Session, service: str) -> list[str]:
 def _name(name: str) -> str:
     return name if name.startswith("/") else "/" + name
 
+
+
+_RAN = (Status.SUCCEEDED, Status.CANCELED, Status.ABORTED)
+"""Final statuses of a goal that ran: its action_result says result true, as rosbridge does."""
 
 def _args_obj(args: Mapping[str, Any] | list[Any] | None, fields: tuple[str, ...]) -> Any:
     if args is None:

@@ -96,8 +96,11 @@ class MemoryActions:
 
     def _to_caller(self, id: ops.Id, action: str, values: Mapping[str, Any] | str,
                    status: int) -> None:
+        # As rosbridge: result true for a goal that ran to a final status (its values),
+        # false only for one that never ran (a text saying why).
+        ran = not isinstance(values, str) and status in (_SUCCEEDED, _CANCELED, _ABORTED)
         self.bridge._to_front(ops.ActionResult(id=id, action=action, values=values,
-                                               status=status, result=status == _SUCCEEDED))
+                                               status=status, result=ran))
 
     def _send_goal(self, op: ops.SendActionGoal) -> None:
         name = _name(op.action)

@@ -91,13 +91,14 @@ async def test_rejected_goal(ws_connect: Any, ros_node: Any, topic: str):
 
 
 async def test_aborted_goal(ws_connect: Any, ros_node: Any, topic: str):
-    """A goal the server aborts ends with its status (6), result false and the result values."""
+    """A goal the server aborts ends with its status (6), the result values and result true
+    (it ran; rosbridge says false only for a goal that never ran)."""
     server = FibServer(ros_node, topic, abort=True)
     ws = await ws_connect()
     await bridge_sees_action(ws, topic)
     await send_goal(ws, topic, {"order": 3}, "ab")
     result = await ws.expect(op="action_result", id="ab")
-    assert result["status"] == ABORTED and result["result"] is False
+    assert result["status"] == ABORTED and result["result"] is True
     assert result["values"] == {"sequence": fib(3)}
     server.destroy()
 
@@ -111,7 +112,7 @@ async def test_cancel_after_acceptance(ws_connect: Any, ros_node: Any, topic: st
     await ws.expect(op="action_feedback", id="c1")
     await ws.send({"op": "cancel_action_goal", "id": "c1", "action": topic})
     result = await ws.expect(op="action_result", id="c1")
-    assert result["status"] == CANCELED and result["result"] is False
+    assert result["status"] == CANCELED and result["result"] is True
     assert result["values"] == {"sequence": [0, 1]}
     assert server.cancel_requests.is_set()
     server.destroy()

@@ -139,4 +139,4 @@ def test_bridge_without_its_extra_says_what_to_install(venv: Venv) -> None:
     assert done.returncode == 2
     assert "Traceback" not in done.stderr
     lines = done.stderr.strip().splitlines()
-    assert len(lines) == 1 and "pip install 'roslibpy-lite[bridge]'" in lines[0], done.stderr
+    assert len(lines) == 1 and "pip install '.[bridge]'" in lines[0], done.stderr
