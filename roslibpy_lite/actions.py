@@ -118,7 +118,11 @@ FeedbackCallback = Callable[[Any], "Awaitable[None] | None"]
 """Called with each feedback of a goal: ``fn(feedback)``, sync or ``async``."""
 
 class GoalStatus(enum.IntEnum):
-    """The status of a goal: the numbers of ``action_msgs/msg/GoalStatus``."""
+    """The status of a goal: the numbers of ``action_msgs/msg/GoalStatus``.
+
+    It equals its number (``GoalStatus.SUCCEEDED == 4``) and prints as its name
+    (``print(result.status)`` shows ``SUCCEEDED``).
+    """
 
     UNKNOWN = 0
     ACCEPTED = 1
@@ -127,6 +131,13 @@ class GoalStatus(enum.IntEnum):
     SUCCEEDED = 4
     CANCELED = 5
     ABORTED = 6
+
+    def __str__(self) -> str:
+        return self.name
+
+    def __format__(self, spec: str) -> str:
+        return format(self.name, spec) if not spec or spec[-1] not in "dxXobn" else \
+            format(int(self), spec)
 
     @property
     def final(self) -> bool:

@@ -162,6 +162,11 @@ class Publisher(_Handle, Generic[T]):
         self.id = id
         self.closed = False
         self.error: RosLibError | None = None
+        """Why this publisher cannot publish at all: the bridge refused its ``advertise``
+        (every later :meth:`publish` raises it)."""
+        self.last_error: RosLibError | None = None
+        """The last message the bridge could not publish, set as soon as the bridge says so
+        (the next :meth:`publish` raises it once; it stays here for inspection)."""
         self._offline: deque[Any] = deque()  # backend-specific form (encoded frame, copy)
         self.offline_buffer = offline_buffer
         self.dropped = 0
@@ -197,7 +202,7 @@ class Publisher(_Handle, Generic[T]):
 
     def _fail_once(self, error: RosLibError) -> None:
         """The bridge could not publish a message: the next :meth:`publish` raises ``error``."""
-        self._error_once = error
+        self._error_once = self.last_error = error
 
     def publish(self, msg: T | Mapping[str, Any]) -> Coroutine[Any, Any, None]:
         """Publish one message (a dict, or an instance of the advertised type).

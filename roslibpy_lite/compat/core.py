@@ -477,9 +477,9 @@ class ActionClient:
             else:
                 status = GoalStatus(int(outcome.status))
                 values = outcome.values if outcome.values is not None else outcome.text
-                if outcome.succeeded:
-                    ros._dispatch(report, resultback, Result({"status": status,
-                                                              "values": values}))
+                if outcome.values is not None:  # it ran to a final status, canceled too:
+                    ros._dispatch(report, resultback, Result({"status": status,  # as stock
+                                                              "values": values}))  # roslibpy
                 else:
                     ros._dispatch(report, errback, {"status": status, "values": values})
             finally:

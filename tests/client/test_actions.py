@@ -265,3 +265,9 @@ async def restart_killed(bridge: BridgeProcess, client: Client) -> None:
     await asyncio.to_thread(bridge.start)
     await client.wait_connected(30)
 
+
+
+def test_goal_status_prints_its_name() -> None:
+    """print(result.status) shows SUCCEEDED, not 4; it still equals its number."""
+    assert str(GoalStatus.SUCCEEDED) == "SUCCEEDED" and f"{GoalStatus.CANCELED}" == "CANCELED"
+    assert GoalStatus.SUCCEEDED == 4 and f"{GoalStatus.ABORTED:d}" == "6"

@@ -153,13 +153,15 @@ async def test_refused_subscribe_not_awaited_reaches_the_error_hook(
 async def test_bridge_publish_error_reaches_hook_and_next_publish(
     loose: RosFront, topic: str
 ) -> None:
-    """A dict the bridge cannot convert (unchecked locally) goes to on_error; the next publish raises."""
+    """A dict the bridge cannot convert (unchecked locally) goes to on_error and is in
+    pub.last_error at once; the next publish raises it."""
     errors = _errors(loose)
     pub = await loose.advertise(topic, "std_msgs/msg/Int32")
     await pub.publish({"data": "seven"})
     error = await asyncio.wait_for(errors.get(), 15)
     assert isinstance(error, StatusError)
     assert f"publish to {topic}" in str(error) and "data" in str(error)
+    assert pub.last_error is error and pub.error is None  # the publisher itself still works
     with pytest.raises(StatusError, match="data"):
         await pub.publish({"data": 7})
     await pub.publish({"data": 8})  # raised once; the publisher goes on
