@@ -94,3 +94,23 @@ async def test_lock_out_is_not_called_a_refused_token(make_bridge: Any, auth: Au
 def test_ws_url_without_port_means_the_rosbridge_port(url: str, expected: str):
     """A ws:// URL without a port goes to 9090; wss:// keeps 443 (a TLS proxy's port)."""
     assert with_default_port(url) == expected
+
+
+async def test_security_md_private_ca_recipe_works(make_bridge: Any, tmp_path: Path):
+    """SECURITY.md's private-CA commands, run as written (address 127.0.0.1), give a bridge
+    certificate our client accepts with only the CA file."""
+    import re
+
+    text = (ROOT / "SECURITY.md").read_text()
+    block = re.search(r"<!-- recipe: private-ca -->\n```bash\n(.*?)```", text, re.S)
+    assert block is not None
+    script = block.group(1).replace("IP:192.168.1.50", "IP:127.0.0.1")
+    subprocess.run(["bash", "-euo", "pipefail", "-c", script], cwd=tmp_path, check=True,
+                   capture_output=True, timeout=60)
+    bridge = make_bridge("--certfile", str(tmp_path / "server.pem"),
+                         "--keyfile", str(tmp_path / "server.key"))
+    async with roslibpy_lite.connect(f"wss://127.0.0.1:{bridge.port}",
+                                     ssl=str(tmp_path / "ca.pem")) as ros:
+        reply = await ros.call_service("/rosapi/get_ros_version",
+                                       "rosapi_msgs/srv/GetROSVersion", {})
+    assert reply["version"] == 2
