@@ -374,6 +374,16 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
         help=f"the bridge (default $ROSLIBPY_LITE_URL or {DEFAULT_URL})",
     )
     p.add_argument(
+        "--token",
+        default=os.environ.get("ROSLIBPY_LITE_TOKEN"),
+        help="token for a bridge that requires one (default $ROSLIBPY_LITE_TOKEN)",
+    )
+    p.add_argument(
+        "--cafile",
+        default=os.environ.get("ROSLIBPY_LITE_CAFILE"),
+        help="CA file for a wss:// bridge with a private CA (default $ROSLIBPY_LITE_CAFILE)",
+    )
+    p.add_argument(
         "--connect-timeout",
         type=float,
         default=30.0,
@@ -383,7 +393,10 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
 
 
 async def _session(args: argparse.Namespace) -> None:
-    async with roslibpy_lite.connect(args.url, open_timeout=args.connect_timeout) as ros:
+    secure = args.url.startswith("wss://")
+    async with roslibpy_lite.connect(args.url, open_timeout=args.connect_timeout,
+                                     token=args.token,
+                                     ssl=args.cafile if secure else None) as ros:
         _say(f"[app] connected to {args.url}")
         await run_app(ros)
 

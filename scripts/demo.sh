@@ -5,11 +5,21 @@
 #   bash scripts/demo.sh                 # bridge on ws://127.0.0.1:9090
 #   PORT=9191 bash scripts/demo.sh       # another port (PORT=0: any free port)
 #   IMU_RATE=5 bash scripts/demo.sh      # a calmer IMU (messages per second, default 50)
+#   bash scripts/demo.sh -- --certfile server.pem --keyfile server.key --auth-file auth.toml
+#                                        # a secured bridge: what follows -- goes to the bridge;
+#                                        # the sample program reads $ROSLIBPY_LITE_TOKEN and
+#                                        # $ROSLIBPY_LITE_CAFILE (SECURITY.md)
 #
 # Set-up on a fresh machine (venv, ROS 2 Jazzy wheels, interfaces) is done by
 # scripts/setup.sh, sourced first. DDS stays on loopback
 # (ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST, exported by setup.sh).
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+BRIDGE_ARGS=()
+if [ "${1:-}" = "--" ]; then
+  shift
+  BRIDGE_ARGS=("$@")
+  set --
+fi
 # shellcheck source=scripts/setup.sh
 . "$ROOT/scripts/setup.sh"
 set +e
@@ -89,7 +99,8 @@ start() {
   names+=("$name")
 }
 
-start bridge 'listening on ws://' "$PY" -m bridge_server --host "$HOST" --port "$PORT"
+start bridge 'listening on wss?://' "$PY" -m bridge_server --host "$HOST" --port "$PORT" \
+  ${BRIDGE_ARGS[@]+"${BRIDGE_ARGS[@]}"}
 if ! IFS= read -r -t 60 -u 3 ready_line || [ "$ready_line" = exited ]; then
   say "the bridge did not start (is port $PORT already in use?)"
   stopping=1
@@ -97,16 +108,18 @@ if ! IFS= read -r -t 60 -u 3 ready_line || [ "$ready_line" = exited ]; then
   wait 2>/dev/null
   exit 1
 fi
-if [[ "$ready_line" =~ ws://[0-9.]+:([0-9]+) ]]; then
-  PORT="${BASH_REMATCH[1]}"
+SCHEME=ws
+if [[ "$ready_line" =~ (wss?)://[0-9.]+:([0-9]+) ]]; then
+  SCHEME="${BASH_REMATCH[1]}"
+  PORT="${BASH_REMATCH[2]}"
 fi
-URL="ws://$HOST:$PORT"
+URL="$SCHEME://$HOST:$PORT"
 
 start imu_sim '' "$PY" -m examples.imu_sim --rate "${IMU_RATE:-50}"
 start robot_app '' "$PY" -m examples.robot_app --url "$URL"
 
 url_opt=""
-[ "$PORT" != 9090 ] && url_opt=" --url $URL"
+{ [ "$PORT" != 9090 ] || [ "$SCHEME" != ws ]; } && url_opt=" --url $URL"
 cat <<EOF
 [demo] ------------------------------------------------------------------------
 [demo] bridge on $URL; the IMU simulator and the sample program are running.

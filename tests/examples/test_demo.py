@@ -134,3 +134,34 @@ def test_demo_reports_a_busy_port() -> None:
             demo.kill()
     assert code == 1, demo.dump()
     assert demo.out[-1] == f"[demo] the bridge did not start (is port {port} already in use?)"
+
+
+def test_demo_runs_secured(tmp_path: Path) -> None:
+    """`demo.sh -- <bridge flags>` serves wss with tokens: the sample program connects with
+    $ROSLIBPY_LITE_TOKEN/$ROSLIBPY_LITE_CAFILE and the CLI calls its service."""
+    import trustme
+
+    from bridge_server.auth import add_principal
+
+    ca = trustme.CA()
+    ca.issue_cert("127.0.0.1").private_key_and_cert_chain_pem.write_to_path(
+        str(tmp_path / "server.pem"))
+    ca.cert_pem.write_to_path(str(tmp_path / "ca.pem"))
+    auth = tmp_path / "auth.toml"
+    app_token = add_principal(auth, "robot_app", "admin")
+    cli_token = add_principal(auth, "laptop", "admin")
+    env = ros_env(PORT="0", ROSLIBPY_LITE_TOKEN=app_token,
+                  ROSLIBPY_LITE_CAFILE=str(tmp_path / "ca.pem"))
+    demo = Program(["bash", "scripts/demo.sh", "--", "--certfile", str(tmp_path / "server.pem"),
+                    "--auth-file", str(auth)], env=env, group=True)
+    try:
+        url = demo.wait_for(r"^\[demo\] bridge on (wss://127\.0\.0\.1:\d+);", timeout=360)[1]
+        demo.wait_for(r"^robot_app \| \[service\] serving /mult_floats", timeout=60)
+        called = cli("service", "call", "/mult_floats", "mult_msgs/srv/MultFloats",
+                     "{x: 2.5, y: 4.0}", "--url", url, "--wait", "15", "--token", cli_token,
+                     "--cafile", str(tmp_path / "ca.pem"))
+        assert (called.returncode, called.stdout) == (0, "result: 10.0\n"), called.stderr
+        assert demo.interrupt(timeout=60) == 0, demo.dump()
+        assert not any(app_token in line or cli_token in line for line in demo.out + demo.err)
+    finally:
+        demo.kill()
