@@ -95,8 +95,19 @@
       if (calls) for (const k in calls.outcomes) n += calls.outcomes[k];
       return [sv.name, sv.type, sv.served_by, n];
     }), "no services served by clients");
-    fill("actions", s.actions.map((a) => [a.name, a.type || "?", a.served_by || "ROS", a.goals || 0]),
-      "no actions");
+    // goals: finished (by outcome, from the counters) plus those in flight now
+    const inUse = {};
+    for (const a of s.actions) inUse[a.name] = a;
+    const actionNames = Object.keys(Object.assign({}, s.action_goals, inUse)).sort();
+    fill("actions", actionNames.map((name) => {
+      const a = inUse[name] || {};
+      const goals = s.action_goals[name];
+      let done = 0;
+      if (goals) for (const k in goals.outcomes) done += goals.outcomes[k];
+      const flying = a.goals || 0;
+      return [name, a.type || "?", a.served_by || "ROS",
+        flying ? `${done + flying} (${flying} running)` : done];
+    }), "no actions");
     fill("workers", s.workers.map((w) => [w.index, w.pid, w.node, duration(s.now - w.started), w.clients]),
       "none");
     const updated = document.getElementById("updated");

@@ -30,6 +30,7 @@ const text = (id) => document.getElementById(id).innerText;
 return {clients: text('client-count'), version: text('version'), uptime: text('uptime'),
         topics: rows('topics'), client_rows: rows('clients').map((r) => r.join(' ')),
         services: rows('services').map((r) => r.join(' ')),
+        actions: rows('actions'),
         updates: Number(document.body.dataset.updates || 0)};
 """
 
@@ -96,7 +97,10 @@ async def test_status_page_shows_live_clients_topics_and_services(
     b: BridgeProcess = make_bridge()
     pub = ros_node.create_publisher(String, topic, 10)
     ros_node.create_timer(1 / 20, lambda: pub.publish(String(data="tick")))
-    service = topic + "_srv"
+    from tests.bridge.action_support import FibServer, bridge_sees_action, send_goal
+
+    service, action = topic + "_srv", topic + "_act"
+    fib_server = None
     readers = [await open_wire(b.url) for _ in range(2)]
     drains: list[asyncio.Task[None]] = []
     try:
@@ -111,6 +115,13 @@ async def test_status_page_shows_live_clients_topics_and_services(
             while True:
                 await ws.ws.recv()
 
+        # Three goals that ran and ended: the actions table counts them after they are done.
+        fib_server = FibServer(ros_node, action)
+        await bridge_sees_action(readers[0], action)
+        for i in range(3):
+            await send_goal(readers[0], action, {"order": 2}, f"g{i}")
+            result = await readers[0].expect(op="action_result", id=f"g{i}")
+            assert result["status"] == 4, result
         drains = [asyncio.create_task(drain(ws)) for ws in readers]
         seen = await asyncio.to_thread(
             _browse, f"http://127.0.0.1:{b.port}/", topic, service,
@@ -121,7 +132,11 @@ async def test_status_page_shows_live_clients_topics_and_services(
             task.cancel()
         for ws in readers:
             await ws.close()
+        if fib_server is not None:
+            fib_server.destroy()
     assert seen["clients"] == "2"
+    row = next(r for r in seen["actions"] if r[0] == action)
+    assert (row[2], row[3]) == ("ROS", "3"), seen["actions"]  # 3 goals ran and ended
     assert seen["version"] == "0.1.0"
     _name, type_name, subscribers, from_ros, to_clients = seen["topic_row"][:5]
     assert (type_name, subscribers) == ("std_msgs/msg/String", "2")
