@@ -566,10 +566,21 @@ class RosNode:
         return []
 
     def other_servers(self, service: str) -> list[str]:
-        """Nodes other than the bridge's own that the ROS graph lists as serving ``service``."""
+        """Servers of ``service`` in the ROS graph other than the bridge's own node, by node
+        name where the graph names them yet ("another ROS node" where it does not).
+
+        Servers are counted by service name (a node's name reaches the graph later than its
+        endpoints, and two nodes may share a name); the bridge's own entry, which can linger
+        a moment after it destroyed a service, is left out.
+        """
         node = self.node
         me = (node.get_name(), node.get_namespace())
-        found = []
+        total = node.count_services(service)
+        mine = any(s == service for s, _ in node.get_service_names_and_types_by_node(*me))
+        others = total - (1 if mine else 0)
+        if others <= 0:
+            return []
+        named = []
         for name, namespace in node.get_node_names_and_namespaces():
             if (name, namespace) == me:
                 continue
@@ -578,8 +589,8 @@ class RosNode:
             except Exception:  # the node left between the two graph queries
                 continue
             if any(s == service for s, _ in served):
-                found.append(namespace.rstrip("/") + "/" + name)
-        return found
+                named.append(namespace.rstrip("/") + "/" + name)
+        return (named or ["(another ROS node)"])[:others]
 
     def now(self) -> tuple[int, int]:
         """The node clock's time as (sec, nanosec)."""

@@ -7,6 +7,7 @@ import argparse
 import asyncio
 import base64
 import contextlib
+import difflib
 import json
 import math
 import re
@@ -200,37 +201,49 @@ class Session:
                                            args or {}, timeout=self.timeout)
 
     async def polled(self, name: str, args: dict[str, Any], key: str, wait: float,
-                     missing: str) -> str:
+                     missing: str, listing: tuple[str, str] | None = None) -> str:
         """``/rosapi/<name>``'s ``key``, asked again up to ``wait`` s while it is empty
-        (graph discovery takes time); then ``CliError(EXIT_NOT_FOUND, missing)``."""
+        (graph discovery takes time); then ``CliError(EXIT_NOT_FOUND, missing)``, with the
+        closest names of ``listing`` (a rosapi list service and its key) as "did you mean"."""
         deadline = time.monotonic() + wait
         while True:
             found = str((await self.rosapi(name, args)).get(key, ""))
             if found:
                 return found
             if time.monotonic() >= deadline:
-                raise CliError(EXIT_NOT_FOUND, missing)
+                raise CliError(EXIT_NOT_FOUND, missing + await self._did_you_mean(
+                    next(iter(args.values()), ""), listing))
             await asyncio.sleep(0.1)
+
+    async def _did_you_mean(self, name: str, listing: tuple[str, str] | None) -> str:
+        if listing is None or not name:
+            return ""
+        known = [str(n) for n in (await self.rosapi(listing[0])).get(listing[1], [])]
+        close = difflib.get_close_matches(name, known, n=3, cutoff=0.7)
+        return f"; did you mean {' or '.join(close)}?" if close else ""
 
     async def topic_type(self, topic: str, wait: float) -> str:
         """The topic's type from the ROS graph; polls up to ``wait`` s."""
         return await self.polled("topic_type", {"topic": topic}, "type", wait,
                                  f"unknown topic {topic} (not in the ROS graph; give its TYPE "
-                                 "to wait for it)")
+                                 "to wait for it)", ("topics", "topics"))
 
     async def service_server(self, service: str, wait: float) -> str:
-        """The node serving ``service``; polls up to ``wait`` s.
+        """The type of ``service`` if a node serves it; polls up to ``wait`` s.
 
-        Asks ``/rosapi/service_node``: a service that only has clients (the
-        graph lists those too) does not count.
+        Asks ``/rosapi/service_type``, which counts servers by service name: a
+        service that only has clients (the graph lists those too) does not count,
+        and nodes sharing a name (two bridges, say) do not hide each other.
         """
-        return await self.polled("service_node", {"service": service}, "node", wait,
-                                 f"unknown service {service} (no node serves it)")
+        return await self.polled("service_type", {"service": service}, "type", wait,
+                                 f"unknown service {service} (no node serves it)",
+                                 ("services", "services"))
 
     async def action_type(self, action: str, wait: float) -> str:
         """The type of the action ``action`` serves; polls up to ``wait`` s."""
         return await self.polled("action_type", {"action": action}, "type", wait,
-                                 f"unknown action {action} (no action server serves it)")
+                                 f"unknown action {action} (no action server serves it)",
+                                 ("action_servers", "action_servers"))
 
 
 def _rosapi(name: str) -> str:

@@ -18,6 +18,7 @@ from roslibpy_lite.cli import (
     main,
 )
 from tests.cli.conftest import Result, Run, closed_port, one_error_line
+from tests.cli.test_commands import until_ok
 from tests.helpers import BridgeProcess, wait_until
 
 
@@ -193,3 +194,13 @@ def test_errors_do_not_disturb_the_bridge(cli: Run, multiplier: str) -> None:
                                          "mult_msgs/srv/MultFloats", "{x: 3.0, y: 3.0}"))
                or result[-1].code == 0, timeout=15, what="a good call")
     assert result[-1].out == "result: 9.0\n"
+
+
+def test_unknown_topic_suggests_the_close_one(cli: Run, ros_node: Any, topic: str) -> None:
+    """`topic echo /imuu` when /imu exists: exit 4, and the message names the close topic."""
+    from std_msgs.msg import String
+
+    ros_node.create_publisher(String, topic, 10)
+    until_ok(cli, "topic", "type", topic, check=lambda r: r.code == 0)
+    result = cli("topic", "echo", topic + "x", "--count", "1")
+    one_error_line(result, EXIT_NOT_FOUND, f"unknown topic {topic}x", f"did you mean {topic}?")
