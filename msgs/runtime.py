@@ -583,6 +583,19 @@ def _find(
     return found
 
 
+def _case_fixed(type_name: str) -> str | None:
+    """The generated type whose name differs from ``type_name`` only in case, if any."""
+    package, _, rest = type_name.lower().partition("/")
+    kind, _, name = rest.rpartition("/")
+    if not package or not name or kind not in ("", *_KINDS) or package not in available_packages():
+        return None
+    for full in available_types(package):
+        pkg_kind, _, found = full.rpartition("/")
+        if found.lower() == name and (not kind or pkg_kind.endswith("/" + kind)):
+            return full
+    return None
+
+
 def lookup(type_name: str) -> type[Message] | type[Service] | type[Action]:
     """The generated class for ``pkg/Name`` or ``pkg/{msg,srv,action}/Name``.
 
@@ -595,6 +608,10 @@ def lookup(type_name: str) -> type[Message] | type[Service] | type[Action]:
         return cached
     match = _NAME_RE.match(type_name) if isinstance(type_name, str) else None
     if match is None:
+        fixed = _case_fixed(type_name) if isinstance(type_name, str) else None
+        if fixed is not None:  # the right name in the wrong case: say so, not "format"
+            raise UnknownTypeError(type_name, f"did you mean {fixed!r}? (type names are "
+                                   "CamelCase, packages lower case)")
         raise UnknownTypeError(
             str(type_name), "expected 'package/Name' or 'package/msg|srv|action/Name'"
         )

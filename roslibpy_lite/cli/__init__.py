@@ -195,7 +195,10 @@ def main(argv: Sequence[str] | None = None, *, stdout: TextIO | None = None) -> 
     except ConnectionClosed as exc:
         return _fail(EXIT_CONNECT, f"connection lost: {exc}")
     except RemoteError as exc:
-        return _fail(EXIT_REMOTE, str(exc))
+        # A type the bridge does not know is the same mistake as one the client does not
+        # know (a typo in TYPE): one exit code for both, whoever noticed it.
+        code = EXIT_USAGE if ": unknown type '" in str(exc) else EXIT_REMOTE
+        return _fail(code, str(exc))
     except UsageError as exc:
         return _fail(EXIT_USAGE, str(exc))
     except BrokenPipeError:

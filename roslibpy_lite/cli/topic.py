@@ -256,7 +256,9 @@ async def cmd_topic_pub(args: argparse.Namespace, out: Out) -> int:
                                         f"{pub.error}")
         if len(subscribers) < wait_subs:
             if not args.quiet:
-                print(f"Waiting for at least {wait_subs} matching subscription(s)...",
+                print(f"Waiting for at least {wait_subs} matching subscription(s) on "
+                      f"{args.topic}... (none yet; Ctrl+C stops, "
+                      "--wait-matching-subscriptions 0 publishes without waiting)",
                       file=sys.stderr, flush=True)
             while len(subscribers) < wait_subs:
                 await asyncio.sleep(0.1)  # ROS graph discovery has no event to await

@@ -108,6 +108,7 @@ class Ros:
     ) -> None:
         self._options = _options(headers)
         self.url = _url(host, port, is_secure)
+        self._last_failure: ConnectError | None = None
         self._loop = LoopThread(f"roslibpy_lite.compat {self.url}")
         self._callbacks = concurrent.futures.ThreadPoolExecutor(
             max_workers=1, thread_name_prefix="roslibpy_lite.compat callbacks")
@@ -161,6 +162,7 @@ class Ros:
                 return
             except ConnectError as exc:
                 log.warning("%s", exc)
+                self._last_failure = exc
                 self.emit("error", exc)
                 await asyncio.sleep(backoff.next())
                 continue
@@ -196,7 +198,12 @@ class Ros:
         try:
             await asyncio.wait_for(self._connected(), timeout)
         except TimeoutError:
-            raise RosTimeoutError("Failed to connect to ROS") from None
+            why = self._last_failure
+            raise RosTimeoutError(
+                f"Failed to connect to ROS at {self.url} within {timeout:g} s: "
+                + (str(why) if why is not None else "no answer yet; check that a rosbridge "
+                   "server is running there and the host and port are right")
+            ) from None
 
     def run_forever(self) -> None:
         """Connect, then block until :meth:`terminate` is called (from a callback or a thread)."""

@@ -204,3 +204,16 @@ def test_unknown_topic_suggests_the_close_one(cli: Run, ros_node: Any, topic: st
     until_ok(cli, "topic", "type", topic, check=lambda r: r.code == 0)
     result = cli("topic", "echo", topic + "x", "--count", "1")
     one_error_line(result, EXIT_NOT_FOUND, f"unknown topic {topic}x", f"did you mean {topic}?")
+
+
+@pytest.mark.parametrize("bad", ["sensor_msgs/msg/Imuu", "sensor_msg/msg/Imu"])
+def test_type_typos_exit_with_one_code(cli: Run, bad: str) -> None:
+    """A typo in TYPE exits 2 whether the client or the bridge noticed it."""
+    result = cli("topic", "echo", "/imu_typo_probe", bad, "--count", "1", "--timeout", "10")
+    one_error_line(result, EXIT_USAGE, bad)
+
+
+def test_interface_show_says_the_case_is_wrong(cli: Run) -> None:
+    """`interface show sensor_msgs/msg/imu` names the right spelling, not the name's format."""
+    result = cli("interface", "show", "sensor_msgs/msg/imu")
+    one_error_line(result, EXIT_NOT_FOUND, "did you mean 'sensor_msgs/msg/Imu'?")

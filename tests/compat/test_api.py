@@ -151,3 +151,21 @@ def test_operations_after_terminate_raise_connection_closed() -> None:
         topic.publish(compat.Message({"data": "x"}))
     with pytest.raises(ConnectionClosed, match="call /add: the client is closed"):
         compat.Service(ros, "/add", "example_interfaces/AddTwoInts").call({"a": 1, "b": 2})
+
+
+def test_wrong_port_says_where_and_what_to_check() -> None:
+    """run() against a port nobody serves fails naming the URL and what to check, not only
+    'Failed to connect to ROS'."""
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    ros = compat.Ros(host="127.0.0.1", port=port)
+    try:
+        with pytest.raises(compat.RosTimeoutError) as info:
+            ros.run(timeout=2)
+    finally:
+        ros.terminate()
+    text = str(info.value)
+    assert f"ws://127.0.0.1:{port}" in text and "rosbridge server" in text
