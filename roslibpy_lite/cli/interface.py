@@ -1,4 +1,5 @@
-"""``roslibpy-lite interface show|list`` (from msgs, no bridge)."""
+"""``roslibpy-lite interface show|list``: from msgs; a type msgs does not know is asked of the
+bridge (rosapi's details), so the robot's own interfaces show too."""
 
 from __future__ import annotations
 
@@ -15,6 +16,8 @@ from .common import (
     Kit,
     Out,
     Parser,
+    Session,
+    with_session,
 )
 
 
@@ -59,8 +62,14 @@ def _show(definition: str, package: str, depth: int, lines: list[str]) -> None:
 
 
 async def cmd_interface_show(args: argparse.Namespace, out: Out) -> int:
-    """``interface show TYPE``: the definition, nested types expanded (from msgs, no bridge)."""
-    cls = _interface_class(args.type)
+    """``interface show TYPE``: the definition, nested types expanded (from msgs; a type
+    msgs does not generate is asked of the bridge at ``--url``)."""
+    try:
+        cls = _interface_class(args.type)
+    except CliError as local:
+        if "did you mean" in local.message or "expected 'package/" in local.message:
+            raise  # a malformed or miscased name: the bridge would not know it either
+        return await _show_from_bridge(args, out, local)
     lines: list[str] = []
     if args.raw:
         lines = cls._definition.rstrip("\n").split("\n")
@@ -69,6 +78,55 @@ async def cmd_interface_show(args: argparse.Namespace, out: Out) -> int:
     for line in lines:
         out.line(line)
     return EXIT_OK
+
+
+async def _show_from_bridge(args: argparse.Namespace, out: Out, local: CliError) -> int:
+    """Print a type's fields as the bridge describes them (rosapi typedefs)."""
+    kind = args.type.split("/")[1] if args.type.count("/") == 2 else "msg"
+    queries = {"msg": [("message_details", "")],
+               "srv": [("service_request_details", ""), ("service_response_details", "---")],
+               "action": [("action_goal_details", ""), ("action_result_details", "---"),
+                          ("action_feedback_details", "---")]}.get(kind, [])
+
+    async def body(s: Session) -> int:
+        blocks: list[tuple[str, list[dict[str, Any]]]] = []
+        for service, separator in queries:
+            try:
+                reply = await s.rosapi(service, {"type": args.type})
+            except Exception:
+                reply = {}
+            typedefs = reply.get("typedefs") or []
+            if not typedefs:
+                raise CliError(EXIT_NOT_FOUND, f"{local.message}; the bridge at {args.url} "
+                               "does not know it either")
+            blocks.append((separator, typedefs))
+        for separator, typedefs in blocks:
+            if separator:
+                out.line(separator)
+            by_type = {str(t.get("type", "")): t for t in typedefs}
+            _typedef_lines(typedefs[0], by_type, 0, out)
+        return EXIT_OK
+    return await with_session(args, body)
+
+
+_MSG_SPELLING = {"boolean": "bool", "octet": "byte", "float": "float32", "double": "float64"}
+"""rosapi names primitive types as IDL does; .msg files (and this command) spell them so."""
+
+
+def _typedef_lines(typedef: dict[str, Any], by_type: dict[str, dict[str, Any]], depth: int,
+                   out: Out) -> None:
+    pad = "\t" * depth
+    for name, value in zip(typedef.get("constnames", []), typedef.get("constvalues", []),
+                           strict=False):
+        out.line(f"{pad}{name} = {value}")
+    for name, ftype, arraylen in zip(typedef.get("fieldnames", []),
+                                     typedef.get("fieldtypes", []),
+                                     typedef.get("fieldarraylen", []), strict=False):
+        suffix = "[]" if arraylen == 0 else f"[{arraylen}]" if arraylen > 0 else ""
+        out.line(f"{pad}{_MSG_SPELLING.get(ftype, ftype)}{suffix} {name}")
+        nested = by_type.get(ftype)
+        if nested is not None and depth < 16:
+            _typedef_lines(nested, by_type, depth + 1, out)
 
 
 async def cmd_interface_list(args: argparse.Namespace, out: Out) -> int:
@@ -84,7 +142,8 @@ async def cmd_interface_list(args: argparse.Namespace, out: Out) -> int:
 
 def add_parsers(groups: Any, kit: Kit) -> None:
     """Add ``interface`` and its commands."""
-    interface = groups.add_parser("interface", help="interface types: show, list (no bridge)")
+    interface = groups.add_parser("interface", help="interface types: show (asks the bridge "
+                                  "for types msgs does not know), list")
     isub = interface.add_subparsers(dest="command", metavar="{show,list}", parser_class=Parser)
     isub.required = True
     p = kit.leaf(isub, "show", cmd_interface_show, "print an interface definition")

@@ -299,3 +299,16 @@ def test_topic_echo_shows_nan(cli: Run, ros_node: Any, topic: str) -> None:
         ros_node.destroy_timer(timer)
     assert (shown.code, shown.out) == (0, "data: .nan\n---\n"), shown
     assert (wire.code, wire.out) == (0, '{"data":null}\n'), wire
+
+
+def test_interface_show_asks_the_bridge_for_types_msgs_lacks(cli: Run) -> None:
+    """A type msgs does not generate (but the robot has) is shown from the bridge's rosapi."""
+    shown = cli("interface", "show", "type_description_interfaces/msg/KeyValue")
+    assert shown.code == 0, shown
+    assert shown.lines == ["string key", "string value"]
+    srv = cli("interface", "show", "type_description_interfaces/srv/GetTypeDescription")
+    assert srv.code == 0, srv
+    assert "string type_name" in srv.lines and "---" in srv.lines
+    assert "bool successful" in srv.lines
+    missing = cli("interface", "show", "nothing_here/msg/Nope")
+    assert missing.code == 4 and "does not know it either" in missing.err, missing
