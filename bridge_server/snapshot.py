@@ -29,7 +29,8 @@ RATE_FIELDS = ("ros_received", "sent", "published")
 
 
 def topic_totals(bridge: Bridge) -> dict[str, dict[str, Any]]:
-    """Per-topic counters of this process (closed objects' counts included)."""
+    """Per-topic counters of this process (closed objects' counts included; ``in_use``
+    marks topics a client or the bridge's ROS side uses now)."""
     topics: dict[str, dict[str, Any]] = {}
     for name, counts in bridge.metrics.retired.items():
         topics[name] = dict(counts)
@@ -42,9 +43,14 @@ def topic_totals(bridge: Bridge) -> dict[str, dict[str, Any]]:
         t = topics.setdefault(name, {})
         t.setdefault("type", _type)
         t["bridge_publishers"] = t.get("bridge_publishers", 0) + 1
+    for name in bridge.ros.subscriptions:
+        topics[name]["in_use"] = True
+    for name, _type, _latch in bridge.ros.publishers:
+        topics[name]["in_use"] = True
     for session in bridge.sessions:
         for sub in session.subs.values():
             t = topics.setdefault(sub.topic, {})
+            t["in_use"] = True
             t["subscribers"] = t.get("subscribers", 0) + 1
             t["sent"] = t.get("sent", 0) + sub.sent
             t["sent_bytes"] = t.get("sent_bytes", 0) + sub.sent_bytes

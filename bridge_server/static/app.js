@@ -83,7 +83,13 @@
       list(c.subscriptions.map((x) => x.topic)), list(c.publishes), list(c.serves),
       queue(c), c.dropped ? el("span", c.dropped, "warn") : 0,
     ]), "no clients connected");
-    const topics = Object.keys(s.topics).sort();
+    // Topics in use now, or with traffic in the last second; ones nobody uses any more
+    // leave the table (their totals stay in /metrics).
+    const topics = Object.keys(s.topics).filter((name) => {
+      const t = s.topics[name];
+      return t.in_use || t.ros_received_per_s || t.sent_per_s || t.published_per_s;
+    }).sort();
+    plotRates(s);
     fill("topics", topics.map((name) => {
       const t = s.topics[name];
       return [name, t.type || "?", t.subscribers || 0, rate(t.ros_received_per_s),
@@ -114,6 +120,32 @@
     updated.textContent = "live · " + new Date().toLocaleTimeString();
     updated.className = "";
     document.body.dataset.updates = String(Number(document.body.dataset.updates || 0) + 1);
+  }
+
+  // The last PLOT_POINTS seconds of messages per second, in all: "is it still flowing?"
+  const PLOT_POINTS = 300;
+  const history = { toClients: [], fromClients: [] };
+
+  function plotRates(s) {
+    let out = 0, inn = 0;
+    for (const name in s.topics) {
+      out += s.topics[name].sent_per_s || 0;
+      inn += s.topics[name].published_per_s || 0;
+    }
+    for (const [key, v] of [["toClients", out], ["fromClients", inn]]) {
+      history[key].push(v);
+      if (history[key].length > PLOT_POINTS) history[key].shift();
+    }
+    const svg = document.getElementById("rates-plot");
+    const w = 600, h = 60;
+    const top = Math.max(1, ...history.toClients, ...history.fromClients);
+    const line = (values) => values.map((v, i) =>
+      `${(w * (PLOT_POINTS - values.length + i) / (PLOT_POINTS - 1)).toFixed(1)},` +
+      `${(h - 2 - (h - 4) * v / top).toFixed(1)}`).join(" ");
+    svg.querySelector(".to-clients").setAttribute("points", line(history.toClients));
+    svg.querySelector(".from-clients").setAttribute("points", line(history.fromClients));
+    document.getElementById("rates-now").textContent =
+      `${out.toFixed(1)} /s to clients, ${inn.toFixed(1)} /s from clients (peak ${top.toFixed(0)})`;
   }
 
   async function poll() {

@@ -31,6 +31,9 @@ return {clients: text('client-count'), version: text('version'), uptime: text('u
         topics: rows('topics'), client_rows: rows('clients').map((r) => r.join(' ')),
         services: rows('services').map((r) => r.join(' ')),
         actions: rows('actions'),
+        plot_points: document.querySelector('#rates-plot .to-clients')
+          .getAttribute('points').trim().split(' ').filter((p) => p).length,
+        rates_now: text('rates-now'),
         updates: Number(document.body.dataset.updates || 0)};
 """
 
@@ -99,7 +102,7 @@ async def test_status_page_shows_live_clients_topics_and_services(
     ros_node.create_timer(1 / 20, lambda: pub.publish(String(data="tick")))
     from tests.bridge.action_support import FibServer, bridge_sees_action, send_goal
 
-    service, action = topic + "_srv", topic + "_act"
+    service, action, gone = topic + "_srv", topic + "_act", ""
     fib_server = None
     readers = [await open_wire(b.url) for _ in range(2)]
     drains: list[asyncio.Task[None]] = []
@@ -115,6 +118,10 @@ async def test_status_page_shows_live_clients_topics_and_services(
             while True:
                 await ws.ws.recv()
 
+        # A topic nobody uses any more leaves the table.
+        gone = topic + "_gone"
+        await readers[0].send({"op": "subscribe", "topic": gone, "type": "std_msgs/msg/String"})
+        await readers[0].send({"op": "unsubscribe", "topic": gone})
         # Three goals that ran and ended: the actions table counts them after they are done.
         fib_server = FibServer(ros_node, action)
         await bridge_sees_action(readers[0], action)
@@ -135,6 +142,8 @@ async def test_status_page_shows_live_clients_topics_and_services(
         if fib_server is not None:
             fib_server.destroy()
     assert seen["clients"] == "2"
+    assert not [c for c in seen["topics"] if c and c[0] == gone], seen["topics"]
+    assert seen["plot_points"] >= 2 and "/s to clients" in seen["rates_now"], seen
     row = next(r for r in seen["actions"] if r[0] == action)
     assert (row[2], row[3]) == ("ROS", "3"), seen["actions"]  # 3 goals ran and ended
     assert seen["version"] == "0.1.0"
