@@ -473,7 +473,7 @@ class SessionActions:
             others = session.ros.other_servers(name + _GOAL_SUFFIX)
             if others and not session.gate.may_take_over(name, None):
                 session.error(
-                    f"advertise_action: {name} is already served by the ROS node {others[0]}; "
+                    f"advertise_action: {name} is already served by {others[0]}; "
                     "a bridge client may serve it too only with the take_over capability",
                     op.id,
                 )

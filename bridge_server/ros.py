@@ -95,6 +95,10 @@ SPIN_ERROR_LOG_INTERVAL = 10.0
 """Seconds between two logged failures of an executor round (the others are counted)."""
 
 
+
+SETTLE_S = 0.25
+"""Seconds a newly matched service client waits before its first request (see settled)."""
+
 class Incoming:
     """One ROS message received on a topic, encoded lazily and once per encoding."""
 
@@ -566,8 +570,8 @@ class RosNode:
         return []
 
     def other_servers(self, service: str) -> list[str]:
-        """Servers of ``service`` in the ROS graph other than the bridge's own node, by node
-        name where the graph names them yet ("another ROS node" where it does not).
+        """Servers of ``service`` in the ROS graph other than the bridge's own node, as
+        "the ROS node /name" where the graph names them yet ("another ROS node" where not).
 
         Servers are counted by service name (a node's name reaches the graph later than its
         endpoints, and two nodes may share a name); the bridge's own entry, which can linger
@@ -589,8 +593,8 @@ class RosNode:
             except Exception:  # the node left between the two graph queries
                 continue
             if any(s == service for s, _ in served):
-                named.append(namespace.rstrip("/") + "/" + name)
-        return (named or ["(another ROS node)"])[:others]
+                named.append("the ROS node " + namespace.rstrip("/") + "/" + name)
+        return (named or ["another ROS node"])[:others]
 
     def now(self) -> tuple[int, int]:
         """The node clock's time as (sec, nanosec)."""
@@ -686,6 +690,25 @@ class RosNode:
             _inline_done_callbacks(client)
         return client
 
+    async def settled(self, client: Any) -> None:
+        """Return once ``client`` has had a matched server for :data:`SETTLE_S` seconds.
+
+        DDS matches each direction of a service on its own: the bridge can see a server as
+        ready (our request writer and response reader matched) before the server has
+        matched our response reader, and a request sent in that window is executed but its
+        answer lost (rmw_fastrtps: "failed to send response"). Nothing on our side shows the
+        server's half, so the first requests on a newly matched client wait a moment; later
+        calls on the same client do not wait at all.
+        """
+        now = self.loop.time()
+        since = getattr(client, "_bridge_ready_at", None)
+        if since is None:
+            since = now
+            client._bridge_ready_at = since
+        wait = since + SETTLE_S - now
+        if wait > 0:
+            await asyncio.sleep(wait)
+
     async def call_when_ready(
         self,
         service: str,
@@ -711,6 +734,7 @@ class RosNode:
                 raise TimeoutError(f"service {service} is not available")
             await asyncio.sleep(delay)
             delay = min(delay * 2, 0.05)
+        await self.settled(client)
         future = self.call(client, request)
         timer = loop.call_at(deadline, _fail_timeout, future)
         try:

@@ -898,6 +898,7 @@ class Session:
                     )
                 await asyncio.sleep(delay)
                 delay = min(delay * 2, 0.05)
+        await ros.settled(client)  # a newly matched server may not hear back yet
         # A timer that fails the future is cheaper than asyncio.wait_for (no extra task).
         future = ros.call(client, request)
         timer = loop.call_at(deadline, _expire, future)
@@ -937,7 +938,7 @@ class Session:
             others = self.ros.other_servers(name)
             if others and not self.gate.may_take_over(name, None):
                 self.error(
-                    f"advertise_service: {name} is already served by the ROS node "
+                    f"advertise_service: {name} is already served by "
                     f"{others[0]}; a bridge client may serve it too only with the take_over "
                     "capability",
                     op.id,
