@@ -27,7 +27,7 @@ from typing import TYPE_CHECKING, Any
 from websockets.asyncio.server import Server, ServerConnection, serve
 from websockets.datastructures import MultipleValuesError
 
-from roslibpy_lite.transports import keepalive
+from roslibpy_lite import keepalive
 
 from .actions import ActionClients, SessionActions
 from .metrics import Recorder

@@ -84,12 +84,10 @@ from typing import TYPE_CHECKING, Any
 
 from websockets.exceptions import ConnectionClosed
 
-from roslibpy_lite import ops
+from roslibpy_lite import keepalive, ops
 from roslibpy_lite.exceptions import ProtocolError
-from roslibpy_lite.ops import parse_op
+from roslibpy_lite.ops import ACKS_HEADER, parse_op
 from roslibpy_lite.protocol import Protocol, decode_frame, split_fragments
-from roslibpy_lite.transports import keepalive
-from roslibpy_lite.transports.base import ACKS_HEADER
 
 from . import convert, rosapi
 from .actions import SessionActions

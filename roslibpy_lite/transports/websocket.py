@@ -24,7 +24,7 @@ from websockets.asyncio.client import connect as ws_connect
 from websockets.exceptions import ConnectionClosed as WsConnectionClosed
 from websockets.exceptions import InvalidHandshake, InvalidMessage, InvalidStatus, InvalidURI
 
-from .. import ops
+from .. import keepalive, ops
 from .._backoff import Backoff
 from ..exceptions import (
     ConnectError,
@@ -37,7 +37,6 @@ from ..exceptions import (
 )
 from ..ops import ACKS_HEADER, AUTH_HEADER
 from ..protocol import Protocol
-from . import keepalive
 
 if TYPE_CHECKING:
     from .base import Link
