@@ -9,6 +9,7 @@ from typing import Any
 from msgs.runtime import UnknownTypeError, lookup
 
 from .common import (
+    EXIT_CONNECT,
     EXIT_NOT_FOUND,
     EXIT_OK,
     PRIMITIVES,
@@ -69,7 +70,13 @@ async def cmd_interface_show(args: argparse.Namespace, out: Out) -> int:
     except CliError as local:
         if "did you mean" in local.message or "expected 'package/" in local.message:
             raise  # a malformed or miscased name: the bridge would not know it either
-        return await _show_from_bridge(args, out, local)
+        try:
+            return await _show_from_bridge(args, out, local)
+        except CliError as exc:
+            if exc.code != EXIT_CONNECT:
+                raise
+            raise CliError(EXIT_NOT_FOUND, f"{local.message}; no bridge at {args.url} to ask "
+                           "about the robot's own types") from None
     lines: list[str] = []
     if args.raw:
         lines = cls._definition.rstrip("\n").split("\n")

@@ -156,9 +156,10 @@ def test_publish_with_a_type_the_bridge_lacks(cli: Run, topic: str) -> None:
 
 
 def test_echo_with_a_type_the_bridge_lacks(cli: Run, topic: str) -> None:
-    """echo with a TYPE no installed package has: the bridge refuses the subscription, status 6."""
+    """echo with a TYPE no installed package has: the bridge refuses the subscription, status 2,
+    as for a type the client itself does not know (a typo in TYPE either way)."""
     one_error_line(cli("topic", "echo", topic, "nopkg/msg/Nothing", "--duration", "10"),
-                   EXIT_REMOTE, "nopkg/msg/Nothing")
+                   EXIT_USAGE, "nopkg/msg/Nothing")
 
 
 def test_call_with_a_type_the_bridge_lacks(cli: Run, multiplier: str) -> None:

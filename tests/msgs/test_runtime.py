@@ -345,7 +345,7 @@ def test_lookup_accepts_both_spellings() -> None:
         ("std_msgs/srv/String", "no type 'String' in std_msgs/srv"),
         ("no_such_pkg/msg/Thing", "no type 'Thing'"),
         ("std_msgs", "expected 'package/Name'"),
-        ("std_msgs/msg/string", "expected 'package/Name'"),
+        ("std_msgs/msg/string", "did you mean 'std_msgs/msg/String'?"),
         ("std_msgs/foo/String", "expected 'package/Name'"),
         ("../x/Y", "expected 'package/Name'"),
         ("runtime/Message", "no generated package 'runtime'"),
