@@ -165,6 +165,11 @@ class LinkProxy:
         if self._server is not None:
             self._server.close()
             await self._server.wait_closed()
+        # the pipes of reset connections: let them finish before the loop stops
+        tasks = [t for t in asyncio.all_tasks() if t is not asyncio.current_task()]
+        for task in tasks:
+            task.cancel()
+        await asyncio.gather(*tasks, return_exceptions=True)
 
     def __enter__(self) -> Self:
         return self.start()
