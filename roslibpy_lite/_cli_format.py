@@ -60,7 +60,7 @@ def parse_values(text: str | None, what: str = "VALUES") -> dict[str, Any]:
             raise ArgumentError(
                 f"{what} is not valid JSON (line {exc.lineno}, column {exc.colno}: {exc.msg}); "
                 "PyYAML is not installed, so only JSON is accepted "
-                "(pip install 'roslibpy-lite[cli]' for YAML)"
+                "(for YAML: pip install pyyaml, or install the wheel with its [cli] extra)"
             ) from None
     if value is None:
         return {}

@@ -91,7 +91,8 @@ EXAMPLES: tuple[str, ...] = (
 def _epilog() -> str:
     codes = "\n".join(f"  {code:<4} {text}" for code, text in EXIT_CODES.items())
     yaml_note = ("VALUES are YAML or JSON" if have_yaml()
-                 else "VALUES are JSON (install 'roslibpy-lite[cli]' for YAML)")
+                 else "VALUES are JSON (for YAML: pip install pyyaml, or the wheel's [cli] "
+                 "extra)")
     examples = "\n".join(f"  roslibpy-lite {e}" for e in EXAMPLES)
     return f"examples:\n{examples}\n\n{yaml_note}.\n\nexit status:\n{codes}"
 

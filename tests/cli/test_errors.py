@@ -143,7 +143,7 @@ def test_json_only_without_pyyaml(
              "--wait", "10")
     assert (ok.code, ok.out) == (0, "result: 10.0\n"), ok
     one_error_line(cli("service", "call", multiplier, "mult_msgs/srv/MultFloats", "{x: 2.5}"),
-                   EXIT_USAGE, "not valid JSON", "roslibpy-lite[cli]")
+                   EXIT_USAGE, "not valid JSON", "pip install pyyaml", "[cli] extra")
 
 
 # -- the other side said no ------------------------------------------------------------------------
