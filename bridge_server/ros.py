@@ -579,7 +579,7 @@ class RosNode:
         """
         node = self.node
         me = (node.get_name(), node.get_namespace())
-        total = node.count_services(service)
+        total = self.server_count(service)
         mine = any(s == service for s, _ in node.get_service_names_and_types_by_node(*me))
         others = total - (1 if mine else 0)
         if others <= 0:

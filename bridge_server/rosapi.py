@@ -117,7 +117,7 @@ def _all_services(bridge: Bridge) -> list[tuple[str, str]]:
     found = {
         (name, types[0] if types else "")
         for name, types in node.get_service_names_and_types()
-        if node.count_services(name) > 0
+        if bridge.ros.server_count(name) > 0
     }
     return sorted(found | set(_own_services()))
 
