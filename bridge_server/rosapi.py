@@ -555,7 +555,15 @@ for _service, (_handler, _srv, _field) in _ACTION_CALLS.items():
 # -- parameters (``/node:param`` names, through each node's parameter services) ------------
 
 PARAM_TIMEOUT = 2.0
-"""Seconds to wait for a node's parameter service."""
+"""Seconds ``get_param_names`` waits for each listed node's parameter service."""
+
+PARAM_DISCOVERY = 5.0
+"""Seconds a named node's parameter service may stay out of the ROS graph before a
+get/set/has/delete fails (a node that does not exist is reported then)."""
+
+PARAM_CALL_TIMEOUT = 10.0
+"""Seconds a get/set/has/delete waits for a listed node to match and answer (a busy
+machine can take seconds to match a node that has just started)."""
 
 AsyncHandler = Callable[["Bridge", Mapping[str, Any]], Awaitable[dict[str, Any]]]
 
@@ -644,7 +652,7 @@ async def _get_values(bridge: Bridge, node: str, names: list[str]) -> list[Any]:
     try:
         response = await bridge.ros.call_when_ready(
             f"{node}/get_parameters", GetParameters, GetParameters.Request(names=names),
-            PARAM_TIMEOUT,
+            PARAM_CALL_TIMEOUT, discovery_wait=PARAM_DISCOVERY,
         )
     except (TimeoutError, LookupError):
         raise RosapiError(f"node {node} does not answer parameter requests") from None
@@ -658,7 +666,8 @@ async def _set_value(bridge: Bridge, node: str, param: str, value: Any) -> tuple
     request = SetParameters.Request(parameters=[Parameter(name=param, value=value)])
     try:
         response = await bridge.ros.call_when_ready(
-            f"{node}/set_parameters", SetParameters, request, PARAM_TIMEOUT
+            f"{node}/set_parameters", SetParameters, request, PARAM_CALL_TIMEOUT,
+            discovery_wait=PARAM_DISCOVERY,
         )
     except (TimeoutError, LookupError):
         raise RosapiError(f"node {node} does not answer parameter requests") from None
