@@ -1,8 +1,9 @@
 """What one session does with actions: goals it sends, and actions it serves.
 
 A :class:`SessionActions` belongs to one :class:`~bridge_server.session.Session`
-(``session.actions``), which hands it every action op (:meth:`SessionActions.handle`)
-and calls :meth:`SessionActions.close` when the client goes away. The rclpy
+(``session.actions``), which hands it the action ops listed in
+:attr:`SessionActions.OPS` and calls :meth:`SessionActions.close` when the client
+goes away. The rclpy
 side lives in :mod:`bridge_server.ros_actions`.
 
 Sending goals
@@ -41,11 +42,9 @@ arrives as ``cancel_action_goal`` with that id. The client answers with
 or 6 ends the goal that way; without a status, ``result`` true means
 SUCCEEDED and false ABORTED. A result that does not fit the type, an
 unadvertise, a disconnect or ``goal_timeout`` abort the goal at once. A name
-another client serves stays with its first owner, as for services: a second
-advertise fails unless the same principal asks (a reconnect), its role has
-``take_over`` on the name, or the owner does not answer a ping within
-``OWNER_PING_TIMEOUT`` s; a taken-over owner's goals are aborted and it gets a
-warning.
+another client serves stays with its first owner, as for services
+(:mod:`bridge_server.ownership`); a taken-over owner's goals are aborted and it
+gets a warning.
 """
 
 from __future__ import annotations
@@ -55,15 +54,14 @@ import itertools
 import json
 import logging
 from collections.abc import Mapping
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, ClassVar
 
 import cbor2
-from websockets.exceptions import ConnectionClosed
 
 from roslibpy_lite import ops
-from roslibpy_lite.protocol import split_fragments
 
 from . import convert
+from .names import full_name
 from .ros_actions import (
     ACTIVE,
     CANCEL_ANSWERS,
@@ -73,10 +71,10 @@ from .ros_actions import (
     SharedActionClient,
     Status,
 )
-from .security import OWNER_PING_TIMEOUT
 from .types import BridgeError, canonical_name, resolve_action
 
 if TYPE_CHECKING:
+    from .security import Gate
     from .session import Session
 
 __all__ = ["ActionClients", "SessionActions"]
@@ -219,7 +217,7 @@ class _Goal:
         self.owner.emit(self, "action_result", result, self.sent.shared.result_conv, status)
 
 
-class _Served:
+class ClientAction:
     """An action this client serves, and the ROS goals it is carrying out."""
 
     def __init__(self, name: str, wire: str, type_name: str) -> None:
@@ -234,32 +232,23 @@ class _Served:
 class SessionActions:
     """One client's goals in flight and served actions."""
 
+    OPS: ClassVar[dict[type[ops.Op], str]] = {
+        ops.SendActionGoal: "send_goal",
+        ops.CancelActionGoal: "cancel_goal",
+        ops.ActionFeedback: "feedback",
+        ops.ActionResult: "result",
+        ops.AdvertiseAction: "advertise",
+        ops.UnadvertiseAction: "unadvertise",
+    }
+    """The ops this capability carries out, and the method for each."""
+
     def __init__(self, session: Session) -> None:
         self.session = session
         self.goals: dict[str, _Goal] = {}
-        self.served: dict[str, _Served] = {}
+        self.served: dict[str, ClientAction] = {}
+        self._owners = session.bridge.action_owners
         self._goal_ids = itertools.count()
-        self._frag_ids = itertools.count()
 
-    @property
-    def _owners(self) -> dict[str, SessionActions]:
-        owners: dict[str, SessionActions] = self.session.bridge.action_owners
-        return owners
-
-    def handle(self, op: ops.Op) -> None:
-        """Carry out one action op."""
-        if isinstance(op, ops.SendActionGoal):
-            self.send_goal(op)
-        elif isinstance(op, ops.CancelActionGoal):
-            self.cancel_goal(op)
-        elif isinstance(op, ops.ActionFeedback):
-            self.feedback(op)
-        elif isinstance(op, ops.ActionResult):
-            self.result(op)
-        elif isinstance(op, ops.AdvertiseAction):
-            self.advertise(op)
-        elif isinstance(op, ops.UnadvertiseAction):
-            self.unadvertise(op)
 
     async def close(self) -> None:
         """The client went away: cancel its goals on the ROS side, abort the goals it served."""
@@ -270,14 +259,18 @@ class SessionActions:
             if goal.sent is not None:
                 goal.sent.cancel()
         for served in list(self.served.values()):
-            self._remove_served(served, "the client that served it disconnected")
+            self.remove_served(served, "the client that served it disconnected")
         self.served.clear()
+
+    def recheck(self, gate: Gate) -> int:
+        """Stop serving the actions the role no longer allows; how many ended."""
+        return self._owners.recheck(self, gate)
 
     # -- sending goals -------------------------------------------------------------------------
 
     def send_goal(self, op: ops.SendActionGoal) -> None:
         """Start a goal: convert it, then wait for a server and send it (a task)."""
-        name = _name(op.action)
+        name = full_name(op.action)
         id: ops.Id = op.id if op.id is not None else (
             f"send_action_goal:{op.action}:{next(self._goal_ids)}"
         )
@@ -292,8 +285,8 @@ class SessionActions:
             return
         conv = convert.converter_for(action_cls.Goal)
         try:
-            goal_msg = conv.from_obj(_args_obj(op.args, conv.fields), "args")
-        except (convert.ConversionError, _Failed) as exc:
+            goal_msg = conv.from_obj(convert.args_mapping(op.args, conv.fields, "goal"), "args")
+        except convert.ConversionError as exc:
             self._refuse(op, id, f"send_action_goal to {name} ({type_name}): {exc}")
             return
         goal = _Goal(self, op, id, name, type_name)
@@ -373,7 +366,7 @@ class SessionActions:
         goal = self.goals.get(str(op.id))
         if goal is None:
             self.session.error(
-                f"cancel_action_goal: no goal {op.id!r} of {_name(op.action)} is in flight "
+                f"cancel_action_goal: no goal {op.id!r} of {full_name(op.action)} is in flight "
                 "on this connection",
                 op.id,
             )
@@ -435,85 +428,44 @@ class SessionActions:
             ok = "true" if status in _RAN else "false"
             tail = f',"status":{status},"result":{ok}}}'
         text = f'{head},"values":{conv.to_json(msg)}{tail}'
-        size = goal.fragment_size
-        if size is not None and len(text) > size:
-            frag_id = f"{goal.id}:{next(self._frag_ids)}"
-            for piece in split_fragments(text, size, frag_id):
-                session.send_text(piece)
-        else:
-            session.send_text(text)
+        session.outbox.send_split(text, goal.fragment_size, None, str(goal.id))
 
     # -- serving actions -----------------------------------------------------------------------
 
     def advertise(self, op: ops.AdvertiseAction) -> None:
         """Serve an action from this client (an rclpy action server in the bridge)."""
         session = self.session
-        name = _name(op.action)
+        name = full_name(op.action)
         action_cls = resolve_action(op.type)
         type_name = canonical_name(op.type, "action")
         mine = self.served.get(name)
         if mine is not None:
             if mine.type_name == type_name:
                 return
-            self._remove_served(mine, "the client advertised it again with another type", False)
+            self.remove_served(mine, "the client advertised it again with another type", False)
             del self.served[name]
         old = session.bridge.action_clients.lingering.pop(name, None)
         if old is not None:  # two servers of one name would both answer each goal
             old.destroy()
-        owner = self._owners.get(name)
-        if owner is not None and owner is not self:
-            if not session.gate.may_take_over(name, owner.session.gate):
-                # The first owner keeps it while it answers a ping, as for services.
-                task = session.loop.create_task(self._claim(op, owner))
-                session.calls.add(task)  # cancelled with the session's calls
-                task.add_done_callback(session.calls.discard)
-                return
-            owner.drop_served(name, f"taken over by client {session.sid}")
-        elif owner is None and old is None and _server_types(session, name + _GOAL_SUFFIX):
-            others = session.ros.other_servers(name + _GOAL_SUFFIX)
-            if others and not session.gate.may_take_over(name, None):
-                session.error(
-                    f"advertise_action: {name} is already served by {others[0]}; "
-                    "a bridge client may serve it too only with the take_over capability",
-                    op.id,
-                )
-                return
-        served = _Served(name, op.action, type_name)
+        goal_service = name + _GOAL_SUFFIX
+
+        def ros_servers() -> list[str]:  # our own lingering server is not another's
+            if old is not None or not _server_types(session, goal_service):
+                return []
+            return session.ros.other_servers(goal_service)
+
+        if not self._owners.admit(self, op, name, ros_servers):
+            return
+        served = ClientAction(name, op.action, type_name)
         served.ros = ServedAction(
             session.ros, name, action_cls,
             lambda goal: self._on_ros_goal(served, goal),
             lambda goal: self._on_ros_cancel(served, goal),
         )
         self.served[name] = served
-        self._owners[name] = self
+        self._owners.take(name, self)
 
-    async def _claim(self, op: ops.AdvertiseAction, owner: SessionActions) -> None:
-        """Advertise an action another client serves only if that client is gone (no pong)."""
-        name = _name(op.action)
-        try:
-            pong = await owner.session.ws.ping()
-            await asyncio.wait_for(pong, OWNER_PING_TIMEOUT)
-            alive = True
-        except (TimeoutError, ConnectionClosed):
-            alive = False
-        session = self.session
-        if session.closed:
-            return
-        if alive and self._owners.get(name) is owner:
-            session.error(
-                f"advertise_action: {name} is already served by client {owner.session.sid}; "
-                "the first owner keeps it (a role with take_over may take it over)",
-                op.id,
-            )
-            return
-        if not alive:
-            log.warning("client %d serves %s but did not answer a ping in %s s: client %d "
-                        "takes the action", owner.session.sid, name, OWNER_PING_TIMEOUT,
-                        session.sid)
-            owner.session.gate.freed.add(name)  # this name, for this claim
-        session.handle_op(op)  # decide again
-
-    def _on_ros_goal(self, served: _Served, goal: ServedGoal) -> None:
+    def _on_ros_goal(self, served: ClientAction, goal: ServedGoal) -> None:
         session = self.session
         if self.served.get(served.name) is not served or session.closed:
             goal.finish(Status.ABORTED)
@@ -536,12 +488,12 @@ class SessionActions:
                                id=gid, feedback=True)
         )
 
-    def _on_ros_cancel(self, served: _Served, goal: ServedGoal) -> None:
+    def _on_ros_cancel(self, served: ClientAction, goal: ServedGoal) -> None:
         gid = served.ids.get(id(goal))
         if gid is not None and gid in served.goals:
             self.session.send_op(ops.CancelActionGoal(id=gid, action=served.wire))
 
-    def _served_expired(self, served: _Served, gid: str, timeout: float) -> None:
+    def _served_expired(self, served: ClientAction, gid: str, timeout: float) -> None:
         entry = self._pop_goal(served, gid)
         if entry is None:
             return
@@ -552,7 +504,7 @@ class SessionActions:
         self.session.status("error", f"goal {gid} timed out after {timeout} s and was aborted",
                             gid)
 
-    def _pop_goal(self, served: _Served, gid: str) -> ServedGoal | None:
+    def _pop_goal(self, served: ClientAction, gid: str) -> ServedGoal | None:
         entry = served.goals.pop(gid, None)
         if entry is None:
             return None
@@ -562,16 +514,16 @@ class SessionActions:
             timer.cancel()
         return goal
 
-    def _find(self, op: ops.ActionFeedback | ops.ActionResult) -> tuple[_Served, str] | None:
+    def _find(self, op: ops.ActionFeedback | ops.ActionResult) -> tuple[ClientAction, str] | None:
         gid = str(op.id)
-        served = self.served.get(_name(op.action))
+        served = self.served.get(full_name(op.action))
         if served is not None and gid in served.goals:
             return served, gid
         for s in self.served.values():
             if gid in s.goals:
                 return s, gid
         self.session.error(
-            f"{op.OP}: no goal {op.id!r} of {_name(op.action)} is waiting on this client", op.id
+            f"{op.OP}: no goal {op.id!r} of {full_name(op.action)} is waiting on this client", op.id
         )
         return None
 
@@ -626,23 +578,18 @@ class SessionActions:
 
     def unadvertise(self, op: ops.UnadvertiseAction) -> None:
         """Stop serving an action; its goals are aborted at once."""
-        name = _name(op.action)
-        served = self.served.pop(name, None)
-        if served is None:
-            self.session.error(
-                f"unadvertise_action: {name} is not served by this client", op.id
-            )
-            return
-        self._remove_served(served, "the client unadvertised it")
+        self._owners.unadvertise(self, op, full_name(op.action))
 
     def drop_served(self, name: str, why: str) -> None:
         """Another client took the action over: forget it here."""
         served = self.served.pop(name, None)
         if served is not None:
-            self._remove_served(served, why, linger=False)
+            self.remove_served(served, why, linger=False)
             self.session.status("warning", f"action {name}: {why}")
 
-    def _remove_served(self, served: _Served, why: str, linger: bool = True) -> None:
+    def remove_served(self, served: ClientAction, why: str, linger: bool = True) -> None:
+        """Stop serving ``served``: its goals are aborted; the rclpy server lingers a moment
+        (``linger``) so that callers still see a server while the name changes hands."""
         for gid in list(served.goals):
             goal = self._pop_goal(served, gid)
             if goal is not None:
@@ -659,8 +606,7 @@ class SessionActions:
                                              ros)
             else:
                 ros.destroy()
-        if self._owners.get(served.name) is self:
-            del self._owners[served.name]
+        self._owners.release(served.name, self)
 
 
 def _end_linger(lingering: dict[str, ServedAction], name: str, ros: ServedAction) -> None:
@@ -682,22 +628,7 @@ def _server_types(session: Session, service: str) -> list[str]:
     return found
 
 
-def _name(name: str) -> str:
-    return name if name.startswith("/") else "/" + name
-
 
 
 _RAN = (Status.SUCCEEDED, Status.CANCELED, Status.ABORTED)
 """Final statuses of a goal that ran: its action_result says result true, as rosbridge does."""
-
-def _args_obj(args: Mapping[str, Any] | list[Any] | None, fields: tuple[str, ...]) -> Any:
-    if args is None:
-        return {}
-    if isinstance(args, list):
-        if len(args) > len(fields):
-            raise _Failed(
-                f"args: {len(args)} values given but the goal has {len(fields)} fields"
-                + (f" ({', '.join(fields)})" if fields else "")
-            )
-        return dict(zip(fields, args, strict=False))
-    return args

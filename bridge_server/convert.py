@@ -90,7 +90,7 @@ import json
 import sys
 import threading
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from typing import Any, Final, Protocol
 
 import cbor2
@@ -103,6 +103,7 @@ __all__ = [
     "ConversionError",
     "Converter",
     "FromObj",
+    "args_mapping",
     "converter_for",
     "deserialize",
     "encode_publish_cbor",
@@ -171,6 +172,25 @@ _b2a = binascii.b2a_base64
 _a2b = binascii.a2b_base64
 _Tag = cbor2.CBORTag
 _cbor_dumps: Callable[[Any], bytes] = cbor2.dumps
+
+
+def args_mapping(
+    args: Mapping[str, Any] | list[Any] | None, fields: Iterable[str], what: str
+) -> Mapping[str, Any]:
+    """A request's ``args`` as a mapping: positional values (a list, as roslibpy may
+    send) are paired with ``fields`` in order; None is no fields set. ``what`` names the
+    request in the error (``request``, ``goal``)."""
+    if args is None:
+        return {}
+    if isinstance(args, list):
+        names = tuple(fields)
+        if len(args) > len(names):
+            raise ConversionError(
+                "args", what, detail=f"{len(args)} values given but the {what} has "
+                f"{len(names)} fields" + (f" ({', '.join(names)})" if names else "")
+            )
+        return dict(zip(names, args, strict=False))
+    return args
 
 
 class ConversionError(BridgeError, ValueError):

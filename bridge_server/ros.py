@@ -96,7 +96,7 @@ SPIN_ERROR_LOG_INTERVAL = 10.0
 
 
 
-SETTLE_S = 0.25
+SETTLE_S = 0.5
 """Seconds a newly matched service client waits before its first request (see settled)."""
 
 class Incoming:

@@ -31,6 +31,7 @@ from roslibpy_lite import keepalive
 
 from .actions import ActionClients, SessionActions
 from .metrics import Recorder
+from .ownership import Ownership
 from .ros import RosNode
 from .ros_actions import check_rclpy_internals
 from .security import Security, SecurityConfig
@@ -42,6 +43,8 @@ if TYPE_CHECKING:
     from collections.abc import Awaitable
 
     from websockets.http11 import Request
+
+    from .services import SessionServices
 
 __all__ = ["Bridge", "BridgeConfig"]
 
@@ -90,8 +93,9 @@ class Bridge:
         self.session_config = config.session
         self.publisher_grace = config.publisher_grace
         self.sessions: set[Session] = set()
-        self.service_owners: dict[str, Session] = {}
-        self.action_owners: dict[str, SessionActions] = {}
+        # which client serves each client-served name (ownership.py)
+        self.service_owners: Ownership[SessionServices] = Ownership("service")
+        self.action_owners: Ownership[SessionActions] = Ownership("action")
         self.action_clients = ActionClients()
         self._ids = itertools.count(1)
         self._server: Server | None = None

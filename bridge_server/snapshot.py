@@ -48,7 +48,7 @@ def topic_totals(bridge: Bridge) -> dict[str, dict[str, Any]]:
     for name, _type, _latch in bridge.ros.publishers:
         topics[name]["in_use"] = True
     for session in bridge.sessions:
-        for sub in session.subs.values():
+        for sub in session.topics.subs.values():
             t = topics.setdefault(sub.topic, {})
             t["in_use"] = True
             t["subscribers"] = t.get("subscribers", 0) + 1
@@ -107,10 +107,10 @@ def take(bridge: Bridge, rates: Mapping[str, Mapping[str, float]]) -> dict[str, 
                 "dropped": sub.dropped_total,
                 "sent": sub.sent,
             }
-            for sub in session.subs.values()
+            for sub in session.topics.subs.values()
         ]
-        queued = sum(len(sub.queue) for sub in session.subs.values())
-        dropped = sum(sub.dropped_total for sub in session.subs.values())
+        queued = sum(len(sub.queue) for sub in session.topics.subs.values())
+        dropped = sum(sub.dropped_total for sub in session.topics.subs.values())
         clients.append(
             {
                 "id": f"{worker}-{session.sid}",
@@ -119,16 +119,16 @@ def take(bridge: Bridge, rates: Mapping[str, Mapping[str, float]]) -> dict[str, 
                 "address": getattr(session, "peer", ""),
                 "connected_at": getattr(session, "connected_at", 0.0),
                 "subscriptions": subs,
-                "publishes": sorted(session.publishers),
-                "serves": sorted(session.served),
+                "publishes": sorted(session.topics.publishers),
+                "serves": sorted(session.services.served),
                 "calls_in_flight": len(session.calls),
-                "queued": queued + len(session._control),
-                "dropped": dropped + session.control_dropped,
+                "queued": queued + len(session.outbox.control),
+                "dropped": dropped + session.outbox.control_dropped,
             }
         )
     services = [
-        {"name": name, "type": served.type_name, "served_by": f"{worker}-{owner.sid}"}
-        for name, owner in sorted(bridge.service_owners.items())
+        {"name": name, "type": served.type_name, "served_by": f"{worker}-{owner.session.sid}"}
+        for name, owner in bridge.service_owners.items()
         if (served := owner.served.get(name)) is not None
     ]
     return {

@@ -38,14 +38,13 @@ error text (:class:`RedactTokens` also scrubs other libraries' log lines).
 from __future__ import annotations
 
 from .credentials import is_loopback
-from .gate import OWNER_PING_TIMEOUT, POLICY_VIOLATION, PRE_AUTH_FRAME_LIMIT, Gate
+from .gate import POLICY_VIOLATION, PRE_AUTH_FRAME_LIMIT, Gate
 from .handshake import Security
 from .options import SecurityConfig, add_arguments, config_from_args, parse_origins
 from .redaction import RedactTokens, install_log_redaction, redact
 from .websockets_internals import BridgeConnection, check_websockets_internals
 
 __all__ = [
-    "OWNER_PING_TIMEOUT",
     "POLICY_VIOLATION",
     "PRE_AUTH_FRAME_LIMIT",
     "BridgeConnection",

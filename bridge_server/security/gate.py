@@ -12,8 +12,6 @@ import time
 from collections.abc import Mapping
 from typing import TYPE_CHECKING, Any
 
-from websockets.exceptions import ConnectionClosed
-
 from roslibpy_lite import ops
 
 from .. import rosapi
@@ -34,15 +32,12 @@ if TYPE_CHECKING:
     from ..session import Session
     from .handshake import Security
 
-__all__ = ["OWNER_PING_TIMEOUT", "POLICY_VIOLATION", "PRE_AUTH_FRAME_LIMIT", "Gate"]
+__all__ = ["POLICY_VIOLATION", "PRE_AUTH_FRAME_LIMIT", "Gate"]
 
 log = logging.getLogger("bridge_server.security")
 
 PRE_AUTH_FRAME_LIMIT = 16 * 1024
 """Largest frame read from a connection that has not authenticated yet."""
-
-OWNER_PING_TIMEOUT = 2.0
-"""Seconds the client serving a name has to answer a ping before another client may take it."""
 
 POLICY_VIOLATION = 1008
 """Close code for a failed ``auth`` op, ops before authentication and op floods."""
@@ -193,18 +188,18 @@ class Gate:
         s = self.session
         have: Mapping[str, Any]
         if isinstance(op, ops.Subscribe):
-            sub = s.subs.get(name)
+            sub = s.topics.subs.get(name)
             ids = c.max_subscription_ids
             if sub is not None and ids and op.id not in sub.ids and len(sub.ids) >= ids:
                 # ids of one topic merge into one subscription, but each is work to merge
                 self.deny(op, f"too many subscription ids for {name} on this connection "
                           f"(at most {ids})")
                 return False
-            have, cap, what = s.subs, c.max_subscriptions, "subscriptions"
+            have, cap, what = s.topics.subs, c.max_subscriptions, "subscriptions"
         elif isinstance(op, ops.Advertise | ops.Publish):
-            have, cap, what = s.publishers, c.max_publishers, "publishers"
+            have, cap, what = s.topics.publishers, c.max_publishers, "publishers"
         elif isinstance(op, ops.AdvertiseService):
-            have, cap, what = s.served, c.max_services, "served services"
+            have, cap, what = s.services.served, c.max_services, "served services"
         elif isinstance(op, ops.AdvertiseAction):  # each is an rclpy action server
             have, cap, what = s.actions.served, c.max_services, "served actions"
         elif isinstance(op, ops.SendActionGoal):  # keyed by goal id, so every new goal counts
@@ -269,7 +264,7 @@ class Gate:
         ``owner_gate`` is the gate of the bridge client serving it, or ``None`` when a ROS
         node (or nobody the bridge knows) serves it. The same principal may (it reconnected
         before the bridge saw the old connection go); a claim may once, for that name only,
-        when the owner failed to answer the claim's ping (:meth:`claim_if_owner_gone`);
+        when the owner failed to answer the claim's ping (:mod:`bridge_server.ownership`);
         otherwise only a role with ``take_over`` on the name. Without an auth file there are
         no roles: only the first two apply.
         """
@@ -280,45 +275,6 @@ class Gate:
             if self.principal is not None and owner_gate.principal is self.principal:
                 return True
         return self.role is not None and self.role.allows("take_over", name)
-
-    def claim_if_owner_gone(self, op: ops.AdvertiseService, owner: Session) -> None:
-        """Advertise a service another client serves only if that client is gone.
-
-        The first owner keeps a name; but a connection whose client vanished
-        (a network drop the bridge has not noticed yet) should not hold it until
-        the keepalive gives up, or the client could never serve it again after
-        it reconnects. So the owner is pinged: no pong within
-        :data:`OWNER_PING_TIMEOUT` seconds and the name is freed for this client.
-        """
-        session = self.session
-        task = session.loop.create_task(self._claim(op, owner))
-        session.calls.add(task)  # cancelled with the session's calls
-        task.add_done_callback(session.calls.discard)
-
-    async def _claim(self, op: ops.AdvertiseService, owner: Session) -> None:
-        name = op.service if op.service.startswith("/") else "/" + op.service
-        try:
-            pong = await owner.ws.ping()
-            await asyncio.wait_for(pong, OWNER_PING_TIMEOUT)
-            alive = True
-        except (TimeoutError, ConnectionClosed):
-            alive = False
-        session = self.session
-        if session.closed or session.bridge.service_owners.get(name) is not owner:
-            if not session.closed:
-                session.handle_op(op)  # the name changed hands meanwhile: decide again
-            return
-        if alive:
-            session.error(
-                f"advertise_service: {name} is already served by client {owner.sid}; the "
-                "first owner keeps it (a role with take_over may take it over)",
-                op.id,
-            )
-            return
-        log.warning("client %d serves %s but did not answer a ping in %s s: client %d takes "
-                    "the service", owner.sid, name, OWNER_PING_TIMEOUT, session.sid)
-        owner.gate.freed.add(name)  # this name, for this claim (see may_take_over)
-        session.handle_op(op)
 
     def filter_rosapi(self, service: str, values: dict[str, Any]) -> dict[str, Any]:
         """A rosapi answer reduced to what the role may see."""

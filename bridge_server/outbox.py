@@ -1,0 +1,341 @@
+"""What one client has yet to be sent: its queues, the drop policy and the writer.
+
+Outgoing queues and the drop policy
+-----------------------------------
+Every subscription (one per topic, whatever the number of ids) has its own
+bounded queue of ``queue_length`` messages (0 means :data:`DEFAULT_QUEUE_LENGTH`);
+when it is full the OLDEST message of that subscription is dropped. Replies
+(service responses, status ops, ROS calls to client-served services) go to a
+separate control queue, bounded by ``control_limit`` (oldest dropped, logged).
+The per-ROS-message fan-out only appends to these queues and sets an event;
+one writer task per client drains them into the socket, so a client that
+stops reading holds at most its queues plus the socket's write buffer, and
+never delays anyone else. Dropped messages are counted per subscription and
+reported to the client as a ``status`` warning (``dropped N messages on
+/topic ...``) at most once per ``drop_report_interval`` seconds (5 s); drops
+inside that interval are summed into the next report. ``set_level`` ``error``
+silences these warnings.
+
+The writer gathers whatever is ready (up to :data:`BATCH_FRAMES` frames or
+:data:`BATCH_BYTES` bytes) and writes it with one socket write.
+
+Merged subscriptions
+--------------------
+Several subscribe ops of one client to one topic (different ids) share one
+:class:`Subscription`, and each message is sent once. The merged options are:
+the least ``throttle_rate``, the largest ``queue_length``, the least
+``fragment_size``, and the ``compression`` of the latest subscribe.
+``throttle_rate`` keeps the newest message of a burst and sends it when the
+interval is over. ``fragment_size`` applies to JSON text only (binary CBOR
+frames are never split).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import itertools
+import logging
+import time
+from collections import deque
+from collections.abc import Callable
+from typing import TYPE_CHECKING
+
+from websockets.exceptions import ConnectionClosed
+
+from roslibpy_lite import ops
+from roslibpy_lite.protocol import split_fragments
+
+if TYPE_CHECKING:
+    from websockets.asyncio.server import ServerConnection
+
+    from .ros import Incoming
+    from .ros import SharedSubscription as _Shared
+
+__all__ = ["BATCH_BYTES", "BATCH_FRAMES", "DEFAULT_QUEUE_LENGTH", "Outbox", "Subscription"]
+
+log = logging.getLogger("bridge_server.session")
+
+DEFAULT_QUEUE_LENGTH = 100
+"""Bound of a subscription's queue when the client asked for ``queue_length`` 0."""
+
+BATCH_FRAMES = 128
+"""Most frames the writer sends with one socket write."""
+
+BATCH_BYTES = 256 * 1024
+"""Most bytes the writer gathers for one socket write (a large frame goes alone)."""
+
+
+class Subscription:
+    """One client's (merged) subscription to one topic: its options and its queue."""
+
+    def __init__(self, outbox: Outbox, topic: str, wire: str) -> None:
+        self.outbox = outbox
+        self.topic = topic
+        self.wire = None if wire == topic else wire  # the client's spelling, if different
+        self.ids: dict[ops.Id | None, ops.Subscribe] = {}
+        self.shared: _Shared | None = None
+        self.queue: deque[Incoming] = deque()
+        self.maxlen = DEFAULT_QUEUE_LENGTH
+        self.throttle = 0.0
+        self.fragment_size: int | None = None
+        self.compression = "none"
+        self.last_sent = 0.0
+        self.pending: Incoming | None = None
+        self.timer: asyncio.TimerHandle | None = None
+        self.dropped = 0
+        self.dropped_total = 0
+        self.sent = 0  # frames of this subscription written, and their bytes (for /metrics)
+        self.sent_bytes = 0
+        self.last_report = -1e9
+        self.report_timer: asyncio.TimerHandle | None = None
+        self.active = True
+
+    def configure(self, default_len: int, max_len: int = 0, min_fragment: int = 0) -> None:
+        """Merge the options of every id: least throttle, largest queue, least fragment size
+        (the queue at most ``max_len``, fragments at least ``min_fragment`` bytes)."""
+        subs = list(self.ids.values())
+        self.throttle = min(s.throttle_rate for s in subs) / 1000.0
+        lens = [s.queue_length or default_len for s in subs]
+        self.maxlen = min(max(lens), max_len) if max_len else max(lens)
+        sizes = [s.fragment_size for s in subs if s.fragment_size]
+        self.fragment_size = max(min(sizes), min_fragment) if sizes else None
+        self.compression = subs[-1].compression
+        while len(self.queue) > self.maxlen:
+            self.queue.popleft()
+            self.outbox.queued -= 1
+
+    def on_message(self, inc: Incoming) -> None:
+        """Called on the loop for each message of the topic: throttle, then queue."""
+        if self.throttle > 0:
+            now = time.monotonic()
+            wait = self.last_sent + self.throttle - now
+            if wait > 0:
+                self.pending = inc
+                if self.timer is None:
+                    self.timer = self.outbox.loop.call_later(wait, self._flush)
+                return
+            self.last_sent = now
+        self.outbox.push(self, inc)
+
+    def _flush(self) -> None:
+        self.timer = None
+        inc, self.pending = self.pending, None
+        if inc is not None and self.active:
+            self.last_sent = time.monotonic()
+            self.outbox.push(self, inc)
+
+    def close(self) -> None:
+        """Stop delivering: clear the queue and any throttle timer."""
+        self.active = False
+        self.outbox.queued -= len(self.queue)
+        self.queue.clear()
+        if self.report_timer is not None:
+            self.report_timer.cancel()
+            self.report_timer = None
+        self.pending = None
+        if self.timer is not None:
+            self.timer.cancel()
+            self.timer = None
+
+
+class Outbox:
+    """One client's outgoing queues and the task that writes them to its socket.
+
+    ``warn`` is how a drop report reaches the client (a ``status`` warning, subject to
+    the client's ``set_level``).
+    """
+
+    def __init__(
+        self,
+        ws: ServerConnection,
+        sid: int,
+        control_limit: int,
+        max_queued: int,
+        drop_report_interval: float,
+        warn: Callable[[str], None],
+    ) -> None:
+        self.ws = ws
+        self.sid = sid
+        self.loop = asyncio.get_running_loop()
+        self.control_limit = control_limit
+        self.max_queued = max_queued or 1 << 62
+        self.drop_report_interval = drop_report_interval
+        self.warn = warn
+        self.control: deque[str | bytes] = deque()
+        self.order: deque[Subscription] = deque()
+        self.queued = 0  # messages in all of this client's subscription queues
+        self.control_dropped = 0
+        self.closed = False
+        self.wake = asyncio.Event()
+        self.frag_ids = itertools.count()
+
+    # -- filling -------------------------------------------------------------------------------
+
+    def send_text(self, text: str | bytes) -> None:
+        """Queue one control frame (replies and status) for the writer."""
+        if self.closed:
+            return
+        control = self.control
+        if len(control) >= self.control_limit:
+            control.popleft()
+            self.control_dropped += 1
+            if self.control_dropped in (1, 10, 100) or self.control_dropped % 1000 == 0:
+                log.warning(
+                    "session %d: dropped %d replies: the client does not read",
+                    self.sid,
+                    self.control_dropped,
+                )
+        control.append(text)
+        self.wake.set()
+
+    def push(self, sub: Subscription, inc: Incoming) -> None:
+        """Queue one message of ``sub``, dropping its oldest when full (or when the client's
+        queues hold ``max_queued`` messages in all)."""
+        q = sub.queue
+        if len(q) >= sub.maxlen or (self.queued >= self.max_queued and q):
+            q.popleft()
+            sub.dropped += 1
+            sub.dropped_total += 1
+            self._note_drop(sub)
+        elif self.queued >= self.max_queued:  # full with other subscriptions' messages
+            sub.dropped += 1
+            sub.dropped_total += 1
+            self._note_drop(sub)
+            return
+        else:
+            self.order.append(sub)
+            self.queued += 1
+        q.append(inc)
+        self.wake.set()
+
+    def close(self) -> None:
+        """Nothing more is queued; the writer stops."""
+        self.closed = True
+        self.wake.set()
+
+    def _note_drop(self, sub: Subscription) -> None:
+        if sub.report_timer is not None:
+            return  # a report is already scheduled
+        wait = sub.last_report + self.drop_report_interval - time.monotonic()
+        if wait > 0:
+            sub.report_timer = self.loop.call_later(wait, self._report_drops, sub)
+        else:
+            self._report_drops(sub)
+
+    def _report_drops(self, sub: Subscription) -> None:
+        sub.report_timer = None
+        n, sub.dropped = sub.dropped, 0
+        if n == 0 or not sub.active:
+            return
+        sub.last_report = time.monotonic()
+        log.info("session %d: dropped %d messages on %s", self.sid, n, sub.topic)
+        self.warn(
+            f"dropped {n} messages on {sub.topic} (queue_length {sub.maxlen}, "
+            f"{sub.dropped_total} in all): the client reads slower than messages arrive"
+        )
+
+    # -- writing -------------------------------------------------------------------------------
+
+    async def writer(self) -> None:
+        """Write what is queued until the outbox is closed (run as the client's task)."""
+        ws = self.ws
+        wake = self.wake
+        batched = hasattr(ws, "send_context") and hasattr(ws, "protocol")
+        try:
+            while not self.closed:
+                frames = self._collect()
+                if not frames:
+                    wake.clear()
+                    await wake.wait()
+                    continue
+                if batched:
+                    await self._send_batch(frames)
+                else:  # pragma: no cover - websockets without send_context
+                    for frame in frames:
+                        await ws.send(frame)
+        except ConnectionClosed:
+            pass
+        except Exception:
+            log.exception("session %d: the writer failed; closing the connection", self.sid)
+            await ws.close(1011, "internal error")
+
+    def _collect(self) -> list[str | bytes]:
+        """Take the frames ready to go: replies first, then messages in arrival order."""
+        frames: list[str | bytes] = []
+        size = 0
+        control = self.control
+        order = self.order
+        while control and len(frames) < BATCH_FRAMES and size < BATCH_BYTES:
+            frame = control.popleft()
+            frames.append(frame)
+            size += len(frame)
+        while order and len(frames) < BATCH_FRAMES and size < BATCH_BYTES:
+            sub = order.popleft()
+            if not sub.queue:
+                continue
+            inc = sub.queue.popleft()
+            self.queued -= 1
+            try:
+                encoded = self._frames(sub, inc)
+            except Exception:
+                log.exception("session %d: cannot encode a message of %s", self.sid, sub.topic)
+                continue
+            before = size
+            for frame in encoded:
+                frames.append(frame)
+                size += len(frame)
+            sub.sent += 1
+            sub.sent_bytes += size - before
+        return frames
+
+    async def _send_batch(self, frames: list[str | bytes]) -> None:
+        """Write several frames with one socket write (one system call, not one per frame).
+
+        Uses websockets' own send context, so its state checks, flow control
+        (``write_limit``) and closing rules apply as for ``send``.
+        """
+        ws = self.ws
+        async with ws.send_context():
+            protocol = ws.protocol
+            for frame in frames:
+                if isinstance(frame, str):
+                    protocol.send_text(frame.encode())
+                else:
+                    protocol.send_binary(frame)
+            chunks = protocol.data_to_send()
+            if all(chunks):
+                ws.transport.write(b"".join(chunks))
+            else:  # an end-of-stream marker: let websockets handle these chunks itself
+                for chunk in chunks:
+                    if chunk:
+                        ws.transport.write(chunk)
+                    elif ws.transport.can_write_eof():
+                        ws.transport.write_eof()
+
+    def _frames(self, sub: Subscription, inc: Incoming) -> list[str | bytes]:
+        comp = sub.compression
+        if comp == "cbor":
+            return [inc.cbor(sub.wire)]
+        if comp == "cbor-raw":
+            return [inc.cbor_raw(sub.wire)]
+        text = inc.json_text(sub.wire)
+        size = sub.fragment_size
+        if size is not None and len(text) > size:
+            return list(split_fragments(text, size, f"{sub.topic}:{next(self.frag_ids)}"))
+        return [text]
+
+    def send_split(
+        self, text: str, size: int | None, frag_id: ops.Id | None, prefix: str
+    ) -> None:
+        """Queue ``text`` as one control frame, or as fragments of ``size`` characters when
+        it is longer (with the id ``frag_id``, or ``prefix:n`` without one)."""
+        if size is not None and len(text) > size:
+            fid = frag_id if frag_id is not None else f"{prefix}:{next(self.frag_ids)}"
+            for piece in split_fragments(text, size, fid):
+                self.send_text(piece)
+        else:
+            self.send_text(text)
+
+    def stats(self) -> tuple[int, int]:
+        """Replies waiting and replies dropped (the subscriptions count their own)."""
+        return len(self.control), self.control_dropped

@@ -1,0 +1,455 @@
+"""Service ops of one client: call_service, and serving services (advertise_service,
+service_response, unadvertise_service).
+
+Service calls
+-------------
+Each ``call_service`` runs as its own task (at most ``max_calls_in_flight``,
+1024, per connection; more fail at once), with ``timeout`` seconds (default
+5). Without a type, a service that is not in the ROS graph within
+``discovery_wait`` (2 s) fails with "does not exist"; with a type, one the graph
+still lists no server of after twice that fails so too (a server started just
+before the call can take ~3 s to appear on a loaded machine). A listed service
+is waited for (its server to match) up to the call's timeout.
+``fragment_size`` on a call splits its ``service_response``. ``/rosapi/*``
+services are answered by the bridge itself (:mod:`bridge_server.rosapi`), and a
+service another client of this bridge serves is called directly, without a ROS
+hop (so its failure keeps its text).
+
+Client-served services
+----------------------
+A ROS caller of a service advertised by the client reaches it as
+``call_service`` with id ``service_request:<service>:<n>``. If the client
+answers ``result: false``, does not answer within ``served_call_timeout``
+(10 s) or answers with a response that does not convert, the ROS caller is
+not answered (an rclpy service cannot reply with an error, and the bridge
+never invents a default response): the caller's own timeout ends its wait.
+When the client unadvertises the service or disconnects, the ROS service is
+destroyed at once; rclpy callers then see ``service_is_ready()`` turn false,
+and requests in flight stay unanswered until the caller's timeout.
+
+Who may serve a name another client (or an rclpy node) serves is decided by
+:mod:`bridge_server.ownership`.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import itertools
+import logging
+import time
+from collections.abc import Mapping
+from typing import TYPE_CHECKING, Any, ClassVar
+
+from roslibpy_lite import ops
+
+from . import convert, rosapi
+from .metrics import outcome
+from .names import full_name
+from .types import BridgeError, canonical_name
+
+if TYPE_CHECKING:
+    from .ros import PendingRosCall, ServedService
+    from .security import Gate
+    from .session import Session
+
+__all__ = ["ClientService", "SessionServices"]
+
+log = logging.getLogger("bridge_server.session")
+
+
+class ClientService:
+    """A service one client serves, with the callers waiting on it."""
+
+    def __init__(self, name: str, type_name: str, wire: str | None = None) -> None:
+        self.name = name
+        self.wire = wire or name  # the name as the client spelled it
+        self.type_name = type_name
+        self.ros: ServedService | None = None
+        self.pending: dict[str, tuple[PendingRosCall | _DirectCall, asyncio.TimerHandle]] = {}
+
+
+class _DirectCall:
+    """A call from another client of this bridge to a service this client serves.
+
+    It goes from session to session without a ROS hop, so a failure keeps its
+    ``result: false`` and text (a ROS service has no way to report one).
+    """
+
+    def __init__(self, future: asyncio.Future[tuple[bool, Any]]) -> None:
+        self.future = future
+
+    def fail(self, reason: str) -> None:
+        if not self.future.done():
+            self.future.set_result((False, reason))
+
+    def succeed(self, values: Mapping[str, Any]) -> None:
+        if not self.future.done():
+            self.future.set_result((True, values))
+
+
+class SessionServices:
+    """One client's service calls in flight and the services it serves."""
+
+    OPS: ClassVar[dict[type[ops.Op], str]] = {
+        ops.CallService: "call_service",
+        ops.ServiceResponse: "service_response",
+        ops.AdvertiseService: "advertise_service",
+        ops.UnadvertiseService: "unadvertise_service",
+    }
+    """The ops this capability carries out, and the method for each."""
+
+    def __init__(self, session: Session) -> None:
+        self.session = session
+        self.ros = session.ros
+        self.served: dict[str, ClientService] = {}
+        self._owners = session.bridge.service_owners
+        self._request_ids = itertools.count()
+
+    # -- calling -------------------------------------------------------------------------------
+
+    def call_service(self, op: ops.CallService) -> None:
+        """Start the call as its own task, unless too many are in flight already."""
+        session = self.session
+        limit = session.config.max_calls_in_flight
+        if len(session.calls) >= limit:
+            self._respond(op.service, op.id, False,
+                          f"too many calls in flight on this connection (at most {limit})")
+            return
+        session.spawn(self._call(op))
+
+    async def _call(self, op: ops.CallService) -> None:
+        """Call a ROS service (or a rosapi one) and answer with ``service_response``."""
+        service = full_name(op.service)
+        wire = op.service  # answer with the name as the client spelled it
+        session = self.session
+        timeout = op.timeout if op.timeout is not None else session.config.call_timeout
+        values: Mapping[str, Any]
+        t0 = time.perf_counter()
+        try:
+            handler = rosapi.HANDLERS.get(service)
+            ahandler = rosapi.ASYNC_HANDLERS.get(service)
+            if handler is not None:
+                values = handler(session.bridge, rosapi.request_args(service, op.args))
+                values = session.gate.filter_rosapi(service, values)  # what the role may see
+            elif ahandler is not None:
+                values = await ahandler(session.bridge, rosapi.request_args(service, op.args))
+                values = session.gate.filter_rosapi(service, values)
+            elif (owner := self._owners.get(service)) is not None:
+                result, direct = await owner.call_direct(service, op, timeout)
+                self._respond(wire, op.id, result, direct, op.fragment_size, t0)
+                return
+            else:
+                values = await self._call_ros(service, op, timeout)
+        except _CallFailed as exc:
+            self._respond(wire, op.id, False, str(exc), op.fragment_size, t0)
+            return
+        except (BridgeError, rosapi.RosapiError) as exc:
+            self._respond(wire, op.id, False, f"{service}: {exc}", op.fragment_size, t0)
+            return
+        except UnicodeError:  # a lone surrogate ("\ud800") in a string reached rclpy
+            why = f"{service}: a string in args is not valid Unicode text (a lone surrogate?)"
+            self._respond(wire, op.id, False, why, op.fragment_size, t0)
+            return
+        except Exception as exc:  # answered, never left as an unretrieved task exception
+            log.exception("session %d: call to %s failed", session.sid, service)
+            why = f"{service}: internal error: {type(exc).__name__}"
+            self._respond(wire, op.id, False, why, op.fragment_size, t0)
+            return
+        self._respond(wire, op.id, True, values, op.fragment_size, t0)
+
+    def _respond(
+        self,
+        service: str,
+        id: ops.Id | None,
+        result: bool,
+        values: Mapping[str, Any] | str,
+        fragment_size: int | None = None,
+        started: float | None = None,
+    ) -> None:
+        session = self.session
+        if started is not None:  # a call_service: count it for /metrics
+            session.bridge.metrics.service_call(
+                full_name(service), outcome(result, values), time.perf_counter() - started
+            )
+        if not result:
+            log.info("session %d: call to %s failed: %s", session.sid, service, values)
+        text = ops.encode(ops.ServiceResponse(service=service, result=result, values=values, id=id))
+        session.outbox.send_split(text, fragment_size, id, service)
+
+    async def _call_ros(
+        self, service: str, op: ops.CallService, timeout: float
+    ) -> Mapping[str, Any]:
+        ros = self.ros
+        loop = self.session.loop
+        config = self.session.config
+        deadline = loop.time() + timeout
+        if op.type is not None:
+            srv_cls = ros.resolve_service(op.type)
+        else:
+            types = ros.service_types(service)
+            if not types:
+                wait_until = min(deadline, loop.time() + config.discovery_wait)
+                while not types and loop.time() < wait_until:
+                    await asyncio.sleep(0.02)
+                    types = ros.service_types(service)
+            if not types:
+                raise _CallFailed(f"service {service} does not exist (not in the ROS graph)")
+            srv_cls = ros.resolve_service(types[0])
+        req_conv = convert.converter_for(srv_cls.Request)
+        try:
+            args = convert.args_mapping(op.args, req_conv.fields, "request")
+            request = req_conv.from_obj(args, "args")
+        except convert.ConversionError as exc:
+            raise _CallFailed(f"{service}: bad request: {exc}") from None
+        client = ros.client_for(service, srv_cls)
+        if not client.service_is_ready():
+            # Wait for a server to be discovered and matched: while the graph lists no
+            # server, at most twice discovery_wait (a server that was just started can take
+            # ~3 s to show on a loaded machine); once it does, up to the call's timeout.
+            unlisted_wait = 2 * config.discovery_wait
+            unlisted_by = loop.time() + unlisted_wait
+            delay = 0.002
+            while not _ready(client):
+                if loop.time() >= unlisted_by and ros.server_count(service) == 0:
+                    ros.drop_client(service, srv_cls)  # so the graph forgets the name
+                    raise _CallFailed(
+                        f"service {service} does not exist (not in the ROS graph after "
+                        f"{unlisted_wait:g} s)"
+                    )
+                if _ready(client) is None:  # another call dropped the cached client
+                    client = ros.client_for(service, srv_cls)
+                if loop.time() >= deadline:
+                    ros.drop_client(service, srv_cls)  # so the graph forgets the name
+                    if ros.server_count(service) == 0:
+                        raise _CallFailed(
+                            f"service {service} does not exist (no server appeared within "
+                            f"{timeout} s)"
+                        )
+                    raise _CallFailed(
+                        f"service {service} did not become available in {timeout} s"
+                    )
+                await asyncio.sleep(delay)
+                delay = min(delay * 2, 0.05)
+        await ros.settled(client)  # a newly matched server may not hear back yet
+        # A timer that fails the future is cheaper than asyncio.wait_for (no extra task).
+        future = ros.call(client, request)
+        timer = loop.call_at(deadline, _expire, future)
+        try:
+            response = await future
+        except _Expired:
+            raise _CallFailed(f"service {service} timed out after {timeout} s") from None
+        finally:
+            timer.cancel()
+            if not future.done():  # this task was cancelled: forget the request
+                future.cancel()
+        obj: Mapping[str, Any] = convert.converter_for(srv_cls.Response).to_obj(response)
+        return obj
+
+    # -- serving -------------------------------------------------------------------------------
+
+    def advertise_service(self, op: ops.AdvertiseService) -> None:
+        """Serve a ROS service from this client."""
+        name = full_name(op.service)
+        srv_cls = self.ros.resolve_service(op.type)
+        type_name = canonical_name(op.type, "srv")
+        if name in rosapi.HANDLERS or name in rosapi.ASYNC_HANDLERS:
+            self.session.error(
+                f"advertise_service: {name} is answered by the bridge itself", op.id
+            )
+            return
+        mine = self.served.get(name)
+        if mine is not None:
+            if mine.type_name == type_name:
+                return
+            self.remove_served(mine, "the client advertised it again with another type")
+            del self.served[name]
+        ros = self.ros
+        if not self._owners.admit(
+            self, op, name, lambda: ros.other_servers(name) if ros.service_types(name) else []
+        ):
+            return
+        served = ClientService(name, type_name, op.service)
+        served.ros = ros.serve(name, srv_cls, lambda pending: self._on_ros_request(served, pending))
+        self.served[name] = served
+        self._owners.take(name, self)
+
+    def _on_ros_request(self, served: ClientService, pending: PendingRosCall) -> None:
+        session = self.session
+        if self.served.get(served.name) is not served or session.closed:
+            log.warning("a ROS call to %s arrived after it was unadvertised: not answered",
+                        served.name)
+            return
+        rid = f"service_request:{served.name}:{next(self._request_ids)}"
+        try:
+            args = pending.served.request_conv.to_obj(pending.request)
+        except Exception:
+            log.exception("cannot convert a request to %s", served.name)
+            return
+        timer = session.loop.call_later(
+            session.config.served_call_timeout, self._served_timeout, served, rid
+        )
+        served.pending[rid] = (pending, timer)
+        session.send_op(ops.CallService(service=served.wire, args=args, id=rid))
+
+    def _served_timeout(
+        self, served: ClientService, rid: str, timeout: float | None = None
+    ) -> None:
+        entry = served.pending.pop(rid, None)
+        if entry is None:
+            return
+        pending = entry[0]
+        if isinstance(pending, _DirectCall):
+            pending.fail(f"service {served.name} timed out after {timeout} s")
+            return
+        log.warning(
+            "session %d: no answer for %s within %s s; the ROS caller is not answered "
+            "(a ROS service cannot send an error, and the bridge never invents a response)",
+            self.session.sid,
+            rid,
+            self.session.config.served_call_timeout,
+        )
+
+    def service_response(self, op: ops.ServiceResponse) -> None:
+        """The client answers a ROS caller of a service it serves."""
+        session = self.session
+        name = full_name(op.service)
+        served = self.served.get(name)
+        entry = None
+        if served is not None and op.id is not None:
+            entry = served.pending.pop(str(op.id), None)
+        if entry is None:
+            for s in self.served.values():
+                if op.id is not None and str(op.id) in s.pending:
+                    served = s
+                    entry = s.pending.pop(str(op.id))
+                    break
+        if entry is None or served is None or served.ros is None:
+            session.error(f"service_response: no ROS call {op.id!r} is waiting on {name}", op.id)
+            return
+        pending, timer = entry
+        timer.cancel()
+        if isinstance(pending, _DirectCall):
+            if not op.result:
+                reason = op.values if isinstance(op.values, str) else "the serving client failed"
+                pending.fail(f"service {name} failed: {reason}")
+                return
+            conv = served.ros.response_conv
+            try:
+                obj = conv.to_obj(conv.from_obj(op.values or {}, "values"))
+            except convert.ConversionError as exc:
+                session.error(f"service_response for {name}: {exc}", op.id)
+                pending.fail(f"service {name} answered with a bad response: {exc}")
+                return
+            pending.succeed(obj)
+            return
+        if not op.result:
+            log.warning(
+                "session %d: the client failed %s (%.200s); the ROS caller is not answered "
+                "(a ROS service cannot send an error, and the bridge never invents a response)",
+                session.sid,
+                op.id,
+                op.values if isinstance(op.values, str) else "no reason given",
+            )
+            return
+        values = op.values if isinstance(op.values, Mapping) else {}
+        try:
+            response = served.ros.response_conv.from_obj(values, "values")
+        except convert.ConversionError as exc:
+            session.error(f"service_response for {name}: {exc}; the ROS caller is not answered",
+                          op.id)
+            return
+        pending.complete(response)
+
+    async def call_direct(
+        self, name: str, op: ops.CallService, timeout: float
+    ) -> tuple[bool, Any]:
+        """Carry out another client's call to a service this client serves (no ROS hop)."""
+        served = self.served.get(name)
+        if served is None or served.ros is None:
+            raise _CallFailed(f"service {name} is no longer served")
+        if op.type is not None and canonical_name(op.type, "srv") != served.type_name:
+            raise _CallFailed(
+                f"service {name} has type {served.type_name}, not {canonical_name(op.type, 'srv')}"
+            )
+        conv = served.ros.request_conv
+        try:
+            args = conv.to_obj(conv.from_obj(
+                convert.args_mapping(op.args, conv.fields, "request"), "args"))
+        except convert.ConversionError as exc:
+            raise _CallFailed(f"{name}: bad request: {exc}") from None
+        session = self.session
+        rid = f"service_request:{name}:{next(self._request_ids)}"
+        future: asyncio.Future[tuple[bool, Any]] = session.loop.create_future()
+        timer = session.loop.call_later(timeout, self._served_timeout, served, rid, timeout)
+        served.pending[rid] = (_DirectCall(future), timer)
+        session.send_op(ops.CallService(service=served.wire, args=args, id=rid))
+        try:
+            return await future
+        finally:
+            entry = served.pending.pop(rid, None)
+            if entry is not None:  # the caller went away first
+                entry[1].cancel()
+
+    def unadvertise_service(self, op: ops.UnadvertiseService) -> None:
+        """Stop serving a service; it leaves ROS at once (waiting ROS callers are not answered)."""
+        self._owners.unadvertise(self, op, full_name(op.service))
+
+    def remove_served(self, served: ClientService, why: str) -> None:
+        """Stop serving ``served``: pending direct calls fail, the ROS service goes."""
+        unanswered = 0
+        for _rid, (pending, timer) in list(served.pending.items()):
+            timer.cancel()
+            if isinstance(pending, _DirectCall):
+                pending.fail(f"service {served.name} failed: {why}")
+            else:
+                unanswered += 1
+        served.pending.clear()
+        if unanswered:
+            log.warning("service %s went (%s): %d ROS caller(s) not answered", served.name, why,
+                        unanswered)
+        if served.ros is not None:
+            # At once: ROS callers see the server leave the graph; nobody gets an invented
+            # default response (an rclpy service has no way to send an error).
+            served.ros.destroy()
+            served.ros = None
+        self._owners.release(served.name, self)
+
+    def drop_served(self, name: str, why: str) -> None:
+        """Another client took the service over: forget it here, and say so."""
+        served = self.served.pop(name, None)
+        if served is not None:
+            self.remove_served(served, why)
+            self.session.status("warning", f"service {name}: {why}")
+
+    # -- the session's hooks -------------------------------------------------------------------
+
+    async def close(self) -> None:
+        """The client left: its services leave ROS at once (calls are the session's)."""
+        for served in list(self.served.values()):
+            self.remove_served(served, "the client that served it disconnected")
+        self.served.clear()
+
+    def recheck(self, gate: Gate) -> int:
+        """Stop serving what the role no longer allows; how many services ended."""
+        return self._owners.recheck(self, gate)
+
+
+class _Expired(Exception):
+    """A ROS service call ran out of time."""
+
+
+def _expire(future: asyncio.Future[Any]) -> None:
+    if not future.done():
+        future.set_exception(_Expired())
+
+
+class _CallFailed(Exception):
+    """A service call failed; the text is sent as the ``service_response`` values."""
+
+
+def _ready(client: Any) -> bool | None:
+    """Whether ``client`` has a matched server; None once the client was destroyed."""
+    try:
+        return bool(client.service_is_ready())
+    except Exception:  # rclpy's InvalidHandle: dropped by another call in the meantime
+        return None
