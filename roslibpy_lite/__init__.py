@@ -42,7 +42,7 @@ from .exceptions import (
 )
 from .handles import Publisher, ServiceServer, Subscription
 from .mock import MockRos
-from .ros import RosFront
+from .ros import RosBase, RosFront
 from .state import StateWatcher
 
 __version__ = "0.1.0"
@@ -68,6 +68,7 @@ __all__ = [
     "Publisher",
     "RemoteError",
     "Ros",
+    "RosBase",
     "RosFront",
     "RosLibError",
     "RosTimeoutError",

@@ -72,13 +72,14 @@ import concurrent.futures
 import enum
 import inspect
 import logging
-from collections.abc import AsyncIterator, Awaitable, Callable, Generator, Mapping
+from collections.abc import AsyncIterator, Awaitable, Callable, Mapping
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, Self, cast
+from typing import TYPE_CHECKING, Any, Protocol, Self, cast
 
 from msgs.runtime import Action, Message, UnknownTypeError, lookup_action
 
 from . import ops
+from ._aio import is_async_callable, running_loop
 from .exceptions import (
     ConnectionClosed,
     InvalidMessageError,
@@ -87,12 +88,11 @@ from .exceptions import (
     RosTimeoutError,
     UsageError,
 )
+from .handles import Backend, _Handle
 from .messages import _check_type_string, _packages, canonical_type, check_dict, from_wire, to_wire
 
 if TYPE_CHECKING:
-    from types import TracebackType
-
-    from .ros import RosFront
+    from collections.abc import Coroutine
 
 __all__ = [
     "ActionError",
@@ -210,13 +210,41 @@ def _part(cls: type[Action] | None, part: str) -> type[Message] | None:
     return cast("type[Message]", getattr(cls, part)) if cls is not None else None
 
 
-def _is_async(fn: Callable[..., Any]) -> bool:
-    return inspect.iscoroutinefunction(fn) or inspect.iscoroutinefunction(
-        getattr(fn, "__call__", None)  # noqa: B004 - an object with an async __call__
-    )
-
-
 # --- sending goals ---------------------------------------------------------------------------
+
+class ActionBackend(Backend, Protocol):
+    """What goals and served actions need from the capability that made them
+    (:class:`~roslibpy_lite.capabilities.actions.Actions`)."""
+
+    @property
+    def validate(self) -> bool:
+        """Whether dicts are checked against their type's ``msgs`` class."""
+        ...
+
+    def _send(self, op: ops.Op) -> None:
+        """Send an op (dropped while disconnected)."""
+        ...
+
+    async def _flush(self) -> None:
+        """Return once everything sent so far is handed to the connection."""
+        ...
+
+    def _spawn(self, coro: Coroutine[Any, Any, None]) -> None:
+        """Run a callback's task (cancelled when the client closes)."""
+        ...
+
+    def _goal_ended(self, goal: GoalHandle) -> None:
+        """A sent goal ended (or failed)."""
+        ...
+
+    def _unadvertise_action(self, server: ActionServer) -> None:
+        """Forget a served action and tell the bridge."""
+        ...
+
+    def _served_goal_done(self, ctx: GoalContext, op: ops.ActionResult | None) -> None:
+        """A served goal's handler returned: send ``op`` (None: the goal was lost)."""
+        ...
+
 
 class GoalHandle:
     """A goal this client sent (made by ``await ros.send_goal(...)``; module doc).
@@ -225,10 +253,10 @@ class GoalHandle:
     feedback until it ends; ``await`` :meth:`result`; :meth:`cancel` it.
     """
 
-    def __init__(self, front: RosFront, action: str, type_name: str,
+    def __init__(self, backend: ActionBackend, action: str, type_name: str,
                  action_cls: type[Action] | None, id: str, *, buffer_size: int,
                  on_feedback: FeedbackCallback | None) -> None:
-        self._front = front
+        self._backend = backend
         self.action = action
         self.type_name = type_name
         self.action_cls = action_cls
@@ -253,7 +281,7 @@ class GoalHandle:
         """True once the goal has ended (or failed)."""
         return self._done.done()
 
-    # -- from the front --
+    # -- from the capability --
 
     def _feedback(self, values: Any) -> None:
         if self.done():
@@ -278,7 +306,7 @@ class GoalHandle:
             try:
                 out = cb(fb)
                 if inspect.isawaitable(out):
-                    self._front._spawn(_awaited_callback(out, self.action))
+                    self._backend._spawn(_awaited_callback(out, self.action))
             except Exception:
                 log.exception("feedback callback of %s raised", self.action)
 
@@ -331,7 +359,7 @@ class GoalHandle:
     def _finished(self) -> None:
         self.closed = True
         self._wake.set()
-        self._front._goal_ended(self)
+        self._backend._goal_ended(self)
 
     # -- the user's side --
 
@@ -364,8 +392,8 @@ class GoalHandle:
         if self.done():
             return
         self.status = GoalStatus.CANCELING
-        self._front._send(ops.CancelActionGoal(id=self.id, action=self.action))
-        await self._front._flush()
+        self._backend._send(ops.CancelActionGoal(id=self.id, action=self.action))
+        await self._backend._flush()
 
     async def feedback(self) -> AsyncIterator[Any]:
         """Each feedback (dict, or ``Feedback`` instance) until the goal ends."""
@@ -432,17 +460,17 @@ class GoalContext:
         cls = _part(server.action_cls, "Feedback")
         what = f"feedback of {server.action}"
         wire = to_wire(feedback, f"{server.type_name}_Feedback", cls, what)
-        if cls is None and server._front.validate:
+        if cls is None and server._backend.validate:
             check_dict(wire, _part(_action_class(server.type_name), "Feedback"), what)
         op = ops.ActionFeedback(id=self.id, action=server.action, values=wire)
-        if _on_loop(self._loop):
+        if running_loop() is self._loop:
             self._send(op)
         else:
             self._loop.call_soon_threadsafe(self._send, op)
 
     def _send(self, op: ops.Op) -> None:
         if not self.lost:
-            self.server._front._send(op)
+            self.server._backend._send(op)
 
     async def wait_cancel(self) -> None:
         """Return once a cancel was requested (async handlers)."""
@@ -453,21 +481,19 @@ class GoalContext:
         self._cancel.set()
 
 
-def _on_loop(loop: asyncio.AbstractEventLoop) -> bool:
-    return asyncio._get_running_loop() is loop
-
-
-class ActionServer:
+class ActionServer(_Handle):
     """An action served by this client (made by ``ros.advertise_action``; module doc).
 
     Use as ``await`` or ``async with``; :meth:`unadvertise` (or ``close``) stops serving.
     """
 
-    def __init__(self, front: RosFront, action: str, type_name: str,
+    _backend: ActionBackend
+
+    def __init__(self, backend: ActionBackend, action: str, type_name: str,
                  action_cls: type[Action] | None, handler: ActionHandler, *, id: str) -> None:
         if not callable(handler):
             raise UsageError(f"advertise_action {action}: handler must be callable")
-        self._front = front
+        self._backend = backend
         self.action = action
         self.type_name = type_name
         self.action_cls = action_cls
@@ -490,35 +516,19 @@ class ActionServer:
         """The ``advertise_action`` op this server stands for."""
         return ops.AdvertiseAction(self.action, self.type_name, id=self.id)
 
-    def _fail(self, error: RosLibError) -> None:
-        self.error = error
-
     async def _ready(self) -> Self:
         try:
-            await self._front._settle(self)  # the bridge's verdict, when it sends one
+            return await super()._ready()  # the bridge's verdict, when it sends one
         except RosLibError:
             self.closed = True
-            self._front._drop_action_server(self)
             raise
-        return self
-
-    def __await__(self) -> Generator[Any, None, Self]:
-        return self._ready().__await__()
-
-    async def __aenter__(self) -> Self:
-        return self
-
-    async def __aexit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
-                        tb: TracebackType | None) -> None:
-        await self.close()
 
     async def unadvertise(self) -> None:
         """Stop serving (goals being served are aborted by the bridge)."""
         if self.closed:
             return
         self.closed = True
-        self._front._drop_action_server(self)
-        self._front._send(ops.UnadvertiseAction(self.action, id=self.id))
+        self._backend._unadvertise_action(self)
         for ctx in self.active.values():
             ctx.lost = True
             ctx._request_cancel()
@@ -538,7 +548,7 @@ class ActionServer:
     # -- running one goal --
 
     async def _run(self, ctx: GoalContext, args: Any) -> None:
-        front = self._front
+        op: ops.ActionResult | None = None
         self.goals += 1
         self.active[ctx.id] = ctx
         try:
@@ -546,7 +556,7 @@ class ActionServer:
             cls = _part(self.action_cls, "Goal")
             if cls is not None:
                 goal = from_wire(goal, cls, f"goal of {self.action}")
-            if _is_async(self.handler):
+            if is_async_callable(self.handler):
                 result = await self.handler(goal, ctx)
             else:
                 if self._threads is None:
@@ -562,7 +572,6 @@ class ActionServer:
         except asyncio.CancelledError:
             if not ctx.lost:
                 raise
-            return
         except Exception as exc:
             self.failures += 1
             log.warning("action handler of %s raised %s: %s", self.action,
@@ -572,9 +581,7 @@ class ActionServer:
                                   status=int(GoalStatus.ABORTED))
         finally:
             self.active.pop(ctx.id, None)
-            front._served_goals.pop(ctx.id, None)
-        if not ctx.lost:
-            front._send_checked(op)
+            self._backend._served_goal_done(ctx, None if ctx.lost else op)
 
     def _result_wire(self, result: Any) -> Mapping[str, Any]:
         cls = _part(self.action_cls, "Result")
@@ -583,7 +590,7 @@ class ActionServer:
         what = f"result of {self.action}"
         wire = to_wire(result, f"{self.type_name}_Result", cls, what)
         check = cls if cls is not None else (
-            _part(_action_class(self.type_name), "Result") if self._front.validate else None)
+            _part(_action_class(self.type_name), "Result") if self._backend.validate else None)
         if check is not None and not isinstance(result, Message):
             from_wire(wire, check, what)
         return wire

@@ -1,4 +1,4 @@
-"""The websocket client: the front (:mod:`roslibpy_lite.ros`) over a real connection.
+"""The websocket client: the client (:mod:`roslibpy_lite.ros`) over a real connection.
 
 Usage::
 
@@ -77,7 +77,7 @@ from typing import TYPE_CHECKING, Any, TypeVar
 
 from ._backoff import Backoff
 from .exceptions import UsageError
-from .ros import RosFront
+from .ros import RosBase
 from .transports.websocket import WebSocketTransport
 
 if TYPE_CHECKING:
@@ -90,7 +90,7 @@ EXIT_INTERRUPTED = 130
 """The exit status of a script stopped with Ctrl+C (128 + SIGINT), as shells report it."""
 
 
-class Client(RosFront):
+class Client(RosBase):
     """A rosbridge v2 connection with everything built on it (see the module docstring).
 
     Make one with :func:`connect`. Args (all keyword-only, all optional):
@@ -123,7 +123,7 @@ class Client(RosFront):
             trusted CAs). A certificate problem raises
             :class:`~roslibpy_lite.exceptions.TLSError` in one line.
         validate: check dict messages against their ``msgs`` class (see
-            :class:`~roslibpy_lite.ros.RosFront`).
+            :class:`~roslibpy_lite.ros.RosBase`).
     """
 
     _receive: Callable[[str | bytes], None]

@@ -1,8 +1,7 @@
 """The handles a backend returns: publishers, subscriptions, service servers.
 
-The front (:class:`~roslibpy_lite.ros.RosFront`, under both
-:class:`~roslibpy_lite.client.Client` and :class:`~roslibpy_lite.mock.MockRos`)
-makes them and supplies the hooks of :class:`Backend`. Every handle
+The capabilities of :mod:`roslibpy_lite.capabilities` make them and supply the
+hooks of :class:`Backend` (:class:`TopicBackend`, :class:`ServiceBackend`). Every handle
 
 - is awaitable (``pub = await ros.advertise(...)``: returns once the
   request has been handed to the connection and, when the bridge confirms
@@ -37,6 +36,7 @@ from typing import TYPE_CHECKING, Any, Generic, Protocol, Self, TypeVar, cast
 from msgs.runtime import Message, Service, ValidationError
 
 from . import ops
+from ._aio import is_async_callable, running_loop
 from .api import MessageCallback, ServiceHandler
 from .exceptions import (
     InvalidMessageError,
@@ -52,29 +52,32 @@ if TYPE_CHECKING:
 __all__ = [
     "Backend",
     "Publisher",
+    "ServiceBackend",
     "ServiceCall",
     "ServiceServer",
     "Subscription",
+    "TopicBackend",
 ]
 
 log = logging.getLogger("roslibpy_lite.client")
 
 T = TypeVar("T")
-_running_loop = asyncio._get_running_loop
 _SKIP: Any = object()
-
-
-def _is_async_callable(fn: Callable[..., Any]) -> bool:
-    if inspect.iscoroutinefunction(fn):
-        return True
-    call = getattr(fn, "__call__", None)  # noqa: B004 - an object with an async __call__
-    return call is not None and inspect.iscoroutinefunction(call)
 
 
 # --- the backend hooks -----------------------------------------------------------------------
 
 class Backend(Protocol):
-    """What a handle needs from the front that made it (private hooks)."""
+    """What every handle needs from the capability that made it."""
+
+    async def _settle(self, handle: Any) -> None:
+        """Return once the handle's request was sent and (if the bridge says so) accepted."""
+        ...
+
+
+class TopicBackend(Backend, Protocol):
+    """What publishers and subscriptions need
+    (:class:`~roslibpy_lite.capabilities.topics.Topics`)."""
 
     def _publish(
         self, pub: Publisher[Any], wire: Mapping[str, Any]
@@ -90,16 +93,12 @@ class Backend(Protocol):
         """Forget a subscription."""
         ...
 
+
+class ServiceBackend(Backend, Protocol):
+    """What a served service needs (:class:`~roslibpy_lite.capabilities.services.Services`)."""
+
     def _unadvertise_service(self, server: ServiceServer) -> None:
         """Forget a served service."""
-        ...
-
-    async def _flush(self) -> None:
-        """Return once everything sent so far has been handed to the connection."""
-        ...
-
-    async def _settle(self, handle: Any) -> None:
-        """Return once the handle's request was sent and (if the bridge says so) accepted."""
         ...
 
 
@@ -140,9 +139,11 @@ class _Handle:
 class Publisher(_Handle, Generic[T]):
     """A publisher on one topic (made by ``ros.advertise``)."""
 
+    _backend: TopicBackend
+
     def __init__(
         self,
-        backend: Backend,
+        backend: TopicBackend,
         topic: str,
         type_name: str,
         msg_cls: type[Message] | None,
@@ -225,7 +226,7 @@ class Publisher(_Handle, Generic[T]):
             ConnectionClosed: the client is closed (``Disconnected`` while the
                 connection is down and buffering is off).
         """
-        if _running_loop() is None:  # another thread: run it later, on the client's loop
+        if running_loop() is None:  # another thread: run it later, on the client's loop
             return _Pending(self._publish_later(msg), f"publish to {self.topic}")
         if self.error is not None:
             raise self.error
@@ -266,9 +267,11 @@ class Subscription(_Handle, Generic[T]):
     that did not fit their class; skipped), :attr:`callback_errors`.
     """
 
+    _backend: TopicBackend
+
     def __init__(
         self,
-        backend: Backend,
+        backend: TopicBackend,
         topic: str,
         type_name: str,
         msg_cls: type[Message] | None,
@@ -339,7 +342,7 @@ class Subscription(_Handle, Generic[T]):
             raise UsageError(f"subscription to {self.topic} is closed")
         if not callable(callback):
             raise UsageError(f"subscribe {self.topic}: callback must be callable")
-        if _is_async_callable(callback):
+        if is_async_callable(callback):
             if self._waiter is not None:
                 raise UsageError(
                     f"subscription to {self.topic} is being iterated; "
@@ -529,9 +532,11 @@ _Outcome = tuple[bool, Mapping[str, Any] | str]
 class ServiceServer(_Handle):
     """A service served by this client (made by ``ros.advertise_service``)."""
 
+    _backend: ServiceBackend
+
     def __init__(
         self,
-        backend: Backend,
+        backend: ServiceBackend,
         service: str,
         type_name: str,
         srv_cls: type[Service] | None,

@@ -1,11 +1,11 @@
-"""Type names and messages: what the front checks locally, before anything is sent.
+"""Type names and messages: what the client checks locally, before anything is sent.
 
 :func:`message_type` / :func:`service_type` turn a type string or a ``msgs``
 class into the canonical name (refusing a malformed or unknown name with
 "did you mean"); :func:`to_wire`, :func:`check_dict` and :func:`from_wire`
 move messages between dicts or ``msgs`` instances and the rosbridge JSON form,
 raising :class:`~roslibpy_lite.exceptions.InvalidMessageError` naming the field.
-Used by the front (:mod:`roslibpy_lite.ros`), the handles
+Used by the client (:mod:`roslibpy_lite.ros`), the handles
 (:mod:`roslibpy_lite.handles`), actions and the in-memory bridge.
 """
 

@@ -1,7 +1,7 @@
 """MockRos: the :class:`~roslibpy_lite.api.Ros` API in memory, for users' unit tests.
 
-No network and no ROS: MockRos is the same front as the websocket
-:class:`~roslibpy_lite.client.Client` (:class:`~roslibpy_lite.ros.RosFront`)
+No network and no ROS: MockRos is the same RosBase as the websocket
+:class:`~roslibpy_lite.client.Client` (:class:`~roslibpy_lite.ros.RosBase`)
 over an in-memory transport that plays the bridge's part
 (:class:`~roslibpy_lite.transports.memory.MemoryTransport`). So the API, the
 validation and the errors are the real client's, by construction. Code
@@ -24,7 +24,7 @@ What it checks, like a real bridge would:
   :class:`~roslibpy_lite.exceptions.UsageError`; subscribing with another type
   is refused as the bridge refuses it: ``await ros.subscribe(...)`` raises
   :class:`~roslibpy_lite.exceptions.StatusError`, and without ``await`` the
-  error hooks (:meth:`~roslibpy_lite.ros.RosFront.on_error`) get it;
+  error hooks (:meth:`~roslibpy_lite.ros.RosBase.on_error`) get it;
 - a published message must fit its type: typed messages are checked against
   their class, dicts against the generated class of the type when there is
   one (:class:`~roslibpy_lite.exceptions.InvalidMessageError` names the field);
@@ -60,7 +60,7 @@ from typing import TYPE_CHECKING, Any
 
 from .exceptions import UsageError
 from .messages import check_dict, message_type, to_wire
-from .ros import RosFront
+from .ros import RosBase
 from .transports.memory import MemoryTransport
 
 if TYPE_CHECKING:
@@ -69,7 +69,7 @@ if TYPE_CHECKING:
 __all__ = ["MockRos"]
 
 
-class MockRos(RosFront):
+class MockRos(RosBase):
     """An in-memory :class:`~roslibpy_lite.api.Ros` (see the module docstring).
 
     Args:
@@ -94,12 +94,12 @@ class MockRos(RosFront):
 
     def disconnect(self) -> None:
         """Play a dropped connection: state ``RECONNECTING``; calls in flight fail."""
-        self._check_open()
+        self._host.check_open()
         self._bridge.drop()
 
     def reconnect(self) -> None:
         """Play a reconnect: handles are restored, buffered publishes delivered, ``CONNECTED``."""
-        self._check_open()
+        self._host.check_open()
         self._bridge.open()
 
     # -- test conveniences ---------------------------------------------------------------------
@@ -122,7 +122,7 @@ class MockRos(RosFront):
         ``type`` defaults to the topic's known type (or the message's class).
         Not recorded in :meth:`published`. ``latch`` keeps it for late subscribers.
         """
-        self._check_open()
+        self._host.check_open()
         if type is None:
             known = self._bridge.topics.get(topic)
             if known is not None:
@@ -135,25 +135,25 @@ class MockRos(RosFront):
         what = f"inject to {topic}"
         wire = to_wire(msg, type_name, cls, what)
         if wire is msg:
-            check_dict(wire, self._check_cls(type_name, cls), what)
+            check_dict(wire, self._topics.check_class(type_name, cls), what)
         self._bridge.inject(topic, type_name, wire, latch=latch)
 
     def subscribers(self, topic: str) -> int:
         """How many open subscriptions ``topic`` has."""
-        return len(self._topic_subs.get(topic, ()))
+        return len(self._topics.by_topic.get(topic, ()))
 
     def served(self) -> list[str]:
         """The names of the services served through this mock."""
-        return sorted(self._servers)
+        return sorted(self._services.servers)
 
     def served_actions(self) -> list[str]:
         """The names of the actions served through this mock."""
-        return sorted(self._action_servers)
+        return sorted(self._actions.servers)
 
     async def drain(self) -> None:
         """Return once every async callback has taken every message delivered so far."""
         while True:
-            busy = [s for s in self._subs.values()
+            busy = [s for s in self._topics.subscriptions.values()
                     if s._async_cbs and (s._queue or not s._idle.is_set())]
             if not busy:
                 return

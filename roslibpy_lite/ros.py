@@ -1,14 +1,15 @@
-"""The front: the whole user API once, over any transport.
+"""The whole user API once, over any transport: :class:`RosBase`.
 
-:class:`RosFront` owns what a user touches: ``advertise``/``subscribe``/
-``call_service``/``advertise_service`` (from
-:class:`~roslibpy_lite.services_front.ServicesMixin`), ``send_goal``/``advertise_action``
-(from :class:`~roslibpy_lite.actions_front.ActionsMixin`), the connection state, validation, the
-handles, request ids, restoring everything after a reconnect, and the error
-rules. Under it a transport (:mod:`roslibpy_lite.transports`) only moves ops:
-:class:`~roslibpy_lite.client.Client` is the front over a websocket,
-:class:`~roslibpy_lite.mock.MockRos` the front over an in-memory bridge. So a
-rule written here holds in production and in unit tests alike.
+:class:`RosBase` is what :class:`~roslibpy_lite.client.Client` (over a
+websocket) and :class:`~roslibpy_lite.mock.MockRos` (over an in-memory bridge)
+share: every method a user calls, the connection state, the error rules and
+restoring everything after a reconnect. What each group of ops does lives in a
+capability (:mod:`roslibpy_lite.capabilities`: topics, services, actions); the
+capabilities share one host (:class:`_Host`: sending, routing received ops,
+request ids, the requests the bridge may answer or refuse by id, and the
+connection's hooks). Under it a transport (:mod:`roslibpy_lite.transports`)
+only moves ops. So a rule written here holds in production and in unit tests
+alike.
 
 The error rules
 ---------------
@@ -22,26 +23,11 @@ The error rules
   wait (at most ``verdict_timeout``) for its verdict and raise
   :class:`~roslibpy_lite.exceptions.StatusError` if it refused. Against a
   stock rosbridge they return at once, as it sends no verdict. A refusal that
-  nobody awaits goes to the error hooks (:meth:`RosFront.on_error`), is
+  nobody awaits goes to the error hooks (:meth:`RosBase.on_error`), is
   logged, sets the handle's ``error`` (the next ``publish`` raises it, an
   ``async for`` raises it), and never only to the log.
 
-Adding a capability (an action client or server, ...)
------------------------------------------------------
-1. Route the ops it receives: ``self._routes[ops.ActionFeedback] = self._on_feedback``
-   (every op type not in ``_routes`` is ignored; ``publish`` has its own fast
-   path). Replies about one request carry its id: keep the waiting requests in
-   a dict keyed by id, as ``call_service`` keeps ``self._calls``
-   (:mod:`roslibpy_lite.services_front`); status errors naming an id in
-   ``self._calls`` fail that call's future.
-2. Send with ``self._send(op)`` (dropped while disconnected) and make ids with
-   ``self._new_id(kind, name)``.
-3. A long-lived handle (a served action) registers with ``self._request(handle, op)``:
-   it is then in ``self._requests`` (status errors with its id reach
-   ``handle._fail``), its verdict is awaited by ``await handle``; and add
-   a callback to ``self._restorers`` that re-sends its op after each reconnect.
-4. Fail what is in flight in :meth:`_disconnected` / :meth:`_shutdown` (both
-   call every function in ``self._on_drop`` with the error).
+Adding a capability: see :mod:`roslibpy_lite.capabilities`.
 """
 
 from __future__ import annotations
@@ -54,40 +40,284 @@ from collections.abc import Callable, Coroutine, Mapping
 from typing import TYPE_CHECKING, Any, Self, overload
 
 from . import ops
-from .actions import ActionServer, GoalHandle
-from .actions_front import ActionsMixin
+from ._aio import running_loop
 from .api import ConnectionState, MessageCallback, StateCallback
+from .capabilities import Pending
+from .capabilities.actions import Actions
+from .capabilities.services import Services
+from .capabilities.topics import Topics
 from .exceptions import (
     ConnectionClosed,
     Disconnected,
+    ProtocolError,
     RosLibError,
     StatusError,
     UsageError,
     status_error,
 )
-from .handles import Publisher, ServiceServer, Subscription
-from .messages import check_name, lookup_message_class, message_type
-from .services_front import ServicesMixin
 from .state import StateHub, StateWatcher, add_callback
 
 if TYPE_CHECKING:
     from types import TracebackType
 
-    from msgs.runtime import Message
+    from msgs.runtime import Action, Message, Service
 
-    from .api import M
+    from .actions import ActionHandler, ActionServer, FeedbackCallback, GoalHandle
+    from .api import DEFAULT_CALL_TIMEOUT, M, ServiceHandler
+    from .handles import Publisher, ServiceCall, ServiceServer, Subscription
     from .transports.base import Transport
+else:
+    from .api import DEFAULT_CALL_TIMEOUT
 
-__all__ = ["ErrorCallback", "RosFront"]
+__all__ = ["ErrorCallback", "RosBase", "RosFront"]
 
 log = logging.getLogger("roslibpy_lite.client")
 
-_Handle = Publisher[Any] | Subscription[Any] | ServiceServer | ActionServer | GoalHandle
 ErrorCallback = Callable[[RosLibError], None]
-"""An error hook: ``fn(error)`` for a bridge error nobody awaits (see :meth:`RosFront.on_error`)."""
+"""An error hook: ``fn(error)`` for a bridge error nobody awaits (see :meth:`RosBase.on_error`)."""
 
 
-class RosFront(ServicesMixin, ActionsMixin):
+class _Host:
+    """What the capabilities share (:class:`roslibpy_lite.capabilities.Host`), and the
+    hooks the transport calls (:class:`roslibpy_lite.transports.base.Link`)."""
+
+    def __init__(self, transport: Transport, validate: bool, verdict_timeout: float) -> None:
+        self.transport = transport
+        self.validate = validate
+        self.verdict_timeout = verdict_timeout
+        self.hub = StateHub(ConnectionState.CONNECTING)
+        self._ids = itertools.count(1)
+        self._pending: dict[str, Pending] = {}
+        self._routes: dict[type[Any], Callable[[Any], None]] = {ops.Status: self._on_status}
+        self._restorers: list[Callable[[], None]] = []
+        self._drops: list[Callable[[ConnectionClosed], None]] = []
+        self._stray: list[Callable[[str, RosLibError], None]] = []
+        self.tasks: set[asyncio.Task[None]] = set()
+        self.status_callbacks: list[Callable[[ops.Status], None]] = []
+        self.error_callbacks: list[ErrorCallback] = []
+        self.status_errors = 0
+
+    # -- what capabilities use -----------------------------------------------------------------
+
+    @property
+    def url(self) -> str:
+        return self.transport.url
+
+    @property
+    def state(self) -> ConnectionState:
+        return self.hub.state
+
+    def check_open(self) -> None:
+        if self.hub.state is ConnectionState.CLOSED:
+            raise ConnectionClosed(f"the connection to {self.transport.url} is closed")
+
+    def route(self, op_type: type[Any], handler: Callable[[Any], None]) -> None:
+        self._routes[op_type] = handler
+
+    def on_restore(self, fn: Callable[[], None]) -> None:
+        self._restorers.append(fn)
+
+    def on_drop(self, fn: Callable[[ConnectionClosed], None]) -> None:
+        self._drops.append(fn)
+
+    def on_stray_error(self, fn: Callable[[str, RosLibError], None]) -> None:
+        self._stray.append(fn)
+
+    def send(self, op: ops.Op) -> None:
+        t = self.transport
+        if t.connected:
+            t.write(t.encode(op))
+
+    def send_or(self, op: ops.Op, fallback: Callable[[str], ops.Op]) -> None:
+        t = self.transport
+        if not t.connected:
+            return
+        try:
+            frame = t.encode(op)
+        except ProtocolError as exc:
+            frame = t.encode(fallback(exc.message))
+        t.write(frame)
+
+    def new_id(self, kind: str, name: str) -> str:
+        return f"{kind}:{name}:{next(self._ids)}"
+
+    def request(self, pending: Pending, op: ops.Op) -> None:
+        self._pending[pending.handle.id] = pending
+        t = self.transport
+        if t.connected:
+            if t.acks:
+                pending.verdict = asyncio.Event()
+            t.write(t.encode(op))
+
+    def track(self, id: str, pending: Pending) -> None:
+        self._pending[id] = pending
+
+    def untrack(self, id: str) -> Pending | None:
+        return self._pending.pop(id, None)
+
+    def pending(self, id: str) -> Pending | None:
+        return self._pending.get(id)
+
+    async def settle(self, handle: Any) -> None:
+        await self.transport.flush()
+        key = handle.id
+        record = self._pending.get(key)
+        event = record.verdict if record is not None else None
+        if record is not None and event is not None:
+            record.awaited = True
+            try:
+                async with asyncio.timeout(self.verdict_timeout):
+                    await event.wait()
+            except TimeoutError:
+                log.debug("no verdict on %s within %s s", key, self.verdict_timeout)
+            finally:
+                record.awaited = False
+                record.verdict = None
+        record = self._pending.get(key)
+        if handle.error is not None and record is not None and record.handle is handle:
+            if record.report is not None:
+                record.report.cancel()
+                record.report = None
+            del self._pending[key]  # refused: forget the handle (nothing is sent)
+            if record.forget is not None:
+                record.forget()
+            raise handle.error
+
+    async def flush(self) -> None:
+        await self.transport.flush()
+
+    async def wait_connected(self, timeout: float | None = None) -> None:
+        await self.hub.wait_connected(timeout)
+
+    def spawn(self, coro: Coroutine[Any, Any, None]) -> asyncio.Task[None]:
+        task: asyncio.Task[None] = asyncio.get_running_loop().create_task(coro)
+        self.tasks.add(task)
+        task.add_done_callback(self.tasks.discard)
+        return task
+
+    # -- the transport's hooks -----------------------------------------------------------------
+
+    def _connected(self) -> None:
+        """A connection is open: every handle's request again, then buffered messages."""
+        for restore in self._restorers:
+            restore()
+        self.hub.set(ConnectionState.CONNECTED)
+
+    def _disconnected(self) -> None:
+        """The connection dropped; a reconnect follows. Calls in flight fail at once."""
+        self.hub.set(ConnectionState.RECONNECTING)
+        url = self.transport.url
+        self._fail_calls(lambda service, call_id: Disconnected(
+            f"connection to {url} dropped while calling {service} (request {call_id})"
+        ))
+        self._release_verdicts()
+        for fn in self._drops:
+            fn(Disconnected(f"connection to {url} dropped"))
+
+    def _shutdown(self, error: ConnectionClosed) -> None:
+        """Enter CLOSED: fail calls, end subscriptions (no messages to the server)."""
+        self.hub.set(ConnectionState.CLOSED)
+        self._fail_calls(lambda service, call_id: error)
+        self._release_verdicts()
+        for fn in self._drops:
+            fn(error)
+
+    def _fail_calls(self, error: Callable[[str, str], Exception]) -> None:
+        """Fail every call in flight (a record with a future) with ``error(name, id)``."""
+        for key, record in list(self._pending.items()):
+            future = record.future
+            if future is not None:
+                del self._pending[key]
+                if not future.done():
+                    future.set_exception(error(record.name, key))
+
+    def _release_verdicts(self) -> None:
+        for record in self._pending.values():
+            event, record.verdict = record.verdict, None
+            if event is not None:
+                event.set()
+
+    def _on_op(self, op: ops.Op) -> None:
+        """Dispatch one op from the transport (never raises)."""
+        route = self._routes.get(type(op))
+        if route is None:
+            log.debug("ignoring a %s op", op.OP)
+            return
+        try:
+            route(op)
+        except Exception:  # a bug here must not kill the connection
+            log.exception("failed to handle a %s op", op.OP)
+
+    # -- status ops ----------------------------------------------------------------------------
+
+    def _on_status(self, op: ops.Status) -> None:
+        for cb in list(self.status_callbacks):
+            try:
+                cb(op)
+            except Exception:
+                log.exception("status callback raised")
+        key = str(op.id) if op.id is not None else None
+        record = self._pending.get(key) if key is not None else None
+        if op.level != "error":
+            if record is not None and record.handle is not None:
+                event, record.verdict = record.verdict, None
+                if event is not None and op.level == "info":
+                    event.set()  # the bridge accepted the request
+                    return
+                if op.level == "info":
+                    return  # an acknowledgement after a reconnect
+            log.info("bridge status %s: %s", op.level, op.msg)
+            return
+        error = status_error(op.msg, level=op.level, id=op.id)  # Forbidden when it says so
+        if key is not None and record is not None:
+            future = record.future
+            if future is not None:
+                del self._pending[key]
+                if not future.done():
+                    future.set_exception(error)
+                return
+            if record.handle is not None:
+                self._refused(key, record, error)
+                return
+        for fn in self._stray:
+            fn(op.msg, error)
+        self.status_errors += 1
+        self.report(error, "bridge error")
+
+    def _refused(self, key: str, record: Pending, error: StatusError) -> None:
+        """The bridge refused a handle's request: the handle fails; awaited or reported."""
+        if record.refuse is not None:
+            record.refuse(error)
+        else:
+            record.handle._fail(error)
+        event, record.verdict = record.verdict, None
+        if event is not None:
+            event.set()
+        if record.awaited:
+            return  # the caller awaiting the handle raises it
+        # Reported a moment later unless the handle is awaited first: an in-memory bridge
+        # refuses during the call itself, and ``await ros.subscribe(...)`` must raise then too.
+        loop = running_loop()
+        if loop is None:
+            self.report(error, f"bridge refused {key}")
+        else:
+            record.report = loop.call_soon(self.report, error, f"bridge refused {key}")
+
+    def report(self, error: RosLibError, what: str) -> None:
+        """Tell the error hooks (and the log) about an error nobody awaits."""
+        if isinstance(error, StatusError):
+            record = self._pending.get(str(error.id))
+            if record is not None:
+                record.report = None
+        log.warning("%s: %s", what, error)
+        for cb in list(self.error_callbacks):
+            try:
+                cb(error)
+            except Exception:
+                log.exception("error callback raised")
+
+
+class RosBase:
     """The user API over a transport (see the module docstring).
 
     Args:
@@ -115,259 +345,60 @@ class RosFront(ServicesMixin, ActionsMixin):
             raise UsageError(f"max_pending must be >= 1, got {max_pending}")
         self.offline_buffer = offline_buffer
         self.max_pending = max_pending
-        self.validate = validate
         self.verdict_timeout = verdict_timeout
         self._transport = transport
-        self._hub = StateHub(ConnectionState.CONNECTING)
-        self._ids = itertools.count(1)
-        # Handles, in creation order (dicts keep it) for restoring after a reconnect.
-        self._publishers: dict[str, list[Publisher[Any]]] = {}
-        self._subs: dict[str, Subscription[Any]] = {}
-        self._topic_subs: dict[str, tuple[Subscription[Any], ...]] = {}
-        self._requests: dict[str, _Handle] = {}
-        self._verdicts: dict[str, asyncio.Event] = {}
-        self._awaited: set[str] = set()
-        self._reports: dict[str, asyncio.Handle] = {}
-        self._handler_tasks: set[asyncio.Task[None]] = set()
-        self._status_callbacks: list[Callable[[ops.Status], None]] = []
-        self._error_callbacks: list[ErrorCallback] = []
-        self._restorers: list[Callable[[], None]] = []
-        self._on_drop: list[Callable[[ConnectionClosed], None]] = []
-        self._routes: dict[type[Any], Callable[[Any], None]] = {ops.Status: self._on_status}
-        self._init_services()  # call_service / advertise_service (roslibpy_lite.services_front)
-        self._init_actions()  # send_goal / advertise_action (roslibpy_lite.actions_front)
-        self.status_errors = 0
-        """``status`` errors from the bridge that named none of our pending requests."""
-        transport.bind(self)
+        self._host = host = _Host(transport, validate, verdict_timeout)
+        # The capabilities, in the order their requests are restored after a reconnect.
+        self._topics = Topics(host, offline_buffer=offline_buffer, max_pending=max_pending)
+        self._services = Services(host)
+        self._actions = Actions(host)
+        host.on_restore(self._topics.flush_offline)  # messages go after every request
+        transport.bind(host)
 
     def __repr__(self) -> str:
-        return f"<{type(self).__name__} {self._transport.url} {self._hub.state.value}>"
+        return f"<{type(self).__name__} {self._transport.url} {self._host.state.value}>"
 
-    # -- the transport's hooks -----------------------------------------------------------------
+    @property
+    def validate(self) -> bool:
+        """Whether dict messages are checked against their type's ``msgs`` class."""
+        return self._host.validate
 
-    def _connected(self) -> None:
-        """A connection is open: send every open handle's request again, then buffered messages."""
-        for pubs in self._publishers.values():
-            self._send(pubs[0].request_op())
-        for sub in self._subs.values():
-            sub.error = None
-            self._send(sub.request_op())
-        for restore in self._restorers:  # served services, then actions
-            restore()
-        t = self._transport
-        for pubs in self._publishers.values():
-            for pub in pubs:
-                pub.error = None
-                while pub._offline and t.connected:
-                    t.write(pub._offline.popleft())
-        self._hub.set(ConnectionState.CONNECTED)
+    @validate.setter
+    def validate(self, value: bool) -> None:
+        self._host.validate = value
 
-    def _disconnected(self) -> None:
-        """The connection dropped; a reconnect follows. Calls in flight fail at once."""
-        self._hub.set(ConnectionState.RECONNECTING)
-        self._fail_calls(lambda service, call_id: Disconnected(
-            f"connection to {self._transport.url} dropped while calling {service} "
-            f"(request {call_id})"
-        ))
-        self._release_verdicts()
-        for fn in self._on_drop:
-            fn(Disconnected(f"connection to {self._transport.url} dropped"))
-
-    def _shutdown(self, error: ConnectionClosed) -> None:
-        """Enter CLOSED: fail calls, end subscriptions (no messages to the server)."""
-        self._hub.set(ConnectionState.CLOSED)
-        self._fail_calls(lambda service, call_id: error)
-        self._release_verdicts()
-        for fn in self._on_drop:
-            fn(error)
-        for sub in list(self._subs.values()):
-            sub._end()
-        for pubs in self._publishers.values():
-            for pub in pubs:
-                pub._offline.clear()
-
-    def _release_verdicts(self) -> None:
-        verdicts, self._verdicts = self._verdicts, {}
-        for event in verdicts.values():
-            event.set()
-
-    # -- the receive path ----------------------------------------------------------------------
-
-    def _on_op(self, op: ops.Op) -> None:
-        """Dispatch one op from the transport (never raises)."""
-        if type(op) is ops.Publish:
-            subs = self._topic_subs.get(op.topic)
-            if subs is not None:
-                msg = op.msg
-                for sub in subs:
-                    sub._deliver(msg)
-            return
-        route = self._routes.get(type(op))
-        if route is None:
-            log.debug("ignoring a %s op", op.OP)
-            return
-        try:
-            route(op)
-        except Exception:  # a bug here must not kill the connection
-            log.exception("failed to handle a %s op", op.OP)
-
-    def _on_status(self, op: ops.Status) -> None:
-        for cb in list(self._status_callbacks):
-            try:
-                cb(op)
-            except Exception:
-                log.exception("status callback raised")
-        key = str(op.id) if op.id is not None else None
-        if op.level != "error":
-            if key is not None and key in self._requests:
-                event = self._verdicts.pop(key, None)
-                if event is not None and op.level == "info":
-                    event.set()  # the bridge accepted the request
-                    return
-                if op.level == "info":
-                    return  # an acknowledgement after a reconnect
-            log.info("bridge status %s: %s", op.level, op.msg)
-            return
-        error = status_error(op.msg, level=op.level, id=op.id)  # Forbidden when it says so
-        if key is not None:
-            call = self._calls.pop(key, None)
-            if call is not None:
-                if not call.future.done():
-                    call.future.set_exception(error)
-                return
-            handle = self._requests.get(key)
-            if handle is not None:
-                self._refused(key, handle, error)
-                return
-        pubs = self._publishers_named_in(op.msg)
-        for pub in pubs:
-            pub._fail_once(error)
-        self.status_errors += 1
-        self._report(error, "bridge error")
-
-    def _refused(self, key: str, handle: _Handle, error: StatusError) -> None:
-        """The bridge refused a handle's request: the handle fails; awaited or reported."""
-        if isinstance(handle, Publisher):  # every handle sharing the advertise
-            for pub in self._publishers.get(handle.topic, [handle]):
-                pub._fail(error)
-        else:
-            handle._fail(error)
-        event = self._verdicts.pop(key, None)
-        if event is not None:
-            event.set()
-        if key in self._awaited:
-            return  # the caller awaiting the handle raises it
-        # Reported a moment later unless the handle is awaited first: an in-memory bridge
-        # refuses during the call itself, and ``await ros.subscribe(...)`` must raise then too.
-        loop = asyncio._get_running_loop()
-        if loop is None:
-            self._report(error, f"bridge refused {key}")
-        else:
-            self._reports[key] = loop.call_soon(self._report, error, f"bridge refused {key}")
-
-    def _publishers_named_in(self, text: str) -> list[Publisher[Any]]:
-        """Publishers of the topic a bridge's ``publish to <topic> ...`` error names."""
-        if not text.startswith("publish to "):
-            return []
-        topic = text[len("publish to "):].split(" ", 1)[0].rstrip(":")
-        found = self._publishers.get(topic) or self._publishers.get(topic.lstrip("/"))
-        return list(found or [])
-
-    def _report(self, error: RosLibError, what: str) -> None:
-        """Tell the error hooks (and the log) about an error nobody awaits."""
-        if isinstance(error, StatusError):
-            self._reports.pop(str(error.id), None)
-        log.warning("%s: %s", what, error)
-        for cb in list(self._error_callbacks):
-            try:
-                cb(error)
-            except Exception:
-                log.exception("error callback raised")
-
-    # -- sending -------------------------------------------------------------------------------
-
-    def _send(self, op: ops.Op) -> None:
-        """Send ``op`` now, or drop it while disconnected (handles are restored on connect)."""
-        t = self._transport
-        if t.connected:
-            t.write(t.encode(op))
-
-    def _new_id(self, kind: str, name: str) -> str:
-        return f"{kind}:{name}:{next(self._ids)}"
-
-    def _request(self, handle: _Handle, op: ops.Op) -> None:
-        """Send a handle's request; with a confirming bridge, expect its verdict."""
-        self._requests[handle.id] = handle
-        t = self._transport
-        if t.connected:
-            if t.acks:
-                self._verdicts[handle.id] = asyncio.Event()
-            t.write(t.encode(op))
-
-    async def _settle(self, handle: _Handle) -> None:
-        """``await handle``: written, and (with a confirming bridge) accepted."""
-        await self._transport.flush()
-        key = handle.id
-        event = self._verdicts.get(key)
-        if event is not None:
-            self._awaited.add(key)
-            try:
-                async with asyncio.timeout(self.verdict_timeout):
-                    await event.wait()
-            except TimeoutError:
-                log.debug("no verdict on %s within %s s", key, self.verdict_timeout)
-            finally:
-                self._awaited.discard(key)
-                self._verdicts.pop(key, None)
-        if handle.error is not None and self._requests.get(key) is handle:
-            report = self._reports.pop(key, None)
-            if report is not None:
-                report.cancel()
-            self._forget(handle)
-            raise handle.error
-
-    def _forget(self, handle: _Handle) -> None:
-        """Drop a refused handle's registration (nothing is sent)."""
-        self._requests.pop(handle.id, None)
-        if isinstance(handle, Publisher):
-            pubs = self._publishers.pop(handle.topic, [])
-            for pub in pubs:
-                self._requests.pop(pub.id, None)
-        elif isinstance(handle, Subscription):
-            self._drop_sub(handle)
-        elif isinstance(handle, ServiceServer) and self._servers.get(handle.service) is handle:
-            del self._servers[handle.service]
-
-    async def _flush(self) -> None:
-        await self._transport.flush()
+    @property
+    def status_errors(self) -> int:
+        """``status`` errors from the bridge that named none of our pending requests."""
+        return self._host.status_errors
 
     # -- state ---------------------------------------------------------------------------------
 
     @property
     def state(self) -> ConnectionState:
         """The current connection state."""
-        return self._hub.state
+        return self._host.state
 
     @property
     def is_connected(self) -> bool:
         """True while the state is ``CONNECTED``."""
-        return self._hub.state is ConnectionState.CONNECTED
+        return self._host.state is ConnectionState.CONNECTED
 
     async def wait_connected(self, timeout: float | None = None) -> None:
         """Return once connected (raises RosTimeoutError, or ConnectionClosed once closed)."""
-        await self._hub.wait_connected(timeout)
+        await self._host.wait_connected(timeout)
 
     def on_state_change(self, callback: StateCallback) -> Callable[[], None]:
         """Call ``callback(state)`` on every change; returns a function that removes it."""
-        return self._hub.on_change(callback)
+        return self._host.hub.on_change(callback)
 
     def state_changes(self) -> StateWatcher:
         """An async iterator of the state changes from now on (ends after ``CLOSED``)."""
-        return self._hub.watch()
+        return self._host.hub.watch()
 
     def on_status(self, callback: Callable[[ops.Status], None]) -> Callable[[], None]:
         """Call ``callback(status_op)`` for every ``status`` op the bridge sends."""
-        return add_callback(self._status_callbacks, callback)
+        return add_callback(self._host.status_callbacks, callback)
 
     def on_error(self, callback: ErrorCallback) -> Callable[[], None]:
         """Call ``callback(error)`` for every bridge error no caller is waiting for.
@@ -377,13 +408,9 @@ class RosFront(ServicesMixin, ActionsMixin):
         a message the bridge could not publish, and errors naming no request.
         Each is logged too. Returns a function that removes the callback.
         """
-        return add_callback(self._error_callbacks, callback)
+        return add_callback(self._host.error_callbacks, callback)
 
-    def _check_open(self) -> None:
-        if self._hub.state is ConnectionState.CLOSED:
-            raise ConnectionClosed(f"the connection to {self._transport.url} is closed")
-
-    # -- publishers ----------------------------------------------------------------------------
+    # -- topics --------------------------------------------------------------------------------
 
     @overload
     def advertise(
@@ -410,71 +437,7 @@ class RosFront(ServicesMixin, ActionsMixin):
             StatusError: the bridge refused (raised at ``await``; else see :meth:`on_error`).
             ConnectionClosed: the client is closed.
         """
-        self._check_open()
-        check_name(topic, "topic")
-        type_name, cls = message_type(type)
-        pubs = self._publishers.get(topic)
-        if pubs and pubs[0].type_name != type_name:
-            raise UsageError(
-                f"advertise {topic}: already advertised here as {pubs[0].type_name}, "
-                f"not {type_name}"
-            )
-        pub: Publisher[Any] = Publisher(
-            self, topic, type_name, cls, latch=latch, queue_size=queue_size,
-            id=self._new_id("advertise", topic), offline_buffer=self.offline_buffer,
-            check_cls=self._check_cls(type_name, cls),
-        )
-        if pubs:
-            pubs.append(pub)
-        else:
-            self._publishers[topic] = [pub]
-            self._request(pub, pub.request_op())
-        return pub
-
-    def _check_cls(self, type_name: str, cls: type[Message] | None) -> type[Message] | None:
-        """The class dicts of ``type_name`` are checked against (None: unchecked)."""
-        if cls is not None:
-            return cls
-        return lookup_message_class(type_name) if self.validate else None
-
-    def _publish(
-        self, pub: Publisher[Any], wire: Mapping[str, Any]
-    ) -> Coroutine[Any, Any, None] | None:
-        t = self._transport
-        if t.connected:
-            t.write(t.encode(ops.Publish(pub.topic, wire)))
-            if t.backlog > self.max_pending:
-                return t.flush()
-            return None
-        self._check_open()
-        if self.offline_buffer == 0:
-            raise Disconnected(
-                f"publish to {pub.topic}: the connection to {t.url} is down"
-            )
-        frame = t.encode(ops.Publish(pub.topic, wire))  # a copy, checked now
-        if len(pub._offline) >= self.offline_buffer:
-            pub._offline.popleft()
-            pub.dropped += 1
-        pub._offline.append(frame)
-        return None
-
-    def _unadvertise(self, pub: Publisher[Any]) -> None:
-        pubs = self._publishers.get(pub.topic)
-        if not pubs or pub not in pubs:
-            return
-        first = pubs[0]
-        pubs.remove(pub)
-        if pubs:
-            if first is pub:  # the request id lives on with the next handle
-                self._requests.pop(pub.id, None)
-                self._requests[pubs[0].id] = pubs[0]
-            return
-        del self._publishers[pub.topic]
-        self._requests.pop(pub.id, None)
-        if self._hub.state is not ConnectionState.CLOSED:
-            self._send(ops.Unadvertise(pub.topic, id=first.id))
-
-    # -- subscriptions -------------------------------------------------------------------------
+        return self._topics.advertise(topic, type, latch, queue_size)
 
     @overload
     def subscribe(
@@ -534,46 +497,128 @@ class RosFront(ServicesMixin, ActionsMixin):
             StatusError: the bridge refused (raised at ``await``; else see :meth:`on_error`).
             ConnectionClosed: the client is closed.
         """
-        self._check_open()
-        check_name(topic, "topic")
-        type_name, cls = message_type(type)
-        if compression == "cbor":
-            _need_cbor()
-        sub: Subscription[Any] = Subscription(
-            self, topic, type_name, cls, throttle_rate=throttle_rate, queue_length=queue_length,
+        return self._topics.subscribe(
+            topic, type, callback, throttle_rate=throttle_rate, queue_length=queue_length,
             compression=compression, fragment_size=fragment_size, buffer_size=buffer_size,
-            id=self._new_id("subscribe", topic),
         )
-        if callback is not None:
-            sub.on_message(callback)
-        self._subs[sub.id] = sub
-        self._topic_subs[topic] = (*self._topic_subs.get(topic, ()), sub)
-        self._request(sub, sub.request_op())
-        return sub
 
-    def _drop_sub(self, sub: Subscription[Any]) -> bool:
-        if self._subs.pop(sub.id, None) is None:
-            return False
-        self._requests.pop(sub.id, None)
-        left = tuple(s for s in self._topic_subs.get(sub.topic, ()) if s is not sub)
-        if left:
-            self._topic_subs[sub.topic] = left
-        else:
-            self._topic_subs.pop(sub.topic, None)
-        return True
+    # -- services ------------------------------------------------------------------------------
 
-    def _unsubscribe(self, sub: Subscription[Any]) -> None:
-        if self._drop_sub(sub) and self._hub.state is not ConnectionState.CLOSED:
-            self._send(ops.Unsubscribe(sub.topic, id=sub.id))
+    @overload
+    def call_service(
+        self,
+        service: str,
+        type: str,
+        args: Mapping[str, Any] | None = None,
+        *,
+        timeout: float | None = DEFAULT_CALL_TIMEOUT,
+    ) -> ServiceCall[dict[str, Any]]: ...
+
+    @overload
+    def call_service(
+        self,
+        service: str,
+        type: type[Service],
+        args: Mapping[str, Any] | Message | None = None,
+        *,
+        timeout: float | None = DEFAULT_CALL_TIMEOUT,
+    ) -> ServiceCall[Any]: ...
+
+    def call_service(
+        self,
+        service: str,
+        type: str | type[Service],
+        args: Mapping[str, Any] | Message | None = None,
+        *,
+        timeout: float | None = DEFAULT_CALL_TIMEOUT,
+    ) -> ServiceCall[Any]:
+        """Call ``service``; ``await`` the result for its response.
+
+        ``args`` is a dict (or a ``Request`` instance for a typed service);
+        the response is a dict, or a ``Response`` instance for a typed
+        service. ``timeout`` (seconds, None: wait for ever) covers waiting for
+        the connection too. The arguments are checked here, at the call; the
+        request is sent when the result is awaited.
+
+        Raises:
+            ServiceError: the service answered ``result: false`` (it failed,
+                does not exist, or the bridge could not call it); the text says why.
+            StatusError: the bridge refused the request itself.
+            RosTimeoutError: no answer within ``timeout``.
+            Disconnected: the connection dropped while waiting.
+            ConnectionClosed: the client is closed.
+            UsageError / InvalidMessageError: bad arguments (raised at the call).
+        """
+        return self._services.call(service, type, args, timeout)
+
+    def advertise_service(
+        self, service: str, type: str | type[Service], handler: ServiceHandler
+    ) -> ServiceServer:
+        """Serve ``service`` to ROS callers with ``handler`` (sync or async).
+
+        The handler gets the request (dict, or ``Request`` instance for a
+        typed service) and returns the response (dict, ``Response``, or
+        None). If it raises, the caller is answered ``result: false`` with
+        the error's text. Use as ``await`` or ``async with``.
+
+        Raises:
+            UsageError: a bad name or type, or the service is already served here.
+            StatusError: the bridge refused (raised at ``await``; else see :meth:`on_error`).
+            ConnectionClosed: the client is closed.
+        """
+        return self._services.advertise(service, type, handler)
+
+    # -- actions -------------------------------------------------------------------------------
+
+    async def send_goal(
+        self,
+        action: str,
+        type: str | type[Action],
+        goal: Mapping[str, Any] | Message | None = None,
+        *,
+        feedback: bool = True,
+        on_feedback: FeedbackCallback | None = None,
+        buffer_size: int = 100,
+    ) -> GoalHandle:
+        """Send a goal to the action server of ``action``; returns its :class:`GoalHandle`.
+
+        ``type`` is an action type string (``pkg/action/Name`` or ``pkg/Name``)
+        or a msgs action class; ``goal`` a dict or its ``Goal`` instance
+        (checked here against the type). ``feedback``: ask for feedback
+        (iterate the handle, or pass ``on_feedback``, sync or async);
+        ``buffer_size``: feedback kept for iteration (the oldest is dropped).
+        Waits for the connection when it is down (at most 10 s).
+
+        Raises:
+            UsageError / InvalidMessageError: a bad name, type or goal.
+            RosTimeoutError: the connection did not come back in time.
+            ConnectionClosed: the client is closed.
+        """
+        return await self._actions.send_goal(action, type, goal, feedback=feedback,
+                                             on_feedback=on_feedback, buffer_size=buffer_size)
+
+    def advertise_action(
+        self, action: str, type: str | type[Action], handler: ActionHandler
+    ) -> ActionServer:
+        """Serve ``action`` to ROS callers with ``handler`` (module doc); ``await`` it.
+
+        Raises:
+            UsageError: a bad name or type, or the action is already served here.
+            StatusError: the bridge refused (raised at ``await``, which waits for the
+                verdict of a confirming bridge; else see
+                :meth:`~roslibpy_lite.ros.RosBase.on_error`).
+            ConnectionClosed: the client is closed.
+        """
+        return self._actions.advertise(action, type, handler)
 
     # -- closing -------------------------------------------------------------------------------
 
     async def close(self) -> None:
         """Close the connection; the state becomes ``CLOSED``. Closing twice is harmless."""
-        self._shutdown(ConnectionClosed(f"the connection to {self._transport.url} was closed"))
+        host = self._host
+        host._shutdown(ConnectionClosed(f"the connection to {self._transport.url} was closed"))
         await self._transport.close()
-        tasks = [t for s in self._subs.values() if (t := s._consumer) is not None]
-        tasks += list(self._handler_tasks)
+        tasks = self._topics.consumers() + list(host.tasks)
         if tasks:
             # Let tasks made just now start, so the handlers they hold are awaited (and
             # cancelled) rather than dropped unawaited.
@@ -596,11 +641,5 @@ class RosFront(ServicesMixin, ActionsMixin):
         await self.close()
 
 
-def _need_cbor() -> None:
-    try:
-        import cbor2  # noqa: F401
-    except ImportError:
-        raise UsageError(
-            "compression='cbor' needs cbor2: install roslibpy-lite[cbor]"
-        ) from None
-
+RosFront = RosBase
+"""The old name of :class:`RosBase` (kept so that existing imports still work)."""

@@ -1,6 +1,6 @@
 """The connection state and who waits on it: :class:`StateHub`, :class:`StateWatcher`.
 
-The front (:mod:`roslibpy_lite.ros`) owns one :class:`StateHub`; its
+The client (:mod:`roslibpy_lite.ros`) owns one :class:`StateHub`; its
 ``on_state_change``, ``state_changes`` and ``wait_connected`` are the hub's.
 """
 

@@ -232,7 +232,7 @@ class Topic:
 
         async def deliver(msg: dict[str, Any]) -> None:
             # One message at a time; the bridge's queue and our buffer bound the backlog.
-            await ros._dispatch_and_wait(callback, msg)
+            await ros.run_on_callback_thread_and_wait(callback, msg)
 
         def open_(client: AioRos) -> Subscription[Any]:
             self._sub = client.subscribe(self.name, self.message_type, deliver,
@@ -240,7 +240,7 @@ class Topic:
                                          queue_length=self.queue_length)
             return self._sub
 
-        ros._do_later(open_)
+        ros.run_when_connected(open_)
 
     def unsubscribe(self) -> None:
         """Stop the subscription."""
@@ -249,7 +249,7 @@ class Topic:
         self._subscribed = False
         if self.ros._loop.closing:  # terminated: closed with the connection
             return
-        self.ros._do_later(lambda client: self._sub.unsubscribe() if self._sub else None)
+        self.ros.run_when_connected(lambda client: self._sub.unsubscribe() if self._sub else None)
 
     def advertise(self) -> None:
         """Announce this client as a publisher of the topic."""
@@ -262,7 +262,7 @@ class Topic:
                                          queue_size=self.queue_size)
             return self._pub
 
-        self.ros._do_later(open_)
+        self.ros.run_when_connected(open_)
 
     def publish(self, message: Mapping[str, Any]) -> None:
         """Publish ``message`` (advertising first if needed).
@@ -282,7 +282,7 @@ class Topic:
         if self.ros.is_connected:
             self.ros._do(f"publish {self.name}", send)
         else:
-            self.ros._do_later(send)
+            self.ros.run_when_connected(send)
 
     def unadvertise(self) -> None:
         """Stop publishing."""
@@ -291,7 +291,7 @@ class Topic:
         self._advertised = False
         if self.ros._loop.closing:  # terminated: closed with the connection
             return
-        self.ros._do_later(lambda client: self._pub.unadvertise() if self._pub else None)
+        self.ros.run_when_connected(lambda client: self._pub.unadvertise() if self._pub else None)
 
 
 class Service:
@@ -364,7 +364,7 @@ class Service:
             self._server = client.advertise_service(self.name, self.service_type, serve)
             return self._server
 
-        self.ros._do_later(open_)
+        self.ros.run_when_connected(open_)
 
     def unadvertise(self) -> None:
         """Stop serving."""
@@ -373,7 +373,8 @@ class Service:
         self._is_advertised = False
         if self.ros._loop.closing:  # terminated: closed with the connection
             return
-        self.ros._do_later(lambda client: self._server.unadvertise() if self._server else None)
+        self.ros.run_when_connected(
+            lambda client: self._server.unadvertise() if self._server else None)
 
 
 class Param:
@@ -451,7 +452,7 @@ class ActionClient:
 
         def on_feedback(values: Any) -> None:
             if feedback is not None:
-                ros._dispatch(feedback, Feedback(values))
+                ros.run_on_callback_thread(feedback, Feedback(values))
 
         def report(callback: Callback | None, value: Any) -> None:
             try:
@@ -469,24 +470,26 @@ class ActionClient:
                     await handle.cancel()
                 outcome = await handle.result()
             except ActionError as exc:
-                ros._dispatch(report, errback, {"status": GoalStatus(int(exc.status)),
+                ros.run_on_callback_thread(report, errback, {"status": GoalStatus(int(exc.status)),
                                                 "values": exc.reason})
             except Exception as exc:
-                ros._dispatch(report, errback, {"status": GoalStatus.UNKNOWN,
+                ros.run_on_callback_thread(report, errback, {"status": GoalStatus.UNKNOWN,
                                                 "values": str(exc)})
             else:
                 status = GoalStatus(int(outcome.status))
                 values = outcome.values if outcome.values is not None else outcome.text
                 if outcome.values is not None:  # it ran to a final status, canceled too:
-                    ros._dispatch(report, resultback, Result({"status": status,  # as stock
-                                                              "values": values}))  # roslibpy
+                    # as stock roslibpy
+                    ros.run_on_callback_thread(
+                        report, resultback, Result({"status": status, "values": values}))
                 else:
-                    ros._dispatch(report, errback, {"status": status, "values": values})
+                    ros.run_on_callback_thread(
+                        report, errback, {"status": status, "values": values})
             finally:
                 self._goals.pop(goal_id, None)
                 self._cancel_wanted.discard(goal_id)
 
-        self.ros._do_later(run)
+        self.ros.run_when_connected(run)
         return goal_id
 
     def cancel_goal(self, goal_id: str) -> None:
@@ -499,7 +502,7 @@ class ActionClient:
             else:
                 await handle.cancel()
 
-        self.ros._do_later(cancel)
+        self.ros.run_when_connected(cancel)
 
     def wait_goal(self, goal_id: str, timeout: float | None = None) -> None:
         """Block until the goal's callback has run (raises RosTimeoutError after ``timeout``)."""

@@ -273,9 +273,13 @@ class Ros:
         with self._lock:
             callbacks = list(self._events.get(event_name, []))
         for callback in callbacks:
-            self._dispatch(callback, *args)
+            self.run_on_callback_thread(callback, *args)
 
-    def _dispatch(self, callback: Callback, *args: Any) -> concurrent.futures.Future[Any] | None:
+    def run_on_callback_thread(
+        self, callback: Callback, *args: Any
+    ) -> concurrent.futures.Future[Any] | None:
+        """Run ``callback(*args)`` on the callback thread (as roslibpy runs callbacks);
+        None once this Ros was terminated. Failures are logged."""
         try:
             future = self._callbacks.submit(callback, *args)
         except RuntimeError:  # terminated
@@ -283,9 +287,9 @@ class Ros:
         future.add_done_callback(_log_raised)
         return future
 
-    async def _dispatch_and_wait(self, callback: Callback, *args: Any) -> None:
+    async def run_on_callback_thread_and_wait(self, callback: Callback, *args: Any) -> None:
         """Run ``callback(*args)`` on the callback thread; return (on the loop) once it ran."""
-        future = self._dispatch(callback, *args)
+        future = self.run_on_callback_thread(callback, *args)
         if future is None:
             return
         loop = asyncio.get_running_loop()
@@ -331,7 +335,7 @@ class Ros:
             return
         loop = self._loop.loop
         with contextlib.suppress(RuntimeError):  # terminated just now
-            loop.call_soon_threadsafe(loop.call_later, delay, self._dispatch, callback)
+            loop.call_soon_threadsafe(loop.call_later, delay, self.run_on_callback_thread, callback)
 
     # -- operations (used by Topic, Service, Param) --------------------------------------------
 
@@ -339,12 +343,13 @@ class Ros:
         """Run ``fn(client)`` on the loop once connected; block for its result."""
         return self._loop.run(self._op(fn), what)
 
-    def _do_later(
+    def run_when_connected(
         self,
         fn: Callable[[AioRos], Any],
         done: Callable[[concurrent.futures.Future[Any]], None] | None = None,
     ) -> None:
-        """Run ``fn(client)`` on the loop once connected, without waiting (in call order).
+        """Run ``fn(client)`` on the loop once connected, without waiting (in call order);
+        the compat Topic, Service and ActionClient classes go through this.
 
         ``done(future)`` runs on the callback thread when it finishes; failures
         without ``done`` are logged.
@@ -361,7 +366,7 @@ class Ros:
         if done is None:
             future.add_done_callback(_log_raised)
         else:
-            future.add_done_callback(lambda f: self._dispatch(done, f))
+            future.add_done_callback(lambda f: self.run_on_callback_thread(done, f))
 
     async def _op(self, fn: Callable[[AioRos], Any]) -> Any:
         client = await self._connected()
@@ -399,7 +404,7 @@ class Ros:
             else:
                 log.error("call %s failed: %s", service, exc)
 
-        self._do_later(call, done)
+        self.run_when_connected(call, done)
         return None
 
     def _rosapi(

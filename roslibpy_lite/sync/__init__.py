@@ -52,12 +52,12 @@ the loop thread, like subscription callbacks.
 from __future__ import annotations
 
 import contextlib
-import inspect
 from collections.abc import Callable, Mapping
 from typing import TYPE_CHECKING, Any, Self, overload
 
 from .. import MockRos as _AioMockRos
 from .. import connect as _aio_connect
+from .._aio import is_async_callable
 from ..api import DEFAULT_CALL_TIMEOUT, ConnectionState, StateCallback
 from ..exceptions import UsageError
 from .actions import ActionServer, GoalHandle
@@ -213,7 +213,7 @@ class _Front:
         """
         if not callable(handler):
             raise UsageError(f"advertise_service {service}: handler must be callable")
-        serve = handler if _is_async(handler) else self._loop.off_loop(handler)
+        serve = handler if is_async_callable(handler) else self._loop.off_loop(handler)
         handle = self._loop.call(f"advertise_service {service}", self.aio.advertise_service,
                                  service, type, serve)
         return ServiceServer(self._loop, handle)
@@ -269,11 +269,6 @@ class _Front:
         tb: TracebackType | None,
     ) -> None:
         self.close()
-
-
-def _is_async(fn: Callable[..., Any]) -> bool:
-    call = getattr(fn, "__call__", None)  # noqa: B004 - an object with an async __call__
-    return inspect.iscoroutinefunction(fn) or inspect.iscoroutinefunction(call)
 
 
 class Client(_Front):

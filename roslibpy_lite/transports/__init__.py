@@ -1,4 +1,4 @@
-"""What carries ops between the front (:mod:`roslibpy_lite.ros`) and a bridge.
+"""What carries ops between the client (:mod:`roslibpy_lite.ros`) and a bridge.
 
 :class:`~roslibpy_lite.transports.base.Transport` is the seam: ops in, ops
 out, connection events up. :mod:`.websocket` speaks to a real bridge;

@@ -1,10 +1,10 @@
-"""The seam between the front and a transport: ops go down, ops and events come up.
+"""The seam between the client and a transport: ops go down, ops and events come up.
 
 A transport never interprets the API: it moves :mod:`roslibpy_lite.ops`
-values. The front calls :meth:`Transport.encode` to check and freeze an op
+values. The client calls :meth:`Transport.encode` to check and freeze an op
 (a frame: the JSON text for a socket, a private copy in memory), then
 :meth:`Transport.write` to send it while connected; frames encoded while
-offline are kept by the front and written after the next connect. Upward, the
+offline are kept by the client and written after the next connect. Upward, the
 transport calls the :class:`Link` hooks: every op that arrives, and each
 change of the connection.
 """
@@ -22,7 +22,7 @@ if TYPE_CHECKING:
 __all__ = ["ACKS_HEADER", "Link", "Transport"]
 
 class Link(Protocol):
-    """What a transport calls on the front that owns it."""
+    """What a transport calls on the client that owns it."""
 
     def _on_op(self, op: ops.Op) -> None:
         """One op arrived (never raises)."""
@@ -51,7 +51,7 @@ class Transport(Protocol):
     """The peer confirms each advertise/subscribe/advertise_service with a ``status``."""
 
     def bind(self, link: Link) -> None:
-        """Attach the front; called once, before :meth:`start`."""
+        """Attach the client; called once, before :meth:`start`."""
         ...
 
     @property
@@ -81,5 +81,5 @@ class Transport(Protocol):
         ...
 
     async def close(self) -> None:
-        """Stop for good (the front has already entered CLOSED)."""
+        """Stop for good (the client has already entered CLOSED)."""
         ...

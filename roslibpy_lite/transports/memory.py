@@ -1,6 +1,6 @@
 """The bridge's part, played in memory: what :class:`~roslibpy_lite.mock.MockRos` runs on.
 
-:class:`MemoryTransport` takes the front's ops as our bridge would and answers
+:class:`MemoryTransport` takes the client's ops as our bridge would and answers
 with the bridge's ops, synchronously: an accepted advertise, subscribe or
 advertise_service is confirmed with a ``status`` ``info`` naming its id, a
 refused one gets the bridge's ``status`` error (a topic used with another
@@ -70,7 +70,7 @@ class MemoryTransport:
         self._link: Link | None = None
 
     def bind(self, link: Link) -> None:
-        """Attach the front."""
+        """Attach the client."""
         self._link = link
 
     @property
@@ -83,7 +83,7 @@ class MemoryTransport:
         self.open()
 
     def open(self) -> None:
-        """Play a (re)connect: the front restores its handles on this fresh session."""
+        """Play a (re)connect: the client restores its handles on this fresh session."""
         assert self._link is not None
         self._up = True
         self._link._connected()
@@ -105,7 +105,7 @@ class MemoryTransport:
         return ops.parse_op(json.loads(ops.encode(op)))
 
     def write(self, frame: ops.Op) -> None:
-        """Carry out one op as the bridge would; its answers reach the front at once."""
+        """Carry out one op as the bridge would; its answers reach the client at once."""
         handler = _HANDLERS.get(type(frame))
         if handler is None:
             self._error(f"{frame.OP}: not supported by MockRos", getattr(frame, "id", None))
@@ -126,16 +126,16 @@ class MemoryTransport:
 
     # -- the bridge's answers -------------------------------------------------------------------
 
-    def _to_front(self, op: ops.Op) -> None:
+    def _to_client(self, op: ops.Op) -> None:
         assert self._link is not None
         if self._up:
             self._link._on_op(op)
 
     def _error(self, msg: str, id: ops.Id | None) -> None:
-        self._to_front(ops.Status("error", msg, id=id))
+        self._to_client(ops.Status("error", msg, id=id))
 
     def _ok(self, op: ops.Advertise | ops.Subscribe | ops.AdvertiseService, name: str) -> None:
-        self._to_front(ops.Status("info", f"ok: {op.OP} {name}", id=op.id))
+        self._to_client(ops.Status("info", f"ok: {op.OP} {name}", id=op.id))
 
     def _check(self, wire: Mapping[str, Any], type_name: str, what: str) -> str | None:
         """The bridge's complaint about ``wire`` as a ``type_name``, or None."""
@@ -195,7 +195,7 @@ class MemoryTransport:
         if latch:
             entry.latched = msg
         if entry.sub_ids:
-            self._to_front(ops.Publish(topic, msg))
+            self._to_client(ops.Publish(topic, msg))
 
     def inject(self, topic: str, type_name: str, msg: Mapping[str, Any], *, latch: bool) -> None:
         """Publish ``msg`` as another node would (not recorded in the history)."""
@@ -225,7 +225,7 @@ class MemoryTransport:
         entry.sub_ids[op.id] = None
         self._ok(op, op.topic)
         if first and entry.latched is not None:
-            self._to_front(ops.Publish(op.topic, entry.latched))
+            self._to_client(ops.Publish(op.topic, entry.latched))
 
     def _unsubscribe(self, op: ops.Unsubscribe) -> None:
         entry = self.topics.get(op.topic)
@@ -267,7 +267,7 @@ class MemoryTransport:
         self._request_ids += 1
         rid = f"service_request:{op.service}:{self._request_ids}"
         self._forwarded[rid] = fwd
-        self._to_front(ops.CallService(op.service, args, served, id=rid))
+        self._to_client(ops.CallService(op.service, args, served, id=rid))
 
     def _service_response(self, op: ops.ServiceResponse) -> None:
         fwd = self._forwarded.pop(str(op.id), None)
@@ -286,7 +286,7 @@ class MemoryTransport:
         self._answer(fwd, True, values)
 
     def _answer(self, fwd: _Forwarded, result: bool, values: Mapping[str, Any] | str) -> None:
-        self._to_front(ops.ServiceResponse(fwd.service, result, values, id=fwd.caller_id))
+        self._to_client(ops.ServiceResponse(fwd.service, result, values, id=fwd.caller_id))
 
     def _set_level(self, op: ops.SetLevel) -> None:
         pass

@@ -99,7 +99,7 @@ class MemoryActions:
         # As rosbridge: result true for a goal that ran to a final status (its values),
         # false only for one that never ran (a text saying why).
         ran = not isinstance(values, str) and status in (_SUCCEEDED, _CANCELED, _ABORTED)
-        self.bridge._to_front(ops.ActionResult(id=id, action=action, values=values,
+        self.bridge._to_client(ops.ActionResult(id=id, action=action, values=values,
                                                status=status, result=ran))
 
     def _send_goal(self, op: ops.SendActionGoal) -> None:
@@ -130,7 +130,7 @@ class MemoryActions:
         gid = f"action_goal:{served[0]}:{self._n}"
         self.goals[gid] = _Goal(op.id or "", op.action, name, type_name, bool(op.feedback))
         self._by_caller[str(op.id)] = gid
-        self.bridge._to_front(ops.SendActionGoal(action=served[0], action_type=type_name,
+        self.bridge._to_client(ops.SendActionGoal(action=served[0], action_type=type_name,
                                                  args=dict(args), id=gid, feedback=True))
 
     def _cancel(self, op: ops.CancelActionGoal) -> None:
@@ -140,7 +140,7 @@ class MemoryActions:
             self.bridge._error(f"cancel_action_goal: no goal {op.id!r} of {_name(op.action)} "
                                "is in flight on this connection", op.id)
             return
-        self.bridge._to_front(ops.CancelActionGoal(id=gid, action=self.served[goal.served][0]))
+        self.bridge._to_client(ops.CancelActionGoal(id=gid, action=self.served[goal.served][0]))
 
     # -- a client serves an action --
 
@@ -151,7 +151,7 @@ class MemoryActions:
                                "(not installed)", op.id)
             return
         self.served[_name(op.action)] = (op.action, type_name)
-        self.bridge._to_front(ops.Status("info", f"ok: {op.OP} {op.action}", id=op.id))
+        self.bridge._to_client(ops.Status("info", f"ok: {op.OP} {op.action}", id=op.id))
 
     def _unadvertise(self, op: ops.UnadvertiseAction) -> None:
         name = _name(op.action)
@@ -178,7 +178,7 @@ class MemoryActions:
             self.bridge._error(f"action_feedback for {goal.served}: {problem}", op.id)
             return
         if goal.feedback:
-            self.bridge._to_front(ops.ActionFeedback(id=goal.caller_id,
+            self.bridge._to_client(ops.ActionFeedback(id=goal.caller_id,
                                                      action=goal.caller_action,
                                                      values=dict(op.values)))
 

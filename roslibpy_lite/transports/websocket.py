@@ -1,6 +1,6 @@
 """Frames over a real websocket: connect, pump, write with backpressure, reconnect.
 
-One task reads frames and hands each completed op to the front (no task per
+One task reads frames and hands each completed op to the client (no task per
 message). One writer task drains a send queue, so the order of our ops is
 kept. A dropped connection is reopened at once, then with exponential backoff
 and jitter while attempts fail (:class:`~roslibpy_lite._backoff.Backoff`); a
@@ -105,7 +105,7 @@ class WebSocketTransport:
         self._closing = False
 
     def bind(self, link: Link) -> None:
-        """Attach the front."""
+        """Attach the client."""
         self._link = link
         self._on_op = link._on_op
 
@@ -275,7 +275,7 @@ class WebSocketTransport:
     # -- receiving -----------------------------------------------------------------------------
 
     def receive(self, frame: str | bytes) -> None:
-        """Decode one frame and hand what it completes to the front (never raises)."""
+        """Decode one frame and hand what it completes to the client (never raises)."""
         try:
             op = self._protocol.receive(frame)
         except ProtocolError as exc:
@@ -357,7 +357,7 @@ class WebSocketTransport:
 
 
 def _unbound(op: ops.Op) -> None:
-    raise RuntimeError("the transport has no front yet")
+    raise RuntimeError("the transport has no client yet")
 
 
 def _refusal(url: str, exc: BaseException) -> ConnectError | None:

@@ -1,0 +1,247 @@
+"""Topics: advertise and publish, subscribe and receive.
+
+Publishers of one topic made by several ``advertise`` calls share one
+``advertise`` request (the first handle's id; the next handle takes it over
+when the first closes). While disconnected, ``publish`` keeps up to
+``offline_buffer`` messages per publisher (the oldest dropped), written after
+the next connect; every handle's request is sent again first.
+"""
+
+from __future__ import annotations
+
+import asyncio
+from collections.abc import Callable, Coroutine, Mapping
+from typing import TYPE_CHECKING, Any
+
+from .. import ops
+from ..api import ConnectionState
+from ..exceptions import ConnectionClosed, Disconnected, RosLibError, UsageError
+from ..handles import Publisher, Subscription
+from ..messages import check_name, lookup_message_class, message_type
+from . import Host, Pending
+
+if TYPE_CHECKING:
+    from msgs.runtime import Message
+
+    from ..api import MessageCallback
+
+__all__ = ["Topics"]
+
+
+class Topics:
+    """One client's publishers and subscriptions (see the module docstring)."""
+
+    def __init__(self, host: Host, *, offline_buffer: int, max_pending: int) -> None:
+        self.host = host
+        self.offline_buffer = offline_buffer
+        self.max_pending = max_pending
+        # Handles, in creation order (dicts keep it) for restoring after a reconnect.
+        self.publishers: dict[str, list[Publisher[Any]]] = {}
+        self.subscriptions: dict[str, Subscription[Any]] = {}  # by request id
+        self.by_topic: dict[str, tuple[Subscription[Any], ...]] = {}
+        host.route(ops.Publish, self._deliver)
+        host.on_restore(self._restore)
+        host.on_drop(self._drop)
+        host.on_stray_error(self._publish_failed)
+
+    # -- publishers ----------------------------------------------------------------------------
+
+    def advertise(
+        self, topic: str, type: str | type[Message], latch: bool, queue_size: int
+    ) -> Publisher[Any]:
+        """A new publisher handle (see ``RosBase.advertise``)."""
+        host = self.host
+        host.check_open()
+        check_name(topic, "topic")
+        type_name, cls = message_type(type)
+        pubs = self.publishers.get(topic)
+        if pubs and pubs[0].type_name != type_name:
+            raise UsageError(
+                f"advertise {topic}: already advertised here as {pubs[0].type_name}, "
+                f"not {type_name}"
+            )
+        pub: Publisher[Any] = Publisher(
+            self, topic, type_name, cls, latch=latch, queue_size=queue_size,
+            id=host.new_id("advertise", topic), offline_buffer=self.offline_buffer,
+            check_cls=self.check_class(type_name, cls),
+        )
+        if pubs:
+            pubs.append(pub)
+        else:
+            self.publishers[topic] = [pub]
+            host.request(Pending(topic, handle=pub, refuse=self._refuse_publishers(topic, pub),
+                                 forget=self._forget_publishers(topic)), pub.request_op())
+        return pub
+
+    def _refuse_publishers(
+        self, topic: str, pub: Publisher[Any]
+    ) -> Callable[[RosLibError], None]:
+        def refuse(error: RosLibError) -> None:  # every handle sharing the advertise fails
+            for each in self.publishers.get(topic, [pub]):
+                each._fail(error)
+        return refuse
+
+    def _forget_publishers(self, topic: str) -> Callable[[], None]:
+        def forget() -> None:
+            for pub in self.publishers.pop(topic, []):
+                self.host.untrack(pub.id)
+        return forget
+
+    def check_class(self, type_name: str, cls: type[Message] | None) -> type[Message] | None:
+        """The class dicts of ``type_name`` are checked against (None: unchecked)."""
+        if cls is not None:
+            return cls
+        return lookup_message_class(type_name) if self.host.validate else None
+
+    def _publish(
+        self, pub: Publisher[Any], wire: Mapping[str, Any]
+    ) -> Coroutine[Any, Any, None] | None:
+        t = self.host.transport
+        if t.connected:
+            t.write(t.encode(ops.Publish(pub.topic, wire)))
+            if t.backlog > self.max_pending:
+                return t.flush()
+            return None
+        self.host.check_open()
+        if self.offline_buffer == 0:
+            raise Disconnected(f"publish to {pub.topic}: the connection to {t.url} is down")
+        frame = t.encode(ops.Publish(pub.topic, wire))  # a copy, checked now
+        if len(pub._offline) >= self.offline_buffer:
+            pub._offline.popleft()
+            pub.dropped += 1
+        pub._offline.append(frame)
+        return None
+
+    def _unadvertise(self, pub: Publisher[Any]) -> None:
+        pubs = self.publishers.get(pub.topic)
+        if not pubs or pub not in pubs:
+            return
+        first = pubs[0]
+        pubs.remove(pub)
+        host = self.host
+        if pubs:
+            if first is pub:  # the request id lives on with the next handle
+                record = host.untrack(pub.id)
+                if record is not None:
+                    record.handle = pubs[0]
+                    host.track(pubs[0].id, record)
+            return
+        del self.publishers[pub.topic]
+        host.untrack(pub.id)
+        if host.state is not ConnectionState.CLOSED:
+            host.send(ops.Unadvertise(pub.topic, id=first.id))
+
+    def _publish_failed(self, text: str, error: RosLibError) -> None:
+        """A bridge's ``publish to <topic> ...`` error: the topic's publishers raise it once."""
+        if not text.startswith("publish to "):
+            return
+        topic = text[len("publish to "):].split(" ", 1)[0].rstrip(":")
+        found = self.publishers.get(topic) or self.publishers.get(topic.lstrip("/"))
+        for pub in found or []:
+            pub._fail_once(error)
+
+    # -- subscriptions -------------------------------------------------------------------------
+
+    def subscribe(
+        self,
+        topic: str,
+        type: str | type[Message],
+        callback: MessageCallback | None,
+        *,
+        throttle_rate: int,
+        queue_length: int,
+        compression: str,
+        fragment_size: int | None,
+        buffer_size: int,
+    ) -> Subscription[Any]:
+        """A new subscription handle (see ``RosBase.subscribe``)."""
+        host = self.host
+        host.check_open()
+        check_name(topic, "topic")
+        type_name, cls = message_type(type)
+        if compression == "cbor":
+            _need_cbor()
+        sub: Subscription[Any] = Subscription(
+            self, topic, type_name, cls, throttle_rate=throttle_rate, queue_length=queue_length,
+            compression=compression, fragment_size=fragment_size, buffer_size=buffer_size,
+            id=host.new_id("subscribe", topic),
+        )
+        if callback is not None:
+            sub.on_message(callback)
+        self.subscriptions[sub.id] = sub
+        self.by_topic[topic] = (*self.by_topic.get(topic, ()), sub)
+        host.request(Pending(topic, handle=sub, forget=lambda: self._forget_sub(sub)),
+                     sub.request_op())
+        return sub
+
+    def _deliver(self, op: ops.Publish) -> None:
+        subs = self.by_topic.get(op.topic)
+        if subs is not None:
+            msg = op.msg
+            for sub in subs:
+                sub._deliver(msg)
+
+    def _forget_sub(self, sub: Subscription[Any]) -> None:
+        self._drop_sub(sub)
+
+    def _drop_sub(self, sub: Subscription[Any]) -> bool:
+        if self.subscriptions.pop(sub.id, None) is None:
+            return False
+        self.host.untrack(sub.id)
+        left = tuple(s for s in self.by_topic.get(sub.topic, ()) if s is not sub)
+        if left:
+            self.by_topic[sub.topic] = left
+        else:
+            self.by_topic.pop(sub.topic, None)
+        return True
+
+    def _unsubscribe(self, sub: Subscription[Any]) -> None:
+        if self._drop_sub(sub) and self.host.state is not ConnectionState.CLOSED:
+            self.host.send(ops.Unsubscribe(sub.topic, id=sub.id))
+
+    def consumers(self) -> list[asyncio.Task[None]]:
+        """The tasks running subscriptions' async callbacks (cancelled on close)."""
+        return [t for s in self.subscriptions.values() if (t := s._consumer) is not None]
+
+    # -- the handles' other hooks --------------------------------------------------------------
+
+    async def _settle(self, handle: Any) -> None:
+        await self.host.settle(handle)
+
+    # -- the connection ------------------------------------------------------------------------
+
+    def _restore(self) -> None:
+        """A connection is open: every publisher's and subscription's request again."""
+        host = self.host
+        for pubs in self.publishers.values():
+            host.send(pubs[0].request_op())
+        for sub in self.subscriptions.values():
+            sub.error = None
+            host.send(sub.request_op())
+
+    def flush_offline(self) -> None:
+        """Write the messages published while disconnected (after every request is restored)."""
+        t = self.host.transport
+        for pubs in self.publishers.values():
+            for pub in pubs:
+                pub.error = None
+                while pub._offline and t.connected:
+                    t.write(pub._offline.popleft())
+
+    def _drop(self, error: ConnectionClosed) -> None:
+        if self.host.state is not ConnectionState.CLOSED:
+            return  # a reconnect follows: handles stay, publishers buffer
+        for sub in list(self.subscriptions.values()):
+            sub._end()
+        for pubs in self.publishers.values():
+            for pub in pubs:
+                pub._offline.clear()
+
+
+def _need_cbor() -> None:
+    try:
+        import cbor2  # noqa: F401
+    except ImportError:
+        raise UsageError(
+            "compression='cbor' needs cbor2: install roslibpy-lite[cbor]"
+        ) from None
