@@ -734,21 +734,21 @@ class Converter:
         ns: dict[str, Any] = {
             "cls": self.msg_cls,
             "new": object.__new__,
-            "CF": getattr(proto, "_check_fields", False),
+            "CHECK_FIELDS": getattr(proto, "_check_fields", False),
             "MISSING": _MISSING,
-            "b64": _b2a,
+            "base64": _b2a,
             "Tag": _Tag,
             "floats": _floats,
             "octets": _octets,
-            "le": _le_bytes,
+            "little_endian": _le_bytes,
             "mapping": _mapping,
             "unknown": _unknown,
-            "enc": _json_encode,
-            "es": _encode_str,
-            "ir": int.__repr__,
-            "fr": float.__repr__,
-            "fz": _float_text,
-            "i8": _int8_text,
+            "json_encode": _json_encode,
+            "json_string": _encode_str,
+            "int_text": int.__repr__,
+            "float_repr": float.__repr__,
+            "float_text": _float_text,
+            "int8_text": _int8_text,
             "FIELDS": frozenset(self.fields),
             "TYPE": self.type_name,
             "list": list,
@@ -789,7 +789,7 @@ class Converter:
             "    if not n:",
             "        return cls()",
             "    m = new(cls)",
-            "    m._check_fields = CF",
+            "    m._check_fields = CHECK_FIELDS",
             '    pp = p + "." if p else ""',
             "    k = 0",
             "    g = o.get",
@@ -817,29 +817,31 @@ class Converter:
             if e == "bool":
                 return [(False, f'("true" if {a} else "false")')]
             if e in _INT_RANGES:
-                return [(False, f"ir({a})")]
+                return [(False, f"int_text({a})")]
             if e in ("float32", "float64"):
-                return [(False, f"(fr(x) if type(x := {a}) is float and x - x == 0.0 else fz(x))")]
+                return [(False, f"(float_repr(x) if type(x := {a}) is float and x - x == 0.0 "
+                                "else float_text(x))")]
             if e == "octet":
-                return [(False, f"ir({a}[0])")]
+                return [(False, f"int_text({a}[0])")]
             if e == "msg":
                 assert f.sub is not None
                 ns[f"t{i}"] = f.sub._to_json_text
                 return [(False, f"t{i}({a})")]
-            return [(False, f"es({a})")]  # string, char
+            return [(False, f"json_string({a})")]  # string, char
         if e == "uint8":
-            return [(True, '"'), (False, f'b64({a}, newline=False).decode("ascii")'), (True, '"')]
+            text = f'base64({a}, newline=False).decode("ascii")'
+            return [(True, '"'), (False, text), (True, '"')]
         if e == "octet":
-            return [(False, f"enc(octets({a}))")]
+            return [(False, f"json_encode(octets({a}))")]
         if e == "int8":  # maps (OccupancyGrid) can be huge: a 256-entry text table
-            return [(False, f"i8({a})")]
+            return [(False, f"int8_text({a})")]
         if e in _CBOR_TAGS:
-            return [(False, f"enc({a}.tolist())")]
+            return [(False, f"json_encode({a}.tolist())")]
         if e == "msg":
             assert f.sub is not None
             ns[f"t{i}"] = f.sub._to_json_text
             return [(True, "["), (False, f'",".join(map(t{i}, {a}))'), (True, "]")]
-        return [(False, f"enc({a})")]  # bool, string, char arrays (lists)
+        return [(False, f"json_encode({a})")]  # bool, string, char arrays (lists)
 
     @staticmethod
     def _out_exprs(f: _Field, a: str, i: int, ns: dict[str, Any]) -> tuple[str, str]:
@@ -858,13 +860,14 @@ class Converter:
             return a, a
         # arrays
         if e == "uint8":
-            return f"b64({a}, newline=False).decode()", f"bytes({a})"
+            return f"base64({a}, newline=False).decode()", f"bytes({a})"
         if e == "octet":
             return f"octets({a})", f'b"".join({a})'
         if e in _CBOR_TAGS:
             tag = _CBOR_TAGS[e]
             # big-endian hosts swap to little-endian first
-            c = f"Tag({tag}, bytes({a}))" if e == "int8" or _LITTLE else f"Tag({tag}, le({a}))"
+            c = (f"Tag({tag}, bytes({a}))" if e == "int8" or _LITTLE
+                 else f"Tag({tag}, little_endian({a}))")
             if e in ("float32", "float64"):
                 return f"floats({a}.tolist())", c
             return f"{a}.tolist()", c
