@@ -19,6 +19,7 @@ import sys
 
 try:
     from . import security
+    from .resume import ResumeConfig
     from .session import DEFAULT_QUEUE_LENGTH, SessionConfig
     from .types import BridgeError
 except ModuleNotFoundError as _missing:  # a client-only install: say which extra to add
@@ -58,6 +59,34 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         default=3.0,
         help="further seconds without any sign of a pinged client before its link counts as "
         "dead and everything it owned is dropped (default 3)",
+    )
+    p.add_argument(
+        "--session-keep",
+        type=float,
+        default=30.0,
+        help="seconds the session of a client whose link dropped is kept for it to resume "
+        "(subscriptions with their queues, services, actions, unconfirmed frames; our client "
+        "asks for this, stock clients never do; default 30; 0: off)",
+    )
+    p.add_argument(
+        "--sessions-per-principal",
+        type=int,
+        default=4,
+        help="most kept sessions per principal (or of unauthenticated clients); the oldest "
+        "goes first (default 4)",
+    )
+    p.add_argument(
+        "--resume-frames",
+        type=int,
+        default=1000,
+        help="most frames a session keeps until its client confirms them, to send again after "
+        "a resume (default 1000)",
+    )
+    p.add_argument(
+        "--resume-bytes",
+        type=int,
+        default=8 * 1024 * 1024,
+        help="most bytes of such frames per session (default 8 MiB)",
     )
     p.add_argument(
         "--node-name",
@@ -156,6 +185,12 @@ async def _run(args: argparse.Namespace) -> int:
             call_timeout=args.call_timeout,
             served_call_timeout=args.served_call_timeout,
             goal_timeout=args.goal_timeout,
+        ),
+        resume=ResumeConfig(
+            session_keep=args.session_keep,
+            sessions_per_principal=max(1, args.sessions_per_principal),
+            resume_frames=max(1, args.resume_frames),
+            resume_bytes=max(1, args.resume_bytes),
         ),
         security=security.config_from_args(args),
     )

@@ -239,7 +239,15 @@ class _Families:
                                 value=float(s.get("started", 0.0)))
         clients = s.get("clients", [])
         yield GaugeMetricFamily(PREFIX + "clients", "Connected websocket clients.",
-                                value=len(clients))
+                                value=len([c for c in clients if not c.get("parked")]))
+        yield GaugeMetricFamily(PREFIX + "sessions_kept",
+                                "Sessions of dropped clients kept for them to resume.",
+                                value=len([c for c in clients if c.get("parked")]))
+        yield CounterMetricFamily(PREFIX + "sessions_resumed", "Sessions resumed by a client.",
+                                  value=int(s.get("sessions_resumed", 0)))
+        yield CounterMetricFamily(PREFIX + "sessions_expired",
+                                  "Kept sessions that ended unresumed.",
+                                  value=int(s.get("sessions_expired", 0)))
         yield CounterMetricFamily(PREFIX + "connections", "Websocket clients accepted.",
                                   value=int(s.get("connections", 0)))
         refused = c("connections_refused", "Connections turned away, by reason.", ["reason"])

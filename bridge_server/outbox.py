@@ -48,6 +48,7 @@ from roslibpy_lite.protocol import split_fragments
 if TYPE_CHECKING:
     from websockets.asyncio.server import ServerConnection
 
+    from .resume import SentFrames
     from .ros import Incoming
     from .ros import SharedSubscription as _Shared
 
@@ -168,6 +169,8 @@ class Outbox:
         self.closed = False
         self.wake = asyncio.Event()
         self.frag_ids = itertools.count()
+        self.sent: SentFrames | None = None  # kept until confirmed, in a resumable session
+        self.ack: str | None = None  # a session_ack to write first (not counted, not kept)
 
     # -- filling -------------------------------------------------------------------------------
 
@@ -208,6 +211,27 @@ class Outbox:
         q.append(inc)
         self.wake.set()
 
+    def send_ack(self, text: str) -> None:
+        """Write this ``session_ack`` ahead of everything (it replaces one not yet written)."""
+        self.ack = text
+        self.wake.set()
+
+    def acked(self, count: int) -> None:
+        """The client confirmed ``count`` frames of a resumable session: forget those."""
+        if self.sent is not None:
+            self.sent.acked(count)
+
+    def resume(self, ws: ServerConnection, count: int) -> int:
+        """Write to ``ws`` from now on, starting with the frames after the client's ``count``;
+        returns how many of those were no longer kept."""
+        self.ws = ws
+        if self.sent is None:
+            return 0
+        again, missing = self.sent.since(count)
+        self.control.extendleft(reversed(again))
+        self.wake.set()
+        return missing
+
     def close(self) -> None:
         """Nothing more is queued; the writer stops."""
         self.closed = True
@@ -244,6 +268,13 @@ class Outbox:
         try:
             while not self.closed:
                 frames = self._collect()
+                sent = self.sent
+                if sent is not None:  # kept until the client confirms them
+                    for frame in frames:
+                        sent.add(frame)
+                    if self.ack is not None:
+                        frames.insert(0, self.ack)
+                        self.ack = None
                 if not frames:
                     wake.clear()
                     await wake.wait()

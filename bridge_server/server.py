@@ -28,14 +28,16 @@ from websockets.asyncio.server import Server, ServerConnection, serve
 from websockets.datastructures import MultipleValuesError
 
 from roslibpy_lite import keepalive
+from roslibpy_lite.ops import RECEIVED_HEADER, SESSION_HEADER
 
 from .actions import ActionClients, SessionActions
 from .metrics import Recorder
 from .ownership import Ownership
+from .resume import ResumeConfig, SentFrames, SessionStore
 from .ros import RosNode
 from .ros_actions import check_rclpy_internals
 from .security import Security, SecurityConfig
-from .session import Session, SessionConfig
+from .session import Session, SessionConfig, wait_ended
 from .web import Web
 from .web_access import WebAccess
 
@@ -66,6 +68,7 @@ class BridgeConfig:
     keepalive_interval: float = keepalive.DEFAULT_INTERVAL  # 0: no keepalive of our own
     keepalive_timeout: float = keepalive.DEFAULT_TIMEOUT
     session: SessionConfig = field(default_factory=SessionConfig)
+    resume: ResumeConfig = field(default_factory=ResumeConfig)  # sessions that outlive links
     security: SecurityConfig = field(default_factory=SecurityConfig)  # TLS, auth, limits
     metrics_port: int | None = None  # /metrics (and the other plain routes) on another port
     worker_index: int = 0  # with --workers: this process's index, and the peers' socket dir
@@ -97,6 +100,8 @@ class Bridge:
         self.service_owners: Ownership[SessionServices] = Ownership("service")
         self.action_owners: Ownership[SessionActions] = Ownership("action")
         self.action_clients = ActionClients()
+        self.resumable = SessionStore(config.resume)  # sessions kept for a resume (resume.py)
+        self.closing = False
         self._ids = itertools.count(1)
         self._server: Server | None = None
         self._refresher: asyncio.Task[None] | None = None
@@ -154,7 +159,24 @@ class Bridge:
         if refusal is not None:  # counted by reason for /metrics
             code = refusal.status_code
             self.metrics.connection_refused(_REFUSALS.get(code, f"http_{code}"))
+        elif self.resumable.enabled and SESSION_HEADER in request.headers:
+            await self._plan_session(connection, request)
         return refusal
+
+    async def _plan_session(self, connection: ServerConnection, request: Request) -> None:
+        """A client that asks for a session gets one: the one it names if that can be
+        resumed (its old connection is given up now), else a new one (resume.py)."""
+        asked = request.headers.get(SESSION_HEADER, "")
+        session = None
+        if asked != "new":
+            session = await self.resumable.claim(asked, getattr(connection, "principal", None))
+        token = asked if session is not None else self.resumable.new_token()
+        connection.session_plan = (token, session)  # type: ignore[attr-defined]
+        if session is not None:
+            try:
+                session.resume_from = int(request.headers.get(RECEIVED_HEADER, "0"))
+            except ValueError:
+                session.resume_from = 0
 
     def graph_changed(self) -> None:
         """Something needs the periodic graph check (a new subscription): run it soon."""
@@ -173,18 +195,34 @@ class Bridge:
             self.ros.refresh()
 
     async def _handle(self, ws: ServerConnection) -> None:
-        sid = next(self._ids)
         peer = _peer(ws)
-        log.info("client %d connected from %s", sid, peer)
-        session = Session(self, ws, sid)
-        session.peer, session.connected_at = peer, time.time()
+        plan: tuple[str, Session | None] | None = getattr(ws, "session_plan", None)
+        token, kept = plan if plan is not None else ("", None)
+        if kept is not None:  # a resumed session: the same client on a new connection
+            log.info("client %d reconnected from %s and resumed its session", kept.sid, peer)
+            kept.peer = peer
+            self.resumable.register(token, kept)
+            session = kept
+            running = session.resume(ws, session.resume_from)
+        else:
+            sid = next(self._ids)
+            log.info("client %d connected from %s", sid, peer)
+            session = Session(self, ws, sid)
+            session.peer, session.connected_at = peer, time.time()
+            self.sessions.add(session)
+            if plan is not None:
+                r = self.resumable.config
+                session.token = token
+                session.outbox.sent = SentFrames(r.resume_frames, r.resume_bytes)
+                self.resumable.register(token, session)
+            running = session.run()
         self.metrics.connections += 1
-        self.sessions.add(session)
         try:
-            await session.run()
+            await running
         finally:
-            self.sessions.discard(session)
-            log.info("client %d (%s) disconnected", sid, peer)
+            if not session.parked:
+                self.sessions.discard(session)
+                log.info("client %d (%s) disconnected", session.sid, peer)
 
     def reload(self) -> bool:
         """Read the certificates and the auth file again (SIGHUP; see :meth:`Security.reload`)."""
@@ -192,6 +230,9 @@ class Bridge:
 
     async def close(self) -> None:
         """Stop listening, close every connection (at most ~1 s), release ROS."""
+        self.closing = True
+        self.resumable.close()
+        await wait_ended()
         if self._refresher is not None:
             self._refresher.cancel()
             with contextlib.suppress(asyncio.CancelledError):

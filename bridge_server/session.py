@@ -48,6 +48,7 @@ from roslibpy_lite.protocol import decode_frame
 
 from .actions import SessionActions
 from .outbox import DEFAULT_QUEUE_LENGTH, Outbox
+from .resume import ACK_INTERVAL
 from .services import SessionServices
 from .topics import SessionTopics
 from .types import BridgeError
@@ -80,6 +81,16 @@ class SessionConfig:
     discovery_wait: float = 2.0
     max_calls_in_flight: int = 1024
     goal_timeout: float = 0.0  # action goals: seconds before one is canceled/aborted, 0 = never
+
+
+_ENDING: set[asyncio.Task[None]] = set()
+"""Clean-ups of kept sessions that were not resumed in time."""
+
+
+async def wait_ended() -> None:
+    """Return once the clean-ups of expired kept sessions have run."""
+    if _ENDING:
+        await asyncio.gather(*list(_ENDING), return_exceptions=True)
 
 
 class Capability(Protocol):
@@ -122,12 +133,19 @@ class Session:
         self.peer = ""  # the client's address, and since when (for the status page)
         self.connected_at = time.time()
         self.frame_len = 0  # the size of the frame being handled (for /metrics)
+        self.token: str | None = None  # a session that outlives its connection (resume.py)
+        self.received = 0  # frames received in this session (told to a resuming client)
+        self.resume_from = 0  # frames the resuming client had received (its handshake said)
+        self._acked_received = 0
+        self._ack_timer: asyncio.TimerHandle | None = None
         self.gate = bridge.security.gate(self)  # auth, rate, names, permissions (security/gate.py)
         self.topics = SessionTopics(self)
         self.services = SessionServices(self)
         self.actions = SessionActions(self)
         self.capabilities: tuple[Capability, ...] = (self.topics, self.services, self.actions)
-        self._handlers: dict[type[ops.Op], Callable[[Any], None]] = {ops.SetLevel: self.set_level}
+        self._handlers: dict[type[ops.Op], Callable[[Any], None]] = {
+            ops.SetLevel: self.set_level, ops.SessionAck: self._on_session_ack,
+        }
         for capability in self.capabilities:
             for op_cls, method in capability.OPS.items():
                 self._handlers[op_cls] = getattr(capability, method)
@@ -140,7 +158,21 @@ class Session:
         return self.outbox.closed
 
     async def run(self) -> None:
-        """Serve the client until it disconnects; then release everything it owned."""
+        """Serve the client until it disconnects; then release what it owned, unless the
+        session is kept for the client to resume (resume.py)."""
+        await self._serve()
+        store = self.bridge.resumable
+        if self.token is not None:
+            if store.park(self.token, self):
+                log.info("client %d: its link is gone; its session is kept for %g s",
+                         self.sid, store.config.session_keep)
+                return
+            store.forget(self.token, self)
+        self.outbox.close()
+        await self.cleanup()
+
+    async def _serve(self) -> None:
+        """Read and carry out the frames of the current connection until it closes."""
         writer = asyncio.create_task(self.outbox.writer(), name=f"session-{self.sid}-writer")
         cfg = self.bridge.config
         watcher = None
@@ -155,13 +187,57 @@ class Session:
         except ConnectionClosed:
             pass
         finally:
-            self.outbox.close()
             if watcher is not None:
                 watcher.cancel()
             writer.cancel()
             with contextlib.suppress(asyncio.CancelledError, ConnectionClosed):
                 await writer
-            await self.cleanup()
+
+    async def resume(self, ws: ServerConnection, client_received: int) -> None:
+        """Carry on over a new connection: first what the client missed, then as before."""
+        self.ws = ws
+        # Fragments of an op cut off with the old connection cannot be completed now.
+        self.protocol = FrameProtocol(
+            max_partial=16, max_fragment_bytes=self.bridge.config.max_message_size
+        )
+        missing = self.outbox.resume(ws, client_received)
+        log.info("client %d: session resumed (%d frames sent again)", self.sid,
+                 len(self.outbox.control))
+        if missing:
+            self.status("warning", f"session resumed, but {missing} messages sent while the "
+                        "link was down were no longer kept (over this bridge's resume limit)")
+        await self.run()
+
+    def end_parked(self) -> None:
+        """The kept session was not resumed in time: release what it owned."""
+        self.token = None
+        self.outbox.close()
+        task = self.loop.create_task(self.cleanup())
+        _ENDING.add(task)
+        task.add_done_callback(_ENDING.discard)
+        self.bridge.sessions.discard(self)
+
+    @property
+    def parked(self) -> bool:
+        """Whether the session is kept without a connection, waiting for its client."""
+        return self.token is not None and self.token in self.bridge.resumable.parked
+
+    def _count_received(self) -> None:
+        self.received += 1
+        if self._ack_timer is None:
+            self._ack_timer = self.loop.call_later(ACK_INTERVAL, self._send_ack)
+
+    def _on_session_ack(self, op: ops.SessionAck) -> None:
+        if self.token is not None:
+            self.received -= 1  # session_ack frames are not counted (handle_frame did)
+        self.outbox.acked(op.count)
+
+    def _send_ack(self) -> None:
+        """Confirm the frames received (ahead of the queue; neither counted nor kept)."""
+        self._ack_timer = None
+        if self.received != self._acked_received and not self.outbox.closed:
+            self._acked_received = self.received
+            self.outbox.send_ack(ops.encode(ops.SessionAck(self.received)))
 
     def _link_dead(self, silence: float) -> None:
         log.warning("client %d: no sign of it for %.1f s (a silent link): dropping it and "
@@ -169,6 +245,8 @@ class Session:
 
     async def cleanup(self) -> None:
         """Release what this client owned: each capability's, then the calls in flight."""
+        if self._ack_timer is not None:
+            self._ack_timer.cancel()
         self.gate.end()
         for capability in self.capabilities:
             await capability.close()
@@ -211,6 +289,8 @@ class Session:
     def handle_frame(self, frame: str | bytes) -> None:
         """Decode one frame and carry out the op it completes; errors go back as ``status``."""
         self.frame_len = len(frame)
+        if self.token is not None:  # confirm it soon (the client keeps it until then)
+            self._count_received()
         if not self.gate.admit_frame(len(frame)):
             return
         try:

@@ -122,6 +122,7 @@ def take(bridge: Bridge, rates: Mapping[str, Mapping[str, float]]) -> dict[str, 
                 "publishes": sorted(session.topics.publishers),
                 "serves": sorted(session.services.served),
                 "calls_in_flight": len(session.calls),
+                "parked": session.parked,  # kept for its client to resume (resume.py)
                 "queued": queued + len(session.outbox.control),
                 "dropped": dropped + session.outbox.control_dropped,
             }
@@ -145,6 +146,8 @@ def take(bridge: Bridge, rates: Mapping[str, Mapping[str, float]]) -> dict[str, 
         ],
         "started": rec.started,
         "connections": rec.connections,
+        "sessions_resumed": bridge.resumable.resumed,
+        "sessions_expired": bridge.resumable.expired,
         "refused": dict(rec.refused),
         "errors": dict(rec.errors),
         "service_calls": rec.services.data,
@@ -187,6 +190,8 @@ def merge(snaps: Iterable[Mapping[str, Any]]) -> dict[str, Any]:
         "workers": [],
         "started": min(s["started"] for s in snaps),
         "connections": 0,
+        "sessions_resumed": 0,
+        "sessions_expired": 0,
         "refused": {},
         "errors": {},
         "service_calls": {},
@@ -198,6 +203,8 @@ def merge(snaps: Iterable[Mapping[str, Any]]) -> dict[str, Any]:
     }
     for s in snaps:
         out["connections"] += s["connections"]
+        out["sessions_resumed"] += s.get("sessions_resumed", 0)
+        out["sessions_expired"] += s.get("sessions_expired", 0)
         for key in ("workers", "clients", "services", "actions"):
             out[key].extend(s[key])
         for key in ("refused", "errors"):

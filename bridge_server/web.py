@@ -41,7 +41,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from roslibpy_lite.ops import ACKS_HEADER, AUTH_HEADER
+from roslibpy_lite.ops import ACKS_HEADER, AUTH_HEADER, RECEIVED_HEADER, SESSION_HEADER
 
 from . import metrics, snapshot
 from .peers import serve_peer_socket
@@ -230,6 +230,12 @@ class Web:
             response.headers["X-Bridge-Worker"] = str(self.bridge.config.worker_index)
         if "1" in request.headers.get_all(ACKS_HEADER):  # we confirm requests (session.py)
             response.headers[ACKS_HEADER] = "1"
+        plan = getattr(connection, "session_plan", None)
+        if plan is not None and response.status_code == 101:  # resume.py
+            token, kept = plan
+            response.headers[SESSION_HEADER] = token
+            if kept is not None:
+                response.headers[RECEIVED_HEADER] = str(kept.received)
         if (response.status_code == 101 and self.bridge.security.auth is not None
                 and getattr(connection, "principal", None) is None):
             response.headers[AUTH_HEADER] = "required"  # no token yet: the first op must be auth

@@ -23,6 +23,8 @@ from .exceptions import LocalProtocolError, RemoteProtocolError
 __all__ = [
     "ACKS_HEADER",
     "AUTH_HEADER",
+    "RECEIVED_HEADER",
+    "SESSION_HEADER",
     "ActionFeedback",
     "ActionResult",
     "Advertise",
@@ -37,6 +39,7 @@ __all__ = [
     "Publish",
     "SendActionGoal",
     "ServiceResponse",
+    "SessionAck",
     "SetLevel",
     "Status",
     "Subscribe",
@@ -64,6 +67,16 @@ AUTH_HEADER = "X-Rosbridge-Auth"
 """Handshake response header of our bridge: ``required`` when it requires a token and this
 connection brought none (it must then send an ``auth`` op first). A client that has no token
 to send can fail at once, saying so, instead of failing at its first op."""
+
+SESSION_HEADER = "X-Rosbridge-Session"
+"""Handshake header of our extension for sessions that survive a dropped link. A client
+sends ``new`` (or the token of the session it had); a bridge that keeps sessions answers
+with the token of this connection's session. Stock servers ignore it."""
+
+RECEIVED_HEADER = "X-Rosbridge-Received"
+"""Handshake header that goes with a session token, both ways: how many frames the sender
+has received in that session. When the bridge answers it, the session was resumed, and each
+side sends again what the other has not received."""
 
 COMPRESSIONS = ("none", "cbor", "cbor-raw", "png")
 """Compression names a subscribe may ask for (png is legacy and refused by our bridge)."""
@@ -281,6 +294,15 @@ class SetLevel:
 
 
 @dataclass(frozen=True, slots=True)
+class SessionAck:
+    """C↔S, in a session negotiated with :data:`SESSION_HEADER` only: the sender has
+    received ``count`` frames of this session; the other side may forget those it sent."""
+
+    OP: ClassVar[str] = "session_ack"
+    count: int
+
+
+@dataclass(frozen=True, slots=True)
 class Auth:
     """C→S: rosauth's shape, sent first by roslib's ``authenticate()``; ``mac`` carries a token.
 
@@ -319,6 +341,7 @@ Op: TypeAlias = (
     | Fragment
     | Status
     | SetLevel
+    | SessionAck
     | Auth
 )
 
@@ -403,6 +426,7 @@ _rule(UnadvertiseAction, action=(_NAME, REQ), id=(_ID, OPT))
 _rule(Fragment, id=(_ID, REQ), data=(_STR, REQ), num=(_COUNT, REQ), total=(_SIZE, REQ))
 _rule(Status, level=(_STR, REQ), msg=(_STR, REQ), id=(_ID, OPT))
 _rule(SetLevel, level=(_STR, REQ), id=(_ID, OPT))
+_rule(SessionAck, count=(_COUNT, REQ))
 _ANY: _Kind = ("anything", lambda v: True, _same)
 _rule(Auth, mac=(_STR, REQ), client=(_ANY, OPT), dest=(_ANY, OPT), rand=(_ANY, OPT),
       t=(_ANY, OPT), level=(_ANY, OPT), end=(_ANY, OPT))

@@ -37,6 +37,7 @@ from ..exceptions import (
 )
 from ..ops import ACKS_HEADER, AUTH_HEADER
 from ..protocol import Protocol
+from .resumable import ACK_INTERVAL, ClientSession
 
 if TYPE_CHECKING:
     from .base import Link
@@ -63,6 +64,8 @@ class WebSocketTransport:
         proxy: str | None = None,
         token: str | None = None,
         ssl_context: ssl.SSLContext | None = None,
+        resume: bool = True,
+        resume_frames: int = 1000,
     ) -> None:
         self.url = with_default_port(url)
         self.reconnect = reconnect
@@ -93,6 +96,10 @@ class WebSocketTransport:
             self._ws_options["ssl"] = ssl_context
         self._link: Link | None = None
         self._on_op: Callable[[ops.Op], None] = _unbound
+        # A session that outlives a dropped link, when the bridge keeps them (resumable.py).
+        self.session: ClientSession | None = ClientSession(resume_frames) if resume else None
+        self._ack_timer: asyncio.TimerHandle | None = None
+        self._ack_frame: str | None = None
         self._protocol = Protocol()
         self._ws: ClientConnection | None = None
         self._outbox: deque[str] = deque()
@@ -158,8 +165,12 @@ class WebSocketTransport:
             while not self._closing:
                 attempts += 1
                 try:
+                    options = self._ws_options
+                    if self.session is not None:
+                        options = {**options, "additional_headers": {
+                            **options["additional_headers"], **self.session.headers()}}
                     ws = await ws_connect(self.url, open_timeout=self._attempt_timeout(deadline),
-                                          **self._ws_options)
+                                          **options)
                 except (OSError, InvalidHandshake, TimeoutError) as exc:
                     refused = _refusal(self.url, exc) or await _plain_to_tls(self.url, exc)
                     if refused is not None:  # a refused token or certificate: retrying cannot help
@@ -207,6 +218,7 @@ class WebSocketTransport:
                     return
                 self.connects += 1
                 self.acks = ws.response is not None and ws.response.headers.get(ACKS_HEADER) == "1"
+                self._opened(ws)
                 opened = loop.time()
                 await self._session(ws)
                 if self._closing:
@@ -266,9 +278,38 @@ class WebSocketTransport:
             with contextlib.suppress(Exception):
                 await ws.close()
 
-    def _lost(self) -> None:
-        """The connection is gone: drop unsent frames, release flush waiters."""
+    def _opened(self, ws: ClientConnection) -> None:
+        """A handshake succeeded: resume the session (what the bridge missed goes first), or
+        start anew (frames kept from the old connection are dropped, as without sessions)."""
+        session = self.session
+        if session is None:
+            return
+        lost = session.lost
+        resumed, again = session.opened(ws.response.headers if ws.response is not None else {})
+        if resumed:
+            log.info("resumed the session with %s: %d frames sent again", self.url, len(again))
+            self._outbox.extendleft(reversed(again))
+            self._queued += len(self._outbox)  # kept at the drop (see _lost), and again
+            return
+        unsent = len(self._outbox)
         self._outbox.clear()
+        self._sent = self._queued
+        if session.lost > lost or unsent:
+            log.warning("the bridge at %s did not keep this client's session: %d frames "
+                        "written before the link dropped may not have reached it",
+                        self.url, session.lost - lost + unsent)
+
+    def _lost(self) -> None:
+        """The connection is gone: release flush waiters; unsent frames are dropped, or kept
+        for a resume when the bridge keeps sessions."""
+        if self._ack_timer is not None:
+            self._ack_timer.cancel()
+            self._ack_timer = None
+        self._ack_frame = None
+        if self.session is None or self.session.token is None or self._closing:
+            self._outbox.clear()
+        else:  # kept for a resume, and no longer counted as queued (so no flush waits)
+            self._queued -= len(self._outbox)
         self._sent = self._queued
         self._wake_flushers()
 
@@ -280,9 +321,36 @@ class WebSocketTransport:
             op = self._protocol.receive(frame)
         except ProtocolError as exc:
             log.warning("ignoring a bad frame from %s: %s", self.url, exc.message)
+            self._count_received()
             return
+        if type(op) is ops.SessionAck:
+            if self.session is not None:
+                self.session.acked(op.count)
+            return
+        if self.session is not None and self.session.token is not None:
+            self._count_received()
         if op is not None:
             self._on_op(op)
+
+    def _count_received(self) -> None:
+        session = self.session
+        if session is None or session.token is None:
+            return
+        session.received += 1
+        if self._ack_timer is None:
+            self._ack_timer = asyncio.get_running_loop().call_later(ACK_INTERVAL, self._ack)
+
+    def _ack(self) -> None:
+        """Confirm what arrived (written ahead of the queue, and neither counted nor kept)."""
+        self._ack_timer = None
+        session = self.session
+        if session is None or self._ws is None or session.received == session.confirmed:
+            return
+        session.confirmed = session.received
+        self._ack_frame = ops.encode(ops.SessionAck(session.received))
+        wake = self._out_wake
+        if wake is not None and not wake.done():
+            wake.set_result(None)
 
     # -- sending -------------------------------------------------------------------------------
 
@@ -306,9 +374,15 @@ class WebSocketTransport:
     async def _write(self, ws: ClientConnection) -> None:
         outbox = self._outbox
         loop = asyncio.get_running_loop()
+        session = self.session
         while True:
+            if self._ack_frame is not None:
+                ack, self._ack_frame = self._ack_frame, None
+                await ws.send(ack)
             while outbox:
                 frame = outbox.popleft()
+                if session is not None and session.token is not None:
+                    session.wrote(frame)  # kept until the bridge confirms it
                 await ws.send(frame)
                 self._sent += 1
                 if self._flush_waiters:

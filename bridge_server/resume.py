@@ -1,0 +1,179 @@
+"""Sessions that outlive their connection (our extension; stock clients never see it).
+
+A client that sends ``X-Rosbridge-Session: new`` (:data:`~roslibpy_lite.ops.SESSION_HEADER`)
+gets a session token back. When its link drops, the bridge keeps the session
+(subscriptions with their bounded queues, publishers, served services and
+actions, the frames it wrote that the client has not confirmed) for
+``session_keep`` seconds. A client that reconnects with the token and the number of
+frames it received (:data:`~roslibpy_lite.ops.RECEIVED_HEADER`) gets the session back:
+the bridge answers with the number of frames it received, and each side sends
+again what the other missed. Both sides confirm what they received with a
+``session_ack`` op every :data:`ACK_INTERVAL` seconds, so each keeps only what
+is in flight.
+
+Limits: ``session_keep`` seconds (0 turns sessions off), at most
+``sessions_per_principal`` kept sessions per principal (the oldest goes first),
+and at most ``resume_frames`` frames / ``resume_bytes`` bytes kept per session
+for sending again (older ones are dropped, and the client hears how many it
+missed). A session belongs to the principal that opened it: resuming needs the
+same principal at the handshake (a header or query token), and the token, 128
+random bits, is never logged.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+import secrets
+from collections import deque
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from .session import Session
+
+__all__ = ["ACK_INTERVAL", "ResumeConfig", "SentFrames", "SessionStore"]
+
+log = logging.getLogger("bridge_server.resume")
+
+ACK_INTERVAL = 0.25
+"""Seconds between a side's ``session_ack`` ops while frames arrive."""
+
+CLAIM_WAIT = 3.0
+"""Seconds a resume waits for the session's old connection to be given up."""
+
+
+@dataclass
+class ResumeConfig:
+    """How long and how much of a dropped client's session the bridge keeps."""
+
+    session_keep: float = 30.0
+    sessions_per_principal: int = 4
+    resume_frames: int = 1000
+    resume_bytes: int = 8 * 1024 * 1024
+
+
+class SentFrames:
+    """The frames one session wrote that its client has not confirmed, numbered from 1."""
+
+    def __init__(self, max_frames: int, max_bytes: int) -> None:
+        self.max_frames = max_frames
+        self.max_bytes = max_bytes
+        self.frames: deque[str | bytes] = deque()
+        self.first = 1  # the number of frames[0]
+        self.count = 0  # frames written in this session
+        self.size = 0
+
+    def add(self, frame: str | bytes) -> None:
+        """One more frame written."""
+        self.count += 1
+        self.frames.append(frame)
+        self.size += len(frame)
+        while self.frames and (len(self.frames) > self.max_frames or self.size > self.max_bytes):
+            self.size -= len(self.frames.popleft())
+            self.first += 1
+
+    def acked(self, count: int) -> None:
+        """The client has received ``count`` frames: forget those."""
+        frames = self.frames
+        while frames and self.first <= count:
+            self.size -= len(frames.popleft())
+            self.first += 1
+
+    def since(self, count: int) -> tuple[list[str | bytes], int]:
+        """The frames after the client's ``count`` (to send again) and how many of those are
+        no longer kept; numbering then goes on from ``count``."""
+        self.acked(count)
+        missing = max(0, self.first - count - 1)
+        again = list(self.frames)
+        self.frames.clear()
+        self.first = count + 1
+        self.count = count
+        self.size = 0
+        return again, missing
+
+
+class SessionStore:
+    """The sessions that can be resumed, by token; the dropped ones wait here."""
+
+    def __init__(self, config: ResumeConfig) -> None:
+        self.config = config
+        self.live: dict[str, Session] = {}
+        self.parked: dict[str, asyncio.TimerHandle] = {}
+        self._parked_event: dict[str, asyncio.Event] = {}
+        self.resumed = 0
+        self.expired = 0
+
+    @property
+    def enabled(self) -> bool:
+        """Whether this bridge keeps sessions at all."""
+        return self.config.session_keep > 0
+
+    def new_token(self) -> str:
+        """A fresh session token (not yet bound to a session)."""
+        return secrets.token_urlsafe(16)
+
+    def register(self, token: str, session: Session) -> None:
+        """``session`` (just opened) can be resumed with ``token``."""
+        self.live[token] = session
+
+    async def claim(self, token: str, principal: object) -> Session | None:
+        """The session ``token`` names, given up by its old connection and held for the new
+        one; None if there is none (expired, unknown) or it belongs to another principal."""
+        session = self.live.get(token)
+        if session is None or session.gate.principal is not principal:
+            return None
+        if token not in self.parked:  # its old link is dead but not noticed yet: give it up
+            event = self._parked_event.setdefault(token, asyncio.Event())
+            session.ws.transport.abort()
+            with contextlib.suppress(TimeoutError):
+                await asyncio.wait_for(event.wait(), CLAIM_WAIT)
+        timer = self.parked.pop(token, None)
+        if timer is None or self.live.get(token) is not session:
+            return None
+        timer.cancel()
+        self.resumed += 1
+        return session
+
+    def park(self, token: str, session: Session) -> bool:
+        """``session`` lost its connection: keep it for ``session_keep`` s (False: it may not
+        be kept, and ends now)."""
+        if self.live.get(token) is not session or session.bridge.closing:
+            self.live.pop(token, None)
+            return False
+        mine = [t for t, s in self.live.items()
+                if t in self.parked and s.gate.principal is session.gate.principal]
+        while len(mine) >= self.config.sessions_per_principal:  # the oldest goes first
+            self.drop(mine.pop(0), "too many kept sessions for its principal")
+        loop = asyncio.get_running_loop()
+        self.parked[token] = loop.call_later(self.config.session_keep, self.drop, token,
+                                             f"not resumed within {self.config.session_keep:g} s")
+        event = self._parked_event.pop(token, None)
+        if event is not None:
+            event.set()
+        return True
+
+    def drop(self, token: str, why: str) -> None:
+        """End a kept session now."""
+        timer = self.parked.pop(token, None)
+        session = self.live.pop(token, None)
+        if timer is not None:
+            timer.cancel()
+        if session is not None:
+            self.expired += 1
+            log.info("client %d: session ended (%s)", session.sid, why)
+            session.end_parked()
+
+    def forget(self, token: str, session: Session) -> None:
+        """``session`` ended for good (closed by the client, or not resumable)."""
+        if self.live.get(token) is session:
+            del self.live[token]
+        timer = self.parked.pop(token, None)
+        if timer is not None:
+            timer.cancel()
+
+    def close(self) -> None:
+        """The bridge stops: end every kept session."""
+        for token in list(self.parked):
+            self.drop(token, "the bridge stopped")
