@@ -9,6 +9,10 @@
   of the run), with the kernel's unsent bytes bounded (``--notsent-lowat``, the default) and
   left to the kernel (``--notsent-lowat 0``, the previous behaviour). A fresh stream keeps
   the age flat; a stale one grows.
+- ``resume``: 10 Hz each way (client to ROS, ROS to client) across an 8 s blackhole, with
+  sessions kept (``--session-keep 30``, the default) and without (``--session-keep 0``, the
+  previous behaviour). Reported: how many of the numbers each side sent the other side got
+  (lost, duplicated).
 
 Nothing here asserts anything about time.
 """
@@ -110,6 +114,60 @@ async def _slow_link(ctx: Ctx, lowat: int, seconds: float) -> dict[str, Any]:
             "age_max_s": round(max((a for _, a in ages), default=0.0), 2)}
 
 
+async def _resume(ctx: Ctx, keep: float, hole: float = 8.0) -> dict[str, Any]:
+    """Lost and duplicated messages each way across a blackhole of ``hole`` seconds."""
+    import roslibpy_lite
+
+    bridge = ctx.bridge()
+    bridge.args += ["--session-keep", str(keep)]
+    await bridge.start()
+    up = ctx.ros("subscribe", "--topic", "/bench_up", "--duration", "60", "--idle", str(hole + 4),
+                 "--expect", "100000")
+    down = ctx.ros("publish", "--topic", "/bench_down", "--rate", "10", "--duration",
+                   str(hole + 4), "--wait-subs", "1")
+    got: list[int] = []
+    sent = 0
+    try:
+        with LinkProxy(("127.0.0.1", bridge.port)) as proxy:
+            ros = await roslibpy_lite.connect(f"ws://127.0.0.1:{proxy.port}")
+            await ros.subscribe("/bench_down", "std_msgs/msg/String",
+                                lambda m: got.append(int(m["data"])), queue_length=1000)
+            pub = await ros.advertise("/bench_up", "std_msgs/msg/String")
+            await up.start()
+            await up.event("matched")
+            await down.start()
+            await down.event("matched")
+            t0 = time.monotonic()
+            holed = restored = False
+            while time.monotonic() - t0 < hole + 4:
+                now = time.monotonic() - t0
+                if not holed and now >= 2:
+                    proxy.blackhole()
+                    holed = True
+                if not restored and now >= 2 + hole:
+                    proxy.restore()
+                    restored = True
+                await pub.publish({"data": str(sent)})
+                sent += 1
+                await asyncio.sleep(0.1)
+            done_down = await down.event("done", 30)
+            await asyncio.sleep(3.0)  # the last ones in flight (no event says "all arrived")
+            await ros.close()
+            done_up = await up.event("done", 60)
+    finally:
+        await up.close()
+        await down.close()
+        await bridge.stop()
+    published = int(done_down["sent"])
+    return {
+        "session_keep_s": keep, "blackhole_s": hole,
+        "client_to_ros": {"sent": sent, "lost": sent - int(done_up["unique"] or 0),
+                          "duplicated": int(done_up["received"]) - int(done_up["unique"] or 0)},
+        "ros_to_client": {"sent": published, "lost": published - len(set(got)),
+                          "duplicated": len(got) - len(set(got))},
+    }
+
+
 async def links(ctx: Ctx) -> dict[str, Any]:
     """Blackhole detection and slow-link freshness, now and with the previous defaults."""
     seconds = 20.0 if ctx.quick else 60.0
@@ -118,4 +176,6 @@ async def links(ctx: Ctx) -> dict[str, Any]:
         "blackhole_previous_defaults": await _blackhole(ctx, 20.0, 20.0),
         "slow_link_now": await _slow_link(ctx, 64 * 1024, seconds),
         "slow_link_kernel_buffers": await _slow_link(ctx, 0, seconds),
+        "resume_now": await _resume(ctx, 30.0),
+        "resume_previous_behaviour": await _resume(ctx, 0.0),
     }

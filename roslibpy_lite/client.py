@@ -124,6 +124,11 @@ class Client(RosBase):
             :class:`~roslibpy_lite.exceptions.TLSError` in one line.
         validate: check dict messages against their ``msgs`` class (see
             :class:`~roslibpy_lite.ros.RosBase`).
+        resume: ask the bridge to keep this client's session across a dropped link
+            (our bridge does, for ``--session-keep`` seconds; stock servers ignore the
+            request): after a reconnect nothing this client sent is lost or published
+            twice, and messages that arrived meanwhile are delivered
+            (:mod:`roslibpy_lite.transports.resumable`).
     """
 
     _receive: Callable[[str | bytes], None]
@@ -145,12 +150,13 @@ class Client(RosBase):
         validate: bool = True,
         token: str | None = None,
         ssl: _ssl.SSLContext | str | None = None,
+        resume: bool = True,
     ) -> None:
         self._ws = WebSocketTransport(
             url, reconnect=reconnect, backoff=backoff, open_timeout=open_timeout,
             max_size=max_size, ping_interval=ping_interval, ping_timeout=ping_timeout,
             ws_compression=ws_compression, proxy=proxy, token=token,
-            ssl_context=_ssl_context(url, ssl),
+            ssl_context=_ssl_context(url, ssl), resume=resume,
         )
         super().__init__(self._ws, offline_buffer=offline_buffer, max_pending=max_pending,
                          validate=validate)
@@ -261,6 +267,7 @@ def connect(
     validate: bool = True,
     token: str | None = None,
     ssl: _ssl.SSLContext | str | None = None,
+    resume: bool = True,
 ) -> Connector:
     """Connect to a rosbridge server at ``url`` (``ws://host:9090``).
 
@@ -281,7 +288,7 @@ def connect(
         url, reconnect=reconnect, backoff=backoff, open_timeout=open_timeout,
         offline_buffer=offline_buffer, max_pending=max_pending, max_size=max_size,
         ping_interval=ping_interval, ping_timeout=ping_timeout, ws_compression=ws_compression,
-        proxy=proxy, validate=validate, token=token, ssl=ssl,
+        proxy=proxy, validate=validate, token=token, ssl=ssl, resume=resume,
     ))
 
 
