@@ -221,6 +221,12 @@ class LinkProxy:
         self._writers.clear()
 
     async def _accept(self, c_reader: asyncio.StreamReader, c_writer: asyncio.StreamWriter) -> None:
+        try:
+            await self._carry(c_reader, c_writer)
+        except asyncio.CancelledError:  # the proxy stops: asyncio would log this task's end
+            _reset(c_writer)
+
+    async def _carry(self, c_reader: asyncio.StreamReader, c_writer: asyncio.StreamWriter) -> None:
         if self.refusing:
             _reset(c_writer)
             return

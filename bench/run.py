@@ -489,10 +489,11 @@ async def latency(ctx: Ctx) -> dict[str, Any]:
 
 
 async def image(ctx: Ctx) -> dict[str, Any]:
-    """640x480 rgb8 Images from a fast rclpy publisher to one client: frames/s, JSON and CBOR."""
+    """640x480 rgb8 Images from a fast rclpy publisher to one client: frames/s, JSON, CBOR and
+    cbor-raw (the CDR bytes as they came from ROS)."""
     out: dict[str, Any] = {}
-    for compression, cap in (("none", 200), ("cbor", 600)):
-        topic = f"/bench/image_{compression}"
+    for compression, cap in (("none", 200), ("cbor", 600), ("cbor-raw", 2000)):
+        topic = f"/bench/image_{compression.replace('-', '_')}"
         bridge = await ctx.bridge().start()
         ws = await ws_open(bridge.url)
         await send_op(ws, {"op": "subscribe", "topic": topic, "type": "sensor_msgs/msg/Image",
@@ -534,7 +535,7 @@ async def image(ctx: Ctx) -> dict[str, Any]:
             await bridge.stop()
         inside = [t for t in frames if t <= t_end]
         fps = (len(inside) - 1) / (inside[-1] - inside[0]) if len(inside) > 2 else 0.0
-        key = "json" if compression == "none" else "cbor"
+        key = "json" if compression == "none" else compression
         out[key] = {"frames_per_s": round(fps, 1), "frames": len(frames),
                     "bridge_cpu_ms_per_frame": round(1e3 * cpu / max(len(frames), 1), 2),
                     "publisher_rate": round(done["rate"], 1), "publisher_cap": cap,

@@ -10,8 +10,11 @@ the next connect; every handle's request is sent again first.
 from __future__ import annotations
 
 import asyncio
+import logging
 from collections.abc import Callable, Coroutine, Mapping
 from typing import TYPE_CHECKING, Any
+
+from msgs.cdr import CdrError, decoder_for
 
 from .. import ops
 from ..api import ConnectionState
@@ -19,6 +22,8 @@ from ..exceptions import ConnectionClosed, Disconnected, RosLibError, UsageError
 from ..handles import Publisher, Subscription
 from ..messages import check_name, lookup_message_class, message_type
 from . import Host, Pending
+
+log = logging.getLogger("roslibpy_lite.client")
 
 if TYPE_CHECKING:
     from msgs.runtime import Message
@@ -39,6 +44,7 @@ class Topics:
         self.publishers: dict[str, list[Publisher[Any]]] = {}
         self.subscriptions: dict[str, Subscription[Any]] = {}  # by request id
         self.by_topic: dict[str, tuple[Subscription[Any], ...]] = {}
+        self._decoders: dict[str, Callable[[bytes], dict[str, Any]]] = {}
         host.route(ops.Publish, self._deliver)
         host.on_restore(self._restore)
         host.on_drop(self._drop)
@@ -159,8 +165,13 @@ class Topics:
         host.check_open()
         check_name(topic, "topic")
         type_name, cls = message_type(type)
-        if compression == "cbor":
-            _need_cbor()
+        if compression in ("cbor", "cbor-raw"):
+            _need_cbor(compression)
+        if compression == "cbor-raw" and self._cdr_decoder(type_name) is None:
+            raise UsageError(
+                f"subscribe {topic}: compression='cbor-raw' needs the definition of "
+                f"{type_name} on this machine to decode CDR, and msgs has none; use 'cbor'"
+            )
         sub: Subscription[Any] = Subscription(
             self, topic, type_name, cls, throttle_rate=throttle_rate, queue_length=queue_length,
             compression=compression, fragment_size=fragment_size, buffer_size=buffer_size,
@@ -178,8 +189,38 @@ class Topics:
         subs = self.by_topic.get(op.topic)
         if subs is not None:
             msg = op.msg
+            if len(msg) == 3 and type(msg.get("bytes")) is bytes and "nsecs" in msg:
+                decoded = self._from_cdr(subs, msg["bytes"])  # compression cbor-raw
+                if decoded is None:
+                    return
+                msg = decoded
             for sub in subs:
                 sub._deliver(msg)
+
+    def _cdr_decoder(self, type_name: str) -> Callable[[bytes], dict[str, Any]] | None:
+        """The CDR decoder of ``type_name`` (None: msgs does not know the type)."""
+        found = self._decoders.get(type_name)
+        if found is None:
+            cls = lookup_message_class(type_name)
+            if cls is None:
+                return None
+            found = self._decoders[type_name] = decoder_for(cls)
+        return found
+
+    def _from_cdr(
+        self, subs: tuple[Subscription[Any], ...], data: bytes
+    ) -> Mapping[str, Any] | None:
+        """A ``cbor-raw`` message in its wire form (None: it does not decode; counted)."""
+        decode = self._cdr_decoder(subs[0].type_name)
+        try:
+            if decode is None:
+                raise CdrError(subs[0].type_name, "", "msgs does not know this type")
+            return decode(data)
+        except CdrError as exc:
+            for sub in subs:
+                sub.decode_errors += 1
+            log.warning("a cbor-raw message on %s does not decode: %s", subs[0].topic, exc)
+            return None
 
     def _forget_sub(self, sub: Subscription[Any]) -> None:
         self._drop_sub(sub)
@@ -238,10 +279,10 @@ class Topics:
                 pub._offline.clear()
 
 
-def _need_cbor() -> None:
+def _need_cbor(compression: str) -> None:
     try:
         import cbor2  # noqa: F401
     except ImportError:
         raise UsageError(
-            "compression='cbor' needs cbor2: install roslibpy-lite[cbor]"
+            f"compression={compression!r} needs cbor2: install roslibpy-lite[cbor]"
         ) from None

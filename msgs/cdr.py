@@ -1,0 +1,223 @@
+"""CDR, the bytes ROS 2 puts on the wire, decoded in pure Python (``cbor-raw`` subscriptions).
+
+:func:`decode` turns the serialized form of a message (XCDR1 with its 4-byte
+encapsulation header, as ``rclpy.serialization.serialize_message`` gives and our
+bridge sends for ``compression: cbor-raw``) into the message's wire form: the dict a
+CBOR subscription gives (``uint8``/``char`` arrays as ``bytes``, other arrays as
+lists, nested messages as dicts), which ``Cls.from_json`` turns into a typed
+instance.
+
+One decoder is generated per type from ``_fields_and_types`` and compiled once
+(as the bridge compiles its converters); numeric arrays are read with
+``array.frombytes`` (no Python object per element until ``tolist``), byte arrays are
+one slice. Malformed or truncated input raises :class:`CdrError` naming the field.
+"""
+
+from __future__ import annotations
+
+import array
+import re
+import struct
+import sys
+from collections.abc import Callable
+from typing import Any
+
+from .runtime import Message, lookup_message
+
+__all__ = ["CdrError", "decode", "decoder_for"]
+
+_PRIMITIVES: dict[str, tuple[str, int]] = {  # rclpy's name -> (struct code, size)
+    "boolean": ("?", 1),
+    "octet": ("B", 1),
+    "char": ("B", 1),
+    "uint8": ("B", 1),
+    "int8": ("b", 1),
+    "int16": ("h", 2),
+    "uint16": ("H", 2),
+    "int32": ("i", 4),
+    "uint32": ("I", 4),
+    "int64": ("q", 8),
+    "uint64": ("Q", 8),
+    "float": ("f", 4),
+    "double": ("d", 8),
+}
+_ARRAY_CODES = {"int8": "b", "int16": "h", "uint16": "H", "int32": "i", "uint32": "I",
+                "int64": "q", "uint64": "Q", "float": "f", "double": "d"}
+_BYTES = ("uint8", "char")  # arrays of these are bytes, as in the CBOR wire form
+_LITTLE = sys.byteorder == "little"
+_TYPE = re.compile(r"^(?:sequence<(?P<seq>[^,>]+)(?:, *(?P<bound>\d+))?>|"
+                   r"(?P<base>[^\[]+)(?:\[(?P<fixed>\d+)\])?)$")
+
+
+class CdrError(ValueError):
+    """Serialized bytes that do not decode as the type says (malformed or truncated).
+
+    ``path`` is the field that could not be read (``header.frame_id``), ``why`` the cause.
+    """
+
+    def __init__(self, type_name: str, path: str, why: str) -> None:
+        self.type_name, self.path, self.why = type_name, path, why
+        where = f"field {path!r}" if path else "the message"
+        super().__init__(f"{type_name}: cannot decode {where} from CDR: {why}")
+
+
+def _fail(type_name: str, field: str, exc: Exception) -> CdrError:
+    if isinstance(exc, CdrError):  # from a nested message: the path starts here
+        return CdrError(type_name, f"{field}.{exc.path}" if exc.path else field, exc.why)
+    why = "truncated" if isinstance(exc, struct.error | IndexError) else str(exc)
+    return CdrError(type_name, field, why)
+
+
+def _wide(data: Any) -> str:
+    """A wstring's characters: UTF-16 code units stored in 4 bytes each."""
+    units = array.array("I")
+    units.frombytes(bytes(data))
+    if not _LITTLE:
+        units.byteswap()
+    return array.array("H", units.tolist()).tobytes().decode("utf-16-le" if _LITTLE
+                                                             else "utf-16-be")
+
+
+class _Gen:
+    """Writes the source of one type's decoder."""
+
+    def __init__(self) -> None:
+        self.lines: list[str] = []
+        self.ns: dict[str, Any] = {
+            "unpack_from": struct.unpack_from, "array": array.array, "bytes": bytes,
+            "LITTLE": _LITTLE, "CdrError": CdrError, "StructError": struct.error,
+            "wide": _wide,
+        }
+        self.n = 0
+
+    def var(self) -> str:
+        self.n += 1
+        return f"v{self.n}"
+
+    def emit(self, depth: int, line: str) -> None:
+        self.lines.append("    " * depth + line)
+
+    def align(self, depth: int, size: int) -> None:
+        if size > 1:
+            self.emit(depth, f"o += (4 - o) % {size}")
+
+    def scalar(self, depth: int, base: str, target: str) -> None:
+        if base in _PRIMITIVES:
+            code, size = _PRIMITIVES[base]
+            self.align(depth, size)
+            self.emit(depth, f"{target} = unpack_from('<{code}', b, o)[0]")
+            self.emit(depth, f"o += {size}")
+        elif base in ("string", "wstring") or base.startswith(("string<", "wstring<")):
+            wide = base.startswith("w")
+            self.align(depth, 4)
+            n = self.var()
+            self.emit(depth, f"{n} = unpack_from('<I', b, o)[0]")
+            if wide:  # Fast-CDR: UTF-16 code units of 4 bytes each, no terminator
+                self.emit(depth, f"if o + 4 + 4 * {n} > len(b): raise IndexError")
+                self.emit(depth, f"{target} = wide(b[o + 4:o + 4 + 4 * {n}])")
+                self.emit(depth, f"o += 4 + 4 * {n}")
+            else:  # the length counts the NUL at the end
+                self.emit(depth, f"if {n} < 1 or o + 4 + {n} > len(b): raise IndexError")
+                self.emit(depth, f"{target} = bytes(b[o + 4:o + 3 + {n}]).decode()")
+                self.emit(depth, f"o += 4 + {n}")
+        else:
+            fn = self.nested(base)
+            self.emit(depth, f"{target}, o = {fn}(b, o)")
+
+    def nested(self, type_name: str) -> str:
+        name = "d_" + re.sub(r"\W", "_", type_name)
+        self.ns[name] = _decoder_with_offset(lookup_message(type_name))
+        return name
+
+    def field(self, depth: int, name: str, spec: str, target: str) -> None:
+        m = _TYPE.match(spec)
+        if m is None:
+            raise CdrError("?", name, f"unknown field type {spec!r}")
+        base = m["seq"] or m["base"]
+        count: str | None = None
+        if m["seq"] is not None:
+            self.align(depth, 4)
+            count = self.var()
+            self.emit(depth, f"{count} = unpack_from('<I', b, o)[0]")
+            self.emit(depth, "o += 4")
+        elif m["fixed"] is not None:
+            count = m["fixed"]
+        if count is None:
+            self.scalar(depth, base, target)
+            return
+        if base in _BYTES or base in _ARRAY_CODES or base == "octet" or base == "boolean":
+            size = _PRIMITIVES[base][1]
+            if size > 1:
+                self.emit(depth, f"if {count}: o += (4 - o) % {size}")
+            end = self.var()
+            self.emit(depth, f"{end} = o + {count} * {size}")
+            self.emit(depth, f"if {end} > len(b): raise IndexError")
+            if base in _BYTES:
+                self.emit(depth, f"{target} = bytes(b[o:{end}])")
+            elif base in ("octet", "boolean"):
+                cast = "bool" if base == "boolean" else ""
+                self.emit(depth, f"{target} = [{cast}(x) for x in bytes(b[o:{end}])]")
+            else:
+                arr = self.var()
+                self.emit(depth, f"{arr} = array('{_ARRAY_CODES[base]}')")
+                self.emit(depth, f"{arr}.frombytes(b[o:{end}])")
+                self.emit(depth, f"if not LITTLE: {arr}.byteswap()")
+                self.emit(depth, f"{target} = {arr}.tolist()")
+            self.emit(depth, f"o = {end}")
+            return
+        items = self.var()
+        self.emit(depth, f"{items} = []")
+        self.emit(depth, f"for _ in range({count}):")
+        item = self.var()
+        self.scalar(depth + 1, base, item)
+        self.emit(depth + 1, f"{items}.append({item})")
+        self.emit(depth, f"{target} = {items}")
+
+
+_DECODERS: dict[type[Message], Callable[[Any, int], tuple[dict[str, Any], int]]] = {}
+
+
+def _decoder_with_offset(cls: type[Message]) -> Callable[[Any, int], tuple[dict[str, Any], int]]:
+    """``fn(buffer, offset) -> (wire dict, offset after it)`` for ``cls`` (compiled once)."""
+    found = _DECODERS.get(cls)
+    if found is not None:
+        return found
+    gen = _Gen()
+    gen.emit(0, "def decode(b, o):")
+    gen.emit(1, "out = {}")
+    gen.emit(1, "field = ''")
+    gen.emit(1, "try:")
+    if not cls._fields_and_types:  # an empty message has one placeholder byte
+        gen.emit(2, "o += 1")
+    for name, spec in cls._fields_and_types.items():
+        gen.emit(2, f"field = {name!r}")
+        gen.field(2, name, spec, f"out[{name!r}]")
+    gen.emit(1, "except (CdrError, StructError, ValueError, IndexError) as exc:")
+    gen.emit(2, "raise fail(TYPE, field, exc) from None")
+    gen.emit(1, "return out, o")
+    gen.ns["fail"] = _fail
+    gen.ns["TYPE"] = cls._type
+    exec(compile("\n".join(gen.lines), f"<cdr {cls._type}>", "exec"), gen.ns)
+    fn: Callable[[Any, int], tuple[dict[str, Any], int]] = gen.ns["decode"]
+    _DECODERS[cls] = fn
+    return fn
+
+
+def decoder_for(cls: type[Message]) -> Callable[[bytes | memoryview], dict[str, Any]]:
+    """``fn(serialized) -> wire dict`` for messages of ``cls`` (see the module docstring)."""
+    inner = _decoder_with_offset(cls)
+
+    def decode_one(data: bytes | memoryview) -> dict[str, Any]:
+        if len(data) < 4:
+            raise CdrError(cls._type, "", f"{len(data)} bytes are too few for CDR")
+        if data[1] != 1:  # 0x00 0x01: CDR little-endian; big-endian senders are rare
+            raise CdrError(cls._type, "", "only little-endian CDR is decoded "
+                           f"(encapsulation {bytes(data[:2]).hex()})")
+        return inner(data, 4)[0]
+
+    return decode_one
+
+
+def decode(data: bytes | memoryview, cls: type[Message]) -> dict[str, Any]:
+    """The wire form of one serialized message of ``cls``."""
+    return decoder_for(cls)(data)
