@@ -72,6 +72,17 @@ def _image_msg(data: Any) -> dict[str, Any]:
     }
 
 
+def _cdr(type_name: str, wire: dict[str, Any]) -> bytes:
+    """The CDR bytes rclpy makes of a message given in its JSON form."""
+    from rclpy.serialization import serialize_message
+
+    from bridge_server import convert
+    from bridge_server.types import resolve_message
+
+    cls = resolve_message(type_name)
+    return bytes(serialize_message(convert.converter_for(cls).from_obj(wire, "msg")))
+
+
 def _timed(feed: Callable[[int], None], n: int, seconds: float) -> dict[str, float]:
     """Run ``feed(n)`` repeatedly for about ``seconds`` (best of 3 rounds); rate per item."""
     feed(min(n, 100))  # warm up
@@ -152,6 +163,21 @@ async def receive_path(seconds: float) -> dict[str, Any]:
     results["imu_json"] = _timed(feed_imu, 500, seconds)
     results["imu_json"]["frame_bytes"] = len(imu_frame)
 
+    # cbor-raw: the CDR bytes rclpy makes, decoded here by msgs.cdr
+    imu_raw = cbor2.dumps({"op": "publish", "topic": "/imu_raw",
+                           "msg": {"secs": 1, "nsecs": 2, "bytes": _cdr("sensor_msgs/msg/Imu",
+                                                                        _imu())}})
+    client.subscribe("/imu_raw", "sensor_msgs/msg/Imu", callback=lambda m: None,
+                     compression="cbor-raw")
+
+    def feed_imu_raw(n: int) -> None:
+        receive = client._receive
+        for _ in range(n):
+            receive(imu_raw)
+
+    results["imu_cbor_raw"] = _timed(feed_imu_raw, 500, seconds)
+    results["imu_cbor_raw"]["frame_bytes"] = len(imu_raw)
+
     pixels = bytes(range(256)) * (W * H * 3 // 256)
     cbor_frame = cbor2.dumps({"op": "publish", "topic": "/img", "msg": _image_msg(pixels)})
     json_frame = json.dumps({"op": "publish", "topic": "/img",
@@ -161,9 +187,18 @@ async def receive_path(seconds: float) -> dict[str, Any]:
     client.subscribe("/img_typed", Image, callback=got.append)
     typed_cbor = cbor2.dumps({"op": "publish", "topic": "/img_typed", "msg": _image_msg(pixels)})
     typed_json = json_frame.replace('"/img"', '"/img_typed"', 1)
+    cdr = _cdr("sensor_msgs/msg/Image", _image_msg(base64.b64encode(pixels).decode()))
+    client.subscribe("/img_raw", "sensor_msgs/msg/Image", callback=got.append,
+                     compression="cbor-raw")
+    client.subscribe("/img_raw_typed", Image, callback=got.append, compression="cbor-raw")
+    raw_frame = cbor2.dumps({"op": "publish", "topic": "/img_raw",
+                             "msg": {"secs": 1, "nsecs": 2, "bytes": cdr}})
+    typed_raw = cbor2.dumps({"op": "publish", "topic": "/img_raw_typed",
+                             "msg": {"secs": 1, "nsecs": 2, "bytes": cdr}})
     frames: tuple[tuple[str, str | bytes], ...] = (
         ("image_cbor_dict", cbor_frame), ("image_cbor_typed", typed_cbor),
         ("image_json_dict", json_frame), ("image_json_typed", typed_json),
+        ("image_cbor_raw_dict", raw_frame), ("image_cbor_raw_typed", typed_raw),
     )
     for name, image_frame in frames:
         def feed_image(n: int, frame: str | bytes = image_frame) -> None:

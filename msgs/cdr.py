@@ -124,6 +124,39 @@ class _Gen:
             fn = self.nested(base)
             self.emit(depth, f"{target}, o = {fn}(b, o)")
 
+    def members(self, depth: int, fields: dict[str, str], out: str, prefix: str) -> None:
+        """Decode ``fields`` into the dict ``out``: runs of same-size primitives with one
+        ``unpack_from``, nested messages inline (no call per nested message)."""
+        if not fields:  # an empty message has one placeholder byte
+            self.emit(depth, "o += 1")
+        items = list(fields.items())
+        i = 0
+        while i < len(items):
+            name, spec = items[i]
+            self.emit(depth, f"field = {prefix + name!r}")
+            if spec in _PRIMITIVES:
+                size = _PRIMITIVES[spec][1]
+                run = [name]
+                while (i + len(run) < len(items) and items[i + len(run)][1] in _PRIMITIVES
+                       and _PRIMITIVES[items[i + len(run)][1]][1] == size):
+                    run.append(items[i + len(run)][0])
+                codes = "".join(_PRIMITIVES[fields[n]][0] for n in run)
+                self.align(depth, size)
+                targets = ", ".join(f"{out}[{n!r}]" for n in run)
+                self.emit(depth, f"{targets}{',' if len(run) == 1 else ''} = "
+                                 f"unpack_from('<{codes}', b, o)")
+                self.emit(depth, f"o += {size * len(run)}")
+                i += len(run)
+                continue
+            if _TYPE.match(spec) and "/" in spec and "[" not in spec and "<" not in spec:
+                inner = self.var()
+                self.emit(depth, f"{inner} = {out}[{name!r}] = {{}}")
+                self.members(depth, lookup_message(spec)._fields_and_types, inner,
+                             f"{prefix}{name}.")
+            else:
+                self.field(depth, name, spec, f"{out}[{name!r}]")
+            i += 1
+
     def nested(self, type_name: str) -> str:
         name = "d_" + re.sub(r"\W", "_", type_name)
         self.ns[name] = _decoder_with_offset(lookup_message(type_name))
@@ -157,6 +190,9 @@ class _Gen:
             elif base in ("octet", "boolean"):
                 cast = "bool" if base == "boolean" else ""
                 self.emit(depth, f"{target} = [{cast}(x) for x in bytes(b[o:{end}])]")
+            elif m["fixed"] is not None and int(count) <= 32:  # small: one unpack_from
+                code = _PRIMITIVES[base][0]
+                self.emit(depth, f"{target} = list(unpack_from('<{count}{code}', b, o))")
             else:
                 arr = self.var()
                 self.emit(depth, f"{arr} = array('{_ARRAY_CODES[base]}')")
@@ -187,11 +223,7 @@ def _decoder_with_offset(cls: type[Message]) -> Callable[[Any, int], tuple[dict[
     gen.emit(1, "out = {}")
     gen.emit(1, "field = ''")
     gen.emit(1, "try:")
-    if not cls._fields_and_types:  # an empty message has one placeholder byte
-        gen.emit(2, "o += 1")
-    for name, spec in cls._fields_and_types.items():
-        gen.emit(2, f"field = {name!r}")
-        gen.field(2, name, spec, f"out[{name!r}]")
+    gen.members(2, cls._fields_and_types, "out", "")
     gen.emit(1, "except (CdrError, StructError, ValueError, IndexError) as exc:")
     gen.emit(2, "raise fail(TYPE, field, exc) from None")
     gen.emit(1, "return out, o")
