@@ -104,21 +104,18 @@ class Incoming:
     """One ROS message received on a topic, encoded lazily and once per encoding.
 
     It arrives serialized (CDR, ``data``): ``cbor-raw`` subscribers get those bytes as they
-    came, and the message is deserialized at most once, when a JSON or CBOR subscriber
-    first needs it (:attr:`msg`).
+    came, and the message is deserialized only to build the JSON or the CBOR encoding, each
+    once (the rclpy object itself is not kept, so a queued message costs its bytes and its
+    encodings, as before).
     """
 
-    __slots__ = ("_cbor", "_cbor_raw", "_json", "_msg", "_msg_json", "conv", "data", "stamp_ns",
-                 "topic")
+    __slots__ = ("_cbor", "_cbor_raw", "_json", "_msg_json", "conv", "data", "stamp_ns", "topic")
 
-    def __init__(
-        self, topic: str, data: bytes, conv: convert.Converter, stamp_ns: int, msg: Any = None
-    ) -> None:
+    def __init__(self, topic: str, data: bytes, conv: convert.Converter, stamp_ns: int) -> None:
         self.topic = topic
         self.data = data
         self.conv = conv
         self.stamp_ns = stamp_ns
-        self._msg = msg
         self._json: str | None = None
         self._msg_json: str | None = None
         self._cbor: bytes | None = None
@@ -126,11 +123,8 @@ class Incoming:
 
     @property
     def msg(self) -> Any:
-        """The rclpy message (deserialized on first use)."""
-        msg = self._msg
-        if msg is None:
-            msg = self._msg = deserialize_message(self.data, self.conv.msg_cls)
-        return msg
+        """The rclpy message, deserialized from :attr:`data` (anew on each use)."""
+        return deserialize_message(self.data, self.conv.msg_cls)
 
     def json_text(self, name: str | None = None) -> str:
         """The whole ``publish`` op as JSON text (built on first use, then shared).

@@ -63,19 +63,23 @@ async def test_every_message_type_round_trips_through_the_bridge(
     """Default and populated instances of every generated message come back from rclpy equal."""
     client: WireClient = await ws_connect()
     cases: list[tuple[str, str, str, type[Message]]] = []
+    endpoints: list[tuple[Any, Any]] = []
     for i, type_name in enumerate(MESSAGE_TYPES):
         rclpy_cls = _rclpy_class(type_name)
         inbound, outbound = f"{topic}/m{i}/in", f"{topic}/m{i}/out"
         pub = ros_node.create_publisher(rclpy_cls, outbound, 10)
-        ros_node.create_subscription(rclpy_cls, inbound, pub.publish, 10)
+        sub = ros_node.create_subscription(rclpy_cls, inbound, pub.publish, 10)
+        endpoints.append((pub, sub))
         cases.append((type_name, inbound, outbound, lookup_message(type_name)))
         await client.send({"op": "advertise", "topic": inbound, "type": type_name})
         await client.send({"op": "subscribe", "topic": outbound, "type": type_name})
 
     def matched() -> bool:
+        # matched endpoint to endpoint (the graph may list a peer before DDS has matched it,
+        # and a message sent in between is lost)
         return all(
-            ros_node.count_publishers(inbound) >= 1 and ros_node.count_subscribers(outbound) >= 1
-            for _, inbound, outbound, _ in cases
+            sub.get_publisher_count() >= 1 and pub.get_subscription_count() >= 1
+            for pub, sub in endpoints
         )
 
     await async_wait_until(matched, timeout=60, what="bridge endpoints for every type")
