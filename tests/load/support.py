@@ -56,28 +56,39 @@ class StalledClient:
 
     def send(self, op: dict[str, Any]) -> None:
         """Send one op as a masked text frame."""
-        payload = json.dumps(op).encode()
+        self._send_frame(0x1, json.dumps(op).encode())
+
+    def _send_frame(self, opcode: int, payload: bytes) -> None:
         mask = os.urandom(4)
         n = len(payload)
         if n < 126:
-            head = struct.pack("!BB", 0x81, 0x80 | n)
+            head = struct.pack("!BB", 0x80 | opcode, 0x80 | n)
         elif n < 65536:
-            head = struct.pack("!BBH", 0x81, 0x80 | 126, n)
+            head = struct.pack("!BBH", 0x80 | opcode, 0x80 | 126, n)
         else:
-            head = struct.pack("!BBQ", 0x81, 0x80 | 127, n)
+            head = struct.pack("!BBQ", 0x80 | opcode, 0x80 | 127, n)
         self.sock.sendall(head + mask + bytes(b ^ mask[i % 4] for i, b in enumerate(payload)))
 
     def read_op(self) -> Any:
-        """Read one whole (unfragmented, unmasked) server frame and decode it as JSON."""
-        b0, b1 = self._read(2)
-        n = b1 & 0x7F
-        if n == 126:
-            n = struct.unpack("!H", self._read(2))[0]
-        elif n == 127:
-            n = struct.unpack("!Q", self._read(8))[0]
-        payload = self._read(n)
-        assert b0 & 0x0F == 0x1, f"expected a text frame, got opcode {b0 & 0x0F}"
-        return json.loads(payload)
+        """Read the next whole (unfragmented, unmasked) text frame and decode it as JSON;
+        a ping on the way (the bridge's keepalive, once the client was silent) is answered
+        with its pong, as any websocket library does."""
+        while True:
+            b0, b1 = self._read(2)
+            n = b1 & 0x7F
+            if n == 126:
+                n = struct.unpack("!H", self._read(2))[0]
+            elif n == 127:
+                n = struct.unpack("!Q", self._read(8))[0]
+            payload = self._read(n)
+            opcode = b0 & 0x0F
+            if opcode == 0x9:  # ping
+                self._send_frame(0xA, payload)
+                continue
+            if opcode == 0xA:  # pong
+                continue
+            assert opcode == 0x1, f"expected a text frame, got opcode {opcode}"
+            return json.loads(payload)
 
     def sync(self, id: str = "stall-sync") -> list[Any]:
         """Make sure everything sent so far was handled: send a cheap call and read until its reply.
