@@ -34,8 +34,9 @@ if [ "$(cat .venv/.deps-stamp 2>/dev/null)" != "$dep_stamp" ]; then
   echo "$dep_stamp" > .venv/.deps-stamp
 fi
 
-# Custom interfaces: CMake into the venv, rebuilt when their sources change.
-for pkg in msgs/interfaces/*/; do
+# Custom interfaces: CMake into the venv, rebuilt when their sources change (ours in
+# msgs/interfaces; test fixtures in tests/interfaces, e.g. example_interfaces, not on PyPI).
+for pkg in msgs/interfaces/*/ tests/interfaces/*/; do
   [ -f "$pkg/package.xml" ] || continue
   name="$(basename "$pkg")"
   src_stamp="$(find "$pkg" -type f | sort | xargs cat | sha256sum | cut -d' ' -f1)"
@@ -53,6 +54,16 @@ for pkg in msgs/interfaces/*/; do
     echo "$src_stamp" > ".venv/.iface-$name"
   fi
 done
+
+# roslibpy's own upstream tests (its sdist), run against our bridge by the peer tests.
+if [ ! -d .venv/peer-src/roslibpy-2.1.0/tests ]; then
+  log "fetching roslibpy 2.1.0's sources (its upstream tests)"
+  mkdir -p .venv/peer-src
+  { python -m pip download -q --disable-pip-version-check --no-deps --no-binary :all: \
+      roslibpy==2.1.0 -d .venv/peer-src 2>&1 | { grep -v "^WARNING: Location .* is ignored" || true; }; } \
+    && tar xzf .venv/peer-src/roslibpy-2.1.0.tar.gz -C .venv/peer-src \
+    || { log "fetching roslibpy's sources failed"; exit 1; }
+fi
 
 # The stock npm client for the peer tests.
 if [ -f tests/peers/node/package.json ] && command -v npm >/dev/null 2>&1; then
