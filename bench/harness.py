@@ -39,15 +39,25 @@ def child_env(domain: int) -> dict[str, str]:
     return env
 
 
+RS_PEER = ROOT.parent / "shared" / "peers" / "rosbridge_server_rs.sh"
+"""Runs rosbridge_server_rs (Rust) on our venv's wheels (read its header)."""
+
+
 class Bridge:
-    """``python -m bridge_server`` on 127.0.0.1, port 0; ``url`` and ``pid`` once started."""
+    """``python -m bridge_server`` on 127.0.0.1, port 0; ``url`` and ``pid`` once started.
+
+    With ``peer="rs"`` it is rosbridge_server_rs instead (:data:`RS_PEER`; no rosapi), for
+    side-by-side figures; ``args`` and ``root`` then do not apply.
+    """
 
     def __init__(
-        self, domain: int, args: list[str] | None = None, root: str | None = None
+        self, domain: int, args: list[str] | None = None, root: str | None = None,
+        peer: str = "ours",
     ) -> None:
         self.domain = domain
         self.args = list(args or [])
         self.root = Path(root).resolve() if root else ROOT
+        self.peer = peer
         self.proc: asyncio.subprocess.Process | None = None
         self.port = 0
         self.lines: deque[str] = deque(maxlen=200)
@@ -67,6 +77,8 @@ class Bridge:
 
     async def start(self, timeout: float = 30.0) -> Bridge:
         """Start the bridge and wait for its ready line."""
+        if self.peer == "rs":
+            return await self._start_rs(timeout + 60)  # the first start downloads the wheel
         self.proc = await asyncio.create_subprocess_exec(
             sys.executable, "-m", "bridge_server", "--host", "127.0.0.1", "--port", "0",
             *self.args,
@@ -91,6 +103,30 @@ class Bridge:
         await asyncio.wait_for(first_line(), timeout)
         self._drain = asyncio.create_task(self._pump())
         return self
+
+    async def _start_rs(self, timeout: float) -> Bridge:
+        """Start rosbridge_server_rs on a free port; ready once the port accepts."""
+        with socket.socket() as s:
+            s.bind(("127.0.0.1", 0))
+            self.port = s.getsockname()[1]
+        self.proc = await asyncio.create_subprocess_exec(
+            "bash", str(RS_PEER), str(self.port), cwd=ROOT, env=child_env(self.domain),
+            stdin=asyncio.subprocess.DEVNULL, stdout=asyncio.subprocess.PIPE,
+            stderr=asyncio.subprocess.STDOUT,
+        )
+        self._drain = asyncio.create_task(self._pump())
+        deadline = asyncio.get_running_loop().time() + timeout
+        while True:
+            try:
+                _, writer = await asyncio.open_connection("127.0.0.1", self.port)
+                writer.close()
+                return self
+            except OSError:
+                if self.proc.returncode is not None:
+                    raise RuntimeError("rosbridge_server_rs exited:\n" + "\n".join(self.lines)) from None
+                if asyncio.get_running_loop().time() > deadline:
+                    raise RuntimeError("rosbridge_server_rs did not listen in time") from None
+                await asyncio.sleep(0.1)
 
     def _env(self) -> dict[str, str]:
         env = child_env(self.domain)

@@ -89,10 +89,11 @@ class Ctx:
     ros_executor: str = "events"
     bridge_root: str | None = None
     bridge_args: list[str] = field(default_factory=list)
+    peer: str = "ours"
 
     def bridge(self) -> Bridge:
-        """A new (not yet started) bridge for one scenario."""
-        return Bridge(self.domain, self.bridge_args, self.bridge_root)
+        """A new (not yet started) bridge for one scenario (``--peer``: ours or rs)."""
+        return Bridge(self.domain, self.bridge_args, self.bridge_root, self.peer)
 
     def ros(self, *args: str) -> RosSide:
         """A new (not yet started) ROS-side process."""
@@ -708,6 +709,9 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                    help="rclpy executor of the ROS-side processes (default events: much faster)")
     p.add_argument("--bridge-root", default=None,
                    help="run the bridge from another checkout (A/B comparisons); default: this one")
+    p.add_argument("--peer", choices=("ours", "rs"), default="ours",
+                   help="the server under test: ours, or rosbridge_server_rs (Rust; "
+                   "../shared/peers/rosbridge_server_rs.sh, no rosapi) for side-by-side figures")
     p.add_argument("--bridge-arg", action="append", default=[],
                    help="extra bridge command-line argument (repeatable), e.g. --bridge-arg=--executor=events")
     return p.parse_args(argv)
@@ -725,7 +729,7 @@ def main(argv: list[str] | None = None) -> int:
     duration = args.duration if args.duration is not None else (1.5 if args.quick else 3.0)
     ctx = Ctx(duration=duration, quick=args.quick, domain=args.domain, profile=args.profile,
               ros_executor=args.ros_executor, bridge_args=list(args.bridge_arg),
-              bridge_root=args.bridge_root)
+              bridge_root=args.bridge_root, peer=args.peer)
     return asyncio.run(run(names, ctx))
 
 
