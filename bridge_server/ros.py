@@ -55,7 +55,6 @@ import rclpy
 from rclpy.context import Context
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
-from rclpy.serialization import deserialize_message
 
 from . import convert
 from .types import resolve_message, resolve_service
@@ -101,30 +100,19 @@ SETTLE_S = 0.5
 """Seconds a newly matched service client waits before its first request (see settled)."""
 
 class Incoming:
-    """One ROS message received on a topic, encoded lazily and once per encoding.
+    """One ROS message received on a topic, encoded lazily and once per encoding."""
 
-    It arrives serialized (CDR, ``data``): ``cbor-raw`` subscribers get those bytes as they
-    came, and the message is deserialized only to build the JSON or the CBOR encoding, each
-    once (the rclpy object itself is not kept, so a queued message costs its bytes and its
-    encodings, as before).
-    """
+    __slots__ = ("_cbor", "_cbor_raw", "_json", "_msg_json", "conv", "msg", "stamp_ns", "topic")
 
-    __slots__ = ("_cbor", "_cbor_raw", "_json", "_msg_json", "conv", "data", "stamp_ns", "topic")
-
-    def __init__(self, topic: str, data: bytes, conv: convert.Converter, stamp_ns: int) -> None:
+    def __init__(self, topic: str, msg: Any, conv: convert.Converter, stamp_ns: int) -> None:
         self.topic = topic
-        self.data = data
+        self.msg = msg
         self.conv = conv
         self.stamp_ns = stamp_ns
         self._json: str | None = None
         self._msg_json: str | None = None
         self._cbor: bytes | None = None
         self._cbor_raw: bytes | None = None
-
-    @property
-    def msg(self) -> Any:
-        """The rclpy message, deserialized from :attr:`data` (anew on each use)."""
-        return deserialize_message(self.data, self.conv.msg_cls)
 
     def json_text(self, name: str | None = None) -> str:
         """The whole ``publish`` op as JSON text (built on first use, then shared).
@@ -135,11 +123,11 @@ class Incoming:
         if name is None or name == self.topic:
             text = self._json
             if text is None:
-                text = self._json = convert.encode_publish_json(self.topic, self._msg_text())
+                text = self._json = convert.encode_publish_json(self.topic, self._msg())
             return text
-        return convert.encode_publish_json(name, self._msg_text())
+        return convert.encode_publish_json(name, self._msg())
 
-    def _msg_text(self) -> str:
+    def _msg(self) -> str:
         msg_json = self._msg_json
         if msg_json is None:
             msg_json = self._msg_json = self.conv.to_json(self.msg)
@@ -157,11 +145,11 @@ class Incoming:
     def cbor_raw(self, name: str | None = None) -> bytes:
         """The ``publish`` op with the serialized CDR message (compression ``cbor-raw``)."""
         if name is not None and name != self.topic:
-            return convert.encode_publish_cbor_raw(name, self.data, self.stamp_ns)
+            return convert.encode_publish_cbor_raw(name, convert.serialize(self.msg), self.stamp_ns)
         data = self._cbor_raw
         if data is None:
             data = self._cbor_raw = convert.encode_publish_cbor_raw(
-                self.topic, self.data, self.stamp_ns
+                self.topic, convert.serialize(self.msg), self.stamp_ns
             )
         return data
 
@@ -253,15 +241,13 @@ class SharedSubscription:
                 with contextlib.suppress(Exception), sub.handle:
                     take = sub.handle.take_message
                     while len(batch) < MAX_BATCH:
-                        taken = take(msg_cls, True)
+                        taken = take(msg_cls, False)
                         if taken is None:
                             break
                         batch.append(taken[0])
             post(deliver, batch, time.time_ns())
 
-        # raw: the messages come serialized; Incoming deserializes them only when needed
-        self._sub = self.ros.node.create_subscription(self.msg_cls, topic, callback, qos,
-                                                      raw=True)
+        self._sub = self.ros.node.create_subscription(self.msg_cls, topic, callback, qos)
         holder.append(self._sub)
         log.debug(
             "subscribed to %s (%s, %s, %s)",
@@ -277,7 +263,7 @@ class SharedSubscription:
             with contextlib.suppress(Exception):
                 self.ros.node.destroy_subscription(sub)
 
-    def _deliver_batch(self, msgs: list[bytes], stamp_ns: int) -> None:
+    def _deliver_batch(self, msgs: list[Any], stamp_ns: int) -> None:
         conv = self.conv
         if conv is None or self.ros.subscriptions.get(self.topic) is not self:
             return  # the subscription was removed meanwhile
