@@ -163,7 +163,7 @@ class Session:
         await self._serve()
         store = self.bridge.resumable
         if self.token is not None:
-            if store.park(self.token, self):
+            if not self._closed_by_client() and store.park(self.token, self):
                 log.info("client %d: its link is gone; its session is kept for %g s",
                          self.sid, store.config.session_keep)
                 return
@@ -238,6 +238,13 @@ class Session:
         if self.received != self._acked_received and not self.outbox.closed:
             self._acked_received = self.received
             self.outbox.send_ack(ops.encode(ops.SessionAck(self.received)))
+
+    def _closed_by_client(self) -> bool:
+        """Whether the client ended the connection itself (a close frame, 1000 or 1001): its
+        session ends with it; only a lost link keeps a session for a resume."""
+        protocol = getattr(self.ws, "protocol", None)
+        received = getattr(protocol, "close_rcvd", None)
+        return received is not None and received.code in (1000, 1001)
 
     def _link_dead(self, silence: float) -> None:
         log.warning("client %d: no sign of it for %.1f s (a silent link): dropping it and "

@@ -126,3 +126,18 @@ async def test_a_kept_session_ends_after_session_keep(make_bridge: Any, ros_node
     assert other.response.headers[SESSION_HEADER] != "made-up-token"
     assert RECEIVED_HEADER not in other.response.headers
     await other.close()
+
+
+async def test_a_client_that_closes_ends_its_session(make_bridge: Any, ros_node: Any,
+                                                     topic: str):
+    """Closing the client (a close frame) ends its session at once: nothing is kept for a
+    resume, its ROS subscription goes, well within --session-keep."""
+    bridge = make_bridge("--session-keep", "60")
+    ros_pub = ros_node.create_publisher(Int32, topic, 10)
+    async with roslibpy_lite.connect(bridge.url) as ros:
+        await ros.subscribe(topic, "std_msgs/msg/Int32")
+        await wait_subscribers(ros_pub)
+        assert ros._transport.session is not None and ros._transport.session.token
+    await async_wait_until(lambda: ros_pub.get_subscription_count() == 0, 10,
+                           "the closed client's subscription to go")
+    assert not any("session is kept" in line for line in bridge.lines)
