@@ -32,6 +32,8 @@ service                            request          response
 /rosapi/service_request_details    type             typedefs of the request
 /rosapi/service_response_details   type             typedefs of the response
 /rosapi/topics_and_raw_types       (none)           topics, types, typedefs_full_text
+/rosapi/interface_definition       type             type, definition (ours: the ros2msg text
+                                                    of any installed msg, srv or action)
 /rosapi/get_param_names            (none)           names (``/node:param``)
 /rosapi/get_param                  name, default_   value (JSON text), successful, reason
                                    value
@@ -422,23 +424,28 @@ def service_response_details(bridge: Bridge, args: Mapping[str, Any]) -> dict[st
     return _service_part(args, "Response")
 
 
-def _msg_source(type_name: str) -> str:
-    """The installed ``.msg`` text of ``pkg/msg/Type`` ("" if not found)."""
+def _source(package: str, kind: str, name: str) -> str | None:
+    """The installed ``.msg``/``.srv``/``.action`` text of a type (None if not found)."""
     import os
     import sys
     from pathlib import Path
 
-    pkg, _, name = type_name.split("/")
     prefixes = [p for p in os.environ.get("AMENT_PREFIX_PATH", "").split(os.pathsep) if p]
     prefixes += [sys.prefix, sys.base_prefix]
     for prefix in prefixes:
-        path = Path(prefix) / "share" / pkg / "msg" / f"{name}.msg"
+        path = Path(prefix) / "share" / package / kind / f"{name}.{kind}"
         if path.is_file():
             try:
                 return path.read_text(encoding="utf-8")
             except OSError:
-                return ""
-    return ""
+                return None
+    return None
+
+
+def _msg_source(type_name: str) -> str:
+    """The installed ``.msg`` text of ``pkg/msg/Type`` ("" if not found)."""
+    pkg, _, name = type_name.split("/")
+    return _source(pkg, "msg", name) or ""
 
 
 _full_texts: dict[str, str] = {}
@@ -471,8 +478,64 @@ def topics_and_raw_types(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, A
     }
 
 
+def interface_definition(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, Any]:
+    """The full definition text of any installed message, service or action type.
+
+    The type's own ``.msg``/``.srv``/``.action`` text, then every message type it
+    uses, each after a line of 80 ``=`` and ``MSG: pkg/msg/Name`` (the ``ros2msg``
+    layout rosbag2 writes into MCAP schemas); clients build typed classes from it.
+    """
+    from msgs.parser import DefinitionError, parse_action, parse_message, parse_service
+
+    name = _str_field(args, "type")
+    match = _TYPE_NAME.match(name)
+    if match is None:
+        raise RosapiError(f"type: {name!r} is not a type name (expected 'pkg/msg/Name', "
+                          "'pkg/srv/Name', 'pkg/action/Name' or 'pkg/Name')")
+    package, kind, short = match["pkg"], match["kind"], match["name"]
+    found = next(((k, text) for k in ((kind,) if kind else ("msg", "srv", "action"))
+                  if (text := _source(package, k, short)) is not None), None)
+    if found is None:
+        raise RosapiError(f"type: {name} is not installed on the robot (no "
+                          f"share/{package}/{kind or 'msg|srv|action'}/{short} definition)")
+    kind, text = found
+    parts: list[str] = [text.rstrip("\n")]
+    try:
+        if kind == "msg":
+            todo = [parse_message(text, package, short)]
+        elif kind == "srv":
+            srv = parse_service(text, package, short)
+            todo = [srv.request, srv.response]
+        else:
+            act = parse_action(text, package, short)
+            todo = [act.goal, act.result, act.feedback]
+        seen = {f"{package}/msg/{short}"}
+        while todo:
+            spec = todo.pop(0)
+            for f in spec.fields:
+                if f.type.is_primitive or f.type.message_type in seen:
+                    continue
+                dep = f.type.message_type
+                seen.add(dep)
+                dep_pkg, _, dep_name = dep.split("/")
+                dep_text = _source(dep_pkg, "msg", dep_name)
+                if dep_text is None:
+                    raise RosapiError(f"type: {name} uses {dep}, which is not installed")
+                parts.append("=" * 80 + f"\nMSG: {dep}\n" + dep_text.rstrip("\n"))
+                todo.append(parse_message(dep_text, dep_pkg, dep_name))
+    except DefinitionError as exc:
+        raise RosapiError(
+            f"type: the installed definition of {name} does not parse: {exc}") from None
+    return {"type": f"{package}/{kind}/{short}", "definition": "\n".join(parts) + "\n"}
+
+
+_TYPE_NAME = re.compile(
+    r"^(?P<pkg>[a-z][a-z0-9_]*)/(?:(?P<kind>msg|srv|action)/)?(?P<name>[A-Z][A-Za-z0-9_]*)$")
+
+
 HANDLERS.update(
     {
+        "/rosapi/interface_definition": interface_definition,
         "/rosapi/message_details": message_details,
         "/rosapi/service_request_details": service_request_details,
         "/rosapi/service_response_details": service_response_details,
@@ -481,6 +544,7 @@ HANDLERS.update(
 )
 TYPES.update(
     {
+        "/rosapi/interface_definition": "rosapi_msgs/srv/InterfaceDefinition",
         "/rosapi/message_details": "rosapi_msgs/srv/MessageDetails",
         "/rosapi/service_request_details": "rosapi_msgs/srv/ServiceRequestDetails",
         "/rosapi/service_response_details": "rosapi_msgs/srv/ServiceResponseDetails",
@@ -489,6 +553,7 @@ TYPES.update(
 )
 FIELDS.update(
     {
+        "/rosapi/interface_definition": ("type",),
         "/rosapi/message_details": ("type",),
         "/rosapi/service_request_details": ("type",),
         "/rosapi/service_response_details": ("type",),

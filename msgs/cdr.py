@@ -11,6 +11,10 @@ One decoder is generated per type from ``_fields_and_types`` and compiled once
 (as the bridge compiles its converters); numeric arrays are read with
 ``array.frombytes`` (no Python object per element until ``tolist``), byte arrays are
 one slice. Malformed or truncated input raises :class:`CdrError` naming the field.
+
+:func:`encode` is the way back, from a typed message to the bytes rclpy's serializer
+gives (MockRos's ``cbor-raw`` and recordings made from it); it walks the fields
+rather than compiling, as it is not on a hot path.
 """
 
 from __future__ import annotations
@@ -24,7 +28,7 @@ from typing import Any
 
 from .runtime import Message, lookup_message
 
-__all__ = ["CdrError", "decode", "decoder_for"]
+__all__ = ["CdrError", "decode", "decoder_for", "encode"]
 
 _PRIMITIVES: dict[str, tuple[str, int]] = {  # rclpy's name -> (struct code, size)
     "boolean": ("?", 1),
@@ -55,10 +59,11 @@ class CdrError(ValueError):
     ``path`` is the field that could not be read (``header.frame_id``), ``why`` the cause.
     """
 
-    def __init__(self, type_name: str, path: str, why: str) -> None:
-        self.type_name, self.path, self.why = type_name, path, why
+    def __init__(self, type_name: str, path: str, why: str, action: str = "decode") -> None:
+        self.type_name, self.path, self.why, self.action = type_name, path, why, action
         where = f"field {path!r}" if path else "the message"
-        super().__init__(f"{type_name}: cannot decode {where} from CDR: {why}")
+        way = "from" if action == "decode" else "to"
+        super().__init__(f"{type_name}: cannot {action} {where} {way} CDR: {why}")
 
 
 def _fail(type_name: str, field: str, exc: Exception) -> CdrError:
@@ -253,3 +258,78 @@ def decoder_for(cls: type[Message]) -> Callable[[bytes | memoryview], dict[str, 
 def decode(data: bytes | memoryview, cls: type[Message]) -> dict[str, Any]:
     """The wire form of one serialized message of ``cls``."""
     return decoder_for(cls)(data)
+
+
+def encode(msg: Message) -> bytes:
+    """The serialized form of ``msg`` (little-endian CDR with its encapsulation header),
+    byte for byte what ``rclpy.serialization.serialize_message`` gives for it."""
+    out = bytearray(b"\x00\x01\x00\x00")
+    _encode_members(out, msg)
+    return bytes(out)
+
+
+def _pad(out: bytearray, size: int) -> None:
+    if size > 1:
+        out += bytes((4 - len(out)) % size)
+
+
+def _encode_members(out: bytearray, msg: Message) -> None:
+    fields = msg._fields_and_types
+    if not fields:  # an empty message has one placeholder byte
+        out.append(0)
+    for name, spec in fields.items():
+        try:
+            _encode_field(out, spec, getattr(msg, name))
+        except CdrError as exc:  # from a nested message: the path starts here
+            raise CdrError(msg._type, f"{name}.{exc.path}", exc.why, "encode") from None
+        except (struct.error, TypeError, ValueError, OverflowError) as exc:
+            raise CdrError(msg._type, name, str(exc), "encode") from None
+
+
+def _encode_field(out: bytearray, spec: str, value: Any) -> None:
+    m = _TYPE.match(spec)
+    if m is None:
+        raise ValueError(f"unknown field type {spec!r}")
+    base = m["seq"] or m["base"]
+    if m["seq"] is None and m["fixed"] is None:
+        _encode_scalar(out, base, value)
+        return
+    if m["seq"] is not None:
+        _pad(out, 4)
+        out += struct.pack("<I", len(value))
+    if base in _BYTES or base == "octet":
+        out += bytes(value)
+    elif base == "boolean":
+        out += bytes(bool(v) for v in value)
+    elif base in _ARRAY_CODES:
+        if len(value):
+            _pad(out, _PRIMITIVES[base][1])
+            values = array.array(_ARRAY_CODES[base], value)
+            if not _LITTLE:
+                values.byteswap()
+            out += values.tobytes()
+    else:
+        for item in value:
+            _encode_scalar(out, base, item)
+
+
+def _encode_scalar(out: bytearray, base: str, value: Any) -> None:
+    if base in _PRIMITIVES:
+        code, size = _PRIMITIVES[base]
+        _pad(out, size)
+        out += struct.pack("<" + code, value)
+    elif base.startswith("wstring"):
+        units = str(value).encode("utf-16-le")
+        _pad(out, 4)
+        out += struct.pack("<I", len(units) // 2)
+        codes = array.array("H", units)
+        out += array.array("I", codes.tolist()).tobytes() if _LITTLE else bytes(
+            b for c in codes.tolist() for b in struct.pack("<I", c))
+    elif base.startswith("string"):
+        data = str(value).encode()
+        _pad(out, 4)
+        out += struct.pack("<I", len(data) + 1)
+        out += data
+        out.append(0)
+    else:
+        _encode_members(out, value)

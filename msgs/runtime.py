@@ -61,6 +61,7 @@ __all__ = [
     "lookup_action",
     "lookup_message",
     "lookup_service",
+    "register",
 ]
 
 _INT_RANGES: dict[str, tuple[int, int]] = {
@@ -625,6 +626,23 @@ def lookup(type_name: str) -> type[Message] | type[Service] | type[Action]:
             return found
     where = f"{package}/{kind}" if kind else package
     raise UnknownTypeError(type_name, f"no type {name!r} in {where} among the generated types")
+
+
+def register(*classes: type[Message] | type[Service] | type[Action]) -> None:
+    """Make classes that live outside ``msgs/`` findable by :func:`lookup`.
+
+    Modules written by ``roslibpy-lite interface gen`` and types built at runtime by
+    :mod:`msgs.dynamic` call this; the full name and the short ``pkg/Name`` are both
+    registered (a message wins the short name over a service or action, as in lookup).
+    """
+    for cls in classes:
+        full: str = cls._type
+        _CACHE[full] = cls
+        package, kind, name = full.split("/")
+        if kind == "msg":
+            _CACHE[f"{package}/{name}"] = cls
+        else:
+            _CACHE.setdefault(f"{package}/{name}", cls)
 
 
 def lookup_message(type_name: str) -> type[Message]:

@@ -41,6 +41,7 @@ from .exceptions import (
     UsageError,
 )
 from .handles import Publisher, ServiceServer, Subscription
+from .messages import RawMessage, define_type
 from .mock import MockRos
 from .ros import RosBase, RosFront
 from .state import StateWatcher
@@ -66,6 +67,7 @@ __all__ = [
     "MockRos",
     "NotAuthenticated",
     "Publisher",
+    "RawMessage",
     "RemoteError",
     "Ros",
     "RosBase",
@@ -81,5 +83,6 @@ __all__ = [
     "UsageError",
     "__version__",
     "connect",
+    "define_type",
     "run",
 ]

@@ -18,7 +18,16 @@ from __future__ import annotations
 
 import enum
 from collections.abc import Awaitable, Callable, Mapping
-from typing import TYPE_CHECKING, Any, Protocol, TypeAlias, TypeVar, overload, runtime_checkable
+from typing import (
+    TYPE_CHECKING,
+    Any,
+    Literal,
+    Protocol,
+    TypeAlias,
+    TypeVar,
+    overload,
+    runtime_checkable,
+)
 
 if TYPE_CHECKING:
     from types import TracebackType
@@ -28,6 +37,7 @@ if TYPE_CHECKING:
     from .actions import ActionHandler, ActionServer, FeedbackCallback, GoalHandle
     from .exceptions import RosLibError
     from .handles import Publisher, ServiceServer, Subscription
+    from .messages import RawMessage
     from .state import StateWatcher
 
 __all__ = [
@@ -135,6 +145,21 @@ class Ros(Protocol):
     def subscribe(
         self,
         topic: str,
+        type: str | type[Message],
+        callback: MessageCallback | None = None,
+        *,
+        throttle_rate: int = 0,
+        queue_length: int = 0,
+        compression: str = "none",
+        fragment_size: int | None = None,
+        buffer_size: int = 100,
+        raw: Literal[True],
+    ) -> Subscription[RawMessage]: ...
+
+    @overload
+    def subscribe(
+        self,
+        topic: str,
         type: str,
         callback: MessageCallback | None = None,
         *,
@@ -143,6 +168,7 @@ class Ros(Protocol):
         compression: str = "none",
         fragment_size: int | None = None,
         buffer_size: int = 100,
+        raw: Literal[False] = False,
     ) -> Subscription[dict[str, Any]]: ...
 
     @overload
@@ -157,6 +183,7 @@ class Ros(Protocol):
         compression: str = "none",
         fragment_size: int | None = None,
         buffer_size: int = 100,
+        raw: Literal[False] = False,
     ) -> Subscription[M]: ...
 
     def subscribe(
@@ -170,8 +197,15 @@ class Ros(Protocol):
         compression: str = "none",
         fragment_size: int | None = None,
         buffer_size: int = 100,
+        raw: bool = False,
     ) -> Subscription[Any]:
         """Subscribe; iterate the handle (``async for``) or pass ``callback``."""
+        ...
+
+    async def load_types(
+        self, *type_names: str, timeout: float | None = DEFAULT_CALL_TIMEOUT
+    ) -> list[type[Message] | type[Service] | type[Action]]:
+        """Typed classes for the robot's own interfaces (definitions from the bridge)."""
         ...
 
     @overload

@@ -44,7 +44,7 @@ from .exceptions import (
     RosTimeoutError,
     UsageError,
 )
-from .messages import check_dict, from_wire, to_wire
+from .messages import RawMessage, check_dict, from_wire, to_wire
 
 if TYPE_CHECKING:
     from types import TracebackType
@@ -282,6 +282,7 @@ class Subscription(_Handle, Generic[T]):
         fragment_size: int | None = None,
         buffer_size: int,
         id: str,
+        raw: bool = False,
     ) -> None:
         if buffer_size < 1:
             raise UsageError(f"subscribe {topic}: buffer_size must be >= 1, got {buffer_size}")
@@ -301,6 +302,7 @@ class Subscription(_Handle, Generic[T]):
         self.throttle_rate = throttle_rate
         self.queue_length = queue_length
         self.compression = compression
+        self.raw = raw  # messages are RawMessage (CDR bytes, the bridge's stamp)
         self.fragment_size = fragment_size
         self.buffer_size = buffer_size
         self.id = id
@@ -310,7 +312,7 @@ class Subscription(_Handle, Generic[T]):
         self.dropped = 0
         self.decode_errors = 0
         self.callback_errors = 0
-        self._queue: deque[Mapping[str, Any]] = deque()
+        self._queue: deque[Mapping[str, Any] | RawMessage] = deque()
         self._sync_cbs: list[Callable[[Any], Any]] = []
         self._async_cbs: list[Callable[[Any], Awaitable[Any]]] = []
         self._buffering = True
@@ -360,8 +362,9 @@ class Subscription(_Handle, Generic[T]):
 
     # -- the receive path ------------------------------------------------------------------
 
-    def _deliver(self, raw: Mapping[str, Any]) -> None:
-        """Take one message in its wire form (called by the backend, never blocks)."""
+    def _deliver(self, raw: Mapping[str, Any] | RawMessage) -> None:
+        """Take one message in its wire form, or a RawMessage for a raw subscription
+        (called by the backend, never blocks)."""
         self.received += 1
         if self._sync_cbs:
             msg = self._decode(raw)
@@ -400,9 +403,9 @@ class Subscription(_Handle, Generic[T]):
         _STRAY.add(task)
         task.add_done_callback(_STRAY.discard)
 
-    def _decode(self, raw: Mapping[str, Any]) -> Any:
+    def _decode(self, raw: Mapping[str, Any] | RawMessage) -> Any:
         cls = self.msg_cls
-        if cls is None:
+        if cls is None or isinstance(raw, RawMessage):
             return raw
         try:
             return cls.from_json(raw)

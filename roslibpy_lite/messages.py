@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import difflib
 from collections.abc import Mapping
+from dataclasses import dataclass
 from typing import Any, TypeVar
 
 from msgs.runtime import (
@@ -29,9 +30,11 @@ from msgs.runtime import lookup as _lookup
 from .exceptions import InvalidMessageError, UsageError
 
 __all__ = [
+    "RawMessage",
     "canonical_type",
     "check_dict",
     "check_name",
+    "define_type",
     "from_wire",
     "lookup_message_class",
     "message_type",
@@ -233,3 +236,56 @@ def from_wire(raw: Mapping[str, Any], cls: type[Message], what: str) -> Message:
         return cls.from_json(raw)
     except ValidationError as exc:
         raise InvalidMessageError(f"{what}: {exc}", path=exc.path) from None
+
+
+@dataclass(frozen=True, slots=True)
+class RawMessage:
+    """One message as the robot serialized it (from a ``raw=True`` subscription).
+
+    ``data`` is the CDR bytes with their 4-byte encapsulation header, exactly what
+    ``rclpy.serialization.serialize_message`` gives; ``stamp_ns`` is when the bridge
+    took the message from ROS (nanoseconds since the epoch), or when this client got
+    it if the bridge sent no stamp. Nothing is decoded until :meth:`decode` is called.
+    """
+
+    topic: str
+    type_name: str
+    data: bytes
+    stamp_ns: int
+
+    def decode(self) -> Message:
+        """The typed message (its type must be generated, or loaded with ``load_types``).
+
+        Raises:
+            UsageError: msgs does not know the type.
+            msgs.cdr.CdrError: the bytes do not decode as the type says.
+        """
+        from msgs.cdr import decode
+
+        cls = lookup_message_class(self.type_name)
+        if cls is None:
+            raise UsageError(f"{self.type_name} is not a type msgs knows: load its "
+                             "definition first (await ros.load_types(...))")
+        return cls.from_json(decode(self.data, cls))
+
+    def __repr__(self) -> str:
+        return (f"RawMessage(topic={self.topic!r}, type_name={self.type_name!r}, "
+                f"data=<{len(self.data)} bytes>, stamp_ns={self.stamp_ns})")
+
+
+def define_type(type_name: str, definition: str) -> type[Message] | type[Service] | type[Action]:
+    """A typed class for an interface msgs does not generate, from its definition text.
+
+    ``definition`` is the ``.msg``/``.srv``/``.action`` text, followed by the
+    definitions of the message types it uses that msgs does not know, each after a
+    line of 80 ``=`` and ``MSG: pkg/msg/Name`` (the layout of an MCAP schema and of
+    the bridge's ``/rosapi/interface_definition``). Afterwards the type is known by
+    name everywhere, MockRos included, which then checks messages of it as the
+    bridge will. ``ros.load_types(...)`` does the same with the robot's own text.
+
+    Raises:
+        msgs.parser.DefinitionError: the text does not parse (names the line).
+    """
+    from msgs.dynamic import load
+
+    return load(type_name, definition)

@@ -37,7 +37,7 @@ import contextlib
 import itertools
 import logging
 from collections.abc import Callable, Coroutine, Mapping
-from typing import TYPE_CHECKING, Any, Self, overload
+from typing import TYPE_CHECKING, Any, Literal, Self, overload
 
 from . import ops
 from ._aio import running_loop
@@ -65,6 +65,7 @@ if TYPE_CHECKING:
     from .actions import ActionHandler, ActionServer, FeedbackCallback, GoalHandle
     from .api import DEFAULT_CALL_TIMEOUT, M, ServiceHandler
     from .handles import Publisher, ServiceCall, ServiceServer, Subscription
+    from .messages import RawMessage
     from .transports.base import Transport
 else:
     from .api import DEFAULT_CALL_TIMEOUT
@@ -443,6 +444,21 @@ class RosBase:
     def subscribe(
         self,
         topic: str,
+        type: str | type[Message],
+        callback: MessageCallback | None = None,
+        *,
+        throttle_rate: int = 0,
+        queue_length: int = 0,
+        compression: str = "none",
+        fragment_size: int | None = None,
+        buffer_size: int = 100,
+        raw: Literal[True],
+    ) -> Subscription[RawMessage]: ...
+
+    @overload
+    def subscribe(
+        self,
+        topic: str,
         type: str,
         callback: MessageCallback | None = None,
         *,
@@ -451,6 +467,7 @@ class RosBase:
         compression: str = "none",
         fragment_size: int | None = None,
         buffer_size: int = 100,
+        raw: Literal[False] = False,
     ) -> Subscription[dict[str, Any]]: ...
 
     @overload
@@ -465,6 +482,7 @@ class RosBase:
         compression: str = "none",
         fragment_size: int | None = None,
         buffer_size: int = 100,
+        raw: Literal[False] = False,
     ) -> Subscription[M]: ...
 
     def subscribe(
@@ -478,17 +496,22 @@ class RosBase:
         compression: str = "none",
         fragment_size: int | None = None,
         buffer_size: int = 100,
+        raw: bool = False,
     ) -> Subscription[Any]:
         """Subscribe to ``topic``.
 
         Messages are dicts for a type string, instances for a msgs class.
         Options: ``throttle_rate`` (ms between messages, at the bridge),
         ``queue_length`` (the bridge's queue for us; 0: its default),
-        ``compression`` (``"none"`` or ``"cbor"``, which needs cbor2),
+        ``compression`` (``"none"``; ``"cbor"``, which needs cbor2; ``"cbor-raw"``:
+        the robot's CDR bytes, decoded here),
         ``fragment_size`` (the bridge splits larger messages into fragments of
         this many characters; they are reassembled here),
         ``buffer_size`` (this side's buffer; the oldest message is dropped
-        when full). Iterate the handle, ``await sub.get()``, or pass
+        when full), ``raw`` (messages are :class:`~roslibpy_lite.messages.RawMessage`:
+        the CDR bytes as the robot serialized them and the bridge's stamp, nothing
+        decoded; the bridge sends ``cbor-raw``, and a server that cannot is served by
+        serializing here, as is MockRos). Iterate the handle, ``await sub.get()``, or pass
         ``callback`` (sync or async). Use as ``async with`` or ``await``
         (which waits for the bridge's verdict when it sends one).
 
@@ -500,7 +523,40 @@ class RosBase:
         return self._topics.subscribe(
             topic, type, callback, throttle_rate=throttle_rate, queue_length=queue_length,
             compression=compression, fragment_size=fragment_size, buffer_size=buffer_size,
+            raw=raw,
         )
+
+    async def load_types(
+        self, *type_names: str, timeout: float | None = DEFAULT_CALL_TIMEOUT
+    ) -> list[type[Message] | type[Service] | type[Action]]:
+        """Typed classes for the robot's own interfaces, built from the bridge's definitions.
+
+        Each name (``pkg/msg/Name``, ``pkg/srv/Name``, ``pkg/action/Name`` or
+        ``pkg/Name``) that msgs does not know is asked of the bridge
+        (``/rosapi/interface_definition``, the definition text installed on the
+        robot) and built with :func:`msgs.dynamic.load`; names msgs knows cost
+        nothing. Afterwards the classes work everywhere a generated one does:
+        typed publishers and subscriptions, checks at the call, ``cbor-raw``.
+
+        Raises:
+            ServiceError: the bridge does not have the type (or is not ours).
+            msgs.parser.DefinitionError: the robot's definition does not parse.
+        """
+        from msgs.dynamic import load
+        from msgs.runtime import UnknownTypeError, lookup
+
+        found: list[type[Message] | type[Service] | type[Action]] = []
+        for name in type_names:
+            try:
+                found.append(lookup(name))
+                continue
+            except UnknownTypeError:
+                pass
+            answer = await self.call_service(
+                "/rosapi/interface_definition", "rosapi_msgs/srv/InterfaceDefinition",
+                {"type": name}, timeout=timeout)
+            found.append(load(answer["type"], answer["definition"]))
+        return found
 
     # -- services ------------------------------------------------------------------------------
 

@@ -11,16 +11,18 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import time
 from collections.abc import Callable, Coroutine, Mapping
 from typing import TYPE_CHECKING, Any
 
-from msgs.cdr import CdrError, decoder_for
+from msgs.cdr import CdrError, decoder_for, encode
+from msgs.runtime import ValidationError
 
 from .. import ops
 from ..api import ConnectionState
 from ..exceptions import ConnectionClosed, Disconnected, RosLibError, UsageError
 from ..handles import Publisher, Subscription
-from ..messages import check_name, lookup_message_class, message_type
+from ..messages import RawMessage, check_name, lookup_message_class, message_type
 from . import Host, Pending
 
 log = logging.getLogger("roslibpy_lite.client")
@@ -159,23 +161,30 @@ class Topics:
         compression: str,
         fragment_size: int | None,
         buffer_size: int,
+        raw: bool = False,
     ) -> Subscription[Any]:
         """A new subscription handle (see ``RosBase.subscribe``)."""
         host = self.host
         host.check_open()
         check_name(topic, "topic")
         type_name, cls = message_type(type)
+        if raw:
+            if compression not in ("none", "cbor-raw"):
+                raise UsageError(f"subscribe {topic}: raw=True takes the bridge's "
+                                 f"'cbor-raw' form, not compression={compression!r}")
+            compression, cls = "cbor-raw", None
         if compression in ("cbor", "cbor-raw"):
             _need_cbor(compression)
-        if compression == "cbor-raw" and self._cdr_decoder(type_name) is None:
+        if compression == "cbor-raw" and not raw and self._cdr_decoder(type_name) is None:
             raise UsageError(
                 f"subscribe {topic}: compression='cbor-raw' needs the definition of "
-                f"{type_name} on this machine to decode CDR, and msgs has none; use 'cbor'"
+                f"{type_name} on this machine to decode CDR, and msgs has none; load it "
+                "with await ros.load_types(...) or use 'cbor'"
             )
         sub: Subscription[Any] = Subscription(
             self, topic, type_name, cls, throttle_rate=throttle_rate, queue_length=queue_length,
             compression=compression, fragment_size=fragment_size, buffer_size=buffer_size,
-            id=host.new_id("subscribe", topic),
+            id=host.new_id("subscribe", topic), raw=raw,
         )
         if callback is not None:
             sub.on_message(callback)
@@ -187,15 +196,45 @@ class Topics:
 
     def _deliver(self, op: ops.Publish) -> None:
         subs = self.by_topic.get(op.topic)
-        if subs is not None:
-            msg = op.msg
-            if len(msg) == 3 and type(msg.get("bytes")) is bytes and "nsecs" in msg:
-                decoded = self._from_cdr(subs, msg["bytes"])  # compression cbor-raw
-                if decoded is None:
-                    return
-                msg = decoded
+        if subs is None:
+            return
+        msg = op.msg
+        if len(msg) == 3 and type(msg.get("bytes")) is bytes and "nsecs" in msg:
+            # compression cbor-raw: raw subscriptions take the bytes, others a decoded dict
+            raw = RawMessage(op.topic, subs[0].type_name, msg["bytes"],
+                             msg["secs"] * 1_000_000_000 + msg["nsecs"])
+            cooked = [s for s in subs if not s.raw]
+            decoded = self._from_cdr(tuple(cooked), raw.data) if cooked else None
             for sub in subs:
+                if sub.raw:
+                    sub._deliver(raw)
+                elif decoded is not None:
+                    sub._deliver(decoded)
+            return
+        encoded: RawMessage | None = None
+        for sub in subs:
+            if not sub.raw:
                 sub._deliver(msg)
+                continue
+            if encoded is None:  # a server without cbor-raw, or MockRos: serialize here
+                encoded = self._to_cdr(sub, msg)
+                if encoded is None:
+                    continue
+            sub._deliver(encoded)
+
+    def _to_cdr(self, sub: Subscription[Any], msg: Mapping[str, Any]) -> RawMessage | None:
+        """A message that came in its JSON/CBOR form as a RawMessage (None: it cannot be)."""
+        cls = lookup_message_class(sub.type_name)
+        try:
+            if cls is None:
+                raise UsageError(f"{sub.type_name} is not a type msgs knows")
+            data = encode(cls.from_json(msg))
+        except (UsageError, ValidationError, CdrError) as exc:
+            sub.decode_errors += 1
+            log.warning("a message on %s cannot be serialized for a raw subscription: %s",
+                        sub.topic, exc)
+            return None
+        return RawMessage(sub.topic, sub.type_name, data, time.time_ns())
 
     def _cdr_decoder(self, type_name: str) -> Callable[[bytes], dict[str, Any]] | None:
         """The CDR decoder of ``type_name`` (None: msgs does not know the type)."""
@@ -209,7 +248,7 @@ class Topics:
 
     def _from_cdr(
         self, subs: tuple[Subscription[Any], ...], data: bytes
-    ) -> Mapping[str, Any] | None:
+    ) -> dict[str, Any] | None:
         """A ``cbor-raw`` message in its wire form (None: it does not decode; counted)."""
         decode = self._cdr_decoder(subs[0].type_name)
         try:

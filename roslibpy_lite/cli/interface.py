@@ -1,5 +1,6 @@
-"""``roslibpy-lite interface show|list``: from msgs; a type msgs does not know is asked of the
-bridge (rosapi's details), so the robot's own interfaces show too."""
+"""``roslibpy-lite interface show|list|gen``: from msgs; a type msgs does not know is asked of
+the bridge (rosapi's details), so the robot's own interfaces show too; ``gen`` writes typed
+modules for them from the bridge's definition text."""
 
 from __future__ import annotations
 
@@ -147,14 +148,93 @@ async def cmd_interface_list(args: argparse.Namespace, out: Out) -> int:
     return EXIT_OK
 
 
+async def cmd_interface_gen(args: argparse.Namespace, out: Out) -> int:
+    """``interface gen TYPE... -o DIR``: typed modules for the robot's own interfaces,
+    written as msgs writes its own (definitions from the bridge at ``--url``)."""
+    import re
+    from pathlib import Path
+
+    from msgs.dynamic import split
+    from msgs.generator import PackageSources, render_package
+    from msgs.parser import DefinitionError, parse_action, parse_message, parse_service
+
+    target = Path(args.output)
+    root_name = target.resolve().name
+    if not re.match(r"^[A-Za-z_][A-Za-z0-9_]*$", root_name) or root_name == "msgs":
+        raise CliError(EXIT_NOT_FOUND, f"-o {args.output}: the directory becomes the Python "
+                       f"package {root_name!r}, which needs an identifier other than 'msgs'")
+
+    async def body(s: Session) -> int:
+        packages: dict[str, PackageSources] = {}
+        seen: set[str] = set()
+        for name in args.types:
+            try:
+                reply = await s.rosapi("interface_definition", {"type": name})
+            except Exception as exc:
+                raise CliError(EXIT_NOT_FOUND, f"{name}: {exc}") from None
+            blocks = split(reply["type"], reply["definition"])
+            for i, (type_name, text) in enumerate(blocks):
+                package, kind, short = type_name.split("/")
+                if type_name in seen or (i and _known(type_name)):
+                    continue  # types msgs has are imported from it
+                seen.add(type_name)
+                pkg = packages.setdefault(package, PackageSources(package))
+                try:
+                    if kind == "msg":
+                        pkg.messages.append(parse_message(text, package, short))
+                    elif kind == "srv":
+                        pkg.services.append(parse_service(text, package, short))
+                    else:
+                        pkg.actions.append(parse_action(text, package, short))
+                except DefinitionError as exc:
+                    raise CliError(EXIT_NOT_FOUND, f"{type_name}: {exc}") from None
+
+        def root(package: str) -> str:
+            return root_name if package in packages else "msgs"
+
+        written = 0
+        target.mkdir(parents=True, exist_ok=True)
+        init = target / "__init__.py"
+        if not init.exists():
+            init.write_text('"""Typed ROS 2 interfaces of the robot, written by roslibpy-lite '
+                            'interface gen."""\n', encoding="utf-8")
+        for package, sources in sorted(packages.items()):
+            for group in (sources.messages, sources.services, sources.actions):
+                group.sort(key=lambda spec: spec.name)
+            directory = target / package
+            directory.mkdir(exist_ok=True)
+            for file_name, source in render_package(sources, root).items():
+                (directory / file_name).write_text(source, encoding="utf-8")
+                written += 1
+        out.line(f"wrote {written} files for {', '.join(sorted(packages))} under {target} "
+                 f"(import {root_name}.<package>.msg)")
+        return EXIT_OK
+    return await with_session(args, body)
+
+
+def _known(type_name: str) -> bool:
+    try:
+        lookup(type_name)
+    except UnknownTypeError:
+        return False
+    return True
+
+
 def add_parsers(groups: Any, kit: Kit) -> None:
     """Add ``interface`` and its commands."""
     interface = groups.add_parser("interface", help="interface types: show (asks the bridge "
-                                  "for types msgs does not know), list")
-    isub = interface.add_subparsers(dest="command", metavar="{show,list}", parser_class=Parser)
+                                  "for types msgs does not know), list, gen (typed modules "
+                                  "for the robot's own types)")
+    isub = interface.add_subparsers(dest="command", metavar="{show,list,gen}",
+                                    parser_class=Parser)
     isub.required = True
     p = kit.leaf(isub, "show", cmd_interface_show, "print an interface definition")
     p.add_argument("type", help="e.g. sensor_msgs/msg/Imu, mult_msgs/srv/MultFloats")
     p.add_argument("--raw", action="store_true", help="do not expand nested types")
     p = kit.leaf(isub, "list", cmd_interface_list, "list the known interface types")
     p.add_argument("package", nargs="?", help="only this package")
+    p = kit.leaf(isub, "gen", cmd_interface_gen,
+                 "write typed modules for the robot's own types (as msgs generates them)")
+    p.add_argument("types", nargs="+", metavar="TYPE", help="e.g. my_robot_msgs/msg/Status")
+    p.add_argument("-o", "--output", required=True,
+                   help="directory to write; it becomes a Python package of that name")

@@ -236,7 +236,8 @@ def test_every_rosapi_answer_naming_things_is_filtered():
     naming_nothing = {"action_feedback_details", "action_goal_details", "action_result_details",
                       "get_ros_version", "get_time", "message_details", "service_request_details",
                       "service_response_details", "service_type", "topic_type", "action_type",
-                      "get_param", "has_param", "set_param", "delete_param", "get_param_names"}
+                      "get_param", "has_param", "set_param", "delete_param", "get_param_names",
+                      "interface_definition"}
     every = set(rosapi.HANDLERS) | set(rosapi.ASYNC_HANDLERS)
     assert every == set(_SEEN_HIDDEN) | {"/rosapi/" + n for n in naming_nothing}
 
