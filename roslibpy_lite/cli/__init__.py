@@ -38,7 +38,7 @@ from ..exceptions import (
     RosTimeoutError,
     UsageError,
 )
-from . import action, interface, node, service, topic
+from . import action, bag, interface, node, service, topic
 from .common import (
     DEFAULT_URL,
     EXIT_CODES,
@@ -149,19 +149,21 @@ def build_parser() -> argparse.ArgumentParser:
         formatter_class=argparse.RawDescriptionHelpFormatter,
         parents=[common],
     )
-    groups = root.add_subparsers(dest="group", metavar="{topic,service,node,interface,action}",
+    groups = root.add_subparsers(dest="group",
+                                 metavar="{topic,service,node,interface,action,bag}",
                                  parser_class=Parser)
     groups.required = True
 
     kit = Kit(common, fmt, wait, swait)
-    for noun in (topic, service, node, interface, action):
+    for noun in (topic, service, node, interface, action, bag):
         noun.add_parsers(groups, kit)
     return root
 
 
 _client_log = logging.getLogger("roslibpy_lite")
 
-_STREAMING = {topic.cmd_topic_echo, topic.cmd_topic_hz, topic.cmd_topic_pub}
+_STREAMING = {topic.cmd_topic_echo, topic.cmd_topic_hz, topic.cmd_topic_pub,
+              bag.cmd_bag_record, bag.cmd_bag_play}
 
 
 def _fail(code: int, message: str) -> int:

@@ -277,10 +277,11 @@ def print_listing(out: Out, args: argparse.Namespace, pairs: list[tuple[str, str
     return EXIT_OK
 
 
-async def with_session(args: argparse.Namespace, body: Callable[[Session], Awaitable[int]]) -> int:
+async def with_session(args: argparse.Namespace, body: Callable[[Session], Awaitable[int]],
+                       *, reconnect: bool = False) -> int:
     secure = args.url.startswith("wss://")
     try:
-        ros = await connect(args.url, reconnect=False, open_timeout=args.timeout,
+        ros = await connect(args.url, reconnect=reconnect, open_timeout=args.timeout,
                             token=args.token, ssl=args.cafile if secure else None)
     except NotAuthenticated as exc:
         text = str(exc)

@@ -1,0 +1,149 @@
+"""``roslibpy-lite bag record|info|play``: MCAP files through the bridge (roslibpy_lite.bag)."""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import contextlib
+import sys
+from typing import Any
+
+from ..exceptions import UsageError
+from .common import (
+    EXIT_ERROR,
+    EXIT_NOT_FOUND,
+    EXIT_OK,
+    CliError,
+    Kit,
+    Out,
+    Parser,
+    Session,
+    with_session,
+)
+
+
+def _size(text: str) -> int:
+    units = {"k": 1e3, "m": 1e6, "g": 1e9}
+    text = text.strip().lower().removesuffix("b")
+    scale = units.get(text[-1:], 1.0)
+    try:
+        return int(float(text[:-1] if text[-1:] in units else text) * scale)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a size: {text!r} (e.g. 500M, 2G)") from None
+
+
+async def cmd_bag_record(args: argparse.Namespace, out: Out) -> int:
+    """``bag record TOPIC... | --all -o FILE``: until Ctrl+C, ``--duration`` or ``--max``."""
+    from ..bag import Recorder
+
+    if not args.topics and not args.all:
+        raise CliError(2, "name topics (or patterns such as '/camera/*'), or pass --all")
+
+    async def body(s: Session) -> int:
+        try:
+            rec = Recorder(s.ros, args.output, topics=args.topics, all_topics=args.all,
+                           max_messages=args.max, split_size=args.split_size,
+                           split_duration=args.split_duration)
+        except UsageError as exc:
+            raise CliError(2, str(exc)) from None
+        live = sys.stderr.isatty() and not args.quiet
+        await rec.start()
+        try:
+            async def show() -> None:
+                while True:
+                    await asyncio.sleep(1.0)
+                    if live:
+                        print("\r\x1b[K" + rec.stats.line(), end="", file=sys.stderr,
+                              flush=True)
+
+            ticker = asyncio.get_running_loop().create_task(show())
+            try:
+                await rec.wait(args.duration)
+            finally:
+                ticker.cancel()
+                with contextlib.suppress(asyncio.CancelledError):
+                    await ticker
+        finally:
+            stats = await asyncio.shield(rec.stop())
+            if live:
+                print(file=sys.stderr)
+            out.line(f"recorded {', '.join(str(f) for f in stats.files)}: {stats.line()}")
+        if stats.error is not None:
+            raise CliError(EXIT_ERROR, f"recording stopped: {stats.error} (the file is "
+                           "readable up to there)")
+        return EXIT_OK
+    return await with_session(args, body, reconnect=True)
+
+
+async def cmd_bag_info(args: argparse.Namespace, out: Out) -> int:
+    """``bag info FILE``: topics, types, counts, duration, size."""
+    from ..bag import info
+
+    try:
+        about = info(args.file)
+    except FileNotFoundError:
+        raise CliError(EXIT_NOT_FOUND, f"no such file: {args.file}") from None
+    except Exception as exc:
+        raise CliError(EXIT_ERROR, f"{args.file} is not a readable MCAP file: {exc}") from None
+    unfinished = "" if about.complete else " (no summary: a recording that did not finish)"
+    out.line(f"File:      {about.path}{unfinished}")
+    out.line(f"Size:      {about.size / 1e6:.2f} MB")
+    out.line(f"Duration:  {about.duration:.3f} s")
+    out.line(f"Messages:  {about.messages}")
+    if about.library:
+        out.line(f"Writer:    {about.library}")
+    for gaps in (about.metadata.get("roslibpy_lite", {}).get("gaps_s"),):
+        if gaps:
+            out.line(f"Gaps (s):  {gaps}")
+    out.line("Topics:")
+    width = max((len(t.topic) for t in about.topics), default=0)
+    for t in about.topics:
+        out.line(f"  {t.topic:<{width}}  {t.type_name}  {t.messages} msgs")
+    return EXIT_OK
+
+
+async def cmd_bag_play(args: argparse.Namespace, out: Out) -> int:
+    """``bag play FILE``: publish through the bridge with the recorded timing."""
+    from ..bag import play
+
+    async def body(s: Session) -> int:
+        stats = await play(s.ros, args.file, rate=args.rate, loop=args.loop,
+                           topics=args.topics or None, start=args.start,
+                           duration=args.duration, latch=args.latch or ())
+        out.line(f"played {stats.messages} messages on {stats.topics} topics "
+                 f"(late by {stats.late_mean_ms:.1f} ms on average, "
+                 f"{stats.late_max_ms:.1f} ms at most)")
+        return EXIT_OK
+    return await with_session(args, body)
+
+
+def add_parsers(groups: Any, kit: Kit) -> None:
+    """Add ``bag`` and its commands."""
+    bag = groups.add_parser("bag", help="MCAP files: record (through the bridge), info, play")
+    bsub = bag.add_subparsers(dest="command", metavar="{record,info,play}", parser_class=Parser)
+    bsub.required = True
+    p = kit.leaf(bsub, "record", cmd_bag_record, "record topics to an MCAP file (Ctrl+C ends "
+                 "it properly)")
+    p.add_argument("topics", nargs="*", metavar="TOPIC", help="names or patterns ('/cam/*')")
+    p.add_argument("-a", "--all", action="store_true", help="every topic")
+    p.add_argument("-o", "--output", required=True, help="the file, e.g. run.mcap")
+    p.add_argument("--duration", type=float, default=None, metavar="SEC", help="stop after")
+    p.add_argument("--max", type=int, default=None, metavar="N", help="stop after N messages")
+    p.add_argument("--split-size", type=_size, default=None, metavar="SIZE",
+                   help="go on in FILE_1.mcap... past this size (500M, 2G)")
+    p.add_argument("--split-duration", type=float, default=None, metavar="SEC",
+                   help="go on in a new file every SEC seconds")
+    p.add_argument("-q", "--quiet", action="store_true", help="no live status line")
+    p = kit.leaf(bsub, "info", cmd_bag_info, "topics, types, counts and times of a file")
+    p.add_argument("file")
+    p = kit.leaf(bsub, "play", cmd_bag_play, "publish a file through the bridge")
+    p.add_argument("file")
+    p.add_argument("--rate", type=float, default=1.0, help="time scale (2: twice as fast)")
+    p.add_argument("--loop", action="store_true", help="start over at the end")
+    p.add_argument("--topics", nargs="+", default=None, metavar="TOPIC", help="only these")
+    p.add_argument("--start", type=float, default=0.0, metavar="SEC",
+                   help="skip this many seconds from the start")
+    p.add_argument("--duration", type=float, default=None, metavar="SEC",
+                   help="play this many seconds")
+    p.add_argument("--latch", nargs="+", default=None, metavar="TOPIC",
+                   help="advertise these latched too (rosbag2's QoS is read when present)")
