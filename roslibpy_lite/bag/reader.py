@@ -108,13 +108,21 @@ def _records(path: Path, topics: Iterable[str] | None, start_ns: int | None,
         except McapError:
             summary = None
         if summary is not None and summary.chunk_indexes:
-            yield from reader.iter_messages(topics=wanted, start_time=start_ns,
-                                            end_time=end_ns, log_time_order=True)
+            # the time bounds are filtered here: their keyword names differ by mcap version
+            for schema, channel, message in reader.iter_messages(topics=wanted,
+                                                                 log_time_order=True):
+                if start_ns is not None and message.log_time < start_ns:
+                    continue
+                if end_ns is not None and message.log_time >= end_ns:
+                    continue
+                yield schema, channel, message
             return
         stream.seek(0)
         count = 0
         try:
-            for schema, channel, message in NonSeekingReader(stream).iter_messages():
+            # in file order (log-time order would hold everything back until the end)
+            messages = NonSeekingReader(stream).iter_messages(log_time_order=False)
+            for schema, channel, message in messages:
                 if wanted is not None and channel.topic not in wanted:
                     continue
                 if start_ns is not None and message.log_time < start_ns:
@@ -124,7 +132,8 @@ def _records(path: Path, topics: Iterable[str] | None, start_ns: int | None,
                 count += 1
                 yield schema, channel, message
         except (McapError, EOFError, ValueError) as exc:
-            log.warning("%s ends early (%s): %d messages read up to there", path, exc, count)
+            log.warning("%s ends early (%s): %d messages read up to there", path,
+                        type(exc).__name__, count)
 
 
 def read(path: str | Path, topics: Iterable[str] | None = None, *,
