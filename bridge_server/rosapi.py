@@ -442,28 +442,18 @@ def _source(package: str, kind: str, name: str) -> str | None:
     return None
 
 
-def _msg_source(type_name: str) -> str:
-    """The installed ``.msg`` text of ``pkg/msg/Type`` ("" if not found)."""
-    pkg, _, name = type_name.split("/")
-    return _source(pkg, "msg", name) or ""
-
-
 _full_texts: dict[str, str] = {}
 
 
 def _full_text(type_name: str) -> str:
-    """A type's definition followed by its dependencies' (ROS's ``MSG: pkg/Type`` layout)."""
+    """A topic type's definition with its dependencies' ("" if not installed; cached)."""
     text = _full_texts.get(type_name)
-    if text is not None:
-        return text
-    try:
-        typedefs = _typedefs(_message_class(type_name), type_name)
-    except Exception:
-        return ""
-    parts = [_msg_source(type_name).rstrip("\n")]
-    for typedef in typedefs[1:]:
-        parts.append("=" * 80 + f"\nMSG: {typedef['type']}\n" + _msg_source(typedef["type"]))
-    text = _full_texts[type_name] = "\n".join(parts).rstrip("\n") + "\n"
+    if text is None:
+        try:
+            text = _definition_of(type_name)["definition"]
+        except RosapiError:
+            text = ""
+        _full_texts[type_name] = text
     return text
 
 
@@ -485,9 +475,12 @@ def interface_definition(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, A
     uses, each after a line of 80 ``=`` and ``MSG: pkg/msg/Name`` (the ``ros2msg``
     layout rosbag2 writes into MCAP schemas); clients build typed classes from it.
     """
+    return _definition_of(_str_field(args, "type"))
+
+
+def _definition_of(name: str) -> dict[str, Any]:
     from msgs.parser import DefinitionError, parse_action, parse_message, parse_service
 
-    name = _str_field(args, "type")
     match = _TYPE_NAME.match(name)
     if match is None:
         raise RosapiError(f"type: {name!r} is not a type name (expected 'pkg/msg/Name', "
