@@ -201,12 +201,14 @@ class Topics:
         msg = op.msg
         if len(msg) == 3 and type(msg.get("bytes")) is bytes and "nsecs" in msg:
             # compression cbor-raw: raw subscriptions take the bytes, others a decoded dict
-            raw = RawMessage(op.topic, subs[0].type_name, msg["bytes"],
-                             msg["secs"] * 1_000_000_000 + msg["nsecs"])
-            cooked = [s for s in subs if not s.raw]
-            decoded = self._from_cdr(tuple(cooked), raw.data) if cooked else None
+            cooked = tuple(s for s in subs if not s.raw)
+            decoded = self._from_cdr(cooked, msg["bytes"]) if cooked else None
+            raw = None if len(cooked) == len(subs) else RawMessage(
+                op.topic, subs[0].type_name, msg["bytes"],
+                msg["secs"] * 1_000_000_000 + msg["nsecs"])
             for sub in subs:
                 if sub.raw:
+                    assert raw is not None
                     sub._deliver(raw)
                 elif decoded is not None:
                     sub._deliver(decoded)
