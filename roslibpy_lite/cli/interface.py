@@ -213,11 +213,13 @@ async def cmd_interface_gen(args: argparse.Namespace, out: Out) -> int:
 
 
 def _known(type_name: str) -> bool:
+    """Whether msgs itself generates ``type_name`` (a type loaded at runtime or written by an
+    earlier ``interface gen`` is registered for lookup too, but is not importable from msgs)."""
     try:
-        lookup(type_name)
+        found = lookup(type_name)
     except UnknownTypeError:
         return False
-    return True
+    return found.__module__.startswith("msgs.") and not found.__module__.startswith("msgs._")
 
 
 def add_parsers(groups: Any, kit: Kit) -> None:
