@@ -91,6 +91,11 @@ requests and responses when more than 10 calls are in flight."""
 MAX_BATCH = 256
 """Most messages taken from one subscription per executor callback."""
 
+REPLAY_MEMORY = 1000
+"""Source timestamps a subscription remembers of the messages it took, so that one made
+to replace it (its publishers turned out transient local) skips the history it already
+handed out when the writers replay it."""
+
 SPIN_ERROR_LOG_INTERVAL = 10.0
 """Seconds between two logged failures of an executor round (the others are counted)."""
 
@@ -203,6 +208,9 @@ class SharedSubscription:
         self._sub: Any = None
         self._warned = False
         self.received = 0
+        # source timestamps of the latest messages taken (on rclpy's thread), for a
+        # re-subscription that replays the writers' history
+        self._taken: deque[int] = deque(maxlen=REPLAY_MEMORY)
 
     @property
     def type_name(self) -> str | None:
@@ -230,12 +238,19 @@ class SharedSubscription:
         topic = self.topic
         msg_cls = self.msg_cls
         holder: list[Any] = []
+        # a subscription made to replace another (the publishers' QoS changed) and that is
+        # transient local gets the writers' history again: what the old one took already is
+        # not handed out twice (known by source timestamp); what it never saw still is
+        taken_before = frozenset(self._taken) if self.transient_local else frozenset()
+        remember = self._taken.append
 
-        def callback(msg: Any) -> None:
+        def callback(msg: Any, info: dict[str, Any]) -> None:
             # rclpy's executor rebuilds its wait set for every message it takes; under load,
             # take what else is queued on this subscription right here, and cross to the loop
             # once for the whole batch.
-            batch = [msg]
+            source = info["source_timestamp"]
+            remember(source)
+            batch = [msg] if source not in taken_before else []
             sub = holder[0] if holder else None
             if sub is not None:
                 with contextlib.suppress(Exception), sub.handle:
@@ -244,8 +259,12 @@ class SharedSubscription:
                         taken = take(msg_cls, False)
                         if taken is None:
                             break
-                        batch.append(taken[0])
-            post(deliver, batch, time.time_ns())
+                        source = taken[1]["source_timestamp"]
+                        remember(source)
+                        if source not in taken_before:
+                            batch.append(taken[0])
+            if batch:
+                post(deliver, batch, time.time_ns())
 
         self._sub = self.ros.node.create_subscription(self.msg_cls, topic, callback, qos)
         holder.append(self._sub)

@@ -2,13 +2,16 @@
 
 from __future__ import annotations
 
+import asyncio
+import contextlib
 import json
 import struct
+import time
 from typing import Any
 
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message
-from std_msgs.msg import Int32MultiArray, String, UInt8MultiArray
+from std_msgs.msg import Int32, Int32MultiArray, String, UInt8MultiArray
 
 from tests.bridge.support import (
     Inbox,
@@ -371,6 +374,42 @@ async def test_late_latched_publisher_reaches_subscriber(
     pub.publish(String(data="latched late"))
     op = await ws.expect(op="publish", topic=topic)
     assert op["msg"]["data"] == "latched late"
+
+
+async def test_a_re_subscription_to_a_latched_topic_hands_out_nothing_twice(
+    ws_connect: Any, bridge: Any, ros_node: Any, topic: str
+):
+    """The bridge subscribes volatile before it sees the publisher, then re-subscribes
+    transient local, and the writer replays its history: every number reaches the client
+    exactly once (none twice, none lost)."""
+    ws = await ws_connect()
+    await ws.send({"op": "subscribe", "topic": topic, "type": "std_msgs/msg/Int32"})
+    await roundtrip(ws)
+    pub = ros_node.create_publisher(
+        Int32, topic, QoSProfile(depth=500, durability=DurabilityPolicy.TRANSIENT_LOCAL))
+    got: list[int] = []
+    sent = 0
+
+    def re_subscribed() -> bool:
+        return any(f"QoS of {topic} changed" in line for line in bridge.lines)
+
+    deadline = time.monotonic() + 20
+    while not (got and re_subscribed()):  # live messages first, then the re-subscription
+        assert time.monotonic() < deadline, ("the bridge did not re-subscribe", got)
+        pub.publish(Int32(data=sent))
+        sent += 1
+        await asyncio.sleep(0.02)  # 50 Hz: the history (500) outlasts the re-subscription
+        with contextlib.suppress(AssertionError):
+            got.append((await ws.expect(op="publish", topic=topic, timeout=0.001))["msg"]["data"])
+    for _ in range(10):
+        pub.publish(Int32(data=sent))
+        sent += 1
+    with contextlib.suppress(AssertionError):
+        while len(got) < sent:
+            got.append((await ws.expect(op="publish", topic=topic, timeout=5))["msg"]["data"])
+    with contextlib.suppress(AssertionError):  # and nothing more comes: no late duplicates
+        got.append((await ws.expect(op="publish", topic=topic, timeout=0.5))["msg"]["data"])
+    assert sorted(got) == list(range(sent)), got
 
 
 async def test_png_compression_falls_back_to_json(ws_connect: Any, ros_node: Any, topic: str):
