@@ -3,7 +3,7 @@
 Sub-commands (each prints JSON lines on stdout: ``{"event": ...}``):
 
 ``publish``    publish numbered messages in a tight timed loop
-               (``--kind string|stamp|image``, ``--rate`` msg/s, 0 = as fast as it can)
+               (``--kind string|stamp|image|imu``, ``--rate`` msg/s, 0 = as fast as it can)
 ``subscribe``  count numbered messages on a topic (std_msgs/String, raw CDR, no deserialising)
 ``serve``      serve ``std_srvs/srv/SetBool`` (answers ``success = data``) until stdin closes
 
@@ -16,8 +16,9 @@ Examples::
 Message formats: ``string`` data is the decimal sequence number; ``stamp`` data
 is ``"<seq> <time.monotonic_ns()>"`` taken just before publishing; ``image`` is a
 640x480 rgb8 ``sensor_msgs/Image`` whose ``header.frame_id`` is the sequence
-number. Every run waits for ``--wait-subs`` matched subscriptions first and
-reports ``{"event": "matched"}`` when they are there.
+number and the send time; ``imu`` is a ``sensor_msgs/Imu`` numbered the same way.
+Every run waits for ``--wait-subs`` matched subscriptions first and reports
+``{"event": "matched"}`` when they are there.
 """
 
 from __future__ import annotations
@@ -73,8 +74,15 @@ def cmd_publish(args: argparse.Namespace) -> int:
 
         msg: Any = Image()
         msg.height, msg.width, msg.encoding, msg.step = 480, 640, "rgb8", 640 * 3
-        msg.data = bytes(range(256)) * (640 * 480 * 3 // 256)
+        size = 640 * 480 * 3
+        msg.data = os.urandom(size) if args.noise else bytes(range(256)) * (size // 256)
         pub = node.create_publisher(Image, args.topic, _qos(args))
+    elif args.kind == "imu":
+        from sensor_msgs.msg import Imu
+
+        msg = Imu()
+        msg.linear_acceleration.z = 9.81
+        pub = node.create_publisher(Imu, args.topic, _qos(args))
     else:
         from std_msgs.msg import String
 
@@ -114,8 +122,8 @@ def cmd_publish(args: argparse.Namespace) -> int:
             msg.data = str(i)
         elif kind == "stamp":
             msg.data = f"{i} {mono()}"
-        else:
-            msg.header.frame_id = f"{i} {mono()}"  # sequence and send time (monotonic ns)
+        else:  # image, imu: sequence and send time (monotonic ns)
+            msg.header.frame_id = f"{i} {mono()}"
         publish(msg)
         i += 1
     elapsed = (mono() - t0) / 1e9
@@ -290,12 +298,15 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         s.add_argument("--executor", choices=("single", "events"), default="events")
         if name == "publish":
             s.add_argument("--topic", required=True)
-            s.add_argument("--kind", choices=("string", "stamp", "image"), default="string")
+            s.add_argument("--kind", choices=("string", "stamp", "image", "imu"),
+                           default="string")
             s.add_argument("--rate", type=float, default=0.0, help="msg/s, 0: as fast as possible")
             s.add_argument("--count", type=int, default=0, help="stop after N (0: use duration)")
             s.add_argument("--wait-subs", type=int, default=1)
             s.add_argument("--settle", type=float, default=0.0)
             s.add_argument("--linger", type=float, default=1.0)
+            s.add_argument("--noise", action="store_true",
+                           help="image pixels are random (as incompressible as a camera's)")
         elif name == "subscribe":
             s.add_argument("--topic", required=True)
             s.add_argument("--wait-pubs", type=int, default=1)

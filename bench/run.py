@@ -27,6 +27,9 @@ Scenarios (targets; rosbridge_suite's figures in brackets):
 - ``idle_cpu``: the bridge's CPU with one connected client (target < 1 % of a core) [~5 %].
 - ``memory_stall``: the bridge's RSS while one client stalls under an image
   flood: start, peak, end [rosbridge grew 400 MB in 6 s].
+- ``record`` (``bench/bag.py``): ``roslibpy-lite bag record`` in its own process, a
+  640x480 camera at 30 Hz plus an IMU at 200 Hz for 60 s: what the file holds against what
+  was published, the recorder's CPU and write rate; then the camera alone at rising rates.
 - ``action_ros_server`` / ``action_client_served`` (``bench/actions.py``): goal
   round trip p50/p99 and feedback throughput, to an rclpy action server and to a
   client-served action driven by an rclpy action client.
@@ -58,6 +61,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from websockets.asyncio.client import ClientConnection
 
 from bench.actions import action_client_served, action_ros_server
+from bench.bag import record
 from bench.harness import Bridge, RosSide, StalledClient, percentile, send_op, ws_open
 from bench.links import links
 from bench.tls import tls_scenario
@@ -73,6 +77,7 @@ TARGETS: dict[str, str] = {
     "memory_stall": "bounded [rosbridge +400 MB in 6 s]",
     "tls": "reference only: the cost of wss:// against ws://",
     "links": "reference: a silent link noticed in seconds; frame age flat over a 2 Mbit/s link",
+    "record": "camera 30 Hz + IMU 200 Hz for 60 s recorded without a loss; recorder CPU",
     "action_ros_server": "reference: goal round trip p50/p99, feedback msg/s at >= 99 %",
     "action_client_served": "reference: goal round trip p50/p99, feedback msg/s at >= 99 %",
 }
@@ -635,6 +640,7 @@ SCENARIOS: dict[str, Callable[[Ctx], Awaitable[dict[str, Any]]]] = {
     "memory_stall": memory_stall,
     "tls": lambda ctx: tls_scenario(ctx, ros_to_client, service, image),
     "links": links,
+    "record": record,
     "action_ros_server": action_ros_server,
     "action_client_served": action_client_served,
 }
@@ -661,6 +667,10 @@ def _headline(name: str, r: dict[str, Any]) -> Any:
     if name.startswith("action_"):
         return {"p50_ms": r["round_trip"]["p50_ms"], "p99_ms": r["round_trip"]["p99_ms"],
                 "feedback_rate_99pct": r["feedback_best_rate_99pct"]}
+    if name == "record":
+        return {"recorded_pct": {t: v["recorded_pct"] for t, v in r["camera_imu"]["topics"].items()},
+                "recorder_cpu_pct": r["camera_imu"]["recorder_cpu_pct"],
+                "best_camera_rate_99pct": r["best_camera_rate_99pct"]}
     if name == "tls":
         keys = ("ros_to_client_best_rate_99pct", "service_p50_ms", "image_cbor_frames_per_s")
         return {scheme: {k: r[scheme][k] for k in keys} for scheme in ("ws", "wss")}
