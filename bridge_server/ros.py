@@ -12,9 +12,11 @@ not thread safe (actions: :mod:`bridge_server.ros_actions`).
 Sharing
 -------
 * :class:`SharedSubscription`: one rclpy subscription per topic for every
-  client. Each message becomes one :class:`Incoming`, which converts itself
-  lazily and at most once per encoding (JSON text, CBOR, CBOR-raw); every
-  subscribed session is handed the same ``str``/``bytes``.
+  client, taking messages serialized (``raw=True``). Each message becomes one
+  :class:`Incoming`: ``cbor-raw`` subscribers get its CDR bytes as they came; it
+  is deserialized at most once, when a JSON or CBOR subscriber needs it, and
+  converted at most once per encoding; every subscribed session is handed the
+  same ``str``/``bytes``.
 * :class:`SharedPublisher`: one rclpy publisher per (topic, type, latch),
   reference counted across sessions.
 * Service clients are cached per (service, type).
@@ -55,6 +57,7 @@ import rclpy
 from rclpy.context import Context
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.serialization import deserialize_message
 
 from . import convert
 from .types import resolve_message, resolve_service
@@ -105,19 +108,34 @@ SETTLE_S = 0.5
 """Seconds a newly matched service client waits before its first request (see settled)."""
 
 class Incoming:
-    """One ROS message received on a topic, encoded lazily and once per encoding."""
+    """One ROS message received on a topic, encoded lazily and once per encoding.
 
-    __slots__ = ("_cbor", "_cbor_raw", "_json", "_msg_json", "conv", "msg", "stamp_ns", "topic")
+    It arrives serialized (CDR, ``data``): ``cbor-raw`` subscribers get those bytes as they
+    came, and the message is deserialized at most once, the first time a JSON or CBOR
+    subscriber needs it.
+    """
 
-    def __init__(self, topic: str, msg: Any, conv: convert.Converter, stamp_ns: int) -> None:
+    __slots__ = ("_cbor", "_cbor_raw", "_json", "_msg", "_msg_json", "conv", "data", "stamp_ns",
+                 "topic")
+
+    def __init__(self, topic: str, data: bytes, conv: convert.Converter, stamp_ns: int) -> None:
         self.topic = topic
-        self.msg = msg
+        self.data = data
         self.conv = conv
         self.stamp_ns = stamp_ns
+        self._msg: Any = None
         self._json: str | None = None
         self._msg_json: str | None = None
         self._cbor: bytes | None = None
         self._cbor_raw: bytes | None = None
+
+    @property
+    def msg(self) -> Any:
+        """The rclpy message, deserialized from :attr:`data` on first use."""
+        msg = self._msg
+        if msg is None:
+            msg = self._msg = deserialize_message(self.data, self.conv.msg_cls)
+        return msg
 
     def json_text(self, name: str | None = None) -> str:
         """The whole ``publish`` op as JSON text (built on first use, then shared).
@@ -128,11 +146,11 @@ class Incoming:
         if name is None or name == self.topic:
             text = self._json
             if text is None:
-                text = self._json = convert.encode_publish_json(self.topic, self._msg())
+                text = self._json = convert.encode_publish_json(self.topic, self._msg_text())
             return text
-        return convert.encode_publish_json(name, self._msg())
+        return convert.encode_publish_json(name, self._msg_text())
 
-    def _msg(self) -> str:
+    def _msg_text(self) -> str:
         msg_json = self._msg_json
         if msg_json is None:
             msg_json = self._msg_json = self.conv.to_json(self.msg)
@@ -148,14 +166,13 @@ class Incoming:
         return data
 
     def cbor_raw(self, name: str | None = None) -> bytes:
-        """The ``publish`` op with the serialized CDR message (compression ``cbor-raw``)."""
+        """The ``publish`` op with the CDR bytes as they came (compression ``cbor-raw``)."""
         if name is not None and name != self.topic:
-            return convert.encode_publish_cbor_raw(name, convert.serialize(self.msg), self.stamp_ns)
+            return convert.encode_publish_cbor_raw(name, self.data, self.stamp_ns)
         data = self._cbor_raw
         if data is None:
             data = self._cbor_raw = convert.encode_publish_cbor_raw(
-                self.topic, convert.serialize(self.msg), self.stamp_ns
-            )
+                self.topic, self.data, self.stamp_ns)
         return data
 
 
@@ -244,7 +261,7 @@ class SharedSubscription:
         taken_before = frozenset(self._taken) if self.transient_local else frozenset()
         remember = self._taken.append
 
-        def callback(msg: Any, info: dict[str, Any]) -> None:
+        def callback(msg: bytes, info: dict[str, Any]) -> None:
             # rclpy's executor rebuilds its wait set for every message it takes; under load,
             # take what else is queued on this subscription right here, and cross to the loop
             # once for the whole batch.
@@ -256,7 +273,7 @@ class SharedSubscription:
                 with contextlib.suppress(Exception), sub.handle:
                     take = sub.handle.take_message
                     while len(batch) < MAX_BATCH:
-                        taken = take(msg_cls, False)
+                        taken = take(msg_cls, True)
                         if taken is None:
                             break
                         source = taken[1]["source_timestamp"]
@@ -266,7 +283,9 @@ class SharedSubscription:
             if batch:
                 post(deliver, batch, time.time_ns())
 
-        self._sub = self.ros.node.create_subscription(self.msg_cls, topic, callback, qos)
+        # raw: the messages come serialized; Incoming deserializes them only when needed
+        self._sub = self.ros.node.create_subscription(self.msg_cls, topic, callback, qos,
+                                                      raw=True)
         holder.append(self._sub)
         log.debug(
             "subscribed to %s (%s, %s, %s)",
@@ -282,7 +301,7 @@ class SharedSubscription:
             with contextlib.suppress(Exception):
                 self.ros.node.destroy_subscription(sub)
 
-    def _deliver_batch(self, msgs: list[Any], stamp_ns: int) -> None:
+    def _deliver_batch(self, msgs: list[bytes], stamp_ns: int) -> None:
         conv = self.conv
         if conv is None or self.ros.subscriptions.get(self.topic) is not self:
             return  # the subscription was removed meanwhile
