@@ -16,7 +16,8 @@ Examples::
 Message formats: ``string`` data is the decimal sequence number; ``stamp`` data
 is ``"<seq> <time.monotonic_ns()>"`` taken just before publishing; ``image`` is a
 640x480 rgb8 ``sensor_msgs/Image`` whose ``header.frame_id`` is the sequence
-number and the send time; ``imu`` is a ``sensor_msgs/Imu`` numbered the same way.
+number and the send time; ``imu`` (``sensor_msgs/Imu``) and ``cloud`` (a 4 MiB
+``sensor_msgs/PointCloud2`` of random x, y, z, intensity) are numbered the same way.
 Every run waits for ``--wait-subs`` matched subscriptions first and reports
 ``{"event": "matched"}`` when they are there.
 """
@@ -77,6 +78,16 @@ def cmd_publish(args: argparse.Namespace) -> int:
         size = 640 * 480 * 3
         msg.data = os.urandom(size) if args.noise else bytes(range(256)) * (size // 256)
         pub = node.create_publisher(Image, args.topic, _qos(args))
+    elif args.kind == "cloud":
+        from sensor_msgs.msg import PointCloud2, PointField
+
+        msg = PointCloud2(height=1, width=4 * 1024 * 1024 // 16, point_step=16,
+                          is_dense=True)
+        msg.fields = [PointField(name=n, offset=4 * k, datatype=PointField.FLOAT32, count=1)
+                      for k, n in enumerate(("x", "y", "z", "intensity"))]
+        msg.row_step = msg.width * msg.point_step
+        msg.data = os.urandom(msg.row_step)
+        pub = node.create_publisher(PointCloud2, args.topic, _qos(args))
     elif args.kind == "imu":
         from sensor_msgs.msg import Imu
 
@@ -122,7 +133,7 @@ def cmd_publish(args: argparse.Namespace) -> int:
             msg.data = str(i)
         elif kind == "stamp":
             msg.data = f"{i} {mono()}"
-        else:  # image, imu: sequence and send time (monotonic ns)
+        else:  # image, imu, cloud: sequence and send time (monotonic ns)
             msg.header.frame_id = f"{i} {mono()}"
         publish(msg)
         i += 1
@@ -298,7 +309,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         s.add_argument("--executor", choices=("single", "events"), default="events")
         if name == "publish":
             s.add_argument("--topic", required=True)
-            s.add_argument("--kind", choices=("string", "stamp", "image", "imu"),
+            s.add_argument("--kind", choices=("string", "stamp", "image", "imu", "cloud"),
                            default="string")
             s.add_argument("--rate", type=float, default=0.0, help="msg/s, 0: as fast as possible")
             s.add_argument("--count", type=int, default=0, help="stop after N (0: use duration)")

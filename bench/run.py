@@ -16,6 +16,8 @@ Scenarios (targets; rosbridge_suite's figures in brackets):
   into a raw subscriber that deserialises nothing).
 - ``ros_to_client``: highest rate of small std_msgs/String (step search) where
   >= 99 % reach a websocket client. Target 8,000 msg/s [500].
+- ``ros_to_client_raw``: the same with ``compression: cbor-raw`` (the client gets the CDR
+  bytes as the bridge took them), on a ladder to 40,000 msg/s.
 - ``client_to_ros``: the same from a websocket client to an rclpy subscriber.
   Target 10,000 msg/s [5,000].
 - ``service``: call_service round trip to an rclpy SetBool service: p50 of
@@ -27,6 +29,8 @@ Scenarios (targets; rosbridge_suite's figures in brackets):
 - ``idle_cpu``: the bridge's CPU with one connected client (target < 1 % of a core) [~5 %].
 - ``memory_stall``: the bridge's RSS while one client stalls under an image
   flood: start, peak, end [rosbridge grew 400 MB in 6 s].
+- ``pointcloud`` (``bench/cloud.py``): a 4 MiB PointCloud2 at 10 Hz to 5 clients, CBOR
+  and cbor-raw: delivered per client, the bridge's CPU and RSS.
 - ``record`` (``bench/bag.py``): ``roslibpy-lite bag record`` in its own process, a
   640x480 camera at 30 Hz plus an IMU at 200 Hz for 60 s: what the file holds against what
   was published, the recorder's CPU and write rate; then the camera alone at rising rates.
@@ -62,6 +66,7 @@ from websockets.asyncio.client import ClientConnection
 
 from bench.actions import action_client_served, action_ros_server
 from bench.bag import record
+from bench.cloud import pointcloud
 from bench.harness import Bridge, RosSide, StalledClient, percentile, send_op, ws_open
 from bench.links import links
 from bench.tls import tls_scenario
@@ -69,6 +74,7 @@ from bench.tls import tls_scenario
 TARGETS: dict[str, str] = {
     "rclpy_ceiling": "reference only",
     "ros_to_client": ">= 8,000 msg/s at >= 99 % (no less than 5,000) [rosbridge 500]",
+    "ros_to_client_raw": "the same with compression cbor-raw: >= 40,000 msg/s at >= 99 %",
     "client_to_ros": ">= 10,000 msg/s at >= 99 % [rosbridge 5,000]",
     "service": "p50 <= 1 ms, >= 1,000 calls/s with 16 in flight [rosbridge 3.7 ms, 74/s]",
     "latency": "p99 <= 1 ms at 200 Hz [rosbridge 1.6 ms]",
@@ -77,6 +83,7 @@ TARGETS: dict[str, str] = {
     "memory_stall": "bounded [rosbridge +400 MB in 6 s]",
     "tls": "reference only: the cost of wss:// against ws://",
     "links": "reference: a silent link noticed in seconds; frame age flat over a 2 Mbit/s link",
+    "pointcloud": "4 MiB PointCloud2 at 10 Hz to 5 clients: all delivered; bridge CPU, RSS",
     "record": "camera 30 Hz + IMU 200 Hz for 60 s recorded without a loss; recorder CPU",
     "action_ros_server": "reference: goal round trip p50/p99, feedback msg/s at >= 99 %",
     "action_client_served": "reference: goal round trip p50/p99, feedback msg/s at >= 99 %",
@@ -222,14 +229,25 @@ class Sink:
         self.t_last = time.monotonic()
 
     def feed(self, frame: str | bytes) -> None:
-        """Count one frame."""
+        """Count one frame (JSON text, or a cbor-raw binary frame: CDR of a String)."""
         self.frames += 1
         self.t_last = time.monotonic()
-        op = json.loads(frame)
-        msg = op.get("msg")
-        if op.get("op") != "publish" or not isinstance(msg, dict):
-            return
-        seq = int(msg["data"].split(" ", 1)[0])
+        if isinstance(frame, bytes):
+            import cbor2
+
+            op = cbor2.loads(frame)
+            cdr = op.get("msg", {}).get("bytes") if op.get("op") == "publish" else None
+            if not isinstance(cdr, bytes):
+                return
+            # encapsulation (4), string length (4) with its NUL, the decimal sequence number
+            text = cdr[8:8 + int.from_bytes(cdr[4:8], "little") - 1]
+            seq = int(text.split(b" ", 1)[0])
+        else:
+            op = json.loads(frame)
+            msg = op.get("msg")
+            if op.get("op") != "publish" or not isinstance(msg, dict):
+                return
+            seq = int(msg["data"].split(" ", 1)[0])
         if 0 <= seq < len(self.seen) and not self.seen[seq]:
             self.seen[seq] = 1
             self.unique += 1
@@ -250,14 +268,15 @@ def _rates(ctx: Ctx, full: list[int], quick: list[int]) -> list[int]:
     return quick if ctx.quick else full
 
 
-async def ros_to_client(ctx: Ctx) -> dict[str, Any]:
-    """Step search: highest ROS -> client rate of small strings with >= 99 % delivered."""
+async def ros_to_client(ctx: Ctx, compression: str = "none") -> dict[str, Any]:
+    """Step search: highest ROS -> client rate of small strings with >= 99 % delivered
+    (``compression``: as the client subscribes; ``cbor-raw`` climbs to 40,000 msg/s)."""
     topic = "/bench/r2c"
     bridge = await ctx.bridge().start()
     ws = await ws_open(bridge.url)
     queue_length = 1000
     await send_op(ws, {"op": "subscribe", "topic": topic, "type": "std_msgs/msg/String",
-                       "queue_length": queue_length, "id": "r2c"})
+                       "queue_length": queue_length, "id": "r2c", "compression": compression})
     current: list[Sink] = [Sink(1)]
 
     async def reader() -> None:
@@ -271,8 +290,12 @@ async def ros_to_client(ctx: Ctx) -> dict[str, Any]:
     profile: dict[str, Any] | None = None
     d = ctx.duration
     try:
-        for rate in _rates(ctx, [2000, 4000, 6000, 8000, 10000, 12000, 15000, 20000],
-                           [2000, 5000, 8000, 10000, 12000, 15000]):
+        ladder = (_rates(ctx, [2000, 4000, 6000, 8000, 10000, 12000, 15000, 20000],
+                         [2000, 5000, 8000, 10000, 12000, 15000])
+                  if compression == "none" else
+                  _rates(ctx, [5000, 10000, 15000, 20000, 25000, 30000, 35000, 40000],
+                         [5000, 10000, 15000, 20000, 30000, 40000]))
+        for rate in ladder:
             current[0] = sink = Sink(int(rate * d * 1.5) + 100)
             cpu0 = cpu_seconds(bridge.pid)
             pub = await ctx.ros("publish", "--topic", topic, "--rate", str(rate), "--duration",
@@ -633,6 +656,7 @@ SCENARIOS: dict[str, Callable[[Ctx], Awaitable[dict[str, Any]]]] = {
     "rclpy_ceiling": rclpy_ceiling,
     "idle_cpu": idle_cpu,
     "ros_to_client": ros_to_client,
+    "ros_to_client_raw": lambda ctx: ros_to_client(ctx, "cbor-raw"),
     "client_to_ros": client_to_ros,
     "service": service,
     "latency": latency,
@@ -641,6 +665,7 @@ SCENARIOS: dict[str, Callable[[Ctx], Awaitable[dict[str, Any]]]] = {
     "tls": lambda ctx: tls_scenario(ctx, ros_to_client, service, image),
     "links": links,
     "record": record,
+    "pointcloud": pointcloud,
     "action_ros_server": action_ros_server,
     "action_client_served": action_client_served,
 }
@@ -652,7 +677,7 @@ def _headline(name: str, r: dict[str, Any]) -> Any:
     if name == "rclpy_ceiling":
         return {"publish_rate": r["max"]["publish_rate"], "receive_rate": r["max"]["receive_rate"],
                 "image_fps": r["image_640x480"]["receive_fps"]}
-    if name in ("ros_to_client", "client_to_ros"):
+    if name in ("ros_to_client", "ros_to_client_raw", "client_to_ros"):
         return r["best_rate_99pct"]
     if name == "service":
         return {"p50_ms": r["p50_ms"], "calls_per_s": r["calls_per_s"]}
@@ -667,6 +692,9 @@ def _headline(name: str, r: dict[str, Any]) -> Any:
     if name.startswith("action_"):
         return {"p50_ms": r["round_trip"]["p50_ms"], "p99_ms": r["round_trip"]["p99_ms"],
                 "feedback_rate_99pct": r["feedback_best_rate_99pct"]}
+    if name == "pointcloud":
+        return {c: {"all_delivered": r[c]["all_delivered"], "cpu_pct": r[c]["bridge_cpu_pct"],
+                    "rss_peak_mb": r[c]["bridge_rss_mb"]["peak"]} for c in ("cbor", "cbor-raw")}
     if name == "record":
         return {"recorded_pct": {t: v["recorded_pct"] for t, v in r["camera_imu"]["topics"].items()},
                 "recorder_cpu_pct": r["camera_imu"]["recorder_cpu_pct"],
