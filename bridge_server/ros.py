@@ -14,9 +14,8 @@ Sharing
 * :class:`SharedSubscription`: one rclpy subscription per topic for every
   client, taking messages serialized (``raw=True``). Each message becomes one
   :class:`Incoming`: ``cbor-raw`` subscribers get its CDR bytes as they came; it
-  is deserialized at most once, when a JSON or CBOR subscriber needs it, and
-  converted at most once per encoding; every subscribed session is handed the
-  same ``str``/``bytes``.
+  is deserialized only to build its JSON or CBOR encoding, each at most once;
+  every subscribed session is handed the same ``str``/``bytes``.
 * :class:`SharedPublisher`: one rclpy publisher per (topic, type, latch),
   reference counted across sessions.
 * Service clients are cached per (service, type).
@@ -111,19 +110,17 @@ class Incoming:
     """One ROS message received on a topic, encoded lazily and once per encoding.
 
     It arrives serialized (CDR, ``data``): ``cbor-raw`` subscribers get those bytes as they
-    came, and the message is deserialized at most once, the first time a JSON or CBOR
-    subscriber needs it.
+    came, and the message is deserialized only to build the JSON or the CBOR encoding, each
+    at most once (a topic with only cbor-raw subscribers is never deserialized).
     """
 
-    __slots__ = ("_cbor", "_cbor_raw", "_json", "_msg", "_msg_json", "conv", "data", "stamp_ns",
-                 "topic")
+    __slots__ = ("_cbor", "_cbor_raw", "_json", "_msg_json", "conv", "data", "stamp_ns", "topic")
 
     def __init__(self, topic: str, data: bytes, conv: convert.Converter, stamp_ns: int) -> None:
         self.topic = topic
         self.data = data
         self.conv = conv
         self.stamp_ns = stamp_ns
-        self._msg: Any = None
         self._json: str | None = None
         self._msg_json: str | None = None
         self._cbor: bytes | None = None
@@ -131,11 +128,10 @@ class Incoming:
 
     @property
     def msg(self) -> Any:
-        """The rclpy message, deserialized from :attr:`data` on first use."""
-        msg = self._msg
-        if msg is None:
-            msg = self._msg = deserialize_message(self.data, self.conv.msg_cls)
-        return msg
+        """The rclpy message, deserialized from :attr:`data` (anew on each use: the JSON and
+        CBOR encodings are each built once and kept, the object is not, so a queued
+        message costs its bytes and its encodings, not a third copy)."""
+        return deserialize_message(self.data, self.conv.msg_cls)
 
     def json_text(self, name: str | None = None) -> str:
         """The whole ``publish`` op as JSON text (built on first use, then shared).
