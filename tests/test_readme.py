@@ -16,7 +16,8 @@ ACTIONS = next(code for kind, code in MARKED if kind == "bridge" and "send_goal"
 
 
 def test_readme_has_its_examples() -> None:
-    """The README carries its tested examples: asyncio, MockRos and the blocking client."""
+    """The README carries its tested examples: asyncio, MockRos, the blocking client and
+    recording."""
     assert set(BLOCKS) == {"bag", "bridge", "mock", "sync"}
 
 

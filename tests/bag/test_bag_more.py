@@ -85,8 +85,8 @@ async def test_a_reconnect_goes_on_in_the_same_file_and_says_how_long_the_gap_wa
 async def test_a_recording_split_by_size_loses_nothing_between_files(
     bridge: BridgeProcess, ros_node: Any, topic: str, tmp_path: Path
 ) -> None:
-    """``split_size``: run.mcap, run_1.mcap, ... each a complete file of its own; together
-    they hold every image once, in order, each file's messages under the limit plus one."""
+    """``split_size``: run.mcap, run_1.mcap, ... each a complete file of its own, closed once
+    it holds the limit; together they hold every image once, in order."""
     from sensor_msgs.msg import Image as RosImage
 
     pub = ros_node.create_publisher(RosImage, topic, 100)
@@ -140,7 +140,9 @@ def test_the_blocking_client_records_and_plays(bridge: BridgeProcess, ros_node: 
 
         ros_node.create_subscription(Int32, topic, on_back, 100)
         with ros.advertise(topic, "std_msgs/msg/Int32") as warm:  # play shares it, matched
+            deadline = time.monotonic() + 30
             while not heard:
+                assert time.monotonic() < deadline, "rclpy never heard the bridge's publisher"
                 warm.publish({"data": -1})
                 time.sleep(0.02)  # discovery has no event to await
             stats = sync_bag.play(ros, path, rate=4.0)
