@@ -383,10 +383,12 @@ async def test_a_re_subscription_to_a_latched_topic_hands_out_nothing_twice(
     transient local, and the writer replays its history: every number reaches the client
     exactly once (none twice, none lost)."""
     ws = await ws_connect()
-    await ws.send({"op": "subscribe", "topic": topic, "type": "std_msgs/msg/Int32"})
+    # the replayed history comes as one burst: a queue (and a history) for the whole run
+    await ws.send({"op": "subscribe", "topic": topic, "type": "std_msgs/msg/Int32",
+                   "queue_length": 1000})
     await roundtrip(ws)
     pub = ros_node.create_publisher(
-        Int32, topic, QoSProfile(depth=500, durability=DurabilityPolicy.TRANSIENT_LOCAL))
+        Int32, topic, QoSProfile(depth=1000, durability=DurabilityPolicy.TRANSIENT_LOCAL))
     got: list[int] = []
     sent = 0
 
@@ -398,7 +400,7 @@ async def test_a_re_subscription_to_a_latched_topic_hands_out_nothing_twice(
         assert time.monotonic() < deadline, ("the bridge did not re-subscribe", got)
         pub.publish(Int32(data=sent))
         sent += 1
-        await asyncio.sleep(0.02)  # 50 Hz: the history (500) outlasts the re-subscription
+        await asyncio.sleep(0.02)  # 50 Hz: the history (1,000) outlasts the deadline
         with contextlib.suppress(AssertionError):
             got.append((await ws.expect(op="publish", topic=topic, timeout=0.001))["msg"]["data"])
     for _ in range(10):
