@@ -5,7 +5,9 @@ from __future__ import annotations
 import argparse
 import asyncio
 import contextlib
+import signal
 import sys
+from collections.abc import Iterator
 from typing import Any
 
 from ..exceptions import UsageError
@@ -33,7 +35,7 @@ def _size(text: str) -> int:
 
 
 async def cmd_bag_record(args: argparse.Namespace, out: Out) -> int:
-    """``bag record TOPIC... | --all -o FILE``: until Ctrl+C, ``--duration`` or ``--max``."""
+    """``bag record TOPIC... | --all -o FILE``: until Ctrl+C or SIGTERM, --duration, --max."""
     from ..bag import Recorder
 
     if not args.topics and not args.all:
@@ -58,7 +60,14 @@ async def cmd_bag_record(args: argparse.Namespace, out: Out) -> int:
 
             ticker = asyncio.get_running_loop().create_task(show())
             try:
-                await rec.wait(args.duration)
+                with _stop_signals() as stopped:
+                    waiting = asyncio.ensure_future(rec.wait(args.duration))
+                    signalled = asyncio.ensure_future(stopped.wait())
+                    await asyncio.wait({waiting, signalled}, return_when=asyncio.FIRST_COMPLETED)
+                    for task in (waiting, signalled):
+                        task.cancel()
+                        with contextlib.suppress(asyncio.CancelledError):
+                            await task
             finally:
                 ticker.cancel()
                 with contextlib.suppress(asyncio.CancelledError):
@@ -73,6 +82,31 @@ async def cmd_bag_record(args: argparse.Namespace, out: Out) -> int:
                            "readable up to there)")
         return EXIT_OK
     return await with_session(args, body, reconnect=True)
+
+
+@contextlib.contextmanager
+def _stop_signals() -> Iterator[asyncio.Event]:
+    """An event set by SIGINT or SIGTERM while inside, for a recording to end properly.
+
+    Handled on the loop, not as KeyboardInterrupt: a ``kill`` (systemd, docker stop) finishes
+    the file as Ctrl+C does, and so does a SIGINT to a recorder started in the background
+    (which inherits SIGINT ignored, so Python would never raise KeyboardInterrupt). Where the
+    loop cannot handle signals (Windows), Ctrl+C still ends it through KeyboardInterrupt.
+    """
+    loop = asyncio.get_running_loop()
+    stopped = asyncio.Event()
+    installed: list[signal.Signals] = []
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        try:
+            loop.add_signal_handler(sig, stopped.set)
+        except (NotImplementedError, RuntimeError, ValueError):
+            continue
+        installed.append(sig)
+    try:
+        yield stopped
+    finally:
+        for sig in installed:
+            loop.remove_signal_handler(sig)
 
 
 async def cmd_bag_info(args: argparse.Namespace, out: Out) -> int:

@@ -229,17 +229,28 @@ def _cli(*argv: str) -> list[str]:
     return [sys.executable, "-m", "roslibpy_lite.cli", *argv]
 
 
-@pytest.mark.parametrize("how", ["sigint", "sigkill"])
+_SIGNALS = {"sigint": signal.SIGINT, "sigint-in-background": signal.SIGINT,
+            "sigterm": signal.SIGTERM, "sigkill": signal.SIGKILL}
+
+
+def _as_background_job() -> None:
+    # what `cmd &` in a script does: the child starts with SIGINT ignored
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+@pytest.mark.parametrize("how", list(_SIGNALS))
 async def test_the_cli_recorder_ends_properly_on_ctrl_c_and_a_killed_one_stays_readable(
     bridge: BridgeProcess, ros_node: Any, topic: str, tmp_path: Path, how: str
 ) -> None:
-    """``bag record`` in its own process: Ctrl+C finishes the file (summary and all); a
-    kill -9 leaves it readable up to its last chunk. ``bag info`` describes both."""
+    """``bag record`` in its own process: Ctrl+C finishes the file (summary and all), and so
+    do SIGTERM and a SIGINT to a recorder started as a background job (SIGINT inherited
+    ignored); a kill -9 leaves it readable up to its last chunk. ``bag info`` describes all."""
     path = tmp_path / "cli.mcap"
     pub = ros_node.create_publisher(RosImage, topic, 10)
     proc = subprocess.Popen(_cli("bag", "record", topic, "-o", str(path), "--url", bridge.url),
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            env={**os.environ, "PYTHONUNBUFFERED": "1"})
+                            env={**os.environ, "PYTHONUNBUFFERED": "1"},
+                            preexec_fn=_as_background_job if how.endswith("background") else None)
     images: dict[str, bytes] = {}
     try:
         def publish() -> None:
@@ -251,7 +262,7 @@ async def test_the_cli_recorder_ends_properly_on_ctrl_c_and_a_killed_one_stays_r
         # 256 KiB chunks: a few dozen 9 KiB images make the first one reach the disk
         await _until(lambda: path.exists() and path.stat().st_size > 300_000, publish,
                      "the recording's first chunks")
-        proc.send_signal(signal.SIGINT if how == "sigint" else signal.SIGKILL)
+        proc.send_signal(_SIGNALS[how])
         out, err = proc.communicate(timeout=30)
     finally:
         if proc.poll() is None:
@@ -259,8 +270,8 @@ async def test_the_cli_recorder_ends_properly_on_ctrl_c_and_a_killed_one_stays_r
             proc.communicate()
     about = info(path)
     assert about.messages > 0 and about.topics[0].topic == topic
-    assert about.complete == (how == "sigint"), (out, err)
-    if how == "sigint":
+    assert about.complete == (how != "sigkill"), (out, err)
+    if how != "sigkill":
         assert proc.returncode == 0 and "recorded" in out, (out, err)
         assert about.messages == len(list(read(path)))
     frames = [m.decode() for m in read(path)]
