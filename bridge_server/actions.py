@@ -384,9 +384,13 @@ class SessionActions:
             return
         if goal.sent is not None:
             goal.sent.cancel()
+            self.fail(goal, f"the goal timed out after {timeout} s (canceled on the action "
+                      "server)")
+            return
         if goal.task is not None:
             goal.task.cancel()
-        self.fail(goal, f"the goal timed out after {timeout} s (canceled on the action server)")
+        self.fail(goal, f"the goal timed out after {timeout} s, before an action server was "
+                  "ready for it (it was never sent)")
 
     def finish(self, goal: _Goal, outcome: str) -> None:
         """Forget a goal (its result was sent, or is about to be) and count its ``outcome``."""

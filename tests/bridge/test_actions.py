@@ -198,14 +198,31 @@ async def test_sender_disconnect_cancels_goal(ws_connect: Any, ros_node: Any, to
 
 
 async def test_goal_timeout(make_bridge: Any, ws_connect: Any, ros_node: Any, topic: str):
-    """With --goal-timeout, a goal running longer fails with a text and is canceled on ROS."""
+    """With --goal-timeout, a goal running longer fails with a text and is canceled on ROS.
+
+    The 0.5 s run from the op's arrival: a loaded machine can take longer than that to make
+    a new bridge's action client ready, and such a goal ends never sent, saying so. Goals
+    go until one reached the server; that one is canceled there.
+    """
     bridge = make_bridge("--goal-timeout", "0.5")
     server = FibServer(ros_node, topic, slow=True)
     ws = await ws_connect(bridge.url)
+    # an action nobody serves: its goal is never sent, and the text says so
+    await send_goal(ws, topic + "_unserved", {"order": 1}, "none")
+    result = await ws.expect(op="action_result", id="none")
+    assert result["result"] is False and result["values"] == (
+        f"{topic}_unserved: the goal timed out after 0.5 s, before an action server was ready "
+        "for it (it was never sent)")
     await bridge_sees_action(ws, topic)
-    await send_goal(ws, topic, {"order": 1}, "t1")
-    result = await ws.expect(op="action_result", id="t1")
-    assert result["result"] is False and "timed out after 0.5 s" in result["values"]
+    for n in range(1, 21):
+        await send_goal(ws, topic, {"order": 1}, f"t{n}")
+        result = await ws.expect(op="action_result", id=f"t{n}")
+        assert result["result"] is False and "timed out after 0.5 s" in result["values"]
+        assert ("canceled on the action server" in result["values"]) != (
+            "it was never sent" in result["values"]), result
+        if server.goals:
+            break
+    assert server.goals, "no goal reached the action server"
     got = await asyncio.get_running_loop().run_in_executor(
         None, server.cancel_requests.wait, 10.0
     )
