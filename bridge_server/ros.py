@@ -103,8 +103,14 @@ SPIN_ERROR_LOG_INTERVAL = 10.0
 
 
 
-SETTLE_S = 0.5
-"""Seconds a newly matched service client waits before its first request (see settled)."""
+SETTLE_S = 1.2
+"""Seconds a newly matched service client waits before its first request (see settled).
+
+The server drops its answer if it has not matched our response reader within 100 ms of the
+request (rmw_fastrtps: the response writer's max blocking time). Discovery normally takes
+milliseconds, but one lost discovery sample is repaired only on Fast DDS's next discovery
+heartbeat (1 s, answered after 100 ms): 0.5 s did not cover that, and CI lost first answers
+that way. Paid once per service and type for the bridge's life (clients are kept)."""
 
 class Incoming:
     """One ROS message received on a topic, encoded lazily and once per encoding.

@@ -8,8 +8,6 @@ cd "$ROOT"
 export ROS_AUTOMATIC_DISCOVERY_RANGE="${ROS_AUTOMATIC_DISCOVERY_RANGE:-LOCALHOST}"
 # One DDS domain per run, so concurrent runs on one machine do not meet.
 export ROS_DOMAIN_ID="${ROS_DOMAIN_ID:-$(( $$ % 100 + 1 ))}"
-# Larger DDS socket buffers for the large-message tests (see the file's comment).
-export FASTRTPS_DEFAULT_PROFILES_FILE="${FASTRTPS_DEFAULT_PROFILES_FILE:-$ROOT/tests/fastdds.xml}"
 echo "[test] ruff"
 ruff check roslibpy_lite bridge_server msgs examples bench tests docs/_hooks
 echo "[test] mypy --strict"
