@@ -101,8 +101,6 @@ handed out when the writers replay it."""
 SPIN_ERROR_LOG_INTERVAL = 10.0
 """Seconds between two logged failures of an executor round (the others are counted)."""
 
-
-
 SETTLE_S = 1.2
 """Seconds a newly matched service client waits before its first request (see settled).
 
@@ -111,6 +109,7 @@ request (rmw_fastrtps: the response writer's max blocking time). Discovery norma
 milliseconds, but one lost discovery sample is repaired only on Fast DDS's next discovery
 heartbeat (1 s, answered after 100 ms): 0.5 s did not cover that, and CI lost first answers
 that way. Paid once per service and type for the bridge's life (clients are kept)."""
+
 
 class Incoming:
     """One ROS message received on a topic, encoded lazily and once per encoding.

@@ -23,6 +23,10 @@ import pytest
 
 os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
 os.environ.setdefault("ROS_DOMAIN_ID", str(os.getpid() % 100 + 1))
+# a 5 s participant lease: bridges the tests kill are forgotten in seconds (see the file)
+os.environ.setdefault(
+    "FASTRTPS_DEFAULT_PROFILES_FILE", os.path.join(os.path.dirname(__file__), "dds_profile.xml")
+)
 
 from tests.helpers import BridgeProcess, WireClient, open_wire, settle_executor, spin_executor
 
@@ -64,7 +68,9 @@ def make_bridge() -> Iterator[Callable[..., BridgeProcess]]:
 
     yield factory
     for proc in made:
-        proc.kill()
+        # a graceful stop: a killed bridge's participant lingers in the others' view (its
+        # lease), where the next test's bridge may take over its ports
+        proc.stop()
 
 
 class _RosRuntime:
