@@ -3,7 +3,8 @@
 Sub-commands (each prints JSON lines on stdout: ``{"event": ...}``):
 
 ``publish``    publish numbered messages in a tight timed loop
-               (``--kind string|stamp|image|imu``, ``--rate`` msg/s, 0 = as fast as it can)
+               (``--kind string|stamp|image|imu``, ``--rate`` msg/s, 0 = as fast as it can;
+               several ``--topic``: each message goes to the next topic in turn)
 ``subscribe``  count numbered messages on a topic (std_msgs/String, raw CDR, no deserialising)
 ``serve``      serve ``std_srvs/srv/SetBool`` (answers ``success = data``) until stdin closes
 
@@ -77,7 +78,7 @@ def cmd_publish(args: argparse.Namespace) -> int:
         msg.height, msg.width, msg.encoding, msg.step = 480, 640, "rgb8", 640 * 3
         size = 640 * 480 * 3
         msg.data = os.urandom(size) if args.noise else bytes(range(256)) * (size // 256)
-        pub = node.create_publisher(Image, args.topic, _qos(args))
+        msg_type: Any = Image
     elif args.kind == "cloud":
         from sensor_msgs.msg import PointCloud2, PointField
 
@@ -87,26 +88,29 @@ def cmd_publish(args: argparse.Namespace) -> int:
                       for k, n in enumerate(("x", "y", "z", "intensity"))]
         msg.row_step = msg.width * msg.point_step
         msg.data = os.urandom(msg.row_step)
-        pub = node.create_publisher(PointCloud2, args.topic, _qos(args))
+        msg_type = PointCloud2
     elif args.kind == "imu":
         from sensor_msgs.msg import Imu
 
         msg = Imu()
         msg.linear_acceleration.z = 9.81
-        pub = node.create_publisher(Imu, args.topic, _qos(args))
+        msg_type = Imu
     else:
         from std_msgs.msg import String
 
         msg = String()
-        pub = node.create_publisher(String, args.topic, _qos(args))
+        msg_type = String
+    # several --topic: the messages go to each in turn (side-by-side latency runs)
+    pubs = [node.create_publisher(msg_type, topic, _qos(args)) for topic in args.topic]
     if args.wait_subs and not _wait(
-        lambda: pub.get_subscription_count() >= args.wait_subs, args.match_timeout
+        lambda: all(p.get_subscription_count() >= args.wait_subs for p in pubs),
+        args.match_timeout,
     ):
-        emit("error", error=f"no {args.wait_subs} subscriber(s) on {args.topic}")
+        emit("error", error=f"no {args.wait_subs} subscriber(s) on {', '.join(args.topic)}")
         node.destroy_node()  # type: ignore[no-untyped-call]
         rclpy.shutdown()
         return 1
-    emit("matched", subscribers=pub.get_subscription_count())
+    emit("matched", subscribers=sum(p.get_subscription_count() for p in pubs))
     if args.settle > 0:
         time.sleep(args.settle)
     rate = args.rate
@@ -116,7 +120,8 @@ def cmd_publish(args: argparse.Namespace) -> int:
     stop_ns = time.monotonic_ns() + int(args.duration * 1e9)
     t0 = time.monotonic_ns()
     i = 0
-    publish = pub.publish
+    publishes = [p.publish for p in pubs]
+    n_pubs = len(pubs)
     mono = time.monotonic_ns
     while True:
         now = mono()
@@ -135,7 +140,7 @@ def cmd_publish(args: argparse.Namespace) -> int:
             msg.data = f"{i} {mono()}"
         else:  # image, imu, cloud: sequence and send time (monotonic ns)
             msg.header.frame_id = f"{i} {mono()}"
-        publish(msg)
+        publishes[i % n_pubs](msg)
         i += 1
     elapsed = (mono() - t0) / 1e9
     emit("done", sent=i, elapsed=elapsed, rate=i / elapsed if elapsed else 0.0)
@@ -308,7 +313,8 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         s.add_argument("--latched", action="store_true")
         s.add_argument("--executor", choices=("single", "events"), default="events")
         if name == "publish":
-            s.add_argument("--topic", required=True)
+            s.add_argument("--topic", required=True, action="append",
+                           help="repeatable: messages go to each topic in turn")
             s.add_argument("--kind", choices=("string", "stamp", "image", "imu", "cloud"),
                            default="string")
             s.add_argument("--rate", type=float, default=0.0, help="msg/s, 0: as fast as possible")

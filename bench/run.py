@@ -24,6 +24,8 @@ Scenarios (targets; rosbridge_suite's figures in brackets):
   sequential calls (target <= 1 ms) and calls/s with 16 in flight (target
   >= 1,000) [3.7 ms; 74 calls/s].
 - ``latency``: one-way ROS -> client latency at 200 Hz, p50/p99 (target p99 <= 1 ms) [1.6 ms].
+- ``latency_side_by_side``: the same for our bridge and rosbridge_server_rs in one run,
+  one publisher taking turns between their topics (and a plain rclpy subscriber's).
 - ``image``: 640x480 rgb8 sensor_msgs/Image to one client, frames/s as JSON
   (target 60) and as CBOR (target 400) [14; 360].
 - ``idle_cpu``: the bridge's CPU with one connected client (target < 1 % of a core) [~5 %].
@@ -78,6 +80,7 @@ TARGETS: dict[str, str] = {
     "client_to_ros": ">= 10,000 msg/s at >= 99 % [rosbridge 5,000]",
     "service": "p50 <= 1 ms, >= 1,000 calls/s with 16 in flight [rosbridge 3.7 ms, 74/s]",
     "latency": "p99 <= 1 ms at 200 Hz [rosbridge 1.6 ms]",
+    "latency_side_by_side": "p50 and p99 at or below rosbridge_server_rs's, on one stream",
     "image": "JSON >= 60 frames/s, CBOR >= 400 frames/s [rosbridge 14; 360]",
     "idle_cpu": "< 1 % of a core [rosbridge ~5 %]",
     "memory_stall": "bounded [rosbridge +400 MB in 6 s]",
@@ -464,6 +467,28 @@ async def service(ctx: Ctx) -> dict[str, Any]:
     }
 
 
+async def _read_stamped(ws: ClientConnection, lat: list[float], skip: int) -> None:
+    """Collect the one-way latency (ms) of every stamped message with a number >= ``skip``."""
+    with contextlib.suppress(Exception):
+        async for frame in ws:
+            now = time.monotonic_ns()
+            op = json.loads(frame)
+            if op.get("op") == "publish":
+                seq, stamp = op["msg"]["data"].split(" ")
+                if int(seq) >= skip:  # skip warm-up
+                    lat.append((now - int(stamp)) / 1e6)
+
+
+def _quantiles_ms(lat: list[float]) -> dict[str, Any]:
+    return {
+        "measured": len(lat),
+        "p50_ms": round(percentile(lat, 0.5), 3),
+        "p90_ms": round(percentile(lat, 0.9), 3),
+        "p99_ms": round(percentile(lat, 0.99), 3),
+        "max_ms": round(max(lat), 3) if lat else None,
+    }
+
+
 async def latency(ctx: Ctx) -> dict[str, Any]:
     """One-way ROS -> client latency at 200 Hz (monotonic stamp in the message, same machine)."""
     topic = "/bench/latency"
@@ -471,18 +496,7 @@ async def latency(ctx: Ctx) -> dict[str, Any]:
     ws = await ws_open(bridge.url)
     await send_op(ws, {"op": "subscribe", "topic": topic, "type": "std_msgs/msg/String"})
     lat: list[float] = []
-
-    async def reader() -> None:
-        with contextlib.suppress(Exception):
-            async for frame in ws:
-                now = time.monotonic_ns()
-                op = json.loads(frame)
-                if op.get("op") == "publish":
-                    seq, stamp = op["msg"]["data"].split(" ")
-                    if int(seq) >= 20:  # skip warm-up
-                        lat.append((now - int(stamp)) / 1e6)
-
-    rtask = asyncio.create_task(reader())
+    rtask = asyncio.create_task(_read_stamped(ws, lat, 20))
     # the same stream straight to an rclpy subscriber process first: the ROS side's own share
     base = await ctx.ros("subscribe", "--topic", "/bench/latency_base", "--stamped", "--idle",
                          "1.0", "--duration", str(ctx.duration + 20)).start()
@@ -508,11 +522,63 @@ async def latency(ctx: Ctx) -> dict[str, Any]:
     return {
         "rate_hz": 200,
         "sent": done["sent"],
-        "measured": len(lat),
-        "p50_ms": round(percentile(lat, 0.5), 3),
-        "p90_ms": round(percentile(lat, 0.9), 3),
-        "p99_ms": round(percentile(lat, 0.99), 3),
-        "max_ms": round(max(lat), 3) if lat else None,
+        **_quantiles_ms(lat),
+        "rclpy_to_rclpy_ms": baseline,
+    }
+
+
+async def latency_side_by_side(ctx: Ctx) -> dict[str, Any]:
+    """``latency`` for our bridge and rosbridge_server_rs in one run, on one stream.
+
+    One rclpy publisher sends each stamped message to the next of their topics in turn
+    (and of a plain rclpy subscriber's), 200 Hz to each: whatever state the machine is in
+    (single-server runs move by 2x from one run to the next here) is the same for all of
+    them. With ``--bridge-root`` that checkout runs beside this one as a third server.
+    """
+    servers = {"ours": Bridge(ctx.domain, ctx.bridge_args),
+               "rosbridge_server_rs": Bridge(ctx.domain, peer="rs")}
+    if ctx.bridge_root:
+        servers[f"ours@{ctx.bridge_root}"] = Bridge(ctx.domain, ctx.bridge_args, ctx.bridge_root)
+    topics = {name: f"/bench/latency_{k}" for k, name in enumerate(servers)}
+    lats: dict[str, list[float]] = {name: [] for name in servers}
+    skip = 20 * (len(servers) + 1)  # the first 20 messages of each topic warm up
+    sockets: list[ClientConnection] = []
+    tasks: list[asyncio.Task[None]] = []
+    base = None
+    try:
+        for name, bridge in servers.items():
+            await bridge.start()
+            ws = await ws_open(bridge.url)
+            sockets.append(ws)
+            await send_op(ws, {"op": "subscribe", "topic": topics[name],
+                               "type": "std_msgs/msg/String"})
+            tasks.append(asyncio.create_task(_read_stamped(ws, lats[name], skip)))
+        duration = ctx.duration * 3
+        base = await ctx.ros("subscribe", "--topic", "/bench/latency_base", "--stamped", "--idle",
+                             "1.0", "--duration", str(duration + 20)).start()
+        topic_args = [a for t in (*topics.values(), "/bench/latency_base") for a in ("--topic", t)]
+        pub = await ctx.ros("publish", *topic_args, "--kind", "stamp",
+                            "--rate", str(200 * (len(servers) + 1)), "--duration", str(duration),
+                            "--settle", "0.3").start()
+        done = await pub.event("done", duration + 30)
+        await asyncio.sleep(0.2)
+        await pub.close()
+        baseline = (await base.event("done", 30)).get("latency_ms")
+    finally:
+        if base is not None:
+            await base.close()
+        for ws in sockets:
+            await ws.close()
+        for task in tasks:
+            task.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await task
+        for bridge in servers.values():
+            await bridge.stop()
+    return {
+        "rate_hz_each": 200,
+        "sent": done["sent"],
+        **{name: _quantiles_ms(lat) for name, lat in lats.items()},
         "rclpy_to_rclpy_ms": baseline,
     }
 
@@ -660,6 +726,7 @@ SCENARIOS: dict[str, Callable[[Ctx], Awaitable[dict[str, Any]]]] = {
     "client_to_ros": client_to_ros,
     "service": service,
     "latency": latency,
+    "latency_side_by_side": latency_side_by_side,
     "image": image,
     "memory_stall": memory_stall,
     "tls": lambda ctx: tls_scenario(ctx, ros_to_client, service, image),
@@ -683,6 +750,9 @@ def _headline(name: str, r: dict[str, Any]) -> Any:
         return {"p50_ms": r["p50_ms"], "calls_per_s": r["calls_per_s"]}
     if name == "latency":
         return {"p50_ms": r["p50_ms"], "p99_ms": r["p99_ms"]}
+    if name == "latency_side_by_side":
+        return {k: {"p50_ms": v["p50_ms"], "p99_ms": v["p99_ms"]}
+                for k, v in r.items() if isinstance(v, dict) and "p50_ms" in v}
     if name == "image":
         return {k: r[k]["frames_per_s"] for k in ("json", "cbor") if k in r}
     if name == "idle_cpu":

@@ -97,6 +97,7 @@ import cbor2
 import numpy
 from rosidl_parser import definition as idl
 
+from bridge_server import cdr_json
 from bridge_server.types import BridgeError, type_name_of
 
 __all__ = [
@@ -718,6 +719,9 @@ class Converter:
             _Field(n, st, msg_cls) for n, st in zip(names, msg_cls.SLOT_TYPES, strict=True)
         ]
         self.fields: tuple[str, ...] = tuple(names)
+        self.json_from_cdr: cdr_json.JsonFromCdr | None = None
+        """CDR bytes -> the same text as :meth:`to_json` gives, without deserializing
+        (:mod:`bridge_server.cdr_json`); ``None`` when msgs does not have the type's layout."""
 
     def to_json(self, ros_msg: Any) -> str:
         """Compact JSON text of ``ros_msg`` (the msg object only, no op envelope)."""
@@ -981,6 +985,7 @@ def converter_for(msg_cls: type[Any]) -> Converter:
         if conv is None:
             conv = Converter(msg_cls)
             conv._compile()
+            conv.json_from_cdr = cdr_json.encoder_for(msg_cls, conv.type_name)
             _converters[msg_cls] = conv
     return conv
 

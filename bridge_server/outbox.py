@@ -17,7 +17,9 @@ inside that interval are summed into the next report. ``set_level`` ``error``
 silences these warnings.
 
 The writer gathers whatever is ready (up to :data:`BATCH_FRAMES` frames or
-:data:`BATCH_BYTES` bytes) and writes it with one socket write.
+:data:`BATCH_BYTES` bytes) and writes it with one socket write. When it is
+idle, the first message or reply queued is written at once, without waiting
+for the writer's turn of the loop (:meth:`Outbox._kick`).
 
 Merged subscriptions
 --------------------
@@ -41,6 +43,7 @@ from collections.abc import Callable
 from typing import TYPE_CHECKING
 
 from websockets.exceptions import ConnectionClosed
+from websockets.protocol import State
 
 from roslibpy_lite import ops
 from roslibpy_lite.protocol import split_fragments
@@ -168,6 +171,7 @@ class Outbox:
         self.control_dropped = 0
         self.closed = False
         self.wake = asyncio.Event()
+        self.idle = False  # the writer waits for something to write (see _kick)
         self.frag_ids = itertools.count()
         self.sent: SentFrames | None = None  # kept until confirmed, in a resumable session
         self.ack: str | None = None  # a session_ack to write first (not counted, not kept)
@@ -189,7 +193,7 @@ class Outbox:
                     self.control_dropped,
                 )
         control.append(text)
-        self.wake.set()
+        self._kick()
 
     def push(self, sub: Subscription, inc: Incoming) -> None:
         """Queue one message of ``sub``, dropping its oldest when full (or when the client's
@@ -209,7 +213,7 @@ class Outbox:
             self.order.append(sub)
             self.queued += 1
         q.append(inc)
-        self.wake.set()
+        self._kick()
 
     def send_ack(self, text: str) -> None:
         """Write this ``session_ack`` ahead of everything (it replaces one not yet written)."""
@@ -260,6 +264,33 @@ class Outbox:
 
     # -- writing -------------------------------------------------------------------------------
 
+    def _kick(self) -> None:
+        """Something was queued: wake the writer, and if it was parked with nothing in
+        flight, write what is queued right now.
+
+        Waking the writer costs a turn of the loop before anything is written: that was
+        a lone message's or reply's largest share of its time in the bridge. What else is
+        queued in the same turn waits for the writer, which gathers it into one write.
+        """
+        if self.idle:
+            self.idle = False
+            ws = self.ws
+            transport = getattr(ws, "transport", None)
+            if (
+                transport is not None
+                and hasattr(ws, "send_context")
+                and ws.protocol.state is State.OPEN
+                and not transport.is_closing()
+                and not transport.get_write_buffer_size()
+            ):
+                try:
+                    self._write(ws, self._take())
+                except Exception:
+                    log.exception("session %d: a write failed; closing the connection", self.sid)
+                    self.closed = True
+                    self.loop.create_task(ws.close(1011, "internal error"))
+        self.wake.set()
+
     async def writer(self) -> None:
         """Write what is queued until the outbox is closed (run as the client's task)."""
         ws = self.ws
@@ -267,20 +298,18 @@ class Outbox:
         batched = hasattr(ws, "send_context") and hasattr(ws, "protocol")
         try:
             while not self.closed:
-                frames = self._collect()
-                sent = self.sent
-                if sent is not None:  # kept until the client confirms them
-                    for frame in frames:
-                        sent.add(frame)
-                    if self.ack is not None:
-                        frames.insert(0, self.ack)
-                        self.ack = None
+                frames = self._take()
                 if not frames:
                     wake.clear()
-                    await wake.wait()
+                    self.idle = True  # _kick may write for the writer until it runs again
+                    try:
+                        await wake.wait()
+                    finally:
+                        self.idle = False
                     continue
                 if batched:
-                    await self._send_batch(frames)
+                    async with ws.send_context():
+                        self._write(ws, frames)
                 else:  # pragma: no cover - websockets without send_context
                     for frame in frames:
                         await ws.send(frame)
@@ -289,6 +318,19 @@ class Outbox:
         except Exception:
             log.exception("session %d: the writer failed; closing the connection", self.sid)
             await ws.close(1011, "internal error")
+
+    def _take(self) -> list[str | bytes]:
+        """The frames to write next (:meth:`_collect`), kept in a resumable session until the
+        client confirms them, after a ``session_ack`` to send first."""
+        frames = self._collect()
+        sent = self.sent
+        if sent is not None:  # kept until the client confirms them
+            for frame in frames:
+                sent.add(frame)
+            if self.ack is not None:
+                frames.insert(0, self.ack)
+                self.ack = None
+        return frames
 
     def _collect(self) -> list[str | bytes]:
         """Take the frames ready to go: replies first, then messages in arrival order."""
@@ -319,29 +361,31 @@ class Outbox:
             sub.sent_bytes += size - before
         return frames
 
-    async def _send_batch(self, frames: list[str | bytes]) -> None:
+    @staticmethod
+    def _write(ws: ServerConnection, frames: list[str | bytes]) -> None:
         """Write several frames with one socket write (one system call, not one per frame).
 
-        Uses websockets' own send context, so its state checks, flow control
-        (``write_limit``) and closing rules apply as for ``send``.
+        The writer calls it inside websockets' own send context, so its state checks,
+        flow control (``write_limit``) and closing rules apply as for ``send``;
+        :meth:`_kick` only when the connection is open and nothing waits to be written.
         """
-        ws = self.ws
-        async with ws.send_context():
-            protocol = ws.protocol
-            for frame in frames:
-                if isinstance(frame, str):
-                    protocol.send_text(frame.encode())
-                else:
-                    protocol.send_binary(frame)
-            chunks = protocol.data_to_send()
-            if all(chunks):
-                ws.transport.write(b"".join(chunks))
-            else:  # an end-of-stream marker: let websockets handle these chunks itself
-                for chunk in chunks:
-                    if chunk:
-                        ws.transport.write(chunk)
-                    elif ws.transport.can_write_eof():
-                        ws.transport.write_eof()
+        if not frames:
+            return
+        protocol = ws.protocol
+        for frame in frames:
+            if isinstance(frame, str):
+                protocol.send_text(frame.encode())
+            else:
+                protocol.send_binary(frame)
+        chunks = protocol.data_to_send()
+        if all(chunks):
+            ws.transport.write(b"".join(chunks))
+        else:  # an end-of-stream marker: let websockets handle these chunks itself
+            for chunk in chunks:
+                if chunk:
+                    ws.transport.write(chunk)
+                elif ws.transport.can_write_eof():
+                    ws.transport.write_eof()
 
     def _frames(self, sub: Subscription, inc: Incoming) -> list[str | bytes]:
         comp = sub.compression

@@ -1,9 +1,11 @@
-"""The ROS side of the bridge: the only module (with convert/types) that imports rclpy.
+"""The ROS side of the bridge (rclpy is imported only here, in ros_*, convert and types).
 
 One rclpy node lives in its own context; an executor spins it in a thread of
-its own. Everything the executor thread learns (a message on a subscribed
-topic, a ROS caller reaching a client-served service, a service response)
-crosses to the asyncio loop with ``loop.call_soon_threadsafe``; hand-offs are
+its own, and the topics the bridge subscribes to are waited on by another
+(:mod:`bridge_server.ros_reader`), away from the executor's per-message work.
+Everything these threads learn (a message on a subscribed topic, a ROS caller
+reaching a client-served service, a service response) crosses to the asyncio
+loop with ``loop.call_soon_threadsafe``; hand-offs are
 batched, so a burst of messages costs one wake-up of the loop, not one each.
 The loop never waits on the executor. The other way, :meth:`RosNode.in_executor`
 runs work on the executor thread (a guard condition), for rclpy APIs that are
@@ -11,8 +13,8 @@ not thread safe (actions: :mod:`bridge_server.ros_actions`).
 
 Sharing
 -------
-* :class:`SharedSubscription`: one rclpy subscription per topic for every
-  client, taking messages serialized (``raw=True``). Each message becomes one
+* :class:`SharedSubscription`: one ROS subscription per topic for every
+  client, taking messages serialized. Each message becomes one
   :class:`Incoming`: ``cbor-raw`` subscribers get its CDR bytes as they came; it
   is deserialized only to build its JSON or CBOR encoding, each at most once;
   every subscribed session is handed the same ``str``/``bytes``.
@@ -47,7 +49,6 @@ import contextlib
 import importlib
 import logging
 import threading
-import time
 from collections import deque
 from collections.abc import Callable
 from typing import Any
@@ -59,6 +60,7 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from rclpy.serialization import deserialize_message
 
 from . import convert
+from .ros_reader import FailureLog, TopicReader
 from .types import resolve_message, resolve_service
 
 __all__ = [
@@ -116,7 +118,8 @@ class Incoming:
 
     It arrives serialized (CDR, ``data``): ``cbor-raw`` subscribers get those bytes as they
     came, and the message is deserialized only to build the JSON or the CBOR encoding, each
-    at most once (a topic with only cbor-raw subscribers is never deserialized).
+    at most once (a topic with only cbor-raw subscribers is never deserialized). The JSON
+    text is made from the bytes directly where it can be (:mod:`bridge_server.cdr_json`).
     """
 
     __slots__ = ("_cbor", "_cbor_raw", "_json", "_msg_json", "conv", "data", "stamp_ns", "topic")
@@ -154,7 +157,12 @@ class Incoming:
     def _msg_text(self) -> str:
         msg_json = self._msg_json
         if msg_json is None:
-            msg_json = self._msg_json = self.conv.to_json(self.msg)
+            fast = self.conv.json_from_cdr
+            if fast is not None:
+                msg_json = fast(self.data)  # None: a NaN, or bytes it cannot decode
+            if msg_json is None:
+                msg_json = self.conv.to_json(self.msg)
+            self._msg_json = msg_json
         return msg_json
 
     def cbor(self, name: str | None = None) -> bytes:
@@ -226,7 +234,7 @@ class SharedSubscription:
         self._sub: Any = None
         self._warned = False
         self.received = 0
-        # source timestamps of the latest messages taken (on rclpy's thread), for a
+        # source timestamps of the latest messages taken (on the reader's thread), for a
         # re-subscription that replays the writers' history
         self._taken: deque[int] = deque(maxlen=REPLAY_MEMORY)
 
@@ -251,43 +259,32 @@ class SharedSubscription:
         self.reliable, self.transient_local = self._wanted_qos()
         depth = BULK_SUBSCRIPTION_DEPTH if _is_bulky(self.msg_cls) else SUBSCRIPTION_DEPTH
         qos = _qos(self.reliable, self.transient_local, depth)
-        post = self.ros.post
-        deliver = self._deliver_batch
         topic = self.topic
         msg_cls = self.msg_cls
-        holder: list[Any] = []
         # a subscription made to replace another (the publishers' QoS changed) and that is
         # transient local gets the writers' history again: what the old one took already is
         # not handed out twice (known by source timestamp); what it never saw still is
         taken_before = frozenset(self._taken) if self.transient_local else frozenset()
         remember = self._taken.append
 
-        def callback(msg: bytes, info: dict[str, Any]) -> None:
-            # rclpy's executor rebuilds its wait set for every message it takes; under load,
-            # take what else is queued on this subscription right here, and cross to the loop
-            # once for the whole batch.
-            source = info["source_timestamp"]
-            remember(source)
-            batch = [msg] if source not in taken_before else []
-            sub = holder[0] if holder else None
-            if sub is not None:
-                with contextlib.suppress(Exception), sub.handle:
-                    take = sub.handle.take_message
-                    while len(batch) < MAX_BATCH:
-                        taken = take(msg_cls, True)
-                        if taken is None:
-                            break
-                        source = taken[1]["source_timestamp"]
-                        remember(source)
-                        if source not in taken_before:
-                            batch.append(taken[0])
-            if batch:
-                post(deliver, batch, time.time_ns())
+        def take(handle: Any) -> list[bytes]:
+            # on the topic reader's thread: what is queued, up to a batch (the reader then
+            # crosses to the loop once for all it took)
+            batch: list[bytes] = []
+            take_message = handle.take_message
+            while len(batch) < MAX_BATCH:
+                taken = take_message(msg_cls, True)  # raw: Incoming deserializes when needed
+                if taken is None:
+                    break
+                source = taken[1]["source_timestamp"]
+                remember(source)
+                if source not in taken_before:
+                    batch.append(taken[0])
+            return batch
 
-        # raw: the messages come serialized; Incoming deserializes them only when needed
-        self._sub = self.ros.node.create_subscription(self.msg_cls, topic, callback, qos,
-                                                      raw=True)
-        holder.append(self._sub)
+        reader = self.ros.reader
+        assert reader is not None, "the ROS side is not started"
+        self._sub = reader.subscribe(msg_cls, topic, qos, take, self._deliver_batch)
         log.debug(
             "subscribed to %s (%s, %s, %s)",
             topic,
@@ -299,8 +296,8 @@ class SharedSubscription:
     def _destroy(self) -> None:
         if self._sub is not None:
             sub, self._sub = self._sub, None
-            with contextlib.suppress(Exception):
-                self.ros.node.destroy_subscription(sub)
+            if self.ros.reader is not None:
+                self.ros.reader.unsubscribe(sub)
 
     def _deliver_batch(self, msgs: list[bytes], stamp_ns: int) -> None:
         conv = self.conv
@@ -475,10 +472,17 @@ class RosNode:
         self._thread: threading.Thread | None = None
         self.node: Any = None
         self.executor: Any = None
+        self.reader: TopicReader | None = None
+        """The thread that waits on the topics (:mod:`bridge_server.ros_reader`)."""
         self._calls: deque[tuple[Callable[..., None], tuple[Any, ...]]] = deque()
         self._calls_gc: Any = None
-        self.spin_errors = 0
+        self._spin_failures = FailureLog("ROS executor round failed; spinning on",
+                                         SPIN_ERROR_LOG_INTERVAL)
+
+    @property
+    def spin_errors(self) -> int:
         """Executor rounds that raised (logged and survived, see :meth:`_spin`)."""
+        return self._spin_failures.count
 
     # -- life cycle --------------------------------------------------------------------------
 
@@ -499,6 +503,8 @@ class RosNode:
         self.executor.add_node(self.node)
         self._thread = threading.Thread(target=self._spin, name="bridge-ros-spin", daemon=True)
         self._thread.start()
+        self.reader = TopicReader(self.context, self.node, self.post)
+        self.reader.start()
 
     def _spin(self) -> None:
         """Spin until shutdown; an exception out of one round never stops the bridge's ROS side.
@@ -509,8 +515,6 @@ class RosNode:
         client would lose ROS for good; the error is logged with its traceback,
         at most once per :data:`SPIN_ERROR_LOG_INTERVAL` seconds (the rest counted).
         """
-        last = -SPIN_ERROR_LOG_INTERVAL
-        quiet = 0
         while True:
             try:
                 self.executor.spin()  # returns once the context is shut down
@@ -518,20 +522,14 @@ class RosNode:
             except ExternalShutdownException:
                 return
             except Exception:
-                self.spin_errors += 1
-                now = time.monotonic()
-                if now - last < SPIN_ERROR_LOG_INTERVAL:
-                    quiet += 1
-                    continue
-                last = now
-                more = f" ({quiet} more since the last report)" if quiet else ""
-                quiet = 0
-                log.exception("ROS executor round failed; spinning on%s", more)
+                self._spin_failures.failed()
 
     def close(self) -> None:
         """Stop spinning, destroy the node and shut this context down."""
         if self.node is None:
             return
+        if self.reader is not None:
+            self.reader.stop()
         with contextlib.suppress(Exception):
             self.executor.shutdown(timeout_sec=0.5)
         with contextlib.suppress(Exception):

@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 import re
 import struct
+from collections.abc import Callable
 from typing import Any
 
 import pytest
@@ -106,12 +107,16 @@ def _message(cls: type[Message]) -> st.SearchStrategy[Message]:
     return st.fixed_dictionaries(fields).map(cls.from_json)
 
 
-@pytest.mark.parametrize(
-    "cls", [Arrays, BoundedSequences, UnboundedSequences, WStrings, Imu, Image,
-            PointCloud2], ids=lambda c: c._type)
-@settings(max_examples=25, deadline=None,
-          suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
-@given(data=st.data())
+def over_rich_types(test: Callable[[type[Message], st.DataObject], None]) -> Any:
+    """Run ``test(cls, data)`` for types with every kind of field, drawing random messages."""
+    rich = [Arrays, BoundedSequences, UnboundedSequences, WStrings, Imu, Image, PointCloud2]
+    test = given(data=st.data())(test)
+    test = settings(max_examples=25, deadline=None, suppress_health_check=[
+        HealthCheck.too_slow, HealthCheck.data_too_large])(test)
+    return pytest.mark.parametrize("cls", rich, ids=lambda c: c._type)(test)
+
+
+@over_rich_types
 def test_random_messages_round_trip_through_rclpy(cls: type[Message], data: st.DataObject) -> None:
     """Random values: serialized by rclpy, decoded here, the same message comes back; and
     serialized here, rclpy reads the same message."""

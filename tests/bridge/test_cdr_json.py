@@ -1,0 +1,90 @@
+"""JSON straight from CDR (bridge_server.cdr_json) gives the converter's text exactly, for
+every type msgs generates, and leaves what it cannot render the same way to the converter."""
+
+from __future__ import annotations
+
+import math
+import sys
+import types
+from typing import Any
+
+import pytest
+from hypothesis import strategies as st
+from rclpy.serialization import serialize_message
+
+from bridge_server import cdr_json, convert
+from bridge_server.ros import Incoming
+from msgs.runtime import Message
+from tests.msgs.test_cdr import (
+    _message,
+    _message_types,
+    _rclpy,
+    _rclpy_class,
+    over_rich_types,
+)
+
+
+@pytest.mark.parametrize("cls", _message_types(), ids=lambda c: c._type)
+def test_every_type_gives_the_converters_text(cls: type[Message]) -> None:
+    rcls = _rclpy_class(cls._type)
+    conv = convert.converter_for(rcls)
+    assert conv.json_from_cdr is not None, "msgs and the installed type differ in layout"
+    ros_msg = rcls()
+    assert conv.json_from_cdr(serialize_message(ros_msg)) == conv.to_json(ros_msg)
+
+
+@over_rich_types
+def test_random_messages_give_the_converters_text(cls: type[Message], data: st.DataObject) -> None:
+    ros_msg = _rclpy(data.draw(_message(cls)))
+    conv = convert.converter_for(type(ros_msg))
+    assert conv.json_from_cdr is not None
+    assert conv.json_from_cdr(serialize_message(ros_msg)) == conv.to_json(ros_msg)
+
+
+def test_nan_and_bad_bytes_are_left_to_the_converter() -> None:
+    from sensor_msgs.msg import Imu as RosImu
+
+    conv = convert.converter_for(RosImu)
+    assert conv.json_from_cdr is not None
+    msg = RosImu()
+    msg.orientation.x = math.nan
+    msg.linear_acceleration_covariance[3] = math.inf
+    data = serialize_message(msg)
+    assert conv.json_from_cdr(data) is None
+    # the Incoming a subscriber gets has the converter's text: null for NaN and Inf
+    text = Incoming("/imu", data, conv, 0).json_text()
+    assert '"orientation":{"x":null,' in text
+    assert "NaN" not in text and "Infinity" not in text
+    assert conv.json_from_cdr(data[:20]) is None  # truncated
+
+
+def _fake_rclpy_class(fields: dict[str, str]) -> type[Any]:
+    return type("Fake", (), {"get_fields_and_field_types": staticmethod(lambda: fields),
+                             "SLOT_TYPES": ()})
+
+
+def test_a_type_with_another_layout_or_unknown_to_msgs_has_no_fast_path() -> None:
+    # the robot's std_msgs/String from another release, say, with another field
+    other = _fake_rclpy_class({"data": "string", "extra": "int32"})
+    assert cdr_json.encoder_for(other, "std_msgs/msg/String") is None
+    same = _fake_rclpy_class({"data": "string"})
+    assert cdr_json.encoder_for(same, "std_msgs/msg/String") is not None
+    assert cdr_json.encoder_for(same, "robot_only_msgs/msg/Thing") is None
+
+
+def test_a_nested_type_with_another_layout_has_no_fast_path(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    from rosidl_parser.definition import NamespacedType
+
+    fields = {"stamp": "builtin_interfaces/Time", "frame_id": "string"}
+    header = type("Header", (), {
+        "get_fields_and_field_types": staticmethod(lambda: fields),
+        "SLOT_TYPES": (NamespacedType(["builtin_interfaces", "msg"], "Time"),),
+    })
+    assert cdr_json.encoder_for(header, "std_msgs/msg/Header") is not None
+    # the same Header on a robot whose builtin_interfaces/Time has another layout
+    module = types.ModuleType("builtin_interfaces.msg")
+    module.Time = _fake_rclpy_class({"sec": "int64", "nanosec": "uint32"})  # type: ignore[attr-defined]
+    monkeypatch.setitem(sys.modules, "builtin_interfaces.msg", module)
+    assert cdr_json.encoder_for(header, "std_msgs/msg/Header") is None
