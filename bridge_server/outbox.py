@@ -272,7 +272,7 @@ class Outbox:
         a lone message's or reply's largest share of its time in the bridge. What else is
         queued in the same turn waits for the writer, which gathers it into one write.
         """
-        if self.idle:
+        if self.idle and not self.closed:
             self.idle = False
             ws = self.ws
             transport = getattr(ws, "transport", None)
