@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import faulthandler
 import logging
 import os
 import signal
@@ -164,6 +165,19 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     return p.parse_args(argv)
 
 
+STOP_DEADLINE = 6.0
+"""Seconds the bridge may take to stop once told to; past them it exits at once (status 1,
+every thread's traceback on stderr), so a service manager or a supervisor is never left
+waiting.
+
+rmw_fastrtps (Jazzy, Fast DDS 2.14) can deadlock while it destroys the bridge's node: one
+thread waits, spinning a core, for a discovery callback to finish while holding the lock that
+callback needs (the spin is Fast-DDS issue #6513). It takes another ROS process's endpoints
+coming or going at that moment, such as the other workers stopping with the same supervisor;
+CI saw a worker stuck that way. The watchdog is faulthandler's own thread, which needs no GIL
+(the stuck thread holds it)."""
+
+
 async def _run(args: argparse.Namespace) -> int:
     from .server import Bridge, BridgeConfig
 
@@ -217,6 +231,8 @@ async def _run(args: argparse.Namespace) -> int:
     bridge.security.startup_warnings(args.host)
     await stop.wait()
     log.info("bridge_server shutting down")
+    # Not cancelled: it covers the rest of the process's exit too.
+    faulthandler.dump_traceback_later(STOP_DEADLINE, exit=True)
     await bridge.close()
     return 0
 

@@ -120,7 +120,9 @@ def test_interrupting_a_blocking_call_in_a_kernel(tmp_path: Path) -> None:
         kc.wait_for_ready(timeout=60)
         _run(kc, CELLS[0] + "\nfrom roslibpy_lite import sync\nros = sync.connect(URL)\n"
                  "sub = ros.subscribe(NAME, 'std_msgs/msg/Int32')")
-        msg_id = kc.execute("print('waiting', flush=True)\nsub.get()")  # no timeout: for ever
+        # no timeout: for ever. stop_on_error=False: the kernel would otherwise abort the
+        # requests that reach it just after this cell's error reply (the next _run: a race)
+        msg_id = kc.execute("print('waiting', flush=True)\nsub.get()", stop_on_error=False)
         while True:  # the cell is running once its first line printed
             msg = kc.get_iopub_msg(timeout=30)
             if msg["parent_header"].get("msg_id") == msg_id and msg["msg_type"] == "stream":
