@@ -1,8 +1,8 @@
 """The topic reader: the bridge's shared subscriptions, waited on by a thread of their own.
 
 rclpy's executor hands out one ready entity at a time, and before each it rebuilds its
-wait set in Python from every entity of the node (the rosapi services, the service
-clients, the action clients and servers), then runs the callback as a task. On the
+wait set in Python from every entity of the node (the service clients and the action
+clients and servers that sessions use), then runs the callback as a task. On the
 bridge that was most of a message's time from the ROS publisher to the client: at
 200 Hz the executor took 0.37 ms (median) to reach the callback of a message that an
 rclpy subscriber in another process had in 0.22 ms, and the loop thread then waited
