@@ -14,7 +14,7 @@ import contextlib
 import time
 from typing import TYPE_CHECKING, Any
 
-from bench.harness import send_op, ws_open
+from bench.harness import close_clients, send_op, ws_open
 
 if TYPE_CHECKING:
     from bench.run import Ctx
@@ -85,12 +85,7 @@ async def _run(ctx: Ctx, compression: str, seconds: float) -> dict[str, Any]:
         await pub.close()
         end_rss = proc.memory_info().rss
     finally:
-        for ws in sockets:
-            await ws.close()
-        for task in readers:
-            task.cancel()
-            with contextlib.suppress(asyncio.CancelledError):
-                await task
+        await close_clients(sockets, readers)
         await bridge.stop()
     mb = 1024 * 1024
     busy = cpu1.user - cpu0.user + cpu1.system - cpu0.system

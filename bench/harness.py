@@ -298,3 +298,13 @@ async def ws_open(url: str) -> ClientConnection:
 def send_op(ws: ClientConnection, op: dict[str, Any]) -> Awaitable[None]:
     """Send one op as JSON text."""
     return ws.send(json.dumps(op))
+
+
+async def close_clients(sockets: list[ClientConnection], readers: list[asyncio.Task[None]]) -> None:
+    """Close a scenario's websocket clients, then cancel the tasks that read them."""
+    for ws in sockets:
+        await ws.close()
+    for task in readers:
+        task.cancel()
+        with contextlib.suppress(asyncio.CancelledError):
+            await task

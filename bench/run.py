@@ -69,7 +69,15 @@ from websockets.asyncio.client import ClientConnection
 from bench.actions import action_client_served, action_ros_server
 from bench.bag import record
 from bench.cloud import pointcloud
-from bench.harness import Bridge, RosSide, StalledClient, percentile, send_op, ws_open
+from bench.harness import (
+    Bridge,
+    RosSide,
+    StalledClient,
+    close_clients,
+    percentile,
+    send_op,
+    ws_open,
+)
 from bench.links import links
 from bench.tls import tls_scenario
 
@@ -567,12 +575,7 @@ async def latency_side_by_side(ctx: Ctx) -> dict[str, Any]:
     finally:
         if base is not None:
             await base.close()
-        for ws in sockets:
-            await ws.close()
-        for task in tasks:
-            task.cancel()
-            with contextlib.suppress(asyncio.CancelledError):
-                await task
+        await close_clients(sockets, tasks)
         for bridge in servers.values():
             await bridge.stop()
     return {
