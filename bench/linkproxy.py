@@ -170,6 +170,7 @@ class LinkProxy:
         for task in tasks:
             task.cancel()
         await asyncio.gather(*tasks, return_exceptions=True)
+        self._reset_all()  # connections that got their upstream half while the server closed
 
     def __enter__(self) -> Self:
         return self.start()
@@ -220,7 +221,15 @@ class LinkProxy:
             _reset(w)
         self._writers.clear()
 
-    async def _accept(self, c_reader: asyncio.StreamReader, c_writer: asyncio.StreamWriter) -> None:
+    def _accept(
+        self, c_reader: asyncio.StreamReader, c_writer: asyncio.StreamWriter
+    ) -> Coroutine[Any, Any, None]:
+        # Counted as open from the start: a stop or a cut before its task first runs resets it
+        # too (a task cancelled before it starts never reaches its own clean-up).
+        self._writers.add(c_writer)
+        return self._serve(c_reader, c_writer)
+
+    async def _serve(self, c_reader: asyncio.StreamReader, c_writer: asyncio.StreamWriter) -> None:
         try:
             await self._carry(c_reader, c_writer)
         except asyncio.CancelledError:  # the proxy stops: asyncio would log this task's end
@@ -228,6 +237,7 @@ class LinkProxy:
 
     async def _carry(self, c_reader: asyncio.StreamReader, c_writer: asyncio.StreamWriter) -> None:
         if self.refusing:
+            self._writers.discard(c_writer)
             _reset(c_writer)
             return
         upstream = _socket(self.rcvbuf)
@@ -235,12 +245,15 @@ class LinkProxy:
         try:
             await asyncio.get_running_loop().sock_connect(upstream, self.target)
             s_reader, s_writer = await asyncio.open_connection(sock=upstream, limit=_CHUNK)
-        except OSError:
+        except BaseException as exc:  # refused, or the proxy stops while connecting
             upstream.close()
+            self._writers.discard(c_writer)
             _reset(c_writer)
-            return
+            if isinstance(exc, OSError):
+                return
+            raise
         self.connections += 1
-        self._writers.update((c_writer, s_writer))
+        self._writers.add(s_writer)
         up, down = _Pipe(self, c_reader, s_writer), _Pipe(self, s_reader, c_writer)
         self._pipes += [up, down]
         await asyncio.gather(up.run(), down.run(), return_exceptions=True)

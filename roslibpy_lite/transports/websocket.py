@@ -516,7 +516,11 @@ async def _plain_to_tls(url: str, exc: BaseException) -> ConnectError | None:
             asyncio.open_connection(parts.hostname, parts.port or 80, ssl=probe), 2.0)
     except (OSError, TimeoutError, ssl.SSLError):
         return None
-    writer.close()
+    # Only the question was asked: no TLS goodbye to wait for (a close() would leave it under
+    # way, and the socket open, if the caller's loop ends with the error this returns).
+    writer.transport.abort()
+    with contextlib.suppress(Exception):
+        await writer.wait_closed()
     return ConnectError(f"{url}: this port speaks TLS: use wss://{url.split('://', 1)[1]} "
                         "(with the CA that signed the bridge's certificate)")
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import asyncio
+import gc
 import subprocess
 import sys
 from pathlib import Path
@@ -45,6 +46,20 @@ async def test_plain_ws_to_a_tls_port_says_use_wss(tls_bridge: BridgeProcess):
     url = f"ws://127.0.0.1:{tls_bridge.port}"
     with pytest.raises(ConnectError, match=r"this port speaks TLS: use wss://127\.0\.0\.1"):
         await asyncio.wait_for(roslibpy_lite.connect(url, open_timeout=60), 30)
+
+
+def test_the_tls_probe_leaves_nothing_open(tls_bridge: BridgeProcess):
+    """The probe that tells a ws:// URL it reached a TLS port closes its socket before the
+    error is raised: a caller whose loop ends with that error leaves nothing open (what
+    was left is collected here, and its ResourceWarning fails the test)."""
+    url = f"ws://127.0.0.1:{tls_bridge.port}"
+
+    async def attempt() -> None:
+        with pytest.raises(ConnectError, match="this port speaks TLS"):
+            await roslibpy_lite.connect(url, open_timeout=60)
+
+    asyncio.run(attempt())
+    gc.collect()
 
 
 async def test_certificate_for_another_name_says_so(make_bridge: Any, tmp_path: Path):
