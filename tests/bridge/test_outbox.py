@@ -6,10 +6,14 @@ from __future__ import annotations
 import asyncio
 from typing import Any
 
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 from websockets.asyncio.client import connect
 from websockets.asyncio.server import ServerConnection, serve
+from websockets.frames import Frame, Opcode
 
-from bridge_server.outbox import Outbox, Subscription
+from bridge_server.outbox import Outbox, Subscription, frame_bytes
 from tests.helpers import async_wait_until
 
 
@@ -23,17 +27,23 @@ class _Text:
         return self.text
 
 
-async def test_an_idle_writer_writes_at_once_and_batches_what_follows() -> None:
+@pytest.mark.parametrize("compression", [None, "deflate"])
+async def test_an_idle_writer_writes_at_once_and_batches_what_follows(
+    compression: str | None,
+) -> None:
+    """Without an extension the outbox frames what it writes; with permessage-deflate
+    websockets does."""
     conns: asyncio.Queue[ServerConnection] = asyncio.Queue()
 
     async def handler(ws: ServerConnection) -> None:
         await conns.put(ws)
         await ws.wait_closed()
 
-    async with serve(handler, "127.0.0.1", 0) as server:
+    async with serve(handler, "127.0.0.1", 0, compression=compression) as server:
         port = next(iter(server.sockets)).getsockname()[1]
-        async with connect(f"ws://127.0.0.1:{port}") as client:
+        async with connect(f"ws://127.0.0.1:{port}", compression=compression) as client:
             ws = await conns.get()
+            assert bool(ws.protocol.extensions) == (compression is not None)
             box = Outbox(ws, 1, 100, 0, 5.0, warn=lambda _msg: None)
             writer = asyncio.create_task(box.writer())
             await async_wait_until(lambda: box.idle, 5.0, "the writer idle")
@@ -61,3 +71,25 @@ async def test_an_idle_writer_writes_at_once_and_batches_what_follows() -> None:
             box.push(sub, _Text("after close"))  # type: ignore[arg-type]
             assert len(writes) == 2, "a closed outbox writes nothing"
             await asyncio.wait_for(writer, 5.0)
+
+
+def _websockets_frames(frames: list[str | bytes]) -> bytes:
+    return b"".join(
+        Frame(Opcode.TEXT, f.encode()).serialize(mask=False, extensions=[])
+        if isinstance(f, str)
+        else Frame(Opcode.BINARY, f).serialize(mask=False, extensions=[])
+        for f in frames
+    )
+
+
+@given(st.lists(st.one_of(st.text(max_size=300), st.binary(max_size=300)), max_size=5))
+def test_frames_are_what_websockets_would_write(frames: list[str | bytes]) -> None:
+    """The outbox's own framing gives websockets' bytes for text and binary frames."""
+    assert frame_bytes(frames) == _websockets_frames(frames)
+
+
+def test_frames_of_every_length_form_are_what_websockets_would_write() -> None:
+    """Each payload length encoding (7-bit, 16-bit, 64-bit) at its edges, text and binary."""
+    for size in (0, 1, 125, 126, 127, 65535, 65536, 70000):
+        frames: list[str | bytes] = ["é" * (size // 2) + "x" * (size % 2), b"\x00" * size]
+        assert frame_bytes(frames) == _websockets_frames(frames), size
