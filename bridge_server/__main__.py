@@ -153,6 +153,13 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         help="bridge processes sharing the port (SO_REUSEPORT), each its own ROS node "
         "(default 1)",
     )
+    p.add_argument(
+        "--topic-reader",
+        choices=("auto", "thread"),  # ros_reader.READERS (which imports rclpy)
+        default="auto",
+        help="what waits on the topics: auto (the middleware wakes the event loop itself, on "
+        "Linux x86-64 and AArch64; a thread elsewhere) or thread (default auto)",
+    )
     p.add_argument("--worker-index", type=int, default=None, help=argparse.SUPPRESS)
     p.add_argument("--worker-dir", default=None, help=argparse.SUPPRESS)
     p.add_argument(
@@ -188,6 +195,7 @@ async def _run(args: argparse.Namespace) -> int:
         write_limit=args.write_limit,
         compression=args.compression == "deflate",
         publisher_grace=args.publisher_grace,
+        topic_reader=args.topic_reader,
         metrics_port=args.metrics_port,
         worker_index=args.worker_index or 0,
         worker_dir=args.worker_dir,
@@ -226,8 +234,8 @@ async def _run(args: argparse.Namespace) -> int:
     else:
         scheme = "wss" if args.certfile else "ws"
         log.info("bridge_server listening on %s://%s:%d", scheme, args.host, bridge.port)
-    log.info("ROS node /%s on ROS_DOMAIN_ID %s", config.node_name,
-             os.environ.get("ROS_DOMAIN_ID", "0"))
+    log.info("ROS node /%s on ROS_DOMAIN_ID %s (topic reader: %s)", config.node_name,
+             os.environ.get("ROS_DOMAIN_ID", "0"), bridge.ros.reader_kind)
     bridge.security.startup_warnings(args.host)
     await stop.wait()
     log.info("bridge_server shutting down")

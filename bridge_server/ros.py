@@ -1,9 +1,10 @@
 """The ROS side of the bridge (rclpy is imported only here, in ros_*, convert and types).
 
 One rclpy node lives in its own context; an executor spins it in a thread of
-its own, and the topics the bridge subscribes to are waited on by another
-(:mod:`bridge_server.ros_reader`), away from the executor's per-message work.
-Everything these threads learn (a message on a subscribed topic, a ROS caller
+its own. The topics the bridge subscribes to are not the executor's
+(:mod:`bridge_server.ros_reader`): the middleware wakes the asyncio loop itself when
+one of their messages arrives, and the loop takes it (a reader thread does that
+where the loop cannot be woken so). Everything the executor learns (a ROS caller
 reaching a client-served service, a service response) crosses to the asyncio
 loop with ``loop.call_soon_threadsafe``; hand-offs are
 batched, so a burst of messages costs one wake-up of the loop, not one each.
@@ -60,7 +61,7 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from rclpy.serialization import deserialize_message
 
 from . import convert
-from .ros_reader import FailureLog, TopicReader
+from .ros_reader import FailureLog, Reader, open_reader
 from .types import resolve_message, resolve_service
 
 __all__ = [
@@ -91,9 +92,6 @@ maps), where a deep history could hold gigabytes while the bridge lags."""
 SERVICE_DEPTH = 1000
 """History depth of the bridge's service clients and servers: the ROS default of 10 loses
 requests and responses when more than 10 calls are in flight."""
-
-MAX_BATCH = 256
-"""Most messages taken from one subscription per executor callback."""
 
 REPLAY_MEMORY = 1000
 """Source timestamps a subscription remembers of the messages it took, so that one made
@@ -267,20 +265,20 @@ class SharedSubscription:
         taken_before = frozenset(self._taken) if self.transient_local else frozenset()
         remember = self._taken.append
 
-        def take(handle: Any) -> list[bytes]:
-            # on the topic reader's thread: what is queued, up to a batch (the reader then
-            # crosses to the loop once for all it took)
+        def take(handle: Any, limit: int) -> tuple[list[bytes], int]:
+            # up to ``limit`` of what is queued (delivered at once, in one hand-off), and
+            # how many were taken (replays skipped included)
             batch: list[bytes] = []
             take_message = handle.take_message
-            while len(batch) < MAX_BATCH:
+            for took in range(limit):
                 taken = take_message(msg_cls, True)  # raw: Incoming deserializes when needed
                 if taken is None:
-                    break
+                    return batch, took
                 source = taken[1]["source_timestamp"]
                 remember(source)
                 if source not in taken_before:
                     batch.append(taken[0])
-            return batch
+            return batch, limit
 
         reader = self.ros.reader
         assert reader is not None, "the ROS side is not started"
@@ -460,9 +458,12 @@ class RosNode:
         loop: asyncio.AbstractEventLoop,
         *,
         name: str = "roslibpy_lite_bridge",
+        topic_reader: str = "auto",
     ) -> None:
         self.loop = loop
         self.name = name
+        self.topic_reader = topic_reader
+        """Who waits on the topics: ``auto`` or ``thread`` (:func:`ros_reader.open_reader`)."""
         self.context = Context()
         self._inbox: deque[tuple[Callable[..., None], tuple[Any, ...]]] = deque()
         self._scheduled = False
@@ -472,12 +473,17 @@ class RosNode:
         self._thread: threading.Thread | None = None
         self.node: Any = None
         self.executor: Any = None
-        self.reader: TopicReader | None = None
-        """The thread that waits on the topics (:mod:`bridge_server.ros_reader`)."""
+        self.reader: Reader | None = None
+        """What takes the topics' messages (:mod:`bridge_server.ros_reader`)."""
         self._calls: deque[tuple[Callable[..., None], tuple[Any, ...]]] = deque()
         self._calls_gc: Any = None
         self._spin_failures = FailureLog("ROS executor round failed; spinning on",
                                          SPIN_ERROR_LOG_INTERVAL)
+
+    @property
+    def reader_kind(self) -> str:
+        """``loop`` or ``thread``: what waits on the topics (:mod:`bridge_server.ros_reader`)."""
+        return self.reader.kind if self.reader is not None else "none"
 
     @property
     def spin_errors(self) -> int:
@@ -503,8 +509,8 @@ class RosNode:
         self.executor.add_node(self.node)
         self._thread = threading.Thread(target=self._spin, name="bridge-ros-spin", daemon=True)
         self._thread.start()
-        self.reader = TopicReader(self.context, self.node, self.post)
-        self.reader.start()
+        self.reader = open_reader(self.context, self.node, self.loop, self.post,
+                                  self.topic_reader)
 
     def _spin(self) -> None:
         """Spin until shutdown; an exception out of one round never stops the bridge's ROS side.

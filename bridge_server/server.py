@@ -65,6 +65,7 @@ class BridgeConfig:
     publisher_grace: float = 2.0
     node_name: str = field(default_factory=lambda: default_node_name())  # see default_node_name
     refresh_interval: float = 0.5
+    topic_reader: str = "auto"  # who waits on the topics (ros_reader.open_reader)
     keepalive_interval: float = keepalive.DEFAULT_INTERVAL  # 0: no keepalive of our own
     keepalive_timeout: float = keepalive.DEFAULT_TIMEOUT
     session: SessionConfig = field(default_factory=SessionConfig)
@@ -106,7 +107,8 @@ class Bridge:
         self._server: Server | None = None
         self._refresher: asyncio.Task[None] | None = None
         self._graph_event = asyncio.Event()
-        self.ros = RosNode(asyncio.get_running_loop(), name=config.node_name)
+        self.ros = RosNode(asyncio.get_running_loop(), name=config.node_name,
+                           topic_reader=config.topic_reader)
         self.metrics = Recorder()
         self.web = Web(self)  # plain-HTTP routes: status page, /metrics, health (web.py)
         self.security = Security(config.security)  # TLS, auth, origins, limits (security/)
