@@ -50,8 +50,9 @@ import platform
 import sys
 import threading
 import time
+from abc import ABC, abstractmethod
 from collections.abc import Callable
-from typing import Any, Protocol
+from typing import Any
 
 from rclpy.exceptions import InvalidHandle
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
@@ -131,11 +132,17 @@ class ReaderSubscription:
         self.fd = -1  # a LoopReader's eventfd
 
 
-class Reader(Protocol):
-    """What the bridge asks of a topic reader (:class:`LoopReader` or :class:`TopicReader`)."""
+class Reader(ABC):
+    """What waits on the bridge's topic subscriptions: a :class:`LoopReader` or a
+    :class:`TopicReader`."""
 
-    errors: FailureLog
-    kind: str  # "loop" or "thread"
+    kind = ""
+    """``loop`` or ``thread``."""
+
+    def __init__(self, node: Any, what_fails: str) -> None:
+        self.node = node
+        self.errors = FailureLog(what_fails)
+        """Takes (or reader rounds) that raised (``errors.count``)."""
 
     def subscribe(
         self,
@@ -144,18 +151,28 @@ class Reader(Protocol):
         qos: Any,
         take: Take,
         deliver: Callable[[list[bytes], int], None],
-    ) -> ReaderSubscription: ...
+    ) -> ReaderSubscription:
+        """Create a subscription on the node that rclpy's executor does not know of, and
+        have its messages taken when they come (see :class:`ReaderSubscription`)."""
+        check_is_valid_msg_type(msg_cls)  # type: ignore[no-untyped-call]  # loads type support
+        with self.node.handle:
+            handle = _rclpy.Subscription(self.node.handle, msg_cls, topic,
+                                         qos.get_c_qos_profile())
+        sub = ReaderSubscription(handle, topic, take, deliver)
+        self._add(sub)
+        return sub
 
-    def unsubscribe(self, sub: ReaderSubscription) -> None: ...
+    @abstractmethod
+    def _add(self, sub: ReaderSubscription) -> None:
+        """Start taking ``sub``'s messages."""
 
-    def stop(self) -> None: ...
+    @abstractmethod
+    def unsubscribe(self, sub: ReaderSubscription) -> None:
+        """Stop taking ``sub``'s messages and destroy it."""
 
-
-def _new_subscription(node: Any, msg_cls: type[Any], topic: str, qos: Any) -> Any:
-    """An rcl subscription on ``node`` that rclpy's executor does not know of."""
-    check_is_valid_msg_type(msg_cls)  # type: ignore[no-untyped-call]  # loads type support
-    with node.handle:
-        return _rclpy.Subscription(node.handle, msg_cls, topic, qos.get_c_qos_profile())
+    @abstractmethod
+    def stop(self) -> None:
+        """Destroy every subscription (before the node is destroyed)."""
 
 
 READERS = ("auto", "thread")
@@ -194,7 +211,7 @@ def _eventfd_wake() -> tuple[Any, int] | None:
     return setter, write
 
 
-class LoopReader:
+class LoopReader(Reader):
     """The topics taken on the loop thread, which the middleware wakes through an eventfd
     per subscription (see the module's docstring). Every method runs on the loop."""
 
@@ -202,25 +219,13 @@ class LoopReader:
 
     def __init__(self, node: Any, loop: asyncio.AbstractEventLoop, setter: Any,
                  write: int) -> None:
-        self.node = node
+        super().__init__(node, "ROS topic reader failed; reading on")
         self.loop = loop
         self._setter = setter
         self._write = write
         self._subs: set[ReaderSubscription] = set()
-        self.errors = FailureLog("ROS topic reader failed; reading on")
-        """Takes that raised (``errors.count``)."""
 
-    def subscribe(
-        self,
-        msg_cls: type[Any],
-        topic: str,
-        qos: Any,
-        take: Take,
-        deliver: Callable[[list[bytes], int], None],
-    ) -> ReaderSubscription:
-        """Create a subscription on the node and take its messages when told they came."""
-        sub = ReaderSubscription(_new_subscription(self.node, msg_cls, topic, qos), topic,
-                                 take, deliver)
+    def _add(self, sub: ReaderSubscription) -> None:
         sub.fd = os.eventfd(0, os.EFD_NONBLOCK | os.EFD_CLOEXEC)
         self.loop.add_reader(sub.fd, self._ready, sub)
         with sub.handle:
@@ -228,8 +233,7 @@ class LoopReader:
         self._subs.add(sub)
         if rc != 0:
             self.unsubscribe(sub)
-            raise RuntimeError(f"rcl could not wake the bridge for {topic} (rcl error {rc})")
-        return sub
+            raise RuntimeError(f"rcl could not wake the bridge for {sub.topic} (rcl error {rc})")
 
     def _ready(self, sub: ReaderSubscription) -> None:
         try:
@@ -269,7 +273,7 @@ class LoopReader:
             self.unsubscribe(sub)
 
 
-class TopicReader:
+class TopicReader(Reader):
     """A thread that waits on the bridge's topic subscriptions and nothing else.
 
     ``post(fn, *args)`` runs ``fn(*args)`` on the loop (:meth:`RosNode.post`).
@@ -278,8 +282,8 @@ class TopicReader:
     kind = "thread"
 
     def __init__(self, context: Any, node: Any, post: Callable[..., None]) -> None:
+        super().__init__(node, "ROS topic reader round failed; reading on")
         self.context = context
-        self.node = node
         self.post = post
         self._subs: tuple[ReaderSubscription, ...] = ()
         self._lock = threading.Lock()
@@ -287,8 +291,6 @@ class TopicReader:
         self._thread: threading.Thread | None = None
         with context.handle:
             self._wake = _rclpy.GuardCondition(context.handle)
-        self.errors = FailureLog("ROS topic reader round failed; reading on")
-        """Reader rounds or takes that raised (``errors.count``)."""
 
     def start(self) -> None:
         """Start the reader's thread."""
@@ -310,21 +312,10 @@ class TopicReader:
         with contextlib.suppress(Exception):
             self._wake.destroy_when_not_in_use()
 
-    def subscribe(
-        self,
-        msg_cls: type[Any],
-        topic: str,
-        qos: Any,
-        take: Take,
-        deliver: Callable[[list[bytes], int], None],
-    ) -> ReaderSubscription:
-        """Create a subscription on the node and wait on it (see :class:`ReaderSubscription`)."""
-        sub = ReaderSubscription(_new_subscription(self.node, msg_cls, topic, qos), topic,
-                                 take, deliver)
+    def _add(self, sub: ReaderSubscription) -> None:
         with self._lock:
             self._subs = (*self._subs, sub)
         self._wake.trigger_guard_condition()
-        return sub
 
     def unsubscribe(self, sub: ReaderSubscription) -> None:
         """Stop waiting on ``sub`` and destroy it (once the reader no longer holds it)."""
