@@ -158,7 +158,8 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         choices=("auto", "thread"),  # ros_reader.READERS (which imports rclpy)
         default="auto",
         help="what waits on the topics: auto (the middleware wakes the event loop itself, on "
-        "Linux x86-64 and AArch64; a thread elsewhere) or thread (default auto)",
+        "Linux x86-64 and AArch64 with rmw_fastrtps; a thread elsewhere) or thread "
+        "(default auto)",
     )
     p.add_argument("--worker-index", type=int, default=None, help=argparse.SUPPRESS)
     p.add_argument("--worker-dir", default=None, help=argparse.SUPPRESS)

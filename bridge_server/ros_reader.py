@@ -32,8 +32,8 @@ The callback's C type is ``void (*)(const void *user_data, size_t count)`` and
 V and AAPCS64) both pass their two arguments in the first two integer registers, the
 pointer's low 32 bits are the descriptor and ``count`` (the number of new messages, never
 0) is what is added to the eventfd's counter. The return value is ignored. So it is used
-only on Linux on those two machines; elsewhere, or when the symbols are missing, the
-reader thread serves.
+only on Linux on those two machines, and with rmw_fastrtps (the default middleware, the one
+tested); elsewhere, or when the symbols are missing, the reader thread serves.
 
 This uses rclpy's implementation module (``_rclpy``) directly, as rclpy's own executor
 does: ``Subscription``, ``WaitSet`` and ``GuardCondition`` of the pinned Jazzy release.
@@ -57,10 +57,12 @@ from typing import Any
 from rclpy.exceptions import InvalidHandle
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.type_support import check_is_valid_msg_type
+from rclpy.utilities import get_rmw_implementation_identifier
 
 __all__ = [
     "MAX_BATCH",
     "READERS",
+    "WAKING_RMW",
     "FailureLog",
     "LoopReader",
     "Reader",
@@ -193,10 +195,16 @@ def open_reader(context: Any, node: Any, loop: asyncio.AbstractEventLoop,
     return reader
 
 
+WAKING_RMW = "rmw_fastrtps_cpp"
+"""The middleware the loop reader is used with: ROS 2's default, the one tested here."""
+
+
 def _eventfd_wake() -> tuple[Any, int] | None:
     """rcl's "on new message" setter and ``eventfd_write``'s address, where the pair works
-    (see the module's docstring)."""
+    (see the module's docstring), with :data:`WAKING_RMW`."""
     if sys.platform != "linux" or platform.machine() not in ("x86_64", "aarch64"):
+        return None
+    if get_rmw_implementation_identifier() != WAKING_RMW:
         return None
     try:
         rcl = ctypes.CDLL("librcl.so", mode=os.RTLD_NOLOAD)  # the one rclpy loaded
@@ -237,20 +245,19 @@ class LoopReader(Reader):
 
     def _ready(self, sub: ReaderSubscription) -> None:
         try:
-            count = os.eventfd_read(sub.fd)  # how many messages came since the last read
+            os.eventfd_read(sub.fd)
         except BlockingIOError:
             return
-        # Taken: those, at most a batch (no empty take to find the end). One that came
-        # after the read wrote the eventfd again; one that was dropped before it was taken
-        # (a full history) only makes a take stop early.
-        limit = min(count, MAX_BATCH)
+        # Taken: all that is queued, at most a batch. The count the middleware gave is not
+        # relied on (rmw implementations count differently); a message that comes after
+        # the read writes the eventfd again.
         try:  # the handle is not held: only the loop destroys it, after removing this reader
-            batch, took = sub.take(sub.handle, limit)
+            batch, took = sub.take(sub.handle, MAX_BATCH)
         except Exception:  # the others are still served
             self.errors.failed(f"taking messages of {sub.topic} failed")
             return
-        if took == limit < count:  # come back for the rest after the others had their turn
-            os.eventfd_write(sub.fd, count - limit)
+        if took == MAX_BATCH:  # come back for the rest after the others had their turn
+            os.eventfd_write(sub.fd, 1)
         if batch:
             sub.deliver(batch, time.time_ns())
 

@@ -90,9 +90,9 @@ def _is_eventfd(fd: int) -> bool:
 async def test_the_loop_reader_comes_back_for_what_one_batch_left(
     monkeypatch: pytest.MonkeyPatch,
 ):
-    """The loop reader takes as many messages as the middleware said came, a batch at a time:
-    what one batch left is taken without a new message arriving (the middleware says only
-    what is new), after the loop's other work had its turn."""
+    """The loop reader takes what is queued a batch at a time: what one batch left is taken
+    without a new message arriving (the middleware says only what is new), after the loop's
+    other work had its turn."""
     monkeypatch.setattr(ros_reader, "MAX_BATCH", 1)
     loop = asyncio.get_running_loop()
     ros = RosNode(loop, name=f"reader_batch_{os.getpid()}")
