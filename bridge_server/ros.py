@@ -98,9 +98,6 @@ REPLAY_MEMORY = 1000
 to replace it (its publishers turned out transient local) skips the history it already
 handed out when the writers replay it."""
 
-SPIN_ERROR_LOG_INTERVAL = 10.0
-"""Seconds between two logged failures of an executor round (the others are counted)."""
-
 SETTLE_S = 1.2
 """Seconds a newly matched service client waits before its first request (see settled).
 
@@ -477,8 +474,7 @@ class RosNode:
         """What takes the topics' messages (:mod:`bridge_server.ros_reader`)."""
         self._calls: deque[tuple[Callable[..., None], tuple[Any, ...]]] = deque()
         self._calls_gc: Any = None
-        self._spin_failures = FailureLog("ROS executor round failed; spinning on",
-                                         SPIN_ERROR_LOG_INTERVAL)
+        self._spin_failures = FailureLog("ROS executor round failed; spinning on")
 
     @property
     def reader_kind(self) -> str:
@@ -519,7 +515,7 @@ class RosNode:
         client made while the executor waits: ros2/rclpy#1589, #1455), surfaces
         here as an exception from ``spin``. Spinning goes on after it, or every
         client would lose ROS for good; the error is logged with its traceback,
-        at most once per :data:`SPIN_ERROR_LOG_INTERVAL` seconds (the rest counted).
+        at most once per :data:`ros_reader.ERROR_LOG_INTERVAL` seconds (the rest counted).
         """
         while True:
             try:
