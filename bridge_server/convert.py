@@ -169,7 +169,6 @@ _json_encode: Callable[[Any], str] = json.JSONEncoder(
     separators=(",", ":"), allow_nan=False, check_circular=False, ensure_ascii=False
 ).encode
 _encode_str: Callable[[str], str] = json.encoder.encode_basestring
-_b2a = binascii.b2a_base64
 _a2b = binascii.a2b_base64
 _Tag = cbor2.CBORTag
 _cbor_dumps: Callable[[Any], bytes] = cbor2.dumps
@@ -740,7 +739,7 @@ class Converter:
             "new": object.__new__,
             "CHECK_FIELDS": getattr(proto, "_check_fields", False),
             "MISSING": _MISSING,
-            "base64": _b2a,
+            "b64_text": cdr_json.b64_text,
             "Tag": _Tag,
             "floats": _floats,
             "octets": _octets,
@@ -833,7 +832,7 @@ class Converter:
                 return [(False, f"t{i}({a})")]
             return [(False, f"json_string({a})")]  # string, char
         if e == "uint8":
-            text = f'base64({a}, newline=False).decode("ascii")'
+            text = f"b64_text({a})"
             return [(True, '"'), (False, text), (True, '"')]
         if e == "octet":
             return [(False, f"json_encode(octets({a}))")]
@@ -864,7 +863,7 @@ class Converter:
             return a, a
         # arrays
         if e == "uint8":
-            return f"base64({a}, newline=False).decode()", f"bytes({a})"
+            return f"b64_text({a})", f"bytes({a})"
         if e == "octet":
             return f"octets({a})", f'b"".join({a})'
         if e in _CBOR_TAGS:

@@ -88,3 +88,62 @@ def test_a_nested_type_with_another_layout_has_no_fast_path(
     module.Time = _fake_rclpy_class({"sec": "int64", "nanosec": "uint32"})  # type: ignore[attr-defined]
     monkeypatch.setitem(sys.modules, "builtin_interfaces.msg", module)
     assert cdr_json.encoder_for(header, "std_msgs/msg/Header") is None
+
+
+@pytest.mark.parametrize("size", [0, 1, 2, 3, 57, 4096, 640 * 480 * 3])
+def test_b64_text_is_standard_base64(size: int) -> None:
+    """The SIMD base64 gives the standard library's text for bytes, arrays and views."""
+    import array
+    import binascii
+    import os
+
+    raw = os.urandom(size)
+    want = binascii.b2a_base64(raw, newline=False).decode("ascii")
+    for value in (raw, array.array("B", raw), memoryview(raw), bytearray(raw)):
+        text = cdr_json.b64_text(value)
+        assert type(text) is str and text == want
+    assert cdr_json._b64_text_stdlib(raw) == want
+
+
+def _camera_frame() -> Any:
+    import os
+
+    from sensor_msgs.msg import Image as RosImage
+
+    msg = RosImage()
+    msg.header.frame_id = 'cam "front"'
+    msg.header.stamp.sec, msg.header.stamp.nanosec = 17, 25
+    msg.height, msg.width, msg.encoding, msg.step = 480, 640, "rgb8", 1920
+    msg.data = os.urandom(480 * 1920)
+    return msg
+
+
+def test_byte_arrays_anywhere_among_the_fields_give_the_converters_text() -> None:
+    """Byte arrays first, between other fields and last (fixed, bounded, unbounded, char)
+    are placed as base64 between the encoder's text of the fields around them."""
+    import os
+
+    from test_msgs.msg import Arrays, BoundedSequences, UnboundedSequences
+
+    for msg in (_camera_frame(), Arrays(), BoundedSequences(), UnboundedSequences()):
+        for name in msg.get_fields_and_field_types():
+            if name in ("uint8_values", "char_values", "byte_values"):
+                size = len(getattr(msg, name)) or 3
+                if name == "byte_values":
+                    setattr(msg, name, [bytes([b]) for b in os.urandom(size)])
+                else:
+                    setattr(msg, name, [b % (256 if name == "uint8_values" else 128)
+                                        for b in os.urandom(size)])
+        conv = convert.converter_for(type(msg))
+        assert conv.json_from_cdr is not None
+        text = conv.json_from_cdr(serialize_message(msg))
+        assert text == conv.to_json(msg)
+        # and it is JSON whose byte arrays decode back to the message's bytes
+        import base64
+        import json
+
+        obj = json.loads(text)
+        if "uint8_values" in obj:
+            assert base64.b64decode(obj["uint8_values"]) == bytes(msg.uint8_values)
+        if "data" in obj:
+            assert base64.b64decode(obj["data"]) == bytes(msg.data)
