@@ -5,9 +5,9 @@ its own. The topics the bridge subscribes to are not the executor's
 (:mod:`bridge_server.ros_reader`): the middleware wakes the asyncio loop itself when
 one of their messages arrives, and the loop takes it (a reader thread does that
 where the loop cannot be woken so). Everything the executor learns (a ROS caller
-reaching a client-served service, a service response) crosses to the asyncio
-loop with ``loop.call_soon_threadsafe``; hand-offs are
-batched, so a burst of messages costs one wake-up of the loop, not one each.
+reaching a client-served service under the thread reader, a service response) crosses
+to the asyncio loop with ``loop.call_soon_threadsafe``; hand-offs are batched, so a
+burst of messages costs one wake-up of the loop, not one each.
 The loop never waits on the executor. The other way, :meth:`RosNode.in_executor`
 runs work on the executor thread (a guard condition), for rclpy APIs that are
 not thread safe (actions: :mod:`bridge_server.ros_actions`).
@@ -37,10 +37,11 @@ subscribes later.
 
 Served services
 ---------------
-A client-served service is a real rclpy service whose response is deferred:
-the rclpy callback returns at once (the executor is never blocked), and the
-response is sent from the loop when the client answers, fails, times out or
-goes away (see :class:`PendingRosCall`).
+A client-served service is a real ROS service whose response is deferred: it is
+sent from the loop when the client answers, fails, times out or goes away (see
+:class:`PendingRosCall`). With the loop reader the middleware wakes the loop for each
+request, which takes it itself (:class:`ServedService`); otherwise it is an rclpy
+service whose callback returns at once, so the executor is never blocked.
 """
 
 from __future__ import annotations
@@ -61,7 +62,7 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from rclpy.serialization import deserialize_message
 
 from . import convert
-from .ros_reader import FailureLog, Reader, open_reader
+from .ros_reader import FailureLog, LoopReader, Reader, ReaderService, open_reader
 from .types import resolve_message, resolve_service
 
 __all__ = [
@@ -397,7 +398,13 @@ class PendingRosCall:
 
 
 class ServedService:
-    """A ROS service whose requests are answered by a websocket client."""
+    """A ROS service whose requests are answered by a websocket client.
+
+    With the loop reader (:class:`~bridge_server.ros_reader.LoopReader`) the middleware
+    wakes the loop for each request, which takes it with its header and answers it on the
+    loop: no executor round, no thread between the caller and the client. Otherwise the
+    service is rclpy's, served by the executor's thread as :class:`PendingRosCall` says.
+    """
 
     def __init__(
         self,
@@ -412,6 +419,13 @@ class ServedService:
         self.request_conv = convert.converter_for(srv_cls.Request)
         self.response_conv = convert.converter_for(srv_cls.Response)
         self.on_request = on_request
+        qos = _qos(True, False, SERVICE_DEPTH)
+        reader = ros.reader
+        self._served: ReaderService | None = None
+        if isinstance(reader, LoopReader):
+            self._served = reader.serve(srv_cls, name, qos, self._on_loop_request)
+            self._real_send: Callable[[Any, Any], None] = self._served.respond
+            return
         post = ros.post
 
         def callback(request: Any, _response: Any) -> Any:
@@ -419,9 +433,7 @@ class ServedService:
             post(self.on_request, pending)
             return pending
 
-        self.srv: Any = ros.node.create_service(
-            srv_cls, name, callback, qos_profile=_qos(True, False, SERVICE_DEPTH)
-        )
+        self.srv: Any = ros.node.create_service(srv_cls, name, callback, qos_profile=qos)
         self._real_send = self.srv.send_response
 
         def send_response(response: Any, header: Any) -> None:
@@ -432,6 +444,11 @@ class ServedService:
 
         self.srv.send_response = send_response
 
+    def _on_loop_request(self, request: Any, header: Any) -> None:
+        pending = PendingRosCall(self, request)
+        pending._attach(header)
+        self.on_request(pending)
+
     def _send(self, response: Any, header: Any) -> None:
         try:
             self._real_send(response, header)
@@ -440,6 +457,11 @@ class ServedService:
 
     def destroy(self) -> None:
         """Remove the ROS service."""
+        if self._served is not None:
+            reader = self.ros.reader
+            if isinstance(reader, LoopReader):
+                reader.unserve(self._served)
+            return
         with contextlib.suppress(Exception):
             self.ros.node.destroy_service(self.srv)
 

@@ -35,6 +35,12 @@ pointer's low 32 bits are the descriptor and ``count`` (the number of new messag
 only on Linux on those two machines, and with rmw_fastrtps (the default middleware, the one
 tested); elsewhere, or when the symbols are missing, the reader thread serves.
 
+The loop reader serves the services that clients advertise the same way
+(``rcl_service_set_on_new_request_callback``): a ROS caller's request wakes the loop, which
+takes it with its header and answers on the loop when the client has, where rclpy's
+executor would have rebuilt its wait set, run the callback on its thread and handed the
+request over (see :class:`ReaderService`).
+
 This uses rclpy's implementation module (``_rclpy``) directly, as rclpy's own executor
 does: ``Subscription``, ``WaitSet`` and ``GuardCondition`` of the pinned Jazzy release.
 """
@@ -56,7 +62,7 @@ from typing import Any
 
 from rclpy.exceptions import InvalidHandle
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
-from rclpy.type_support import check_is_valid_msg_type
+from rclpy.type_support import check_for_type_support, check_is_valid_msg_type
 from rclpy.utilities import get_rmw_implementation_identifier
 
 __all__ = [
@@ -66,6 +72,7 @@ __all__ = [
     "FailureLog",
     "LoopReader",
     "Reader",
+    "ReaderService",
     "ReaderSubscription",
     "TopicReader",
     "open_reader",
@@ -134,6 +141,29 @@ class ReaderSubscription:
         self.fd = -1  # a LoopReader's eventfd
 
 
+class ReaderService:
+    """One rcl service served on the loop (:meth:`LoopReader.serve`).
+
+    ``on_request(request, header)`` runs on the loop for each request a ROS caller sends;
+    :meth:`respond` answers it (on the loop, whenever the answer is there).
+    """
+
+    __slots__ = ("fd", "handle", "name", "on_request", "request_cls")
+
+    def __init__(self, handle: Any, name: str, request_cls: type[Any],
+                 on_request: Callable[[Any, Any], None]) -> None:
+        self.handle = handle
+        self.name = name
+        self.request_cls = request_cls
+        self.on_request = on_request
+        self.fd = -1
+
+    def respond(self, response: Any, header: Any) -> None:
+        """Send ``response`` to the caller whose request came with ``header`` (its
+        ``rmw_service_info_t``)."""
+        self.handle.service_send_response(response, header.request_id)
+
+
 class Reader(ABC):
     """What waits on the bridge's topic subscriptions: a :class:`LoopReader` or a
     :class:`TopicReader`."""
@@ -199,9 +229,9 @@ WAKING_RMW = "rmw_fastrtps_cpp"
 """The middleware the loop reader is used with: ROS 2's default, the one tested here."""
 
 
-def _eventfd_wake() -> tuple[Any, int] | None:
-    """rcl's "on new message" setter and ``eventfd_write``'s address, where the pair works
-    (see the module's docstring), with :data:`WAKING_RMW`."""
+def _eventfd_wake() -> tuple[Any, Any, int] | None:
+    """rcl's "on new message" and "on new request" setters and ``eventfd_write``'s address,
+    where they work (see the module's docstring), with :data:`WAKING_RMW`."""
     if sys.platform != "linux" or platform.machine() not in ("x86_64", "aarch64"):
         return None
     if get_rmw_implementation_identifier() != WAKING_RMW:
@@ -209,14 +239,16 @@ def _eventfd_wake() -> tuple[Any, int] | None:
     try:
         rcl = ctypes.CDLL("librcl.so", mode=os.RTLD_NOLOAD)  # the one rclpy loaded
         setter = rcl.rcl_subscription_set_on_new_message_callback
+        service_setter = rcl.rcl_service_set_on_new_request_callback
         write = ctypes.cast(ctypes.CDLL(None).eventfd_write, ctypes.c_void_p).value
     except (OSError, AttributeError):
         return None
     if write is None:
         return None
-    setter.argtypes = [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p]
-    setter.restype = ctypes.c_int
-    return setter, write
+    for fn in (setter, service_setter):
+        fn.argtypes = [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p]
+        fn.restype = ctypes.c_int
+    return setter, service_setter, write
 
 
 class LoopReader(Reader):
@@ -226,12 +258,14 @@ class LoopReader(Reader):
     kind = "loop"
 
     def __init__(self, node: Any, loop: asyncio.AbstractEventLoop, setter: Any,
-                 write: int) -> None:
+                 service_setter: Any, write: int) -> None:
         super().__init__(node, "ROS topic reader failed; reading on")
         self.loop = loop
         self._setter = setter
+        self._service_setter = service_setter
         self._write = write
         self._subs: set[ReaderSubscription] = set()
+        self._services: set[ReaderService] = set()
 
     def _add(self, sub: ReaderSubscription) -> None:
         sub.fd = os.eventfd(0, os.EFD_NONBLOCK | os.EFD_CLOEXEC)
@@ -274,10 +308,63 @@ class LoopReader(Reader):
         with contextlib.suppress(InvalidHandle):
             sub.handle.destroy_when_not_in_use()
 
+    def serve(self, srv_cls: type[Any], name: str, qos: Any,
+              on_request: Callable[[Any, Any], None]) -> ReaderService:
+        """Create a service on the node that rclpy's executor does not know of; each request
+        wakes the loop, which takes it and calls ``on_request(request, header)``."""
+        check_for_type_support(srv_cls)  # type: ignore[no-untyped-call]
+        with self.node.handle:
+            handle = _rclpy.Service(self.node.handle, srv_cls, name, qos.get_c_qos_profile())
+        svc = ReaderService(handle, name, srv_cls.Request, on_request)
+        svc.fd = os.eventfd(0, os.EFD_NONBLOCK | os.EFD_CLOEXEC)
+        self.loop.add_reader(svc.fd, self._request_ready, svc)
+        self._services.add(svc)
+        with handle:
+            rc = self._service_setter(handle.pointer, self._write, svc.fd)
+        if rc != 0:
+            self.unserve(svc)
+            raise RuntimeError(f"rcl could not wake the bridge for {name} (rcl error {rc})")
+        return svc
+
+    def _request_ready(self, svc: ReaderService) -> None:
+        try:
+            os.eventfd_read(svc.fd)
+        except BlockingIOError:
+            return
+        for _ in range(MAX_BATCH):
+            try:
+                got = svc.handle.service_take_request(svc.request_cls)
+            except Exception:
+                self.errors.failed(f"taking a request to {svc.name} failed")
+                return
+            request, header = got if got is not None else (None, None)
+            if header is None:  # nothing left
+                return
+            try:
+                svc.on_request(request, header)
+            except Exception:  # the other requests and services are still served
+                self.errors.failed(f"serving a request to {svc.name} failed")
+        os.eventfd_write(svc.fd, 1)  # come back for the rest after the others had their turn
+
+    def unserve(self, svc: ReaderService) -> None:
+        """Stop the middleware's calls for ``svc`` (they end before this returns), destroy it."""
+        if svc not in self._services:
+            return
+        self._services.discard(svc)
+        with contextlib.suppress(InvalidHandle), svc.handle:
+            self._service_setter(svc.handle.pointer, None, None)
+        with contextlib.suppress(Exception):  # the loop is closing
+            self.loop.remove_reader(svc.fd)
+        os.close(svc.fd)
+        with contextlib.suppress(InvalidHandle):
+            svc.handle.destroy_when_not_in_use()
+
     def stop(self) -> None:
-        """Destroy every subscription (before the node is destroyed)."""
+        """Destroy every subscription and service (before the node is destroyed)."""
         for sub in list(self._subs):
             self.unsubscribe(sub)
+        for svc in list(self._services):
+            self.unserve(svc)
 
 
 class TopicReader(Reader):

@@ -150,3 +150,86 @@ async def test_a_bridge_serves_topics_with_either_reader(
         assert got == [str(i) for i in range(20)]
     finally:
         await ws.close()
+
+
+async def test_the_loop_reader_serves_a_service_on_the_loop(
+    monkeypatch: pytest.MonkeyPatch, ros_node: Any, caplog: pytest.LogCaptureFixture
+):
+    """A service the loop reader serves: each request wakes the loop with its header, answers
+    reach the caller they belong to (out of order too), what one batch left is taken without
+    a new request, a failing handler is logged while the others are answered, and removing it
+    takes it off the graph and leaves no eventfd open."""
+    from std_srvs.srv import SetBool
+
+    from tests.bridge.support import ros_future, wait_service
+
+    monkeypatch.setattr(ros_reader, "MAX_BATCH", 1)
+    loop = asyncio.get_running_loop()
+    fds_before = _open_fds()
+    ros = RosNode(loop, name=f"reader_service_{os.getpid()}")
+    ros.start()
+    reader = ros.reader
+    assert isinstance(reader, ros_reader.LoopReader)
+    name = f"/reader_service_{os.getpid()}"
+    waiting: list[tuple[Any, Any]] = []
+    arrived = asyncio.Event()
+
+    def on_request(request: Any, header: Any) -> None:
+        assert asyncio.get_running_loop() is loop  # on the loop, not a middleware thread
+        if request.data is False and not waiting:
+            raise RuntimeError("boom in a handler")
+        waiting.append((request, header))
+        if len(waiting) == 3:
+            arrived.set()
+
+    try:
+        svc = reader.serve(SetBool, name, QoSProfile(depth=10), on_request)  # type: ignore[no-untyped-call]
+        client = ros_node.create_client(SetBool, name)
+        await wait_service(client)
+        with caplog.at_level(logging.ERROR, logger="bridge_server.ros"):
+            client.call_async(SetBool.Request(data=False))  # the handler raises: not answered
+            await async_wait_until(lambda: reader.errors.count >= 1, 10.0, "the failing handler")
+        assert "serving a request to" in caplog.text and "boom in a handler" in caplog.text
+        calls = [client.call_async(SetBool.Request(data=True)) for _ in range(3)]
+        await asyncio.wait_for(arrived.wait(), 10.0)
+        for i, (_request, header) in reversed(list(enumerate(waiting))):
+            svc.respond(SetBool.Response(success=True, message=str(i)), header)
+        answers = [(await ros_future(call)).message for call in calls]
+        assert answers == ["0", "1", "2"]
+        reader.unserve(svc)
+        await async_wait_until(lambda: not client.service_is_ready(), 10.0, "the service gone")
+    finally:
+        ros.close()
+    assert not [fd for fd in _open_fds() - fds_before if _is_eventfd(fd)], "an eventfd left open"
+
+
+@pytest.mark.parametrize("kind", KINDS)
+async def test_a_bridge_serves_client_services_with_either_reader(
+    kind: str, make_bridge: Any, ros_node: Any, topic: str
+):
+    """A service a client advertises answers rclpy callers through a bridge with either
+    reader (the loop takes the requests itself; the thread reader leaves them to rclpy's
+    executor), each answer reaching its own caller when several wait at once."""
+    from std_srvs.srv import SetBool
+
+    from tests.bridge.support import ros_future, wait_service
+    from tests.helpers import open_wire
+
+    bridge = make_bridge("--topic-reader", kind)
+    ws = await open_wire(bridge.url)
+    try:
+        await ws.send({"op": "advertise_service", "service": topic, "type": "std_srvs/SetBool"})
+        client = ros_node.create_client(SetBool, topic)
+        await wait_service(client)
+        calls = [client.call_async(SetBool.Request(data=i % 2 == 0)) for i in range(4)]
+        requests = [await ws.expect(op="call_service", service=topic) for _ in calls]
+        for request in reversed(requests):  # answered last first
+            await ws.send({"op": "service_response", "service": topic, "id": request["id"],
+                           "result": True,
+                           "values": {"success": request["args"]["data"],
+                                      "message": request["id"]}})
+        answers = [await ros_future(call) for call in calls]
+        assert [a.success for a in answers] == [True, False, True, False]
+        assert [a.message for a in answers] == [r["id"] for r in requests]
+    finally:
+        await ws.close()
