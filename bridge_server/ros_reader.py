@@ -297,16 +297,9 @@ class LoopReader(Reader):
 
     def unsubscribe(self, sub: ReaderSubscription) -> None:
         """Stop the middleware's calls for ``sub`` (they end before this returns), destroy it."""
-        if sub not in self._subs:
-            return
-        self._subs.discard(sub)
-        with contextlib.suppress(InvalidHandle), sub.handle:
-            self._setter(sub.handle.pointer, None, None)
-        with contextlib.suppress(Exception):  # the loop is closing
-            self.loop.remove_reader(sub.fd)
-        os.close(sub.fd)
-        with contextlib.suppress(InvalidHandle):
-            sub.handle.destroy_when_not_in_use()
+        if sub in self._subs:
+            self._subs.discard(sub)
+            self._release(sub.handle, sub.fd, self._setter)
 
     def serve(self, srv_cls: type[Any], name: str, qos: Any,
               on_request: Callable[[Any, Any], None]) -> ReaderService:
@@ -348,16 +341,20 @@ class LoopReader(Reader):
 
     def unserve(self, svc: ReaderService) -> None:
         """Stop the middleware's calls for ``svc`` (they end before this returns), destroy it."""
-        if svc not in self._services:
-            return
-        self._services.discard(svc)
-        with contextlib.suppress(InvalidHandle), svc.handle:
-            self._service_setter(svc.handle.pointer, None, None)
+        if svc in self._services:
+            self._services.discard(svc)
+            self._release(svc.handle, svc.fd, self._service_setter)
+
+    def _release(self, handle: Any, fd: int, setter: Any) -> None:
+        """Unset the middleware's callback of ``handle`` (no call is running once this
+        returns), stop waiting on its eventfd, close it and destroy the handle."""
+        with contextlib.suppress(InvalidHandle), handle:
+            setter(handle.pointer, None, None)
         with contextlib.suppress(Exception):  # the loop is closing
-            self.loop.remove_reader(svc.fd)
-        os.close(svc.fd)
+            self.loop.remove_reader(fd)
+        os.close(fd)
         with contextlib.suppress(InvalidHandle):
-            svc.handle.destroy_when_not_in_use()
+            handle.destroy_when_not_in_use()
 
     def stop(self) -> None:
         """Destroy every subscription and service (before the node is destroyed)."""
