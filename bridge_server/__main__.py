@@ -248,11 +248,20 @@ async def _run(args: argparse.Namespace) -> int:
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point of ``python -m bridge_server`` and ``roslibpy-lite-bridge``."""
-    if (sys.argv[1:] if argv is None else argv)[:1] in (["add-principal"], ["remove-principal"]):
+    command = (sys.argv[1:] if argv is None else argv)[:1]
+    if command in (["add-principal"], ["remove-principal"]):
         from .auth import main as principals
 
         return principals(sys.argv[1:] if argv is None else argv)
+    if command == ["healthcheck"]:
+        from .healthcheck import main as healthcheck
+
+        return healthcheck((sys.argv[1:] if argv is None else argv)[1:])
     args = parse_args(argv)
+    refusal = security.exposure_refusal(args)
+    if refusal is not None:
+        print(f"roslibpy-lite-bridge: refusing to start: {refusal}", file=sys.stderr)
+        return 2
     os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
     logging.basicConfig(
         level=getattr(logging, args.log_level),
@@ -263,6 +272,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.log_level != "DEBUG":
         logging.getLogger("websockets").setLevel(logging.WARNING)
     try:
+        security.check_readable(security.config_from_args(args))  # names the file and user
         if args.workers > 1 and args.worker_index is None:
             from .workers import Supervisor
 

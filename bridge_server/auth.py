@@ -30,8 +30,11 @@ a failure.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import hashlib
 import hmac
+import os
+import pwd
 import re
 import secrets
 import sys
@@ -150,7 +153,9 @@ def load_auth_file(path: str | Path) -> AuthConfig:
     try:
         data = tomllib.loads(path.read_text(encoding="utf-8"))
     except OSError as exc:
-        raise AuthFileError(f"{path}: cannot read: {exc.strerror}") from None
+        from .security.options import user_name  # (security imports this module)
+
+        raise AuthFileError(f"cannot read {path} as user {user_name()}: {exc.strerror}") from None
     except tomllib.TOMLDecodeError as exc:
         raise AuthFileError(f"{path}: not valid TOML: {exc}") from None
     unknown = set(data) - {"roles", "principals"}
@@ -222,16 +227,38 @@ class FailureTracker:
 # -- the helper command ----------------------------------------------------------------------
 
 
-def add_principal(path: Path, name: str, role: str) -> str:
+def owner_ids(user: str) -> tuple[int, int]:
+    """The uid and primary gid of ``user``: a name, or a number (a container's user, who
+    may have no account here: then the group stays as it is, -1)."""
+    try:
+        entry = pwd.getpwuid(int(user)) if user.isdigit() else pwd.getpwnam(user)
+    except KeyError:
+        if user.isdigit():
+            return int(user), -1
+        raise AuthFileError(f"--owner {user}: no such user on this machine") from None
+    return entry.pw_uid, entry.pw_gid
+
+
+def add_principal(path: Path, name: str, role: str, owner: str | None = None) -> str:
     """Add principal ``name`` with ``role`` to the auth file (made with example roles if new).
 
-    Returns the new token; only its hash is written.
+    A new file is made mode 600, in a folder made mode 750 if it is missing. With ``owner``
+    (the user the bridge runs as) the file becomes that user's, and a folder made here its
+    group's, so the bridge can read the file and nobody else can. Returns the new token;
+    only its hash is written.
     """
     if not re.fullmatch(r"[A-Za-z0-9_-]+", name):  # a TOML bare key: 'é' would break the file
         raise AuthFileError(f"principal name {name!r}: use ASCII letters, digits, '-' and '_'")
+    ids = owner_ids(owner) if owner is not None else None
+    if not path.parent.exists():
+        path.parent.mkdir(mode=0o750, parents=True)
+        if ids is not None:
+            os.chown(path.parent, -1, ids[1])
     if not path.exists():
         path.write_text(EXAMPLE_ROLES, encoding="utf-8")
         path.chmod(0o600)
+    if ids is not None:
+        os.chown(path, *ids)
     config = load_auth_file(path)
     if role not in config.roles:
         known = ", ".join(config.roles)
@@ -266,7 +293,11 @@ def remove_principal(path: Path, name: str) -> None:
     text = "".join(kept)
     tmp = path.with_name(path.name + ".tmp")
     tmp.write_text(text, encoding="utf-8")
-    tmp.chmod(path.stat().st_mode & 0o777)
+    st = path.stat()
+    tmp.chmod(st.st_mode & 0o777)
+    if (st.st_uid, st.st_gid) != (os.geteuid(), os.getegid()):  # keep the bridge's ownership
+        with contextlib.suppress(PermissionError):  # (only root may give a file away)
+            os.chown(tmp, st.st_uid, st.st_gid)
     try:
         left = load_auth_file(tmp)
         if any(p.name == name for p in left.principals):  # e.g. written as a dotted key
@@ -308,13 +339,19 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("name", help="principal name (ASCII letters, digits, '-', '_')")
     p.add_argument("--role", required=True, help="a role defined in the file")
     p.add_argument("--auth-file", required=True, type=Path,
-                   help="the TOML auth file (created with example roles if missing)")
+                   help="the TOML auth file (created mode 600 with example roles if missing, "
+                   "and its folder mode 750)")
+    p.add_argument("--owner", help="the user the bridge runs as (e.g. roslibpy-bridge): the "
+                   "file becomes theirs, a folder made here their group's")
     args = p.parse_args(argv)
     try:
-        token = add_principal(args.auth_file, args.name, args.role)
+        token = add_principal(args.auth_file, args.name, args.role, args.owner)
     except AuthFileError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 1
+    except OSError as exc:  # a folder or file this user may not write
+        print(f"error: {args.auth_file}: {exc.strerror or exc}", file=sys.stderr)
+        return 2
     print(token)
     print(f"principal {args.name} ({args.role}) added to {args.auth_file}; "
           "this token is shown only now (a running bridge accepts it after SIGHUP)",

@@ -36,24 +36,7 @@ fi
 
 # Custom interfaces: CMake into the venv, rebuilt when their sources change (ours in
 # msgs/interfaces; test fixtures in tests/interfaces, e.g. example_interfaces, not on PyPI).
-for pkg in msgs/interfaces/*/ tests/interfaces/*/; do
-  [ -f "$pkg/package.xml" ] || continue
-  name="$(basename "$pkg")"
-  src_stamp="$(find "$pkg" -type f | sort | xargs cat | sha256sum | cut -d' ' -f1)"
-  if [ "$(cat ".venv/.iface-$name" 2>/dev/null)" != "$src_stamp" ]; then
-    log "building interface package $name"
-    bdir=".venv/build/$name"
-    rm -rf "$bdir"; mkdir -p "$bdir"
-    (
-      cd "$bdir"
-      AMENT_PREFIX_PATH="$VIRTUAL_ENV" CMAKE_PREFIX_PATH="$VIRTUAL_ENV" \
-        cmake "$ROOT/$pkg" -DPython3_EXECUTABLE="$VIRTUAL_ENV/bin/python" \
-        -DCMAKE_INSTALL_PREFIX="$VIRTUAL_ENV" -DBUILD_TESTING=OFF > build.log 2>&1 \
-        && make -j"$(nproc)" >> build.log 2>&1 && make install >> build.log 2>&1
-    ) || { log "building $name failed; see $bdir/build.log"; tail -30 "$bdir/build.log" >&2; exit 1; }
-    echo "$src_stamp" > ".venv/.iface-$name"
-  fi
-done
+VENV="$VIRTUAL_ENV" bash "$ROOT/scripts/build-interfaces.sh" msgs/interfaces tests/interfaces
 
 # roslibpy's own upstream tests (its sdist), run against our bridge by the peer tests.
 if [ ! -d .venv/peer-src/roslibpy-2.1.0/tests ]; then

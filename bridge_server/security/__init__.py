@@ -40,7 +40,15 @@ from __future__ import annotations
 from .credentials import is_loopback
 from .gate import POLICY_VIOLATION, PRE_AUTH_FRAME_LIMIT, Gate
 from .handshake import Security
-from .options import SecurityConfig, add_arguments, config_from_args, parse_origins
+from .options import (
+    SecurityConfig,
+    add_arguments,
+    check_readable,
+    config_from_args,
+    exposure_refusal,
+    parse_origins,
+    user_name,
+)
 from .redaction import RedactTokens, install_log_redaction, redact
 from .websockets_internals import BridgeConnection, check_websockets_internals
 
@@ -53,10 +61,13 @@ __all__ = [
     "Security",
     "SecurityConfig",
     "add_arguments",
+    "check_readable",
     "check_websockets_internals",
     "config_from_args",
+    "exposure_refusal",
     "install_log_redaction",
     "is_loopback",
     "parse_origins",
     "redact",
+    "user_name",
 ]

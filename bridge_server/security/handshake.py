@@ -16,6 +16,7 @@ from websockets.asyncio.server import ServerConnection
 from websockets.http11 import Request, Response
 
 from ..auth import AuthConfig, AuthFileError, FailureTracker, load_auth_file
+from ..types import BridgeError
 from .credentials import client_address, is_loopback, token_of
 from .gate import PRE_AUTH_FRAME_LIMIT, Gate
 from .options import SecurityConfig
@@ -52,7 +53,15 @@ class Security:
         """The server TLS context (``None`` without ``--certfile``)."""
         if not self.config.certfile:
             return None
-        self._ssl = self._load_ssl(ssl.create_default_context(ssl.Purpose.CLIENT_AUTH))
+        try:
+            self._ssl = self._load_ssl(ssl.create_default_context(ssl.Purpose.CLIENT_AUTH))
+        except ssl.SSLError as exc:  # its text names no file
+            c = self.config
+            files = " and ".join(f"{opt} {path}" for opt, path in (
+                ("--certfile", c.certfile), ("--keyfile", c.keyfile), ("--client-ca", c.client_ca),
+            ) if path)
+            raise BridgeError(f"{files}: not a usable PEM certificate, key or CA "
+                              f"({exc.reason or exc})") from None
         return self._ssl
 
     def _load_ssl(self, ctx: ssl.SSLContext) -> ssl.SSLContext:

@@ -3,9 +3,22 @@
 from __future__ import annotations
 
 import argparse
+import getpass
+import os
 from dataclasses import dataclass
 
-__all__ = ["SecurityConfig", "add_arguments", "config_from_args", "parse_origins"]
+from ..types import BridgeError
+from .credentials import is_loopback
+
+__all__ = [
+    "SecurityConfig",
+    "add_arguments",
+    "check_readable",
+    "config_from_args",
+    "exposure_refusal",
+    "parse_origins",
+    "user_name",
+]
 
 
 @dataclass
@@ -52,6 +65,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     g.add_argument("--auth-file", help="TOML file of roles and principals: require a token "
                    "(make one with: roslibpy-lite-bridge add-principal NAME --role ROLE "
                    "--auth-file FILE)")
+    g.add_argument("--insecure", action="store_true",
+                   help="allow a non-loopback --host without --auth-file (anyone who reaches "
+                   "the port may do anything; a warning is logged at every start)")
     g.add_argument("--allowed-origins", help="comma-separated browser origins allowed to "
                    "connect, e.g. https://ui.example.com (clients without Origin always may)")
     g.add_argument("--max-clients", type=int, default=d.max_clients,
@@ -127,3 +143,39 @@ def config_from_args(args: argparse.Namespace) -> SecurityConfig:
         notsent_lowat=args.notsent_lowat,
         inbound_budget_total=args.inbound_budget_total,
     )
+
+
+def exposure_refusal(args: argparse.Namespace) -> str | None:
+    """Why the bridge must not start with these options (``None``: it may).
+
+    A bridge listening beyond this machine without ``--auth-file`` lets anyone who reaches
+    the port drive the robot; it starts so only when ``--insecure`` says that is meant.
+    """
+    if is_loopback(args.host) or args.auth_file or args.insecure:
+        return None
+    return (f"--host {args.host or '(every address)'} is reachable from other machines: give "
+            "--auth-file FILE (SECURITY.md), or --insecure to serve everyone who reaches the "
+            "port, or --host 127.0.0.1")
+
+
+def user_name() -> str:
+    """The name of the user this process runs as (its uid if it has none)."""
+    try:
+        return getpass.getuser()
+    except (KeyError, OSError):
+        return str(os.getuid())
+
+
+def check_readable(config: SecurityConfig) -> None:
+    """Raise :class:`BridgeError` naming the option, the file and the user for the first
+    configured file (certificate, key, CA, auth file) this process cannot read."""
+    for option, path in (("--certfile", config.certfile), ("--keyfile", config.keyfile),
+                         ("--client-ca", config.client_ca), ("--auth-file", config.auth_file)):
+        if not path:
+            continue
+        try:
+            with open(path, "rb"):
+                pass
+        except OSError as exc:
+            raise BridgeError(f"{option}: cannot read {path} as user {user_name()}: "
+                              f"{exc.strerror or exc}") from None

@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import re
 import shutil
+import signal
 import subprocess
 import sys
 import tomllib
@@ -84,22 +85,29 @@ def _instructions(text: str) -> list[tuple[str, str]]:
 
 
 def test_dockerfile_structure_and_command_match_the_entry_point() -> None:
-    """FROM first, sources copied exist, a non-root user, a /readyz health check, and
-    ENTRYPOINT + CMD parse with the bridge's own argument parser."""
+    """FROM first, sources copied exist, a non-root user, DDS on this machine, a health check
+    that is the bridge's own, and ENTRYPOINT + CMD that parse with the bridge's argument
+    parser and pass its exposure rule: every address, but with tokens and TLS, whose files
+    come from the mounted /etc/roslibpy-lite/ the header documents."""
     from bridge_server.__main__ import parse_args
+    from bridge_server.security import exposure_refusal
 
-    steps = _instructions(DOCKERFILE.read_text())
+    text = DOCKERFILE.read_text()
+    steps = _instructions(text)
     words = [w for w, _ in steps]
-    assert words[0] == "FROM" and "python:3.11" in steps[0][1]
+    assert words[0] == "FROM"
+    assert [rest for w, rest in steps if w == "FROM"][-1].startswith("python:3.11")
     for word, rest in steps:
-        if word == "COPY":
+        if word == "COPY" and not rest.startswith("--from="):
             for src in rest.split()[:-1]:
                 assert (ROOT / src).exists(), f"COPY {src}: no such path in the repository"
     users = [rest for w, rest in steps if w == "USER"]
     assert users and users[-1] not in ("root", "0")
-    assert any(w == "RUN" and '".[bridge]"' in rest for w, rest in steps)
+    env = " ".join(rest for w, rest in steps if w == "ENV")
+    assert "ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST" in env
+    assert "ROS_AUTOMATIC_DISCOVERY_RANGE=SUBNET" in text  # the header says how to widen it
     health = next(rest for w, rest in steps if w == "HEALTHCHECK")
-    assert "/readyz" in health
+    assert json.loads(health.partition("CMD")[2]) == ["roslibpy-lite-bridge", "healthcheck"]
     entry = json.loads(next(rest for w, rest in steps if w == "ENTRYPOINT"))
     cmd = json.loads(next(rest for w, rest in steps if w == "CMD"))
     assert entry == ["roslibpy-lite-bridge"]
@@ -107,7 +115,99 @@ def test_dockerfile_structure_and_command_match_the_entry_point() -> None:
     assert flags <= _bridge_flags(), flags - _bridge_flags()
     args = parse_args(cmd)
     assert (args.host, args.port, args.workers) == ("0.0.0.0", 9090, 2)
+    assert exposure_refusal(args) is None and not args.insecure
+    files = [args.auth_file, args.certfile, args.keyfile]
+    for path in files:
+        assert path.startswith("/etc/roslibpy-lite/"), path
+        assert f"{Path(path).name} " in text.partition("FROM")[0], f"{path} not in the header"
+    assert "-v /etc/roslibpy-lite:/etc/roslibpy-lite:ro" in text
     assert "EXPOSE" in words and ("EXPOSE", "9090") in steps
+    # The robot's interfaces: a stage --build-context replaces, built with the one script.
+    assert ("FROM", "scratch AS interfaces") in steps
+    assert any(w == "COPY" and rest.startswith("--from=interfaces ") for w, rest in steps)
+    assert any(w == "RUN" and "scripts/build-interfaces.sh msgs/interfaces interfaces" in rest
+               and '".[bridge,build-interfaces]"' in rest for w, rest in steps)
+
+
+def _container_run(tmp: Path, argv: list[str], health: list[str]) -> dict[str, object]:
+    """Run ``argv`` (a bridge) as a container's main process would, alone in a PID namespace
+    of its own with its own /proc, wait for its ready line, run ``health`` (the health check)
+    while it serves and again after it stopped; returns the bridge's lines and both results."""
+    driver = tmp / "container.py"
+    driver.write_text(CONTAINER_DRIVER)
+    out = subprocess.run(["unshare", "--pid", "--fork", "--mount-proc", sys.executable,
+                          str(driver), json.dumps(argv), json.dumps(health)],
+                         cwd=tmp, env=ros_env(PYTHONPATH=str(ROOT)),  # this checkout's code
+                         capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stdout + out.stderr
+    return json.loads(out.stdout.splitlines()[-1])  # type: ignore[no-any-return]
+
+
+CONTAINER_DRIVER = """
+import json, signal, subprocess, sys
+argv, health = json.loads(sys.argv[1]), json.loads(sys.argv[2])
+bridge = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+lines = []
+for line in bridge.stdout:
+    lines.append(line)
+    if "bridge_server listening on" in line:
+        break
+def check():
+    done = subprocess.run(health, capture_output=True, text=True, timeout=30)
+    return [done.returncode, done.stderr]
+serving = check() if bridge.poll() is None else None
+bridge.send_signal(signal.SIGTERM)
+lines += bridge.stdout.readlines()
+bridge.wait(30)
+print(json.dumps({"lines": lines, "serving": serving, "stopped": check()}))
+"""
+
+
+def _docker_files(tmp: Path) -> dict[str, str]:
+    """What an operator mounts at /etc/roslibpy-lite/: a token file and a certificate."""
+    import trustme
+
+    from bridge_server.auth import add_principal
+
+    add_principal(tmp / "auth.toml", "dashboard", "viewer")
+    cert = trustme.CA().issue_cert("127.0.0.1")
+    cert.cert_chain_pems[0].write_to_path(str(tmp / "server.pem"))
+    cert.private_key_pem.write_to_path(str(tmp / "server.key"))
+    return {f"/etc/roslibpy-lite/{name}": str(tmp / name)
+            for name in ("auth.toml", "server.pem", "server.key")}
+
+
+@pytest.mark.skipif(shutil.which("unshare") is None, reason="unshare (util-linux) missing")
+def test_dockerfile_healthcheck_follows_the_port_and_scheme(tmp_path: Path) -> None:
+    """The image's ENTRYPOINT + CMD with another port, as `docker run IMAGE ... --port P`
+    gives them, serve wss:// (2 workers); the HEALTHCHECK command, run beside them as in the
+    container, passes while the bridge serves and fails once it stopped."""
+    steps = _instructions(DOCKERFILE.read_text())
+    entry = json.loads(next(rest for w, rest in steps if w == "ENTRYPOINT"))
+    cmd = json.loads(next(rest for w, rest in steps if w == "CMD"))
+    health = json.loads(next(rest for w, rest in steps if w == "HEALTHCHECK").partition("CMD")[2])
+    bin_dir = Path(sys.executable).parent
+    files = _docker_files(tmp_path)
+    argv = [str(bin_dir / entry[0]), *[files.get(a, a) for a in cmd], "--port", str(_free_port())]
+    result = _container_run(tmp_path, argv, [str(bin_dir / health[0]), *health[1:]])
+    assert any("listening on wss://0.0.0.0:" in line for line in result["lines"]), result  # type: ignore[attr-defined]
+    assert result["serving"] == [0, ""], result
+    assert result["stopped"] == [1, "healthcheck: no running roslibpy-lite-bridge found; give "
+                                 "the bridge's options: roslibpy-lite-bridge healthcheck "
+                                 "--port PORT ...\n"], result
+
+
+def test_dockerfile_without_its_mounted_files_names_the_first_missing_one() -> None:
+    """The image's command without /etc/roslibpy-lite/ mounted stops with one line naming the
+    file and the user, not a traceback."""
+    steps = _instructions(DOCKERFILE.read_text())
+    cmd = json.loads(next(rest for w, rest in steps if w == "CMD"))
+    out = subprocess.run([sys.executable, "-m", "bridge_server", *cmd], cwd=ROOT, env=ros_env(),
+                         capture_output=True, text=True, timeout=60)
+    assert out.returncode == 1
+    assert "cannot start: --certfile: cannot read /etc/roslibpy-lite/server.pem as user" \
+        in out.stderr
+    assert "Traceback" not in out.stderr
 
 
 def _unit_command(tmp: Path, port: int, with_log_dirs: bool = True) -> tuple[list[str], dict[str, str]]:
@@ -210,3 +310,87 @@ def test_unit_command_serves_as_a_user_without_a_home(tmp_path: Path) -> None:
                             timeout=60)
     assert failed.returncode != 0
     assert "Failed to create log directory" in failed.stdout + failed.stderr
+
+
+STEPS_SKIPPED = {
+    "useradd": "makes a system user on the test machine (the steps use nobody instead)",
+    "python3.11 -m venv": "the test runs in this checkout's venv",
+    "/opt/roslibpy-lite/.venv/bin/pip install": "tests/install builds and installs the wheel",
+    "cp deploy/roslibpy-lite-bridge.service": "installs into the machine's systemd",
+    "systemctl": "needs systemd running (systemd-analyze verify checks the unit)",
+}
+
+
+def _install_steps() -> list[str]:
+    """The commands of the unit's header, in order (the lines starting with `#   $ `)."""
+    return [line.partition("$ ")[2] for line in UNIT.read_text().splitlines()
+            if line.startswith("#   $ ")]
+
+
+@pytest.mark.skipif(shutil.which("unshare") is None or shutil.which("openssl") is None,
+                    reason="unshare or openssl missing")
+def test_unit_install_steps_run_as_written(tmp_path: Path) -> None:
+    """The unit header's install steps, run as written in a temporary root (/etc and /opt
+    moved there, the service user played by nobody): the auth file and its folder are made
+    readable by that user only, the certificate is made, the robot's interfaces build, and
+    the unit's ExecStart then serves wss:// with the printed token, which the health check
+    step confirms. Only the steps that change the machine itself are left out (see
+    STEPS_SKIPPED); the unit passes systemd-analyze in its own test."""
+    import asyncio
+    import pwd
+    import ssl
+    import stat
+
+    import roslibpy_lite
+
+    steps = _install_steps()
+    skipped = [s for s in steps if any(s.startswith(k) for k in STEPS_SKIPPED)]
+    assert len(skipped) == len(STEPS_SKIPPED) + 1  # systemctl twice
+    etc = tmp_path / "etc" / "roslibpy-lite"
+    venv = Path(sys.prefix)
+
+    def here(command: str) -> str:
+        return (command.replace("/etc/roslibpy-lite", str(etc))
+                .replace("/opt/roslibpy-lite/.venv", str(venv))
+                .replace("roslibpy-bridge ", "nobody "))
+
+    run = [here(s) for s in steps if s not in skipped]
+    assert not etc.parent.exists()
+    out = subprocess.run(["bash", "-euo", "pipefail", "-c", "\n".join(run[:-1])], cwd=ROOT,
+                         env=ros_env(VIRTUAL_ENV=str(venv), PYTHONPATH=str(ROOT)),
+                         capture_output=True, text=True, timeout=600)
+    assert out.returncode == 0, out.stdout + out.stderr
+    token = out.stdout.strip()
+    nobody = pwd.getpwnam("nobody")
+    auth = etc / "auth.toml"
+    assert stat.S_IMODE(auth.stat().st_mode) == 0o600 and auth.stat().st_uid == nobody.pw_uid
+    assert stat.S_IMODE(etc.stat().st_mode) == 0o750 and etc.stat().st_gid == nobody.pw_gid
+    assert (etc / "server.key").stat().st_uid == nobody.pw_uid
+    port = _free_port()
+    service = _unit_sections(UNIT.read_text())["Service"]
+    argv = [here(a) for a in service["ExecStart"][0].split()]
+    argv[argv.index("--port") + 1] = str(port)
+    health = run[-1].split()
+    assert health[1:] == ["healthcheck"]
+    result = _container_run(tmp_path, argv, health)
+    assert result["serving"] == [0, ""], result
+
+    async def call() -> object:
+        ctx = ssl.create_default_context(cafile=str(etc / "server.pem"))
+        async with roslibpy_lite.connect(f"wss://127.0.0.1:{port}", ssl=ctx, token=token) as ros:
+            return await ros.call_service("/rosapi/get_ros_version",
+                                          "rosapi_msgs/srv/GetROSVersion", {})
+
+    bridge = subprocess.Popen(argv, cwd=tmp_path, env=ros_env(PYTHONPATH=str(ROOT)),
+                              stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    try:
+        assert bridge.stdout is not None
+        for line in bridge.stdout:
+            if "listening on wss://" in line:
+                break
+        assert asyncio.run(call())["version"] == 2  # type: ignore[index]
+    finally:
+        bridge.send_signal(signal.SIGTERM)
+        bridge.wait(15)
+        if bridge.stdout is not None:
+            bridge.stdout.close()
