@@ -89,9 +89,11 @@ class BridgeProcess:
     Everything the bridge logs is kept in ``lines`` (and echoed on failure).
     """
 
-    def __init__(self, port: int = 0, args: list[str] | None = None) -> None:
+    def __init__(self, port: int = 0, args: list[str] | None = None,
+                 env: dict[str, str] | None = None) -> None:
         self.port = port
         self.args = list(args or [])
+        self.env = env or {}
         self.proc: subprocess.Popen[str] | None = None
         self.lines: list[str] = []
         self._cond = threading.Condition()
@@ -108,7 +110,7 @@ class BridgeProcess:
         cmd = [sys.executable, "-m", "bridge_server", "--host", "127.0.0.1",
                "--port", str(self.port), *self.args]
         self.proc = subprocess.Popen(
-            cmd, cwd=ROOT, env=ros_env(), stdin=subprocess.DEVNULL,
+            cmd, cwd=ROOT, env=ros_env(**self.env), stdin=subprocess.DEVNULL,
             stdout=subprocess.PIPE,
             stderr=subprocess.STDOUT, text=True, bufsize=1,
         )
