@@ -3,7 +3,8 @@
 - a **counter** publishing ``std_msgs/msg/Int16`` on ``/example_counter`` once
   per second, starting at 0;
 - an **IMU summer** subscribed to ``sensor_msgs/msg/Imu`` on ``/imu``, adding
-  up ``angular_velocity.x`` and printing each value and the running sum;
+  up ``angular_velocity.x`` and printing the value and the running sum once a
+  second (the IMU publishes at 50 Hz);
 - a **service** ``/mult_floats`` (``mult_msgs/srv/MultFloats``) answering
   ``x * y``;
 - an **action** ``/integrate_imu`` (``mult_msgs/action/IntegrateImu``):
@@ -36,6 +37,7 @@ import math
 import os
 import signal
 import sys
+import time
 from collections.abc import Callable, Sequence
 from typing import Protocol
 
@@ -143,22 +145,34 @@ async def run_counter(
 
 
 class ImuSummer:
-    """Adds up ``angular_velocity.x`` of every Imu message it is given."""
+    """Adds up ``angular_velocity.x`` of every Imu message it is given.
 
-    def __init__(self, out: Output | None = _say) -> None:
+    It prints the first message's value and sum, then the latest ones at most once per
+    ``every`` seconds (0: every message), so a 50 Hz IMU makes a line a second.
+    """
+
+    def __init__(self, out: Output | None = _say, *, every: float = 1.0,
+                 clock: Clock | None = None) -> None:
         self.total = 0.0
         """The running sum."""
         self.count = 0
         """Messages summed."""
         self._out = out
+        self._every = every
+        self._now = clock.time if clock is not None else time.monotonic
+        self._printed_at: float | None = None
 
     def add(self, msg: Imu) -> float:
-        """Add one message; returns the new sum (and prints value and sum)."""
+        """Add one message; returns the new sum (and prints value and sum when it is time)."""
         x = msg.angular_velocity.x
         self.total += x
         self.count += 1
         if self._out is not None:
-            self._out(f"[imu] #{self.count} angular_velocity.x={x:+.4f} sum={self.total:+.4f}")
+            now = self._now()
+            if self._printed_at is None or now - self._printed_at >= self._every:
+                self._printed_at = now
+                self._out(f"[imu] #{self.count} angular_velocity.x={x:+.4f} "
+                          f"sum={self.total:+.4f}")
         return self.total
 
     async def run(
@@ -340,7 +354,7 @@ async def run_app(
     ``ready`` is set once the subscription, the service and the action are in place.
     """
     stop = stop or asyncio.Event()
-    summer = ImuSummer(out)
+    summer = ImuSummer(out, clock=clock)
     integrator = ImuIntegrator(clock, out)
     subscribed, served, acting = asyncio.Event(), asyncio.Event(), asyncio.Event()
     async with asyncio.TaskGroup() as tg:

@@ -120,10 +120,11 @@ async def test_counter_unadvertises_when_cancelled() -> None:
 
 
 async def test_imu_summer_adds_angular_velocity_x_and_prints_each() -> None:
-    """The summer adds angular_velocity.x of each Imu and prints the value and the running sum."""
+    """The summer adds angular_velocity.x of each Imu and prints the value and the running sum
+    (of each message, with every=0)."""
     ros = MockRos()
     lines: list[str] = []
-    summer = ImuSummer(lines.append)
+    summer = ImuSummer(lines.append, every=0)
     ready = asyncio.Event()
     task = asyncio.create_task(summer.run(ros, count=3, ready=ready))
     await ready.wait()
@@ -151,6 +152,23 @@ async def test_imu_summer_accepts_dict_messages_from_the_wire() -> None:
                "sensor_msgs/msg/Imu")
     ros.inject(IMU_TOPIC, {"angular_velocity": {"x": 3.5}}, "sensor_msgs/msg/Imu")
     assert await task == pytest.approx(5.5)
+
+
+def test_imu_summer_prints_a_line_a_second_of_a_50_hz_imu() -> None:
+    """Three seconds of a 50 Hz IMU make three lines (the first message's, then one a second),
+    each with the running sum of every message."""
+    clock = FakeClock(start=100.0)
+    lines: list[str] = []
+    summer = ImuSummer(lines.append, clock=clock)
+    for i in range(150):
+        clock.now = 100.0 + i / 50
+        summer.add(imu(0.5))
+    assert summer.count == 150 and summer.total == pytest.approx(75.0)
+    assert lines == [
+        "[imu] #1 angular_velocity.x=+0.5000 sum=+0.5000",
+        "[imu] #51 angular_velocity.x=+0.5000 sum=+25.5000",
+        "[imu] #101 angular_velocity.x=+0.5000 sum=+50.5000",
+    ]
 
 
 def test_imu_summer_handles_nan() -> None:
