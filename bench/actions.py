@@ -22,12 +22,9 @@ import asyncio
 import contextlib
 import json
 import time
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
-from bench.harness import ROOT, RosSide, percentile, ws_open
-
-if TYPE_CHECKING:
-    from bench.run import Ctx
+from bench.harness import ROOT, Ctx, RosSide, percentile, ws_open
 
 FIB = "test_msgs/action/Fibonacci"
 ACTION_SIDE = str(ROOT / "bench" / "ros_actions_side.py")

@@ -24,13 +24,9 @@ import sys
 import tempfile
 import time
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
-from bench.harness import ROOT, child_env
-
-if TYPE_CHECKING:
-    from bench.harness import Bridge
-    from bench.run import Ctx
+from bench.harness import CODE_ROOT, Bridge, Ctx, child_env
 
 __all__ = ["record"]
 
@@ -47,7 +43,7 @@ async def _recording(ctx: Ctx, bridge: Bridge, streams: dict[str, tuple[str, flo
     path = Path(tempfile.mkdtemp(prefix="bench-bag-")) / "run.mcap"
     recorder = await asyncio.create_subprocess_exec(
         sys.executable, "-m", "roslibpy_lite.cli", "bag", "record", *streams, "-o", str(path),
-        "--url", bridge.url, cwd=ROOT, env=child_env(ctx.domain),
+        "--url", bridge.url, cwd=CODE_ROOT, env=child_env(ctx.domain),
         stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE)
     publishers = [ctx.ros("publish", "--topic", topic, "--kind", kind, "--rate", str(rate),
                           "--duration", str(seconds), "--depth", "100", "--wait-subs", "1",

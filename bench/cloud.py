@@ -12,12 +12,9 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import time
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
-from bench.harness import close_clients, send_op, ws_open
-
-if TYPE_CHECKING:
-    from bench.run import Ctx
+from bench.harness import Ctx, close_clients, send_op, ws_open
 
 __all__ = ["pointcloud"]
 

@@ -14,33 +14,78 @@ import json
 import os
 import re
 import socket
+import ssl
 import struct
 import sys
 from collections import deque
 from collections.abc import Awaitable
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 from websockets.asyncio.client import ClientConnection, connect
 
-from bench.tls import client_ssl
-
 ROOT = Path(__file__).resolve().parent.parent
+"""The checkout this harness comes from (its scenarios and ROS-side programs run from here)."""
+CODE_ROOT = Path(os.environ.get("BENCH_CODE_ROOT") or ROOT).resolve()
+"""The checkout whose bridge and client are measured: ``ROOT`` unless ``BENCH_CODE_ROOT``
+names another (``python -m bench --compare`` runs this harness on another revision's code)."""
+if CODE_ROOT != ROOT and str(CODE_ROOT) not in sys.path:
+    # this package is imported already (from ROOT); roslibpy_lite, bridge_server and msgs
+    # are imported from CODE_ROOT from here on
+    sys.path.insert(0, str(CODE_ROOT))
 ROS_SIDE = str(Path(__file__).resolve().parent / "ros_side.py")
 READY = re.compile(r"bridge_server listening on wss?://([\d.]+):(\d+)")
 
 
+def with_code_root(env: dict[str, str], root: Path) -> dict[str, str]:
+    """``env`` with ``root`` first on ``PYTHONPATH`` when it is not this checkout."""
+    if root != ROOT:
+        env["PYTHONPATH"] = os.pathsep.join(p for p in (str(root), env.get("PYTHONPATH", "")) if p)
+    return env
+
+
 def child_env(domain: int) -> dict[str, str]:
-    """Environment of every child: loopback DDS, the benchmark's ROS domain, unbuffered output."""
+    """Environment of every child: loopback DDS, the benchmark's ROS domain, unbuffered output,
+    and :data:`CODE_ROOT`'s packages first on the path."""
     env = dict(os.environ)
     env["ROS_AUTOMATIC_DISCOVERY_RANGE"] = env.get("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
     env["ROS_DOMAIN_ID"] = str(domain)
     env["PYTHONUNBUFFERED"] = "1"
-    return env
+    return with_code_root(env, CODE_ROOT)
 
 
-RS_PEER = ROOT.parent / "shared" / "peers" / "rosbridge_server_rs.sh"
+def _rs_peer() -> Path:
+    """``shared/peers/rosbridge_server_rs.sh`` beside this checkout or one of its parents
+    (``BENCH_RS_PEER`` names it elsewhere)."""
+    named = os.environ.get("BENCH_RS_PEER")
+    if named:
+        return Path(named)
+    for parent in ROOT.parents:
+        candidate = parent / "shared" / "peers" / "rosbridge_server_rs.sh"
+        if candidate.exists():
+            return candidate
+    return ROOT.parent / "shared" / "peers" / "rosbridge_server_rs.sh"
+
+
+RS_PEER = _rs_peer()
 """Runs rosbridge_server_rs (Rust) on our venv's wheels (read its header)."""
+
+_tls_trust: list[ssl.SSLContext] = []
+
+
+def trust_tls(context: ssl.SSLContext) -> None:
+    """Make ``context`` the client TLS context of wss:// bench bridges (the tls scenario)."""
+    _tls_trust[:] = [context]
+
+
+def client_ssl(url: str) -> ssl.SSLContext | None:
+    """The client TLS context for a wss:// URL of a bench bridge (``None`` for ws://)."""
+    if not url.startswith("wss:"):
+        return None
+    if not _tls_trust:
+        raise RuntimeError("no TLS bridge was set up (run the tls scenario)")
+    return _tls_trust[0]
 
 
 class Bridge:
@@ -56,7 +101,7 @@ class Bridge:
     ) -> None:
         self.domain = domain
         self.args = list(args or [])
-        self.root = Path(root).resolve() if root else ROOT
+        self.root = Path(root).resolve() if root else CODE_ROOT
         self.peer = peer
         self.proc: asyncio.subprocess.Process | None = None
         self.port = 0
@@ -129,12 +174,8 @@ class Bridge:
                 await asyncio.sleep(0.1)
 
     def _env(self) -> dict[str, str]:
-        env = child_env(self.domain)
-        if self.root != ROOT:  # import bridge_server (and its siblings) from that checkout
-            env["PYTHONPATH"] = os.pathsep.join(
-                p for p in (str(self.root), env.get("PYTHONPATH", "")) if p
-            )
-        return env
+        # import bridge_server (and its siblings) from that checkout
+        return with_code_root(child_env(self.domain), self.root)
 
     async def _pump(self) -> None:
         assert self.proc is not None and self.proc.stdout is not None
@@ -230,6 +271,28 @@ class RosSide:
             self._reader.cancel()
             with contextlib.suppress(asyncio.CancelledError):
                 await self._reader
+
+
+@dataclass
+class Ctx:
+    """Options shared by the scenarios."""
+
+    duration: float
+    quick: bool
+    domain: int
+    profile: bool
+    ros_executor: str = "events"
+    bridge_root: str | None = None
+    bridge_args: list[str] = field(default_factory=list)
+    peer: str = "ours"
+
+    def bridge(self) -> Bridge:
+        """A new (not yet started) bridge for one scenario (``--peer``: ours or rs)."""
+        return Bridge(self.domain, self.bridge_args, self.bridge_root, self.peer)
+
+    def ros(self, *args: str) -> RosSide:
+        """A new (not yet started) ROS-side process."""
+        return RosSide(self.domain, *args, "--executor", self.ros_executor)
 
 
 def percentile(values: list[float], q: float) -> float:

@@ -21,13 +21,10 @@ from __future__ import annotations
 
 import asyncio
 import time
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
-from bench.harness import percentile, send_op, ws_open
+from bench.harness import Ctx, percentile, send_op, ws_open
 from bench.linkproxy import LinkProxy
-
-if TYPE_CHECKING:
-    from bench.run import Ctx
 
 __all__ = ["links"]
 

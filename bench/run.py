@@ -58,12 +58,10 @@ import tempfile
 import time
 from collections import Counter
 from collections.abc import Awaitable, Callable
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
-
 from websockets.asyncio.client import ClientConnection
 
 from bench.actions import action_client_served, action_ros_server
@@ -71,7 +69,7 @@ from bench.bag import record
 from bench.cloud import pointcloud
 from bench.harness import (
     Bridge,
-    RosSide,
+    Ctx,
     StalledClient,
     close_clients,
     percentile,
@@ -99,28 +97,6 @@ TARGETS: dict[str, str] = {
     "action_ros_server": "reference: goal round trip p50/p99, feedback msg/s at >= 99 %",
     "action_client_served": "reference: goal round trip p50/p99, feedback msg/s at >= 99 %",
 }
-
-
-@dataclass
-class Ctx:
-    """Options shared by the scenarios."""
-
-    duration: float
-    quick: bool
-    domain: int
-    profile: bool
-    ros_executor: str = "events"
-    bridge_root: str | None = None
-    bridge_args: list[str] = field(default_factory=list)
-    peer: str = "ours"
-
-    def bridge(self) -> Bridge:
-        """A new (not yet started) bridge for one scenario (``--peer``: ours or rs)."""
-        return Bridge(self.domain, self.bridge_args, self.bridge_root, self.peer)
-
-    def ros(self, *args: str) -> RosSide:
-        """A new (not yet started) ROS-side process."""
-        return RosSide(self.domain, *args, "--executor", self.ros_executor)
 
 
 class Profiler:

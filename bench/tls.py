@@ -14,35 +14,23 @@ import ssl
 import tempfile
 from collections.abc import Awaitable, Callable
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
-if TYPE_CHECKING:
-    from bench.run import Ctx
+from bench.harness import Ctx, trust_tls
 
-__all__ = ["client_ssl", "tls_scenario"]
-
-_client: ssl.SSLContext | None = None
-
-
-def client_ssl(url: str) -> ssl.SSLContext | None:
-    """The client TLS context for a wss:// URL of a bench bridge (``None`` for ws://)."""
-    if not url.startswith("wss:"):
-        return None
-    if _client is None:
-        raise RuntimeError("no TLS bridge was set up (run the tls scenario)")
-    return _client
+__all__ = ["tls_scenario"]
 
 
 def _make_certs() -> str:
     """A server certificate for 127.0.0.1 (key and chain in one PEM); trust it on the client."""
     import trustme
 
-    global _client
     ca = trustme.CA()
     path = Path(tempfile.mkdtemp(prefix="bench-tls-")) / "server.pem"
     ca.issue_cert("127.0.0.1").private_key_and_cert_chain_pem.write_to_path(str(path))
-    _client = ssl.create_default_context()
-    ca.configure_trust(_client)
+    client = ssl.create_default_context()
+    ca.configure_trust(client)
+    trust_tls(client)
     return str(path)
 
 
