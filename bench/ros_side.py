@@ -7,12 +7,15 @@ Sub-commands (each prints JSON lines on stdout: ``{"event": ...}``):
                several ``--topic``: each message goes to the next topic in turn)
 ``subscribe``  count numbered messages on a topic (std_msgs/String, raw CDR, no deserialising)
 ``serve``      serve ``std_srvs/srv/SetBool`` (answers ``success = data``) until stdin closes
+``call``       call a ``std_srvs/srv/SetBool`` service: round trips of sequential calls, then
+               calls/s with ``--in-flight`` outstanding
 
 Examples::
 
     python bench/ros_side.py publish --topic /x --rate 8000 --duration 3
     python bench/ros_side.py subscribe --topic /x --idle 1.0 --duration 20
     python bench/ros_side.py serve --service /svc
+    python bench/ros_side.py call --service /svc --calls 500 --in-flight 16 --duration 3
 
 Message formats: ``string`` data is the decimal sequence number; ``stamp`` data
 is ``"<seq> <time.monotonic_ns()>"`` taken just before publishing; ``image`` is a
@@ -143,7 +146,8 @@ def cmd_publish(args: argparse.Namespace) -> int:
         publishes[i % n_pubs](msg)
         i += 1
     elapsed = (mono() - t0) / 1e9
-    emit("done", sent=i, elapsed=elapsed, rate=i / elapsed if elapsed else 0.0)
+    emit("done", sent=i, elapsed=elapsed, rate=i / elapsed if elapsed else 0.0,
+         t_end=time.monotonic())
     if args.linger > 0:  # keep the writer alive so reliable readers can catch up
         time.sleep(args.linger)
     node.destroy_node()  # type: ignore[no-untyped-call]
@@ -159,17 +163,24 @@ def cmd_subscribe(args: argparse.Namespace) -> int:
     rclpy.init()
     node = rclpy.create_node(f"bench_sub_{os.getpid()}")
     state = {"n": 0, "first": -1, "last": -1, "t_first": 0.0, "t_last": 0.0, "seen": 0}
+    in_order_at: list[float] = []  # image frames numbered above all before them: arrival times
     seen = bytearray(args.expect) if args.expect else None
     stamped = args.stamped
     latencies: list[float] = []
 
     def on_image(data: bytes) -> None:
-        # count only (raw CDR, nothing deserialised): frames/s the ROS side can carry
+        # raw CDR, nothing deserialised but the sequence number in header.frame_id (after the
+        # encapsulation and the stamp): frames/s, and how many came in order, the ROS side carries
         now = time.monotonic()
+        seq = int(data[16:16 + int.from_bytes(data[12:16], "little") - 1].split(b" ", 1)[0])
         if state["n"] == 0:
             state["t_first"] = now
+            state["first"] = seq
         state["n"] += 1
         state["t_last"] = now
+        if seq > state["last"]:
+            in_order_at.append(now)
+            state["last"] = seq
 
     def on_raw(data: bytes) -> None:
         # CDR: 4-byte encapsulation header, uint32 length (incl. NUL), chars, NUL.
@@ -200,14 +211,7 @@ def cmd_subscribe(args: argparse.Namespace) -> int:
         sub = node.create_subscription(Image, args.topic, on_image, _qos(args), raw=True)
     else:
         sub = node.create_subscription(String, args.topic, on_raw, _qos(args), raw=True)
-    if args.executor == "events":
-        from rclpy.experimental.events_executor import EventsExecutor
-
-        executor: Any = EventsExecutor()
-    else:
-        from rclpy.executors import SingleThreadedExecutor
-
-        executor = SingleThreadedExecutor()
+    executor = _executor(args)
     executor.add_node(node)
     spin_once = executor.spin_once
     deadline = time.monotonic() + args.match_timeout
@@ -233,6 +237,7 @@ def cmd_subscribe(args: argparse.Namespace) -> int:
         "done",
         received=state["n"],
         unique=state["seen"] if seen is not None else None,
+        in_order_at=[round(t, 4) for t in in_order_at] if args.kind == "image" else None,
         first=state["first"],
         last=state["last"],
         span=span,
@@ -273,14 +278,7 @@ def cmd_serve(args: argparse.Namespace) -> int:
 
     # the default service QoS keeps only 10 requests: more in flight would be lost
     node.create_service(SetBool, args.service, handle, qos_profile=_qos(args))
-    if args.executor == "events":
-        from rclpy.experimental.events_executor import EventsExecutor
-
-        executor: Any = EventsExecutor()
-    else:
-        from rclpy.executors import SingleThreadedExecutor
-
-        executor = SingleThreadedExecutor()
+    executor = _executor(args)
     executor.add_node(node)
     emit("ready", service=args.service)
     stdin_closed = threading.Event()
@@ -300,11 +298,88 @@ def cmd_serve(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_call(args: argparse.Namespace) -> int:
+    """Call std_srvs/srv/SetBool: ``--calls`` one at a time (round trips in ms), then as many
+    as it can with ``--in-flight`` outstanding for ``--duration`` seconds (calls/s)."""
+    import rclpy
+    from std_srvs.srv import SetBool
+
+    rclpy.init()
+    node = rclpy.create_node(f"bench_caller_{os.getpid()}")
+    client = node.create_client(SetBool, args.service, qos_profile=_qos(args))
+    executor = _executor(args)
+    executor.add_node(node)
+    spin_once = executor.spin_once
+    deadline = time.monotonic() + args.match_timeout
+    while not client.service_is_ready() and time.monotonic() < deadline:
+        spin_once(timeout_sec=0.01)
+    if not client.service_is_ready():
+        emit("error", error=f"no server for {args.service}")
+        return 1
+    emit("matched")
+    request = SetBool.Request(data=True)
+    failed = 0
+
+    def settle(future: Any) -> None:
+        nonlocal failed
+        result = future.result()
+        failed += result is None or not result.success
+
+    def call_and_wait() -> None:
+        future: Any = client.call_async(request)
+        stop = time.monotonic() + args.match_timeout
+        while not future.done():
+            if time.monotonic() > stop:
+                raise TimeoutError(f"no answer from {args.service} in {args.match_timeout} s")
+            spin_once(timeout_sec=0.05)
+        settle(future)
+
+    for _ in range(args.warmup):
+        call_and_wait()
+    latencies: list[float] = []
+    for _ in range(args.calls):
+        t = time.perf_counter_ns()
+        call_and_wait()
+        latencies.append((time.perf_counter_ns() - t) / 1e6)
+    done = 0
+    pending: set[Any] = set()
+    t0 = time.monotonic()
+    stop_at = t0 + args.duration
+    while pending or time.monotonic() < stop_at:
+        while len(pending) < args.in_flight and time.monotonic() < stop_at:
+            pending.add(client.call_async(request))
+        spin_once(timeout_sec=0.05)
+        for future in [f for f in pending if f.done()]:
+            pending.discard(future)
+            settle(future)
+            done += 1
+        if time.monotonic() > stop_at + args.match_timeout:
+            break  # answers lost: say so below
+    elapsed = time.monotonic() - t0
+    emit("done", latency_ms=_quantiles(latencies), calls=args.calls, failed=failed,
+         in_flight=args.in_flight, calls_per_s=done / elapsed, unanswered=len(pending))
+    executor.shutdown(timeout_sec=1.0)
+    node.destroy_node()  # type: ignore[no-untyped-call]
+    rclpy.shutdown()
+    return 0
+
+
+def _executor(args: argparse.Namespace) -> Any:
+    """The executor ``--executor`` names."""
+    if args.executor == "events":
+        from rclpy.experimental.events_executor import EventsExecutor
+
+        return EventsExecutor()
+    from rclpy.executors import SingleThreadedExecutor
+
+    return SingleThreadedExecutor()
+
+
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     """The command line."""
     p = argparse.ArgumentParser(description=__doc__.split("\n", 1)[0])
     sub = p.add_subparsers(dest="cmd", required=True)
-    for name in ("publish", "subscribe", "serve"):
+    for name in ("publish", "subscribe", "serve", "call"):
         s = sub.add_parser(name)
         s.add_argument("--duration", type=float, default=3.0)
         s.add_argument("--match-timeout", type=float, default=15.0)
@@ -334,13 +409,19 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                            help='data is "<seq> <monotonic_ns>": report one-way latency')
         else:
             s.add_argument("--service", required=True)
+        if name == "call":
+            s.add_argument("--calls", type=int, default=1000, help="sequential calls timed")
+            s.add_argument("--warmup", type=int, default=50, help="sequential calls first")
+            s.add_argument("--in-flight", type=int, default=16,
+                           help="outstanding calls for --duration seconds (calls/s)")
     return p.parse_args(argv)
 
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point."""
     args = parse_args(argv)
-    handler = {"publish": cmd_publish, "subscribe": cmd_subscribe, "serve": cmd_serve}[args.cmd]
+    handler = {"publish": cmd_publish, "subscribe": cmd_subscribe, "serve": cmd_serve,
+               "call": cmd_call}[args.cmd]
     return handler(args)
 
 

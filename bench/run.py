@@ -12,8 +12,8 @@ library), and they count frames without decoding big payloads.
 Scenarios (targets; rosbridge_suite's figures in brackets):
 
 - ``rclpy_ceiling``: one rclpy publisher process -> one rclpy subscriber process,
-  no bridge: what the ROS side alone can carry (small strings, and 640x480 images
-  into a raw subscriber that deserialises nothing).
+  no bridge: what the ROS side alone can carry (small strings, and the ``image``
+  scenario's 640x480 images into a raw subscriber that deserialises nothing).
 - ``ros_to_client``: highest rate of small std_msgs/String (step search) where
   >= 99 % reach a websocket client. Target 8,000 msg/s [500].
 - ``ros_to_client_raw``: the same with ``compression: cbor-raw`` (the client gets the CDR
@@ -23,11 +23,15 @@ Scenarios (targets; rosbridge_suite's figures in brackets):
 - ``service``: call_service round trip to an rclpy SetBool service: p50 of
   sequential calls (target <= 1 ms) and calls/s with 16 in flight (target
   >= 1,000) [3.7 ms; 74 calls/s].
+- ``client_service``: the mirror of ``service``: a websocket client serves SetBool, an rclpy
+  client calls it through the bridge: p50/p99 of sequential calls, calls/s with 16 in flight.
 - ``latency``: one-way ROS -> client latency at 200 Hz, p50/p99 (target p99 <= 1 ms) [1.6 ms].
 - ``latency_side_by_side``: the same for our bridge and rosbridge_server_rs in one run,
   one publisher taking turns between their topics (and a plain rclpy subscriber's).
-- ``image``: 640x480 rgb8 sensor_msgs/Image to one client, frames/s as JSON
-  (target 60) and as CBOR (target 400) [14; 360].
+- ``image``: 640x480 rgb8 sensor_msgs/Image from an rclpy publisher as fast as it goes to
+  one client; frames that reached the client in order per second of publishing, as JSON
+  (target 60), CBOR (target 400) and cbor-raw [14; 360], beside the ROS ceiling (the same
+  publisher into a raw rclpy subscriber, no bridge, measured the same way in the same run).
 - ``idle_cpu``: the bridge's CPU with one connected client (target < 1 % of a core) [~5 %].
 - ``memory_stall``: the bridge's RSS while one client stalls under an image
   flood: start, peak, end [rosbridge grew 400 MB in 6 s].
@@ -52,6 +56,7 @@ import contextlib
 import json
 import os
 import platform
+import re
 import shutil
 import sys
 import tempfile
@@ -85,6 +90,7 @@ TARGETS: dict[str, str] = {
     "ros_to_client_raw": "the same with compression cbor-raw: >= 40,000 msg/s at >= 99 %",
     "client_to_ros": ">= 10,000 msg/s at >= 99 % [rosbridge 5,000]",
     "service": "p50 <= 1 ms, >= 1,000 calls/s with 16 in flight [rosbridge 3.7 ms, 74/s]",
+    "client_service": "p50 and p99 at or below rosbridge_server_rs's (--peer rs)",
     "latency": "p99 <= 1 ms at 200 Hz [rosbridge 1.6 ms]",
     "latency_side_by_side": "p50 and p99 at or below rosbridge_server_rs's, on one stream",
     "image": "JSON >= 60 frames/s, CBOR >= 400 frames/s [rosbridge 14; 360]",
@@ -191,19 +197,37 @@ async def rclpy_ceiling(ctx: Ctx) -> dict[str, Any]:
             "receive_rate": round(got["rate"]),
             "delivered_pct": round(100.0 * got["received"] / max(done["sent"], 1), 2),
         }
-    # 640x480 rgb8 images, publisher capped at 600/s, raw subscriber (nothing deserialised)
-    sub = await ctx.ros("subscribe", "--kind", "image", "--topic", "/bench/ceiling_image",
-                        "--depth", "50", "--duration", str(d + 20), "--idle", "1.0").start()
-    pub = await ctx.ros("publish", "--kind", "image", "--topic", "/bench/ceiling_image",
-                        "--rate", "600", "--depth", "5", "--duration", str(d),
-                        "--settle", "0.3").start()
-    done = await pub.event("done", d + 40)
-    got = await sub.event("done", 40)
-    await pub.close()
-    await sub.close()
-    out["image_640x480"] = {"publish_rate": round(done["rate"], 1),
-                            "receive_fps": round(got["rate"], 1), "received": got["received"]}
+    out["image_640x480"] = await image_ceiling(ctx)
     return out
+
+
+IMAGE_PUBLISHER = ("--kind", "image", "--rate", "0", "--depth", "5", "--settle", "0.3",
+                   "--linger", "0.5")
+"""The one image publisher of every image figure (each encoding, every server, the ROS
+ceiling): 640x480 rgb8 frames numbered in ``header.frame_id``, as fast as rclpy publishes
+them for the scenario's duration, history depth 5."""
+
+
+async def image_ceiling(ctx: Ctx) -> dict[str, Any]:
+    """What rclpy alone delivers: :data:`IMAGE_PUBLISHER` to a raw rclpy subscriber (nothing
+    deserialised; the history depth of 50 the bridge gives image subscriptions), no bridge."""
+    topic = "/bench/ceiling_image"
+    d = ctx.duration
+    sub = await ctx.ros("subscribe", "--kind", "image", "--topic", topic, "--depth", "50",
+                        "--duration", str(d + 20), "--idle", "1.0").start()
+    pub = await ctx.ros("publish", "--topic", topic, *IMAGE_PUBLISHER, "--duration",
+                        str(d)).start()
+    try:
+        done = await pub.event("done", d + 40)
+        got = await sub.event("done", 40)
+    finally:
+        await pub.close()
+        await sub.close()
+    cutoff = done["t_end"] + IMAGE_GRACE
+    in_order = sum(t <= cutoff for t in got["in_order_at"])
+    return {"frames_per_s": round(in_order / done["elapsed"], 1), "in_order": in_order,
+            "received": got["received"], "published": done["sent"],
+            "publish_s": round(done["elapsed"], 2)}
 
 
 class Sink:
@@ -243,10 +267,12 @@ class Sink:
 async def _drain_until(
     sink: Any, want: int, idle: float = 1.0, limit: float = 15.0
 ) -> None:
-    """Wait until ``sink.unique`` reaches ``want`` or nothing arrived for ``idle`` seconds."""
-    deadline = time.monotonic() + limit
+    """Wait until ``sink.unique`` reaches ``want`` or nothing arrived for ``idle`` seconds
+    (counted from the later of the last arrival and this call), ``limit`` seconds at most."""
+    start = time.monotonic()
+    deadline = start + limit
     while sink.unique < want and time.monotonic() < deadline:
-        if time.monotonic() - sink.t_last > idle:
+        if time.monotonic() - max(sink.t_last, start) > idle:
             return
         await asyncio.sleep(0.02)
 
@@ -451,6 +477,46 @@ async def service(ctx: Ctx) -> dict[str, Any]:
     }
 
 
+async def client_service(ctx: Ctx) -> dict[str, Any]:
+    """An rclpy client calls a SetBool service a websocket client serves through the bridge:
+    round trips of sequential calls (ROS request -> bridge -> client -> bridge -> ROS reply)
+    and calls/s with 16 in flight; runs with ``--peer rs`` too."""
+    name = "/bench/client_srv"
+    bridge = await ctx.bridge().start()
+    ws = await ws_open(bridge.url)
+    await send_op(ws, {"op": "advertise_service", "service": name,
+                       "type": "std_srvs/srv/SetBool"})
+    served = [0]
+
+    async def serve() -> None:
+        with contextlib.suppress(Exception):
+            async for frame in ws:
+                op = json.loads(frame)
+                if op.get("op") != "call_service":
+                    continue
+                served[0] += 1
+                await send_op(ws, {"op": "service_response", "service": name,
+                                   "id": op.get("id"), "result": True,
+                                   "values": {"success": bool(op["args"]["data"]),
+                                              "message": "ok"}})
+
+    stask = asyncio.create_task(serve())
+    try:
+        caller = await ctx.ros("call", "--service", name, "--calls",
+                               str(300 if ctx.quick else 1000), "--in-flight", "16",
+                               "--duration", str(ctx.duration), "--match-timeout", "20").start()
+        done = await caller.event("done", 120 + ctx.duration)
+        await caller.close()
+    finally:
+        await close_clients([ws], [stask])
+        await bridge.stop()
+    q = done["latency_ms"] or {}
+    return {"sequential_calls": done["calls"], "p50_ms": q.get("p50"), "p90_ms": q.get("p90"),
+            "p99_ms": q.get("p99"), "in_flight": done["in_flight"],
+            "calls_per_s": round(done["calls_per_s"]), "failures": done["failed"],
+            "unanswered": done["unanswered"], "served_by_client": served[0]}
+
+
 async def _read_stamped(ws: ClientConnection, lat: list[float], skip: int) -> None:
     """Collect the one-way latency (ms) of every stamped message with a number >= ``skip``."""
     with contextlib.suppress(Exception):
@@ -562,33 +628,92 @@ async def latency_side_by_side(ctx: Ctx) -> dict[str, Any]:
     }
 
 
+_FRAME_SEQ = re.compile(rb"(\d+) \d{6,}")
+"""``header.frame_id`` of a bench image, ``"<seq> <monotonic ns>"``: the only digits-space-digits
+in a publish frame's first bytes, whichever the encoding (JSON text, CBOR, CDR in cbor-raw)."""
+
+
+def frame_seq(frame: str | bytes) -> int | None:
+    """The sequence number of a bench image's publish frame (``None`` if it has none)."""
+    head = frame[:512]
+    m = _FRAME_SEQ.search(head.encode() if isinstance(head, str) else head)
+    return int(m.group(1)) if m else None
+
+
+IMAGE_GRACE = 1.0
+"""Seconds after the publisher's last frame in which frames still count as delivered (a
+server that holds frames back longer, as rosbridge_server_rs does under a full-speed image
+stream, delivers them outside the measured time)."""
+
+
+class InOrder:
+    """Counts the frames of a numbered stream and those that came in order (numbered above
+    every frame before them: a late or repeated frame is not); frames without a number
+    (a status op) are counted apart, as ``other``."""
+
+    def __init__(self) -> None:
+        self.frames = 0
+        self.other = 0
+        self.last = -1
+        self.t_last = time.monotonic()
+        self.in_order_at: list[float] = []
+        """When each frame in order came (``time.monotonic()``)."""
+
+    @property
+    def unique(self) -> int:
+        """Frames in order so far (what :func:`_drain_until` waits on)."""
+        return len(self.in_order_at)
+
+    def in_order_by(self, t: float) -> int:
+        """Frames in order that came by ``t`` (``time.monotonic()``)."""
+        return sum(at <= t for at in self.in_order_at)
+
+    def feed(self, seq: int | None) -> None:
+        """Count one frame numbered ``seq`` (``None``: not a frame of the stream)."""
+        if seq is None:
+            self.other += 1
+            return
+        self.frames += 1
+        self.t_last = time.monotonic()
+        if seq > self.last:
+            self.in_order_at.append(self.t_last)
+            self.last = seq
+
+
 async def image(ctx: Ctx) -> dict[str, Any]:
-    """640x480 rgb8 Images from a fast rclpy publisher to one client: frames/s, JSON, CBOR and
-    cbor-raw (the CDR bytes as they came from ROS)."""
-    out: dict[str, Any] = {}
-    for compression, cap in (("none", 200), ("cbor", 600), ("cbor-raw", 2000)):
+    """640x480 rgb8 Images to one client as JSON, CBOR and cbor-raw (the CDR bytes as they came
+    from ROS), beside the ROS ceiling; the publisher is :data:`IMAGE_PUBLISHER` throughout.
+
+    ``frames_per_s`` is the frames that reached the client in order, divided by the publishing
+    time: the same measure for every server (``--peer``, ``--bridge-root``) and for the ceiling.
+    Frames still on their way when the publisher stops count if they come within
+    :data:`IMAGE_GRACE` of its last (the ceiling's the same way).
+    """
+    ceiling = await image_ceiling(ctx)
+    out: dict[str, Any] = {"ros_ceiling": ceiling}
+    for compression in ("none", "cbor", "cbor-raw"):
         topic = f"/bench/image_{compression.replace('-', '_')}"
         bridge = await ctx.bridge().start()
         ws = await ws_open(bridge.url)
         await send_op(ws, {"op": "subscribe", "topic": topic, "type": "sensor_msgs/msg/Image",
                            "compression": compression, "queue_length": 5})
-        frames: list[float] = []
+        stream = InOrder()
         sizes: list[int] = []
 
-        async def reader(ws: ClientConnection = ws, frames: list[float] = frames,
+        async def reader(ws: ClientConnection = ws, stream: InOrder = stream,
                          sizes: list[int] = sizes) -> None:
             with contextlib.suppress(Exception):
                 async for frame in ws:
-                    frames.append(time.monotonic())
-                    if len(sizes) < 3:
+                    seq = frame_seq(frame)
+                    stream.feed(seq)
+                    if not sizes and seq is not None:
                         sizes.append(len(frame))
 
         rtask = asyncio.create_task(reader())
         profile = None
         try:
-            pub = await ctx.ros("publish", "--topic", topic, "--kind", "image", "--rate",
-                                str(cap), "--duration", str(ctx.duration), "--depth", "5",
-                                "--settle", "0.3", "--linger", "0.5").start()
+            pub = await ctx.ros("publish", "--topic", topic, *IMAGE_PUBLISHER, "--duration",
+                                str(ctx.duration)).start()
             await pub.event("matched")
             cpu0 = cpu_seconds(bridge.pid)
             prof = None
@@ -596,23 +721,24 @@ async def image(ctx: Ctx) -> dict[str, Any]:
                 prof = Profiler(bridge.pid, ctx.duration)
                 await prof.start()
             done = await pub.event("done", ctx.duration + 30)
-            t_end = time.monotonic()
+            cutoff = done["t_end"] + IMAGE_GRACE
+            await _drain_until(stream, done["sent"], idle=IMAGE_GRACE,
+                               limit=cutoff - time.monotonic())
             cpu = cpu_seconds(bridge.pid) - cpu0
             await pub.close()
             if prof is not None:
                 profile = await prof.result()
         finally:
-            await ws.close()
-            rtask.cancel()
-            with contextlib.suppress(asyncio.CancelledError):
-                await rtask
+            await close_clients([ws], [rtask])
             await bridge.stop()
-        inside = [t for t in frames if t <= t_end]
-        fps = (len(inside) - 1) / (inside[-1] - inside[0]) if len(inside) > 2 else 0.0
         key = "json" if compression == "none" else compression
-        out[key] = {"frames_per_s": round(fps, 1), "frames": len(frames),
-                    "bridge_cpu_ms_per_frame": round(1e3 * cpu / max(len(frames), 1), 2),
-                    "publisher_rate": round(done["rate"], 1), "publisher_cap": cap,
+        in_order = stream.in_order_by(cutoff)
+        out[key] = {"frames_per_s": round(in_order / done["elapsed"], 1),
+                    "ros_ceiling_fps": ceiling["frames_per_s"],
+                    "in_order": in_order, "frames": stream.frames,
+                    "other_frames": stream.other,
+                    "published": done["sent"], "publish_s": round(done["elapsed"], 2),
+                    "bridge_cpu_ms_per_frame": round(1e3 * cpu / max(stream.frames, 1), 2),
                     "frame_bytes": sizes[0] if sizes else None}
         if profile is not None:
             out[key]["profile"] = profile
@@ -704,6 +830,7 @@ SCENARIOS: dict[str, Callable[[Ctx], Awaitable[dict[str, Any]]]] = {
     "ros_to_client_raw": lambda ctx: ros_to_client(ctx, "cbor-raw"),
     "client_to_ros": client_to_ros,
     "service": service,
+    "client_service": client_service,
     "latency": latency,
     "latency_side_by_side": latency_side_by_side,
     "image": image,
@@ -722,18 +849,19 @@ def _headline(name: str, r: dict[str, Any]) -> Any:
         return "error"
     if name == "rclpy_ceiling":
         return {"publish_rate": r["max"]["publish_rate"], "receive_rate": r["max"]["receive_rate"],
-                "image_fps": r["image_640x480"]["receive_fps"]}
+                "image_fps": r["image_640x480"]["frames_per_s"]}
     if name in ("ros_to_client", "ros_to_client_raw", "client_to_ros"):
         return r["best_rate_99pct"]
-    if name == "service":
-        return {"p50_ms": r["p50_ms"], "calls_per_s": r["calls_per_s"]}
+    if name in ("service", "client_service"):
+        return {"p50_ms": r["p50_ms"], "p99_ms": r["p99_ms"], "calls_per_s": r["calls_per_s"]}
     if name == "latency":
         return {"p50_ms": r["p50_ms"], "p99_ms": r["p99_ms"]}
     if name == "latency_side_by_side":
         return {k: {"p50_ms": v["p50_ms"], "p99_ms": v["p99_ms"]}
                 for k, v in r.items() if isinstance(v, dict) and "p50_ms" in v}
     if name == "image":
-        return {k: r[k]["frames_per_s"] for k in ("json", "cbor") if k in r}
+        return {k: r[k]["frames_per_s"] for k in ("json", "cbor", "cbor-raw") if k in r} | {
+            "ros_ceiling": r["ros_ceiling"]["frames_per_s"]}
     if name == "idle_cpu":
         return r["connected_pct_of_core"]
     if name == "memory_stall":
