@@ -72,7 +72,9 @@ from websockets.asyncio.client import ClientConnection
 from bench.actions import action_client_served, action_ros_server
 from bench.bag import record
 from bench.cloud import pointcloud
+from bench.compare import COMPARE_SCENARIOS, compare
 from bench.harness import (
+    CODE_ROOT,
     Bridge,
     Ctx,
     StalledClient,
@@ -882,6 +884,15 @@ def _headline(name: str, r: dict[str, Any]) -> Any:
     return None
 
 
+def _code() -> dict[str, str]:
+    """Whose client and bridge were measured: the checkout, and where the client came from."""
+    import importlib.util
+
+    spec = importlib.util.find_spec("roslibpy_lite")
+    return {"root": str(CODE_ROOT), "python": sys.executable,
+            "roslibpy_lite": str(spec.origin) if spec else "not found"}
+
+
 async def run(names: list[str], ctx: Ctx) -> int:
     """Run the scenarios in order, printing one JSON object each and a summary."""
     summary: dict[str, Any] = {}
@@ -904,6 +915,7 @@ async def run(names: list[str], ctx: Ctx) -> int:
         "quick": ctx.quick,
         "wall_s": round(time.monotonic() - t_all, 1),
         "machine": {"cpus": os.cpu_count(), "python": platform.python_version()},
+        "code": _code(),
     }), flush=True)
     return 1 if failed else 0
 
@@ -927,6 +939,13 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p.add_argument("--peer", choices=("ours", "rs"), default="ours",
                    help="the server under test: ours, or rosbridge_server_rs (Rust; "
                    "../shared/peers/rosbridge_server_rs.sh, no rosapi) for side-by-side figures")
+    p.add_argument("--compare", metavar="REV", default=None,
+                   help="A/B: this tree against git revision REV, alternating, one table "
+                   "(bench/README.md); the scenarios default to the compare set")
+    p.add_argument("--repeat", type=int, default=3,
+                   help="--compare: rounds of each side (default 3)")
+    p.add_argument("--compare-json", metavar="PATH", default=None,
+                   help="--compare: where to write the table as JSON (default: the cache folder)")
     p.add_argument("--bridge-arg", action="append", default=[],
                    help="extra bridge command-line argument (repeatable), e.g. --bridge-arg=--executor=events")
     return p.parse_args(argv)
@@ -935,12 +954,17 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
 def main(argv: list[str] | None = None) -> int:
     """Entry point."""
     args = parse_args(argv)
-    names = list(SCENARIOS) if "all" in args.scenario else args.scenario
+    if args.compare and args.scenario == ["all"]:
+        names = list(COMPARE_SCENARIOS)
+    else:
+        names = list(SCENARIOS) if "all" in args.scenario else args.scenario
     unknown = [n for n in names if n not in SCENARIOS]
     if unknown:
         print(f"unknown scenario(s): {', '.join(unknown)}; known: {', '.join(SCENARIOS)}",
               file=sys.stderr)
         return 2
+    if args.compare:
+        return compare(args, names)
     duration = args.duration if args.duration is not None else (1.5 if args.quick else 3.0)
     ctx = Ctx(duration=duration, quick=args.quick, domain=args.domain, profile=args.profile,
               ros_executor=args.ros_executor, bridge_args=list(args.bridge_arg),

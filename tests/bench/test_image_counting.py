@@ -1,0 +1,61 @@
+"""The image figures count frames in order, by the number in ``header.frame_id``, in any encoding."""
+
+from __future__ import annotations
+
+import json
+import os
+
+import cbor2
+
+from bench.harness import RosSide
+from bench.run import InOrder, frame_seq
+
+STAMP = "12 743068554089"  # "<seq> <monotonic ns>", as bench/ros_side.py publishes
+
+
+def _cdr() -> bytes:
+    text = STAMP.encode() + b"\0"
+    return (b"\0\1\0\0" + bytes(8) + len(text).to_bytes(4, "little") + text
+            + bytes(3) + (480).to_bytes(4, "little") + bytes(1000))
+
+
+def test_frame_seq_in_every_encoding() -> None:
+    """JSON text, CBOR and cbor-raw publish frames give their number; a status op gives none."""
+    header = {"stamp": {"sec": 0, "nanosec": 0}, "frame_id": STAMP}
+    as_json = json.dumps({"op": "publish", "topic": "/bench/image_none",
+                          "msg": {"header": header, "height": 480, "data": "AAEC" * 1000}})
+    as_cbor = cbor2.dumps({"op": "publish", "topic": "/bench/image_cbor",
+                           "msg": {"header": header, "height": 480, "data": bytes(1000)}})
+    raw = cbor2.dumps({"op": "publish", "topic": "/bench/image_cbor_raw",
+                       "msg": {"secs": 1, "nsecs": 2, "bytes": _cdr()}})
+    status = json.dumps({"op": "status", "level": "warning",
+                         "msg": "dropped 1 messages on /p (queue_length 5, 1 in all)"})
+    assert [frame_seq(f) for f in (as_json, as_cbor, raw, status)] == [12, 12, 12, None]
+
+
+def test_in_order_counts() -> None:
+    """A late or repeated frame is a frame but not one in order; an unnumbered one is apart."""
+    stream = InOrder()
+    for seq in (3, 1, 4, None, 4, 5):
+        stream.feed(seq)
+    assert (stream.frames, stream.unique, stream.other) == (5, 3, 1)
+    assert stream.in_order_by(stream.in_order_at[1]) == 2
+
+
+async def test_ros_side_counts_images_in_order() -> None:
+    """The ceiling's raw rclpy subscriber reads the number of every image and when it came."""
+    domain = int(os.environ["ROS_DOMAIN_ID"])
+    topic = "/bench_test/ceiling_image"
+    sub = await RosSide(domain, "subscribe", "--kind", "image", "--topic", topic, "--depth",
+                        "50", "--idle", "1.0", "--duration", "30").start()
+    pub = await RosSide(domain, "publish", "--kind", "image", "--topic", topic, "--count", "30",
+                        "--rate", "100", "--depth", "50", "--settle", "0.3").start()
+    try:
+        done = await pub.event("done", 60)
+        got = await sub.event("done", 60)
+    finally:
+        await pub.close()
+        await sub.close()
+    assert done["sent"] == got["received"] == len(got["in_order_at"]) == 30
+    assert got["in_order_at"] == sorted(got["in_order_at"])
+    assert got["in_order_at"][-1] <= done["t_end"] + 1.0
