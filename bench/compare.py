@@ -4,7 +4,8 @@ REV (any revision git knows: ``main~3``, a tag, a sha) is checked out once in a 
 under the cache folder (``$BENCH_CACHE_DIR``, default ``~/.cache/roslibpy-lite-bench``):
 ``trees/<sha>``. Its Python environment is this one when REV's ``pyproject.toml`` declares the
 same dependencies (``project.dependencies``, every optional extra, ``requires-python``) as
-this tree's, or else a venv of its own, ``venvs/<hash of that set>``, made once with pip
+this tree's, or other ones that this venv's installed packages all meet (REV before a
+dependency was added); else a venv of its own, ``venvs/<hash of that set>``, made once with pip
 (REV installed with its ``bridge``, ``cbor``, ``cli`` and ``mcap`` extras, and psutil; the
 custom interfaces under ``msgs/interfaces`` are not built: no scenario uses them). The output
 says which.
@@ -212,6 +213,33 @@ def dependency_set(pyproject: str) -> dict[str, Any]:
     }
 
 
+def unmet(requirements: Sequence[str]) -> list[str]:
+    """Those of ``requirements`` (PEP 508) that this Python's installed packages do not meet
+    (a requirement's extras are not followed; one whose marker excludes this Python is met)."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    from packaging.requirements import Requirement
+
+    out: list[str] = []
+    for text in requirements:
+        req = Requirement(text)
+        if req.marker is not None and not req.marker.evaluate():
+            continue
+        try:
+            have = version(req.name)
+        except PackageNotFoundError:
+            out.append(text)
+            continue
+        if not req.specifier.contains(have, prereleases=True):
+            out.append(f"{text} (have {have})")
+    return out
+
+
+def _all_requirements(deps: dict[str, Any]) -> list[str]:
+    return [*deps["dependencies"], *(r for extra in deps["optional-dependencies"].values()
+                                     for r in extra)]
+
+
 def cache_dir() -> Path:
     """Where worktrees and venvs of compared revisions are kept."""
     return Path(os.environ.get("BENCH_CACHE_DIR")
@@ -264,15 +292,21 @@ def environment(sha: str, tree: Path, log: Callable[[str], None]) -> str:
         log(f"environment: this venv ({sys.prefix}); REV's pyproject.toml declares the same "
             "dependencies")
         return sys.executable
+    missing = unmet(_all_requirements(theirs))
+    if not missing:
+        log(f"environment: this venv ({sys.prefix}); REV's pyproject.toml declares other "
+            "dependencies, and this venv meets every one of them")
+        return sys.executable
     key = hashlib.sha256(json.dumps(theirs, sort_keys=True).encode()).hexdigest()[:16]
     venv = cache_dir() / "venvs" / key
     python = venv / "bin" / "python"
     stamp = venv / ".ready"
     if stamp.exists():
-        log(f"environment: REV's own venv {venv} (its dependencies differ from this tree's; "
-            "made before)")
+        log(f"environment: REV's own venv {venv} (this venv does not meet "
+            f"{', '.join(missing)}; made before)")
         return str(python)
-    log(f"environment: REV's dependencies differ from this tree's; making its venv {venv}")
+    log(f"environment: REV's dependencies differ from this tree's and this venv does not meet "
+        f"{', '.join(missing)}; making its venv {venv}")
     subprocess.run([sys.executable, "-m", "venv", "--clear", str(venv)], check=True)
     subprocess.run([str(python), "-m", "pip", "install", "-q", "--disable-pip-version-check",
                     f"{tree}[bridge,cbor,cli,mcap]", "psutil"], check=True)

@@ -11,7 +11,7 @@ from typing import Any
 
 import pytest
 
-from bench.compare import Row, dependency_set, render, rows
+from bench.compare import Row, dependency_set, render, rows, unmet
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -113,3 +113,13 @@ def test_compare_head_end_to_end(tmp_path: Path) -> None:
                         / subprocess.run(["git", "rev-parse", "HEAD"], cwd=ROOT, text=True,
                                          capture_output=True).stdout.strip())],
                        cwd=ROOT, capture_output=True)
+
+
+def test_unmet_requirements() -> None:
+    """This venv is kept for REV when it meets REV's pins; a pin it cannot meet is named."""
+    from importlib.metadata import version
+
+    have = version("websockets")
+    assert unmet([f"websockets=={have}", "pytest>=1", 'nothing-here; python_version < "3"']) == []
+    assert unmet(["websockets<1", "no-such-package-c29"]) == [
+        f"websockets<1 (have {have})", "no-such-package-c29"]
