@@ -922,7 +922,8 @@ async def run(names: list[str], ctx: Ctx) -> int:
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     """The command line."""
-    p = argparse.ArgumentParser(description="End-to-end benchmarks of the bridge (JSON output).")
+    p = argparse.ArgumentParser(prog="python -m bench",
+                                description="End-to-end benchmarks of the bridge (JSON output).")
     p.add_argument("--scenario", nargs="+", default=["all"],
                    help=f"all, or some of: {', '.join(SCENARIOS)}")
     p.add_argument("--duration", type=float, default=None,
