@@ -123,3 +123,18 @@ def test_unmet_requirements() -> None:
     assert unmet([f"websockets=={have}", "pytest>=1", 'nothing-here; python_version < "3"']) == []
     assert unmet(["websockets<1", "no-such-package-c29"]) == [
         f"websockets<1 (have {have})", "no-such-package-c29"]
+
+
+@pytest.mark.parametrize(
+    ("args", "says"),
+    [(["--compare", "no-such-revision-c29"], "--compare 'no-such-revision-c29': not a revision"),
+     (["--compare", "HEAD", "--repeat", "0"], "--repeat 0: give 1 or more rounds")],
+)
+def test_bad_compare_arguments(args: list[str], says: str, tmp_path: Path) -> None:
+    """A revision git does not know, or no rounds, is refused with what was wrong."""
+    env = dict(os.environ, BENCH_CACHE_DIR=str(tmp_path))
+    done = subprocess.run([sys.executable, "-m", "bench", *args], cwd=ROOT, env=env,
+                          capture_output=True, text=True, timeout=60)
+    assert done.returncode != 0
+    assert says in done.stderr
+    assert not (tmp_path / "trees").exists()
