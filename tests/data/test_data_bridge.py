@@ -3,9 +3,7 @@ compression, as arrays; an MCAP file written by another tool, as a table."""
 
 from __future__ import annotations
 
-import asyncio
 import warnings
-from collections.abc import AsyncIterator, Callable
 from pathlib import Path
 from typing import Any
 
@@ -16,9 +14,9 @@ import pytest
 import roslibpy_lite
 from msgs.dynamic import full_text
 from msgs.sensor_msgs.msg import Image, PointCloud2
-from roslibpy_lite import Client, RosTimeoutError, Subscription
+from roslibpy_lite import Client
 from roslibpy_lite.data import bag_to_dataframe, to_numpy
-from tests.helpers import BridgeProcess
+from tests.client.test_bridge_formats import first_message
 
 with warnings.catch_warnings():
     warnings.filterwarnings("ignore", "module 'sre_.*' is deprecated", DeprecationWarning)
@@ -34,25 +32,6 @@ POINTS = np.zeros(H * W, dtype=[("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("ring
 POINTS["x"] = np.arange(H * W) * 0.5
 POINTS["z"] = -1.25
 POINTS["ring"] = np.arange(H * W) % 16
-
-
-@pytest.fixture
-async def client(bridge: BridgeProcess) -> AsyncIterator[Client]:
-    """A client on the session's bridge."""
-    async with roslibpy_lite.connect(bridge.url) as ros:
-        yield ros
-
-
-async def _first(publish: Callable[[], None], sub: Subscription[Any], timeout: float = 15) -> Any:
-    """Publish from rclpy until the subscription hears something (discovery has no event)."""
-    deadline = asyncio.get_running_loop().time() + timeout
-    while True:
-        publish()
-        try:
-            return await sub.get(0.25)
-        except RosTimeoutError:
-            if asyncio.get_running_loop().time() > deadline:
-                raise
 
 
 def _image() -> Any:
@@ -84,9 +63,9 @@ async def test_images_and_clouds_from_rclpy_are_the_same_arrays(
     image_type: Any = Image if typed else "sensor_msgs/msg/Image"
     cloud_type: Any = PointCloud2 if typed else "sensor_msgs/msg/PointCloud2"
     async with client.subscribe(f"{topic}/image", image_type, compression=compression) as sub:
-        image = await _first(lambda: image_pub.publish(_image()), sub)
+        image = await first_message(lambda: image_pub.publish(_image()), sub)
     async with client.subscribe(f"{topic}/cloud", cloud_type, compression=compression) as sub:
-        cloud = await _first(lambda: cloud_pub.publish(_cloud()), sub)
+        cloud = await first_message(lambda: cloud_pub.publish(_cloud()), sub)
     pixels = to_numpy(image)
     assert pixels.shape == (H, W, 3)
     np.testing.assert_array_equal(pixels, PIXELS)
