@@ -107,6 +107,7 @@ __all__ = [
     "args_mapping",
     "converter_for",
     "deserialize",
+    "encode_call_json",
     "encode_publish_cbor",
     "encode_publish_cbor_raw",
     "encode_publish_json",
@@ -997,6 +998,13 @@ def converter_for(msg_cls: type[Any]) -> Converter:
 def encode_publish_json(topic: str, msg_json: str) -> str:
     """The JSON text of a server-to-client publish op around an already encoded msg."""
     return "".join(('{"op":"publish","topic":', _encode_str(topic), ',"msg":', msg_json, "}"))
+
+
+def encode_call_json(service: str, args_json: str, id: str) -> str:
+    """The JSON text of a server-to-client ``call_service`` op (a ROS caller reached a
+    service the client serves) around already encoded ``args``."""
+    return "".join(('{"op":"call_service","service":', _encode_str(service), ',"args":',
+                    args_json, ',"id":', _encode_str(id), "}"))
 
 
 _cbor_prefixes: dict[str, bytes] = {}

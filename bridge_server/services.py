@@ -280,8 +280,9 @@ class SessionServices:
                         served.name)
             return
         rid = f"service_request:{served.name}:{next(self._request_ids)}"
-        try:
-            args = pending.served.request_conv.to_obj(pending.request)
+        try:  # the op's text in one step, the request by its compiled converter
+            text = convert.encode_call_json(served.wire, pending.served.request_conv.to_json(
+                pending.request), rid)
         except Exception:
             log.exception("cannot convert a request to %s", served.name)
             return
@@ -289,7 +290,7 @@ class SessionServices:
             session.config.served_call_timeout, self._served_timeout, served, rid
         )
         served.pending[rid] = (pending, timer)
-        session.send_op(ops.CallService(service=served.wire, args=args, id=rid))
+        session.outbox.send_text(text)
 
     def _served_timeout(
         self, served: ClientService, rid: str, timeout: float | None = None
