@@ -337,7 +337,13 @@ class SharedSubscription:
 
 
 class SharedPublisher:
-    """A ROS publisher shared (reference counted) by the sessions that advertised it."""
+    """A ROS publisher shared (reference counted) by the sessions that advertised it.
+
+    A latched one keeps only its last message (transient local, depth 1), whatever queue
+    size the client asked for: a late subscriber, ROS node or bridge client, gets the
+    last value, not the writer's history (``queue_size`` of the rosbridge op is the depth
+    of an ordinary publisher).
+    """
 
     def __init__(self, ros: RosNode, topic: str, msg_cls: type[Any], latch: bool, depth: int):
         self.ros = ros
@@ -346,7 +352,8 @@ class SharedPublisher:
         self.conv = convert.converter_for(msg_cls)
         self.latch = latch
         self.refs = 0
-        self.pub = ros.node.create_publisher(msg_cls, topic, _qos(True, latch, max(depth, 1)))
+        depth = 1 if latch else max(depth, 1)
+        self.pub = ros.node.create_publisher(msg_cls, topic, _qos(True, latch, depth))
 
     @property
     def type_name(self) -> str:

@@ -156,6 +156,35 @@ def test_topic_pub_times_publishes_that_many(cli: Run, ros_node: Any, topic: str
     assert got == [7, 7, 7]
 
 
+def test_topic_echo_latched_topic_prints_the_last_message(
+    cli: Run, bridge: Any, ros_node: Any, topic: str
+) -> None:
+    """A client's latched topic given three messages: a late echo --count 1 prints the third,
+    and a late rclpy transient-local subscriber asking for 10 gets only the third."""
+    from rclpy.qos import DurabilityPolicy, QoSProfile
+    from std_msgs.msg import String
+
+    from roslibpy_lite import sync
+
+    with sync.connect(bridge.url) as ros:
+        pub = ros.advertise(topic, "std_msgs/msg/String", latch=True)
+        for label in ("first", "second", "third"):
+            pub.publish({"data": label})
+        # the bridge handles a connection's ops in order: once this answers, all 3 are out
+        ros.call_service("/rosapi/topics", "rosapi_msgs/srv/Topics", {})
+        result = cli("topic", "echo", topic, "--count", "1", "--json", "--wait", "10")
+        assert (result.code, result.lines) == (0, ['{"data":"third"}']), result
+        got: list[str] = []
+        ros_node.create_subscription(
+            String, topic, lambda m: got.append(m.data),
+            QoSProfile(depth=10, durability=DurabilityPolicy.TRANSIENT_LOCAL))
+        wait_until(lambda: got, timeout=10, what="the latched message")
+        # a second publish: everything replayed was delivered before it
+        pub.publish({"data": "fourth"})
+        wait_until(lambda: "fourth" in got, timeout=10, what="the live message")
+        assert got == ["third", "fourth"]
+
+
 def test_topic_hz_reports_rate_statistics(cli: Run, talker: list[str], topic: str) -> None:
     """topic hz --json reports rate, min, max, std dev and window; the text form is ros2's."""
     result = cli("topic", "hz", topic, "std_msgs/msg/String", "--count", "25", "--json")
