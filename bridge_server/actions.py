@@ -169,6 +169,10 @@ class _Goal:
     def on_accepted(self) -> None:
         self._answered()
         log.debug("goal %s on %s accepted", self.id, self.name)
+        session = self.owner.session
+        if session.acks and self._live():  # the client asked for verdicts (ACKS_HEADER)
+            session.send_op(ops.Status(level="info", msg=f"ok: send_action_goal {self.name} "
+                                       "accepted by the action server", id=self.id))
 
     def on_rejected(self) -> None:
         self._answered()

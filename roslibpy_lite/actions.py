@@ -30,9 +30,10 @@ The outcome rules
   when the goal has not ended in time; the goal goes on (``await goal.cancel()``
   to stop it).
 
-``goal.status`` is ``UNKNOWN`` until the server shows the goal runs (its first
-feedback: ``EXECUTING``), ``CANCELING`` after :meth:`GoalHandle.cancel`, and
-the final status once the result came.
+``goal.status`` is ``UNKNOWN`` until the server shows it took the goal
+(``ACCEPTED`` when our bridge reports the acceptance, ``EXECUTING`` at the
+first feedback; :meth:`GoalHandle.accepted` waits for either), ``CANCELING``
+after :meth:`GoalHandle.cancel`, and the final status once the result came.
 
 Serving an action::
 
@@ -273,6 +274,7 @@ class GoalHandle:
         self._done: asyncio.Future[ActionResult] = asyncio.get_running_loop().create_future()
         self._done.add_done_callback(_consume)
         self._on_feedback = on_feedback
+        self._known_accepted = asyncio.Event()
 
     def __repr__(self) -> str:
         return f"<GoalHandle {self.action} {self.id} {self.status.name}>"
@@ -283,9 +285,16 @@ class GoalHandle:
 
     # -- from the capability --
 
+    def _confirmed(self) -> None:
+        """The bridge says the action server accepted the goal."""
+        if self.status is GoalStatus.UNKNOWN:
+            self.status = GoalStatus.ACCEPTED
+        self._known_accepted.set()
+
     def _feedback(self, values: Any) -> None:
         if self.done():
             return
+        self._known_accepted.set()  # feedback comes only from a goal that runs
         if self.status is GoalStatus.UNKNOWN or self.status is GoalStatus.ACCEPTED:
             self.status = GoalStatus.EXECUTING
         fb = values
@@ -359,6 +368,7 @@ class GoalHandle:
     def _finished(self) -> None:
         self.closed = True
         self._wake.set()
+        self._known_accepted.set()  # accepted() looks at how it ended
         self._backend._goal_ended(self)
 
     # -- the user's side --
@@ -386,6 +396,27 @@ class GoalHandle:
                               + (f": {outcome.text}" if outcome.text else ""),
                               outcome.status, outcome.values)
         return outcome
+
+    async def accepted(self, timeout: float | None = None) -> None:
+        """Return once the action server is known to have accepted the goal.
+
+        Our bridge says so as soon as the server accepts; a stock rosbridge says nothing,
+        so there the first feedback or the goal's result shows it.
+
+        Raises:
+            ActionError: the goal never ran (refused by the bridge, rejected by the
+                server, no such action, ...).
+            RosTimeoutError: not known to be accepted within ``timeout`` seconds.
+            Disconnected / ConnectionClosed: the connection went first.
+        """
+        try:
+            async with asyncio.timeout(timeout):
+                await self._known_accepted.wait()
+        except TimeoutError:
+            raise RosTimeoutError(f"goal to {self.action}: not accepted within {timeout} s "
+                                  f"(status {self.status.name})") from None
+        if self.error is not None:
+            raise self.error
 
     async def cancel(self) -> None:
         """Ask the action server to cancel the goal (its result follows); harmless once ended."""

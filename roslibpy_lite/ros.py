@@ -261,6 +261,9 @@ class _Host:
         record = self._pending.get(key) if key is not None else None
         if op.level != "error":
             if record is not None and record.handle is not None:
+                if op.level == "info" and record.confirm is not None:
+                    record.confirm()
+                    return
                 event, record.verdict = record.verdict, None
                 if event is not None and op.level == "info":
                     event.set()  # the bridge accepted the request

@@ -56,6 +56,9 @@ class Pending:
     forget: Callable[[], None] | None = None
     verdict: asyncio.Event | None = None
     """Set when a confirming bridge (``transport.acks``) accepted or refused the request."""
+    confirm: Callable[[], None] | None = None
+    """Called on the bridge's ``info`` status for the id (ours: an action server accepted
+    the goal)."""
     awaited: bool = False
     """Someone awaits the handle: a refusal is raised there, not reported."""
     report: asyncio.Handle | None = None

@@ -91,7 +91,7 @@ class Actions:
                             on_feedback=on_feedback)
         self.goals[id] = handle
         # Status errors naming the goal fail it; nobody awaits a verdict on it.
-        host.track(id, Pending(action, handle=handle, awaited=True))
+        host.track(id, Pending(action, handle=handle, awaited=True, confirm=handle._confirmed))
         host.send(ops.SendActionGoal(action=action, action_type=type_name, args=wire, id=id,
                                      feedback=feedback))
         await host.flush()

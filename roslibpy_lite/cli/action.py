@@ -115,6 +115,10 @@ async def cmd_action_send_goal(args: argparse.Namespace, out: Out) -> int:
 
 async def _follow(goal: GoalHandle, args: argparse.Namespace, out: Out,
                   shown: type[Action] | None) -> int:
+    try:
+        await goal.accepted()  # our bridge says so at once; a stock one by feedback or result
+    except ActionError as exc:
+        raise _goal_error(exc) from None
     if not args.json:
         out.line(f"Goal accepted with ID: {goal.id}")
         out.line("")
@@ -127,8 +131,7 @@ async def _follow(goal: GoalHandle, args: argparse.Namespace, out: Out,
     try:
         outcome = await goal.result()
     except ActionError as exc:
-        code = EXIT_NOT_FOUND if "does not exist" in exc.reason else EXIT_REMOTE
-        raise CliError(code, str(exc)) from None
+        raise _goal_error(exc) from None
     if args.json:
         out.line(json.dumps({"status": outcome.status.name, "result": outcome.values},
                             separators=(",", ":")))
@@ -143,6 +146,11 @@ async def _follow(goal: GoalHandle, args: argparse.Namespace, out: Out,
     print(f"roslibpy-lite: goal to {args.action} ended {outcome.status.name}",
           file=sys.stderr, flush=True)
     return EXIT_REMOTE
+
+
+def _goal_error(exc: ActionError) -> CliError:
+    code = EXIT_NOT_FOUND if "does not exist" in exc.reason else EXIT_REMOTE
+    return CliError(code, str(exc))
 
 
 async def _cancel(goal: GoalHandle, args: argparse.Namespace, out: Out) -> int:

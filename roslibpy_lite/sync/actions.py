@@ -45,6 +45,11 @@ class GoalHandle(_Wrapper[actions.GoalHandle]):
         return self._loop.run(self.handle.result(timeout, raise_on_failure=raise_on_failure),
                               f"result of {self.handle.action}")
 
+    def accepted(self, timeout: float | None = None) -> None:
+        """Return once the action server is known to have accepted the goal (as
+        :meth:`roslibpy_lite.actions.GoalHandle.accepted`, with its exceptions)."""
+        self._loop.run(self.handle.accepted(timeout), f"goal to {self.handle.action}")
+
     def cancel(self) -> None:
         """Ask the action server to cancel the goal (its result follows)."""
         self._loop.run(self.handle.cancel(), f"cancel goal to {self.handle.action}")

@@ -132,6 +132,9 @@ class MemoryActions:
         self._by_caller[str(op.id)] = gid
         self.bridge._to_client(ops.SendActionGoal(action=served[0], action_type=type_name,
                                                  args=dict(args), id=gid, feedback=True))
+        # a served action accepts every goal; the caller hears it as from our bridge
+        self.bridge._to_client(ops.Status("info", f"ok: send_action_goal {name} accepted by "
+                                          "the action server", id=op.id))
 
     def _cancel(self, op: ops.CancelActionGoal) -> None:
         gid = self._by_caller.get(str(op.id))

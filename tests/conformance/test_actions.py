@@ -88,6 +88,24 @@ async def test_cancel(ros: Ros, topic: str) -> None:
         await goal.result(raise_on_failure=True)
 
 
+async def test_accepted_is_known_before_any_feedback(ros: Ros, topic: str) -> None:
+    """accepted() returns when the bridge says the server took the goal (status ACCEPTED,
+    no feedback yet); for a goal that never ran it raises why."""
+    async def quiet(goal: Any, ctx: GoalContext) -> dict[str, Any]:
+        await ctx.wait_cancel()
+        return {"samples": 0}
+
+    await ros.advertise_action(topic, IMU, quiet)
+    goal = await ros.send_goal(topic, IMU, {"seconds": 100.0})
+    await goal.accepted(timeout=10)
+    assert goal.status is GoalStatus.ACCEPTED and goal.last_feedback is None
+    await goal.cancel()
+    assert (await goal.result(timeout=10)).status is GoalStatus.CANCELED
+    nobody = await ros.send_goal(topic + "_nobody", IMU, {"seconds": 1.0})
+    with pytest.raises(ActionError, match="does not exist"):
+        await nobody.accepted(timeout=15)
+
+
 async def test_handler_that_raises_aborts(ros: Ros, topic: str) -> None:
     """A handler that raises aborts the goal; the sender sees ABORTED."""
     async def broken(goal: Any, ctx: GoalContext) -> None:

@@ -140,3 +140,29 @@ def test_cli_viewer_is_refused_when_it_publishes(
     assert out.returncode == 6, out
     assert "forbidden" in out.stderr and "viewer" in out.stderr
     assert len(out.stderr.strip().splitlines()) == 1
+
+
+def test_cli_send_goal_as_viewer_is_never_reported_accepted(
+    auth_bridge: BridgeProcess, auth: AuthFile, ros_node: Any, topic: str
+):
+    """`action send_goal` as a viewer: the refusal, exit 6, and no "Goal accepted" line;
+    an admin's goal is reported accepted (the bridge says when the server accepted it)."""
+    from tests.bridge.action_support import FIB, FibServer
+
+    server = FibServer(ros_node, topic)
+    try:
+        def send(role: str) -> subprocess.CompletedProcess[str]:
+            return _cli("--url", auth_bridge.url, "--token", auth.tokens[role], "action",
+                        "send_goal", topic, FIB, "{order: 2}", "--wait", "10")
+
+        out = send("viewer")
+        assert out.returncode == 6, out
+        assert "Goal accepted" not in out.stdout, out
+        assert "forbidden: role viewer may not send_action_goal" in out.stderr, out
+        assert len(out.stderr.strip().splitlines()) == 1, out
+        out = send("admin")
+        assert out.returncode == 0, out
+        assert "Goal accepted with ID: send_action_goal:" in out.stdout, out
+        assert out.stdout.rstrip().endswith("Goal finished with status: SUCCEEDED")
+    finally:
+        server.destroy()
