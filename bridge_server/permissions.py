@@ -260,6 +260,7 @@ _LISTS: dict[str, tuple[str, tuple[str, ...]]] = {
     "/rosapi/nodes": ("introspection", ("nodes",)),
     "/rosapi/publishers": ("introspection", ("publishers",)),
     "/rosapi/subscribers": ("introspection", ("subscribers",)),
+    "/rosapi/publishers_qos": ("introspection", ("publishers", "qos")),
     "/rosapi/action_servers": ("introspection", ("action_servers",)),
     "/rosapi/get_param_names": ("params", ("names",)),
 }

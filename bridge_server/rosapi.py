@@ -21,6 +21,8 @@ service                            request          response
 /rosapi/node_details               node             subscribing, publishing, services
 /rosapi/publishers                 topic            publishers
 /rosapi/subscribers                topic            subscribers
+/rosapi/publishers_qos             topic            publishers, qos (ours: each publisher's
+                                                    offered QoS, rosbag2's keys and words)
 /rosapi/action_servers             (none)           action_servers
 /rosapi/action_type                action           type ("" if no server offers it)
 /rosapi/action_goal_details        type             typedefs of the goal
@@ -233,6 +235,38 @@ def publishers(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, Any]:
     return {"publishers": _endpoint_nodes(infos)}
 
 
+def _duration(value: Any) -> dict[str, int]:
+    sec, nsec = divmod(int(value.nanoseconds), 1_000_000_000)
+    return {"sec": sec, "nsec": nsec}
+
+
+def _policy(value: Any) -> str:
+    return str(getattr(value, "name", value)).lower()  # rmw's words: keep_last, reliable...
+
+
+def publishers_qos(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, Any]:
+    """Each publisher of a topic (its node) and the QoS it offers, with the keys and words
+    rosbag2 records as a channel's ``offered_qos_profiles``; the graph reports no history
+    ("unknown", depth 0), as rosbag2 records it too."""
+    infos = bridge.ros.node.get_publishers_info_by_topic(_topic_field(args))
+    nodes, profiles = [], []
+    for info in infos:
+        q = info.qos_profile
+        nodes.append(_full(info.node_name, info.node_namespace))
+        profiles.append({
+            "history": _policy(q.history),
+            "depth": int(q.depth),
+            "reliability": _policy(q.reliability),
+            "durability": _policy(q.durability),
+            "deadline": _duration(q.deadline),
+            "lifespan": _duration(q.lifespan),
+            "liveliness": _policy(q.liveliness),
+            "liveliness_lease_duration": _duration(q.liveliness_lease_duration),
+            "avoid_ros_namespace_conventions": bool(q.avoid_ros_namespace_conventions),
+        })
+    return {"publishers": nodes, "qos": profiles}
+
+
 def subscribers(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, Any]:
     """Nodes subscribed to a topic."""
     infos = bridge.ros.node.get_subscriptions_info_by_topic(_topic_field(args))
@@ -270,6 +304,7 @@ HANDLERS: dict[str, Handler] = {
     "/rosapi/node_details": node_details,
     "/rosapi/publishers": publishers,
     "/rosapi/subscribers": subscribers,
+    "/rosapi/publishers_qos": publishers_qos,
     "/rosapi/action_servers": action_servers,
     "/rosapi/get_time": get_time,
     "/rosapi/get_ros_version": get_ros_version,
@@ -288,6 +323,7 @@ TYPES: dict[str, str] = {
     "/rosapi/node_details": "rosapi_msgs/srv/NodeDetails",
     "/rosapi/publishers": "rosapi_msgs/srv/Publishers",
     "/rosapi/subscribers": "rosapi_msgs/srv/Subscribers",
+    "/rosapi/publishers_qos": "rosapi_msgs/srv/PublishersQos",
     "/rosapi/action_servers": "rosapi_msgs/srv/GetActionServers",
     "/rosapi/get_time": "rosapi_msgs/srv/GetTime",
     "/rosapi/get_ros_version": "rosapi_msgs/srv/GetROSVersion",
@@ -303,6 +339,7 @@ FIELDS: dict[str, tuple[str, ...]] = {
     "/rosapi/node_details": ("node",),
     "/rosapi/publishers": ("topic",),
     "/rosapi/subscribers": ("topic",),
+    "/rosapi/publishers_qos": ("topic",),
 }
 """Request field order, for ``args`` given as a list."""
 

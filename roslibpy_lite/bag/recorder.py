@@ -16,7 +16,7 @@ from typing import IO, TYPE_CHECKING, Self
 from ..api import ConnectionState
 from ..exceptions import RosLibError, UsageError
 from ..messages import RawMessage
-from ._mcap import ROS2_PROFILE, SCHEMA_ENCODING, need_mcap
+from ._mcap import ROS2_PROFILE, SCHEMA_ENCODING, format_size, need_mcap, qos_yaml
 
 if TYPE_CHECKING:
     from mcap.writer import Writer
@@ -33,12 +33,15 @@ _PATTERN_CHARS = frozenset("*?[")
 
 @dataclass
 class RecordStats:
-    """What a recording wrote. ``dropped``: messages lost on this side (a full receive
-    buffer or bytes that could not be taken); ``gaps``: seconds without a connection,
-    one entry per reconnect; ``error``: why the recording ended early (None: it did not)."""
+    """What a recording wrote. ``bytes``: the messages' own bytes (CDR); ``file_bytes``:
+    the files' size on disk once stopped (compressed, with index and summary);
+    ``dropped``: messages lost on this side (a full receive buffer or bytes that could
+    not be taken); ``gaps``: seconds without a connection, one entry per reconnect;
+    ``error``: why the recording ended early (None: it did not)."""
 
     messages: int = 0
     bytes: int = 0
+    file_bytes: int = 0
     per_topic: dict[str, int] = field(default_factory=dict)
     dropped: int = 0
     gaps: list[float] = field(default_factory=list)
@@ -53,12 +56,15 @@ class RecordStats:
         return (self.ended or time.monotonic()) - self.started if self.started else 0.0
 
     def line(self) -> str:
-        """One line for a live display: topics, messages, MB, rates, drops."""
+        """One line for a live display: topics, messages, their size (and the files' once
+        stopped), rates, drops."""
         seconds = max(self.duration, 1e-9)
         gaps = f", {len(self.gaps)} gap(s) {sum(self.gaps):.1f} s" if self.gaps else ""
+        on_disk = f" ({format_size(self.file_bytes)} on disk)" if self.file_bytes else ""
         return (f"{len(self.per_topic)} topics, {self.messages} msgs, "
-                f"{self.bytes / 1e6:.1f} MB, {self.messages / seconds:.0f} msg/s, "
-                f"{self.bytes / 1e6 / seconds:.2f} MB/s, {self.dropped} dropped{gaps}")
+                f"{format_size(self.bytes)} of messages{on_disk}, "
+                f"{self.messages / seconds:.0f} msg/s, {format_size(self.bytes / seconds)}/s, "
+                f"{self.dropped} dropped{gaps}")
 
 
 class Recorder:
@@ -112,6 +118,7 @@ class Recorder:
         self.stats = RecordStats()
         self._subs: dict[str, Subscription[RawMessage]] = {}
         self._types: dict[str, tuple[str, str]] = {}  # topic -> (type, definition text)
+        self._qos: dict[str, str] = {}  # topic -> rosbag2's offered_qos_profiles
         self._channels: dict[str, int] = {}
         self._schemas: dict[str, int] = {}
         self._file: IO[bytes] | None = None
@@ -160,6 +167,7 @@ class Recorder:
         self._subs.clear()
         self._close()
         self.stats.ended = time.monotonic()
+        self.stats.file_bytes = sum(f.stat().st_size for f in self.stats.files if f.exists())
         return self.stats
 
     async def __aenter__(self) -> Self:
@@ -197,6 +205,7 @@ class Recorder:
         if text is None:
             text = await self._definition(type_name)
         self._types[topic] = (type_name, text)
+        self._qos[topic] = await self._offered_qos(topic)
         self._register(topic)
         sub = self.ros.subscribe(topic, type_name, raw=True, buffer_size=self.buffer_size)
         sub.on_message(self._on_message)
@@ -216,6 +225,18 @@ class Recorder:
                 {"type": type_name})
             text: str = answer["definition"]
             return text
+
+    async def _offered_qos(self, topic: str) -> str:
+        """The publishers' QoS as rosbag2 records it ("" where the bridge cannot say: a
+        stock rosbridge, MockRos), so that players re-latch transient-local topics."""
+        try:
+            answer = await self.ros.call_service(
+                "/rosapi/publishers_qos", "rosapi_msgs/srv/PublishersQos", {"topic": topic})
+        except RosLibError as exc:
+            log.debug("no QoS for %s: %s", topic, exc)
+            return ""
+        profiles = answer.get("qos")
+        return qos_yaml(profiles) if isinstance(profiles, list) and profiles else ""
 
     # -- the file --------------------------------------------------------------------------
 
@@ -247,7 +268,9 @@ class Recorder:
         if schema is None:
             schema = self._schemas[type_name] = writer.register_schema(
                 type_name, SCHEMA_ENCODING, text.encode())
-        self._channels[topic] = writer.register_channel(topic, "cdr", schema)
+        qos = self._qos.get(topic, "")
+        self._channels[topic] = writer.register_channel(
+            topic, "cdr", schema, metadata={"offered_qos_profiles": qos} if qos else {})
 
     def _on_message(self, raw: RawMessage) -> None:
         writer = self._writer

@@ -112,6 +112,7 @@ def _stop_signals() -> Iterator[asyncio.Event]:
 async def cmd_bag_info(args: argparse.Namespace, out: Out) -> int:
     """``bag info FILE``: topics, types, counts, duration, size."""
     from ..bag import info
+    from ..bag._mcap import format_size
 
     try:
         about = info(args.file)
@@ -121,7 +122,7 @@ async def cmd_bag_info(args: argparse.Namespace, out: Out) -> int:
         raise CliError(EXIT_ERROR, f"{args.file} is not a readable MCAP file: {exc}") from None
     unfinished = "" if about.complete else " (no summary: a recording that did not finish)"
     out.line(f"File:      {about.path}{unfinished}")
-    out.line(f"Size:      {about.size / 1e6:.2f} MB")
+    out.line(f"Size:      {format_size(about.size)}")
     out.line(f"Duration:  {about.duration:.3f} s")
     out.line(f"Messages:  {about.messages}")
     if about.library:

@@ -4,6 +4,7 @@ against the real bridge and checked with the independent reader (mcap-ros2-suppo
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import threading
 import time
 from pathlib import Path
@@ -164,3 +165,95 @@ def test_the_blocking_mock_records_what_the_code_under_test_publishes(tmp_path: 
             ros.drain()
         assert rec.stats.messages == 5
     assert [m.decode().data for m in read(path)] == [0, 1, 2, 3, 4]  # type: ignore[attr-defined]
+
+
+def test_the_cli_reports_the_file_size_and_records_the_publishers_qos(
+    bridge: BridgeProcess, ros_node: Any, topic: str, tmp_path: Path
+) -> None:
+    """`bag record` of a latched topic: its last line and `bag info` give the file's size
+    on disk in the same words; the channel carries rosbag2's offered_qos_profiles (YAML, the
+    keys and words rosbag2 writes) saying transient local."""
+    import subprocess
+    import sys
+
+    import yaml
+    from std_msgs.msg import String
+
+    from roslibpy_lite.bag._mcap import format_size
+
+    pub = ros_node.create_publisher(
+        String, topic, QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL))
+    pub.publish(String(data="kept"))
+    path = tmp_path / "latched.mcap"
+
+    def cli(*argv: str) -> subprocess.CompletedProcess[str]:
+        return subprocess.run([sys.executable, "-m", "roslibpy_lite.cli", *argv],
+                              capture_output=True, text=True, timeout=60)
+
+    rec = cli("bag", "record", topic, "-o", str(path), "--max", "1", "-q", "--url", bridge.url)
+    assert rec.returncode == 0, rec
+    # the message's CDR: a 4-byte header, the length, "kept" and its NUL, padded to 4
+    size = format_size(path.stat().st_size)
+    assert f"1 topics, 1 msgs, 16 B of messages ({size} on disk)" in rec.stdout, rec.stdout
+    shown = cli("bag", "info", str(path))
+    assert f"Size:      {size}\n" in shown.stdout, shown
+    with path.open("rb") as f:
+        channels = list(make_reader(f).get_summary().channels.values())  # type: ignore[union-attr]
+    profiles = yaml.safe_load(channels[0].metadata["offered_qos_profiles"])
+    assert len(profiles) == 1 and set(profiles[0]) == {
+        "history", "depth", "reliability", "durability", "deadline", "lifespan", "liveliness",
+        "liveliness_lease_duration", "avoid_ros_namespace_conventions"}
+    assert profiles[0]["durability"] == "transient_local"
+    assert profiles[0]["reliability"] == "reliable"
+    assert set(profiles[0]["deadline"]) == {"sec", "nsec"}
+
+
+async def test_our_recording_of_a_latched_topic_plays_latched(
+    bridge: BridgeProcess, ros_node: Any, topic: str, tmp_path: Path
+) -> None:
+    """A latched topic recorded by us plays latched without being named in latch=: a
+    transient-local rclpy subscriber made once the rclpy publisher is gone gets the value."""
+    from std_msgs.msg import String
+
+    from roslibpy_lite.bag import play
+
+    latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+    pub = ros_node.create_publisher(String, topic, latched)
+    pub.publish(String(data="kept"))
+    later = ros_node.create_publisher(String, f"{topic}_later", 10)
+    path = tmp_path / "run.mcap"
+    async with roslibpy_lite.connect(bridge.url) as ros:
+        async with Recorder(ros, path, topics=[topic, f"{topic}_later"]) as rec:
+            await async_wait_until(lambda: rec.stats.per_topic.get(topic) == 1,
+                                   what="the latched message recorded")
+            while not rec.stats.per_topic.get(f"{topic}_later"):  # until matched (discovery)
+                later.publish(String(data="later"))
+                await asyncio.sleep(0.05)
+        ros_node.destroy_publisher(pub)
+        await async_wait_until(lambda: ros_node.count_publishers(topic) == 0,
+                               what="the rclpy publisher gone")
+        # played 1000 times slower: the "later" message waits while the subscriber comes
+        playing = asyncio.ensure_future(play(ros, path, rate=0.001))
+        try:
+            await async_wait_until(lambda: ros_node.count_publishers(topic) == 1,
+                                   what="the player's publisher")
+            got: list[str] = []
+            ros_node.create_subscription(String, topic, lambda m: got.append(m.data), latched)
+            await async_wait_until(lambda: got == ["kept"], timeout=10,
+                                   what="the played latched message")
+        finally:
+            playing.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await playing
+
+
+@pytest.mark.parametrize(("n", "shown"), [
+    (0, "0 B"), (999, "999 B"), (1000, "1.0 kB"), (18_500, "18.5 kB"), (999_949, "999.9 kB"),
+    (999_950, "1.0 MB"), (3_200_000, "3.2 MB"), (1_500_000_000, "1.5 GB"),
+    (2_000_000_000_000, "2000.0 GB"),
+])
+def test_sizes_are_shown_in_the_unit_that_fits(n: int, shown: str) -> None:
+    """One formatter for record and info: bytes up to 999, then kB, MB, GB (powers of 1000)."""
+    from roslibpy_lite.bag._mcap import format_size
+
+    assert format_size(n) == shown

@@ -210,6 +210,8 @@ _SEEN_HIDDEN = {
     "/rosapi/nodes": {"nodes": ["/seen", "/hidden"]},
     "/rosapi/publishers": {"publishers": ["/seen", "/hidden"]},
     "/rosapi/subscribers": {"subscribers": ["/seen", "/hidden"]},
+    "/rosapi/publishers_qos": {"publishers": ["/seen", "/hidden"],
+                               "qos": [{"durability": "volatile"}, {"durability": "volatile"}]},
     "/rosapi/action_servers": {"action_servers": ["/seen", "/hidden"]},
     "/rosapi/node_details": {"subscribing": ["/seen", "/hidden"],
                              "publishing": ["/seen", "/hidden"], "services": ["/seen", "/hidden"]},
