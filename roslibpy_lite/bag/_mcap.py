@@ -18,8 +18,11 @@ def need_mcap() -> None:
     try:
         import mcap  # noqa: F401
     except ImportError:
-        raise UsageError("recording and playing MCAP files needs the mcap library: "
-                         "pip install 'roslibpy-lite[mcap]'") from None
+        raise UsageError(MISSING) from None
+
+
+MISSING = "the mcap extra is not installed: pip install 'roslibpy-lite[mcap]'"
+"""What is said when the ``mcap`` library is missing, and only that."""
 
 
 def format_size(n: float) -> str:

@@ -15,6 +15,7 @@ from .common import (
     EXIT_ERROR,
     EXIT_NOT_FOUND,
     EXIT_OK,
+    EXIT_USAGE,
     CliError,
     Kit,
     Out,
@@ -34,12 +35,24 @@ def _size(text: str) -> int:
         raise argparse.ArgumentTypeError(f"not a size: {text!r} (e.g. 500M, 2G)") from None
 
 
+def _need_mcap() -> None:
+    """Say that the extra is missing (and how to install it) before anything else."""
+    from ..bag._mcap import need_mcap
+
+    try:
+        need_mcap()
+    except UsageError as exc:
+        raise CliError(EXIT_USAGE, str(exc)) from None
+
+
 async def cmd_bag_record(args: argparse.Namespace, out: Out) -> int:
     """``bag record TOPIC... | --all -o FILE``: until Ctrl+C or SIGTERM, --duration, --max."""
     from ..bag import Recorder
 
+    _need_mcap()
+
     if not args.topics and not args.all:
-        raise CliError(2, "name topics (or patterns such as '/camera/*'), or pass --all")
+        raise CliError(EXIT_USAGE, "name topics (or patterns such as '/camera/*'), or pass --all")
 
     async def body(s: Session) -> int:
         try:
@@ -47,7 +60,7 @@ async def cmd_bag_record(args: argparse.Namespace, out: Out) -> int:
                            max_messages=args.max, split_size=args.split_size,
                            split_duration=args.split_duration)
         except UsageError as exc:
-            raise CliError(2, str(exc)) from None
+            raise CliError(EXIT_USAGE, str(exc)) from None
         live = sys.stderr.isatty() and not args.quiet
         await rec.start()
         try:
@@ -114,6 +127,8 @@ async def cmd_bag_info(args: argparse.Namespace, out: Out) -> int:
     from ..bag import info
     from ..bag._mcap import format_size
 
+    _need_mcap()
+
     try:
         about = info(args.file)
     except FileNotFoundError:
@@ -140,6 +155,8 @@ async def cmd_bag_info(args: argparse.Namespace, out: Out) -> int:
 async def cmd_bag_play(args: argparse.Namespace, out: Out) -> int:
     """``bag play FILE``: publish through the bridge with the recorded timing."""
     from ..bag import play
+
+    _need_mcap()
 
     async def body(s: Session) -> int:
         stats = await play(s.ros, args.file, rate=args.rate, loop=args.loop,

@@ -218,3 +218,21 @@ def test_interface_show_says_the_case_is_wrong(cli: Run) -> None:
     """`interface show sensor_msgs/msg/imu` names the right spelling, not the name's format."""
     result = cli("interface", "show", "sensor_msgs/msg/imu")
     one_error_line(result, EXIT_NOT_FOUND, "did you mean 'sensor_msgs/msg/Imu'?")
+
+
+@pytest.mark.parametrize("argv", [
+    ("bag", "info", "run.mcap"),
+    ("bag", "record", "/imu", "-o", "run.mcap"),
+    ("bag", "play", "run.mcap"),
+])
+def test_bag_without_the_mcap_library_says_only_how_to_install_it(
+    argv: tuple[str, ...], capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Without mcap every bag command says the extra is missing and the pip line, before it
+    looks at the file or the bridge (no "not a readable MCAP file", no connection error)."""
+    monkeypatch.setitem(sys.modules, "mcap", None)  # import mcap raises ImportError
+    code = main([*argv, "--url", f"ws://127.0.0.1:{closed_port()}"])
+    captured = capsys.readouterr()
+    one_error_line(Result(code, captured.out, captured.err), EXIT_USAGE)
+    assert captured.err == ("roslibpy-lite: the mcap extra is not installed: "
+                            "pip install 'roslibpy-lite[mcap]'\n")
