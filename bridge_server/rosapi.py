@@ -34,6 +34,8 @@ service                            request          response
 /rosapi/service_request_details    type             typedefs of the request
 /rosapi/service_response_details   type             typedefs of the response
 /rosapi/topics_and_raw_types       (none)           topics, types, typedefs_full_text
+/rosapi/interfaces                 (none)           interfaces (every installed msg, srv and
+                                                    action type, ``pkg/msg/Name``)
 /rosapi/interface_definition       type             type, definition (ours: the ros2msg text
                                                     of any installed msg, srv or action)
 /rosapi/get_param_names            (none)           names (``/node:param``)
@@ -494,6 +496,13 @@ def _full_text(type_name: str) -> str:
     return text
 
 
+def interfaces(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, Any]:
+    """Every interface type installed with the bridge (what a client may ``load_types``)."""
+    from .types import installed_interfaces
+
+    return {"interfaces": installed_interfaces()}
+
+
 def topics_and_raw_types(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, Any]:
     """Topics, their types, and each type's full definition text (with its dependencies)."""
     pairs = sorted(bridge.ros.node.get_topic_names_and_types())
@@ -566,6 +575,7 @@ _TYPE_NAME = re.compile(
 HANDLERS.update(
     {
         "/rosapi/interface_definition": interface_definition,
+        "/rosapi/interfaces": interfaces,
         "/rosapi/message_details": message_details,
         "/rosapi/service_request_details": service_request_details,
         "/rosapi/service_response_details": service_response_details,
@@ -575,6 +585,7 @@ HANDLERS.update(
 TYPES.update(
     {
         "/rosapi/interface_definition": "rosapi_msgs/srv/InterfaceDefinition",
+        "/rosapi/interfaces": "rosapi_msgs/srv/Interfaces",
         "/rosapi/message_details": "rosapi_msgs/srv/MessageDetails",
         "/rosapi/service_request_details": "rosapi_msgs/srv/ServiceRequestDetails",
         "/rosapi/service_response_details": "rosapi_msgs/srv/ServiceResponseDetails",

@@ -158,6 +158,24 @@ def _index_dirs() -> list[Path]:
     return dirs
 
 
+def installed_interfaces() -> list[str]:
+    """Every interface type the ament index lists (``pkg/msg/Name``, ``pkg/srv/...``,
+    ``pkg/action/...``), sorted: what this bridge can resolve."""
+    found: set[str] = set()
+    for d in _index_dirs():
+        for entry in d.iterdir():
+            try:
+                lines = entry.read_text(encoding="utf-8").splitlines()
+            except OSError:
+                continue
+            for line in lines:
+                kind, _, file_name = line.strip().partition("/")
+                name, _, _ext = file_name.partition(".")
+                if kind in ("msg", "srv", "action") and _TYPE_RE.match(name):
+                    found.add(f"{entry.name}/{kind}/{name}")
+    return sorted(found)
+
+
 def _index_lists(tn: TypeName) -> bool | None:
     """Whether the ament index lists ``tn``; ``None`` if no index is present at all."""
     dirs = _index_dirs()

@@ -137,14 +137,30 @@ def _typedef_lines(typedef: dict[str, Any], by_type: dict[str, dict[str, Any]], 
             _typedef_lines(nested, by_type, depth + 1, out)
 
 
+BRIDGE_ONLY = "  [bridge: load_types or interface gen]"
+"""How ``interface list --remote`` marks a type the bridge has and this installation lacks."""
+
+
 async def cmd_interface_list(args: argparse.Namespace, out: Out) -> int:
-    """``interface list [PACKAGE]``: the types this installation knows."""
+    """``interface list [PACKAGE] [--remote]``: the types this installation knows; with
+    ``--remote`` also the bridge's (at ``--url``), those only it has marked."""
     from msgs.runtime import available_packages, available_types
 
-    if args.package is not None and args.package not in available_packages():
-        raise CliError(EXIT_NOT_FOUND, f"unknown interface package {args.package}")
-    for name in available_types(args.package):
-        out.line(name)
+    local = available_types(args.package) if (
+        args.package is None or args.package in available_packages()) else []
+    remote: list[str] = []
+    if args.remote:
+        async def body(s: Session) -> int:
+            remote.extend(str(n) for n in (await s.rosapi("interfaces")).get("interfaces", [])
+                          if args.package is None or str(n).split("/")[0] == args.package)
+            return EXIT_OK
+        await with_session(args, body)
+    if not local and not remote:
+        where = " here or on the bridge" if args.remote else " (--remote asks the bridge)"
+        raise CliError(EXIT_NOT_FOUND, f"unknown interface package {args.package}{where}")
+    known = set(local)
+    for name in sorted(known.union(remote)):
+        out.line(name if name in known else name + BRIDGE_ONLY)
     return EXIT_OK
 
 
@@ -235,6 +251,9 @@ def add_parsers(groups: Any, kit: Kit) -> None:
     p.add_argument("--raw", action="store_true", help="do not expand nested types")
     p = kit.leaf(isub, "list", cmd_interface_list, "list the known interface types")
     p.add_argument("package", nargs="?", help="only this package")
+    p.add_argument("-r", "--remote", action="store_true",
+                   help="add the bridge's types (at --url); those only it has are marked "
+                        "(load them with load_types, or interface gen)")
     p = kit.leaf(isub, "gen", cmd_interface_gen,
                  "write typed modules for the robot's own types (as msgs generates them)")
     p.add_argument("types", nargs="+", metavar="TYPE", help="e.g. my_robot_msgs/msg/Status")

@@ -275,6 +275,55 @@ def test_interface_list(cli: Run) -> None:
         "mult_msgs/action/IntegrateImu", "mult_msgs/srv/MultFloats"]
 
 
+def test_interface_list_remote_adds_the_bridges_types_marked(cli: Run) -> None:
+    """interface list --remote adds the bridge's types; the robot's own (robot_msgs: built
+    into the bridge's venv, not in msgs) are marked as only the bridge's; without --remote
+    a package only the bridge has is unknown here, and the error says --remote asks it."""
+    from roslibpy_lite.cli.interface import BRIDGE_ONLY
+
+    both = cli("interface", "list", "--remote")
+    assert both.code == 0, both
+    assert "robot_msgs/msg/Status" + BRIDGE_ONLY in both.lines
+    assert "std_msgs/msg/String" in both.lines  # known on both sides: not marked
+    assert all(not line.startswith("std_msgs/") or not line.endswith(BRIDGE_ONLY)
+               for line in both.lines)
+    robot = cli("interface", "list", "robot_msgs", "-r")
+    assert robot.code == 0 and robot.lines and all(
+        line.startswith("robot_msgs/") and line.endswith(BRIDGE_ONLY) for line in robot.lines)
+    local = cli("interface", "list", "robot_msgs", url=None)
+    assert local.code == 4 and "--remote asks the bridge" in local.err, local
+
+
+def test_list_hides_hidden_topics_and_services(cli: Run, ros_node: Any, topic: str) -> None:
+    """topic list and service list hide names with a part starting with _ (an action's
+    /_action/ topics and services, a /_private topic) as ros2 does; --include-hidden shows
+    them."""
+    from std_msgs.msg import String
+
+    from tests.bridge.action_support import FibServer
+
+    server = FibServer(ros_node, topic)
+    ros_node.create_publisher(String, f"{topic}/_private", 10)
+    ros_node.create_publisher(String, f"{topic}/shown", 10)
+    try:
+        hidden = {f"{topic}/_action/feedback", f"{topic}/_action/status", f"{topic}/_private"}
+        every = until_ok(cli, "topic", "list", "--include-hidden",
+                         check=lambda r: hidden | {f"{topic}/shown"} <= set(r.lines))
+        listed = cli("topic", "list")
+        assert f"{topic}/shown" in listed.lines and not hidden & set(listed.lines), listed
+        assert not [n for n in listed.lines if "/_" in n]
+        assert {n for n in every.lines if "/_" not in n} <= set(listed.lines)
+        goal = f"{topic}/_action/send_goal"
+        until_ok(cli, "service", "list", "--include-hidden-services",
+                 check=lambda r: goal in r.lines)
+        services = cli("service", "list", "-t")
+        assert services.code == 0 and goal not in services.out
+        assert not [n for n in services.lines if "/_" in n]
+        assert any(n.startswith("/rosapi/topics ") for n in services.lines)
+    finally:
+        server.destroy()
+
+
 def test_url_from_the_environment(
     cli: Run, monkeypatch: pytest.MonkeyPatch, bridge: Any
 ) -> None:

@@ -239,7 +239,7 @@ def test_every_rosapi_answer_naming_things_is_filtered():
                       "get_ros_version", "get_time", "message_details", "service_request_details",
                       "service_response_details", "service_type", "topic_type", "action_type",
                       "get_param", "has_param", "set_param", "delete_param", "get_param_names",
-                      "interface_definition"}
+                      "interface_definition", "interfaces"}
     every = set(rosapi.HANDLERS) | set(rosapi.ASYNC_HANDLERS)
     assert every == set(_SEEN_HIDDEN) | {"/rosapi/" + n for n in naming_nothing}
 
