@@ -266,9 +266,17 @@ async def named_types(
     return [(n, str(r.get("type", ""))) for n, r in zip(names, replies, strict=True)]
 
 
+def hidden(name: str) -> bool:
+    """Whether a topic or service name is hidden, as ros2 sees it: a part of it starts with
+    ``_`` (an action's ``/_action/...`` topics and services, say)."""
+    return any(part.startswith("_") for part in name.split("/"))
+
+
 def print_listing(out: Out, args: argparse.Namespace, pairs: list[tuple[str, str]]) -> int:
     """A ``list`` command's output: JSON objects with ``--json``, else a name a line
-    (``name [type]`` with ``-t``)."""
+    (``name [type]`` with ``-t``); hidden names only with ``--include-hidden``."""
+    if not getattr(args, "include_hidden", True):
+        pairs = [(n, t) for n, t in pairs if not hidden(n)]
     if args.json:
         out.line(json.dumps([{"name": n, "type": t} for n, t in pairs]))
         return EXIT_OK

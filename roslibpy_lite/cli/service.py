@@ -86,6 +86,9 @@ def add_parsers(groups: Any, kit: Kit) -> None:
     ssub.required = True
     p = kit.leaf(ssub, "list", cmd_service_list, "list the services", kit.fmt)
     p.add_argument("-t", "--show-types", action="store_true", help="show each service's type")
+    p.add_argument("--include-hidden", "--include-hidden-services", action="store_true",
+                   help="also hidden services (a part of the name starts with _, such as "
+                        "an action's /_action/ services)")
     p = kit.leaf(ssub, "type", cmd_service_type, "print a service's type", kit.swait)
     p.add_argument("service")
     p = kit.leaf(ssub, "call", cmd_service_call, "call a service and print the response", kit.fmt,

@@ -291,6 +291,9 @@ def add_parsers(groups: Any, kit: Kit) -> None:
     tsub.required = True
     p = kit.leaf(tsub, "list", cmd_topic_list, "list the topics in the ROS graph", kit.fmt)
     p.add_argument("-t", "--show-types", action="store_true", help="show each topic's type")
+    p.add_argument("--include-hidden", "--include-hidden-topics", action="store_true",
+                   help="also hidden topics (a part of the name starts with _, such as "
+                        "an action's /_action/ topics)")
     p = kit.leaf(tsub, "type", cmd_topic_type, "print a topic's type", kit.wait)
     p.add_argument("topic")
     p = kit.leaf(tsub, "info", cmd_topic_info, "a topic's type, publishers and subscribers",
