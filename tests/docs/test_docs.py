@@ -86,3 +86,83 @@ def test_api_pages_show_no_raw_sphinx_roles(tmp_path: Path) -> None:
     assert any("roslibpy_lite" in p.read_text() for p in pages)  # the API reference is there
     found = {str(p.relative_to(site)): len(raw.findall(p.read_text())) for p in pages}
     assert not {k: v for k, v in found.items() if v}, found
+
+
+def test_no_page_promises_what_is_coming() -> None:
+    """No page (nor the README) says "Coming": what exists is documented as it is, and
+    what does not exist is not announced."""
+    pages = [*sorted(DOCS.rglob("*.md")), ROOT / "README.md"]
+    said = [f"{page.relative_to(ROOT)}:{n}: {line.strip()}"
+            for page in pages
+            for n, line in enumerate(page.read_text().splitlines(), 1)
+            if re.search(r"\bcoming\b", line, re.IGNORECASE)]
+    assert said == []
+
+
+def _rendered_modules() -> set[str]:
+    """The modules whose contents the API reference renders: each ``::: target`` (a module,
+    or an object whose ``__module__`` counts) and each member its ``members: [...]`` names;
+    every reference page must be in the nav."""
+    import importlib
+
+    nav = (ROOT / "mkdocs.yml").read_text()
+    modules: set[str] = set()
+    for page in sorted((DOCS / "reference").glob("*.md")):
+        assert f"reference/{page.name}" in nav, f"{page.name} is not in mkdocs.yml's nav"
+        text = page.read_text()
+        for target, members in re.findall(
+                r"^::: ([\w.]+)\n(?:    options:\n(?:      .*\n)*?      members: \[([^\]]*)\])?",
+                text, re.MULTILINE):
+            module_name, _, attr = target, "", ""
+            while True:
+                try:
+                    obj: object = importlib.import_module(module_name)
+                    break
+                except ModuleNotFoundError:
+                    module_name, _, last = module_name.rpartition(".")
+                    attr = f"{last}.{attr}".rstrip(".")
+            for step in filter(None, attr.split(".")):
+                obj = getattr(obj, step)
+            owners = [obj] + [getattr(obj, m.strip()) for m in members.split(",") if m.strip()]
+            for owner in owners:
+                name = getattr(owner, "__name__", "") if isinstance(owner, type(re)) else \
+                    getattr(owner, "__module__", "")
+                modules.add(name)
+    return modules
+
+
+def test_every_public_module_is_in_the_api_reference() -> None:
+    """Each module of roslibpy_lite (and of roslibpy_lite.sync) whose name does not start
+    with _ is rendered by a reference page: itself, or what it defines."""
+    import pkgutil
+
+    import roslibpy_lite
+    import roslibpy_lite.sync
+
+    modules = [f"roslibpy_lite.{m.name}" for m in pkgutil.iter_modules(roslibpy_lite.__path__)]
+    modules += [f"roslibpy_lite.sync.{m.name}"
+                for m in pkgutil.iter_modules(roslibpy_lite.sync.__path__)]
+    public = [m for m in modules if not m.rpartition(".")[2].startswith("_")]
+    rendered = _rendered_modules()
+    missing = [m for m in public
+               if not any(r == m or r.startswith(m + ".") for r in rendered)]
+    assert "roslibpy_lite.bag" in public and missing == []
+
+
+def test_the_extras_named_in_the_docs_exist_and_are_all_listed() -> None:
+    """Getting started's extras table lists every extra a user installs (not the
+    repository's own dev and build-interfaces), and no page names an extra that does not
+    exist (docs/cli.md spoke of a `bag` extra)."""
+    import tomllib
+
+    extras = set(tomllib.loads((ROOT / "pyproject.toml").read_text())["project"][
+        "optional-dependencies"])
+    table = re.findall(r"^\| `([\w-]+)` \|", (DOCS / "getting-started.md").read_text(),
+                       re.MULTILINE)
+    assert set(table) == extras - {"dev", "build-interfaces"}
+    for page in [*sorted(DOCS.rglob("*.md")), ROOT / "README.md"]:
+        text = page.read_text()
+        named = re.findall(r"\bthe `([\w-]+)` extra", text) + re.findall(r"roslibpy-lite\[([\w,-]+)\]",
+                                                                   text)
+        unknown = {e for group in named for e in group.split(",")} - extras
+        assert unknown == set(), f"{page.relative_to(ROOT)} names extras {unknown}"
