@@ -4,7 +4,11 @@ Contract (what the client relies on):
 
 * :class:`Message` is the base of every generated message class. The classes are
   mutable, slotted, keyword-only dataclasses (``String(data="hi")``; like rclpy, fields
-  may be reassigned). Class attributes:
+  may be reassigned). Building one checks each field's kind, range and length (an
+  unknown field is a ``TypeError``, a value that does not fit a :class:`ValidationError`
+  naming the field, the expected type and the message type); a nested message was
+  checked when it was built. Fields reassigned later are checked by ``validate()``.
+  Class attributes:
 
   - ``_type``: ``"pkg/msg/Name"``; service parts ``"pkg/srv/Name_Request"`` /
     ``"pkg/srv/Name_Response"``; action parts ``"pkg/action/Name_Goal"``,
@@ -42,7 +46,9 @@ from __future__ import annotations
 import array
 import base64
 import binascii
+import dataclasses as _dc
 import importlib
+import keyword
 import math
 import re
 from collections.abc import Callable, Mapping
@@ -79,6 +85,7 @@ _INT_RANGES: dict[str, tuple[int, int]] = {
 _MSG_NAMES = {"boolean": "bool", "octet": "byte", "float": "float32", "double": "float64"}
 _FLOAT32_MAX = 3.4028234663852886e38
 _REPR_LIMIT = 40
+_MISSING = object()
 
 
 class ValidationError(ValueError):
@@ -189,7 +196,7 @@ def _string_conv(base: str, bound: int | None) -> _Conv:
     return conv
 
 
-def _nested_conv(type_name: str, wire: bool) -> _Conv:
+def _nested_conv(type_name: str, wire: bool, deep: bool = True) -> _Conv:
     cls_box: list[type[Message]] = []
 
     def conv(value: Any) -> Message:
@@ -197,7 +204,7 @@ def _nested_conv(type_name: str, wire: bool) -> _Conv:
             cls_box.append(lookup_message(type_name))
         cls = cls_box[0]
         if isinstance(value, cls):
-            if not wire:
+            if not wire and deep:
                 value.validate()
             return value
         if wire and isinstance(value, Mapping):
@@ -311,7 +318,7 @@ _FIXED_RE = re.compile(r"^(?P<elem>.+)\[(?P<size>\d+)\]$")
 _STRING_RE = re.compile(r"^(?P<base>w?string)(?:<(?P<bound>\d+)>)?$")
 
 
-def _scalar_conv(idl: str, wire: bool) -> _Conv:
+def _scalar_conv(idl: str, wire: bool, deep: bool = True) -> _Conv:
     if idl == "boolean":
         return _bool_conv
     if idl in _INT_RANGES:
@@ -323,7 +330,7 @@ def _scalar_conv(idl: str, wire: bool) -> _Conv:
         bound = match["bound"]
         return _string_conv(match["base"], int(bound) if bound else None)
     if "/" in idl:
-        return _nested_conv(idl, wire)
+        return _nested_conv(idl, wire, deep)
     raise ValueError(f"unsupported field type {idl!r}")
 
 
@@ -342,7 +349,9 @@ def _expected_name(idl: str) -> str:
     return _MSG_NAMES.get(idl, idl)
 
 
-def _field_conv(idl: str, wire: bool) -> _Conv:
+def _field_conv(idl: str, wire: bool, deep: bool = True) -> _Conv:
+    """The converter (``wire``: from the wire form) or checker of a field; ``deep=False``
+    takes a nested message instance as it is (checked when it was built)."""
     fixed: int | None = None
     bound: int | None = None
     elem: str | None = None
@@ -356,11 +365,11 @@ def _field_conv(idl: str, wire: bool) -> _Conv:
             elem = match["elem"]
             fixed = int(match["size"])
     if elem is None:
-        return _scalar_conv(idl, wire)
+        return _scalar_conv(idl, wire, deep)
     expected = _expected_name(idl)
     if elem == "uint8":
         return _bytes_conv(expected, fixed, bound, wire)
-    return _list_conv(_scalar_conv(elem, wire), elem, expected, fixed, bound, wire)
+    return _list_conv(_scalar_conv(elem, wire, deep), elem, expected, fixed, bound, wire)
 
 
 def _float_enc(value: Any) -> Any:
@@ -412,9 +421,10 @@ def _field_enc(idl: str) -> _Enc | None:
 class _Codec:
     """The converters of one message class, built once from ``_fields_and_types``."""
 
-    __slots__ = ("check", "decode", "encode")
+    __slots__ = ("build", "check", "decode", "encode", "fields", "on_build")
 
-    def __init__(self, fields_and_types: Mapping[str, str]) -> None:
+    def __init__(self, cls: type[Message]) -> None:
+        fields_and_types = cls._fields_and_types
         self.decode: dict[str, _Conv] = {
             name: _field_conv(idl, True) for name, idl in fields_and_types.items()
         }
@@ -424,6 +434,100 @@ class _Codec:
         self.encode: tuple[tuple[str, _Enc | None], ...] = tuple(
             (name, _field_enc(idl)) for name, idl in fields_and_types.items()
         )
+        # at construction: nested instances were checked when they were built
+        self.build: tuple[tuple[str, _Conv], ...] = tuple(
+            (name, _field_conv(idl, False, deep=False)) for name, idl in fields_and_types.items()
+        )
+        self.on_build = _build_check(cls, dict(self.build))
+        # from_json's way to an instance without checking twice: (name, default, factory)
+        self.fields: tuple[tuple[str, Any, Callable[[], Any] | None], ...] = tuple(
+            (f.name, f.default, None if f.default_factory is _dc.MISSING else f.default_factory)
+            for f in _dc.fields(cls)
+        ) if _dc.is_dataclass(cls) else ()
+
+
+def _fast_test(idl: str, var: str) -> str | None:
+    """A Python expression true when ``var`` surely fits a scalar field of type ``idl``
+    (None: no fast test; the field's checker decides). What it does not pass goes to the
+    checker, which accepts it or raises."""
+    if idl == "boolean":
+        return f"({var} is True or {var} is False)"
+    if idl in _INT_RANGES:
+        low, high = _INT_RANGES[idl]
+        return f"(type({var}) is int and {low} <= {var} <= {high})"
+    if idl == "double":
+        return f"type({var}) is float"
+    if idl == "float":
+        return f"(type({var}) is float and -{_FLOAT32_MAX!r} <= {var} <= {_FLOAT32_MAX!r})"
+    if idl in ("string", "wstring"):
+        return f"type({var}) is str"
+    if idl in ("sequence<uint8>", "sequence<octet>"):
+        return f"type({var}) is bytes"
+    return None
+
+
+_ELEMENT_TYPES = {"boolean": bool, "double": float, "string": str, "wstring": str,
+                  **{idl: int for idl in _INT_RANGES}}
+
+
+def _fast_list_test(idl: str, key: str, types: dict[str, Any]) -> str | None:
+    """The fast test of a nested message or a list field (see _fast_test); the classes
+    and element types it names are put in ``types`` under ``key``."""
+    match = _SEQUENCE_RE.match(idl) or _FIXED_RE.match(idl)
+    if match is None:
+        if "/" not in idl:
+            return None
+        types[key] = lookup_message(idl)  # a nested message: its own class
+        return f"type(v) is {key}"
+    elem = match["elem"]
+    size = match.groupdict().get("size")
+    bound = match.groupdict().get("bound")
+    kind = lookup_message(elem) if "/" in elem else _ELEMENT_TYPES.get(elem)
+    if kind is None:
+        return None
+    types[key] = frozenset({kind})
+    test = f"type(v) is list and {{*map(type, v)}} <= {key}"
+    if size is not None:
+        test += f" and len(v) == {size}"
+    elif bound is not None:
+        test += f" and len(v) <= {bound}"
+    if elem in _INT_RANGES:
+        low, high = _INT_RANGES[elem]
+        test += f" and (not v or ({low} <= min(v) and max(v) <= {high}))"
+    return f"({test})"
+
+
+def _build_check(cls: type[Message], convs: dict[str, _Conv]) -> Callable[[Message], None]:
+    """``cls``'s construction check, written out once as one function: a fast test per
+    scalar field inline, the field's checker for the rest and for what the test lets by."""
+    lines = ["def check(self):"]
+    nested: dict[str, type[Message]] = {}
+    for name, idl in cls._fields_and_types.items():
+        if not name.isidentifier() or keyword.iskeyword(name):
+            raise ValueError(f"{cls._type}: field name {name!r} is not a Python name")
+        lines.append(f"    v = self.{name}")
+        test = _fast_test(idl, "v")
+        if test is None:
+            test = _fast_list_test(idl, f"T_{name}", nested)
+        if test is None:
+            lines.append(f"    slow(self, {name!r}, v)")
+        else:
+            lines.append(f"    if not {test}: slow(self, {name!r}, v)")
+    if len(lines) == 1:
+        lines.append("    pass")
+
+    def slow(msg: Message, name: str, value: Any) -> None:
+        try:
+            convs[name](value)
+        except ValidationError as exc:
+            err = exc._under(name)
+            raise ValidationError(err.path, err.expected,
+                                  f"{err.problem} (building {msg._type})") from None
+
+    namespace: dict[str, Any] = {"slow": slow, **nested}
+    exec("\n".join(lines), namespace)  # our own text, written from the field table
+    check: Callable[[Message], None] = namespace["check"]
+    return check
 
 
 _CODECS: dict[type[Message], _Codec] = {}
@@ -432,7 +536,7 @@ _CODECS: dict[type[Message], _Codec] = {}
 def _codec(cls: type[Message]) -> _Codec:
     codec = _CODECS.get(cls)
     if codec is None:
-        codec = _Codec(cls._fields_and_types)
+        codec = _Codec(cls)
         _CODECS[cls] = codec
     return codec
 
@@ -476,7 +580,8 @@ class Message:
         """
         if not isinstance(data, Mapping):
             raise ValidationError("", f"{cls._type} object", _describe(data))
-        decode = _codec(cls).decode
+        codec = _codec(cls)
+        decode = codec.decode
         kwargs: dict[str, Any] = {}
         for key, value in data.items():
             conv = decode.get(key)
@@ -489,8 +594,26 @@ class Message:
                 kwargs[key] = conv(value)
             except ValidationError as exc:
                 raise exc._under(key) from None
-        factory: Callable[..., Self] = cls
-        return factory(**kwargs)
+        # converted, hence checked: built as __init__ would, without __post_init__'s check
+        msg = object.__new__(cls)
+        for name, default, factory in codec.fields:
+            value = kwargs.get(name, _MISSING)
+            if value is _MISSING:
+                value = default if factory is None else factory()
+            object.__setattr__(msg, name, value)
+        return msg
+
+    def __post_init__(self) -> None:
+        """Check each field's kind, range and length when the message is built (a nested
+        message was checked when it was built); see :meth:`validate`.
+
+        Raises :class:`ValidationError` naming the field, the expected type and the type.
+        """
+        cls = type(self)
+        check = _codec(cls).on_build
+        if "__post_init__" not in cls.__dict__:
+            cls.__post_init__ = check  # type: ignore[method-assign, assignment]  # directly now
+        check(self)
 
     def validate(self) -> None:
         """Check every field's Python-side value (kind, range, length, nesting).

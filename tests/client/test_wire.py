@@ -93,8 +93,10 @@ async def test_typed_publish_checks_type_and_fields(ros: Client, peer: ScriptedP
     await peer.expect(op="publish", topic="/n", msg={"data": 7})
     with pytest.raises(UsageError, match="std_msgs/msg/Int16"):
         await pub.publish(String(data="x"))  # type: ignore[arg-type]
+    bad = Int16()
+    bad.data = 70000  # reassigned after it was built (construction would refuse it)
     with pytest.raises(InvalidMessageError, match="data") as info:
-        await pub.publish(Int16(data=70000))
+        await pub.publish(bad)
     assert info.value.path == "data"
     untyped = await ros.advertise("/m", "std_msgs/msg/String")
     with pytest.raises(UsageError, match="expected a std_msgs/msg/String"):

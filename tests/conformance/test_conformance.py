@@ -93,8 +93,10 @@ async def test_typed_publish_refuses_wrong_type_and_bad_fields(ros: Ros, topic: 
     pub = await ros.advertise(topic, Int32)
     with pytest.raises(UsageError, match="std_msgs/msg/Int32"):
         await pub.publish(String(data="x"))  # type: ignore[arg-type]
+    bad = Int32()
+    bad.data = 2**40  # reassigned after it was built (construction would refuse it)
     with pytest.raises(InvalidMessageError, match="data"):
-        await pub.publish(Int32(data=2**40))
+        await pub.publish(bad)
     await pub.close()
 
 

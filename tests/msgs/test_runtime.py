@@ -297,29 +297,61 @@ def test_integral_float_is_accepted_for_integers() -> None:
 
 
 def test_validate_checks_python_side_values() -> None:
-    """validate() checks kinds, ranges, lengths and nested messages on an instance."""
+    """validate() checks kinds, ranges, lengths and nested messages of an instance whose
+    fields were reassigned after it was built."""
     Arrays().validate()
     PoseStamped().validate()
     msg = PoseStamped()
     msg.pose.position.x = "1"  # type: ignore[assignment]
     with pytest.raises(ValidationError, match=r"^pose\.position\.x: expected float64"):
         msg.validate()
-    bad_len = Arrays(int32_values=[1])
-    with pytest.raises(ValidationError, match="int32_values"):
-        bad_len.validate()
-    not_bytes = UInt8MultiArray(data="AQID")  # type: ignore[arg-type]
-    with pytest.raises(ValidationError, match="data: expected uint8"):
-        not_bytes.validate()
-    wrong_nested = PoseStamped(pose=Point())  # type: ignore[arg-type]
-    with pytest.raises(ValidationError, match="pose: expected geometry_msgs/Pose"):
-        wrong_nested.validate()
-    with pytest.raises(ValidationError, match="data: expected int16, 32768 is out of range"):
-        Int16(data=2**15).validate()
-    with pytest.raises(ValidationError, match=r"^position: expected float64\[\] \(a list\)"):
-        JointState(position=(1.0,)).validate()  # type: ignore[arg-type]
-    nested_bad = BoundedSequences(basic_types_values=[BasicTypes(), BasicTypes(int8_value=999)])
-    with pytest.raises(ValidationError, match=r"^basic_types_values\[1\]\.int8_value: "):
-        nested_bad.validate()
+    cases: list[tuple[Any, str, Any, str]] = [
+        (Arrays(), "int32_values", [1], "int32_values"),
+        (UInt8MultiArray(), "data", "AQID", "data: expected uint8"),
+        (PoseStamped(), "pose", Point(), "pose: expected geometry_msgs/Pose"),
+        (Int16(), "data", 2**15, "data: expected int16, 32768 is out of range"),
+        (JointState(), "position", (1.0,), r"^position: expected float64\[\] \(a list\)"),
+        (BoundedSequences(), "basic_types_values", [BasicTypes(), BasicTypes()],
+         r"^basic_types_values\[1\]\.int8_value: "),
+    ]
+    for target, field, value, error in cases:
+        setattr(target, field, value)
+        if field == "basic_types_values":
+            value[1].int8_value = 999
+        with pytest.raises(ValidationError, match=error):
+            target.validate()
+
+
+@pytest.mark.parametrize(("build", "error"), [
+    (lambda: UInt8MultiArray(data="AQID"), r"^data: expected uint8\[\], got str 'AQID' "
+                                          r"\(building std_msgs/msg/UInt8MultiArray\)$"),
+    (lambda: BasicTypes(uint8_value="fast"), r"^uint8_value: expected uint8, got str 'fast' "
+                                             r"\(building test_msgs/msg/BasicTypes\)$"),
+    (lambda: Int16(data=2**15), "data: expected int16, 32768 is out of range"),
+    (lambda: Arrays(int32_values=[1]), r"^int32_values: expected int32\[3\], got 1 elements"),
+    (lambda: PoseStamped(pose=Point()), "pose: expected geometry_msgs/Pose instance"),
+    (lambda: JointState(position=(1.0,)), r"^position: expected float64\[\] \(a list\)"),
+    (lambda: JointState(name=["a", 2]), r"^name\[1\]: expected string, got int 2"),
+    (lambda: BoundedSequences(basic_types_values=[BasicTypes()] * 4), "basic_types_values"),
+    (lambda: BasicTypes(float32_value=1e39), "out of the float32 range"),
+    (lambda: BasicTypes(bool_value=1), "bool_value: expected bool"),
+])
+def test_a_message_is_checked_when_it_is_built(build: Any, error: str) -> None:
+    """A field of the wrong kind, range or length raises at construction, naming the field,
+    the expected type and the message type (as an unknown field does), not at publish."""
+    with pytest.raises(ValidationError, match=error):
+        build()
+
+
+def test_construction_keeps_what_it_accepts() -> None:
+    """Values that fit pass unchanged: ints for floats, float32 infinities, bytes-likes, nested
+    instances (checked when they were built), ints that a float64 array may hold."""
+    assert BasicTypes(float64_value=2).float64_value == 2
+    assert BasicTypes(float32_value=math.inf).float32_value == math.inf
+    assert UInt8MultiArray(data=bytearray(b"ab")).data == bytearray(b"ab")
+    pose = PoseStamped(pose=PoseStamped().pose)
+    assert pose.pose.position.x == 0.0
+    assert JointState(position=[1, 2.5]).position == [1, 2.5]
 
 
 def test_lookup_accepts_both_spellings() -> None:

@@ -110,8 +110,10 @@ def test_typed_messages_round_trip(ros: Ros, topic: str) -> None:
     typed = ros.advertise(topic + "_i", Int32)
     with pytest.raises(UsageError, match="std_msgs/msg/Int32"):
         typed.publish(String(data="x"))  # type: ignore[arg-type]
+    bad = Int32()
+    bad.data = 2**40  # reassigned after it was built (construction would refuse it)
     with pytest.raises(InvalidMessageError, match="data"):
-        typed.publish(Int32(data=2**40))
+        typed.publish(bad)
 
 
 def test_latched_topic_reaches_late_subscriber(ros: Ros, topic: str) -> None:
