@@ -28,9 +28,21 @@ A goal the server neither accepts nor rejects within ``call_timeout`` s (a
 lost request: rclpy servers keep only 10 requests by default) fails too.
 ``cancel_action_goal`` with the goal's id cancels it, before or after the
 server accepted it; the result (usually CANCELED) follows. A refused cancel
-is reported as a ``status`` warning. When the client disconnects, its goals
+is reported as a ``status`` warning. The id names one of this connection's own
+goals: the op cannot reach another client's. When the client disconnects, its goals
 are canceled on the ROS side. ``goal_timeout`` (s, 0 = none) cancels goals
 that run longer, and fails them with a text.
+
+The action's services called as plain services
+-----------------------------------------------
+``call_service`` to ``<action>/_action/cancel_goal`` (which ``send_action_goal``
+on the action allows, see :func:`~bridge_server.permissions.hidden_requirement`)
+cancels only goals this connection sent with ``send_action_goal``, unless the
+client's role has ``cancel_any_goal`` on the action. A cancel of
+another's goal id, of a zero id (every goal) or with a stamp (every goal
+accepted before it) is refused with a text that says so; it is not narrowed,
+since the caller would be told of fewer goals canceling than it asked for.
+Without an auth file there are no roles, and no such limit.
 
 Serving actions
 ---------------
@@ -88,6 +100,7 @@ CLIENT_IDLE = 30.0
 """Seconds an action client nobody uses is kept (it stays matched for the next goal)."""
 
 _GOAL_SUFFIX = "/_action/send_goal"
+_CANCEL_SUFFIX = "/_action/cancel_goal"
 _OUTCOMES = {Status.SUCCEEDED: "succeeded", Status.CANCELED: "canceled",
              Status.ABORTED: "aborted"}
 
@@ -437,6 +450,35 @@ class SessionActions:
             tail = f',"status":{status},"result":{ok}}}'
         text = f'{head},"values":{conv.to_json(msg)}{tail}'
         session.outbox.send_split(text, goal.fragment_size, None, str(goal.id))
+
+    # -- an action's services, called as plain services (call_service) -----------------------
+
+    def cancel_refusal(self, service: str, request: Any) -> str | None:
+        """Why this client may not send ``request`` to ``service`` (``None``: it may).
+
+        Only ``<action>/_action/cancel_goal`` is limited: see the module docstring.
+        """
+        action = service.removesuffix(_CANCEL_SUFFIX)
+        role = self.session.gate.role
+        if action == service or role is None or role.allows("cancel_any_goal", action):
+            return None
+        grant = f"cancel_any_goal on {action} allows it"
+        info = getattr(request, "goal_info", None)
+        if info is None:
+            return "forbidden: the request must be an action_msgs/srv/CancelGoal request"
+        uuid = bytes(info.goal_id.uuid)
+        if info.stamp.sec or info.stamp.nanosec or not any(uuid):
+            return (f"forbidden: role {role.name} may cancel only goals this connection sent, "
+                    "and a zero goal id or a stamp cancels other clients' goals too: give "
+                    f"one goal's id and a zero stamp ({grant})")
+        if any(
+            g.name == action and g.sent is not None and g.sent.handle is not None
+            and bytes(g.sent.handle.goal_id.uuid) == uuid
+            for g in self.goals.values()
+        ):
+            return None
+        return (f"forbidden: role {role.name} may not cancel goal {uuid.hex()} of {action}: "
+                f"this connection did not send it ({grant})")
 
     # -- serving actions -----------------------------------------------------------------------
 

@@ -72,7 +72,7 @@ FORGET_AFTER = 600.0
 EXAMPLE_ROLES = """\
 # Roles: capabilities on name patterns (fnmatch globs); deny wins over allow.
 # Capabilities: subscribe, publish, call_service, serve_service, send_action_goal,
-# serve_action, params, introspection, take_over; "all" grants every one.
+# cancel_any_goal, serve_action, params, introspection, take_over; "all" grants every one.
 
 [roles.viewer]
 subscribe = ["*"]

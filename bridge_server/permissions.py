@@ -11,7 +11,10 @@ A role grants capabilities on ``fnmatch`` globs (``*`` also matches ``/``)::
 
 Capabilities (:data:`CAPABILITIES`): ``subscribe``, ``publish`` (also
 advertise), ``call_service``, ``serve_service`` (advertise_service),
-``send_action_goal`` (and cancel), ``serve_action`` (advertise_action and
+``send_action_goal`` (and cancel the client's own goals), ``cancel_any_goal``
+(with ``send_action_goal``: also cancel goals other clients sent, through the
+action's ``_action/cancel_goal`` service, see :mod:`bridge_server.actions`),
+``serve_action`` (advertise_action and
 the feedback/result of served goals), ``params`` (the ``/node:param`` names
 of rosapi's get/set/has/delete_param and get_param_names), ``introspection``
 (the rosapi lists and lookups; answers list only the names it matches) and
@@ -53,6 +56,7 @@ CAPABILITIES = (
     "call_service",
     "serve_service",
     "send_action_goal",
+    "cancel_any_goal",
     "serve_action",
     "params",
     "introspection",

@@ -201,6 +201,9 @@ class SessionServices:
             request = req_conv.from_obj(args, "args")
         except convert.ConversionError as exc:
             raise _CallFailed(f"{service}: bad request: {exc}") from None
+        refusal = self.session.actions.cancel_refusal(service, request)  # an action's cancel_goal
+        if refusal is not None:
+            raise _CallFailed(f"{service}: {refusal}")
         client = ros.client_for(service, srv_cls)
         if not client.service_is_ready():
             # Wait for a server to be discovered and matched: while the graph lists no
