@@ -8,7 +8,11 @@ once a second for the rates), never per message. :func:`merge` combines the
 snapshots of several workers into one view of the whole bridge.
 
 Actions: ``actions`` lists the actions clients serve (``served_by`` a client
-id) or send goals to (``served_by`` ``ROS``), with the goals in flight.
+id) or send goals to (``served_by`` ``ROS``), with their types and the goals in
+flight. An action served in ROS stays listed while ``action_goals`` counts
+goals of it, with its type from the ROS graph (which lists the goal service
+while a server offers it or the bridge's action client for it is kept;
+``None`` after both are gone).
 """
 
 from __future__ import annotations
@@ -26,6 +30,7 @@ if TYPE_CHECKING:
 __all__ = ["RateMeter", "merge", "take", "topic_totals"]
 
 RATE_FIELDS = ("ros_received", "sent", "published")
+_GOAL_SERVICE = "/_action/send_goal"
 
 
 def topic_totals(bridge: Bridge) -> dict[str, dict[str, Any]]:
@@ -173,7 +178,24 @@ def _actions(bridge: Bridge) -> list[dict[str, Any]]:
             a = found.setdefault(goal.name, {"name": goal.name, "type": goal.type_name,
                                              "served_by": "ROS", "goals": 0})
             a["goals"] += 1
+    counted = [name for name in bridge.metrics.actions.data if name not in found]
+    if counted:  # no goal of these is in flight: the graph knows their types
+        types = _graph_action_types(bridge)
+        for name in counted:
+            found[name] = {"name": name, "type": types.get(name), "served_by": "ROS",
+                           "goals": 0}
     return [found[k] for k in sorted(found)]
+
+
+def _graph_action_types(bridge: Bridge) -> dict[str, str]:
+    """Action name -> type of the actions the ROS graph lists a goal service of (served,
+    or only called)."""
+    types = {}
+    for service, service_types in bridge.ros.node.get_service_names_and_types():
+        if service.endswith(_GOAL_SERVICE) and service_types:
+            types[service.removesuffix(_GOAL_SERVICE)] = service_types[0].removesuffix(
+                "_SendGoal")
+    return types
 
 
 _MAX_FIELDS = ("ros_received_per_s",)  # each worker receives the same ROS stream
@@ -205,8 +227,9 @@ def merge(snaps: Iterable[Mapping[str, Any]]) -> dict[str, Any]:
         out["connections"] += s["connections"]
         out["sessions_resumed"] += s.get("sessions_resumed", 0)
         out["sessions_expired"] += s.get("sessions_expired", 0)
-        for key in ("workers", "clients", "services", "actions"):
+        for key in ("workers", "clients", "services"):
             out[key].extend(s[key])
+        _add_actions(out["actions"], s["actions"])
         for key in ("refused", "errors"):
             _add(out[key], s[key])
         for key in ("service_calls", "action_goals"):
@@ -225,6 +248,23 @@ def merge(snaps: Iterable[Mapping[str, Any]]) -> dict[str, Any]:
     out["clients"].sort(key=lambda c: (c["worker"], c["sid"]))
     out["services"].sort(key=lambda sv: sv["name"])
     return out
+
+
+def _add_actions(into: list[dict[str, Any]], more: Iterable[Mapping[str, Any]]) -> None:
+    """Join workers' action lists: one entry per action, goals in flight added up, the
+    type any worker knows, served by a client if one serves it."""
+    by_name = {a["name"]: a for a in into}
+    for a in more:
+        acc = by_name.get(a["name"])
+        if acc is None:
+            acc = by_name[a["name"]] = dict(a)
+            into.append(acc)
+            continue
+        acc["goals"] += a["goals"]
+        acc["type"] = acc["type"] or a["type"]
+        if acc["served_by"] == "ROS":
+            acc["served_by"] = a["served_by"]
+    into.sort(key=lambda a: a["name"])
 
 
 def _add(into: dict[str, Any], more: Mapping[str, Any]) -> None:

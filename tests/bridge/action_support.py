@@ -110,17 +110,20 @@ def fib(order: int) -> list[int]:
     return sequence
 
 
-async def bridge_sees_action(ws: Any, name: str, timeout: float = 20.0) -> None:
-    """Poll ``/rosapi/action_servers`` until the bridge's graph lists ``name``."""
+async def bridge_sees_action(ws: Any, name: str, timeout: float = 20.0,
+                             gone: bool = False) -> None:
+    """Poll ``/rosapi/action_servers`` until the bridge's graph lists ``name`` (with
+    ``gone``: until it no longer does)."""
     deadline = time.monotonic() + timeout
     while True:
         rid = f"as{next(_ids)}"
         await ws.send({"op": "call_service", "service": "/rosapi/action_servers", "id": rid})
         reply = await ws.expect(op="service_response", id=rid)
-        if name in reply["values"]["action_servers"]:
+        if (name in reply["values"]["action_servers"]) != gone:
             return
         if time.monotonic() > deadline:
-            raise AssertionError(f"the bridge never listed the action {name}")
+            raise AssertionError(f"the bridge {'still lists' if gone else 'never listed'} "
+                                 f"the action {name}")
         await asyncio.sleep(0.02)
 
 

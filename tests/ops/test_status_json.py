@@ -6,6 +6,7 @@ from typing import Any
 
 from bridge_server.metrics import LATENCY_BUCKETS
 from bridge_server.snapshot import merge
+from tests.bridge.action_support import FIB, FibServer, bridge_sees_action, send_goal
 from tests.helpers import BridgeProcess, open_wire
 from tests.ops.support import status
 
@@ -42,6 +43,39 @@ async def test_status_lists_clients_services_and_actions(make_bridge: Any, topic
     assert s["topics"][topic]["subscribers"] == 1
 
 
+async def test_status_names_the_type_of_an_action_served_in_ros(
+    make_bridge: Any, ros_node: Any, topic: str
+) -> None:
+    """An rclpy action server's type is listed once goals to it are counted, when no goal is
+    in flight: after a goal of the wrong type (which made no action client), and after the
+    server went away (the bridge's action client keeps the name in the graph)."""
+    b: BridgeProcess = make_bridge()
+    action = topic + "_act"
+    server = FibServer(ros_node, action)
+    ws = await open_wire(b.url)
+    try:
+        await bridge_sees_action(ws, action)
+        await ws.send({"op": "send_action_goal", "action": action, "id": "wrong",
+                       "action_type": "test_msgs/action/NestedMessage", "args": {}})
+        result = await ws.expect(op="action_result", id="wrong", timeout=20)
+        assert result["status"] == 6 and f"has type {FIB}" in result["values"], result
+        s = await status(b.port)
+        assert s["actions"] == [{"name": action, "type": FIB, "served_by": "ROS", "goals": 0}]
+
+        await send_goal(ws, action, {"order": 2}, "right")
+        assert (await ws.expect(op="action_result", id="right", timeout=20))["status"] == 4
+        server.destroy()
+        server = None
+        await bridge_sees_action(ws, action, gone=True)
+        s = await status(b.port)
+        assert s["actions"] == [{"name": action, "type": FIB, "served_by": "ROS", "goals": 0}]
+        assert s["action_goals"][action]["outcomes"] == {"failed": 1, "succeeded": 1}
+    finally:
+        await ws.close()
+        if server is not None:
+            server.destroy()
+
+
 def _snap(worker: int, sent: int, rate: float, clients: int) -> dict[str, Any]:
     buckets = [0] * (len(LATENCY_BUCKETS) + 1)
     buckets[3] = sent
@@ -70,3 +104,20 @@ def test_merge_adds_counts_joins_lists_and_takes_the_max_ros_rate() -> None:
     t = m["topics"]["/t"]
     assert (t["type"], t["sent"], t["ros_received_per_s"], t["sent_per_s"]) == (
         "std_msgs/msg/String", 15, 50.0, 149.0)
+
+
+def test_merge_lists_each_action_once() -> None:
+    """Workers that both use an action: one row, goals in flight added up, the type one of
+    them knows, and the client that serves it rather than ROS."""
+    a, b, c = _snap(0, 1, 1.0, 1), _snap(1, 1, 1.0, 1), _snap(2, 1, 1.0, 1)
+    a["actions"] = [{"name": "/a", "type": None, "served_by": "ROS", "goals": 1},
+                    {"name": "/z", "type": FIB, "served_by": "ROS", "goals": 0}]
+    b["actions"] = [{"name": "/a", "type": FIB, "served_by": "ROS", "goals": 2}]
+    c["actions"] = [{"name": "/a", "type": FIB, "served_by": "2-1", "goals": 0},
+                    {"name": "/b", "type": FIB, "served_by": "ROS", "goals": 0}]
+    assert merge([a, b, c])["actions"] == [
+        {"name": "/a", "type": FIB, "served_by": "2-1", "goals": 3},
+        {"name": "/b", "type": FIB, "served_by": "ROS", "goals": 0},
+        {"name": "/z", "type": FIB, "served_by": "ROS", "goals": 0},
+    ]
+    assert a["actions"][0]["goals"] == 1  # the workers' snapshots are left as they were

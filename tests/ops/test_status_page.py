@@ -5,10 +5,12 @@ from __future__ import annotations
 import asyncio
 import shutil
 import tempfile
+from collections.abc import Callable
 from typing import Any
 
 import pytest
 
+from tests.bridge.action_support import FIB, FibServer, bridge_sees_action, send_goal
 from tests.bridge.support import wait_subscribers
 from tests.helpers import ROOT, BridgeProcess, open_wire
 
@@ -38,9 +40,15 @@ return {clients: text('client-count'), version: text('version'), uptime: text('u
 """
 
 
-def _browse(url: str, topic: str, service: str, shots: dict[str, tuple[int, int]]) -> dict[str, Any]:
-    """Load the page, wait for live figures, read what it shows, save screenshots."""
+def _browse(url: str, missing: Callable[[dict[str, Any]], list[str]],
+            shots: dict[str, tuple[int, int]]) -> dict[str, Any]:
+    """Load the page, wait (up to a deadline) until it shows all the test expects
+    (``missing`` of a reading is empty), read it, save screenshots.
+
+    The reading returned has ``missing``: what the page still lacked at the deadline.
+    """
     from selenium import webdriver
+    from selenium.common.exceptions import TimeoutException
     from selenium.webdriver.chrome.service import Service
     from selenium.webdriver.support.ui import WebDriverWait
 
@@ -59,17 +67,20 @@ def _browse(url: str, topic: str, service: str, shots: dict[str, tuple[int, int]
 
         def read(d: Any) -> dict[str, Any]:
             # One script reads the page at once: the tables are redrawn every second.
-            return dict(d.execute_script(_READ_PAGE))
+            page = dict(d.execute_script(_READ_PAGE))
+            page["missing"] = missing(page)
+            return page
 
-        def live_rate(d: Any) -> Any:
-            page = read(d)
-            for cells in page["topics"]:
-                if cells and cells[0] == topic and cells[3] not in (NO_VALUE, "0.0"):
-                    return page
-            return False
+        last: dict[str, Any] = {}
 
-        seen: dict[str, Any] = WebDriverWait(driver, 20, poll_frequency=0.1).until(live_rate)
-        seen["topic_row"] = next(c for c in seen["topics"] if c[0] == topic)
+        def shows_all(d: Any) -> Any:
+            last.update(read(d))
+            return dict(last) if not last["missing"] else False
+
+        try:
+            seen: dict[str, Any] = WebDriverWait(driver, 30, poll_frequency=0.1).until(shows_all)
+        except TimeoutException:
+            return last  # the test's assertion shows what never appeared
         # It keeps updating by itself.
         before = seen["updates"]
         WebDriverWait(driver, 10, poll_frequency=0.1).until(
@@ -91,6 +102,35 @@ def _browse(url: str, topic: str, service: str, shots: dict[str, tuple[int, int]
         shutil.rmtree(profile, ignore_errors=True)
 
 
+def _missing(page: dict[str, Any], topic: str, gone: str, service: str, action: str,
+             served_action: str, served_by: str) -> list[str]:
+    """What of the test's clients, topics, services and actions ``page`` does not show (yet)."""
+    missing = []
+    rows = {cells[0]: cells for cells in page["topics"] if cells}
+    row = rows.get(topic, [])
+    # name, type, subscribers, from ROS /s, to clients /s: about 20 /s
+    if len(row) < 5 or row[1:3] != ["std_msgs/msg/String", "2"] or NO_VALUE in row[3:5] or not (
+            5.0 <= float(row[3]) <= 40.0 and float(row[4]) > 0):
+        missing.append(f"a live rate of about 20 /s for {topic}: {row}")
+    if gone in rows:
+        missing.append(f"{gone} left the topics table")
+    if page["plot_points"] < 2 or "/s to clients" not in page["rates_now"]:
+        missing.append(f"a plot of 2 points or more: {page['plot_points']}, {page['rates_now']}")
+    if page["clients"] != "2" or len(page["client_rows"]) != 2 or not all(
+            "127.0.0.1:" in r and topic in r for r in page["client_rows"]):
+        missing.append(f"the 2 clients: {page['clients']}, {page['client_rows']}")
+    if not any(service in r and "std_srvs/srv/Trigger" in r for r in page["services"]):
+        missing.append(f"the served service: {page['services']}")
+    actions = {cells[0]: cells for cells in page["actions"] if cells}
+    # name, type, served by, goals: 3 goals that ran and ended; a client-served one idle
+    if actions.get(action) != [action, FIB, "ROS", "3"]:
+        missing.append(f"{action} of {FIB} served by ROS, 3 goals: {actions.get(action)}")
+    if actions.get(served_action) != [served_action, FIB, served_by, "0"]:
+        missing.append(f"{served_action} of {FIB} served by client {served_by}: "
+                       f"{actions.get(served_action)}")
+    return missing
+
+
 async def test_status_page_shows_live_clients_topics_and_services(
     make_bridge: Any, ros_node: Any, topic: str
 ) -> None:
@@ -100,9 +140,9 @@ async def test_status_page_shows_live_clients_topics_and_services(
     b: BridgeProcess = make_bridge()
     pub = ros_node.create_publisher(String, topic, 10)
     ros_node.create_timer(1 / 20, lambda: pub.publish(String(data="tick")))
-    from tests.bridge.action_support import FibServer, bridge_sees_action, send_goal
 
-    service, action, gone = topic + "_srv", topic + "_act", ""
+    service, action, served_action = topic + "_srv", topic + "_act", topic + "_served_act"
+    gone = topic + "_gone"
     fib_server = None
     readers = [await open_wire(b.url) for _ in range(2)]
     drains: list[asyncio.Task[None]] = []
@@ -112,6 +152,7 @@ async def test_status_page_shows_live_clients_topics_and_services(
                            "queue_length": 5})
         await readers[1].send({"op": "advertise_service", "service": service,
                                "type": "std_srvs/srv/Trigger"})
+        await readers[1].send({"op": "advertise_action", "action": served_action, "type": FIB})
         await wait_subscribers(pub)
 
         async def drain(ws: Any) -> None:
@@ -119,7 +160,6 @@ async def test_status_page_shows_live_clients_topics_and_services(
                 await ws.ws.recv()
 
         # A topic nobody uses any more leaves the table.
-        gone = topic + "_gone"
         await readers[0].send({"op": "subscribe", "topic": gone, "type": "std_msgs/msg/String"})
         await readers[0].send({"op": "unsubscribe", "topic": gone})
         # Three goals that ran and ended: the actions table counts them after they are done.
@@ -131,7 +171,8 @@ async def test_status_page_shows_live_clients_topics_and_services(
             assert result["status"] == 4, result
         drains = [asyncio.create_task(drain(ws)) for ws in readers]
         seen = await asyncio.to_thread(
-            _browse, f"http://127.0.0.1:{b.port}/", topic, service,
+            _browse, f"http://127.0.0.1:{b.port}/",
+            lambda page: _missing(page, topic, gone, service, action, served_action, "0-2"),
             {"desktop": (1280, 900), "phone": (390, 844)},
         )
     finally:
@@ -141,18 +182,8 @@ async def test_status_page_shows_live_clients_topics_and_services(
             await ws.close()
         if fib_server is not None:
             fib_server.destroy()
-    assert seen["clients"] == "2"
-    assert not [c for c in seen["topics"] if c and c[0] == gone], seen["topics"]
-    assert seen["plot_points"] >= 2 and "/s to clients" in seen["rates_now"], seen
-    row = next(r for r in seen["actions"] if r[0] == action)
-    assert (row[2], row[3]) == ("ROS", "3"), seen["actions"]  # 3 goals ran and ended
+    assert seen["missing"] == [], seen
     assert seen["version"] == "0.1.0"
-    _name, type_name, subscribers, from_ros, to_clients = seen["topic_row"][:5]
-    assert (type_name, subscribers) == ("std_msgs/msg/String", "2")
-    assert 5.0 <= float(from_ros) <= 40.0 and float(to_clients) > 0  # about 20 /s
-    assert len(seen["client_rows"]) == 2
-    assert all("127.0.0.1:" in row and topic in row for row in seen["client_rows"])
-    assert any(service in row and "std_srvs/srv/Trigger" in row for row in seen["services"])
     # On a phone-sized screen the tables become cards and nothing scrolls sideways.
     assert seen["phone_table_display"] == "none"
     assert seen["phone_overflow"] is False
