@@ -256,7 +256,7 @@ def main(argv: list[str] | None = None) -> int:
     if command == ["healthcheck"]:
         from .healthcheck import main as healthcheck
 
-        return healthcheck((sys.argv[1:] if argv is None else argv)[1:])
+        return healthcheck((sys.argv[1:] if argv is None else argv)[1:], parse_args)
     args = parse_args(argv)
     refusal = security.exposure_refusal(args)
     if refusal is not None:

@@ -22,6 +22,7 @@ import ssl
 import sys
 import urllib.error
 import urllib.request
+from collections.abc import Callable
 from pathlib import Path
 
 __all__ = ["HealthcheckError", "bridge_argv", "main", "probe", "readyz_url"]
@@ -106,8 +107,9 @@ def probe(url: str, cafile: str | None, timeout: float) -> str | None:
     return None if status == 200 else f"{url}: HTTP {status} (not ready)"
 
 
-def main(argv: list[str]) -> int:
-    """``roslibpy-lite-bridge healthcheck [--cafile CA] [--timeout S] [BRIDGE OPTIONS...]``."""
+def main(argv: list[str], parse_args: Callable[[list[str]], argparse.Namespace]) -> int:
+    """``roslibpy-lite-bridge healthcheck [--cafile CA] [--timeout S] [BRIDGE OPTIONS...]``;
+    ``parse_args`` reads the bridge's options (the entry point's own, handed in)."""
     p = argparse.ArgumentParser(
         prog="roslibpy-lite-bridge healthcheck",
         description="Exit 0 if the bridge on this machine is ready (its /readyz), else 1. "
@@ -118,8 +120,6 @@ def main(argv: list[str]) -> int:
                    "bridge's own --certfile)")
     p.add_argument("--timeout", type=float, default=3.0, help="seconds to wait (default 3)")
     ours, bridge_options = p.parse_known_args(argv)
-    from .__main__ import parse_args
-
     try:
         args = parse_args(bridge_options or bridge_argv())
         url = readyz_url(args)
