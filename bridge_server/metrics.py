@@ -28,6 +28,7 @@ name                                              type       labels
 ``queue_drops_total``                             counter    topic (all clients)
 ``client_queue_drops_total``                      counter    client, topic (connected)
 ``client_queued_messages``                        gauge      client (waiting to be sent)
+``resume_kept_frames``                            gauge      client (sent, not yet confirmed)
 ``service_calls_total``                           counter    service, outcome
 ``service_call_duration_seconds``                 histogram  service
 ``action_goals_total``                            counter    action, outcome
@@ -287,12 +288,17 @@ class _Families:
                    ["client", "topic"])
         queued = g("client_queued_messages", "Messages waiting to be sent, per client.",
                    ["client"])
+        kept = g("resume_kept_frames", "Frames written to a client in a resumable session and "
+                 "not yet confirmed by it (kept to send again after a dropped link).",
+                 ["client"])
         per_drop: dict[tuple[str, str], int] = {}
         per_queued: dict[str, int] = {}
+        per_kept: dict[str, int] = {}
         shown = sorted(clients, key=lambda cl: (cl.get("worker", 0), cl.get("sid", 0)))
         for i, cl in enumerate(shown):
             cid = str(cl["id"]) if i < CLIENT_LIMIT else OTHER
             per_queued[cid] = per_queued.get(cid, 0) + int(cl.get("queued", 0))
+            per_kept[cid] = per_kept.get(cid, 0) + int(cl.get("resume_kept", 0))
             for sub in cl.get("subscriptions", []):
                 key = (cid, topic(sub["topic"]))
                 per_drop[key] = per_drop.get(key, 0) + int(sub.get("dropped", 0))
@@ -300,8 +306,11 @@ class _Families:
             cdrops.add_metric([cid, tname], n)
         for cid, n in sorted(per_queued.items()):
             queued.add_metric([cid], n)
+        for cid, n in sorted(per_kept.items()):
+            kept.add_metric([cid], n)
         yield cdrops
         yield queued
+        yield kept
 
         for kind, label in (("service_calls", "service"), ("action_goals", "action")):
             what = kind[:-1]

@@ -130,6 +130,10 @@ def take(bridge: Bridge, rates: Mapping[str, Mapping[str, float]]) -> dict[str, 
                 "parked": session.parked,  # kept for its client to resume (resume.py)
                 "queued": queued + len(session.outbox.control),
                 "dropped": dropped + session.outbox.control_dropped,
+                # frames written and not yet confirmed by the client (resume.py): about what
+                # is in flight on a live link, growing while its link is down
+                "resume_kept": (len(session.outbox.sent.frames)
+                                if session.outbox.sent is not None else 0),
             }
         )
     services = [

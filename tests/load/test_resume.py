@@ -141,3 +141,57 @@ async def test_a_client_that_closes_ends_its_session(make_bridge: Any, ros_node:
     await async_wait_until(lambda: ros_pub.get_subscription_count() == 0, 10,
                            "the closed client's subscription to go")
     assert not any("session is kept" in line for line in bridge.lines)
+
+
+async def test_acks_trim_what_the_bridge_keeps(link: tuple[BridgeProcess, LinkProxy],
+                                               ros_node: Any, topic: str):
+    """The client's session_acks trim the frames the bridge keeps for a resume: under steady
+    traffic the status page's ``resume_kept`` (and the ``resume_kept_frames`` gauge) stay near 0
+    and reach 0 once the traffic stops; while the link is down they grow by every frame
+    written, and after the resume they fall back to 0."""
+    from bridge_server.metrics import PREFIX
+    from tests.ops.support import scrape, status, value
+
+    bridge, proxy = link
+    ros_pub = ros_node.create_publisher(Int32, topic, 1000)
+
+    async def kept() -> int:
+        (client,) = (await status(bridge.port))["clients"]
+        return int(client["resume_kept"])
+
+    async def kept_settles_at_0(what: str) -> None:
+        deadline = asyncio.get_running_loop().time() + 10
+        while (n := await kept()) != 0:
+            assert asyncio.get_running_loop().time() < deadline, f"{n} frames kept {what}"
+            await asyncio.sleep(0.05)
+        assert value(await scrape(bridge.port), PREFIX + "resume_kept_frames",
+                     client="0-1") == 0
+
+    async with roslibpy_lite.connect(f"ws://127.0.0.1:{proxy.port}") as ros:
+        sub = await ros.subscribe(topic, "std_msgs/msg/Int32", queue_length=1000,
+                                  buffer_size=1000)
+        await wait_subscribers(ros_pub)
+        samples = []
+        for i in range(150):  # 50 Hz for 3 s
+            ros_pub.publish(Int32(data=i))
+            if i % 10 == 9:
+                samples.append(await kept())
+            await asyncio.sleep(0.02)
+        got = [(await sub.get(timeout=10))["data"] for _ in range(150)]
+        assert got == list(range(150))
+        assert max(samples) <= 40, samples  # a few acks' worth at most, not the 150 written
+        await kept_settles_at_0("after steady traffic")
+
+        proxy.blackhole()
+        for i in range(150, 190):
+            ros_pub.publish(Int32(data=i))
+        deadline = asyncio.get_running_loop().time() + 10
+        while (n := await kept()) < 40:  # every frame written since is kept for a resume
+            assert asyncio.get_running_loop().time() < deadline, f"only {n} frames kept"
+            await asyncio.sleep(0.05)
+        samples = await scrape(bridge.port)
+        assert value(samples, PREFIX + "resume_kept_frames", client="0-1") >= 40
+        proxy.restore()
+        got = [(await sub.get(timeout=30))["data"] for _ in range(40)]
+        assert got == list(range(150, 190))
+        await kept_settles_at_0("after the resume")
