@@ -28,7 +28,8 @@ from websockets.asyncio.server import Server, ServerConnection, serve
 from websockets.datastructures import MultipleValuesError
 
 from roslibpy_lite import keepalive
-from roslibpy_lite.ops import RECEIVED_HEADER, SESSION_HEADER
+from roslibpy_lite.exceptions import RemoteProtocolError
+from roslibpy_lite.ops import RECEIVED_HEADER, SESSION_HEADER, parse_received
 
 from .actions import ActionClients, SessionActions
 from .metrics import Recorder
@@ -44,7 +45,7 @@ from .web_access import WebAccess
 if TYPE_CHECKING:
     from collections.abc import Awaitable
 
-    from websockets.http11 import Request
+    from websockets.http11 import Request, Response
 
     from .services import SessionServices
 
@@ -154,6 +155,8 @@ class Bridge:
             if response is not None:
                 return response
             refusal = await self.security.process_request(connection, request)
+            if refusal is None and self.resumable.enabled and SESSION_HEADER in request.headers:
+                refusal = await self._plan_session(connection, request)
         except MultipleValuesError as exc:  # a header given twice that must be given once
             log.warning("refused a request from %s: header %s sent more than once",
                         _peer(connection), exc)
@@ -161,24 +164,34 @@ class Bridge:
         if refusal is not None:  # counted by reason for /metrics
             code = refusal.status_code
             self.metrics.connection_refused(_REFUSALS.get(code, f"http_{code}"))
-        elif self.resumable.enabled and SESSION_HEADER in request.headers:
-            await self._plan_session(connection, request)
         return refusal
 
-    async def _plan_session(self, connection: ServerConnection, request: Request) -> None:
+    async def _plan_session(self, connection: ServerConnection, request: Request
+                            ) -> Response | None:
         """A client that asks for a session gets one: the one it names if that can be
-        resumed (its old connection is given up now), else a new one (resume.py)."""
+        resumed (its old connection is given up now), else a new one (resume.py). A resume
+        whose received count is malformed, or more than the session sent, is refused (400)
+        before the session is touched, so it stays resumable."""
         asked = request.headers.get(SESSION_HEADER, "")
         session = None
+        received = 0
         if asked != "new":
-            session = await self.resumable.claim(asked, getattr(connection, "principal", None))
+            principal = getattr(connection, "principal", None)
+            live = self.resumable.live.get(asked)
+            sent = live.outbox.sent if live is not None and live.gate.principal is principal \
+                else None  # another's session is not told apart from none
+            try:
+                received = parse_received(request.headers.get(RECEIVED_HEADER),
+                                          None if sent is None else sent.count)
+            except RemoteProtocolError as exc:
+                log.warning("refused a session resume from %s: %s", _peer(connection), exc)
+                return connection.respond(400, f"{exc}\n")
+            session = await self.resumable.claim(asked, principal)
         token = asked if session is not None else self.resumable.new_token()
         connection.session_plan = (token, session)  # type: ignore[attr-defined]
         if session is not None:
-            try:
-                session.resume_from = int(request.headers.get(RECEIVED_HEADER, "0"))
-            except ValueError:
-                session.resume_from = 0
+            session.resume_from = received
+        return None
 
     def graph_changed(self) -> None:
         """Something needs the periodic graph check (a new subscription): run it soon."""

@@ -50,6 +50,7 @@ __all__ = [
     "encode",
     "op_name",
     "parse_op",
+    "parse_received",
     "to_obj",
 ]
 
@@ -77,6 +78,34 @@ RECEIVED_HEADER = "X-Rosbridge-Received"
 """Handshake header that goes with a session token, both ways: how many frames the sender
 has received in that session. When the bridge answers it, the session was resumed, and each
 side sends again what the other has not received."""
+
+
+def parse_received(value: str | None, limit: int | None) -> int:
+    """The frame count of a :data:`RECEIVED_HEADER` value: ASCII decimal digits only, at most
+    ``limit`` (what the other side has sent in the session: no one receives more; ``None``:
+    the form alone is checked).
+
+    Raises :class:`~roslibpy_lite.exceptions.RemoteProtocolError` with one line naming the
+    header and what is wrong with the value (missing, empty, not ASCII digits, too large).
+    """
+    if value is None:
+        raise RemoteProtocolError(f"{RECEIVED_HEADER} is missing: a resumed session needs "
+                                  "the count of frames received")
+    shown = ascii(value if len(value) <= 24 else value[:24] + "...")
+    if not value:
+        raise RemoteProtocolError(f"{RECEIVED_HEADER} is empty: expected the count of frames "
+                                  "received (ASCII decimal digits)")
+    if not (value.isascii() and value.isdigit()):
+        raise RemoteProtocolError(f"{RECEIVED_HEADER} {shown} is not a count of frames "
+                                  "(ASCII decimal digits only)")
+    if limit is None:
+        return int(value)
+    digits = value.lstrip("0") or "0"  # int() is not asked to read thousands of digits
+    count = int(digits) if len(digits) <= len(str(limit)) else limit + 1
+    if count > limit:
+        raise RemoteProtocolError(f"{RECEIVED_HEADER} {shown} is more than this session has "
+                                  f"sent ({limit} frames)")
+    return count
 
 COMPRESSIONS = ("none", "cbor", "cbor-raw", "png")
 """Compression names a subscribe may ask for (png is legacy and refused by our bridge)."""

@@ -17,7 +17,7 @@ from __future__ import annotations
 from collections import deque
 from collections.abc import Mapping
 
-from ..ops import RECEIVED_HEADER, SESSION_HEADER
+from ..ops import RECEIVED_HEADER, SESSION_HEADER, parse_received
 
 __all__ = ["ACK_INTERVAL", "ClientSession"]
 
@@ -47,11 +47,15 @@ class ClientSession:
 
     def opened(self, headers: Mapping[str, str]) -> tuple[bool, list[str]]:
         """After a handshake: whether the session was resumed, and the frames to write
-        again first (in order). A new session starts its counts from zero."""
+        again first (in order). A new session starts its counts from zero.
+
+        Raises :class:`~roslibpy_lite.exceptions.RemoteProtocolError` when the bridge resumed
+        the session with a received count that is malformed or more than we sent.
+        """
         token = headers.get(SESSION_HEADER)
         got = headers.get(RECEIVED_HEADER)
-        if token is not None and token == self.token and got is not None and got.isdigit():
-            count = int(got)
+        if token is not None and token == self.token and got is not None:
+            count = parse_received(got, self.sent)
             self.acked(count)
             self.lost += max(0, self.first - count - 1)
             again = list(self.unconfirmed)

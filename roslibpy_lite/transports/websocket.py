@@ -32,6 +32,7 @@ from ..exceptions import (
     Disconnected,
     NotAuthenticated,
     ProtocolError,
+    RemoteProtocolError,
     TLSError,
     UsageError,
 )
@@ -218,7 +219,16 @@ class WebSocketTransport:
                     return
                 self.connects += 1
                 self.acks = ws.response is not None and ws.response.headers.get(ACKS_HEADER) == "1"
-                self._opened(ws)
+                try:
+                    self._opened(ws)
+                except RemoteProtocolError as exc:  # a resume answered with a bad count
+                    await ws.close(1002, "bad resume count")
+                    failed = ConnectError(f"the bridge at {self.url} resumed this client's "
+                                          f"session wrongly: {exc}")
+                    if not self._fail_first(failed):
+                        log.error("%s", failed)
+                        link._shutdown(failed)
+                    return
                 opened = loop.time()
                 await self._session(ws)
                 if self._closing:

@@ -13,6 +13,7 @@ from collections.abc import Callable
 from typing import Any
 
 from websockets.asyncio.server import Server, ServerConnection, serve
+from websockets.http11 import Request, Response
 
 from roslibpy_lite import Backoff
 
@@ -32,6 +33,7 @@ class ScriptedPeer:
         self.received: list[dict[str, Any]] = []
         self._changed = asyncio.Condition()
         self.auto: dict[str, Callable[[dict[str, Any]], dict[str, Any] | None]] = {}
+        self.answer_headers: dict[str, str] = {}  # added to every handshake's answer
 
     @property
     def url(self) -> str:
@@ -40,9 +42,14 @@ class ScriptedPeer:
 
     async def start(self) -> ScriptedPeer:
         """Listen (on the same port as before after a :meth:`stop`)."""
-        self.server = await serve(self._handle, "127.0.0.1", self.port)
+        self.server = await serve(self._handle, "127.0.0.1", self.port,
+                                  process_response=self._respond)
         self.port = self.server.sockets[0].getsockname()[1]
         return self
+
+    def _respond(self, conn: ServerConnection, request: Request, response: Response) -> None:
+        for name, value in self.answer_headers.items():
+            response.headers[name] = value
 
     async def _handle(self, conn: ServerConnection) -> None:
         async with self._changed:
