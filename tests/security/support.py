@@ -10,7 +10,7 @@ from typing import Any
 from websockets.asyncio.client import connect
 
 from bridge_server.auth import EXAMPLE_ROLES, hash_token, new_token
-from tests.helpers import WireClient
+from tests.helpers import BridgeProcess, WireClient
 
 ROLES = EXAMPLE_ROLES + """
 [roles.tester]
@@ -115,3 +115,37 @@ async def wire(
     ws = await connect(url, additional_headers=extra, ssl=ssl_context, max_size=None,
                        open_timeout=10, **kwargs)
     return WireClient(ws)
+
+
+async def bridge_entities(ros_node: Any, bridge: BridgeProcess, admin: WireClient,
+                          marker: str) -> dict[str, set[str]]:
+    """The bridge node's ROS entities (``subscriptions``, ``publishers``, ``services``,
+    ``clients``: names), as this node's graph sees them once the bridge's newest ones are in
+    it: ``admin`` (a principal allowed to) subscribes and advertises ``marker`` now, and each
+    kind of endpoint is announced in order, so whatever the bridge made before is seen too."""
+    from rclpy._rclpy_pybind11 import NodeNameNonExistentError
+
+    from tests.helpers import async_wait_until
+
+    await admin.send({"op": "subscribe", "topic": marker, "type": "std_msgs/msg/String"})
+    await admin.send({"op": "advertise", "topic": marker, "type": "std_msgs/msg/String"})
+    ns, _, name = bridge.node_name.rpartition("/")
+    ns = ns or "/"
+    graph = {
+        "subscriptions": ros_node.get_subscriber_names_and_types_by_node,
+        "publishers": ros_node.get_publisher_names_and_types_by_node,
+        "services": ros_node.get_service_names_and_types_by_node,
+        "clients": ros_node.get_client_names_and_types_by_node,
+    }
+
+    def seen() -> dict[str, set[str]] | None:
+        try:
+            found = {kind: {n for n, _ in read(name, ns)} for kind, read in graph.items()}
+        except NodeNameNonExistentError:  # not discovered yet
+            return None
+        ready = marker in found["subscriptions"] and marker in found["publishers"]
+        return found if ready else None
+
+    found: dict[str, set[str]] = await async_wait_until(
+        seen, 20, f"the bridge's endpoints on {marker}")
+    return found

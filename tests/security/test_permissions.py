@@ -14,6 +14,7 @@ from std_srvs.srv import SetBool
 from bridge_server.permissions import Role
 from tests.bridge.support import Inbox, publish_until_heard, roundtrip, wait_publishers
 from tests.helpers import BridgeProcess
+from tests.security.support import bridge_entities
 
 Connect = Callable[..., Any]
 
@@ -72,8 +73,11 @@ async def test_call_service_forbidden_never_reaches_the_service(
     assert seen == [True]
 
 
-async def test_each_capability_is_denied_without_it(connect_as: Connect, topic: str):
-    """Subscribe, advertise_service, action goals, serving actions and params each need their grant."""
+async def test_each_capability_is_denied_without_it(
+    connect_as: Connect, auth_bridge: BridgeProcess, ros_node: Any, topic: str
+):
+    """Subscribe, advertise_service, action goals, serving actions and params each need their
+    grant; the bridge's node makes none of the ROS entities they would need."""
     nobody = await connect_as("nothing")
     await nobody.send({"op": "subscribe", "topic": topic, "type": "std_msgs/msg/String",
                        "id": "s"})
@@ -96,14 +100,27 @@ async def test_each_capability_is_denied_without_it(connect_as: Connect, topic: 
     await _forbidden(viewer, "p", "viewer", "params", "/some_node:speed")
     await nobody.send({"op": "call_service", "service": "/rosapi/topics", "id": "t"})
     await _forbidden(nobody, "t", "nothing", "introspection", "any name")
+    admin = await connect_as("admin")
+    made = await bridge_entities(ros_node, auth_bridge, admin, topic + "_marker")
+    assert topic not in made["subscriptions"]
+    assert topic not in made["services"]  # advertise_service
+    assert topic + "/_action/send_goal" not in made["clients"]  # send_action_goal
+    assert topic + "/_action/send_goal" not in made["services"]  # advertise_action
+    assert "/some_node/get_parameters" not in made["clients"]  # rosapi get_param
 
 
-async def test_forbidden_ops_in_fragments_cbor_and_rosapi_params(connect_as: Connect, topic: str):
-    """A publish split into fragments, an advertise as a CBOR frame and set_param are each refused."""
+async def test_forbidden_ops_in_fragments_cbor_and_rosapi_params(
+    connect_as: Connect, auth_bridge: BridgeProcess, ros_node: Any, topic: str
+):
+    """A publish split into fragments, an advertise as a CBOR frame and set_param are each
+    refused: the bridge's node makes no publisher on the topic and no parameter client for
+    the node, whose parameter keeps its value."""
     import cbor2
 
     from roslibpy_lite.protocol import split_fragments
 
+    ros_node.declare_parameter("speed", 1.0)
+    node = ros_node.get_fully_qualified_name()
     viewer = await connect_as("viewer")
     text = json.dumps({"op": "publish", "topic": topic, "msg": {"data": "x" * 300}, "id": "fr"})
     for piece in split_fragments(text, 100, "frag"):
@@ -113,8 +130,13 @@ async def test_forbidden_ops_in_fragments_cbor_and_rosapi_params(connect_as: Con
                                        "type": "std_msgs/msg/String", "id": "cb"}))
     await _forbidden(viewer, "cb", "viewer", "publish", topic)
     await viewer.send({"op": "call_service", "service": "rosapi/set_param", "id": "sp",
-                       "args": ["/some_node:speed", "1.0"]})
-    await _forbidden(viewer, "sp", "viewer", "params", "/some_node:speed")
+                       "args": [f"{node}:speed", "9.0"]})
+    await _forbidden(viewer, "sp", "viewer", "params", f"{node}:speed")
+    admin = await connect_as("admin")
+    made = await bridge_entities(ros_node, auth_bridge, admin, topic + "_marker")
+    assert topic not in made["publishers"]
+    assert node + "/set_parameters" not in made["clients"]
+    assert ros_node.get_parameter("speed").value == 1.0
 
 
 async def test_deny_wins_over_allow(connect_as: Connect, topic: str):

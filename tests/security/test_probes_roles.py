@@ -23,7 +23,7 @@ from bridge_server.auth import hash_token, new_token
 from tests.bridge.support import roundtrip, wait_subscribers
 from tests.helpers import BridgeProcess, async_wait_until, open_wire
 from tests.ops.support import aget
-from tests.security.support import AuthFile, wire
+from tests.security.support import AuthFile, bridge_entities, wire
 
 SETBOOL = "std_srvs/srv/SetBool"
 
@@ -85,16 +85,23 @@ async def test_hidden_services_need_their_own_capability(
      ("advertise", "/probe/act/_action/feedback", "serve_action on /probe/act")],
 )
 async def test_action_topics_and_parameter_events_need_their_capability(
-    connect_as: Any, op: str, name: str, capability: str
+    connect_as: Any, auth_bridge: BridgeProcess, ros_node: Any, topic: str, op: str,
+    name: str, capability: str
 ):
     """Subscribing to an action's feedback/status or to /parameter_events, or publishing an
-    action's feedback, needs the capability that governs them."""
+    action's feedback, needs the capability that governs them: the bridge's node makes no
+    such subscription or publisher (it does for admin)."""
     prober = await connect_as("prober")
     types = {"/parameter_events": "rcl_interfaces/msg/ParameterEvent",
              "/probe/act/_action/status": "action_msgs/msg/GoalStatusArray"}
-    await prober.send({"op": op, "topic": name, "id": "x",
-                       "type": types.get(name, "std_msgs/msg/String")})
+    request = {"op": op, "topic": name, "type": types.get(name, "std_msgs/msg/String")}
+    await prober.send({**request, "id": "x"})
     await _refused(prober, "x", "forbidden", capability)
+    admin = await connect_as("admin")
+    kind = "subscriptions" if op == "subscribe" else "publishers"
+    assert name not in (await bridge_entities(ros_node, auth_bridge, admin, topic + "_a"))[kind]
+    await admin.send({**request, "id": "y"})
+    assert name in (await bridge_entities(ros_node, auth_bridge, admin, topic + "_b"))[kind]
 
 
 async def test_nul_in_a_rosapi_parameter_name_is_refused(connect_as: Any, ros_node: Any):
@@ -301,6 +308,29 @@ async def test_a_header_sent_twice_is_a_clean_refusal(auth_bridge: BridgeProcess
     status = reply.split(b"\r\n", 1)[0]
     assert b" 400 " in status or b" 401 " in status, reply[:200]
     assert not [line for line in auth_bridge.lines if "Traceback" in line]
+
+
+async def test_a_valid_token_sent_twice_is_refused_naming_why(
+    auth_bridge: BridgeProcess, auth: AuthFile
+):
+    """Two Authorization headers are refused even when each holds a valid token (which of
+    two a proxy or a client meant is not guessed): 401 naming the header sent twice, no
+    upgrade; the same token sent once is let in."""
+    token = auth.tokens["admin"]
+    head = ("GET / HTTP/1.1\r\nHost: 127.0.0.1\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n"
+            "Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\nSec-WebSocket-Version: 13\r\n"
+            "{}\r\n")
+    once = f"Authorization: Bearer {token}\r\n"
+    reply = await _raw_request(auth_bridge.port, head.format(once + once))
+    status, _, body = reply.partition(b"\r\n\r\n")
+    assert status.startswith(b"HTTP/1.1 401 "), reply[:200]
+    assert b"Authorization header (sent more than once)" in body, body
+    assert token.encode() not in reply
+    reader, writer = await asyncio.open_connection("127.0.0.1", auth_bridge.port)
+    writer.write(head.format(once).encode())
+    assert (await asyncio.wait_for(reader.readline(), 10)).startswith(b"HTTP/1.1 101 ")
+    writer.close()
+    assert not any(token in line for line in auth_bridge.lines)
 
 
 async def test_malformed_frames_before_auth_close_at_once(auth_bridge: BridgeProcess):
