@@ -48,6 +48,19 @@ def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo[None]) ->
         report.longrepr = f"skipped under CI=true, which needs every test to run: {reason}"
 
 
+@pytest.hookimpl(hookwrapper=True)
+def pytest_make_collect_report(collector: pytest.Collector) -> Iterator[None]:
+    """The same for a whole module skipped while collected (a module-level
+    ``pytest.importorskip`` or ``pytest.skip(allow_module_level=True)``)."""
+    outcome = yield
+    report = outcome.get_result()  # type: ignore[attr-defined]
+    if _STRICT_SKIPS and report.skipped:
+        reason = report.longrepr[2] if isinstance(report.longrepr, tuple) else str(report.longrepr)
+        report.outcome = "failed"
+        report.longrepr = (f"{collector.nodeid} skipped at collection under CI=true, which "
+                           f"needs every test to run: {reason}")
+
+
 @pytest.fixture(scope="session")
 def bridge() -> Iterator[BridgeProcess]:
     """One running bridge shared by the session."""
