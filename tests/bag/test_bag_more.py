@@ -146,10 +146,13 @@ def test_the_blocking_client_records_and_plays(bridge: BridgeProcess, ros_node: 
                 assert time.monotonic() < deadline, "rclpy never heard the bridge's publisher"
                 warm.publish({"data": -1})
                 time.sleep(0.02)  # discovery has no event to await
+            began = time.monotonic()
             stats = sync_bag.play(ros, path, rate=4.0)
+            took = time.monotonic() - began
             wait_until(lambda: len(heard) >= 20 + heard.count(-1), 10,
                        "20 played messages in rclpy")
     assert stats.messages == 20
+    assert took >= info(path).duration / 4.0 - 1e-3, took  # the recorded timing, 4x as fast
     with lock:
         assert [n for n in heard if n != -1] == recorded
 
