@@ -154,8 +154,9 @@ async def test_a_ros_node_service_is_not_taken_over_without_take_over(
         await admin.send({"op": "call_service", "service": "/rosapi/services", "id": "l"})
         return name in (await admin.expect(op="service_response", id="l"))["values"]["services"]
 
-    while not await listed():
-        await asyncio.sleep(0.05)
+    async with asyncio.timeout(20):
+        while not await listed():
+            await asyncio.sleep(0.05)
     await server.send({"op": "advertise_service", "service": name, "type": SETBOOL, "id": "adv"})
     msg = await _refused(server, "adv", "already served by", "take_over")
     # the node by name once the graph names it (it names endpoints first)
