@@ -147,3 +147,93 @@ def test_byte_arrays_anywhere_among_the_fields_give_the_converters_text() -> Non
             assert base64.b64decode(obj["uint8_values"]) == bytes(msg.uint8_values)
         if "data" in obj:
             assert base64.b64decode(obj["data"]) == bytes(msg.data)
+
+
+_FLOATS = {"float", "double"}
+
+
+def _fill_floats(msg: Any, value: float) -> int:
+    """Set every float of an rclpy message (nested, in fixed arrays, one item in each float
+    sequence) to ``value``; how many were set."""
+    from rosidl_parser.definition import AbstractNestedType, Array, BasicType, NamespacedType
+
+    n = 0
+    for name, kind in zip(msg.get_fields_and_field_types(), msg.SLOT_TYPES, strict=True):
+        if isinstance(kind, BasicType) and kind.typename in _FLOATS:
+            setattr(msg, name, value)
+            n += 1
+        elif isinstance(kind, NamespacedType):
+            n += _fill_floats(getattr(msg, name), value)
+        elif isinstance(kind, AbstractNestedType):
+            item = kind.value_type
+            if isinstance(item, BasicType) and item.typename in _FLOATS:
+                if isinstance(kind, Array):
+                    getattr(msg, name)[:] = value
+                    n += kind.size
+                else:
+                    setattr(msg, name, [value])
+                    n += 1
+            elif isinstance(item, NamespacedType) and isinstance(kind, Array):
+                n += sum(_fill_floats(m, value) for m in getattr(msg, name))
+    return n
+
+
+@pytest.mark.parametrize("value", [math.nan, math.inf, -math.inf], ids=str)
+def test_nan_and_inf_in_every_float_bearing_type_give_the_converters_text(value: float) -> None:
+    """In every type msgs generates that carries a float (scalar, array, sequence, nested),
+    every float set to NaN/Inf: the fast path declines, and the Incoming's text is the
+    converter's (null for each, never NaN or Infinity in the JSON)."""
+    from rclpy.serialization import deserialize_message
+
+    tried = 0
+    for cls in _message_types():
+        rcls = _rclpy_class(cls._type)
+        msg = rcls()
+        count = _fill_floats(msg, value)
+        if not count:
+            continue
+        tried += 1
+        conv = convert.converter_for(rcls)
+        data = serialize_message(msg)
+        assert conv.json_from_cdr is not None and conv.json_from_cdr(data) is None, cls._type
+        text = Incoming("/t", data, conv, 0).json_text()
+        want = conv.to_json(deserialize_message(data, rcls))
+        assert text == convert.encode_publish_json("/t", want), cls._type
+        assert "NaN" not in text and "Infinity" not in text, cls._type
+        assert text.count("null") >= min(count, 1), cls._type
+    assert tried >= 20, tried  # geometry, sensor and nav types among them
+
+
+class _CountingIncoming(Incoming):
+    """An Incoming that counts how often its message is deserialized with rclpy."""
+
+    __slots__ = ("deserialized",)
+
+    def __init__(self, *args: Any) -> None:
+        super().__init__(*args)
+        self.deserialized = 0
+
+    @property
+    def msg(self) -> Any:
+        self.deserialized += 1
+        return super().msg
+
+
+def test_incoming_takes_the_cdr_fast_path_when_it_can() -> None:
+    """A finite Imu's JSON comes straight from its CDR bytes: rclpy never deserializes it
+    (for the JSON text, once for all subscribers); with a NaN in it, it falls back to one
+    deserialization."""
+    from sensor_msgs.msg import Imu as RosImu
+
+    conv = convert.converter_for(RosImu)
+    msg = RosImu()
+    msg.linear_acceleration.z = 9.81
+    fine = _CountingIncoming("/imu", serialize_message(msg), conv, 0)
+    text = fine.json_text()
+    assert fine.json_text("imu") and fine.json_text() is text
+    assert fine.deserialized == 0 and '"z":9.81' in text
+    msg.orientation.w = math.nan
+    odd = _CountingIncoming("/imu", serialize_message(msg), conv, 0)
+    odd.json_text()
+    odd.json_text("imu")
+    assert odd.deserialized == 1
