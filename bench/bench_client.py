@@ -76,8 +76,8 @@ def _cdr(type_name: str, wire: dict[str, Any]) -> bytes:
     """The CDR bytes rclpy makes of a message given in its JSON form."""
     from rclpy.serialization import serialize_message
 
-    from bridge_server import convert
-    from bridge_server.types import resolve_message
+    from bridge_server.rclpy_graph import convert
+    from bridge_server.rclpy_graph.types import resolve_message
 
     cls = resolve_message(type_name)
     return bytes(serialize_message(convert.converter_for(cls).from_obj(wire, "msg")))

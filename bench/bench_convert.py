@@ -1,4 +1,4 @@
-"""Micro-benchmark of bridge_server.convert: conversions per second, printed as JSON.
+"""Micro-benchmark of bridge_server.rclpy_graph.convert: conversions per second, printed as JSON.
 
 Run: ``python bench/bench_convert.py [--seconds 0.5] [--no-tune]``. Each case
 runs for about ``--seconds`` (best of three short rounds, the machine is
@@ -21,7 +21,7 @@ from typing import Any
 os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
-from bridge_server.convert import (
+from bridge_server.rclpy_graph.convert import (
     converter_for,
     encode_publish_cbor,
     encode_publish_cbor_raw,

@@ -20,9 +20,9 @@ import sys
 
 try:
     from . import security
-    from .resume import ResumeConfig
-    from .session import DEFAULT_QUEUE_LENGTH, SessionConfig
-    from .types import BridgeError
+    from .rclpy_graph.types import BridgeError
+    from .session.resume import ResumeConfig
+    from .session.session import DEFAULT_QUEUE_LENGTH, SessionConfig
 except ModuleNotFoundError as _missing:  # a client-only install: say which extra to add
     from ._requires import missing_dependency
 
@@ -222,7 +222,7 @@ async def _run(args: argparse.Namespace) -> int:
     for sig in (signal.SIGINT, signal.SIGTERM):
         loop.add_signal_handler(sig, stop.set)
     if args.worker_index is not None:
-        from .workers import watch_supervisor
+        from .http.workers import watch_supervisor
 
         config.node_name = f"{config.node_name}_w{args.worker_index}"
         watch_supervisor(stop)  # a worker stops with its supervisor, even a killed one
@@ -250,7 +250,7 @@ def main(argv: list[str] | None = None) -> int:
     """Entry point of ``python -m bridge_server`` and ``roslibpy-lite-bridge``."""
     command = (sys.argv[1:] if argv is None else argv)[:1]
     if command in (["add-principal"], ["remove-principal"]):
-        from .auth import main as principals
+        from .security.auth import main as principals
 
         return principals(sys.argv[1:] if argv is None else argv)
     if command == ["healthcheck"]:
@@ -274,7 +274,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         security.check_readable(security.config_from_args(args))  # names the file and user
         if args.workers > 1 and args.worker_index is None:
-            from .workers import Supervisor
+            from .http.workers import Supervisor
 
             argv = sys.argv[1:] if argv is None else argv
             return Supervisor(argv, args.workers, args.host, args.port, args.metrics_port).run()

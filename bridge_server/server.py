@@ -31,23 +31,23 @@ from roslibpy_lite import keepalive
 from roslibpy_lite.exceptions import RemoteProtocolError
 from roslibpy_lite.ops import RECEIVED_HEADER, SESSION_HEADER, parse_received
 
-from .actions import ActionClients, SessionActions
-from .metrics import Recorder
-from .ownership import Ownership
-from .resume import ResumeConfig, SentFrames, SessionStore
-from .ros import RosNode
-from .ros_actions import check_rclpy_internals
+from .http.metrics import Recorder
+from .http.web import Web
+from .http.web_access import WebAccess
+from .rclpy_graph.actions import check_rclpy_internals
+from .rclpy_graph.node import RosNode
 from .security import Security, SecurityConfig
-from .session import Session, SessionConfig, wait_ended
-from .web import Web
-from .web_access import WebAccess
+from .session.actions import ActionClients, SessionActions
+from .session.ownership import Ownership
+from .session.resume import ResumeConfig, SentFrames, SessionStore
+from .session.session import Session, SessionConfig, wait_ended
 
 if TYPE_CHECKING:
     from collections.abc import Awaitable
 
     from websockets.http11 import Request, Response
 
-    from .services import SessionServices
+    from .session.services import SessionServices
 
 __all__ = ["Bridge", "BridgeConfig"]
 

@@ -5,7 +5,7 @@ token of a request), :mod:`.handshake` (:class:`Security`: TLS, reload, the hand
 :mod:`.gate` (:class:`Gate`: per session), :mod:`.redaction` (tokens out of logs) and
 :mod:`.websockets_internals` (the inbound byte budget, the only code that relies on
 websockets' private internals). Who may see the plain-HTTP routes is
-:class:`bridge_server.web.WebAccess`.
+:class:`bridge_server.http.web.WebAccess`.
 
 One :class:`Security` per bridge holds the configuration (:class:`SecurityConfig`,
 set from the command line) and does three jobs:

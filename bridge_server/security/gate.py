@@ -14,10 +14,11 @@ from typing import TYPE_CHECKING, Any
 
 from roslibpy_lite import ops
 
-from .. import rosapi
-from ..auth import Principal
-from ..names import InvalidNameError, check_name
-from ..permissions import (
+from ..session import rosapi
+from .auth import Principal
+from .credentials import client_address
+from .names import InvalidNameError, check_name
+from .permissions import (
     Role,
     UnsafeNameError,
     filter_rosapi,
@@ -25,11 +26,10 @@ from ..permissions import (
     requirement,
     rosapi_requirement,
 )
-from .credentials import client_address
 from .websockets_internals import BridgeConnection
 
 if TYPE_CHECKING:
-    from ..session import Session
+    from ..session.session import Session
     from .handshake import Security
 
 __all__ = ["POLICY_VIOLATION", "PRE_AUTH_FRAME_LIMIT", "Gate"]
@@ -264,7 +264,7 @@ class Gate:
         ``owner_gate`` is the gate of the bridge client serving it, or ``None`` when a ROS
         node (or nobody the bridge knows) serves it. The same principal may (it reconnected
         before the bridge saw the old connection go); a claim may once, for that name only,
-        when the owner failed to answer the claim's ping (:mod:`bridge_server.ownership`);
+        when the owner failed to answer the claim's ping (:mod:`bridge_server.session.ownership`);
         otherwise only a role with ``take_over`` on the name. Without an auth file there are
         no roles: only the first two apply.
         """

@@ -15,15 +15,15 @@ from typing import TYPE_CHECKING, Any
 from websockets.asyncio.server import ServerConnection
 from websockets.http11 import Request, Response
 
-from ..auth import AuthConfig, AuthFileError, FailureTracker, load_auth_file
-from ..types import BridgeError
+from ..rclpy_graph.types import BridgeError
+from .auth import AuthConfig, AuthFileError, FailureTracker, load_auth_file
 from .credentials import client_address, is_loopback, token_of
 from .gate import PRE_AUTH_FRAME_LIMIT, Gate
 from .options import SecurityConfig
 from .websockets_internals import BridgeConnection, Inbound, check_websockets_internals
 
 if TYPE_CHECKING:
-    from ..session import Session
+    from ..session.session import Session
 
 __all__ = ["Security"]
 

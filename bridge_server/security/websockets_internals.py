@@ -19,10 +19,10 @@ from websockets.asyncio.messages import Assembler, SimpleQueue
 from websockets.asyncio.server import ServerConnection
 from websockets.frames import Frame
 
-from ..types import BridgeError
+from ..rclpy_graph.types import BridgeError
 
 if TYPE_CHECKING:
-    from ..auth import Principal
+    from .auth import Principal
     from .handshake import Security
 
 __all__ = [

@@ -431,7 +431,7 @@ async def test_first_owner_keeps_the_action(ws_connect: Any, ros_node: Any, topi
 @pytest.mark.parametrize("package", ["test_msgs", "mult_msgs"])
 def test_every_action_type_converts(package: str):
     """Goal, feedback and result of every action in the package convert both ways, JSON and CBOR."""
-    from bridge_server import convert
+    from bridge_server.rclpy_graph import convert
 
     types = _action_types(package)
     assert types, f"{package} has no actions"
@@ -448,8 +448,8 @@ def test_every_action_type_converts(package: str):
                          ids=lambda a: a.__name__)
 async def test_every_action_type_through_the_bridge(ws_connect: Any, topic: str, action: Any):
     """Goal, feedback (CBOR) and result of each action type cross the bridge intact."""
-    from bridge_server import convert
-    from bridge_server.types import type_name_of
+    from bridge_server.rclpy_graph import convert
+    from bridge_server.rclpy_graph.types import type_name_of
 
     type_name = type_name_of(action)
     goal_obj, feedback_obj, result_obj = (

@@ -1,4 +1,4 @@
-"""ROS message <-> rosbridge JSON/CBOR conversion (bridge_server.convert) with real rclpy classes."""
+"""ROS message <-> rosbridge JSON/CBOR conversion (bridge_server.rclpy_graph.convert) with real rclpy classes."""
 
 from __future__ import annotations
 
@@ -21,8 +21,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from rosidl_parser import definition as idl
 
-import bridge_server.convert as convert_mod
-from bridge_server.convert import (
+import bridge_server.rclpy_graph.convert as convert_mod
+from bridge_server.rclpy_graph.convert import (
     ConversionError,
     Converter,
     converter_for,
@@ -32,7 +32,7 @@ from bridge_server.convert import (
     encode_publish_json,
     serialize,
 )
-from bridge_server.types import BridgeError
+from bridge_server.rclpy_graph.types import BridgeError
 
 # rclpy's type-support import pulls in lark, which imports the deprecated sre_* modules;
 # warnings are errors in this suite, so load it once here with that one warning silenced.
@@ -987,7 +987,7 @@ def _near_valid_object(cls: type[Any], depth: int = 0) -> st.SearchStrategy[dict
 @st.composite
 def _fuzz_cases(draw: st.DrawFn) -> tuple[type[Any], dict[str, Any]]:
     """A message type and a random JSON object for it: near-valid, or arbitrary JSON."""
-    from bridge_server.types import resolve_message
+    from bridge_server.rclpy_graph.types import resolve_message
 
     cls = resolve_message(draw(st.sampled_from(_FUZZ_TYPES)))
     keys = st.sampled_from(list(cls.get_fields_and_field_types())) | st.text(max_size=6)

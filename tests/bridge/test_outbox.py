@@ -13,7 +13,7 @@ from websockets.asyncio.client import connect
 from websockets.asyncio.server import ServerConnection, serve
 from websockets.frames import Frame, Opcode
 
-from bridge_server.outbox import Outbox, Subscription, frame_bytes
+from bridge_server.session.outbox import Outbox, Subscription, frame_bytes
 from tests.helpers import async_wait_until
 
 

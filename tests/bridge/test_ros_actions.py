@@ -9,9 +9,9 @@ from typing import Any
 
 import pytest
 
-from bridge_server import ros_actions
-from bridge_server.ros import RosNode
-from bridge_server.ros_actions import SharedActionClient, Status
+from bridge_server.rclpy_graph import actions as ros_actions
+from bridge_server.rclpy_graph.actions import SharedActionClient, Status
+from bridge_server.rclpy_graph.node import RosNode
 from tests.bridge.action_support import FibServer, fib
 from tests.helpers import async_wait_until
 

@@ -9,7 +9,7 @@ from typing import Any
 
 import pytest
 
-from bridge_server.ros import RosNode
+from bridge_server.rclpy_graph.node import RosNode
 from tests.helpers import async_wait_until
 
 
@@ -25,7 +25,7 @@ async def test_a_failing_executor_round_does_not_stop_ros(caplog: pytest.LogCapt
             timer.cancel()
             raise RuntimeError("boom in a ROS callback")
 
-        with caplog.at_level(logging.ERROR, logger="bridge_server.ros"):
+        with caplog.at_level(logging.ERROR, logger="bridge_server.rclpy_graph.node"):
             timer = ros.node.create_timer(0.01, boom)
             await async_wait_until(lambda: ros.spin_errors >= 1, 10.0, "the failing round")
             done = asyncio.Event()

@@ -1,4 +1,4 @@
-"""The topic readers (bridge_server/ros_reader.py): the middleware waking the event loop
+"""The topic readers (bridge_server/rclpy_graph/reader.py): the middleware waking the event loop
 through an eventfd, and the reader thread that serves where that cannot work."""
 
 from __future__ import annotations
@@ -13,8 +13,8 @@ from rclpy.qos import QoSProfile
 from rclpy.serialization import deserialize_message
 from std_msgs.msg import String
 
-from bridge_server import ros_reader
-from bridge_server.ros import RosNode
+from bridge_server.rclpy_graph import reader as ros_reader
+from bridge_server.rclpy_graph.node import RosNode
 from tests.bridge.support import bridge_sees_topic, wait_subscribers
 from tests.helpers import async_wait_until
 
@@ -61,7 +61,7 @@ async def test_a_reader_survives_a_failing_take(kind: str, caplog: pytest.LogCap
         good_pub = ros.node.create_publisher(String, "/reader_good", qos)
         await wait_subscribers(bad_pub)
         await wait_subscribers(good_pub)
-        with caplog.at_level(logging.ERROR, logger="bridge_server.ros"):
+        with caplog.at_level(logging.ERROR, logger="bridge_server.rclpy_graph.node"):
             bad_pub.publish(String(data="lost"))
             await async_wait_until(lambda: reader.errors.count >= 1, 10.0, "the failing take")
             good_pub.publish(String(data="hello"))
@@ -186,7 +186,7 @@ async def test_the_loop_reader_serves_a_service_on_the_loop(
         svc = reader.serve(SetBool, name, QoSProfile(depth=10), on_request)  # type: ignore[no-untyped-call]
         client = ros_node.create_client(SetBool, name)
         await wait_service(client)
-        with caplog.at_level(logging.ERROR, logger="bridge_server.ros"):
+        with caplog.at_level(logging.ERROR, logger="bridge_server.rclpy_graph.node"):
             client.call_async(SetBool.Request(data=False))  # the handler raises: not answered
             await async_wait_until(lambda: reader.errors.count >= 1, 10.0, "the failing handler")
         assert "serving a request to" in caplog.text and "boom in a handler" in caplog.text

@@ -1,4 +1,4 @@
-"""Type-name parsing and resolution (bridge_server.types) against the installed rclpy packages."""
+"""Type-name parsing and resolution (bridge_server.rclpy_graph.types) against the installed rclpy packages."""
 
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ import sys
 
 import pytest
 
-from bridge_server.types import (
+from bridge_server.rclpy_graph.types import (
     BridgeError,
     TypeName,
     TypeNameError,

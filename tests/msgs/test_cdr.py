@@ -14,8 +14,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from rclpy.serialization import deserialize_message, serialize_message
 
-from bridge_server import convert
-from bridge_server.types import resolve_action, resolve_message, resolve_service
+from bridge_server.rclpy_graph import convert
+from bridge_server.rclpy_graph.types import resolve_action, resolve_message, resolve_service
 from msgs import cdr
 from msgs.runtime import Message, Service, available_types, lookup, lookup_message
 from msgs.sensor_msgs.msg import Image, Imu, PointCloud2

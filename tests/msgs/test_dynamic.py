@@ -11,7 +11,8 @@ from rclpy.serialization import deserialize_message, serialize_message
 from robot_msgs.msg import Status as RosStatus
 from robot_msgs.srv import SetMode as RosSetMode
 
-from bridge_server import convert, rosapi
+from bridge_server.rclpy_graph import convert
+from bridge_server.session import rosapi
 from msgs import cdr, dynamic
 from msgs.parser import DefinitionError
 from msgs.runtime import Message, Service, UnknownTypeError, ValidationError, lookup

@@ -167,7 +167,7 @@ def _docker_files(tmp: Path) -> dict[str, str]:
     """What an operator mounts at /etc/roslibpy-lite/: a token file and a certificate."""
     import trustme
 
-    from bridge_server.auth import add_principal
+    from bridge_server.security.auth import add_principal
 
     add_principal(tmp / "auth.toml", "dashboard", "viewer")
     cert = trustme.CA().issue_cert("127.0.0.1")
@@ -217,7 +217,7 @@ def _unit_command(tmp: Path, port: int, with_log_dirs: bool = True) -> tuple[lis
     HOME a system user without a home directory has under ProtectHome (nothing writable)."""
     import trustme
 
-    from bridge_server.auth import add_principal
+    from bridge_server.security.auth import add_principal
 
     service = _unit_sections(UNIT.read_text())["Service"]
     argv = service["ExecStart"][0].split()

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from bridge_server.web import Access, visible
+from bridge_server.http.web import Access, visible
 from tests.helpers import BridgeProcess, open_wire
 from tests.ops.support import aget
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from bridge_server.metrics import LABEL_LIMIT, OTHER, LabelCap
+from bridge_server.http.metrics import LABEL_LIMIT, OTHER, LabelCap
 from tests.bridge.support import wait_subscribers
 from tests.helpers import BridgeProcess, open_wire
 from tests.ops.support import aget, scrape, value

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 from typing import Any
 
-from bridge_server.metrics import LATENCY_BUCKETS
-from bridge_server.snapshot import merge
+from bridge_server.http.metrics import LATENCY_BUCKETS
+from bridge_server.http.snapshot import merge
 from tests.bridge.action_support import FIB, FibServer, bridge_sees_action, send_goal
 from tests.helpers import BridgeProcess, open_wire
 from tests.ops.support import status

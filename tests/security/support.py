@@ -9,7 +9,7 @@ from typing import Any
 
 from websockets.asyncio.client import connect
 
-from bridge_server.auth import EXAMPLE_ROLES, hash_token, new_token
+from bridge_server.security.auth import EXAMPLE_ROLES, hash_token, new_token
 from tests.helpers import BridgeProcess, WireClient
 
 ROLES = EXAMPLE_ROLES + """

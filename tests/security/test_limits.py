@@ -142,8 +142,8 @@ async def test_inbound_byte_budget_pauses_and_resumes_reading():
 
 async def test_websockets_internals_are_checked_at_start_up(monkeypatch: pytest.MonkeyPatch):
     """The budget's websockets internals pass the start-up check; if they change, it says so."""
+    from bridge_server.rclpy_graph.types import BridgeError
     from bridge_server.security import check_websockets_internals
-    from bridge_server.types import BridgeError
 
     check_websockets_internals()
     monkeypatch.setattr(BudgetAssembler, "maybe_pause", lambda self: None)
@@ -155,8 +155,8 @@ def test_rclpy_internals_are_checked_at_start_up(monkeypatch: pytest.MonkeyPatch
     """The action code's rclpy internals pass the start-up check; if one is gone, it says so."""
     from rclpy.action.server import ServerGoalHandle
 
-    from bridge_server.ros_actions import check_rclpy_internals
-    from bridge_server.types import BridgeError
+    from bridge_server.rclpy_graph.actions import check_rclpy_internals
+    from bridge_server.rclpy_graph.types import BridgeError
 
     check_rclpy_internals()
     monkeypatch.delattr(ServerGoalHandle, "_update_state")

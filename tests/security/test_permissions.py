@@ -11,7 +11,7 @@ from typing import Any
 from std_msgs.msg import String
 from std_srvs.srv import SetBool
 
-from bridge_server.permissions import Role
+from bridge_server.security.permissions import Role
 from tests.bridge.support import Inbox, publish_until_heard, roundtrip, wait_publishers
 from tests.helpers import BridgeProcess
 from tests.security.support import bridge_entities
@@ -244,8 +244,8 @@ _SEEN_HIDDEN = {
 
 def test_every_rosapi_answer_naming_things_is_filtered():
     """Each rosapi list (and service_node) keeps only names the role's introspection matches."""
-    from bridge_server import rosapi
-    from bridge_server.permissions import filter_rosapi
+    from bridge_server.security.permissions import filter_rosapi
+    from bridge_server.session import rosapi
 
     role = Role.from_table("r", {"introspection": ["/seen*"], "params": ["/seen*"]})
     for service, answer in _SEEN_HIDDEN.items():

@@ -19,7 +19,7 @@ from std_msgs.msg import String
 from std_srvs.srv import SetBool
 from websockets.exceptions import ConnectionClosed
 
-from bridge_server.auth import hash_token, new_token
+from bridge_server.security.auth import hash_token, new_token
 from tests.bridge.support import roundtrip, wait_subscribers
 from tests.helpers import BridgeProcess, async_wait_until, open_wire
 from tests.ops.support import aget

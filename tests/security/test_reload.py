@@ -12,7 +12,12 @@ from pathlib import Path
 import pytest
 from websockets.exceptions import ConnectionClosed, InvalidStatus
 
-from bridge_server.auth import AuthFileError, add_principal, load_auth_file, remove_principal
+from bridge_server.security.auth import (
+    AuthFileError,
+    add_principal,
+    load_auth_file,
+    remove_principal,
+)
 from tests.bridge.support import roundtrip
 from tests.helpers import ROOT, BridgeProcess, ros_env
 from tests.security.support import ROLES, wire

@@ -13,7 +13,7 @@ Capabilities (:data:`CAPABILITIES`): ``subscribe``, ``publish`` (also
 advertise), ``call_service``, ``serve_service`` (advertise_service),
 ``send_action_goal`` (and cancel the client's own goals), ``cancel_any_goal``
 (with ``send_action_goal``: also cancel goals other clients sent, through the
-action's ``_action/cancel_goal`` service, see :mod:`bridge_server.actions`),
+action's ``_action/cancel_goal`` service, see :mod:`bridge_server.session.actions`),
 ``serve_action`` (advertise_action and
 the feedback/result of served goals), ``params`` (the ``/node:param`` names
 of rosapi's get/set/has/delete_param and get_param_names), ``introspection``
@@ -37,7 +37,7 @@ from typing import Any
 
 from roslibpy_lite import ops
 
-from .types import BridgeError
+from ..rclpy_graph.types import BridgeError
 
 __all__ = [
     "CAPABILITIES",

@@ -37,7 +37,7 @@ Errors
     BridgeError                 root of the bridge's own errors
      +-- TypeNameError          malformed type string ("std_msgs", "a/b/c/d")
      +-- UnknownTypeError       well-formed name that names no installed type
-     +-- (convert.ConversionError lives in bridge_server.convert)
+     +-- (convert.ConversionError lives in bridge_server.rclpy_graph.convert)
 
 Each error's message quotes the offending string.
 """

@@ -4,7 +4,7 @@ A :class:`SessionActions` belongs to one :class:`~bridge_server.session.Session`
 (``session.actions``), which hands it the action ops listed in
 :attr:`SessionActions.OPS` and calls :meth:`SessionActions.close` when the client
 goes away. The rclpy
-side lives in :mod:`bridge_server.ros_actions`.
+side lives in :mod:`bridge_server.rclpy_graph.actions`.
 
 Sending goals
 -------------
@@ -14,7 +14,7 @@ fields) converts the goal, waits for an action server (at most
 graph does not list the action at all: one started just before can take ~3 s to
 appear on a loaded machine, as for typed service calls) and sends it. A newly
 matched server is first probed until it answers (see
-:meth:`~bridge_server.ros_actions.SharedActionClient.ready`), so that the goal's
+:meth:`~bridge_server.rclpy_graph.actions.SharedActionClient.ready`), so that the goal's
 answer cannot be lost to discovery still under way. With ``feedback: true`` each feedback goes back
 as ``action_feedback`` {id, action, values}. The end is one ``action_result``
 {id, action, values, status, result}: ``status`` is the GoalStatus number,
@@ -36,7 +36,7 @@ that run longer, and fails them with a text.
 The action's services called as plain services
 -----------------------------------------------
 ``call_service`` to ``<action>/_action/cancel_goal`` (which ``send_action_goal``
-on the action allows, see :func:`~bridge_server.permissions.hidden_requirement`)
+on the action allows, see :func:`~bridge_server.security.permissions.hidden_requirement`)
 cancels only goals this connection sent with ``send_action_goal``, unless the
 client's role has ``cancel_any_goal`` on the action. A cancel of
 another's goal id, of a zero id (every goal) or with a stamp (every goal
@@ -55,7 +55,7 @@ or 6 ends the goal that way; without a status, ``result`` true means
 SUCCEEDED and false ABORTED. A result that does not fit the type, an
 unadvertise, a disconnect or ``goal_timeout`` abort the goal at once. A name
 another client serves stays with its first owner, as for services
-(:mod:`bridge_server.ownership`); a taken-over owner's goals are aborted and it
+(:mod:`bridge_server.session.ownership`); a taken-over owner's goals are aborted and it
 gets a warning.
 """
 
@@ -72,9 +72,8 @@ import cbor2
 
 from roslibpy_lite import ops
 
-from . import convert
-from .names import full_name
-from .ros_actions import (
+from ..rclpy_graph import convert
+from ..rclpy_graph.actions import (
     ACTIVE,
     CANCEL_ANSWERS,
     SentGoal,
@@ -83,15 +82,16 @@ from .ros_actions import (
     SharedActionClient,
     Status,
 )
-from .types import BridgeError, canonical_name, resolve_action
+from ..rclpy_graph.types import BridgeError, canonical_name, resolve_action
+from ..security.names import full_name
 
 if TYPE_CHECKING:
-    from .security import Gate
+    from ..security import Gate
     from .session import Session
 
 __all__ = ["ActionClients", "SessionActions"]
 
-log = logging.getLogger("bridge_server.actions")
+log = logging.getLogger("bridge_server.session.actions")
 
 ACTION_LINGER = 1.0
 """Seconds an unadvertised action server stays in ROS, so callers fetch the aborted results."""

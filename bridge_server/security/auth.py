@@ -2,7 +2,7 @@
 
 The auth file is TOML, written by hand or by the helper::
 
-    [roles.viewer]                 # see bridge_server.permissions for the keys
+    [roles.viewer]                 # see bridge_server.security.permissions for the keys
     subscribe = ["*"]
     introspection = ["*"]
 
@@ -12,7 +12,7 @@ The auth file is TOML, written by hand or by the helper::
 
 Tokens are 256-bit random strings made by the helper
 (``roslibpy-lite-bridge add-principal alice --role viewer --auth-file auth.toml``
-or ``python -m bridge_server.auth alice --role viewer --auth-file auth.toml``),
+or ``python -m bridge_server.security.auth alice --role viewer --auth-file auth.toml``),
 printed once and stored only as a salted SHA-256 digest. A fast hash is the
 right tool for a random token of that length (a slow KDF protects guessable
 passwords, and a token is not one); every principal is compared with
@@ -46,8 +46,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from ..rclpy_graph.types import BridgeError
 from .permissions import Role, RoleError
-from .types import BridgeError
 
 __all__ = [
     "AuthConfig",
@@ -153,7 +153,7 @@ def load_auth_file(path: str | Path) -> AuthConfig:
     try:
         data = tomllib.loads(path.read_text(encoding="utf-8"))
     except OSError as exc:
-        from .security.options import user_name  # (security imports this module)
+        from .options import user_name  # (the security package imports this module)
 
         raise AuthFileError(f"cannot read {path} as user {user_name()}: {exc.strerror}") from None
     except tomllib.TOMLDecodeError as exc:

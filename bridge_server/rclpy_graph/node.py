@@ -2,7 +2,7 @@
 
 One rclpy node lives in its own context; an executor spins it in a thread of
 its own. The topics the bridge subscribes to are not the executor's
-(:mod:`bridge_server.ros_reader`): the middleware wakes the asyncio loop itself when
+(:mod:`.reader`): the middleware wakes the asyncio loop itself when
 one of their messages arrives, and the loop takes it (a reader thread does that
 where the loop cannot be woken so). Everything the executor learns (a ROS caller
 reaching a client-served service under the thread reader, a service response) crosses
@@ -10,7 +10,7 @@ to the asyncio loop with ``loop.call_soon_threadsafe``; hand-offs are batched, s
 burst of messages costs one wake-up of the loop, not one each.
 The loop never waits on the executor. The other way, :meth:`RosNode.in_executor`
 runs work on the executor thread (a guard condition), for rclpy APIs that are
-not thread safe (actions: :mod:`bridge_server.ros_actions`).
+not thread safe (actions: :mod:`bridge_server.rclpy_graph.actions`).
 
 Sharing
 -------
@@ -62,7 +62,7 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from rclpy.serialization import deserialize_message
 
 from . import convert
-from .ros_reader import FailureLog, LoopReader, Reader, ReaderService, open_reader
+from .reader import FailureLog, LoopReader, Reader, ReaderService, open_reader
 from .types import resolve_message, resolve_service
 
 __all__ = [
@@ -74,7 +74,7 @@ __all__ = [
     "SharedSubscription",
 ]
 
-log = logging.getLogger("bridge_server.ros")
+log = logging.getLogger("bridge_server.rclpy_graph.node")
 
 Listener = Callable[["Incoming"], None]
 
@@ -115,7 +115,7 @@ class Incoming:
     It arrives serialized (CDR, ``data``): ``cbor-raw`` subscribers get those bytes as they
     came, and the message is deserialized only to build the JSON or the CBOR encoding, each
     at most once (a topic with only cbor-raw subscribers is never deserialized). The JSON
-    text is made from the bytes directly where it can be (:mod:`bridge_server.cdr_json`).
+    text is made from the bytes directly where it can be (:mod:`.cdr_json`).
     """
 
     __slots__ = ("_cbor", "_cbor_raw", "_json", "_msg_json", "conv", "data", "stamp_ns", "topic")
@@ -407,7 +407,7 @@ class PendingRosCall:
 class ServedService:
     """A ROS service whose requests are answered by a websocket client.
 
-    With the loop reader (:class:`~bridge_server.ros_reader.LoopReader`) the middleware
+    With the loop reader (:class:`~bridge_server.rclpy_graph.reader.LoopReader`) the middleware
     wakes the loop for each request, which takes it with its header and answers it on the
     loop: no executor round, no thread between the caller and the client. Otherwise the
     service is rclpy's, served by the executor's thread as :class:`PendingRosCall` says.
@@ -500,14 +500,14 @@ class RosNode:
         self.node: Any = None
         self.executor: Any = None
         self.reader: Reader | None = None
-        """What takes the topics' messages (:mod:`bridge_server.ros_reader`)."""
+        """What takes the topics' messages (:mod:`.reader`)."""
         self._calls: deque[tuple[Callable[..., None], tuple[Any, ...]]] = deque()
         self._calls_gc: Any = None
         self._spin_failures = FailureLog("ROS executor round failed; spinning on")
 
     @property
     def reader_kind(self) -> str:
-        """``loop`` or ``thread``: what waits on the topics (:mod:`bridge_server.ros_reader`)."""
+        """``loop`` or ``thread``: what waits on the topics (:mod:`.reader`)."""
         return self.reader.kind if self.reader is not None else "none"
 
     @property

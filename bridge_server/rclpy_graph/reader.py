@@ -78,7 +78,7 @@ __all__ = [
     "open_reader",
 ]
 
-log = logging.getLogger("bridge_server.ros")
+log = logging.getLogger("bridge_server.rclpy_graph.node")
 
 MAX_BATCH = 256
 """Most messages taken from one subscription at a time (the reader comes back for more)."""

@@ -5,7 +5,7 @@
                         ``/status.json`` once a second)
 ``GET /static/<file>``  the page's own CSS and JavaScript (no CDN, nothing external)
 ``GET /status.json``    the whole bridge (every worker) as JSON, filtered for the viewer
-``GET /metrics``        Prometheus text exposition (:mod:`bridge_server.metrics`)
+``GET /metrics``        Prometheus text exposition (:mod:`bridge_server.http.metrics`)
 ``GET /healthz``        200 while the process runs (liveness)
 ``GET /readyz``         200 once rclpy is up and the port is listening, else 503
 ======================  =================================================================
@@ -25,7 +25,7 @@ a ``topic``, a ``service``, an ``action`` or a ``client``.
 :func:`visible` applies it to the status data and to the metrics, so neither
 shows what the role may not. This plain :class:`Access` shows everything
 (authentication off); the bridge sets ``bridge.web.access`` to
-:class:`bridge_server.web_access.WebAccess` (tokens, roles' ``introspection``
+:class:`bridge_server.http.web_access.WebAccess` (tokens, roles' ``introspection``
 patterns). The page passes its own ``?token=`` on to ``/status.json``.
 """
 
@@ -50,11 +50,11 @@ if TYPE_CHECKING:
     from websockets.asyncio.server import ServerConnection
     from websockets.http11 import Request, Response
 
-    from .server import Bridge
+    from ..server import Bridge
 
 __all__ = ["Access", "Denied", "Reply", "Web", "visible"]
 
-log = logging.getLogger("bridge_server.web")
+log = logging.getLogger("bridge_server.http.web")
 
 STATIC = Path(__file__).resolve().parent / "static"
 _TYPES = {

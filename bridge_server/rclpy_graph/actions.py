@@ -32,11 +32,11 @@ from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from unique_identifier_msgs.msg import UUID
 
 from . import convert
-from .ros import SERVICE_DEPTH, _qos
+from .node import SERVICE_DEPTH, _qos
 from .types import BridgeError
 
 if TYPE_CHECKING:
-    from .ros import RosNode
+    from .node import RosNode
 
 __all__ = [
     "ACTIVE",
@@ -48,7 +48,7 @@ __all__ = [
     "Status",
 ]
 
-log = logging.getLogger("bridge_server.ros_actions")
+log = logging.getLogger("bridge_server.rclpy_graph.actions")
 
 _action: Any = importlib.import_module("rclpy.action")  # untyped API, used as Any
 

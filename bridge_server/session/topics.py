@@ -1,11 +1,11 @@
 """Topic ops of one client: advertise, unadvertise, publish, subscribe, unsubscribe.
 
 Several subscribe ops of one client to one topic (different ids) are merged
-into one :class:`~bridge_server.outbox.Subscription` (see
-:mod:`bridge_server.outbox` for the merged options and the queues);
+into one :class:`~bridge_server.session.outbox.Subscription` (see
+:mod:`bridge_server.session.outbox` for the merged options and the queues);
 ``compression: png`` (legacy) falls back to plain JSON with a warning.
 Publishers are shared between clients per topic, type and latching
-(:meth:`bridge_server.ros.RosNode.acquire_publisher`); a client's are released
+(:meth:`bridge_server.rclpy_graph.node.RosNode.acquire_publisher`); a client's are released
 ``publisher_grace`` seconds after it leaves.
 """
 
@@ -16,14 +16,14 @@ from typing import TYPE_CHECKING, Any, ClassVar
 
 from roslibpy_lite import ops
 
-from . import convert
-from .names import full_name
+from ..rclpy_graph import convert
+from ..rclpy_graph.types import canonical_name
+from ..security.names import full_name
 from .outbox import Subscription
-from .types import canonical_name
 
 if TYPE_CHECKING:
-    from .ros import SharedPublisher
-    from .security import Gate
+    from ..rclpy_graph.node import SharedPublisher
+    from ..security import Gate
     from .session import Session
 
 __all__ = ["SessionTopics"]

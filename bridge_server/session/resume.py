@@ -35,7 +35,7 @@ if TYPE_CHECKING:
 
 __all__ = ["ACK_INTERVAL", "ResumeConfig", "SentFrames", "SessionStore"]
 
-log = logging.getLogger("bridge_server.resume")
+log = logging.getLogger("bridge_server.session.resume")
 
 ACK_INTERVAL = 0.25
 """Seconds between a side's ``session_ack`` ops while frames arrive."""

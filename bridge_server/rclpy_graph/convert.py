@@ -97,8 +97,8 @@ import cbor2
 import numpy
 from rosidl_parser import definition as idl
 
-from bridge_server import cdr_json
-from bridge_server.types import BridgeError, type_name_of
+from bridge_server.rclpy_graph import cdr_json
+from bridge_server.rclpy_graph.types import BridgeError, type_name_of
 
 __all__ = [
     "ConversionError",
@@ -721,7 +721,7 @@ class Converter:
         self.fields: tuple[str, ...] = tuple(names)
         self.json_from_cdr: cdr_json.JsonFromCdr | None = None
         """CDR bytes -> the same text as :meth:`to_json` gives, without deserializing
-        (:mod:`bridge_server.cdr_json`); ``None`` when msgs does not have the type's layout."""
+        (:mod:`.cdr_json`); ``None`` when msgs does not have the type's layout."""
 
     def to_json(self, ros_msg: Any) -> str:
         """Compact JSON text of ``ros_msg`` (the msg object only, no op envelope)."""

@@ -2,7 +2,7 @@
 
 :func:`take` reads the live state (sessions, their subscriptions and queues,
 the shared ROS subscriptions, served services) plus the process's
-:class:`~bridge_server.metrics.Recorder`. It runs on the loop thread, at most
+:class:`~bridge_server.http.metrics.Recorder`. It runs on the loop thread, at most
 once per request of ``/metrics`` or ``/status.json`` (and a per-topic subset
 once a second for the rates), never per message. :func:`merge` combines the
 snapshots of several workers into one view of the whole bridge.
@@ -25,7 +25,7 @@ from typing import TYPE_CHECKING, Any
 from .metrics import add_timing
 
 if TYPE_CHECKING:
-    from .server import Bridge
+    from ..server import Bridge
 
 __all__ = ["RateMeter", "merge", "take", "topic_totals"]
 

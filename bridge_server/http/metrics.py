@@ -5,7 +5,7 @@ The hot paths never call prometheus_client. Per-message work only raises plain
 ``sent``/``sent_bytes``/``dropped_total``, a shared ROS subscription's
 ``received``). Rarer events (connections, refusals, errors, service calls,
 publishes from clients) go to a :class:`Recorder` of plain dicts. At scrape
-time :func:`bridge_server.snapshot.take` turns the live state plus the
+time :func:`bridge_server.http.snapshot.take` turns the live state plus the
 recorder into a JSON-able snapshot, snapshots of all workers are merged, and
 :func:`render` builds the metric families with prometheus_client's own
 ``*MetricFamily`` classes and exposition code.

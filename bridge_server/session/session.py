@@ -5,16 +5,16 @@ A :class:`Session` reads the client's frames, decodes them into ops
 the gate (:mod:`bridge_server.security`: authentication, rate, names,
 permissions) and hands each op to the capability that carries it out:
 
-- :class:`~bridge_server.topics.SessionTopics`: advertise, unadvertise,
+- :class:`~bridge_server.session.topics.SessionTopics`: advertise, unadvertise,
   publish, subscribe, unsubscribe;
-- :class:`~bridge_server.services.SessionServices`: call_service and
+- :class:`~bridge_server.session.services.SessionServices`: call_service and
   serving services;
-- :class:`~bridge_server.actions.SessionActions`: goals and serving actions;
+- :class:`~bridge_server.session.actions.SessionActions`: goals and serving actions;
 - the session itself: set_level.
 
 Each capability lists its ops and methods in ``OPS``; the session builds one
 table of bound methods from them, so an op costs one dictionary lookup. What a
-client is sent goes through its :class:`~bridge_server.outbox.Outbox` (the
+client is sent goes through its :class:`~bridge_server.session.outbox.Outbox` (the
 queues, the drop policy and the writer task).
 
 Adding a capability
@@ -46,19 +46,19 @@ from roslibpy_lite.ops import ACKS_HEADER, parse_op
 from roslibpy_lite.protocol import Protocol as FrameProtocol
 from roslibpy_lite.protocol import decode_frame
 
+from ..rclpy_graph.types import BridgeError
 from .actions import SessionActions
 from .outbox import DEFAULT_QUEUE_LENGTH, Outbox
 from .resume import ACK_INTERVAL
 from .services import SessionServices
 from .topics import SessionTopics
-from .types import BridgeError
 
 if TYPE_CHECKING:
     from websockets.asyncio.server import ServerConnection
 
-    from .ros import RosNode
-    from .security import Gate
-    from .server import Bridge
+    from ..rclpy_graph.node import RosNode
+    from ..security import Gate
+    from ..server import Bridge
 
 __all__ = ["DEFAULT_QUEUE_LENGTH", "Capability", "Session", "SessionConfig"]
 

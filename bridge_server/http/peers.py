@@ -1,8 +1,8 @@
 """How workers see each other: each serves its snapshot on a unix socket, and reads the others'.
 
 With ``--workers N`` every worker's status page and ``/metrics`` show the whole bridge: the
-web routes (:mod:`bridge_server.web`) merge this worker's snapshot with the ones fetched
-here. The supervisor itself is :mod:`bridge_server.workers`.
+web routes (:mod:`bridge_server.http.web`) merge this worker's snapshot with the ones fetched
+here. The supervisor itself is :mod:`bridge_server.http.workers`.
 """
 
 from __future__ import annotations

@@ -11,7 +11,7 @@ still lists no server of after twice that fails so too (a server started just
 before the call can take ~3 s to appear on a loaded machine). A listed service
 is waited for (its server to match) up to the call's timeout.
 ``fragment_size`` on a call splits its ``service_response``. ``/rosapi/*``
-services are answered by the bridge itself (:mod:`bridge_server.rosapi`), and a
+services are answered by the bridge itself (:mod:`bridge_server.session.rosapi`), and a
 service another client of this bridge serves is called directly, without a ROS
 hop (so its failure keeps its text).
 
@@ -28,7 +28,7 @@ destroyed at once; rclpy callers then see ``service_is_ready()`` turn false,
 and requests in flight stay unanswered until the caller's timeout.
 
 Who may serve a name another client (or an rclpy node) serves is decided by
-:mod:`bridge_server.ownership`.
+:mod:`bridge_server.session.ownership`.
 """
 
 from __future__ import annotations
@@ -42,14 +42,15 @@ from typing import TYPE_CHECKING, Any, ClassVar
 
 from roslibpy_lite import ops
 
-from . import convert, rosapi
-from .metrics import outcome
-from .names import full_name
-from .types import BridgeError, canonical_name
+from ..http.metrics import outcome
+from ..rclpy_graph import convert
+from ..rclpy_graph.types import BridgeError, canonical_name
+from ..security.names import full_name
+from . import rosapi
 
 if TYPE_CHECKING:
-    from .ros import PendingRosCall, ServedService
-    from .security import Gate
+    from ..rclpy_graph.node import PendingRosCall, ServedService
+    from ..security import Gate
     from .session import Session
 
 __all__ = ["ClientService", "SessionServices"]

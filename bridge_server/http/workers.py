@@ -11,9 +11,9 @@ between any two nodes.
 
 The whole bridge in one view: each worker also listens on a unix socket
 ``D/worker-<i>.sock`` that answers with its snapshot
-(:func:`bridge_server.snapshot.take`) as JSON. Whichever worker answers
+(:func:`bridge_server.http.snapshot.take`) as JSON. Whichever worker answers
 ``/metrics`` or ``/status.json`` asks the others and merges
-(:func:`bridge_server.snapshot.merge`). A counter of a restarted worker starts
+(:func:`bridge_server.http.snapshot.merge`). A counter of a restarted worker starts
 again from zero (Prometheus sees a counter reset).
 
 The supervisor relays the workers' logs, prints the ready line once every
@@ -44,7 +44,7 @@ from typing import IO
 
 __all__ = ["STOP_GRACE", "Supervisor", "watch_supervisor"]
 
-log = logging.getLogger("bridge_server.workers")
+log = logging.getLogger("bridge_server.http.workers")
 
 STOP_GRACE = 0.8
 """Seconds workers get to stop after SIGTERM before they are killed."""

@@ -52,9 +52,9 @@ from roslibpy_lite.protocol import split_fragments
 if TYPE_CHECKING:
     from websockets.asyncio.server import ServerConnection
 
+    from ..rclpy_graph.node import Incoming
+    from ..rclpy_graph.node import SharedSubscription as _Shared
     from .resume import SentFrames
-    from .ros import Incoming
-    from .ros import SharedSubscription as _Shared
 
 __all__ = [
     "BATCH_BYTES",

@@ -59,11 +59,11 @@ import re
 from collections.abc import Awaitable, Callable, Mapping
 from typing import TYPE_CHECKING, Any
 
-from .names import InvalidNameError, check_name
-from .types import BridgeError, canonical_name
+from ..rclpy_graph.types import BridgeError, canonical_name
+from ..security.names import InvalidNameError, check_name
 
 if TYPE_CHECKING:
-    from .server import Bridge
+    from ..server import Bridge
 
 __all__ = ["ASYNC_HANDLERS", "FIELDS", "HANDLERS", "TYPES", "RosapiError", "request_args"]
 
@@ -408,7 +408,7 @@ def _typedef(cls: type[Any], name: str) -> tuple[dict[str, Any], list[type[Any]]
 
 
 def _message_class(name: str) -> type[Any]:
-    from .types import resolve_message
+    from ..rclpy_graph.types import resolve_message
 
     try:
         return resolve_message(name)
@@ -418,7 +418,7 @@ def _message_class(name: str) -> type[Any]:
 
 def _typedefs(cls: type[Any], name: str) -> list[dict[str, Any]]:
     """The typedef of ``cls`` then those of every nested type, each once."""
-    from .types import type_name_of
+    from ..rclpy_graph.types import type_name_of
 
     out: list[dict[str, Any]] = []
     seen: set[type[Any]] = set()
@@ -442,7 +442,7 @@ def message_details(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, Any]:
 
 
 def _service_part(args: Mapping[str, Any], part: str) -> dict[str, Any]:
-    from .types import resolve_service
+    from ..rclpy_graph.types import resolve_service
 
     name = _str_field(args, "type")
     try:
@@ -498,7 +498,7 @@ def _full_text(type_name: str) -> str:
 
 def interfaces(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, Any]:
     """Every interface type installed with the bridge (what a client may ``load_types``)."""
-    from .types import installed_interfaces
+    from ..rclpy_graph.types import installed_interfaces
 
     return {"interfaces": installed_interfaces()}
 
@@ -620,7 +620,7 @@ def action_type(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, Any]:
 
 
 def _action_part(args: Mapping[str, Any], part: str) -> dict[str, Any]:
-    from .types import resolve_action
+    from ..rclpy_graph.types import resolve_action
 
     name = _str_field(args, "type")
     try:

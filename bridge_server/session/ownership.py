@@ -26,12 +26,12 @@ from websockets.exceptions import ConnectionClosed
 from roslibpy_lite import ops
 
 if TYPE_CHECKING:
-    from .security import Gate
+    from ..security import Gate
     from .session import Session
 
 __all__ = ["OWNER_PING_TIMEOUT", "Ownership", "Provider"]
 
-log = logging.getLogger("bridge_server.ownership")
+log = logging.getLogger("bridge_server.session.ownership")
 
 OWNER_PING_TIMEOUT = 2.0
 """Seconds an owner has to answer a ping before another client may claim its name."""

@@ -1,6 +1,6 @@
 """Who may see the bridge's plain-HTTP routes under its security configuration.
 
-:mod:`bridge_server.web` serves the routes through an :class:`~bridge_server.web.Access`;
+:mod:`bridge_server.http.web` serves the routes through an :class:`~bridge_server.http.web.Access`;
 this is the one that knows tokens and roles.
 """
 
@@ -9,14 +9,14 @@ from __future__ import annotations
 import logging
 from typing import TYPE_CHECKING, Any
 
-from .auth import Principal
-from .security.credentials import token_of
+from ..security.auth import Principal
+from ..security.credentials import token_of
 from .web import Access, Denied
 
 if TYPE_CHECKING:
     from websockets.http11 import Request
 
-    from .security import Security
+    from ..security import Security
 
 __all__ = ["WebAccess"]
 
