@@ -284,9 +284,11 @@ async def test_client_text_cannot_forge_a_log_line(bridge: BridgeProcess, ws_con
                    "type": "std_msgs/msg/X\n" + fake + "\u0000"})
     await ws.expect(op="status", id="f")
     await roundtrip(ws)
+    # The bridge's log reaches bridge.lines through a pipe: wait for the escaped line.
+    await async_wait_until(lambda: [line for line in bridge.lines[start:]
+                                    if "\\n2001-01-01" in line], 10.0, "the escaped log line")
     lines = bridge.lines[start:]
     assert not [line for line in lines if line.startswith("2001-")], lines
-    assert [line for line in lines if "\\n2001-01-01" in line], lines
     assert not [line for line in lines if "\x00" in line]
 
 
