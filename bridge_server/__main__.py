@@ -20,7 +20,7 @@ import sys
 
 try:
     from . import security
-    from .rclpy_graph.types import BridgeError
+    from .interfaces import BridgeError
     from .session.resume import ResumeConfig
     from .session.session import DEFAULT_QUEUE_LENGTH, SessionConfig
 except ModuleNotFoundError as _missing:  # a client-only install: say which extra to add

@@ -31,11 +31,12 @@ from roslibpy_lite import keepalive
 from roslibpy_lite.exceptions import RemoteProtocolError
 from roslibpy_lite.ops import RECEIVED_HEADER, SESSION_HEADER, parse_received
 
+from .graph import Graph
 from .http.metrics import Recorder
 from .http.web import Web
 from .http.web_access import WebAccess
 from .rclpy_graph.actions import check_rclpy_internals
-from .rclpy_graph.node import RosNode
+from .rclpy_graph.graph import RclpyGraph
 from .security import Security, SecurityConfig
 from .session.actions import ActionClients, SessionActions
 from .session.ownership import Ownership
@@ -108,8 +109,9 @@ class Bridge:
         self._server: Server | None = None
         self._refresher: asyncio.Task[None] | None = None
         self._graph_event = asyncio.Event()
-        self.ros = RosNode(asyncio.get_running_loop(), name=config.node_name,
-                           topic_reader=config.topic_reader)
+        self.ros = RclpyGraph(asyncio.get_running_loop(), name=config.node_name,
+                              topic_reader=config.topic_reader)
+        self.graph: Graph = self.ros  # all the sessions, rosapi and the status page see of ROS
         self.metrics = Recorder()
         self.web = Web(self)  # plain-HTTP routes: status page, /metrics, health (web.py)
         self.security = Security(config.security)  # TLS, auth, origins, limits (security/)

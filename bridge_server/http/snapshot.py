@@ -39,18 +39,18 @@ def topic_totals(bridge: Bridge) -> dict[str, dict[str, Any]]:
     topics: dict[str, dict[str, Any]] = {}
     for name, counts in bridge.metrics.retired.items():
         topics[name] = dict(counts)
-    for name, shared in bridge.ros.subscriptions.items():
+    for name, shared in bridge.graph.subscriptions.items():
         t = topics.setdefault(name, {})
         t["ros_received"] = t.get("ros_received", 0) + shared.received
         if shared.type_name is not None:
             t["type"] = shared.type_name
-    for name, _type, _latch in bridge.ros.publishers:
+    for name, _type, _latch in bridge.graph.publishers:
         t = topics.setdefault(name, {})
         t.setdefault("type", _type)
         t["bridge_publishers"] = t.get("bridge_publishers", 0) + 1
-    for name in bridge.ros.subscriptions:
+    for name in bridge.graph.subscriptions:
         topics[name]["in_use"] = True
-    for name, _type, _latch in bridge.ros.publishers:
+    for name, _type, _latch in bridge.graph.publishers:
         topics[name]["in_use"] = True
     for session in bridge.sessions:
         for sub in session.topics.subs.values():
@@ -148,7 +148,7 @@ def take(bridge: Bridge, rates: Mapping[str, Mapping[str, float]]) -> dict[str, 
             {
                 "index": worker,
                 "pid": os.getpid(),
-                "node": bridge.ros.name,
+                "node": bridge.graph.name,
                 "started": rec.started,
                 "clients": len(clients),
             }

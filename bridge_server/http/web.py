@@ -190,11 +190,9 @@ class Web:
 
     def ready(self) -> str | None:
         """Why the bridge is not ready (``None``: ready)."""
-        ros = self.bridge.ros
-        if ros.node is None or not ros.context.ok():
-            return "rclpy is not running"
-        if ros._thread is None or not ros._thread.is_alive():
-            return "the ROS executor thread is not running"
+        trouble = self.bridge.graph.trouble()
+        if trouble is not None:
+            return trouble
         server = self.bridge._server
         if server is None or not server.is_serving():
             return "not listening"

@@ -25,15 +25,15 @@ import importlib
 import logging
 import secrets
 from collections.abc import Callable
-from typing import TYPE_CHECKING, Any, Protocol
+from typing import TYPE_CHECKING, Any
 
-from action_msgs.msg import GoalStatus
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from unique_identifier_msgs.msg import UUID
 
+from ..graph import ACTIVE, GoalListener, Status
+from ..interfaces import BridgeError
 from . import convert
 from .node import SERVICE_DEPTH, _qos
-from .types import BridgeError
 
 if TYPE_CHECKING:
     from .node import RosNode
@@ -101,27 +101,6 @@ def check_rclpy_internals() -> None:
         )
 
 
-class Status:
-    """``action_msgs/msg/GoalStatus`` numbers."""
-
-    UNKNOWN = GoalStatus.STATUS_UNKNOWN
-    ACCEPTED = GoalStatus.STATUS_ACCEPTED
-    EXECUTING = GoalStatus.STATUS_EXECUTING
-    CANCELING = GoalStatus.STATUS_CANCELING
-    SUCCEEDED = GoalStatus.STATUS_SUCCEEDED
-    CANCELED = GoalStatus.STATUS_CANCELED
-    ABORTED = GoalStatus.STATUS_ABORTED
-
-
-ACTIVE = frozenset({Status.ACCEPTED, Status.EXECUTING, Status.CANCELING})
-"""Statuses of a goal that is not finished."""
-
-CANCEL_ANSWERS = {
-    1: "the action server refused to cancel it",
-    2: "the action server does not know it",
-    3: "it had already finished",
-}
-"""``CancelGoal`` return codes other than 0 (ERROR_NONE), as text."""
 
 
 def _action_qos() -> dict[str, Any]:
@@ -131,25 +110,6 @@ def _action_qos() -> dict[str, Any]:
         "result_service_qos_profile": services,
         "cancel_service_qos_profile": services,
     }
-
-
-class GoalListener(Protocol):
-    """What a :class:`SentGoal` reports, on the loop thread."""
-
-    def on_accepted(self) -> None:
-        """The action server accepted the goal."""
-
-    def on_rejected(self) -> None:
-        """The action server rejected the goal."""
-
-    def on_feedback(self, feedback: Any) -> None:
-        """One feedback message (the action's ``Feedback``)."""
-
-    def on_cancel_answer(self, code: int) -> None:
-        """The server's answer to a cancel request (0: canceling)."""
-
-    def on_result(self, status: int, result: Any) -> None:
-        """The goal finished (``status`` is terminal) or the request failed (``result`` None)."""
 
 
 class SentGoal:

@@ -90,15 +90,18 @@ import json
 import sys
 import threading
 import time
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Callable, Mapping
 from typing import Any, Final, Protocol
 
 import cbor2
 import numpy
 from rosidl_parser import definition as idl
 
+from bridge_server.interfaces import MISSING as _MISSING
+from bridge_server.interfaces import ConversionError, args_mapping
+from bridge_server.interfaces import describe as _describe
 from bridge_server.rclpy_graph import cdr_json
-from bridge_server.rclpy_graph.types import BridgeError, type_name_of
+from bridge_server.rclpy_graph.types import type_name_of
 
 __all__ = [
     "ConversionError",
@@ -107,7 +110,6 @@ __all__ = [
     "args_mapping",
     "converter_for",
     "deserialize",
-    "encode_call_json",
     "encode_publish_cbor",
     "encode_publish_cbor_raw",
     "encode_publish_json",
@@ -118,7 +120,6 @@ __all__ = [
 
 now_ns: Callable[[], int] = time.time_ns
 
-_MISSING: Final = object()
 _FLT_MAX: Final = 3.4028234663852886e38
 _LITTLE: Final = sys.byteorder == "little"
 
@@ -173,72 +174,6 @@ _encode_str: Callable[[str], str] = json.encoder.encode_basestring
 _a2b = binascii.a2b_base64
 _Tag = cbor2.CBORTag
 _cbor_dumps: Callable[[Any], bytes] = cbor2.dumps
-
-
-def args_mapping(
-    args: Mapping[str, Any] | list[Any] | None, fields: Iterable[str], what: str
-) -> Mapping[str, Any]:
-    """A request's ``args`` as a mapping: positional values (a list, as roslibpy may
-    send) are paired with ``fields`` in order; None is no fields set. ``what`` names the
-    request in the error (``request``, ``goal``)."""
-    if args is None:
-        return {}
-    if isinstance(args, list):
-        names = tuple(fields)
-        if len(args) > len(names):
-            raise ConversionError(
-                "args", what, detail=f"{len(args)} values given but the {what} has "
-                f"{len(names)} fields" + (f" ({', '.join(names)})" if names else "")
-            )
-        return dict(zip(names, args, strict=False))
-    return args
-
-
-class ConversionError(BridgeError, ValueError):
-    """A value could not be converted to (or from) the ROS field it was meant for.
-
-    ``path`` is the full field path (``""`` for the message itself),
-    ``expected`` names the expected type, and the message says what was got.
-    """
-
-    def __init__(self, path: str, expected: str, got: object = _MISSING, detail: str = "") -> None:
-        self.path = path
-        self.expected = expected
-        where = path or "message"
-        if detail:
-            text = f"{where}: {detail}"
-        else:
-            text = f"{where}: expected {expected}, got {_describe(got)}"
-        self.detail = detail
-        super().__init__(text)
-
-
-def _describe(v: object) -> str:
-    """A short description of a received value, never the whole payload."""
-    if v is _MISSING:
-        return "nothing"
-    if v is None:
-        return "null"
-    if v is True:
-        return "true"
-    if v is False:
-        return "false"
-    if isinstance(v, int):
-        if abs(v) < 10**30:
-            return f"integer {v}"
-        return f"integer of {v.bit_length()} bits"
-    if isinstance(v, float):
-        return f"number {v!r}"
-    if isinstance(v, str):
-        shown = v if len(v) <= 40 else v[:37] + "..."
-        return f"string {shown!r}" + (f" ({len(v)} characters)" if len(v) > 40 else "")
-    if isinstance(v, list | tuple):
-        return f"array of {len(v)} items"
-    if isinstance(v, Mapping):
-        return "object"
-    if isinstance(v, bytes | bytearray | memoryview):
-        return f"{len(v)} bytes"
-    return type(v).__name__
 
 
 # --------------------------------------------------------------------------------------------
@@ -998,13 +933,6 @@ def converter_for(msg_cls: type[Any]) -> Converter:
 def encode_publish_json(topic: str, msg_json: str) -> str:
     """The JSON text of a server-to-client publish op around an already encoded msg."""
     return "".join(('{"op":"publish","topic":', _encode_str(topic), ',"msg":', msg_json, "}"))
-
-
-def encode_call_json(service: str, args_json: str, id: str) -> str:
-    """The JSON text of a server-to-client ``call_service`` op (a ROS caller reached a
-    service the client serves) around already encoded ``args``."""
-    return "".join(('{"op":"call_service","service":', _encode_str(service), ',"args":',
-                    args_json, ',"id":', _encode_str(id), "}"))
 
 
 _cbor_prefixes: dict[str, bytes] = {}

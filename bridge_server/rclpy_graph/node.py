@@ -53,7 +53,7 @@ import logging
 import threading
 from collections import deque
 from collections.abc import Callable
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import rclpy
 from rclpy.context import Context
@@ -64,6 +64,9 @@ from rclpy.serialization import deserialize_message
 from . import convert
 from .reader import FailureLog, LoopReader, Reader, ReaderService, open_reader
 from .types import resolve_message, resolve_service
+
+if TYPE_CHECKING:
+    from ..graph import Publisher, TopicFeed
 
 __all__ = [
     "Incoming",
@@ -698,8 +701,9 @@ class RosNode:
         shared.listeners.append(listener)
         return shared
 
-    def unsubscribe(self, shared: SharedSubscription, listener: Listener) -> None:
+    def unsubscribe(self, shared: TopicFeed, listener: Listener) -> None:
         """Remove ``listener``; the ROS subscription goes when its last listener does."""
+        assert isinstance(shared, SharedSubscription)  # one of this node's
         with contextlib.suppress(ValueError):
             shared.listeners.remove(listener)
         if not shared.listeners and self.subscriptions.get(shared.topic) is shared:
@@ -729,8 +733,9 @@ class RosNode:
         pub.refs += 1
         return pub
 
-    def release_publisher(self, pub: SharedPublisher) -> None:
+    def release_publisher(self, pub: Publisher) -> None:
         """Lower the reference count; the ROS publisher goes with the last reference."""
+        assert isinstance(pub, SharedPublisher)  # one of this node's
         pub.refs -= 1
         if pub.refs > 0:
             return

@@ -1,9 +1,7 @@
-"""ROS interface type names: parsing, resolution to rclpy classes, and the bridge's error roots.
+"""ROS interface types on rclpy: type names resolved to rclpy classes.
 
-Type strings arrive from clients in two spellings, ``pkg/Type`` and
-``pkg/<kind>/Type`` with kind one of ``msg``, ``srv``, ``action``. Both are
-accepted everywhere; the canonical spelling the bridge answers with is
-``pkg/<kind>/Type``.
+Type names and the error roots are ROS-free and live in :mod:`bridge_server.interfaces`
+(re-exported here); this module adds what needs the installed ROS packages.
 
 API
 ---
@@ -30,26 +28,28 @@ under ``$AMENT_PREFIX_PATH`` and the interpreter prefix), so a client can
 never make the bridge import an arbitrary Python module. Successful lookups
 are cached; the cache is thread safe (a race only costs a second import).
 
-Errors
-------
-::
-
-    BridgeError                 root of the bridge's own errors
-     +-- TypeNameError          malformed type string ("std_msgs", "a/b/c/d")
-     +-- UnknownTypeError       well-formed name that names no installed type
-     +-- (convert.ConversionError lives in bridge_server.rclpy_graph.convert)
-
-Each error's message quotes the offending string.
+Errors are :mod:`bridge_server.interfaces`' (``TypeNameError``, ``UnknownTypeError``).
 """
 
 from __future__ import annotations
 
 import importlib
 import os
-import re
 import sys
 from pathlib import Path
-from typing import Any, Final, Literal, NamedTuple
+from typing import Any
+
+from ..interfaces import (
+    KINDS,
+    TYPE_RE,
+    BridgeError,
+    Kind,
+    TypeName,
+    TypeNameError,
+    UnknownTypeError,
+    canonical_name,
+    parse_type_name,
+)
 
 __all__ = [
     "BridgeError",
@@ -64,83 +64,6 @@ __all__ = [
     "resolve_service",
     "type_name_of",
 ]
-
-Kind = Literal["msg", "srv", "action"]
-_KINDS: Final = ("msg", "srv", "action")
-
-_PKG_RE: Final = re.compile(r"[A-Za-z][A-Za-z0-9_]*\Z")
-_TYPE_RE: Final = re.compile(r"[A-Za-z][A-Za-z0-9_]*\Z")
-
-
-class BridgeError(Exception):
-    """Root of the errors raised by the bridge's own code."""
-
-
-class TypeNameError(BridgeError, ValueError):
-    """A type string is malformed (wrong number of parts, bad characters, wrong kind)."""
-
-    def __init__(self, name: object, reason: str) -> None:
-        self.name = name
-        self.reason = reason
-        super().__init__(f"invalid type name {name!r}: {reason}")
-
-
-class UnknownTypeError(BridgeError, LookupError):
-    """A well-formed type string names no installed ROS interface."""
-
-    def __init__(self, name: str, reason: str = "") -> None:
-        self.name = name
-        self.reason = reason
-        text = f"unknown type {name!r}"
-        if reason:
-            text += f": {reason}"
-        super().__init__(text)
-
-
-class TypeName(NamedTuple):
-    """A parsed type string: package, kind and type."""
-
-    package: str
-    kind: Kind
-    type: str
-
-    def __str__(self) -> str:
-        return f"{self.package}/{self.kind}/{self.type}"
-
-
-def parse_type_name(name: object, kind: Kind) -> TypeName:
-    """Parse ``pkg/Type`` or ``pkg/<kind>/Type`` expecting interfaces of ``kind``.
-
-    Raises :class:`TypeNameError` if ``name`` is not a string of that shape, or
-    if it spells a different kind than ``kind`` (``std_srvs/srv/Empty`` given
-    where a message is expected).
-    """
-    if not isinstance(name, str):
-        raise TypeNameError(name, f"expected a string like 'pkg/{kind}/Type'")
-    parts = name.split("/")
-    if len(parts) == 2:
-        pkg, typ = parts
-    elif len(parts) == 3:
-        pkg, got_kind, typ = parts
-        if got_kind not in _KINDS:
-            raise TypeNameError(
-                name, f"middle part must be one of msg, srv, action, got {got_kind!r}"
-            )
-        if got_kind != kind:
-            raise TypeNameError(name, f"names a {got_kind} type where a {kind} type is expected")
-    else:
-        raise TypeNameError(name, f"expected 'pkg/Type' or 'pkg/{kind}/Type'")
-    if not _PKG_RE.match(pkg):
-        raise TypeNameError(name, f"bad package name {pkg!r}")
-    if not _TYPE_RE.match(typ):
-        raise TypeNameError(name, f"bad type name {typ!r}")
-    return TypeName(pkg, kind, typ)
-
-
-def canonical_name(name: object, kind: Kind) -> str:
-    """Return the canonical ``pkg/<kind>/Type`` spelling of a type string (no import)."""
-    return str(parse_type_name(name, kind))
-
 
 def _index_dirs() -> list[Path]:
     """Directories that hold ``rosidl_interfaces`` ament index entries."""
@@ -171,7 +94,7 @@ def installed_interfaces() -> list[str]:
             for line in lines:
                 kind, _, file_name = line.strip().partition("/")
                 name, _, _ext = file_name.partition(".")
-                if kind in ("msg", "srv", "action") and _TYPE_RE.match(name):
+                if kind in ("msg", "srv", "action") and TYPE_RE.match(name):
                     found.add(f"{entry.name}/{kind}/{name}")
     return sorted(found)
 
@@ -251,6 +174,6 @@ def type_name_of(cls: type[Any]) -> str:
     and ``test_msgs/action/Fibonacci_Goal``.
     """
     parts = getattr(cls, "__module__", "").split(".")
-    if len(parts) < 2 or parts[1] not in _KINDS:
+    if len(parts) < 2 or parts[1] not in KINDS:
         raise TypeError(f"{cls!r} is not an rclpy interface class")
     return f"{parts[0]}/{parts[1]}/{cls.__name__}"

@@ -46,7 +46,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from ..rclpy_graph.types import BridgeError
+from ..interfaces import BridgeError
 from .permissions import Role, RoleError
 
 __all__ = [

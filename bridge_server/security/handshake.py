@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING, Any
 from websockets.asyncio.server import ServerConnection
 from websockets.http11 import Request, Response
 
-from ..rclpy_graph.types import BridgeError
+from ..interfaces import BridgeError
 from .auth import AuthConfig, AuthFileError, FailureTracker, load_auth_file
 from .credentials import client_address, is_loopback, token_of
 from .gate import PRE_AUTH_FRAME_LIMIT, Gate

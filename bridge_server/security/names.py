@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import re
 
-from ..rclpy_graph.types import BridgeError
+from ..interfaces import BridgeError
 
 __all__ = ["MAX_NAME_LENGTH", "InvalidNameError", "check_name", "full_name"]
 

@@ -7,7 +7,7 @@ import getpass
 import os
 from dataclasses import dataclass
 
-from ..rclpy_graph.types import BridgeError
+from ..interfaces import BridgeError
 from .credentials import is_loopback
 
 __all__ = [

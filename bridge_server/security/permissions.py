@@ -37,7 +37,7 @@ from typing import Any
 
 from roslibpy_lite import ops
 
-from ..rclpy_graph.types import BridgeError
+from ..interfaces import BridgeError
 
 __all__ = [
     "CAPABILITIES",

@@ -19,7 +19,7 @@ from websockets.asyncio.messages import Assembler, SimpleQueue
 from websockets.asyncio.server import ServerConnection
 from websockets.frames import Frame
 
-from ..rclpy_graph.types import BridgeError
+from ..interfaces import BridgeError
 
 if TYPE_CHECKING:
     from .auth import Principal

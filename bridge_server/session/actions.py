@@ -3,8 +3,8 @@
 A :class:`SessionActions` belongs to one :class:`~bridge_server.session.Session`
 (``session.actions``), which hands it the action ops listed in
 :attr:`SessionActions.OPS` and calls :meth:`SessionActions.close` when the client
-goes away. The rclpy
-side lives in :mod:`bridge_server.rclpy_graph.actions`.
+goes away. The ROS side is the session's :class:`~bridge_server.graph.Graph` (on
+rclpy: :mod:`bridge_server.rclpy_graph.actions`).
 
 Sending goals
 -------------
@@ -14,7 +14,7 @@ fields) converts the goal, waits for an action server (at most
 graph does not list the action at all: one started just before can take ~3 s to
 appear on a loaded machine, as for typed service calls) and sends it. A newly
 matched server is first probed until it answers (see
-:meth:`~bridge_server.rclpy_graph.actions.SharedActionClient.ready`), so that the goal's
+:meth:`~bridge_server.graph.ActionClient.ready`), so that the goal's
 answer cannot be lost to discovery still under way. With ``feedback: true`` each feedback goes back
 as ``action_feedback`` {id, action, values}. The end is one ``action_result``
 {id, action, values, status, result}: ``status`` is the GoalStatus number,
@@ -72,20 +72,12 @@ import cbor2
 
 from roslibpy_lite import ops
 
-from ..rclpy_graph import convert
-from ..rclpy_graph.actions import (
-    ACTIVE,
-    CANCEL_ANSWERS,
-    SentGoal,
-    ServedAction,
-    ServedGoal,
-    SharedActionClient,
-    Status,
-)
-from ..rclpy_graph.types import BridgeError, canonical_name, resolve_action
+from ..graph import ACTIVE, CANCEL_ANSWERS, Status
+from ..interfaces import BridgeError, ConversionError, args_mapping, canonical_name
 from ..security.names import full_name
 
 if TYPE_CHECKING:
+    from ..graph import ActionClient, Converter, SentGoal, ServedAction, ServedGoal
     from ..security import Gate
     from .session import Session
 
@@ -113,21 +105,21 @@ class ActionClients:
     """
 
     def __init__(self) -> None:
-        self.clients: dict[tuple[str, type[Any]], SharedActionClient] = {}
+        self.clients: dict[tuple[str, type[Any]], ActionClient] = {}
         self.lingering: dict[str, ServedAction] = {}  # unadvertised, still answering callers
         self._used: dict[tuple[str, type[Any]], float] = {}
         self._sweeper: asyncio.TimerHandle | None = None
 
-    def get(self, session: Session, name: str, action_cls: type[Any]) -> SharedActionClient:
+    def get(self, session: Session, name: str, action_cls: type[Any]) -> ActionClient:
         """The shared client for ``name`` of ``action_cls`` (created on first use)."""
         key = (name, action_cls)
         client = self.clients.get(key)
         if client is None:
-            client = self.clients[key] = SharedActionClient(session.ros, name, action_cls)
+            client = self.clients[key] = session.graph.action_client(name, action_cls)
         self.touch(session, client)
         return client
 
-    def touch(self, session: Session, client: SharedActionClient) -> None:
+    def touch(self, session: Session, client: ActionClient) -> None:
         """``client`` is in use now."""
         loop = session.loop
         self._used[(client.name, client.action_cls)] = loop.time()
@@ -295,15 +287,15 @@ class SessionActions:
             self.session.error(f"send_action_goal: goal {id!r} is already in flight", id)
             return
         try:
-            action_cls = resolve_action(op.action_type)
+            action_cls = self.session.graph.resolve_action(op.action_type)
             type_name = canonical_name(op.action_type, "action")
         except BridgeError as exc:
             self._refuse(op, id, f"send_action_goal to {name}: {exc}")
             return
-        conv = convert.converter_for(action_cls.Goal)
+        conv = self.session.graph.converter(action_cls.Goal)
         try:
-            goal_msg = conv.from_obj(convert.args_mapping(op.args, conv.fields, "goal"), "args")
-        except convert.ConversionError as exc:
+            goal_msg = conv.from_obj(args_mapping(op.args, conv.fields, "goal"), "args")
+        except ConversionError as exc:
             self._refuse(op, id, f"send_action_goal to {name} ({type_name}): {exc}")
             return
         goal = _Goal(self, op, id, name, type_name)
@@ -337,7 +329,7 @@ class SessionActions:
         wait = self.session.config.call_timeout
         goal.answer_timer = self.session.loop.call_later(wait, goal.no_answer, wait)
 
-    async def _server_for(self, goal: _Goal, action_cls: type[Any]) -> SharedActionClient:
+    async def _server_for(self, goal: _Goal, action_cls: type[Any]) -> ActionClient:
         session = self.session
         loop = session.loop
         name = goal.name
@@ -352,7 +344,7 @@ class SessionActions:
             if client is not None and client.ready():
                 clients.touch(session, client)
                 return client
-            types = _server_types(session, name + _GOAL_SUFFIX)
+            types = session.graph.server_types(name + _GOAL_SUFFIX)
             owner = self._owners.get(name)
             if not types and owner is not None and name in owner.served:
                 # served by a client of this bridge: it exists even while the graph lags
@@ -431,7 +423,7 @@ class SessionActions:
                              result=False, status=status)
         )
 
-    def emit(self, goal: _Goal, op: str, msg: Any, conv: convert.Converter,
+    def emit(self, goal: _Goal, op: str, msg: Any, conv: Converter,
              status: int | None = None) -> None:
         """Send ``action_feedback`` or ``action_result`` with ``msg`` as values (JSON or CBOR)."""
         session = self.session
@@ -486,7 +478,7 @@ class SessionActions:
         """Serve an action from this client (an rclpy action server in the bridge)."""
         session = self.session
         name = full_name(op.action)
-        action_cls = resolve_action(op.type)
+        action_cls = session.graph.resolve_action(op.type)
         type_name = canonical_name(op.type, "action")
         mine = self.served.get(name)
         if mine is not None:
@@ -500,15 +492,15 @@ class SessionActions:
         goal_service = name + _GOAL_SUFFIX
 
         def ros_servers() -> list[str]:  # our own lingering server is not another's
-            if old is not None or not _server_types(session, goal_service):
+            if old is not None or not session.graph.server_types(goal_service):
                 return []
-            return session.ros.other_servers(goal_service)
+            return session.graph.other_servers(goal_service)
 
         if not self._owners.admit(self, op, name, ros_servers):
             return
         served = ClientAction(name, op.action, type_name)
-        served.ros = ServedAction(
-            session.ros, name, action_cls,
+        served.ros = session.graph.serve_action(
+            name, action_cls,
             lambda goal: self._on_ros_goal(served, goal),
             lambda goal: self._on_ros_cancel(served, goal),
         )
@@ -586,7 +578,7 @@ class SessionActions:
         goal = served.goals[gid][0]
         try:
             msg = goal.served.feedback_conv.from_obj(op.values, "values")
-        except convert.ConversionError as exc:
+        except ConversionError as exc:
             self.session.error(f"action_feedback for {served.name}: {exc}", op.id)
             return
         goal.feedback(msg)
@@ -616,7 +608,7 @@ class SessionActions:
         if isinstance(op.values, Mapping):
             try:
                 result = goal.served.result_conv.from_obj(op.values, "values")
-            except convert.ConversionError as exc:
+            except ConversionError as exc:
                 self.session.error(
                     f"action_result for {served.name}: {exc}; the goal was aborted", op.id
                 )
@@ -663,21 +655,6 @@ def _end_linger(lingering: dict[str, ServedAction], name: str, ros: ServedAction
     if lingering.get(name) is ros:
         del lingering[name]
         ros.destroy()
-
-
-def _server_types(session: Session, service: str) -> list[str]:
-    """Types of ``service`` as its servers offer it (the graph's own list has clients' too)."""
-    node = session.ros.node
-    found: list[str] = []
-    for n, ns in node.get_node_names_and_namespaces():
-        try:
-            served = node.get_service_names_and_types_by_node(n, ns)
-        except Exception:  # the node went away meanwhile
-            continue
-        found += [t for s, types in served if s == service for t in types if t not in found]
-    return found
-
-
 
 
 _RAN = (Status.SUCCEEDED, Status.CANCELED, Status.ABORTED)

@@ -52,8 +52,8 @@ from roslibpy_lite.protocol import split_fragments
 if TYPE_CHECKING:
     from websockets.asyncio.server import ServerConnection
 
-    from ..rclpy_graph.node import Incoming
-    from ..rclpy_graph.node import SharedSubscription as _Shared
+    from ..graph import Message as Incoming
+    from ..graph import TopicFeed as _Shared
     from .resume import SentFrames
 
 __all__ = [

@@ -47,22 +47,23 @@ service                            request          response
 =================================  ===============  ===========================================
 
 Parameters are ROS 2 node parameters named ``/node:param``, read and written
-through the node's own parameter services (``rcl_interfaces``); values travel
-as JSON text, as in rosapi.
+through the node's own parameter services (``rcl_interfaces``, by the
+:class:`~bridge_server.graph.Graph`); values travel as JSON text, as in rosapi.
+Every answer comes from the Graph: nothing here knows rclpy.
 """
 
 from __future__ import annotations
 
 import asyncio
 import json
-import re
 from collections.abc import Awaitable, Callable, Mapping
 from typing import TYPE_CHECKING, Any
 
-from ..rclpy_graph.types import BridgeError, canonical_name
+from ..interfaces import BridgeError, canonical_name
 from ..security.names import InvalidNameError, check_name
 
 if TYPE_CHECKING:
+    from ..graph import Graph
     from ..server import Bridge
 
 __all__ = ["ASYNC_HANDLERS", "FIELDS", "HANDLERS", "TYPES", "RosapiError", "request_args"]
@@ -119,11 +120,11 @@ def _all_services(bridge: Bridge) -> list[tuple[str, str]]:
     share a name (two bridges started with the same ``--node-name``, or any two nodes a
     careless launch file named alike), and a by-node query sees only one of them.
     """
-    node = bridge.ros.node
+    graph = bridge.graph
     found = {
         (name, types[0] if types else "")
-        for name, types in node.get_service_names_and_types()
-        if bridge.ros.server_count(name) > 0
+        for name, types in graph.service_names_and_types()
+        if graph.server_count(name) > 0
     }
     return sorted(found | set(_own_services()))
 
@@ -144,20 +145,20 @@ def _srv_type(name: str) -> str:
 
 def topics(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, Any]:
     """Every topic in the graph and its (first) type."""
-    pairs = sorted(bridge.ros.node.get_topic_names_and_types())
+    pairs = sorted(bridge.graph.topic_names_and_types())
     return {"topics": [n for n, _ in pairs], "types": [t[0] if t else "" for _, t in pairs]}
 
 
 def topics_for_type(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, Any]:
     """Topics whose type is the given one (either spelling)."""
     wanted = _msg_type(_str_field(args, "type"))
-    pairs = sorted(bridge.ros.node.get_topic_names_and_types())
+    pairs = sorted(bridge.graph.topic_names_and_types())
     return {"topics": [n for n, types in pairs if wanted in types]}
 
 
 def topic_type(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, Any]:
     """The type of one topic, "" if the graph does not know it."""
-    types = bridge.ros.topic_types(_str_field(args, "topic"))
+    types = bridge.graph.topic_types(_str_field(args, "topic"))
     return {"type": types[0] if types else ""}
 
 
@@ -185,12 +186,12 @@ _UNKNOWN = "_NODE_NAME_UNKNOWN_"
 
 
 def _node_names(bridge: Bridge) -> list[tuple[str, str]]:
-    names = bridge.ros.node.get_node_names_and_namespaces()
+    names = bridge.graph.node_names()
     return sorted({(n, ns) for n, ns in names if n != _UNKNOWN})
 
 
-def _endpoint_nodes(infos: Any) -> list[str]:
-    return sorted({_full(i.node_name, i.node_namespace) for i in infos if i.node_name != _UNKNOWN})
+def _endpoint_nodes(nodes: list[tuple[str, str]]) -> list[str]:
+    return sorted({_full(n, ns) for n, ns in nodes if n != _UNKNOWN})
 
 
 def nodes(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, Any]:
@@ -204,11 +205,10 @@ def service_node(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, Any]:
     if name in HANDLERS or name in bridge.service_owners:
         # rosapi itself, or served by one of this bridge's clients: this node serves it,
         # whatever the graph says yet
-        return {"node": _full(bridge.ros.node.get_name(), bridge.ros.node.get_namespace())}
-    node = bridge.ros.node
+        return {"node": _full(*bridge.graph.own_node())}
     for n, ns in _node_names(bridge):
         try:
-            found = node.get_service_names_and_types_by_node(n, ns)
+            found = bridge.graph.node_services(n, ns)
         except Exception:
             continue
         if any(s == name for s, _ in found):
@@ -222,19 +222,15 @@ def node_details(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, Any]:
     name, ns = _split(full)
     if (name, ns) not in _node_names(bridge):
         raise RosapiError(f"node {full} is not in the ROS graph")
-    node = bridge.ros.node
-    subs = [t for t, _ in node.get_subscriber_names_and_types_by_node(name, ns)]
-    pubs = [t for t, _ in node.get_publisher_names_and_types_by_node(name, ns)]
-    srvs = [s for s, _ in node.get_service_names_and_types_by_node(name, ns)]
-    if name == node.get_name() and ns == node.get_namespace():
+    subs, pubs, srvs = bridge.graph.node_endpoints(name, ns)
+    if (name, ns) == bridge.graph.own_node():
         srvs += [n for n, _ in _own_services()]
     return {"subscribing": sorted(subs), "publishing": sorted(pubs), "services": sorted(srvs)}
 
 
 def publishers(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, Any]:
     """Nodes publishing on a topic."""
-    infos = bridge.ros.node.get_publishers_info_by_topic(_topic_field(args))
-    return {"publishers": _endpoint_nodes(infos)}
+    return {"publishers": _endpoint_nodes(bridge.graph.topic_publishers(_topic_field(args)))}
 
 
 def _duration(value: Any) -> dict[str, int]:
@@ -271,8 +267,7 @@ def publishers_qos(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, Any]:
 
 def subscribers(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, Any]:
     """Nodes subscribed to a topic."""
-    infos = bridge.ros.node.get_subscriptions_info_by_topic(_topic_field(args))
-    return {"subscribers": _endpoint_nodes(infos)}
+    return {"subscribers": _endpoint_nodes(bridge.graph.topic_subscribers(_topic_field(args)))}
 
 
 def action_servers(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, Any]:
@@ -285,7 +280,7 @@ def action_servers(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, Any]:
 
 def get_time(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, Any]:
     """The bridge node's clock; ROS 1 key names are added for older clients."""
-    sec, nanosec = bridge.ros.now()
+    sec, nanosec = bridge.graph.now()
     return {"time": {"sec": sec, "nanosec": nanosec, "secs": sec, "nsecs": nanosec}}
 
 
@@ -348,149 +343,32 @@ FIELDS: dict[str, tuple[str, ...]] = {
 
 # -- type definitions (message_details and friends) ----------------------------------------
 
-_SEQ = re.compile(r"sequence<([^,>]+)(?:,\s*(\d+))?>\Z")
-_ARR = re.compile(r"(.+)\[(\d+)\]\Z")
-_EXAMPLES = {"boolean": "False", "string": "", "wstring": "", "float": "0.0", "double": "0.0"}
-
-
-def _split_field_type(spec: str) -> tuple[str, int]:
-    """Base type and array length: ``sequence<double>`` -> (double, 0), ``double[36]`` ->
-    (double, 36), ``int32`` -> (int32, -1)."""
-    m = _SEQ.match(spec)
-    if m:
-        return m.group(1).strip(), 0
-    m = _ARR.match(spec)
-    if m:
-        return m.group(1), int(m.group(2))
-    return spec, -1
-
-
-def _full_type(base: str) -> str:
-    if "/" in base:
-        pkg, _, name = base.rpartition("/")
-        return f"{pkg.split('/')[0]}/msg/{name}"
-    if base.startswith(("string<", "wstring<")):
-        return base.split("<")[0]
-    return base
-
-
-def _typedef(cls: type[Any], name: str) -> tuple[dict[str, Any], list[type[Any]]]:
-    meta = type(cls)
-    constants = getattr(meta, f"_{meta.__name__}__constants", {}) or {}
-    fieldnames, fieldtypes, arraylens, examples = [], [], [], []
-    nested: list[type[Any]] = []
-    for field_name, spec in cls.get_fields_and_field_types().items():
-        base, arraylen = _split_field_type(spec)
-        full = _full_type(base)
-        fieldnames.append(field_name)
-        fieldtypes.append(full)
-        arraylens.append(arraylen)
-        if arraylen >= 0:
-            examples.append("[]")
-        elif "/" in full:
-            examples.append("{}")
-        else:
-            examples.append(_EXAMPLES.get(full, "0"))
-        if "/" in full:
-            nested.append(_message_class(full))
-    return (
-        {
-            "type": name,
-            "fieldnames": fieldnames,
-            "fieldtypes": fieldtypes,
-            "fieldarraylen": arraylens,
-            "examples": examples,
-            "constnames": list(constants),
-            "constvalues": [str(v) for v in constants.values()],
-        },
-        nested,
-    )
-
-
-def _message_class(name: str) -> type[Any]:
-    from ..rclpy_graph.types import resolve_message
-
-    try:
-        return resolve_message(name)
-    except BridgeError as exc:
-        raise RosapiError(str(exc)) from None
-
-
-def _typedefs(cls: type[Any], name: str) -> list[dict[str, Any]]:
-    """The typedef of ``cls`` then those of every nested type, each once."""
-    from ..rclpy_graph.types import type_name_of
-
-    out: list[dict[str, Any]] = []
-    seen: set[type[Any]] = set()
-    todo: list[tuple[type[Any], str]] = [(cls, name)]
-    while todo:
-        current, current_name = todo.pop(0)
-        if current in seen:
-            continue
-        seen.add(current)
-        typedef, nested = _typedef(current, current_name)
-        out.append(typedef)
-        todo.extend((n, type_name_of(n)) for n in nested if n not in seen)
-    return out
-
-
 def message_details(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, Any]:
     """Field names, types, array lengths and constants of a message type and its parts."""
     name = _str_field(args, "type")
-    cls = _message_class(name)
-    return {"typedefs": _typedefs(cls, _msg_type(name))}
-
-
-def _service_part(args: Mapping[str, Any], part: str) -> dict[str, Any]:
-    from ..rclpy_graph.types import resolve_service
-
-    name = _str_field(args, "type")
-    try:
-        srv = resolve_service(name)
-    except BridgeError as exc:
-        raise RosapiError(str(exc)) from None
-    cls = getattr(srv, part)
-    return {"typedefs": _typedefs(cls, f"{_srv_type(name)}_{part}")}
+    return {"typedefs": bridge.graph.typedefs(name, "msg")}
 
 
 def service_request_details(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, Any]:
     """Typedefs of a service type's request."""
-    return _service_part(args, "Request")
+    return {"typedefs": bridge.graph.typedefs(_str_field(args, "type"), "srv", "Request")}
 
 
 def service_response_details(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, Any]:
     """Typedefs of a service type's response."""
-    return _service_part(args, "Response")
-
-
-def _source(package: str, kind: str, name: str) -> str | None:
-    """The installed ``.msg``/``.srv``/``.action`` text of a type (None if not found)."""
-    import os
-    import sys
-    from pathlib import Path
-
-    prefixes = [p for p in os.environ.get("AMENT_PREFIX_PATH", "").split(os.pathsep) if p]
-    prefixes += [sys.prefix, sys.base_prefix]
-    for prefix in prefixes:
-        path = Path(prefix) / "share" / package / kind / f"{name}.{kind}"
-        if path.is_file():
-            try:
-                return path.read_text(encoding="utf-8")
-            except OSError:
-                return None
-    return None
+    return {"typedefs": bridge.graph.typedefs(_str_field(args, "type"), "srv", "Response")}
 
 
 _full_texts: dict[str, str] = {}
 
 
-def _full_text(type_name: str) -> str:
+def _full_text(graph: Graph, type_name: str) -> str:
     """A topic type's definition with its dependencies' ("" if not installed; cached)."""
     text = _full_texts.get(type_name)
     if text is None:
         try:
-            text = _definition_of(type_name)["definition"]
-        except RosapiError:
+            text = graph.interface_definition(type_name)["definition"]
+        except BridgeError:
             text = ""
         _full_texts[type_name] = text
     return text
@@ -498,19 +376,17 @@ def _full_text(type_name: str) -> str:
 
 def interfaces(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, Any]:
     """Every interface type installed with the bridge (what a client may ``load_types``)."""
-    from ..rclpy_graph.types import installed_interfaces
-
-    return {"interfaces": installed_interfaces()}
+    return {"interfaces": bridge.graph.installed_interfaces()}
 
 
 def topics_and_raw_types(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, Any]:
     """Topics, their types, and each type's full definition text (with its dependencies)."""
-    pairs = sorted(bridge.ros.node.get_topic_names_and_types())
+    pairs = sorted(bridge.graph.topic_names_and_types())
     types = [t[0] if t else "" for _, t in pairs]
     return {
         "topics": [n for n, _ in pairs],
         "types": types,
-        "typedefs_full_text": [_full_text(t) if t else "" for t in types],
+        "typedefs_full_text": [_full_text(bridge.graph, t) if t else "" for t in types],
     }
 
 
@@ -521,55 +397,7 @@ def interface_definition(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, A
     uses, each after a line of 80 ``=`` and ``MSG: pkg/msg/Name`` (the ``ros2msg``
     layout rosbag2 writes into MCAP schemas); clients build typed classes from it.
     """
-    return _definition_of(_str_field(args, "type"))
-
-
-def _definition_of(name: str) -> dict[str, Any]:
-    from msgs.parser import DefinitionError, parse_action, parse_message, parse_service
-
-    match = _TYPE_NAME.match(name)
-    if match is None:
-        raise RosapiError(f"type: {name!r} is not a type name (expected 'pkg/msg/Name', "
-                          "'pkg/srv/Name', 'pkg/action/Name' or 'pkg/Name')")
-    package, kind, short = match["pkg"], match["kind"], match["name"]
-    found = next(((k, text) for k in ((kind,) if kind else ("msg", "srv", "action"))
-                  if (text := _source(package, k, short)) is not None), None)
-    if found is None:
-        raise RosapiError(f"type: {name} is not installed on the robot (no "
-                          f"share/{package}/{kind or 'msg|srv|action'}/{short} definition)")
-    kind, text = found
-    parts: list[str] = [text.rstrip("\n")]
-    try:
-        if kind == "msg":
-            todo = [parse_message(text, package, short)]
-        elif kind == "srv":
-            srv = parse_service(text, package, short)
-            todo = [srv.request, srv.response]
-        else:
-            act = parse_action(text, package, short)
-            todo = [act.goal, act.result, act.feedback]
-        seen = {f"{package}/msg/{short}"}
-        while todo:
-            spec = todo.pop(0)
-            for f in spec.fields:
-                if f.type.is_primitive or f.type.message_type in seen:
-                    continue
-                dep = f.type.message_type
-                seen.add(dep)
-                dep_pkg, _, dep_name = dep.split("/")
-                dep_text = _source(dep_pkg, "msg", dep_name)
-                if dep_text is None:
-                    raise RosapiError(f"type: {name} uses {dep}, which is not installed")
-                parts.append("=" * 80 + f"\nMSG: {dep}\n" + dep_text.rstrip("\n"))
-                todo.append(parse_message(dep_text, dep_pkg, dep_name))
-    except DefinitionError as exc:
-        raise RosapiError(
-            f"type: the installed definition of {name} does not parse: {exc}") from None
-    return {"type": f"{package}/{kind}/{short}", "definition": "\n".join(parts) + "\n"}
-
-
-_TYPE_NAME = re.compile(
-    r"^(?P<pkg>[a-z][a-z0-9_]*)/(?:(?P<kind>msg|srv|action)/)?(?P<name>[A-Z][A-Za-z0-9_]*)$")
+    return bridge.graph.interface_definition(_str_field(args, "type"))
 
 
 HANDLERS.update(
@@ -619,31 +447,19 @@ def action_type(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, Any]:
     return {"type": ""}
 
 
-def _action_part(args: Mapping[str, Any], part: str) -> dict[str, Any]:
-    from ..rclpy_graph.types import resolve_action
-
-    name = _str_field(args, "type")
-    try:
-        action = resolve_action(name)
-        canonical = canonical_name(name, "action")
-    except BridgeError as exc:
-        raise RosapiError(str(exc)) from None
-    return {"typedefs": _typedefs(getattr(action, part), f"{canonical}_{part}")}
-
-
 def action_goal_details(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, Any]:
     """Typedefs of an action type's goal."""
-    return _action_part(args, "Goal")
+    return {"typedefs": bridge.graph.typedefs(_str_field(args, "type"), "action", "Goal")}
 
 
 def action_result_details(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, Any]:
     """Typedefs of an action type's result."""
-    return _action_part(args, "Result")
+    return {"typedefs": bridge.graph.typedefs(_str_field(args, "type"), "action", "Result")}
 
 
 def action_feedback_details(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, Any]:
     """Typedefs of an action type's feedback."""
-    return _action_part(args, "Feedback")
+    return {"typedefs": bridge.graph.typedefs(_str_field(args, "type"), "action", "Feedback")}
 
 
 _ACTION_CALLS = {
@@ -663,14 +479,6 @@ for _service, (_handler, _srv, _field) in _ACTION_CALLS.items():
 PARAM_TIMEOUT = 2.0
 """Seconds ``get_param_names`` waits for each listed node's parameter service."""
 
-PARAM_DISCOVERY = 5.0
-"""Seconds a named node's parameter service may stay out of the ROS graph before a
-get/set/has/delete fails (a node that does not exist is reported then)."""
-
-PARAM_CALL_TIMEOUT = 10.0
-"""Seconds a get/set/has/delete waits for a listed node to match and answer (a busy
-machine can take seconds to match a node that has just started)."""
-
 AsyncHandler = Callable[["Bridge", Mapping[str, Any]], Awaitable[dict[str, Any]]]
 
 
@@ -687,59 +495,6 @@ def _param_name(args: Mapping[str, Any]) -> tuple[str, str, str]:
     return node, param, f"{node}:{param}"
 
 
-def _from_parameter_value(value: Any) -> Any:
-    kind = value.type
-    if kind == 1:
-        return bool(value.bool_value)
-    if kind == 2:
-        return int(value.integer_value)
-    if kind == 3:
-        return float(value.double_value)
-    if kind == 4:
-        return str(value.string_value)
-    if kind == 5:
-        return [int(b) if isinstance(b, int) else b[0] for b in value.byte_array_value]
-    if kind == 6:
-        return [bool(v) for v in value.bool_array_value]
-    if kind == 7:
-        return [int(v) for v in value.integer_array_value]
-    if kind == 8:
-        return [float(v) for v in value.double_array_value]
-    if kind == 9:
-        return [str(v) for v in value.string_array_value]
-    return None
-
-
-def _to_parameter_value(value: Any) -> Any:
-    from rcl_interfaces.msg import ParameterValue
-
-    pv = ParameterValue()
-    if value is None:
-        pv.type = 0
-    elif isinstance(value, bool):
-        pv.type, pv.bool_value = 1, value
-    elif isinstance(value, int):
-        pv.type, pv.integer_value = 2, value
-    elif isinstance(value, float):
-        pv.type, pv.double_value = 3, value
-    elif isinstance(value, str):
-        pv.type, pv.string_value = 4, value
-    elif isinstance(value, list) and all(isinstance(v, bool) for v in value):
-        pv.type, pv.bool_array_value = 6, value
-    elif isinstance(value, list) and all(isinstance(v, int) for v in value):
-        pv.type, pv.integer_array_value = 7, value
-    elif isinstance(value, list) and all(isinstance(v, int | float) for v in value):
-        pv.type, pv.double_array_value = 8, [float(v) for v in value]
-    elif isinstance(value, list) and all(isinstance(v, str) for v in value):
-        pv.type, pv.string_array_value = 9, value
-    else:
-        raise RosapiError(
-            "args.value: a ROS 2 parameter is a bool, int, float, string or a list of one of "
-            f"those, got {type(value).__name__}"
-        )
-    return pv
-
-
 def _json_arg(args: Mapping[str, Any], name: str) -> Any:
     text = args.get(name)
     if text is None or text == "":
@@ -752,82 +507,63 @@ def _json_arg(args: Mapping[str, Any], name: str) -> Any:
         raise RosapiError(f"args.{name}: not valid JSON ({exc})") from None
 
 
-async def _get_values(bridge: Bridge, node: str, names: list[str]) -> list[Any]:
-    from rcl_interfaces.srv import GetParameters
-
-    try:
-        response = await bridge.ros.call_when_ready(
-            f"{node}/get_parameters", GetParameters, GetParameters.Request(names=names),
-            PARAM_CALL_TIMEOUT, discovery_wait=PARAM_DISCOVERY,
-        )
-    except (TimeoutError, LookupError):
-        raise RosapiError(f"node {node} does not answer parameter requests") from None
-    return list(response.values)
-
-
-async def _set_value(bridge: Bridge, node: str, param: str, value: Any) -> tuple[bool, str]:
-    from rcl_interfaces.msg import Parameter
-    from rcl_interfaces.srv import SetParameters
-
-    request = SetParameters.Request(parameters=[Parameter(name=param, value=value)])
-    try:
-        response = await bridge.ros.call_when_ready(
-            f"{node}/set_parameters", SetParameters, request, PARAM_CALL_TIMEOUT,
-            discovery_wait=PARAM_DISCOVERY,
-        )
-    except (TimeoutError, LookupError):
-        raise RosapiError(f"node {node} does not answer parameter requests") from None
-    result = response.results[0]
-    return bool(result.successful), str(result.reason)
-
-
 async def get_param_names(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, Any]:
     """Every parameter of every node that offers parameter services, as ``/node:param``."""
-    from rcl_interfaces.srv import ListParameters
-
-    own = _full(bridge.ros.node.get_name(), bridge.ros.node.get_namespace())
+    graph = bridge.graph
+    own = _full(*graph.own_node())
     nodes = [_full(n, ns) for n, ns in _node_names(bridge)]
 
     async def one(node: str) -> list[str]:
         if node == own:
             return []
         try:
-            response = await bridge.ros.call_when_ready(
-                f"{node}/list_parameters", ListParameters, ListParameters.Request(),
-                PARAM_TIMEOUT,
-            )
+            names = await graph.parameter_names(node, PARAM_TIMEOUT)
         except Exception:
             return []
-        return [f"{node}:{name}" for name in response.result.names]
+        return [f"{node}:{name}" for name in names]
 
     found = await asyncio.gather(*(one(n) for n in nodes))
     return {"names": sorted(name for names in found for name in names)}
+
+
+async def _get_value(bridge: Bridge, node: str, param: str) -> tuple[bool, Any]:
+    try:
+        return await bridge.graph.get_parameter(node, param)
+    except (TimeoutError, LookupError):
+        raise RosapiError(f"node {node} does not answer parameter requests") from None
+
+
+async def _set_value(bridge: Bridge, node: str, param: str, value: Any) -> tuple[bool, str]:
+    try:
+        return await bridge.graph.set_parameter(node, param, value)
+    except (TimeoutError, LookupError):
+        raise RosapiError(f"node {node} does not answer parameter requests") from None
+    except ValueError as exc:  # a value no parameter can hold
+        raise RosapiError(str(exc)) from None
 
 
 async def get_param(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, Any]:
     """A parameter's value as JSON text (``default_value`` if it is not set)."""
     node, param, full = _param_name(args)
     default = args.get("default_value", "")
-    values = await _get_values(bridge, node, [param])
-    if not values or values[0].type == 0:
+    is_set, value = await _get_value(bridge, node, param)
+    if not is_set:
         return {"value": default if isinstance(default, str) else "", "successful": True,
                 "reason": f"{full} is not set"}
-    return {"value": json.dumps(_from_parameter_value(values[0])), "successful": True,
-            "reason": ""}
+    return {"value": json.dumps(value), "successful": True, "reason": ""}
 
 
 async def has_param(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, Any]:
     """Whether a parameter is set."""
     node, param, _ = _param_name(args)
-    values = await _get_values(bridge, node, [param])
-    return {"exists": bool(values) and values[0].type != 0}
+    is_set, _value = await _get_value(bridge, node, param)
+    return {"exists": is_set}
 
 
 async def set_param(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, Any]:
     """Set a parameter from JSON text; fails (result false) if the node refuses."""
     node, param, full = _param_name(args)
-    value = _to_parameter_value(_json_arg(args, "value"))
-    ok, reason = await _set_value(bridge, node, param, value)
+    ok, reason = await _set_value(bridge, node, param, _json_arg(args, "value"))
     if not ok:
         raise RosapiError(f"{full}: the node refused the value" + (f": {reason}" * bool(reason)))
     return {}
@@ -836,7 +572,7 @@ async def set_param(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, Any]:
 async def delete_param(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, Any]:
     """Unset (undeclare) a parameter; fails if the node does not allow it."""
     node, param, full = _param_name(args)
-    ok, reason = await _set_value(bridge, node, param, _to_parameter_value(None))
+    ok, reason = await _set_value(bridge, node, param, None)
     if not ok:
         raise RosapiError(f"{full}: the node refused to unset it" + (f": {reason}" * bool(reason)))
     return {}

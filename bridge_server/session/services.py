@@ -35,21 +35,27 @@ from __future__ import annotations
 
 import asyncio
 import itertools
+import json
 import logging
 import time
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from typing import TYPE_CHECKING, Any, ClassVar
 
 from roslibpy_lite import ops
 
 from ..http.metrics import outcome
-from ..rclpy_graph import convert
-from ..rclpy_graph.types import BridgeError, canonical_name
+from ..interfaces import (
+    BridgeError,
+    ConversionError,
+    ServiceCallError,
+    args_mapping,
+    canonical_name,
+)
 from ..security.names import full_name
 from . import rosapi
 
 if TYPE_CHECKING:
-    from ..rclpy_graph.node import PendingRosCall, ServedService
+    from ..graph import RosCall, ServedService
     from ..security import Gate
     from .session import Session
 
@@ -66,7 +72,7 @@ class ClientService:
         self.wire = wire or name  # the name as the client spelled it
         self.type_name = type_name
         self.ros: ServedService | None = None
-        self.pending: dict[str, tuple[PendingRosCall | _DirectCall, asyncio.TimerHandle]] = {}
+        self.pending: dict[str, tuple[RosCall | _DirectCall, asyncio.TimerHandle]] = {}
 
 
 class _DirectCall:
@@ -101,7 +107,7 @@ class SessionServices:
 
     def __init__(self, session: Session) -> None:
         self.session = session
-        self.ros = session.ros
+        self.graph = session.graph
         self.served: dict[str, ClientService] = {}
         self._owners = session.bridge.service_owners
         self._request_ids = itertools.count()
@@ -140,8 +146,11 @@ class SessionServices:
                 self._respond(wire, op.id, result, direct, op.fragment_size, t0)
                 return
             else:
-                values = await self._call_ros(service, op, timeout)
-        except _CallFailed as exc:
+                values = await self.graph.call_service(
+                    service, op.type, op.args, timeout, session.config.discovery_wait,
+                    lambda request: session.actions.cancel_refusal(service, request),
+                )
+        except (_CallFailed, ServiceCallError) as exc:
             self._respond(wire, op.id, False, str(exc), op.fragment_size, t0)
             return
         except (BridgeError, rosapi.RosapiError) as exc:
@@ -177,84 +186,12 @@ class SessionServices:
         text = ops.encode(ops.ServiceResponse(service=service, result=result, values=values, id=id))
         session.outbox.send_split(text, fragment_size, id, service)
 
-    async def _call_ros(
-        self, service: str, op: ops.CallService, timeout: float
-    ) -> Mapping[str, Any]:
-        ros = self.ros
-        loop = self.session.loop
-        config = self.session.config
-        deadline = loop.time() + timeout
-        if op.type is not None:
-            srv_cls = ros.resolve_service(op.type)
-        else:
-            types = ros.service_types(service)
-            if not types:
-                wait_until = min(deadline, loop.time() + config.discovery_wait)
-                while not types and loop.time() < wait_until:
-                    await asyncio.sleep(0.02)
-                    types = ros.service_types(service)
-            if not types:
-                raise _CallFailed(f"service {service} does not exist (not in the ROS graph)")
-            srv_cls = ros.resolve_service(types[0])
-        req_conv = convert.converter_for(srv_cls.Request)
-        try:
-            args = convert.args_mapping(op.args, req_conv.fields, "request")
-            request = req_conv.from_obj(args, "args")
-        except convert.ConversionError as exc:
-            raise _CallFailed(f"{service}: bad request: {exc}") from None
-        refusal = self.session.actions.cancel_refusal(service, request)  # an action's cancel_goal
-        if refusal is not None:
-            raise _CallFailed(f"{service}: {refusal}")
-        client = ros.client_for(service, srv_cls)
-        if not client.service_is_ready():
-            # Wait for a server to be discovered and matched: while the graph lists no
-            # server, at most twice discovery_wait (a server that was just started can take
-            # ~3 s to show on a loaded machine); once it does, up to the call's timeout.
-            unlisted_wait = 2 * config.discovery_wait
-            unlisted_by = loop.time() + unlisted_wait
-            delay = 0.002
-            while not _ready(client):
-                if loop.time() >= unlisted_by and ros.server_count(service) == 0:
-                    ros.drop_client(service, srv_cls)  # so the graph forgets the name
-                    raise _CallFailed(
-                        f"service {service} does not exist (not in the ROS graph after "
-                        f"{unlisted_wait:g} s)"
-                    )
-                if _ready(client) is None:  # another call dropped the cached client
-                    client = ros.client_for(service, srv_cls)
-                if loop.time() >= deadline:
-                    ros.drop_client(service, srv_cls)  # so the graph forgets the name
-                    if ros.server_count(service) == 0:
-                        raise _CallFailed(
-                            f"service {service} does not exist (no server appeared within "
-                            f"{timeout} s)"
-                        )
-                    raise _CallFailed(
-                        f"service {service} did not become available in {timeout} s"
-                    )
-                await asyncio.sleep(delay)
-                delay = min(delay * 2, 0.05)
-        await ros.settled(client)  # a newly matched server may not hear back yet
-        # A timer that fails the future is cheaper than asyncio.wait_for (no extra task).
-        future = ros.call(client, request)
-        timer = loop.call_at(deadline, _expire, future)
-        try:
-            response = await future
-        except _Expired:
-            raise _CallFailed(f"service {service} timed out after {timeout} s") from None
-        finally:
-            timer.cancel()
-            if not future.done():  # this task was cancelled: forget the request
-                future.cancel()
-        obj: Mapping[str, Any] = convert.converter_for(srv_cls.Response).to_obj(response)
-        return obj
-
     # -- serving -------------------------------------------------------------------------------
 
     def advertise_service(self, op: ops.AdvertiseService) -> None:
         """Serve a ROS service from this client."""
         name = full_name(op.service)
-        srv_cls = self.ros.resolve_service(op.type)
+        srv_cls = self.graph.resolve_service(op.type)
         type_name = canonical_name(op.type, "srv")
         if name in rosapi.HANDLERS or name in rosapi.ASYNC_HANDLERS:
             self.session.error(
@@ -267,17 +204,18 @@ class SessionServices:
                 return
             self.remove_served(mine, "the client advertised it again with another type")
             del self.served[name]
-        ros = self.ros
+        graph = self.graph
         if not self._owners.admit(
-            self, op, name, lambda: ros.other_servers(name) if ros.service_types(name) else []
+            self, op, name, lambda: graph.other_servers(name) if graph.service_types(name) else []
         ):
             return
         served = ClientService(name, type_name, op.service)
-        served.ros = ros.serve(name, srv_cls, lambda pending: self._on_ros_request(served, pending))
+        served.ros = graph.serve(name, srv_cls,
+                                 lambda pending: self._on_ros_request(served, pending))
         self.served[name] = served
         self._owners.take(name, self)
 
-    def _on_ros_request(self, served: ClientService, pending: PendingRosCall) -> None:
+    def _on_ros_request(self, served: ClientService, pending: RosCall) -> None:
         session = self.session
         if self.served.get(served.name) is not served or session.closed:
             log.warning("a ROS call to %s arrived after it was unadvertised: not answered",
@@ -285,7 +223,7 @@ class SessionServices:
             return
         rid = f"service_request:{served.name}:{next(self._request_ids)}"
         try:  # the op's text in one step, the request by its compiled converter
-            text = convert.encode_call_json(served.wire, pending.served.request_conv.to_json(
+            text = _encode_call_json(served.wire, pending.served.request_conv.to_json(
                 pending.request), rid)
         except Exception:
             log.exception("cannot convert a request to %s", served.name)
@@ -341,7 +279,7 @@ class SessionServices:
             conv = served.ros.response_conv
             try:
                 obj = conv.to_obj(conv.from_obj(op.values or {}, "values"))
-            except convert.ConversionError as exc:
+            except ConversionError as exc:
                 session.error(f"service_response for {name}: {exc}", op.id)
                 pending.fail(f"service {name} answered with a bad response: {exc}")
                 return
@@ -359,7 +297,7 @@ class SessionServices:
         values = op.values if isinstance(op.values, Mapping) else {}
         try:
             response = served.ros.response_conv.from_obj(values, "values")
-        except convert.ConversionError as exc:
+        except ConversionError as exc:
             session.error(f"service_response for {name}: {exc}; the ROS caller is not answered",
                           op.id)
             return
@@ -379,8 +317,8 @@ class SessionServices:
         conv = served.ros.request_conv
         try:
             args = conv.to_obj(conv.from_obj(
-                convert.args_mapping(op.args, conv.fields, "request"), "args"))
-        except convert.ConversionError as exc:
+                args_mapping(op.args, conv.fields, "request"), "args"))
+        except ConversionError as exc:
             raise _CallFailed(f"{name}: bad request: {exc}") from None
         session = self.session
         rid = f"service_request:{name}:{next(self._request_ids)}"
@@ -439,22 +377,15 @@ class SessionServices:
         return self._owners.recheck(self, gate)
 
 
-class _Expired(Exception):
-    """A ROS service call ran out of time."""
-
-
-def _expire(future: asyncio.Future[Any]) -> None:
-    if not future.done():
-        future.set_exception(_Expired())
-
-
 class _CallFailed(Exception):
     """A service call failed; the text is sent as the ``service_response`` values."""
 
 
-def _ready(client: Any) -> bool | None:
-    """Whether ``client`` has a matched server; None once the client was destroyed."""
-    try:
-        return bool(client.service_is_ready())
-    except Exception:  # rclpy's InvalidHandle: dropped by another call in the meantime
-        return None
+_encode_str: Callable[[str], str] = json.encoder.encode_basestring
+
+
+def _encode_call_json(service: str, args_json: str, id: str) -> str:
+    """The JSON text of a server-to-client ``call_service`` op (a ROS caller reached a
+    service the client serves) around already encoded ``args``."""
+    return "".join(('{"op":"call_service","service":', _encode_str(service), ',"args":',
+                    args_json, ',"id":', _encode_str(id), "}"))

@@ -25,7 +25,8 @@ Write a class in a module of its own with ``OPS`` (op class -> method name),
 add it to :meth:`Session.__init__`'s ``capabilities`` line. It talks to the
 session through its public members: ``send_op``/``send_text``, ``status``,
 ``error``, ``spawn`` (a task cancelled with the session), ``outbox``, ``gate``,
-``ros``, ``bridge``, ``config``, ``loop`` and ``closed``.
+``graph`` (the ROS side: :class:`~bridge_server.graph.Graph`), ``bridge``,
+``config``, ``loop`` and ``closed``.
 """
 
 from __future__ import annotations
@@ -46,7 +47,7 @@ from roslibpy_lite.ops import ACKS_HEADER, parse_op
 from roslibpy_lite.protocol import Protocol as FrameProtocol
 from roslibpy_lite.protocol import decode_frame
 
-from ..rclpy_graph.types import BridgeError
+from ..interfaces import BridgeError
 from .actions import SessionActions
 from .outbox import DEFAULT_QUEUE_LENGTH, Outbox
 from .resume import ACK_INTERVAL
@@ -56,7 +57,7 @@ from .topics import SessionTopics
 if TYPE_CHECKING:
     from websockets.asyncio.server import ServerConnection
 
-    from ..rclpy_graph.node import RosNode
+    from ..graph import Graph
     from ..security import Gate
     from ..server import Bridge
 
@@ -112,7 +113,7 @@ class Session:
 
     def __init__(self, bridge: Bridge, ws: ServerConnection, sid: int) -> None:
         self.bridge = bridge
-        self.ros: RosNode = bridge.ros
+        self.graph: Graph = bridge.graph
         self.ws = ws
         self.sid = sid
         self.config: SessionConfig = bridge.session_config

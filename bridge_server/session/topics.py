@@ -5,7 +5,7 @@ into one :class:`~bridge_server.session.outbox.Subscription` (see
 :mod:`bridge_server.session.outbox` for the merged options and the queues);
 ``compression: png`` (legacy) falls back to plain JSON with a warning.
 Publishers are shared between clients per topic, type and latching
-(:meth:`bridge_server.rclpy_graph.node.RosNode.acquire_publisher`); a client's are released
+(:meth:`bridge_server.graph.Graph.acquire_publisher`); a client's are released
 ``publisher_grace`` seconds after it leaves.
 """
 
@@ -16,13 +16,12 @@ from typing import TYPE_CHECKING, Any, ClassVar
 
 from roslibpy_lite import ops
 
-from ..rclpy_graph import convert
-from ..rclpy_graph.types import canonical_name
+from ..interfaces import ConversionError, canonical_name
 from ..security.names import full_name
 from .outbox import Subscription
 
 if TYPE_CHECKING:
-    from ..rclpy_graph.node import SharedPublisher
+    from ..graph import Publisher
     from ..security import Gate
     from .session import Session
 
@@ -43,8 +42,8 @@ class SessionTopics:
 
     def __init__(self, session: Session) -> None:
         self.session = session
-        self.ros = session.ros
-        self.publishers: dict[str, SharedPublisher] = {}
+        self.graph = session.graph
+        self.publishers: dict[str, Publisher] = {}
         self.subs: dict[str, Subscription] = {}
 
     # -- publishing ----------------------------------------------------------------------------
@@ -52,7 +51,7 @@ class SessionTopics:
     def advertise(self, op: ops.Advertise) -> None:
         """Create (or share) a ROS publisher for the topic."""
         topic = full_name(op.topic)
-        cls = self.ros.resolve_message(op.type)
+        cls = self.graph.resolve_message(op.type)
         type_name = canonical_name(op.type, "msg")
         current = self.publishers.get(topic)
         if current is not None:
@@ -64,8 +63,8 @@ class SessionTopics:
                 op.id,
             )
             return
-        existing = [t for t in self.ros.topic_types(topic) if t != type_name]
-        existing += [t for t in self.ros.publisher_types(topic) if t != type_name]
+        existing = [t for t in self.graph.topic_types(topic) if t != type_name]
+        existing += [t for t in self.graph.publisher_types(topic) if t != type_name]
         if existing:
             self.session.error(
                 f"advertise: topic {topic} already has type {existing[0]}; "
@@ -73,7 +72,7 @@ class SessionTopics:
                 op.id,
             )
             return
-        self.publishers[topic] = self.ros.acquire_publisher(
+        self.publishers[topic] = self.graph.acquire_publisher(
             topic, cls, bool(op.latch), op.queue_size or 1
         )
 
@@ -86,14 +85,14 @@ class SessionTopics:
                 f"unadvertise: topic {topic} is not advertised by this client", op.id
             )
             return
-        self.ros.release_publisher(pub)
+        self.graph.release_publisher(pub)
 
     def publish(self, op: ops.Publish) -> None:
         """Convert the message and publish it (auto-advertising a topic the graph knows)."""
         topic = full_name(op.topic)
         pub = self.publishers.get(topic)
         if pub is None:
-            types = self.ros.topic_types(topic)
+            types = self.graph.topic_types(topic)
             if not types:
                 self.session.error(
                     f"publish: topic {topic} is not advertised and the ROS graph has no type "
@@ -101,13 +100,13 @@ class SessionTopics:
                     op.id,
                 )
                 return
-            cls = self.ros.resolve_message(types[0])
-            pub = self.publishers[topic] = self.ros.acquire_publisher(
+            cls = self.graph.resolve_message(types[0])
+            pub = self.publishers[topic] = self.graph.acquire_publisher(
                 topic, cls, bool(op.latch), op.queue_size or 10
             )
         try:
             msg = pub.conv.from_obj(op.msg, "msg")
-        except convert.ConversionError as exc:
+        except ConversionError as exc:
             self.session.error(f"publish to {topic} ({pub.type_name}): {exc}", op.id)
             return
         pub.publish(msg)
@@ -131,13 +130,13 @@ class SessionTopics:
         self._warn_limits(op, topic)
         cls: type[Any] | None = None
         if op.type is None:
-            graph = self.ros.topic_types(topic)
+            graph = self.graph.topic_types(topic)
             if graph:  # known now: an uninstalled type is an error the client should hear
-                cls = self.ros.resolve_message(graph[0])
+                cls = self.graph.resolve_message(graph[0])
         else:
-            cls = self.ros.resolve_message(op.type)
+            cls = self.graph.resolve_message(op.type)
             type_name = canonical_name(op.type, "msg")
-            graph = self.ros.topic_types(topic)
+            graph = self.graph.topic_types(topic)
             if graph and type_name not in graph:
                 session.error(
                     f"subscribe: topic {topic} has type {graph[0]} in the ROS graph, "
@@ -151,7 +150,7 @@ class SessionTopics:
             sub.ids[op.id] = op
             self._configure(sub)
             try:
-                sub.shared = self.ros.subscribe(topic, cls, sub.on_message)
+                sub.shared = self.graph.subscribe(topic, cls, sub.on_message)
             except ValueError as exc:
                 session.error(f"subscribe: {exc}", op.id)
                 return
@@ -165,9 +164,9 @@ class SessionTopics:
         if cls is not None and shared is not None:
             if shared.msg_cls is None:
                 try:
-                    self.ros.subscribe(topic, cls, sub.on_message)
+                    self.graph.subscribe(topic, cls, sub.on_message)
                 finally:
-                    self.ros.unsubscribe(shared, sub.on_message)
+                    self.graph.unsubscribe(shared, sub.on_message)
             elif shared.msg_cls is not cls:
                 session.error(
                     f"subscribe: topic {topic} is already subscribed with type "
@@ -225,8 +224,8 @@ class SessionTopics:
         metrics.retire_subscription(sub.topic, sub.sent, sub.sent_bytes, sub.dropped_total)
         if sub.shared is not None:
             shared, sub.shared = sub.shared, None
-            self.ros.unsubscribe(shared, sub.on_message)
-            if self.ros.subscriptions.get(shared.topic) is not shared:  # it went: keep its count
+            self.graph.unsubscribe(shared, sub.on_message)
+            if self.graph.subscriptions.get(shared.topic) is not shared:  # it went: keep its count
                 metrics.retire_ros_subscription(shared.topic, shared.received)
 
     # -- the session's hooks -------------------------------------------------------------------
@@ -239,9 +238,9 @@ class SessionTopics:
         grace = self.session.bridge.publisher_grace
         for pub in self.publishers.values():
             if grace > 0:
-                self.session.loop.call_later(grace, self.ros.release_publisher, pub)
+                self.session.loop.call_later(grace, self.graph.release_publisher, pub)
             else:
-                self.ros.release_publisher(pub)
+                self.graph.release_publisher(pub)
         self.publishers.clear()
 
     def recheck(self, gate: Gate) -> int:
@@ -258,7 +257,7 @@ class SessionTopics:
         for topic in list(self.publishers):
             why = gate.forbids("publish", topic)
             if why is not None:
-                self.ros.release_publisher(self.publishers.pop(topic))
+                self.graph.release_publisher(self.publishers.pop(topic))
                 self.session.error(f"advertise: publisher of {topic} ended: {why}")
                 ended += 1
         return ended

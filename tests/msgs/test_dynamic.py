@@ -12,7 +12,7 @@ from robot_msgs.msg import Status as RosStatus
 from robot_msgs.srv import SetMode as RosSetMode
 
 from bridge_server.rclpy_graph import convert
-from bridge_server.session import rosapi
+from bridge_server.rclpy_graph.introspection import interface_definition
 from msgs import cdr, dynamic
 from msgs.parser import DefinitionError
 from msgs.runtime import Message, Service, UnknownTypeError, ValidationError, lookup
@@ -20,7 +20,7 @@ from msgs.sensor_msgs.msg import Image
 
 
 def _definition(type_name: str) -> str:
-    text: str = rosapi.interface_definition(None, {"type": type_name})["definition"]  # type: ignore[arg-type]
+    text: str = interface_definition(type_name)["definition"]
     return text
 
 

@@ -1,0 +1,294 @@
+"""What the bridge tells about ROS types and nodes, from rclpy: rosapi typedefs, full
+interface definitions, node parameters.
+
+The ``/rosapi/*`` services (:mod:`bridge_server.session.rosapi`) ask for these through
+the :class:`~bridge_server.graph.Graph`; :class:`~.node.RosNode` answers with the
+functions here. Errors are :class:`~bridge_server.interfaces.BridgeError`s whose text
+says what was wrong (a rosapi caller gets it as the call's failure).
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import sys
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from rcl_interfaces.msg import Parameter, ParameterValue
+from rcl_interfaces.srv import GetParameters, ListParameters, SetParameters
+
+from ..interfaces import BridgeError, canonical_name
+from .types import resolve_action, resolve_message, resolve_service, type_name_of
+
+if TYPE_CHECKING:
+    from .node import RosNode
+
+__all__ = [
+    "PARAM_CALL_TIMEOUT",
+    "PARAM_DISCOVERY",
+    "get_parameter",
+    "interface_definition",
+    "parameter_names",
+    "set_parameter",
+    "typedefs",
+]
+
+PARAM_DISCOVERY = 5.0
+"""Seconds a named node's parameter service may stay out of the ROS graph before a
+get/set/has/delete fails (a node that does not exist is reported then)."""
+
+PARAM_CALL_TIMEOUT = 10.0
+"""Seconds a get/set/has/delete waits for a listed node to match and answer (a busy
+machine can take seconds to match a node that has just started)."""
+
+
+# -- typedefs (rosapi message_details and friends) -----------------------------------------
+
+_SEQ = re.compile(r"sequence<([^,>]+)(?:,\s*(\d+))?>\Z")
+_ARR = re.compile(r"(.+)\[(\d+)\]\Z")
+_EXAMPLES = {"boolean": "False", "string": "", "wstring": "", "float": "0.0", "double": "0.0"}
+
+
+def _split_field_type(spec: str) -> tuple[str, int]:
+    """Base type and array length: ``sequence<double>`` -> (double, 0), ``double[36]`` ->
+    (double, 36), ``int32`` -> (int32, -1)."""
+    m = _SEQ.match(spec)
+    if m:
+        return m.group(1).strip(), 0
+    m = _ARR.match(spec)
+    if m:
+        return m.group(1), int(m.group(2))
+    return spec, -1
+
+
+def _full_type(base: str) -> str:
+    if "/" in base:
+        pkg, _, name = base.rpartition("/")
+        return f"{pkg.split('/')[0]}/msg/{name}"
+    if base.startswith(("string<", "wstring<")):
+        return base.split("<")[0]
+    return base
+
+
+def _typedef(cls: type[Any], name: str) -> tuple[dict[str, Any], list[type[Any]]]:
+    meta = type(cls)
+    constants = getattr(meta, f"_{meta.__name__}__constants", {}) or {}
+    fieldnames, fieldtypes, arraylens, examples = [], [], [], []
+    nested: list[type[Any]] = []
+    for field_name, spec in cls.get_fields_and_field_types().items():
+        base, arraylen = _split_field_type(spec)
+        full = _full_type(base)
+        fieldnames.append(field_name)
+        fieldtypes.append(full)
+        arraylens.append(arraylen)
+        if arraylen >= 0:
+            examples.append("[]")
+        elif "/" in full:
+            examples.append("{}")
+        else:
+            examples.append(_EXAMPLES.get(full, "0"))
+        if "/" in full:
+            nested.append(resolve_message(full))
+    return (
+        {
+            "type": name,
+            "fieldnames": fieldnames,
+            "fieldtypes": fieldtypes,
+            "fieldarraylen": arraylens,
+            "examples": examples,
+            "constnames": list(constants),
+            "constvalues": [str(v) for v in constants.values()],
+        },
+        nested,
+    )
+
+
+def _typedefs(cls: type[Any], name: str) -> list[dict[str, Any]]:
+    """The typedef of ``cls`` then those of every nested type, each once."""
+    out: list[dict[str, Any]] = []
+    seen: set[type[Any]] = set()
+    todo: list[tuple[type[Any], str]] = [(cls, name)]
+    while todo:
+        current, current_name = todo.pop(0)
+        if current in seen:
+            continue
+        seen.add(current)
+        typedef, nested = _typedef(current, current_name)
+        out.append(typedef)
+        todo.extend((n, type_name_of(n)) for n in nested if n not in seen)
+    return out
+
+
+def typedefs(name: str, kind: str, part: str | None = None) -> list[dict[str, Any]]:
+    """The rosapi typedefs of type ``name`` of ``kind`` (``msg``, ``srv``, ``action``), of
+    its ``part`` for a service or an action (``Request``, ``Goal``, ...), then those of
+    every nested type."""
+    if kind == "msg":
+        cls = resolve_message(name)
+        return _typedefs(cls, canonical_name(name, "msg"))
+    if kind == "srv":
+        cls = resolve_service(name)
+        canonical = canonical_name(name, "srv")
+    else:
+        cls = resolve_action(name)
+        canonical = canonical_name(name, "action")
+    return _typedefs(getattr(cls, part or ""), f"{canonical}_{part}")
+
+
+# -- interface definitions -------------------------------------------------------------------
+
+
+def _source(package: str, kind: str, name: str) -> str | None:
+    """The installed ``.msg``/``.srv``/``.action`` text of a type (None if not found)."""
+    prefixes = [p for p in os.environ.get("AMENT_PREFIX_PATH", "").split(os.pathsep) if p]
+    prefixes += [sys.prefix, sys.base_prefix]
+    for prefix in prefixes:
+        path = Path(prefix) / "share" / package / kind / f"{name}.{kind}"
+        if path.is_file():
+            try:
+                return path.read_text(encoding="utf-8")
+            except OSError:
+                return None
+    return None
+
+
+def interface_definition(name: str) -> dict[str, Any]:
+    """The full definition text of any installed message, service or action type.
+
+    The type's own ``.msg``/``.srv``/``.action`` text, then every message type it
+    uses, each after a line of 80 ``=`` and ``MSG: pkg/msg/Name`` (the ``ros2msg``
+    layout rosbag2 writes into MCAP schemas); clients build typed classes from it.
+    """
+    from msgs.parser import DefinitionError, parse_action, parse_message, parse_service
+
+    match = _TYPE_NAME.match(name)
+    if match is None:
+        raise BridgeError(f"type: {name!r} is not a type name (expected 'pkg/msg/Name', "
+                          "'pkg/srv/Name', 'pkg/action/Name' or 'pkg/Name')")
+    package, kind, short = match["pkg"], match["kind"], match["name"]
+    found = next(((k, text) for k in ((kind,) if kind else ("msg", "srv", "action"))
+                  if (text := _source(package, k, short)) is not None), None)
+    if found is None:
+        raise BridgeError(f"type: {name} is not installed on the robot (no "
+                          f"share/{package}/{kind or 'msg|srv|action'}/{short} definition)")
+    kind, text = found
+    parts: list[str] = [text.rstrip("\n")]
+    try:
+        if kind == "msg":
+            todo = [parse_message(text, package, short)]
+        elif kind == "srv":
+            srv = parse_service(text, package, short)
+            todo = [srv.request, srv.response]
+        else:
+            act = parse_action(text, package, short)
+            todo = [act.goal, act.result, act.feedback]
+        seen = {f"{package}/msg/{short}"}
+        while todo:
+            spec = todo.pop(0)
+            for f in spec.fields:
+                if f.type.is_primitive or f.type.message_type in seen:
+                    continue
+                dep = f.type.message_type
+                seen.add(dep)
+                dep_pkg, _, dep_name = dep.split("/")
+                dep_text = _source(dep_pkg, "msg", dep_name)
+                if dep_text is None:
+                    raise BridgeError(f"type: {name} uses {dep}, which is not installed")
+                parts.append("=" * 80 + f"\nMSG: {dep}\n" + dep_text.rstrip("\n"))
+                todo.append(parse_message(dep_text, dep_pkg, dep_name))
+    except DefinitionError as exc:
+        raise BridgeError(
+            f"type: the installed definition of {name} does not parse: {exc}") from None
+    return {"type": f"{package}/{kind}/{short}", "definition": "\n".join(parts) + "\n"}
+
+
+_TYPE_NAME = re.compile(
+    r"^(?P<pkg>[a-z][a-z0-9_]*)/(?:(?P<kind>msg|srv|action)/)?(?P<name>[A-Z][A-Za-z0-9_]*)$")
+
+
+# -- parameters (through each node's own parameter services, rcl_interfaces) ----------------
+
+
+async def parameter_names(ros: RosNode, node: str, timeout: float) -> list[str]:
+    """Names of ``node``'s parameters (any failure raises)."""
+    response = await ros.call_when_ready(
+        f"{node}/list_parameters", ListParameters, ListParameters.Request(), timeout
+    )
+    return list(response.result.names)
+
+
+async def get_parameter(ros: RosNode, node: str, name: str) -> tuple[bool, Any]:
+    """(is set, value) of one parameter of ``node``."""
+    response = await ros.call_when_ready(
+        f"{node}/get_parameters", GetParameters, GetParameters.Request(names=[name]),
+        PARAM_CALL_TIMEOUT, discovery_wait=PARAM_DISCOVERY,
+    )
+    values = list(response.values)
+    if not values or values[0].type == 0:
+        return False, None
+    return True, _from_parameter_value(values[0])
+
+
+async def set_parameter(ros: RosNode, node: str, name: str, value: Any) -> tuple[bool, str]:
+    """Set (``None``: unset) one parameter of ``node``: (accepted, the node's reason)."""
+    request = SetParameters.Request(
+        parameters=[Parameter(name=name, value=_to_parameter_value(value))]
+    )
+    response = await ros.call_when_ready(
+        f"{node}/set_parameters", SetParameters, request, PARAM_CALL_TIMEOUT,
+        discovery_wait=PARAM_DISCOVERY,
+    )
+    result = response.results[0]
+    return bool(result.successful), str(result.reason)
+
+
+def _from_parameter_value(value: Any) -> Any:
+    kind = value.type
+    if kind == 1:
+        return bool(value.bool_value)
+    if kind == 2:
+        return int(value.integer_value)
+    if kind == 3:
+        return float(value.double_value)
+    if kind == 4:
+        return str(value.string_value)
+    if kind == 5:
+        return [int(b) if isinstance(b, int) else b[0] for b in value.byte_array_value]
+    if kind == 6:
+        return [bool(v) for v in value.bool_array_value]
+    if kind == 7:
+        return [int(v) for v in value.integer_array_value]
+    if kind == 8:
+        return [float(v) for v in value.double_array_value]
+    if kind == 9:
+        return [str(v) for v in value.string_array_value]
+    return None
+
+
+def _to_parameter_value(value: Any) -> Any:
+    pv = ParameterValue()
+    if value is None:
+        pv.type = 0
+    elif isinstance(value, bool):
+        pv.type, pv.bool_value = 1, value
+    elif isinstance(value, int):
+        pv.type, pv.integer_value = 2, value
+    elif isinstance(value, float):
+        pv.type, pv.double_value = 3, value
+    elif isinstance(value, str):
+        pv.type, pv.string_value = 4, value
+    elif isinstance(value, list) and all(isinstance(v, bool) for v in value):
+        pv.type, pv.bool_array_value = 6, value
+    elif isinstance(value, list) and all(isinstance(v, int) for v in value):
+        pv.type, pv.integer_array_value = 7, value
+    elif isinstance(value, list) and all(isinstance(v, int | float) for v in value):
+        pv.type, pv.double_array_value = 8, [float(v) for v in value]
+    elif isinstance(value, list) and all(isinstance(v, str) for v in value):
+        pv.type, pv.string_array_value = 9, value
+    else:
+        raise ValueError(
+            "args.value: a ROS 2 parameter is a bool, int, float, string or a list of one of "
+            f"those, got {type(value).__name__}"
+        )
+    return pv
