@@ -1,7 +1,10 @@
-"""What one session may do: the ``auth`` op, the op rate, names, the role and the caps.
+"""What one session may do: the ``auth`` op, the op rate, names and the role.
 
 The session consults its :class:`Gate` before each frame (:meth:`Gate.admit_frame`) and
-each op (:meth:`Gate.check`); a refusal answers the offender and nobody else.
+each op (:meth:`Gate.check`); a refusal answers the offender and nobody else. The gate
+answers only "may this principal do this to this name": how many subscriptions, publishers,
+served names or goals one connection may hold is the op groups' own business
+(``LIMITS`` in :mod:`bridge_server.session`).
 """
 
 from __future__ import annotations
@@ -151,9 +154,7 @@ class Gate:
         except (InvalidNameError, UnsafeNameError) as exc:
             self.deny(op, str(exc))
             return False
-        if self.role is not None and not self.allowed(op, *governing, used=name):
-            return False
-        return self._within_caps(op, name)
+        return self.role is None or self.allowed(op, *governing, used=name)
 
     def allowed(self, op: Any, capability: str, name: str, used: str | None = None) -> bool:
         """Whether the role may use ``capability`` on ``name``; if not, ``op`` is refused.
@@ -183,44 +184,9 @@ class Gate:
             return None
         return f"role {role.name} may not {capability} on {governing}"
 
-    def _within_caps(self, op: Any, name: str) -> bool:
-        c = self.security.config
-        s = self.session
-        have: Mapping[str, Any]
-        if isinstance(op, ops.Subscribe):
-            sub = s.topics.subs.get(name)
-            ids = c.max_subscription_ids
-            if sub is not None and ids and op.id not in sub.ids and len(sub.ids) >= ids:
-                # ids of one topic merge into one subscription, but each is work to merge
-                self.deny(op, f"too many subscription ids for {name} on this connection "
-                          f"(at most {ids})")
-                return False
-            have, cap, what = s.topics.subs, c.max_subscriptions, "subscriptions"
-        elif isinstance(op, ops.Advertise | ops.Publish):
-            have, cap, what = s.topics.publishers, c.max_publishers, "publishers"
-        elif isinstance(op, ops.AdvertiseService):
-            have, cap, what = s.services.served, c.max_services, "served services"
-        elif isinstance(op, ops.AdvertiseAction):  # each is an rclpy action server
-            have, cap, what = s.actions.served, c.max_services, "served actions"
-        elif isinstance(op, ops.SendActionGoal):  # keyed by goal id, so every new goal counts
-            have, cap, what = s.actions.goals, c.max_goals, "goals in flight"
-        else:
-            return True
-        if cap and name not in have and len(have) >= cap:
-            self.deny(op, f"too many {what} on this connection (at most {cap})")
-            return False
-        return True
-
     def deny(self, op: Any, why: str) -> None:
-        """Refuse ``op``: a status error, plus the failure shape a stock client waits for."""
-        op_id = getattr(op, "id", None)
-        self.session.error(f"{op.OP}: {why}", op_id)
-        if isinstance(op, ops.CallService):
-            self.session.send_op(ops.ServiceResponse(
-                service=op.service, result=False, values=f"{op.OP}: {why}", id=op_id))
-        elif isinstance(op, ops.SendActionGoal) and op_id is not None:
-            self.session.send_op(ops.ActionResult(
-                id=op_id, action=op.action, values=f"{op.OP}: {why}", result=False, status=6))
+        """Refuse ``op`` (:meth:`Session.refuse <bridge_server.session.session.Session.refuse>`)."""
+        self.session.refuse(op, why)
 
     def _auth(self, op: ops.Auth) -> None:
         auth = self.security.auth

@@ -75,6 +75,7 @@ from roslibpy_lite import ops
 from ..graph import ACTIVE, CANCEL_ANSWERS, Status
 from ..interfaces import BridgeError, ConversionError, args_mapping, canonical_name
 from ..security.names import full_name
+from .limits import over_cap
 
 if TYPE_CHECKING:
     from ..graph import ActionClient, Converter, SentGoal, ServedAction, ServedGoal
@@ -250,6 +251,22 @@ class SessionActions:
         ops.UnadvertiseAction: "unadvertise",
     }
     """The ops this capability carries out, and the method for each."""
+    LIMITS: ClassVar[dict[type[ops.Op], str]] = {
+        ops.SendActionGoal: "goal_limit",
+        ops.AdvertiseAction: "serve_limit",
+    }
+    """The ops that add to what the connection holds, and the method that checks each."""
+
+    def goal_limit(self, op: ops.SendActionGoal) -> str | None:
+        """Why one more goal in flight would pass the connection's limits (goals are keyed
+        by goal id, so every new goal counts)."""
+        return over_cap(self.goals, full_name(op.action), self.session.limits.max_goals,
+                        "goals in flight")
+
+    def serve_limit(self, op: ops.AdvertiseAction) -> str | None:
+        """Why serving one more action (each an rclpy action server) would pass the limits."""
+        return over_cap(self.served, full_name(op.action), self.session.limits.max_services,
+                        "served actions")
 
     def __init__(self, session: Session) -> None:
         self.session = session

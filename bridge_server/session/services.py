@@ -53,6 +53,7 @@ from ..interfaces import (
 )
 from ..security.names import full_name
 from . import rosapi
+from .limits import over_cap
 
 if TYPE_CHECKING:
     from ..graph import RosCall, ServedService
@@ -104,6 +105,13 @@ class SessionServices:
         ops.UnadvertiseService: "unadvertise_service",
     }
     """The ops this capability carries out, and the method for each."""
+    LIMITS: ClassVar[dict[type[ops.Op], str]] = {ops.AdvertiseService: "serve_limit"}
+    """The ops that add to what the connection holds, and the method that checks each."""
+
+    def serve_limit(self, op: ops.AdvertiseService) -> str | None:
+        """Why serving one more service would pass the connection's limits."""
+        return over_cap(self.served, full_name(op.service), self.session.limits.max_services,
+                        "served services")
 
     def __init__(self, session: Session) -> None:
         self.session = session

@@ -20,12 +20,13 @@ queues, the drop policy and the writer task).
 Adding a capability
 -------------------
 Write a class in a module of its own with ``OPS`` (op class -> method name),
+``LIMITS`` (op class -> method saying why the op would pass a per-connection limit),
 ``__init__(session)``, ``async close()`` (the client left) and
 ``recheck(gate) -> int`` (the role changed: end what it no longer allows), and
 add it to :meth:`Session.__init__`'s ``capabilities`` line. It talks to the
 session through its public members: ``send_op``/``send_text``, ``status``,
 ``error``, ``spawn`` (a task cancelled with the session), ``outbox``, ``gate``,
-``graph`` (the ROS side: :class:`~bridge_server.graph.Graph`), ``bridge``,
+``graph`` (the ROS side: :class:`~bridge_server.graph.Graph`), ``limits``, ``bridge``,
 ``config``, ``loop`` and ``closed``.
 """
 
@@ -58,7 +59,7 @@ if TYPE_CHECKING:
     from websockets.asyncio.server import ServerConnection
 
     from ..graph import Graph
-    from ..security import Gate
+    from ..security import Gate, SecurityConfig
     from ..server import Bridge
 
 __all__ = ["DEFAULT_QUEUE_LENGTH", "Capability", "Session", "SessionConfig"]
@@ -98,6 +99,9 @@ class Capability(Protocol):
     """A group of ops a session carries out (see "Adding a capability" above)."""
 
     OPS: ClassVar[dict[type[ops.Op], str]]
+    LIMITS: ClassVar[dict[type[ops.Op], str]]
+    """Op class -> method ``(op) -> str | None``: why the op would take the connection past
+    one of its limits (``None``: it would not). Asked after the gate let the op through."""
 
     async def close(self) -> None:
         """The client left: release what it owned."""
@@ -147,9 +151,28 @@ class Session:
         self._handlers: dict[type[ops.Op], Callable[[Any], None]] = {
             ops.SetLevel: self.set_level, ops.SessionAck: self._on_session_ack,
         }
+        self._limits: dict[type[ops.Op], Callable[[Any], str | None]] = {}
         for capability in self.capabilities:
             for op_cls, method in capability.OPS.items():
                 self._handlers[op_cls] = getattr(capability, method)
+            for op_cls, method in capability.LIMITS.items():
+                self._limits[op_cls] = getattr(capability, method)
+
+    @property
+    def limits(self) -> SecurityConfig:
+        """The bridge's per-connection limits (as configured now: SIGHUP may change them)."""
+        return self.bridge.security.config
+
+    def refuse(self, op: Any, why: str) -> None:
+        """Refuse ``op``: a status error, plus the failure shape a stock client waits for."""
+        op_id = getattr(op, "id", None)
+        self.error(f"{op.OP}: {why}", op_id)
+        if isinstance(op, ops.CallService):
+            self.send_op(ops.ServiceResponse(
+                service=op.service, result=False, values=f"{op.OP}: {why}", id=op_id))
+        elif isinstance(op, ops.SendActionGoal) and op_id is not None:
+            self.send_op(ops.ActionResult(
+                id=op_id, action=op.action, values=f"{op.OP}: {why}", result=False, status=6))
 
     # -- running -------------------------------------------------------------------------------
 
@@ -325,6 +348,10 @@ class Session:
     def handle_op(self, op: ops.Op) -> None:
         """Carry out one parsed op."""
         if not self.gate.check(op):
+            return
+        limit = self._limits.get(type(op))
+        if limit is not None and (why := limit(op)) is not None:
+            self.refuse(op, why)
             return
         errors = self.errors_sent
         try:

@@ -18,6 +18,7 @@ from roslibpy_lite import ops
 
 from ..interfaces import ConversionError, canonical_name
 from ..security.names import full_name
+from .limits import over_cap
 from .outbox import Subscription
 
 if TYPE_CHECKING:
@@ -39,6 +40,28 @@ class SessionTopics:
         ops.Unadvertise: "unadvertise",
     }
     """The ops this capability carries out, and the method for each."""
+    LIMITS: ClassVar[dict[type[ops.Op], str]] = {
+        ops.Subscribe: "subscribe_limit",
+        ops.Advertise: "publisher_limit",
+        ops.Publish: "publisher_limit",
+    }
+    """The ops that add to what the connection holds, and the method that checks each."""
+
+    def subscribe_limit(self, op: ops.Subscribe) -> str | None:
+        """Why this subscription would pass the connection's limits (``None``: it would not)."""
+        limits = self.session.limits
+        topic = full_name(op.topic)
+        sub = self.subs.get(topic)
+        ids = limits.max_subscription_ids
+        if sub is not None and ids and op.id not in sub.ids and len(sub.ids) >= ids:
+            # ids of one topic merge into one subscription, but each is work to merge
+            return f"too many subscription ids for {topic} on this connection (at most {ids})"
+        return over_cap(self.subs, topic, limits.max_subscriptions, "subscriptions")
+
+    def publisher_limit(self, op: ops.Advertise | ops.Publish) -> str | None:
+        """Why a publisher for this op would pass the connection's limits."""
+        return over_cap(self.publishers, full_name(op.topic), self.session.limits.max_publishers,
+                        "publishers")
 
     def __init__(self, session: Session) -> None:
         self.session = session
