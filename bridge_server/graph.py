@@ -338,6 +338,11 @@ class Graph(Protocol):
     def topic_publishers(self, topic: str) -> list[tuple[str, str]]:
         """Nodes publishing on ``topic`` as (name, namespace)."""
 
+    def topic_publishers_qos(self, topic: str) -> list[tuple[str, str, dict[str, Any]]]:
+        """Publishers of ``topic`` as (name, namespace, offered QoS in rosbag2's keys and
+        words: history, depth, reliability, durability, deadline, lifespan, liveliness,
+        ...)."""
+
     def topic_subscribers(self, topic: str) -> list[tuple[str, str]]:
         """Nodes subscribed to ``topic`` as (name, namespace)."""
 

@@ -195,7 +195,7 @@ def _graph_action_types(bridge: Bridge) -> dict[str, str]:
     """Action name -> type of the actions the ROS graph lists a goal service of (served,
     or only called)."""
     types = {}
-    for service, service_types in bridge.ros.node.get_service_names_and_types():
+    for service, service_types in bridge.graph.service_names_and_types():
         if service.endswith(_GOAL_SERVICE) and service_types:
             types[service.removesuffix(_GOAL_SERVICE)] = service_types[0].removesuffix(
                 "_SendGoal")

@@ -69,6 +69,25 @@ class RclpyGraph(RosNode):
         return [(i.node_name, i.node_namespace)
                 for i in self.node.get_publishers_info_by_topic(topic)]
 
+    def topic_publishers_qos(self, topic: str) -> list[tuple[str, str, dict[str, Any]]]:
+        """Publishers of ``topic`` with the QoS each offers, in rosbag2's keys and words (the
+        graph reports no history: "unknown", depth 0, as rosbag2 records it too)."""
+        found = []
+        for info in self.node.get_publishers_info_by_topic(topic):
+            q = info.qos_profile
+            found.append((info.node_name, info.node_namespace, {
+                "history": _policy(q.history),
+                "depth": int(q.depth),
+                "reliability": _policy(q.reliability),
+                "durability": _policy(q.durability),
+                "deadline": _duration(q.deadline),
+                "lifespan": _duration(q.lifespan),
+                "liveliness": _policy(q.liveliness),
+                "liveliness_lease_duration": _duration(q.liveliness_lease_duration),
+                "avoid_ros_namespace_conventions": bool(q.avoid_ros_namespace_conventions),
+            }))
+        return found
+
     def topic_subscribers(self, topic: str) -> list[tuple[str, str]]:
         """Nodes subscribed to ``topic`` as (name, namespace)."""
         return [(i.node_name, i.node_namespace)
@@ -235,3 +254,12 @@ def _ready(client: Any) -> bool | None:
         return bool(client.service_is_ready())
     except Exception:  # rclpy's InvalidHandle: dropped by another call in the meantime
         return None
+
+
+def _duration(value: Any) -> dict[str, int]:
+    sec, nsec = divmod(int(value.nanoseconds), 1_000_000_000)
+    return {"sec": sec, "nsec": nsec}
+
+
+def _policy(value: Any) -> str:
+    return str(getattr(value, "name", value)).lower()  # rmw's words: keep_last, reliable...

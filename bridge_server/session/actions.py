@@ -80,7 +80,7 @@ from .limits import over_cap
 if TYPE_CHECKING:
     from ..graph import ActionClient, Converter, SentGoal, ServedAction, ServedGoal
     from ..security import Gate
-    from .session import Session
+    from .host import Host
 
 __all__ = ["ActionClients", "SessionActions"]
 
@@ -111,7 +111,7 @@ class ActionClients:
         self._used: dict[tuple[str, type[Any]], float] = {}
         self._sweeper: asyncio.TimerHandle | None = None
 
-    def get(self, session: Session, name: str, action_cls: type[Any]) -> ActionClient:
+    def get(self, session: Host, name: str, action_cls: type[Any]) -> ActionClient:
         """The shared client for ``name`` of ``action_cls`` (created on first use)."""
         key = (name, action_cls)
         client = self.clients.get(key)
@@ -120,17 +120,17 @@ class ActionClients:
         self.touch(session, client)
         return client
 
-    def touch(self, session: Session, client: ActionClient) -> None:
+    def touch(self, session: Host, client: ActionClient) -> None:
         """``client`` is in use now."""
         loop = session.loop
         self._used[(client.name, client.action_cls)] = loop.time()
         if self._sweeper is None:
             self._sweeper = loop.call_later(CLIENT_IDLE, self._sweep, session)
 
-    def _sweep(self, session: Session) -> None:
+    def _sweep(self, session: Host) -> None:
         self._sweeper = None
         now = session.loop.time()
-        busy = {id(g.sent.shared) for s in session.bridge.sessions
+        busy = {id(g.sent.shared) for s in session.shared.sessions
                 for g in s.actions.goals.values() if g.sent is not None}
         for key, used in list(self._used.items()):
             client = self.clients.get(key)
@@ -268,11 +268,11 @@ class SessionActions:
         return over_cap(self.served, full_name(op.action), self.session.limits.max_services,
                         "served actions")
 
-    def __init__(self, session: Session) -> None:
+    def __init__(self, session: Host) -> None:
         self.session = session
         self.goals: dict[str, _Goal] = {}
         self.served: dict[str, ClientAction] = {}
-        self._owners = session.bridge.action_owners
+        self._owners = session.shared.action_owners
         self._goal_ids = itertools.count()
 
 
@@ -352,7 +352,7 @@ class SessionActions:
         name = goal.name
         wanted = goal.type_name + "_SendGoal"
         config = session.config
-        clients = session.bridge.action_clients
+        clients = session.shared.action_clients
         deadline = loop.time() + config.call_timeout
         listed_by = loop.time() + min(2 * config.discovery_wait, config.call_timeout)
         delay = 0.002
@@ -423,7 +423,7 @@ class SessionActions:
         if self.goals.get(str(goal.id)) is goal:
             del self.goals[str(goal.id)]
             seconds = self.session.loop.time() - goal.t0
-            self.session.bridge.metrics.action_goal(goal.name, outcome, seconds)
+            self.session.shared.metrics.action_goal(goal.name, outcome, seconds)
         if goal.timer is not None:
             goal.timer.cancel()
             goal.timer = None
@@ -503,7 +503,7 @@ class SessionActions:
                 return
             self.remove_served(mine, "the client advertised it again with another type", False)
             del self.served[name]
-        old = session.bridge.action_clients.lingering.pop(name, None)
+        old = session.shared.action_clients.lingering.pop(name, None)
         if old is not None:  # two servers of one name would both answer each goal
             old.destroy()
         goal_service = name + _GOAL_SUFFIX
@@ -659,7 +659,7 @@ class SessionActions:
         if ros is not None:
             ros.alive = False  # new goals are rejected while it lingers
             if linger:
-                lingering = self.session.bridge.action_clients.lingering
+                lingering = self.session.shared.action_clients.lingering
                 lingering[served.name] = ros
                 self.session.loop.call_later(ACTION_LINGER, _end_linger, lingering, served.name,
                                              ros)

@@ -64,7 +64,7 @@ from ..security.names import InvalidNameError, check_name
 
 if TYPE_CHECKING:
     from ..graph import Graph
-    from ..server import Bridge
+    from .host import Shared
 
 __all__ = ["ASYNC_HANDLERS", "FIELDS", "HANDLERS", "TYPES", "RosapiError", "request_args"]
 
@@ -75,7 +75,7 @@ class RosapiError(BridgeError):
     """A rosapi request was invalid (the text says which field and why)."""
 
 
-Handler = Callable[["Bridge", Mapping[str, Any]], dict[str, Any]]
+Handler = Callable[["Shared", Mapping[str, Any]], dict[str, Any]]
 
 
 def _str_field(args: Mapping[str, Any], name: str) -> str:
@@ -113,7 +113,7 @@ def _own_services() -> list[tuple[str, str]]:
     return sorted((name, TYPES[name]) for name in (*HANDLERS, *ASYNC_HANDLERS))
 
 
-def _all_services(bridge: Bridge) -> list[tuple[str, str]]:
+def _all_services(bridge: Shared) -> list[tuple[str, str]]:
     """Services that have a server (the graph also lists names that only have clients).
 
     Servers are counted by service name, never looked up by node name: several nodes may
@@ -143,37 +143,37 @@ def _srv_type(name: str) -> str:
         raise RosapiError(str(exc)) from None
 
 
-def topics(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, Any]:
+def topics(bridge: Shared, args: Mapping[str, Any]) -> dict[str, Any]:
     """Every topic in the graph and its (first) type."""
     pairs = sorted(bridge.graph.topic_names_and_types())
     return {"topics": [n for n, _ in pairs], "types": [t[0] if t else "" for _, t in pairs]}
 
 
-def topics_for_type(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, Any]:
+def topics_for_type(bridge: Shared, args: Mapping[str, Any]) -> dict[str, Any]:
     """Topics whose type is the given one (either spelling)."""
     wanted = _msg_type(_str_field(args, "type"))
     pairs = sorted(bridge.graph.topic_names_and_types())
     return {"topics": [n for n, types in pairs if wanted in types]}
 
 
-def topic_type(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, Any]:
+def topic_type(bridge: Shared, args: Mapping[str, Any]) -> dict[str, Any]:
     """The type of one topic, "" if the graph does not know it."""
     types = bridge.graph.topic_types(_str_field(args, "topic"))
     return {"type": types[0] if types else ""}
 
 
-def services(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, Any]:
+def services(bridge: Shared, args: Mapping[str, Any]) -> dict[str, Any]:
     """Every service in the graph, plus the bridge's own rosapi services."""
     return {"services": [n for n, _ in _all_services(bridge)]}
 
 
-def services_for_type(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, Any]:
+def services_for_type(bridge: Shared, args: Mapping[str, Any]) -> dict[str, Any]:
     """Services whose type is the given one (either spelling)."""
     wanted = _srv_type(_str_field(args, "type"))
     return {"services": [n for n, t in _all_services(bridge) if t == wanted]}
 
 
-def service_type(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, Any]:
+def service_type(bridge: Shared, args: Mapping[str, Any]) -> dict[str, Any]:
     """The type of one service, "" if unknown."""
     name = _str_field(args, "service")
     for n, t in _all_services(bridge):
@@ -185,7 +185,7 @@ def service_type(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, Any]:
 _UNKNOWN = "_NODE_NAME_UNKNOWN_"
 
 
-def _node_names(bridge: Bridge) -> list[tuple[str, str]]:
+def _node_names(bridge: Shared) -> list[tuple[str, str]]:
     names = bridge.graph.node_names()
     return sorted({(n, ns) for n, ns in names if n != _UNKNOWN})
 
@@ -194,12 +194,12 @@ def _endpoint_nodes(nodes: list[tuple[str, str]]) -> list[str]:
     return sorted({_full(n, ns) for n, ns in nodes if n != _UNKNOWN})
 
 
-def nodes(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, Any]:
+def nodes(bridge: Shared, args: Mapping[str, Any]) -> dict[str, Any]:
     """Every node, fully qualified."""
     return {"nodes": [_full(n, ns) for n, ns in _node_names(bridge)]}
 
 
-def service_node(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, Any]:
+def service_node(bridge: Shared, args: Mapping[str, Any]) -> dict[str, Any]:
     """The node serving a service, "" if unknown."""
     name = _str_field(args, "service")
     if name in HANDLERS or name in bridge.service_owners:
@@ -216,7 +216,7 @@ def service_node(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, Any]:
     return {"node": ""}
 
 
-def node_details(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, Any]:
+def node_details(bridge: Shared, args: Mapping[str, Any]) -> dict[str, Any]:
     """Topics a node subscribes to and publishes, and the services it offers."""
     full = _str_field(args, "node")
     name, ns = _split(full)
@@ -228,49 +228,25 @@ def node_details(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, Any]:
     return {"subscribing": sorted(subs), "publishing": sorted(pubs), "services": sorted(srvs)}
 
 
-def publishers(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, Any]:
+def publishers(bridge: Shared, args: Mapping[str, Any]) -> dict[str, Any]:
     """Nodes publishing on a topic."""
     return {"publishers": _endpoint_nodes(bridge.graph.topic_publishers(_topic_field(args)))}
 
 
-def _duration(value: Any) -> dict[str, int]:
-    sec, nsec = divmod(int(value.nanoseconds), 1_000_000_000)
-    return {"sec": sec, "nsec": nsec}
-
-
-def _policy(value: Any) -> str:
-    return str(getattr(value, "name", value)).lower()  # rmw's words: keep_last, reliable...
-
-
-def publishers_qos(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, Any]:
+def publishers_qos(bridge: Shared, args: Mapping[str, Any]) -> dict[str, Any]:
     """Each publisher of a topic (its node) and the QoS it offers, with the keys and words
     rosbag2 records as a channel's ``offered_qos_profiles``; the graph reports no history
     ("unknown", depth 0), as rosbag2 records it too."""
-    infos = bridge.ros.node.get_publishers_info_by_topic(_topic_field(args))
-    nodes, profiles = [], []
-    for info in infos:
-        q = info.qos_profile
-        nodes.append(_full(info.node_name, info.node_namespace))
-        profiles.append({
-            "history": _policy(q.history),
-            "depth": int(q.depth),
-            "reliability": _policy(q.reliability),
-            "durability": _policy(q.durability),
-            "deadline": _duration(q.deadline),
-            "lifespan": _duration(q.lifespan),
-            "liveliness": _policy(q.liveliness),
-            "liveliness_lease_duration": _duration(q.liveliness_lease_duration),
-            "avoid_ros_namespace_conventions": bool(q.avoid_ros_namespace_conventions),
-        })
-    return {"publishers": nodes, "qos": profiles}
+    found = bridge.graph.topic_publishers_qos(_topic_field(args))
+    return {"publishers": [_full(n, ns) for n, ns, _ in found], "qos": [q for _, _, q in found]}
 
 
-def subscribers(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, Any]:
+def subscribers(bridge: Shared, args: Mapping[str, Any]) -> dict[str, Any]:
     """Nodes subscribed to a topic."""
     return {"subscribers": _endpoint_nodes(bridge.graph.topic_subscribers(_topic_field(args)))}
 
 
-def action_servers(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, Any]:
+def action_servers(bridge: Shared, args: Mapping[str, Any]) -> dict[str, Any]:
     """Actions that have a goal service in the graph."""
     suffix = "/_action/send_goal"
     names = {n[: -len(suffix)] for n, _ in _all_services(bridge) if n.endswith(suffix)}
@@ -278,13 +254,13 @@ def action_servers(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, Any]:
     return {"action_servers": sorted(names)}
 
 
-def get_time(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, Any]:
+def get_time(bridge: Shared, args: Mapping[str, Any]) -> dict[str, Any]:
     """The bridge node's clock; ROS 1 key names are added for older clients."""
     sec, nanosec = bridge.graph.now()
     return {"time": {"sec": sec, "nanosec": nanosec, "secs": sec, "nsecs": nanosec}}
 
 
-def get_ros_version(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, Any]:
+def get_ros_version(bridge: Shared, args: Mapping[str, Any]) -> dict[str, Any]:
     """ROS 2, Jazzy."""
     return {"version": 2, "distro": DISTRO}
 
@@ -343,18 +319,18 @@ FIELDS: dict[str, tuple[str, ...]] = {
 
 # -- type definitions (message_details and friends) ----------------------------------------
 
-def message_details(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, Any]:
+def message_details(bridge: Shared, args: Mapping[str, Any]) -> dict[str, Any]:
     """Field names, types, array lengths and constants of a message type and its parts."""
     name = _str_field(args, "type")
     return {"typedefs": bridge.graph.typedefs(name, "msg")}
 
 
-def service_request_details(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, Any]:
+def service_request_details(bridge: Shared, args: Mapping[str, Any]) -> dict[str, Any]:
     """Typedefs of a service type's request."""
     return {"typedefs": bridge.graph.typedefs(_str_field(args, "type"), "srv", "Request")}
 
 
-def service_response_details(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, Any]:
+def service_response_details(bridge: Shared, args: Mapping[str, Any]) -> dict[str, Any]:
     """Typedefs of a service type's response."""
     return {"typedefs": bridge.graph.typedefs(_str_field(args, "type"), "srv", "Response")}
 
@@ -374,12 +350,12 @@ def _full_text(graph: Graph, type_name: str) -> str:
     return text
 
 
-def interfaces(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, Any]:
+def interfaces(bridge: Shared, args: Mapping[str, Any]) -> dict[str, Any]:
     """Every interface type installed with the bridge (what a client may ``load_types``)."""
     return {"interfaces": bridge.graph.installed_interfaces()}
 
 
-def topics_and_raw_types(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, Any]:
+def topics_and_raw_types(bridge: Shared, args: Mapping[str, Any]) -> dict[str, Any]:
     """Topics, their types, and each type's full definition text (with its dependencies)."""
     pairs = sorted(bridge.graph.topic_names_and_types())
     types = [t[0] if t else "" for _, t in pairs]
@@ -390,7 +366,7 @@ def topics_and_raw_types(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, A
     }
 
 
-def interface_definition(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, Any]:
+def interface_definition(bridge: Shared, args: Mapping[str, Any]) -> dict[str, Any]:
     """The full definition text of any installed message, service or action type.
 
     The type's own ``.msg``/``.srv``/``.action`` text, then every message type it
@@ -433,7 +409,7 @@ FIELDS.update(
 # -- actions ---------------------------------------------------------------------------------
 
 
-def action_type(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, Any]:
+def action_type(bridge: Shared, args: Mapping[str, Any]) -> dict[str, Any]:
     """The type of one action (``pkg/action/Type``), "" if no server offers it."""
     name = _str_field(args, "action").rstrip("/")
     name = name if name.startswith("/") else "/" + name
@@ -447,17 +423,17 @@ def action_type(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, Any]:
     return {"type": ""}
 
 
-def action_goal_details(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, Any]:
+def action_goal_details(bridge: Shared, args: Mapping[str, Any]) -> dict[str, Any]:
     """Typedefs of an action type's goal."""
     return {"typedefs": bridge.graph.typedefs(_str_field(args, "type"), "action", "Goal")}
 
 
-def action_result_details(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, Any]:
+def action_result_details(bridge: Shared, args: Mapping[str, Any]) -> dict[str, Any]:
     """Typedefs of an action type's result."""
     return {"typedefs": bridge.graph.typedefs(_str_field(args, "type"), "action", "Result")}
 
 
-def action_feedback_details(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, Any]:
+def action_feedback_details(bridge: Shared, args: Mapping[str, Any]) -> dict[str, Any]:
     """Typedefs of an action type's feedback."""
     return {"typedefs": bridge.graph.typedefs(_str_field(args, "type"), "action", "Feedback")}
 
@@ -479,7 +455,7 @@ for _service, (_handler, _srv, _field) in _ACTION_CALLS.items():
 PARAM_TIMEOUT = 2.0
 """Seconds ``get_param_names`` waits for each listed node's parameter service."""
 
-AsyncHandler = Callable[["Bridge", Mapping[str, Any]], Awaitable[dict[str, Any]]]
+AsyncHandler = Callable[["Shared", Mapping[str, Any]], Awaitable[dict[str, Any]]]
 
 
 def _param_name(args: Mapping[str, Any]) -> tuple[str, str, str]:
@@ -507,7 +483,7 @@ def _json_arg(args: Mapping[str, Any], name: str) -> Any:
         raise RosapiError(f"args.{name}: not valid JSON ({exc})") from None
 
 
-async def get_param_names(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, Any]:
+async def get_param_names(bridge: Shared, args: Mapping[str, Any]) -> dict[str, Any]:
     """Every parameter of every node that offers parameter services, as ``/node:param``."""
     graph = bridge.graph
     own = _full(*graph.own_node())
@@ -526,14 +502,14 @@ async def get_param_names(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, 
     return {"names": sorted(name for names in found for name in names)}
 
 
-async def _get_value(bridge: Bridge, node: str, param: str) -> tuple[bool, Any]:
+async def _get_value(bridge: Shared, node: str, param: str) -> tuple[bool, Any]:
     try:
         return await bridge.graph.get_parameter(node, param)
     except (TimeoutError, LookupError):
         raise RosapiError(f"node {node} does not answer parameter requests") from None
 
 
-async def _set_value(bridge: Bridge, node: str, param: str, value: Any) -> tuple[bool, str]:
+async def _set_value(bridge: Shared, node: str, param: str, value: Any) -> tuple[bool, str]:
     try:
         return await bridge.graph.set_parameter(node, param, value)
     except (TimeoutError, LookupError):
@@ -542,7 +518,7 @@ async def _set_value(bridge: Bridge, node: str, param: str, value: Any) -> tuple
         raise RosapiError(str(exc)) from None
 
 
-async def get_param(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, Any]:
+async def get_param(bridge: Shared, args: Mapping[str, Any]) -> dict[str, Any]:
     """A parameter's value as JSON text (``default_value`` if it is not set)."""
     node, param, full = _param_name(args)
     default = args.get("default_value", "")
@@ -553,14 +529,14 @@ async def get_param(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, Any]:
     return {"value": json.dumps(value), "successful": True, "reason": ""}
 
 
-async def has_param(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, Any]:
+async def has_param(bridge: Shared, args: Mapping[str, Any]) -> dict[str, Any]:
     """Whether a parameter is set."""
     node, param, _ = _param_name(args)
     is_set, _value = await _get_value(bridge, node, param)
     return {"exists": is_set}
 
 
-async def set_param(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, Any]:
+async def set_param(bridge: Shared, args: Mapping[str, Any]) -> dict[str, Any]:
     """Set a parameter from JSON text; fails (result false) if the node refuses."""
     node, param, full = _param_name(args)
     ok, reason = await _set_value(bridge, node, param, _json_arg(args, "value"))
@@ -569,7 +545,7 @@ async def set_param(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, Any]:
     return {}
 
 
-async def delete_param(bridge: Bridge, args: Mapping[str, Any]) -> dict[str, Any]:
+async def delete_param(bridge: Shared, args: Mapping[str, Any]) -> dict[str, Any]:
     """Unset (undeclare) a parameter; fails if the node does not allow it."""
     node, param, full = _param_name(args)
     ok, reason = await _set_value(bridge, node, param, None)

@@ -58,7 +58,7 @@ from .limits import over_cap
 if TYPE_CHECKING:
     from ..graph import RosCall, ServedService
     from ..security import Gate
-    from .session import Session
+    from .host import Host
 
 __all__ = ["ClientService", "SessionServices"]
 
@@ -113,11 +113,11 @@ class SessionServices:
         return over_cap(self.served, full_name(op.service), self.session.limits.max_services,
                         "served services")
 
-    def __init__(self, session: Session) -> None:
+    def __init__(self, session: Host) -> None:
         self.session = session
         self.graph = session.graph
         self.served: dict[str, ClientService] = {}
-        self._owners = session.bridge.service_owners
+        self._owners = session.shared.service_owners
         self._request_ids = itertools.count()
 
     # -- calling -------------------------------------------------------------------------------
@@ -144,10 +144,10 @@ class SessionServices:
             handler = rosapi.HANDLERS.get(service)
             ahandler = rosapi.ASYNC_HANDLERS.get(service)
             if handler is not None:
-                values = handler(session.bridge, rosapi.request_args(service, op.args))
+                values = handler(session.shared, rosapi.request_args(service, op.args))
                 values = session.gate.filter_rosapi(service, values)  # what the role may see
             elif ahandler is not None:
-                values = await ahandler(session.bridge, rosapi.request_args(service, op.args))
+                values = await ahandler(session.shared, rosapi.request_args(service, op.args))
                 values = session.gate.filter_rosapi(service, values)
             elif (owner := self._owners.get(service)) is not None:
                 result, direct = await owner.call_direct(service, op, timeout)
@@ -186,7 +186,7 @@ class SessionServices:
     ) -> None:
         session = self.session
         if started is not None:  # a call_service: count it for /metrics
-            session.bridge.metrics.service_call(
+            session.shared.metrics.service_call(
                 full_name(service), outcome(result, values), time.perf_counter() - started
             )
         if not result:

@@ -61,6 +61,7 @@ if TYPE_CHECKING:
     from ..graph import Graph
     from ..security import Gate, SecurityConfig
     from ..server import Bridge
+    from .host import Shared
 
 __all__ = ["DEFAULT_QUEUE_LENGTH", "Capability", "Session", "SessionConfig"]
 
@@ -118,6 +119,7 @@ class Session:
     def __init__(self, bridge: Bridge, ws: ServerConnection, sid: int) -> None:
         self.bridge = bridge
         self.graph: Graph = bridge.graph
+        self.shared: Shared = bridge  # what the op groups share with the other sessions
         self.ws = ws
         self.sid = sid
         self.config: SessionConfig = bridge.session_config

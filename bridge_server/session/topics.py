@@ -24,7 +24,7 @@ from .outbox import Subscription
 if TYPE_CHECKING:
     from ..graph import Publisher
     from ..security import Gate
-    from .session import Session
+    from .host import Host
 
 __all__ = ["SessionTopics"]
 
@@ -63,7 +63,7 @@ class SessionTopics:
         return over_cap(self.publishers, full_name(op.topic), self.session.limits.max_publishers,
                         "publishers")
 
-    def __init__(self, session: Session) -> None:
+    def __init__(self, session: Host) -> None:
         self.session = session
         self.graph = session.graph
         self.publishers: dict[str, Publisher] = {}
@@ -133,7 +133,7 @@ class SessionTopics:
             self.session.error(f"publish to {topic} ({pub.type_name}): {exc}", op.id)
             return
         pub.publish(msg)
-        self.session.bridge.metrics.published(topic, self.session.frame_len)
+        self.session.shared.metrics.published(topic, self.session.frame_len)
 
     # -- subscribing ---------------------------------------------------------------------------
 
@@ -178,7 +178,7 @@ class SessionTopics:
                 session.error(f"subscribe: {exc}", op.id)
                 return
             self.subs[topic] = sub
-            session.bridge.graph_changed()
+            session.shared.graph_changed()
             latched = sub.shared.latched
             if latched is not None:
                 session.outbox.push(sub, latched)
@@ -224,13 +224,13 @@ class SessionTopics:
 
     def _configure(self, sub: Subscription) -> None:
         """Apply the merged options of a subscription's ids, within the bridge's limits."""
-        limits = self.session.bridge.security.config
+        limits = self.session.limits
         sub.configure(self.session.config.default_queue_length, limits.max_queue_length,
                       limits.min_fragment_size)
 
     def _warn_limits(self, op: ops.Subscribe, topic: str) -> None:
         """Say which of a subscribe's options the bridge's limits lower or raise."""
-        limits = self.session.bridge.security.config
+        limits = self.session.limits
         if limits.max_queue_length and op.queue_length > limits.max_queue_length:
             self.session.status(
                 "warning", f"subscribe to {topic}: queue_length {op.queue_length} is over "
@@ -243,7 +243,7 @@ class SessionTopics:
 
     def _drop_sub(self, sub: Subscription) -> None:
         sub.close()
-        metrics = self.session.bridge.metrics
+        metrics = self.session.shared.metrics
         metrics.retire_subscription(sub.topic, sub.sent, sub.sent_bytes, sub.dropped_total)
         if sub.shared is not None:
             shared, sub.shared = sub.shared, None
@@ -258,7 +258,7 @@ class SessionTopics:
         for sub in list(self.subs.values()):
             self._drop_sub(sub)
         self.subs.clear()
-        grace = self.session.bridge.publisher_grace
+        grace = self.session.shared.publisher_grace
         for pub in self.publishers.values():
             if grace > 0:
                 self.session.loop.call_later(grace, self.graph.release_publisher, pub)

@@ -160,3 +160,17 @@ def test_the_session_side_does_not_import_the_backend(side: str) -> None:
     assert not direct, f"{side} imports {BACKEND}: {direct}"
     chains = mine(_reaches_backend(_runtime_graph()))
     assert not chains, f"{side} reaches {BACKEND} at run time: {chains}"
+
+
+OP_GROUPS = ("bridge_server.session.topics", "bridge_server.session.services",
+             "bridge_server.session.actions", "bridge_server.session.rosapi")
+WHOLE = ("bridge_server.server", "bridge_server.session.session")
+
+
+@pytest.mark.parametrize("group", OP_GROUPS)
+def test_the_op_groups_hold_a_narrow_handle(group: str) -> None:
+    """An op group gets a Host (session/host.py), never the Session class or the bridge:
+    it imports neither (for type checking neither)."""
+    found = _all_imports()[group]
+    bad = sorted(t for t in found if t in WHOLE or t.startswith(tuple(w + "." for w in WHOLE)))
+    assert not bad, f"{group} imports {bad}"
