@@ -1,10 +1,13 @@
-"""The ROS side of the bridge on rclpy: the only package that imports rclpy.
+"""The ROS side of the bridge on rclpy: the only package that imports ROS (a test keeps it so).
 
+- :mod:`.graph`: :class:`~.graph.RclpyGraph`, the :class:`~bridge_server.graph.Graph`
+  the sessions hold;
 - :mod:`.node`: the rclpy node, its executor thread, shared publishers,
   subscriptions, service clients and servers;
 - :mod:`.reader`: what waits on the topics and wakes the event loop;
 - :mod:`.actions`: action clients and servers on rclpy's C layer;
+- :mod:`.introspection`: rosapi typedefs, interface definitions, node parameters;
 - :mod:`.convert` / :mod:`.cdr_json`: message conversion (rclpy objects and CDR
   bytes to and from rosbridge JSON/CBOR);
-- :mod:`.types`: type names, their resolution to rclpy classes, the error roots.
+- :mod:`.types`: type names resolved to rclpy classes.
 """
