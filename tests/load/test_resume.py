@@ -149,7 +149,7 @@ async def test_acks_trim_what_the_bridge_keeps(link: tuple[BridgeProcess, LinkPr
     traffic the status page's ``resume_kept`` (and the ``resume_kept_frames`` gauge) stay near 0
     and reach 0 once the traffic stops; while the link is down they grow by every frame
     written, and after the resume they fall back to 0."""
-    from bridge_server.metrics import PREFIX
+    from bridge_server.http.metrics import PREFIX
     from tests.ops.support import scrape, status, value
 
     bridge, proxy = link

@@ -12,7 +12,7 @@ from std_msgs.msg import Int32
 from websockets.asyncio.client import connect as ws_connect
 from websockets.exceptions import InvalidStatus
 
-from bridge_server.metrics import PREFIX
+from bridge_server.http.metrics import PREFIX
 from roslibpy_lite.ops import RECEIVED_HEADER, SESSION_HEADER
 from tests.bridge.support import wait_subscribers
 from tests.helpers import WireClient, async_wait_until
