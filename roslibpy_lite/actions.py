@@ -89,7 +89,7 @@ from .exceptions import (
     RosTimeoutError,
     UsageError,
 )
-from .handles import Backend, _Handle
+from .handles import Backend, _BridgeHandle
 from .messages import _check_type_string, _packages, canonical_type, check_dict, from_wire, to_wire
 
 if TYPE_CHECKING:
@@ -242,7 +242,7 @@ class ActionBackend(Backend, Protocol):
         """Forget a served action and tell the bridge."""
         ...
 
-    def _served_goal_done(self, ctx: GoalContext, op: ops.ActionResult | None) -> None:
+    def _served_goal_done(self, ctx: GoalContext, op: ops.ActionResultOp | None) -> None:
         """A served goal's handler returned: send ``op`` (None: the goal was lost)."""
         ...
 
@@ -319,7 +319,7 @@ class GoalHandle:
             except Exception:
                 log.exception("feedback callback of %s raised", self.action)
 
-    def _result(self, op: ops.ActionResult) -> None:
+    def _result(self, op: ops.ActionResultOp) -> None:
         if self.done():
             return
         try:
@@ -512,7 +512,7 @@ class GoalContext:
         self._cancel.set()
 
 
-class ActionServer(_Handle):
+class ActionServer(_BridgeHandle):
     """An action served by this client (made by ``ros.advertise_action``; module doc).
 
     Use as ``await`` or ``async with``; :meth:`unadvertise` (or ``close``) stops serving.
@@ -579,7 +579,7 @@ class ActionServer(_Handle):
     # -- running one goal --
 
     async def _run(self, ctx: GoalContext, args: Any) -> None:
-        op: ops.ActionResult | None = None
+        op: ops.ActionResultOp | None = None
         self.goals += 1
         self.active[ctx.id] = ctx
         try:
@@ -598,7 +598,7 @@ class ActionServer(_Handle):
                 if inspect.isawaitable(result):
                     result = await result
             status = GoalStatus.CANCELED if ctx.cancel_requested else GoalStatus.SUCCEEDED
-            op = ops.ActionResult(id=ctx.id, action=self.action, result=True,
+            op = ops.ActionResultOp(id=ctx.id, action=self.action, result=True,
                                   values=self._result_wire(result), status=int(status))
         except asyncio.CancelledError:
             if not ctx.lost:
@@ -607,7 +607,7 @@ class ActionServer(_Handle):
             self.failures += 1
             log.warning("action handler of %s raised %s: %s", self.action,
                         type(exc).__name__, exc)
-            op = ops.ActionResult(id=ctx.id, action=self.action, result=False,
+            op = ops.ActionResultOp(id=ctx.id, action=self.action, result=False,
                                   values=str(exc) or type(exc).__name__,
                                   status=int(GoalStatus.ABORTED))
         finally:

@@ -102,7 +102,7 @@ class ServiceBackend(Backend, Protocol):
         ...
 
 
-class _Handle:
+class _BridgeHandle:
     """What every handle shares: close state, await and ``async with``."""
 
     _backend: Backend
@@ -136,7 +136,7 @@ class _Handle:
         await self.close()
 
 
-class Publisher(_Handle, Generic[T]):
+class Publisher(_BridgeHandle, Generic[T]):
     """A publisher on one topic (made by ``ros.advertise``)."""
 
     _backend: TopicBackend
@@ -227,7 +227,7 @@ class Publisher(_Handle, Generic[T]):
                 connection is down and buffering is off).
         """
         if running_loop() is None:  # another thread: run it later, on the client's loop
-            return _Pending(self._publish_later(msg), f"publish to {self.topic}")
+            return _Deferred(self._publish_later(msg), f"publish to {self.topic}")
         if self.error is not None:
             raise self.error
         if self._error_once is not None:
@@ -240,7 +240,7 @@ class Publisher(_Handle, Generic[T]):
         self.published += 1
         if waiting is None:
             return _DONE
-        return _Pending(waiting, f"publish to {self.topic} (waiting for queue space)")
+        return _Deferred(waiting, f"publish to {self.topic} (waiting for queue space)")
 
     async def _publish_later(self, msg: T | Mapping[str, Any]) -> None:
         await self.publish(msg)
@@ -258,7 +258,7 @@ class Publisher(_Handle, Generic[T]):
         await self.unadvertise()
 
 
-class Subscription(_Handle, Generic[T]):
+class Subscription(_BridgeHandle, Generic[T]):
     """A subscription to one topic (made by ``ros.subscribe``).
 
     Iterate it (``async for msg in sub``), await :meth:`get`, or register
@@ -533,7 +533,7 @@ _STRAY: set[asyncio.Task[None]] = set()
 _Outcome = tuple[bool, Mapping[str, Any] | str]
 
 
-class ServiceServer(_Handle):
+class ServiceServer(_BridgeHandle):
     """A service served by this client (made by ``ros.advertise_service``)."""
 
     _backend: ServiceBackend
@@ -663,7 +663,7 @@ class _Done(Coroutine[Any, None, None]):
 _DONE = _Done()
 
 
-class _Pending(Coroutine[Any, Any, T]):
+class _Deferred(Coroutine[Any, Any, T]):
     """A coroutine wrapper that says "did you forget await?" if it is dropped unstarted.
 
     It is a real :class:`collections.abc.Coroutine`, so ``asyncio.create_task``
@@ -706,7 +706,7 @@ class _NotAwaited(UsageError, AttributeError):
     """An awaitable used as its result (an AttributeError too, so ``getattr(x, n, d)`` works)."""
 
 
-class ServiceCall(_Pending[T]):
+class ServiceCall(_Deferred[T]):
     """What ``ros.call_service(...)`` returns: ``await`` it for the response.
 
     Used without ``await`` (indexed, its attributes read, iterated, or

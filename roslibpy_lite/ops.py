@@ -26,7 +26,7 @@ __all__ = [
     "RECEIVED_HEADER",
     "SESSION_HEADER",
     "ActionFeedback",
-    "ActionResult",
+    "ActionResultOp",
     "Advertise",
     "AdvertiseAction",
     "AdvertiseService",
@@ -262,7 +262,7 @@ class ActionFeedback:
 
 
 @dataclass(frozen=True, slots=True)
-class ActionResult:
+class ActionResultOp:
     """Both ways: the result of the goal ``id`` (``status`` is a GoalStatus int)."""
 
     OP: ClassVar[str] = "action_result"
@@ -364,7 +364,7 @@ Op: TypeAlias = (
     | SendActionGoal
     | CancelActionGoal
     | ActionFeedback
-    | ActionResult
+    | ActionResultOp
     | AdvertiseAction
     | UnadvertiseAction
     | Fragment
@@ -448,7 +448,7 @@ _rule(SendActionGoal, action=(_NAME, REQ), action_type=(_NAME, REQ), args=(_ARGS
       compression=(_COMPRESSION, OPT))
 _rule(CancelActionGoal, id=(_ID, REQ), action=(_NAME, REQ))
 _rule(ActionFeedback, id=(_ID, REQ), action=(_NAME, REQ), values=(_OBJECT, REQ))
-_rule(ActionResult, id=(_ID, REQ), action=(_NAME, REQ), values=(_VALUES, OPT),
+_rule(ActionResultOp, id=(_ID, REQ), action=(_NAME, REQ), values=(_VALUES, OPT),
       result=(_BOOL, REQ), status=(_INT, OPT))
 _rule(AdvertiseAction, action=(_NAME, REQ), type=(_NAME, REQ), id=(_ID, OPT))
 _rule(UnadvertiseAction, action=(_NAME, REQ), id=(_ID, OPT))

@@ -42,7 +42,7 @@ from typing import TYPE_CHECKING, Any, Literal, Self, overload
 from . import ops
 from ._aio import running_loop
 from .api import ConnectionState, MessageCallback, StateCallback
-from .capabilities import Pending
+from .capabilities import Tracked
 from .capabilities.actions import Actions
 from .capabilities.services import Services
 from .capabilities.topics import Topics
@@ -88,7 +88,7 @@ class _Host:
         self.verdict_timeout = verdict_timeout
         self.hub = StateHub(ConnectionState.CONNECTING)
         self._ids = itertools.count(1)
-        self._pending: dict[str, Pending] = {}
+        self._pending: dict[str, Tracked] = {}
         self._routes: dict[type[Any], Callable[[Any], None]] = {ops.Status: self._on_status}
         self._restorers: list[Callable[[], None]] = []
         self._drops: list[Callable[[ConnectionClosed], None]] = []
@@ -142,7 +142,7 @@ class _Host:
     def new_id(self, kind: str, name: str) -> str:
         return f"{kind}:{name}:{next(self._ids)}"
 
-    def request(self, pending: Pending, op: ops.Op) -> None:
+    def request(self, pending: Tracked, op: ops.Op) -> None:
         self._pending[pending.handle.id] = pending
         t = self.transport
         if t.connected:
@@ -150,13 +150,13 @@ class _Host:
                 pending.verdict = asyncio.Event()
             t.write(t.encode(op))
 
-    def track(self, id: str, pending: Pending) -> None:
+    def track(self, id: str, pending: Tracked) -> None:
         self._pending[id] = pending
 
-    def untrack(self, id: str) -> Pending | None:
+    def untrack(self, id: str) -> Tracked | None:
         return self._pending.pop(id, None)
 
-    def pending(self, id: str) -> Pending | None:
+    def pending(self, id: str) -> Tracked | None:
         return self._pending.get(id)
 
     async def settle(self, handle: Any) -> None:
@@ -288,7 +288,7 @@ class _Host:
         self.status_errors += 1
         self.report(error, "bridge error")
 
-    def _refused(self, key: str, record: Pending, error: StatusError) -> None:
+    def _refused(self, key: str, record: Tracked, error: StatusError) -> None:
         """The bridge refused a handle's request: the handle fails; awaited or reported."""
         if record.refuse is not None:
             record.refuse(error)

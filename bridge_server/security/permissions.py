@@ -145,7 +145,7 @@ _NEEDS: dict[type[Any], tuple[str, Callable[[Any], str]]] = {
     ops.CancelActionGoal: ("send_action_goal", lambda op: _abs(op.action)),
     ops.AdvertiseAction: ("serve_action", lambda op: _abs(op.action)),
     ops.ActionFeedback: ("serve_action", lambda op: _abs(op.action)),
-    ops.ActionResult: ("serve_action", lambda op: _abs(op.action)),
+    ops.ActionResultOp: ("serve_action", lambda op: _abs(op.action)),
 }
 """Ops not listed (unsubscribe, unadvertise*, service_response, set_level, ...) only touch
 what the client already owns, so they need no capability of their own."""

@@ -246,7 +246,7 @@ class SessionActions:
         ops.SendActionGoal: "send_goal",
         ops.CancelActionGoal: "cancel_goal",
         ops.ActionFeedback: "feedback",
-        ops.ActionResult: "result",
+        ops.ActionResultOp: "result",
         ops.AdvertiseAction: "advertise",
         ops.UnadvertiseAction: "unadvertise",
     }
@@ -326,7 +326,7 @@ class SessionActions:
         """Bad input: a status error, and the failed result stock clients wait for."""
         self.session.error(text, id)
         self.session.send_op(
-            ops.ActionResult(id=id, action=op.action, values=text, result=False,
+            ops.ActionResultOp(id=id, action=op.action, values=text, result=False,
                              status=Status.ABORTED)
         )
 
@@ -436,7 +436,7 @@ class SessionActions:
         self.finish(goal, "canceled" if status == Status.CANCELED else "failed")
         log.info("session %d: goal %s on %s failed: %s", self.session.sid, goal.id, goal.name, why)
         self.session.send_op(
-            ops.ActionResult(id=goal.id, action=goal.wire, values=f"{goal.name}: {why}",
+            ops.ActionResultOp(id=goal.id, action=goal.wire, values=f"{goal.name}: {why}",
                              result=False, status=status)
         )
 
@@ -573,7 +573,7 @@ class SessionActions:
             timer.cancel()
         return goal
 
-    def _find(self, op: ops.ActionFeedback | ops.ActionResult) -> tuple[ClientAction, str] | None:
+    def _find(self, op: ops.ActionFeedback | ops.ActionResultOp) -> tuple[ClientAction, str] | None:
         gid = str(op.id)
         served = self.served.get(full_name(op.action))
         if served is not None and gid in served.goals:
@@ -600,7 +600,7 @@ class SessionActions:
             return
         goal.feedback(msg)
 
-    def result(self, op: ops.ActionResult) -> None:
+    def result(self, op: ops.ActionResultOp) -> None:
         """The serving client ends a ROS goal."""
         found = self._find(op)
         if found is None:

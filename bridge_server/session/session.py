@@ -173,7 +173,7 @@ class Session:
             self.send_op(ops.ServiceResponse(
                 service=op.service, result=False, values=f"{op.OP}: {why}", id=op_id))
         elif isinstance(op, ops.SendActionGoal) and op_id is not None:
-            self.send_op(ops.ActionResult(
+            self.send_op(ops.ActionResultOp(
                 id=op_id, action=op.action, values=f"{op.OP}: {why}", result=False, status=6))
 
     # -- running -------------------------------------------------------------------------------

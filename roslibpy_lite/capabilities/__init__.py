@@ -7,7 +7,7 @@ composes three: :class:`~roslibpy_lite.capabilities.topics.Topics`
 (call and serve services) and :class:`~roslibpy_lite.capabilities.actions.Actions`
 (send and serve goals). Each talks to the client only through :class:`Host`, and
 keeps its own state; a request the bridge may answer or refuse by id is one
-:class:`Pending` record in the host.
+:class:`Tracked` record in the host.
 
 Adding a capability
 -------------------
@@ -16,7 +16,7 @@ Write a class in a module of its own that takes a :class:`Host`; in its
 it re-sends after a reconnect (:meth:`Host.on_restore`) and what it fails when
 the connection drops (:meth:`Host.on_drop`). Send with :meth:`Host.send`, make
 ids with :meth:`Host.new_id`, and keep each request the bridge answers by id as
-a :class:`Pending` (:meth:`Host.request` for a handle's request,
+a :class:`Tracked` (:meth:`Host.request` for a handle's request,
 :meth:`Host.track` for a call). Then add one line to ``RosBase.__init__`` that
 makes it, and the user-facing methods that call it.
 """
@@ -34,11 +34,11 @@ if TYPE_CHECKING:
     from ..exceptions import ConnectionClosed, RosLibError
     from ..transports.base import Transport
 
-__all__ = ["Host", "Pending"]
+__all__ = ["Host", "Tracked"]
 
 
 @dataclass(eq=False, slots=True)
-class Pending:
+class Tracked:
     """One request the bridge may answer or refuse by its id.
 
     A one-shot call has a ``future`` that the answer (or a refusal, or a dropped
@@ -120,20 +120,20 @@ class Host(Protocol):
         """A new request id (``kind:name:n``)."""
         ...
 
-    def request(self, pending: Pending, op: ops.Op) -> None:
+    def request(self, pending: Tracked, op: ops.Op) -> None:
         """Track a handle's request under ``pending.handle.id`` and send ``op``; a
         confirming bridge's verdict is then awaited by ``await handle``."""
         ...
 
-    def track(self, id: str, pending: Pending) -> None:
+    def track(self, id: str, pending: Tracked) -> None:
         """Track a request under ``id`` (sent by the caller)."""
         ...
 
-    def untrack(self, id: str) -> Pending | None:
+    def untrack(self, id: str) -> Tracked | None:
         """Stop tracking ``id``; its record, if it was tracked."""
         ...
 
-    def pending(self, id: str) -> Pending | None:
+    def pending(self, id: str) -> Tracked | None:
         """The record tracked under ``id``."""
         ...
 

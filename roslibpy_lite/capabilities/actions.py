@@ -29,7 +29,7 @@ from ..actions import (
 from ..api import DEFAULT_CALL_TIMEOUT, ConnectionState
 from ..exceptions import ConnectionClosed, Disconnected, UsageError
 from ..messages import check_dict, check_name, to_wire
-from . import Host, Pending
+from . import Host, Tracked
 
 __all__ = ["Actions"]
 
@@ -48,7 +48,7 @@ class Actions:
         self.served_goals: dict[str, tuple[GoalContext, asyncio.Task[None]]] = {}
         self._failed_goals: collections.deque[str] = collections.deque()
         host.route(ops.ActionFeedback, self._on_feedback)
-        host.route(ops.ActionResult, self._on_result)
+        host.route(ops.ActionResultOp, self._on_result)
         host.route(ops.SendActionGoal, self._serve_goal)
         host.route(ops.CancelActionGoal, self._on_cancel_goal)
         host.on_restore(self._restore)
@@ -91,7 +91,7 @@ class Actions:
                             on_feedback=on_feedback)
         self.goals[id] = handle
         # Status errors naming the goal fail it; nobody awaits a verdict on it.
-        host.track(id, Pending(action, handle=handle, awaited=True, confirm=handle._confirmed))
+        host.track(id, Tracked(action, handle=handle, awaited=True, confirm=handle._confirmed))
         host.send(ops.SendActionGoal(action=action, action_type=type_name, args=wire, id=id,
                                      feedback=feedback))
         await host.flush()
@@ -113,7 +113,7 @@ class Actions:
         if goal is not None:
             goal._feedback(op.values)
 
-    def _on_result(self, op: ops.ActionResult) -> None:
+    def _on_result(self, op: ops.ActionResultOp) -> None:
         goal = self.goals.get(str(op.id))
         if goal is not None:
             goal._result(op)
@@ -133,7 +133,7 @@ class Actions:
         server = ActionServer(self, action, type_name, cls, handler,
                               id=host.new_id("advertise_action", action))
         self.servers[action] = server
-        host.request(Pending(action, handle=server, forget=lambda: self._forget(server)),
+        host.request(Tracked(action, handle=server, forget=lambda: self._forget(server)),
                      server.request_op())
         return server
 
@@ -150,7 +150,7 @@ class Actions:
         server = self.servers.get(op.action)
         if server is None or op.id is None:
             if op.id is not None:
-                self.host.send(ops.ActionResult(id=op.id, action=op.action, result=False,
+                self.host.send(ops.ActionResultOp(id=op.id, action=op.action, result=False,
                                                 values=f"{op.action} is not served here",
                                                 status=int(GoalStatus.ABORTED)))
             return
@@ -177,7 +177,7 @@ class Actions:
     def _spawn(self, coro: Coroutine[Any, Any, None]) -> None:
         self.host.spawn(coro)
 
-    def _served_goal_done(self, ctx: GoalContext, op: ops.ActionResult | None) -> None:
+    def _served_goal_done(self, ctx: GoalContext, op: ops.ActionResultOp | None) -> None:
         """A served goal's handler returned: send its result (None: the goal was lost).
 
         A result that cannot be encoded aborts the goal with the reason.
@@ -185,7 +185,7 @@ class Actions:
         self.served_goals.pop(ctx.id, None)
         if op is None:
             return
-        self.host.send_or(op, lambda why: ops.ActionResult(
+        self.host.send_or(op, lambda why: ops.ActionResultOp(
             id=op.id, action=op.action, result=False, values=why,
             status=int(GoalStatus.ABORTED)))
 

@@ -23,7 +23,7 @@ from ..messages import (
     service_type,
     to_wire,
 )
-from . import Host, Pending
+from . import Host, Tracked
 
 if TYPE_CHECKING:
     from msgs.runtime import Message, Service
@@ -85,7 +85,7 @@ class Services:
                 if not host.transport.connected:
                     await host.wait_connected()
                 future: asyncio.Future[_Answer] = loop.create_future()
-                host.track(call_id, Pending(service, future=future))
+                host.track(call_id, Tracked(service, future=future))
                 # The bridge gets a little longer, so our own timeout decides.
                 server_timeout = timeout + 1.0 if timeout is not None else None
                 host.send(ops.CallService(service, wire, type_name, id=call_id,
@@ -134,7 +134,7 @@ class Services:
         server = ServiceServer(self, service, type_name, srv_cls, handler,
                                id=host.new_id("advertise_service", service))
         self.servers[service] = server
-        host.request(Pending(service, handle=server, forget=lambda: self._forget(server)),
+        host.request(Tracked(service, handle=server, forget=lambda: self._forget(server)),
                      server.request_op())
         return server
 

@@ -23,7 +23,7 @@ from ..api import ConnectionState
 from ..exceptions import ConnectionClosed, Disconnected, RosLibError, UsageError
 from ..handles import Publisher, Subscription
 from ..messages import RawMessage, check_name, lookup_message_class, message_type
-from . import Host, Pending
+from . import Host, Tracked
 
 log = logging.getLogger("roslibpy_lite.client")
 
@@ -77,7 +77,7 @@ class Topics:
             pubs.append(pub)
         else:
             self.publishers[topic] = [pub]
-            host.request(Pending(topic, handle=pub, refuse=self._refuse_publishers(topic, pub),
+            host.request(Tracked(topic, handle=pub, refuse=self._refuse_publishers(topic, pub),
                                  forget=self._forget_publishers(topic)), pub.request_op())
         return pub
 
@@ -190,7 +190,7 @@ class Topics:
             sub.on_message(callback)
         self.subscriptions[sub.id] = sub
         self.by_topic[topic] = (*self.by_topic.get(topic, ()), sub)
-        host.request(Pending(topic, handle=sub, forget=lambda: self._forget_sub(sub)),
+        host.request(Tracked(topic, handle=sub, forget=lambda: self._forget_sub(sub)),
                      sub.request_op())
         return sub
 

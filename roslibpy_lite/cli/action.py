@@ -27,10 +27,10 @@ from .common import (
     EXIT_REMOTE,
     EXIT_USAGE,
     CliError,
+    CliSession,
     Kit,
     Out,
     Parser,
-    Session,
     check_values,
     cli_values,
     for_display,
@@ -42,13 +42,13 @@ from .common import (
 )
 
 
-async def _servers(s: Session) -> list[str]:
+async def _servers(s: CliSession) -> list[str]:
     return sorted((await s.rosapi("action_servers")).get("action_servers", []))
 
 
 async def cmd_action_list(args: argparse.Namespace, out: Out) -> int:
     """``action list [-t]``."""
-    async def body(s: Session) -> int:
+    async def body(s: CliSession) -> int:
         pairs = await named_types(s, await _servers(s), "action_type", "action",
                                   args.show_types or args.json)
         return print_listing(out, args, pairs)
@@ -57,7 +57,7 @@ async def cmd_action_list(args: argparse.Namespace, out: Out) -> int:
 
 async def cmd_action_type(args: argparse.Namespace, out: Out) -> int:
     """``action type ACTION``."""
-    async def body(s: Session) -> int:
+    async def body(s: CliSession) -> int:
         out.line(await s.action_type(args.action, args.wait))
         return EXIT_OK
     return await with_session(args, body)
@@ -65,7 +65,7 @@ async def cmd_action_type(args: argparse.Namespace, out: Out) -> int:
 
 async def cmd_action_info(args: argparse.Namespace, out: Out) -> int:
     """``action info ACTION``: its type and the nodes serving it."""
-    async def body(s: Session) -> int:
+    async def body(s: CliSession) -> int:
         type_ = await s.action_type(args.action, args.wait)
         nodes = (await s.rosapi("nodes")).get("nodes", [])
         details = await asyncio.gather(*(s.rosapi("node_details", {"node": n}) for n in nodes))
@@ -96,7 +96,7 @@ async def cmd_action_send_goal(args: argparse.Namespace, out: Out) -> int:
     if args.cancel_wait <= 0:
         raise CliError(EXIT_USAGE, f"--cancel-wait must be > 0, got {args.cancel_wait}")
 
-    async def body(s: Session) -> int:
+    async def body(s: CliSession) -> int:
         await s.action_type(args.action, args.wait)
         if not args.json:
             out.line("Sending goal:")

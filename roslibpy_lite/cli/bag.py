@@ -17,10 +17,10 @@ from .common import (
     EXIT_OK,
     EXIT_USAGE,
     CliError,
+    CliSession,
     Kit,
     Out,
     Parser,
-    Session,
     with_session,
 )
 
@@ -54,7 +54,7 @@ async def cmd_bag_record(args: argparse.Namespace, out: Out) -> int:
     if not args.topics and not args.all:
         raise CliError(EXIT_USAGE, "name topics (or patterns such as '/camera/*'), or pass --all")
 
-    async def body(s: Session) -> int:
+    async def body(s: CliSession) -> int:
         try:
             rec = Recorder(s.ros, args.output, topics=args.topics, all_topics=args.all,
                            max_messages=args.max, split_size=args.split_size,
@@ -158,7 +158,7 @@ async def cmd_bag_play(args: argparse.Namespace, out: Out) -> int:
 
     _need_mcap()
 
-    async def body(s: Session) -> int:
+    async def body(s: CliSession) -> int:
         stats = await play(s.ros, args.file, rate=args.rate, loop=args.loop,
                            topics=args.topics or None, start=args.start,
                            duration=args.duration, latch=args.latch or ())

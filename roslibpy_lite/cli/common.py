@@ -188,7 +188,7 @@ def _show_field(value: Any, type_: str) -> Any:
 # -- the connection ------------------------------------------------------------------------------
 
 
-class Session:
+class CliSession:
     """A connected client plus the rosapi helpers the commands share."""
 
     def __init__(self, ros: Client, timeout: float) -> None:
@@ -256,7 +256,7 @@ Command = Callable[[argparse.Namespace, Out], Coroutine[Any, Any, int]]
 
 
 async def named_types(
-    s: Session, names: list[str], service: str, key: str, wanted: bool
+    s: CliSession, names: list[str], service: str, key: str, wanted: bool
 ) -> list[tuple[str, str]]:
     """``(name, type)`` for each name, asking ``/rosapi/<service>`` (``{key: name}``) only
     when the types are ``wanted`` (``""`` otherwise)."""
@@ -285,7 +285,7 @@ def print_listing(out: Out, args: argparse.Namespace, pairs: list[tuple[str, str
     return EXIT_OK
 
 
-async def with_session(args: argparse.Namespace, body: Callable[[Session], Awaitable[int]],
+async def with_session(args: argparse.Namespace, body: Callable[[CliSession], Awaitable[int]],
                        *, reconnect: bool = False) -> int:
     secure = args.url.startswith("wss://")
     try:
@@ -304,7 +304,7 @@ async def with_session(args: argparse.Namespace, body: Callable[[Session], Await
     except UsageError as exc:
         raise CliError(EXIT_USAGE, str(exc)) from None
     try:
-        return await body(Session(ros, args.timeout))
+        return await body(CliSession(ros, args.timeout))
     finally:
         await ros.close()
 
@@ -316,7 +316,7 @@ async def until(duration: float | None, work: Awaitable[None]) -> None:
             await work
 
 
-def lost(s: Session, what: str) -> CliError:
+def lost(s: CliSession, what: str) -> CliError:
     return CliError(EXIT_CONNECT, f"{what}: the connection to {s.ros.url} was lost")
 
 

@@ -15,10 +15,10 @@ from .common import (
     EXIT_OK,
     PRIMITIVES,
     CliError,
+    CliSession,
     Kit,
     Out,
     Parser,
-    Session,
     with_session,
 )
 
@@ -96,7 +96,7 @@ async def _show_from_bridge(args: argparse.Namespace, out: Out, local: CliError)
                "action": [("action_goal_details", ""), ("action_result_details", "---"),
                           ("action_feedback_details", "---")]}.get(kind, [])
 
-    async def body(s: Session) -> int:
+    async def body(s: CliSession) -> int:
         blocks: list[tuple[str, list[dict[str, Any]]]] = []
         for service, separator in queries:
             try:
@@ -150,7 +150,7 @@ async def cmd_interface_list(args: argparse.Namespace, out: Out) -> int:
         args.package is None or args.package in available_packages()) else []
     remote: list[str] = []
     if args.remote:
-        async def body(s: Session) -> int:
+        async def body(s: CliSession) -> int:
             remote.extend(str(n) for n in (await s.rosapi("interfaces")).get("interfaces", [])
                           if args.package is None or str(n).split("/")[0] == args.package)
             return EXIT_OK
@@ -180,7 +180,7 @@ async def cmd_interface_gen(args: argparse.Namespace, out: Out) -> int:
         raise CliError(EXIT_NOT_FOUND, f"-o {args.output}: the directory becomes the Python "
                        f"package {root_name!r}, which needs an identifier other than 'msgs'")
 
-    async def body(s: Session) -> int:
+    async def body(s: CliSession) -> int:
         packages: dict[str, PackageSources] = {}
         seen: set[str] = set()
         for name in args.types:

@@ -10,17 +10,17 @@ from .common import (
     EXIT_NOT_FOUND,
     EXIT_OK,
     CliError,
+    CliSession,
     Kit,
     Out,
     Parser,
-    Session,
     with_session,
 )
 
 
 async def cmd_node_list(args: argparse.Namespace, out: Out) -> int:
     """``node list``."""
-    async def body(s: Session) -> int:
+    async def body(s: CliSession) -> int:
         names = sorted((await s.rosapi("nodes")).get("nodes", []))
         if args.json:
             out.line(json.dumps(names))
@@ -32,7 +32,7 @@ async def cmd_node_list(args: argparse.Namespace, out: Out) -> int:
 
 async def cmd_node_info(args: argparse.Namespace, out: Out) -> int:
     """``node info NODE``: what a node publishes, subscribes to and serves."""
-    async def body(s: Session) -> int:
+    async def body(s: CliSession) -> int:
         name = args.node if args.node.startswith("/") else "/" + args.node
         if name not in (await s.rosapi("nodes")).get("nodes", []):
             raise CliError(EXIT_NOT_FOUND, f"unknown node {name}")

@@ -18,10 +18,10 @@ from .common import (
     EXIT_REMOTE,
     EXIT_USAGE,
     CliError,
+    CliSession,
     Kit,
     Out,
     Parser,
-    Session,
     check_values,
     cli_values,
     local_class,
@@ -34,7 +34,7 @@ from .common import (
 
 async def cmd_service_list(args: argparse.Namespace, out: Out) -> int:
     """``service list [-t]``."""
-    async def body(s: Session) -> int:
+    async def body(s: CliSession) -> int:
         names = sorted((await s.rosapi("services")).get("services", []))
         pairs = await named_types(s, names, "service_type", "service",
                                   args.show_types or args.json)
@@ -44,7 +44,7 @@ async def cmd_service_list(args: argparse.Namespace, out: Out) -> int:
 
 async def cmd_service_type(args: argparse.Namespace, out: Out) -> int:
     """``service type SERVICE``."""
-    async def body(s: Session) -> int:
+    async def body(s: CliSession) -> int:
         await s.service_server(args.service, args.wait)
         found = str((await s.rosapi("service_type", {"service": args.service})).get("type", ""))
         if not found:
@@ -63,7 +63,7 @@ async def cmd_service_call(args: argparse.Namespace, out: Out) -> int:
     if args.call_timeout is not None and args.call_timeout <= 0:
         raise CliError(EXIT_USAGE, f"--call-timeout must be > 0, got {args.call_timeout}")
 
-    async def body(s: Session) -> int:
+    async def body(s: CliSession) -> int:
         await s.service_server(args.service, args.wait)
         try:
             response = await s.ros.call_service(args.service, args.type, values,

@@ -18,10 +18,10 @@ from .common import (
     EXIT_REMOTE,
     EXIT_USAGE,
     CliError,
+    CliSession,
     Kit,
     Out,
     Parser,
-    Session,
     check_values,
     cli_values,
     for_display,
@@ -37,7 +37,7 @@ from .common import (
 
 async def cmd_topic_list(args: argparse.Namespace, out: Out) -> int:
     """``topic list [-t]``."""
-    async def body(s: Session) -> int:
+    async def body(s: CliSession) -> int:
         reply = await s.rosapi("topics")
         pairs = sorted(zip(reply.get("topics", []), reply.get("types", []), strict=False))
         return print_listing(out, args, pairs)
@@ -46,7 +46,7 @@ async def cmd_topic_list(args: argparse.Namespace, out: Out) -> int:
 
 async def cmd_topic_type(args: argparse.Namespace, out: Out) -> int:
     """``topic type TOPIC``."""
-    async def body(s: Session) -> int:
+    async def body(s: CliSession) -> int:
         out.line(await s.topic_type(args.topic, args.wait))
         return EXIT_OK
     return await with_session(args, body)
@@ -54,7 +54,7 @@ async def cmd_topic_type(args: argparse.Namespace, out: Out) -> int:
 
 async def cmd_topic_info(args: argparse.Namespace, out: Out) -> int:
     """``topic info TOPIC [-v]``: type and the nodes publishing and subscribing."""
-    async def body(s: Session) -> int:
+    async def body(s: CliSession) -> int:
         type_ = await s.topic_type(args.topic, args.wait)
         pubs, subs = await asyncio.gather(
             s.rosapi("publishers", {"topic": args.topic}),
@@ -90,7 +90,7 @@ def _stop_after(args: argparse.Namespace) -> float | None:
     return duration
 
 
-async def _resolve_topic_type(s: Session, args: argparse.Namespace) -> str:
+async def _resolve_topic_type(s: CliSession, args: argparse.Namespace) -> str:
     if args.type:
         type_parts(args.type, "msg")
         return str(args.type)
@@ -108,7 +108,7 @@ async def cmd_topic_echo(args: argparse.Namespace, out: Out) -> int:
         args.count = 1
     duration = _stop_after(args)
 
-    async def body(s: Session) -> int:
+    async def body(s: CliSession) -> int:
         type_ = await _resolve_topic_type(s, args)
         cls = None if args.json else local_class(type_, "msg")
         seen = 0
@@ -179,7 +179,7 @@ async def cmd_topic_hz(args: argparse.Namespace, out: Out) -> int:
     if args.window < 1:
         raise CliError(EXIT_USAGE, f"--window must be >= 1, got {args.window}")
 
-    async def body(s: Session) -> int:
+    async def body(s: CliSession) -> int:
         type_ = await _resolve_topic_type(s, args)
         stats = RateStats(args.window)
         loop = asyncio.get_running_loop()
@@ -243,7 +243,7 @@ async def cmd_topic_pub(args: argparse.Namespace, out: Out) -> int:
     if wait_subs < 0:
         raise CliError(EXIT_USAGE, "--wait-matching-subscriptions must be >= 0")
 
-    async def body(s: Session) -> int:
+    async def body(s: CliSession) -> int:
         pub = s.ros.advertise(args.topic, args.type, latch=args.latch)
         try:  # our bridge confirms or refuses at once; a stock one is asked below
             await pub

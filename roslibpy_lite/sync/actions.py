@@ -13,7 +13,7 @@ from typing import Any
 
 from .. import actions
 from ..exceptions import RosTimeoutError
-from .handles import _Handle, _Wrapper
+from .handles import _BlockingHandle, _Wrapper
 
 __all__ = ["ActionServer", "GoalHandle"]
 
@@ -82,7 +82,7 @@ class GoalHandle(_Wrapper[actions.GoalHandle]):
         return self.feedback()
 
 
-class ActionServer(_Handle[actions.ActionServer]):
+class ActionServer(_BlockingHandle[actions.ActionServer]):
     """A blocking action server: ``with`` it, or :meth:`unadvertise` (``close``)."""
 
     @property

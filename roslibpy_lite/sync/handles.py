@@ -53,7 +53,7 @@ class _Wrapper(Generic[H]):
         return f"<sync {self.handle!r}>"
 
 
-class _Handle(_Wrapper[C]):
+class _BlockingHandle(_Wrapper[C]):
     """What the closable blocking handles share: ``with``, ``closed``, ``close``."""
 
     @property
@@ -73,7 +73,7 @@ class _Handle(_Wrapper[C]):
             self.close()
 
 
-class Publisher(_Handle["handles.Publisher[Any]"], Generic[T]):
+class Publisher(_BlockingHandle["handles.Publisher[Any]"], Generic[T]):
     """A blocking publisher (made by :meth:`Client.advertise`); a context manager.
 
     ``publish`` checks the message on your thread (a bad one raises at once)
@@ -149,7 +149,7 @@ def _log_failure(task: asyncio.Task[None]) -> None:
         log.error("publish from a callback failed: %s", task.exception())
 
 
-class Subscription(_Handle["handles.Subscription[Any]"], Generic[T]):
+class Subscription(_BlockingHandle["handles.Subscription[Any]"], Generic[T]):
     """A blocking subscription (made by :meth:`Client.subscribe`).
 
     ``for msg in sub`` iterates until it is closed; :meth:`get` and
@@ -213,7 +213,7 @@ class Subscription(_Handle["handles.Subscription[Any]"], Generic[T]):
         self.close()
 
 
-class ServiceServer(_Handle["handles.ServiceServer"]):
+class ServiceServer(_BlockingHandle["handles.ServiceServer"]):
     """A blocking service server (made by :meth:`Client.advertise_service`)."""
 
     @property

@@ -31,7 +31,7 @@ if TYPE_CHECKING:
 
 __all__ = ["ACTION_OPS", "MemoryActions"]
 
-ACTION_OPS = (ops.SendActionGoal, ops.CancelActionGoal, ops.ActionFeedback, ops.ActionResult,
+ACTION_OPS = (ops.SendActionGoal, ops.CancelActionGoal, ops.ActionFeedback, ops.ActionResultOp,
               ops.AdvertiseAction, ops.UnadvertiseAction)
 _SUCCEEDED, _CANCELED, _ABORTED = 4, 5, 6
 
@@ -68,7 +68,7 @@ class MemoryActions:
             self._cancel(op)
         elif isinstance(op, ops.ActionFeedback):
             self._feedback(op)
-        elif isinstance(op, ops.ActionResult):
+        elif isinstance(op, ops.ActionResultOp):
             self._result(op)
         elif isinstance(op, ops.AdvertiseAction):
             self._advertise(op)
@@ -99,7 +99,7 @@ class MemoryActions:
         # As rosbridge: result true for a goal that ran to a final status (its values),
         # false only for one that never ran (a text saying why).
         ran = not isinstance(values, str) and status in (_SUCCEEDED, _CANCELED, _ABORTED)
-        self.bridge._to_client(ops.ActionResult(id=id, action=action, values=values,
+        self.bridge._to_client(ops.ActionResultOp(id=id, action=action, values=values,
                                                status=status, result=ran))
 
     def _send_goal(self, op: ops.SendActionGoal) -> None:
@@ -165,7 +165,7 @@ class MemoryActions:
             if goal.served == name:
                 self._end(gid, _ABORTED, None)
 
-    def _find(self, op: ops.ActionFeedback | ops.ActionResult) -> _Goal | None:
+    def _find(self, op: ops.ActionFeedback | ops.ActionResultOp) -> _Goal | None:
         goal = self.goals.get(str(op.id))
         if goal is None:
             self.bridge._error(f"{op.OP}: no goal {op.id!r} of {_name(op.action)} is waiting "
@@ -185,7 +185,7 @@ class MemoryActions:
                                                      action=goal.caller_action,
                                                      values=dict(op.values)))
 
-    def _result(self, op: ops.ActionResult) -> None:
+    def _result(self, op: ops.ActionResultOp) -> None:
         goal = self._find(op)
         if goal is None:
             return
