@@ -24,7 +24,7 @@ from .actions import (
     GoalStatus,
 )
 from .api import ConnectionState, Ros
-from .client import Client, Connector, connect, run
+from .client import Client, ClientOptions, Connector, connect, run
 from .exceptions import (
     ConnectError,
     ConnectionClosed,
@@ -54,6 +54,7 @@ __all__ = [
     "ActionServer",
     "Backoff",
     "Client",
+    "ClientOptions",
     "ConnectError",
     "ConnectionClosed",
     "ConnectionState",

@@ -73,7 +73,7 @@ from __future__ import annotations
 import asyncio
 import ssl as _ssl
 from collections.abc import Callable, Coroutine, Generator
-from typing import TYPE_CHECKING, Any, TypeVar
+from typing import TYPE_CHECKING, Any, TypedDict, TypeVar, Unpack
 
 from ._backoff import Backoff
 from .exceptions import UsageError
@@ -83,11 +83,33 @@ from .transports.websocket import WebSocketTransport
 if TYPE_CHECKING:
     from types import TracebackType
 
-__all__ = ["Client", "Connector", "connect", "run"]
+__all__ = ["Client", "ClientOptions", "Connector", "connect", "run"]
 
 T = TypeVar("T")
 EXIT_INTERRUPTED = 130
 """The exit status of a script stopped with Ctrl+C (128 + SIGINT), as shells report it."""
+
+
+class ClientOptions(TypedDict, total=False):
+    """The keyword options :func:`connect` (and ``sync.connect``) pass on to :class:`Client`.
+
+    Their meanings and defaults are :class:`Client`'s (a test keeps the two lists equal).
+    """
+
+    reconnect: bool
+    backoff: Backoff | None
+    open_timeout: float
+    offline_buffer: int
+    max_pending: int
+    max_size: int | None
+    ping_interval: float | None
+    ping_timeout: float | None
+    ws_compression: str | None
+    proxy: str | None
+    validate: bool
+    token: str | None
+    ssl: _ssl.SSLContext | str | None
+    resume: bool
 
 
 class Client(RosBase):
@@ -251,29 +273,12 @@ class _ConnectNotAwaited(UsageError, AttributeError):
     """A Connector used as the client it opens."""
 
 
-def connect(
-    url: str,
-    *,
-    reconnect: bool = True,
-    backoff: Backoff | None = None,
-    open_timeout: float = 10.0,
-    offline_buffer: int = 100,
-    max_pending: int = 1024,
-    max_size: int | None = 256 * 1024 * 1024,
-    ping_interval: float | None = 2.0,
-    ping_timeout: float | None = 3.0,
-    ws_compression: str | None = None,
-    proxy: str | None = None,
-    validate: bool = True,
-    token: str | None = None,
-    ssl: _ssl.SSLContext | str | None = None,
-    resume: bool = True,
-) -> Connector:
+def connect(url: str, **options: Unpack[ClientOptions]) -> Connector:
     """Connect to a rosbridge server at ``url`` (``ws://host:9090``).
 
     ``async with connect(url) as ros:`` or ``ros = await connect(url)``. See
-    :class:`Client` for the options. Returns once the first connection is
-    open.
+    :class:`Client` for the ``options`` (:class:`ClientOptions`). Returns once
+    the first connection is open.
 
     Raises (when awaited):
         ConnectError: no connection within ``open_timeout`` seconds (with
@@ -284,12 +289,7 @@ def connect(
         UsageError: a malformed URL or option (``ssl=`` with ``ws://``, an
             unreadable CA file).
     """
-    return Connector(Client(
-        url, reconnect=reconnect, backoff=backoff, open_timeout=open_timeout,
-        offline_buffer=offline_buffer, max_pending=max_pending, max_size=max_size,
-        ping_interval=ping_interval, ping_timeout=ping_timeout, ws_compression=ws_compression,
-        proxy=proxy, validate=validate, token=token, ssl=ssl, resume=resume,
-    ))
+    return Connector(Client(url, **options))
 
 
 def _ssl_context(url: str, ssl: _ssl.SSLContext | str | None) -> _ssl.SSLContext | None:

@@ -36,6 +36,7 @@ from .common import (
     for_display,
     local_class,
     named_types,
+    print_line,
     print_listing,
     type_parts,
     with_session,
@@ -57,10 +58,7 @@ async def cmd_action_list(args: argparse.Namespace, out: Out) -> int:
 
 async def cmd_action_type(args: argparse.Namespace, out: Out) -> int:
     """``action type ACTION``."""
-    async def body(s: CliSession) -> int:
-        out.line(await s.action_type(args.action, args.wait))
-        return EXIT_OK
-    return await with_session(args, body)
+    return await print_line(args, out, lambda s: s.action_type(args.action, args.wait))
 
 
 async def cmd_action_info(args: argparse.Namespace, out: Out) -> int:
@@ -177,12 +175,9 @@ def add_parsers(groups: Any, kit: Kit) -> None:
     awaits.add_argument("--wait", type=float, default=2.0, metavar="SEC",
                         help="seconds to wait for the action to appear in the ROS graph "
                              "(default 2)")
-    action = groups.add_parser("action", help="actions: list, info, type, send_goal")
-    asub = action.add_subparsers(dest="command", metavar="{list,info,type,send_goal}",
-                                 parser_class=Parser)
-    asub.required = True
-    p = kit.leaf(asub, "list", cmd_action_list, "list the action servers", kit.fmt)
-    p.add_argument("-t", "--show-types", action="store_true", help="show each action's type")
+    asub = kit.group(groups, "action", "actions: list, info, type, send_goal",
+                     "list,info,type,send_goal")
+    kit.listing(asub, cmd_action_list, "list the action servers", "action")
     p = kit.leaf(asub, "info", cmd_action_info, "an action's type and the nodes serving it",
                  kit.fmt, awaits)
     p.add_argument("action")

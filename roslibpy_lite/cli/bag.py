@@ -20,7 +20,6 @@ from .common import (
     CliSession,
     Kit,
     Out,
-    Parser,
     with_session,
 )
 
@@ -171,9 +170,8 @@ async def cmd_bag_play(args: argparse.Namespace, out: Out) -> int:
 
 def add_parsers(groups: Any, kit: Kit) -> None:
     """Add ``bag`` and its commands."""
-    bag = groups.add_parser("bag", help="MCAP files: record (through the bridge), info, play")
-    bsub = bag.add_subparsers(dest="command", metavar="{record,info,play}", parser_class=Parser)
-    bsub.required = True
+    bsub = kit.group(groups, "bag", "MCAP files: record (through the bridge), info, play",
+                     "record,info,play")
     p = kit.leaf(bsub, "record", cmd_bag_record, "record topics to an MCAP file (Ctrl+C ends "
                  "it properly)")
     p.add_argument("topics", nargs="*", metavar="TOPIC", help="names or patterns ('/cam/*')")

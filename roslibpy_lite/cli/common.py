@@ -316,6 +316,15 @@ async def until(duration: float | None, work: Awaitable[None]) -> None:
             await work
 
 
+async def print_line(args: argparse.Namespace, out: Out,
+                     find: Callable[[CliSession], Awaitable[str]]) -> int:
+    """Print the one line ``find`` answers in a session (``topic type``, ``action type``)."""
+    async def body(s: CliSession) -> int:
+        out.line(await find(s))
+        return EXIT_OK
+    return await with_session(args, body)
+
+
 def lost(s: CliSession, what: str) -> CliError:
     return CliError(EXIT_CONNECT, f"{what}: the connection to {s.ros.url} was lost")
 
@@ -344,3 +353,23 @@ class Kit:
             name, help=help_, description=help_, parents=[self.common, *parents])
         p.set_defaults(func=fn)
         return p
+
+    @staticmethod
+    def group(groups: Any, name: str, help_: str, commands: str) -> Any:
+        """Add the command group ``name`` (its ``commands``, comma-separated); its subparsers."""
+        parser = groups.add_parser(name, help=help_)
+        sub = parser.add_subparsers(dest="command", metavar=f"{{{commands}}}",
+                                    parser_class=Parser)
+        sub.required = True
+        return sub
+
+    def listing(self, sub: Any, fn: Command, help_: str, each: str, *, hidden: bool = False
+                ) -> None:
+        """Add ``list [-t]`` running ``fn`` (``-t``: show each ``each``'s type), with
+        ``--include-hidden`` too when ``hidden``."""
+        p = self.leaf(sub, "list", fn, help_, self.fmt)
+        p.add_argument("-t", "--show-types", action="store_true", help=f"show each {each}'s type")
+        if hidden:
+            p.add_argument("--include-hidden", f"--include-hidden-{each}s", action="store_true",
+                           help=f"also hidden {each}s (a part of the name starts with _, such as "
+                                f"an action's /_action/ {each}s)")

@@ -18,7 +18,6 @@ from .common import (
     CliSession,
     Kit,
     Out,
-    Parser,
     with_session,
 )
 
@@ -240,12 +239,9 @@ def _known(type_name: str) -> bool:
 
 def add_parsers(groups: Any, kit: Kit) -> None:
     """Add ``interface`` and its commands."""
-    interface = groups.add_parser("interface", help="interface types: show (asks the bridge "
-                                  "for types msgs does not know), list, gen (typed modules "
-                                  "for the robot's own types)")
-    isub = interface.add_subparsers(dest="command", metavar="{show,list,gen}",
-                                    parser_class=Parser)
-    isub.required = True
+    isub = kit.group(groups, "interface", "interface types: show (asks the bridge for types "
+                     "msgs does not know), list, gen (typed modules for the robot's own types)",
+                     "show,list,gen")
     p = kit.leaf(isub, "show", cmd_interface_show, "print an interface definition")
     p.add_argument("type", help="e.g. sensor_msgs/msg/Imu, mult_msgs/srv/MultFloats")
     p.add_argument("--raw", action="store_true", help="do not expand nested types")

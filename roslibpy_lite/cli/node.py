@@ -13,7 +13,6 @@ from .common import (
     CliSession,
     Kit,
     Out,
-    Parser,
     with_session,
 )
 
@@ -52,9 +51,7 @@ async def cmd_node_info(args: argparse.Namespace, out: Out) -> int:
 
 def add_parsers(groups: Any, kit: Kit) -> None:
     """Add ``node`` and its commands."""
-    node = groups.add_parser("node", help="nodes: list, info")
-    nsub = node.add_subparsers(dest="command", metavar="{list,info}", parser_class=Parser)
-    nsub.required = True
+    nsub = kit.group(groups, "node", "nodes: list, info", "list,info")
     kit.leaf(nsub, "list", cmd_node_list, "list the nodes", kit.fmt)
     p = kit.leaf(nsub, "info", cmd_node_info, "what a node publishes, subscribes to and serves",
                  kit.fmt)

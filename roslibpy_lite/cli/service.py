@@ -21,7 +21,6 @@ from .common import (
     CliSession,
     Kit,
     Out,
-    Parser,
     check_values,
     cli_values,
     local_class,
@@ -80,15 +79,8 @@ async def cmd_service_call(args: argparse.Namespace, out: Out) -> int:
 
 def add_parsers(groups: Any, kit: Kit) -> None:
     """Add ``service`` and its commands."""
-    service = groups.add_parser("service", help="services: list, type, call")
-    ssub = service.add_subparsers(dest="command", metavar="{list,type,call}",
-                                  parser_class=Parser)
-    ssub.required = True
-    p = kit.leaf(ssub, "list", cmd_service_list, "list the services", kit.fmt)
-    p.add_argument("-t", "--show-types", action="store_true", help="show each service's type")
-    p.add_argument("--include-hidden", "--include-hidden-services", action="store_true",
-                   help="also hidden services (a part of the name starts with _, such as "
-                        "an action's /_action/ services)")
+    ssub = kit.group(groups, "service", "services: list, type, call", "list,type,call")
+    kit.listing(ssub, cmd_service_list, "list the services", "service", hidden=True)
     p = kit.leaf(ssub, "type", cmd_service_type, "print a service's type", kit.swait)
     p.add_argument("service")
     p = kit.leaf(ssub, "call", cmd_service_call, "call a service and print the response", kit.fmt,

@@ -21,13 +21,13 @@ from .common import (
     CliSession,
     Kit,
     Out,
-    Parser,
     check_values,
     cli_values,
     for_display,
     local_class,
     lost,
     nan_to_none,
+    print_line,
     print_listing,
     type_parts,
     until,
@@ -46,10 +46,7 @@ async def cmd_topic_list(args: argparse.Namespace, out: Out) -> int:
 
 async def cmd_topic_type(args: argparse.Namespace, out: Out) -> int:
     """``topic type TOPIC``."""
-    async def body(s: CliSession) -> int:
-        out.line(await s.topic_type(args.topic, args.wait))
-        return EXIT_OK
-    return await with_session(args, body)
+    return await print_line(args, out, lambda s: s.topic_type(args.topic, args.wait))
 
 
 async def cmd_topic_info(args: argparse.Namespace, out: Out) -> int:
@@ -285,15 +282,9 @@ async def cmd_topic_pub(args: argparse.Namespace, out: Out) -> int:
 
 def add_parsers(groups: Any, kit: Kit) -> None:
     """Add ``topic`` and its commands."""
-    topic = groups.add_parser("topic", help="topics: list, type, info, echo, pub, hz")
-    tsub = topic.add_subparsers(dest="command", metavar="{list,type,info,echo,pub,hz}",
-                                parser_class=Parser)
-    tsub.required = True
-    p = kit.leaf(tsub, "list", cmd_topic_list, "list the topics in the ROS graph", kit.fmt)
-    p.add_argument("-t", "--show-types", action="store_true", help="show each topic's type")
-    p.add_argument("--include-hidden", "--include-hidden-topics", action="store_true",
-                   help="also hidden topics (a part of the name starts with _, such as "
-                        "an action's /_action/ topics)")
+    tsub = kit.group(groups, "topic", "topics: list, type, info, echo, pub, hz",
+                     "list,type,info,echo,pub,hz")
+    kit.listing(tsub, cmd_topic_list, "list the topics in the ROS graph", "topic", hidden=True)
     p = kit.leaf(tsub, "type", cmd_topic_type, "print a topic's type", kit.wait)
     p.add_argument("topic")
     p = kit.leaf(tsub, "info", cmd_topic_info, "a topic's type, publishers and subscribers",

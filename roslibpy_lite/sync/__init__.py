@@ -53,7 +53,7 @@ from __future__ import annotations
 
 import contextlib
 from collections.abc import Callable, Mapping
-from typing import TYPE_CHECKING, Any, Self, overload
+from typing import TYPE_CHECKING, Any, Self, Unpack, overload
 
 from .. import MockRos as _AioMockRos
 from .. import connect as _aio_connect
@@ -72,6 +72,7 @@ if TYPE_CHECKING:
     from .. import handles
     from ..actions import ActionHandler, FeedbackCallback
     from ..api import M, Ros
+    from ..client import ClientOptions
 
 __all__ = [
     "HANDLER_THREADS",
@@ -275,7 +276,7 @@ class Client(_Front):
     """A blocking rosbridge client (made by :func:`connect`); see the module docstring."""
 
 
-def connect(url: str, **options: Any) -> Client:
+def connect(url: str, **options: Unpack[ClientOptions]) -> Client:
     """Connect to the rosbridge server at ``url`` and return a blocking :class:`Client`.
 
     Takes every keyword option of :func:`roslibpy_lite.connect` (``reconnect``,
@@ -298,7 +299,7 @@ def connect(url: str, **options: Any) -> Client:
     return Client(loop, ros)
 
 
-async def _open(url: str, options: dict[str, Any]) -> Ros:
+async def _open(url: str, options: ClientOptions) -> Ros:
     ros: Ros = await _aio_connect(url, **options)
     return ros
 
