@@ -16,17 +16,17 @@ instances, validated before they are sent).
 
 from __future__ import annotations
 
-import enum
-from collections.abc import Awaitable, Callable, Mapping
-from typing import (
-    TYPE_CHECKING,
-    Any,
-    Literal,
-    Protocol,
-    TypeAlias,
-    TypeVar,
-    overload,
-    runtime_checkable,
+from collections.abc import Callable, Mapping
+from typing import TYPE_CHECKING, Any, Literal, Protocol, Self, overload, runtime_checkable
+
+from ._api_types import (
+    DEFAULT_CALL_TIMEOUT,
+    ConnectionState,
+    ErrorCallback,
+    M,
+    MessageCallback,
+    ServiceHandler,
+    StateCallback,
 )
 
 if TYPE_CHECKING:
@@ -34,57 +34,21 @@ if TYPE_CHECKING:
 
     from msgs.runtime import Action, Message, Service
 
+    from . import ops
     from .actions import ActionHandler, ActionServer, FeedbackCallback, GoalHandle
-    from .exceptions import RosLibError
-    from .handles import Publisher, ServiceServer, Subscription
+    from .handles import Publisher, ServiceCall, ServiceServer, Subscription
     from .messages import RawMessage
     from .state import StateWatcher
 
 __all__ = [
     "DEFAULT_CALL_TIMEOUT",
     "ConnectionState",
+    "ErrorCallback",
     "MessageCallback",
     "Ros",
     "ServiceHandler",
     "StateCallback",
 ]
-
-M = TypeVar("M", bound="Message")
-T_contra = TypeVar("T_contra", contravariant=True)
-
-DEFAULT_CALL_TIMEOUT = 10.0
-"""Seconds a service call waits for its answer unless told otherwise."""
-
-
-class ConnectionState(enum.Enum):
-    """Where a connection is in its life.
-
-    ``CONNECTING`` (first attempt) → ``CONNECTED`` ⇄ ``RECONNECTING`` → ``CLOSED``.
-    ``CLOSED`` is final: the client was closed, or the connection dropped and
-    reconnecting is off.
-    """
-
-    CONNECTING = "connecting"
-    CONNECTED = "connected"
-    RECONNECTING = "reconnecting"
-    CLOSED = "closed"
-
-
-MessageCallback: TypeAlias = Callable[[Any], "Awaitable[None] | None"]
-"""A subscription callback: ``fn(msg)``, sync or ``async``."""
-
-ServiceHandler: TypeAlias = Callable[[Any], Any]
-"""A service handler: ``fn(request) -> response``, sync or ``async``.
-
-It receives the request (a dict, or the ``Request`` instance for a typed
-service) and returns the response (a dict, a ``Response`` instance, or
-``None`` for an empty/default response). If it raises, the caller gets
-``result: false`` with the error's text.
-"""
-
-StateCallback: TypeAlias = Callable[[ConnectionState], None]
-"""Called with each new :class:`ConnectionState`."""
-
 
 @runtime_checkable
 class Ros(Protocol):
@@ -98,6 +62,19 @@ class Ros(Protocol):
     @property
     def is_connected(self) -> bool:
         """True while the state is ``CONNECTED``."""
+        ...
+
+    @property
+    def validate(self) -> bool:
+        """Whether dict messages are checked against their type's ``msgs`` class."""
+        ...
+
+    @validate.setter
+    def validate(self, value: bool) -> None: ...
+
+    @property
+    def status_errors(self) -> int:
+        """``status`` errors from the bridge that named none of our pending requests."""
         ...
 
     async def wait_connected(self, timeout: float | None = None) -> None:
@@ -117,7 +94,11 @@ class Ros(Protocol):
         """An async iterator of the state changes from now on (ends after ``CLOSED``)."""
         ...
 
-    def on_error(self, callback: Callable[[RosLibError], None]) -> Callable[[], None]:
+    def on_status(self, callback: Callable[[ops.Status], None]) -> Callable[[], None]:
+        """Call ``callback(status_op)`` for every ``status`` op the bridge sends."""
+        ...
+
+    def on_error(self, callback: ErrorCallback) -> Callable[[], None]:
         """Call ``callback(error)`` for each bridge error no caller awaits; returns its remover.
 
         A refused request that was not awaited, a message the bridge could not
@@ -209,33 +190,33 @@ class Ros(Protocol):
         ...
 
     @overload
-    async def call_service(
+    def call_service(
         self,
         service: str,
         type: str,
         args: Mapping[str, Any] | None = None,
         *,
         timeout: float | None = DEFAULT_CALL_TIMEOUT,
-    ) -> dict[str, Any]: ...
+    ) -> ServiceCall[dict[str, Any]]: ...
 
     @overload
-    async def call_service(
+    def call_service(
         self,
         service: str,
         type: type[Service],
         args: Mapping[str, Any] | Message | None = None,
         *,
         timeout: float | None = DEFAULT_CALL_TIMEOUT,
-    ) -> Any: ...
+    ) -> ServiceCall[Any]: ...
 
-    async def call_service(
+    def call_service(
         self,
         service: str,
         type: str | type[Service],
         args: Mapping[str, Any] | Message | None = None,
         *,
         timeout: float | None = DEFAULT_CALL_TIMEOUT,
-    ) -> Any:
+    ) -> ServiceCall[Any]:
         """Call a service; returns the response (dict, or ``Response`` for a typed service)."""
         ...
 
@@ -268,7 +249,7 @@ class Ros(Protocol):
         """Close everything; the state becomes ``CLOSED``."""
         ...
 
-    async def __aenter__(self) -> Ros:
+    async def __aenter__(self) -> Self:
         """Use as ``async with``; closes on exit."""
         ...
 

@@ -37,7 +37,7 @@ from msgs.runtime import Message, Service, ValidationError
 
 from . import ops
 from ._aio import is_async_callable, running_loop
-from .api import MessageCallback, ServiceHandler
+from ._api_types import MessageCallback, ServiceHandler
 from .exceptions import (
     InvalidMessageError,
     RosLibError,

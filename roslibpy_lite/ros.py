@@ -41,7 +41,7 @@ from typing import TYPE_CHECKING, Any, Literal, Self, overload
 
 from . import ops
 from ._aio import running_loop
-from .api import ConnectionState, MessageCallback, StateCallback
+from ._api_types import ConnectionState, ErrorCallback, MessageCallback, StateCallback
 from .capabilities import Tracked
 from .capabilities.actions import Actions
 from .capabilities.services import Services
@@ -62,21 +62,17 @@ if TYPE_CHECKING:
 
     from msgs.runtime import Action, Message, Service
 
+    from ._api_types import DEFAULT_CALL_TIMEOUT, M, ServiceHandler
     from .actions import ActionHandler, ActionServer, FeedbackCallback, GoalHandle
-    from .api import DEFAULT_CALL_TIMEOUT, M, ServiceHandler
     from .handles import Publisher, ServiceCall, ServiceServer, Subscription
     from .messages import RawMessage
     from .transports.base import Transport
 else:
-    from .api import DEFAULT_CALL_TIMEOUT
+    from ._api_types import DEFAULT_CALL_TIMEOUT
 
 __all__ = ["ErrorCallback", "RosBase", "RosFront"]
 
 log = logging.getLogger("roslibpy_lite.client")
-
-ErrorCallback = Callable[[RosLibError], None]
-"""An error hook: ``fn(error)`` for a bridge error nobody awaits (see :meth:`RosBase.on_error`)."""
-
 
 class _Host:
     """What the capabilities share (:class:`roslibpy_lite.capabilities.Host`), and the
@@ -99,10 +95,6 @@ class _Host:
         self.status_errors = 0
 
     # -- what capabilities use -----------------------------------------------------------------
-
-    @property
-    def url(self) -> str:
-        return self.transport.url
 
     @property
     def state(self) -> ConnectionState:
@@ -155,9 +147,6 @@ class _Host:
 
     def untrack(self, id: str) -> Tracked | None:
         return self._pending.pop(id, None)
-
-    def pending(self, id: str) -> Tracked | None:
-        return self._pending.get(id)
 
     async def settle(self, handle: Any) -> None:
         await self.transport.flush()

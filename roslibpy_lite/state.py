@@ -13,7 +13,7 @@ from collections import deque
 from collections.abc import Callable
 from typing import Any, Self
 
-from .api import ConnectionState, StateCallback
+from ._api_types import ConnectionState, StateCallback
 from .exceptions import ConnectionClosed, RosTimeoutError
 
 __all__ = ["StateHub", "StateWatcher", "add_callback"]

@@ -5,7 +5,8 @@
 composes three: :class:`~roslibpy_lite.capabilities.topics.Topics`
 (advertise, publish, subscribe), :class:`~roslibpy_lite.capabilities.services.Services`
 (call and serve services) and :class:`~roslibpy_lite.capabilities.actions.Actions`
-(send and serve goals). Each talks to the client only through :class:`Host`, and
+(send and serve goals). Each talks to the client only through :class:`Host` (topics
+through :class:`TopicsHost`, the serving ones through :class:`ServingHost`), and
 keeps its own state; a request the bridge may answer or refuse by id is one
 :class:`Tracked` record in the host.
 
@@ -30,11 +31,11 @@ from typing import TYPE_CHECKING, Any, Protocol
 
 if TYPE_CHECKING:
     from .. import ops
-    from ..api import ConnectionState
+    from .._api_types import ConnectionState
     from ..exceptions import ConnectionClosed, RosLibError
     from ..transports.base import Transport
 
-__all__ = ["Host", "Tracked"]
+__all__ = ["Host", "ServingHost", "TopicsHost", "Tracked"]
 
 
 @dataclass(eq=False, slots=True)
@@ -66,16 +67,12 @@ class Tracked:
 
 
 class Host(Protocol):
-    """What a capability may use of the client it belongs to."""
+    """What every capability may use of the client it belongs to (a capability that needs
+    more takes :class:`TopicsHost` or :class:`ServingHost`)."""
 
     @property
     def transport(self) -> Transport:
         """What carries the ops (to encode and write frames on a hot path)."""
-        ...
-
-    @property
-    def url(self) -> str:
-        """Where the client connects (for error texts)."""
         ...
 
     @property
@@ -104,16 +101,8 @@ class Host(Protocol):
         """Call ``fn(error)`` when the connection drops or closes (``state`` says which)."""
         ...
 
-    def on_stray_error(self, fn: Callable[[str, RosLibError], None]) -> None:
-        """Call ``fn(text, error)`` for a bridge error that names no pending request."""
-        ...
-
     def send(self, op: ops.Op) -> None:
         """Send ``op`` now, or drop it while disconnected."""
-        ...
-
-    def send_or(self, op: ops.Op, fallback: Callable[[str], ops.Op]) -> None:
-        """Send ``op``; if it cannot be encoded, send ``fallback(reason)`` instead."""
         ...
 
     def new_id(self, kind: str, name: str) -> str:
@@ -133,10 +122,6 @@ class Host(Protocol):
         """Stop tracking ``id``; its record, if it was tracked."""
         ...
 
-    def pending(self, id: str) -> Tracked | None:
-        """The record tracked under ``id``."""
-        ...
-
     async def settle(self, handle: Any) -> None:
         """``await handle``: its request written and, with a confirming bridge, accepted
         (raises the refusal)."""
@@ -144,6 +129,22 @@ class Host(Protocol):
 
     async def flush(self) -> None:
         """Return once everything sent so far is handed to the connection."""
+        ...
+
+
+class TopicsHost(Host, Protocol):
+    """What :class:`~roslibpy_lite.capabilities.topics.Topics` uses besides :class:`Host`."""
+
+    def on_stray_error(self, fn: Callable[[str, RosLibError], None]) -> None:
+        """Call ``fn(text, error)`` for a bridge error that names no pending request."""
+        ...
+
+
+class ServingHost(Host, Protocol):
+    """What the capabilities that serve (services, actions) use besides :class:`Host`."""
+
+    def send_or(self, op: ops.Op, fallback: Callable[[str], ops.Op]) -> None:
+        """Send ``op``; if it cannot be encoded, send ``fallback(reason)`` instead."""
         ...
 
     async def wait_connected(self, timeout: float | None = None) -> None:

@@ -15,6 +15,7 @@ from typing import Any
 from msgs.runtime import Action, Message
 
 from .. import ops
+from .._api_types import DEFAULT_CALL_TIMEOUT, ConnectionState
 from ..actions import (
     ActionHandler,
     ActionServer,
@@ -26,10 +27,9 @@ from ..actions import (
     _part,
     action_type,
 )
-from ..api import DEFAULT_CALL_TIMEOUT, ConnectionState
 from ..exceptions import ConnectionClosed, Disconnected, UsageError
 from ..messages import check_dict, check_name, to_wire
-from . import Host, Tracked
+from . import ServingHost, Tracked
 
 __all__ = ["Actions"]
 
@@ -41,7 +41,7 @@ _RECENT_FAILED = 64  # failed goals whose late status errors are still recognise
 class Actions:
     """One client's goals in flight and the actions it serves."""
 
-    def __init__(self, host: Host) -> None:
+    def __init__(self, host: ServingHost) -> None:
         self.host = host
         self.goals: dict[str, GoalHandle] = {}
         self.servers: dict[str, ActionServer] = {}

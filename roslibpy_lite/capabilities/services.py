@@ -12,7 +12,7 @@ from collections.abc import Mapping
 from typing import TYPE_CHECKING, Any
 
 from .. import ops
-from ..api import ConnectionState, ServiceHandler
+from .._api_types import ConnectionState, ServiceHandler
 from ..exceptions import RosTimeoutError, ServiceError, UsageError
 from ..handles import ServiceCall, ServiceServer
 from ..messages import (
@@ -23,7 +23,7 @@ from ..messages import (
     service_type,
     to_wire,
 )
-from . import Host, Tracked
+from . import ServingHost, Tracked
 
 if TYPE_CHECKING:
     from msgs.runtime import Message, Service
@@ -39,7 +39,7 @@ _Answer = Mapping[str, Any] | str
 class Services:
     """One client's service calls in flight and the services it serves."""
 
-    def __init__(self, host: Host) -> None:
+    def __init__(self, host: ServingHost) -> None:
         self.host = host
         self.servers: dict[str, ServiceServer] = {}  # by name, in creation order
         host.route(ops.ServiceResponse, self._on_response)

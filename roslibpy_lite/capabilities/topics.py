@@ -19,18 +19,18 @@ from msgs.cdr import CdrError, decoder_for, encode
 from msgs.runtime import ValidationError
 
 from .. import ops
-from ..api import ConnectionState
+from .._api_types import ConnectionState
 from ..exceptions import ConnectionClosed, Disconnected, RosLibError, UsageError
 from ..handles import Publisher, Subscription
 from ..messages import RawMessage, check_name, lookup_message_class, message_type
-from . import Host, Tracked
+from . import TopicsHost, Tracked
 
 log = logging.getLogger("roslibpy_lite.client")
 
 if TYPE_CHECKING:
     from msgs.runtime import Message
 
-    from ..api import MessageCallback
+    from .._api_types import MessageCallback
 
 __all__ = ["Topics"]
 
@@ -38,7 +38,7 @@ __all__ = ["Topics"]
 class Topics:
     """One client's publishers and subscriptions (see the module docstring)."""
 
-    def __init__(self, host: Host, *, offline_buffer: int, max_pending: int) -> None:
+    def __init__(self, host: TopicsHost, *, offline_buffer: int, max_pending: int) -> None:
         self.host = host
         self.offline_buffer = offline_buffer
         self.max_pending = max_pending

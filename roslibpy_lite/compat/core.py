@@ -7,6 +7,7 @@ package docstring for what differs). Messages are dict-like
 
 from __future__ import annotations
 
+import concurrent.futures
 import enum
 import itertools
 import json
@@ -15,7 +16,7 @@ import threading
 import time
 from collections import UserDict
 from collections.abc import Callable, Mapping
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Protocol
 
 from ..actions import ActionError
 from ..exceptions import RosTimeoutError
@@ -23,7 +24,7 @@ from ..exceptions import RosTimeoutError
 if TYPE_CHECKING:
     from ..api import Ros as AioRos
     from ..handles import Publisher, ServiceServer, Subscription
-    from .ros import Ros
+    from ..sync import LoopThread
 
 __all__ = [
     "ActionClient",
@@ -46,6 +47,55 @@ __all__ = [
 log = logging.getLogger("roslibpy_lite.compat")
 
 Callback = Callable[..., Any]
+
+
+class Driver(Protocol):
+    """What :class:`Topic`, :class:`Service`, :class:`Param` and :class:`ActionClient` use of
+    the :class:`~roslibpy_lite.compat.Ros` they are given (it is one)."""
+
+    @property
+    def is_connected(self) -> bool:
+        """True while the connection is open."""
+        ...
+
+    @property
+    def loop_thread(self) -> LoopThread:
+        """The thread whose asyncio loop runs the connection."""
+        ...
+
+    def run_blocking(self, what: str, fn: Callable[[AioRos], Any]) -> Any:
+        """Run ``fn(client)`` on the loop once connected; block for its result."""
+        ...
+
+    def run_when_connected(
+        self,
+        fn: Callable[[AioRos], Any],
+        done: Callable[[concurrent.futures.Future[Any]], None] | None = None,
+    ) -> None:
+        """Run ``fn(client)`` on the loop once connected, without waiting (in call order)."""
+        ...
+
+    def run_on_callback_thread(
+        self, callback: Callback, *args: Any
+    ) -> concurrent.futures.Future[Any] | None:
+        """Run ``callback(*args)`` on the callback thread."""
+        ...
+
+    async def run_on_callback_thread_and_wait(self, callback: Callback, *args: Any) -> None:
+        """Run ``callback(*args)`` on the callback thread; return once it ran."""
+        ...
+
+    def request_service(
+        self,
+        service: str,
+        type_name: str,
+        args: dict[str, Any],
+        callback: Callback | None,
+        errback: Callback | None,
+        timeout: float | None,
+    ) -> ServiceResponse | None:
+        """Call a service blocking (returns the response) or with callback/errback."""
+        ...
 
 
 class _Values(UserDict[str, Any]):
@@ -186,7 +236,7 @@ class Topic:
 
     def __init__(
         self,
-        ros: Ros,
+        ros: Driver,
         name: str,
         message_type: str,
         compression: str | None = None,
@@ -247,7 +297,7 @@ class Topic:
         if not self._subscribed:
             return
         self._subscribed = False
-        if self.ros._loop.closing:  # terminated: closed with the connection
+        if self.ros.loop_thread.closing:  # terminated: closed with the connection
             return
         self.ros.run_when_connected(lambda client: self._sub.unsubscribe() if self._sub else None)
 
@@ -280,7 +330,7 @@ class Topic:
             return self._pub.publish(msg)
 
         if self.ros.is_connected:
-            self.ros._do(f"publish {self.name}", send)
+            self.ros.run_blocking(f"publish {self.name}", send)
         else:
             self.ros.run_when_connected(send)
 
@@ -289,7 +339,7 @@ class Topic:
         if not self._advertised:
             return
         self._advertised = False
-        if self.ros._loop.closing:  # terminated: closed with the connection
+        if self.ros.loop_thread.closing:  # terminated: closed with the connection
             return
         self.ros.run_when_connected(lambda client: self._pub.unadvertise() if self._pub else None)
 
@@ -305,7 +355,7 @@ class Service:
     """
 
     def __init__(
-        self, ros: Ros, name: str, service_type: str, reconnect_on_close: bool = True
+        self, ros: Driver, name: str, service_type: str, reconnect_on_close: bool = True
     ) -> None:
         self.ros = ros
         self.name = name
@@ -335,8 +385,8 @@ class Service:
         """
         if self._is_advertised:
             return None
-        return self.ros._call(self.name, self.service_type, plain(request), callback, errback,
-                              timeout)
+        return self.ros.request_service(self.name, self.service_type, plain(request), callback,
+                                        errback, timeout)
 
     def advertise(self, callback: Callable[[Any, ServiceResponse], bool]) -> None:
         """Serve the service with ``callback(request, response) -> bool``.
@@ -357,7 +407,7 @@ class Service:
             result: dict[str, Any] = plain(response)
             return result
 
-        serve = self.ros._loop.off_loop(handler)
+        serve = self.ros.loop_thread.off_loop(handler)
         self._is_advertised = True
 
         def open_(client: AioRos) -> ServiceServer:
@@ -371,7 +421,7 @@ class Service:
         if not self._is_advertised:
             return
         self._is_advertised = False
-        if self.ros._loop.closing:  # terminated: closed with the connection
+        if self.ros.loop_thread.closing:  # terminated: closed with the connection
             return
         self.ros.run_when_connected(
             lambda client: self._server.unadvertise() if self._server else None)
@@ -380,7 +430,7 @@ class Service:
 class Param:
     """A ROS parameter (``/node:name`` in ROS 2), as ``roslibpy.Param``."""
 
-    def __init__(self, ros: Ros, name: str) -> None:
+    def __init__(self, ros: Driver, name: str) -> None:
         self.ros = ros
         self.name = name
 
@@ -391,8 +441,8 @@ class Param:
         """The value (blocking unless ``callback`` is given, which then gets the value)."""
         on_result = None if callback is None else (
             lambda result: callback(json.loads(result["value"])))
-        result = self.ros._call("/rosapi/get_param", "rosapi_msgs/srv/GetParam",
-                                {"name": self.name}, on_result, errback, timeout)
+        result = self.ros.request_service("/rosapi/get_param", "rosapi_msgs/srv/GetParam",
+                                          {"name": self.name}, on_result, errback, timeout)
         return None if result is None else json.loads(result["value"])
 
     def set(
@@ -400,17 +450,17 @@ class Param:
         timeout: float | None = None,
     ) -> None:
         """Set the value."""
-        self.ros._call("/rosapi/set_param", "rosapi_msgs/srv/SetParam",
-                       {"name": self.name, "value": json.dumps(value)}, callback, errback,
-                       timeout)
+        self.ros.request_service("/rosapi/set_param", "rosapi_msgs/srv/SetParam",
+                                 {"name": self.name, "value": json.dumps(value)}, callback, errback,
+                                 timeout)
 
     def delete(
         self, callback: Callback | None = None, errback: Callback | None = None,
         timeout: float | None = None,
     ) -> None:
         """Delete the parameter."""
-        self.ros._call("/rosapi/delete_param", "rosapi_msgs/srv/DeleteParam",
-                       {"name": self.name}, callback, errback, timeout)
+        self.ros.request_service("/rosapi/delete_param", "rosapi_msgs/srv/DeleteParam",
+                                 {"name": self.name}, callback, errback, timeout)
 
 
 class ActionClient:
@@ -429,7 +479,7 @@ class ActionClient:
     ``{"status": GoalStatus.SUCCEEDED, "values": {...}}``.
     """
 
-    def __init__(self, ros: Ros, name: str, action_type: str,
+    def __init__(self, ros: Driver, name: str, action_type: str,
                  reconnect_on_close: bool = True) -> None:
         self.ros = ros
         self.name = name

@@ -337,9 +337,14 @@ class Ros:
         with contextlib.suppress(RuntimeError):  # terminated just now
             loop.call_soon_threadsafe(loop.call_later, delay, self.run_on_callback_thread, callback)
 
-    # -- operations (used by Topic, Service, Param) --------------------------------------------
+    # -- operations (used by Topic, Service, Param: compat.core.Driver) ------------------------
 
-    def _do(self, what: str, fn: Callable[[AioRos], Any]) -> Any:
+    @property
+    def loop_thread(self) -> LoopThread:
+        """The thread whose asyncio loop runs the connection."""
+        return self._loop
+
+    def run_blocking(self, what: str, fn: Callable[[AioRos], Any]) -> Any:
         """Run ``fn(client)`` on the loop once connected; block for its result."""
         return self._loop.run(self._op(fn), what)
 
@@ -375,7 +380,7 @@ class Ros:
             result = await result
         return result
 
-    def _call(
+    def request_service(
         self,
         service: str,
         type_name: str,
@@ -391,7 +396,7 @@ class Ros:
 
         if callback is None:
             try:
-                return ServiceResponse(self._do(f"call {service}", call))
+                return ServiceResponse(self.run_blocking(f"call {service}", call))
             except ServiceError as exc:
                 raise ServiceException(exc.reason) from None
 
@@ -418,8 +423,9 @@ class Ros:
     ) -> Any:
         """Call ``/rosapi/<name>``: ``result[key]`` when blocking, else ``callback(response)``."""
         type_name = "rosapi_msgs/srv/" + "".join(p.capitalize() for p in name.split("_"))
-        result = self._call(f"/rosapi/{name}", _ROSAPI_TYPES.get(name, type_name), args,
-                            callback, errback, ROSAPI_TIMEOUT if timeout is None else timeout)
+        result = self.request_service(
+            f"/rosapi/{name}", _ROSAPI_TYPES.get(name, type_name), args, callback, errback,
+            ROSAPI_TIMEOUT if timeout is None else timeout)
         if result is None or key is None:
             return result
         return result[key]

@@ -70,8 +70,9 @@ if TYPE_CHECKING:
     from msgs.runtime import Action, Message, Service
 
     from .. import handles
+    from .._api_types import M
     from ..actions import ActionHandler, FeedbackCallback
-    from ..api import M, Ros
+    from ..api import Ros
     from ..client import ClientOptions
 
 __all__ = [

@@ -108,7 +108,7 @@ class MemoryTransport:
         """Carry out one op as the bridge would; its answers reach the client at once."""
         handler = _HANDLERS.get(type(frame))
         if handler is None:
-            self._error(f"{frame.OP}: not supported by MockRos", getattr(frame, "id", None))
+            self.send_error(f"{frame.OP}: not supported by MockRos", getattr(frame, "id", None))
             return
         handler(self, frame)
 
@@ -126,18 +126,18 @@ class MemoryTransport:
 
     # -- the bridge's answers -------------------------------------------------------------------
 
-    def _to_client(self, op: ops.Op) -> None:
+    def to_client(self, op: ops.Op) -> None:
         assert self._link is not None
         if self._up:
             self._link._on_op(op)
 
-    def _error(self, msg: str, id: ops.Id | None) -> None:
-        self._to_client(ops.Status("error", msg, id=id))
+    def send_error(self, msg: str, id: ops.Id | None) -> None:
+        self.to_client(ops.Status("error", msg, id=id))
 
     def _ok(self, op: ops.Advertise | ops.Subscribe | ops.AdvertiseService, name: str) -> None:
-        self._to_client(ops.Status("info", f"ok: {op.OP} {name}", id=op.id))
+        self.to_client(ops.Status("info", f"ok: {op.OP} {name}", id=op.id))
 
-    def _check(self, wire: Mapping[str, Any], type_name: str, what: str) -> str | None:
+    def check(self, wire: Mapping[str, Any], type_name: str, what: str) -> str | None:
         """The bridge's complaint about ``wire`` as a ``type_name``, or None."""
         cls = lookup_message_class(type_name) if self.validate else None
         if cls is None:
@@ -162,7 +162,7 @@ class MemoryTransport:
     def _advertise(self, op: ops.Advertise) -> None:
         entry = self.topic_of(op.topic, canonical_type(op.type, "msg"), "advertise")
         if isinstance(entry, str):
-            self._error(entry, op.id)
+            self.send_error(entry, op.id)
             return
         entry.advertised = True
         entry.latch = bool(op.latch)
@@ -171,22 +171,23 @@ class MemoryTransport:
     def _unadvertise(self, op: ops.Unadvertise) -> None:
         entry = self.topics.get(op.topic)
         if entry is None or not entry.advertised:
-            self._error(f"unadvertise: topic {op.topic} is not advertised by this client", op.id)
+            self.send_error(f"unadvertise: topic {op.topic} is not advertised by this client",
+                            op.id)
             return
         entry.advertised = False
 
     def _publish(self, op: ops.Publish) -> None:
         entry = self.topics.get(op.topic)
         if entry is None:
-            self._error(
+            self.send_error(
                 f"publish: topic {op.topic} is not advertised and the ROS graph has no type "
                 "for it; send advertise first",
                 op.id,
             )
             return
-        problem = self._check(op.msg, entry.type_name, "msg")
+        problem = self.check(op.msg, entry.type_name, "msg")
         if problem is not None:
-            self._error(f"publish to {op.topic} ({entry.type_name}): {problem}", op.id)
+            self.send_error(f"publish to {op.topic} ({entry.type_name}): {problem}", op.id)
             return
         entry.history.append(op.msg)
         self._deliver(op.topic, entry, op.msg, latch=entry.latch)
@@ -195,7 +196,7 @@ class MemoryTransport:
         if latch:
             entry.latched = msg
         if entry.sub_ids:
-            self._to_client(ops.Publish(topic, msg))
+            self.to_client(ops.Publish(topic, msg))
 
     def inject(self, topic: str, type_name: str, msg: Mapping[str, Any], *, latch: bool) -> None:
         """Publish ``msg`` as another node would (not recorded in the history)."""
@@ -211,11 +212,11 @@ class MemoryTransport:
         entry = self.topics.get(op.topic)
         if entry is None:
             if type_name is None:
-                self._error(f"subscribe: topic {op.topic} has no type yet; give one", op.id)
+                self.send_error(f"subscribe: topic {op.topic} has no type yet; give one", op.id)
                 return
             entry = self.topics[op.topic] = _Topic(type_name)
         elif type_name is not None and entry.type_name != type_name:
-            self._error(
+            self.send_error(
                 f"subscribe: topic {op.topic} has type {entry.type_name} in the ROS graph, "
                 f"not {type_name}",
                 op.id,
@@ -225,7 +226,7 @@ class MemoryTransport:
         entry.sub_ids[op.id] = None
         self._ok(op, op.topic)
         if first and entry.latched is not None:
-            self._to_client(ops.Publish(op.topic, entry.latched))
+            self.to_client(ops.Publish(op.topic, entry.latched))
 
     def _unsubscribe(self, op: ops.Unsubscribe) -> None:
         entry = self.topics.get(op.topic)
@@ -260,14 +261,14 @@ class MemoryTransport:
             self._answer(fwd, False, f"service {op.service} has type {served}, not {type_name}")
             return
         args = op.args if isinstance(op.args, Mapping) else {}
-        problem = self._check(args, f"{served}_Request", "args")
+        problem = self.check(args, f"{served}_Request", "args")
         if problem is not None:
             self._answer(fwd, False, f"{op.service}: bad request: {problem}")
             return
         self._request_ids += 1
         rid = f"service_request:{op.service}:{self._request_ids}"
         self._forwarded[rid] = fwd
-        self._to_client(ops.CallService(op.service, args, served, id=rid))
+        self.to_client(ops.CallService(op.service, args, served, id=rid))
 
     def _service_response(self, op: ops.ServiceResponse) -> None:
         fwd = self._forwarded.pop(str(op.id), None)
@@ -278,7 +279,7 @@ class MemoryTransport:
             self._answer(fwd, False, f"service {fwd.service} failed: {reason}")
             return
         values = op.values if isinstance(op.values, Mapping) else {}
-        problem = self._check(values, f"{fwd.type_name}_Response", "values")
+        problem = self.check(values, f"{fwd.type_name}_Response", "values")
         if problem is not None:
             self._answer(fwd, False,
                          f"service {fwd.service} answered with a bad response: {problem}")
@@ -286,7 +287,7 @@ class MemoryTransport:
         self._answer(fwd, True, values)
 
     def _answer(self, fwd: _Forwarded, result: bool, values: Mapping[str, Any] | str) -> None:
-        self._to_client(ops.ServiceResponse(fwd.service, result, values, id=fwd.caller_id))
+        self.to_client(ops.ServiceResponse(fwd.service, result, values, id=fwd.caller_id))
 
     def _set_level(self, op: ops.SetLevel) -> None:
         pass

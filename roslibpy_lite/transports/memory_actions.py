@@ -17,7 +17,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Protocol
 
 from msgs.runtime import UnknownTypeError, lookup_action
 
@@ -27,7 +27,6 @@ from ..messages import canonical_type
 if TYPE_CHECKING:
     from msgs.runtime import Action
 
-    from .memory import MemoryTransport
 
 __all__ = ["ACTION_OPS", "MemoryActions"]
 
@@ -49,10 +48,30 @@ def _name(action: str) -> str:
     return "/" + action.lstrip("/")
 
 
+class Bridge(Protocol):
+    """What the actions' part uses of the in-memory bridge it belongs to
+    (:class:`~roslibpy_lite.transports.memory.MemoryTransport`)."""
+
+    validate: bool
+    """Whether goals, feedback and results are checked against their types."""
+
+    def to_client(self, op: ops.Op) -> None:
+        """Hand ``op`` to the client, as the bridge would send it."""
+        ...
+
+    def send_error(self, msg: str, id: ops.Id | None) -> None:
+        """Tell the client of an error (a ``status`` op naming ``id``)."""
+        ...
+
+    def check(self, wire: Mapping[str, Any], type_name: str, what: str) -> str | None:
+        """The bridge's complaint about ``wire`` as a ``type_name``, or None."""
+        ...
+
+
 class MemoryActions:
     """Served actions and goals in flight of one in-memory bridge."""
 
-    def __init__(self, bridge: MemoryTransport) -> None:
+    def __init__(self, bridge: Bridge) -> None:
         self.bridge = bridge
         self.served: dict[str, tuple[str, str]] = {}
         """Served actions: name → (the name as the client spelled it, type)."""
@@ -91,7 +110,7 @@ class MemoryActions:
 
     def _refuse(self, op: ops.SendActionGoal, text: str) -> None:
         id = op.id if op.id is not None else ""
-        self.bridge._error(text, id)
+        self.bridge.send_error(text, id)
         self._to_caller(id, op.action, text, _ABORTED)
 
     def _to_caller(self, id: ops.Id, action: str, values: Mapping[str, Any] | str,
@@ -99,7 +118,7 @@ class MemoryActions:
         # As rosbridge: result true for a goal that ran to a final status (its values),
         # false only for one that never ran (a text saying why).
         ran = not isinstance(values, str) and status in (_SUCCEEDED, _CANCELED, _ABORTED)
-        self.bridge._to_client(ops.ActionResultOp(id=id, action=action, values=values,
+        self.bridge.to_client(ops.ActionResultOp(id=id, action=action, values=values,
                                                status=status, result=ran))
 
     def _send_goal(self, op: ops.SendActionGoal) -> None:
@@ -111,7 +130,7 @@ class MemoryActions:
                              f"{op.action_type!r} (not installed)")
             return
         args = op.args if isinstance(op.args, Mapping) else {}
-        problem = self.bridge._check(args, f"{type_name}_Goal", "args")
+        problem = self.bridge.check(args, f"{type_name}_Goal", "args")
         if problem is not None:
             self._refuse(op, f"send_action_goal to {name} ({type_name}): {problem}")
             return
@@ -119,47 +138,48 @@ class MemoryActions:
         if served is None:
             text = f"action {name} does not exist (no action server in the ROS graph)"
             self._to_caller(op.id or "", op.action, f"{name}: {text}", _ABORTED)
-            self.bridge._error(f"send_action_goal: {text}", op.id)
+            self.bridge.send_error(f"send_action_goal: {text}", op.id)
             return
         if served[1] != type_name:
             text = f"action {name} has type {served[1]}, not {type_name}"
             self._to_caller(op.id or "", op.action, f"{name}: {text}", _ABORTED)
-            self.bridge._error(f"send_action_goal: {text}", op.id)
+            self.bridge.send_error(f"send_action_goal: {text}", op.id)
             return
         self._n += 1
         gid = f"action_goal:{served[0]}:{self._n}"
         self.goals[gid] = _Goal(op.id or "", op.action, name, type_name, bool(op.feedback))
         self._by_caller[str(op.id)] = gid
-        self.bridge._to_client(ops.SendActionGoal(action=served[0], action_type=type_name,
+        self.bridge.to_client(ops.SendActionGoal(action=served[0], action_type=type_name,
                                                  args=dict(args), id=gid, feedback=True))
         # a served action accepts every goal; the caller hears it as from our bridge
-        self.bridge._to_client(ops.Status("info", f"ok: send_action_goal {name} accepted by "
+        self.bridge.to_client(ops.Status("info", f"ok: send_action_goal {name} accepted by "
                                           "the action server", id=op.id))
 
     def _cancel(self, op: ops.CancelActionGoal) -> None:
         gid = self._by_caller.get(str(op.id))
         goal = self.goals.get(gid) if gid is not None else None
         if gid is None or goal is None:
-            self.bridge._error(f"cancel_action_goal: no goal {op.id!r} of {_name(op.action)} "
+            self.bridge.send_error(f"cancel_action_goal: no goal {op.id!r} of {_name(op.action)} "
                                "is in flight on this connection", op.id)
             return
-        self.bridge._to_client(ops.CancelActionGoal(id=gid, action=self.served[goal.served][0]))
+        self.bridge.to_client(ops.CancelActionGoal(id=gid, action=self.served[goal.served][0]))
 
     # -- a client serves an action --
 
     def _advertise(self, op: ops.AdvertiseAction) -> None:
         type_name = canonical_type(op.type, "action")
         if self._cls(type_name) is None and self.bridge.validate:
-            self.bridge._error(f"advertise_action: unknown action type {op.type!r} "
+            self.bridge.send_error(f"advertise_action: unknown action type {op.type!r} "
                                "(not installed)", op.id)
             return
         self.served[_name(op.action)] = (op.action, type_name)
-        self.bridge._to_client(ops.Status("info", f"ok: {op.OP} {op.action}", id=op.id))
+        self.bridge.to_client(ops.Status("info", f"ok: {op.OP} {op.action}", id=op.id))
 
     def _unadvertise(self, op: ops.UnadvertiseAction) -> None:
         name = _name(op.action)
         if self.served.pop(name, None) is None:
-            self.bridge._error(f"unadvertise_action: {name} is not served by this client", op.id)
+            self.bridge.send_error(f"unadvertise_action: {name} is not served by this client",
+                                   op.id)
             return
         for gid, goal in list(self.goals.items()):
             if goal.served == name:
@@ -168,7 +188,7 @@ class MemoryActions:
     def _find(self, op: ops.ActionFeedback | ops.ActionResultOp) -> _Goal | None:
         goal = self.goals.get(str(op.id))
         if goal is None:
-            self.bridge._error(f"{op.OP}: no goal {op.id!r} of {_name(op.action)} is waiting "
+            self.bridge.send_error(f"{op.OP}: no goal {op.id!r} of {_name(op.action)} is waiting "
                                "on this client", op.id)
         return goal
 
@@ -176,12 +196,12 @@ class MemoryActions:
         goal = self._find(op)
         if goal is None:
             return
-        problem = self.bridge._check(op.values, f"{goal.type_name}_Feedback", "values")
+        problem = self.bridge.check(op.values, f"{goal.type_name}_Feedback", "values")
         if problem is not None:
-            self.bridge._error(f"action_feedback for {goal.served}: {problem}", op.id)
+            self.bridge.send_error(f"action_feedback for {goal.served}: {problem}", op.id)
             return
         if goal.feedback:
-            self.bridge._to_client(ops.ActionFeedback(id=goal.caller_id,
+            self.bridge.to_client(ops.ActionFeedback(id=goal.caller_id,
                                                      action=goal.caller_action,
                                                      values=dict(op.values)))
 
@@ -193,7 +213,7 @@ class MemoryActions:
         if status is None:
             status = _SUCCEEDED if op.result else _ABORTED
         elif status not in (_SUCCEEDED, _CANCELED, _ABORTED):
-            self.bridge._error(
+            self.bridge.send_error(
                 f"action_result for {goal.served}: status {status} is not a final status "
                 "(4 succeeded, 5 canceled, 6 aborted); the goal was aborted", op.id)
             status = _ABORTED
@@ -201,9 +221,9 @@ class MemoryActions:
             status = _ABORTED
         values = op.values if isinstance(op.values, Mapping) else None
         if values is not None:
-            problem = self.bridge._check(values, f"{goal.type_name}_Result", "values")
+            problem = self.bridge.check(values, f"{goal.type_name}_Result", "values")
             if problem is not None:
-                self.bridge._error(
+                self.bridge.send_error(
                     f"action_result for {goal.served}: {problem}; the goal was aborted", op.id)
                 status, values = _ABORTED, None
         self._end(str(op.id), status, values)

@@ -1,4 +1,5 @@
-"""No module imports another that imports it back at run time (imports for type checking aside)."""
+"""No module imports another that imports it back: at run time in every package, and in
+roslibpy_lite even counting the imports made only for type checking."""
 
 from __future__ import annotations
 
@@ -18,8 +19,9 @@ def _module_name(path: Path) -> str:
     return ".".join(parts)
 
 
-def _runtime_imports(path: Path, name: str, modules: set[str]) -> set[str]:
-    """Project modules ``path`` imports outside ``if TYPE_CHECKING:`` blocks, at any depth."""
+def _imports(path: Path, name: str, modules: set[str], type_level: bool) -> set[str]:
+    """Project modules ``path`` imports at any depth (inside ``if TYPE_CHECKING:`` blocks
+    too when ``type_level``)."""
     tree = ast.parse(path.read_text(), str(path))
     package = name if path.name == "__init__.py" else name.rpartition(".")[0]
     found: set[str] = set()
@@ -33,7 +35,8 @@ def _runtime_imports(path: Path, name: str, modules: set[str]) -> set[str]:
 
     def visit(node: ast.AST) -> None:
         for child in ast.iter_child_nodes(node):
-            if isinstance(child, ast.If) and "TYPE_CHECKING" in ast.unparse(child.test):
+            if (not type_level and isinstance(child, ast.If)
+                    and "TYPE_CHECKING" in ast.unparse(child.test)):
                 for other in child.orelse:
                     visit(other)
                 continue
@@ -55,7 +58,7 @@ def _runtime_imports(path: Path, name: str, modules: set[str]) -> set[str]:
     return found
 
 
-def _graph() -> dict[str, set[str]]:
+def _graph(type_level: bool = False) -> dict[str, set[str]]:
     files = {
         _module_name(p): p
         for pkg in PACKAGES
@@ -63,7 +66,7 @@ def _graph() -> dict[str, set[str]]:
         if "generated" not in p.parts
     }
     modules = set(files)
-    graph = {name: _runtime_imports(path, name, modules) for name, path in files.items()}
+    graph = {name: _imports(path, name, modules, type_level) for name, path in files.items()}
     for name in graph:  # a package's __init__ is not a cycle partner of its own submodules
         graph[name] = {t for t in graph[name] if not name.startswith(t + ".")}
     return graph
@@ -115,3 +118,17 @@ def test_no_runtime_import_cycles(package: str) -> None:
     """Modules of each package (and across packages) import each other in one direction only."""
     cycles = [c for c in _cycles(_graph()) if any(m.split(".")[0] == package for m in c)]
     assert not cycles, f"runtime import cycles: {cycles}"
+
+
+def test_the_type_level_graph_counts_type_checking_imports() -> None:
+    """api imports the handles only for type checking: an edge at type level, none at run time."""
+    assert "roslibpy_lite.handles" in _graph(type_level=True)["roslibpy_lite.api"]
+    assert "roslibpy_lite.handles" not in _graph()["roslibpy_lite.api"]
+
+
+def test_no_type_level_import_cycles_in_roslibpy_lite() -> None:
+    """Counting the imports made only for type checking, roslibpy_lite's modules still import
+    each other in one direction only (each seam a small protocol, not a reach back)."""
+    cycles = [c for c in _cycles(_graph(type_level=True))
+              if any(m.split(".")[0] == "roslibpy_lite" for m in c)]
+    assert not cycles, f"type-level import cycles: {cycles}"
