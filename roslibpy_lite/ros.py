@@ -187,13 +187,13 @@ class _Host:
 
     # -- the transport's hooks -----------------------------------------------------------------
 
-    def _connected(self) -> None:
+    def link_up(self) -> None:
         """A connection is open: every handle's request again, then buffered messages."""
         for restore in self._restorers:
             restore()
         self.hub.set(ConnectionState.CONNECTED)
 
-    def _disconnected(self) -> None:
+    def link_down(self) -> None:
         """The connection dropped; a reconnect follows. Calls in flight fail at once."""
         self.hub.set(ConnectionState.RECONNECTING)
         url = self.transport.url
@@ -204,7 +204,7 @@ class _Host:
         for fn in self._drops:
             fn(Disconnected(f"connection to {url} dropped"))
 
-    def _shutdown(self, error: ConnectionClosed) -> None:
+    def shut_down(self, error: ConnectionClosed) -> None:
         """Enter CLOSED: fail calls, end subscriptions (no messages to the server)."""
         self.hub.set(ConnectionState.CLOSED)
         self._fail_calls(lambda service, call_id: error)
@@ -227,7 +227,7 @@ class _Host:
             if event is not None:
                 event.set()
 
-    def _on_op(self, op: ops.Op) -> None:
+    def receive_op(self, op: ops.Op) -> None:
         """Dispatch one op from the transport (never raises)."""
         route = self._routes.get(type(op))
         if route is None:
@@ -664,7 +664,7 @@ class RosBase:
     async def close(self) -> None:
         """Close the connection; the state becomes ``CLOSED``. Closing twice is harmless."""
         host = self._host
-        host._shutdown(ConnectionClosed(f"the connection to {self._transport.url} was closed"))
+        host.shut_down(ConnectionClosed(f"the connection to {self._transport.url} was closed"))
         await self._transport.close()
         tasks = self._topics.consumers() + list(host.tasks)
         if tasks:

@@ -24,19 +24,19 @@ __all__ = ["ACKS_HEADER", "Link", "Transport"]
 class Link(Protocol):
     """What a transport calls on the client that owns it."""
 
-    def _on_op(self, op: ops.Op) -> None:
+    def receive_op(self, op: ops.Op) -> None:
         """One op arrived (never raises)."""
         ...
 
-    def _connected(self) -> None:
+    def link_up(self) -> None:
         """A connection is open: restore every handle, then report CONNECTED."""
         ...
 
-    def _disconnected(self) -> None:
+    def link_down(self) -> None:
         """The connection dropped and a reconnect follows: fail what was in flight."""
         ...
 
-    def _shutdown(self, error: ConnectionClosed) -> None:
+    def shut_down(self, error: ConnectionClosed) -> None:
         """The connection is gone for good (state CLOSED)."""
         ...
 

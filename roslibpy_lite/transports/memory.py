@@ -86,7 +86,7 @@ class MemoryTransport:
         """Play a (re)connect: the client restores its handles on this fresh session."""
         assert self._link is not None
         self._up = True
-        self._link._connected()
+        self._link.link_up()
 
     def drop(self) -> None:
         """Play a dropped connection: the session's publishers, subscriptions and services go."""
@@ -98,7 +98,7 @@ class MemoryTransport:
         self.services.clear()
         self._forwarded.clear()
         self.actions.drop()
-        self._link._disconnected()
+        self._link.link_down()
 
     def encode(self, op: ops.Op) -> ops.Op:
         """A private copy of ``op`` through its JSON form."""
@@ -129,7 +129,7 @@ class MemoryTransport:
     def to_client(self, op: ops.Op) -> None:
         assert self._link is not None
         if self._up:
-            self._link._on_op(op)
+            self._link.receive_op(op)
 
     def send_error(self, msg: str, id: ops.Id | None) -> None:
         self.to_client(ops.Status("error", msg, id=id))

@@ -96,7 +96,7 @@ class WebSocketTransport:
         if ssl_context is not None:
             self._ws_options["ssl"] = ssl_context
         self._link: Link | None = None
-        self._on_op: Callable[[ops.Op], None] = _unbound
+        self._deliver_op: Callable[[ops.Op], None] = _unbound
         # A session that outlives a dropped link, when the bridge keeps them (resumable.py).
         self.session: ClientSession | None = ClientSession(resume_frames) if resume else None
         self._ack_timer: asyncio.TimerHandle | None = None
@@ -115,7 +115,7 @@ class WebSocketTransport:
     def bind(self, link: Link) -> None:
         """Attach the client."""
         self._link = link
-        self._on_op = link._on_op
+        self._deliver_op = link.receive_op
 
     @property
     def connected(self) -> bool:
@@ -139,7 +139,7 @@ class WebSocketTransport:
             return False
         self._first.set_exception(error)
         assert self._link is not None
-        self._link._shutdown(ConnectionClosed(str(error)))
+        self._link.shut_down(ConnectionClosed(str(error)))
         return True
 
     def _attempt_timeout(self, deadline: float) -> float:
@@ -177,7 +177,7 @@ class WebSocketTransport:
                     if refused is not None:  # a refused token or certificate: retrying cannot help
                         if not self._fail_first(refused):
                             log.error("%s", refused)
-                            link._shutdown(refused)
+                            link.shut_down(refused)
                         return
                     now = loop.time()
                     give_up = not self.reconnect or now >= deadline or _tls_mismatch(self.url, exc)
@@ -199,7 +199,7 @@ class WebSocketTransport:
                     continue
                 except InvalidURI as exc:
                     if not self._fail_first(UsageError(f"bad URL {self.url!r}: {exc}")):
-                        link._shutdown(ConnectionClosed(f"bad URL {self.url!r}"))
+                        link.shut_down(ConnectionClosed(f"bad URL {self.url!r}"))
                     return
                 except Exception as exc:  # anything else websockets may raise: a failed attempt
                     if self._fail_first(ConnectError(self._failed_attempt(exc, attempts, started))):
@@ -215,7 +215,7 @@ class WebSocketTransport:
                         "Python, --token or $ROSLIBPY_LITE_TOKEN on the command line)")
                     if not self._fail_first(refused):
                         log.error("%s", refused)
-                        link._shutdown(refused)
+                        link.shut_down(refused)
                     return
                 self.connects += 1
                 self.acks = ws.response is not None and ws.response.headers.get(ACKS_HEADER) == "1"
@@ -236,15 +236,15 @@ class WebSocketTransport:
                 closed = _closed_by_policy(self.url, ws)
                 if closed is not None:  # the bridge refused us (our token, our op rate)
                     log.error("%s", closed)
-                    link._shutdown(closed)
+                    link.shut_down(closed)
                     return
                 if not self.reconnect:
                     log.warning("connection to %s lost; reconnect is off", self.url)
-                    link._shutdown(Disconnected(f"connection to {self.url} lost"))
+                    link.shut_down(Disconnected(f"connection to {self.url} lost"))
                     return
                 log.warning("connection to %s lost; reconnecting", self.url)
                 self._lost()
-                link._disconnected()
+                link.link_down()
                 if loop.time() - opened >= self.stable_after:
                     self.backoff.reset()  # it was a good connection: try again at once
                 else:  # a peer that accepts and drops at once: back off, do not hammer it
@@ -263,7 +263,7 @@ class WebSocketTransport:
         assert self._link is not None
         self._ws = ws
         self._protocol = Protocol()
-        self._link._connected()
+        self._link.link_up()
         if self._first is not None and not self._first.done():
             self._first.set_result(None)
         writer = asyncio.get_running_loop().create_task(self._write(ws))
@@ -340,7 +340,7 @@ class WebSocketTransport:
         if self.session is not None and self.session.token is not None:
             self._count_received()
         if op is not None:
-            self._on_op(op)
+            self._deliver_op(op)
 
     def _count_received(self) -> None:
         session = self.session
