@@ -285,13 +285,14 @@ class GoalHandle:
 
     # -- from the capability --
 
-    def _confirmed(self) -> None:
-        """The bridge says the action server accepted the goal."""
+    def confirmed(self) -> None:
+        """The bridge says the action server accepted the goal (for the actions capability)."""
         if self.status is GoalStatus.UNKNOWN:
             self.status = GoalStatus.ACCEPTED
         self._known_accepted.set()
 
-    def _feedback(self, values: Any) -> None:
+    def feedback_arrived(self, values: Any) -> None:
+        """One feedback message for this goal arrived (for the actions capability)."""
         if self.done():
             return
         self._known_accepted.set()  # feedback comes only from a goal that runs
@@ -319,7 +320,8 @@ class GoalHandle:
             except Exception:
                 log.exception("feedback callback of %s raised", self.action)
 
-    def _result(self, op: ops.ActionResultOp) -> None:
+    def result_arrived(self, op: ops.ActionResultOp) -> None:
+        """The goal's result arrived (for the actions capability)."""
         if self.done():
             return
         try:
@@ -336,14 +338,14 @@ class GoalHandle:
             if status is GoalStatus.CANCELED:
                 self._end(ActionResult(status, None, text))
             else:
-                self._fail(ActionError(self.action, text, status))
+                self.fail(ActionError(self.action, text, status))
             return
         cls = _part(self.action_cls, "Result")
         if cls is not None:
             try:
                 values = from_wire(values, cls, f"result of {self.action}")
             except InvalidMessageError as exc:
-                self._fail(ActionError(self.action, str(exc), GoalStatus.ABORTED))
+                self.fail(ActionError(self.action, str(exc), GoalStatus.ABORTED))
                 return
         else:
             values = dict(values)
@@ -354,7 +356,7 @@ class GoalHandle:
         self._done.set_result(outcome)
         self._finished()
 
-    def _fail(self, error: RosLibError) -> None:
+    def fail(self, error: RosLibError) -> None:
         """The goal failed (a status error naming it, a failed result, a dropped connection)."""
         if self.done():
             return
@@ -507,7 +509,8 @@ class GoalContext:
         """Return once a cancel was requested (async handlers)."""
         await self._cancel.wait()
 
-    def _request_cancel(self) -> None:
+    def request_cancel(self) -> None:
+        """The caller asked to cancel this goal (for the actions capability)."""
         self.cancel_requested = True
         self._cancel.set()
 
@@ -562,10 +565,10 @@ class ActionServer(_BridgeHandle):
         self._backend._unadvertise_action(self)
         for ctx in self.active.values():
             ctx.lost = True
-            ctx._request_cancel()
-        self._stop_threads()
+            ctx.request_cancel()
+        self.stop_threads()
 
-    def _stop_threads(self) -> None:
+    def stop_threads(self) -> None:
         """Let the handler threads end once their goals return (they saw the cancel);
         goals still waiting for a thread never start."""
         if self._threads is not None:
@@ -578,7 +581,8 @@ class ActionServer(_BridgeHandle):
 
     # -- running one goal --
 
-    async def _run(self, ctx: GoalContext, args: Any) -> None:
+    async def run_goal(self, ctx: GoalContext, args: Any) -> None:
+        """Run the handler for one goal and send its result (for the actions capability)."""
         op: ops.ActionResultOp | None = None
         self.goals += 1
         self.active[ctx.id] = ctx

@@ -113,7 +113,7 @@ class _BridgeHandle:
         """Close the handle."""
         raise NotImplementedError
 
-    def _fail(self, error: RosLibError) -> None:
+    def fail(self, error: RosLibError) -> None:
         """The bridge reported that this handle's request failed."""
         self.error = error
 
@@ -168,7 +168,7 @@ class Publisher(_BridgeHandle, Generic[T]):
         self.last_error: RosLibError | None = None
         """The last message the bridge could not publish, set as soon as the bridge says so
         (the next :meth:`publish` raises it once; it stays here for inspection)."""
-        self._offline: deque[Any] = deque()  # backend-specific form (encoded frame, copy)
+        self.offline_queue: deque[Any] = deque()  # backend-specific form (encoded frame, copy)
         self.offline_buffer = offline_buffer
         self.dropped = 0
         """Messages dropped because the offline buffer was full (oldest first)."""
@@ -183,7 +183,7 @@ class Publisher(_BridgeHandle, Generic[T]):
     @property
     def offline_pending(self) -> int:
         """Messages published while the connection was down, waiting to be sent."""
-        return len(self._offline)
+        return len(self.offline_queue)
 
     def request_op(self) -> ops.Advertise:
         """The ``advertise`` op this publisher stands for."""
@@ -201,7 +201,7 @@ class Publisher(_BridgeHandle, Generic[T]):
             check_dict(wire, self._check_cls, what)
         return wire
 
-    def _fail_once(self, error: RosLibError) -> None:
+    def fail_next_publish(self, error: RosLibError) -> None:
         """The bridge could not publish a message: the next :meth:`publish` raises ``error``."""
         self._error_once = self.last_error = error
 
@@ -250,7 +250,7 @@ class Publisher(_BridgeHandle, Generic[T]):
         if self.closed:
             return
         self.closed = True
-        self._offline.clear()
+        self.offline_queue.clear()
         self._backend._unadvertise(self)
 
     async def close(self) -> None:
@@ -317,7 +317,7 @@ class Subscription(_BridgeHandle, Generic[T]):
         self._async_cbs: list[Callable[[Any], Awaitable[Any]]] = []
         self._buffering = True
         self._waiter: asyncio.Future[None] | None = None
-        self._consumer: asyncio.Task[None] | None = None
+        self.consumer: asyncio.Task[None] | None = None
         self._idle = asyncio.Event()
         self._idle.set()
 
@@ -352,8 +352,8 @@ class Subscription(_BridgeHandle, Generic[T]):
                     "iterate it or give it async callbacks, not both"
                 )
             self._async_cbs.append(cast("Callable[[Any], Awaitable[Any]]", callback))
-            if self._consumer is None:
-                self._consumer = asyncio.get_running_loop().create_task(
+            if self.consumer is None:
+                self.consumer = asyncio.get_running_loop().create_task(
                     self._consume(), name=f"roslibpy_lite subscription {self.topic}"
                 )
         else:
@@ -362,7 +362,7 @@ class Subscription(_BridgeHandle, Generic[T]):
 
     # -- the receive path ------------------------------------------------------------------
 
-    def _deliver(self, raw: Mapping[str, Any] | RawMessage) -> None:
+    def deliver(self, raw: Mapping[str, Any] | RawMessage) -> None:
         """Take one message in its wire form, or a RawMessage for a raw subscription
         (called by the backend, never blocks)."""
         self.received += 1
@@ -421,7 +421,9 @@ class Subscription(_BridgeHandle, Generic[T]):
         if waiter is not None and not waiter.done():
             waiter.set_result(None)
 
-    def _fail(self, error: RosLibError) -> None:
+    def fail(self, error: RosLibError) -> None:
+        """The bridge refused the subscription, or it ended: iteration raises ``error``
+        (for the topics capability)."""
         self.error = error
         self._wake()
 
@@ -454,7 +456,7 @@ class Subscription(_BridgeHandle, Generic[T]):
 
     async def _drained(self) -> None:
         """Return once async callbacks have taken every buffered message (for MockRos.drain)."""
-        if self._consumer is not None and not self._consumer.done():
+        if self.consumer is not None and not self.consumer.done():
             await self._idle.wait()
 
     # -- reading ---------------------------------------------------------------------------
@@ -511,15 +513,15 @@ class Subscription(_BridgeHandle, Generic[T]):
         """Stop the subscription; an ``async for`` over it ends after the buffered messages."""
         if self.closed:
             return
-        self._end()
+        self.mark_closed()
         self._backend._unsubscribe(self)
-        consumer = self._consumer
+        consumer = self.consumer
         if consumer is not None and consumer is not asyncio.current_task():
             consumer.cancel()
             with contextlib.suppress(asyncio.CancelledError):
                 await consumer
 
-    def _end(self) -> None:
+    def mark_closed(self) -> None:
         """Mark closed and wake readers (the backend closes too; no message to the server)."""
         self.closed = True
         self._wake()

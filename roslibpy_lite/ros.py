@@ -282,7 +282,7 @@ class _Host:
         if record.refuse is not None:
             record.refuse(error)
         else:
-            record.handle._fail(error)
+            record.handle.fail(error)
         event, record.verdict = record.verdict, None
         if event is not None:
             event.set()

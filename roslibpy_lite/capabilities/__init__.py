@@ -45,7 +45,7 @@ class Tracked:
     A one-shot call has a ``future`` that the answer (or a refusal, or a dropped
     connection) settles. A long-lived handle (publisher, subscription, served
     service or action, goal) has a ``handle``; a refusal calls ``refuse`` (the
-    handle's ``_fail`` when not given) and, once the refusal has been raised at
+    handle's ``fail`` when not given) and, once the refusal has been raised at
     ``await handle``, ``forget`` drops the handle's registration.
     """
 

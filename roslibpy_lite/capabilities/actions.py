@@ -91,7 +91,7 @@ class Actions:
                             on_feedback=on_feedback)
         self.goals[id] = handle
         # Status errors naming the goal fail it; nobody awaits a verdict on it.
-        host.track(id, Tracked(action, handle=handle, awaited=True, confirm=handle._confirmed))
+        host.track(id, Tracked(action, handle=handle, awaited=True, confirm=handle.confirmed))
         host.send(ops.SendActionGoal(action=action, action_type=type_name, args=wire, id=id,
                                      feedback=feedback))
         await host.flush()
@@ -111,12 +111,12 @@ class Actions:
     def _on_feedback(self, op: ops.ActionFeedback) -> None:
         goal = self.goals.get(str(op.id))
         if goal is not None:
-            goal._feedback(op.values)
+            goal.feedback_arrived(op.values)
 
     def _on_result(self, op: ops.ActionResultOp) -> None:
         goal = self.goals.get(str(op.id))
         if goal is not None:
-            goal._result(op)
+            goal.result_arrived(op)
         else:
             log.debug("action_result for an unknown goal %r", op.id)
 
@@ -155,13 +155,13 @@ class Actions:
                                                 status=int(GoalStatus.ABORTED)))
             return
         ctx = GoalContext(server, str(op.id), asyncio.get_running_loop())
-        task = self.host.spawn(server._run(ctx, op.args))
+        task = self.host.spawn(server.run_goal(ctx, op.args))
         self.served_goals[ctx.id] = (ctx, task)
 
     def _on_cancel_goal(self, op: ops.CancelActionGoal) -> None:
         entry = self.served_goals.get(str(op.id))
         if entry is not None:
-            entry[0]._request_cancel()
+            entry[0].request_cancel()
 
     # -- the handles' hooks --------------------------------------------------------------------
 
@@ -200,17 +200,17 @@ class Actions:
         goals, self.goals = self.goals, {}
         for goal in goals.values():
             if isinstance(error, Disconnected):
-                goal._fail(Disconnected(f"{error} while goal {goal.id} to {goal.action} "
+                goal.fail(Disconnected(f"{error} while goal {goal.id} to {goal.action} "
                                         "was in flight"))
             else:
-                goal._fail(error)
+                goal.fail(error)
         served, self.served_goals = self.served_goals, {}
         for ctx, task in served.values():
             ctx.lost = True
-            ctx._request_cancel()
+            ctx.request_cancel()
             if not task.done():
                 with contextlib.suppress(RuntimeError):
                     task.cancel()
         if self.host.state is ConnectionState.CLOSED:  # for good: no more goals come
             for server in self.servers.values():
-                server._stop_threads()
+                server.stop_threads()

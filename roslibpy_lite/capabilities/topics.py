@@ -86,7 +86,7 @@ class Topics:
     ) -> Callable[[RosLibError], None]:
         def refuse(error: RosLibError) -> None:  # every handle sharing the advertise fails
             for each in self.publishers.get(topic, [pub]):
-                each._fail(error)
+                each.fail(error)
         return refuse
 
     def _forget_publishers(self, topic: str) -> Callable[[], None]:
@@ -114,10 +114,10 @@ class Topics:
         if self.offline_buffer == 0:
             raise Disconnected(f"publish to {pub.topic}: the connection to {t.url} is down")
         frame = t.encode(ops.Publish(pub.topic, wire))  # a copy, checked now
-        if len(pub._offline) >= self.offline_buffer:
-            pub._offline.popleft()
+        if len(pub.offline_queue) >= self.offline_buffer:
+            pub.offline_queue.popleft()
             pub.dropped += 1
-        pub._offline.append(frame)
+        pub.offline_queue.append(frame)
         return None
 
     def _unadvertise(self, pub: Publisher[Any]) -> None:
@@ -146,7 +146,7 @@ class Topics:
         topic = text[len("publish to "):].split(" ", 1)[0].rstrip(":")
         found = self.publishers.get(topic) or self.publishers.get(topic.lstrip("/"))
         for pub in found or []:
-            pub._fail_once(error)
+            pub.fail_next_publish(error)
 
     # -- subscriptions -------------------------------------------------------------------------
 
@@ -209,20 +209,20 @@ class Topics:
             for sub in subs:
                 if sub.raw:
                     assert raw is not None
-                    sub._deliver(raw)
+                    sub.deliver(raw)
                 elif decoded is not None:
-                    sub._deliver(decoded)
+                    sub.deliver(decoded)
             return
         encoded: RawMessage | None = None
         for sub in subs:
             if not sub.raw:
-                sub._deliver(msg)
+                sub.deliver(msg)
                 continue
             if encoded is None:  # a server without cbor-raw, or MockRos: serialize here
                 encoded = self._to_cdr(sub, msg)
                 if encoded is None:
                     continue
-            sub._deliver(encoded)
+            sub.deliver(encoded)
 
     def _to_cdr(self, sub: Subscription[Any], msg: Mapping[str, Any]) -> RawMessage | None:
         """A message that came in its JSON/CBOR form as a RawMessage (None: it cannot be)."""
@@ -283,7 +283,7 @@ class Topics:
 
     def consumers(self) -> list[asyncio.Task[None]]:
         """The tasks running subscriptions' async callbacks (cancelled on close)."""
-        return [t for s in self.subscriptions.values() if (t := s._consumer) is not None]
+        return [t for s in self.subscriptions.values() if (t := s.consumer) is not None]
 
     # -- the handles' other hooks --------------------------------------------------------------
 
@@ -307,17 +307,17 @@ class Topics:
         for pubs in self.publishers.values():
             for pub in pubs:
                 pub.error = None
-                while pub._offline and t.connected:
-                    t.write(pub._offline.popleft())
+                while pub.offline_queue and t.connected:
+                    t.write(pub.offline_queue.popleft())
 
     def _drop(self, error: ConnectionClosed) -> None:
         if self.host.state is not ConnectionState.CLOSED:
             return  # a reconnect follows: handles stay, publishers buffer
         for sub in list(self.subscriptions.values()):
-            sub._end()
+            sub.mark_closed()
         for pubs in self.publishers.values():
             for pub in pubs:
-                pub._offline.clear()
+                pub.offline_queue.clear()
 
 
 def _need_cbor(compression: str) -> None:
