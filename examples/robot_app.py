@@ -38,7 +38,7 @@ import os
 import signal
 import sys
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Awaitable, Callable, Sequence
 from typing import Protocol
 
 import roslibpy_lite
@@ -84,8 +84,8 @@ class Clock(Protocol):
         """Seconds on a monotonic scale."""
         ...
 
-    async def sleep(self, seconds: float) -> None:
-        """Wait ``seconds``."""
+    def sleep(self, seconds: float) -> Awaitable[None]:
+        """Wait ``seconds`` (``await clock.sleep(s)``)."""
         ...
 
 

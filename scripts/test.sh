@@ -11,7 +11,7 @@ export ROS_DOMAIN_ID="${ROS_DOMAIN_ID:-$(( $$ % 100 + 1 ))}"
 echo "[test] ruff"
 ruff check roslibpy_lite bridge_server msgs examples bench tests docs/_hooks
 echo "[test] mypy --strict"
-mypy roslibpy_lite bridge_server msgs examples bench
+mypy roslibpy_lite bridge_server msgs examples bench tests
 echo "[test] mkdocs build --strict"
 SITE="$(mktemp -d)"
 NO_MKDOCS_2_WARNING=1 mkdocs build --strict --quiet --site-dir "$SITE"

@@ -295,7 +295,7 @@ def action_server_answers(client: Any, every: float = 0.2) -> Callable[[], bool]
         now = time.monotonic()
         if now - last[0] >= every:
             last[0] = now
-            nobody = ClientGoalHandle(client, UUID(uuid=list(os.urandom(16))),
+            nobody = ClientGoalHandle(client, UUID(uuid=list(os.urandom(16))),  # type: ignore[no-untyped-call]
                                       client._action_type.Impl.SendGoalService.Response())
             client._get_result_async(nobody).add_done_callback(lambda _f: answered.set())
         return False

@@ -83,7 +83,7 @@ async def test_a_recording_through_the_bridge_reads_back_as_rclpy_published(
 ) -> None:
     """Image, IMU, the robot's own type and a latched map, recorded with cbor-raw; the
     independent reader (mcap_ros2) and ours give back what rclpy published."""
-    latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+    latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)  # type: ignore[no-untyped-call]
     grid = OccupancyGrid()
     grid.header.frame_id = "map"
     grid.info.width, grid.info.height = 4, 2
@@ -162,7 +162,7 @@ async def test_a_file_from_the_independent_writer_plays_into_rclpy_in_order(
                                                  "linear_acceleration": {"x": 0.0, "y": 0.0,
                                                                          "z": 9.81 + i}},
                                  log_time=t0 + i * 20_000_000, publish_time=t0 + i * 20_000_000)
-        writer.finish()
+        writer.finish()  # type: ignore[no-untyped-call]
     about = info(path)
     assert about.messages == 20 and abs(about.duration - 0.38) < 1e-6
     got: list[tuple[float, Any]] = []
@@ -207,8 +207,10 @@ async def test_mockros_records_what_the_code_under_test_publishes(tmp_path: Path
             await rec.wait(5)
     assert rec.stats.messages == 6
     ours = [(m.topic, m.decode()) for m in read(path)]
-    assert [msg.data for t, msg in ours if t == "/chatter"] == ["hello 0", "hello 1", "hello 2"]
-    assert [msg.label for t, msg in ours if t == "/status"] == ["s0", "s1", "s2"]
+    assert [msg.data for t, msg in ours  # type: ignore[attr-defined]
+            if t == "/chatter"] == ["hello 0", "hello 1", "hello 2"]
+    assert [msg.label for t, msg in ours  # type: ignore[attr-defined]
+            if t == "/status"] == ["s0", "s1", "s2"]
     theirs = [decoded.label for _, _, _, decoded in _theirs(path, ["/status"])]
     assert theirs == ["s0", "s1", "s2"]
 

@@ -36,7 +36,7 @@ async def test_a_reconnect_goes_on_in_the_same_file_and_says_how_long_the_gap_wa
     # transient local with room for the whole run: what went out before the bridge's
     # subscription matched reaches it too, so the file must hold every number (and a
     # subscription made afresh instead of resumed would get them twice)
-    pub = ros_node.create_publisher(Int32, topic, QoSProfile(
+    pub = ros_node.create_publisher(Int32, topic, QoSProfile(  # type: ignore[no-untyped-call]
         depth=200, durability=DurabilityPolicy.TRANSIENT_LOCAL))
     sent = 0
 

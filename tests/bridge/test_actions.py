@@ -34,7 +34,7 @@ def _action_types(package: str) -> list[Any]:
 # -- a client sends goals to a ROS action server ---------------------------------------------
 
 
-async def test_goal_feedback_and_result(ws_connect: Any, ros_node: Any, topic: str):
+async def test_goal_feedback_and_result(ws_connect: Any, ros_node: Any, topic: str) -> None:
     """A goal (args object, ROS 1 type spelling) gets its feedback in order and a SUCCEEDED result."""
     server = FibServer(ros_node, topic)
     ws = await ws_connect()
@@ -54,7 +54,7 @@ async def test_goal_feedback_and_result(ws_connect: Any, ros_node: Any, topic: s
     server.destroy()
 
 
-async def test_goal_args_list_without_feedback(ws_connect: Any, ros_node: Any, topic: str):
+async def test_goal_args_list_without_feedback(ws_connect: Any, ros_node: Any, topic: str) -> None:
     """args as a list is zipped onto the goal's fields; without feedback: true none is sent."""
     server = FibServer(ros_node, topic)
     ws = await ws_connect()
@@ -67,7 +67,7 @@ async def test_goal_args_list_without_feedback(ws_connect: Any, ros_node: Any, t
     server.destroy()
 
 
-async def test_goal_answers_in_the_clients_spelling(ws_connect: Any, ros_node: Any, topic: str):
+async def test_goal_answers_in_the_clients_spelling(ws_connect: Any, ros_node: Any, topic: str) -> None:
     """A relative action name works, and replies use the name as the client spelled it."""
     server = FibServer(ros_node, topic)
     ws = await ws_connect()
@@ -78,7 +78,7 @@ async def test_goal_answers_in_the_clients_spelling(ws_connect: Any, ros_node: A
     server.destroy()
 
 
-async def test_rejected_goal(ws_connect: Any, ros_node: Any, topic: str):
+async def test_rejected_goal(ws_connect: Any, ros_node: Any, topic: str) -> None:
     """A goal the server rejects ends with result false and a text saying so."""
     server = FibServer(ros_node, topic, accept=False)
     ws = await ws_connect()
@@ -90,7 +90,7 @@ async def test_rejected_goal(ws_connect: Any, ros_node: Any, topic: str):
     server.destroy()
 
 
-async def test_aborted_goal(ws_connect: Any, ros_node: Any, topic: str):
+async def test_aborted_goal(ws_connect: Any, ros_node: Any, topic: str) -> None:
     """A goal the server aborts ends with its status (6), the result values and result true
     (it ran; rosbridge says false only for a goal that never ran)."""
     server = FibServer(ros_node, topic, abort=True)
@@ -103,7 +103,7 @@ async def test_aborted_goal(ws_connect: Any, ros_node: Any, topic: str):
     server.destroy()
 
 
-async def test_cancel_after_acceptance(ws_connect: Any, ros_node: Any, topic: str):
+async def test_cancel_after_acceptance(ws_connect: Any, ros_node: Any, topic: str) -> None:
     """cancel_action_goal after the first feedback cancels the ROS goal: status 5."""
     server = FibServer(ros_node, topic, slow=True)
     ws = await ws_connect()
@@ -118,7 +118,7 @@ async def test_cancel_after_acceptance(ws_connect: Any, ros_node: Any, topic: st
     server.destroy()
 
 
-async def test_cancel_before_acceptance(ws_connect: Any, ros_node: Any, topic: str):
+async def test_cancel_before_acceptance(ws_connect: Any, ros_node: Any, topic: str) -> None:
     """A cancel that arrives while the server is still deciding cancels the goal once accepted."""
     gate = threading.Event()
     server = FibServer(ros_node, topic, slow=True, gate=gate)
@@ -135,7 +135,7 @@ async def test_cancel_before_acceptance(ws_connect: Any, ros_node: Any, topic: s
     server.destroy()
 
 
-async def test_cancel_while_waiting_for_a_server(ws_connect: Any, topic: str):
+async def test_cancel_while_waiting_for_a_server(ws_connect: Any, topic: str) -> None:
     """A goal canceled while the bridge still waits for an action server ends canceled at once."""
     ws = await ws_connect()
     await send_goal(ws, topic, {"order": 1}, "w1")
@@ -153,7 +153,7 @@ def _wait_goal(server: FibServer) -> None:
     raise AssertionError("the goal never reached the server")
 
 
-async def test_many_goals_in_flight(ws_connect: Any, ros_node: Any, topic: str):
+async def test_many_goals_in_flight(ws_connect: Any, ros_node: Any, topic: str) -> None:
     """Thirty goals sent at once on one action each get their own result."""
     server = FibServer(ros_node, topic)
     ws = await ws_connect()
@@ -166,7 +166,7 @@ async def test_many_goals_in_flight(ws_connect: Any, ros_node: Any, topic: str):
     server.destroy()
 
 
-async def test_several_clients_one_server(ws_connect: Any, ros_node: Any, topic: str):
+async def test_several_clients_one_server(ws_connect: Any, ros_node: Any, topic: str) -> None:
     """Goals of three clients to one action server reach the right client each."""
     server = FibServer(ros_node, topic)
     clients = [await ws_connect() for _ in range(3)]
@@ -182,7 +182,7 @@ async def test_several_clients_one_server(ws_connect: Any, ros_node: Any, topic:
     server.destroy()
 
 
-async def test_sender_disconnect_cancels_goal(ws_connect: Any, ros_node: Any, topic: str):
+async def test_sender_disconnect_cancels_goal(ws_connect: Any, ros_node: Any, topic: str) -> None:
     """A client that disconnects with a goal in flight has it canceled on the ROS side."""
     server = FibServer(ros_node, topic, slow=True)
     ws = await ws_connect()
@@ -197,7 +197,7 @@ async def test_sender_disconnect_cancels_goal(ws_connect: Any, ros_node: Any, to
     server.destroy()
 
 
-async def test_goal_timeout(make_bridge: Any, ws_connect: Any, ros_node: Any, topic: str):
+async def test_goal_timeout(make_bridge: Any, ws_connect: Any, ros_node: Any, topic: str) -> None:
     """With --goal-timeout, a goal running longer fails with a text and is canceled on ROS.
 
     The 0.5 s run from the op's arrival: a loaded machine can take longer than that to make
@@ -230,7 +230,7 @@ async def test_goal_timeout(make_bridge: Any, ws_connect: Any, ros_node: Any, to
     server.destroy()
 
 
-async def test_cbor_feedback_and_result(ws_connect: Any, ros_node: Any, topic: str):
+async def test_cbor_feedback_and_result(ws_connect: Any, ros_node: Any, topic: str) -> None:
     """compression cbor sends feedback and result as CBOR frames; int32[] is a typed array."""
     server = FibServer(ros_node, topic)
     ws = await ws_connect()
@@ -254,7 +254,7 @@ async def test_cbor_feedback_and_result(ws_connect: Any, ros_node: Any, topic: s
     server.destroy()
 
 
-async def test_fragmented_result(ws_connect: Any, ros_node: Any, topic: str):
+async def test_fragmented_result(ws_connect: Any, ros_node: Any, topic: str) -> None:
     """fragment_size splits a large result into fragments that join into the action_result."""
     server = FibServer(ros_node, topic)
     ws = await ws_connect()
@@ -284,7 +284,7 @@ async def _serving(ws_connect: Any, ros_node: Any, topic: str) -> tuple[Any, Ros
     return ws, caller
 
 
-async def test_serve_action_to_rclpy(ws_connect: Any, ros_node: Any, topic: str):
+async def test_serve_action_to_rclpy(ws_connect: Any, ros_node: Any, topic: str) -> None:
     """A ROS goal reaches the client as send_action_goal; its feedback and result reach ROS."""
     ws, caller = await _serving(ws_connect, ros_node, topic)
     handle = await caller.send(3)
@@ -303,7 +303,7 @@ async def test_serve_action_to_rclpy(ws_connect: Any, ros_node: Any, topic: str)
     caller.destroy()
 
 
-async def test_served_cancel_from_ros(ws_connect: Any, ros_node: Any, topic: str):
+async def test_served_cancel_from_ros(ws_connect: Any, ros_node: Any, topic: str) -> None:
     """A ROS cancel request reaches the client as cancel_action_goal; it ends the goal canceled."""
     ws, caller = await _serving(ws_connect, ros_node, topic)
     handle = await caller.send(9)
@@ -322,7 +322,7 @@ async def test_served_cancel_from_ros(ws_connect: Any, ros_node: Any, topic: str
 @pytest.mark.parametrize("how", ["disconnect", "unadvertise", "result_false", "bad_values"])
 async def test_served_goal_aborted_at_once(
     ws_connect: Any, ros_node: Any, topic: str, how: str
-):
+) -> None:
     """A serving client that goes away, unadvertises or answers wrongly aborts its goal at once."""
     ws, caller = await _serving(ws_connect, ros_node, topic)
     handle = await caller.send(2)
@@ -344,7 +344,7 @@ async def test_served_goal_aborted_at_once(
     caller.destroy()
 
 
-async def test_served_goal_timeout(make_bridge: Any, ws_connect: Any, ros_node: Any, topic: str):
+async def test_served_goal_timeout(make_bridge: Any, ws_connect: Any, ros_node: Any, topic: str) -> None:
     """With --goal-timeout, a served goal the client never finishes is aborted; the client is told."""
     bridge = make_bridge("--goal-timeout", "0.5")
     ws = await ws_connect(bridge.url)
@@ -360,7 +360,7 @@ async def test_served_goal_timeout(make_bridge: Any, ws_connect: Any, ros_node: 
     caller.destroy()
 
 
-async def test_served_many_goals(ws_connect: Any, ros_node: Any, topic: str):
+async def test_served_many_goals(ws_connect: Any, ros_node: Any, topic: str) -> None:
     """Several ROS goals in flight on one served action are told apart by their ids."""
     ws, caller = await _serving(ws_connect, ros_node, topic)
     handles = [await caller.send(n) for n in range(2, 7)]
@@ -379,7 +379,7 @@ async def test_served_many_goals(ws_connect: Any, ros_node: Any, topic: str):
     caller.destroy()
 
 
-async def test_client_to_client_action(ws_connect: Any, topic: str):
+async def test_client_to_client_action(ws_connect: Any, topic: str) -> None:
     """A goal one client sends reaches an action another client serves, and back."""
     server_ws = await ws_connect()
     await server_ws.send({"op": "advertise_action", "action": topic, "type": FIB})
@@ -397,7 +397,7 @@ async def test_client_to_client_action(ws_connect: Any, topic: str):
     assert result["status"] == SUCCEEDED and result["values"] == {"sequence": fib(3)}
 
 
-async def test_first_owner_keeps_the_action(ws_connect: Any, ros_node: Any, topic: str):
+async def test_first_owner_keeps_the_action(ws_connect: Any, ros_node: Any, topic: str) -> None:
     """A second client cannot take a served action from a live owner; after unadvertise it can."""
     first, caller = await _serving(ws_connect, ros_node, topic)
     handle = await caller.send(2)
@@ -429,7 +429,7 @@ async def test_first_owner_keeps_the_action(ws_connect: Any, ros_node: Any, topi
 
 
 @pytest.mark.parametrize("package", ["test_msgs", "mult_msgs"])
-def test_every_action_type_converts(package: str):
+def test_every_action_type_converts(package: str) -> None:
     """Goal, feedback and result of every action in the package convert both ways, JSON and CBOR."""
     from bridge_server.rclpy_graph import convert
 
@@ -446,7 +446,7 @@ def test_every_action_type_converts(package: str):
 
 @pytest.mark.parametrize("action", [a for p in ("test_msgs", "mult_msgs") for a in _action_types(p)],
                          ids=lambda a: a.__name__)
-async def test_every_action_type_through_the_bridge(ws_connect: Any, topic: str, action: Any):
+async def test_every_action_type_through_the_bridge(ws_connect: Any, topic: str, action: Any) -> None:
     """Goal, feedback (CBOR) and result of each action type cross the bridge intact."""
     from bridge_server.rclpy_graph import convert
     from bridge_server.rclpy_graph.types import type_name_of
@@ -481,7 +481,7 @@ def _plain(value: Any) -> Any:
     """A CBOR-decoded value with typed arrays (tags) turned back into lists."""
     if isinstance(value, cbor2.CBORTag):
         codes = {69: "H", 70: "I", 71: "Q", 72: "b", 77: "h", 78: "i", 79: "q", 85: "f", 86: "d"}
-        return list(memoryview(value.value).cast(codes[value.tag]))
+        return list(memoryview(value.value).cast(codes[value.tag]))  # type: ignore[call-overload]
     if isinstance(value, dict):
         return {k: _plain(v) for k, v in value.items()}
     if isinstance(value, list):
@@ -503,7 +503,7 @@ async def _rosapi(ws: Any, service: str, args: Any = None) -> dict[str, Any]:
     return values
 
 
-async def test_rosapi_action_calls(ws_connect: Any, ros_node: Any, topic: str):
+async def test_rosapi_action_calls(ws_connect: Any, ros_node: Any, topic: str) -> None:
     """action_servers lists ROS- and client-served actions; action_type and *_details answer."""
     server = FibServer(ros_node, topic)
     ws = await ws_connect()

@@ -27,7 +27,7 @@ async def _failed_goal(ws: Any, id: str) -> tuple[str, dict[str, Any]]:
         ("Fibonacci", "Fibonacci"),
     ],
 )
-async def test_unknown_action_type(ws_connect: Any, topic: str, action_type: str, named: str):
+async def test_unknown_action_type(ws_connect: Any, topic: str, action_type: str, named: str) -> None:
     """An action type that is malformed or not installed is named in the error and the result."""
     ws, other = await _pair(ws_connect)
     await ws.send({"op": "send_action_goal", "action": topic, "action_type": action_type,
@@ -38,7 +38,7 @@ async def test_unknown_action_type(ws_connect: Any, topic: str, action_type: str
     await _still_working(ws, other, topic)
 
 
-async def test_no_such_action_server(ws_connect: Any, topic: str):
+async def test_no_such_action_server(ws_connect: Any, topic: str) -> None:
     """A goal to an action nobody serves fails with "does not exist", naming the action."""
     ws, other = await _pair(ws_connect)
     await send_goal(ws, topic, {"order": 3}, "n1")
@@ -48,7 +48,7 @@ async def test_no_such_action_server(ws_connect: Any, topic: str):
     await _still_working(ws, other, topic)
 
 
-async def test_action_type_differs_from_graph(ws_connect: Any, ros_node: Any, topic: str):
+async def test_action_type_differs_from_graph(ws_connect: Any, ros_node: Any, topic: str) -> None:
     """A goal whose type differs from the served action's names both types."""
     server = FibServer(ros_node, topic)
     ws, other = await _pair(ws_connect)
@@ -70,7 +70,7 @@ async def test_action_type_differs_from_graph(ws_connect: Any, ros_node: Any, to
         ([1, 2, 3], "3 values"),
     ],
 )
-async def test_goal_does_not_fit_the_type(ws_connect: Any, topic: str, args: Any, named: str):
+async def test_goal_does_not_fit_the_type(ws_connect: Any, topic: str, args: Any, named: str) -> None:
     """A goal that does not fit the type names the field path (or the count of list args)."""
     ws, other = await _pair(ws_connect)
     await send_goal(ws, topic, args, "f1")
@@ -80,7 +80,7 @@ async def test_goal_does_not_fit_the_type(ws_connect: Any, topic: str, args: Any
     await _still_working(ws, other, topic)
 
 
-async def test_args_of_the_wrong_kind(ws_connect: Any, topic: str):
+async def test_args_of_the_wrong_kind(ws_connect: Any, topic: str) -> None:
     """args that is neither an object nor a list is refused, naming the field."""
     ws, other = await _pair(ws_connect)
     await send_goal(ws, topic, "order=3", "k1")
@@ -90,7 +90,7 @@ async def test_args_of_the_wrong_kind(ws_connect: Any, topic: str):
 
 
 @pytest.mark.parametrize("op", ["cancel_action_goal", "action_feedback", "action_result"])
-async def test_unknown_goal_id(ws_connect: Any, topic: str, op: str):
+async def test_unknown_goal_id(ws_connect: Any, topic: str, op: str) -> None:
     """cancel, feedback or result for a goal id nobody knows is an error naming the id."""
     ws, other = await _pair(ws_connect)
     frame: dict[str, Any] = {"op": op, "id": "ghost", "action": topic}
@@ -104,7 +104,7 @@ async def test_unknown_goal_id(ws_connect: Any, topic: str, op: str):
     await _still_working(ws, other, topic)
 
 
-async def test_duplicate_goal_id(ws_connect: Any, ros_node: Any, topic: str):
+async def test_duplicate_goal_id(ws_connect: Any, ros_node: Any, topic: str) -> None:
     """A second goal with the id of one still in flight is refused; the first goes on."""
     server = FibServer(ros_node, topic, slow=True)
     ws, other = await _pair(ws_connect)
@@ -121,7 +121,7 @@ async def test_duplicate_goal_id(ws_connect: Any, ros_node: Any, topic: str):
     server.destroy()
 
 
-async def test_advertise_unknown_action_type(ws_connect: Any, topic: str):
+async def test_advertise_unknown_action_type(ws_connect: Any, topic: str) -> None:
     """advertise_action with a type that is not installed names the type."""
     ws, other = await _pair(ws_connect)
     await ws.send({"op": "advertise_action", "action": topic, "type": "test_msgs/Nope", "id": "a1"})
@@ -130,7 +130,7 @@ async def test_advertise_unknown_action_type(ws_connect: Any, topic: str):
     await _still_working(ws, other, topic)
 
 
-async def test_unadvertise_not_served(ws_connect: Any, topic: str):
+async def test_unadvertise_not_served(ws_connect: Any, topic: str) -> None:
     """unadvertise_action of an action this client does not serve is an error naming it."""
     ws, other = await _pair(ws_connect)
     await ws.send({"op": "unadvertise_action", "action": topic, "id": "ua"})
@@ -139,7 +139,7 @@ async def test_unadvertise_not_served(ws_connect: Any, topic: str):
     await _still_working(ws, other, topic)
 
 
-async def test_served_feedback_that_does_not_fit(ws_connect: Any, ros_node: Any, topic: str):
+async def test_served_feedback_that_does_not_fit(ws_connect: Any, ros_node: Any, topic: str) -> None:
     """Feedback that does not fit the type names the field; the goal goes on and can succeed."""
     ws, other = await _pair(ws_connect)
     await ws.send({"op": "advertise_action", "action": topic, "type": FIB})
@@ -160,7 +160,7 @@ async def test_served_feedback_that_does_not_fit(ws_connect: Any, ros_node: Any,
 
 async def test_served_result_with_a_status_that_is_not_final(
     ws_connect: Any, ros_node: Any, topic: str
-):
+) -> None:
     """A result whose status is not final (2 executing) is an error, and the goal is aborted."""
     ws, other = await _pair(ws_connect)
     await ws.send({"op": "advertise_action", "action": topic, "type": FIB})
@@ -178,7 +178,7 @@ async def test_served_result_with_a_status_that_is_not_final(
 
 
 @pytest.mark.parametrize("op", ["send_action_goal", "advertise_action"])
-async def test_invalid_action_name(ws_connect: Any, topic: str, op: str):
+async def test_invalid_action_name(ws_connect: Any, topic: str, op: str) -> None:
     """An action name ROS cannot carry is refused with an error naming it."""
     ws, other = await _pair(ws_connect)
     bad = topic + "/bad name!"

@@ -50,7 +50,7 @@ async def _error(ws: Any, **fields: Any) -> str:
     return str(status["msg"])
 
 
-async def test_malformed_json(ws_connect: Any, topic: str):
+async def test_malformed_json(ws_connect: Any, topic: str) -> None:
     """A text frame that is not JSON gets an error naming the position of the fault."""
     ws, other = await _pair(ws_connect)
     await ws.send_raw('{"op": "publish", "topic": ')
@@ -59,7 +59,7 @@ async def test_malformed_json(ws_connect: Any, topic: str):
     await _still_working(ws, other, topic)
 
 
-async def test_invalid_binary_frame(ws_connect: Any, topic: str):
+async def test_invalid_binary_frame(ws_connect: Any, topic: str) -> None:
     """A binary frame that is not valid CBOR gets an error saying so."""
     ws, other = await _pair(ws_connect)
     await ws.send_raw(b"\xff\xff\x00\x1c")
@@ -68,7 +68,7 @@ async def test_invalid_binary_frame(ws_connect: Any, topic: str):
     await _still_working(ws, other, topic)
 
 
-async def test_unknown_op(ws_connect: Any, topic: str):
+async def test_unknown_op(ws_connect: Any, topic: str) -> None:
     """An unknown op is named in the error, which carries the request id."""
     ws, other = await _pair(ws_connect)
     await ws.send({"op": "frobnicate", "id": "u1"})
@@ -77,7 +77,7 @@ async def test_unknown_op(ws_connect: Any, topic: str):
     await _still_working(ws, other, topic)
 
 
-async def test_missing_field(ws_connect: Any, topic: str):
+async def test_missing_field(ws_connect: Any, topic: str) -> None:
     """An op without a required field gets an error naming the op and the field."""
     ws, other = await _pair(ws_connect)
     await ws.send({"op": "subscribe", "id": "m1"})
@@ -86,7 +86,7 @@ async def test_missing_field(ws_connect: Any, topic: str):
     await _still_working(ws, other, topic)
 
 
-async def test_ill_typed_field(ws_connect: Any, topic: str):
+async def test_ill_typed_field(ws_connect: Any, topic: str) -> None:
     """A field of the wrong kind is named with what was expected."""
     ws, other = await _pair(ws_connect)
     await ws.send({"op": "subscribe", "topic": topic, "throttle_rate": "fast", "id": "i1"})
@@ -95,7 +95,7 @@ async def test_ill_typed_field(ws_connect: Any, topic: str):
     await _still_working(ws, other, topic)
 
 
-async def test_unknown_type(ws_connect: Any, topic: str):
+async def test_unknown_type(ws_connect: Any, topic: str) -> None:
     """Advertising a type no installed package provides names the type."""
     ws, other = await _pair(ws_connect)
     await ws.send({"op": "advertise", "topic": topic, "type": "no_such_pkg/Thing", "id": "t1"})
@@ -104,7 +104,7 @@ async def test_unknown_type(ws_connect: Any, topic: str):
     await _still_working(ws, other, topic)
 
 
-async def test_malformed_type_string(ws_connect: Any, topic: str):
+async def test_malformed_type_string(ws_connect: Any, topic: str) -> None:
     """A type string of the wrong shape is quoted in the error."""
     ws, other = await _pair(ws_connect)
     await ws.send({"op": "advertise", "topic": topic, "type": "std_msgs", "id": "t2"})
@@ -113,7 +113,7 @@ async def test_malformed_type_string(ws_connect: Any, topic: str):
     await _still_working(ws, other, topic)
 
 
-async def test_publish_field_the_type_lacks(ws_connect: Any, topic: str):
+async def test_publish_field_the_type_lacks(ws_connect: Any, topic: str) -> None:
     """A published message with a field its type lacks names the field path."""
     ws, other = await _pair(ws_connect)
     await ws.send({"op": "advertise", "topic": topic, "type": "geometry_msgs/Pose"})
@@ -124,7 +124,7 @@ async def test_publish_field_the_type_lacks(ws_connect: Any, topic: str):
     await _still_working(ws, other, topic)
 
 
-async def test_publish_wrong_value_kind(ws_connect: Any, topic: str):
+async def test_publish_wrong_value_kind(ws_connect: Any, topic: str) -> None:
     """A value of the wrong kind names the field path and the expected type."""
     ws, other = await _pair(ws_connect)
     await ws.send({"op": "advertise", "topic": topic, "type": "std_msgs/String"})
@@ -134,7 +134,7 @@ async def test_publish_wrong_value_kind(ws_connect: Any, topic: str):
     await _still_working(ws, other, topic)
 
 
-async def test_publish_out_of_range_value(ws_connect: Any, topic: str):
+async def test_publish_out_of_range_value(ws_connect: Any, topic: str) -> None:
     """An integer outside its field's range names the field path and the type."""
     ws, other = await _pair(ws_connect)
     await ws.send({"op": "advertise", "topic": topic, "type": "std_msgs/msg/UInt8"})
@@ -144,7 +144,7 @@ async def test_publish_out_of_range_value(ws_connect: Any, topic: str):
     await _still_working(ws, other, topic)
 
 
-async def test_advertise_conflicting_type(ws_connect: Any, ros_node: Any, topic: str):
+async def test_advertise_conflicting_type(ws_connect: Any, ros_node: Any, topic: str) -> None:
     """Advertising a topic with another type than the graph's names both types."""
     ros_node.create_publisher(String, topic, 10)
     ws, other = await _pair(ws_connect)
@@ -155,7 +155,7 @@ async def test_advertise_conflicting_type(ws_connect: Any, ros_node: Any, topic:
     await _still_working(ws, other, topic)
 
 
-async def test_call_missing_service(ws_connect: Any, topic: str):
+async def test_call_missing_service(ws_connect: Any, topic: str) -> None:
     """A call to a service that does not exist fails with result false naming the service."""
     ws, other = await _pair(ws_connect)
     await ws.send({"op": "call_service", "service": topic, "id": "c1"})
@@ -165,7 +165,7 @@ async def test_call_missing_service(ws_connect: Any, topic: str):
     await _still_working(ws, other, topic)
 
 
-async def test_service_timeout(ws_connect: Any, ros_node: Any, topic: str):
+async def test_service_timeout(ws_connect: Any, ros_node: Any, topic: str) -> None:
     """A service that never answers fails after the timeout, saying how long was waited."""
     release = threading.Event()
     finished = threading.Event()
@@ -192,7 +192,7 @@ async def test_service_timeout(ws_connect: Any, ros_node: Any, topic: str):
     assert reply["result"] is False and "timed out after 0.3 s" in reply["values"]
 
 
-async def test_subscribe_unknown_type(ws_connect: Any, topic: str):
+async def test_subscribe_unknown_type(ws_connect: Any, topic: str) -> None:
     """A subscribe that cannot be made (unknown type) is answered with an error and its id."""
     ws, other = await _pair(ws_connect)
     await ws.send({"op": "subscribe", "topic": topic, "type": "std_msgs/NoSuchThing", "id": "s1"})
@@ -201,7 +201,7 @@ async def test_subscribe_unknown_type(ws_connect: Any, topic: str):
     await _still_working(ws, other, topic)
 
 
-async def test_fragment_bad_num_total(ws_connect: Any, topic: str):
+async def test_fragment_bad_num_total(ws_connect: Any, topic: str) -> None:
     """A fragment whose num is not below total names both fields."""
     ws, other = await _pair(ws_connect)
     await ws.send({"op": "fragment", "id": "f1", "data": "{}", "num": 5, "total": 2})

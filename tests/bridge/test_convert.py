@@ -326,7 +326,7 @@ def test_error_message_does_not_carry_the_payload() -> None:
 # --------------------------------------------------------------------------------------------
 # arrays
 
-NUMERIC = {
+NUMERIC: dict[str, tuple[str, list[Any], list[Any]]] = {
     "int8_values": ("int8", [-128, 0, 127], [-129]),
     "int16_values": ("int16", [-32768, 0, 32767], [32768]),
     "uint16_values": ("uint16", [0, 1, 65535], [-1]),

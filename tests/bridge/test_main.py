@@ -17,7 +17,7 @@ from tests.bridge.support import roundtrip
 from tests.helpers import ROOT, ros_env
 
 
-def test_help_lists_options():
+def test_help_lists_options() -> None:
     """``--help`` exits 0 and documents the main options."""
     out = subprocess.run(
         [sys.executable, "-m", "bridge_server", "--help"],
@@ -28,7 +28,7 @@ def test_help_lists_options():
         assert option in out
 
 
-async def test_logs_connect_and_disconnect(make_bridge: Any, ws_connect: Any):
+async def test_logs_connect_and_disconnect(make_bridge: Any, ws_connect: Any) -> None:
     """Each connection and disconnection is logged with the peer address and session id."""
     bridge = make_bridge()
     start = len(bridge.lines)
@@ -41,7 +41,7 @@ async def test_logs_connect_and_disconnect(make_bridge: Any, ws_connect: Any):
 
 
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
-async def test_signal_exits_cleanly(make_bridge: Any, ws_connect: Any, sig: int):
+async def test_signal_exits_cleanly(make_bridge: Any, ws_connect: Any, sig: int) -> None:
     """SIGINT and SIGTERM stop the bridge promptly with exit code 0, even with busy clients."""
     bridge = make_bridge()
     ws = await ws_connect(bridge.url)
@@ -58,7 +58,7 @@ async def test_signal_exits_cleanly(make_bridge: Any, ws_connect: Any, sig: int)
         await ws.recv(timeout=5)
 
 
-async def test_inbound_size_limit(make_bridge: Any):
+async def test_inbound_size_limit(make_bridge: Any) -> None:
     """A frame over --max-message-size closes that connection with code 1009, others live on."""
     bridge = make_bridge("--max-message-size", "2000")
     async with connect(bridge.url) as big, connect(bridge.url) as other:
@@ -72,7 +72,7 @@ async def test_inbound_size_limit(make_bridge: Any):
         assert reply["result"] is True
 
 
-async def test_publisher_released_after_disconnect(make_bridge: Any, ros_node: Any, topic: str):
+async def test_publisher_released_after_disconnect(make_bridge: Any, ros_node: Any, topic: str) -> None:
     """A disconnected client's publisher is removed after the grace period."""
     from std_msgs.msg import String
 
@@ -87,7 +87,7 @@ async def test_publisher_released_after_disconnect(make_bridge: Any, ros_node: A
     await async_wait_until(lambda: sub.get_publisher_count() == 0, what="publisher released")
 
 
-async def test_fragments_bounded_by_max_message_size(make_bridge: Any):
+async def test_fragments_bounded_by_max_message_size(make_bridge: Any) -> None:
     """Fragments cannot build an op larger than --max-message-size: the sender is told."""
     bridge = make_bridge("--max-message-size", "2000")
     async with connect(bridge.url) as ws:

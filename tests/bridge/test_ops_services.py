@@ -39,7 +39,7 @@ async def _bridge_sees_service(ws: Any, name: str) -> None:
         await asyncio.sleep(0.02)
 
 
-async def test_call_service_args_object_with_type(ws_connect: Any, ros_node: Any, topic: str):
+async def test_call_service_args_object_with_type(ws_connect: Any, ros_node: Any, topic: str) -> None:
     """call_service with an args object and a type reaches an rclpy service and returns its answer."""
     _mult(ros_node, topic)
     ws = await ws_connect()
@@ -50,7 +50,7 @@ async def test_call_service_args_object_with_type(ws_connect: Any, ros_node: Any
                      "values": {"result": 13.5}, "id": "c1"}
 
 
-async def test_call_service_args_list_without_type(ws_connect: Any, ros_node: Any, topic: str):
+async def test_call_service_args_list_without_type(ws_connect: Any, ros_node: Any, topic: str) -> None:
     """call_service with args as a list (zipped onto the request fields) and the type from the graph."""
     _mult(ros_node, topic)
     ws = await ws_connect()
@@ -62,7 +62,7 @@ async def test_call_service_args_list_without_type(ws_connect: Any, ros_node: An
     assert reply["values"] == {"result": 10.0}
 
 
-async def test_call_service_short_type_spelling(ws_connect: Any, ros_node: Any, topic: str):
+async def test_call_service_short_type_spelling(ws_connect: Any, ros_node: Any, topic: str) -> None:
     """The ``pkg/Type`` spelling of a service type works too."""
     ros_node.create_service(SetBool, topic, lambda req, resp: _set_bool(req, resp))
     ws = await ws_connect()
@@ -78,7 +78,7 @@ def _set_bool(req: Any, resp: Any) -> Any:
     return resp
 
 
-async def test_call_service_timeout(ws_connect: Any, ros_node: Any, topic: str):
+async def test_call_service_timeout(ws_connect: Any, ros_node: Any, topic: str) -> None:
     """A service that does not answer in time fails with result false naming the timeout."""
     release = threading.Event()
     finished = threading.Event()
@@ -107,7 +107,7 @@ async def test_call_service_timeout(ws_connect: Any, ros_node: Any, topic: str):
     assert topic in reply["values"]
 
 
-async def test_slow_call_does_not_block_connection(ws_connect: Any, ros_node: Any, topic: str):
+async def test_slow_call_does_not_block_connection(ws_connect: Any, ros_node: Any, topic: str) -> None:
     """A slow call runs concurrently: a later fast call on the same connection answers first."""
     release = threading.Event()
     finished = threading.Event()
@@ -136,7 +136,7 @@ async def test_slow_call_does_not_block_connection(ws_connect: Any, ros_node: An
     assert last["result"] is True
 
 
-async def test_advertise_service_answers_ros_caller(ws_connect: Any, ros_node: Any, topic: str):
+async def test_advertise_service_answers_ros_caller(ws_connect: Any, ros_node: Any, topic: str) -> None:
     """After advertise_service, an rclpy client's call reaches the client and gets its answer."""
     ws = await ws_connect()
     await ws.send({"op": "advertise_service", "service": topic, "type": "mult_msgs/MultFloats"})
@@ -154,7 +154,7 @@ async def test_advertise_service_answers_ros_caller(ws_connect: Any, ros_node: A
 
 async def test_served_service_failure_is_not_answered_with_a_default(
     ws_connect: Any, ros_node: Any, topic: str
-):
+) -> None:
     """A client answering result false leaves the ROS caller unanswered (no invented default)."""
     ws = await ws_connect()
     await ws.send({"op": "advertise_service", "service": topic, "type": "std_srvs/srv/SetBool"})
@@ -172,7 +172,7 @@ async def test_served_service_failure_is_not_answered_with_a_default(
     assert not failed.done()
 
 
-async def test_unadvertise_service(ws_connect: Any, ros_node: Any, topic: str):
+async def test_unadvertise_service(ws_connect: Any, ros_node: Any, topic: str) -> None:
     """unadvertise_service removes the ROS service at once; waiting callers get no default."""
     ws = await ws_connect()
     await ws.send({"op": "advertise_service", "service": topic, "type": "std_srvs/SetBool"})
@@ -185,7 +185,7 @@ async def test_unadvertise_service(ws_connect: Any, ros_node: Any, topic: str):
     assert not future.done()
 
 
-async def test_disconnect_fails_pending_ros_callers(ws_connect: Any, ros_node: Any, topic: str):
+async def test_disconnect_fails_pending_ros_callers(ws_connect: Any, ros_node: Any, topic: str) -> None:
     """When the serving client disconnects, its service leaves ROS; callers get no default."""
     ws = await ws_connect()
     await ws.send({"op": "advertise_service", "service": topic, "type": "std_srvs/SetBool"})
@@ -198,7 +198,7 @@ async def test_disconnect_fails_pending_ros_callers(ws_connect: Any, ros_node: A
     assert not future.done()
 
 
-async def test_first_owner_keeps_a_served_service(ws_connect: Any, ros_node: Any, topic: str):
+async def test_first_owner_keeps_a_served_service(ws_connect: Any, ros_node: Any, topic: str) -> None:
     """A second client advertising a service another client serves is refused; the first keeps it."""
     first = await ws_connect()
     await first.send({"op": "advertise_service", "service": topic, "type": "std_srvs/SetBool"})
@@ -217,7 +217,7 @@ async def test_first_owner_keeps_a_served_service(ws_connect: Any, ros_node: Any
     assert (await ros_future(future)).message == "first"
 
 
-async def test_fragmented_call_service(ws_connect: Any, ros_node: Any, topic: str):
+async def test_fragmented_call_service(ws_connect: Any, ros_node: Any, topic: str) -> None:
     """A call_service op sent as fragment ops is reassembled and carried out."""
     _mult(ros_node, topic)
     ws = await ws_connect()
@@ -231,7 +231,7 @@ async def test_fragmented_call_service(ws_connect: Any, ros_node: Any, topic: st
     assert reply["values"] == {"result": 3.0}
 
 
-async def test_call_service_fragment_size(ws_connect: Any, ros_node: Any, topic: str):
+async def test_call_service_fragment_size(ws_connect: Any, ros_node: Any, topic: str) -> None:
     """A call_service with fragment_size gets its service_response as fragment ops."""
     _mult(ros_node, topic)
     ws = await ws_connect()
@@ -248,7 +248,7 @@ async def test_call_service_fragment_size(ws_connect: Any, ros_node: Any, topic:
                      "values": {"result": 4.0}, "id": "fr"}
 
 
-async def test_client_to_client_call_keeps_failure(ws_connect: Any, topic: str):
+async def test_client_to_client_call_keeps_failure(ws_connect: Any, topic: str) -> None:
     """A call to a service another client of the bridge serves gets its answer, failures included."""
     server = await ws_connect()
     await server.send({"op": "advertise_service", "service": topic, "type": "std_srvs/SetBool"})

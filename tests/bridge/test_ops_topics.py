@@ -24,10 +24,10 @@ from tests.helpers import async_wait_until
 
 
 def _latched() -> QoSProfile:
-    return QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+    return QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)  # type: ignore[no-untyped-call]
 
 
-async def test_advertise_publish_reaches_ros_subscriber(ws_connect: Any, ros_node: Any, topic: str):
+async def test_advertise_publish_reaches_ros_subscriber(ws_connect: Any, ros_node: Any, topic: str) -> None:
     """A client's advertise + publish arrives at an rclpy subscriber."""
     inbox = Inbox()
     sub = ros_node.create_subscription(String, topic, inbox, 10)
@@ -41,7 +41,7 @@ async def test_advertise_publish_reaches_ros_subscriber(ws_connect: Any, ros_nod
 
 async def test_publish_without_advertise_uses_graph_type(
     ws_connect: Any, ros_node: Any, topic: str
-):
+) -> None:
     """Publishing to a topic the graph knows works without advertise (the graph gives the type)."""
     inbox = Inbox()
     sub = ros_node.create_subscription(String, topic, inbox, 10)
@@ -59,7 +59,7 @@ def _bridge_knows(node: Any, topic: str) -> bool:
     return any(name == topic for name, _ in node.get_topic_names_and_types())
 
 
-async def test_ros_publisher_reaches_subscriber(ws_connect: Any, ros_node: Any, topic: str):
+async def test_ros_publisher_reaches_subscriber(ws_connect: Any, ros_node: Any, topic: str) -> None:
     """An rclpy publisher's messages reach a client that subscribed with a type."""
     pub = ros_node.create_publisher(String, topic, 10)
     ws = await ws_connect()
@@ -70,7 +70,7 @@ async def test_ros_publisher_reaches_subscriber(ws_connect: Any, ros_node: Any, 
     assert op == {"op": "publish", "topic": topic, "msg": {"data": "from ros"}}
 
 
-async def test_subscribe_infers_type_from_graph(ws_connect: Any, ros_node: Any, topic: str):
+async def test_subscribe_infers_type_from_graph(ws_connect: Any, ros_node: Any, topic: str) -> None:
     """A subscribe without a type uses the type the ROS graph lists for the topic."""
     pub = ros_node.create_publisher(String, topic, 10)
     ws = await ws_connect()
@@ -82,7 +82,7 @@ async def test_subscribe_infers_type_from_graph(ws_connect: Any, ros_node: Any, 
     assert op["msg"] == {"data": "typed by graph"}
 
 
-async def test_late_publisher_is_heard(ws_connect: Any, ros_node: Any, topic: str):
+async def test_late_publisher_is_heard(ws_connect: Any, ros_node: Any, topic: str) -> None:
     """A subscribe without a type made before any publisher exists works once one appears."""
     ws = await ws_connect()
     await ws.send({"op": "subscribe", "topic": topic, "id": "late"})
@@ -94,7 +94,7 @@ async def test_late_publisher_is_heard(ws_connect: Any, ros_node: Any, topic: st
     assert op["msg"] == {"data": "finally"}
 
 
-async def test_both_type_spellings(ws_connect: Any, topic: str):
+async def test_both_type_spellings(ws_connect: Any, topic: str) -> None:
     """``std_msgs/String`` and ``std_msgs/msg/String`` name the same type on advertise and subscribe."""
     ws = await ws_connect()
     await ws.send({"op": "advertise", "topic": topic, "type": "std_msgs/String"})
@@ -119,7 +119,7 @@ async def test_both_type_spellings(ws_connect: Any, topic: str):
     assert statuses == []
 
 
-async def test_throttle_rate_keeps_latest(ws_connect: Any, ros_node: Any, topic: str):
+async def test_throttle_rate_keeps_latest(ws_connect: Any, ros_node: Any, topic: str) -> None:
     """With throttle_rate, a burst is thinned out and its last message still arrives."""
     pub = ros_node.create_publisher(String, topic, 100)
     ws = await ws_connect()
@@ -129,7 +129,7 @@ async def test_throttle_rate_keeps_latest(ws_connect: Any, ros_node: Any, topic:
     await wait_subscribers(pub)
     for i in range(20):
         pub.publish(String(data=str(i)))
-    seen = []
+    seen: list[Any] = []
     while not seen or seen[-1] != "19":
         seen.append((await ws.expect(op="publish", topic=topic))["msg"]["data"])
     assert len(seen) < 20
@@ -138,7 +138,7 @@ async def test_throttle_rate_keeps_latest(ws_connect: Any, ros_node: Any, topic:
 
 async def test_queue_length_drops_oldest_for_slow_reader(
     ws_connect: Any, ros_node: Any, topic: str
-):
+) -> None:
     """A client that does not read loses the oldest messages (newest kept) and is told so."""
     pub = ros_node.create_publisher(String, topic, 100)
     ws = await ws_connect()
@@ -165,7 +165,7 @@ async def test_queue_length_drops_oldest_for_slow_reader(
     assert topic in warning["msg"] and "dropped" in warning["msg"]
 
 
-async def test_fragment_size_splits_outgoing(ws_connect: Any, ros_node: Any, topic: str):
+async def test_fragment_size_splits_outgoing(ws_connect: Any, ros_node: Any, topic: str) -> None:
     """With fragment_size, a large publish arrives as fragment ops that reassemble into it; a
     size under the bridge's floor (1,024 bytes) is raised to it, with a warning saying so."""
     pub = ros_node.create_publisher(String, topic, 10)
@@ -190,7 +190,7 @@ async def test_fragment_size_splits_outgoing(ws_connect: Any, ros_node: Any, top
     assert json.loads(text) == {"op": "publish", "topic": topic, "msg": {"data": data}}
 
 
-async def test_compression_cbor(ws_connect: Any, ros_node: Any, topic: str):
+async def test_compression_cbor(ws_connect: Any, ros_node: Any, topic: str) -> None:
     """compression=cbor sends a binary CBOR publish op; int32[] is a typed array (tag 78)."""
     pub = ros_node.create_publisher(Int32MultiArray, topic, 10)
     ws = await ws_connect()
@@ -206,7 +206,7 @@ async def test_compression_cbor(ws_connect: Any, ros_node: Any, topic: str):
     assert list(struct.unpack("<3i", data.value)) == [1, -2, 300000]
 
 
-async def test_compression_cbor_uint8_as_bytes(ws_connect: Any, ros_node: Any, topic: str):
+async def test_compression_cbor_uint8_as_bytes(ws_connect: Any, ros_node: Any, topic: str) -> None:
     """compression=cbor carries uint8[] as a CBOR byte string."""
     pub = ros_node.create_publisher(UInt8MultiArray, topic, 10)
     ws = await ws_connect()
@@ -220,7 +220,7 @@ async def test_compression_cbor_uint8_as_bytes(ws_connect: Any, ros_node: Any, t
     assert op["msg"]["data"] == b"\x00\x01\xff"
 
 
-async def test_compression_cbor_raw(ws_connect: Any, ros_node: Any, topic: str):
+async def test_compression_cbor_raw(ws_connect: Any, ros_node: Any, topic: str) -> None:
     """compression=cbor-raw sends the CDR bytes with a receive stamp."""
     pub = ros_node.create_publisher(String, topic, 10)
     ws = await ws_connect()
@@ -236,7 +236,7 @@ async def test_compression_cbor_raw(ws_connect: Any, ros_node: Any, topic: str):
     assert deserialize_message(msg["bytes"], String).data == "raw"
 
 
-async def test_merged_subscriptions_deliver_once(ws_connect: Any, ros_node: Any, topic: str):
+async def test_merged_subscriptions_deliver_once(ws_connect: Any, ros_node: Any, topic: str) -> None:
     """Several ids on one topic merge: each message arrives once; each id unsubscribes alone."""
     pub = ros_node.create_publisher(String, topic, 10)
     ws = await ws_connect()
@@ -256,7 +256,7 @@ async def test_merged_subscriptions_deliver_once(ws_connect: Any, ros_node: Any,
     await async_wait_until(lambda: pub.get_subscription_count() == 0, what="subscription gone")
 
 
-async def test_unsubscribe_without_id_removes_all(ws_connect: Any, ros_node: Any, topic: str):
+async def test_unsubscribe_without_id_removes_all(ws_connect: Any, ros_node: Any, topic: str) -> None:
     """An unsubscribe without id ends every subscription of that client to the topic."""
     pub = ros_node.create_publisher(String, topic, 10)
     ws = await ws_connect()
@@ -271,7 +271,7 @@ async def test_unsubscribe_without_id_removes_all(ws_connect: Any, ros_node: Any
 
 async def test_one_ros_subscription_shared_by_clients(
     ws_connect: Any, ros_node: Any, topic: str
-):
+) -> None:
     """Two clients on one topic share one ROS subscription and both get every message."""
     pub = ros_node.create_publisher(String, topic, 10)
     a = await ws_connect()
@@ -289,7 +289,7 @@ async def test_one_ros_subscription_shared_by_clients(
 
 async def test_latched_topic_reaches_late_subscribers(
     ws_connect: Any, ros_node: Any, topic: str
-):
+) -> None:
     """A transient-local (latched) message reaches clients that subscribe after it was sent."""
     pub = ros_node.create_publisher(String, topic, _latched())
     pub.publish(String(data="map"))
@@ -302,7 +302,7 @@ async def test_latched_topic_reaches_late_subscribers(
     assert (await second.expect(op="publish", topic=topic))["msg"]["data"] == "map"
 
 
-async def test_client_latched_advertise(ws_connect: Any, ros_node: Any, topic: str):
+async def test_client_latched_advertise(ws_connect: Any, ros_node: Any, topic: str) -> None:
     """advertise with latch=true makes a transient-local publisher a late rclpy subscriber hears."""
     ws = await ws_connect()
     await ws.send({"op": "advertise", "topic": topic, "type": "std_msgs/String", "latch": True})
@@ -313,9 +313,9 @@ async def test_client_latched_advertise(ws_connect: Any, ros_node: Any, topic: s
     assert (await inbox.get()).data == "kept"
 
 
-async def test_best_effort_publisher_is_heard(ws_connect: Any, ros_node: Any, topic: str):
+async def test_best_effort_publisher_is_heard(ws_connect: Any, ros_node: Any, topic: str) -> None:
     """A best-effort publisher (sensor style) is matched: the bridge subscribes best effort."""
-    qos = QoSProfile(depth=5, reliability=ReliabilityPolicy.BEST_EFFORT)
+    qos = QoSProfile(depth=5, reliability=ReliabilityPolicy.BEST_EFFORT)  # type: ignore[no-untyped-call]
     pub = ros_node.create_publisher(String, topic, qos)
     ws = await ws_connect()
     await async_wait_until(lambda: _bridge_knows(ros_node, topic), what="topic in the graph")
@@ -333,7 +333,7 @@ async def test_best_effort_publisher_is_heard(ws_connect: Any, ros_node: Any, to
     assert op["msg"]["data"].startswith("be")
 
 
-async def test_unadvertise_removes_publisher(ws_connect: Any, ros_node: Any, topic: str):
+async def test_unadvertise_removes_publisher(ws_connect: Any, ros_node: Any, topic: str) -> None:
     """unadvertise removes the bridge's ROS publisher for the topic."""
     sub = ros_node.create_subscription(String, topic, lambda m: None, 10)
     ws = await ws_connect()
@@ -343,12 +343,12 @@ async def test_unadvertise_removes_publisher(ws_connect: Any, ros_node: Any, top
     await async_wait_until(lambda: sub.get_publisher_count() == 0, what="publisher gone")
 
 
-async def test_late_best_effort_publisher_is_matched(ws_connect: Any, ros_node: Any, topic: str):
+async def test_late_best_effort_publisher_is_matched(ws_connect: Any, ros_node: Any, topic: str) -> None:
     """A best-effort publisher appearing after the subscribe is matched (the bridge re-subscribes)."""
     ws = await ws_connect()
     await ws.send({"op": "subscribe", "topic": topic, "type": "std_msgs/String"})
     await roundtrip(ws)
-    qos = QoSProfile(depth=5, reliability=ReliabilityPolicy.BEST_EFFORT)
+    qos = QoSProfile(depth=5, reliability=ReliabilityPolicy.BEST_EFFORT)  # type: ignore[no-untyped-call]
     pub = ros_node.create_publisher(String, topic, qos)
     await wait_subscribers(pub)
     n = 0
@@ -365,7 +365,7 @@ async def test_late_best_effort_publisher_is_matched(ws_connect: Any, ros_node: 
 
 async def test_late_latched_publisher_reaches_subscriber(
     ws_connect: Any, ros_node: Any, topic: str
-):
+) -> None:
     """A latched message from a publisher appearing after the subscribe still arrives."""
     ws = await ws_connect()
     await ws.send({"op": "subscribe", "topic": topic, "type": "std_msgs/String"})
@@ -378,7 +378,7 @@ async def test_late_latched_publisher_reaches_subscriber(
 
 async def test_a_re_subscription_to_a_latched_topic_hands_out_nothing_twice(
     ws_connect: Any, bridge: Any, ros_node: Any, topic: str
-):
+) -> None:
     """The bridge subscribes volatile before it sees the publisher, then re-subscribes
     transient local, and the writer replays its history: every number reaches the client
     exactly once (none twice, none lost)."""
@@ -388,7 +388,7 @@ async def test_a_re_subscription_to_a_latched_topic_hands_out_nothing_twice(
                    "queue_length": 1000})
     await roundtrip(ws)
     pub = ros_node.create_publisher(
-        Int32, topic, QoSProfile(depth=1000, durability=DurabilityPolicy.TRANSIENT_LOCAL))
+        Int32, topic, QoSProfile(depth=1000, durability=DurabilityPolicy.TRANSIENT_LOCAL))  # type: ignore[no-untyped-call]
     got: list[int] = []
     sent = 0
 
@@ -414,7 +414,7 @@ async def test_a_re_subscription_to_a_latched_topic_hands_out_nothing_twice(
     assert sorted(got) == list(range(sent)), got
 
 
-async def test_png_compression_falls_back_to_json(ws_connect: Any, ros_node: Any, topic: str):
+async def test_png_compression_falls_back_to_json(ws_connect: Any, ros_node: Any, topic: str) -> None:
     """compression=png (legacy, offered by stock clients) subscribes with plain JSON and a warning."""
     pub = ros_node.create_publisher(String, topic, 10)
     ws = await ws_connect()
@@ -428,7 +428,7 @@ async def test_png_compression_falls_back_to_json(ws_connect: Any, ros_node: Any
     assert op["msg"] == {"data": "plain"}
 
 
-async def test_relative_names_are_echoed(ws_connect: Any, ros_node: Any, topic: str):
+async def test_relative_names_are_echoed(ws_connect: Any, ros_node: Any, topic: str) -> None:
     """A name without the leading slash means the absolute one, and replies use the client's spelling."""
     pub = ros_node.create_publisher(String, topic, 10)
     ws = await ws_connect()

@@ -54,7 +54,10 @@ async def _on_executor(ros: RosNode, fn: Any) -> Any:
     """Run ``fn`` on the bridge's executor thread; its return value."""
     loop = asyncio.get_running_loop()
     result: asyncio.Future[Any] = loop.create_future()
-    ros.in_executor(lambda: loop.call_soon_threadsafe(result.set_result, fn()))
+    def run() -> None:
+        loop.call_soon_threadsafe(result.set_result, fn())
+
+    ros.in_executor(run)
     return await asyncio.wait_for(result, 10.0)
 
 

@@ -29,7 +29,10 @@ async def test_a_failing_executor_round_does_not_stop_ros(caplog: pytest.LogCapt
             timer = ros.node.create_timer(0.01, boom)
             await async_wait_until(lambda: ros.spin_errors >= 1, 10.0, "the failing round")
             done = asyncio.Event()
-            ros.in_executor(lambda: loop.call_soon_threadsafe(done.set))
+            def wake() -> None:
+                loop.call_soon_threadsafe(done.set)
+
+            ros.in_executor(wake)
             await asyncio.wait_for(done.wait(), 10.0)
         assert ros.spin_errors == 1
         assert "ROS executor round failed; spinning on" in caplog.text

@@ -10,7 +10,7 @@ from collections.abc import Callable
 from typing import Any
 
 import pytest
-from rclpy.action import ActionServer
+from rclpy.action.server import ActionServer
 from std_msgs.msg import String
 from std_srvs.srv import SetBool
 from test_msgs.action import Fibonacci
@@ -51,10 +51,10 @@ async def _until(
 
 
 def _fq(node: Any) -> str:
-    return node.get_fully_qualified_name()
+    return str(node.get_fully_qualified_name())
 
 
-async def test_topics_lists_names_and_types(ws_connect: Any, ros_node: Any, topic: str):
+async def test_topics_lists_names_and_types(ws_connect: Any, ros_node: Any, topic: str) -> None:
     """/rosapi/topics lists every topic with its type at the same index."""
     ros_node.create_publisher(String, topic, 10)
     ws = await ws_connect()
@@ -63,7 +63,7 @@ async def test_topics_lists_names_and_types(ws_connect: Any, ros_node: Any, topi
     assert values["types"][values["topics"].index(topic)] == "std_msgs/msg/String"
 
 
-async def test_topics_for_type_both_spellings(ws_connect: Any, ros_node: Any, topic: str):
+async def test_topics_for_type_both_spellings(ws_connect: Any, ros_node: Any, topic: str) -> None:
     """/rosapi/topics_for_type finds topics by type, in either spelling."""
     ros_node.create_publisher(String, topic, 10)
     ws = await ws_connect()
@@ -73,7 +73,7 @@ async def test_topics_for_type_both_spellings(ws_connect: Any, ros_node: Any, to
     assert topic in short["topics"]
 
 
-async def test_topic_type(ws_connect: Any, ros_node: Any, topic: str):
+async def test_topic_type(ws_connect: Any, ros_node: Any, topic: str) -> None:
     """/rosapi/topic_type answers the type, or "" for an unknown topic; args may be a list."""
     ros_node.create_publisher(String, topic, 10)
     ws = await ws_connect()
@@ -83,7 +83,7 @@ async def test_topic_type(ws_connect: Any, ros_node: Any, topic: str):
     assert await _call(ws, "/rosapi/topic_type", {"topic": topic + "_none"}) == {"type": ""}
 
 
-async def test_services_include_ros_and_rosapi(ws_connect: Any, ros_node: Any, topic: str):
+async def test_services_include_ros_and_rosapi(ws_connect: Any, ros_node: Any, topic: str) -> None:
     """/rosapi/services lists ROS services and the bridge's own rosapi services."""
     ros_node.create_service(SetBool, topic, lambda req, resp: resp)
     ws = await ws_connect()
@@ -92,7 +92,7 @@ async def test_services_include_ros_and_rosapi(ws_connect: Any, ros_node: Any, t
         assert name in values["services"]
 
 
-async def test_service_type_and_services_for_type(ws_connect: Any, ros_node: Any, topic: str):
+async def test_service_type_and_services_for_type(ws_connect: Any, ros_node: Any, topic: str) -> None:
     """/rosapi/service_type and /rosapi/services_for_type agree on a ROS service's type."""
     ros_node.create_service(SetBool, topic, lambda req, resp: resp)
     ws = await ws_connect()
@@ -104,7 +104,7 @@ async def test_service_type_and_services_for_type(ws_connect: Any, ros_node: Any
     assert own == {"type": "rosapi_msgs/srv/Topics"}
 
 
-async def test_service_node(ws_connect: Any, ros_node: Any, topic: str):
+async def test_service_node(ws_connect: Any, ros_node: Any, topic: str) -> None:
     """/rosapi/service_node names the node serving a service."""
     ros_node.create_service(SetBool, topic, lambda req, resp: resp)
     ws = await ws_connect()
@@ -114,7 +114,7 @@ async def test_service_node(ws_connect: Any, ros_node: Any, topic: str):
 
 async def test_service_node_of_a_client_served_service(
     ws_connect: Any, bridge: BridgeProcess, topic: str
-):
+) -> None:
     """/rosapi/service_node names the bridge's node for a service one of its clients serves."""
     server = await ws_connect()
     await server.send({"op": "advertise_service", "service": topic, "type": "std_srvs/SetBool"})
@@ -124,7 +124,7 @@ async def test_service_node_of_a_client_served_service(
     assert values == {"node": bridge.node_name}
 
 
-async def test_nodes_fully_qualified(ws_connect: Any, bridge: BridgeProcess, ros_node: Any):
+async def test_nodes_fully_qualified(ws_connect: Any, bridge: BridgeProcess, ros_node: Any) -> None:
     """/rosapi/nodes lists fully qualified node names, the bridge's own included."""
     ws = await ws_connect()
     values = await _until(ws, "/rosapi/nodes", None, lambda v: _fq(ros_node) in v["nodes"])
@@ -132,7 +132,7 @@ async def test_nodes_fully_qualified(ws_connect: Any, bridge: BridgeProcess, ros
     assert all(n.startswith("/") for n in values["nodes"])
 
 
-async def test_node_details(ws_connect: Any, ros_node: Any, topic: str):
+async def test_node_details(ws_connect: Any, ros_node: Any, topic: str) -> None:
     """/rosapi/node_details lists a node's publications, subscriptions and services."""
     ros_node.create_publisher(String, topic + "_out", 10)
     ros_node.create_subscription(String, topic + "_in", lambda m: None, 10)
@@ -147,7 +147,7 @@ async def test_node_details(ws_connect: Any, ros_node: Any, topic: str):
     assert topic + "_in" in values["subscribing"]
 
 
-async def test_node_details_unknown_node_fails(ws_connect: Any):
+async def test_node_details_unknown_node_fails(ws_connect: Any) -> None:
     """/rosapi/node_details for a node not in the graph fails with result false naming it."""
     ws = await ws_connect()
     await ws.send({"op": "call_service", "service": "/rosapi/node_details",
@@ -156,7 +156,7 @@ async def test_node_details_unknown_node_fails(ws_connect: Any):
     assert reply["result"] is False and "/no/such_node" in reply["values"]
 
 
-async def test_publishers_and_subscribers(ws_connect: Any, bridge: BridgeProcess, ros_node: Any, topic: str):
+async def test_publishers_and_subscribers(ws_connect: Any, bridge: BridgeProcess, ros_node: Any, topic: str) -> None:
     """/rosapi/publishers and /rosapi/subscribers name the nodes on each side of a topic."""
     ros_node.create_publisher(String, topic, 10)
     ws = await ws_connect()
@@ -167,17 +167,17 @@ async def test_publishers_and_subscribers(ws_connect: Any, bridge: BridgeProcess
                  lambda v: bridge.node_name in v["subscribers"])
 
 
-async def test_action_servers(ws_connect: Any, ros_node: Any, topic: str):
+async def test_action_servers(ws_connect: Any, ros_node: Any, topic: str) -> None:
     """/rosapi/action_servers lists actions served in the graph."""
-    server = ActionServer(ros_node, Fibonacci, topic, lambda goal: Fibonacci.Result())
+    server = ActionServer(ros_node, Fibonacci, topic, lambda goal: Fibonacci.Result())  # type: ignore[no-untyped-call]
     try:
         ws = await ws_connect()
         await _until(ws, "/rosapi/action_servers", None, lambda v: topic in v["action_servers"])
     finally:
-        server.destroy()
+        server.destroy()  # type: ignore[no-untyped-call]
 
 
-async def test_get_time(ws_connect: Any):
+async def test_get_time(ws_connect: Any) -> None:
     """/rosapi/get_time gives the bridge clock as {sec, nanosec} (plus ROS 1 secs, nsecs)."""
     ws = await ws_connect()
     t = (await _call(ws, "/rosapi/get_time"))["time"]
@@ -186,13 +186,13 @@ async def test_get_time(ws_connect: Any):
     assert (t["secs"], t["nsecs"]) == (t["sec"], t["nanosec"])
 
 
-async def test_get_ros_version(ws_connect: Any):
+async def test_get_ros_version(ws_connect: Any) -> None:
     """/rosapi/get_ros_version says ROS 2 Jazzy."""
     ws = await ws_connect()
     assert await _call(ws, "/rosapi/get_ros_version") == {"version": 2, "distro": "jazzy"}
 
 
-async def test_rosapi_bad_args(ws_connect: Any):
+async def test_rosapi_bad_args(ws_connect: Any) -> None:
     """A rosapi call missing its request field fails with result false naming the field."""
     ws = await ws_connect()
     await ws.send({"op": "call_service", "service": "/rosapi/topic_type", "args": {}, "id": "b"})
@@ -200,7 +200,7 @@ async def test_rosapi_bad_args(ws_connect: Any):
     assert reply["result"] is False and "'topic'" in reply["values"]
 
 
-async def test_rosapi_unknown_field_named(ws_connect: Any):
+async def test_rosapi_unknown_field_named(ws_connect: Any) -> None:
     """A rosapi call with a field its request lacks names that field and the real ones."""
     ws = await ws_connect()
     await ws.send({"op": "call_service", "service": "/rosapi/topic_type",
@@ -210,7 +210,7 @@ async def test_rosapi_unknown_field_named(ws_connect: Any):
     assert "args.topik" in reply["values"] and "topic" in reply["values"]
 
 
-async def test_services_lists_only_served_names(ws_connect: Any, topic: str):
+async def test_services_lists_only_served_names(ws_connect: Any, topic: str) -> None:
     """A call to a service nobody serves does not make /rosapi/services list it."""
     ws = await ws_connect()
     await ws.send({"op": "call_service", "service": topic, "type": "std_srvs/SetBool",
@@ -221,7 +221,7 @@ async def test_services_lists_only_served_names(ws_connect: Any, topic: str):
     assert await _call(ws, "/rosapi/service_type", {"service": topic}) == {"type": ""}
 
 
-async def test_message_details(ws_connect: Any):
+async def test_message_details(ws_connect: Any) -> None:
     """/rosapi/message_details gives the typedef of a type, then of its nested types."""
     ws = await ws_connect()
     values = await _call(ws, "/rosapi/message_details", {"type": "geometry_msgs/PoseWithCovariance"})
@@ -237,7 +237,7 @@ async def test_message_details(ws_connect: Any):
     assert first["constvalues"][first["constnames"].index("STATUS_SUCCEEDED")] == "4"
 
 
-async def test_service_request_and_response_details(ws_connect: Any):
+async def test_service_request_and_response_details(ws_connect: Any) -> None:
     """/rosapi/service_request_details and _response_details describe the two halves."""
     ws = await ws_connect()
     req = await _call(ws, "/rosapi/service_request_details", {"type": "std_srvs/srv/SetBool"})
@@ -247,7 +247,7 @@ async def test_service_request_and_response_details(ws_connect: Any):
     assert resp["typedefs"][0]["fieldtypes"] == ["boolean", "string"]
 
 
-async def test_message_details_unknown_type(ws_connect: Any):
+async def test_message_details_unknown_type(ws_connect: Any) -> None:
     """/rosapi/message_details of an unknown type fails naming it."""
     ws = await ws_connect()
     await ws.send({"op": "call_service", "service": "/rosapi/message_details",
@@ -256,7 +256,7 @@ async def test_message_details_unknown_type(ws_connect: Any):
     assert reply["result"] is False and "nope_msgs/Nothing" in reply["values"]
 
 
-async def test_params_get_set_names(ws_connect: Any, ros_node: Any):
+async def test_params_get_set_names(ws_connect: Any, ros_node: Any) -> None:
     """Node parameters are listed, read and written as /node:param with JSON text values."""
     ros_node.declare_parameter("speed", 1.5)
     ros_node.declare_parameter("names", ["a", "b"])
@@ -276,7 +276,7 @@ async def test_params_get_set_names(ws_connect: Any, ros_node: Any):
     assert missing["value"] == "7"
 
 
-async def test_set_param_refused_names_param(ws_connect: Any, ros_node: Any):
+async def test_set_param_refused_names_param(ws_connect: Any, ros_node: Any) -> None:
     """A value of the wrong type is refused by the node; the failure names the parameter."""
     ros_node.declare_parameter("count", 3)
     full = _fq(ros_node)
@@ -289,7 +289,7 @@ async def test_set_param_refused_names_param(ws_connect: Any, ros_node: Any):
     assert reply["result"] is False and f"{full}:count" in reply["values"]
 
 
-async def test_topics_and_raw_types(ws_connect: Any, ros_node: Any, topic: str):
+async def test_topics_and_raw_types(ws_connect: Any, ros_node: Any, topic: str) -> None:
     """/rosapi/topics_and_raw_types gives each topic's full definition text, dependencies too."""
     from geometry_msgs.msg import PoseStamped
 

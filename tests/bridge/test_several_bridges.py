@@ -32,11 +32,11 @@ async def _until_listed(ws: WireClient, service: str, key: str, name: str) -> No
 @pytest.mark.parametrize("same_name", [False, True])
 async def test_two_bridges_see_the_whole_graph(
     make_bridge: Any, tmp_path: Any, ros_node: Any, topic: str, same_name: bool
-):
+) -> None:
     """A loopback bridge and a secured one on one domain each list and type an rclpy service,
     an rclpy action and a service a client of the other bridge serves; by default their node
     names differ, and lookups hold even when both are given the same --node-name."""
-    from rclpy.action import ActionServer
+    from rclpy.action.server import ActionServer
 
     auth = make_auth_file(tmp_path)
     extra = ["--node-name", "twin_bridge"] if same_name else []
@@ -46,7 +46,7 @@ async def test_two_bridges_see_the_whole_graph(
         assert plain.node_name != secured.node_name
     service, action, served = topic + "_srv", topic + "_act", topic + "_served"
     ros_node.create_service(SetBool, service, lambda q, r: r)
-    server = ActionServer(ros_node, Fibonacci, action, lambda goal: Fibonacci.Result())
+    server = ActionServer(ros_node, Fibonacci, action, lambda goal: Fibonacci.Result())  # type: ignore[no-untyped-call]
     a = await open_wire(plain.url)
     b = await wire(secured.url, auth.tokens["admin"])
     try:
@@ -71,7 +71,7 @@ async def test_two_bridges_see_the_whole_graph(
     finally:
         await a.close()
         await b.close()
-        server.destroy()
+        server.destroy()  # type: ignore[no-untyped-call]
 
 
 def test_node_name_option_and_default(make_bridge: Any) -> None:

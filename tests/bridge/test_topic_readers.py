@@ -22,7 +22,7 @@ KINDS = {"auto": "loop", "thread": "thread"}  # --topic-reader -> the reader it 
 
 
 def _take_all(handle: Any, limit: int) -> tuple[list[bytes], int]:
-    batch = []
+    batch: list[bytes] = []
     while len(batch) < limit and (taken := handle.take_message(String, True)) is not None:
         batch.append(taken[0])
     return batch, len(batch)
@@ -33,7 +33,7 @@ def _open_fds() -> set[int]:
 
 
 @pytest.mark.parametrize("kind", KINDS)
-async def test_a_reader_survives_a_failing_take(kind: str, caplog: pytest.LogCaptureFixture):
+async def test_a_reader_survives_a_failing_take(kind: str, caplog: pytest.LogCaptureFixture) -> None:
     """A subscription whose taking raises is logged; the reader serves the others on, lets go
     of a subscription that is removed, and stops with the bridge's ROS side (leaving no
     descriptor and no thread behind)."""
@@ -89,7 +89,7 @@ def _is_eventfd(fd: int) -> bool:
 
 async def test_the_loop_reader_comes_back_for_what_one_batch_left(
     monkeypatch: pytest.MonkeyPatch,
-):
+) -> None:
     """The loop reader takes what is queued a batch at a time: what one batch left is taken
     without a new message arriving (the middleware says only what is new), after the loop's
     other work had its turn."""
@@ -129,7 +129,7 @@ async def test_the_loop_reader_comes_back_for_what_one_batch_left(
 @pytest.mark.parametrize("kind", KINDS)
 async def test_a_bridge_serves_topics_with_either_reader(
     kind: str, make_bridge: Any, ros_node: Any, topic: str
-):
+) -> None:
     """``--topic-reader``: the bridge says which reader it runs, and a client gets what an
     rclpy publisher sends, in order, through it."""
     from tests.helpers import open_wire
@@ -154,7 +154,7 @@ async def test_a_bridge_serves_topics_with_either_reader(
 
 async def test_the_loop_reader_serves_a_service_on_the_loop(
     monkeypatch: pytest.MonkeyPatch, ros_node: Any, caplog: pytest.LogCaptureFixture
-):
+) -> None:
     """A service the loop reader serves: each request wakes the loop with its header, answers
     reach the caller they belong to (out of order too), what one batch left is taken without
     a new request, a failing handler is logged while the others are answered, and removing it
@@ -206,7 +206,7 @@ async def test_the_loop_reader_serves_a_service_on_the_loop(
 @pytest.mark.parametrize("kind", KINDS)
 async def test_a_bridge_serves_client_services_with_either_reader(
     kind: str, make_bridge: Any, ros_node: Any, topic: str
-):
+) -> None:
     """A service a client advertises answers rclpy callers through a bridge with either
     reader (the loop takes the requests itself; the thread reader leaves them to rclpy's
     executor), each answer reaching its own caller when several wait at once."""

@@ -191,9 +191,12 @@ def test_call_timeout(cli: Run, ros_node: Any, topic: str) -> None:
 def test_errors_do_not_disturb_the_bridge(cli: Run, multiplier: str) -> None:
     """After all of the above, the bridge still answers a good call."""
     result: list[Result] = []
-    wait_until(lambda: result.append(cli("service", "call", multiplier,
-                                         "mult_msgs/srv/MultFloats", "{x: 3.0, y: 3.0}"))
-               or result[-1].code == 0, timeout=15, what="a good call")
+    def good_call() -> bool:
+        result.append(cli("service", "call", multiplier, "mult_msgs/srv/MultFloats",
+                          "{x: 3.0, y: 3.0}"))
+        return result[-1].code == 0
+
+    wait_until(good_call, timeout=15, what="a good call")
     assert result[-1].out == "result: 9.0\n"
 
 

@@ -270,4 +270,4 @@ async def restart_killed(bridge: BridgeProcess, client: Client) -> None:
 def test_goal_status_prints_its_name() -> None:
     """print(result.status) shows SUCCEEDED, not 4; it still equals its number."""
     assert str(GoalStatus.SUCCEEDED) == "SUCCEEDED" and f"{GoalStatus.CANCELED}" == "CANCELED"
-    assert GoalStatus.SUCCEEDED == 4 and f"{GoalStatus.ABORTED:d}" == "6"
+    assert int(GoalStatus.SUCCEEDED) == 4 and f"{GoalStatus.ABORTED:d}" == "6"

@@ -115,7 +115,7 @@ async def test_cbor_raw_gives_what_cbor_gives(client: Client, ros_node: Any, top
         got = []
         for compression in ("cbor", "cbor-raw"):
             async with client.subscribe(name, type_name, compression=compression) as sub:
-                got.append(await first_message(lambda pub=pub, msg=msg: pub.publish(msg), sub))
+                got.append(await first_message(lambda: pub.publish(msg), sub))  # noqa: B023 - awaited here
         assert got[0] == got[1], type_name
     assert got[1]["data"] == PIXELS
 

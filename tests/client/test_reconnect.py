@@ -110,7 +110,7 @@ async def test_offline_publishes_are_flushed_after_graceful_restart(
     """Messages published while the bridge was away reach an rclpy subscriber after reconnecting."""
     bridge, client = bridge_and_client
     inbox = Inbox()
-    qos = QoSProfile(depth=10, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+    qos = QoSProfile(depth=10, durability=DurabilityPolicy.TRANSIENT_LOCAL)  # type: ignore[no-untyped-call]
     ros_sub = ros_node.create_subscription(RosString, topic, lambda m: inbox(m.data), qos)
     pub = await client.advertise(topic, "std_msgs/msg/String", latch=True)
     await until_heard(lambda: pub.publish({"data": "before"}), inbox, "before")

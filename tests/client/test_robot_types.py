@@ -63,6 +63,7 @@ async def test_a_loaded_type_publishes_typed_and_is_checked_at_the_call(
 ) -> None:
     """A typed publisher of a loaded type reaches rclpy; a wrong field fails at the call."""
     [status] = await client.load_types("robot_msgs/Status")
+    assert issubclass(status, Message)
     got: list[RosStatus] = []
     ros_node.create_subscription(RosStatus, topic, got.append, 10)
     pub = await client.advertise(topic, status)

@@ -63,7 +63,7 @@ async def test_type_typo_says_did_you_mean(ros: Ros, topic: str) -> None:
         with pytest.raises(UsageError, match="did you mean 'std_msgs/msg/String'"):
             call()
     with pytest.raises(UsageError, match="did you mean 'mult_msgs/srv/MultFloats'"):
-        ros.call_service(topic, "mult_msgs/srv/MultFloat", {})  # type: ignore[unused-coroutine]
+        ros.call_service(topic, "mult_msgs/srv/MultFloat", {})
     with pytest.raises(UsageError, match="did you mean 'mult_msgs/srv/MultFloats'"):
         ros.advertise_service(topic, "mult_msgs/MultFloat", lambda req: None)
 
@@ -71,7 +71,7 @@ async def test_type_typo_says_did_you_mean(ros: Ros, topic: str) -> None:
 async def test_a_class_of_the_wrong_kind_is_named(ros: Ros, topic: str) -> None:
     """A message class where a service is needed (and the reverse) names both kinds."""
     with pytest.raises(UsageError, match="is a message type, but a service type is needed"):
-        ros.call_service(topic, String, {})  # type: ignore[arg-type, unused-coroutine]
+        ros.call_service(topic, String, {})  # type: ignore[arg-type]
     with pytest.raises(UsageError, match="is a service type, but a message type is needed"):
         ros.advertise(topic, MultFloats)  # type: ignore[type-var]
 
@@ -92,7 +92,7 @@ async def test_a_dict_that_does_not_fit_raises_at_publish(ros: Ros, topic: str) 
 async def test_call_arguments_are_checked_at_the_call(ros: Ros, topic: str) -> None:
     """Request fields that do not fit raise InvalidMessageError before anything is sent."""
     with pytest.raises(InvalidMessageError, match="x"):
-        ros.call_service(topic, MULT, {"x": "two"})  # type: ignore[unused-coroutine]
+        ros.call_service(topic, MULT, {"x": "two"})
 
 
 # -- a forgotten await --------------------------------------------------------------------------
@@ -104,9 +104,9 @@ async def test_call_result_used_without_await_says_so(
     async with ros.advertise_service(topic, MULT, lambda req: {"result": 1.0}):
         pending = ros.call_service(topic, MULT, {"x": 1.0, "y": 1.0})
         with pytest.raises(UsageError, match="did you forget await"):
-            pending["result"]  # type: ignore[index]
+            pending["result"]
         with pytest.raises(UsageError, match="did you forget await"):
-            pending.result  # type: ignore[attr-defined]  # noqa: B018
+            pending.result  # noqa: B018
         with caplog.at_level(logging.ERROR, "roslibpy_lite.client"):
             del pending
         assert "never awaited: did you forget await?" in caplog.text

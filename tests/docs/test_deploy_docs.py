@@ -28,7 +28,7 @@ def _shell_blocks(page: Path) -> list[str]:
         if fence and lines is None:
             lines, shell = [], fence[1] in ("", "bash", "sh", "console")
         elif fence:
-            if shell:
+            if shell and lines is not None:
                 blocks.append("\n".join(lines))
             lines = None
         elif lines is not None:

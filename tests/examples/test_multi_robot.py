@@ -19,7 +19,7 @@ def test_multi_robot_talks_to_two_bridges_at_once(
     alpha: BridgeProcess = make_bridge()
     beta: BridgeProcess = make_bridge()
     commands: list[str] = []
-    latched = QoSProfile(depth=10, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+    latched = QoSProfile(depth=10, durability=DurabilityPolicy.TRANSIENT_LOCAL)  # type: ignore[no-untyped-call]
     ros_node.create_subscription(String, topic + "_cmd", lambda m: commands.append(m.data),
                                  latched)
     pub = ros_node.create_publisher(String, topic, 10)

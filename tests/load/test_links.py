@@ -36,7 +36,7 @@ async def _state(ros: Any, wanted: ConnectionState, timeout: float) -> float:
 
 async def test_client_notices_a_silent_link_and_comes_back(
     link: tuple[BridgeProcess, LinkProxy], ros_node: Any, topic: str
-):
+) -> None:
     """A blackhole (no FIN, no RST) takes the client out of CONNECTED within its keepalive
     bound (2 + 3 s by default; the wait here allows 15 s); after the link returns it reconnects
     and its subscription delivers again."""
@@ -65,7 +65,7 @@ async def test_client_notices_a_silent_link_and_comes_back(
 
 async def test_bridge_drops_a_client_behind_a_silent_link(
     link: tuple[BridgeProcess, LinkProxy], ros_node: Any, topic: str
-):
+) -> None:
     """The bridge notices a blackholed client by itself and releases what it owned: its ROS
     subscription goes away, and the log says why."""
     bridge, proxy = link
@@ -83,7 +83,7 @@ async def test_bridge_drops_a_client_behind_a_silent_link(
 
 async def test_a_busy_slow_link_is_not_taken_for_a_dead_one(
     link: tuple[BridgeProcess, LinkProxy], ros_node: Any, topic: str
-):
+) -> None:
     """At 250 kB/s a 640x480 rgb8 frame takes over 3.5 s to cross, longer than the keepalive
     allows for a pong; the link stays up on both sides because TCP shows it is moving."""
     bridge, proxy = link

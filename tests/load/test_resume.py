@@ -16,6 +16,7 @@ from std_msgs.msg import Int32
 import roslibpy_lite
 from bench.linkproxy import LinkProxy
 from roslibpy_lite.api import ConnectionState
+from roslibpy_lite.transports.websocket import WebSocketTransport
 from tests.bridge.support import wait_publishers, wait_subscribers
 from tests.helpers import BridgeProcess, async_wait_until
 
@@ -30,7 +31,7 @@ def link(make_bridge: Any) -> Iterator[tuple[BridgeProcess, LinkProxy]]:
 
 async def test_an_8_s_blackhole_loses_and_duplicates_nothing(
     link: tuple[BridgeProcess, LinkProxy], ros_node: Any, topic: str
-):
+) -> None:
     """10 Hz each way across an 8 s blackhole: the client notices, reconnects, resumes its
     session; ROS gets every number the client published exactly once and in order, and the
     client gets every number ROS published, exactly once and in order."""
@@ -85,7 +86,7 @@ async def test_an_8_s_blackhole_loses_and_duplicates_nothing(
 
 
 async def test_a_kept_session_ends_after_session_keep(make_bridge: Any, ros_node: Any,
-                                                      topic: str):
+                                                      topic: str) -> None:
     """A client that asked for a session and vanished keeps its subscription for
     ``--session-keep`` seconds (the status page lists it as parked), then the bridge releases
     it; the token is in the handshake answer and never in the log. A resume with a made-up
@@ -129,7 +130,7 @@ async def test_a_kept_session_ends_after_session_keep(make_bridge: Any, ros_node
 
 
 async def test_a_client_that_closes_ends_its_session(make_bridge: Any, ros_node: Any,
-                                                     topic: str):
+                                                     topic: str) -> None:
     """Closing the client (a close frame) ends its session at once: nothing is kept for a
     resume, its ROS subscription goes, well within --session-keep."""
     bridge = make_bridge("--session-keep", "60")
@@ -137,7 +138,9 @@ async def test_a_client_that_closes_ends_its_session(make_bridge: Any, ros_node:
     async with roslibpy_lite.connect(bridge.url) as ros:
         await ros.subscribe(topic, "std_msgs/msg/Int32")
         await wait_subscribers(ros_pub)
-        assert ros._transport.session is not None and ros._transport.session.token
+        transport = ros._transport
+        assert isinstance(transport, WebSocketTransport)
+        assert transport.session is not None and transport.session.token
     await async_wait_until(lambda: ros_pub.get_subscription_count() == 0, 10,
                            "the closed client's subscription to go")
     assert not any("session is kept" in line for line in bridge.lines)

@@ -7,7 +7,7 @@ import json
 import re
 import struct
 from collections.abc import Callable
-from typing import Any
+from typing import Any, Literal
 
 import pytest
 from hypothesis import HealthCheck, given, settings
@@ -20,6 +20,9 @@ from msgs import cdr
 from msgs.runtime import Message, Service, available_types, lookup, lookup_message
 from msgs.sensor_msgs.msg import Image, Imu, PointCloud2
 from msgs.test_msgs.msg import Arrays, BoundedSequences, UnboundedSequences, WStrings
+
+_SURROGATES: tuple[Literal["Cs"]] = ("Cs",)
+"""Surrogates are not text a message can carry."""
 
 
 def _message_types() -> list[type[Message]]:
@@ -81,7 +84,7 @@ def _scalar(base: str) -> st.SearchStrategy[Any]:
         return st.floats(allow_nan=False, allow_infinity=False)
     if base.startswith(("string", "wstring")):
         bound = _BOUND.search(base)
-        chars = st.characters(blacklist_categories=("Cs",), blacklist_characters="\x00")
+        chars = st.characters(blacklist_categories=_SURROGATES, blacklist_characters="\x00")
         return st.text(chars, max_size=int(bound[1]) if bound else 6)
     return _message(lookup_message(base)).map(lambda m: m.to_json())
 

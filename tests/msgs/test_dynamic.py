@@ -39,7 +39,8 @@ def test_a_robot_type_gets_the_fields_rclpy_has() -> None:
     assert lookup("robot_msgs/Status") is status and lookup("robot_msgs/msg/Status") is status
     assert dynamic.load("robot_msgs/msg/Status", "garbage that is not parsed again") is status
     wheel = lookup("robot_msgs/msg/Wheel")
-    assert wheel._fields_and_types == {"name": "string", "speed": "double", "ticks": "int32[3]"}
+    assert wheel._fields_and_types == {  # type: ignore[union-attr]
+        "name": "string", "speed": "double", "ticks": "int32[3]"}
 
 
 def test_a_robot_type_validates_and_round_trips_cdr_with_rclpy() -> None:

@@ -48,7 +48,7 @@ def bridge_9090() -> Iterator[BridgeProcess]:
 def fibonacci(module_node: Any) -> Iterator[Any]:
     """An rclpy Fibonacci server on /fibonacci, STEP_S per number, honouring cancels."""
     from example_interfaces.action import Fibonacci
-    from rclpy.action import ActionServer, CancelResponse
+    from rclpy.action.server import ActionServer, CancelResponse
     from rclpy.callback_groups import ReentrantCallbackGroup
 
     def execute(goal: Any) -> Any:
@@ -63,11 +63,11 @@ def fibonacci(module_node: Any) -> Iterator[Any]:
         goal.succeed()
         return Fibonacci.Result(sequence=sequence)
 
-    server = ActionServer(module_node, Fibonacci, "/fibonacci", execute,
+    server = ActionServer(module_node, Fibonacci, "/fibonacci", execute,  # type: ignore[no-untyped-call]
                           cancel_callback=lambda _goal: CancelResponse.ACCEPT,
                           callback_group=ReentrantCallbackGroup())
     yield server
-    server.destroy()
+    server.destroy()  # type: ignore[no-untyped-call]
 
 
 @pytest.mark.parametrize("transport", ["twisted", "asyncio"])

@@ -21,21 +21,21 @@ from tests.ops.support import aget
 from tests.security.support import AuthFile, wire
 
 
-async def test_bearer_header_authenticates(auth_bridge: BridgeProcess, auth: AuthFile):
+async def test_bearer_header_authenticates(auth_bridge: BridgeProcess, auth: AuthFile) -> None:
     """A valid token in an Authorization: Bearer header opens a working session."""
     ws = await wire(auth_bridge.url, auth.tokens["viewer"])
     await roundtrip(ws)
     await ws.close()
 
 
-async def test_query_token_authenticates(auth_bridge: BridgeProcess, auth: AuthFile):
+async def test_query_token_authenticates(auth_bridge: BridgeProcess, auth: AuthFile) -> None:
     """A valid token in the ?token= query parameter (what browsers can send) works."""
     ws = await wire(f"{auth_bridge.url}/?token={auth.tokens['viewer']}")
     await roundtrip(ws)
     await ws.close()
 
 
-async def test_auth_op_authenticates(auth_bridge: BridgeProcess, auth: AuthFile):
+async def test_auth_op_authenticates(auth_bridge: BridgeProcess, auth: AuthFile) -> None:
     """An auth op as the first message (roslib's authenticate()) with the token as mac works."""
     ws = await wire(auth_bridge.url)
     await ws.send({"op": "auth", "mac": auth.tokens["viewer"], "client": "c", "dest": "d",
@@ -45,7 +45,7 @@ async def test_auth_op_authenticates(auth_bridge: BridgeProcess, auth: AuthFile)
 
 
 @pytest.mark.parametrize("where", ["header", "query"])
-async def test_wrong_token_is_http_401(auth_bridge: BridgeProcess, where: str):
+async def test_wrong_token_is_http_401(auth_bridge: BridgeProcess, where: str) -> None:
     """A wrong token in the header or the query is refused at the handshake with HTTP 401."""
     url, headers = auth_bridge.url, {}
     if where == "header":
@@ -60,7 +60,7 @@ async def test_wrong_token_is_http_401(auth_bridge: BridgeProcess, where: str):
     assert response.headers["WWW-Authenticate"].startswith("Bearer")
 
 
-async def test_wrong_auth_op_closes_with_1008(auth_bridge: BridgeProcess):
+async def test_wrong_auth_op_closes_with_1008(auth_bridge: BridgeProcess) -> None:
     """A failed auth op closes the connection with code 1008 (policy violation)."""
     ws = await wire(auth_bridge.url)
     await ws.send({"op": "auth", "mac": "wrong-token"})
@@ -72,7 +72,7 @@ async def test_wrong_auth_op_closes_with_1008(auth_bridge: BridgeProcess):
 
 async def test_ops_before_auth_are_refused(
     auth_bridge: BridgeProcess, auth: AuthFile, ros_node: Any, topic: str
-):
+) -> None:
     """Without a token, an op other than auth closes the connection (1008) and is not carried out."""
     ws = await wire(auth_bridge.url)
     await ws.send({"op": "advertise_service", "service": topic, "type": "std_srvs/srv/SetBool"})
@@ -87,7 +87,7 @@ async def test_ops_before_auth_are_refused(
     await admin.close()
 
 
-async def test_no_token_times_out(make_bridge: Any, auth: AuthFile):
+async def test_no_token_times_out(make_bridge: Any, auth: AuthFile) -> None:
     """A connection that never authenticates is closed (1008) after the handshake timeout."""
     bridge = make_bridge("--auth-file", str(auth.path), "--handshake-timeout", "1")
     ws = await wire(bridge.url)
@@ -97,7 +97,7 @@ async def test_no_token_times_out(make_bridge: Any, auth: AuthFile):
     assert "authentication required" in info.value.rcvd.reason
 
 
-async def test_repeated_failures_lock_the_address_out(make_bridge: Any, auth: AuthFile):
+async def test_repeated_failures_lock_the_address_out(make_bridge: Any, auth: AuthFile) -> None:
     """After 5 failures from one address even a valid token gets 429 with Retry-After."""
     bridge = make_bridge("--auth-file", str(auth.path))
     for _ in range(5):
@@ -111,7 +111,7 @@ async def test_repeated_failures_lock_the_address_out(make_bridge: Any, auth: Au
     assert b"too many failed authentication attempts" in info.value.response.body
 
 
-def test_failure_tracker_backs_off_and_forgets():
+def test_failure_tracker_backs_off_and_forgets() -> None:
     """The lock-out grows with each failure past the free ones; a success does not reset it."""
     tracker = FailureTracker(free=2, max_lockout=60)
     tracker.failed("a")
@@ -127,7 +127,7 @@ def test_failure_tracker_backs_off_and_forgets():
     assert tracker.locked_for("a") > 2
 
 
-async def test_tokens_never_reach_the_log(make_bridge: Any, auth: AuthFile):
+async def test_tokens_never_reach_the_log(make_bridge: Any, auth: AuthFile) -> None:
     """With DEBUG logging, no token (valid or wrong, header, query or auth op) is in the log."""
     bridge = make_bridge("--auth-file", str(auth.path), "--log-level", "DEBUG")
     wrong = "Wq7zXk2Vb9Lr4Tn8Jd1Hs6"  # random-looking: no 6 characters of it occur by chance
@@ -166,7 +166,7 @@ async def test_tokens_never_reach_the_log(make_bridge: Any, auth: AuthFile):
             assert part not in log and part.encode().hex() not in flat
 
 
-def test_redact_scrubs_every_carrier():
+def test_redact_scrubs_every_carrier() -> None:
     """The log filter hides bearer headers, query tokens, auth-op macs and received frames."""
     text = "Authorization: Bearer abc123 GET /?token=xyz&x=1 {'mac': 'm1'} {\"mac\": \"m2\"}"
     clean = redact(text)
@@ -177,7 +177,7 @@ def test_redact_scrubs_every_carrier():
     assert frame == "< BINARY <redacted> [58 bytes]"
 
 
-def test_add_principal_prints_a_token_once_and_stores_a_hash(tmp_path: Path):
+def test_add_principal_prints_a_token_once_and_stores_a_hash(tmp_path: Path) -> None:
     """The helper command adds a principal; the file holds only a hash that verifies the token."""
     path = tmp_path / "auth.toml"
     out = subprocess.run(
@@ -208,7 +208,7 @@ def test_add_principal_prints_a_token_once_and_stores_a_hash(tmp_path: Path):
         ("[roles.r\n", "not valid TOML"),
     ],
 )
-def test_bad_auth_file_names_the_problem(tmp_path: Path, text: str, message: str):
+def test_bad_auth_file_names_the_problem(tmp_path: Path, text: str, message: str) -> None:
     """A malformed auth file is refused with a message naming the file and the key."""
     path = tmp_path / "auth.toml"
     path.write_text(text)
@@ -217,7 +217,7 @@ def test_bad_auth_file_names_the_problem(tmp_path: Path, text: str, message: str
     assert str(path) in str(info.value)
 
 
-def test_bridge_refuses_to_start_with_a_bad_auth_file(tmp_path: Path):
+def test_bridge_refuses_to_start_with_a_bad_auth_file(tmp_path: Path) -> None:
     """The bridge exits 1 with one clear line when the auth file cannot be used."""
     path = tmp_path / "auth.toml"
     path.write_text("[roles.r]\nfly = ['*']\n")
@@ -243,7 +243,7 @@ def test_bridge_refuses_to_start_with_a_bad_auth_file(tmp_path: Path):
 def test_startup_warning_for_exposed_ports(
     caplog: pytest.LogCaptureFixture, auth: AuthFile, host: str, auth_file: bool, cert: bool,
     expected: str | None,
-):
+) -> None:
     """Binding a non-loopback address without auth or TLS logs a loud warning; loopback does not."""
     config = SecurityConfig(auth_file=str(auth.path) if auth_file else None,
                             certfile="unused.pem" if cert else None)
@@ -255,7 +255,7 @@ def test_startup_warning_for_exposed_ports(
         assert len(caplog.records) == 1 and expected in caplog.records[0].getMessage()
 
 
-def test_help_lists_security_options():
+def test_help_lists_security_options() -> None:
     """--help documents every security option."""
     out = subprocess.run(
         [sys.executable, "-m", "bridge_server", "--help"],
@@ -268,7 +268,7 @@ def test_help_lists_security_options():
         assert option in out
 
 
-def test_example_auth_file_loads():
+def test_example_auth_file_loads() -> None:
     """examples/auth.example.toml (the roles SECURITY.md documents) is a valid auth file."""
     config = load_auth_file(ROOT / "examples" / "auth.example.toml")
     viewer, operator, admin = (config.roles[n] for n in ("viewer", "operator", "admin"))
@@ -277,7 +277,7 @@ def test_example_auth_file_loads():
     assert admin.allows("params", "/node:speed") and not operator.has("params")
 
 
-async def test_large_frames_before_auth_close_the_connection(auth_bridge: BridgeProcess):
+async def test_large_frames_before_auth_close_the_connection(auth_bridge: BridgeProcess) -> None:
     """Before authenticating, a frame larger than an auth op closes the connection (1009 at its
     header: the bridge never holds it)."""
     ws = await wire(auth_bridge.url)
@@ -288,7 +288,7 @@ async def test_large_frames_before_auth_close_the_connection(auth_bridge: Bridge
     assert "16384" in info.value.rcvd.reason
 
 
-async def test_fragments_before_auth_are_refused(auth_bridge: BridgeProcess):
+async def test_fragments_before_auth_are_refused(auth_bridge: BridgeProcess) -> None:
     """Without a token, a fragment is not held for reassembly: the connection closes (1008)."""
     ws = await wire(auth_bridge.url)
     await ws.send({"op": "fragment", "id": "f", "data": '{"op": "sub', "num": 0, "total": 2})
@@ -298,7 +298,7 @@ async def test_fragments_before_auth_are_refused(auth_bridge: BridgeProcess):
     assert "authentication required before 'fragment'" in info.value.rcvd.reason
 
 
-def test_principal_repr_holds_no_token_hash(auth: AuthFile):
+def test_principal_repr_holds_no_token_hash(auth: AuthFile) -> None:
     """A principal's repr (in a traceback or a log line) shows neither its salt nor its digest."""
     for principal in load_auth_file(auth.path).principals:
         text = repr(principal)
@@ -307,7 +307,7 @@ def test_principal_repr_holds_no_token_hash(auth: AuthFile):
         assert repr(principal.digest) not in text
 
 
-async def test_large_frame_before_auth_closes_at_its_header(auth_bridge: BridgeProcess):
+async def test_large_frame_before_auth_closes_at_its_header(auth_bridge: BridgeProcess) -> None:
     """Without a token, a frame header announcing 15 MiB closes the connection (1009) at once:
     the bridge does not wait for, or hold, the bytes it announced."""
     ws = await wire(auth_bridge.url)
@@ -323,7 +323,7 @@ async def test_large_frame_before_auth_closes_at_its_header(auth_bridge: BridgeP
 
 async def test_locked_out_address_gets_no_guess_on_open_connections(
     make_bridge: Any, auth: AuthFile
-):
+) -> None:
     """Connections opened before a lock-out cannot use auth ops to go on guessing."""
     bridge = make_bridge("--auth-file", str(auth.path))
     waiting = [await wire(bridge.url) for _ in range(6)]
@@ -338,7 +338,7 @@ async def test_locked_out_address_gets_no_guess_on_open_connections(
     assert "too many failed authentication attempts" in info.value.rcvd.reason
 
 
-def test_add_principal_refuses_a_name_toml_cannot_hold(tmp_path: Path):
+def test_add_principal_refuses_a_name_toml_cannot_hold(tmp_path: Path) -> None:
     """A non-ASCII principal name is refused before anything is written; the file stays usable."""
     from bridge_server.security.auth import add_principal
 
@@ -350,7 +350,7 @@ def test_add_principal_refuses_a_name_toml_cannot_hold(tmp_path: Path):
     assert [p.name for p in load_auth_file(path).principals] == ["alice", "bob"]
 
 
-def test_failures_long_past_are_forgotten():
+def test_failures_long_past_are_forgotten() -> None:
     """A failure long after the last one starts the count afresh instead of extending a lock-out."""
     from bridge_server.security import auth as auth_module
 

@@ -25,7 +25,7 @@ def _assembler(totals: Inbound, calls: list[str]) -> BudgetAssembler:
 
 async def test_total_returns_to_zero_after_reads_and_closes() -> None:
     """Frames read, frames dropped by a close, and frames read after a close: the total ends at 0."""
-    totals, calls = Inbound(), []
+    totals, calls = Inbound(), list[str]()
     read, half, dropped = (_assembler(totals, calls) for _ in range(3))
     for asm in (read, half, dropped):
         for _ in range(5):
@@ -45,7 +45,7 @@ async def test_total_returns_to_zero_after_reads_and_closes() -> None:
 
 async def test_cancelled_read_of_a_fragmented_message_gives_its_bytes_back() -> None:
     """A read cancelled between fragments puts them back, counted once; the whole read empties it."""
-    totals, calls = Inbound(), []
+    totals, calls = Inbound(), list[str]()
     asm = _assembler(totals, calls)
     asm.put(Frame(Opcode.TEXT, b"a" * FRAME, fin=False))
     reader = asyncio.ensure_future(asm.get())

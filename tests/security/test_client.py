@@ -21,7 +21,7 @@ def _url(bridge: BridgeProcess) -> str:
 
 async def test_connect_with_token_and_ca_file(
     tls_bridge: BridgeProcess, certs: Certs, auth: AuthFile
-):
+) -> None:
     """connect(token=, ssl=<CA file>) reaches a wss:// bridge that requires a token."""
     async with roslibpy_lite.connect(_url(tls_bridge), token=auth.tokens["viewer"],
                                      ssl=str(certs.ca)) as ros:
@@ -30,7 +30,7 @@ async def test_connect_with_token_and_ca_file(
         assert reply["version"] == 2
 
 
-async def test_refused_token_is_not_retried(tls_bridge: BridgeProcess, certs: Certs):
+async def test_refused_token_is_not_retried(tls_bridge: BridgeProcess, certs: Certs) -> None:
     """A wrong token raises NotAuthenticated after one attempt, even with reconnect on."""
     start = len(tls_bridge.lines)
     with pytest.raises(NotAuthenticated, match="refused our token") as info:
@@ -47,7 +47,7 @@ async def test_refused_token_is_not_retried(tls_bridge: BridgeProcess, certs: Ce
 
 async def test_forbidden_ops_raise_forbidden(
     tls_bridge: BridgeProcess, certs: Certs, auth: AuthFile, topic: str
-):
+) -> None:
     """A viewer's advertise and service call raise Forbidden naming the op, name and role."""
     async with roslibpy_lite.connect(_url(tls_bridge), token=auth.tokens["viewer"],
                                      ssl=certs.context()) as ros:
@@ -60,7 +60,7 @@ async def test_forbidden_ops_raise_forbidden(
 
 async def test_untrusted_certificate_is_one_line_tls_error(
     tls_bridge: BridgeProcess, certs: Certs, auth: AuthFile
-):
+) -> None:
     """A bridge whose CA the client does not trust gives TLSError in one line, not retried."""
     with pytest.raises(TLSError) as info:
         await roslibpy_lite.connect(_url(tls_bridge), token=auth.tokens["viewer"],
@@ -69,7 +69,7 @@ async def test_untrusted_certificate_is_one_line_tls_error(
     assert "\n" not in text and "certificate" in text and "--cafile" in text
 
 
-async def test_mutual_tls_without_a_client_certificate(make_bridge: Any, certs: Certs):
+async def test_mutual_tls_without_a_client_certificate(make_bridge: Any, certs: Certs) -> None:
     """A bridge that requires client certificates: without one the client gets TLSError."""
     bridge = make_bridge("--certfile", str(certs.server), "--client-ca", str(certs.client_ca))
     with pytest.raises(TLSError, match="client certificate"):
@@ -79,7 +79,7 @@ async def test_mutual_tls_without_a_client_certificate(make_bridge: Any, certs: 
         await ros.call_service("/rosapi/get_ros_version", "rosapi_msgs/srv/GetROSVersion", {})
 
 
-async def test_policy_close_is_not_reconnected(make_bridge: Any, topic: str):
+async def test_policy_close_is_not_reconnected(make_bridge: Any, topic: str) -> None:
     """When the bridge closes us with 1008 (an op flood), the client closes instead of looping."""
     bridge = make_bridge("--max-op-rate", "10", "--op-burst", "10")
     ros = await roslibpy_lite.connect(bridge.url)
@@ -96,7 +96,7 @@ async def test_policy_close_is_not_reconnected(make_bridge: Any, topic: str):
     await ros.close()
 
 
-def test_ssl_option_needs_a_wss_url():
+def test_ssl_option_needs_a_wss_url() -> None:
     """ssl= with a ws:// URL is a usage error, said at once."""
     with pytest.raises(UsageError, match="wss://"):
         roslibpy_lite.connect("ws://127.0.0.1:9", ssl="ca.pem")
@@ -107,7 +107,7 @@ def _cli(*args: str, **env: str) -> subprocess.CompletedProcess[str]:
                           env=ros_env(**env), capture_output=True, text=True, timeout=60)
 
 
-def test_cli_token_and_cafile(tls_bridge: BridgeProcess, certs: Certs, auth: AuthFile):
+def test_cli_token_and_cafile(tls_bridge: BridgeProcess, certs: Certs, auth: AuthFile) -> None:
     """The CLI takes --token/--cafile, or $ROSLIBPY_LITE_TOKEN/$ROSLIBPY_LITE_CAFILE."""
     url = _url(tls_bridge)
     out = _cli("--url", url, "--token", auth.tokens["viewer"], "--cafile", str(certs.ca),
@@ -118,7 +118,7 @@ def test_cli_token_and_cafile(tls_bridge: BridgeProcess, certs: Certs, auth: Aut
     assert out.returncode == 0 and "/rosout" in out.stdout, out.stderr
 
 
-def test_cli_refused_token_and_bad_certificate(tls_bridge: BridgeProcess, certs: Certs):
+def test_cli_refused_token_and_bad_certificate(tls_bridge: BridgeProcess, certs: Certs) -> None:
     """A wrong token or an untrusted certificate: exit 3 with one line saying which."""
     url = _url(tls_bridge)
     out = _cli("--url", url, "--token", "wrong-token", "--cafile", str(certs.ca), "topic", "list")
@@ -132,7 +132,7 @@ def test_cli_refused_token_and_bad_certificate(tls_bridge: BridgeProcess, certs:
 
 def test_cli_viewer_is_refused_when_it_publishes(
     tls_bridge: BridgeProcess, certs: Certs, auth: AuthFile, topic: str
-):
+) -> None:
     """`topic pub` as a viewer over wss fails with one line saying the role may not publish."""
     out = _cli("--url", _url(tls_bridge), "--token", auth.tokens["viewer"], "--cafile",
                str(certs.ca), "topic", "pub", topic, "std_msgs/msg/String", "{data: hi}",

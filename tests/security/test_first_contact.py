@@ -23,7 +23,7 @@ def _cli(*args: str) -> subprocess.CompletedProcess[str]:
                           env=ros_env(), capture_output=True, text=True, timeout=60)
 
 
-async def test_no_token_fails_at_connect(auth_bridge: BridgeProcess):
+async def test_no_token_fails_at_connect(auth_bridge: BridgeProcess) -> None:
     """Without a token, connect() to an auth bridge raises NotAuthenticated saying how to give
     one, instead of reporting CONNECTED and failing at the first op."""
     with pytest.raises(NotAuthenticated) as info:
@@ -33,7 +33,7 @@ async def test_no_token_fails_at_connect(auth_bridge: BridgeProcess):
     assert "--token" in text and "$ROSLIBPY_LITE_TOKEN" in text
 
 
-def test_cli_without_a_token_says_so_once(auth_bridge: BridgeProcess):
+def test_cli_without_a_token_says_so_once(auth_bridge: BridgeProcess) -> None:
     """The CLI without a token exits 3 with one line naming --token (not 'send the auth op')."""
     out = _cli("--url", auth_bridge.url, "topic", "list")
     assert out.returncode == 3, out
@@ -41,14 +41,14 @@ def test_cli_without_a_token_says_so_once(auth_bridge: BridgeProcess):
     assert len(out.stderr.strip().splitlines()) == 1
 
 
-async def test_plain_ws_to_a_tls_port_says_use_wss(tls_bridge: BridgeProcess):
+async def test_plain_ws_to_a_tls_port_says_use_wss(tls_bridge: BridgeProcess) -> None:
     """ws:// to a port that speaks TLS fails at once (not after open_timeout) saying wss://."""
     url = f"ws://127.0.0.1:{tls_bridge.port}"
     with pytest.raises(ConnectError, match=r"this port speaks TLS: use wss://127\.0\.0\.1"):
         await asyncio.wait_for(roslibpy_lite.connect(url, open_timeout=60), 30)
 
 
-def test_the_tls_probe_leaves_nothing_open(tls_bridge: BridgeProcess):
+def test_the_tls_probe_leaves_nothing_open(tls_bridge: BridgeProcess) -> None:
     """The probe that tells a ws:// URL it reached a TLS port closes its socket before the
     error is raised: a caller whose loop ends with that error leaves nothing open (what
     was left is collected here, and its ResourceWarning fails the test)."""
@@ -62,7 +62,7 @@ def test_the_tls_probe_leaves_nothing_open(tls_bridge: BridgeProcess):
     gc.collect()
 
 
-async def test_certificate_for_another_name_says_so(make_bridge: Any, tmp_path: Path):
+async def test_certificate_for_another_name_says_so(make_bridge: Any, tmp_path: Path) -> None:
     """A certificate without this address in its subjectAltName is named as the problem, not
     the CA (which is trusted)."""
     import trustme
@@ -80,14 +80,14 @@ async def test_certificate_for_another_name_says_so(make_bridge: Any, tmp_path: 
     assert "give the CA" not in text
 
 
-def test_cli_prints_the_ca_hint_once(tls_bridge: BridgeProcess, certs: Certs, auth: AuthFile):
+def test_cli_prints_the_ca_hint_once(tls_bridge: BridgeProcess, certs: Certs, auth: AuthFile) -> None:
     """An untrusted certificate on the command line: one line, the --cafile hint once."""
     out = _cli("--url", f"wss://127.0.0.1:{tls_bridge.port}", "--token", auth.tokens["viewer"],
                "--cafile", str(certs.other_ca), "topic", "list")
     assert out.returncode == 3 and out.stderr.count("--cafile") == 1, out.stderr
 
 
-async def test_lock_out_is_not_called_a_refused_token(make_bridge: Any, auth: AuthFile):
+async def test_lock_out_is_not_called_a_refused_token(make_bridge: Any, auth: AuthFile) -> None:
     """During a lock-out even the right token is refused: the error says why, and when to retry."""
     bridge = make_bridge("--auth-file", str(auth.path))
     for _ in range(5):
@@ -106,12 +106,12 @@ async def test_lock_out_is_not_called_a_refused_token(make_bridge: Any, auth: Au
      ("ws://robot:80", "ws://robot:80"), ("wss://robot.example", "wss://robot.example"),
      ("ws://[::1]", "ws://[::1]:9090"), ("ws://user@robot", "ws://user@robot:9090")],
 )
-def test_ws_url_without_port_means_the_rosbridge_port(url: str, expected: str):
+def test_ws_url_without_port_means_the_rosbridge_port(url: str, expected: str) -> None:
     """A ws:// URL without a port goes to 9090; wss:// keeps 443 (a TLS proxy's port)."""
     assert with_default_port(url) == expected
 
 
-async def test_security_md_private_ca_recipe_works(make_bridge: Any, tmp_path: Path):
+async def test_security_md_private_ca_recipe_works(make_bridge: Any, tmp_path: Path) -> None:
     """SECURITY.md's private-CA commands, run as written (address 127.0.0.1), give a bridge
     certificate our client accepts with only the CA file."""
     import re

@@ -12,6 +12,7 @@ import pytest
 from websockets.asyncio.client import connect
 from websockets.exceptions import ConnectionClosed, InvalidStatus
 from websockets.frames import Frame, Opcode
+from websockets.typing import Origin
 
 from bridge_server.security.websockets_internals import BudgetAssembler, Inbound
 from tests.bridge.action_support import FibServer, send_goal
@@ -26,17 +27,17 @@ async def _refused(url: str, **kwargs: Any) -> tuple[int, str]:
     return response.status_code, bytes(response.body or b"").decode()
 
 
-async def test_allowed_origins(make_bridge: Any):
+async def test_allowed_origins(make_bridge: Any) -> None:
     """A browser from an origin not listed is refused (403); listed origins and non-browsers pass."""
     bridge = make_bridge("--allowed-origins", "https://ui.example.com, http://localhost:8080")
     code, text = await _refused(bridge.url, origin="https://evil.example")
     assert code == 403 and "https://evil.example" in text and "not allowed" in text
-    for origin in ("https://ui.example.com", None):
+    for origin in (Origin("https://ui.example.com"), None):
         ws = await connect(bridge.url, origin=origin, open_timeout=10)
         await ws.close()
 
 
-async def test_max_clients(make_bridge: Any):
+async def test_max_clients(make_bridge: Any) -> None:
     """Past --max-clients a new client gets 503 naming the limit; a freed place can be taken."""
     bridge = make_bridge("--max-clients", "2")
     first, second = await open_wire(bridge.url), await open_wire(bridge.url)
@@ -52,7 +53,7 @@ async def test_max_clients(make_bridge: Any):
     await third.close()
 
 
-async def test_max_clients_per_address(make_bridge: Any):
+async def test_max_clients_per_address(make_bridge: Any) -> None:
     """Past --max-clients-per-address a second client from 127.0.0.1 gets 429."""
     bridge = make_bridge("--max-clients-per-address", "1")
     first = await open_wire(bridge.url)
@@ -62,7 +63,7 @@ async def test_max_clients_per_address(make_bridge: Any):
     await first.close()
 
 
-async def test_handshake_timeout_closes_a_silent_socket(make_bridge: Any):
+async def test_handshake_timeout_closes_a_silent_socket(make_bridge: Any) -> None:
     """A TCP connection that never sends a handshake is closed after --handshake-timeout."""
     bridge = make_bridge("--handshake-timeout", "1")
     reader, writer = await asyncio.open_connection("127.0.0.1", bridge.port)
@@ -75,7 +76,7 @@ async def test_handshake_timeout_closes_a_silent_socket(make_bridge: Any):
     await ws.close()
 
 
-async def test_op_rate_warns_then_closes(make_bridge: Any):
+async def test_op_rate_warns_then_closes(make_bridge: Any) -> None:
     """Over --max-op-rate a client gets a warning status, then a close 1008; others go on."""
     bridge = make_bridge("--max-op-rate", "20", "--op-burst", "20")
     other = await open_wire(bridge.url)
@@ -93,7 +94,7 @@ async def test_op_rate_warns_then_closes(make_bridge: Any):
     await other.close()
 
 
-async def test_caps_on_subscriptions_publishers_and_services(make_bridge: Any, topic: str):
+async def test_caps_on_subscriptions_publishers_and_services(make_bridge: Any, topic: str) -> None:
     """Past each per-client cap the op fails with a status naming the cap; existing names still work."""
     bridge = make_bridge("--max-subscriptions", "1", "--max-publishers", "1",
                          "--max-services", "1")
@@ -119,7 +120,7 @@ async def test_caps_on_subscriptions_publishers_and_services(make_bridge: Any, t
     await ws.close()
 
 
-async def test_inbound_byte_budget_pauses_and_resumes_reading():
+async def test_inbound_byte_budget_pauses_and_resumes_reading() -> None:
     """Frames waiting past the connection's byte budget (or the total) pause reading until read."""
     calls: list[str] = []
     totals = Inbound()
@@ -140,7 +141,7 @@ async def test_inbound_byte_budget_pauses_and_resumes_reading():
     assert calls[-1] == "resume" and totals.bytes == 400
 
 
-async def test_websockets_internals_are_checked_at_start_up(monkeypatch: pytest.MonkeyPatch):
+async def test_websockets_internals_are_checked_at_start_up(monkeypatch: pytest.MonkeyPatch) -> None:
     """The budget's websockets internals pass the start-up check; if they change, it says so."""
     from bridge_server.rclpy_graph.types import BridgeError
     from bridge_server.security import check_websockets_internals
@@ -151,7 +152,7 @@ async def test_websockets_internals_are_checked_at_start_up(monkeypatch: pytest.
         check_websockets_internals()
 
 
-def test_rclpy_internals_are_checked_at_start_up(monkeypatch: pytest.MonkeyPatch):
+def test_rclpy_internals_are_checked_at_start_up(monkeypatch: pytest.MonkeyPatch) -> None:
     """The action code's rclpy internals pass the start-up check; if one is gone, it says so."""
     from rclpy.action.server import ServerGoalHandle
 
@@ -164,7 +165,7 @@ def test_rclpy_internals_are_checked_at_start_up(monkeypatch: pytest.MonkeyPatch
         check_rclpy_internals()
 
 
-async def test_cap_on_goals_in_flight(make_bridge: Any, ros_node: Any, topic: str):
+async def test_cap_on_goals_in_flight(make_bridge: Any, ros_node: Any, topic: str) -> None:
     """Past --max-goals a goal fails with a status naming the cap; a finished goal frees its place."""
     bridge = make_bridge("--max-goals", "1")
     server = FibServer(ros_node, topic, slow=True)

@@ -21,20 +21,20 @@ BAD_NAMES = ["/foo bar", "//x", "/1abc", "/a/", "/caf\u00e9", "/x\ud800"]
 
 
 @pytest.mark.parametrize("name", BAD_NAMES)
-def test_check_name_refuses_invalid_names(name: str):
+def test_check_name_refuses_invalid_names(name: str) -> None:
     """Each invalid name is refused with a message quoting it."""
     with pytest.raises(InvalidNameError, match="invalid topic name"):
         check_name(name)
 
 
-def test_check_name_accepts_valid_names():
+def test_check_name_accepts_valid_names() -> None:
     """Ordinary names (nested, underscores, digits after the first character) pass."""
     for name in ("/a", "/robot_1/cmd_vel", "/_private/x2", "/rosapi/topics"):
         check_name(name)
 
 
 @pytest.mark.parametrize("name", ["/foo bar", "//x", "/1abc", "/a/"])
-async def test_subscribe_without_type_to_an_invalid_name_is_refused(ws_connect: Any, name: str):
+async def test_subscribe_without_type_to_an_invalid_name_is_refused(ws_connect: Any, name: str) -> None:
     """A subscribe without a type to an invalid name gets a status error naming it."""
     ws = await ws_connect()
     await ws.send({"op": "subscribe", "topic": name, "id": "s"})
@@ -57,14 +57,15 @@ async def _no_traceback_since(bridge: BridgeProcess, start: int, ws: Any) -> lis
 )
 async def test_invalid_names_are_one_clean_error(
     ws_connect: Any, bridge: BridgeProcess, op: str, field: str
-):
+) -> None:
     """Invalid names on any op give a status naming the problem and no traceback in the log."""
     ws = await ws_connect()
     start = len(bridge.lines)
     body: dict[str, Any] = {"op": op, field: "/bad name", "id": "x"}
-    body.update({"advertise": {"type": "std_msgs/msg/String"},
-                 "advertise_service": {"type": "std_srvs/srv/SetBool"},
-                 "publish": {"msg": {}}, "call_service": {}}[op])
+    extra: dict[str, dict[str, Any]] = {"advertise": {"type": "std_msgs/msg/String"},
+                                        "advertise_service": {"type": "std_srvs/srv/SetBool"},
+                                        "publish": {"msg": {}}, "call_service": {}}
+    body.update(extra[op])
     await ws.send(body)
     status = await ws.expect(op="status", id="x")
     assert "invalid" in status["msg"] and "'/bad name'" in status["msg"]
@@ -74,7 +75,7 @@ async def test_invalid_names_are_one_clean_error(
 
 async def test_lone_surrogate_in_a_published_string(
     ws_connect: Any, bridge: BridgeProcess, topic: str
-):
+) -> None:
     """A JSON string holding a lone surrogate is refused with a status that says so, no traceback."""
     ws = await ws_connect()
     start = len(bridge.lines)
@@ -89,7 +90,7 @@ async def test_lone_surrogate_in_a_published_string(
 
 async def test_lone_surrogate_in_service_call_args(
     ws_connect: Any, bridge: BridgeProcess, ros_node: Any, topic: str
-):
+) -> None:
     """A lone surrogate in call_service args fails the call with a clear reason, no traceback."""
     from test_msgs.srv import BasicTypes
 
@@ -104,7 +105,7 @@ async def test_lone_surrogate_in_service_call_args(
     await _no_traceback_since(bridge, start, ws)
 
 
-async def test_fragments_dropped_for_room_are_reported(ws_connect: Any):
+async def test_fragments_dropped_for_room_are_reported(ws_connect: Any) -> None:
     """When more fragmented ops are incomplete than the bridge keeps, the sender hears which."""
     ws = await ws_connect()
     for i in range(17):  # the bridge keeps 16 incomplete fragmented ops per connection
@@ -115,7 +116,7 @@ async def test_fragments_dropped_for_room_are_reported(ws_connect: Any):
 
 
 @pytest.mark.parametrize("name", ["/bad node:x", "/n\ud800:x", "//n:x"])
-async def test_invalid_node_in_a_parameter_name(ws_connect: Any, bridge: BridgeProcess, name: str):
+async def test_invalid_node_in_a_parameter_name(ws_connect: Any, bridge: BridgeProcess, name: str) -> None:
     """A bad node in a rosapi parameter name fails the call naming it, with no traceback."""
     ws = await ws_connect()
     start = len(bridge.lines)
@@ -137,7 +138,7 @@ async def test_invalid_node_in_a_parameter_name(ws_connect: Any, bridge: BridgeP
 )
 async def test_rosapi_lookups_with_bad_names(
     ws_connect: Any, bridge: BridgeProcess, service: str, args: dict[str, Any], expected: str
-):
+) -> None:
     """rosapi lookups with invalid or unknown names fail with a reason, no traceback."""
     ws = await ws_connect()
     start = len(bridge.lines)

@@ -50,7 +50,7 @@ def reload(bridge: BridgeProcess, pattern: str) -> str:
     return bridge.wait_for_line(pattern, start=start)
 
 
-async def test_sighup_reloads_principals_and_roles(auth_path: Path, bridges: list[BridgeProcess]):
+async def test_sighup_reloads_principals_and_roles(auth_path: Path, bridges: list[BridgeProcess]) -> None:
     """A removed principal's session is closed, a changed role applies at once, a new token works."""
     alice = add_principal(auth_path, "alice", "tester")
     bob = add_principal(auth_path, "bob", "viewer")
@@ -91,7 +91,7 @@ async def test_sighup_reloads_principals_and_roles(auth_path: Path, bridges: lis
 
 async def test_an_auth_file_that_does_not_load_changes_nothing(
     auth_path: Path, bridges: list[BridgeProcess]
-):
+) -> None:
     """A broken file on SIGHUP: an error naming the problem; sessions and tokens stay valid."""
     bob = add_principal(auth_path, "bob", "viewer")
     bridge = BridgeProcess(args=["--auth-file", str(auth_path)]).start()
@@ -106,7 +106,7 @@ async def test_an_auth_file_that_does_not_load_changes_nothing(
     await again.close()
 
 
-async def test_sighup_reloads_the_certificate(tmp_path: Path, bridges: list[BridgeProcess]):
+async def test_sighup_reloads_the_certificate(tmp_path: Path, bridges: list[BridgeProcess]) -> None:
     """New handshakes get the new certificate, open connections keep theirs; a bad file is
     refused and the certificate in use stays."""
     import trustme
@@ -138,7 +138,7 @@ async def test_sighup_reloads_the_certificate(tmp_path: Path, bridges: list[Brid
         await ws.close()
 
 
-async def test_workers_pass_sighup_on(auth_path: Path, bridges: list[BridgeProcess]):
+async def test_workers_pass_sighup_on(auth_path: Path, bridges: list[BridgeProcess]) -> None:
     """With --workers, SIGHUP to the supervisor reloads every worker."""
     bridge = BridgeProcess(args=["--workers", "2", "--auth-file", str(auth_path)]).start()
     bridges.append(bridge)
@@ -154,7 +154,7 @@ async def test_workers_pass_sighup_on(auth_path: Path, bridges: list[BridgeProce
         await ws.close()
 
 
-def test_remove_principal_keeps_the_rest_of_the_file(auth_path: Path):
+def test_remove_principal_keeps_the_rest_of_the_file(auth_path: Path) -> None:
     """remove-principal drops one [principals.NAME] table; comments and the others stay."""
     add_principal(auth_path, "alice", "viewer")
     add_principal(auth_path, "bob", "tester")

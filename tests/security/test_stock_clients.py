@@ -63,7 +63,7 @@ def _run(argv: list[str], cwd: Any, **env: str) -> dict[str, Any]:
 
 def test_roslibpy_over_wss_with_a_bearer_header(
     tls_bridge: BridgeProcess, certs: Certs, auth: AuthFile
-):
+) -> None:
     """roslibpy (is_secure=True, headers=) connects with a token; its viewer publish is refused."""
     start = len(tls_bridge.lines)
     result = _run([sys.executable, "-c", ROSLIBPY_SCRIPT], None, PORT=str(tls_bridge.port),
@@ -76,7 +76,7 @@ def test_roslibpy_over_wss_with_a_bearer_header(
 @pytest.mark.parametrize("mode", ["query", "auth"])
 def test_roslib_over_wss_with_a_token(
     tls_bridge: BridgeProcess, certs: Certs, auth: AuthFile, mode: str
-):
+) -> None:
     """roslib from npm connects over wss with ?token= or authenticate(); a viewer publish is refused."""
     node = shutil.which("node")
     if node is None:

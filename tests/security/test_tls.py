@@ -18,7 +18,7 @@ def wss(bridge: BridgeProcess) -> str:
     return f"wss://127.0.0.1:{bridge.port}"
 
 
-async def test_wss_with_a_token(tls_bridge: BridgeProcess, certs: Certs, auth: AuthFile):
+async def test_wss_with_a_token(tls_bridge: BridgeProcess, certs: Certs, auth: AuthFile) -> None:
     """A client trusting the CA connects over wss:// with a token; the ready line says wss."""
     ws = await wire(wss(tls_bridge), auth.tokens["viewer"], ssl_context=certs.context())
     await roundtrip(ws)
@@ -28,7 +28,7 @@ async def test_wss_with_a_token(tls_bridge: BridgeProcess, certs: Certs, auth: A
 
 async def test_viewer_over_wss_is_refused_when_it_publishes(
     tls_bridge: BridgeProcess, certs: Certs, auth: AuthFile
-):
+) -> None:
     """The done-when scenario: a viewer over wss may subscribe but its publish is forbidden."""
     ws = await wire(wss(tls_bridge), auth.tokens["viewer"], ssl_context=certs.context())
     await ws.send({"op": "subscribe", "topic": "/chatter", "type": "std_msgs/msg/String",
@@ -42,14 +42,14 @@ async def test_viewer_over_wss_is_refused_when_it_publishes(
 
 async def test_untrusted_certificate_is_a_certificate_error(
     tls_bridge: BridgeProcess, certs: Certs, auth: AuthFile
-):
+) -> None:
     """A client that does not trust the bridge's CA fails with a certificate verification error."""
     with pytest.raises(ssl.SSLCertVerificationError):
         await wire(wss(tls_bridge), auth.tokens["viewer"],
                    ssl_context=certs.context(ca=certs.other_ca))
 
 
-async def test_mutual_tls_requires_a_client_certificate(make_bridge: Any, certs: Certs):
+async def test_mutual_tls_requires_a_client_certificate(make_bridge: Any, certs: Certs) -> None:
     """With --client-ca, a client without a certificate is refused; one with it connects."""
     bridge = make_bridge("--certfile", str(certs.server), "--client-ca", str(certs.client_ca))
     ws = await wire(wss(bridge), ssl_context=certs.context(client_cert=True))
@@ -60,7 +60,7 @@ async def test_mutual_tls_requires_a_client_certificate(make_bridge: Any, certs:
         await roundtrip(ws)  # TLS 1.3 reports the missing certificate on the first read
 
 
-async def test_workers_serve_wss(make_bridge: Any, certs: Certs, auth: AuthFile):
+async def test_workers_serve_wss(make_bridge: Any, certs: Certs, auth: AuthFile) -> None:
     """With --workers, every worker serves TLS and checks tokens; the ready line says wss."""
     bridge = make_bridge("--workers", "2", "--certfile", str(certs.server),
                          "--auth-file", str(auth.path))
@@ -71,7 +71,7 @@ async def test_workers_serve_wss(make_bridge: Any, certs: Certs, auth: AuthFile)
         await ws.close()
 
 
-def test_tls_context_requires_tls_1_2_and_client_certificates(certs: Certs):
+def test_tls_context_requires_tls_1_2_and_client_certificates(certs: Certs) -> None:
     """The server context refuses TLS below 1.2, and --client-ca makes a certificate required."""
     from bridge_server.security import Security, SecurityConfig
 

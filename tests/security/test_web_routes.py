@@ -14,7 +14,7 @@ from tests.ops.support import aget
 from tests.security.support import AuthFile, wire
 
 
-async def test_routes_need_a_token_and_introspection(auth_bridge: BridgeProcess, auth: AuthFile):
+async def test_routes_need_a_token_and_introspection(auth_bridge: BridgeProcess, auth: AuthFile) -> None:
     """Without a token /metrics and /status.json are 401; a role without introspection gets 403."""
     base = f"http://127.0.0.1:{auth_bridge.port}"
     for route in ("/metrics", "/status.json"):
@@ -32,7 +32,7 @@ async def test_routes_need_a_token_and_introspection(auth_bridge: BridgeProcess,
 
 async def test_status_lists_only_what_the_role_may_see(
     auth_bridge: BridgeProcess, auth: AuthFile, topic: str
-):
+) -> None:
     """/status.json for a narrow role leaves out topics its introspection patterns do not match."""
     seen, hidden = "/seen" + topic.replace("/", "_"), "/hidden" + topic.replace("/", "_")
     admin = await wire(auth_bridge.url, auth.tokens["admin"])
@@ -49,7 +49,7 @@ async def test_status_lists_only_what_the_role_may_see(
     await admin.close()
 
 
-async def test_wrong_tokens_on_routes_count_toward_the_lock_out(make_bridge: Any, auth: AuthFile):
+async def test_wrong_tokens_on_routes_count_toward_the_lock_out(make_bridge: Any, auth: AuthFile) -> None:
     """Wrong tokens on /metrics lock the address out: then /metrics and websockets get 429."""
     bridge = make_bridge("--auth-file", str(auth.path))
     base = f"http://127.0.0.1:{bridge.port}"

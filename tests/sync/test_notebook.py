@@ -83,7 +83,7 @@ def kernel_env(bridge: BridgeProcess, topic: str, tmp_path: Path,
 @pytest.mark.usefixtures("kernel_env")
 def test_blocking_client_in_a_jupyter_kernel(tmp_path: Path) -> None:
     """A notebook connects, serves and calls a service, hears a message and closes cleanly."""
-    nb = nbformat.v4.new_notebook(cells=[nbformat.v4.new_code_cell(c) for c in CELLS])
+    nb = nbformat.v4.new_notebook(cells=[nbformat.v4.new_code_cell(c) for c in CELLS])  # type: ignore[no-untyped-call]
     km = _kernel_manager(tmp_path)
     client = NotebookClient(nb, km=km, timeout=90, resources={"metadata": {"path": str(ROOT)}})
     client.execute(cleanup_kc=True)  # shut the kernel and its channels down (km is ours)
