@@ -222,27 +222,27 @@ class ActionBackend(Backend, Protocol):
         """Whether dicts are checked against their type's ``msgs`` class."""
         ...
 
-    def _send(self, op: ops.Op) -> None:
+    def send(self, op: ops.Op) -> None:
         """Send an op (dropped while disconnected)."""
         ...
 
-    async def _flush(self) -> None:
+    async def flush(self) -> None:
         """Return once everything sent so far is handed to the connection."""
         ...
 
-    def _spawn(self, coro: Coroutine[Any, Any, None]) -> None:
+    def spawn(self, coro: Coroutine[Any, Any, None]) -> None:
         """Run a callback's task (cancelled when the client closes)."""
         ...
 
-    def _goal_ended(self, goal: GoalHandle) -> None:
+    def goal_ended(self, goal: GoalHandle) -> None:
         """A sent goal ended (or failed)."""
         ...
 
-    def _unadvertise_action(self, server: ActionServer) -> None:
+    def forget_action(self, server: ActionServer) -> None:
         """Forget a served action and tell the bridge."""
         ...
 
-    def _served_goal_done(self, ctx: GoalContext, op: ops.ActionResultOp | None) -> None:
+    def served_goal_done(self, ctx: GoalContext, op: ops.ActionResultOp | None) -> None:
         """A served goal's handler returned: send ``op`` (None: the goal was lost)."""
         ...
 
@@ -316,7 +316,7 @@ class GoalHandle:
             try:
                 out = cb(fb)
                 if inspect.isawaitable(out):
-                    self._backend._spawn(_awaited_callback(out, self.action))
+                    self._backend.spawn(_awaited_callback(out, self.action))
             except Exception:
                 log.exception("feedback callback of %s raised", self.action)
 
@@ -371,7 +371,7 @@ class GoalHandle:
         self.closed = True
         self._wake.set()
         self._known_accepted.set()  # accepted() looks at how it ended
-        self._backend._goal_ended(self)
+        self._backend.goal_ended(self)
 
     # -- the user's side --
 
@@ -425,8 +425,8 @@ class GoalHandle:
         if self.done():
             return
         self.status = GoalStatus.CANCELING
-        self._backend._send(ops.CancelActionGoal(id=self.id, action=self.action))
-        await self._backend._flush()
+        self._backend.send(ops.CancelActionGoal(id=self.id, action=self.action))
+        await self._backend.flush()
 
     async def feedback(self) -> AsyncIterator[Any]:
         """Each feedback (dict, or ``Feedback`` instance) until the goal ends."""
@@ -503,7 +503,7 @@ class GoalContext:
 
     def _send(self, op: ops.Op) -> None:
         if not self.lost:
-            self.server._backend._send(op)
+            self.server._backend.send(op)
 
     async def wait_cancel(self) -> None:
         """Return once a cancel was requested (async handlers)."""
@@ -562,7 +562,7 @@ class ActionServer(_BridgeHandle):
         if self.closed:
             return
         self.closed = True
-        self._backend._unadvertise_action(self)
+        self._backend.forget_action(self)
         for ctx in self.active.values():
             ctx.lost = True
             ctx.request_cancel()
@@ -616,7 +616,7 @@ class ActionServer(_BridgeHandle):
                                   status=int(GoalStatus.ABORTED))
         finally:
             self.active.pop(ctx.id, None)
-            self._backend._served_goal_done(ctx, None if ctx.lost else op)
+            self._backend.served_goal_done(ctx, None if ctx.lost else op)
 
     def _result_wire(self, result: Any) -> Mapping[str, Any]:
         cls = _part(self.action_cls, "Result")

@@ -70,7 +70,7 @@ _SKIP: Any = object()
 class Backend(Protocol):
     """What every handle needs from the capability that made it."""
 
-    async def _settle(self, handle: Any) -> None:
+    async def settle(self, handle: Any) -> None:
         """Return once the handle's request was sent and (if the bridge says so) accepted."""
         ...
 
@@ -79,17 +79,17 @@ class TopicBackend(Backend, Protocol):
     """What publishers and subscriptions need
     (:class:`~roslibpy_lite.capabilities.topics.Topics`)."""
 
-    def _publish(
+    def publish_message(
         self, pub: Publisher[Any], wire: Mapping[str, Any]
     ) -> Coroutine[Any, Any, None] | None:
         """Send (or buffer) one message; may return a coroutine to await for backpressure."""
         ...
 
-    def _unadvertise(self, pub: Publisher[Any]) -> None:
+    def forget_publisher(self, pub: Publisher[Any]) -> None:
         """Forget a publisher."""
         ...
 
-    def _unsubscribe(self, sub: Subscription[Any]) -> None:
+    def forget_subscription(self, sub: Subscription[Any]) -> None:
         """Forget a subscription."""
         ...
 
@@ -97,7 +97,7 @@ class TopicBackend(Backend, Protocol):
 class ServiceBackend(Backend, Protocol):
     """What a served service needs (:class:`~roslibpy_lite.capabilities.services.Services`)."""
 
-    def _unadvertise_service(self, server: ServiceServer) -> None:
+    def forget_service(self, server: ServiceServer) -> None:
         """Forget a served service."""
         ...
 
@@ -118,7 +118,7 @@ class _BridgeHandle:
         self.error = error
 
     async def _ready(self) -> Self:
-        await self._backend._settle(self)
+        await self._backend.settle(self)
         return self
 
     def __await__(self) -> Generator[Any, None, Self]:
@@ -236,7 +236,7 @@ class Publisher(_BridgeHandle, Generic[T]):
         if self.closed:
             raise UsageError(f"publisher of {self.topic} is closed")
         wire = self.to_wire(msg)
-        waiting = self._backend._publish(self, wire)
+        waiting = self._backend.publish_message(self, wire)
         self.published += 1
         if waiting is None:
             return _DONE
@@ -251,7 +251,7 @@ class Publisher(_BridgeHandle, Generic[T]):
             return
         self.closed = True
         self.offline_queue.clear()
-        self._backend._unadvertise(self)
+        self._backend.forget_publisher(self)
 
     async def close(self) -> None:
         """Same as :meth:`unadvertise`."""
@@ -514,7 +514,7 @@ class Subscription(_BridgeHandle, Generic[T]):
         if self.closed:
             return
         self.mark_closed()
-        self._backend._unsubscribe(self)
+        self._backend.forget_subscription(self)
         consumer = self.consumer
         if consumer is not None and consumer is not asyncio.current_task():
             consumer.cancel()
@@ -631,7 +631,7 @@ class ServiceServer(_BridgeHandle):
         if self.closed:
             return
         self.closed = True
-        self._backend._unadvertise_service(self)
+        self._backend.forget_service(self)
 
     async def close(self) -> None:
         """Same as :meth:`unadvertise`."""

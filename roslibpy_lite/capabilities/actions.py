@@ -97,7 +97,7 @@ class Actions:
         await host.flush()
         return handle
 
-    def _goal_ended(self, goal: GoalHandle) -> None:
+    def goal_ended(self, goal: GoalHandle) -> None:
         self.goals.pop(goal.id, None)
         host = self.host
         if goal.error is None or isinstance(goal.error, ConnectionClosed):
@@ -141,7 +141,7 @@ class Actions:
         if self.servers.get(server.action) is server:
             del self.servers[server.action]
 
-    def _unadvertise_action(self, server: ActionServer) -> None:
+    def forget_action(self, server: ActionServer) -> None:
         self._forget(server)
         self.host.untrack(server.id)
         self.host.send(ops.UnadvertiseAction(server.action, id=server.id))
@@ -165,19 +165,19 @@ class Actions:
 
     # -- the handles' hooks --------------------------------------------------------------------
 
-    def _send(self, op: ops.Op) -> None:
+    def send(self, op: ops.Op) -> None:
         self.host.send(op)
 
-    async def _flush(self) -> None:
+    async def flush(self) -> None:
         await self.host.flush()
 
-    async def _settle(self, handle: Any) -> None:
+    async def settle(self, handle: Any) -> None:
         await self.host.settle(handle)
 
-    def _spawn(self, coro: Coroutine[Any, Any, None]) -> None:
+    def spawn(self, coro: Coroutine[Any, Any, None]) -> None:
         self.host.spawn(coro)
 
-    def _served_goal_done(self, ctx: GoalContext, op: ops.ActionResultOp | None) -> None:
+    def served_goal_done(self, ctx: GoalContext, op: ops.ActionResultOp | None) -> None:
         """A served goal's handler returned: send its result (None: the goal was lost).
 
         A result that cannot be encoded aborts the goal with the reason.

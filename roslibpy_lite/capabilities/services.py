@@ -142,7 +142,7 @@ class Services:
         if self.servers.get(server.service) is server:
             del self.servers[server.service]
 
-    def _unadvertise_service(self, server: ServiceServer) -> None:
+    def forget_service(self, server: ServiceServer) -> None:
         if self.servers.get(server.service) is not server:
             return
         del self.servers[server.service]
@@ -151,7 +151,7 @@ class Services:
         if host.state is not ConnectionState.CLOSED:
             host.send(ops.UnadvertiseService(server.service, id=server.id))
 
-    async def _settle(self, handle: Any) -> None:
+    async def settle(self, handle: Any) -> None:
         await self.host.settle(handle)
 
     def _serve_request(self, op: ops.CallService) -> None:

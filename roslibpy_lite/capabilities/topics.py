@@ -101,7 +101,7 @@ class Topics:
             return cls
         return lookup_message_class(type_name) if self.host.validate else None
 
-    def _publish(
+    def publish_message(
         self, pub: Publisher[Any], wire: Mapping[str, Any]
     ) -> Coroutine[Any, Any, None] | None:
         t = self.host.transport
@@ -120,7 +120,7 @@ class Topics:
         pub.offline_queue.append(frame)
         return None
 
-    def _unadvertise(self, pub: Publisher[Any]) -> None:
+    def forget_publisher(self, pub: Publisher[Any]) -> None:
         pubs = self.publishers.get(pub.topic)
         if not pubs or pub not in pubs:
             return
@@ -277,7 +277,7 @@ class Topics:
             self.by_topic.pop(sub.topic, None)
         return True
 
-    def _unsubscribe(self, sub: Subscription[Any]) -> None:
+    def forget_subscription(self, sub: Subscription[Any]) -> None:
         if self._drop_sub(sub) and self.host.state is not ConnectionState.CLOSED:
             self.host.send(ops.Unsubscribe(sub.topic, id=sub.id))
 
@@ -287,7 +287,7 @@ class Topics:
 
     # -- the handles' other hooks --------------------------------------------------------------
 
-    async def _settle(self, handle: Any) -> None:
+    async def settle(self, handle: Any) -> None:
         await self.host.settle(handle)
 
     # -- the connection ------------------------------------------------------------------------
