@@ -187,7 +187,7 @@ def test_the_cli_reports_the_file_size_and_records_the_publishers_qos(
     from roslibpy_lite.bag._mcap import format_size
 
     pub = ros_node.create_publisher(
-        String, topic, QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL))
+        String, topic, QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL))  # type: ignore[no-untyped-call]
     pub.publish(String(data="kept"))
     path = tmp_path / "latched.mcap"
 
@@ -222,7 +222,7 @@ async def test_our_recording_of_a_latched_topic_plays_latched(
 
     from roslibpy_lite.bag import play
 
-    latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+    latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)  # type: ignore[no-untyped-call]
     pub = ros_node.create_publisher(String, topic, latched)
     pub.publish(String(data="kept"))
     later = ros_node.create_publisher(String, f"{topic}_later", 10)

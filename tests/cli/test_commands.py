@@ -177,7 +177,7 @@ def test_topic_echo_latched_topic_prints_the_last_message(
         got: list[str] = []
         ros_node.create_subscription(
             String, topic, lambda m: got.append(m.data),
-            QoSProfile(depth=10, durability=DurabilityPolicy.TRANSIENT_LOCAL))
+            QoSProfile(depth=10, durability=DurabilityPolicy.TRANSIENT_LOCAL))  # type: ignore[no-untyped-call]
         wait_until(lambda: got, timeout=10, what="the latched message")
         # a second publish: everything replayed was delivered before it
         pub.publish({"data": "fourth"})

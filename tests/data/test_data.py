@@ -147,6 +147,7 @@ def test_point_clouds_are_structured_arrays(big: bool, pad: int) -> None:
     for form in (msg, msg.to_json()):
         got = to_numpy(form)
         assert got.shape == (6,)
+        assert want.dtype.names is not None
         for name in want.dtype.names:
             np.testing.assert_array_equal(got[name], want[name])
     bad = msg.to_json()

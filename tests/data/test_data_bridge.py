@@ -95,7 +95,7 @@ def test_a_topic_of_another_tools_mcap_file_as_a_table(tmp_path: Path) -> None:
             if i % 10 == 0:
                 writer.write_message("/note", text, {"data": f"note {i}"},
                                      log_time=t0 + i * 5_000_000, publish_time=t0)
-        writer.finish()
+        writer.finish()  # type: ignore[no-untyped-call]
     frame = bag_to_dataframe(path, "/imu", fields=["angular_velocity.x", "angular_velocity.z"])
     assert list(frame.columns) == ["angular_velocity.x", "angular_velocity.z"]
     assert len(frame) == 50

@@ -323,18 +323,18 @@ def test_validate_checks_python_side_values() -> None:
 
 
 @pytest.mark.parametrize(("build", "error"), [
-    (lambda: UInt8MultiArray(data="AQID"), r"^data: expected uint8\[\], got str 'AQID' "
+    (lambda: UInt8MultiArray(data="AQID"), r"^data: expected uint8\[\], got str 'AQID' "  # type: ignore[arg-type]
                                           r"\(building std_msgs/msg/UInt8MultiArray\)$"),
-    (lambda: BasicTypes(uint8_value="fast"), r"^uint8_value: expected uint8, got str 'fast' "
+    (lambda: BasicTypes(uint8_value="fast"), r"^uint8_value: expected uint8, got str 'fast' "  # type: ignore[arg-type]
                                              r"\(building test_msgs/msg/BasicTypes\)$"),
     (lambda: Int16(data=2**15), "data: expected int16, 32768 is out of range"),
     (lambda: Arrays(int32_values=[1]), r"^int32_values: expected int32\[3\], got 1 elements"),
-    (lambda: PoseStamped(pose=Point()), "pose: expected geometry_msgs/Pose instance"),
-    (lambda: JointState(position=(1.0,)), r"^position: expected float64\[\] \(a list\)"),
-    (lambda: JointState(name=["a", 2]), r"^name\[1\]: expected string, got int 2"),
+    (lambda: PoseStamped(pose=Point()), "pose: expected geometry_msgs/Pose instance"),  # type: ignore[arg-type]
+    (lambda: JointState(position=(1.0,)), r"^position: expected float64\[\] \(a list\)"),  # type: ignore[arg-type]
+    (lambda: JointState(name=["a", 2]), r"^name\[1\]: expected string, got int 2"),  # type: ignore[list-item]
     (lambda: BoundedSequences(basic_types_values=[BasicTypes()] * 4), "basic_types_values"),
     (lambda: BasicTypes(float32_value=1e39), "out of the float32 range"),
-    (lambda: BasicTypes(bool_value=1), "bool_value: expected bool"),
+    (lambda: BasicTypes(bool_value=1), "bool_value: expected bool"),  # type: ignore[arg-type]
 ])
 def test_a_message_is_checked_when_it_is_built(build: Any, error: str) -> None:
     """A field of the wrong kind, range or length raises at construction, naming the field,
@@ -348,7 +348,7 @@ def test_construction_keeps_what_it_accepts() -> None:
     instances (checked when they were built), ints that a float64 array may hold."""
     assert BasicTypes(float64_value=2).float64_value == 2
     assert BasicTypes(float32_value=math.inf).float32_value == math.inf
-    assert UInt8MultiArray(data=bytearray(b"ab")).data == bytearray(b"ab")
+    assert UInt8MultiArray(data=bytearray(b"ab")).data == bytearray(b"ab")  # type: ignore[arg-type]
     pose = PoseStamped(pose=PoseStamped().pose)
     assert pose.pose.position.x == 0.0
     assert JointState(position=[1, 2.5]).position == [1, 2.5]

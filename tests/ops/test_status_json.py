@@ -51,7 +51,8 @@ async def test_status_names_the_type_of_an_action_served_in_ros(
     server went away (the bridge's action client keeps the name in the graph)."""
     b: BridgeProcess = make_bridge()
     action = topic + "_act"
-    server = FibServer(ros_node, action)
+    fib = FibServer(ros_node, action)
+    server: FibServer | None = fib  # None once destroyed
     ws = await open_wire(b.url)
     try:
         await bridge_sees_action(ws, action)
@@ -64,7 +65,7 @@ async def test_status_names_the_type_of_an_action_served_in_ros(
 
         await send_goal(ws, action, {"order": 2}, "right")
         assert (await ws.expect(op="action_result", id="right", timeout=20))["status"] == 4
-        server.destroy()
+        fib.destroy()
         server = None
         await bridge_sees_action(ws, action, gone=True)
         s = await status(b.port)

@@ -144,7 +144,7 @@ def test_cli_viewer_is_refused_when_it_publishes(
 
 def test_cli_send_goal_as_viewer_is_never_reported_accepted(
     auth_bridge: BridgeProcess, auth: AuthFile, ros_node: Any, topic: str
-):
+) -> None:
     """`action send_goal` as a viewer: the refusal, exit 6, and no "Goal accepted" line;
     an admin's goal is reported accepted (the bridge says when the server accepted it)."""
     from tests.bridge.action_support import FIB, FibServer
