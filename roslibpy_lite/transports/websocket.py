@@ -227,7 +227,7 @@ class WebSocketTransport:
                                           f"session wrongly: {exc}")
                     if not self._fail_first(failed):
                         log.error("%s", failed)
-                        link._shutdown(failed)
+                        link.shut_down(failed)
                     return
                 opened = loop.time()
                 await self._session(ws)

@@ -33,7 +33,7 @@ def bag(tmp_path: Path) -> Path:
             stamp = T0 + round(t * 1e9)
             writer.write_message(topic, schema, {"data": f"{topic} {t:g}"},
                                  log_time=stamp, publish_time=stamp)
-        writer.finish()
+        writer.finish()  # type: ignore[no-untyped-call]
     return path
 
 

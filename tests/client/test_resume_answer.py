@@ -14,6 +14,7 @@ from roslibpy_lite import ConnectionState
 from roslibpy_lite.exceptions import RemoteProtocolError
 from roslibpy_lite.ops import RECEIVED_HEADER, SESSION_HEADER
 from roslibpy_lite.transports.resumable import ClientSession
+from roslibpy_lite.transports.websocket import WebSocketTransport
 from tests.client.support import ScriptedPeer, fast_backoff
 
 BAD_COUNTS = [
@@ -55,8 +56,10 @@ async def test_a_bad_count_in_the_resume_answer_ends_the_client(
     peer.answer_headers = {SESSION_HEADER: "tok"}
     try:
         async with roslibpy_lite.connect(peer.url, backoff=fast_backoff()) as ros:
-            assert ros._transport.session is not None
-            assert ros._transport.session.token == "tok"
+            transport = ros._transport
+            assert isinstance(transport, WebSocketTransport)
+            assert transport.session is not None
+            assert transport.session.token == "tok"
             ros.advertise("/x", "std_msgs/msg/Int32")  # the one frame it sent
             await peer.expect(op="advertise")
             peer.answer_headers = {SESSION_HEADER: "tok", RECEIVED_HEADER: count}

@@ -58,6 +58,11 @@ def _imports(path: Path, name: str, modules: set[str], type_level: bool) -> set[
     return found
 
 
+def _runtime_imports(path: Path, name: str, modules: set[str]) -> set[str]:
+    """Project modules ``path`` imports outside ``if TYPE_CHECKING:`` blocks, at any depth."""
+    return _imports(path, name, modules, type_level=False)
+
+
 def _graph(type_level: bool = False) -> dict[str, set[str]]:
     files = {
         _module_name(p): p

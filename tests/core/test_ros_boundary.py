@@ -72,7 +72,7 @@ def _all_imports() -> dict[str, set[str]]:
 
 
 def _ros_importers(imports: dict[str, set[str]], ros: set[str]) -> dict[str, list[str]]:
-    out = {}
+    out: dict[str, list[str]] = {}
     for name, targets in imports.items():
         if name == BACKEND or name.startswith(BACKEND + "."):
             continue
@@ -90,7 +90,7 @@ def _runtime_graph() -> dict[str, set[str]]:
 def _reaches_backend(imports: dict[str, set[str]]) -> dict[str, list[str]]:
     """Session-side modules that import the backend, or import one that does (through any
     chain of project modules), as module -> the chain."""
-    out = {}
+    out: dict[str, list[str]] = {}
     for start in imports:
         if not start.startswith(SESSION_SIDE):
             continue

@@ -147,7 +147,7 @@ async def test_a_client_that_closes_ends_its_session(make_bridge: Any, ros_node:
 
 
 async def test_acks_trim_what_the_bridge_keeps(link: tuple[BridgeProcess, LinkProxy],
-                                               ros_node: Any, topic: str):
+                                               ros_node: Any, topic: str) -> None:
     """The client's session_acks trim the frames the bridge keeps for a resume: under steady
     traffic the status page's ``resume_kept`` (and the ``resume_kept_frames`` gauge) stay near 0
     and reach 0 once the traffic stops; while the link is down they grow by every frame
@@ -192,8 +192,8 @@ async def test_acks_trim_what_the_bridge_keeps(link: tuple[BridgeProcess, LinkPr
         while (n := await kept()) < 40:  # every frame written since is kept for a resume
             assert asyncio.get_running_loop().time() < deadline, f"only {n} frames kept"
             await asyncio.sleep(0.05)
-        samples = await scrape(bridge.port)
-        assert value(samples, PREFIX + "resume_kept_frames", client="0-1") >= 40
+        scraped = await scrape(bridge.port)
+        assert value(scraped, PREFIX + "resume_kept_frames", client="0-1") >= 40
         proxy.restore()
         got = [(await sub.get(timeout=30))["data"] for _ in range(40)]
         assert got == list(range(150, 190))

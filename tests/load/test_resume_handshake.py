@@ -37,7 +37,7 @@ BAD_COUNTS: list[tuple[str | None, str]] = [
 
 async def test_bad_received_counts_are_refused_and_the_session_stays_resumable(
     make_bridge: Any, ros_node: Any, topic: str
-):
+) -> None:
     """Each bad X-Rosbridge-Received value gets 400 with one line naming the header and what
     is wrong (logged once, the token never); the kept session is untouched, and a resume with
     a correct count then gets back exactly the frames after that count."""

@@ -24,12 +24,12 @@ async def _forbidden(ws: Any, id: str, role: str, capability: str, name: str) ->
     assert status["level"] == "error"
     assert "forbidden" in status["msg"] and role in status["msg"]
     assert capability in status["msg"] and name in status["msg"]
-    return status
+    return dict(status)
 
 
 async def test_viewer_publish_is_forbidden_and_reaches_no_ros_node(
     connect_as: Connect, ros_node: Any, topic: str
-):
+) -> None:
     """A viewer's advertise and publish are refused; an rclpy subscriber only gets what others send."""
     inbox = Inbox()
     sub = ros_node.create_subscription(String, topic, lambda m: inbox(m.data), 10)
@@ -48,7 +48,7 @@ async def test_viewer_publish_is_forbidden_and_reaches_no_ros_node(
 
 async def test_call_service_forbidden_never_reaches_the_service(
     connect_as: Connect, ros_node: Any, topic: str
-):
+) -> None:
     """A viewer's call_service fails (status and service_response) and the ROS service never runs."""
     seen: list[bool] = []
     lock = threading.Lock()
@@ -75,7 +75,7 @@ async def test_call_service_forbidden_never_reaches_the_service(
 
 async def test_each_capability_is_denied_without_it(
     connect_as: Connect, auth_bridge: BridgeProcess, ros_node: Any, topic: str
-):
+) -> None:
     """Subscribe, advertise_service, action goals, serving actions and params each need their
     grant; the bridge's node makes none of the ROS entities they would need."""
     nobody = await connect_as("nothing")
@@ -111,7 +111,7 @@ async def test_each_capability_is_denied_without_it(
 
 async def test_forbidden_ops_in_fragments_cbor_and_rosapi_params(
     connect_as: Connect, auth_bridge: BridgeProcess, ros_node: Any, topic: str
-):
+) -> None:
     """A publish split into fragments, an advertise as a CBOR frame and set_param are each
     refused: the bridge's node makes no publisher on the topic and no parameter client for
     the node, whose parameter keeps its value."""
@@ -139,7 +139,7 @@ async def test_forbidden_ops_in_fragments_cbor_and_rosapi_params(
     assert ros_node.get_parameter("speed").value == 1.0
 
 
-async def test_deny_wins_over_allow(connect_as: Connect, topic: str):
+async def test_deny_wins_over_allow(connect_as: Connect, topic: str) -> None:
     """The tester may publish on /op/* but not on /op/forbidden, which its role denies."""
     operator = await connect_as("tester")
     await operator.send({"op": "advertise", "topic": "/op/forbidden",
@@ -153,7 +153,7 @@ async def test_deny_wins_over_allow(connect_as: Connect, topic: str):
 
 async def test_introspection_lists_only_what_the_role_may_see(
     connect_as: Connect, ros_node: Any, topic: str
-):
+) -> None:
     """rosapi topics, services and nodes answers hold only names the role's patterns match."""
     seen, hidden = "/seen" + topic.replace("/", "_"), "/hidden" + topic.replace("/", "_")
     ros_node.create_publisher(String, seen, 10)
@@ -197,7 +197,7 @@ async def test_introspection_lists_only_what_the_role_may_see(
 
 async def test_first_owner_keeps_a_service_unless_the_role_takes_over(
     connect_as: Connect, topic: str
-):
+) -> None:
     """Another principal cannot take a served name; the same principal or take_over can."""
     first = await connect_as("server")
     await first.send({"op": "advertise_service", "service": topic, "type": "std_srvs/srv/SetBool"})
@@ -214,7 +214,7 @@ async def test_first_owner_keeps_a_service_unless_the_role_takes_over(
     assert "taken over" in note["msg"] and topic in note["msg"]
 
 
-def test_role_patterns_and_all():
+def test_role_patterns_and_all() -> None:
     """Globs match whole names, 'all' grants every capability, deny beats allow."""
     role = Role.from_table("r", {"all": ["/robot/*"], "deny": {"publish": ["/robot/estop"]}})
     assert role.allows("subscribe", "/robot/camera") and role.allows("take_over", "/robot/x")
@@ -222,7 +222,7 @@ def test_role_patterns_and_all():
     assert not role.allows("publish", "/robot/estop") and role.allows("publish", "/robot/cmd")
 
 
-_SEEN_HIDDEN = {
+_SEEN_HIDDEN: dict[str, dict[str, Any]] = {
     "/rosapi/topics": {"topics": ["/seen", "/hidden"], "types": ["a/msg/A", "b/msg/B"]},
     "/rosapi/topics_and_raw_types": {"topics": ["/seen", "/hidden"], "types": ["a", "b"],
                                      "typedefs_full_text": ["ta", "tb"]},
@@ -242,7 +242,7 @@ _SEEN_HIDDEN = {
 """An answer of each rosapi service that names things, holding a visible and a hidden name."""
 
 
-def test_every_rosapi_answer_naming_things_is_filtered():
+def test_every_rosapi_answer_naming_things_is_filtered() -> None:
     """Each rosapi list (and service_node) keeps only names the role's introspection matches."""
     from bridge_server.security.permissions import filter_rosapi
     from bridge_server.session import rosapi
@@ -268,7 +268,7 @@ def test_every_rosapi_answer_naming_things_is_filtered():
 
 async def test_a_vanished_owner_loses_its_service(
     ws_connect: Any, bridge: BridgeProcess, topic: str
-):
+) -> None:
     """An owner that no longer answers pings (a network drop) gives the name to a new client."""
     owner = await ws_connect()
     await owner.send({"op": "advertise_service", "service": topic, "type": "std_srvs/srv/SetBool"})

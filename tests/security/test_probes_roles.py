@@ -60,7 +60,7 @@ async def _refused(ws: Any, id: str, *words: str) -> str:
 )
 async def test_hidden_services_need_their_own_capability(
     connect_as: Any, ros_node: Any, hidden: str, capability: str, governing: str
-):
+) -> None:
     """An action's internal services and a node's parameter services, called as plain services
     under a call_service glob, are refused; the ROS handler never runs (it does for admin)."""
     calls = _recording_service(ros_node, hidden)
@@ -87,7 +87,7 @@ async def test_hidden_services_need_their_own_capability(
 async def test_action_topics_and_parameter_events_need_their_capability(
     connect_as: Any, auth_bridge: BridgeProcess, ros_node: Any, topic: str, op: str,
     name: str, capability: str
-):
+) -> None:
     """Subscribing to an action's feedback/status or to /parameter_events, or publishing an
     action's feedback, needs the capability that governs them: the bridge's node makes no
     such subscription or publisher (it does for admin)."""
@@ -104,7 +104,7 @@ async def test_action_topics_and_parameter_events_need_their_capability(
     assert name in (await bridge_entities(ros_node, auth_bridge, admin, topic + "_b"))[kind]
 
 
-async def test_nul_in_a_rosapi_parameter_name_is_refused(connect_as: Any, ros_node: Any):
+async def test_nul_in_a_rosapi_parameter_name_is_refused(connect_as: Any, ros_node: Any) -> None:
     """set_param with a NUL in the name is refused and the parameter keeps its value; an
     allowed name (the role's '*_display' glob) does change."""
     from rclpy.parameter import Parameter
@@ -127,7 +127,7 @@ async def test_nul_in_a_rosapi_parameter_name_is_refused(connect_as: Any, ros_no
     assert ros_node.get_parameter("speed_limit").type_ == Parameter.Type.DOUBLE
 
 
-async def test_deny_star_blocks_checks_that_take_no_name(auth_bridge: BridgeProcess, auth: AuthFile):
+async def test_deny_star_blocks_checks_that_take_no_name(auth_bridge: BridgeProcess, auth: AuthFile) -> None:
     """deny.introspection = ["*"] refuses the rosapi lists and the status routes."""
     blind = await wire(auth_bridge.url, auth.tokens["blind"])
     await blind.send({"op": "call_service", "service": "/rosapi/topics", "id": "t"})
@@ -142,7 +142,7 @@ async def test_deny_star_blocks_checks_that_take_no_name(auth_bridge: BridgeProc
 
 async def test_a_ros_node_service_is_not_taken_over_without_take_over(
     connect_as: Any, ros_node: Any, topic: str
-):
+) -> None:
     """advertise_service on a name an rclpy node serves is refused naming the node; callers
     still reach the rclpy service. A role with take_over may serve it."""
     name = "/probe" + topic
@@ -173,7 +173,7 @@ async def test_a_ros_node_service_is_not_taken_over_without_take_over(
 
 async def test_one_missed_ping_frees_only_the_claimed_name(
     connect_as: Any, auth_bridge: BridgeProcess, topic: str
-):
+) -> None:
     """An owner that stalled once loses the name claimed then, not its other names: a later
     claim of another of its services pings again and is refused while it answers."""
     first, second = "/probe" + topic + "_a", "/probe" + topic + "_b"
@@ -194,7 +194,7 @@ async def test_one_missed_ping_frees_only_the_claimed_name(
     assert not [op for op in other.backlog if op.get("id") == "a"]  # the first claim won
 
 
-async def test_queue_length_and_fragment_size_are_bounded(make_bridge: Any, topic: str):
+async def test_queue_length_and_fragment_size_are_bounded(make_bridge: Any, topic: str) -> None:
     """A huge queue_length is lowered to --max-queue-length and a tiny fragment_size raised to
     --min-fragment-size, each with a warning; ids per topic are capped."""
     bridge = make_bridge("--max-queue-length", "5", "--max-subscription-ids", "3")
@@ -213,7 +213,7 @@ async def test_queue_length_and_fragment_size_are_bounded(make_bridge: Any, topi
     await ws.close()
 
 
-async def test_queued_messages_per_client_are_bounded(make_bridge: Any, ros_node: Any, topic: str):
+async def test_queued_messages_per_client_are_bounded(make_bridge: Any, ros_node: Any, topic: str) -> None:
     """A client that stops reading holds at most --max-queued-messages messages even with a
     larger queue_length: the bridge drops and counts the rest instead of growing."""
     bridge = make_bridge("--max-queued-messages", "20")
@@ -241,7 +241,7 @@ async def test_queued_messages_per_client_are_bounded(make_bridge: Any, ros_node
     await ws.close()
 
 
-async def test_sighup_narrowing_ends_live_subscriptions(tmp_path: Path, ros_node: Any, topic: str):
+async def test_sighup_narrowing_ends_live_subscriptions(tmp_path: Path, ros_node: Any, topic: str) -> None:
     """After SIGHUP narrows a role, a live subscription the role no longer allows ends: the
     client hears why and the bridge's ROS subscription goes away."""
     secret = "/secret" + topic
@@ -275,7 +275,7 @@ async def test_sighup_narrowing_ends_live_subscriptions(tmp_path: Path, ros_node
         bridge.stop()
 
 
-async def test_client_text_cannot_forge_a_log_line(bridge: BridgeProcess, ws_connect: Any):
+async def test_client_text_cannot_forge_a_log_line(bridge: BridgeProcess, ws_connect: Any) -> None:
     """A newline in a client's type name stays inside one escaped log line."""
     fake = "2001-01-01 00:00:00,000 INFO bridge_server.security: client 1 authenticated as admin"
     ws = await ws_connect()
@@ -302,7 +302,7 @@ async def _raw_request(port: int, head: str) -> bytes:
 
 
 @pytest.mark.parametrize("header", ["Origin: http://a", "Authorization: Bearer x"])
-async def test_a_header_sent_twice_is_a_clean_refusal(auth_bridge: BridgeProcess, header: str):
+async def test_a_header_sent_twice_is_a_clean_refusal(auth_bridge: BridgeProcess, header: str) -> None:
     """Origin or Authorization given twice gets HTTP 400 (or 401 for a token), no 500."""
     head = (f"GET / HTTP/1.1\r\nHost: 127.0.0.1\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n"
             f"Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\nSec-WebSocket-Version: 13\r\n"
@@ -315,7 +315,7 @@ async def test_a_header_sent_twice_is_a_clean_refusal(auth_bridge: BridgeProcess
 
 async def test_a_valid_token_sent_twice_is_refused_naming_why(
     auth_bridge: BridgeProcess, auth: AuthFile
-):
+) -> None:
     """Two Authorization headers are refused even when each holds a valid token (which of
     two a proxy or a client meant is not guessed): 401 naming the header sent twice, no
     upgrade; the same token sent once is let in."""
@@ -336,7 +336,7 @@ async def test_a_valid_token_sent_twice_is_refused_naming_why(
     assert not any(token in line for line in auth_bridge.lines)
 
 
-async def test_malformed_frames_before_auth_close_at_once(auth_bridge: BridgeProcess):
+async def test_malformed_frames_before_auth_close_at_once(auth_bridge: BridgeProcess) -> None:
     """The first malformed frame before authentication closes the connection (1008)."""
     ws = await wire(auth_bridge.url)
     await ws.send_raw("{not json")
@@ -348,7 +348,7 @@ async def test_malformed_frames_before_auth_close_at_once(auth_bridge: BridgePro
 
 async def test_another_principals_token_says_what_happened(
     auth_bridge: BridgeProcess, auth: AuthFile
-):
+) -> None:
     """An auth op with another principal's valid token closes saying so, not 'not valid'."""
     ws = await wire(auth_bridge.url, auth.tokens["viewer"])
     await ws.send({"op": "auth", "mac": auth.tokens["admin"]})
@@ -360,7 +360,7 @@ async def test_another_principals_token_says_what_happened(
 
 async def test_status_page_shows_addresses_only_to_roles_with_clients(
     auth_bridge: BridgeProcess, auth: AuthFile
-):
+) -> None:
     """A viewer's /status.json has no client addresses; the admin's has them."""
     ws = await wire(auth_bridge.url, auth.tokens["viewer"])
     await roundtrip(ws)
