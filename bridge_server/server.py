@@ -32,7 +32,7 @@ from roslibpy_lite.exceptions import RemoteProtocolError
 from roslibpy_lite.ops import RECEIVED_HEADER, SESSION_HEADER, parse_received
 
 from .graph import Graph
-from .http.metrics import Recorder
+from .http.metrics import BridgeMetrics
 from .http.web import Web
 from .http.web_access import WebAccess
 from .rclpy_graph.actions import check_rclpy_internals
@@ -112,7 +112,7 @@ class Bridge:
         self.ros = RclpyGraph(asyncio.get_running_loop(), name=config.node_name,
                               topic_reader=config.topic_reader)
         self.graph: Graph = self.ros  # all the sessions, rosapi and the status page see of ROS
-        self.metrics = Recorder()
+        self.metrics = BridgeMetrics()
         self.web = Web(self)  # plain-HTTP routes: status page, /metrics, health (web.py)
         self.security = Security(config.security)  # TLS, auth, origins, limits (security/)
         self.web.access = WebAccess(self.security)  # who sees the plain-HTTP routes

@@ -4,7 +4,7 @@ The hot paths never call prometheus_client. Per-message work only raises plain
 ``int`` attributes that already sit on the objects involved (a subscription's
 ``sent``/``sent_bytes``/``dropped_total``, a shared ROS subscription's
 ``received``). Rarer events (connections, refusals, errors, service calls,
-publishes from clients) go to a :class:`Recorder` of plain dicts. At scrape
+publishes from clients) go to a :class:`BridgeMetrics` of plain dicts. At scrape
 time :func:`bridge_server.http.snapshot.take` turns the live state plus the
 recorder into a JSON-able snapshot, snapshots of all workers are merged, and
 :func:`render` builds the metric families with prometheus_client's own
@@ -53,7 +53,7 @@ at most :data:`CLIENT_LIMIT` connected clients (lowest ids); the rest fold
 into ``"other"``. With ``--workers`` each worker keeps its own admission list
 for the scrapes it answers, so past the limit two scrapes may fold differently.
 
-Actions: the action ops call :meth:`Recorder.action_goal` (the hook is here
+Actions: the action ops call :meth:`BridgeMetrics.action_goal` (the hook is here
 and exported even while no action exists).
 """
 
@@ -78,8 +78,8 @@ __all__ = [
     "LABEL_LIMIT",
     "LATENCY_BUCKETS",
     "OTHER",
+    "BridgeMetrics",
     "LabelCap",
-    "Recorder",
     "outcome",
     "render",
 ]
@@ -143,7 +143,7 @@ class _Timings:
         entry["sum"] += seconds
 
 
-class Recorder:
+class BridgeMetrics:
     """One process's event counters (plain dicts), plus what closed objects counted.
 
     Every method is called on the loop thread.

@@ -2,7 +2,7 @@
 
 :func:`take` reads the live state (sessions, their subscriptions and queues,
 the shared ROS subscriptions, served services) plus the process's
-:class:`~bridge_server.http.metrics.Recorder`. It runs on the loop thread, at most
+:class:`~bridge_server.http.metrics.BridgeMetrics`. It runs on the loop thread, at most
 once per request of ``/metrics`` or ``/status.json`` (and a per-topic subset
 once a second for the rates), never per message. :func:`merge` combines the
 snapshots of several workers into one view of the whole bridge.

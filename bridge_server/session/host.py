@@ -17,7 +17,7 @@ if TYPE_CHECKING:
     from roslibpy_lite import ops
 
     from ..graph import Graph
-    from ..http.metrics import Recorder
+    from ..http.metrics import BridgeMetrics
     from ..security import Gate, SecurityConfig
     from .actions import ActionClients, SessionActions
     from .outbox import Outbox
@@ -32,7 +32,7 @@ class Shared(Protocol):
     """What the sessions of one server share (the bridge is one)."""
 
     graph: Graph
-    metrics: Recorder
+    metrics: BridgeMetrics
     service_owners: Ownership[SessionServices]
     action_owners: Ownership[SessionActions]
     action_clients: ActionClients
