@@ -8,8 +8,8 @@ Needs only ``websockets``; no ROS installation::
         pub = await ros.advertise("/chatter", "std_msgs/msg/String")
         await pub.publish({"data": "hello"})
 
-:class:`~roslibpy_lite.mock.MockRos` offers the same API in memory for tests;
-both satisfy the :class:`~roslibpy_lite.api.Ros` protocol.
+:class:`~roslibpy_lite.mock.MockRos` offers the same API in memory for tests; both are
+:class:`~roslibpy_lite.api.Ros` (the front, ``RosBase``) over another transport.
 """
 
 from __future__ import annotations

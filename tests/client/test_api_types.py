@@ -1,4 +1,4 @@
-"""Both backends satisfy the Ros protocol, as mypy --strict sees it."""
+"""Both backends are Ros, as mypy --strict sees it."""
 
 from __future__ import annotations
 

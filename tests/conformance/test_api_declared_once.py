@@ -1,69 +1,40 @@
-"""The ``Ros`` protocol (api.py) declares exactly what ``RosBase`` (ros.py, the source) offers.
+"""The user API is declared once: ``Ros`` (api.py) is the front, ``RosBase`` (ros.py), itself.
 
-mypy checks that the backends satisfy the protocol (``_typecheck.py``), which lets
-the protocol lag behind the front (a new method, a narrower overload, another
-default); this test makes every difference a failure, so an API change made in
-``ros.py`` must be made in ``api.py`` in the same commit.
+There is no second copy of its methods and overloads to keep in step (api.py used to
+restate them as a Protocol); both backends are the front over another transport, and
+``tests/client/test_api_types.py`` checks that mypy sees them as ``Ros``.
 """
 
 from __future__ import annotations
 
 import inspect
-import typing
-from collections.abc import Callable
-from typing import Any
 
-import pytest
-
-from roslibpy_lite.api import Ros
+import roslibpy_lite
+from roslibpy_lite import api
 from roslibpy_lite.ros import RosBase
 
-_PROTOCOL_ONLY = {"_is_protocol", "_is_runtime_protocol"}
+
+def test_ros_is_the_front_itself() -> None:
+    """``Ros`` everywhere it is exported is ``RosBase``, and both backends are one."""
+    assert api.Ros is RosBase
+    assert roslibpy_lite.Ros is RosBase
+    assert issubclass(roslibpy_lite.Client, RosBase)
+    assert issubclass(roslibpy_lite.MockRos, RosBase)
 
 
-def _public(cls: type) -> dict[str, Any]:
-    """The public members ``cls`` defines itself or inherits below ``object``, by name."""
-    names = {
-        n for klass in cls.__mro__ if klass not in (object, typing.Protocol, typing.Generic)
-        for n in vars(klass)
-        if (not n.startswith("_") or n in {"__aenter__", "__aexit__"}) and n not in _PROTOCOL_ONLY
-    }
-    return {n: inspect.getattr_static(cls, n) for n in names}
+def test_no_module_restates_the_api() -> None:
+    """No class in the client outside ros.py declares the front's public methods again (a
+    Protocol copy of it, say): an API change is written in one place."""
+    front = {n for n, v in vars(RosBase).items() if not n.startswith("_") and callable(v)}
+    import pkgutil
 
-
-def _shape(member: Any) -> list[str]:
-    """A member's signature and those of its overloads, as text (annotations as written)."""
-    fn: Callable[..., Any] = member
-    if isinstance(member, property):
-        assert member.fget is not None
-        fn = member.fget
-    kind = "property" if isinstance(member, property) else (
-        "async" if inspect.iscoroutinefunction(fn) else "def")
-    return [f"{kind} {inspect.signature(fn)}",
-            *(f"overload {inspect.signature(o)}" for o in typing.get_overloads(fn))]
-
-
-def test_the_same_public_names() -> None:
-    """Every public member of the front is in the protocol, and nothing else is."""
-    assert sorted(_public(Ros)) == sorted(_public(RosBase))
-
-
-@pytest.mark.parametrize("name", sorted(_public(Ros)))
-def test_the_same_signature_and_overloads(name: str) -> None:
-    """Each member has the same kind, signature, defaults and overloads in both."""
-    assert _shape(_public(Ros)[name]) == _shape(_public(RosBase)[name])
-
-
-def test_the_check_sees_an_overload_missing() -> None:
-    """A function with one overload fewer has another shape."""
-    @typing.overload
-    def f(x: int) -> int: ...
-    @typing.overload
-    def f(x: str) -> str: ...
-    def f(x: Any) -> Any:
-        return x
-
-    def g(x: Any) -> Any:
-        return x
-
-    assert _shape(f) != _shape(g)
+    for info in pkgutil.walk_packages(roslibpy_lite.__path__, "roslibpy_lite."):
+        if info.name.startswith(("roslibpy_lite.cli", "roslibpy_lite.sync", "roslibpy_lite.compat")):
+            continue  # the blocking client and the drop-in have their own return types
+        module = __import__(info.name, fromlist=["_"])
+        for name, cls in vars(module).items():
+            if not inspect.isclass(cls) or cls.__module__ != info.name or issubclass(cls, RosBase):
+                continue
+            own = {n for n in vars(cls) if not n.startswith("_")}
+            restated = own & front
+            assert len(restated) < 5, f"{info.name}.{name} restates {sorted(restated)}"

@@ -126,9 +126,10 @@ def test_no_runtime_import_cycles(package: str) -> None:
 
 
 def test_the_type_level_graph_counts_type_checking_imports() -> None:
-    """api imports the handles only for type checking: an edge at type level, none at run time."""
-    assert "roslibpy_lite.handles" in _graph(type_level=True)["roslibpy_lite.api"]
-    assert "roslibpy_lite.handles" not in _graph()["roslibpy_lite.api"]
+    """The bag player imports api only for type checking: an edge at type level, none at run
+    time."""
+    assert "roslibpy_lite.api" in _graph(type_level=True)["roslibpy_lite.bag.player"]
+    assert "roslibpy_lite.api" not in _graph()["roslibpy_lite.bag.player"]
 
 
 def test_no_type_level_import_cycles_in_roslibpy_lite() -> None:
