@@ -22,6 +22,8 @@ from __future__ import annotations
 from collections.abc import Callable, Mapping
 from typing import Any, Protocol
 
+from roslibpy_lite.actions import GoalStatus
+
 __all__ = [
     "ACTIVE",
     "CANCEL_ANSWERS",
@@ -42,16 +44,9 @@ __all__ = [
 ]
 
 
-class Status:
-    """``action_msgs/msg/GoalStatus`` numbers (fixed by the ROS 2 interface)."""
-
-    UNKNOWN = 0
-    ACCEPTED = 1
-    EXECUTING = 2
-    CANCELING = 3
-    SUCCEEDED = 4
-    CANCELED = 5
-    ABORTED = 6
+Status = GoalStatus
+"""``action_msgs/msg/GoalStatus`` numbers: the client's :class:`~roslibpy_lite.actions.GoalStatus`
+(an ``IntEnum``, so rclpy takes its members as the numbers they are)."""
 
 
 ACTIVE = frozenset({Status.ACCEPTED, Status.EXECUTING, Status.CANCELING})

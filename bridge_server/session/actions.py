@@ -94,7 +94,7 @@ CLIENT_IDLE = 30.0
 
 _GOAL_SUFFIX = "/_action/send_goal"
 _CANCEL_SUFFIX = "/_action/cancel_goal"
-_OUTCOMES = {Status.SUCCEEDED: "succeeded", Status.CANCELED: "canceled",
+_OUTCOMES: dict[int, str] = {Status.SUCCEEDED: "succeeded", Status.CANCELED: "canceled",
              Status.ABORTED: "aborted"}
 
 
