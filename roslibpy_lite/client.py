@@ -72,7 +72,7 @@ from __future__ import annotations
 
 import asyncio
 import ssl as _ssl
-from collections.abc import Callable, Coroutine, Generator
+from collections.abc import Callable, Coroutine, Generator, Sequence
 from typing import TYPE_CHECKING, Any, TypedDict, TypeVar, Unpack
 
 from ._backoff import Backoff
@@ -157,7 +157,7 @@ class Client(RosBase):
 
     def __init__(
         self,
-        url: str,
+        url: str | Sequence[str],
         *,
         reconnect: bool = True,
         backoff: Backoff | None = None,
@@ -178,7 +178,8 @@ class Client(RosBase):
             url, reconnect=reconnect, backoff=backoff, open_timeout=open_timeout,
             max_size=max_size, ping_interval=ping_interval, ping_timeout=ping_timeout,
             ws_compression=ws_compression, proxy=proxy, token=token,
-            ssl_context=_ssl_context(url, ssl), resume=resume,
+            ssl_context=_ssl_context([url] if isinstance(url, str) else url, ssl),
+            resume=resume,
         )
         super().__init__(self._ws, offline_buffer=offline_buffer, max_pending=max_pending,
                          validate=validate)
@@ -187,8 +188,13 @@ class Client(RosBase):
 
     @property
     def url(self) -> str:
-        """The bridge's URL."""
+        """The bridge's URL (of several: the one connected to, or tried next)."""
         return self._ws.url
+
+    @property
+    def urls(self) -> tuple[str, ...]:
+        """Every URL this client may connect to, in the order it tries them."""
+        return self._ws.urls
 
     @property
     def reconnect(self) -> bool:
@@ -273,8 +279,12 @@ class _ConnectNotAwaited(UsageError, AttributeError):
     """A Connector used as the client it opens."""
 
 
-def connect(url: str, **options: Unpack[ClientOptions]) -> Connector:
+def connect(url: str | Sequence[str], **options: Unpack[ClientOptions]) -> Connector:
     """Connect to a rosbridge server at ``url`` (``ws://host:9090``).
+
+    Several URLs (a list: relays serving the same robot, or bridges on the same ROS graph)
+    are tried in turn: the first that answers is used, and when its connection is lost the
+    client moves to the next and restores its subscriptions, publishers and services there.
 
     ``async with connect(url) as ros:`` or ``ros = await connect(url)``. See
     :class:`Client` for the ``options`` (:class:`ClientOptions`). Returns once
@@ -292,12 +302,14 @@ def connect(url: str, **options: Unpack[ClientOptions]) -> Connector:
     return Connector(Client(url, **options))
 
 
-def _ssl_context(url: str, ssl: _ssl.SSLContext | str | None) -> _ssl.SSLContext | None:
-    """The TLS context for ``url``: as given, or one trusting the CA file ``ssl`` names."""
+def _ssl_context(urls: Sequence[str], ssl: _ssl.SSLContext | str | None
+                 ) -> _ssl.SSLContext | None:
+    """The TLS context for ``urls``: as given, or one trusting the CA file ``ssl`` names."""
     if ssl is None:
         return None
-    if not url.startswith("wss://"):
-        raise UsageError(f"ssl= is for wss:// URLs, not {url!r}")
+    for url in urls:
+        if not url.startswith("wss://"):
+            raise UsageError(f"ssl= is for wss:// URLs, not {url!r}")
     if isinstance(ssl, _ssl.SSLContext):
         return ssl
     try:

@@ -52,7 +52,7 @@ the loop thread, like subscription callbacks.
 from __future__ import annotations
 
 import contextlib
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from typing import TYPE_CHECKING, Any, Self, Unpack, overload
 
 from .. import MockRos as _AioMockRos
@@ -277,12 +277,13 @@ class Client(_Front):
     """A blocking rosbridge client (made by :func:`connect`); see the module docstring."""
 
 
-def connect(url: str, **options: Unpack[ClientOptions]) -> Client:
+def connect(url: str | Sequence[str], **options: Unpack[ClientOptions]) -> Client:
     """Connect to the rosbridge server at ``url`` and return a blocking :class:`Client`.
 
     Takes every keyword option of :func:`roslibpy_lite.connect` (``reconnect``,
     ``backoff``, ``open_timeout``, ``offline_buffer``, ``max_pending``,
-    ``token``, ``ssl``, ...), passed through unchanged. Returns once the
+    ``token``, ``ssl``, ...), passed through unchanged, and several URLs as it does (tried
+    in turn; the next when a connection is lost). Returns once the
     first connection is open; use as ``with sync.connect(url) as ros:`` or
     call ``ros.close()``.
 
@@ -300,7 +301,7 @@ def connect(url: str, **options: Unpack[ClientOptions]) -> Client:
     return Client(loop, ros)
 
 
-async def _open(url: str, options: ClientOptions) -> Ros:
+async def _open(url: str | Sequence[str], options: ClientOptions) -> Ros:
     ros: Ros = await _aio_connect(url, **options)
     return ros
 

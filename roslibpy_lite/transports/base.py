@@ -44,8 +44,9 @@ class Link(Protocol):
 class Transport(Protocol):
     """Carries ops to and from a bridge (see the module docstring)."""
 
-    url: str
-    """What this transport connects to (for error texts)."""
+    @property
+    def url(self) -> str:
+        """What this transport connects to (for error texts)."""
 
     acks: bool
     """The peer confirms each advertise/subscribe/advertise_service with a ``status``."""

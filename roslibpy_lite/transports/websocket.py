@@ -15,7 +15,7 @@ import contextlib
 import logging
 import ssl
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING, Any
 from urllib.parse import urlsplit
 
@@ -53,7 +53,7 @@ class WebSocketTransport:
 
     def __init__(
         self,
-        url: str,
+        url: str | Sequence[str],
         *,
         reconnect: bool = True,
         backoff: Backoff | None = None,
@@ -68,7 +68,10 @@ class WebSocketTransport:
         resume: bool = True,
         resume_frames: int = 1000,
     ) -> None:
-        self.url = with_default_port(url)
+        self.urls = tuple(with_default_port(u) for u in ([url] if isinstance(url, str) else url))
+        if not self.urls:
+            raise UsageError("no URL to connect to")
+        self._at = 0  # the URL connected to, or tried next
         self.reconnect = reconnect
         self.backoff = backoff or Backoff()
         self.open_timeout = open_timeout
@@ -112,6 +115,16 @@ class WebSocketTransport:
         self._first: asyncio.Future[None] | None = None
         self._closing = False
 
+    @property
+    def url(self) -> str:
+        """The URL connected to (or tried next)."""
+        return self.urls[self._at]
+
+    def _move_on(self) -> bool:
+        """Take the next URL (several: each in turn); True when a round of them is done."""
+        self._at = (self._at + 1) % len(self.urls)
+        return self._at == 0
+
     def bind(self, link: Link) -> None:
         """Attach the client."""
         self._link = link
@@ -152,7 +165,8 @@ class WebSocketTransport:
         """The text of a failed first connection: what was tried, what went wrong, what to check."""
         took = asyncio.get_running_loop().time() - started
         tried = f"{attempts} attempt{'s' if attempts != 1 else ''} in {took:.1f} s"
-        return f"cannot connect to {self.url} ({tried}): {_why(exc)}; {_hint(self.url, exc)}"
+        where = self.url if len(self.urls) == 1 else f"any of {', '.join(self.urls)}"
+        return f"cannot connect to {where} ({tried}): {_why(exc)}; {_hint(self.url, exc)}"
 
     async def _run(self) -> None:
         assert self._link is not None
@@ -181,6 +195,12 @@ class WebSocketTransport:
                         return
                     now = loop.time()
                     give_up = not self.reconnect or now >= deadline or _tls_mismatch(self.url, exc)
+                    first = self._first is not None and not self._first.done()
+                    if len(self.urls) > 1 and not (first and now >= deadline) \
+                            and not self._move_on():
+                        log.info("cannot connect to %s (%s); trying %s", self.urls[self._at - 1],
+                                 _why(exc), self.url)
+                        continue  # the next one at once; a full round failed backs off
                     if give_up and self._fail_first(
                         ConnectError(self._failed_attempt(exc, attempts, started))
                     ):
@@ -242,7 +262,11 @@ class WebSocketTransport:
                     log.warning("connection to %s lost; reconnect is off", self.url)
                     link.shut_down(Disconnected(f"connection to {self.url} lost"))
                     return
-                log.warning("connection to %s lost; reconnecting", self.url)
+                lost_url = self.url
+                if len(self.urls) > 1:
+                    self._move_on()  # a server that died: the next one, not the same again
+                log.warning("connection to %s lost; reconnecting%s", lost_url,
+                            f" to {self.url}" if self.url != lost_url else "")
                 self._lost()
                 link.link_down()
                 if loop.time() - opened >= self.stable_after:
