@@ -44,6 +44,7 @@ from ._aio import running_loop
 from ._api_types import ConnectionState, ErrorCallback, MessageCallback, StateCallback
 from .capabilities import Tracked
 from .capabilities.actions import Actions
+from .capabilities.introspection import Introspection
 from .capabilities.services import Services
 from .capabilities.topics import Topics
 from .exceptions import (
@@ -345,6 +346,7 @@ class RosBase:
         self._topics = Topics(host, offline_buffer=offline_buffer, max_pending=max_pending)
         self._services = Services(host)
         self._actions = Actions(host)
+        self._graph = Introspection(self)
         host.on_restore(self._topics.flush_offline)  # messages go after every request
         transport.bind(host)
 
@@ -364,6 +366,12 @@ class RosBase:
     def status_errors(self) -> int:
         """``status`` errors from the bridge that named none of our pending requests."""
         return self._host.status_errors
+
+    @property
+    def graph(self) -> Introspection:
+        """The ROS graph and parameters (topics, services, actions, nodes, params), asked of
+        the bridge's ``/rosapi``: see :mod:`roslibpy_lite.capabilities.introspection`."""
+        return self._graph
 
     # -- state ---------------------------------------------------------------------------------
 

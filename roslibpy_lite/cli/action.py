@@ -35,7 +35,6 @@ from .common import (
     cli_values,
     for_display,
     local_class,
-    named_types,
     print_line,
     print_listing,
     type_parts,
@@ -43,16 +42,14 @@ from .common import (
 )
 
 
-async def _servers(s: CliSession) -> list[str]:
-    return sorted((await s.rosapi("action_servers")).get("action_servers", []))
-
-
 async def cmd_action_list(args: argparse.Namespace, out: Out) -> int:
     """``action list [-t]``."""
     async def body(s: CliSession) -> int:
-        pairs = await named_types(s, await _servers(s), "action_type", "action",
-                                  args.show_types or args.json)
-        return print_listing(out, args, pairs)
+        if args.show_types or args.json:
+            found = await s.ros.graph.actions(timeout=s.timeout)
+            return print_listing(out, args, [(x.name, x.type) for x in found])
+        names = sorted((await s.rosapi("action_servers")).get("action_servers", []))
+        return print_listing(out, args, [(n, "") for n in names])
     return await with_session(args, body)
 
 
@@ -65,11 +62,9 @@ async def cmd_action_info(args: argparse.Namespace, out: Out) -> int:
     """``action info ACTION``: its type and the nodes serving it."""
     async def body(s: CliSession) -> int:
         type_ = await s.action_type(args.action, args.wait)
-        nodes = (await s.rosapi("nodes")).get("nodes", [])
-        details = await asyncio.gather(*(s.rosapi("node_details", {"node": n}) for n in nodes))
         goal_service = args.action.rstrip("/") + "/_action/send_goal"
-        servers = [n for n, d in zip(nodes, details, strict=True)
-                   if goal_service in d.get("services", [])]
+        servers = [n.name for n in await s.ros.graph.nodes(timeout=s.timeout)
+                   if goal_service in n.services]
         if args.json:
             out.line(json.dumps({"name": args.action, "type": type_,
                                  "action_servers": servers}))

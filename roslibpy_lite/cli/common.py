@@ -197,8 +197,7 @@ class CliSession:
 
     async def rosapi(self, name: str, args: dict[str, Any] | None = None) -> dict[str, Any]:
         """Call ``/rosapi/<name>`` and return its response."""
-        return await self.ros.call_service(f"/rosapi/{name}", f"rosapi_msgs/srv/{_rosapi(name)}",
-                                           args or {}, timeout=self.timeout)
+        return await self.ros.graph.rosapi(name, args, timeout=self.timeout)
 
     async def polled(self, name: str, args: dict[str, Any], key: str, wait: float,
                      missing: str, listing: tuple[str, str] | None = None) -> str:
@@ -246,24 +245,7 @@ class CliSession:
                                  ("action_servers", "action_servers"))
 
 
-def _rosapi(name: str) -> str:
-    special = {"get_time": "GetTime", "get_ros_version": "GetROSVersion",
-               "action_servers": "GetActionServers"}
-    return special.get(name, "".join(p.capitalize() for p in name.split("_")))
-
-
 Command = Callable[[argparse.Namespace, Out], Coroutine[Any, Any, int]]
-
-
-async def named_types(
-    s: CliSession, names: list[str], service: str, key: str, wanted: bool
-) -> list[tuple[str, str]]:
-    """``(name, type)`` for each name, asking ``/rosapi/<service>`` (``{key: name}``) only
-    when the types are ``wanted`` (``""`` otherwise)."""
-    if not wanted:
-        return [(n, "") for n in names]
-    replies = await asyncio.gather(*(s.rosapi(service, {key: n}) for n in names))
-    return [(n, str(r.get("type", ""))) for n, r in zip(names, replies, strict=True)]
 
 
 def hidden(name: str) -> bool:

@@ -20,7 +20,7 @@ from .common import (
 async def cmd_node_list(args: argparse.Namespace, out: Out) -> int:
     """``node list``."""
     async def body(s: CliSession) -> int:
-        names = sorted((await s.rosapi("nodes")).get("nodes", []))
+        names = await s.ros.graph.node_names(timeout=s.timeout)
         if args.json:
             out.line(json.dumps(names))
         for name in names if not args.json else ():
@@ -33,17 +33,19 @@ async def cmd_node_info(args: argparse.Namespace, out: Out) -> int:
     """``node info NODE``: what a node publishes, subscribes to and serves."""
     async def body(s: CliSession) -> int:
         name = args.node if args.node.startswith("/") else "/" + args.node
-        if name not in (await s.rosapi("nodes")).get("nodes", []):
+        if name not in await s.ros.graph.node_names(timeout=s.timeout):
             raise CliError(EXIT_NOT_FOUND, f"unknown node {name}")
-        details = await s.rosapi("node_details", {"node": name})
+        node = await s.ros.graph.node(name, timeout=s.timeout)
+        lists = {"subscribing": node.subscribers, "publishing": node.publishers,
+                 "services": node.services}
         if args.json:
-            out.line(json.dumps({"name": name, **details}))
+            out.line(json.dumps({"name": name, **{k: list(v) for k, v in lists.items()}}))
             return EXIT_OK
         out.line(name)
         for title, key in (("Subscribers", "subscribing"), ("Publishers", "publishing"),
                            ("Service Servers", "services")):
             out.line(f"  {title}:")
-            for item in details.get(key, []):
+            for item in lists[key]:
                 out.line(f"    {item}")
         return EXIT_OK
     return await with_session(args, body)

@@ -24,7 +24,6 @@ from .common import (
     check_values,
     cli_values,
     local_class,
-    named_types,
     print_listing,
     type_parts,
     with_session,
@@ -34,10 +33,11 @@ from .common import (
 async def cmd_service_list(args: argparse.Namespace, out: Out) -> int:
     """``service list [-t]``."""
     async def body(s: CliSession) -> int:
+        if args.show_types or args.json:
+            found = await s.ros.graph.services(timeout=s.timeout)
+            return print_listing(out, args, [(x.name, x.type) for x in found])
         names = sorted((await s.rosapi("services")).get("services", []))
-        pairs = await named_types(s, names, "service_type", "service",
-                                  args.show_types or args.json)
-        return print_listing(out, args, pairs)
+        return print_listing(out, args, [(n, "") for n in names])
     return await with_session(args, body)
 
 

@@ -38,9 +38,8 @@ from .common import (
 async def cmd_topic_list(args: argparse.Namespace, out: Out) -> int:
     """``topic list [-t]``."""
     async def body(s: CliSession) -> int:
-        reply = await s.rosapi("topics")
-        pairs = sorted(zip(reply.get("topics", []), reply.get("types", []), strict=False))
-        return print_listing(out, args, pairs)
+        topics = await s.ros.graph.topics(timeout=s.timeout)
+        return print_listing(out, args, [(t.name, t.type) for t in topics])
     return await with_session(args, body)
 
 

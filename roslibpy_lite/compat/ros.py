@@ -29,6 +29,7 @@ import roslibpy_lite
 
 from .._backoff import Backoff
 from ..api import ConnectionState
+from ..capabilities.introspection import rosapi_type
 from ..exceptions import (
     ConnectError,
     ConnectionClosed,
@@ -422,9 +423,8 @@ class Ros:
         timeout: float | None = None,
     ) -> Any:
         """Call ``/rosapi/<name>``: ``result[key]`` when blocking, else ``callback(response)``."""
-        type_name = "rosapi_msgs/srv/" + "".join(p.capitalize() for p in name.split("_"))
         result = self.request_service(
-            f"/rosapi/{name}", _ROSAPI_TYPES.get(name, type_name), args, callback, errback,
+            f"/rosapi/{name}", rosapi_type(name), args, callback, errback,
             ROSAPI_TIMEOUT if timeout is None else timeout)
         if result is None or key is None:
             return result
@@ -533,10 +533,6 @@ class Ros:
     ) -> None:
         """Delete parameter ``name``."""
         Param(self, name).delete(callback, errback, timeout=ROSAPI_TIMEOUT)
-
-
-_ROSAPI_TYPES = {"action_servers": "rosapi_msgs/srv/GetActionServers"}
-"""The rosapi types whose name is not the service name in CamelCase."""
 
 
 def _finish(waiter: asyncio.Future[None]) -> None:

@@ -62,6 +62,7 @@ from ..api import DEFAULT_CALL_TIMEOUT, ConnectionState, StateCallback
 from ..exceptions import UsageError
 from .actions import ActionServer, GoalHandle
 from .handles import PUBLISH_WINDOW, Publisher, ServiceServer, StateChanges, Subscription
+from .introspection import Graph
 from .loop import HANDLER_THREADS, LoopThread
 
 if TYPE_CHECKING:
@@ -81,6 +82,7 @@ __all__ = [
     "ActionServer",
     "Client",
     "GoalHandle",
+    "Graph",
     "LoopThread",
     "MockRos",
     "Publisher",
@@ -98,6 +100,8 @@ class _Front:
         self._loop = loop
         self.aio = ros
         """The asyncio client underneath (use it from the loop thread only)."""
+        self.graph = Graph(loop, ros.graph)
+        """The ROS graph and parameters, blocking (:class:`~roslibpy_lite.sync.Graph`)."""
 
     def __repr__(self) -> str:
         return f"<sync {self.aio!r}>"

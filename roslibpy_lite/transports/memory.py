@@ -7,7 +7,8 @@ refused one gets the bridge's ``status`` error (a topic used with another
 type); a publish reaches the subscriptions of its topic; a service call
 reaches the served handler as a ``call_service`` and its ``service_response``
 goes back to the caller; a call to a service nobody serves fails at once with
-the bridge's "does not exist" text. Actions go through the bridge's action
+the bridge's "does not exist" text. The ``/rosapi/*`` introspection services are
+answered from what it holds (:mod:`.memory_rosapi`). Actions go through the bridge's action
 part, played by :mod:`.memory_actions`. With ``validate`` on, messages, requests
 and responses are checked against the ``msgs`` class of their type, as the
 bridge checks them against the ROS type.
@@ -28,6 +29,7 @@ from .. import ops
 from ..exceptions import InvalidMessageError, UsageError
 from ..messages import canonical_type, from_wire, lookup_message_class
 from .memory_actions import ACTION_OPS, MemoryActions
+from .memory_rosapi import MemoryRosapi, RosapiRefusal
 
 if TYPE_CHECKING:
     from .base import Link
@@ -66,6 +68,8 @@ class MemoryTransport:
         self._request_ids = 0
         self.actions = MemoryActions(self)
         """Served actions and goals in flight (:mod:`.memory_actions`)."""
+        self.rosapi = MemoryRosapi(self)
+        """The ``/rosapi/*`` answers and the parameter store (:mod:`.memory_rosapi`)."""
         self._up = False
         self._link: Link | None = None
 
@@ -250,6 +254,9 @@ class MemoryTransport:
                 self._answer(fwd, False, f"service {op.service} is no longer served")
 
     def _call_service(self, op: ops.CallService) -> None:
+        if op.service.startswith("/rosapi/") and op.service not in self.services:
+            self._call_rosapi(op)
+            return
         served = self.services.get(op.service)
         type_name = canonical_type(op.type, "srv") if op.type else served
         fwd = _Forwarded(op.id, op.service, type_name or "")
@@ -269,6 +276,19 @@ class MemoryTransport:
         rid = f"service_request:{op.service}:{self._request_ids}"
         self._forwarded[rid] = fwd
         self.to_client(ops.CallService(op.service, args, served, id=rid))
+
+    def _call_rosapi(self, op: ops.CallService) -> None:
+        fwd = _Forwarded(op.id, op.service, "")
+        try:
+            values = self.rosapi.answer(op.service, op.args if isinstance(op.args, Mapping) else {})
+        except RosapiRefusal as exc:
+            self._answer(fwd, False, f"{op.service}: {exc}")  # as the bridge words it
+            return
+        if values is None:
+            self._answer(fwd, False, f"service {op.service} does not exist (MockRos answers "
+                         f"{', '.join(sorted(self.rosapi.types()))})")
+            return
+        self._answer(fwd, True, values)
 
     def _service_response(self, op: ops.ServiceResponse) -> None:
         fwd = self._forwarded.pop(str(op.id), None)
