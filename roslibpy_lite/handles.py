@@ -44,6 +44,7 @@ from .exceptions import (
     RosTimeoutError,
     UsageError,
 )
+from .jupyter import in_cell
 from .messages import RawMessage, check_dict, from_wire, to_wire
 
 if TYPE_CHECKING:
@@ -345,6 +346,7 @@ class Subscription(_BridgeHandle, Generic[T]):
             raise UsageError(f"subscription to {self.topic} is closed")
         if not callable(callback):
             raise UsageError(f"subscribe {self.topic}: callback must be callable")
+        callback = in_cell(callback)  # its output under the cell that subscribed, in Jupyter
         if is_async_callable(callback):
             if self._waiter is not None:
                 raise UsageError(

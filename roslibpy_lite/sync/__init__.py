@@ -60,6 +60,7 @@ from .. import connect as _aio_connect
 from .._aio import is_async_callable
 from ..api import DEFAULT_CALL_TIMEOUT, ConnectionState, StateCallback
 from ..exceptions import UsageError
+from ..jupyter import in_cell
 from .actions import ActionServer, GoalHandle
 from .handles import PUBLISH_WINDOW, Publisher, ServiceServer, StateChanges, Subscription
 from .introspection import Graph
@@ -181,6 +182,8 @@ class _Front:
         :meth:`roslibpy_lite.api.Ros.subscribe` (``throttle_rate``,
         ``queue_length``, ``compression``, ``fragment_size``, ``buffer_size``).
         """
+        if callback is not None:  # in Jupyter: its output under this cell, not the loop's
+            callback = in_cell(callback)
         handle = self._loop.call(f"subscribe {topic}", self._subscribe, topic, type,
                                  callback, options)
         return Subscription(self._loop, handle)

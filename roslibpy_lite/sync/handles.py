@@ -17,6 +17,7 @@ from typing import TYPE_CHECKING, Any, Generic, Protocol, Self, TypeVar
 
 from ..api import ConnectionState
 from ..exceptions import ConnectionClosed, RosTimeoutError, UsageError
+from ..jupyter import in_cell
 from .loop import LoopThread
 
 if TYPE_CHECKING:
@@ -206,7 +207,7 @@ class Subscription(_BlockingHandle["handles.Subscription[Any]"], Generic[T]):
 
     def on_message(self, callback: Callable[[T], Any]) -> None:
         """Also deliver every message to ``callback`` (it runs on the loop thread)."""
-        self._loop.call(f"on_message {self.topic}", self.handle.on_message, callback)
+        self._loop.call(f"on_message {self.topic}", self.handle.on_message, in_cell(callback))
 
     def unsubscribe(self) -> None:
         """Stop the subscription."""

@@ -5,20 +5,16 @@ The kernel is this interpreter (a kernelspec written for the test), so it sees t
 
 from __future__ import annotations
 
-import json
 import sys
 from pathlib import Path
 from typing import Any
 
 import nbformat
 import pytest
-from jupyter_client.kernelspec import KernelSpecManager
-from jupyter_client.manager import AsyncKernelManager, KernelManager
 from nbclient import NotebookClient
 
+from tests import notebooks
 from tests.helpers import ROOT, BridgeProcess
-
-KERNEL = "roslibpy-lite-test"
 
 CELLS = [
     # The parameters: where the bridge is, and a name of our own.
@@ -53,41 +49,21 @@ CELLS = [
 ]
 
 
-def _kernel_manager(tmp_path: Path, cls: type[Any] = AsyncKernelManager) -> Any:
-    """A kernel of THIS interpreter (the venv's), whatever kernels the machine has installed."""
-    spec_dir = tmp_path / "kernels" / KERNEL
-    spec_dir.mkdir(parents=True)
-    (spec_dir / "kernel.json").write_text(json.dumps({
-        "argv": [sys.executable, "-m", "ipykernel_launcher", "-f", "{connection_file}"],
-        "display_name": "roslibpy-lite tests",
-        "language": "python",
-    }))
-    specs = KernelSpecManager(kernel_dirs=[str(tmp_path / "kernels")])
-    return cls(kernel_name=KERNEL, kernel_spec_manager=specs)
-
-
-def _stdout(cell: Any) -> str:
-    return "".join(o.get("text", "") for o in cell.outputs if o.get("name") == "stdout")
-
-
 @pytest.fixture
 def kernel_env(bridge: BridgeProcess, topic: str, tmp_path: Path,
                monkeypatch: pytest.MonkeyPatch) -> None:
     """The kernel's environment: the bridge's URL, a name of the test's own, no files in $HOME."""
-    monkeypatch.setenv("ROSLIBPY_LITE_NOTEBOOK_URL", bridge.url)
-    monkeypatch.setenv("ROSLIBPY_LITE_NOTEBOOK_NAME", topic)
-    monkeypatch.setenv("JUPYTER_RUNTIME_DIR", str(tmp_path / "runtime"))
-    monkeypatch.setenv("IPYTHONDIR", str(tmp_path / "ipython"))
+    notebooks.kernel_env(monkeypatch, tmp_path, url=bridge.url, name=topic)
 
 
 @pytest.mark.usefixtures("kernel_env")
 def test_blocking_client_in_a_jupyter_kernel(tmp_path: Path) -> None:
     """A notebook connects, serves and calls a service, hears a message and closes cleanly."""
     nb = nbformat.v4.new_notebook(cells=[nbformat.v4.new_code_cell(c) for c in CELLS])  # type: ignore[no-untyped-call]
-    km = _kernel_manager(tmp_path)
+    km = notebooks.kernel_manager(tmp_path)
     client = NotebookClient(nb, km=km, timeout=90, resources={"metadata": {"path": str(ROOT)}})
     client.execute(cleanup_kc=True)  # shut the kernel and its channels down (km is ours)
-    outputs = [_stdout(cell) for cell in nb.cells]
+    outputs = [notebooks.stdout_of(cell) for cell in nb.cells]
     assert outputs[1:] == [
         f"python: {sys.executable}\nloop running: True\n",
         "result: 42.0\n",
@@ -96,29 +72,11 @@ def test_blocking_client_in_a_jupyter_kernel(tmp_path: Path) -> None:
     ]
 
 
-def _run(kc: Any, code: str) -> str:
-    """Execute ``code`` in the kernel; its stdout (fails on an error in the cell)."""
-    out: list[str] = []
-
-    def hook(msg: dict[str, Any]) -> None:
-        if msg["msg_type"] == "stream":
-            out.append(msg["content"]["text"])
-
-    reply = kc.execute_interactive(code, timeout=60, output_hook=hook)
-    assert reply["content"]["status"] == "ok", reply["content"]
-    return "".join(out)
-
-
 @pytest.mark.usefixtures("kernel_env")
 def test_interrupting_a_blocking_call_in_a_kernel(tmp_path: Path) -> None:
     """Interrupting the kernel (Jupyter's stop button) ends a waiting get(); the client still works."""
-    km = _kernel_manager(tmp_path, KernelManager)
-    km.start_kernel(cwd=str(ROOT))
-    kc = km.client()
-    kc.start_channels()
-    try:
-        kc.wait_for_ready(timeout=60)
-        _run(kc, CELLS[0] + "\nfrom roslibpy_lite import sync\nros = sync.connect(URL)\n"
+    with notebooks.running_kernel(tmp_path) as (km, kc):
+        notebooks.run_cell(kc, CELLS[0] + "\nfrom roslibpy_lite import sync\nros = sync.connect(URL)\n"
                  "sub = ros.subscribe(NAME, 'std_msgs/msg/Int32')")
         # no timeout: for ever. stop_on_error=False: the kernel would otherwise abort the
         # requests that reach it just after this cell's error reply (the next _run: a race)
@@ -133,11 +91,70 @@ def test_interrupting_a_blocking_call_in_a_kernel(tmp_path: Path) -> None:
         assert (reply["content"]["status"], reply["content"].get("ename")) == (
             "error", "KeyboardInterrupt")
         # The interrupted get() was cancelled on the loop thread: a new one may wait again.
-        assert _run(kc, "try:\n    sub.get(timeout=0.2)\nexcept Exception as exc:\n"
+        assert notebooks.run_cell(kc, "try:\n    sub.get(timeout=0.2)\nexcept Exception as exc:\n"
                         "    print(type(exc).__name__)\n"
                         "print(ros.state.value, ros.call_service('/rosapi/topics', "
                         "'rosapi_msgs/srv/Topics', timeout=30)['topics'].__class__.__name__)\n"
                         "ros.close()") == "RosTimeoutError\nconnected list\n"
-    finally:
-        kc.stop_channels()
-        km.shutdown_kernel(now=True)
+
+
+@pytest.mark.usefixtures("kernel_env")
+def test_callback_output_goes_to_the_cell_that_subscribed(tmp_path: Path) -> None:
+    """A callback's print, made while a later cell runs, is sent as output of the cell that
+    subscribed: on the blocking client (loop thread) and the asyncio client (its task)."""
+    with notebooks.running_kernel(tmp_path) as (_, kc):
+        notebooks.executed(kc, CELLS[0] + "\nimport asyncio, threading\nimport roslibpy_lite\n"
+                           "from roslibpy_lite import sync\nros = sync.connect(URL)\n"
+                           "aros = await roslibpy_lite.connect(URL)\n"
+                           "pub = ros.advertise(NAME, 'std_msgs/msg/Int32')\n"
+                           "blocking_heard, async_heard = threading.Event(), asyncio.Event()")
+        subscribed = notebooks.executed(
+            kc, "def on_blocking(msg):\n    print('blocking callback', msg['data'])\n"
+                "    blocking_heard.set()\n"
+                "def on_async(msg):\n    print('async callback', msg['data'])\n"
+                "    async_heard.set()\n"
+                "ros.subscribe(NAME, 'std_msgs/msg/Int32', on_blocking)\n"
+                "await aros.subscribe(NAME, 'std_msgs/msg/Int32', on_async)")
+        # Published until both heard (ROS discovery has no event), from a later cell.
+        seen = notebooks.run_collecting(
+            kc, "for i in range(300):\n    pub.publish({'data': i})\n"
+                "    await asyncio.sleep(0.05)\n"
+                "    if blocking_heard.is_set() and async_heard.is_set():\n        break\n"
+                "print('both heard:', blocking_heard.is_set() and async_heard.is_set())")
+        notebooks.executed(kc, "ros.close()\nawait aros.close()")
+    callbacks = [(parent, text) for parent, text in seen if "callback" in text]
+    assert any("both heard: True" in text for _, text in seen), seen
+    assert {kind for _, text in callbacks for kind in ("blocking", "async") if kind in text} == {
+        "blocking", "async"}
+    assert {parent for parent, _ in callbacks} == {subscribed}, seen
+
+
+def test_state_and_reconnect_log_in_the_notebook(
+    make_bridge: Any, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """jupyter.show_log() and show_state(ros): when the bridge goes and comes back, the log
+    lines and the rewritten state line are output of the cell that asked for them."""
+    private = make_bridge()
+    notebooks.kernel_env(monkeypatch, tmp_path, url=private.url, name="/unused")
+    with notebooks.running_kernel(tmp_path) as (_, kc):
+        notebooks.executed(kc, CELLS[0] + "\nfrom roslibpy_lite import jupyter, sync\n"
+                           "ros = sync.connect(URL)\nchanges = ros.state_changes()")
+        shown = notebooks.executed(kc, "jupyter.show_log()\njupyter.show_state(ros)")
+        private.stop()
+        while_down = notebooks.run_collecting_all(
+            kc, "print(changes.next(timeout=30).value)")
+        private.start()
+        back = notebooks.run_collecting_all(kc, "print(changes.next(timeout=60).value)\n"
+                                                "ros.close()")
+    seen = while_down + back
+    printed = [m["content"]["text"] for m in seen if m["msg_type"] == "stream"
+               and m["content"]["name"] == "stdout"]
+    assert printed == ["reconnecting\n", "connected\n"]
+    logged = [m for m in seen if m["msg_type"] == "stream" and m["content"]["name"] == "stderr"]
+    assert any("lost; reconnecting" in m["content"]["text"] for m in logged), seen
+    assert {m["parent_header"]["msg_id"] for m in logged} == {shown}
+    updates = [m["content"]["data"]["text/plain"] for m in seen
+               if m["msg_type"] == "update_display_data"]
+    assert [u.split(" since ")[0] for u in updates] == [
+        f"{private.url}: reconnecting", f"{private.url}: connected", f"{private.url}: closed"]
+    assert all(u.endswith(" (1 reconnect)") for u in updates), updates
