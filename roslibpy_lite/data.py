@@ -316,21 +316,24 @@ def to_dataframe(messages: Iterable[Any], fields: Iterable[str] | None = None, *
     e.g. when they were received) when given; else 0, 1, 2, ...
     """
     times_ns = None if times is None else [round(t * 1e9) for t in times]
-    return _frame(list(messages), fields, times_ns)
-
-
-def _frame(msgs: list[Any], fields: Iterable[str] | None,
-           times_ns: list[int] | None) -> pandas.DataFrame:
-    pd = _pandas()
     chosen = list(fields) if fields is not None else None
-    frame = pd.DataFrame([flatten(m, chosen) for m in msgs])
-    stamps: list[int | None] | None = [_header_stamp_ns(m) for m in msgs]
-    if not msgs or any(t is None for t in stamps or ()):
-        stamps = list(times_ns) if times_ns is not None else None
-        if stamps is not None and len(stamps) != len(msgs):
-            raise UsageError(f"{len(stamps)} times for {len(msgs)} messages")
-    if stamps is not None:
-        frame.index = pd.to_datetime(stamps, unit="ns", utc=True).rename("time")
+    msgs = list(messages)
+    return _frame([flatten(m, chosen) for m in msgs], [_header_stamp_ns(m) for m in msgs],
+                  times_ns)
+
+
+def _frame(rows: list[dict[str, Any]], stamps: list[int | None],
+           times_ns: list[int] | None) -> pandas.DataFrame:
+    """The table of ``rows``, indexed by ``stamps`` when every row has one, else ``times_ns``."""
+    pd = _pandas()
+    frame = pd.DataFrame(rows)
+    index: list[int | None] | None = stamps
+    if not rows or any(t is None for t in stamps):
+        index = list(times_ns) if times_ns is not None else None
+        if index is not None and len(index) != len(rows):
+            raise UsageError(f"{len(index)} times for {len(rows)} messages")
+    if index is not None:
+        frame.index = pd.to_datetime(index, unit="ns", utc=True).rename("time")
     return frame
 
 
@@ -350,10 +353,15 @@ def bag_to_dataframe(path: str | Path, topic: str,
     a message without a header stamp is indexed by when it was recorded)."""
     from .bag import read
 
-    messages, times_ns = [], []
-    for rec in read(path, topics=[topic]):
-        messages.append(rec.decode())
+    chosen = list(fields) if fields is not None else None
+    rows: list[dict[str, Any]] = []
+    stamps: list[int | None] = []
+    times_ns: list[int] = []
+    for rec in read(path, topics=[topic]):  # one message decoded at a time: only rows stay
+        msg = rec.decode()
+        rows.append(flatten(msg, chosen))
+        stamps.append(_header_stamp_ns(msg))
         times_ns.append(rec.log_time_ns)
-    if not messages:
+    if not rows:
         raise UsageError(f"{path}: no message on {topic}")
-    return _frame(messages, fields, times_ns)
+    return _frame(rows, stamps, times_ns)
