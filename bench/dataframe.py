@@ -12,7 +12,8 @@ loads each topic into a pandas DataFrame twice, each time in a fresh process:
 
 The IMU table has every field; the camera table the header and the image's shape, not the
 pixels (what a table of frames is for), so both readers still read every frame's bytes.
-Reported per case: seconds (reading and building the table, after the imports), peak RSS
+Reported per case: seconds and CPU seconds (reading and building the table, after the
+imports; the CPU figure is the steadier on a shared machine), peak RSS
 and its rise over the process's RSS after the imports, rows and columns. Printed as one
 JSON object. It asserts nothing about time.
 """
@@ -146,11 +147,11 @@ def _child(reader: str, path: str, topic: str) -> None:
     import roslibpy_lite.data  # noqa: F401
 
     before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
-    t0 = time.perf_counter()
+    t0, cpu0 = time.perf_counter(), time.process_time()
     frame = READERS[reader](path, topic, FIELDS[topic])
-    seconds = time.perf_counter() - t0
+    seconds, cpu = time.perf_counter() - t0, time.process_time() - cpu0
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
-    print(json.dumps({"seconds": round(seconds, 2), "peak_rss_mb": round(peak / 1024, 1),
+    print(json.dumps({"seconds": round(seconds, 2), "cpu_s": round(cpu, 2), "peak_rss_mb": round(peak / 1024, 1),
                       "rise_mb": round((peak - before) / 1024, 1), "rows": len(frame),
                       "columns": len(frame.columns),
                       "table_mb": round(frame.memory_usage(deep=True).sum() / 2**20, 1)}))

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import logging
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
@@ -18,6 +19,18 @@ if TYPE_CHECKING:
 __all__ = ["BagInfo", "BagMessage", "TopicInfo", "info", "read"]
 
 log = logging.getLogger("roslibpy_lite.bag")
+
+
+@functools.lru_cache(maxsize=256)
+def _message_class(type_name: str, definition: str) -> type[Message]:
+    """The class of a file's schema, built once per (name, text), not once per message."""
+    from msgs.dynamic import load
+    from msgs.runtime import Message
+
+    cls = load(type_name, definition)
+    if not (isinstance(cls, type) and issubclass(cls, Message)):
+        raise UsageError(f"{type_name} is not a message type")
+    return cls
 
 
 @dataclass(frozen=True, slots=True)
@@ -39,12 +52,8 @@ class BagMessage:
             msgs.cdr.CdrError: the bytes do not decode as the schema says.
         """
         from msgs.cdr import decode
-        from msgs.dynamic import load
-        from msgs.runtime import Message
 
-        cls = load(self.type_name, self.definition)
-        if not (isinstance(cls, type) and issubclass(cls, Message)):
-            raise UsageError(f"{self.type_name} is not a message type")
+        cls = _message_class(self.type_name, self.definition)
         return cls.from_json(decode(self.data, cls))
 
     def raw(self) -> RawMessage:
