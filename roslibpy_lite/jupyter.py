@@ -88,7 +88,9 @@ def in_cell(callback: F) -> F:
 
 
 class _Attributed:
-    """A callback wrapped by :func:`in_cell`, equal (and hashing equal) to the original."""
+    """A callback wrapped by :func:`in_cell`: equal (and hashing equal) to the original, and
+    reading as it (``__code__``, ``__closure__``, ``__self__``...), so that code comparing
+    callbacks (a re-run cell's subscribe) sees the function it was given."""
 
     __roslibpy_lite_cell__ = True
     __wrapped__: Callable[..., Any]
@@ -101,6 +103,11 @@ class _Attributed:
     def __call__(self, *args: Any, **kwargs: Any) -> Any:
         with _parents(self._captured):
             return self.__wrapped__(*args, **kwargs)
+
+    def __getattr__(self, name: str) -> Any:
+        if name == "__wrapped__":  # not set yet (inside update_wrapper)
+            raise AttributeError(name)
+        return getattr(self.__wrapped__, name)
 
     def __eq__(self, other: object) -> bool:
         return other is self or other == self.__wrapped__

@@ -121,12 +121,18 @@ def test_callback_output_goes_to_the_cell_that_subscribed(tmp_path: Path) -> Non
                 "    await asyncio.sleep(0.05)\n"
                 "    if blocking_heard.is_set() and async_heard.is_set():\n        break\n"
                 "print('both heard:', blocking_heard.is_set() and async_heard.is_set())")
-        notebooks.executed(kc, "ros.close()\nawait aros.close()")
+        # The wrapper reads as the function (a re-run cell's subscribe can recognise it).
+        same = notebooks.run_cell(
+            kc, "from roslibpy_lite.jupyter import in_cell\nw = in_cell(on_blocking)\n"
+                "print(w is not on_blocking, w == on_blocking, hash(w) == hash(on_blocking),\n"
+                "      w.__code__ is on_blocking.__code__, w.__qualname__, in_cell(w) is w)\n"
+                "ros.close()\nawait aros.close()")
     callbacks = [(parent, text) for parent, text in seen if "callback" in text]
     assert any("both heard: True" in text for _, text in seen), seen
     assert {kind for _, text in callbacks for kind in ("blocking", "async") if kind in text} == {
         "blocking", "async"}
     assert {parent for parent, _ in callbacks} == {subscribed}, seen
+    assert same == "True True True True on_blocking True\n"
 
 
 def test_state_and_reconnect_log_in_the_notebook(
