@@ -47,6 +47,7 @@ import array
 import base64
 import binascii
 import dataclasses as _dc
+import html
 import importlib
 import keyword
 import math
@@ -615,6 +616,11 @@ class Message:
             cls.__post_init__ = check  # type: ignore[method-assign, assignment]  # directly now
         check(self)
 
+    def _repr_html_(self) -> str:
+        """The message as an HTML table for Jupyter: a row per field, nested messages as
+        nested tables, large fields summarised as ``repr()`` does."""
+        return _message_html(self)
+
     def validate(self) -> None:
         """Check every field's Python-side value (kind, range, length, nesting).
 
@@ -650,6 +656,18 @@ def _message_repr(self: Message) -> str:
     fields = ", ".join(f"{name}={_short_repr(getattr(self, name))}"
                        for name in self._fields_and_types)
     return f"{type(self).__name__}({fields})"
+
+
+def _message_html(msg: Message) -> str:
+    rows = []
+    for name in msg._fields_and_types:
+        value = getattr(msg, name)
+        shown = (_message_html(value) if isinstance(value, Message)
+                 else f"<code>{html.escape(_short_repr(value))}</code>")
+        rows.append(f"<tr><th style='text-align:left'>{html.escape(name)}</th>"
+                    f"<td style='text-align:left'>{shown}</td></tr>")
+    return (f"<table><caption style='text-align:left'>{html.escape(msg._type)}</caption>"
+            + "".join(rows) + "</table>")
 
 
 class Service:
