@@ -92,6 +92,14 @@ class Message(Protocol):
     def topic(self) -> str:
         """The topic it came on."""
 
+    @property
+    def data(self) -> bytes:
+        """The message as the ROS side received it: CDR with its 4-byte header, undecoded."""
+
+    @property
+    def stamp_ns(self) -> int:
+        """When the ROS side received it (nanoseconds since the epoch)."""
+
     def json_text(self, name: str | None = None) -> str:
         """The whole ``publish`` op as JSON text (``name``: the topic as the client spelt it)."""
 

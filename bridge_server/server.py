@@ -31,6 +31,7 @@ from roslibpy_lite import keepalive
 from roslibpy_lite.exceptions import RemoteProtocolError
 from roslibpy_lite.ops import RECEIVED_HEADER, SESSION_HEADER, parse_received
 
+from .foxglove import SUBPROTOCOL, FoxgloveSession, Hub, select_subprotocol
 from .graph import Graph
 from .http.metrics import BridgeMetrics
 from .http.web import Web
@@ -116,6 +117,7 @@ class Bridge:
         self.web = Web(self)  # plain-HTTP routes: status page, /metrics, health (web.py)
         self.security = Security(config.security)  # TLS, auth, origins, limits (security/)
         self.web.access = WebAccess(self.security)  # who sees the plain-HTTP routes
+        self.foxglove = Hub(self.graph, self.graph_changed)  # Foxglove clients (foxglove/)
 
     @property
     def port(self) -> int:
@@ -143,6 +145,7 @@ class Bridge:
             ping_interval=None if own_keepalive else (self.config.keepalive_interval or None),
             ping_timeout=None if own_keepalive else (self.config.keepalive_timeout or None),
             process_request=self._process_request,
+            select_subprotocol=select_subprotocol,  # foxglove.websocket.v1, else rosbridge
             process_response=self.web.process_response,
             reuse_port=self.config.worker_dir is not None,
             **self.security.serve_kwargs(),
@@ -213,6 +216,9 @@ class Bridge:
 
     async def _handle(self, ws: ServerConnection) -> None:
         peer = _peer(ws)
+        if ws.subprotocol == SUBPROTOCOL:
+            await self._handle_foxglove(ws, peer)
+            return
         plan: tuple[str, Session | None] | None = getattr(ws, "session_plan", None)
         token, kept = plan if plan is not None else ("", None)
         if kept is not None:  # a resumed session: the same client on a new connection
@@ -241,9 +247,23 @@ class Bridge:
                 self.sessions.discard(session)
                 log.info("client %d (%s) disconnected", session.sid, peer)
 
+    async def _handle_foxglove(self, ws: ServerConnection, peer: str) -> None:
+        """A Foxglove client: its own session type, the same graph, limits and gate."""
+        sid = next(self._ids)
+        log.info("client %d connected from %s (foxglove.websocket.v1)", sid, peer)
+        session = FoxgloveSession(self, self.foxglove, ws, sid)
+        session.peer = peer
+        self.metrics.connections += 1
+        try:
+            await session.run()
+        finally:
+            log.info("client %d (%s) disconnected", sid, peer)
+
     def reload(self) -> bool:
         """Read the certificates and the auth file again (SIGHUP; see :meth:`Security.reload`)."""
-        return self.security.reload(session.gate for session in list(self.sessions))
+        gates = [session.gate for session in list(self.sessions)]
+        gates += [session.gate for session in list(self.foxglove.sessions)]
+        return self.security.reload(gates)
 
     async def close(self) -> None:
         """Stop listening, close every connection (at most ~1 s), release ROS."""
@@ -255,6 +275,7 @@ class Bridge:
             with contextlib.suppress(asyncio.CancelledError):
                 await self._refresher
         await self.web.close()
+        await self.foxglove.close()
         if self._server is not None:
             self._server.close(close_connections=True)
             waiter: Awaitable[Any] = self._server.wait_closed()
@@ -262,8 +283,8 @@ class Bridge:
                 await asyncio.wait_for(waiter, 0.5)
             except TimeoutError:
                 # Peers that do not answer the closing handshake are cut off.
-                for session in list(self.sessions):
-                    session.ws.transport.abort()
+                for ws in [s.ws for s in self.sessions] + [s.ws for s in self.foxglove.sessions]:
+                    ws.transport.abort()
                 with contextlib.suppress(TimeoutError):
                     await asyncio.wait_for(self._server.wait_closed(), 0.2)
         self.ros.close()

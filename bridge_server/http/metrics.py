@@ -19,6 +19,7 @@ name                                              type       labels
 ``workers``                                       gauge
 ``start_time_seconds``                            gauge      (earliest worker start)
 ``clients``                                       gauge      (connected now)
+``clients_by_protocol``                           gauge      protocol (rosbridge, foxglove)
 ``connections_total``                             counter    (accepted websocket clients)
 ``connections_refused_total``                     counter    reason
 ``topic_subscribers``                             gauge      topic
@@ -241,6 +242,13 @@ class _Families:
         clients = s.get("clients", [])
         yield GaugeMetricFamily(PREFIX + "clients", "Connected websocket clients.",
                                 value=len([c for c in clients if not c.get("parked")]))
+        by_protocol = GaugeMetricFamily(PREFIX + "clients_by_protocol",
+                                        "Connected websocket clients by the protocol they speak.",
+                                        labels=["protocol"])
+        for name in ("rosbridge", "foxglove"):
+            by_protocol.add_metric([name], len([c for c in clients if not c.get("parked")
+                                                and c.get("protocol", "rosbridge") == name]))
+        yield by_protocol
         yield GaugeMetricFamily(PREFIX + "sessions_kept",
                                 "Sessions of dropped clients kept for them to resume.",
                                 value=len([c for c in clients if c.get("parked")]))

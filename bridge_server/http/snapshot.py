@@ -25,7 +25,9 @@ from typing import TYPE_CHECKING, Any
 from .metrics import add_timing
 
 if TYPE_CHECKING:
+    from ..foxglove.session import FoxgloveSession
     from ..server import Bridge
+    from ..session.session import Session
 
 __all__ = ["RateMeter", "merge", "take", "topic_totals"]
 
@@ -52,7 +54,8 @@ def topic_totals(bridge: Bridge) -> dict[str, dict[str, Any]]:
         topics[name]["in_use"] = True
     for name, _type, _latch in bridge.graph.publishers:
         topics[name]["in_use"] = True
-    for session in bridge.sessions:
+    every: list[Session | FoxgloveSession] = [*bridge.sessions, *bridge.foxglove.sessions]
+    for session in every:
         for sub in session.topics.subs.values():
             t = topics.setdefault(sub.topic, {})
             t["in_use"] = True
@@ -102,7 +105,8 @@ def take(bridge: Bridge, rates: Mapping[str, Mapping[str, float]]) -> dict[str, 
         if name in topics:
             topics[name].update(r)
     clients = []
-    for session in sorted(bridge.sessions, key=lambda s: s.sid):
+    every: list[Session | FoxgloveSession] = [*bridge.sessions, *bridge.foxglove.sessions]
+    for session in sorted(every, key=lambda s: s.sid):
         subs = [
             {
                 "topic": sub.topic,
@@ -121,6 +125,7 @@ def take(bridge: Bridge, rates: Mapping[str, Mapping[str, float]]) -> dict[str, 
                 "id": f"{worker}-{session.sid}",
                 "sid": session.sid,
                 "worker": worker,
+                "protocol": session.protocol_name,  # rosbridge or foxglove
                 "address": getattr(session, "peer", ""),
                 "connected_at": getattr(session, "connected_at", 0.0),
                 "subscriptions": subs,

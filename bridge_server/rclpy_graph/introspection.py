@@ -278,6 +278,8 @@ def _to_parameter_value(value: Any) -> Any:
         pv.type, pv.double_value = 3, value
     elif isinstance(value, str):
         pv.type, pv.string_value = 4, value
+    elif isinstance(value, bytes | bytearray):
+        pv.type, pv.byte_array_value = 5, [bytes((b,)) for b in value]
     elif isinstance(value, list) and all(isinstance(v, bool) for v in value):
         pv.type, pv.bool_array_value = 6, value
     elif isinstance(value, list) and all(isinstance(v, int) for v in value):

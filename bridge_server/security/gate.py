@@ -32,6 +32,7 @@ from .permissions import (
 from .websockets_internals import BridgeConnection
 
 if TYPE_CHECKING:
+    from ..foxglove.session import FoxgloveSession
     from ..session.session import Session
     from .handshake import Security
 
@@ -49,7 +50,8 @@ POLICY_VIOLATION = 1008
 class Gate:
     """What one session may do: consulted for every frame and every op."""
 
-    def __init__(self, security: Security, session: Session, principal: Principal | None):
+    def __init__(self, security: Security, session: Session | FoxgloveSession,
+                 principal: Principal | None) -> None:
         self.security = security
         self.session = session
         self.principal = principal

@@ -23,6 +23,7 @@ from .options import SecurityConfig
 from .websockets_internals import BridgeConnection, Inbound, check_websockets_internals
 
 if TYPE_CHECKING:
+    from ..foxglove.session import FoxgloveSession
     from ..session.session import Session
 
 __all__ = ["Security"]
@@ -238,7 +239,7 @@ class Security:
         else:
             self.per_address.pop(address, None)
 
-    def gate(self, session: Session) -> Gate:
+    def gate(self, session: Session | FoxgloveSession) -> Gate:
         """The gate for a new session."""
         principal = getattr(session.ws, "principal", None)
         return Gate(self, session, principal)

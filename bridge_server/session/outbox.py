@@ -101,6 +101,7 @@ class Subscription:
         self.last_report = -1e9
         self.report_timer: asyncio.TimerHandle | None = None
         self.active = True
+        self.encode: Callable[[Incoming], str | bytes] | None = None  # a frame of its own
 
     def configure(self, default_len: int, max_len: int = 0, min_fragment: int = 0) -> None:
         """Merge the options of every id: least throttle, largest queue, least fragment size
@@ -440,6 +441,8 @@ class Outbox:
                     ws.transport.write_eof()
 
     def _frames(self, sub: Subscription, inc: Incoming) -> list[str | bytes]:
+        if sub.encode is not None:  # another protocol's framing (bridge_server.foxglove)
+            return [sub.encode(inc)]
         comp = sub.compression
         if comp == "cbor":
             return [inc.cbor(sub.wire)]

@@ -116,6 +116,9 @@ class Capability(Protocol):
 class Session:
     """One websocket client of the bridge."""
 
+    protocol_name = "rosbridge"
+    """The protocol the client speaks (the status page and /metrics show it)."""
+
     def __init__(self, bridge: Bridge, ws: ServerConnection, sid: int) -> None:
         self.bridge = bridge
         self.graph: Graph = bridge.graph

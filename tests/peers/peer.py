@@ -212,19 +212,32 @@ class PeerProcess:
         return self.proc.returncode
 
 
-def _node_argv(url: str, native_websocket: bool) -> list[str]:
-    """The command line of the Node driver; skips without node, fails without its modules."""
+def _node_argv(url: str, native_websocket: bool, script: str = "peer.mjs",
+               package: str = "roslib") -> list[str]:
+    """The command line of a Node driver; skips without node, fails without its modules."""
     node = shutil.which("node")
     if node is None:
-        pytest.skip("node is not on PATH: the roslib (npm) peer tests need Node.js 20+")
-    if not (NODE_DIR / "node_modules" / "roslib" / "package.json").is_file():
+        pytest.skip(f"node is not on PATH: the {package} (npm) peer tests need Node.js 20+")
+    if not (NODE_DIR / "node_modules" / package / "package.json").is_file():
         pytest.fail(
-            "tests/peers/node/node_modules has no roslib: run scripts/setup.sh "
+            f"tests/peers/node/node_modules has no {package}: run scripts/setup.sh "
             "(or `npm ci` in tests/peers/node)",
             pytrace=False,
         )
     flags = ["--experimental-websocket"] if native_websocket else []
-    return [node, *flags, str(NODE_DIR / "peer.mjs"), url]
+    return [node, *flags, str(NODE_DIR / script), url]
+
+
+def foxglove_peer(url: str, bridge: BridgeProcess | None = None) -> PeerProcess:
+    """A started Foxglove client (``@foxglove/ws-protocol`` in Node) on ``url``."""
+    argv = _node_argv(url, False, "foxglove_peer.mjs", "@foxglove/ws-protocol")
+    peer = PeerProcess("foxglove", argv, PEERS)
+    peer.bridge = bridge
+    try:
+        return peer.start()
+    except BaseException:
+        peer.close()
+        raise
 
 
 class PeerPool:
@@ -244,8 +257,11 @@ class PeerPool:
 
         Kinds: "roslibpy" (its default Twisted transport), "roslibpy-asyncio" (its
         opt-in asyncio transport), "roslib" (Node; ``native_websocket`` picks Node's
-        own WebSocket instead of the ``ws`` package).
+        own WebSocket instead of the ``ws`` package), "foxglove" (``@foxglove/ws-protocol``
+        in Node).
         """
+        if kind == "foxglove":
+            return foxglove_peer(self.bridge.url, self.bridge)
         env: dict[str, str] = {}
         if kind in ("roslibpy", "roslibpy-asyncio"):
             argv = [sys.executable, str(PEERS / "roslibpy_peer.py"), "127.0.0.1",

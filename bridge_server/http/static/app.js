@@ -79,7 +79,7 @@
     document.getElementById("client-count").textContent = s.clients.length;
     document.getElementById("worker-count").textContent = s.workers.length;
     fill("clients", s.clients.map((c) => [
-      c.id, c.address, new Date(c.connected_at * 1000).toLocaleTimeString(),
+      c.id, c.protocol || "rosbridge", c.address, new Date(c.connected_at * 1000).toLocaleTimeString(),
       list(c.subscriptions.map((x) => x.topic)), list(c.publishes), list(c.serves),
       queue(c), c.dropped ? el("span", c.dropped, "warn") : 0,
     ]), "no clients connected");

@@ -1,0 +1,26 @@
+"""The Foxglove WebSocket protocol (``foxglove.websocket.v1``) beside rosbridge v2, on one port.
+
+A client that offers the subprotocol in its handshake (Foxglove, Lichtblick, the
+``@foxglove/ws-protocol`` client) gets a :class:`FoxgloveSession`; every other client gets
+a rosbridge session as before. :mod:`.wire` is the protocol's frames without I/O,
+:mod:`.hub` what the Foxglove sessions of a bridge share (channels, services, watches),
+:mod:`.session` one client. They reach ROS only through the
+:class:`~bridge_server.graph.Graph`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+from .hub import Hub
+from .session import FoxgloveSession
+from .wire import SUBPROTOCOL
+
+__all__ = ["SUBPROTOCOL", "FoxgloveSession", "Hub", "select_subprotocol"]
+
+
+def select_subprotocol(connection: Any, offered: Sequence[str]) -> Any:
+    """websockets' hook: ``foxglove.websocket.v1`` if the client offers it, else none (a
+    rosbridge client, which offers nothing or something we do not speak)."""
+    return SUBPROTOCOL if SUBPROTOCOL in offered else None

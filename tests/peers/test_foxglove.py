@@ -1,0 +1,398 @@
+"""The stock Foxglove WebSocket client (``@foxglove/ws-protocol`` from npm, unchanged) in Node
+against our bridge on the rosbridge port, with rclpy on the ROS side.
+
+The Node driver is ``tests/peers/node/foxglove_peer.mjs``; it decodes and encodes CDR with
+``@foxglove/rosmsg2-serialization`` from the schemas the bridge advertises, so a message
+that arrives equal to what rclpy published shows that the channel, its schema and the raw
+bytes all agree.
+"""
+
+from __future__ import annotations
+
+import queue
+import time
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from bridge_server.foxglove.hub import foxglove_schema
+from msgs import dynamic
+from tests.helpers import BridgeProcess, wait_until
+from tests.peers import scenarios
+from tests.peers.peer import PeerPool, PeerProcess, foxglove_peer
+from tests.security.support import make_auth_file
+
+DEADLINE = scenarios.DEADLINE
+
+
+@pytest.fixture
+def fox(peer_pool: PeerPool) -> PeerProcess:
+    """The module's connected Foxglove client, ready for this test."""
+    return peer_pool.get("foxglove")
+
+
+def _schema(type_name: str) -> str:
+    """The definition text of a type as Foxglove clients take it."""
+    return foxglove_schema(dynamic.full_text(type_name))
+
+
+def _messages(peer: PeerProcess, topic: str) -> list[dict[str, Any]]:
+    return [e for e in peer.new_events() if e.get("event") == "message" and e["topic"] == topic]
+
+
+def _errors(peer: PeerProcess) -> list[str]:
+    return [e["message"] for e in peer.new_events()
+            if e.get("event") == "status" and e.get("level") == 2]
+
+
+def _wait_error(peer: PeerProcess, part: str) -> str:
+    event = peer.wait_event(lambda e: e.get("event") == "status" and e.get("level") == 2
+                            and part in e.get("message", ""), DEADLINE, f"status error '{part}'")
+    return str(event["message"])
+
+
+def _publish_until_seen(peer: PeerProcess, pub: Any, topic: str, msg: Any) -> dict[str, Any]:
+    """Publish from rclpy until the client has a message on ``topic`` (DDS matching)."""
+    deadline = time.monotonic() + DEADLINE
+    while time.monotonic() < deadline:
+        pub.publish(msg)
+        try:
+            return peer.wait_event(lambda e: e.get("event") == "message" and e["topic"] == topic,
+                                   scenarios.ATTEMPT, f"message on {topic}")
+        except AssertionError:
+            continue
+    raise AssertionError(f"no message on {topic}\n{peer.diagnostics()}")
+
+
+def _serving_on(peer: PeerProcess, ros_node: Any, topic: str) -> None:
+    """The connection is open and the bridge still serves it: a new subscription works."""
+    from std_msgs.msg import String
+
+    assert peer.request("is_open") is True
+    pub = ros_node.create_publisher(String, topic + "_alive", 10)
+    peer.request("subscribe", topic=topic + "_alive", timeout_ms=int(DEADLINE * 1000))
+    assert _publish_until_seen(peer, pub, topic + "_alive", String(data="alive"))["msg"] == {
+        "data": "alive"}
+
+
+# -- the handshake -------------------------------------------------------------------------------
+
+
+def test_server_info(fox: PeerProcess) -> None:
+    """The client offering foxglove.websocket.v1 gets it, and a serverInfo with what we do."""
+    assert fox.info["protocol"] == "foxglove.websocket.v1"
+    info = fox.info["serverInfo"]
+    assert {"clientPublish", "parameters", "parametersSubscribe", "services",
+            "connectionGraph"} <= set(info["capabilities"])
+    assert "assets" not in info["capabilities"]
+    assert info["supportedEncodings"] == ["cdr", "json"]
+
+
+def test_channels_have_full_schemas(fox: PeerProcess, ros_node: Any, topic: str) -> None:
+    """An rclpy publisher's topic is advertised as a cdr channel with the ros2msg definition
+    text, its dependencies included."""
+    from sensor_msgs.msg import Image
+
+    ros_node.create_publisher(Image, topic, 10)
+    channel = fox.request("wait_channel", topic=topic, timeout_ms=int(DEADLINE * 1000))
+    assert channel["encoding"] == "cdr"
+    assert channel["schemaEncoding"] == "ros2msg"
+    assert channel["schemaName"] == "sensor_msgs/msg/Image"
+    schema = channel["schema"]
+    assert "uint32 height" in schema
+    # dependencies as the fields name them, the spelling @foxglove/rosmsg matches
+    assert "MSG: std_msgs/Header" in schema and "MSG: builtin_interfaces/Time" in schema
+
+
+def test_channel_goes_with_its_topic(fox: PeerProcess, ros_node: Any, topic: str) -> None:
+    """When the last publisher of a topic goes, the client is told the channel went."""
+    from std_msgs.msg import String
+
+    pub = ros_node.create_publisher(String, topic, 10)
+    channel = fox.request("wait_channel", topic=topic, timeout_ms=int(DEADLINE * 1000))
+    ros_node.destroy_publisher(pub)
+    fox.wait_event(lambda e: e.get("event") == "unadvertise"
+                   and channel["id"] in e["channelIds"], DEADLINE, "unadvertise")
+
+
+# -- subscribing ---------------------------------------------------------------------------------
+
+
+def test_subscribe_image(fox: PeerProcess, ros_node: Any, topic: str) -> None:
+    """A 640x480 rgb8 Image arrives as CDR that the client decodes to what rclpy published."""
+    from sensor_msgs.msg import Image
+
+    pub = ros_node.create_publisher(Image, topic, 10)
+    fox.request("subscribe", topic=topic, timeout_ms=int(DEADLINE * 1000))
+    img = Image(height=480, width=640, encoding="rgb8", step=640 * 3, is_bigendian=0)
+    img.header.frame_id = "camera"
+    img.header.stamp.sec, img.header.stamp.nanosec = 12, 345
+    pixels = bytes(i * 7 % 251 for i in range(640 * 480 * 3))
+    img.data = pixels
+    event = _publish_until_seen(fox, pub, topic, img)
+    msg = event["msg"]
+    assert msg["header"] == {"stamp": {"sec": 12, "nanosec": 345}, "frame_id": "camera"}
+    assert (msg["height"], msg["width"], msg["encoding"], msg["step"]) == (480, 640, "rgb8",
+                                                                            1920)
+    assert msg["data"]["$typed"] == "Uint8Array"
+    assert bytes(msg["data"]["values"]) == pixels
+    stamp = int(event["timestamp"]["$bigint"])  # the receive time, in ns
+    assert abs(stamp - time.time_ns()) < 60 * 10**9
+
+
+def test_subscribe_imu(fox: PeerProcess, ros_node: Any, topic: str) -> None:
+    """An Imu (nested messages, float64[9] covariances) decodes to rclpy's numbers."""
+    from sensor_msgs.msg import Imu
+
+    pub = ros_node.create_publisher(Imu, topic, 10)
+    fox.request("subscribe", topic=topic, timeout_ms=int(DEADLINE * 1000))
+    imu = Imu()
+    imu.header.frame_id = "imu_link"
+    imu.orientation.x, imu.orientation.w = 0.25, 0.75
+    imu.angular_velocity.z = -1.5
+    imu.linear_acceleration.z = 9.81
+    imu.orientation_covariance = [float(i) / 8 for i in range(9)]
+    msg = _publish_until_seen(fox, pub, topic, imu)["msg"]
+    assert msg["header"]["frame_id"] == "imu_link"
+    assert msg["orientation"] == {"x": 0.25, "y": 0.0, "z": 0.0, "w": 0.75}
+    assert msg["angular_velocity"]["z"] == -1.5
+    assert msg["linear_acceleration"]["z"] == 9.81
+    assert msg["orientation_covariance"]["values"] == [float(i) / 8 for i in range(9)]
+
+
+def test_unsubscribe(fox: PeerProcess, ros_node: Any, topic: str) -> None:
+    """After unsubscribe the bridge drops its ROS subscription of the topic."""
+    from std_msgs.msg import String
+
+    pub = ros_node.create_publisher(String, topic, 10)
+    fox.request("subscribe", topic=topic, timeout_ms=int(DEADLINE * 1000))
+    _publish_until_seen(fox, pub, topic, String(data="x"))
+    fox.request("unsubscribe", topic=topic)
+    wait_until(lambda: pub.get_subscription_count() == 0, DEADLINE, "the bridge to unsubscribe")
+
+
+# -- publishing, services, parameters ----------------------------------------------------------
+
+
+def test_client_publishes(fox: PeerProcess, ros_node: Any, topic: str) -> None:
+    """clientAdvertise and binary CDR message data reach an rclpy subscriber."""
+    from geometry_msgs.msg import Twist
+
+    inbox: queue.Queue[Any] = queue.Queue()
+    ros_node.create_subscription(Twist, topic, inbox.put, 10)
+    fox.request("advertise", topic=topic, schemaName="geometry_msgs/msg/Twist",
+                schema=_schema("geometry_msgs/msg/Twist"))
+    sent = {"linear": {"x": 1.5, "y": 0, "z": 0}, "angular": {"x": 0, "y": 0, "z": -0.5}}
+    deadline = time.monotonic() + DEADLINE
+    got = None
+    while got is None and time.monotonic() < deadline:
+        fox.request("publish", topic=topic, msg=sent)
+        try:
+            got = inbox.get(timeout=scenarios.ATTEMPT)
+        except queue.Empty:
+            assert not _errors(fox), _errors(fox)
+    assert got is not None, fox.diagnostics()
+    assert (got.linear.x, got.angular.z) == (1.5, -0.5)
+    fox.request("unadvertise", topic=topic)
+
+
+def test_call_service(fox: PeerProcess, ros_node: Any, topic: str) -> None:
+    """An rclpy SetBool service is advertised, and a CDR call gets its CDR answer."""
+    from std_srvs.srv import SetBool
+
+    def answer(request: Any, response: Any) -> Any:
+        response.success = request.data
+        response.message = f"rclpy got {request.data}"
+        return response
+
+    ros_node.create_service(SetBool, topic, answer)
+    service = fox.request("service", service=topic, timeout_ms=int(DEADLINE * 1000))
+    assert service["type"] == "std_srvs/srv/SetBool"
+    assert service["request"]["schemaName"] == "std_srvs/srv/SetBool_Request"
+    reply = fox.request("call_service", service=topic, request={"data": True},
+                        timeout=DEADLINE)
+    assert reply == {"encoding": "cdr", "value": {"success": True, "message": "rclpy got True"}}
+
+
+def test_parameters(fox: PeerProcess, ros_runtime: Any, topic: str) -> None:
+    """A node's parameter is read, set (the node sees it) and followed (/node.param names)."""
+    name = "fox_params" + topic.replace("/", "_")[:30]
+    node = ros_runtime.rclpy.create_node(name, context=ros_runtime.context)
+    from rclpy.executors import SingleThreadedExecutor
+
+    executor = SingleThreadedExecutor(context=ros_runtime.context)
+    executor.add_node(node)
+    import threading
+
+    stop = threading.Event()
+
+    def spin() -> None:
+        while not stop.is_set():
+            executor.spin_once(0.05)
+
+    thread = threading.Thread(target=spin, daemon=True)
+    thread.start()
+    try:
+        node.declare_parameter("gain", 1.5)
+        full = f"/{name}.gain"
+        fox.request("subscribe_parameters", names=[full])
+        deadline = time.monotonic() + DEADLINE
+        values: list[Any] = []
+        while not values and time.monotonic() < deadline:  # until the bridge sees the node
+            fox.request("get_parameters", names=[full], id="get1")
+            event = fox.wait_event(lambda e: e.get("event") == "parameterValues"
+                                   and e["id"] == "get1", DEADLINE, "parameterValues")
+            values = event["parameters"]
+            fox.begin_test()
+        assert values == [{"name": full, "value": 1.5, "type": "float64"}]
+        fox.request("set_parameters", parameters=[{"name": full, "value": 3, "type": "float64"}],
+                    id="set1")
+        event = fox.wait_event(lambda e: e.get("event") == "parameterValues"
+                               and e["id"] == "set1", DEADLINE, "the set's answer")
+        assert event["parameters"] == [{"name": full, "value": 3.0, "type": "float64"}]
+        assert node.get_parameter("gain").value == 3.0
+        fox.wait_event(lambda e: e.get("event") == "parameterValues" and e["id"] is None
+                       and e["parameters"][0]["name"] == full, DEADLINE, "the update")
+    finally:
+        stop.set()
+        thread.join(5)
+        node.destroy_node()
+
+
+def test_connection_graph(fox: PeerProcess, ros_node: Any, topic: str) -> None:
+    """A connection graph update names the rclpy node publishing a topic."""
+    from std_msgs.msg import String
+
+    ros_node.create_publisher(String, topic, 10)
+    fox.request("wait_channel", topic=topic, timeout_ms=int(DEADLINE * 1000))
+    fox.request("subscribe_graph")
+    me = f"/{ros_node.get_name()}"
+    fox.wait_event(lambda e: e.get("event") == "connectionGraphUpdate" and any(
+        t["name"] == topic and me in t["publisherIds"]
+        for t in e["update"]["publishedTopics"]), DEADLINE, "a graph update with the topic")
+
+
+def test_rosbridge_and_foxglove_at_once(fox: PeerProcess, peer_pool: PeerPool, ros_node: Any,
+                                        topic: str, bridge: BridgeProcess) -> None:
+    """A roslib client and a Foxglove client on one bridge get the same topic each their way,
+    and the status page lists each with its protocol."""
+    import json
+    import urllib.request
+
+    from std_msgs.msg import String
+
+    roslib = peer_pool.get("roslib")
+    pub = ros_node.create_publisher(String, topic, 10)
+    roslib.request("subscribe", topic=topic, type="std_msgs/msg/String")
+    fox.request("subscribe", topic=topic, timeout_ms=int(DEADLINE * 1000))
+    deadline = time.monotonic() + DEADLINE
+    while time.monotonic() < deadline and not (
+            _messages(fox, topic) and [e for e in roslib.new_events()
+                                       if e.get("event") == "message"]):
+        pub.publish(String(data="both"))
+        time.sleep(scenarios.ATTEMPT)  # publish again until both were matched (DDS)
+    assert _messages(fox, topic)[0]["msg"] == {"data": "both"}
+    assert next(e for e in roslib.new_events() if e.get("event") == "message")["msg"] == {
+        "data": "both"}
+    with urllib.request.urlopen(bridge.url.replace("ws:", "http:") + "/status.json",
+                                timeout=DEADLINE) as response:
+        status = json.load(response)
+    protocols = {c["protocol"] for c in status["clients"]}
+    assert {"rosbridge", "foxglove"} <= protocols
+
+
+# -- bad input -----------------------------------------------------------------------------------
+
+
+def test_bad_frames_get_status_errors(fox: PeerProcess, ros_node: Any, topic: str) -> None:
+    """Malformed JSON, an unknown op, bad binary opcodes, unknown channel, subscription and
+    service ids: each answered with a status error naming it; the connection serves on."""
+    cases: list[tuple[str, dict[str, Any], str]] = [
+        ("send_text", {"text": "{not json"}, "not JSON"),
+        ("send_text", {"text": '{"op": "frobnicate"}'}, "unknown op 'frobnicate'"),
+        ("send_text", {"text": '{"op": "subscribe", "subscriptions": [{"id": "x"}]}'},
+         "subscribe.subscriptions[0].id"),
+        ("send_binary", {"hex": "07aabb"}, "unknown binary opcode 0x07"),
+        ("send_binary", {"hex": "01aa"}, "too short"),
+        ("send_text", {"text": '{"op": "subscribe", "subscriptions": [{"id": 9, '
+                               '"channelId": 999999}]}'}, "no channel 999999"),
+        ("send_text", {"text": '{"op": "unsubscribe", "subscriptionIds": [424242]}'},
+         "no subscription 424242"),
+        ("send_binary", {"hex": "01" + "39300000" + "00010000"}, "no client channel 12345"),
+    ]
+    for cmd, params, part in cases:
+        fox.request(cmd, timeout=DEADLINE, **params)
+        _wait_error(fox, part)
+    with pytest.raises(Exception, match="no service 777"):
+        fox.request("call_service_id", service_id=777, hex="00010000")
+    _serving_on(fox, ros_node, topic)
+
+
+def test_bad_cdr_is_not_published(fox: PeerProcess, ros_node: Any, topic: str) -> None:
+    """Truncated CDR on a client channel is refused with a status error; rclpy gets nothing."""
+    from std_msgs.msg import String
+
+    inbox: queue.Queue[Any] = queue.Queue()
+    ros_node.create_subscription(String, topic, inbox.put, 10)
+    fox.request("advertise", topic=topic, schemaName="std_msgs/msg/String",
+                schema=_schema("std_msgs/msg/String"))
+    fox.request("publish_bytes", topic=topic, hex="00010000ff000000")  # a 255-byte string: cut
+    _wait_error(fox, f"message data on {topic}")
+    deadline = time.monotonic() + DEADLINE
+    while inbox.empty() and time.monotonic() < deadline:  # good ones go through (once matched)
+        fox.request("publish", topic=topic, msg={"data": "good"})
+        time.sleep(scenarios.ATTEMPT)
+    assert {m.data for m in list(inbox.queue)} == {"good"}
+
+
+@pytest.fixture(scope="module")
+def secured(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[BridgeProcess, Any]]:
+    """A bridge with an auth file and a small message size limit."""
+    tmp: Path = tmp_path_factory.mktemp("foxglove_auth")
+    auth = make_auth_file(tmp)
+    proc = BridgeProcess(args=["--auth-file", str(auth.path), "--max-message-size", "65536"])
+    proc.start()
+    yield proc, auth
+    proc.stop()
+
+
+def test_token_in_query_string(secured: tuple[BridgeProcess, Any], ros_node: Any,
+                               topic: str) -> None:
+    """A token in ?token= opens a Foxglove session; without one the bridge closes it (1008)."""
+    bridge, auth = secured
+    with pytest.raises(AssertionError, match=r"could not connect.*1008"):
+        foxglove_peer(bridge.url, bridge)
+    peer = foxglove_peer(f"{bridge.url}/?token={auth.tokens['tester']}", bridge)
+    try:
+        assert peer.info["protocol"] == "foxglove.websocket.v1"
+    finally:
+        peer.close()
+    assert auth.tokens["tester"] not in "\n".join(bridge.lines)
+
+
+def test_forbidden_publish_and_oversize(secured: tuple[BridgeProcess, Any], ros_node: Any,
+                                        topic: str) -> None:
+    """A publish the role forbids and a client message over the size limit each get a status
+    error; nothing reaches ROS; the client serves on."""
+    from std_msgs.msg import String
+
+    bridge, auth = secured
+    peer = foxglove_peer(f"{bridge.url}/?token={auth.tokens['tester']}", bridge)
+    try:
+        inbox: queue.Queue[Any] = queue.Queue()
+        ros_node.create_subscription(String, "/op/forbidden", inbox.put, 10)
+        peer.request("advertise", topic="/op/forbidden", schemaName="std_msgs/msg/String",
+                     schema=_schema("std_msgs/msg/String"))
+        _wait_error(peer, "forbidden: role tester may not publish on /op/forbidden")
+        peer.request("publish_bytes", channel=1, hex="00010000030000006869000000")
+        _wait_error(peer, "no client channel")
+        peer.request("advertise", topic="/op" + topic, schemaName="std_msgs/msg/String",
+                     schema=_schema("std_msgs/msg/String"))
+        peer.request("send_big", channel=2, size=100_000)
+        _wait_error(peer, "over this bridge's limit of 65536 bytes")
+        assert inbox.empty()
+        _serving_on(peer, ros_node, "/op" + topic)
+    finally:
+        peer.close()
