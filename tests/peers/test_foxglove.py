@@ -396,3 +396,109 @@ def test_forbidden_publish_and_oversize(secured: tuple[BridgeProcess, Any], ros_
         _serving_on(peer, ros_node, "/op" + topic)
     finally:
         peer.close()
+
+
+# -- slow clients, time ----------------------------------------------------------------------------
+
+
+def _status(bridge: BridgeProcess) -> Any:
+    import json
+    import urllib.request
+
+    with urllib.request.urlopen(bridge.url.replace("ws:", "http:") + "/status.json",
+                                timeout=DEADLINE) as response:
+        return json.load(response)
+
+
+def test_slow_client_gets_the_newest_frames(bridge: BridgeProcess, ros_node: Any,
+                                            topic: str) -> None:
+    """A Foxglove client that stops reading while 60 camera frames (640x480 rgb8) go through
+    the bridge is sent the newest ones when it reads again, not a backlog of all 60: the
+    older ones are dropped and it is told so."""
+    import json
+
+    from sensor_msgs.msg import Image
+    from websockets.sync.client import connect
+
+    from msgs import cdr
+    from msgs.runtime import lookup_message
+
+    image_cls = lookup_message("sensor_msgs/msg/Image")
+    pub = ros_node.create_publisher(Image, topic, 10)
+    img = Image(height=480, width=640, encoding="rgb8", step=1920, data=bytes(640 * 480 * 3))
+    # max_queue=1: the client library itself holds at most one frame it was not asked for
+    with connect(bridge.url, subprotocols=["foxglove.websocket.v1"], max_size=None, max_queue=1,
+                 open_timeout=DEADLINE) as ws:
+        channel = None
+        while channel is None:
+            frame = ws.recv(DEADLINE)
+            if isinstance(frame, str) and json.loads(frame)["op"] == "advertise":
+                channel = next((c for c in json.loads(frame)["channels"]
+                                if c["topic"] == topic), None)
+        ws.send(json.dumps({"op": "subscribe", "subscriptions": [{"id": 7,
+                                                                 "channelId": channel["id"]}]}))
+        deadline = time.monotonic() + DEADLINE
+        while True:  # one frame through, so the bridge's subscription is matched
+            img.header.frame_id = "first"
+            pub.publish(img)
+            try:
+                frame = ws.recv(scenarios.ATTEMPT)
+            except TimeoutError:
+                assert time.monotonic() < deadline, "no first frame"
+                continue
+            if isinstance(frame, bytes):
+                break
+        while True:  # drain what else the first publishes sent
+            try:
+                ws.recv(1.0)
+            except TimeoutError:
+                break
+        received = _status(bridge)["topics"][topic]["ros_received"]
+        for i in range(60):  # the client reads nothing meanwhile
+            img.header.frame_id = str(i)
+            pub.publish(img)
+            wait_until(lambda n=received + i + 1: _status(bridge)["topics"][topic][
+                "ros_received"] >= n, DEADLINE, f"the bridge to receive frame {i}")
+        numbers: list[int] = []
+        warnings: list[str] = []
+        while not numbers or numbers[-1] != 59:
+            frame = ws.recv(DEADLINE)
+            if isinstance(frame, bytes):
+                assert frame[0] == 1 and int.from_bytes(frame[1:5], "little") == 7
+                numbers.append(int(cdr.decode(frame[13:], image_cls)["header"]["frame_id"]))
+            elif json.loads(frame)["op"] == "status":
+                warnings.append(json.loads(frame)["message"])
+    assert numbers == sorted(numbers)
+    assert len(numbers) < 45, f"a backlog was sent: {numbers}"
+    assert any(f"on {topic}" in w and "dropped" in w for w in warnings), warnings
+
+
+def test_time_from_clock(bridge: BridgeProcess, peer_pool: PeerPool, ros_node: Any,
+                         topic: str) -> None:
+    """With /clock published, a new Foxglove client is offered 'time' and sent its value."""
+    from rosgraph_msgs.msg import Clock
+
+    clock = ros_node.create_publisher(Clock, "/clock", 10)
+    try:
+        shared = peer_pool.get("foxglove")
+        shared.request("wait_channel", topic="/clock", timeout_ms=int(DEADLINE * 1000))
+        peer = foxglove_peer(bridge.url, bridge)
+        try:
+            assert "time" in peer.info["serverInfo"]["capabilities"]
+            msg = Clock()
+            msg.clock.sec, msg.clock.nanosec = 1234, 5678
+            deadline = time.monotonic() + DEADLINE
+            event = None
+            while event is None and time.monotonic() < deadline:
+                clock.publish(msg)
+                try:
+                    event = peer.wait_event(lambda e: e.get("event") == "time",
+                                            scenarios.ATTEMPT, "time")
+                except AssertionError:
+                    continue
+            assert event is not None, peer.diagnostics()
+            assert event["timestamp"] == {"$bigint": str(1234 * 10**9 + 5678)}
+        finally:
+            peer.close()
+    finally:
+        ros_node.destroy_publisher(clock)
