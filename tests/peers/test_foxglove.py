@@ -9,6 +9,7 @@ bytes all agree.
 
 from __future__ import annotations
 
+import functools
 import queue
 import time
 from collections.abc import Iterator
@@ -410,6 +411,11 @@ def _status(bridge: BridgeProcess) -> Any:
         return json.load(response)
 
 
+def _bridge_received(bridge: BridgeProcess, topic: str, count: int) -> bool:
+    """Whether the bridge has received ``count`` messages of ``topic`` from ROS."""
+    return bool(_status(bridge)["topics"][topic]["ros_received"] >= count)
+
+
 def test_slow_client_gets_the_newest_frames(bridge: BridgeProcess, ros_node: Any,
                                             topic: str) -> None:
     """A Foxglove client that stops reading while 60 camera frames (640x480 rgb8) go through
@@ -419,6 +425,7 @@ def test_slow_client_gets_the_newest_frames(bridge: BridgeProcess, ros_node: Any
 
     from sensor_msgs.msg import Image
     from websockets.sync.client import connect
+    from websockets.typing import Subprotocol
 
     from msgs import cdr
     from msgs.runtime import lookup_message
@@ -427,8 +434,8 @@ def test_slow_client_gets_the_newest_frames(bridge: BridgeProcess, ros_node: Any
     pub = ros_node.create_publisher(Image, topic, 10)
     img = Image(height=480, width=640, encoding="rgb8", step=1920, data=bytes(640 * 480 * 3))
     # max_queue=1: the client library itself holds at most one frame it was not asked for
-    with connect(bridge.url, subprotocols=["foxglove.websocket.v1"], max_size=None, max_queue=1,
-                 open_timeout=DEADLINE) as ws:
+    with connect(bridge.url, subprotocols=[Subprotocol("foxglove.websocket.v1")], max_size=None,
+                 max_queue=1, open_timeout=DEADLINE) as ws:
         channel = None
         while channel is None:
             frame = ws.recv(DEADLINE)
@@ -457,8 +464,8 @@ def test_slow_client_gets_the_newest_frames(bridge: BridgeProcess, ros_node: Any
         for i in range(60):  # the client reads nothing meanwhile
             img.header.frame_id = str(i)
             pub.publish(img)
-            wait_until(lambda n=received + i + 1: _status(bridge)["topics"][topic][
-                "ros_received"] >= n, DEADLINE, f"the bridge to receive frame {i}")
+            wait_until(functools.partial(_bridge_received, bridge, topic, received + i + 1),
+                       DEADLINE, f"the bridge to receive frame {i}")
         numbers: list[int] = []
         warnings: list[str] = []
         while not numbers or numbers[-1] != 59:
@@ -476,7 +483,7 @@ def test_slow_client_gets_the_newest_frames(bridge: BridgeProcess, ros_node: Any
 def test_time_from_clock(bridge: BridgeProcess, peer_pool: PeerPool, ros_node: Any,
                          topic: str) -> None:
     """With /clock published, a new Foxglove client is offered 'time' and sent its value."""
-    from rosgraph_msgs.msg import Clock
+    from rosgraph_msgs.msg import Clock  # type: ignore[import-untyped]
 
     clock = ros_node.create_publisher(Clock, "/clock", 10)
     try:
