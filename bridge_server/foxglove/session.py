@@ -4,14 +4,16 @@ A :class:`FoxgloveSession` is what :class:`~bridge_server.session.session.Sessio
 for rosbridge clients, for clients that offered ``foxglove.websocket.v1`` in the
 handshake, on the same port. It goes through the same parts: the bridge's
 :class:`~bridge_server.graph.Graph` (never rclpy), an
-:class:`~bridge_server.session.outbox.Outbox` (a bounded queue per subscription that
-drops the oldest, so a slow client gets the newest frames, not a backlog), the
+:class:`~bridge_server.session.outbox.Outbox` (a queue per subscription bounded by
+:data:`QUEUE_BYTES` that drops the oldest, so a slow client gets the newest frames, not a
+backlog), the
 per-connection limits, and the :class:`~bridge_server.security.Gate` (token from the
 handshake, op rate, and the role's say on each name). Every refusal or bad frame is
 answered with a ``status`` error naming what was wrong; the connection stays up.
 
 Messages go out as the ROS side received them: the CDR bytes of each message behind
-the 13-byte message-data header, no decoding. What a client publishes or sends as a
+the 13-byte message-data header, no decoding, and no copy per client (the header and the
+shared payload are joined only into the socket write). What a client publishes or sends as a
 service request is decoded from CDR (or JSON) with the pure-Python classes of
 :mod:`msgs` (:func:`~bridge_server.foxglove.hub.message_class`), checked by the same
 converter as rosbridge's publishes, and only then reaches ROS.
@@ -53,12 +55,13 @@ if TYPE_CHECKING:
     from ..server import Bridge
     from .hub import Hub, ServiceEntry
 
-__all__ = ["ENCODINGS", "OVERSIZE_GRACE", "QUEUE_LENGTH", "FoxgloveSession"]
+__all__ = ["ENCODINGS", "OVERSIZE_GRACE", "QUEUE_BYTES", "FoxgloveSession"]
 
 log = logging.getLogger("bridge_server.foxglove")
 
-QUEUE_LENGTH = 10
-"""Messages a subscription holds for a slow client; the oldest goes first when full."""
+QUEUE_BYTES = 4 * 1024 * 1024
+"""Bytes of messages a subscription holds for a slow client (at most the bridge's default
+queue length of them); when full, the oldest goes first."""
 
 ENCODINGS = ("cdr", "json")
 """Encodings a client may publish and call services in."""
@@ -121,6 +124,7 @@ class FoxgloveSession:
         self.subscriptions: dict[int, tuple[Subscription, wire.Channel]] = {}
         self.client_channels: dict[int, _ClientChannel] = {}
         self._publisher_refs: dict[str, int] = {}
+        self._listeners: dict[Subscription, Callable[[RosMessage], None]] = {}
         self.parameter_names: set[str] | None = None  # None: not following; empty: all
         self.wants_graph = False
         self.uses_time = False
@@ -316,18 +320,25 @@ class FoxgloveSession:
         topic = channel.topic
         cls = self.graph.resolve_message(channel.schema_name)
         sub = Subscription(self.outbox, topic, topic)
-        sub.maxlen = min(QUEUE_LENGTH, self.limits.max_queue_length or QUEUE_LENGTH)
         header = wire.message_data_header
         hub = self.hub
+        cap = min(self.config.default_queue_length, self.limits.max_queue_length or 1 << 30)
 
-        def frame(inc: RosMessage) -> bytes:
+        def frame(inc: RosMessage) -> tuple[bytes, bytes]:
             stamp = hub.clock_ns if self.uses_time and hub.clock_ns is not None else inc.stamp_ns
-            return header(sub_id, stamp) + inc.data
+            return header(sub_id, stamp), inc.data  # the payload is not copied per client
+
+        def on_message(inc: RosMessage) -> None:
+            # newest wins within QUEUE_BYTES: 4 camera frames, or the default count of small ones
+            sub.maxlen = max(1, min(cap, QUEUE_BYTES // (len(inc.data) + 1)))
+            sub.on_message(inc)
 
         sub.encode = frame
+        self._listeners[sub] = on_message
         try:
-            sub.shared = self.graph.subscribe(topic, cls, sub.on_message)
+            sub.shared = self.graph.subscribe(topic, cls, on_message)
         except ValueError as exc:
+            del self._listeners[sub]
             self.error(f"subscribe: {exc}")
             return
         self.subscriptions[sub_id] = (sub, channel)
@@ -352,7 +363,7 @@ class FoxgloveSession:
         metrics.retire_subscription(sub.topic, sub.sent, sub.sent_bytes, sub.dropped_total)
         if sub.shared is not None:
             shared, sub.shared = sub.shared, None
-            self.graph.unsubscribe(shared, sub.on_message)
+            self.graph.unsubscribe(shared, self._listeners.pop(sub))
             if self.graph.subscriptions.get(shared.topic) is not shared:
                 metrics.retire_ros_subscription(shared.topic, shared.received)
 

@@ -40,7 +40,7 @@ import logging
 import struct
 import time
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING
 
 from websockets.exceptions import ConnectionClosed
@@ -60,6 +60,7 @@ __all__ = [
     "BATCH_BYTES",
     "BATCH_FRAMES",
     "DEFAULT_QUEUE_LENGTH",
+    "Frame",
     "Outbox",
     "Subscription",
     "frame_bytes",
@@ -101,7 +102,7 @@ class Subscription:
         self.last_report = -1e9
         self.report_timer: asyncio.TimerHandle | None = None
         self.active = True
-        self.encode: Callable[[Incoming], str | bytes] | None = None  # a frame of its own
+        self.encode: Callable[[Incoming], Frame] | None = None  # a frame of its own
 
     def configure(self, default_len: int, max_len: int = 0, min_fragment: int = 0) -> None:
         """Merge the options of every id: least throttle, largest queue, least fragment size
@@ -151,9 +152,15 @@ class Subscription:
             self.timer = None
 
 
-def frame_bytes(frames: list[str | bytes]) -> bytes:
+Frame = str | bytes | tuple[bytes, bytes]
+"""One websocket frame to write: text (``str``), binary (``bytes``), or binary in two parts
+(a header and a payload shared with other clients, joined only into the socket write)."""
+
+
+def frame_bytes(frames: Sequence[Frame]) -> bytes:
     """Unmasked, unfragmented websocket frames (RFC 6455 5.2, as a server sends them): text
-    for ``str``, binary for ``bytes``, one after the other.
+    for ``str``, binary for ``bytes`` (or a pair of ``bytes``: one frame of both), one after
+    the other.
 
     What websockets' ``send_text``/``send_binary`` would write for the same frames on a
     connection without extensions (``tests/bridge/test_outbox.py`` compares them), in a
@@ -166,6 +173,17 @@ def frame_bytes(frames: list[str | bytes]) -> bytes:
         if isinstance(frame, str):
             data = frame.encode()
             head = 0x81  # FIN, text
+        elif isinstance(frame, tuple):  # a binary frame in two parts, not joined before
+            size = len(frame[0]) + len(frame[1])
+            if size < 126:
+                add(bytes((0x82, size)))
+            elif size < 0x10000:
+                add(_HEAD16(0x82, 126, size))
+            else:
+                add(_HEAD64(0x82, 127, size))
+            add(frame[0])
+            add(frame[1])
+            continue
         else:
             data = frame
             head = 0x82  # FIN, binary
@@ -182,6 +200,11 @@ def frame_bytes(frames: list[str | bytes]) -> bytes:
 
 _HEAD16 = struct.Struct("!BBH").pack
 _HEAD64 = struct.Struct("!BBQ").pack
+
+
+def _joined(frame: Frame) -> str | bytes:
+    """The frame as one ``str`` or ``bytes`` (a two-part frame joined)."""
+    return b"".join(frame) if isinstance(frame, tuple) else frame
 
 
 class Outbox:
@@ -354,29 +377,29 @@ class Outbox:
                         self._write(ws, frames)
                 else:  # pragma: no cover - websockets without send_context
                     for frame in frames:
-                        await ws.send(frame)
+                        await ws.send(_joined(frame))
         except ConnectionClosed:
             pass
         except Exception:
             log.exception("session %d: the writer failed; closing the connection", self.sid)
             await ws.close(1011, "internal error")
 
-    def _take(self) -> list[str | bytes]:
+    def _take(self) -> list[Frame]:
         """The frames to write next (:meth:`_collect`), kept in a resumable session until the
         client confirms them, after a ``session_ack`` to send first."""
         frames = self._collect()
         sent = self.sent
         if sent is not None:  # kept until the client confirms them
             for frame in frames:
-                sent.add(frame)
+                sent.add(_joined(frame))
             if self.ack is not None:
                 frames.insert(0, self.ack)
                 self.ack = None
         return frames
 
-    def _collect(self) -> list[str | bytes]:
+    def _collect(self) -> list[Frame]:
         """Take the frames ready to go: replies first, then messages in arrival order."""
-        frames: list[str | bytes] = []
+        frames: list[Frame] = []
         size = 0
         control = self.control
         order = self.order
@@ -396,15 +419,15 @@ class Outbox:
                 log.exception("session %d: cannot encode a message of %s", self.sid, sub.topic)
                 continue
             before = size
-            for frame in encoded:
-                frames.append(frame)
-                size += len(frame)
+            for piece in encoded:
+                frames.append(piece)
+                size += len(piece) if not isinstance(piece, tuple) else sum(map(len, piece))
             sub.sent += 1
             sub.sent_bytes += size - before
         return frames
 
     @staticmethod
-    def _write(ws: ServerConnection, frames: list[str | bytes]) -> None:
+    def _write(ws: ServerConnection, frames: list[Frame]) -> None:
         """Write several frames with one socket write (one system call, not one per frame).
 
         The writer calls it inside websockets' own send context, so its state checks,
@@ -429,7 +452,7 @@ class Outbox:
             if isinstance(frame, str):
                 protocol.send_text(frame.encode())
             else:
-                protocol.send_binary(frame)
+                protocol.send_binary(frame if isinstance(frame, bytes) else b"".join(frame))
         chunks = protocol.data_to_send()
         if all(chunks):
             ws.transport.write(b"".join(chunks))
@@ -440,7 +463,7 @@ class Outbox:
                 elif ws.transport.can_write_eof():
                     ws.transport.write_eof()
 
-    def _frames(self, sub: Subscription, inc: Incoming) -> list[str | bytes]:
+    def _frames(self, sub: Subscription, inc: Incoming) -> list[Frame]:
         if sub.encode is not None:  # another protocol's framing (bridge_server.foxglove)
             return [sub.encode(inc)]
         comp = sub.compression

@@ -13,6 +13,7 @@ from websockets.asyncio.client import connect
 from websockets.asyncio.server import ServerConnection, serve
 from websockets.frames import Frame, Opcode
 
+from bridge_server.session.outbox import Frame as OutFrame
 from bridge_server.session.outbox import Outbox, Subscription, frame_bytes
 from tests.helpers import async_wait_until
 
@@ -93,3 +94,12 @@ def test_frames_of_every_length_form_are_what_websockets_would_write() -> None:
     for size in (0, 1, 125, 126, 127, 65535, 65536, 70000):
         frames: list[str | bytes] = ["é" * (size // 2) + "x" * (size % 2), b"\x00" * size]
         assert frame_bytes(frames) == _websockets_frames(frames), size
+
+
+def test_two_part_frames_are_one_binary_frame() -> None:
+    """A (header, payload) pair is written as the one binary frame of both, at each length
+    form (the Foxglove path shares the payload among clients instead of joining it)."""
+    for size in (0, 1, 112, 113, 65522, 65523, 70000):
+        head, payload = b"\x01" * 13, bytes(range(256)) * (size // 256) + b"\x07" * (size % 256)
+        pair: list[OutFrame] = [(head, payload), "after"]
+        assert frame_bytes(pair) == _websockets_frames([head + payload, "after"]), size
