@@ -40,6 +40,9 @@ Scenarios (targets; rosbridge_suite's figures in brackets):
 - ``record`` (``bench/bag.py``): ``roslibpy-lite bag record`` in its own process, a
   640x480 camera at 30 Hz plus an IMU at 200 Hz for 60 s: what the file holds against what
   was published, the recorder's CPU and write rate; then the camera alone at rising rates.
+- ``foxglove`` (``bench/foxglove.py``): the Foxglove path against the rosbridge cbor-raw path
+  on one bridge: 640x480 images at the publisher's pace and small messages per second to one
+  client, and one 30 Hz camera to 10 viewers (the bridge's CPU per frame).
 - ``action_ros_server`` / ``action_client_served`` (``bench/actions.py``): goal
   round trip p50/p99 and feedback throughput, to an rclpy action server and to a
   client-served action driven by an rclpy action client.
@@ -73,6 +76,7 @@ from bench.actions import action_client_served, action_ros_server
 from bench.bag import record
 from bench.cloud import pointcloud
 from bench.compare import COMPARE_SCENARIOS, compare
+from bench.foxglove import foxglove
 from bench.harness import (
     CODE_ROOT,
     Bridge,
@@ -101,6 +105,8 @@ TARGETS: dict[str, str] = {
     "tls": "reference only: the cost of wss:// against ws://",
     "links": "reference: a silent link noticed in seconds; frame age flat over a 2 Mbit/s link",
     "pointcloud": "4 MiB PointCloud2 at 10 Hz to 5 clients: all delivered; bridge CPU, RSS",
+    "foxglove": "the Foxglove path at least as fast as rosbridge cbor-raw on the same bridge; "
+                "10 Foxglove viewers of one camera: bridge CPU per frame",
     "record": "camera 30 Hz + IMU 200 Hz for 60 s recorded without a loss; recorder CPU",
     "action_ros_server": "reference: goal round trip p50/p99, feedback msg/s at >= 99 %",
     "action_client_served": "reference: goal round trip p50/p99, feedback msg/s at >= 99 %",
@@ -841,6 +847,7 @@ SCENARIOS: dict[str, Callable[[Ctx], Awaitable[dict[str, Any]]]] = {
     "links": links,
     "record": record,
     "pointcloud": pointcloud,
+    "foxglove": foxglove,
     "action_ros_server": action_ros_server,
     "action_client_served": action_client_served,
 }
@@ -874,6 +881,10 @@ def _headline(name: str, r: dict[str, Any]) -> Any:
     if name == "pointcloud":
         return {c: {"all_delivered": r[c]["all_delivered"], "cpu_pct": r[c]["bridge_cpu_pct"],
                     "rss_peak_mb": r[c]["bridge_rss_mb"]["peak"]} for c in ("cbor", "cbor-raw")}
+    if name == "foxglove":
+        return {part: {path: r[part][path][key] for path in ("foxglove", "cbor-raw")}
+                for part, key in (("image", "frames_per_s"), ("small", "best_rate_99pct"),
+                                  ("viewers", "bridge_cpu_ms_per_published_frame"))}
     if name == "record":
         return {"recorded_pct": {t: v["recorded_pct"] for t, v in r["camera_imu"]["topics"].items()},
                 "recorder_cpu_pct": r["camera_imu"]["recorder_cpu_pct"],
