@@ -10,6 +10,7 @@ bytes all agree.
 from __future__ import annotations
 
 import functools
+import json
 import queue
 import time
 from collections.abc import Iterator
@@ -353,7 +354,8 @@ def secured(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[BridgePr
     """A bridge with an auth file and a small message size limit."""
     tmp: Path = tmp_path_factory.mktemp("foxglove_auth")
     auth = make_auth_file(tmp)
-    proc = BridgeProcess(args=["--auth-file", str(auth.path), "--max-message-size", "65536"])
+    proc = BridgeProcess(args=["--auth-file", str(auth.path), "--max-message-size", "65536",
+                               "--max-publishers", "2"])
     proc.start()
     yield proc, auth
     proc.stop()
@@ -399,11 +401,80 @@ def test_forbidden_publish_and_oversize(secured: tuple[BridgeProcess, Any], ros_
         peer.close()
 
 
+def test_role_decides_what_is_shown(secured: tuple[BridgeProcess, Any], ros_node: Any,
+                                    topic: str) -> None:
+    """A role that may subscribe only to /probe/* is shown only those channels, and its
+    subscribe to another channel's id (learnt elsewhere) is refused as forbidden."""
+    from std_msgs.msg import String
+
+    bridge, auth = secured
+    ros_node.create_publisher(String, "/probe" + topic, 10)
+    ros_node.create_publisher(String, topic, 10)
+    tester = foxglove_peer(f"{bridge.url}/?token={auth.tokens['tester']}", bridge)
+    try:
+        tester.request("wait_channel", topic="/probe" + topic, timeout_ms=int(DEADLINE * 1000))
+        other = tester.request("wait_channel", topic=topic, timeout_ms=int(DEADLINE * 1000))
+    finally:
+        tester.close()
+    prober = foxglove_peer(f"{bridge.url}/?token={auth.tokens['prober']}", bridge)
+    try:
+        first = prober.wait_event(lambda e: e.get("event") == "advertise", DEADLINE, "advertise")
+        shown = {c["topic"] for c in first["channels"]}
+        assert "/probe" + topic in shown and topic not in shown
+        assert all(t.startswith("/probe/") for t in shown), shown
+        prober.request("send_text", text=json.dumps(
+            {"op": "subscribe", "subscriptions": [{"id": 1, "channelId": other["id"]}]}))
+        _wait_error(prober, f"{topic}: forbidden: role prober may not subscribe")
+    finally:
+        prober.close()
+
+
+def test_publisher_limit(secured: tuple[BridgeProcess, Any], topic: str) -> None:
+    """--max-publishers holds for Foxglove client channels: the third topic is refused."""
+    bridge, auth = secured
+    peer = foxglove_peer(f"{bridge.url}/?token={auth.tokens['tester']}", bridge)
+    try:
+        for n in range(3):
+            peer.request("advertise", topic=f"/op{topic}_{n}", schemaName="std_msgs/msg/String",
+                         schema=_schema("std_msgs/msg/String"))
+        _wait_error(peer, f"/op{topic}_2): too many publishers on this connection (at most 2)")
+        assert len([m for m in _errors(peer) if "too many publishers" in m]) == 1
+    finally:
+        peer.close()
+
+
+def test_json_publish_and_bad_service_request(fox: PeerProcess, ros_node: Any,
+                                              topic: str) -> None:
+    """A client channel in json encoding reaches rclpy; a service request whose CDR does not
+    decode gets a serviceCallFailure naming the type, and nothing is called."""
+    from std_msgs.msg import String
+    from std_srvs.srv import SetBool
+
+    inbox: queue.Queue[Any] = queue.Queue()
+    ros_node.create_subscription(String, topic, inbox.put, 10)
+    fox.request("advertise", topic=topic, schemaName="std_msgs/msg/String", encoding="json")
+    deadline = time.monotonic() + DEADLINE
+    while inbox.empty() and time.monotonic() < deadline:
+        fox.request("publish", topic=topic, msg={"data": "as json"})
+        time.sleep(scenarios.ATTEMPT)  # until the bridge's publisher is matched (DDS)
+    assert inbox.get_nowait().data == "as json"
+    calls: list[Any] = []
+
+    def answer(request: Any, response: Any) -> Any:
+        calls.append(request)
+        return response
+
+    ros_node.create_service(SetBool, topic + "_srv", answer)
+    service = fox.request("service", service=topic + "_srv", timeout_ms=int(DEADLINE * 1000))
+    with pytest.raises(Exception, match="does not decode as std_srvs/srv/SetBool"):
+        fox.request("call_service_id", service_id=service["id"], hex="0001")
+    assert calls == []
+
+
 # -- slow clients, time ----------------------------------------------------------------------------
 
 
 def _status(bridge: BridgeProcess) -> Any:
-    import json
     import urllib.request
 
     with urllib.request.urlopen(bridge.url.replace("ws:", "http:") + "/status.json",
