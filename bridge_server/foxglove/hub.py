@@ -309,6 +309,17 @@ class Hub:
             providers.sort()
         return state
 
+    def follow_graph(self, session: FoxgloveSession) -> None:
+        """``session`` follows the connection graph: the followers so far hear what changed
+        since they were told, and ``session`` hears the whole graph as it is now."""
+        if session.wants_graph:
+            return
+        self._refresh_connection_graph(self.graph.topic_names_and_types())
+        session.wants_graph = True
+        whole = self.connection_graph.update_since(GraphState())
+        if whole is not None:
+            session.send_graph_update(whole)
+
     def _refresh_connection_graph(self, topics: list[tuple[str, list[str]]]) -> None:
         new = self.current_graph(topics)
         update = new.update_since(self.connection_graph)

@@ -584,13 +584,7 @@ class FoxgloveSession:
     # -- connection graph, assets ----------------------------------------------------------------
 
     def _follow_graph(self, op: wire.SubscribeConnectionGraph) -> None:
-        if self.wants_graph:
-            return
-        self.wants_graph = True
-        update = self.hub.current_graph().update_since(type(self.hub.connection_graph)())
-        if update is not None:
-            self.send_graph_update(update)
-        self.hub.connection_graph = self.hub.current_graph()
+        self.hub.follow_graph(self)
 
     def _unfollow_graph(self, op: wire.UnsubscribeConnectionGraph) -> None:
         self.wants_graph = False

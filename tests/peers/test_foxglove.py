@@ -471,6 +471,43 @@ def test_json_publish_and_bad_service_request(fox: PeerProcess, ros_node: Any,
     assert calls == []
 
 
+def test_sighup_ends_what_the_role_no_longer_allows(tmp_path: Path, ros_node: Any,
+                                                    topic: str) -> None:
+    """After SIGHUP narrows the role, a Foxglove client's live subscription it no longer
+    allows ends: the client hears why, and the bridge's ROS subscription goes."""
+    import signal
+
+    from std_msgs.msg import String
+
+    from bridge_server.security.auth import hash_token, new_token
+
+    token = new_token()
+    roles = '[roles.watcher]\nsubscribe = ["*"]\n'
+    principal = f'\n[principals.dora]\nrole = "watcher"\ntoken_hash = "{hash_token(token)}"\n'
+    path = tmp_path / "auth.toml"
+    path.write_text(roles + principal)
+    bridge = BridgeProcess(args=["--auth-file", str(path)]).start()
+    try:
+        pub = ros_node.create_publisher(String, "/secret" + topic, 10)
+        peer = foxglove_peer(f"{bridge.url}/?token={token}", bridge)
+        try:
+            peer.request("subscribe", topic="/secret" + topic, timeout_ms=int(DEADLINE * 1000))
+            _publish_until_seen(peer, pub, "/secret" + topic, String(data="before"))
+            path.write_text(roles + 'deny.subscribe = ["/secret*"]\n' + principal)
+            start = len(bridge.lines)
+            assert bridge.proc is not None
+            bridge.proc.send_signal(signal.SIGHUP)
+            line = bridge.wait_for_line(r"reloaded the auth file", start=start)
+            assert "1 grant(s) the new roles no longer allow ended" in line
+            _wait_error(peer, f"/secret{topic} ended: role watcher may not subscribe")
+            wait_until(lambda: pub.get_subscription_count() == 0, DEADLINE,
+                       "the bridge's ROS subscription to end")
+        finally:
+            peer.close()
+    finally:
+        bridge.stop()
+
+
 # -- slow clients, time ----------------------------------------------------------------------------
 
 
