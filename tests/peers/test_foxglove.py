@@ -24,7 +24,7 @@ from msgs import dynamic
 from tests.helpers import BridgeProcess, wait_until
 from tests.peers import scenarios
 from tests.peers.peer import PeerPool, PeerProcess, foxglove_peer
-from tests.security.support import make_auth_file
+from tests.security.support import WatcherAuth, make_auth_file
 
 DEADLINE = scenarios.DEADLINE
 
@@ -475,29 +475,17 @@ def test_sighup_ends_what_the_role_no_longer_allows(tmp_path: Path, ros_node: An
                                                     topic: str) -> None:
     """After SIGHUP narrows the role, a Foxglove client's live subscription it no longer
     allows ends: the client hears why, and the bridge's ROS subscription goes."""
-    import signal
-
     from std_msgs.msg import String
 
-    from bridge_server.security.auth import hash_token, new_token
-
-    token = new_token()
-    roles = '[roles.watcher]\nsubscribe = ["*"]\n'
-    principal = f'\n[principals.dora]\nrole = "watcher"\ntoken_hash = "{hash_token(token)}"\n'
-    path = tmp_path / "auth.toml"
-    path.write_text(roles + principal)
-    bridge = BridgeProcess(args=["--auth-file", str(path)]).start()
+    auth = WatcherAuth(tmp_path)
+    bridge = BridgeProcess(args=["--auth-file", str(auth.path)]).start()
     try:
         pub = ros_node.create_publisher(String, "/secret" + topic, 10)
-        peer = foxglove_peer(f"{bridge.url}/?token={token}", bridge)
+        peer = foxglove_peer(f"{bridge.url}/?token={auth.token}", bridge)
         try:
             peer.request("subscribe", topic="/secret" + topic, timeout_ms=int(DEADLINE * 1000))
             _publish_until_seen(peer, pub, "/secret" + topic, String(data="before"))
-            path.write_text(roles + 'deny.subscribe = ["/secret*"]\n' + principal)
-            start = len(bridge.lines)
-            assert bridge.proc is not None
-            bridge.proc.send_signal(signal.SIGHUP)
-            line = bridge.wait_for_line(r"reloaded the auth file", start=start)
+            line = auth.narrow(bridge)
             assert "1 grant(s) the new roles no longer allow ended" in line
             _wait_error(peer, f"/secret{topic} ended: role watcher may not subscribe")
             wait_until(lambda: pub.get_subscription_count() == 0, DEADLINE,

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import signal
 import ssl
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -149,3 +150,25 @@ async def bridge_entities(ros_node: Any, bridge: BridgeProcess, admin: WireClien
     found: dict[str, set[str]] = await async_wait_until(
         seen, 20, f"the bridge's endpoints on {marker}")
     return found
+
+
+class WatcherAuth:
+    """An auth file with one principal (role ``watcher``: subscribe to anything) that a test
+    narrows (``deny.subscribe`` on ``/secret*``) and then reloads with SIGHUP."""
+
+    ROLES = '[roles.watcher]\nsubscribe = ["*"]\n'
+
+    def __init__(self, directory: Path) -> None:
+        self.token = new_token()
+        self.path = directory / "auth.toml"
+        self._principal = (f'\n[principals.dora]\nrole = "watcher"\n'
+                           f'token_hash = "{hash_token(self.token)}"\n')
+        self.path.write_text(self.ROLES + self._principal)
+
+    def narrow(self, bridge: BridgeProcess) -> str:
+        """Deny ``/secret*`` to the role, send the bridge SIGHUP; its reload log line."""
+        self.path.write_text(self.ROLES + 'deny.subscribe = ["/secret*"]\n' + self._principal)
+        start = len(bridge.lines)
+        assert bridge.proc is not None
+        bridge.proc.send_signal(signal.SIGHUP)
+        return bridge.wait_for_line(r"reloaded the auth file", start=start)

@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import asyncio
 import json
-import signal
 import threading
 from pathlib import Path
 from typing import Any
@@ -19,11 +18,10 @@ from std_msgs.msg import String
 from std_srvs.srv import SetBool
 from websockets.exceptions import ConnectionClosed
 
-from bridge_server.security.auth import hash_token, new_token
 from tests.bridge.support import roundtrip, wait_subscribers
 from tests.helpers import BridgeProcess, async_wait_until, open_wire
 from tests.ops.support import aget
-from tests.security.support import AuthFile, bridge_entities, wire
+from tests.security.support import AuthFile, WatcherAuth, bridge_entities, wire
 
 SETBOOL = "std_srvs/srv/SetBool"
 
@@ -245,12 +243,9 @@ async def test_sighup_narrowing_ends_live_subscriptions(tmp_path: Path, ros_node
     """After SIGHUP narrows a role, a live subscription the role no longer allows ends: the
     client hears why and the bridge's ROS subscription goes away."""
     secret = "/secret" + topic
-    token = new_token()
-    roles = '[roles.watcher]\nsubscribe = ["*"]\n'
-    principal = f'\n[principals.dora]\nrole = "watcher"\ntoken_hash = "{hash_token(token)}"\n'
-    path = tmp_path / "auth.toml"
-    path.write_text(roles + principal)
-    bridge = BridgeProcess(args=["--auth-file", str(path)]).start()
+    auth = WatcherAuth(tmp_path)
+    token = auth.token
+    bridge = BridgeProcess(args=["--auth-file", str(auth.path)]).start()
     try:
         pub = ros_node.create_publisher(String, secret, 10)
         ws = await wire(bridge.url, token)
@@ -259,11 +254,7 @@ async def test_sighup_narrowing_ends_live_subscriptions(tmp_path: Path, ros_node
         await wait_subscribers(pub)
         pub.publish(String(data="before"))
         assert (await ws.expect(op="publish", topic=secret))["msg"]["data"] == "before"
-        path.write_text(roles + 'deny.subscribe = ["/secret*"]\n' + principal)
-        start = len(bridge.lines)
-        assert bridge.proc is not None
-        bridge.proc.send_signal(signal.SIGHUP)
-        line = bridge.wait_for_line(r"reloaded the auth file", start=start)
+        line = auth.narrow(bridge)
         assert "1 grant(s) the new roles no longer allow ended" in line
         status = await ws.expect(op="status", id="s")
         assert status["level"] == "error" and "ended" in status["msg"]
