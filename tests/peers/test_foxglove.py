@@ -218,6 +218,24 @@ def test_call_service(fox: PeerProcess, ros_node: Any, topic: str) -> None:
     assert reply == {"encoding": "cdr", "value": {"success": True, "message": "rclpy got True"}}
 
 
+def test_what_goes_is_withdrawn(fox: PeerProcess, ros_node: Any, topic: str) -> None:
+    """A service whose server goes is unadvertised to the client; a client channel it
+    unadvertises takes the bridge's ROS publisher with it."""
+    from std_srvs.srv import SetBool
+
+    server = ros_node.create_service(SetBool, topic + "_srv", lambda req, res: res)
+    service = fox.request("service", service=topic + "_srv", timeout_ms=int(DEADLINE * 1000))
+    ros_node.destroy_service(server)
+    fox.wait_event(lambda e: e.get("event") == "unadvertiseServices"
+                   and service["id"] in e["serviceIds"], DEADLINE, "unadvertiseServices")
+    fox.request("advertise", topic=topic, schemaName="std_msgs/msg/String",
+                schema=_schema("std_msgs/msg/String"))
+    wait_until(lambda: ros_node.count_publishers(topic) == 1, DEADLINE, "the bridge's publisher")
+    fox.request("unadvertise", topic=topic)
+    wait_until(lambda: ros_node.count_publishers(topic) == 0, DEADLINE,
+               "the bridge's publisher to go")
+
+
 def test_parameters(fox: PeerProcess, ros_runtime: Any, topic: str) -> None:
     """A node's parameter is read, set (the node sees it) and followed (/node.param names)."""
     name = "fox_params" + topic.replace("/", "_")[:30]
