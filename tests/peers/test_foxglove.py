@@ -241,6 +241,7 @@ def test_parameters(fox: PeerProcess, ros_runtime: Any, topic: str) -> None:
     name = "fox_params" + topic.replace("/", "_")[:30]
     node = ros_runtime.rclpy.create_node(name, context=ros_runtime.context)
     from rclpy.executors import SingleThreadedExecutor
+    from rclpy.parameter import Parameter
 
     executor = SingleThreadedExecutor(context=ros_runtime.context)
     executor.add_node(node)
@@ -273,6 +274,12 @@ def test_parameters(fox: PeerProcess, ros_runtime: Any, topic: str) -> None:
                                and e["id"] == "set1", DEADLINE, "the set's answer")
         assert event["parameters"] == [{"name": full, "value": 3.0, "type": "float64"}]
         assert node.get_parameter("gain").value == 3.0
+        node.declare_parameter("blob", Parameter.Type.BYTE_ARRAY)
+        fox.request("set_parameters", parameters=[
+            {"name": f"/{name}.blob", "value": "aGk=", "type": "byte_array"}], id="set2")
+        fox.wait_event(lambda e: e.get("event") == "parameterValues" and e["id"] == "set2",
+                       DEADLINE, "the second set's answer")
+        assert node.get_parameter("blob").value == [b"h", b"i"]
         fox.wait_event(lambda e: e.get("event") == "parameterValues" and e["id"] is None
                        and e["parameters"][0]["name"] == full, DEADLINE, "the update")
     finally:
