@@ -59,9 +59,10 @@ __all__ = ["ENCODINGS", "OVERSIZE_GRACE", "QUEUE_BYTES", "FoxgloveSession"]
 
 log = logging.getLogger("bridge_server.foxglove")
 
-QUEUE_BYTES = 4 * 1024 * 1024
+QUEUE_BYTES = 8 * 1024 * 1024
 """Bytes of messages a subscription holds for a slow client (at most the bridge's default
-queue length of them); when full, the oldest goes first."""
+queue length of them; nine 640x480 rgb8 frames, about foxglove_bridge's 10 MB send buffer
+limit per connection); when full, the oldest goes first."""
 
 ENCODINGS = ("cdr", "json")
 """Encodings a client may publish and call services in."""
@@ -329,7 +330,7 @@ class FoxgloveSession:
             return header(sub_id, stamp), inc.data  # the payload is not copied per client
 
         def on_message(inc: RosMessage) -> None:
-            # newest wins within QUEUE_BYTES: 4 camera frames, or the default count of small ones
+            # newest wins within QUEUE_BYTES: 9 camera frames, or the default count of small ones
             sub.maxlen = max(1, min(cap, QUEUE_BYTES // (len(inc.data) + 1)))
             sub.on_message(inc)
 
