@@ -170,6 +170,7 @@ class FoxgloveSession:
     def _hello(self) -> None:
         """``serverInfo``, then the channels and services the client may use."""
         hub = self.hub
+        hub.attach(self)  # the first client's look at the graph happens now
         capabilities = ["clientPublish", "parameters", "parametersSubscribe", "services",
                         "connectionGraph"]
         if "/clock" in hub.channels:
@@ -181,7 +182,6 @@ class FoxgloveSession:
             metadata={"ROS_DISTRO": "jazzy", "protocols": "rosbridge v2, foxglove.websocket.v1"},
             sessionId=f"{self.bridge.metrics.started:.0f}",
         ))
-        self.hub.attach(self)
         self.graph_changed(list(hub.channels.values()), [], list(hub.services.values()), [])
 
     async def cleanup(self) -> None:

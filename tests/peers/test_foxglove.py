@@ -601,15 +601,27 @@ def test_slow_client_gets_the_newest_frames(bridge: BridgeProcess, ros_node: Any
     assert any(f"on {topic}" in w and "dropped" in w for w in warnings), warnings
 
 
-def test_time_from_clock(bridge: BridgeProcess, peer_pool: PeerPool, ros_node: Any,
-                         topic: str) -> None:
-    """With /clock published, a new Foxglove client is offered 'time' and sent its value."""
+def _graph_topics(bridge: BridgeProcess) -> list[str]:
+    """The topics the bridge's ROS side lists (asked over rosbridge: /rosapi/topics)."""
+    from websockets.sync.client import connect
+
+    with connect(bridge.url, open_timeout=DEADLINE) as ws:
+        ws.send(json.dumps({"op": "call_service", "service": "/rosapi/topics", "id": "t"}))
+        while True:
+            reply = json.loads(ws.recv(DEADLINE))
+            if reply.get("op") == "service_response":
+                return list(reply["values"]["topics"])
+
+
+def test_time_from_clock(make_bridge: Any, ros_node: Any, topic: str) -> None:
+    """With /clock published, the first Foxglove client of a bridge is offered 'time' and
+    sent the clock's value."""
     from rosgraph_msgs.msg import Clock  # type: ignore[import-untyped]
 
     clock = ros_node.create_publisher(Clock, "/clock", 10)
     try:
-        shared = peer_pool.get("foxglove")
-        shared.request("wait_channel", topic="/clock", timeout_ms=int(DEADLINE * 1000))
+        bridge = make_bridge()
+        wait_until(lambda: "/clock" in _graph_topics(bridge), DEADLINE, "/clock in the graph")
         peer = foxglove_peer(bridge.url, bridge)
         try:
             assert "time" in peer.info["serverInfo"]["capabilities"]
