@@ -3,9 +3,16 @@ client frame parses to, and the error text for frames that are wrong."""
 
 from __future__ import annotations
 
+import dataclasses
+import json
 import struct
+import types
+import typing
+from typing import Any
 
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 
 from bridge_server.foxglove import wire
 from bridge_server.foxglove.hub import GraphState, foxglove_schema
@@ -83,3 +90,70 @@ def test_graph_update_is_the_difference() -> None:
         "publishedTopics": [{"name": "/b", "publisherIds": ["/n3"]}], "subscribedTopics": [],
         "advertisedServices": [], "removedTopics": ["/gone"], "removedServices": ["/s"]}
     assert new.update_since(new) is None
+
+
+_JSON = st.recursive(
+    st.none() | st.booleans() | st.integers(-2**40, 2**40) | st.floats(allow_nan=False)
+    | st.text(max_size=20),
+    lambda inner: st.lists(inner, max_size=4) | st.dictionaries(st.text(max_size=12), inner,
+                                                                 max_size=4),
+    max_leaves=12,
+)
+_KEYS = {"subscribe": ["subscriptions"], "unsubscribe": ["subscriptionIds"],
+         "advertise": ["channels"], "unadvertise": ["channelIds"],
+         "getParameters": ["parameterNames", "id"], "setParameters": ["parameters", "id"],
+         "subscribeParameterUpdates": ["parameterNames"], "fetchAsset": ["uri", "requestId"],
+         "nope": []}
+_ITEM = st.dictionaries(st.sampled_from(["id", "channelId", "topic", "encoding", "schemaName",
+                                         "name", "value", "type"]), _JSON, max_size=8)
+
+
+def _frame(op: str) -> st.SearchStrategy[str]:
+    """JSON frames of ``op`` whose fields hold anything: values, lists of values or items."""
+    value = _JSON | st.lists(_JSON | _ITEM, max_size=3)
+    fields = st.fixed_dictionaries({k: value for k in _KEYS[op]})
+    return fields.map(lambda f: json.dumps({"op": op, **f}))
+
+
+@given(st.text(max_size=80) | st.sampled_from(sorted(_KEYS)).flatmap(_frame))
+def test_any_text_is_an_op_or_a_wire_error(text: str) -> None:
+    """Whatever text a client sends parses to an op or raises WireError, nothing else."""
+    try:
+        op = wire.parse_text(text)
+    except wire.WireError as exc:
+        assert str(exc)
+    else:
+        assert _typed(op, type(op)), op
+
+
+def _typed(value: Any, hint: Any) -> bool:
+    """Whether ``value`` is of the type ``hint`` (the wire ops' annotations), all the way in."""
+    origin, args = typing.get_origin(hint), typing.get_args(hint)
+    if hint is Any:
+        return True
+    if isinstance(hint, type) and dataclasses.is_dataclass(hint):
+        hints = typing.get_type_hints(hint)
+        return isinstance(value, hint) and all(
+            _typed(getattr(value, f.name), hints[f.name]) for f in dataclasses.fields(hint))
+    if origin in (types.UnionType, typing.Union):
+        return any(_typed(value, a) for a in args)
+    if origin is tuple:
+        if not isinstance(value, tuple):
+            return False
+        if len(args) == 2 and args[1] is Ellipsis:
+            return all(_typed(v, args[0]) for v in value)
+        return len(value) == len(args) and all(map(_typed, value, args))
+    if hint is int:
+        return isinstance(value, int) and not isinstance(value, bool)
+    return isinstance(value, hint)
+
+
+@given(st.binary(max_size=40))
+def test_any_bytes_are_an_op_or_a_wire_error(data: bytes) -> None:
+    """Whatever binary frame a client sends parses to an op or raises WireError."""
+    try:
+        op = wire.parse_binary(data)
+    except wire.WireError as exc:
+        assert str(exc)
+    else:
+        assert isinstance(op, wire.ClientMessage | wire.ServiceCall)
