@@ -95,7 +95,11 @@ class _Topics:
 
 
 class _Services:
-    served: dict[str, Any] = {}  # a Foxglove client serves nothing
+    """What the status page reads of a client's served services: a Foxglove client serves
+    none."""
+
+    def __init__(self) -> None:
+        self.served: dict[str, Any] = {}
 
 
 class FoxgloveSession:
