@@ -236,28 +236,16 @@ def test_what_goes_is_withdrawn(fox: PeerProcess, ros_node: Any, topic: str) -> 
                "the bridge's publisher to go")
 
 
-def test_parameters(fox: PeerProcess, ros_runtime: Any, topic: str) -> None:
+def test_parameters(fox: PeerProcess, ros_node: Any, topic: str) -> None:
     """A node's parameter is read, set (the node sees it) and followed (/node.param names)."""
-    name = "fox_params" + topic.replace("/", "_")[:30]
-    node = ros_runtime.rclpy.create_node(name, context=ros_runtime.context)
-    from rclpy.executors import SingleThreadedExecutor
     from rclpy.parameter import Parameter
 
-    executor = SingleThreadedExecutor(context=ros_runtime.context)
-    executor.add_node(node)
-    import threading
-
-    stop = threading.Event()
-
-    def spin() -> None:
-        while not stop.is_set():
-            executor.spin_once(0.05)
-
-    thread = threading.Thread(target=spin, daemon=True)
-    thread.start()
+    gain, blob = "gain" + topic.replace("/", "_"), "blob" + topic.replace("/", "_")
+    node = f"/{ros_node.get_name()}"
+    full = f"{node}.{gain}"
+    ros_node.declare_parameter(gain, 1.5)
+    ros_node.declare_parameter(blob, Parameter.Type.BYTE_ARRAY)
     try:
-        node.declare_parameter("gain", 1.5)
-        full = f"/{name}.gain"
         fox.request("subscribe_parameters", names=[full])
         deadline = time.monotonic() + DEADLINE
         values: list[Any] = []
@@ -273,19 +261,17 @@ def test_parameters(fox: PeerProcess, ros_runtime: Any, topic: str) -> None:
         event = fox.wait_event(lambda e: e.get("event") == "parameterValues"
                                and e["id"] == "set1", DEADLINE, "the set's answer")
         assert event["parameters"] == [{"name": full, "value": 3.0, "type": "float64"}]
-        assert node.get_parameter("gain").value == 3.0
-        node.declare_parameter("blob", Parameter.Type.BYTE_ARRAY)
-        fox.request("set_parameters", parameters=[
-            {"name": f"/{name}.blob", "value": "aGk=", "type": "byte_array"}], id="set2")
-        fox.wait_event(lambda e: e.get("event") == "parameterValues" and e["id"] == "set2",
-                       DEADLINE, "the second set's answer")
-        assert node.get_parameter("blob").value == [b"h", b"i"]
+        assert ros_node.get_parameter(gain).value == 3.0
         fox.wait_event(lambda e: e.get("event") == "parameterValues" and e["id"] is None
                        and e["parameters"][0]["name"] == full, DEADLINE, "the update")
+        fox.request("set_parameters", parameters=[
+            {"name": f"{node}.{blob}", "value": "aGk=", "type": "byte_array"}], id="set2")
+        fox.wait_event(lambda e: e.get("event") == "parameterValues" and e["id"] == "set2",
+                       DEADLINE, "the second set's answer")
+        assert ros_node.get_parameter(blob).value == [b"h", b"i"]
     finally:
-        stop.set()
-        thread.join(5)
-        node.destroy_node()
+        ros_node.undeclare_parameter(gain)
+        ros_node.undeclare_parameter(blob)
 
 
 def test_connection_graph(fox: PeerProcess, ros_node: Any, topic: str) -> None:
