@@ -107,6 +107,7 @@ class ClientOptions(TypedDict, total=False):
     ws_compression: str | None
     proxy: str | None
     validate: bool
+    strict: bool
     token: str | None
     ssl: _ssl.SSLContext | str | None
     resume: bool
@@ -146,6 +147,8 @@ class Client(RosBase):
             :class:`~roslibpy_lite.exceptions.TLSError` in one line.
         validate: check dict messages against their ``msgs`` class (see
             :class:`~roslibpy_lite.ros.RosBase`).
+        strict: refuse message and request dicts that leave fields out (see
+            :class:`~roslibpy_lite.ros.RosBase`).
         resume: ask the bridge to keep this client's session across a dropped link
             (our bridge does, for ``--session-keep`` seconds; stock servers ignore the
             request): after a reconnect nothing this client sent is lost or published
@@ -170,6 +173,7 @@ class Client(RosBase):
         ws_compression: str | None = None,
         proxy: str | None = None,
         validate: bool = True,
+        strict: bool = False,
         token: str | None = None,
         ssl: _ssl.SSLContext | str | None = None,
         resume: bool = True,
@@ -182,7 +186,7 @@ class Client(RosBase):
             resume=resume,
         )
         super().__init__(self._ws, offline_buffer=offline_buffer, max_pending=max_pending,
-                         validate=validate)
+                         validate=validate, strict=strict)
         self._receive = self._ws.receive  # the receive path, for tests and benchmarks
         self._started = False
 

@@ -313,8 +313,11 @@ def to_dataframe(messages: Iterable[Any], fields: Iterable[str] | None = None, *
 
     The index is the messages' ``header.stamp`` (UTC ``DatetimeIndex``, named ``time``)
     when every message has one; else ``times`` (seconds since the epoch, one per message,
-    e.g. when they were received) when given; else 0, 1, 2, ...
+    e.g. when they were received) when given, or the receive times of what
+    ``sub.collect(seconds)`` returned; else 0, 1, 2, ...
     """
+    if times is None:
+        times = getattr(messages, "times", None)  # a Collected list
     times_ns = None if times is None else [round(t * 1e9) for t in times]
     chosen = list(fields) if fields is not None else None
     msgs = list(messages)

@@ -14,12 +14,27 @@ The tree::
     │   └── StatusError              the bridge sent a ``status`` error about our request
     │       └── Forbidden            ... because our role may not do that (on that name)
     ├── RosTimeoutError              no answer in time (also a ``TimeoutError``)
+    ├── NoMessageYet                 ``sub.latest()`` before any message arrived
     └── ConnectionClosed             the connection is gone (the client was closed)
         ├── ConnectError             the connection could not be opened
         │   ├── NotAuthenticated     the bridge refused our token (HTTP 401, or close 1008)
         │   └── TLSError             the TLS handshake failed (a certificate problem)
         └── Disconnected             the connection dropped while this request was in flight,
-                                     or a publish found it down and buffering is off
+            │                        or a publish found it down and buffering is off
+            └── NotConnected         the link is down right now (reconnecting): a call, a
+                                     read of a fresh value, or an unbuffered publish refused
+                                     at once, naming the state
+
+Warnings, under one root too (``warnings.simplefilter("error", RosLibWarning)`` makes
+them errors)::
+
+    RosLibWarning                    root (a UserWarning)
+    ├── ReplacedClientWarning        sync.connect to a URL this process already had a
+    │                                client for: the earlier client was closed
+    ├── DuplicateCallbackWarning     a callback subscribed again to a topic: it moved to
+    │                                the new subscription instead of running twice
+    └── PartialMessageWarning        a dict of a known type misses fields (the bridge
+                                     fills in defaults); once per type and field set
 
 Remote failures (the other side said no) are kept apart from local misuse
 (we asked for something invalid), as h11 does. Exceptions from websockets and
@@ -32,14 +47,20 @@ __all__ = [
     "ConnectError",
     "ConnectionClosed",
     "Disconnected",
+    "DuplicateCallbackWarning",
     "Forbidden",
     "InvalidMessageError",
     "LocalProtocolError",
+    "NoMessageYet",
     "NotAuthenticated",
+    "NotConnected",
+    "PartialMessageWarning",
     "ProtocolError",
     "RemoteError",
     "RemoteProtocolError",
+    "ReplacedClientWarning",
     "RosLibError",
+    "RosLibWarning",
     "RosTimeoutError",
     "ServiceError",
     "StatusError",
@@ -140,6 +161,10 @@ class RosTimeoutError(RosLibError, TimeoutError):
     """No answer arrived within the allowed time."""
 
 
+class NoMessageYet(RosLibError, LookupError):
+    """``sub.latest()`` was asked before the subscription received any message."""
+
+
 class ConnectionClosed(RosLibError):
     """The connection to the bridge is closed."""
 
@@ -164,4 +189,38 @@ class Disconnected(ConnectionClosed):
 
     Also raised by a publish while the connection is down when the client
     was made with ``offline_buffer=0`` (no buffering).
+    """
+
+
+class NotConnected(Disconnected):
+    """The link to the bridge is down right now (the client is reconnecting), so the request
+    was refused at once rather than left to time out.
+
+    ``state`` is the connection state at the time (``reconnecting``, or ``connecting``).
+    Calls that take ``wait_connected=True`` wait for the link instead.
+    """
+
+    def __init__(self, message: str, *, state: str) -> None:
+        super().__init__(message)
+        self.state = state
+
+
+class RosLibWarning(UserWarning):
+    """Root of every warning roslibpy_lite gives."""
+
+
+class ReplacedClientWarning(RosLibWarning):
+    """``sync.connect(url)`` found an open client of this process on the same URL (a
+    re-run notebook cell) and closed it, with its thread and subscriptions."""
+
+
+class DuplicateCallbackWarning(RosLibWarning):
+    """A callback was subscribed to a topic it already receives (the same function, or the
+    same code from a re-run cell): it moved to the new subscription instead of running twice."""
+
+
+class PartialMessageWarning(RosLibWarning):
+    """A dict of a type the client knows misses fields; the bridge fills in their defaults.
+
+    Given once per type and set of missing fields; ``strict=True`` refuses such dicts.
     """

@@ -20,7 +20,14 @@ Subscriptions deliver to callbacks or to their own bounded buffer:
   :meth:`Subscription.get`.
 
 The buffer keeps at most ``buffer_size`` messages: when full, the OLDEST is
-dropped and :attr:`Subscription.dropped` counts it.
+dropped and :attr:`Subscription.dropped` counts it. Who keeps and drops what between the
+robot and this buffer (the bridge's ``queue_length``, the link, this buffer) is drawn in
+one place: the "Buffers" section of the Publish and subscribe guide
+(``docs/guides/pubsub.md``).
+
+Fresh values do not go through the buffer: :meth:`Subscription.latest` is the newest
+message received and its age, :meth:`Subscription.next` the first one after the call,
+:meth:`Subscription.collect` every one during some seconds.
 """
 
 from __future__ import annotations
@@ -29,9 +36,10 @@ import asyncio
 import contextlib
 import inspect
 import logging
+import time
 from collections import deque
 from collections.abc import Awaitable, Callable, Coroutine, Generator, Mapping
-from typing import TYPE_CHECKING, Any, Generic, Protocol, Self, TypeVar, cast
+from typing import TYPE_CHECKING, Any, Generic, NamedTuple, Protocol, Self, TypeVar, cast
 
 from msgs.runtime import Message, Service, ValidationError
 
@@ -40,18 +48,21 @@ from ._aio import is_async_callable, running_loop
 from ._api_types import MessageCallback, ServiceHandler
 from .exceptions import (
     InvalidMessageError,
+    NoMessageYet,
     RosLibError,
     RosTimeoutError,
     UsageError,
 )
 from .jupyter import in_cell
-from .messages import RawMessage, check_dict, from_wire, to_wire
+from .messages import Completeness, RawMessage, check_dict, from_wire, to_wire
 
 if TYPE_CHECKING:
     from types import TracebackType
 
 __all__ = [
     "Backend",
+    "Collected",
+    "Latest",
     "Publisher",
     "ServiceBackend",
     "ServiceCall",
@@ -92,6 +103,16 @@ class TopicBackend(Backend, Protocol):
 
     def forget_subscription(self, sub: Subscription[Any]) -> None:
         """Forget a subscription."""
+        ...
+
+    def require_link(self, what: str, hint: str = "pass wait_connected=True to wait for it"
+                     ) -> None:
+        """Raise :class:`~roslibpy_lite.exceptions.NotConnected` (naming the state) unless
+        the link is up, :class:`~roslibpy_lite.exceptions.ConnectionClosed` once closed."""
+        ...
+
+    def link_note(self) -> str:
+        """``""`` while connected, else `` (state reconnecting)`` for an error text."""
         ...
 
 
@@ -154,6 +175,8 @@ class Publisher(_BridgeHandle, Generic[T]):
         id: str,
         offline_buffer: int,
         check_cls: type[Message] | None = None,
+        strict: bool | None = None,
+        completeness: Completeness | None = None,
     ) -> None:
         self._backend = backend
         self.topic = topic
@@ -177,6 +200,9 @@ class Publisher(_BridgeHandle, Generic[T]):
         """Messages accepted by :meth:`publish`."""
         self._check_cls = check_cls if msg_cls is None else msg_cls
         self._error_once: RosLibError | None = None
+        self.strict = strict
+        """Refuse dicts that leave fields out (None: the client's ``strict``)."""
+        self._completeness = completeness if completeness is not None else Completeness()
 
     def __repr__(self) -> str:
         return f"<Publisher {self.topic} {self.type_name}{' closed' if self.closed else ''}>"
@@ -194,12 +220,14 @@ class Publisher(_BridgeHandle, Generic[T]):
     def to_wire(self, msg: T | Mapping[str, Any]) -> Mapping[str, Any]:
         """The wire form of ``msg`` after the type checks (see :func:`to_wire`).
 
-        A dict is checked against the type's ``msgs`` class when there is one.
+        A dict is checked against the type's ``msgs`` class when there is one, and
+        one that leaves fields out is warned about once or refused (``strict``).
         """
         what = f"publish to {self.topic}"
         wire = to_wire(msg, self.type_name, self.msg_cls, what)
         if wire is msg:
             check_dict(wire, self._check_cls, what)
+            self._completeness.check(wire, self._check_cls, what, self.strict)
         return wire
 
     def fail_next_publish(self, error: RosLibError) -> None:
@@ -259,11 +287,50 @@ class Publisher(_BridgeHandle, Generic[T]):
         await self.unadvertise()
 
 
+class Latest(NamedTuple, Generic[T]):
+    """The newest message of a subscription and how old it is (:meth:`Subscription.latest`).
+
+    Unpacks as ``msg, age = sub.latest()``.
+    """
+
+    msg: T
+    """The message, as the subscription gives it (dict, typed instance or RawMessage)."""
+    age: float
+    """Seconds since this client received it."""
+
+
+class Collected(list[T]):
+    """The messages :meth:`Subscription.collect` received, oldest first: a list, with
+    :attr:`times` beside it (``roslibpy_lite.data.to_dataframe`` indexes by them when the
+    messages have no header stamp)."""
+
+    def __init__(self, messages: list[T], times: list[float]) -> None:
+        super().__init__(messages)
+        self.times = times
+        """When each message was received (seconds since the epoch)."""
+
+
+class _Tap:
+    """A reader of fresh messages (``next`` or ``collect``): sees each message delivered
+    from its start on, apart from the buffer."""
+
+    __slots__ = ("future", "messages", "times", "wait_connected")
+
+    def __init__(self, future: asyncio.Future[None] | None, wait_connected: bool) -> None:
+        self.future = future
+        self.wait_connected = wait_connected
+        self.messages: list[Any] = []
+        self.times: list[float] = []
+
+
 class Subscription(_BridgeHandle, Generic[T]):
     """A subscription to one topic (made by ``ros.subscribe``).
 
-    Iterate it (``async for msg in sub``), await :meth:`get`, or register
-    callbacks (:meth:`on_message`). Counters: :attr:`received`,
+    Iterate it (``async for msg in sub``), await :meth:`get` (the OLDEST buffered message:
+    it can be seconds old), or register callbacks (:meth:`on_message`); for fresh values
+    read :meth:`latest` (the newest and its age), await :meth:`next` (the first after the
+    call) or :meth:`collect` (every message during some seconds). What the buffers keep and
+    drop: the "Buffers" section of the Publish and subscribe guide. Counters: :attr:`received`,
     :attr:`dropped` (buffer overflow), :attr:`decode_errors` (typed messages
     that did not fit their class; skipped), :attr:`callback_errors`.
     """
@@ -304,6 +371,11 @@ class Subscription(_BridgeHandle, Generic[T]):
         self.queue_length = queue_length
         self.compression = compression
         self.raw = raw  # messages are RawMessage (CDR bytes, the bridge's stamp)
+        self.uint8_as_sent = False
+        """False (the default): ``uint8[]``/``char[]`` fields of dict messages are
+        ``bytes`` whatever the compression, where msgs knows the type. True: as the
+        bridge sent them (base64 text under JSON), as roslibpy gives them (the
+        roslibpy drop-in sets it)."""
         self.fragment_size = fragment_size
         self.buffer_size = buffer_size
         self.id = id
@@ -321,6 +393,10 @@ class Subscription(_BridgeHandle, Generic[T]):
         self.consumer: asyncio.Task[None] | None = None
         self._idle = asyncio.Event()
         self._idle.set()
+        self._latest: Mapping[str, Any] | RawMessage | None = None
+        self._latest_at = 0.0  # time.monotonic() of receipt
+        self._since = time.monotonic()
+        self._taps: list[_Tap] = []
 
     def __repr__(self) -> str:
         return f"<Subscription {self.topic} {self.type_name}{' closed' if self.closed else ''}>"
@@ -362,12 +438,31 @@ class Subscription(_BridgeHandle, Generic[T]):
             self._sync_cbs.append(callback)
         self._buffering = bool(self._async_cbs)
 
+    def remove_callback(self, callback: Any, same: Callable[[Any, Any], bool]) -> Any:
+        """Stop calling the registered callback that ``same(it, callback)`` finds; returns
+        it (None: there is none). For the topics capability's duplicate rule."""
+        for cbs in (self._sync_cbs, self._async_cbs):
+            for cb in cbs:
+                if same(cb, callback):
+                    cbs.remove(cb)
+                    self._buffering = bool(self._async_cbs)
+                    return cb
+        return None
+
+    def has_callbacks(self) -> bool:
+        """Whether any callback is registered."""
+        return bool(self._sync_cbs or self._async_cbs)
+
     # -- the receive path ------------------------------------------------------------------
 
     def deliver(self, raw: Mapping[str, Any] | RawMessage) -> None:
         """Take one message in its wire form, or a RawMessage for a raw subscription
         (called by the backend, never blocks)."""
         self.received += 1
+        self._latest = raw
+        self._latest_at = time.monotonic()
+        if self._taps:
+            self._feed_taps(raw)
         if self._sync_cbs:
             msg = self._decode(raw)
             if msg is not _SKIP:
@@ -392,6 +487,21 @@ class Subscription(_BridgeHandle, Generic[T]):
         waiter = self._waiter
         if waiter is not None and not waiter.done():
             waiter.set_result(None)
+
+    def _feed_taps(self, raw: Mapping[str, Any] | RawMessage) -> None:
+        now = time.time()
+        for tap in self._taps:
+            tap.messages.append(raw)
+            tap.times.append(now)
+            if tap.future is not None and not tap.future.done():
+                tap.future.set_result(None)
+
+    def link_lost(self, error: RosLibError) -> None:
+        """The link dropped (a reconnect follows): readers of fresh messages that do not wait
+        for the connection fail with ``error`` (for the topics capability)."""
+        for tap in self._taps:
+            if not tap.wait_connected and tap.future is not None and not tap.future.done():
+                tap.future.set_exception(error)
 
     def _run_stray(self, awaitable: Awaitable[Any]) -> None:
         async def run() -> None:
@@ -428,6 +538,9 @@ class Subscription(_BridgeHandle, Generic[T]):
         (for the topics capability)."""
         self.error = error
         self._wake()
+        for tap in self._taps:
+            if tap.future is not None and not tap.future.done():
+                tap.future.set_exception(error)
 
     async def _wait(self) -> None:
         if self._waiter is not None:
@@ -487,10 +600,17 @@ class Subscription(_BridgeHandle, Generic[T]):
             await self._wait()
 
     async def get(self, timeout: float | None = None) -> T:
-        """The next message.
+        """The OLDEST message waiting in this subscription's buffer, or, when it is empty,
+        the next one to arrive: what ``async for`` gives next.
+
+        Nothing is skipped, so a message read a while after subscribing may be seconds old
+        (up to ``buffer_size`` messages wait; see the "Buffers" section of the Publish and
+        subscribe guide). For the newest message use :meth:`latest`, for one that arrives
+        after the call :meth:`next`.
 
         Raises:
-            RosTimeoutError: none arrived within ``timeout`` seconds.
+            RosTimeoutError: none arrived within ``timeout`` seconds (the text names the
+                connection state when the link is down).
             UsageError: the subscription is closed.
             StatusError: the bridge refused this subscription.
         """
@@ -501,8 +621,106 @@ class Subscription(_BridgeHandle, Generic[T]):
             raise UsageError(f"subscription to {self.topic} is closed") from None
         except TimeoutError:
             raise RosTimeoutError(
-                f"no message on {self.topic} within {timeout} s"
+                f"no message on {self.topic} within {timeout} s{self._backend.link_note()}"
             ) from None
+
+    def latest(self, *, allow_stale: bool = False) -> Latest[T]:
+        """The newest message received (whatever the buffer holds) and its age in seconds.
+
+        Reads without waiting and takes nothing from the buffer. ``allow_stale=True`` also
+        answers while the link is down (the age then says how stale it is).
+
+        Raises:
+            NotConnected: the link is down (the text names the state); the message would
+                be from before the outage.
+            NoMessageYet: nothing has arrived yet (``await sub.next(timeout)`` waits).
+            UsageError: the subscription is closed.
+            StatusError: the bridge refused this subscription.
+        """
+        self._check_readable()
+        if not allow_stale:
+            self._backend.require_link(f"latest message on {self.topic}",
+                                       "latest(allow_stale=True) reads it anyway")
+        raw = self._latest
+        if raw is None:
+            raise NoMessageYet(
+                f"no message on {self.topic} yet (subscribed "
+                f"{time.monotonic() - self._since:.1f} s ago); await sub.next(timeout) "
+                "waits for one"
+            )
+        msg = self._decode(raw)
+        if msg is _SKIP:
+            raise NoMessageYet(f"the latest message on {self.topic} did not fit "
+                               f"{self.type_name} (see the log)")
+        return Latest(msg, time.monotonic() - self._latest_at)
+
+    async def next(self, timeout: float | None = None, *, wait_connected: bool = False) -> T:
+        """The first message to arrive after this call (the buffer is left as it is).
+
+        ``wait_connected=True``: while the link is down, wait for it (within ``timeout``)
+        instead of raising.
+
+        Raises:
+            NotConnected: the link is down, or drops while waiting (unless ``wait_connected``).
+            RosTimeoutError: none arrived within ``timeout`` seconds.
+            UsageError: the subscription is closed.
+            StatusError: the bridge refused this subscription.
+        """
+        self._check_readable()
+        if not wait_connected:
+            self._backend.require_link(f"next message on {self.topic}")
+        tap = _Tap(asyncio.get_running_loop().create_future(), wait_connected)
+        self._taps.append(tap)
+        try:
+            async with asyncio.timeout(timeout):
+                while True:
+                    assert tap.future is not None
+                    await tap.future
+                    while tap.messages:
+                        msg = self._decode(tap.messages.pop(0))
+                        if msg is not _SKIP:
+                            result: T = msg
+                            return result
+                    tap.future = asyncio.get_running_loop().create_future()
+        except TimeoutError:
+            raise RosTimeoutError(
+                f"no message on {self.topic} within {timeout} s{self._backend.link_note()}"
+            ) from None
+        finally:
+            self._taps.remove(tap)
+
+    async def collect(self, seconds: float) -> Collected[T]:
+        """Every message that arrives during the next ``seconds`` seconds, oldest first,
+        with when each arrived (:class:`Collected`; the buffer is left as it is).
+
+        Raises:
+            NotConnected: the link is down when it starts.
+            UsageError: ``seconds`` is negative, or the subscription is closed.
+        """
+        if not seconds >= 0:
+            raise UsageError(f"collect from {self.topic}: seconds must be >= 0, got {seconds!r}")
+        self._check_readable()
+        self._backend.require_link(f"collect from {self.topic}", "await ros.wait_connected() first")
+        tap = _Tap(None, True)
+        self._taps.append(tap)
+        try:
+            await asyncio.sleep(seconds)  # a window of time is what was asked for
+        finally:
+            self._taps.remove(tap)
+        messages: list[T] = []
+        times: list[float] = []
+        for raw, when in zip(tap.messages, tap.times, strict=True):
+            msg = self._decode(raw)
+            if msg is not _SKIP:
+                messages.append(msg)
+                times.append(when)
+        return Collected(messages, times)
+
+    def _check_readable(self) -> None:
+        if self.error is not None:
+            raise self.error
+        if self.closed:
+            raise UsageError(f"subscription to {self.topic} is closed")
 
     @property
     def pending(self) -> int:
@@ -527,6 +745,9 @@ class Subscription(_BridgeHandle, Generic[T]):
         """Mark closed and wake readers (the backend closes too; no message to the server)."""
         self.closed = True
         self._wake()
+        for tap in self._taps:
+            if tap.future is not None and not tap.future.done():
+                tap.future.set_exception(UsageError(f"subscription to {self.topic} is closed"))
 
     async def close(self) -> None:
         """Same as :meth:`unsubscribe`."""

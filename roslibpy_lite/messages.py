@@ -11,9 +11,14 @@ Used by the client (:mod:`roslibpy_lite.ros`), the handles
 
 from __future__ import annotations
 
+import base64
+import binascii
 import difflib
-from collections.abc import Mapping
+import sys
+import warnings
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any, TypeVar
 
 from msgs.runtime import (
@@ -27,10 +32,12 @@ from msgs.runtime import (
 )
 from msgs.runtime import lookup as _lookup
 
-from .exceptions import InvalidMessageError, UsageError
+from .exceptions import InvalidMessageError, PartialMessageWarning, UsageError
 
 __all__ = [
+    "Completeness",
     "RawMessage",
+    "bytes_fixer",
     "canonical_type",
     "check_dict",
     "check_name",
@@ -38,8 +45,10 @@ __all__ = [
     "from_wire",
     "lookup_message_class",
     "message_type",
+    "missing_fields",
     "service_type",
     "to_wire",
+    "user_stacklevel",
 ]
 
 
@@ -195,22 +204,27 @@ def to_wire(
 _BULK = 1024
 
 
+def _changed(value: Mapping[str, Any], changes: Iterable[tuple[str, Any, Any]]
+             ) -> Mapping[str, Any]:
+    """``value`` with each ``(key, old, new)`` where ``new is not old`` applied to a copy;
+    ``value`` itself when nothing changed."""
+    out: dict[str, Any] | None = None
+    for key, old, new in changes:
+        if new is not old:
+            if out is None:
+                out = dict(value)
+            out[key] = new
+    return value if out is None else out
+
+
 def _outline(value: Any) -> Any:
     """``value`` with bulky strings, byte strings and lists emptied (their kind kept).
 
     Returns ``value`` itself when nothing in it is bulky (no copy).
     """
     if isinstance(value, Mapping):
-        out: dict[str, Any] | None = None
-        for k, v in value.items():
-            if isinstance(v, int | float):
-                continue
-            w = _outline(v)
-            if w is not v:
-                if out is None:
-                    out = dict(value)
-                out[k] = w
-        return value if out is None else out
+        return _changed(value, ((k, v, _outline(v)) for k, v in value.items()
+                                if not isinstance(v, int | float)))
     if isinstance(value, str | bytes | list) and len(value) > _BULK:
         return value[:0]
     if isinstance(value, list) and value and isinstance(value[0], Mapping):
@@ -236,6 +250,172 @@ def from_wire(raw: Mapping[str, Any], cls: type[Message], what: str) -> Message:
         return cls.from_json(raw)
     except ValidationError as exc:
         raise InvalidMessageError(f"{what}: {exc}", path=exc.path) from None
+
+
+# --- the shape of a type: its byte fields, its fields a dict left out -------------------------
+
+def _element(idl: str) -> tuple[str, bool]:
+    """A field's element type and whether the field is an array (``msgs``' spelling)."""
+    if idl.startswith("sequence<"):
+        return idl[len("sequence<"):-1].split(",", 1)[0].strip(), True
+    if idl.endswith("]") and "[" in idl:
+        return idl[:idl.index("[")], True
+    return idl, False
+
+
+_Fix = Callable[[Any], Any]
+_FIXERS: dict[str, _Fix | None] = {}
+
+
+def _b64(value: Any) -> Any:
+    if isinstance(value, str):
+        try:
+            return base64.b64decode(value, validate=True)
+        except (binascii.Error, ValueError):
+            return value  # not base64: left for the type check to name
+    if isinstance(value, list):
+        try:
+            return bytes(value)
+        except (TypeError, ValueError):
+            return value
+    return value
+
+
+def _each(fix: _Fix) -> _Fix:
+    def each(values: Any) -> Any:
+        if not isinstance(values, list):
+            return values
+        fixed = [fix(v) for v in values]
+        return values if all(a is b for a, b in zip(fixed, values, strict=True)) else fixed
+    return each
+
+
+def _fields_fixer(steps: list[tuple[str, _Fix]]) -> _Fix:
+    def fix(wire: Any) -> Any:
+        if not isinstance(wire, Mapping):
+            return wire
+        return _changed(wire, ((name, value, conv(value)) for name, conv in steps
+                               if (value := wire.get(name)) is not None))
+    return fix
+
+
+def bytes_fixer(type_name: str) -> Callable[[Any], Any] | None:
+    """A function giving a wire dict of ``type_name`` with its ``uint8[]``/``char[]`` fields
+    (nested ones too) as ``bytes``, however they came (base64 text under JSON, a list of
+    ints); None when the type has no such field or ``msgs`` does not know it.
+
+    The function returns its argument itself when nothing needed changing (CBOR's bytes),
+    else a shallow copy with the changed fields. Built once per type.
+    """
+    if type_name in _FIXERS:
+        return _FIXERS[type_name]
+    _FIXERS[type_name] = None  # a type that contains itself (through an array) ends here
+    cls = lookup_message_class(type_name)
+    steps: list[tuple[str, _Fix]] = []
+    for name, idl in (cls._fields_and_types.items() if cls is not None else ()):
+        elem, is_array = _element(idl)
+        if is_array and elem in ("uint8", "char"):
+            steps.append((name, _b64))
+        elif "/" in elem:
+            inner = bytes_fixer(elem)
+            if inner is not None:
+                steps.append((name, _each(inner) if is_array else inner))
+    fixer = _fields_fixer(steps) if steps else None
+    _FIXERS[type_name] = fixer
+    return fixer
+
+
+def missing_fields(wire: Mapping[str, Any], cls: type[Message]) -> list[str]:
+    """The fields of ``cls`` that the dict ``wire`` leaves out, as dotted paths
+    (``angular``, ``header.stamp``; ``points[].z`` inside arrays of messages), in
+    definition order. Only the dicts given are walked: a nested message left out is one name.
+    """
+    out: list[str] = []
+    _missing_into(out, "", wire, cls)
+    return out
+
+
+def _missing_into(out: list[str], prefix: str, wire: Mapping[str, Any], cls: type[Message]
+                  ) -> None:
+    for name, idl in cls._fields_and_types.items():
+        if name not in wire:
+            out.append(prefix + name)
+            continue
+        elem, is_array = _element(idl)
+        if "/" not in elem:
+            continue
+        inner = lookup_message_class(elem)
+        value = wire[name]
+        if inner is None:
+            continue
+        if not is_array:
+            if isinstance(value, Mapping):
+                _missing_into(out, f"{prefix}{name}.", value, inner)
+            continue
+        seen: set[str] = set()
+        for item in value if isinstance(value, list) else ():
+            if isinstance(item, Mapping):
+                found: list[str] = []
+                _missing_into(found, f"{prefix}{name}[].", item, inner)
+                out.extend(f for f in found if f not in seen)
+                seen.update(found)
+
+
+_PACKAGE_DIR = str(Path(__file__).resolve().parent)
+
+
+def user_stacklevel() -> int:
+    """The ``stacklevel`` of the first frame outside roslibpy_lite (the user's call)."""
+    frame = sys._getframe(1)
+    level = 1
+    while frame is not None and frame.f_code.co_filename.startswith(_PACKAGE_DIR):
+        frame = frame.f_back  # type: ignore[assignment]
+        level += 1
+    return level
+
+
+class Completeness:
+    """The rule for dicts that leave fields out: the bridge fills in their defaults (as
+    rosbridge does: users publish partial Twists), and the client says so once per type
+    and set of missing fields with a :class:`~roslibpy_lite.exceptions.PartialMessageWarning`
+    naming them; ``strict`` refuses such dicts instead. An empty dict asks for every
+    default as plainly as ``None`` does: no warning (``strict`` refuses it too).
+
+    Args:
+        strict: the client's default (``strict=`` on ``connect`` and ``MockRos``).
+    """
+
+    def __init__(self, strict: bool = False) -> None:
+        self.strict = strict
+        self._seen: set[tuple[str, tuple[str, ...]]] = set()
+
+    def check(self, wire: Mapping[str, Any], cls: type[Message] | None, what: str,
+              strict: bool | None = None) -> None:
+        """Warn once (or, strict, raise) if the dict ``wire`` of ``cls`` leaves fields out.
+
+        Raises:
+            InvalidMessageError: strict, and fields are missing (all named).
+        """
+        if cls is None or isinstance(wire, Message):
+            return
+        missing = missing_fields(wire, cls)
+        if not missing:
+            return
+        names = ", ".join(missing)
+        if self.strict if strict is None else strict:
+            raise InvalidMessageError(
+                f"{what}: the {cls._type} dict lacks {names} (strict=True wants every field)",
+                path=missing[0])
+        if not wire:
+            return  # {}: every default, asked for as plainly as None
+        key = (cls._type, tuple(missing))
+        if key in self._seen:
+            return
+        self._seen.add(key)
+        warnings.warn(PartialMessageWarning(
+            f"{what}: the {cls._type} dict lacks {names}; the bridge fills in their defaults "
+            "(said once per type and field set; strict=True refuses such dicts)"),
+            stacklevel=user_stacklevel())
 
 
 @dataclass(frozen=True, slots=True)

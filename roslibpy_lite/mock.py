@@ -80,11 +80,14 @@ class MockRos(RosBase):
             does. The in-memory bridge checks them anyway, as the real bridge
             does, and reports a misfit later, through the error hooks and the
             next ``publish``.
+        strict: refuse dicts that leave fields out, as the real client's ``strict``.
     """
 
-    def __init__(self, *, offline_buffer: int = 100, validate: bool = True) -> None:
+    def __init__(self, *, offline_buffer: int = 100, validate: bool = True,
+                 strict: bool = False) -> None:
         self._bridge = MemoryTransport()
-        super().__init__(self._bridge, offline_buffer=offline_buffer, validate=validate)
+        super().__init__(self._bridge, offline_buffer=offline_buffer, validate=validate,
+                         strict=strict)
         self._bridge.open()
 
     def __repr__(self) -> str:

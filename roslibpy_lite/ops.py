@@ -12,6 +12,7 @@ The module does no I/O and needs nothing beyond the standard library.
 
 from __future__ import annotations
 
+import base64
 import json
 import math
 from collections.abc import Callable, Mapping
@@ -555,18 +556,26 @@ def to_obj(op: Op) -> dict[str, Any]:
 def encode(op: Op) -> str:
     """The JSON text of ``op`` for one websocket text frame.
 
-    Non-finite floats (NaN, ±Inf) go out as ``null``, since JSON has none.
+    Non-finite floats (NaN, ±Inf) go out as ``null``, since JSON has none; bytes
+    (a ``uint8[]`` field as a subscription gives it) as base64 text, rosbridge's JSON form.
 
     Raises:
         LocalProtocolError: a value cannot be expressed in JSON.
     """
     obj = to_obj(op)
     try:
-        return json.dumps(obj, separators=(",", ":"), allow_nan=False)
+        return json.dumps(obj, separators=(",", ":"), allow_nan=False, default=_base64)
     except ValueError:
-        return json.dumps(_finite(obj), separators=(",", ":"), allow_nan=False)
+        return json.dumps(_finite(obj), separators=(",", ":"), allow_nan=False,
+                          default=_base64)
     except TypeError as exc:
         raise LocalProtocolError(f"{op.OP}: cannot encode as JSON: {exc}", op=op.OP) from None
+
+
+def _base64(value: Any) -> str:
+    if isinstance(value, bytes | bytearray | memoryview):
+        return base64.b64encode(value).decode("ascii")
+    raise TypeError(f"Object of type {type(value).__name__} is not JSON serializable")
 
 
 def _finite(value: Any) -> Any:

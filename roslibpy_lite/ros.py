@@ -50,12 +50,14 @@ from .capabilities.topics import Topics
 from .exceptions import (
     ConnectionClosed,
     Disconnected,
+    NotConnected,
     ProtocolError,
     RosLibError,
     StatusError,
     UsageError,
     status_error,
 )
+from .messages import Completeness
 from .state import StateHub, StateWatcher, add_callback
 
 if TYPE_CHECKING:
@@ -79,9 +81,11 @@ class _Host:
     """What the capabilities share (:class:`roslibpy_lite.capabilities.Host`), and the
     hooks the transport calls (:class:`roslibpy_lite.transports.base.Link`)."""
 
-    def __init__(self, transport: Transport, validate: bool, verdict_timeout: float) -> None:
+    def __init__(self, transport: Transport, validate: bool, verdict_timeout: float,
+                 strict: bool = False) -> None:
         self.transport = transport
         self.validate = validate
+        self.completeness = Completeness(strict)
         self.verdict_timeout = verdict_timeout
         self.hub = StateHub(ConnectionState.CONNECTING)
         self._ids = itertools.count(1)
@@ -104,6 +108,20 @@ class _Host:
     def check_open(self) -> None:
         if self.hub.state is ConnectionState.CLOSED:
             raise ConnectionClosed(f"the connection to {self.transport.url} is closed")
+
+    def require_link(self, what: str, hint: str = "pass wait_connected=True to wait for it"
+                     ) -> None:
+        state = self.hub.state
+        if state is ConnectionState.CONNECTED:
+            return
+        self.check_open()
+        raise NotConnected(
+            f"{what}: the connection to {self.transport.url} is down (state {state.value}); "
+            f"{hint}", state=state.value)
+
+    def link_note(self) -> str:
+        state = self.hub.state
+        return "" if state is ConnectionState.CONNECTED else f" (state {state.value})"
 
     def route(self, op_type: type[Any], handler: Callable[[Any], None]) -> None:
         self._routes[op_type] = handler
@@ -322,6 +340,12 @@ class RosBase:
             when there is one (on by default; off saves the check's time).
         verdict_timeout: how long ``await ros.advertise(...)`` (and subscribe,
             advertise_service) waits for the bridge's verdict when it sends one.
+        strict: refuse a message or request dict that leaves fields out
+            (:class:`~roslibpy_lite.exceptions.InvalidMessageError` naming them) instead of
+            letting the bridge fill in defaults with a
+            :class:`~roslibpy_lite.exceptions.PartialMessageWarning` (once per type and
+            field set); ``advertise`` and ``call_service`` take ``strict=`` too. Needs the
+            type's ``msgs`` class (a typed class, or ``validate``).
     """
 
     def __init__(
@@ -332,6 +356,7 @@ class RosBase:
         max_pending: int = 1024,
         validate: bool = True,
         verdict_timeout: float = 5.0,
+        strict: bool = False,
     ) -> None:
         if offline_buffer < 0:
             raise UsageError(f"offline_buffer must be >= 0, got {offline_buffer}")
@@ -341,7 +366,7 @@ class RosBase:
         self.max_pending = max_pending
         self.verdict_timeout = verdict_timeout
         self._transport = transport
-        self._host = host = _Host(transport, validate, verdict_timeout)
+        self._host = host = _Host(transport, validate, verdict_timeout, strict)
         # The capabilities, in the order their requests are restored after a reconnect.
         self._topics = Topics(host, offline_buffer=offline_buffer, max_pending=max_pending)
         self._services = Services(host)
@@ -361,6 +386,15 @@ class RosBase:
     @validate.setter
     def validate(self, value: bool) -> None:
         self._host.validate = value
+
+    @property
+    def strict(self) -> bool:
+        """Whether dicts that leave fields out are refused (see the class's ``strict``)."""
+        return self._host.completeness.strict
+
+    @strict.setter
+    def strict(self, value: bool) -> None:
+        self._host.completeness.strict = value
 
     @property
     def status_errors(self) -> int:
@@ -415,21 +449,27 @@ class RosBase:
 
     @overload
     def advertise(
-        self, topic: str, type: str, *, latch: bool = False, queue_size: int = 100
+        self, topic: str, type: str, *, latch: bool = False, queue_size: int = 100,
+        strict: bool | None = None,
     ) -> Publisher[dict[str, Any]]: ...
 
     @overload
     def advertise(
-        self, topic: str, type: type[M], *, latch: bool = False, queue_size: int = 100
+        self, topic: str, type: type[M], *, latch: bool = False, queue_size: int = 100,
+        strict: bool | None = None,
     ) -> Publisher[M]: ...
 
     def advertise(
-        self, topic: str, type: str | type[Message], *, latch: bool = False, queue_size: int = 100
+        self, topic: str, type: str | type[Message], *, latch: bool = False, queue_size: int = 100,
+        strict: bool | None = None,
     ) -> Publisher[Any]:
         """Announce a publisher on ``topic``.
 
         ``type`` is a type string (publish dicts) or a msgs class (publish
         instances or dicts). ``latch``: late subscribers get the last message.
+        ``strict``: refuse dicts that leave fields out (None: the client's ``strict``;
+        otherwise they are sent, the bridge fills in defaults, and a
+        :class:`~roslibpy_lite.exceptions.PartialMessageWarning` names the fields once).
         Use as ``pub = await ros.advertise(...)`` or ``async with ros.advertise(...) as pub``;
         awaiting waits for the bridge's verdict when it sends one.
 
@@ -438,7 +478,7 @@ class RosBase:
             StatusError: the bridge refused (raised at ``await``; else see :meth:`on_error`).
             ConnectionClosed: the client is closed.
         """
-        return self._topics.advertise(topic, type, latch, queue_size)
+        return self._topics.advertise(topic, type, latch, queue_size, strict)
 
     @overload
     def subscribe(
@@ -526,6 +566,11 @@ class RosBase:
             raw=raw,
         )
 
+    def subscriptions(self) -> list[Subscription[Any]]:
+        """The open subscriptions of this client, oldest first (close the ones a re-run
+        cell left behind with ``await sub.close()``)."""
+        return [s for s in self._topics.subscriptions.values() if not s.closed]
+
     async def load_types(
         self, *type_names: str, timeout: float | None = DEFAULT_CALL_TIMEOUT
     ) -> list[type[Message] | type[Service] | type[Action]]:
@@ -568,6 +613,8 @@ class RosBase:
         args: Mapping[str, Any] | None = None,
         *,
         timeout: float | None = DEFAULT_CALL_TIMEOUT,
+        wait_connected: bool = False,
+        strict: bool | None = None,
     ) -> ServiceCall[dict[str, Any]]: ...
 
     @overload
@@ -578,6 +625,8 @@ class RosBase:
         args: Mapping[str, Any] | Message | None = None,
         *,
         timeout: float | None = DEFAULT_CALL_TIMEOUT,
+        wait_connected: bool = False,
+        strict: bool | None = None,
     ) -> ServiceCall[Any]: ...
 
     def call_service(
@@ -587,25 +636,35 @@ class RosBase:
         args: Mapping[str, Any] | Message | None = None,
         *,
         timeout: float | None = DEFAULT_CALL_TIMEOUT,
+        wait_connected: bool = False,
+        strict: bool | None = None,
     ) -> ServiceCall[Any]:
         """Call ``service``; ``await`` the result for its response.
 
         ``args`` is a dict (or a ``Request`` instance for a typed service);
         the response is a dict, or a ``Response`` instance for a typed
-        service. ``timeout`` (seconds, None: wait for ever) covers waiting for
-        the connection too. The arguments are checked here, at the call; the
-        request is sent when the result is awaited.
+        service. ``timeout`` is in seconds (None: wait for ever). While the link
+        is down (reconnecting) the call fails at once with
+        :class:`~roslibpy_lite.exceptions.NotConnected`, naming the state;
+        ``wait_connected=True`` waits for the connection instead, within
+        ``timeout``. The arguments are checked here, at the call; the
+        request is sent when the result is awaited. A dict that leaves fields
+        out is sent with the bridge's defaults and a
+        :class:`~roslibpy_lite.exceptions.PartialMessageWarning` naming them
+        (once per type and field set), or refused with ``strict=True`` (None:
+        the client's ``strict``).
 
         Raises:
             ServiceError: the service answered ``result: false`` (it failed,
                 does not exist, or the bridge could not call it); the text says why.
             StatusError: the bridge refused the request itself.
             RosTimeoutError: no answer within ``timeout``.
+            NotConnected: the link is down (unless ``wait_connected``).
             Disconnected: the connection dropped while waiting.
             ConnectionClosed: the client is closed.
             UsageError / InvalidMessageError: bad arguments (raised at the call).
         """
-        return self._services.call(service, type, args, timeout)
+        return self._services.call(service, type, args, timeout, wait_connected, strict)
 
     def advertise_service(
         self, service: str, type: str | type[Service], handler: ServiceHandler

@@ -33,6 +33,7 @@ if TYPE_CHECKING:
     from .. import ops
     from .._api_types import ConnectionState
     from ..exceptions import ConnectionClosed, RosLibError
+    from ..messages import Completeness
     from ..transports.base import Transport
 
 __all__ = ["Host", "ServingHost", "TopicsHost", "Tracked"]
@@ -85,8 +86,23 @@ class Host(Protocol):
         """The connection's state."""
         ...
 
+    @property
+    def completeness(self) -> Completeness:
+        """The rule for dicts that leave fields out (warn once, or refuse when strict)."""
+        ...
+
     def check_open(self) -> None:
         """Raise ConnectionClosed once the client is closed."""
+        ...
+
+    def require_link(self, what: str, hint: str = "pass wait_connected=True to wait for it"
+                     ) -> None:
+        """Raise NotConnected (naming ``what``, the state, then ``hint``) unless the link is
+        up; ConnectionClosed once the client is closed."""
+        ...
+
+    def link_note(self) -> str:
+        """``""`` while connected, else `` (state reconnecting)`` to end an error text."""
         ...
 
     def route(self, op_type: type[Any], handler: Callable[[Any], None]) -> None:

@@ -16,6 +16,7 @@ from .._api_types import ConnectionState, ServiceHandler
 from ..exceptions import RosTimeoutError, ServiceError, UsageError
 from ..handles import ServiceCall, ServiceServer
 from ..messages import (
+    bytes_fixer,
     check_dict,
     check_name,
     from_wire,
@@ -54,6 +55,8 @@ class Services:
         type: str | type[Service],
         args: Mapping[str, Any] | Message | None,
         timeout: float | None,
+        wait_connected: bool = False,
+        strict: bool | None = None,
     ) -> ServiceCall[Any]:
         """A call to ``service`` (see ``RosBase.call_service``): checked now, sent when awaited."""
         host = self.host
@@ -63,11 +66,16 @@ class Services:
         what = f"call {service}"
         request_cls = srv_cls.Request if srv_cls else None
         wire = to_wire({} if args is None else args, f"{type_name}_Request", request_cls, what)
+        check_cls = request_cls
         if request_cls is None and host.validate:
-            check_dict(wire, lookup_message_class(f"{type_name}_Request"), what)
+            check_cls = lookup_message_class(f"{type_name}_Request")
+            check_dict(wire, check_cls, what)
+        if args is not None and wire is args:  # None asks for the defaults
+            host.completeness.check(wire, check_cls, what, strict)
         if timeout is not None and not timeout > 0:
             raise UsageError(f"call {service}: timeout must be > 0 or None, got {timeout!r}")
-        return ServiceCall(self._call(service, type_name, srv_cls, wire, timeout), service)
+        return ServiceCall(
+            self._call(service, type_name, srv_cls, wire, timeout, wait_connected), service)
 
     async def _call(
         self,
@@ -76,8 +84,11 @@ class Services:
         srv_cls: type[Service] | None,
         wire: Mapping[str, Any],
         timeout: float | None,
+        wait_connected: bool,
     ) -> Any:
         host = self.host
+        if not wait_connected:
+            host.require_link(f"call {service}")
         call_id = host.new_id("call_service", service)
         loop = asyncio.get_running_loop()
         try:
@@ -103,7 +114,8 @@ class Services:
             values = {}
         if srv_cls is not None:
             return from_wire(values, srv_cls.Response, f"response of {service}")
-        return dict(values)
+        fix = bytes_fixer(f"{type_name}_Response")
+        return dict(values if fix is None else fix(values))
 
     def _on_response(self, op: ops.ServiceResponse) -> None:
         record = self.host.untrack(str(op.id)) if op.id is not None else None

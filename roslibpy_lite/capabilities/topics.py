@@ -12,6 +12,7 @@ from __future__ import annotations
 import asyncio
 import logging
 import time
+import warnings
 from collections.abc import Callable, Coroutine, Mapping
 from typing import TYPE_CHECKING, Any
 
@@ -20,9 +21,23 @@ from msgs.runtime import ValidationError
 
 from .. import ops
 from .._api_types import ConnectionState
-from ..exceptions import ConnectionClosed, Disconnected, RosLibError, UsageError
+from ..exceptions import (
+    ConnectionClosed,
+    Disconnected,
+    DuplicateCallbackWarning,
+    NotConnected,
+    RosLibError,
+    UsageError,
+)
 from ..handles import Publisher, Subscription
-from ..messages import RawMessage, check_name, lookup_message_class, message_type
+from ..messages import (
+    RawMessage,
+    bytes_fixer,
+    check_name,
+    lookup_message_class,
+    message_type,
+    user_stacklevel,
+)
 from . import TopicsHost, Tracked
 
 log = logging.getLogger("roslibpy_lite.client")
@@ -55,7 +70,8 @@ class Topics:
     # -- publishers ----------------------------------------------------------------------------
 
     def advertise(
-        self, topic: str, type: str | type[Message], latch: bool, queue_size: int
+        self, topic: str, type: str | type[Message], latch: bool, queue_size: int,
+        strict: bool | None = None,
     ) -> Publisher[Any]:
         """A new publisher handle (see ``RosBase.advertise``)."""
         host = self.host
@@ -71,7 +87,8 @@ class Topics:
         pub: Publisher[Any] = Publisher(
             self, topic, type_name, cls, latch=latch, queue_size=queue_size,
             id=host.new_id("advertise", topic), offline_buffer=self.offline_buffer,
-            check_cls=self.check_class(type_name, cls),
+            check_cls=self.check_class(type_name, cls), strict=strict,
+            completeness=host.completeness,
         )
         if pubs:
             pubs.append(pub)
@@ -110,9 +127,11 @@ class Topics:
             if t.backlog > self.max_pending:
                 return t.flush()
             return None
-        self.host.check_open()
-        if self.offline_buffer == 0:
+        if self.offline_buffer == 0:  # no buffering: fail fast, naming the state
+            self.host.require_link(f"publish to {pub.topic}",
+                                   "offline_buffer > 0 keeps messages until it is back")
             raise Disconnected(f"publish to {pub.topic}: the connection to {t.url} is down")
+        self.host.check_open()
         frame = t.encode(ops.Publish(pub.topic, wire))  # a copy, checked now
         if len(pub.offline_queue) >= self.offline_buffer:
             pub.offline_queue.popleft()
@@ -188,11 +207,33 @@ class Topics:
         )
         if callback is not None:
             sub.on_message(callback)
+            self._move_callback(topic, callback)
         self.subscriptions[sub.id] = sub
         self.by_topic[topic] = (*self.by_topic.get(topic, ()), sub)
         host.request(Tracked(topic, handle=sub, forget=lambda: self._forget_sub(sub)),
                      sub.request_op())
         return sub
+
+    def _move_callback(self, topic: str, callback: MessageCallback) -> None:
+        """An open subscription of ``topic`` that already calls ``callback`` (or the same
+        code: a re-run notebook cell) gives it up, so it runs once; one left with no
+        callback closes. Says so with a DuplicateCallbackWarning."""
+        for earlier in self.by_topic.get(topic, ()):
+            found = earlier.remove_callback(callback, same_callback)
+            if found is None:
+                continue
+            left = earlier.has_callbacks()
+            if not left:
+                self.forget_subscription(earlier)
+                earlier.mark_closed()
+                if earlier.consumer is not None:
+                    earlier.consumer.cancel()
+            name = getattr(callback, "__qualname__", repr(callback))
+            warnings.warn(DuplicateCallbackWarning(
+                f"subscribe {topic}: callback {name} already ran for an earlier subscription "
+                f"of {topic}; it now runs once, for the new one (the earlier subscription "
+                f"{'keeps its other callbacks' if left else 'is closed'})"),
+                stacklevel=user_stacklevel())
 
     def _deliver(self, op: ops.Publish) -> None:
         subs = self.by_topic.get(op.topic)
@@ -214,9 +255,16 @@ class Topics:
                     sub.deliver(decoded)
             return
         encoded: RawMessage | None = None
+        fix = bytes_fixer(subs[0].type_name)  # uint8[] fields as bytes, whatever came
+        fixed = None
         for sub in subs:
             if not sub.raw:
-                sub.deliver(msg)
+                if fix is None or sub.uint8_as_sent:
+                    sub.deliver(msg)
+                    continue
+                if fixed is None:
+                    fixed = fix(msg)
+                sub.deliver(fixed)
                 continue
             if encoded is None:  # a server without cbor-raw, or MockRos: serialize here
                 encoded = self._to_cdr(sub, msg)
@@ -290,6 +338,13 @@ class Topics:
     async def settle(self, handle: Any) -> None:
         await self.host.settle(handle)
 
+    def require_link(self, what: str, hint: str = "pass wait_connected=True to wait for it"
+                     ) -> None:
+        self.host.require_link(what, hint)
+
+    def link_note(self) -> str:
+        return self.host.link_note()
+
     # -- the connection ------------------------------------------------------------------------
 
     def _restore(self) -> None:
@@ -312,12 +367,35 @@ class Topics:
 
     def _drop(self, error: ConnectionClosed) -> None:
         if self.host.state is not ConnectionState.CLOSED:
-            return  # a reconnect follows: handles stay, publishers buffer
+            # a reconnect follows: handles stay, publishers buffer; fresh reads fail now
+            state = self.host.state.value
+            lost = NotConnected(f"the connection to {self.host.transport.url} dropped (state "
+                                f"{state}) while waiting for a message", state=state)
+            for sub in self.subscriptions.values():
+                sub.link_lost(lost)
+            return
         for sub in list(self.subscriptions.values()):
             sub.mark_closed()
         for pubs in self.publishers.values():
             for pub in pubs:
                 pub.offline_queue.clear()
+
+
+def same_callback(a: Any, b: Any) -> bool:
+    """Whether ``a`` and ``b`` are one callback: equal, or the same code with the same
+    defaults, closure and bound object (a function defined again by a re-run cell)."""
+    if a == b:
+        return True
+    fa, fb = getattr(a, "__func__", a), getattr(b, "__func__", b)
+    if getattr(a, "__self__", None) is not getattr(b, "__self__", None):
+        return False
+    code_a, code_b = getattr(fa, "__code__", None), getattr(fb, "__code__", None)
+    if code_a is None or code_a != code_b or fa.__qualname__ != fb.__qualname__:
+        return False
+    if fa.__defaults__ != fb.__defaults__ or fa.__kwdefaults__ != fb.__kwdefaults__:
+        return False
+    cells_a, cells_b = fa.__closure__ or (), fb.__closure__ or ()
+    return all(x.cell_contents is y.cell_contents for x, y in zip(cells_a, cells_b, strict=True))
 
 
 def _need_cbor(compression: str) -> None:

@@ -288,6 +288,7 @@ class Topic:
             self._sub = client.subscribe(self.name, self.message_type, deliver,
                                          throttle_rate=self.throttle_rate,
                                          queue_length=self.queue_length)
+            self._sub.uint8_as_sent = True  # base64 text under JSON, as roslibpy gives
             return self._sub
 
         ros.run_when_connected(open_)

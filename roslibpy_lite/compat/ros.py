@@ -393,7 +393,9 @@ class Ros:
         """Call a service blocking (returns the response) or with callback/errback."""
 
         def call(client: AioRos) -> Any:
-            return client.call_service(service, type_name, args, timeout=timeout)
+            # roslibpy's calls wait for the connection while it is being reopened
+            return client.call_service(service, type_name, args, timeout=timeout,
+                                       wait_connected=True)
 
         if callback is None:
             try:

@@ -52,6 +52,8 @@ the loop thread, like subscription callbacks.
 from __future__ import annotations
 
 import contextlib
+import threading
+import warnings
 from collections.abc import Callable, Mapping, Sequence
 from typing import TYPE_CHECKING, Any, Self, Unpack, overload
 
@@ -59,7 +61,7 @@ from .. import MockRos as _AioMockRos
 from .. import connect as _aio_connect
 from .._aio import is_async_callable
 from ..api import DEFAULT_CALL_TIMEOUT, ConnectionState, StateCallback
-from ..exceptions import UsageError
+from ..exceptions import ReplacedClientWarning, UsageError
 from ..jupyter import in_cell
 from .actions import ActionServer, GoalHandle
 from .handles import PUBLISH_WINDOW, Publisher, ServiceServer, StateChanges, Subscription
@@ -145,20 +147,23 @@ class _Front:
 
     @overload
     def advertise(
-        self, topic: str, type: str, *, latch: bool = False, queue_size: int = 100
+        self, topic: str, type: str, *, latch: bool = False, queue_size: int = 100,
+        strict: bool | None = None,
     ) -> Publisher[dict[str, Any]]: ...
 
     @overload
     def advertise(
-        self, topic: str, type: type[M], *, latch: bool = False, queue_size: int = 100
+        self, topic: str, type: type[M], *, latch: bool = False, queue_size: int = 100,
+        strict: bool | None = None,
     ) -> Publisher[M]: ...
 
     def advertise(
-        self, topic: str, type: str | type[Message], *, latch: bool = False, queue_size: int = 100
+        self, topic: str, type: str | type[Message], *, latch: bool = False, queue_size: int = 100,
+        strict: bool | None = None,
     ) -> Publisher[Any]:
         """Announce a publisher on ``topic`` (see :meth:`roslibpy_lite.api.Ros.advertise`)."""
         handle = self._loop.call(f"advertise {topic}", self.aio.advertise, topic, type,
-                                 latch=latch, queue_size=queue_size)
+                                 latch=latch, queue_size=queue_size, strict=strict)
         return Publisher(self._loop, handle)
 
     @overload
@@ -188,6 +193,12 @@ class _Front:
                                  callback, options)
         return Subscription(self._loop, handle)
 
+    def subscriptions(self) -> list[Subscription[Any]]:
+        """The open subscriptions of this client, oldest first (``sub.close()`` ends one)."""
+        found: list[handles.Subscription[Any]] = self._loop.call(
+            "subscriptions", self.aio.subscriptions)
+        return [Subscription(self._loop, h) for h in found]
+
     async def _subscribe(
         self, topic: str, type: Any, callback: Any, options: dict[str, Any]
     ) -> handles.Subscription[Any]:
@@ -202,13 +213,17 @@ class _Front:
         args: Mapping[str, Any] | Message | None = None,
         *,
         timeout: float | None = DEFAULT_CALL_TIMEOUT,
+        wait_connected: bool = False,
+        strict: bool | None = None,
     ) -> Any:
         """Call ``service``; returns its response (see :meth:`roslibpy_lite.api.Ros.call_service`).
 
-        Raises ServiceError, RosTimeoutError, Disconnected, ConnectionClosed,
-        UsageError as the asyncio client does.
+        Raises ServiceError, RosTimeoutError, NotConnected (at once while the link is
+        down, unless ``wait_connected``), Disconnected, ConnectionClosed, UsageError as
+        the asyncio client does.
         """
-        call = self.aio.call_service(service, type, args, timeout=timeout)  # type: ignore[arg-type]
+        call = self.aio.call_service(service, type, args, timeout=timeout,  # type: ignore[arg-type]
+                                     wait_connected=wait_connected, strict=strict)
         return self._loop.run(call, f"call {service}")
 
     def advertise_service(
@@ -283,8 +298,31 @@ class _Front:
 class Client(_Front):
     """A blocking rosbridge client (made by :func:`connect`); see the module docstring."""
 
+    def close(self) -> None:
+        """Close the connection and stop the loop thread. Closing twice is harmless."""
+        key = self._replace_key
+        with _OPEN_LOCK:
+            if key is not None and _OPEN.get(key) is self:
+                del _OPEN[key]
+        super().close()
 
-def connect(url: str | Sequence[str], **options: Unpack[ClientOptions]) -> Client:
+    _replace_key: str | tuple[str, ...] | None = None  # set by connect(..., replace=True)
+
+    @property
+    def url(self) -> str:
+        """The bridge's URL."""
+        url: str = self.aio.url  # type: ignore[attr-defined]
+        return url
+
+
+_OPEN: dict[str | tuple[str, ...], Client] = {}
+"""The latest open client :func:`connect` made for each URL (or list of URLs; ``replace``
+closes it)."""
+_OPEN_LOCK = threading.Lock()
+
+
+def connect(url: str | Sequence[str], *, replace: bool = True,
+            **options: Unpack[ClientOptions]) -> Client:
     """Connect to the rosbridge server at ``url`` and return a blocking :class:`Client`.
 
     Takes every keyword option of :func:`roslibpy_lite.connect` (``reconnect``,
@@ -294,18 +332,40 @@ def connect(url: str | Sequence[str], **options: Unpack[ClientOptions]) -> Clien
     first connection is open; use as ``with sync.connect(url) as ros:`` or
     call ``ros.close()``.
 
+    Connecting again to a URL this process still has an open client for (a
+    notebook's ``ros = sync.connect(URL)`` cell run again) CLOSES the earlier
+    client first, its thread, socket and subscriptions with it, and says so with a
+    :class:`~roslibpy_lite.exceptions.ReplacedClientWarning` naming the URL; so a
+    re-run leaves one client on the bridge. ``replace=False`` keeps both (a program
+    that wants two connections to one bridge).
+
     Raises:
         ConnectError: no connection within ``open_timeout`` seconds (also its
             subclasses NotAuthenticated and TLSError, as :func:`roslibpy_lite.connect`).
         UsageError: a malformed URL or option.
     """
+    key = url if isinstance(url, str) else tuple(url)
+    if replace:
+        with _OPEN_LOCK:
+            earlier = _OPEN.pop(key, None)
+        if earlier is not None and not earlier._loop.closing:
+            warnings.warn(ReplacedClientWarning(
+                f"sync.connect({url!r}): this process already had an open client for "
+                f"{url}; it was closed with its {len(earlier.aio.subscriptions())} "
+                "subscription(s) (replace=False keeps both)"), stacklevel=2)
+            earlier.close()
     loop = LoopThread(f"roslibpy_lite.sync {url}")
     try:
         ros = loop.run(_open(url, options), f"connect {url}")
     except BaseException:
         loop.stop()
         raise
-    return Client(loop, ros)
+    client = Client(loop, ros)
+    if replace:
+        client._replace_key = key
+        with _OPEN_LOCK:
+            _OPEN[key] = client
+    return client
 
 
 async def _open(url: str | Sequence[str], options: ClientOptions) -> Ros:
@@ -322,10 +382,12 @@ class MockRos(_Front):
     Close it (or use ``with``) to stop its thread.
     """
 
-    def __init__(self, *, offline_buffer: int = 100, validate: bool = True) -> None:
+    def __init__(self, *, offline_buffer: int = 100, validate: bool = True,
+                 strict: bool = False) -> None:
         loop = LoopThread("roslibpy_lite.sync mock")
         mock: _AioMockRos = loop.call(
-            "MockRos", _AioMockRos, offline_buffer=offline_buffer, validate=validate)
+            "MockRos", _AioMockRos, offline_buffer=offline_buffer, validate=validate,
+            strict=strict)
         super().__init__(loop, mock)
         self._mock = mock
 

@@ -173,14 +173,40 @@ class Subscription(_BlockingHandle["handles.Subscription[Any]"], Generic[T]):
         return self.handle.dropped
 
     def get(self, timeout: float | None = None) -> T:
-        """The next message (waits at most ``timeout`` seconds; None: for ever).
+        """The OLDEST buffered message, or the next to arrive when none waits (at most
+        ``timeout`` seconds; None: for ever). It can be seconds old: see
+        :meth:`roslibpy_lite.handles.Subscription.get`; :meth:`latest` and :meth:`next`
+        give fresh ones.
 
         Raises:
-            RosTimeoutError: none arrived in time.
+            RosTimeoutError: none arrived in time (naming the state when the link is down).
             UsageError: the subscription is closed.
         """
         msg: T = self._loop.run(self.handle.get(timeout), f"get from {self.topic}")
         return msg
+
+    def latest(self, *, allow_stale: bool = False) -> handles.Latest[T]:
+        """The newest message received and its age: ``msg, age = sub.latest()``
+        (see :meth:`roslibpy_lite.handles.Subscription.latest`; raises NotConnected while
+        the link is down unless ``allow_stale``, NoMessageYet before the first message)."""
+        found: handles.Latest[T] = self._loop.call(
+            f"latest on {self.topic}", self.handle.latest, allow_stale=allow_stale)
+        return found
+
+    def next(self, timeout: float | None = None, *, wait_connected: bool = False) -> T:
+        """The first message to arrive after the call (see
+        :meth:`roslibpy_lite.handles.Subscription.next`: NotConnected at once while the link
+        is down unless ``wait_connected``; RosTimeoutError after ``timeout`` seconds)."""
+        msg: T = self._loop.run(self.handle.next(timeout, wait_connected=wait_connected),
+                                f"next on {self.topic}")
+        return msg
+
+    def collect(self, seconds: float) -> handles.Collected[T]:
+        """Every message that arrives during the next ``seconds`` seconds, with when each
+        arrived (see :meth:`roslibpy_lite.handles.Subscription.collect`)."""
+        found: handles.Collected[T] = self._loop.run(self.handle.collect(seconds),
+                                                      f"collect from {self.topic}")
+        return found
 
     def messages(self, timeout: float | None = None) -> Iterator[T]:
         """Iterate the messages until the subscription closes.

@@ -272,6 +272,9 @@ class MemoryTransport:
         if problem is not None:
             self._answer(fwd, False, f"{op.service}: bad request: {problem}")
             return
+        request_cls = lookup_message_class(f"{served}_Request")
+        if request_cls is not None:  # the fields left out get their defaults, as in ROS
+            args = request_cls.from_json(args).to_json()
         self._request_ids += 1
         rid = f"service_request:{op.service}:{self._request_ids}"
         self._forwarded[rid] = fwd

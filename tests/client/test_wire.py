@@ -315,7 +315,8 @@ async def test_offline_buffer_zero_raises_disconnected(peer: ScriptedPeer) -> No
 
 
 async def test_call_made_while_reconnecting_waits_for_the_connection(peer: ScriptedPeer) -> None:
-    """A call started while reconnecting is sent once connected again, within its timeout."""
+    """A call started while reconnecting with wait_connected=True is sent once connected
+    again, within its timeout."""
     async with roslibpy_lite.connect(peer.url, backoff=fast_backoff()) as ros:
         port = peer.port
         await peer.stop()
@@ -324,7 +325,8 @@ async def test_call_made_while_reconnecting_waits_for_the_connection(peer: Scrip
             "op": "service_response", "service": op["service"], "id": op["id"], "result": True,
             "values": {"result": 2.0},
         }
-        call = asyncio.create_task(ros.call_service("/later", MULT, {}, timeout=20))
+        call = asyncio.create_task(ros.call_service("/later", MULT, {}, timeout=20,
+                                                    wait_connected=True))
         await asyncio.sleep(0)
         assert not call.done()
         peer.port = port

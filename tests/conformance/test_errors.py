@@ -196,7 +196,8 @@ async def test_bulky_dicts_are_checked_by_shape(ros: Ros, topic: str) -> None:
     import base64
 
     pub = await ros.advertise(topic, "sensor_msgs/msg/Image")
-    image = {"height": 480, "width": 640, "encoding": "rgb8", "step": 1920,
+    image = {"header": {"stamp": {"sec": 0, "nanosec": 0}, "frame_id": ""}, "is_bigendian": 0,
+             "height": 480, "width": 640, "encoding": "rgb8", "step": 1920,
              "data": base64.b64encode(bytes(640 * 480 * 3)).decode()}
     await pub.publish(image)
     with pytest.raises(InvalidMessageError, match="width"):
