@@ -266,11 +266,17 @@ def _element(idl: str) -> tuple[str, bool]:
 _Fix = Callable[[Any], Any]
 _FIXERS: dict[str, _Fix | None] = {}
 
+_b64decode: Callable[..., bytes]
+try:  # SIMD base64 where installed (the data extra): a 640x480 RGB frame in ~0.1 ms, not ~3
+    from pybase64 import b64decode as _b64decode
+except ImportError:  # pragma: no cover - the client alone needs nothing more
+    _b64decode = base64.b64decode
+
 
 def _b64(value: Any) -> Any:
     if isinstance(value, str):
         try:
-            return base64.b64decode(value, validate=True)
+            return _b64decode(value, validate=True)
         except (binascii.Error, ValueError):
             return value  # not base64: left for the type check to name
     if isinstance(value, list):
