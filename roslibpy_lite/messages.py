@@ -334,7 +334,8 @@ def bytes_fixer(type_name: str) -> Callable[[Any], Any] | None:
 def missing_fields(wire: Mapping[str, Any], cls: type[Message]) -> list[str]:
     """The fields of ``cls`` that the dict ``wire`` leaves out, as dotted paths
     (``angular``, ``header.stamp``; ``points[].z`` inside arrays of messages), in
-    definition order. Only the dicts given are walked: a nested message left out is one name.
+    definition order. Only the dicts given are walked: a nested message left out is one
+    name, and one given as ``{}`` asks for its defaults (nothing is missing there).
     """
     out: list[str] = []
     _missing_into(out, "", wire, cls)
@@ -355,7 +356,7 @@ def _missing_into(out: list[str], prefix: str, wire: Mapping[str, Any], cls: typ
         if inner is None:
             continue
         if not is_array:
-            if isinstance(value, Mapping):
+            if isinstance(value, Mapping) and value:  # {}: that message's defaults, asked for
                 _missing_into(out, f"{prefix}{name}.", value, inner)
             continue
         seen: set[str] = set()

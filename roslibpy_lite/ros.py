@@ -548,12 +548,19 @@ class RosBase:
         ``fragment_size`` (the bridge splits larger messages into fragments of
         this many characters; they are reassembled here),
         ``buffer_size`` (this side's buffer; the oldest message is dropped
-        when full), ``raw`` (messages are :class:`~roslibpy_lite.messages.RawMessage`:
+        when full; who keeps and drops what, from the robot to here, is the
+        "Buffers" section of the Publish and subscribe guide), ``raw`` (messages are
+        :class:`~roslibpy_lite.messages.RawMessage`:
         the CDR bytes as the robot serialized them and the bridge's stamp, nothing
         decoded; the bridge sends ``cbor-raw``, and a server that cannot is served by
-        serializing here, as is MockRos). Iterate the handle, ``await sub.get()``, or pass
-        ``callback`` (sync or async). Use as ``async with`` or ``await``
-        (which waits for the bridge's verdict when it sends one).
+        serializing here, as is MockRos). Iterate the handle, ``await sub.get()`` (both
+        read the buffer, oldest first), or pass ``callback`` (sync or async); for fresh
+        values ``sub.latest()``, ``await sub.next(timeout)``, ``await sub.collect(seconds)``.
+        A ``callback`` this client already runs for ``topic`` (the same function, or the
+        same code from a re-run cell) moves to the new subscription instead of running
+        twice (:class:`~roslibpy_lite.exceptions.DuplicateCallbackWarning`). ``uint8[]``
+        fields of dict messages are ``bytes`` whatever the compression. Use as
+        ``async with`` or ``await`` (which waits for the bridge's verdict when it sends one).
 
         Raises:
             UsageError: a bad topic, type or option (or cbor2 missing).
@@ -702,7 +709,8 @@ class RosBase:
         (checked here against the type). ``feedback``: ask for feedback
         (iterate the handle, or pass ``on_feedback``, sync or async);
         ``buffer_size``: feedback kept for iteration (the oldest is dropped).
-        Waits for the connection when it is down (at most 10 s).
+        Waits for the connection when it is down (at most 10 s). A goal dict that
+        leaves fields out is warned about once (or refused: the client's ``strict``).
 
         Raises:
             UsageError / InvalidMessageError: a bad name, type or goal.

@@ -82,8 +82,12 @@ class Actions:
         what = f"goal to {action}"
         goal_cls = _part(cls, "Goal")
         wire = to_wire({} if goal is None else goal, f"{type_name}_Goal", goal_cls, what)
+        check_cls = goal_cls
         if goal_cls is None and host.validate:
-            check_dict(wire, _part(_action_class(type_name), "Goal"), what)
+            check_cls = _part(_action_class(type_name), "Goal")
+            check_dict(wire, check_cls, what)
+        if goal is not None and wire is goal:
+            host.completeness.check(wire, check_cls, what)
         if not host.transport.connected:
             await host.wait_connected(DEFAULT_CALL_TIMEOUT)
         id = host.new_id("send_action_goal", action)

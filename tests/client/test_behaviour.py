@@ -227,3 +227,17 @@ def test_blocking_client_has_the_same_fresh_reads() -> None:
             sub.next(5)
         ros.reconnect()
         assert sub.collect(0.01) == []
+
+
+async def test_partial_goal_dicts_are_warned_about_or_refused() -> None:
+    """A goal dict that leaves fields out is warned about once, or refused by a strict client."""
+    nested = "test_msgs/action/NestedMessage"
+    async with MockRos() as ros:
+        await ros.advertise_action("/nest", nested, lambda goal, ctx: {})
+        with pytest.warns(PartialMessageWarning, match=r"goal to /nest: .* lacks nested_field, "
+                                                       r"nested_different_pkg"):
+            goal = await ros.send_goal("/nest", nested, {"nested_field_no_pkg": {}})
+        await goal.result(5)
+    async with MockRos(strict=True) as ros:
+        with pytest.raises(InvalidMessageError, match="lacks nested_field_no_pkg"):
+            await ros.send_goal("/nest", nested, {"nested_field": {}})
