@@ -22,10 +22,12 @@ def test_client_options_name_every_option_of_client_with_its_type() -> None:
 
 
 def test_connect_functions_take_client_options() -> None:
-    """``connect`` and ``sync.connect`` take the url and ``**ClientOptions``."""
-    for fn in (roslibpy_lite.connect, sync.connect):
+    """``connect`` and ``sync.connect`` take the url and ``**ClientOptions`` (``sync.connect``
+    also its own ``replace``, whether to close an open client of the same URL)."""
+    for fn, own in ((roslibpy_lite.connect, []), (sync.connect, ["replace"])):
         params = list(inspect.signature(fn).parameters.values())
         assert [(p.name, p.kind) for p in params] == [
             ("url", inspect.Parameter.POSITIONAL_OR_KEYWORD),
+            *((name, inspect.Parameter.KEYWORD_ONLY) for name in own),
             ("options", inspect.Parameter.VAR_KEYWORD)], fn
-        assert params[1].annotation == "Unpack[ClientOptions]", fn
+        assert params[-1].annotation == "Unpack[ClientOptions]", fn
