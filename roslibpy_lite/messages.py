@@ -13,10 +13,12 @@ from __future__ import annotations
 
 import base64
 import binascii
+import contextlib
 import difflib
 import sys
+import threading
 import warnings
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, TypeVar
@@ -43,12 +45,14 @@ __all__ = [
     "check_name",
     "define_type",
     "from_wire",
+    "held_warnings",
     "lookup_message_class",
     "message_type",
     "missing_fields",
     "service_type",
     "to_wire",
     "user_stacklevel",
+    "warn_user",
 ]
 
 
@@ -381,6 +385,32 @@ def user_stacklevel() -> int:
     return level
 
 
+_HELD = threading.local()
+
+
+def warn_user(warning: Warning) -> None:
+    """Give ``warning`` at the user's call, or keep it for :func:`held_warnings` to hand
+    over (the blocking client re-gives it on the caller's thread, not its loop thread)."""
+    held: list[Warning] | None = getattr(_HELD, "warnings", None)
+    if held is not None:
+        held.append(warning)
+        return
+    warnings.warn(warning, stacklevel=user_stacklevel())
+
+
+@contextlib.contextmanager
+def held_warnings() -> Iterator[list[Warning]]:
+    """Keep the warnings :func:`warn_user` gives in this thread during the block (no await
+    inside it), in the list it yields."""
+    before = getattr(_HELD, "warnings", None)
+    held: list[Warning] = []
+    _HELD.warnings = held
+    try:
+        yield held
+    finally:
+        _HELD.warnings = before
+
+
 class Completeness:
     """The rule for dicts that leave fields out: the bridge fills in their defaults (as
     rosbridge does: users publish partial Twists), and the client says so once per type
@@ -419,10 +449,9 @@ class Completeness:
         if key in self._seen:
             return
         self._seen.add(key)
-        warnings.warn(PartialMessageWarning(
+        warn_user(PartialMessageWarning(
             f"{what}: the {cls._type} dict lacks {names}; the bridge fills in their defaults "
-            "(said once per type and field set; strict=True refuses such dicts)"),
-            stacklevel=user_stacklevel())
+            "(said once per type and field set; strict=True refuses such dicts)"))
 
 
 @dataclass(frozen=True, slots=True)

@@ -12,7 +12,6 @@ from __future__ import annotations
 import asyncio
 import logging
 import time
-import warnings
 from collections.abc import Callable, Coroutine, Mapping
 from typing import TYPE_CHECKING, Any
 
@@ -36,7 +35,7 @@ from ..messages import (
     check_name,
     lookup_message_class,
     message_type,
-    user_stacklevel,
+    warn_user,
 )
 from . import TopicsHost, Tracked
 
@@ -229,11 +228,10 @@ class Topics:
                 if earlier.consumer is not None:
                     earlier.consumer.cancel()
             name = getattr(callback, "__qualname__", repr(callback))
-            warnings.warn(DuplicateCallbackWarning(
+            warn_user(DuplicateCallbackWarning(
                 f"subscribe {topic}: callback {name} already ran for an earlier subscription "
                 f"of {topic}; it now runs once, for the new one (the earlier subscription "
-                f"{'keeps its other callbacks' if left else 'is closed'})"),
-                stacklevel=user_stacklevel())
+                f"{'keeps its other callbacks' if left else 'is closed'})"))
 
     def _deliver(self, op: ops.Publish) -> None:
         subs = self.by_topic.get(op.topic)

@@ -63,6 +63,7 @@ from .._aio import is_async_callable
 from ..api import DEFAULT_CALL_TIMEOUT, ConnectionState, StateCallback
 from ..exceptions import ReplacedClientWarning, UsageError
 from ..jupyter import in_cell
+from ..messages import held_warnings
 from .actions import ActionServer, GoalHandle
 from .handles import PUBLISH_WINDOW, Publisher, ServiceServer, StateChanges, Subscription
 from .introspection import Graph
@@ -189,8 +190,10 @@ class _Front:
         """
         if callback is not None:  # in Jupyter: its output under this cell, not the loop's
             callback = in_cell(callback)
-        handle = self._loop.call(f"subscribe {topic}", self._subscribe, topic, type,
-                                 callback, options)
+        handle, held = self._loop.call(f"subscribe {topic}", self._subscribe, topic, type,
+                                       callback, options)
+        for warning in held:  # given here, on the caller's thread (a notebook's cell)
+            warnings.warn(warning, stacklevel=2)
         return Subscription(self._loop, handle)
 
     def subscriptions(self) -> list[Subscription[Any]]:
@@ -201,8 +204,10 @@ class _Front:
 
     async def _subscribe(
         self, topic: str, type: Any, callback: Any, options: dict[str, Any]
-    ) -> handles.Subscription[Any]:
-        return await self.aio.subscribe(topic, type, callback, **options)
+    ) -> tuple[handles.Subscription[Any], list[Warning]]:
+        with held_warnings() as held:
+            sub = self.aio.subscribe(topic, type, callback, **options)
+        return await sub, held
 
     # -- services ----------------------------------------------------------------------------
 

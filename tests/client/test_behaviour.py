@@ -241,3 +241,18 @@ async def test_partial_goal_dicts_are_warned_about_or_refused() -> None:
     async with MockRos(strict=True) as ros:
         with pytest.raises(InvalidMessageError, match="lacks nested_field_no_pkg"):
             await ros.send_goal("/nest", nested, {"nested_field": {}})
+
+
+def test_blocking_client_warns_on_the_callers_thread() -> None:
+    """sync: subscribing a callback again warns at the caller's line (a notebook cell's
+    output), not on the loop thread; the callback still runs once."""
+    got: list[Any] = []
+    with sync.MockRos() as ros:
+        ros.subscribe("/n", INT, got.append)
+        with pytest.warns(DuplicateCallbackWarning) as caught:
+            ros.subscribe("/n", INT, got.append)
+        assert caught[0].filename == __file__
+        ros.inject("/n", {"data": 1})
+        ros.drain()
+        assert got == [{"data": 1}]
+        assert len(ros.subscriptions()) == 1
