@@ -29,7 +29,9 @@ What it checks, like a real bridge would:
   their class, dicts against the generated class of the type when there is
   one (:class:`~roslibpy_lite.exceptions.InvalidMessageError` names the field);
 - every message travels in its wire form (a JSON round trip), so subscribers
-  never share objects with publishers.
+  never share objects with publishers;
+- a service request that leaves fields out reaches the handler with their
+  defaults filled in, as ROS gives it to a server behind a bridge.
 
 Delivery is deterministic: ``publish`` hands the message to every
 subscription of the topic before it returns (sync callbacks run at once,
