@@ -113,6 +113,7 @@ async def cmd_topic_echo(args: argparse.Namespace, out: Out) -> int:
             nonlocal seen
             async with s.ros.subscribe(args.topic, type_, throttle_rate=args.throttle_ms,
                                        queue_length=args.queue_length) as sub:
+                sub.uint8_as_sent = True  # printed in the wire form (--json keeps base64)
                 async for msg in sub:
                     shown = for_display(msg, cls)
                     if args.field:
@@ -199,6 +200,7 @@ async def cmd_topic_hz(args: argparse.Namespace, out: Out) -> int:
         async def work() -> None:
             async with s.ros.subscribe(args.topic, type_, queue_length=args.queue_length,
                                        buffer_size=10_000) as sub:
+                sub.uint8_as_sent = True  # only counted: no decoding of byte arrays
                 next_report = loop.time() + 1.0
                 while True:
                     try:
