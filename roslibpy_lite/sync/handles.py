@@ -53,6 +53,13 @@ class _Wrapper(Generic[H]):
     def __repr__(self) -> str:
         return f"<sync {self.handle!r}>"
 
+    def __eq__(self, other: object) -> bool:
+        """Two wrappers of one asyncio handle are equal (``sub in ros.subscriptions()``)."""
+        return type(other) is type(self) and other.handle is self.handle
+
+    def __hash__(self) -> int:
+        return id(self.handle)
+
 
 class _BlockingHandle(_Wrapper[C]):
     """What the closable blocking handles share: ``with``, ``closed``, ``close``."""
