@@ -81,4 +81,16 @@ def test_the_guide_runs_in_a_kernel(bridge: BridgeProcess, robot: tuple[str, str
     plot = out["import matplotlib.pyplot as plt"]
     assert notebooks.stdout_of(plot) == "plotted 30 samples\n"
     assert any("image/png" in o.get("data", {}) for o in plot.outputs), plot.outputs
+    assert printed("msg, age = imu_sub.latest()") == (
+        "latest: imu_link under a second old: True\nfresh: imu_link collected: True\ntime\n")
+    again = out["robot = sync.connect(URL)  # the blocking client's cell, run again"]
+    assert notebooks.stdout_of(again) == "connected: True\n"
+    assert "ReplacedClientWarning" in _stderr(again) and bridge.url in _stderr(again)
+    assert printed("ticks = []") == "open subscriptions: 1\n"
+    assert "DuplicateCallbackWarning" in _stderr(out["ticks = []"])
     assert notebooks.stdout_of(nb.cells[-1]) == "state: closed\n"
+
+
+def _stderr(cell: Any) -> str:
+    return "".join(o.get("text", "") for o in cell.outputs
+                   if o.get("output_type") == "stream" and o.get("name") == "stderr")
