@@ -17,6 +17,7 @@ Service handlers run on the loop thread's worker pool.
 from __future__ import annotations
 
 import asyncio
+import base64
 import concurrent.futures
 import contextlib
 import inspect
@@ -399,14 +400,14 @@ class Ros:
 
         if callback is None:
             try:
-                return ServiceResponse(self.run_blocking(f"call {service}", call))
+                return ServiceResponse(_as_json(self.run_blocking(f"call {service}", call)))
             except ServiceError as exc:
                 raise ServiceException(exc.reason) from None
 
         def done(future: concurrent.futures.Future[Any]) -> None:
             exc = future.exception()
             if exc is None:
-                callback(ServiceResponse(future.result()))
+                callback(ServiceResponse(_as_json(future.result())))
             elif errback is not None:
                 errback(exc.reason if isinstance(exc, ServiceError) else str(exc))
             else:
@@ -548,3 +549,15 @@ def _log_raised(future: concurrent.futures.Future[Any]) -> None:
     exc = future.exception()
     if exc is not None:
         log.error("a roslibpy_lite.compat callback or operation failed: %r", exc)
+
+
+def _as_json(value: Any) -> Any:
+    """``value`` with ``bytes`` (the client's ``uint8[]`` fields) as base64 text, the JSON
+    form roslibpy gives its users."""
+    if isinstance(value, bytes):
+        return base64.b64encode(value).decode("ascii")
+    if isinstance(value, dict):
+        return {k: _as_json(v) for k, v in value.items()}
+    if isinstance(value, list):
+        return [_as_json(v) for v in value]
+    return value

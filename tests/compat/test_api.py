@@ -169,3 +169,38 @@ def test_wrong_port_says_where_and_what_to_check() -> None:
         ros.terminate()
     text = str(info.value)
     assert f"ws://127.0.0.1:{port}" in text and "rosbridge server" in text
+
+
+def test_byte_arrays_are_base64_text_as_roslibpy_gives_them(
+    bridge: BridgeProcess, ros_node: Any, topic: str
+) -> None:
+    """The drop-in keeps roslibpy's shape for uint8[] fields under JSON: base64 text in a
+    subscribed message and in a service response (the native client gives bytes)."""
+    from sensor_msgs.msg import Image
+    from test_msgs.srv import Arrays
+
+    def arrays(request: Any, response: Any) -> Any:
+        response.uint8_values = [1, 2, 255]
+        return response
+
+    ros_node.create_service(Arrays, topic + "_arrays", arrays)
+    pub = ros_node.create_publisher(Image, topic, 10)
+    ros = compat.Ros(bridge.url)
+    ros.run()
+    try:
+        got: list[Any] = []
+        heard = threading.Event()
+
+        def on_image(message: dict[str, Any]) -> None:
+            got.append(message)
+            heard.set()
+
+        compat.Topic(ros, topic, "sensor_msgs/Image").subscribe(on_image)
+        while not heard.wait(0.2):
+            pub.publish(Image(height=1, width=3, encoding="mono8", step=3, data=[1, 2, 255]))
+        assert got[0]["data"] == "AQL/"
+        service = compat.Service(ros, topic + "_arrays", "test_msgs/Arrays")
+        response = service.call(compat.ServiceRequest({}), timeout=30)
+        assert response is not None and response["uint8_values"] == "AQL/"
+    finally:
+        ros.terminate()
