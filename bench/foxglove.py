@@ -30,7 +30,16 @@ from typing import Any
 from websockets.asyncio.client import ClientConnection, connect
 from websockets.typing import Subprotocol
 
-from bench.harness import Bridge, Ctx, close_clients, send_op, ws_open
+from bench.harness import (
+    IMAGE_GRACE,
+    IMAGE_PUBLISHER,
+    Bridge,
+    Ctx,
+    close_clients,
+    frame_seq,
+    send_op,
+    ws_open,
+)
 
 __all__ = ["foxglove"]
 
@@ -78,7 +87,6 @@ class _Count:
         self.t_last = time.monotonic()
 
     def feed(self, frame: str | bytes) -> None:
-        from bench.run import frame_seq
 
         if not isinstance(frame, bytes):
             return  # status and advertise ops
@@ -122,7 +130,6 @@ async def _settle(counts: list[_Count], want: int, limit: float = 10.0) -> None:
 
 
 async def _image(ctx: Ctx, bridge: Bridge, path: str) -> dict[str, Any]:
-    from bench.run import IMAGE_GRACE, IMAGE_PUBLISHER
 
     async def body(pub: Any, counts: list[_Count]) -> dict[str, Any]:
         await pub.event("matched")

@@ -371,3 +371,28 @@ async def close_clients(sockets: list[ClientConnection], readers: list[asyncio.T
         task.cancel()
         with contextlib.suppress(asyncio.CancelledError):
             await task
+
+
+IMAGE_PUBLISHER = ("--kind", "image", "--rate", "0", "--depth", "5", "--settle", "0.3",
+                   "--linger", "0.5")
+"""The one image publisher of every image figure (each encoding, every server, the ROS
+ceiling): 640x480 rgb8 frames numbered in ``header.frame_id``, as fast as rclpy publishes
+them for the scenario's duration, history depth 5."""
+
+
+_FRAME_SEQ = re.compile(rb"(\d+) \d{6,}")
+"""``header.frame_id`` of a bench image, ``"<seq> <monotonic ns>"``: the only digits-space-digits
+in a publish frame's first bytes, whichever the encoding (JSON text, CBOR, CDR in cbor-raw)."""
+
+
+def frame_seq(frame: str | bytes) -> int | None:
+    """The sequence number of a bench image's publish frame (``None`` if it has none)."""
+    head = frame[:512]
+    m = _FRAME_SEQ.search(head.encode() if isinstance(head, str) else head)
+    return int(m.group(1)) if m else None
+
+
+IMAGE_GRACE = 1.0
+"""Seconds after the publisher's last frame in which frames still count as delivered (a
+server that holds frames back longer, as rosbridge_server_rs does under a full-speed image
+stream, delivers them outside the measured time)."""

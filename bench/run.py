@@ -59,7 +59,6 @@ import contextlib
 import json
 import os
 import platform
-import re
 import shutil
 import sys
 import tempfile
@@ -79,10 +78,13 @@ from bench.compare import COMPARE_SCENARIOS, compare
 from bench.foxglove import foxglove
 from bench.harness import (
     CODE_ROOT,
+    IMAGE_GRACE,
+    IMAGE_PUBLISHER,
     Bridge,
     Ctx,
     StalledClient,
     close_clients,
+    frame_seq,
     percentile,
     send_op,
     ws_open,
@@ -207,13 +209,6 @@ async def rclpy_ceiling(ctx: Ctx) -> dict[str, Any]:
         }
     out["image_640x480"] = await image_ceiling(ctx)
     return out
-
-
-IMAGE_PUBLISHER = ("--kind", "image", "--rate", "0", "--depth", "5", "--settle", "0.3",
-                   "--linger", "0.5")
-"""The one image publisher of every image figure (each encoding, every server, the ROS
-ceiling): 640x480 rgb8 frames numbered in ``header.frame_id``, as fast as rclpy publishes
-them for the scenario's duration, history depth 5."""
 
 
 async def image_ceiling(ctx: Ctx) -> dict[str, Any]:
@@ -634,24 +629,6 @@ async def latency_side_by_side(ctx: Ctx) -> dict[str, Any]:
         **{name: _quantiles_ms(lat) for name, lat in lats.items()},
         "rclpy_to_rclpy_ms": baseline,
     }
-
-
-_FRAME_SEQ = re.compile(rb"(\d+) \d{6,}")
-"""``header.frame_id`` of a bench image, ``"<seq> <monotonic ns>"``: the only digits-space-digits
-in a publish frame's first bytes, whichever the encoding (JSON text, CBOR, CDR in cbor-raw)."""
-
-
-def frame_seq(frame: str | bytes) -> int | None:
-    """The sequence number of a bench image's publish frame (``None`` if it has none)."""
-    head = frame[:512]
-    m = _FRAME_SEQ.search(head.encode() if isinstance(head, str) else head)
-    return int(m.group(1)) if m else None
-
-
-IMAGE_GRACE = 1.0
-"""Seconds after the publisher's last frame in which frames still count as delivered (a
-server that holds frames back longer, as rosbridge_server_rs does under a full-speed image
-stream, delivers them outside the measured time)."""
 
 
 class InOrder:

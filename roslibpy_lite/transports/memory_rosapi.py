@@ -13,12 +13,9 @@ from __future__ import annotations
 
 import json
 from collections.abc import Callable, Mapping
-from typing import TYPE_CHECKING, Any
+from typing import Any, Protocol
 
 from ..capabilities.introspection import rosapi_type
-
-if TYPE_CHECKING:
-    from .memory import MemoryTransport
 
 __all__ = ["MOCK_NODE", "MemoryRosapi", "RosapiRefusal"]
 
@@ -30,10 +27,41 @@ class RosapiRefusal(Exception):
     """A rosapi request the bridge answers with ``result: false`` (the text says why)."""
 
 
+class _HeldTopic(Protocol):
+    @property
+    def type_name(self) -> str: ...
+    @property
+    def sub_ids(self) -> Mapping[Any, None]: ...
+    @property
+    def advertised(self) -> bool: ...
+
+
+class _HeldActions(Protocol):
+    @property
+    def served(self) -> Mapping[str, tuple[str, str]]: ...
+
+
+class Held(Protocol):
+    """What the in-memory bridge (:class:`~.memory.MemoryTransport`) holds, as its rosapi
+    answers read it (a protocol, so this module does not import the transport's)."""
+
+    @property
+    def topics(self) -> Mapping[str, _HeldTopic]:
+        """Topics by name."""
+
+    @property
+    def services(self) -> Mapping[str, str]:
+        """Served services' types by name."""
+
+    @property
+    def actions(self) -> _HeldActions:
+        """Served actions."""
+
+
 class MemoryRosapi:
     """The ``/rosapi/*`` answers of one in-memory bridge (module doc)."""
 
-    def __init__(self, bridge: MemoryTransport) -> None:
+    def __init__(self, bridge: Held) -> None:
         self.bridge = bridge
         self.params: dict[str, Any] = {}
         """The parameter store: ``/node:param`` -> value (what JSON carries)."""
