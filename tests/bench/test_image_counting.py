@@ -7,8 +7,8 @@ import os
 
 import cbor2
 
-from bench.harness import RosSide
-from bench.run import InOrder, frame_seq
+from bench.harness import RosSide, frame_seq
+from bench.run import InOrder
 
 STAMP = "12 743068554089"  # "<seq> <monotonic ns>", as bench/ros_side.py publishes
 
