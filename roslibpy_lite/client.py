@@ -72,11 +72,15 @@ from __future__ import annotations
 
 import asyncio
 import ssl as _ssl
+import warnings
+import weakref
 from collections.abc import Callable, Coroutine, Generator, Sequence
 from typing import TYPE_CHECKING, Any, TypedDict, TypeVar, Unpack
 
+from . import jupyter
+from ._api_types import ConnectionState
 from ._backoff import Backoff
-from .exceptions import UsageError
+from .exceptions import ReplacedClientWarning, UsageError
 from .ros import RosBase
 from .transports.websocket import WebSocketTransport
 
@@ -248,11 +252,24 @@ class Connector:
     :class:`~roslibpy_lite.exceptions.UsageError` saying "did you forget await?".
     """
 
-    def __init__(self, client: Client) -> None:
+    def __init__(self, client: Client, replace: str | tuple[str, ...] | None = None) -> None:
         self._client = client
+        self._replace = replace
 
     async def _open(self) -> Client:
+        key = self._replace
+        if key is not None:
+            ref = _OPEN.pop(key, None)
+            earlier = ref() if ref is not None else None
+            if earlier is not None and earlier.state is not ConnectionState.CLOSED:
+                warnings.warn(ReplacedClientWarning(
+                    f"connect({key!r}): this process already had an open client for it; it "
+                    f"was closed with its {len(earlier.subscriptions())} subscription(s) "
+                    "(replace=False keeps both)"), stacklevel=2)
+                await earlier.close()
         await self._client._start()
+        if key is not None:
+            _OPEN[key] = weakref.ref(self._client)
         return self._client
 
     def __await__(self) -> Generator[Any, None, Client]:
@@ -283,7 +300,12 @@ class _ConnectNotAwaited(UsageError, AttributeError):
     """A Connector used as the client it opens."""
 
 
-def connect(url: str | Sequence[str], **options: Unpack[ClientOptions]) -> Connector:
+_OPEN: dict[str | tuple[str, ...], weakref.ref[Client]] = {}
+"""The latest client :func:`connect` opened with ``replace`` for each URL (or list)."""
+
+
+def connect(url: str | Sequence[str], *, replace: bool | None = None,
+            **options: Unpack[ClientOptions]) -> Connector:
     """Connect to a rosbridge server at ``url`` (``ws://host:9090``).
 
     Several URLs (a list: relays serving the same robot, or bridges on the same ROS graph)
@@ -294,6 +316,13 @@ def connect(url: str | Sequence[str], **options: Unpack[ClientOptions]) -> Conne
     :class:`Client` for the ``options`` (:class:`ClientOptions`). Returns once
     the first connection is open.
 
+    ``replace``: close an open client this process made for the same URL (or list) first,
+    with a :class:`~roslibpy_lite.exceptions.ReplacedClientWarning` naming it. ``None``
+    (the default) replaces inside a Jupyter kernel, where a cell run again
+    (``ros = await connect(URL)``) would otherwise leave the earlier client connected with
+    its subscriptions, and not elsewhere, where a program may want two clients of one
+    bridge.
+
     Raises (when awaited):
         ConnectError: no connection within ``open_timeout`` seconds (with
             ``reconnect`` on, attempts are retried with backoff until then).
@@ -303,7 +332,10 @@ def connect(url: str | Sequence[str], **options: Unpack[ClientOptions]) -> Conne
         UsageError: a malformed URL or option (``ssl=`` with ``ws://``, an
             unreadable CA file).
     """
-    return Connector(Client(url, **options))
+    if replace is None:
+        replace = jupyter.in_kernel()
+    key = (url if isinstance(url, str) else tuple(url)) if replace else None
+    return Connector(Client(url, **options), key)
 
 
 def _ssl_context(urls: Sequence[str], ssl: _ssl.SSLContext | str | None

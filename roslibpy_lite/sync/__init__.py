@@ -374,7 +374,7 @@ def connect(url: str | Sequence[str], *, replace: bool = True,
 
 
 async def _open(url: str | Sequence[str], options: ClientOptions) -> Ros:
-    ros: Ros = await _aio_connect(url, **options)
+    ros: Ros = await _aio_connect(url, replace=False, **options)  # connect above decides
     return ros
 
 

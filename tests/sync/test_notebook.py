@@ -14,7 +14,7 @@ import pytest
 from nbclient import NotebookClient
 
 from tests import notebooks
-from tests.helpers import ROOT, BridgeProcess
+from tests.helpers import ROOT, BridgeProcess, wait_until
 
 CELLS = [
     # The parameters: where the bridge is, and a name of our own.
@@ -164,3 +164,29 @@ def test_state_and_reconnect_log_in_the_notebook(
     assert [u.split(" since ")[0] for u in updates] == [
         f"{private.url}: reconnecting", f"{private.url}: connected", f"{private.url}: closed"]
     assert all(u.endswith(" (1 reconnect)") for u in updates), updates
+
+
+def test_an_asyncio_connect_cell_run_again_replaces_its_client(
+        make_bridge: Any, topic: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """``ros = await roslibpy_lite.connect(URL)`` with a subscribe, run three times in a real
+    kernel: each re-run warns and closes the earlier client, so the bridge keeps one."""
+    import asyncio
+
+    from tests.ops.support import scrape, value
+
+    bridge = make_bridge()
+    notebooks.kernel_env(monkeypatch, tmp_path, url=bridge.url, name=topic)
+    cell = ("import os, roslibpy_lite\n"
+            "ros = await roslibpy_lite.connect(os.environ['ROSLIBPY_LITE_NOTEBOOK_URL'])\n"
+            "sub = ros.subscribe(os.environ['ROSLIBPY_LITE_NOTEBOOK_NAME'], 'std_msgs/msg/Int32')\n"
+            "print('subscriptions:', len(ros.subscriptions()))")
+    with notebooks.running_kernel(tmp_path) as (_, kc):
+        outputs = [notebooks.run_collecting_all(kc, cell) for _ in range(3)]
+        texts = ["".join(m["content"].get("text", "") for m in out) for out in outputs]
+        assert "ReplacedClientWarning" not in texts[0]
+        for text in texts[1:]:
+            assert "ReplacedClientWarning" in text and bridge.url in text, text
+            assert "closed with its 1 subscription(s)" in text, text
+        wait_until(lambda: value(asyncio.run(scrape(bridge.port)),
+                                 "roslibpy_bridge_clients") == 1, 10, "one client on the bridge")
+        notebooks.run_cell(kc, "await ros.close()")
