@@ -210,12 +210,19 @@ class Session:
             watcher = asyncio.create_task(keepalive.watch(
                 transport, self.ws.ping, self._link_dead, cfg.keepalive_interval,
                 cfg.keepalive_timeout), name=f"session-{self.sid}-keepalive")
+        # Each whole message with nothing queued before it is handled as it is read (no
+        # turn of the loop to wake this task); the others come through the loop below.
+        hand_over = getattr(self.ws, "hand_frames_to", None)
+        if hand_over is not None:
+            hand_over(self.handle_frame)
         try:
             async for frame in self.ws:
                 self.handle_frame(frame)
         except ConnectionClosed:
             pass
         finally:
+            if hand_over is not None:
+                hand_over(None)
             if watcher is not None:
                 watcher.cancel()
             writer.cancel()
