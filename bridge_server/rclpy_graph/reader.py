@@ -324,20 +324,26 @@ class LoopReader(Reader):
             os.eventfd_read(svc.fd)
         except BlockingIOError:
             return
+        # Every request queued is taken before any is handed on: handing one on writes to
+        # its client's socket, and on loopback the client may run on this CPU at once, so
+        # what the loop does after the write (the last, empty take) would wait for it.
+        taken = []
         for _ in range(MAX_BATCH):
             try:
                 got = svc.handle.service_take_request(svc.request_cls)
             except Exception:
                 self.errors.failed(f"taking a request to {svc.name} failed")
-                return
-            request, header = got if got is not None else (None, None)
-            if header is None:  # nothing left
-                return
+                break
+            if got is None or got[1] is None:  # nothing left
+                break
+            taken.append(got)
+        else:
+            os.eventfd_write(svc.fd, 1)  # come back for the rest after the others had their turn
+        for request, header in taken:
             try:
                 svc.on_request(request, header)
             except Exception:  # the other requests and services are still served
                 self.errors.failed(f"serving a request to {svc.name} failed")
-        os.eventfd_write(svc.fd, 1)  # come back for the rest after the others had their turn
 
     def unserve(self, svc: ReaderService) -> None:
         """Stop the middleware's calls for ``svc`` (they end before this returns), destroy it."""

@@ -4,6 +4,7 @@ through an eventfd, and the reader thread that serves where that cannot work."""
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import logging
 import os
 from typing import Any
@@ -233,3 +234,55 @@ async def test_a_bridge_serves_client_services_with_either_reader(
         assert [a.message for a in answers] == [r["id"] for r in requests]
     finally:
         await ws.close()
+
+
+async def test_the_loop_reader_takes_every_queued_request_before_handing_one_on(
+    ros_node: Any,
+) -> None:
+    """Requests that wait together are all taken before the first is handed on: handing one on
+    writes to a client, which on loopback may run on the loop's CPU at once, so nothing of
+    the loop's own work (the last, empty take) is left to wait behind it."""
+    from std_srvs.srv import SetBool
+
+    from tests.bridge.support import wait_service
+
+    loop = asyncio.get_running_loop()
+    ros = RosNode(loop, name=f"reader_batch_{os.getpid()}")
+    ros.start()
+    reader = ros.reader
+    assert isinstance(reader, ros_reader.LoopReader)
+    name = f"/reader_batch_{os.getpid()}"
+    left_when_handed: list[bool] = []
+    seen = [0]  # requests handed on or taken by the handler
+    handed = asyncio.Event()
+
+    def on_request(request: Any, header: Any) -> None:
+        # What is still queued when a request is handed on (taken here: it is not answered).
+        got = svc.handle.service_take_request(SetBool.Request)
+        left = got is not None and got[1] is not None
+        left_when_handed.append(left)
+        seen[0] += 1 + left
+        if seen[0] >= 3:
+            handed.set()
+
+    try:
+        svc = reader.serve(SetBool, name, QoSProfile(depth=10), on_request)  # type: ignore[no-untyped-call]
+        client = ros_node.create_client(SetBool, name)
+        await wait_service(client)
+        loop.remove_reader(svc.fd)  # the three requests wait together until the loop looks
+        for _ in range(3):
+            client.call_async(SetBool.Request(data=True))
+        woken = [0]
+
+        def all_queued() -> bool:
+            with contextlib.suppress(BlockingIOError):
+                woken[0] += os.eventfd_read(svc.fd)
+            return woken[0] >= 3
+
+        await async_wait_until(all_queued, 10.0, "three requests waiting")
+        os.eventfd_write(svc.fd, woken[0])
+        loop.add_reader(svc.fd, reader._request_ready, svc)
+        await asyncio.wait_for(handed.wait(), 10.0)
+        assert left_when_handed == [False, False, False]
+    finally:
+        ros.close()
