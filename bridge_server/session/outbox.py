@@ -19,7 +19,8 @@ silences these warnings.
 The writer gathers whatever is ready (up to :data:`BATCH_FRAMES` frames or
 :data:`BATCH_BYTES` bytes) and writes it with one socket write. When it is
 idle, the first message or reply queued is written at once, without waiting
-for the writer's turn of the loop (:meth:`Outbox._kick`).
+for the writer's turn of the loop (:meth:`Outbox._kick`); the writer is woken
+only if more follows in the same turn.
 
 Merged subscriptions
 --------------------
@@ -330,8 +331,9 @@ class Outbox:
     # -- writing -------------------------------------------------------------------------------
 
     def _kick(self) -> None:
-        """Something was queued: wake the writer, and if it was parked with nothing in
-        flight, write what is queued right now.
+        """Something was queued: if the writer is parked with nothing in flight, write what
+        is queued right now (the writer is woken only if more follows in this turn, see
+        :meth:`_settle`); else wake the writer.
 
         Waking the writer costs a turn of the loop before anything is written: that was
         a lone message's or reply's largest share of its time in the bridge. What else is
@@ -354,7 +356,18 @@ class Outbox:
                     log.exception("session %d: a write failed; closing the connection", self.sid)
                     self.closed = True
                     self.loop.create_task(ws.close(1011, "internal error"))
+                else:
+                    self.loop.call_soon(self._settle)
+                    return
         self.wake.set()
+
+    def _settle(self) -> None:
+        """The turn of a direct write is over. What was queued after it in that turn woke
+        the writer; with nothing more, the writer stays parked and the next message is
+        written at once again, without a task's wake-up and an empty round of the writer
+        loop after every lone reply or message."""
+        if not self.wake.is_set():
+            self.idle = True
 
     async def writer(self) -> None:
         """Write what is queued until the outbox is closed (run as the client's task)."""

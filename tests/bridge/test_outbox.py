@@ -4,12 +4,14 @@ written before ``push`` returns, what follows in the same turn goes in one write
 from __future__ import annotations
 
 import asyncio
+from collections.abc import AsyncIterator
+from contextlib import asynccontextmanager
 from typing import Any
 
 import pytest
 from hypothesis import given
 from hypothesis import strategies as st
-from websockets.asyncio.client import connect
+from websockets.asyncio.client import ClientConnection, connect
 from websockets.asyncio.server import ServerConnection, serve
 from websockets.frames import Frame, Opcode
 
@@ -28,12 +30,12 @@ class _Text:
         return self.text
 
 
-@pytest.mark.parametrize("compression", [None, "deflate"])
-async def test_an_idle_writer_writes_at_once_and_batches_what_follows(
+@asynccontextmanager
+async def _parked_outbox(
     compression: str | None,
-) -> None:
-    """Without an extension the outbox frames what it writes; with permessage-deflate
-    websockets does."""
+) -> AsyncIterator[tuple[Outbox, ClientConnection, ServerConnection, asyncio.Task[None]]]:
+    """An outbox on the server side of a real connection, its writer parked (idle); the
+    client end reads what it writes."""
     conns: asyncio.Queue[ServerConnection] = asyncio.Queue()
 
     async def handler(ws: ServerConnection) -> None:
@@ -44,34 +46,44 @@ async def test_an_idle_writer_writes_at_once_and_batches_what_follows(
         port = next(iter(server.sockets)).getsockname()[1]
         async with connect(f"ws://127.0.0.1:{port}", compression=compression) as client:
             ws = await conns.get()
-            assert bool(ws.protocol.extensions) == (compression is not None)
             box = Outbox(ws, 1, 100, 0, 5.0, warn=lambda _msg: None)
             writer = asyncio.create_task(box.writer())
             await async_wait_until(lambda: box.idle, 5.0, "the writer idle")
-            writes: list[bytes] = []
-            transport: Any = ws.transport
-            real_write = transport.write
+            yield box, client, ws, writer
 
-            def counting_write(data: bytes) -> None:
-                writes.append(data)
-                real_write(data)
 
-            transport.write = counting_write
-            sub = Subscription(box, "/t", "/t")
-            box.push(sub, _Text("first"))  # type: ignore[arg-type]
-            assert len(writes) == 1, "an idle writer's first message waits for no turn"
-            box.push(sub, _Text("second"))  # type: ignore[arg-type]
-            box.send_text("a reply")
-            box.push(sub, _Text("third"))  # type: ignore[arg-type]
-            assert len(writes) == 1, "what follows in the same turn waits for the writer"
-            got = [await asyncio.wait_for(client.recv(), 5.0) for _ in range(4)]
-            assert got == ["first", "a reply", "second", "third"]  # replies go first
-            assert len(writes) == 2, "the writer wrote the three that followed at once"
-            await async_wait_until(lambda: box.idle, 5.0, "the writer idle again")
-            box.close()
-            box.push(sub, _Text("after close"))  # type: ignore[arg-type]
-            assert len(writes) == 2, "a closed outbox writes nothing"
-            await asyncio.wait_for(writer, 5.0)
+@pytest.mark.parametrize("compression", [None, "deflate"])
+async def test_an_idle_writer_writes_at_once_and_batches_what_follows(
+    compression: str | None,
+) -> None:
+    """Without an extension the outbox frames what it writes; with permessage-deflate
+    websockets does."""
+    async with _parked_outbox(compression) as (box, client, ws, writer):
+        assert bool(ws.protocol.extensions) == (compression is not None)
+        writes: list[bytes] = []
+        transport: Any = ws.transport
+        real_write = transport.write
+
+        def counting_write(data: bytes) -> None:
+            writes.append(data)
+            real_write(data)
+
+        transport.write = counting_write
+        sub = Subscription(box, "/t", "/t")
+        box.push(sub, _Text("first"))  # type: ignore[arg-type]
+        assert len(writes) == 1, "an idle writer's first message waits for no turn"
+        box.push(sub, _Text("second"))  # type: ignore[arg-type]
+        box.send_text("a reply")
+        box.push(sub, _Text("third"))  # type: ignore[arg-type]
+        assert len(writes) == 1, "what follows in the same turn waits for the writer"
+        got = [await asyncio.wait_for(client.recv(), 5.0) for _ in range(4)]
+        assert got == ["first", "a reply", "second", "third"]  # replies go first
+        assert len(writes) == 2, "the writer wrote the three that followed at once"
+        await async_wait_until(lambda: box.idle, 5.0, "the writer idle again")
+        box.close()
+        box.push(sub, _Text("after close"))  # type: ignore[arg-type]
+        assert len(writes) == 2, "a closed outbox writes nothing"
+        await asyncio.wait_for(writer, 5.0)
 
 
 def _websockets_frames(frames: list[str | bytes]) -> bytes:
@@ -103,3 +115,29 @@ def test_two_part_frames_are_one_binary_frame() -> None:
         head, payload = b"\x01" * 13, bytes(range(256)) * (size // 256) + b"\x07" * (size % 256)
         pair: list[OutFrame] = [(head, payload), "after"]
         assert frame_bytes(pair) == _websockets_frames([head + payload, "after"]), size
+
+
+async def test_a_lone_message_written_at_once_leaves_the_writer_parked() -> None:
+    """After a direct write with nothing following in its turn the writer is not woken (no
+    task wake-up and empty round per lone reply); a message in a later turn is again written
+    at once, and one that follows a direct write in its turn still waits for the writer."""
+    async with _parked_outbox(None) as (box, client, _ws, writer):
+        rounds = [0]
+        real_take = box._take
+
+        def counting_take() -> list[OutFrame]:
+            rounds[0] += 1
+            return real_take()
+
+        box._take = counting_take  # type: ignore[method-assign]
+        for i in range(3):
+            box.send_text(f"reply {i}")
+            assert await asyncio.wait_for(client.recv(), 5.0) == f"reply {i}"
+            await async_wait_until(lambda: box.idle, 5.0, "parked again")
+        assert rounds[0] == 3, "each lone reply: one take (the direct write), no writer round"
+        box.send_text("a")
+        box.send_text("b")  # follows a direct write in its turn: the writer sends it
+        assert [await asyncio.wait_for(client.recv(), 5.0) for _ in range(2)] == ["a", "b"]
+        await async_wait_until(lambda: box.idle, 5.0, "parked after the burst")
+        box.close()
+        await asyncio.wait_for(writer, 5.0)
