@@ -123,8 +123,11 @@ class AuthConfig:
 
 
 def new_token() -> str:
-    """A fresh random token (256 bits, URL safe, so it fits in a query string)."""
-    return secrets.token_urlsafe(32)
+    """A fresh random token (256 bits, URL safe, so it fits in a query string), never
+    starting with ``-``: given as ``--token TOKEN`` it would read as an option."""
+    while (token := secrets.token_urlsafe(32)).startswith("-"):
+        pass
+    return token
 
 
 def hash_token(token: str, salt: bytes | None = None) -> str:

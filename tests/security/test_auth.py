@@ -14,7 +14,7 @@ from websockets.asyncio.client import connect
 from websockets.exceptions import ConnectionClosed, InvalidStatus
 
 from bridge_server.security import Security, SecurityConfig, redact
-from bridge_server.security.auth import AuthFileError, FailureTracker, load_auth_file
+from bridge_server.security.auth import AuthFileError, FailureTracker, load_auth_file, new_token
 from tests.bridge.support import roundtrip
 from tests.helpers import ROOT, BridgeProcess, ros_env
 from tests.ops.support import aget
@@ -109,6 +109,14 @@ async def test_repeated_failures_lock_the_address_out(make_bridge: Any, auth: Au
     assert info.value.response.status_code == 429
     assert int(info.value.response.headers["Retry-After"]) >= 1
     assert b"too many failed authentication attempts" in info.value.response.body
+
+
+def test_a_new_token_never_reads_as_an_option() -> None:
+    """Tokens go on command lines (``--token TOKEN``): none starts with '-' (one in 64 of
+    URL-safe base64 would, so 2,000 of them all but surely meet it)."""
+    tokens = [new_token() for _ in range(2000)]
+    assert not [t for t in tokens if t.startswith("-")]
+    assert len(set(tokens)) == 2000 and all(len(t) == 43 for t in tokens)
 
 
 def test_failure_tracker_backs_off_and_forgets() -> None:
