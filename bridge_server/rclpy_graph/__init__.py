@@ -7,7 +7,8 @@
 - :mod:`.reader`: what waits on the topics and wakes the event loop;
 - :mod:`.actions`: action clients and servers on rclpy's C layer;
 - :mod:`.introspection`: rosapi typedefs, interface definitions, node parameters;
-- :mod:`.convert` / :mod:`.cdr_json`: message conversion (rclpy objects and CDR
-  bytes to and from rosbridge JSON/CBOR);
+- :mod:`.convert`: message conversion (rclpy objects to and from rosbridge JSON/CBOR;
+  JSON straight from CDR bytes and the ``publish`` envelopes are
+  :mod:`bridge_server.codec`'s, which needs no ROS);
 - :mod:`.types`: type names resolved to rclpy classes.
 """

@@ -97,10 +97,15 @@ import cbor2
 import numpy
 from rosidl_parser import definition as idl
 
+from bridge_server.codec import cdr_json
+from bridge_server.codec.publish import (
+    encode_publish_cbor,
+    encode_publish_cbor_raw,
+    encode_publish_json,
+)
 from bridge_server.interfaces import MISSING as _MISSING
 from bridge_server.interfaces import ConversionError, args_mapping
 from bridge_server.interfaces import describe as _describe
-from bridge_server.rclpy_graph import cdr_json
 from bridge_server.rclpy_graph.types import type_name_of
 
 __all__ = [
@@ -656,7 +661,8 @@ class Converter:
         self.fields: tuple[str, ...] = tuple(names)
         self.json_from_cdr: cdr_json.JsonFromCdr | None = None
         """CDR bytes -> the same text as :meth:`to_json` gives, without deserializing
-        (:mod:`.cdr_json`); ``None`` when msgs does not have the type's layout."""
+        (:mod:`bridge_server.codec.cdr_json`); ``None`` when msgs does not have the type's
+        layout."""
 
     def to_json(self, ros_msg: Any) -> str:
         """Compact JSON text of ``ros_msg`` (the msg object only, no op envelope)."""
@@ -928,50 +934,6 @@ def converter_for(msg_cls: type[Any]) -> Converter:
 # --------------------------------------------------------------------------------------------
 # Whole-op encoders
 
-
-
-def encode_publish_json(topic: str, msg_json: str) -> str:
-    """The JSON text of a server-to-client publish op around an already encoded msg."""
-    return "".join(('{"op":"publish","topic":', _encode_str(topic), ',"msg":', msg_json, "}"))
-
-
-_cbor_prefixes: dict[str, bytes] = {}
-
-
-def _cbor_prefix(topic: str) -> bytes:
-    """CBOR of ``{"op": "publish", "topic": topic, "msg": `` (a 3-entry map up to the value)."""
-    prefix = _cbor_prefixes.get(topic)
-    if prefix is None:
-        prefix = b"\xa3" + b"".join(map(cbor2.dumps, ("op", "publish", "topic", topic, "msg")))
-        if len(_cbor_prefixes) > 4096:
-            _cbor_prefixes.clear()
-        _cbor_prefixes[topic] = prefix
-    return prefix
-
-
-def encode_publish_cbor(topic: str, ros_msg: Any, conv: Converter) -> bytes:
-    """The CBOR bytes of a whole publish op (compression ``"cbor"``).
-
-    Identical to ``cbor2.dumps({"op": "publish", "topic": topic, "msg": obj})``
-    with ``obj = conv.to_cbor_obj(ros_msg)``; the envelope bytes are cached per topic.
-    """
-    return _cbor_prefix(topic) + _cbor_dumps(conv.to_cbor_obj(ros_msg))
-
-
-def encode_publish_cbor_raw(topic: str, serialized: bytes, stamp_ns: int) -> bytes:
-    """The CBOR bytes of a publish op for compression ``"cbor-raw"``.
-
-    ``serialized`` is the CDR of the message (:func:`serialize`, or what an
-    rclpy ``raw=True`` subscription delivers); ``stamp_ns`` the receive time.
-    """
-    secs, nsecs = divmod(stamp_ns, 1_000_000_000)
-    return cbor2.dumps(
-        {
-            "op": "publish",
-            "topic": topic,
-            "msg": {"secs": secs, "nsecs": nsecs, "bytes": bytes(serialized)},
-        }
-    )
 
 
 _M_TRIM_THRESHOLD: Final = -1

@@ -118,7 +118,7 @@ class Incoming:
     It arrives serialized (CDR, ``data``): ``cbor-raw`` subscribers get those bytes as they
     came, and the message is deserialized only to build the JSON or the CBOR encoding, each
     at most once (a topic with only cbor-raw subscribers is never deserialized). The JSON
-    text is made from the bytes directly where it can be (:mod:`.cdr_json`).
+    text is made from the bytes directly where it can be (:mod:`bridge_server.codec.cdr_json`).
     """
 
     __slots__ = ("_cbor", "_cbor_raw", "_json", "_msg_json", "conv", "data", "stamp_ns", "topic")
