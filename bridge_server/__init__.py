@@ -8,6 +8,10 @@ Run it with ``python -m bridge_server --host 127.0.0.1 --port 9090`` (or the
   groups, outbox, ownership, resume, the ``/rosapi/*`` services);
 - :mod:`bridge_server.rclpy_graph`: the ROS side on rclpy (the node, its executor
   thread and readers, shared entities, actions, message conversion, type names);
+- :mod:`bridge_server.codec`: message encodings that need no ROS (JSON from CDR, the
+  ``publish`` envelopes);
+- :mod:`bridge_server.zenoh`: the relay tier (the robot's exporter, the relay's Graph,
+  ``roslibpy-lite-relay``), without ROS;
 - :mod:`bridge_server.http`: the status page, metrics, health, peers, workers;
 - :mod:`bridge_server.security`: handshake, gate, credentials, roles, names.
 """

@@ -23,6 +23,8 @@ try:
     from .interfaces import BridgeError
     from .session.resume import ResumeConfig
     from .session.session import DEFAULT_QUEUE_LENGTH, SessionConfig
+    from .zenoh import link as zenoh_link
+    from .zenoh.keys import check_robot
 except ModuleNotFoundError as _missing:  # a client-only install: say which extra to add
     from ._requires import missing_dependency
 
@@ -161,6 +163,17 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         "Linux x86-64 and AArch64 with rmw_fastrtps; a thread elsewhere) or thread "
         "(default auto)",
     )
+    p.add_argument(
+        "--no-websocket",
+        action="store_true",
+        help="open no websocket listener (a robot reached only through Zenoh relays, "
+        "--zenoh-connect: it needs no open port)",
+    )
+    p.add_argument(
+        "--robot",
+        default=None,
+        help="this robot's name on Zenoh (its keys are under NAME/; with --zenoh-connect)",
+    )
     p.add_argument("--worker-index", type=int, default=None, help=argparse.SUPPRESS)
     p.add_argument("--worker-dir", default=None, help=argparse.SUPPRESS)
     p.add_argument(
@@ -170,6 +183,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         help="logging level (default INFO)",
     )
     security.add_arguments(p)
+    zenoh_link.add_arguments(p, listen=False)
     return p.parse_args(argv)
 
 
@@ -202,6 +216,7 @@ async def _run(args: argparse.Namespace) -> int:
         worker_dir=args.worker_dir,
         keepalive_interval=args.keepalive_interval,
         keepalive_timeout=args.keepalive_timeout,
+        websocket=not args.no_websocket,
         **({"node_name": args.node_name} if args.node_name else {}),
         session=SessionConfig(
             default_queue_length=args.send_queue,
@@ -228,20 +243,32 @@ async def _run(args: argparse.Namespace) -> int:
         watch_supervisor(stop)  # a worker stops with its supervisor, even a killed one
     bridge = Bridge(config)
     await bridge.start()
+    exporter = None
+    if args.zenoh_connect:  # the robot dials out to Zenoh routers (bridge_server/zenoh/)
+        from .zenoh.exporter import Exporter
+
+        exporter = Exporter(bridge.graph, args.robot, zenoh_link.options_from_args(args),
+                            graph_changed=bridge.graph_changed)
+        exporter.start()
+        log.info("robot %s dialing out to Zenoh at %s", args.robot, ", ".join(args.zenoh_connect))
     # SIGHUP (systemctl reload): certificates and the auth file are read again.
     loop.add_signal_handler(signal.SIGHUP, bridge.reload)
     if args.worker_index is not None:  # the supervisor prints the bridge's ready line
         log.info("bridge_server worker %d listening", args.worker_index)
+    elif not config.websocket:
+        log.info("bridge_server running without a websocket listener")
     else:
         scheme = "wss" if args.certfile else "ws"
         log.info("bridge_server listening on %s://%s:%d", scheme, args.host, bridge.port)
     log.info("ROS node /%s on ROS_DOMAIN_ID %s (topic reader: %s)", config.node_name,
-             os.environ.get("ROS_DOMAIN_ID", "0"), bridge.ros.reader_kind)
+             os.environ.get("ROS_DOMAIN_ID", "0"), getattr(bridge.ros, "reader_kind", "?"))
     bridge.security.startup_warnings(args.host)
     await stop.wait()
     log.info("bridge_server shutting down")
     # Not cancelled: it covers the rest of the process's exit too.
     faulthandler.dump_traceback_later(STOP_DEADLINE, exit=True)
+    if exporter is not None:
+        await exporter.close()
     await bridge.close()
     return 0
 
@@ -259,6 +286,13 @@ def main(argv: list[str] | None = None) -> int:
         return healthcheck((sys.argv[1:] if argv is None else argv)[1:], parse_args)
     args = parse_args(argv)
     refusal = security.exposure_refusal(args)
+    if refusal is None and args.zenoh_connect and args.robot is None:
+        refusal = "--zenoh-connect needs --robot NAME (the robot's name on Zenoh)"
+    if refusal is None and args.robot is not None:
+        try:
+            check_robot(args.robot)
+        except BridgeError as exc:
+            refusal = f"--robot: {exc}"
     if refusal is not None:
         print(f"roslibpy-lite-bridge: refusing to start: {refusal}", file=sys.stderr)
         return 2

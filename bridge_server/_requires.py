@@ -13,21 +13,24 @@ from typing import NoReturn
 __all__ = ["INSTALL_HINT", "missing_dependency"]
 
 INSTALL_HINT = (
-    "python -m pip install '.[bridge]' in a virtual environment, from a checkout of the "
+    "python -m pip install '.[{extra}]' in a virtual environment, from a checkout of the "
     "roslibpy-lite repository (the project is not on PyPI; docs/ros-on-pypi.md)"
 )
 
 _OURS = ("bridge_server", "roslibpy_lite", "msgs")
 
 
-def missing_dependency(exc: ModuleNotFoundError) -> NoReturn:
-    """Exit with status 2 and one line naming the missing module and the extra to install.
+def missing_dependency(exc: ModuleNotFoundError, extra: str = "bridge") -> NoReturn:
+    """Exit with status 2 and one line naming the missing module and the extra to install
+    (``bridge``, or ``relay`` for ``roslibpy-lite-relay``).
 
     A missing module of our own packages is a bug, not a missing extra: it is re-raised.
     """
     name = exc.name or "?"
     if name.split(".")[0] in _OURS:
         raise exc
-    print(f"roslibpy-lite-bridge: the bridge's dependencies are not installed (no module "
-          f"named {name!r}); install them with: {INSTALL_HINT}", file=sys.stderr)
+    program = "roslibpy-lite-relay" if extra == "relay" else "roslibpy-lite-bridge"
+    print(f"{program}: the {extra}'s dependencies are not installed (no module "
+          f"named {name!r}); install them with: {INSTALL_HINT.format(extra=extra)}",
+          file=sys.stderr)
     raise SystemExit(2)

@@ -142,7 +142,7 @@ class Publisher(Protocol):
         """The topic type's converter."""
 
     def publish(self, msg: Any) -> None:
-        """Publish one message (made with :attr:`conv`)."""
+        """Publish one message (made with :attr:`conv`, or its CDR bytes)."""
 
 
 class RosCall(Protocol):

@@ -22,7 +22,7 @@ import logging
 import os
 import time
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Protocol
 
 from websockets.asyncio.server import Server, ServerConnection, serve
 from websockets.datastructures import MultipleValuesError
@@ -36,8 +36,6 @@ from .graph import Graph
 from .http.metrics import BridgeMetrics
 from .http.web import Web
 from .http.web_access import WebAccess
-from .rclpy_graph.actions import check_rclpy_internals
-from .rclpy_graph.graph import RclpyGraph
 from .security import Security, SecurityConfig
 from .session.actions import ActionClients, SessionActions
 from .session.ownership import Ownership
@@ -45,13 +43,13 @@ from .session.resume import ResumeConfig, SentFrames, SessionStore
 from .session.session import Session, SessionConfig, wait_ended
 
 if TYPE_CHECKING:
-    from collections.abc import Awaitable
+    from collections.abc import Awaitable, Callable
 
     from websockets.http11 import Request, Response
 
     from .session.services import SessionServices
 
-__all__ = ["Bridge", "BridgeConfig"]
+__all__ = ["Bridge", "BridgeConfig", "ServedGraph"]
 
 log = logging.getLogger("bridge_server")
 
@@ -77,6 +75,23 @@ class BridgeConfig:
     metrics_port: int | None = None  # /metrics (and the other plain routes) on another port
     worker_index: int = 0  # with --workers: this process's index, and the peers' socket dir
     worker_dir: str | None = None
+    websocket: bool = True  # False: no listener at all (a robot reached only through Zenoh)
+
+
+class ServedGraph(Graph, Protocol):
+    """A Graph the bridge runs: started with it, refreshed while topics are subscribed,
+    closed with it (:class:`~bridge_server.rclpy_graph.graph.RclpyGraph`, or a relay's
+    ``ZenohGraph``)."""
+
+    def start(self) -> None:
+        """Start serving (called on the event loop)."""
+
+    def refresh(self) -> None:
+        """Resolve late types, follow QoS changes (called every ``refresh_interval`` s while
+        something is subscribed)."""
+
+    def close(self) -> None:
+        """Release everything."""
 
 
 NODE_NAME_PREFIX = "roslibpy_lite_bridge"
@@ -95,7 +110,9 @@ def default_node_name() -> str:
 class Bridge:
     """The running bridge: the ROS node, the websocket server and the live sessions."""
 
-    def __init__(self, config: BridgeConfig) -> None:
+    def __init__(self, config: BridgeConfig, graph: ServedGraph | None = None) -> None:
+        """``graph``: the ROS side (default: rclpy's, imported only then, so a relay
+        that gives its own Graph runs without ROS)."""
         self.config = config
         self.session_config = config.session
         self.publisher_grace = config.publisher_grace
@@ -110,8 +127,16 @@ class Bridge:
         self._server: Server | None = None
         self._refresher: asyncio.Task[None] | None = None
         self._graph_event = asyncio.Event()
-        self.ros = RclpyGraph(asyncio.get_running_loop(), name=config.node_name,
-                              topic_reader=config.topic_reader)
+        self._checks: list[Callable[[], None]] = []
+        if graph is None:
+            from .rclpy_graph.actions import check_rclpy_internals
+            from .rclpy_graph.graph import RclpyGraph
+
+            graph = RclpyGraph(asyncio.get_running_loop(), name=config.node_name,
+                               topic_reader=config.topic_reader)
+            # a clear error at start, not a crash at the first action goal
+            self._checks.append(check_rclpy_internals)
+        self.ros: ServedGraph = graph
         self.graph: Graph = self.ros  # all the sessions, rosapi and the status page see of ROS
         self.metrics = BridgeMetrics()
         self.web = Web(self)  # plain-HTTP routes: status page, /metrics, health (web.py)
@@ -127,9 +152,22 @@ class Bridge:
         return int(sock.getsockname()[1])
 
     async def start(self) -> None:
-        """Start ROS and listen."""
-        check_rclpy_internals()  # a clear error now, not a crash at the first action goal
+        """Start ROS and listen (unless ``config.websocket`` is off)."""
+        self.start_graph()
+        if self.config.websocket:
+            await self.listen()
+
+    def start_graph(self) -> None:
+        """Start the ROS side and its refresh loop, without listening: a front that serves
+        several bridges' sessions on one port (the relay) calls this, then hands connections
+        to :meth:`admit` and :meth:`serve_connection`."""
+        for check in self._checks:
+            check()
         self.ros.start()
+        self._refresher = asyncio.create_task(self._refresh_loop(), name="bridge-refresh")
+
+    async def listen(self) -> None:
+        """Open the websocket listener and the plain-HTTP routes."""
         own_keepalive = bool(self.config.keepalive_interval) and keepalive.supported_here()
         self._server = await serve(
             self._handle,
@@ -151,7 +189,15 @@ class Bridge:
             **self.security.serve_kwargs(),
         )
         await self.web.start()
-        self._refresher = asyncio.create_task(self._refresh_loop(), name="bridge-refresh")
+
+    async def admit(self, connection: ServerConnection, request: Request) -> Any:
+        """The checks before a connection's handshake (plain-HTTP routes, security, session
+        resume), for a front that serves this bridge's sessions on its own port."""
+        return await self._process_request(connection, request)
+
+    async def serve_connection(self, ws: ServerConnection) -> None:
+        """Serve one admitted connection until it ends (for such a front)."""
+        await self._handle(ws)
 
     async def _process_request(self, connection: ServerConnection, request: Request) -> Any:
         """Before the handshake: plain-HTTP routes first (web.py), then the security checks."""

@@ -1,0 +1,347 @@
+"""The robot's side of the relay tier: its bridge's :class:`~bridge_server.graph.Graph` on Zenoh.
+
+``roslibpy-lite-bridge --zenoh-connect tcp/router:7447 --robot r1`` runs one
+:class:`Exporter` beside (or, with ``--no-websocket``, instead of) the websocket listener.
+It dials out to the routers and offers the robot under ``r1/`` as :mod:`.keys` describes:
+
+- a topic is subscribed in ROS only while some relay's demand token for it exists (an
+  unwatched robot sends nothing); each message is put once, as the CDR bytes that came,
+  however many relays and viewers watch it;
+- a relay's publisher token makes a shared publisher of the Graph, and the messages put
+  under ``@in/`` are published through it, CDR bytes as they came;
+- service calls are queries, answered by the Graph's own ``call_service``;
+- the graph (topics, services, nodes and the definitions of their types) is put when it
+  changes, and answers queries.
+
+It talks to ROS only through the Graph protocol, so it knows nothing of rclpy. Zenoh calls
+back on its own threads: every callback crosses to the event loop with
+``call_soon_threadsafe`` and the Graph is used there only.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import json
+import logging
+import secrets
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import zenoh
+
+from ..graph import Graph, Message, Publisher, TopicFeed
+from ..interfaces import BridgeError
+from . import keys
+from .keys import CallRequest, Meta, Snapshot
+from .link import ZenohOptions, open_session
+
+__all__ = ["Exporter"]
+
+log = logging.getLogger("bridge_server.zenoh.exporter")
+
+SNAPSHOT_INTERVAL = 1.0
+"""Seconds between two looks at the ROS graph (a changed one is put at once)."""
+
+
+@dataclass
+class _Export:
+    """One watched topic: the Graph's feed, the relays that watch it, the last message put."""
+
+    feed: TopicFeed
+    listener: Callable[[Message], None]
+    relays: set[str] = field(default_factory=set)
+    seq: int = 0
+    last: tuple[Message, bytes] | None = None
+
+
+class Exporter:
+    """The robot ``robot``'s Graph offered on Zenoh (see the module's text)."""
+
+    def __init__(self, graph: Graph, robot: str, options: ZenohOptions,
+                 graph_changed: Callable[[], None] = lambda: None,
+                 snapshot_interval: float = SNAPSHOT_INTERVAL) -> None:
+        self.graph = graph
+        self.robot = keys.check_robot(robot)
+        self.options = options
+        self.graph_changed = graph_changed
+        self.snapshot_interval = snapshot_interval
+        self.epoch = secrets.token_hex(6)
+        self.session: zenoh.Session | None = None
+        self.exports: dict[str, _Export] = {}
+        self.publishers: dict[tuple[str, str, bool], tuple[Publisher, set[str]]] = {}
+        self.snapshot = Snapshot()
+        self._snapshot_bytes = b""
+        self._definitions: dict[str, str] = {}
+        self._typedefs: dict[str, list[dict[str, Any]]] = {}
+        self._entities: list[Any] = []
+        self._tasks: set[asyncio.Task[None]] = set()
+        self._loop = asyncio.get_running_loop()
+        self._runner: asyncio.Task[None] | None = None
+
+    # -- life ----------------------------------------------------------------------------------
+
+    def start(self) -> None:
+        """Dial out (in the background: the robot serves ROS while no router answers)."""
+        self._runner = self._loop.create_task(self._run(), name="zenoh-exporter")
+        self._runner.add_done_callback(_report)
+
+    async def _run(self) -> None:
+        self.session = session = await open_session(self.options)
+        log.info("robot %s is on Zenoh (session %s)", self.robot, session.zid())
+        r = self.robot
+        here = self._on_loop
+        live = session.liveliness()
+        self.snapshot = self._take_snapshot()
+        self._snapshot_bytes = self.snapshot.encode()
+        self._entities = [
+            session.declare_queryable(f"{r}/{keys.GRAPH}", here(self._answer_graph)),
+            session.declare_queryable(f"{r}/{keys.LATCHED}/**", here(self._answer_latched)),
+            session.declare_queryable(f"{r}/{keys.CALL}/**", here(self._answer_call)),
+            session.declare_subscriber(f"{r}/{keys.IN}/**", here(self._on_in)),
+            live.declare_subscriber(f"{r}/{keys.DEMAND}/**", here(self._on_demand), history=True),
+            live.declare_subscriber(f"{r}/{keys.ADVERTISE}/**", here(self._on_advertise),
+                                    history=True),
+            live.declare_token(f"{r}/{keys.ALIVE}"),
+        ]
+        while True:
+            await asyncio.sleep(self.snapshot_interval)
+            self._refresh_snapshot()
+
+    def _on_loop(self, fn: Callable[[Any], None]) -> Callable[[Any], None]:
+        """A Zenoh callback that hands its argument to ``fn`` on the event loop."""
+        loop = self._loop
+
+        def cross(arg: Any) -> None:
+            with contextlib.suppress(RuntimeError):  # the loop closed while Zenoh called
+                loop.call_soon_threadsafe(fn, arg)
+
+        return cross
+
+    async def close(self) -> None:
+        """Leave Zenoh (the relays see the robot go) and release what the relays held."""
+        if self._runner is not None:
+            self._runner.cancel()
+            with contextlib.suppress(asyncio.CancelledError, BridgeError):
+                await self._runner
+        for task in list(self._tasks):
+            task.cancel()
+        for export in self.exports.values():
+            self.graph.unsubscribe(export.feed, export.listener)
+        self.exports.clear()
+        for pub, _relays in self.publishers.values():
+            self.graph.release_publisher(pub)
+        self.publishers.clear()
+        for entity in self._entities:
+            with contextlib.suppress(zenoh.ZError):
+                entity.undeclare()
+        self._entities.clear()
+        if self.session is not None:
+            session, self.session = self.session, None
+            await self._loop.run_in_executor(None, session.close)
+
+    # -- topics: demand-driven -----------------------------------------------------------------
+
+    def _on_demand(self, sample: zenoh.Sample) -> None:
+        try:
+            relay, topic = keys.parse_demand(str(sample.key_expr))
+        except IndexError:
+            return
+        export = self.exports.get(topic)
+        if sample.kind == zenoh.SampleKind.PUT:
+            if export is None:
+                export = self._export(topic)
+                if export is None:
+                    return
+            export.relays.add(relay)
+        elif export is not None:
+            export.relays.discard(relay)
+            if not export.relays:
+                del self.exports[topic]
+                self.graph.unsubscribe(export.feed, export.listener)
+                log.info("nobody watches %s through a relay now: unsubscribed", topic)
+
+    def _export(self, topic: str) -> _Export | None:
+        key = f"{self.robot}/{topic[1:]}"
+
+        def listener(msg: Message) -> None:
+            if self.session is not None:
+                payload, attachment = self._stamp(export, msg)
+                self.session.put(key, payload, attachment=attachment)
+
+        try:
+            feed = self.graph.subscribe(topic, None, listener)
+        except (BridgeError, ValueError) as exc:
+            log.warning("a relay asked for %s, which cannot be subscribed: %s", topic, exc)
+            return None
+        export = self.exports[topic] = _Export(feed, listener)
+        self.graph_changed()  # the type may be learned later: the bridge's refresh does it
+        log.info("a relay watches %s: subscribed", topic)
+        return export
+
+    def _stamp(self, export: _Export, msg: Message) -> tuple[bytes, bytes]:
+        """The payload and attachment of ``msg``, numbered in its topic's stream."""
+        last = export.last
+        if last is not None and last[0] is msg:
+            return msg.data, last[1]
+        export.seq += 1
+        meta = Meta(type=export.feed.type_name or "", latched=export.feed.latched is msg,
+                    stamp_ns=msg.stamp_ns, epoch=self.epoch, seq=export.seq)
+        attachment = meta.encode()
+        export.last = (msg, attachment)
+        return msg.data, attachment
+
+    def _answer_latched(self, query: zenoh.Query) -> None:
+        with _answering(query):
+            topic = keys.name_of(str(query.key_expr), 2)
+            export = self.exports.get(topic)
+            latched = export.feed.latched if export is not None else None
+            if export is not None and latched is not None:
+                payload, attachment = self._stamp(export, latched)
+                query.reply(query.key_expr, payload, attachment=attachment)
+
+    # -- publishing for relays' clients --------------------------------------------------------
+
+    def _on_advertise(self, sample: zenoh.Sample) -> None:
+        try:
+            relay, topic, latch, type_name = keys.parse_advertise(str(sample.key_expr))
+        except IndexError:
+            return
+        entry = (topic, type_name, latch)
+        if sample.kind == zenoh.SampleKind.PUT:
+            if self._publisher(entry) is not None:
+                self.publishers[entry][1].add(relay)
+            return
+        held = self.publishers.get(entry)
+        if held is not None:
+            held[1].discard(relay)
+            if not held[1]:
+                del self.publishers[entry]
+                self.graph.release_publisher(held[0])
+
+    def _publisher(self, entry: tuple[str, str, bool]) -> Publisher | None:
+        held = self.publishers.get(entry)
+        if held is not None:
+            return held[0]
+        topic, type_name, latch = entry
+        try:
+            cls = self.graph.resolve_message(type_name)
+            pub = self.graph.acquire_publisher(topic, cls, latch, 10)
+        except (BridgeError, ValueError) as exc:
+            log.warning("a relay's publisher of %s (%s) cannot be made: %s", topic, type_name,
+                        exc)
+            return None
+        self.publishers[entry] = (pub, set())
+        return pub
+
+    def _on_in(self, sample: zenoh.Sample) -> None:
+        topic = keys.name_of(str(sample.key_expr), 2)
+        try:
+            meta = Meta.decode(sample.attachment.to_bytes() if sample.attachment else None)
+        except BridgeError as exc:
+            log.warning("a message for %s from a relay is dropped: %s", topic, exc)
+            return
+        pub = self._publisher((topic, meta.type, meta.latched))
+        if pub is not None:
+            pub.publish(sample.payload.to_bytes())
+
+    # -- services ------------------------------------------------------------------------------
+
+    def _answer_call(self, query: zenoh.Query) -> None:
+        task = self._loop.create_task(self._call(query))
+        self._tasks.add(task)
+        task.add_done_callback(self._tasks.discard)
+
+    async def _call(self, query: zenoh.Query) -> None:
+        with _answering(query):
+            service = keys.name_of(str(query.key_expr), 2)
+            try:
+                req = CallRequest.decode(query.payload.to_bytes() if query.payload else b"")
+                response = await self.graph.call_service(
+                    service, req.type, req.args, req.timeout, req.discovery_wait)
+            except BridgeError as exc:
+                query.reply_err(str(exc).encode())
+                return
+            query.reply(query.key_expr, _json(response))
+
+    # -- the graph -----------------------------------------------------------------------------
+
+    def _answer_graph(self, query: zenoh.Query) -> None:
+        with _answering(query):
+            query.reply(query.key_expr, self._snapshot_bytes)
+
+    def _refresh_snapshot(self) -> None:
+        try:
+            snap = self._take_snapshot()
+        except Exception:  # a graph query failed while a node left: try again next time
+            log.debug("the graph snapshot failed", exc_info=True)
+            return
+        data = snap.encode()
+        if data != self._snapshot_bytes and self.session is not None:
+            self.snapshot, self._snapshot_bytes = snap, data
+            self.session.put(f"{self.robot}/{keys.GRAPH}", data)
+
+    def _take_snapshot(self) -> Snapshot:
+        g = self.graph
+        topics = sorted(g.topic_names_and_types())
+        services = sorted(g.service_names_and_types())
+        nodes: dict[str, dict[str, Any]] = {}
+        for name, ns in g.node_names():
+            try:
+                subs, pubs, _srvs = g.node_endpoints(name, ns)
+                serves = g.node_services(name, ns)
+            except Exception:  # it left meanwhile
+                continue
+            nodes[ns.rstrip("/") + "/" + name] = {
+                "name": name, "namespace": ns, "subscribes": sorted(subs),
+                "publishes": sorted(pubs), "serves": sorted(serves)}
+        for type_name in {t for _, ts in topics for t in ts}:
+            self._define(type_name, "msg")
+        for type_name in {t for _, ts in services for t in ts}:
+            self._define(type_name, "srv")
+        wanted = {t for _, ts in [*topics, *services] for t in ts}
+        return Snapshot(
+            node=g.name, own_node=g.own_node(), topics=topics, services=services, nodes=nodes,
+            publishers={t: [(n, ns, q) for n, ns, q in g.topic_publishers_qos(t)]
+                        for t, _ in topics},
+            subscribers={t: g.topic_subscribers(t) for t, _ in topics},
+            definitions={t: d for t, d in self._definitions.items() if t in wanted and d},
+            typedefs={t: d for t, d in self._typedefs.items()
+                      if t in wanted or t.rsplit("_", 1)[0] in wanted},
+            interfaces=g.installed_interfaces())
+
+    def _define(self, type_name: str, kind: str) -> None:
+        """Learn a type's definition text and typedefs once (they do not change)."""
+        if type_name in self._definitions:
+            return
+        try:
+            self._definitions[type_name] = self.graph.interface_definition(type_name)[
+                "definition"]
+            if kind == "msg":
+                self._typedefs[type_name] = self.graph.typedefs(type_name, "msg")
+            else:
+                for part in ("Request", "Response"):
+                    self._typedefs[f"{type_name}_{part}"] = self.graph.typedefs(
+                        type_name, "srv", part)
+        except (BridgeError, LookupError, ValueError) as exc:
+            self._definitions[type_name] = ""  # not installed here: asked once
+            log.debug("no definition of %s: %s", type_name, exc)
+
+
+def _report(task: asyncio.Task[None]) -> None:
+    if not task.cancelled() and task.exception() is not None:
+        log.error("the robot left Zenoh: %s", task.exception())
+
+
+@contextlib.contextmanager
+def _answering(query: zenoh.Query) -> Any:
+    """Finish the query when the block ends (the querier hears "no more replies")."""
+    try:
+        yield
+    finally:
+        query.drop()  # type: ignore[no-untyped-call]
+
+
+def _json(obj: Any) -> bytes:
+    return json.dumps(obj, separators=(",", ":")).encode()
