@@ -1,0 +1,622 @@
+"""The relay's side: a :class:`~bridge_server.graph.Graph` of one robot, read from Zenoh.
+
+A relay holds one :class:`ZenohGraph` per robot its clients ask for, shared by their
+sessions, over one Zenoh session. What the sessions ask of ROS becomes the keys of
+:mod:`.keys`:
+
+- a topic's shared subscription is a Zenoh subscriber plus a demand token (so the robot
+  subscribes in ROS), and each message is built from the CDR bytes the robot put: JSON
+  straight from CDR (:mod:`bridge_server.codec.cdr_json`), CBOR from ``msgs.cdr``'s
+  decoding, ``cbor-raw`` the bytes as they came, each at most once per message;
+- a shared publisher is a publisher token (the robot makes the ROS publisher) and one put
+  of CDR bytes (``msgs.cdr``) per message;
+- a service call is one query answered by the robot's own ``call_service``;
+- the graph, the types' definitions and typedefs come from the robot's snapshot (kept
+  up to date by its puts), so the sessions' synchronous questions read a cache.
+
+Types are ``msgs`` classes: generated ones, or built at run time from the definitions the
+robot sent (:mod:`msgs.dynamic`), so a robot's own types need nothing installed on the
+relay. What the relay does not carry yet (actions, services served by clients, node
+parameters) raises :class:`~bridge_server.interfaces.BridgeError` naming the op and "not
+supported through a relay yet", which the sessions send to the client as a status error.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import json
+import logging
+import time
+from collections.abc import Callable, Mapping
+from typing import Any
+
+import zenoh
+
+import msgs.dynamic
+from msgs import cdr
+from msgs.parser import DefinitionError
+from msgs.runtime import Message as WireMessage
+from msgs.runtime import UnknownTypeError as WireUnknownType
+from msgs.runtime import ValidationError, lookup_message, lookup_service
+
+from ..codec.cdr_json import JsonFromCdr, wire_encoder
+from ..codec.publish import encode_publish_cbor, encode_publish_cbor_raw, encode_publish_json
+from ..graph import Listener, RosCall, ServedAction, ServedGoal, ServedService
+from ..interfaces import (
+    BridgeError,
+    ConversionError,
+    ServiceCallError,
+    UnknownTypeError,
+    canonical_name,
+)
+from . import keys
+from .keys import CallRequest, Meta, Snapshot
+
+__all__ = ["NOT_YET", "RelayConverter", "ZenohFeed", "ZenohGraph", "ZenohMessage",
+           "ZenohPublisher"]
+
+log = logging.getLogger("bridge_server.zenoh.graph")
+
+NOT_YET = "not supported through a relay yet"
+"""The words every refusal of what a relay cannot do yet ends with."""
+
+SNAPSHOT_WAIT = 5.0
+"""Seconds a new robot's first graph snapshot is waited for."""
+
+
+class RelayConverter:
+    """:class:`~bridge_server.graph.Converter` of one ``msgs`` message class (the relay's
+    messages are ``msgs`` instances)."""
+
+    def __init__(self, cls: type[WireMessage]) -> None:
+        self.cls = cls
+        self.decode = cdr.decoder_for(cls)
+        self.json_from_cdr: JsonFromCdr = wire_encoder(cls)
+
+    @property
+    def type_name(self) -> str:
+        """Canonical ``pkg/msg/Type``."""
+        return self.cls._type
+
+    @property
+    def fields(self) -> tuple[str, ...]:
+        """Field names in declaration order."""
+        return tuple(self.cls._fields_and_types)
+
+    def to_obj(self, msg: Any) -> dict[str, Any]:
+        """The message as a JSON-ready dict."""
+        return msg.to_json()  # type: ignore[no-any-return]
+
+    def to_json(self, msg: Any) -> str:
+        """The message as compact JSON text."""
+        return json.dumps(self.to_obj(msg), separators=(",", ":"), allow_nan=False,
+                          ensure_ascii=False)
+
+    def to_cbor_obj(self, msg: Any) -> Any:
+        """The message as a CBOR-ready dict (byte strings for byte arrays)."""
+        return self.decode(cdr.encode(msg))
+
+    def from_obj(self, obj: Any, path: str = "") -> Any:
+        """A new message from a decoded object; ``ConversionError`` naming the field."""
+        try:
+            return self.cls.from_json(obj)
+        except ValidationError as exc:
+            where = ".".join(p for p in (path, exc.path) if p)
+            raise ConversionError(where, exc.expected, detail=str(exc)) from None
+
+    def text_of(self, data: bytes) -> str:
+        """The message's JSON text from its CDR bytes."""
+        text = self.json_from_cdr(data)
+        if text is None:  # a NaN or infinity: null, as rosbridge sends them
+            text = self.to_json(self.cls.from_json(self.decode(data)))
+        return text
+
+
+class ZenohMessage:
+    """One message the robot put, encoded for clients lazily and once per encoding."""
+
+    __slots__ = ("_cbor", "_cbor_raw", "_json", "_msg_json", "conv", "data", "stamp_ns",
+                 "topic")
+
+    def __init__(self, topic: str, data: bytes, conv: RelayConverter, stamp_ns: int) -> None:
+        self.topic = topic
+        self.data = data
+        self.conv = conv
+        self.stamp_ns = stamp_ns
+        self._msg_json: str | None = None
+        self._json: str | None = None
+        self._cbor: bytes | None = None
+        self._cbor_raw: bytes | None = None
+
+    def _text(self) -> str:
+        if self._msg_json is None:
+            self._msg_json = self.conv.text_of(self.data)
+        return self._msg_json
+
+    def json_text(self, name: str | None = None) -> str:
+        """The whole ``publish`` op as JSON text."""
+        if name is not None and name != self.topic:
+            return encode_publish_json(name, self._text())
+        if self._json is None:
+            self._json = encode_publish_json(self.topic, self._text())
+        return self._json
+
+    def cbor(self, name: str | None = None) -> bytes:
+        """The whole ``publish`` op CBOR-encoded."""
+        if name is not None and name != self.topic:
+            return encode_publish_cbor(name, self.data, self)
+        if self._cbor is None:
+            self._cbor = encode_publish_cbor(self.topic, self.data, self)
+        return self._cbor
+
+    def to_cbor_obj(self, data: bytes) -> Any:
+        """The CBOR object of the message's bytes (for :func:`encode_publish_cbor`)."""
+        return self.conv.decode(data)
+
+    def cbor_raw(self, name: str | None = None) -> bytes:
+        """The whole ``publish`` op with the CDR bytes as they came."""
+        if name is not None and name != self.topic:
+            return encode_publish_cbor_raw(name, self.data, self.stamp_ns)
+        if self._cbor_raw is None:
+            self._cbor_raw = encode_publish_cbor_raw(self.topic, self.data, self.stamp_ns)
+        return self._cbor_raw
+
+
+class ZenohFeed:
+    """The relay's one subscription to a robot's topic, shared by its sessions."""
+
+    def __init__(self, graph: ZenohGraph, topic: str, msg_cls: Any) -> None:
+        self.graph = graph
+        self.topic = topic
+        self.msg_cls = msg_cls
+        self.received = 0
+        self.listeners: list[Listener] = []
+        self._latched: ZenohMessage | None = None
+        self._type: str | None = msg_cls._type if msg_cls is not None else None
+        self._place = ("", 0)  # (epoch, seq) of the last message taken
+        self._entities: list[Any] = []
+        self._warned = False
+
+    @property
+    def latched(self) -> ZenohMessage | None:
+        """The last message of a latched topic, for a late subscriber."""
+        return self._latched
+
+    @property
+    def type_name(self) -> str | None:
+        """Canonical type of the topic, once known."""
+        return self._type
+
+    def open(self) -> None:
+        """Listen, then tell the robot (so nothing it puts is missed), then ask for the
+        latched message."""
+        g = self.graph
+        session = g.session
+        here = g.on_loop
+        self._entities = [
+            session.declare_subscriber(keys.key_of(g.robot, self.topic), here(self.on_sample)),
+            session.liveliness().declare_token(
+                keys.key_of(g.robot, self.topic, f"{keys.DEMAND}/{g.relay}")),
+        ]
+        session.get(keys.key_of(g.robot, self.topic, keys.LATCHED),
+                    zenoh.handlers.Callback(here(self.on_reply)))
+
+    def close(self) -> None:
+        """Stop listening; the robot unsubscribes once no relay wants the topic."""
+        for entity in self._entities:
+            with contextlib.suppress(zenoh.ZError):
+                entity.undeclare()
+        self._entities.clear()
+
+    def on_reply(self, reply: zenoh.Reply) -> None:
+        """The robot's latched message, asked for at :meth:`open`."""
+        if reply.ok is not None:
+            self.on_sample(reply.ok)
+
+    def on_sample(self, sample: zenoh.Sample) -> None:
+        """One message the robot put (on the loop)."""
+        if self.graph.subscriptions.get(self.topic) is not self:
+            return
+        try:
+            meta = Meta.decode(sample.attachment.to_bytes() if sample.attachment else None)
+            conv = self.graph.converter(self.graph.resolve_message(meta.type))
+        except BridgeError as exc:
+            if not self._warned:
+                self._warned = True
+                log.warning("messages of %s on robot %s are dropped: %s", self.topic,
+                            self.graph.robot, exc)
+            return
+        epoch, seq = self._place
+        if meta.epoch == epoch and meta.seq <= seq:
+            return  # had it already (the latched reply and the put of the same message)
+        self._place = (meta.epoch, meta.seq)
+        self._type = conv.type_name
+        self.received += 1
+        msg = ZenohMessage(self.topic, sample.payload.to_bytes(), conv,
+                           meta.stamp_ns or time.time_ns())
+        if meta.latched:
+            self._latched = msg
+        for listener in list(self.listeners):
+            try:
+                listener(msg)
+            except Exception:
+                log.exception("listener failed on %s", self.topic)
+
+
+class ZenohPublisher:
+    """A publisher of a robot's topic, shared by the relay's sessions that advertised it."""
+
+    def __init__(self, graph: ZenohGraph, topic: str, msg_cls: Any, latch: bool) -> None:
+        self.graph = graph
+        self.topic = topic
+        self.latch = latch
+        self.refs = 0
+        self.conv = graph.converter(msg_cls)
+        self.key = keys.key_of(graph.robot, topic, keys.IN)
+        self.attachment = Meta(type=self.conv.type_name, latched=latch).encode()
+        self.token = graph.session.liveliness().declare_token(
+            keys.advertise_key(graph.robot, graph.relay, topic, self.conv.type_name, latch))
+
+    @property
+    def type_name(self) -> str:
+        """Canonical message type."""
+        return self.conv.type_name
+
+    def publish(self, msg: Any) -> None:
+        """Send one message (a ``msgs`` instance, or its CDR bytes) to the robot."""
+        data = msg if isinstance(msg, bytes) else cdr.encode(msg)
+        self.graph.session.put(self.key, data, attachment=self.attachment)
+
+    def close(self) -> None:
+        """The last reference went: the robot drops its publisher."""
+        with contextlib.suppress(zenoh.ZError):
+            self.token.undeclare()  # type: ignore[no-untyped-call]
+
+
+class ZenohGraph:
+    """The Graph of robot ``robot`` over a Zenoh session (see the module's text)."""
+
+    def __init__(self, session: zenoh.Session, robot: str, relay: str) -> None:
+        self.session = session
+        self.robot = keys.check_robot(robot)
+        self.relay = keys.check_relay(relay)
+        self.loop = asyncio.get_running_loop()
+        self.snapshot = Snapshot()
+        self.alive = False
+        self.subscriptions: dict[str, ZenohFeed] = {}
+        self.publishers: dict[tuple[str, str, bool], ZenohPublisher] = {}
+        self._converters: dict[type[Any], RelayConverter] = {}
+        self._entities: list[Any] = []
+        self._have_snapshot = asyncio.Event()
+
+    @property
+    def name(self) -> str:
+        """The robot's bridge node name, as the robot reports it."""
+        return self.snapshot.node or f"relay_{self.relay}_{self.robot}"
+
+    def on_loop(self, fn: Callable[[Any], None]) -> Callable[[Any], None]:
+        """A Zenoh callback that hands its argument to ``fn`` on the event loop."""
+        loop = self.loop
+
+        def cross(arg: Any) -> None:
+            with contextlib.suppress(RuntimeError):  # the loop closed meanwhile
+                loop.call_soon_threadsafe(fn, arg)
+
+        return cross
+
+    # -- life ----------------------------------------------------------------------------------
+
+    def start(self) -> None:
+        """Follow the robot's liveliness and graph."""
+        r = self.robot
+        self._entities = [
+            self.session.liveliness().declare_subscriber(
+                f"{r}/{keys.ALIVE}", self.on_loop(self._on_alive), history=True),
+            self.session.declare_subscriber(f"{r}/{keys.GRAPH}", self.on_loop(self._on_graph)),
+        ]
+        self.session.get(f"{r}/{keys.GRAPH}",
+                         zenoh.handlers.Callback(self.on_loop(self._on_graph_reply)))
+
+    async def ready(self, timeout: float = SNAPSHOT_WAIT) -> bool:
+        """Whether the robot's first graph snapshot came within ``timeout`` s."""
+        with contextlib.suppress(TimeoutError):
+            await asyncio.wait_for(self._have_snapshot.wait(), timeout)
+        return self._have_snapshot.is_set()
+
+    def refresh(self) -> None:
+        """Nothing to do: the robot follows its own graph."""
+
+    def close(self) -> None:
+        """Drop every subscription, publisher and declaration."""
+        for feed in self.subscriptions.values():
+            feed.close()
+        self.subscriptions.clear()
+        for pub in self.publishers.values():
+            pub.close()
+        self.publishers.clear()
+        for entity in self._entities:
+            with contextlib.suppress(zenoh.ZError):
+                entity.undeclare()
+        self._entities.clear()
+
+    def trouble(self) -> str | None:
+        """Why the robot is not served (``None``: it is)."""
+        if not self.alive:
+            return f"robot {self.robot} is not connected to this relay's Zenoh network"
+        return None
+
+    def _on_alive(self, sample: zenoh.Sample) -> None:
+        self.alive = sample.kind == zenoh.SampleKind.PUT
+        log.info("robot %s %s", self.robot, "is here" if self.alive else "went away")
+
+    def _on_graph(self, sample: zenoh.Sample) -> None:
+        try:
+            self.snapshot = Snapshot.decode(sample.payload.to_bytes())
+        except BridgeError as exc:
+            log.warning("robot %s: %s", self.robot, exc)
+            return
+        self._have_snapshot.set()
+
+    def _on_graph_reply(self, reply: zenoh.Reply) -> None:
+        if reply.ok is not None:
+            self._on_graph(reply.ok)
+
+    # -- types ---------------------------------------------------------------------------------
+
+    def _load(self, name: str, kind: str) -> Any:
+        canonical = canonical_name(name, kind)  # type: ignore[arg-type]
+        text = self.snapshot.definitions.get(canonical)
+        try:
+            if text:
+                return msgs.dynamic.load(canonical, text)
+            return lookup_message(canonical) if kind == "msg" else lookup_service(canonical)
+        except (WireUnknownType, DefinitionError) as exc:
+            raise UnknownTypeError(name, f"robot {self.robot} does not list it and msgs does "
+                                   f"not generate it ({exc})") from None
+
+    def resolve_message(self, name: str) -> Any:
+        """The ``msgs`` class of message type ``name`` (the robot's definition if it sent
+        one, else the generated type)."""
+        return self._load(name, "msg")
+
+    def resolve_service(self, name: str) -> Any:
+        """The ``msgs`` service type named ``name``."""
+        return self._load(name, "srv")
+
+    def resolve_action(self, name: str) -> Any:
+        """Actions are not carried by relays yet."""
+        raise BridgeError(f"actions are {NOT_YET}")
+
+    def converter(self, cls: Any) -> RelayConverter:
+        """The converter of a ``msgs`` message class."""
+        conv = self._converters.get(cls)
+        if conv is None:
+            conv = self._converters[cls] = RelayConverter(cls)
+        return conv
+
+    def typedefs(self, name: str, kind: str, part: str | None = None) -> list[dict[str, Any]]:
+        """rosapi typedefs of a type in the robot's graph."""
+        if kind == "action":
+            raise BridgeError(f"actions are {NOT_YET}")
+        key = canonical_name(name, kind) + (f"_{part}" if part else "")  # type: ignore[arg-type]
+        found = self.snapshot.typedefs.get(key)
+        if found is None:
+            raise BridgeError(f"no typedefs of {key}: robot {self.robot} has no topic or "
+                              "service of that type")
+        return found
+
+    def installed_interfaces(self) -> list[str]:
+        """Every interface type the robot has installed."""
+        return list(self.snapshot.interfaces)
+
+    def interface_definition(self, name: str) -> dict[str, Any]:
+        """The full definition text of a type in the robot's graph (or one msgs has)."""
+        for kind in ("msg", "srv"):
+            with contextlib.suppress(BridgeError):
+                canonical = canonical_name(name, kind)
+                text = self.snapshot.definitions.get(canonical)
+                if text:
+                    return {"type": canonical, "definition": text}
+        try:
+            canonical = canonical_name(name, "msg")
+            return {"type": canonical, "definition": msgs.dynamic.full_text(canonical)}
+        except (BridgeError, WireUnknownType):
+            raise BridgeError(f"no definition of {name!r}: robot {self.robot} has no topic "
+                              "or service of that type") from None
+
+    # -- introspection (the robot's snapshot) --------------------------------------------------
+
+    def topic_names_and_types(self) -> list[tuple[str, list[str]]]:
+        """Every topic of the robot with its types."""
+        return [(n, list(ts)) for n, ts in self.snapshot.topics]
+
+    def service_names_and_types(self) -> list[tuple[str, list[str]]]:
+        """Every service of the robot with its types."""
+        return [(n, list(ts)) for n, ts in self.snapshot.services]
+
+    def node_names(self) -> list[tuple[str, str]]:
+        """Every node of the robot as (name, namespace)."""
+        return [(n["name"], n["namespace"]) for n in self.snapshot.nodes.values()]
+
+    def own_node(self) -> tuple[str, str]:
+        """The robot's bridge node."""
+        return self.snapshot.own_node
+
+    def _node(self, name: str, namespace: str) -> dict[str, Any]:
+        node = self.snapshot.nodes.get(namespace.rstrip("/") + "/" + name)
+        if node is None:
+            raise LookupError(f"robot {self.robot} has no node {namespace}/{name}")
+        return node
+
+    def node_endpoints(self, name: str, namespace: str) -> tuple[list[str], list[str], list[str]]:
+        """Topics a node subscribes to, publishes, services it serves."""
+        node = self._node(name, namespace)
+        return (list(node["subscribes"]), list(node["publishes"]),
+                [s for s, _ in node["serves"]])
+
+    def node_services(self, name: str, namespace: str) -> list[tuple[str, list[str]]]:
+        """Services a node serves, with their types."""
+        return [(s, list(ts)) for s, ts in self._node(name, namespace)["serves"]]
+
+    def topic_publishers(self, topic: str) -> list[tuple[str, str]]:
+        """Nodes publishing on ``topic``."""
+        return [(n, ns) for n, ns, _ in self.snapshot.publishers.get(topic, [])]
+
+    def topic_publishers_qos(self, topic: str) -> list[tuple[str, str, dict[str, Any]]]:
+        """Publishers of ``topic`` with their QoS."""
+        return [(n, ns, dict(q)) for n, ns, q in self.snapshot.publishers.get(topic, [])]
+
+    def topic_subscribers(self, topic: str) -> list[tuple[str, str]]:
+        """Nodes subscribed to ``topic``."""
+        return [(n, ns) for n, ns in self.snapshot.subscribers.get(topic, [])]
+
+    def topic_types(self, topic: str) -> list[str]:
+        """Types the robot lists for ``topic``."""
+        return next((list(ts) for n, ts in self.snapshot.topics if n == topic), [])
+
+    def publisher_types(self, topic: str) -> set[str]:
+        """Types of this relay's own publishers on ``topic``."""
+        return {t for name, t, _ in self.publishers if name == topic}
+
+    def service_types(self, service: str) -> list[str]:
+        """Types the robot lists for ``service``."""
+        return next((list(ts) for n, ts in self.snapshot.services if n == service), [])
+
+    def _servers(self, service: str) -> list[dict[str, Any]]:
+        return [n for n in self.snapshot.nodes.values()
+                if any(s == service for s, _ in n["serves"])]
+
+    def server_count(self, service: str) -> int:
+        """How many of the robot's nodes serve ``service``."""
+        return len(self._servers(service))
+
+    def other_servers(self, service: str) -> list[str]:
+        """The robot's servers of ``service`` (the relay serves none itself)."""
+        return ["the ROS node " + n["namespace"].rstrip("/") + "/" + n["name"]
+                for n in self._servers(service)]
+
+    def server_types(self, service: str) -> list[str]:
+        """Types of ``service`` as the robot's servers offer it."""
+        found: list[str] = []
+        for node in self._servers(service):
+            found += [t for s, ts in node["serves"] if s == service for t in ts
+                      if t not in found]
+        return found
+
+    def now(self) -> tuple[int, int]:
+        """The relay's wall clock as (sec, nanosec)."""
+        sec, nsec = divmod(time.time_ns(), 1_000_000_000)
+        return sec, nsec
+
+    # -- topics --------------------------------------------------------------------------------
+
+    def subscribe(self, topic: str, msg_cls: Any, listener: Listener) -> ZenohFeed:
+        """Add ``listener`` to the topic's shared subscription (made on first use)."""
+        feed = self.subscriptions.get(topic)
+        if feed is None:
+            feed = ZenohFeed(self, topic, msg_cls)
+            self.subscriptions[topic] = feed
+            feed.open()
+        elif msg_cls is not None and feed.msg_cls is not None and feed.msg_cls is not msg_cls:
+            raise ValueError(f"topic {topic} is already subscribed with type {feed.type_name}")
+        elif msg_cls is not None and feed.msg_cls is None:
+            feed.msg_cls = msg_cls
+        feed.listeners.append(listener)
+        return feed
+
+    def unsubscribe(self, shared: Any, listener: Listener) -> None:
+        """Remove ``listener``; the subscription (and the demand) goes with the last."""
+        feed: ZenohFeed = shared
+        with contextlib.suppress(ValueError):
+            feed.listeners.remove(listener)
+        if not feed.listeners and self.subscriptions.get(feed.topic) is feed:
+            del self.subscriptions[feed.topic]
+            feed.close()
+
+    def acquire_publisher(self, topic: str, msg_cls: Any, latch: bool, depth: int
+                          ) -> ZenohPublisher:
+        """A shared publisher for (topic, type, latch), its reference count raised."""
+        key = (topic, msg_cls._type, latch)
+        pub = self.publishers.get(key)
+        if pub is None:
+            pub = self.publishers[key] = ZenohPublisher(self, topic, msg_cls, latch)
+        pub.refs += 1
+        return pub
+
+    def release_publisher(self, pub: Any) -> None:
+        """Lower the reference count; the publisher goes with the last reference."""
+        mine: ZenohPublisher = pub
+        mine.refs -= 1
+        key = (mine.topic, mine.type_name, mine.latch)
+        if mine.refs <= 0 and self.publishers.get(key) is mine:
+            del self.publishers[key]
+            mine.close()
+
+    # -- services ------------------------------------------------------------------------------
+
+    async def call_service(
+        self, service: str, srv_type: str | None, args: Mapping[str, Any] | list[Any] | None,
+        timeout: float, discovery_wait: float,
+        check: Callable[[Any], str | None] | None = None,
+    ) -> dict[str, Any]:
+        """One query to the robot, which calls the service itself."""
+        if check is not None:
+            raise ServiceCallError(f"{service}: this call is {NOT_YET}")
+        future: asyncio.Future[dict[str, Any]] = self.loop.create_future()
+
+        def answer(reply: zenoh.Reply) -> None:
+            if future.done():
+                return
+            if reply.ok is not None:
+                future.set_result(json.loads(reply.ok.payload.to_bytes()))
+            elif reply.err is not None:
+                future.set_exception(ServiceCallError(reply.err.payload.to_string()))
+
+        def ended(_: Any = None) -> None:
+            if not future.done():
+                future.set_exception(ServiceCallError(
+                    f"service {service}: robot {self.robot} did not answer (is it connected "
+                    "to this relay's Zenoh network?)"))
+
+        request = CallRequest(type=srv_type, args=args, timeout=timeout,
+                              discovery_wait=discovery_wait)
+        self.session.get(keys.key_of(self.robot, service, keys.CALL),
+                         zenoh.handlers.Callback(self.on_loop(answer),
+                                                 lambda: self.on_loop(ended)(None)),
+                         payload=request.encode(),
+                         timeout=timeout + 2 * discovery_wait + 1.0)
+        return await future
+
+    def serve(self, name: str, srv_cls: Any, on_request: Callable[[RosCall], None]
+              ) -> ServedService:
+        """Serving a service from a client is not carried by relays yet."""
+        raise BridgeError(f"serving a service from a client is {NOT_YET}")
+
+    # -- parameters ----------------------------------------------------------------------------
+
+    async def parameter_names(self, node: str, timeout: float) -> list[str]:
+        """Node parameters are not carried by relays yet."""
+        raise BridgeError(f"node parameters are {NOT_YET}")
+
+    async def get_parameter(self, node: str, name: str) -> tuple[bool, Any]:
+        """Node parameters are not carried by relays yet."""
+        raise BridgeError(f"node parameters are {NOT_YET}")
+
+    async def set_parameter(self, node: str, name: str, value: Any) -> tuple[bool, str]:
+        """Node parameters are not carried by relays yet."""
+        raise BridgeError(f"node parameters are {NOT_YET}")
+
+    # -- actions -------------------------------------------------------------------------------
+
+    def action_client(self, name: str, action_cls: Any) -> Any:
+        """Actions are not carried by relays yet."""
+        raise BridgeError(f"actions are {NOT_YET}")
+
+    def serve_action(
+        self, name: str, action_cls: Any, on_goal: Callable[[ServedGoal], None],
+        on_cancel: Callable[[ServedGoal], None],
+    ) -> ServedAction:
+        """Actions are not carried by relays yet."""
+        raise BridgeError(f"actions are {NOT_YET}")
+

@@ -1,0 +1,263 @@
+"""``roslibpy-lite-relay``: a rosbridge v2 server without ROS, serving robots on Zenoh.
+
+Clients connect to ``ws://relay:9090/<robot>`` (``wss://`` with ``--certfile``): the path
+names the robot. Each robot gets one :class:`~bridge_server.server.Bridge` (its sessions,
+owners, metrics, kept sessions) over one :class:`~.graph.ZenohGraph`, made when its first
+client comes and shared by the later ones; every robot's sessions are served on the one
+port with the bridge's own session, security and resume code. A path naming no robot that
+is on the Zenoh network is refused (404, naming it) before the handshake.
+
+``--zenoh-listen tcp/0.0.0.0:7447`` makes the relay the Zenoh router itself (robots and
+other relays connect to it); ``--zenoh-connect`` makes it a client of routers. Two relays
+on one router serve the same robots: each robot's messages cross its uplink once, whatever
+the number of relays and viewers.
+
+It logs ``relay listening on ws://HOST:PORT`` once ready and stops within about a second
+of SIGINT or SIGTERM.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import logging
+import secrets
+import signal
+import sys
+from typing import TYPE_CHECKING, Any
+
+try:
+    from websockets.asyncio.server import Server, ServerConnection, serve
+
+    from .. import security
+    from ..http.web_access import WebAccess
+    from ..interfaces import BridgeError
+    from ..security import Security
+    from ..server import Bridge, BridgeConfig
+    from ..session.resume import ResumeConfig
+    from ..session.session import SessionConfig
+    from . import keys
+    from . import link as zenoh_link
+    from .graph import ZenohGraph
+except ModuleNotFoundError as _missing:  # an install without the relay extra
+    from .._requires import missing_dependency
+
+    missing_dependency(_missing, "relay")
+
+if TYPE_CHECKING:
+    import zenoh
+    from websockets.http11 import Request, Response
+
+__all__ = ["Relay", "main", "parse_args"]
+
+log = logging.getLogger("bridge_server.relay")
+
+ALIVE_WAIT = 2.0
+"""Seconds a robot's liveliness is asked for when a client names it."""
+
+
+class Relay:
+    """The relay: one websocket port, one Zenoh session, one Bridge per robot served."""
+
+    def __init__(self, config: BridgeConfig, options: zenoh_link.ZenohOptions,
+                 relay_id: str | None = None) -> None:
+        self.config = config
+        self.options = options
+        self.relay_id = keys.check_relay(relay_id or secrets.token_hex(6))
+        self.security = Security(config.security)
+        self.robots: dict[str, Bridge] = {}
+        self.session: zenoh.Session | None = None
+        self._server: Server | None = None
+        self._opening: dict[str, asyncio.Task[Bridge | None]] = {}
+
+    @property
+    def port(self) -> int:
+        """The websocket port actually bound."""
+        assert self._server is not None
+        return int(next(iter(self._server.sockets)).getsockname()[1])
+
+    async def start(self) -> None:
+        """Join Zenoh, then listen."""
+        self.session = await zenoh_link.open_session(self.options)
+        self._server = await serve(
+            self._handle, self.config.host, self.config.port,
+            max_size=self.config.max_message_size, write_limit=self.config.write_limit,
+            compression=None, max_queue=64, close_timeout=1.0,
+            ping_interval=self.config.keepalive_interval or None,
+            ping_timeout=self.config.keepalive_timeout or None,
+            process_request=self._process_request,
+            **self.security.serve_kwargs(),
+        )
+
+    async def robot(self, name: str) -> Bridge | None:
+        """The Bridge of robot ``name``, made on first use; ``None`` if it is not on Zenoh."""
+        bridge = self.robots.get(name)
+        if bridge is not None:
+            return bridge
+        opening = self._opening.get(name)
+        if opening is None:  # one opening per robot, however many clients ask at once
+            opening = self._opening[name] = asyncio.ensure_future(self._open_robot(name))
+            opening.add_done_callback(lambda _: self._opening.pop(name, None))
+        return await asyncio.shield(opening)
+
+    async def _open_robot(self, name: str) -> Bridge | None:
+        assert self.session is not None
+        if not await self._alive(name):
+            return None
+        graph = ZenohGraph(self.session, name, self.relay_id)
+        bridge = Bridge(self.config, graph=graph)
+        bridge.security = self.security  # one auth file, one SIGHUP, for every robot
+        bridge.web.access = WebAccess(self.security)
+        graph.start()
+        if not await graph.ready():
+            log.warning("robot %s sent no graph snapshot in time: serving it without", name)
+        bridge.start_graph()
+        self.robots[name] = bridge
+        log.info("serving robot %s", name)
+        return bridge
+
+    async def _alive(self, name: str) -> bool:
+        """Whether robot ``name``'s liveliness token is on the network."""
+        assert self.session is not None
+        import zenoh
+
+        loop = asyncio.get_running_loop()
+        found: asyncio.Future[bool] = loop.create_future()
+
+        def seen(_: Any) -> None:
+            if not found.done():
+                found.set_result(True)
+
+        def ended() -> None:
+            if not found.done():
+                found.set_result(False)
+
+        def reply(r: Any) -> None:
+            if r.ok is not None:
+                loop.call_soon_threadsafe(seen, None)
+
+        self.session.liveliness().get(
+            f"{name}/{keys.ALIVE}",
+            zenoh.handlers.Callback(reply, lambda: loop.call_soon_threadsafe(ended)),
+            timeout=ALIVE_WAIT)
+        return await found
+
+    async def _process_request(self, connection: ServerConnection, request: Request
+                               ) -> Response | None:
+        """The path names the robot: refuse a path naming none on Zenoh, else hand the
+        request to that robot's Bridge (plain-HTTP routes, security, session resume)."""
+        name = request.path.partition("?")[0].strip("/").split("/")[0]
+        if not name:
+            return connection.respond(
+                404, "name a robot in the path: ws://<relay>:<port>/<robot>\n")
+        try:
+            keys.check_robot(name)
+        except BridgeError as exc:
+            return connection.respond(400, f"{exc}\n")
+        bridge = await self.robot(name)
+        if bridge is None:
+            log.info("refused a client asking for robot %s: not on Zenoh", name)
+            return connection.respond(
+                404, f"no robot named {name!r} is connected to this relay's Zenoh network\n")
+        connection.robot_bridge = bridge  # type: ignore[attr-defined]
+        refusal: Response | None = await bridge.admit(connection, request)
+        return refusal
+
+    async def _handle(self, ws: ServerConnection) -> None:
+        bridge: Bridge = ws.robot_bridge  # type: ignore[attr-defined]
+        await bridge.serve_connection(ws)
+
+    def reload(self) -> bool:
+        """SIGHUP: certificates and the auth file again, every robot's sessions rechecked."""
+        return self.security.reload(
+            s.gate for bridge in self.robots.values() for s in list(bridge.sessions))
+
+    async def close(self) -> None:
+        """Close every robot's sessions, leave Zenoh."""
+        if self._server is not None:
+            self._server.close(close_connections=True)
+        for bridge in list(self.robots.values()):
+            await bridge.close()
+        self.robots.clear()
+        if self.session is not None:
+            session, self.session = self.session, None
+            await asyncio.get_running_loop().run_in_executor(None, session.close)
+
+
+def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
+    """The command line."""
+    p = argparse.ArgumentParser(
+        prog="roslibpy-lite-relay",
+        description="A rosbridge v2 server without ROS: serves the robots that dial out to "
+        "Zenoh (roslibpy-lite-bridge --zenoh-connect ... --robot NAME) at ws://HOST:PORT/NAME.",
+    )
+    p.add_argument("--host", default="127.0.0.1", help="address to bind (default 127.0.0.1)")
+    p.add_argument("--port", type=int, default=9090, help="port (0: any free port)")
+    p.add_argument("--relay-id", default=None,
+                   help="this relay's name on Zenoh (default: random; it names its demand "
+                   "and publisher tokens)")
+    p.add_argument("--max-message-size", type=int, default=16 * 1024 * 1024,
+                   help="largest inbound frame in bytes (default 16 MiB)")
+    p.add_argument("--call-timeout", type=float, default=5.0,
+                   help="default call_service timeout in seconds (default 5)")
+    p.add_argument("--session-keep", type=float, default=30.0,
+                   help="seconds a dropped client's session is kept for it to resume "
+                   "(default 30; 0: off)")
+    p.add_argument("--log-level", default="INFO",
+                   choices=("DEBUG", "INFO", "WARNING", "ERROR"),
+                   help="logging level (default INFO)")
+    security.add_arguments(p)
+    zenoh_link.add_arguments(p, listen=True)
+    return p.parse_args(argv)
+
+
+async def _run(args: argparse.Namespace) -> int:
+    config = BridgeConfig(
+        host=args.host, port=args.port, max_message_size=args.max_message_size,
+        node_name="relay",
+        session=SessionConfig(call_timeout=args.call_timeout),
+        resume=ResumeConfig(session_keep=args.session_keep),
+        security=security.config_from_args(args),
+    )
+    relay = Relay(config, zenoh_link.options_from_args(args), args.relay_id)
+    stop = asyncio.Event()
+    loop = asyncio.get_running_loop()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        loop.add_signal_handler(sig, stop.set)
+    await relay.start()
+    loop.add_signal_handler(signal.SIGHUP, relay.reload)
+    scheme = "wss" if args.certfile else "ws"
+    zenoh_where = (f"Zenoh router on {', '.join(args.zenoh_listen)}" if args.zenoh_listen
+                   else f"Zenoh client of {', '.join(args.zenoh_connect)}")
+    log.info("relay %s (%s)", relay.relay_id, zenoh_where)
+    log.info("relay listening on %s://%s:%d", scheme, args.host, relay.port)
+    relay.security.startup_warnings(args.host)
+    await stop.wait()
+    log.info("relay shutting down")
+    await relay.close()
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point of ``roslibpy-lite-relay`` and ``python -m bridge_server.zenoh.relay``."""
+    args = parse_args(argv)
+    refusal = security.exposure_refusal(args)
+    if refusal is not None:
+        print(f"roslibpy-lite-relay: refusing to start: {refusal}", file=sys.stderr)
+        return 2
+    logging.basicConfig(level=getattr(logging, args.log_level), stream=sys.stderr,
+                        format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+    security.install_log_redaction()
+    if args.log_level != "DEBUG":
+        logging.getLogger("websockets").setLevel(logging.WARNING)
+    try:
+        security.check_readable(security.config_from_args(args))
+        zenoh_link.options_from_args(args).config()  # a bad option named before anything
+        return asyncio.run(_run(args))
+    except (OSError, BridgeError) as exc:
+        log.error("cannot start: %s", exc)
+        return 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
