@@ -201,6 +201,7 @@ CI saw a worker stuck that way. The watchdog is faulthandler's own thread, which
 
 
 async def _run(args: argparse.Namespace) -> int:
+    from .rclpy_graph.graph import RclpyGraph
     from .server import Bridge, BridgeConfig
 
     config = BridgeConfig(
@@ -241,7 +242,8 @@ async def _run(args: argparse.Namespace) -> int:
 
         config.node_name = f"{config.node_name}_w{args.worker_index}"
         watch_supervisor(stop)  # a worker stops with its supervisor, even a killed one
-    bridge = Bridge(config)
+    graph = RclpyGraph(loop, name=config.node_name, topic_reader=config.topic_reader)
+    bridge = Bridge(config, graph)
     await bridge.start()
     exporter = None
     if args.zenoh_connect:  # the robot dials out to Zenoh routers (bridge_server/zenoh/)
@@ -261,7 +263,7 @@ async def _run(args: argparse.Namespace) -> int:
         scheme = "wss" if args.certfile else "ws"
         log.info("bridge_server listening on %s://%s:%d", scheme, args.host, bridge.port)
     log.info("ROS node /%s on ROS_DOMAIN_ID %s (topic reader: %s)", config.node_name,
-             os.environ.get("ROS_DOMAIN_ID", "0"), getattr(bridge.ros, "reader_kind", "?"))
+             os.environ.get("ROS_DOMAIN_ID", "0"), graph.reader_kind)
     bridge.security.startup_warnings(args.host)
     await stop.wait()
     log.info("bridge_server shutting down")

@@ -43,7 +43,7 @@ from .session.resume import ResumeConfig, SentFrames, SessionStore
 from .session.session import Session, SessionConfig, wait_ended
 
 if TYPE_CHECKING:
-    from collections.abc import Awaitable, Callable
+    from collections.abc import Awaitable
 
     from websockets.http11 import Request, Response
 
@@ -110,9 +110,9 @@ def default_node_name() -> str:
 class Bridge:
     """The running bridge: the ROS node, the websocket server and the live sessions."""
 
-    def __init__(self, config: BridgeConfig, graph: ServedGraph | None = None) -> None:
-        """``graph``: the ROS side (default: rclpy's, imported only then, so a relay
-        that gives its own Graph runs without ROS)."""
+    def __init__(self, config: BridgeConfig, graph: ServedGraph) -> None:
+        """``graph``: the ROS side (``RclpyGraph`` for the bridge, a ``ZenohGraph`` per robot
+        in a relay); the server itself imports no ROS."""
         self.config = config
         self.session_config = config.session
         self.publisher_grace = config.publisher_grace
@@ -127,15 +127,6 @@ class Bridge:
         self._server: Server | None = None
         self._refresher: asyncio.Task[None] | None = None
         self._graph_event = asyncio.Event()
-        self._checks: list[Callable[[], None]] = []
-        if graph is None:
-            from .rclpy_graph.actions import check_rclpy_internals
-            from .rclpy_graph.graph import RclpyGraph
-
-            graph = RclpyGraph(asyncio.get_running_loop(), name=config.node_name,
-                               topic_reader=config.topic_reader)
-            # a clear error at start, not a crash at the first action goal
-            self._checks.append(check_rclpy_internals)
         self.ros: ServedGraph = graph
         self.graph: Graph = self.ros  # all the sessions, rosapi and the status page see of ROS
         self.metrics = BridgeMetrics()
@@ -161,8 +152,6 @@ class Bridge:
         """Start the ROS side and its refresh loop, without listening: a front that serves
         several bridges' sessions on one port (the relay) calls this, then hands connections
         to :meth:`admit` and :meth:`serve_connection`."""
-        for check in self._checks:
-            check()
         self.ros.start()
         self._refresher = asyncio.create_task(self._refresh_loop(), name="bridge-refresh")
 

@@ -15,7 +15,7 @@ from typing import Any
 
 from ..interfaces import ConversionError, ServiceCallError, args_mapping
 from . import convert, introspection
-from .actions import ServedAction, ServedGoal, SharedActionClient
+from .actions import ServedAction, ServedGoal, SharedActionClient, check_rclpy_internals
 from .node import RosNode
 from .types import installed_interfaces, resolve_action
 
@@ -24,6 +24,12 @@ __all__ = ["RclpyGraph"]
 
 class RclpyGraph(RosNode):
     """The ROS side of the bridge on rclpy (all of :class:`~bridge_server.graph.Graph`)."""
+
+    def start(self) -> None:
+        """Check rclpy's internals the actions use (a clear error now, not a crash at the
+        first goal), then start the node."""
+        check_rclpy_internals()
+        super().start()
 
     def trouble(self) -> str | None:
         """Why the ROS side is not serving (``None``: it is)."""

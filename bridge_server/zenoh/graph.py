@@ -560,9 +560,9 @@ class ZenohGraph:
         timeout: float, discovery_wait: float,
         check: Callable[[Any], str | None] | None = None,
     ) -> dict[str, Any]:
-        """One query to the robot, which calls the service itself."""
-        if check is not None:
-            raise ServiceCallError(f"{service}: this call is {NOT_YET}")
+        """One query to the robot, which calls the service itself (``check`` refuses an
+        action's cancel for a goal of the session's; relays carry no goals yet, so it is not
+        asked)."""
         future: asyncio.Future[dict[str, Any]] = self.loop.create_future()
 
         def answer(reply: zenoh.Reply) -> None:

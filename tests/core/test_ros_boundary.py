@@ -8,7 +8,9 @@ and under ``if TYPE_CHECKING:`` too.
 from __future__ import annotations
 
 import ast
+import json
 import os
+import subprocess
 import sys
 from pathlib import Path
 
@@ -20,7 +22,8 @@ BACKEND = "bridge_server.rclpy_graph"
 ROS_FREE = ("roslibpy_lite", "msgs", "bridge_server")
 """Packages whose modules (the backend's aside) must not import ROS."""
 SESSION_SIDE = ("bridge_server.session", "bridge_server.http", "bridge_server.security",
-                "bridge_server.graph", "bridge_server.interfaces")
+                "bridge_server.graph", "bridge_server.interfaces", "bridge_server.codec",
+                "bridge_server.zenoh")
 """What a relay without ROS runs: it must not reach the backend."""
 
 
@@ -174,3 +177,36 @@ def test_the_op_groups_hold_a_narrow_handle(group: str) -> None:
     found = _all_imports()[group]
     bad = sorted(t for t in found if t in WHOLE or t.startswith(tuple(w + "." for w in WHOLE)))
     assert not bad, f"{group} imports {bad}"
+
+
+RELAY_IMPORTS = ("bridge_server.zenoh.relay", "bridge_server.server",
+                 "bridge_server.session.session", "bridge_server.security",
+                 "bridge_server.http.web", "bridge_server.codec.cdr_json")
+"""What ``roslibpy-lite-relay`` runs: its entry module and the bridge's server, sessions,
+security and HTTP code."""
+
+
+def test_the_relay_runs_where_ros_is_not_installed() -> None:
+    """In a Python where rclpy and every ROS package cannot be imported, the relay's entry
+    module, the server, the sessions, security, HTTP and the codecs import, and parse the
+    relay's command line; the rclpy backend is never loaded."""
+    code = (
+        "import json, sys\n"
+        "for name in json.loads(sys.argv[1]):\n"
+        "    sys.modules[name] = None  # import rclpy (or any ROS package): ImportError\n"
+        "import importlib\n"
+        "for module in json.loads(sys.argv[2]):\n"
+        "    importlib.import_module(module)\n"
+        "from bridge_server.zenoh.relay import parse_args\n"
+        "args = parse_args(['--zenoh-listen', 'tcp/127.0.0.1:7447', '--port', '0'])\n"
+        "assert args.zenoh_listen == ['tcp/127.0.0.1:7447']\n"
+        "print(json.dumps(sorted(m for m in sys.modules if m.startswith('bridge_server'))))\n"
+    )
+    blocked = sorted(_ros_packages())
+    done = subprocess.run(
+        [sys.executable, "-c", code, json.dumps(blocked), json.dumps(RELAY_IMPORTS)],
+        cwd=ROOT, capture_output=True, text=True, timeout=60, check=False)
+    assert done.returncode == 0, done.stderr
+    loaded = json.loads(done.stdout.strip().splitlines()[-1])
+    assert "bridge_server.zenoh.relay" in loaded and "bridge_server.server" in loaded
+    assert not [m for m in loaded if m.startswith(BACKEND)], loaded
