@@ -1,0 +1,106 @@
+"""A whole relay tier in this process: a relay that is the Zenoh router, and a robot (a real
+rclpy Graph, the bridge's own, without a websocket listener) whose exporter dials out to it.
+
+Everything is real: the Zenoh router and links, the rclpy node, the websocket server; only
+the processes are one.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import socket
+from collections.abc import AsyncIterator
+from dataclasses import dataclass
+from typing import Any
+
+from bridge_server.rclpy_graph.graph import RclpyGraph
+from bridge_server.server import Bridge, BridgeConfig
+from bridge_server.zenoh.exporter import Exporter
+from bridge_server.zenoh.link import ZenohOptions
+from bridge_server.zenoh.relay import Relay
+
+ROBOT = "robot1"
+
+
+def free_port() -> int:
+    """A TCP port nobody listens on now (for the Zenoh router, which reports no bound port)."""
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+@dataclass
+class Tier:
+    """The relay, the robot's bridge and exporter, and where clients connect."""
+
+    relay: Relay
+    robot: Bridge
+    exporter: Exporter
+    router: str
+
+    def url(self, robot: str = ROBOT) -> str:
+        """The websocket URL of ``robot`` through the relay."""
+        return f"ws://127.0.0.1:{self.relay.port}/{robot}"
+
+    def demand(self, topic: str) -> set[str]:
+        """The relays watching ``topic`` as the robot's exporter knows them."""
+        export = self.exporter.exports.get(topic)
+        return set(export.relays) if export is not None else set()
+
+
+async def start_relay(router: str | None = None, listen: str | None = None,
+                      relay_id: str | None = None) -> Relay:
+    """A relay on an ephemeral port: the router (``listen``) or a client of ``router``."""
+    options = ZenohOptions(listen=[listen] if listen else [],
+                           connect=[router] if router and not listen else [])
+    relay = Relay(BridgeConfig(port=0, node_name="relay"), options, relay_id)
+    await relay.start()
+    return relay
+
+
+async def start_robot(router: str, robot: str = ROBOT) -> tuple[Bridge, Exporter]:
+    """The robot's bridge (rclpy, no listener) and its exporter, dialing out to ``router``."""
+    config = BridgeConfig(websocket=False, refresh_interval=0.1)
+    graph = RclpyGraph(asyncio.get_running_loop(), name=config.node_name)
+    bridge = Bridge(config, graph)
+    await bridge.start()
+    exporter = Exporter(bridge.graph, robot, ZenohOptions(connect=[router]),
+                        graph_changed=bridge.graph_changed, snapshot_interval=0.2)
+    exporter.start()
+    return bridge, exporter
+
+
+async def robot_reachable(relay: Relay, robot: str = ROBOT, timeout: float = 20.0) -> None:
+    """Wait until ``relay`` serves ``robot`` (its liveliness reached the relay)."""
+    deadline = asyncio.get_running_loop().time() + timeout
+    while await relay.robot(robot) is None:
+        if asyncio.get_running_loop().time() > deadline:
+            raise AssertionError(f"robot {robot} never reached the relay")
+
+
+@contextlib.asynccontextmanager
+async def tier() -> AsyncIterator[Tier]:
+    """A relay (the router) and a robot connected to it; all closed afterwards."""
+    router = f"tcp/127.0.0.1:{free_port()}"
+    relay = await start_relay(listen=router)
+    robot, exporter = await start_robot(router)
+    try:
+        await robot_reachable(relay)
+        yield Tier(relay, robot, exporter, router)
+    finally:
+        await relay.close()
+        await exporter.close()
+        await robot.close()
+
+
+async def until(predicate: Any, what: str, timeout: float = 15.0) -> Any:
+    """Await ``predicate()`` being truthy (Zenoh and ROS discovery have no event here)."""
+    deadline = asyncio.get_running_loop().time() + timeout
+    while True:
+        value = predicate()
+        if value:
+            return value
+        if asyncio.get_running_loop().time() > deadline:
+            raise AssertionError(f"timed out after {timeout} s waiting for {what}")
+        await asyncio.sleep(0.02)

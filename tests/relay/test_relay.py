@@ -1,0 +1,311 @@
+"""The relay tier in one process (tests/relay/support.py): a robot's rclpy topics, services and
+own types reach websocket clients of a relay without ROS, and back; the robot subscribes in
+ROS only while someone watches."""
+
+from __future__ import annotations
+
+import asyncio
+import struct
+import sys
+from typing import Any
+
+import pytest
+from std_msgs.msg import String
+from std_srvs.srv import SetBool
+
+import roslibpy_lite
+from tests.helpers import open_wire, ros_env
+from tests.relay.support import ROBOT, robot_reachable, start_relay, tier, until
+
+pytestmark = pytest.mark.timeout(90)
+
+
+async def _first(ws: Any, publish: Any, topic: str, timeout: float = 20.0) -> Any:
+    """Publish from rclpy until the client hears the topic (discovery has no event)."""
+    deadline = asyncio.get_running_loop().time() + timeout
+    while True:
+        publish()
+        try:
+            return await ws.expect(op="publish", topic=topic, timeout=0.3)
+        except AssertionError:
+            if asyncio.get_running_loop().time() > deadline:
+                raise
+
+
+@pytest.mark.parametrize("compression", ["none", "cbor", "cbor-raw"])
+async def test_a_robot_topic_reaches_a_relay_client(ros_node: Any, topic: str,
+                                                    compression: str) -> None:
+    """An rclpy String on the robot reaches a client of the relay as JSON, CBOR and cbor-raw
+    (the CDR bytes the robot's ROS subscription took)."""
+    pub = ros_node.create_publisher(String, topic, 10)
+    async with tier() as t:
+        ws = await open_wire(t.url())
+        try:
+            await ws.send({"op": "subscribe", "topic": topic, "type": "std_msgs/msg/String",
+                           "compression": compression})
+            op = await _first(ws, lambda: pub.publish(String(data="through the relay")), topic)
+            if compression == "cbor-raw":
+                raw = op["msg"]["bytes"]
+                (length,) = struct.unpack_from("<I", raw, 4)
+                assert raw[8:8 + length - 1] == b"through the relay"
+                assert op["msg"]["secs"] > 1_700_000_000
+            else:
+                assert op["msg"] == {"data": "through the relay"}
+        finally:
+            await ws.close()
+
+
+async def test_a_client_publishes_to_the_robot(ros_node: Any, topic: str) -> None:
+    """A relay client's advertise and publish reach an rclpy subscriber on the robot (the
+    robot publishes the CDR bytes the relay made from the client's JSON)."""
+    got: list[str] = []
+    ros_node.create_subscription(String, topic, lambda m: got.append(m.data), 10)
+    async with tier() as t:
+        ws = await open_wire(t.url())
+        try:
+            await ws.send({"op": "advertise", "topic": topic, "type": "std_msgs/msg/String"})
+            n = 0
+            deadline = asyncio.get_running_loop().time() + 20
+            while not got:  # until the robot's publisher matched the rclpy subscriber
+                n += 1
+                await ws.send({"op": "publish", "topic": topic, "msg": {"data": f"hi {n}"}})
+                await asyncio.sleep(0.1)
+                assert asyncio.get_running_loop().time() < deadline, "nothing reached ROS"
+            assert got[0].startswith("hi ")
+            await ws.send({"op": "publish", "topic": topic, "msg": {"data": 5}})
+            error = await ws.expect(op="status", level="error")
+            assert "data" in error["msg"] and "string" in error["msg"], error
+        finally:
+            await ws.close()
+
+
+async def test_latched_both_ways(ros_node: Any, topic: str) -> None:
+    """A latched rclpy topic's one message reaches relay clients that subscribe after it was
+    sent (the first through the robot, the second from the relay's copy); a client's latched
+    publisher gives a transient-local rclpy subscriber the last message."""
+    from rclpy.qos import DurabilityPolicy, QoSProfile
+
+    latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)  # type: ignore[no-untyped-call]
+    pub = ros_node.create_publisher(String, topic, latched)
+    pub.publish(String(data="the map"))
+    async with tier() as t:
+        first, second = await open_wire(t.url()), await open_wire(t.url())
+        try:
+            await first.send({"op": "subscribe", "topic": topic})
+            op = await first.expect(op="publish", topic=topic, timeout=20)
+            assert op["msg"] == {"data": "the map"}
+            await second.send({"op": "subscribe", "topic": topic})
+            op = await second.expect(op="publish", topic=topic, timeout=10)
+            assert op["msg"] == {"data": "the map"}
+            with pytest.raises(AssertionError):  # once each, not again
+                await first.expect(op="publish", topic=topic, timeout=0.5)
+
+            back = topic + "_back"
+            await first.send({"op": "advertise", "topic": back, "type": "std_msgs/msg/String",
+                              "latch": True})
+            await first.send({"op": "publish", "topic": back, "msg": {"data": "kept"}})
+            await until(lambda: back in [n for n, _ in t.robot.graph.topic_names_and_types()],
+                        "the robot's latched publisher")
+            got: list[str] = []
+            ros_node.create_subscription(String, back, lambda m: got.append(m.data), latched)
+            await until(lambda: got, "the latched message in ROS")
+            assert got == ["kept"]
+        finally:
+            await first.close()
+            await second.close()
+
+
+async def test_a_service_call_through_the_relay(ros_node: Any, topic: str) -> None:
+    """call_service through the relay is answered by an rclpy service on the robot; a call to a
+    service the robot does not have fails with the robot's reason."""
+    def answer(req: Any, res: Any) -> Any:
+        res.message = f"got {req.data}"
+        return res
+
+    ros_node.create_service(SetBool, topic, answer)
+    async with tier() as t:
+        ws = await open_wire(t.url())
+        try:
+            await ws.send({"op": "call_service", "service": topic, "type": "std_srvs/srv/SetBool",
+                           "args": {"data": True}, "id": "c1"})
+            reply = await ws.expect(op="service_response", id="c1", timeout=20)
+            assert reply["result"] is True, reply
+            assert reply["values"] == {"success": False, "message": "got True"}
+            await ws.send({"op": "call_service", "service": topic + "_none", "id": "c2",
+                           "timeout": 1})
+            reply = await ws.expect(op="service_response", id="c2", timeout=20)
+            assert reply["result"] is False
+            assert "does not exist" in reply["values"], reply
+        finally:
+            await ws.close()
+
+
+async def test_the_robots_own_type(ros_node: Any, topic: str) -> None:
+    """A type installed only on the robot (robot_msgs, which msgs does not generate) is
+    decoded by the relay from the definition the robot sent, and its typedefs and definition
+    are the robot's."""
+    from robot_msgs.msg import Status, Wheel
+
+    pub = ros_node.create_publisher(Status, topic, 10)
+    msg = Status(mode=1, label="rover", blob=b"\x01\x02", battery_cells=[3.5, 3.75],
+                 wheels=[Wheel(name="left", speed=0.5, ticks=[1, 2, 3])])
+    async with tier() as t:
+        ws = await open_wire(t.url())
+        try:
+            await ws.send({"op": "subscribe", "topic": topic, "compression": "cbor"})
+            op = await _first(ws, lambda: pub.publish(msg), topic)
+            got = op["msg"]
+            assert got["label"] == "rover" and got["mode"] == 1 and got["blob"] == b"\x01\x02"
+            assert got["wheels"][0]["name"] == "left" and list(got["wheels"][0]["ticks"]) == [1, 2, 3]
+            assert list(got["battery_cells"]) == [3.5, 3.75]
+            await ws.send({"op": "call_service", "service": "/rosapi/message_details",
+                           "args": {"type": "robot_msgs/msg/Status"}, "id": "d"})
+            reply = await ws.expect(op="service_response", id="d")
+            names = [d["type"] for d in reply["values"]["typedefs"]]
+            assert names[0] == "robot_msgs/msg/Status" and "robot_msgs/msg/Wheel" in names
+        finally:
+            await ws.close()
+
+
+async def test_demand_drives_the_robots_subscriptions(ros_node: Any, topic: str) -> None:
+    """The robot has no ROS subscription to a topic while no relay client watches it; it
+    subscribes with the first viewer, keeps it while one is left, and drops it when the last
+    leaves and when the relay itself goes."""
+    pub = ros_node.create_publisher(String, topic, 10)
+    async with tier() as t:
+        subs = t.robot.graph.subscriptions
+        assert topic not in subs
+        a, b = await open_wire(t.url()), await open_wire(t.url())
+        await a.send({"op": "subscribe", "topic": topic, "type": "std_msgs/msg/String"})
+        await _first(a, lambda: pub.publish(String(data="x")), topic)
+        assert topic in subs and t.demand(topic) == {t.relay.relay_id}
+        await b.send({"op": "subscribe", "topic": topic, "type": "std_msgs/msg/String"})
+        await _first(b, lambda: pub.publish(String(data="y")), topic)
+        await a.close()
+        served = t.relay.robots[ROBOT]
+        await until(lambda: len(served.sessions) == 1, "the relay to see the first viewer go")
+        b.backlog.clear()
+        await _first(b, lambda: pub.publish(String(data="still")), topic)  # b's feed goes on
+        assert topic in subs
+        await b.close()
+        await until(lambda: topic not in subs, "the robot to unsubscribe after the last viewer")
+        again = await open_wire(t.url())
+        await again.send({"op": "subscribe", "topic": topic, "type": "std_msgs/msg/String"})
+        await until(lambda: topic in subs, "the robot to subscribe again")
+        await t.relay.close()  # the relay dies: its demand token vanishes with its session
+        await until(lambda: topic not in subs, "the robot to unsubscribe after the relay went")
+
+
+async def test_a_path_naming_no_robot_is_refused() -> None:
+    """A client asking for a robot that is not on Zenoh (or naming none, or a name that is
+    not one) is refused before the handshake with the reason; the robot's own path works."""
+    from websockets.asyncio.client import connect
+    from websockets.exceptions import InvalidStatus
+
+    async with tier() as t:
+        base = f"ws://127.0.0.1:{t.relay.port}"
+        for path, status, words in (("/robot2", 404, "no robot named 'robot2'"),
+                                    ("/", 404, "name a robot in the path"),
+                                    ("/@alive", 400, "invalid robot name '@alive'")):
+            with pytest.raises(InvalidStatus) as refused:
+                async with connect(base + path, open_timeout=10):
+                    pass
+            response = refused.value.response
+            assert response.status_code == status, path
+            assert words in response.body.decode(), response.body
+        async with connect(t.url(), open_timeout=10):
+            pass
+
+
+async def test_what_a_relay_cannot_do_yet_is_refused_clearly(topic: str) -> None:
+    """Actions, client-served services and node parameters answer a status error naming the op
+    and "not supported through a relay yet" (a goal also gets its failed result), never a
+    hang."""
+    async with tier() as t:
+        ws = await open_wire(t.url())
+        try:
+            await ws.send({"op": "send_action_goal", "action": topic, "id": "g",
+                           "action_type": "example_interfaces/action/Fibonacci", "args": {}})
+            error = await ws.expect(op="status", level="error", id="g")
+            assert error["msg"].startswith("send_action_goal") and "not supported through a " \
+                "relay yet" in error["msg"], error
+            result = await ws.expect(op="action_result", id="g")
+            assert result["result"] is False
+            await ws.send({"op": "advertise_service", "service": topic,
+                           "type": "std_srvs/srv/SetBool"})
+            error = await ws.expect(op="status", level="error")
+            assert error["msg"].startswith("advertise_service") and "not supported through " \
+                "a relay yet" in error["msg"], error
+            await ws.send({"op": "call_service", "service": "/rosapi/get_param", "id": "p",
+                           "args": {"name": "/some_node:x"}})
+            reply = await ws.expect(op="service_response", id="p")
+            assert reply["result"] is False and "not supported through a relay yet" in \
+                reply["values"], reply
+        finally:
+            await ws.close()
+
+
+async def test_a_second_relay_on_the_first_ones_router(ros_node: Any, topic: str) -> None:
+    """A relay that is a Zenoh client of the first relay's router serves the same robot; the
+    robot knows both relays watch the topic and still holds one ROS subscription."""
+    pub = ros_node.create_publisher(String, topic, 10)
+    async with tier() as t:
+        second = await start_relay(router=t.router)
+        try:
+            await robot_reachable(second)
+            one = await open_wire(t.url())
+            two = await open_wire(f"ws://127.0.0.1:{second.port}/{ROBOT}")
+            for ws in (one, two):
+                await ws.send({"op": "subscribe", "topic": topic, "type": "std_msgs/msg/String"})
+            await _first(one, lambda: pub.publish(String(data="both")), topic)
+            await _first(two, lambda: pub.publish(String(data="both")), topic)
+            assert t.demand(topic) == {t.relay.relay_id, second.relay_id}
+            assert list(t.robot.graph.subscriptions).count(topic) == 1
+            await one.close()
+            await two.close()
+        finally:
+            await second.close()
+
+
+async def test_our_client_and_stock_roslibpy_through_the_relay(ros_node: Any, topic: str) -> None:
+    """roslibpy_lite and roslibpy from PyPI (unchanged, in a child process) subscribe through
+    the relay by URL and get the robot's messages."""
+    pub = ros_node.create_publisher(String, topic, 10)
+    stop = asyncio.Event()
+
+    async def keep_publishing() -> None:  # discovery has no event: publish until all heard
+        n = 0
+        while not stop.is_set():
+            n += 1
+            pub.publish(String(data=f"m{n}"))
+            await asyncio.sleep(0.05)
+
+    async with tier() as t:
+        publisher = asyncio.create_task(keep_publishing())
+        script = (
+            "import sys, threading, roslibpy\n"
+            "ros = roslibpy.Ros(sys.argv[1])\n"
+            "ros.run(timeout=20)\n"
+            "got = threading.Event()\n"
+            "t = roslibpy.Topic(ros, sys.argv[2], 'std_msgs/String')\n"
+            "t.subscribe(lambda m: (print('GOT', m['data'], flush=True), got.set()))\n"
+            "print('OK' if got.wait(20) else 'NOTHING', flush=True)\n"
+            "ros.terminate()\n"
+        )
+        proc = await asyncio.create_subprocess_exec(
+            sys.executable, "-c", script, t.url(), topic, stdout=asyncio.subprocess.PIPE,
+            stderr=asyncio.subprocess.STDOUT, env=ros_env())
+        try:
+            async with roslibpy_lite.connect(t.url()) as ros:
+                sub = ros.subscribe(topic, "std_msgs/msg/String")
+                msg = await sub.get(20)
+                assert msg["data"].startswith("m")
+            out, _ = await asyncio.wait_for(proc.communicate(), 60)
+            text = out.decode()
+            assert "GOT m" in text and "OK" in text, text
+        finally:
+            stop.set()
+            await publisher
+            if proc.returncode is None:
+                proc.kill()
+                await proc.wait()

@@ -1,0 +1,106 @@
+"""The relay against the wire contract (bridge_server/zenoh/keys.py) alone: a robot played by a
+plain Zenoh session of this test, with no ROS at all, puts what an exporter would."""
+
+from __future__ import annotations
+
+from collections.abc import AsyncIterator
+from typing import Any
+
+import pytest
+import zenoh
+
+from bridge_server.zenoh import keys
+from bridge_server.zenoh.keys import Meta, Snapshot
+from bridge_server.zenoh.link import ZenohOptions, open_session
+from msgs import cdr
+from msgs.std_msgs.msg import String
+from tests.helpers import open_wire
+from tests.relay.support import free_port, robot_reachable, start_relay, until
+
+pytestmark = pytest.mark.timeout(60)
+
+ROBOT = "played"
+
+
+@pytest.fixture
+async def played() -> AsyncIterator[tuple[Any, zenoh.Session]]:
+    """A relay (the router) and a Zenoh session that plays robot ``played``: alive, and a
+    snapshot with one topic."""
+    router = f"tcp/127.0.0.1:{free_port()}"
+    relay = await start_relay(listen=router)
+    robot = await open_session(ZenohOptions(connect=[router]))
+    snap = Snapshot(node="played_bridge", topics=[("/chatter", ["std_msgs/msg/String"])])
+
+    def answer(query: zenoh.Query) -> None:
+        query.reply(query.key_expr, snap.encode())
+        query.drop()  # type: ignore[no-untyped-call]
+
+    held: list[Any] = [robot.declare_queryable(f"{ROBOT}/{keys.GRAPH}", answer),
+            robot.liveliness().declare_token(f"{ROBOT}/{keys.ALIVE}")]
+    try:
+        await robot_reachable(relay, ROBOT)
+        yield relay, robot
+    finally:
+        await relay.close()
+        for entity in held:
+            entity.undeclare()
+        robot.close()  # type: ignore[no-untyped-call]
+
+
+async def _subscribe(relay: Any, robot: zenoh.Session, ws: Any) -> None:
+    """Subscribe the client to /chatter and wait for the relay's demand token (declared after
+    its Zenoh subscriber, so what the robot puts from then on reaches it)."""
+    seen: list[str] = []
+    watcher = robot.liveliness().declare_subscriber(
+        f"{ROBOT}/{keys.DEMAND}/{relay.relay_id}/chatter",
+        lambda s: seen.append(str(s.kind)), history=True)
+    try:
+        await ws.send({"op": "subscribe", "topic": "/chatter"})
+        await until(lambda: "SampleKind.PUT" in seen, "the relay's demand token")
+    finally:
+        watcher.undeclare()  # type: ignore[no-untyped-call]
+
+
+async def test_each_message_reaches_a_client_once(played: tuple[Any, zenoh.Session]) -> None:
+    """The same message put twice (the latched reply and the put of one message carry the
+    same epoch and number) reaches the client once; the next number, and a new epoch (the
+    robot's exporter restarted, counting from 1 again), each get through."""
+    relay, robot = played
+    ws = await open_wire(f"ws://127.0.0.1:{relay.port}/{ROBOT}")
+    try:
+        await _subscribe(relay, robot, ws)
+
+        def put(text: str, seq: int, epoch: str = "e1") -> None:
+            meta = Meta(type="std_msgs/msg/String", stamp_ns=1, epoch=epoch, seq=seq)
+            robot.put(f"{ROBOT}/chatter", cdr.encode(String(data=text)),
+                      attachment=meta.encode())
+
+        put("one", 1)
+        put("one again", 1)
+        put("two", 2)
+        put("restarted", 1, epoch="e2")
+        got = [(await ws.expect(op="publish", topic="/chatter"))["msg"]["data"]
+               for _ in range(3)]
+        assert got == ["one", "two", "restarted"]
+        with pytest.raises(AssertionError):
+            await ws.expect(op="publish", topic="/chatter", timeout=0.5)
+    finally:
+        await ws.close()
+
+
+async def test_a_message_without_its_type_is_dropped_and_said(
+        played: tuple[Any, zenoh.Session], caplog: pytest.LogCaptureFixture) -> None:
+    """A put whose attachment is not a Meta object is not delivered; the relay's log says why
+    (once), and the next good message gets through."""
+    relay, robot = played
+    ws = await open_wire(f"ws://127.0.0.1:{relay.port}/{ROBOT}")
+    try:
+        await _subscribe(relay, robot, ws)
+        robot.put(f"{ROBOT}/chatter", b"\x00\x01\x00\x00", attachment=b"not json")
+        good = Meta(type="std_msgs/msg/String", epoch="e", seq=1).encode()
+        robot.put(f"{ROBOT}/chatter", cdr.encode(String(data="fine")), attachment=good)
+        op = await ws.expect(op="publish", topic="/chatter")
+        assert op["msg"] == {"data": "fine"}
+        assert any("is not a Meta object" in r.getMessage() for r in caplog.records)
+    finally:
+        await ws.close()
