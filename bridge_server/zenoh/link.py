@@ -64,6 +64,10 @@ class ZenohOptions:
         conf.insert_json5("scouting/gossip/enabled", "false" if not self.listen else "true")
         conf.insert_json5("connect/endpoints", json.dumps(self.connect))
         conf.insert_json5("listen/endpoints", json.dumps(self.listen))
+        # Robots and relays meet over networks: Zenoh's shared memory between processes of
+        # one machine (its default for payloads over ~3 KB) would bypass the link and its
+        # TLS, so the link carries everything here too.
+        conf.insert_json5("transport/shared_memory/enabled", "false")
         # a client waits for its routers (in open_session's thread) instead of failing
         conf.insert_json5("connect/timeout_ms", json.dumps({"client": -1, "router": 0}))
         tls = "transport/link/tls"
