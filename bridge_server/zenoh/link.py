@@ -16,6 +16,7 @@ import argparse
 import asyncio
 import json
 import os
+import threading
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
@@ -81,15 +82,37 @@ class ZenohOptions:
 
 
 async def open_session(options: ZenohOptions) -> zenoh.Session:
-    """Open the session in a thread (a client waits there until a router answers)."""
+    """Open the session in a thread of its own (a client waits there until a router
+    answers); cancelled meanwhile, the session is closed as soon as it opens. The thread is a
+    daemon: a process told to stop while no router answered exits without waiting for it."""
     import zenoh
 
     conf = options.config()
     loop = asyncio.get_running_loop()
-    try:
-        return await loop.run_in_executor(None, zenoh.open, conf)
-    except zenoh.ZError as exc:
-        raise BridgeError(f"cannot open the Zenoh session: {exc}") from None
+    opened: asyncio.Future[zenoh.Session] = loop.create_future()
+
+    def deliver(session: zenoh.Session | None, exc: BaseException | None) -> None:
+        if opened.done():  # nobody waits any more
+            if session is not None:
+                threading.Thread(target=session.close, daemon=True).start()
+        elif exc is not None:
+            opened.set_exception(BridgeError(f"cannot open the Zenoh session: {exc}"))
+        else:
+            opened.set_result(session)  # type: ignore[arg-type]
+
+    def open_it() -> None:
+        try:
+            session = zenoh.open(conf)
+        except zenoh.ZError as exc:
+            loop.call_soon_threadsafe(deliver, None, exc)
+            return
+        try:
+            loop.call_soon_threadsafe(deliver, session, None)
+        except RuntimeError:  # the loop is closed: the process is stopping
+            session.close()  # type: ignore[no-untyped-call]
+
+    threading.Thread(target=open_it, daemon=True, name="zenoh-open").start()
+    return await opened
 
 
 def add_arguments(p: argparse.ArgumentParser, listen: bool) -> None:
