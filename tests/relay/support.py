@@ -50,22 +50,26 @@ class Tier:
 
 
 async def start_relay(router: str | None = None, listen: str | None = None,
-                      relay_id: str | None = None) -> Relay:
-    """A relay on an ephemeral port: the router (``listen``) or a client of ``router``."""
+                      relay_id: str | None = None, cert: str | None = None) -> Relay:
+    """A relay on an ephemeral port: the router (``listen``; ``cert`` a PEM with the key and
+    the certificate chain for a tls/ endpoint) or a client of ``router``."""
     options = ZenohOptions(listen=[listen] if listen else [],
-                           connect=[router] if router and not listen else [])
+                           connect=[router] if router and not listen else [],
+                           tls_cert=cert, tls_key=cert)
     relay = Relay(BridgeConfig(port=0, node_name="relay"), options, relay_id)
     await relay.start()
     return relay
 
 
-async def start_robot(router: str, robot: str = ROBOT) -> tuple[Bridge, Exporter]:
-    """The robot's bridge (rclpy, no listener) and its exporter, dialing out to ``router``."""
+async def start_robot(router: str, robot: str = ROBOT, ca: str | None = None
+                      ) -> tuple[Bridge, Exporter]:
+    """The robot's bridge (rclpy, no listener) and its exporter, dialing out to ``router``
+    (``ca``: the CA of a tls/ router's certificate)."""
     config = BridgeConfig(websocket=False, refresh_interval=0.1)
     graph = RclpyGraph(asyncio.get_running_loop(), name=config.node_name)
     bridge = Bridge(config, graph)
     await bridge.start()
-    exporter = Exporter(bridge.graph, robot, ZenohOptions(connect=[router]),
+    exporter = Exporter(bridge.graph, robot, ZenohOptions(connect=[router], tls_ca=ca),
                         graph_changed=bridge.graph_changed, snapshot_interval=0.2)
     exporter.start()
     return bridge, exporter
@@ -80,11 +84,13 @@ async def robot_reachable(relay: Relay, robot: str = ROBOT, timeout: float = 20.
 
 
 @contextlib.asynccontextmanager
-async def tier() -> AsyncIterator[Tier]:
-    """A relay (the router) and a robot connected to it; all closed afterwards."""
-    router = f"tcp/127.0.0.1:{free_port()}"
-    relay = await start_relay(listen=router)
-    robot, exporter = await start_robot(router)
+async def tier(tls: tuple[str, str] | None = None) -> AsyncIterator[Tier]:
+    """A relay (the router) and a robot connected to it; all closed afterwards. ``tls``:
+    (CA file, the router's key and certificate file) for a tls/ link."""
+    scheme = "tls" if tls else "tcp"
+    router = f"{scheme}/127.0.0.1:{free_port()}"
+    relay = await start_relay(listen=router, cert=tls[1] if tls else None)
+    robot, exporter = await start_robot(router, ca=tls[0] if tls else None)
     try:
         await robot_reachable(relay)
         yield Tier(relay, robot, exporter, router)

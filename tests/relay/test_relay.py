@@ -7,6 +7,7 @@ from __future__ import annotations
 import asyncio
 import struct
 import sys
+from pathlib import Path
 from typing import Any
 
 import pytest
@@ -16,6 +17,7 @@ from std_srvs.srv import SetBool
 import roslibpy_lite
 from tests.helpers import open_wire, ros_env
 from tests.relay.support import ROBOT, robot_reachable, start_relay, tier, until
+from tests.security.support import make_certs
 
 pytestmark = pytest.mark.timeout(90)
 
@@ -32,13 +34,19 @@ async def _first(ws: Any, publish: Any, topic: str, timeout: float = 20.0) -> An
                 raise
 
 
-@pytest.mark.parametrize("compression", ["none", "cbor", "cbor-raw"])
+@pytest.mark.parametrize("compression", ["none", "cbor", "cbor-raw", "none over tls"])
 async def test_a_robot_topic_reaches_a_relay_client(ros_node: Any, topic: str,
-                                                    compression: str) -> None:
+                                                    compression: str, tmp_path: Path) -> None:
     """An rclpy String on the robot reaches a client of the relay as JSON, CBOR and cbor-raw
-    (the CDR bytes the robot's ROS subscription took)."""
+    (the CDR bytes the robot's ROS subscription took), and over a tls/ Zenoh link (the robot
+    trusting the router's CA)."""
     pub = ros_node.create_publisher(String, topic, 10)
-    async with tier() as t:
+    tls = None
+    if compression.endswith(" over tls"):
+        compression = compression.split()[0]
+        certs = make_certs(tmp_path)
+        tls = (str(certs.ca), str(certs.server))
+    async with tier(tls) as t:
         ws = await open_wire(t.url())
         try:
             await ws.send({"op": "subscribe", "topic": topic, "type": "std_msgs/msg/String",
