@@ -2,11 +2,15 @@
 
 from __future__ import annotations
 
+import os
+import re
+import shlex
 import threading
 from pathlib import Path
 from typing import Any
 
 from robot_msgs.msg import Status as RosStatus
+from std_msgs.msg import String
 
 from tests.helpers import ROOT, BridgeProcess, marked_blocks, run_snippet
 
@@ -16,9 +20,9 @@ ACTIONS = next(code for kind, code in MARKED if kind == "bridge" and "send_goal"
 
 
 def test_readme_has_its_examples() -> None:
-    """The README carries its tested examples: asyncio, MockRos, the blocking client and
-    recording."""
-    assert set(BLOCKS) == {"bag", "bridge", "mock", "sync"}
+    """The README carries its tested examples: asyncio, MockRos, the blocking client,
+    recording and a client of a relay."""
+    assert set(BLOCKS) == {"bag", "bridge", "mock", "relay", "sync"}
 
 
 def test_client_example_runs_against_the_bridge(bridge: BridgeProcess) -> None:
@@ -73,3 +77,86 @@ def test_bag_example_records_reads_and_plays(bridge: BridgeProcess, ros_node: An
     assert "5 msgs" in lines[0] and "0 dropped" in lines[0], out
     assert all(line.startswith("/robot/status Status robot ") for line in lines[1:6]), out
     assert lines[6] == "5 messages"
+
+
+def _relay_commands() -> tuple[list[str], list[str]]:
+    """The README's relay and robot commands (their options), from its relay section."""
+    section = (ROOT / "README.md").read_text().split("### Robots behind NAT")[1]
+    lines = [line.strip() for line in section.split("```bash")[1].split("```")[0].splitlines()]
+    relay = next(line for line in lines if line.startswith("roslibpy-lite-relay "))
+    robot = next(line for line in lines if line.startswith("roslibpy-lite-bridge "))
+    return shlex.split(relay)[1:], shlex.split(robot)[1:]
+
+
+def test_relay_example_runs_through_a_relay(ros_node: Any, tmp_path: Path) -> None:
+    """The README's two commands run as written (the relay's ports, host and auth file put
+    on this machine): the robot's bridge, with no listener, dials out to the relay, and the
+    client example hears the robot's /chatter through the relay with a token."""
+    import subprocess
+    import sys
+
+    from tests.helpers import ros_env, wait_until
+    from tests.relay.support import free_port
+    from tests.security.support import make_auth_file
+
+    relay_args, robot_args = _relay_commands()
+    zport = free_port()
+    auth = make_auth_file(tmp_path)
+    swap = {"0.0.0.0": "127.0.0.1", "auth.toml": str(auth.path),
+            "tcp/0.0.0.0:7447": f"tcp/127.0.0.1:{zport}",
+            "tcp/relay.example.com:7447": f"tcp/127.0.0.1:{zport}"}
+    relay_cmd = [sys.executable, "-m", "bridge_server.zenoh.relay",
+                 *[swap.get(a, a) for a in relay_args], "--port", "0"]
+    robot_cmd = [sys.executable, "-m", "bridge_server", *[swap.get(a, a) for a in robot_args]]
+    logs = [tmp_path / "relay.log", tmp_path / "robot.log"]
+    procs = []
+    for cmd, log in zip((relay_cmd, robot_cmd), logs, strict=True):
+        with log.open("w") as sink:  # a file, not a pipe nobody drains while the test runs
+            procs.append(subprocess.Popen(cmd, cwd=ROOT, env=ros_env(), stdout=sink,
+                                          stderr=subprocess.STDOUT))
+    pub = ros_node.create_publisher(String, "/chatter", 10)
+    stop = threading.Event()
+
+    def publish() -> None:  # the robot's talker, at 20 Hz, until the example is done
+        while not stop.wait(0.05):
+            pub.publish(String(data="hello from behind NAT"))
+
+    thread = threading.Thread(target=publish, daemon=True)
+    thread.start()
+    try:
+        ready = wait_until(lambda: re.search(r"relay listening on ws://[\d.]+:(\d+)",
+                                             logs[0].read_text()) or procs[0].poll(),
+                           30, "the relay's ready line")
+        assert isinstance(ready, re.Match), logs[0].read_text()
+        port = int(ready[1])
+        url = f"ws://127.0.0.1:{port}/robot1"
+        wait_until(lambda: _robot_served(url, auth.tokens["admin"]), 30, "the robot at the relay")
+        code = BLOCKS["relay"].replace("ws://relay.example.com:9090/robot1", url)
+        os.environ["RELAY_TOKEN"] = auth.tokens["admin"]
+        try:
+            out = run_snippet(code)
+        finally:
+            del os.environ["RELAY_TOKEN"]
+        assert out.strip() == "robot1 says hello from behind NAT", out
+    finally:
+        stop.set()
+        thread.join()
+        for proc in procs:
+            proc.terminate()
+        for proc in procs:
+            proc.wait(20)
+
+
+def _robot_served(url: str, token: str) -> bool:
+    """Whether the relay admits a client of the robot (not 404: the robot is on Zenoh)."""
+    from websockets.exceptions import InvalidStatus
+    from websockets.sync.client import connect
+
+    try:
+        with connect(url, additional_headers={"Authorization": f"Bearer {token}"},
+                     open_timeout=10):
+            return True
+    except InvalidStatus as exc:
+        if exc.response.status_code != 404:
+            raise
+        return False

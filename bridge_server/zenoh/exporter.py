@@ -89,7 +89,6 @@ class Exporter:
 
     async def _run(self) -> None:
         self.session = session = await open_session(self.options)
-        log.info("robot %s is on Zenoh (session %s)", self.robot, session.zid())
         r = self.robot
         here = self._on_loop
         live = session.liveliness()
@@ -105,6 +104,7 @@ class Exporter:
                                     history=True),
             live.declare_token(f"{r}/{keys.ALIVE}"),
         ]
+        log.info("robot %s is on Zenoh (session %s)", self.robot, session.zid())
         while True:
             await asyncio.sleep(self.snapshot_interval)
             self._refresh_snapshot()

@@ -36,12 +36,12 @@ def _shell_blocks(page: Path) -> list[str]:
     return blocks
 
 
-def _bridge_commands(page: Path) -> list[list[str]]:
-    """The options of each `roslibpy-lite-bridge` server command in the page's shell blocks."""
+def _bridge_commands(page: Path, program: str = "roslibpy-lite-bridge") -> list[list[str]]:
+    """The options of each server command of ``program`` in the page's shell blocks."""
     found = []
     for block in _shell_blocks(page):
         for line in re.sub(r"\\\n\s*", " ", block).splitlines():
-            if not line.strip().startswith("roslibpy-lite-bridge "):
+            if not line.strip().startswith(program + " "):
                 continue
             words = shlex.split(line.strip(), comments=True)
             if words[1:2] not in ([s] for s in SUBCOMMANDS):
@@ -67,6 +67,18 @@ def test_every_bridge_command_starts_and_the_first_is_safe(page: Path) -> None:
         first = parse_args(commands[0])
         assert is_loopback(first.host) or (first.auth_file and first.certfile), \
             f"{page.name} starts with an open bridge: {' '.join(commands[0])}"
+
+
+def test_every_relay_command_starts() -> None:
+    """Every relay command shown has the relay's options and passes its start checks (the
+    README's and the relay guide's, at least)."""
+    from bridge_server.zenoh.relay import parse_args as relay_args
+
+    pages = {p.name: _bridge_commands(p, "roslibpy-lite-relay") for p in PAGES}
+    assert pages["README.md"] and pages["relay.md"], pages
+    for name, commands in pages.items():
+        for argv in commands:
+            assert exposure_refusal(relay_args(argv)) is None, f"{name}: {' '.join(argv)}"
 
 
 def test_one_folder_for_the_bridges_files() -> None:
