@@ -75,6 +75,7 @@ class Exporter:
         self._snapshot_bytes = b""
         self._definitions: dict[str, str] = {}
         self._typedefs: dict[str, list[dict[str, Any]]] = {}
+        self._interfaces: list[str] | None = None  # read once: the ament index is files
         self._entities: list[Any] = []
         self._tasks: set[asyncio.Task[None]] = set()
         self._loop = asyncio.get_running_loop()
@@ -309,7 +310,12 @@ class Exporter:
             definitions={t: d for t, d in self._definitions.items() if t in wanted and d},
             typedefs={t: d for t, d in self._typedefs.items()
                       if t in wanted or t.rsplit("_", 1)[0] in wanted},
-            interfaces=g.installed_interfaces())
+            interfaces=self._installed())
+
+    def _installed(self) -> list[str]:
+        if self._interfaces is None:
+            self._interfaces = self.graph.installed_interfaces()
+        return self._interfaces
 
     def _define(self, type_name: str, kind: str) -> None:
         """Learn a type's definition text and typedefs once (they do not change)."""

@@ -317,3 +317,42 @@ async def test_our_client_and_stock_roslibpy_through_the_relay(ros_node: Any, to
             if proc.returncode is None:
                 proc.kill()
                 await proc.wait()
+
+
+@pytest.mark.parametrize(("argv", "words"), [
+    (["--zenoh-connect", "tcp/127.0.0.1:7447"], "--zenoh-connect needs --robot NAME"),
+    (["--zenoh-connect", "tcp/127.0.0.1:7447", "--robot", "my robot"],
+     "--robot: invalid robot name 'my robot'"),
+    (["--zenoh-connect", "tcp/127.0.0.1:7447", "--robot", "@alive"],
+     "--robot: invalid robot name '@alive'"),
+])
+def test_the_robots_command_line_refuses_a_bad_robot(argv: list[str], words: str,
+                                                      capsys: pytest.CaptureFixture[str]) -> None:
+    """The robot's bridge does not start without a usable robot name, and says which option
+    is wrong and why."""
+    from bridge_server.__main__ import main
+
+    assert main(["--no-websocket", *argv]) == 2
+    assert words in capsys.readouterr().err
+
+
+def test_the_relays_command_line_refuses_bad_zenoh_options(
+        tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
+    """A relay with no Zenoh endpoint, a missing TLS file or a tls/ listener without its
+    certificate does not start, and the log names the option."""
+    from bridge_server.zenoh.relay import main
+
+    cert = tmp_path / "cert.pem"
+    cert.write_text("")
+    for argv, words in (
+        ([], "no Zenoh endpoint: give --zenoh-connect or --zenoh-listen"),
+        (["--zenoh-listen", "tcp/127.0.0.1:7447", "--zenoh-tls-ca", str(tmp_path / "no.pem")],
+         f"--zenoh-tls-ca {tmp_path / 'no.pem'}: not a readable file"),
+        (["--zenoh-listen", "tls/127.0.0.1:7447"], "a tls/ or quic/ --zenoh-listen endpoint "
+         "needs --zenoh-tls-cert and --zenoh-tls-key"),
+        (["--zenoh-listen", "tcp/127.0.0.1:7447", "--zenoh-tls-cert", str(cert)],
+         "--zenoh-tls-cert and --zenoh-tls-key go together"),
+    ):
+        caplog.clear()
+        assert main(["--port", "0", *argv]) == 1, argv
+        assert any(words in r.getMessage() for r in caplog.records), (argv, caplog.text)
