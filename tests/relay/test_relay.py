@@ -356,3 +356,33 @@ def test_the_relays_command_line_refuses_bad_zenoh_options(
         caplog.clear()
         assert main(["--port", "0", *argv]) == 1, argv
         assert any(words in r.getMessage() for r in caplog.records), (argv, caplog.text)
+
+
+async def test_a_restarted_robot_is_watched_again(ros_node: Any, topic: str) -> None:
+    """The robot's bridge stops and starts again (a new exporter run, numbering from 1): it
+    finds the relay's demand still there and subscribes again, and the client that stayed
+    connected gets the latched topic's last message again, though the relay had taken higher
+    numbers from the robot's first run."""
+    from rclpy.qos import DurabilityPolicy, QoSProfile
+
+    from tests.relay.support import start_robot
+
+    latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)  # type: ignore[no-untyped-call]
+    pub = ros_node.create_publisher(String, topic, latched)
+    pub.publish(String(data="m1"))
+    async with tier() as t:
+        ws = await open_wire(t.url())
+        try:
+            await ws.send({"op": "subscribe", "topic": topic, "type": "std_msgs/msg/String"})
+            assert (await ws.expect(op="publish", topic=topic, timeout=20))["msg"]["data"] == "m1"
+            for n in range(2, 6):  # the first run numbers these 2..5
+                pub.publish(String(data=f"m{n}"))
+                op = await ws.expect(op="publish", topic=topic)
+                assert op["msg"]["data"] == f"m{n}"
+            await t.exporter.close()
+            await t.robot.close()
+            t.robot, t.exporter = await start_robot(t.router)
+            op = await ws.expect(op="publish", topic=topic, timeout=20)  # number 1 of the new run
+            assert op["msg"] == {"data": "m5"}
+        finally:
+            await ws.close()
