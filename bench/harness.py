@@ -97,9 +97,13 @@ class Bridge:
 
     def __init__(
         self, domain: int, args: list[str] | None = None, root: str | None = None,
-        peer: str = "ours",
+        peer: str = "ours", module: str = "bridge_server", ready: re.Pattern[str] = READY,
     ) -> None:
+        """``module``/``ready``: another of our servers (``bridge_server.zenoh.relay``) and
+        its ready line (the port is its second group, if it has one)."""
         self.domain = domain
+        self.module = module
+        self.ready = ready
         self.args = list(args or [])
         self.root = Path(root).resolve() if root else CODE_ROOT
         self.peer = peer
@@ -125,7 +129,7 @@ class Bridge:
         if self.peer == "rs":
             return await self._start_rs(timeout + 60)  # the first start downloads the wheel
         self.proc = await asyncio.create_subprocess_exec(
-            sys.executable, "-m", "bridge_server", "--host", "127.0.0.1", "--port", "0",
+            sys.executable, "-m", self.module, "--host", "127.0.0.1", "--port", "0",
             *self.args,
             cwd=self.root, env=self._env(), stdin=asyncio.subprocess.DEVNULL,
             stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.STDOUT,
@@ -140,9 +144,9 @@ class Bridge:
                     raise RuntimeError("bridge exited before listening:\n" + "\n".join(self.lines))
                 line = raw.decode(errors="replace").rstrip()
                 self.lines.append(line)
-                m = READY.search(line)
+                m = self.ready.search(line)
                 if m:
-                    self.port = int(m.group(2))
+                    self.port = int(m.group(2)) if m.re.groups >= 2 else 0
                     return
 
         await asyncio.wait_for(first_line(), timeout)

@@ -37,6 +37,9 @@ Scenarios (targets; rosbridge_suite's figures in brackets):
   flood: start, peak, end [rosbridge grew 400 MB in 6 s].
 - ``pointcloud`` (``bench/cloud.py``): a 4 MiB PointCloud2 at 10 Hz to 5 clients, CBOR
   and cbor-raw: delivered per client, the bridge's CPU and RSS.
+- ``relay_uplink`` (``bench/relay.py``): a 640x480 camera at 10 Hz to 1, 10, 50, 100
+  viewers through a relay (the robot dials out over Zenoh) and straight to the bridge: the
+  robot's uplink bytes against one viewer's, frames delivered, relay and robot CPU.
 - ``record`` (``bench/bag.py``): ``roslibpy-lite bag record`` in its own process, a
   640x480 camera at 30 Hz plus an IMU at 200 Hz for 60 s: what the file holds against what
   was published, the recorder's CPU and write rate; then the camera alone at rising rates.
@@ -90,6 +93,7 @@ from bench.harness import (
     ws_open,
 )
 from bench.links import links
+from bench.relay import relay_uplink
 from bench.tls import tls_scenario
 
 TARGETS: dict[str, str] = {
@@ -109,6 +113,8 @@ TARGETS: dict[str, str] = {
     "pointcloud": "4 MiB PointCloud2 at 10 Hz to 5 clients: all delivered; bridge CPU, RSS",
     "foxglove": "the Foxglove path at least as fast as rosbridge cbor-raw on the same bridge; "
                 "10 Foxglove viewers of one camera: bridge CPU per frame",
+    "relay_uplink": "robot uplink through a relay flat in viewers (<= 1.1x one viewer's); "
+                    "straight to the bridge N times",
     "record": "camera 30 Hz + IMU 200 Hz for 60 s recorded without a loss; recorder CPU",
     "action_ros_server": "reference: goal round trip p50/p99, feedback msg/s at >= 99 %",
     "action_client_served": "reference: goal round trip p50/p99, feedback msg/s at >= 99 %",
@@ -825,6 +831,7 @@ SCENARIOS: dict[str, Callable[[Ctx], Awaitable[dict[str, Any]]]] = {
     "record": record,
     "pointcloud": pointcloud,
     "foxglove": foxglove,
+    "relay_uplink": relay_uplink,
     "action_ros_server": action_ros_server,
     "action_client_served": action_client_served,
 }
@@ -862,6 +869,8 @@ def _headline(name: str, r: dict[str, Any]) -> Any:
         return {part: {path: r[part][path][key] for path in ("foxglove", "cbor-raw")}
                 for part, key in (("image", "frames_per_s"), ("small", "best_rate_99pct"),
                                   ("viewers", "bridge_cpu_ms_per_published_frame"))}
+    if name == "relay_uplink":
+        return {way: {r["viewers"]: r["x_one_viewer"] for r in r[way]} for way in ("relay", "direct")}
     if name == "record":
         return {"recorded_pct": {t: v["recorded_pct"] for t, v in r["camera_imu"]["topics"].items()},
                 "recorder_cpu_pct": r["camera_imu"]["recorder_cpu_pct"],

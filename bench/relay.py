@@ -1,0 +1,169 @@
+"""The robot's uplink with many viewers (``--scenario relay_uplink``): through a relay, and
+straight to the robot's bridge.
+
+A 640x480 rgb8 camera (random pixels, as incompressible as a real one) at 10 Hz, watched by
+1, 10, 50 and 100 websocket viewers (1 and 10 with ``--quick``), each subscribed with
+``cbor-raw``. Two set-ups, one after the other:
+
+- **relay**: the robot's bridge without a websocket listener dials out to a relay that is
+  the Zenoh router (``--no-websocket --zenoh-connect``); the viewers connect to the relay
+  (``ws://relay/robot``). The robot's Zenoh link goes through a counting TCP proxy
+  (:class:`~bench.linkproxy.LinkProxy`): its bytes are the robot's uplink.
+- **direct**: the viewers connect to the robot's bridge through the same kind of proxy:
+  its bytes are what the robot sends them.
+
+Reported per set-up and number of viewers: the uplink in MiB/s and as a multiple of one
+viewer's, the frames each viewer got against those published (min and median), and the
+relay's and the robot bridge's CPU (% of one core). On a 2-core machine the viewers (this
+process), the relay and the robot share the cores, so delivered frames fall with many
+viewers for want of CPU; the uplink bytes do not depend on that. Nothing here asserts
+anything about time.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import re
+import socket
+import statistics
+import time
+from typing import Any
+
+from bench.harness import Bridge, Ctx, close_clients, send_op, ws_open
+from bench.linkproxy import LinkProxy
+
+__all__ = ["relay_uplink"]
+
+TOPIC = "/bench_camera"
+ROBOT = "benchbot"
+RATE_HZ = 10
+FRAME_BYTES = 640 * 480 * 3
+RELAY_READY = re.compile(r"relay listening on wss?://([\d.]+):(\d+)")
+ROBOT_READY = re.compile(r"robot \S+ dialing out to Zenoh")
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+async def _viewers(url: str, n: int, timeout: float = 30.0) -> list[Any]:
+    """``n`` raw websocket clients subscribed to the camera with cbor-raw (a relay answers
+    404 until the robot's liveliness reached it: retried until ``timeout``)."""
+    deadline = time.monotonic() + timeout
+    sockets: list[Any] = []
+    while len(sockets) < n:
+        try:
+            ws = await ws_open(url)
+        except Exception:
+            if time.monotonic() > deadline:
+                raise
+            await asyncio.sleep(0.2)
+            continue
+        await send_op(ws, {"op": "subscribe", "topic": TOPIC, "type": "sensor_msgs/msg/Image",
+                           "compression": "cbor-raw", "queue_length": 2})
+        sockets.append(ws)
+    return sockets
+
+
+async def _watch(ctx: Ctx, url: str, n: int, link: LinkProxy, pids: dict[str, int],
+                 seconds: float) -> dict[str, Any]:
+    """Subscribe ``n`` viewers at ``url``, publish the camera, count what crossed ``link``."""
+    import psutil
+
+    sockets = await _viewers(url, n)
+    got = [0] * n
+
+    async def reader(i: int) -> None:
+        with contextlib.suppress(Exception):
+            async for frame in sockets[i]:
+                if isinstance(frame, bytes) and len(frame) > FRAME_BYTES:
+                    got[i] += 1
+
+    readers = [asyncio.create_task(reader(i)) for i in range(n)]
+    procs = {name: psutil.Process(pid) for name, pid in pids.items()}
+    try:
+        pub = await ctx.ros("publish", "--topic", TOPIC, "--kind", "image", "--noise",
+                            "--rate", str(RATE_HZ), "--duration", str(seconds), "--depth", "5",
+                            "--settle", "0.5", "--linger", "2").start()
+        await pub.event("matched", 60)
+        before = link.bytes_forwarded
+        cpu0 = {name: p.cpu_times() for name, p in procs.items()}
+        t0 = time.monotonic()
+        sent = (await pub.event("done", seconds + 60))["sent"]
+        deadline = time.monotonic() + 5
+        while min(got) < sent and time.monotonic() < deadline:
+            await asyncio.sleep(0.1)  # the last frames in flight; bounded
+        wall = time.monotonic() - t0
+        uplink = link.bytes_forwarded - before
+        cpu1 = {name: p.cpu_times() for name, p in procs.items()}
+        await pub.close()
+    finally:
+        await close_clients(sockets, readers)
+    cpu = {f"{name}_cpu_pct": round(100.0 * (cpu1[name].user - cpu0[name].user
+                                            + cpu1[name].system - cpu0[name].system) / wall, 1)
+           for name in procs}
+    return {
+        "viewers": n,
+        "published": sent,
+        "frames_per_viewer": {"min": min(got), "median": statistics.median(got)},
+        "uplink_mib_per_s": round(uplink / wall / 2**20, 2),
+        "uplink_mib": round(uplink / 2**20, 1),
+        **cpu,
+    }
+
+
+async def _through_relay(ctx: Ctx, counts: tuple[int, ...], seconds: float) -> list[dict[str, Any]]:
+    router_port = _free_port()
+    relay = Bridge(ctx.domain, ["--zenoh-listen", f"tcp/127.0.0.1:{router_port}"],
+                   ctx.bridge_root, module="bridge_server.zenoh.relay", ready=RELAY_READY)
+    await relay.start()
+    results = []
+    try:
+        with LinkProxy(("127.0.0.1", router_port)) as link:
+            robot = Bridge(ctx.domain, ["--no-websocket", "--robot", ROBOT, "--zenoh-connect",
+                                        f"tcp/127.0.0.1:{link.port}"], ctx.bridge_root,
+                           ready=ROBOT_READY)
+            await robot.start()
+            try:
+                url = f"ws://127.0.0.1:{relay.port}/{ROBOT}"
+                for n in counts:
+                    results.append(await _watch(ctx, url, n, link,
+                                                {"relay": relay.pid, "robot": robot.pid},
+                                                seconds))
+            finally:
+                await robot.stop()
+    finally:
+        await relay.stop()
+    return results
+
+
+async def _direct(ctx: Ctx, counts: tuple[int, ...], seconds: float) -> list[dict[str, Any]]:
+    bridge = await ctx.bridge().start()
+    results = []
+    try:
+        with LinkProxy(("127.0.0.1", bridge.port)) as link:
+            for n in counts:
+                results.append(await _watch(ctx, f"ws://127.0.0.1:{link.port}", n, link,
+                                            {"robot": bridge.pid}, seconds))
+    finally:
+        await bridge.stop()
+    return results
+
+
+def _with_ratio(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    one = rows[0]["uplink_mib_per_s"] or float("nan")
+    return [{**r, "x_one_viewer": round(r["uplink_mib_per_s"] / one, 2)} for r in rows]
+
+
+async def relay_uplink(ctx: Ctx) -> dict[str, Any]:
+    """The ``relay_uplink`` scenario (see the module docstring)."""
+    counts = (1, 10) if ctx.quick else (1, 10, 50, 100)
+    seconds = 4.0 if ctx.quick else 8.0
+    return {
+        "camera": f"640x480 rgb8 at {RATE_HZ} Hz ({FRAME_BYTES / 2**20:.2f} MiB a frame)",
+        "relay": _with_ratio(await _through_relay(ctx, counts, seconds)),
+        "direct": _with_ratio(await _direct(ctx, counts, seconds)),
+    }
