@@ -24,16 +24,17 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import json
 import re
 import socket
 import statistics
 import time
 from typing import Any
 
-from bench.harness import Bridge, Ctx, close_clients, send_op, ws_open
+from bench.harness import READY, Bridge, Ctx, close_clients, percentile, send_op, ws_open
 from bench.linkproxy import LinkProxy
 
-__all__ = ["relay_uplink"]
+__all__ = ["relay_imu", "relay_service", "relay_uplink"]
 
 TOPIC = "/bench_camera"
 ROBOT = "benchbot"
@@ -166,4 +167,147 @@ async def relay_uplink(ctx: Ctx) -> dict[str, Any]:
         "camera": f"640x480 rgb8 at {RATE_HZ} Hz ({FRAME_BYTES / 2**20:.2f} MiB a frame)",
         "relay": _with_ratio(await _through_relay(ctx, counts, seconds)),
         "direct": _with_ratio(await _direct(ctx, counts, seconds)),
+    }
+
+
+@contextlib.asynccontextmanager
+async def _tier(ctx: Ctx, relays: int = 1, robot_listens: bool = False
+                ) -> Any:
+    """``relays`` relays (the first the Zenoh router, the others its clients) and a robot
+    dialing out to the first; yields (the relays, the robot's bridge)."""
+    router = f"tcp/127.0.0.1:{_free_port()}"
+    started: list[Bridge] = []
+    try:
+        for i in range(relays):
+            zenoh = ["--zenoh-listen", router] if i == 0 else ["--zenoh-connect", router]
+            relay = Bridge(ctx.domain, zenoh, ctx.bridge_root, module="bridge_server.zenoh.relay",
+                           ready=RELAY_READY)
+            started.append(await relay.start())
+        robot = Bridge(ctx.domain, [*([] if robot_listens else ["--no-websocket"]), "--robot",
+                                    ROBOT, "--zenoh-connect", router], ctx.bridge_root,
+                       ready=READY if robot_listens else ROBOT_READY)
+        started.append(await robot.start())
+        yield started[:relays], robot
+    finally:
+        for b in reversed(started):
+            await b.stop()
+
+
+async def relay_service(ctx: Ctx) -> dict[str, Any]:
+    """``relay_service``: call_service round trips to an rclpy SetBool service through a
+    relay and straight to the robot's bridge, in alternating blocks of 100 sequential calls
+    (whatever the machine does meanwhile, both see it): p50/p99 of each."""
+    name = "/bench/relay_srv"
+    blocks = 3 if ctx.quick else 10
+    lat: dict[str, list[float]] = {"relay": [], "direct": []}
+    srv = await ctx.ros("serve", "--service", name, "--duration", "600").start()
+    try:
+        await srv.event("ready")
+        async with _tier(ctx, robot_listens=True) as (relays, robot):
+            sockets = {"relay": await _viewers_at(_url(relays[0])),
+                       "direct": await _viewers_at(robot.url)}
+            try:
+                for ws in sockets.values():  # the first call of each waits for discovery
+                    await _call_until_answered(ws, name)
+                for _ in range(blocks):
+                    for way, ws in sockets.items():
+                        for _ in range(100):
+                            t = time.perf_counter_ns()
+                            await _call(ws, name)
+                            lat[way].append((time.perf_counter_ns() - t) / 1e6)
+            finally:
+                for ws in sockets.values():
+                    await ws.close()
+    finally:
+        await srv.close()
+    return {way: {"calls": len(v), "p50_ms": round(percentile(v, 0.5), 3),
+                  "p99_ms": round(percentile(v, 0.99), 3)} for way, v in lat.items()}
+
+
+def _url(relay: Bridge) -> str:
+    return f"ws://127.0.0.1:{relay.port}/{ROBOT}"
+
+
+async def _viewers_at(url: str) -> Any:
+    deadline = time.monotonic() + 30
+    while True:
+        try:
+            return await ws_open(url)
+        except Exception:
+            if time.monotonic() > deadline:
+                raise
+            await asyncio.sleep(0.2)
+
+
+async def _call(ws: Any, service: str) -> dict[str, Any]:
+    await send_op(ws, {"op": "call_service", "service": service, "type": "std_srvs/srv/SetBool",
+                       "args": {"data": True}, "id": "c"})
+    while True:
+        op = json.loads(await ws.recv())
+        if op.get("op") == "service_response":
+            return dict(op)
+
+
+async def _call_until_answered(ws: Any, service: str) -> None:
+    deadline = time.monotonic() + 30
+    while (reply := await _call(ws, service)).get("result") is not True:
+        if time.monotonic() > deadline:
+            raise RuntimeError(f"{service} never answered: {reply}")
+        await asyncio.sleep(0.2)
+
+
+async def relay_imu(ctx: Ctx) -> dict[str, Any]:
+    """``relay_imu``: a 100 Hz sensor_msgs/Imu to 200 JSON viewers spread over two relays (50
+    with ``--quick``): the fraction delivered, the latency from the rclpy publisher's stamp to
+    each viewer (p50/p99, ms), and the relays' CPU per message delivered."""
+    import psutil
+
+    viewers = 50 if ctx.quick else 200
+    seconds = 5.0 if ctx.quick else 10.0
+    topic = "/bench_imu"
+    lat: list[float] = []
+    got = [0] * viewers
+    async with _tier(ctx, relays=2) as (relays, _robot):
+        sockets = []
+        for i in range(viewers):
+            ws = await _viewers_at(_url(relays[i % 2]))
+            await send_op(ws, {"op": "subscribe", "topic": topic, "type": "sensor_msgs/msg/Imu",
+                               "queue_length": 100})
+            sockets.append(ws)
+
+        async def reader(i: int) -> None:
+            with contextlib.suppress(Exception):
+                async for frame in sockets[i]:
+                    now = time.monotonic_ns()
+                    op = json.loads(frame)
+                    if op.get("op") == "publish":
+                        seq, stamp = op["msg"]["header"]["frame_id"].split(" ")
+                        got[i] += 1
+                        if int(seq) >= 20:  # skip the warm-up
+                            lat.append((now - int(stamp)) / 1e6)
+
+        readers = [asyncio.create_task(reader(i)) for i in range(viewers)]
+        procs = [psutil.Process(r.pid) for r in relays]
+        try:
+            pub = await ctx.ros("publish", "--topic", topic, "--kind", "imu", "--rate", "100",
+                                "--duration", str(seconds), "--depth", "100", "--settle", "0.5",
+                                "--linger", "2").start()
+            await pub.event("matched", 60)
+            cpu0 = [p.cpu_times() for p in procs]
+            sent = (await pub.event("done", seconds + 60))["sent"]
+            deadline = time.monotonic() + 5
+            while min(got) < sent and time.monotonic() < deadline:
+                await asyncio.sleep(0.1)
+            cpu1 = [p.cpu_times() for p in procs]
+            await pub.close()
+        finally:
+            await close_clients(sockets, readers)
+    delivered = sum(got)
+    busy = sum(b.user - a.user + b.system - a.system for a, b in zip(cpu0, cpu1, strict=True))
+    return {
+        "viewers": viewers, "relays": 2, "rate_hz": 100, "published": sent,
+        "delivered_fraction": round(delivered / (sent * viewers), 4) if sent else None,
+        "latency_p50_ms": round(percentile(lat, 0.5), 3),
+        "latency_p99_ms": round(percentile(lat, 0.99), 3),
+        "relay_cpu_us_per_message": round(1e6 * busy / delivered, 1) if delivered else None,
     }

@@ -93,7 +93,7 @@ from bench.harness import (
     ws_open,
 )
 from bench.links import links
-from bench.relay import relay_uplink
+from bench.relay import relay_imu, relay_service, relay_uplink
 from bench.tls import tls_scenario
 
 TARGETS: dict[str, str] = {
@@ -115,6 +115,8 @@ TARGETS: dict[str, str] = {
                 "10 Foxglove viewers of one camera: bridge CPU per frame",
     "relay_uplink": "robot uplink through a relay flat in viewers (<= 1.1x one viewer's); "
                     "straight to the bridge N times",
+    "relay_service": "reference: service round trip through a relay against straight",
+    "relay_imu": "200 viewers of a 100 Hz IMU over two relays: all delivered; latency, relay CPU",
     "record": "camera 30 Hz + IMU 200 Hz for 60 s recorded without a loss; recorder CPU",
     "action_ros_server": "reference: goal round trip p50/p99, feedback msg/s at >= 99 %",
     "action_client_served": "reference: goal round trip p50/p99, feedback msg/s at >= 99 %",
@@ -832,6 +834,8 @@ SCENARIOS: dict[str, Callable[[Ctx], Awaitable[dict[str, Any]]]] = {
     "pointcloud": pointcloud,
     "foxglove": foxglove,
     "relay_uplink": relay_uplink,
+    "relay_service": relay_service,
+    "relay_imu": relay_imu,
     "action_ros_server": action_ros_server,
     "action_client_served": action_client_served,
 }
@@ -871,6 +875,11 @@ def _headline(name: str, r: dict[str, Any]) -> Any:
                                   ("viewers", "bridge_cpu_ms_per_published_frame"))}
     if name == "relay_uplink":
         return {way: {r["viewers"]: r["x_one_viewer"] for r in r[way]} for way in ("relay", "direct")}
+    if name == "relay_service":
+        return r
+    if name == "relay_imu":
+        return {k: r[k] for k in ("delivered_fraction", "latency_p50_ms", "latency_p99_ms",
+                                  "relay_cpu_us_per_message")}
     if name == "record":
         return {"recorded_pct": {t: v["recorded_pct"] for t, v in r["camera_imu"]["topics"].items()},
                 "recorder_cpu_pct": r["camera_imu"]["recorder_cpu_pct"],
