@@ -1,0 +1,267 @@
+"""A robot nobody can reach, reached through a relay (issue 26).
+
+The robot's bridge and its rclpy node run in a network namespace this test makes: inside
+it, only loopback and one veth link whose far end (in this namespace, on an address the
+test gives it) is the Zenoh router of a relay. Nothing listens inside the robot's
+namespace, so nothing can connect in; the bridge dials out. Clients connect to the relay
+on 127.0.0.1 and name the robot in the URL path: our client and stock roslibpy subscribe,
+publish, and call the robot's service.
+
+Needs root and ``ip`` (iproute2); under CI (``CI=true``) their absence fails the run
+(tests/conftest.py), here it skips.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import json
+import os
+import re
+import shutil
+import socket
+import subprocess
+import sys
+import textwrap
+import threading
+from collections.abc import Iterator
+from dataclasses import dataclass
+
+import pytest
+
+import roslibpy_lite
+from tests.helpers import ROOT, ros_env
+
+ROBOT = "natbot"
+READY = re.compile(r"relay listening on ws://127\.0\.0\.1:(\d+)")
+
+# The robot's own ROS side: a talker, a service and an echo of what the relay's clients
+# publish, all in the robot's namespace.
+ROBOT_NODE = textwrap.dedent("""
+    import rclpy, sys
+    from rclpy.executors import ExternalShutdownException
+    from std_msgs.msg import String
+    from std_srvs.srv import SetBool
+
+    rclpy.init()
+    node = rclpy.create_node("nat_robot")
+    talk = node.create_publisher(String, "/nat/chatter", 10)
+    echo = node.create_publisher(String, "/nat/echo", 10)
+    node.create_subscription(String, "/nat/cmd", lambda m: echo.publish(String(data="echo " + m.data)), 10)
+
+    def serve(request, response):
+        response.success = request.data
+        response.message = "answered inside the namespace"
+        return response
+
+    node.create_service(SetBool, "/nat/set", serve)
+    count = [0]
+
+    def tick():
+        count[0] += 1
+        talk.publish(String(data=f"hello {count[0]}"))
+
+    node.create_timer(0.05, tick)
+    print("robot node up", flush=True)
+    try:
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+""")
+
+
+@dataclass
+class Namespace:
+    """The robot's network namespace and the veth pair to the router's side."""
+
+    name: str
+    router_ip: str
+    robot_ip: str
+
+    def exec(self, *argv: str) -> list[str]:
+        """``argv`` to run inside the namespace."""
+        return ["ip", "netns", "exec", self.name, *argv]
+
+
+def _ip(*args: str) -> None:
+    subprocess.run(["ip", *args], check=True, capture_output=True, text=True)
+
+
+@pytest.fixture
+def robot_netns() -> Iterator[Namespace]:
+    """A namespace with only loopback and a /30 veth link to this namespace."""
+    if os.geteuid() != 0 or shutil.which("ip") is None:
+        pytest.skip("network namespaces need root and iproute2 ('ip')")
+    tag = f"{os.getpid() % 10000}"
+    ns = Namespace(f"rlnat{tag}", f"10.213.{os.getpid() % 200}.1", f"10.213.{os.getpid() % 200}.2")
+    host_end, robot_end = f"rlh{tag}", f"rlr{tag}"
+    _ip("netns", "add", ns.name)
+    try:
+        _ip("link", "add", host_end, "type", "veth", "peer", "name", robot_end)
+        _ip("link", "set", robot_end, "netns", ns.name)
+        _ip("addr", "add", f"{ns.router_ip}/30", "dev", host_end)
+        _ip("link", "set", host_end, "up")
+        _ip("netns", "exec", ns.name, "ip", "addr", "add", f"{ns.robot_ip}/30", "dev", robot_end)
+        _ip("netns", "exec", ns.name, "ip", "link", "set", robot_end, "up")
+        _ip("netns", "exec", ns.name, "ip", "link", "set", "lo", "up")
+        yield ns
+    finally:
+        with contextlib.suppress(subprocess.CalledProcessError):
+            _ip("link", "del", host_end)  # takes its peer with it
+        _ip("netns", "del", ns.name)
+
+
+class Proc:
+    """A child process whose output is kept (and shown when a test fails)."""
+
+    def __init__(self, argv: list[str], env: dict[str, str]) -> None:
+        self.lines: list[str] = []
+        self.seen = threading.Condition()
+        self.proc = subprocess.Popen(argv, cwd=ROOT, env=env, stdout=subprocess.PIPE,
+                                     stderr=subprocess.STDOUT, text=True)
+        threading.Thread(target=self._pump, daemon=True).start()
+
+    def _pump(self) -> None:
+        assert self.proc.stdout is not None
+        for line in self.proc.stdout:
+            with self.seen:
+                self.lines.append(line.rstrip())
+                self.seen.notify_all()
+
+    def wait_for(self, pattern: re.Pattern[str], timeout: float = 30.0) -> re.Match[str]:
+        """The first output line matching ``pattern`` (waiting for it)."""
+        def found() -> re.Match[str] | None:
+            return next((m for line in self.lines if (m := pattern.search(line))), None)
+
+        with self.seen:
+            if not self.seen.wait_for(lambda: found() is not None or self.proc.poll() is not None,
+                                      timeout):
+                raise AssertionError(f"no line like {pattern.pattern!r}:\n" + "\n".join(self.lines))
+        match = found()
+        assert match is not None, "exited:\n" + "\n".join(self.lines)
+        return match
+
+    def stop(self) -> None:
+        """SIGTERM, then SIGKILL."""
+        if self.proc.poll() is None:
+            self.proc.terminate()
+            try:
+                self.proc.wait(10)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait()
+        if self.proc.stdout is not None:
+            self.proc.stdout.close()
+
+
+@pytest.fixture
+def relay_and_robot(robot_netns: Namespace) -> Iterator[tuple[str, Namespace, list[Proc]]]:
+    """The relay here (the router on the veth's address), the robot's bridge and node in
+    the namespace; yields the robot's URL through the relay."""
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        zport = s.getsockname()[1]  # the same number is free on the veth's address too
+    env = ros_env()
+    procs: list[Proc] = []
+    try:
+        relay = Proc([sys.executable, "-m", "bridge_server.zenoh.relay", "--port", "0",
+                      "--zenoh-listen", f"tcp/{robot_netns.router_ip}:{zport}"], env)
+        procs.append(relay)
+        port = int(relay.wait_for(READY).group(1))
+        robot = Proc(robot_netns.exec(sys.executable, "-m", "bridge_server", "--no-websocket",
+                                      "--robot", ROBOT, "--zenoh-connect",
+                                      f"tcp/{robot_netns.router_ip}:{zport}"), env)
+        procs.append(robot)
+        robot.wait_for(re.compile(rf"robot {ROBOT} is on Zenoh"))
+        node = Proc(robot_netns.exec(sys.executable, "-c", ROBOT_NODE), env)
+        procs.append(node)
+        node.wait_for(re.compile("robot node up"))
+        yield f"ws://127.0.0.1:{port}/{ROBOT}", robot_netns, procs
+    finally:
+        for p in reversed(procs):
+            p.stop()
+
+
+async def _connect_when_there(url: str) -> roslibpy_lite.Client:
+    """The relay refuses a robot (404) until the robot's liveliness reached it."""
+    deadline = asyncio.get_running_loop().time() + 30
+    while True:
+        try:
+            return await roslibpy_lite.connect(url, open_timeout=5)
+        except roslibpy_lite.ConnectError:
+            if asyncio.get_running_loop().time() > deadline:
+                raise
+            await asyncio.sleep(0.2)
+
+
+def test_nothing_can_connect_to_the_robot(relay_and_robot: tuple[str, Namespace, list[Proc]]
+                                          ) -> None:
+    """The robot's namespace listens on no TCP port; its bridge's port is closed from outside."""
+    _, ns, _ = relay_and_robot
+    listening = subprocess.run(ns.exec("ss", "-ltnH"), capture_output=True, text=True,
+                               check=True).stdout.strip()
+    assert listening == ""
+    with socket.socket() as s, pytest.raises(ConnectionRefusedError):
+        s.settimeout(5)
+        s.connect((ns.robot_ip, 9090))
+
+
+async def test_a_client_reaches_the_robot_through_the_relay(
+        relay_and_robot: tuple[str, Namespace, list[Proc]]) -> None:
+    url, _, _ = relay_and_robot
+    ros = await _connect_when_there(url)
+    try:
+        sub = ros.subscribe("/nat/chatter", "std_msgs/msg/String")
+        first = await sub.get(30)
+        assert first["data"].startswith("hello ")
+        answer = await ros.call_service("/nat/set", "std_srvs/srv/SetBool", {"data": True},
+                                        timeout=30)
+        assert answer == {"success": True, "message": "answered inside the namespace"}
+        echoes = ros.subscribe("/nat/echo", "std_msgs/msg/String")
+        pub = await ros.advertise("/nat/cmd", "std_msgs/msg/String")
+        deadline = asyncio.get_running_loop().time() + 30
+        while True:  # the robot's subscriber matches the new publisher in its own time
+            await pub.publish({"data": "from outside"})
+            try:
+                assert (await echoes.get(0.5))["data"] == "echo from outside"
+                break
+            except TimeoutError:
+                if asyncio.get_running_loop().time() > deadline:
+                    raise
+    finally:
+        await ros.close()
+
+
+# Stock roslibpy, unchanged, in a child process (Twisted's reactor runs once per process);
+# the robot is named in the URL's path, which roslibpy takes whole as its host.
+ROSLIBPY_SCRIPT = textwrap.dedent("""
+    import json, sys, threading
+    import roslibpy
+
+    ros = roslibpy.Ros(host=sys.argv[1])
+    ros.run(timeout=30)
+    heard, got = threading.Event(), []
+    roslibpy.Topic(ros, "/nat/chatter", "std_msgs/msg/String").subscribe(
+        lambda m: (got.append(m), heard.set()))
+    heard.wait(30)
+    answer = roslibpy.Service(ros, "/nat/set", "std_srvs/srv/SetBool").call(
+        roslibpy.ServiceRequest({"data": False}), timeout=30)
+    print(json.dumps({"heard": got[:1], "answer": dict(answer)}), flush=True)
+    ros.terminate()
+""")
+
+
+def test_stock_roslibpy_reaches_the_robot(relay_and_robot: tuple[str, Namespace, list[Proc]]
+                                          ) -> None:
+    url, _, _ = relay_and_robot
+
+    async def reachable() -> None:
+        await (await _connect_when_there(url)).close()
+
+    asyncio.run(reachable())
+    done = subprocess.run([sys.executable, "-c", ROSLIBPY_SCRIPT, url], cwd=ROOT, env=ros_env(),
+                          capture_output=True, text=True, timeout=90)
+    assert done.returncode == 0, done.stdout + done.stderr
+    result = json.loads(done.stdout.strip().splitlines()[-1])
+    assert result["heard"] and result["heard"][0]["data"].startswith("hello ")
+    assert result["answer"] == {"success": False, "message": "answered inside the namespace"}
