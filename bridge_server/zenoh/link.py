@@ -62,10 +62,6 @@ class ZenohOptions:
         conf = zenoh.Config()
         conf.insert_json5("mode", json.dumps(self.mode))
         conf.insert_json5("scouting/multicast/enabled", "false")
-        # Robots and relays meet over networks. Zenoh would hand big payloads between two
-        # processes of one machine through shared memory instead, past the link (and its
-        # TLS) that tests and benchmarks put between them: the link carries everything.
-        conf.insert_json5("transport/shared_memory/enabled", "false")
         conf.insert_json5("scouting/gossip/enabled", "false" if not self.listen else "true")
         conf.insert_json5("connect/endpoints", json.dumps(self.connect))
         conf.insert_json5("listen/endpoints", json.dumps(self.listen))
