@@ -28,9 +28,10 @@ from collections.abc import Iterator
 from dataclasses import dataclass
 
 import pytest
+from websockets.exceptions import InvalidStatus
 
 import roslibpy_lite
-from tests.helpers import ROOT, ros_env
+from tests.helpers import ROOT, WireClient, open_wire, ros_env
 
 ROBOT = "natbot"
 READY = re.compile(r"relay listening on ws://127\.0\.0\.1:(\d+)")
@@ -77,6 +78,8 @@ class Namespace:
     name: str
     router_ip: str
     robot_ip: str
+    host_end: str
+    """The veth's end on this side: set down, it cuts the robot off (a blackhole)."""
 
     def exec(self, *argv: str) -> list[str]:
         """``argv`` to run inside the namespace."""
@@ -93,8 +96,9 @@ def robot_netns() -> Iterator[Namespace]:
     if os.geteuid() != 0 or shutil.which("ip") is None:
         pytest.skip("network namespaces need root and iproute2 ('ip')")
     tag = f"{os.getpid() % 10000}"
-    ns = Namespace(f"rlnat{tag}", f"10.213.{os.getpid() % 200}.1", f"10.213.{os.getpid() % 200}.2")
     host_end, robot_end = f"rlh{tag}", f"rlr{tag}"
+    ns = Namespace(f"rlnat{tag}", f"10.213.{os.getpid() % 200}.1",
+                   f"10.213.{os.getpid() % 200}.2", host_end)
     _ip("netns", "add", ns.name)
     try:
         _ip("link", "add", host_end, "type", "veth", "peer", "name", robot_end)
@@ -154,20 +158,46 @@ class Proc:
             self.proc.stdout.close()
 
 
-@pytest.fixture
-def relay_and_robot(robot_netns: Namespace) -> Iterator[tuple[str, Namespace, list[Proc]]]:
-    """The relay here (the router on the veth's address), the robot's bridge and node in
-    the namespace; yields the robot's URL through the relay."""
+def _free_port() -> int:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
-        zport = s.getsockname()[1]  # the same number is free on the veth's address too
+        return int(s.getsockname()[1])  # the same number is free on the veth's address too
+
+
+def start_relay(ns: Namespace, zport: int, port: int) -> Proc:
+    """The relay, the Zenoh router on the veth's address, serving websockets on ``port``."""
+    relay = Proc([sys.executable, "-m", "bridge_server.zenoh.relay", "--port", str(port),
+                  "--zenoh-listen", f"tcp/{ns.router_ip}:{zport}"], ros_env())
+    relay.wait_for(READY)
+    return relay
+
+
+@dataclass
+class Tier:
+    """The relay (``procs[0]``), the robot's bridge and node, and where clients connect."""
+
+    url: str
+    ns: Namespace
+    procs: list[Proc]
+    zport: int
+    port: int
+
+    def restart_relay(self) -> None:
+        """Stop the relay (the Zenoh router) and start it again on the same ports."""
+        self.procs[0].stop()
+        self.procs[0] = start_relay(self.ns, self.zport, self.port)
+
+
+@pytest.fixture
+def relay_and_robot(robot_netns: Namespace) -> Iterator[Tier]:
+    """The relay here (the router on the veth's address), the robot's bridge and node in
+    the namespace; yields the robot's URL through the relay, the namespace, and the
+    processes (the relay first)."""
+    zport, port = _free_port(), _free_port()
     env = ros_env()
     procs: list[Proc] = []
     try:
-        relay = Proc([sys.executable, "-m", "bridge_server.zenoh.relay", "--port", "0",
-                      "--zenoh-listen", f"tcp/{robot_netns.router_ip}:{zport}"], env)
-        procs.append(relay)
-        port = int(relay.wait_for(READY).group(1))
+        procs.append(start_relay(robot_netns, zport, port))
         robot = Proc(robot_netns.exec(sys.executable, "-m", "bridge_server", "--no-websocket",
                                       "--robot", ROBOT, "--zenoh-connect",
                                       f"tcp/{robot_netns.router_ip}:{zport}"), env)
@@ -176,7 +206,7 @@ def relay_and_robot(robot_netns: Namespace) -> Iterator[tuple[str, Namespace, li
         node = Proc(robot_netns.exec(sys.executable, "-c", ROBOT_NODE), env)
         procs.append(node)
         node.wait_for(re.compile("robot node up"))
-        yield f"ws://127.0.0.1:{port}/{ROBOT}", robot_netns, procs
+        yield Tier(f"ws://127.0.0.1:{port}/{ROBOT}", robot_netns, procs, zport, port)
     finally:
         for p in reversed(procs):
             p.stop()
@@ -194,10 +224,9 @@ async def _connect_when_there(url: str) -> roslibpy_lite.Client:
             await asyncio.sleep(0.2)
 
 
-def test_nothing_can_connect_to_the_robot(relay_and_robot: tuple[str, Namespace, list[Proc]]
-                                          ) -> None:
+def test_nothing_can_connect_to_the_robot(relay_and_robot: Tier) -> None:
     """The robot's namespace listens on no TCP port; its bridge's port is closed from outside."""
-    _, ns, _ = relay_and_robot
+    ns = relay_and_robot.ns
     listening = subprocess.run(ns.exec("ss", "-ltnH"), capture_output=True, text=True,
                                check=True).stdout.strip()
     assert listening == ""
@@ -206,9 +235,8 @@ def test_nothing_can_connect_to_the_robot(relay_and_robot: tuple[str, Namespace,
         s.connect((ns.robot_ip, 9090))
 
 
-async def test_a_client_reaches_the_robot_through_the_relay(
-        relay_and_robot: tuple[str, Namespace, list[Proc]]) -> None:
-    url, _, _ = relay_and_robot
+async def test_a_client_reaches_the_robot_through_the_relay(relay_and_robot: Tier) -> None:
+    url = relay_and_robot.url
     ros = await _connect_when_there(url)
     try:
         sub = ros.subscribe("/nat/chatter", "std_msgs/msg/String")
@@ -251,9 +279,8 @@ ROSLIBPY_SCRIPT = textwrap.dedent("""
 """)
 
 
-def test_stock_roslibpy_reaches_the_robot(relay_and_robot: tuple[str, Namespace, list[Proc]]
-                                          ) -> None:
-    url, _, _ = relay_and_robot
+def test_stock_roslibpy_reaches_the_robot(relay_and_robot: Tier) -> None:
+    url = relay_and_robot.url
 
     async def reachable() -> None:
         await (await _connect_when_there(url)).close()
@@ -265,3 +292,55 @@ def test_stock_roslibpy_reaches_the_robot(relay_and_robot: tuple[str, Namespace,
     result = json.loads(done.stdout.strip().splitlines()[-1])
     assert result["heard"] and result["heard"][0]["data"].startswith("hello ")
     assert result["answer"] == {"success": False, "message": "answered inside the namespace"}
+
+
+async def _open_when_there(url: str) -> WireClient:
+    """A raw websocket client of the robot (the relay answers 404 until it is there)."""
+    deadline = asyncio.get_running_loop().time() + 30
+    while True:
+        try:
+            return await open_wire(url)
+        except (OSError, InvalidStatus):
+            if asyncio.get_running_loop().time() > deadline:
+                raise
+            await asyncio.sleep(0.2)
+
+
+async def _hears_chatter(wire: WireClient) -> None:
+    await wire.expect(op="publish", topic="/nat/chatter", timeout=30)
+
+
+async def test_a_cut_robot_is_reported_and_comes_back(relay_and_robot: Tier) -> None:
+    """Blackhole the robot's only link: the relay's clients are told it went away (a status,
+    not silence), then that it is back, and its messages flow again."""
+    url, ns = relay_and_robot.url, relay_and_robot.ns
+    wire = await _open_when_there(url)
+    try:
+        await wire.send({"op": "subscribe", "topic": "/nat/chatter", "type": "std_msgs/msg/String"})
+        await _hears_chatter(wire)
+        _ip("link", "set", ns.host_end, "down")
+        gone = await wire.expect(op="status", level="warning", timeout=40)
+        assert ROBOT in gone["msg"] and "went away" in gone["msg"]
+        _ip("link", "set", ns.host_end, "up")
+        back = await wire.expect(op="status", level="info", timeout=60)
+        assert ROBOT in back["msg"] and "back" in back["msg"]
+        wire.backlog.clear()
+        await _hears_chatter(wire)
+    finally:
+        await wire.close()
+
+
+async def test_a_restarted_router_gets_its_robot_back(relay_and_robot: Tier) -> None:
+    """The relay that is the Zenoh router restarts: the robot dials in again by itself."""
+    url = relay_and_robot.url
+    wire = await _open_when_there(url)
+    await wire.send({"op": "subscribe", "topic": "/nat/chatter", "type": "std_msgs/msg/String"})
+    await _hears_chatter(wire)
+    await wire.close()
+    relay_and_robot.restart_relay()
+    wire = await _open_when_there(url)
+    try:
+        await wire.send({"op": "subscribe", "topic": "/nat/chatter", "type": "std_msgs/msg/String"})
+        await _hears_chatter(wire)
+    finally:
+        await wire.close()
