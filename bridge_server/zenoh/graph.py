@@ -284,6 +284,8 @@ class ZenohGraph:
         self.loop = asyncio.get_running_loop()
         self.snapshot = Snapshot()
         self.alive = False
+        self.presence_listeners: list[Callable[[bool], None]] = []
+        """Called on the loop when the robot goes (False) or comes back (True)."""
         self.subscriptions: dict[str, ZenohFeed] = {}
         self.publishers: dict[tuple[str, str, bool], ZenohPublisher] = {}
         self._converters: dict[type[Any], RelayConverter] = {}
@@ -308,7 +310,10 @@ class ZenohGraph:
     # -- life ----------------------------------------------------------------------------------
 
     def start(self) -> None:
-        """Follow the robot's liveliness and graph."""
+        """Follow the robot's liveliness and graph (once: the relay starts it to wait for the
+        first snapshot, and the Bridge starts its graph again)."""
+        if self._entities:
+            return
         r = self.robot
         self._entities = [
             self.session.liveliness().declare_subscriber(
@@ -347,8 +352,11 @@ class ZenohGraph:
         return None
 
     def _on_alive(self, sample: zenoh.Sample) -> None:
-        self.alive = sample.kind == zenoh.SampleKind.PUT
+        was, self.alive = self.alive, sample.kind == zenoh.SampleKind.PUT
         log.info("robot %s %s", self.robot, "is here" if self.alive else "went away")
+        if self.alive != was:
+            for listener in list(self.presence_listeners):
+                listener(self.alive)
 
     def _on_graph(self, sample: zenoh.Sample) -> None:
         try:

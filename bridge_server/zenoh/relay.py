@@ -106,6 +106,7 @@ class Relay:
             return None
         graph = ZenohGraph(self.session, name, self.relay_id)
         bridge = Bridge(self.config, graph=graph)
+        graph.presence_listeners.append(lambda here: _tell_presence(bridge, name, here))
         bridge.security = self.security  # one auth file, one SIGHUP, for every robot
         bridge.web.access = WebAccess(self.security)
         graph.start()
@@ -182,6 +183,17 @@ class Relay:
         if self.session is not None:
             session, self.session = self.session, None
             await asyncio.get_running_loop().run_in_executor(None, session.close)
+
+
+def _tell_presence(bridge: Bridge, robot: str, here: bool) -> None:
+    """Tell every client of ``robot`` that it went away (its link, or this relay's link to
+    the router, is gone: what it does now waits) or that it is back."""
+    for session in list(bridge.sessions):
+        if here:
+            session.status("info", f"robot {robot} is back: its topics flow again")
+        else:
+            session.status("warning", f"robot {robot} went away: its link to the Zenoh network "
+                           "(or this relay's) is gone; subscriptions resume when it is back")
 
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:

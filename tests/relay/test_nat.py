@@ -316,6 +316,7 @@ async def test_a_cut_robot_is_reported_and_comes_back(relay_and_robot: Tier) -> 
     url, ns = relay_and_robot.url, relay_and_robot.ns
     wire = await _open_when_there(url)
     try:
+        await wire.send({"op": "set_level", "level": "info"})  # the return is news, not a warning
         await wire.send({"op": "subscribe", "topic": "/nat/chatter", "type": "std_msgs/msg/String"})
         await _hears_chatter(wire)
         _ip("link", "set", ns.host_end, "down")
