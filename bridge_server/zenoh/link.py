@@ -8,6 +8,13 @@ out, nothing dials in); a relay with ``--zenoh-listen`` is itself a router in-pr
 Multicast scouting is off: who talks to whom is what the options say, nothing found on
 the LAN. A client waits for its router as long as it takes (the session opens in a thread,
 so the event loop goes on), and Zenoh reconnects it by itself if the link drops.
+
+Every link can be TLS, and a router can ask each side for a certificate
+(``--zenoh-mtls``): then a robot proves who it is by its certificate's common name, and
+the router lets it use only the keys under that name (:func:`robot_acl`), so no robot can
+publish, serve or answer as another. Relays, named by their certificates too
+(``--zenoh-relay``), may use every robot's keys; which viewer may reach which robot is the
+relay's roles' business (``robots = [...]`` in a role).
 """
 
 from __future__ import annotations
@@ -16,27 +23,74 @@ import argparse
 import asyncio
 import json
 import os
+import re
 import threading
+from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from ..interfaces import BridgeError
+from . import keys
 
 if TYPE_CHECKING:
     import zenoh
 
-__all__ = ["ZenohOptions", "add_arguments", "open_session", "options_from_args"]
+__all__ = ["ZenohOptions", "add_arguments", "open_session", "options_from_args", "robot_acl"]
+
+_PROTOCOLS = ("tcp", "tls", "quic", "udp", "unixsock-stream")
+_ENDPOINT = re.compile(r"(?P<proto>[a-z-]+)/(?P<addr>[^#?]+)(?:[#?].*)?")
+_CONTROL = (keys.ALIVE, keys.DEMAND, keys.LATCHED, keys.GRAPH, keys.CALL, keys.ADVERTISE,
+            keys.IN)
+"""The robot's control chunks: Zenoh's verbatim chunks, which no wildcard matches, so the
+access rules name each."""
+# Everything a robot does on its own keys: puts its topics, declares its queryables and
+# answers them, holds its liveliness token, follows the relays' tokens, takes their puts.
+_MESSAGES = ["put", "delete", "declare_subscriber", "query", "declare_queryable", "reply",
+             "liveliness_token", "declare_liveliness_subscriber", "liveliness_query"]
+
+
+def _under(prefix: str) -> list[str]:
+    return [f"{prefix}/**", *(f"{prefix}/{c}" for c in _CONTROL),
+            *(f"{prefix}/{c}/**" for c in _CONTROL)]
+
+
+def robot_acl(robots: Sequence[str], relays: Sequence[str]) -> dict[str, Any]:
+    """A router's access control: each robot (by its certificate's common name, which is its
+    robot name) only on keys under its name, each relay on every robot's, anyone else on
+    nothing."""
+    rules: list[dict[str, Any]] = []
+    subjects: list[dict[str, Any]] = []
+    policies: list[dict[str, Any]] = []
+
+    def allow(rule: str, names: list[str], key_exprs: list[str]) -> None:
+        rules.append({"id": rule, "messages": _MESSAGES, "flows": ["ingress", "egress"],
+                      "permission": "allow", "key_exprs": key_exprs})
+        subjects.append({"id": rule, "cert_common_names": names})
+        policies.append({"rules": [rule], "subjects": [rule]})
+
+    for i, robot in enumerate(robots):
+        allow(f"robot{i}", [robot], [robot, *_under(robot)])
+    if relays:
+        allow("relays", list(relays), ["**", *_under("*")[1:]])
+    return {"enabled": True, "default_permission": "deny", "rules": rules,
+            "subjects": subjects, "policies": policies}
 
 
 @dataclass
 class ZenohOptions:
-    """Where the session connects or listens, and its TLS files."""
+    """Where the session connects or listens, its TLS files, and (a router) who may come in."""
 
     connect: list[str] = field(default_factory=list)
     listen: list[str] = field(default_factory=list)
     tls_ca: str | None = None
     tls_cert: str | None = None
     tls_key: str | None = None
+    mtls: bool = False
+    """A listener asks whoever connects for a certificate signed by ``tls_ca``."""
+    robots: list[str] = field(default_factory=list)
+    """With ``mtls``: robots let in by their certificates' common names, each on its keys."""
+    relays: list[str] = field(default_factory=list)
+    """With ``mtls``: relays let in by their certificates' common names, on every key."""
 
     @property
     def mode(self) -> str:
@@ -49,6 +103,15 @@ class ZenohOptions:
 
         if not self.connect and not self.listen:
             raise BridgeError("no Zenoh endpoint: give --zenoh-connect or --zenoh-listen")
+        for option, endpoints in (("--zenoh-connect", self.connect),
+                                  ("--zenoh-listen", self.listen)):
+            for e in endpoints:
+                m = _ENDPOINT.fullmatch(e)
+                if m is None or m["proto"] not in _PROTOCOLS or (
+                        ":" not in m["addr"] and m["proto"] != "unixsock-stream"):
+                    raise BridgeError(
+                        f"{option} {e!r}: not a Zenoh endpoint (PROTOCOL/HOST:PORT, protocol "
+                        f"one of {', '.join(_PROTOCOLS)}; for example tls/relay.example.com:7447)")
         for what, path in (("--zenoh-tls-ca", self.tls_ca), ("--zenoh-tls-cert", self.tls_cert),
                            ("--zenoh-tls-key", self.tls_key)):
             if path is not None and not os.access(path, os.R_OK):
@@ -59,6 +122,20 @@ class ZenohOptions:
         if uses_tls and self.listen and self.tls_cert is None:
             raise BridgeError("a tls/ or quic/ --zenoh-listen endpoint needs --zenoh-tls-cert "
                               "and --zenoh-tls-key")
+        if uses_tls and self.tls_ca is None:
+            raise BridgeError("a tls/ or quic/ endpoint needs --zenoh-tls-ca (the authority "
+                              "that signs the other side's certificate)")
+        if self.mtls and not (self.listen and uses_tls):
+            raise BridgeError("--zenoh-mtls asks those who connect for certificates: it needs "
+                              "a tls/ --zenoh-listen endpoint")
+        if (self.robots or self.relays) and not self.mtls:
+            raise BridgeError("--zenoh-robot/--zenoh-relay name certificates: they need "
+                              "--zenoh-mtls")
+        for robot in self.robots:
+            try:
+                keys.check_robot(robot)
+            except BridgeError as exc:
+                raise BridgeError(f"--zenoh-robot: {exc}") from None
         conf = zenoh.Config()
         conf.insert_json5("mode", json.dumps(self.mode))
         conf.insert_json5("scouting/multicast/enabled", "false")
@@ -78,6 +155,12 @@ class ZenohOptions:
             side = "listen" if self.listen else "connect"
             conf.insert_json5(f"{tls}/{side}_certificate", json.dumps(self.tls_cert))
             conf.insert_json5(f"{tls}/{side}_private_key", json.dumps(self.tls_key))
+        # Zenoh shows this side's certificate to a listener only with mTLS on (one switch for
+        # both ways): a client with a certificate turns it on, a router when told to.
+        if self.mtls or (not self.listen and self.tls_cert is not None):
+            conf.insert_json5(f"{tls}/enable_mtls", "true")
+        if self.robots or self.relays:
+            conf.insert_json5("access_control", json.dumps(robot_acl(self.robots, self.relays)))
         return conf
 
 
@@ -131,6 +214,16 @@ def add_arguments(p: argparse.ArgumentParser, listen: bool) -> None:
                    help="this side's TLS certificate (a router's for tls/ listen endpoints)")
     g.add_argument("--zenoh-tls-key", default=None, metavar="FILE",
                    help="the private key of --zenoh-tls-cert")
+    if listen:
+        g.add_argument("--zenoh-mtls", action="store_true",
+                       help="ask whoever connects for a certificate signed by --zenoh-tls-ca "
+                       "(mutual TLS: a robot's certificate's common name is its robot name)")
+        g.add_argument("--zenoh-robot", action="append", default=[], metavar="NAME",
+                       help="with --zenoh-mtls: a robot let in by its certificate, on the keys "
+                       "under its own name only (may be given several times)")
+        g.add_argument("--zenoh-relay", action="append", default=[], metavar="NAME",
+                       help="with --zenoh-mtls: another relay let in by its certificate's "
+                       "common name, on every robot's keys (may be given several times)")
 
 
 def options_from_args(args: argparse.Namespace) -> ZenohOptions:
@@ -138,4 +231,6 @@ def options_from_args(args: argparse.Namespace) -> ZenohOptions:
     return ZenohOptions(connect=list(args.zenoh_connect),
                         listen=list(getattr(args, "zenoh_listen", []) or []),
                         tls_ca=args.zenoh_tls_ca, tls_cert=args.zenoh_tls_cert,
-                        tls_key=args.zenoh_tls_key)
+                        tls_key=args.zenoh_tls_key, mtls=getattr(args, "zenoh_mtls", False),
+                        robots=list(getattr(args, "zenoh_robot", []) or []),
+                        relays=list(getattr(args, "zenoh_relay", []) or []))

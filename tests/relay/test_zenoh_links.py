@@ -1,0 +1,225 @@
+"""Zenoh links between robots and relays: TLS, mutual TLS, and each robot on its own keys.
+
+Real Zenoh sessions in this process (a router and clients over TLS on loopback), real
+certificates from ``trustme``.
+"""
+
+from __future__ import annotations
+
+import queue
+import re
+import socket
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+zenoh = pytest.importorskip("zenoh")
+trustme = pytest.importorskip("trustme")
+
+from bridge_server.interfaces import BridgeError  # noqa: E402
+from bridge_server.zenoh.link import ZenohOptions  # noqa: E402
+
+DEADLINE = 10.0
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+@dataclass
+class Pki:
+    dir: Path
+    ca: Path
+
+    def cert(self, name: str, ca: Any = None) -> tuple[Path, Path]:
+        """A certificate with common name ``name`` (signed by ``ca``: another CA)."""
+        issued = (ca or self.authority).issue_cert(name, common_name=name)
+        cert, key = self.dir / f"{name}.pem", self.dir / f"{name}.key"
+        issued.cert_chain_pems[0].write_to_path(cert)
+        issued.private_key_pem.write_to_path(key)
+        return cert, key
+
+    authority: Any = None
+
+
+@pytest.fixture
+def pki(tmp_path: Path) -> Pki:
+    authority = trustme.CA()
+    ca = tmp_path / "ca.pem"
+    authority.cert_pem.write_to_path(ca)
+    p = Pki(tmp_path, ca, authority)
+    cert, key = tmp_path / "router.pem", tmp_path / "router.key"
+    issued = authority.issue_cert("127.0.0.1", "localhost", common_name="router")
+    issued.cert_chain_pems[0].write_to_path(cert)
+    issued.private_key_pem.write_to_path(key)
+    return p
+
+
+@pytest.fixture
+def router(pki: Pki) -> Iterator[tuple[Any, str]]:
+    """A router asking for certificates: robot1 and robot2 on their own keys, relay on all."""
+    endpoint = f"tls/127.0.0.1:{_free_port()}"
+    link = ZenohOptions(listen=[endpoint], tls_ca=str(pki.ca), tls_cert=str(pki.dir / "router.pem"),
+                        tls_key=str(pki.dir / "router.key"), mtls=True,
+                        robots=["robot1", "robot2"], relays=["relay"])
+    session = zenoh.open(link.config())
+    try:
+        yield session, endpoint
+    finally:
+        session.close()
+
+
+def _client(pki: Pki, endpoint: str, name: str | None, ca: Any = None,
+            wait: bool = True) -> Any:
+    cert = key = None
+    if name is not None:
+        cert, key = (str(p) for p in pki.cert(name, ca))
+    config = ZenohOptions(connect=[endpoint], tls_ca=str(pki.ca), tls_cert=cert,
+                          tls_key=key).config()
+    if not wait:  # give up after a while instead of waiting for the router forever
+        config.insert_json5("connect/timeout_ms", "3000")
+        config.insert_json5("connect/exit_on_failure", "true")
+    return zenoh.open(config)
+
+
+def _reaches_router(session: Any) -> bool:
+    return bool(list(session.info.routers_zid()))
+
+
+def _subscribe(session: Any, *keyexprs: str) -> tuple[list[Any], queue.Queue[str]]:
+    got: queue.Queue[str] = queue.Queue()
+    subs = [session.declare_subscriber(k, lambda s: got.put(str(s.key_expr)))
+            for k in keyexprs]
+    return subs, got
+
+
+def _wait_matched(entity: Any) -> None:
+    """Wait until a publisher has a subscriber, or a querier a queryable, that matches it
+    (declarations travel apart from data)."""
+    matched: queue.Queue[bool] = queue.Queue()
+    listener = entity.declare_matching_listener(lambda status: matched.put(status.matching))
+    if not entity.matching_status.matching:
+        while not matched.get(timeout=DEADLINE):
+            pass
+    listener.undeclare()
+
+
+def _put_when_heard(session: Any, key: str) -> None:
+    pub = session.declare_publisher(key)
+    _wait_matched(pub)
+    pub.put(b"x")
+    pub.undeclare()
+
+
+def test_a_robot_publishes_under_its_own_name_only(pki: Pki, router: tuple[Any, str]) -> None:
+    _, endpoint = router
+    relay = _client(pki, endpoint, "relay")
+    robot = _client(pki, endpoint, "robot1")
+    try:
+        # As a relay does: per robot (a subscription to '**' would reach no robot, whose
+        # keys are only its own).
+        subs, got = _subscribe(relay, "robot1/**", "robot2/**")
+        # Its own name: delivered. Then robot2's name, then its own again: data on one
+        # link keeps its order, so when the last arrives the forged one would have too.
+        _put_when_heard(robot, "robot1/camera")
+        assert got.get(timeout=DEADLINE) == "robot1/camera"
+        robot.put("robot2/camera", b"forged")
+        robot.put("robot1/imu", b"x")
+        assert got.get(timeout=DEADLINE) == "robot1/imu"
+        assert got.empty()
+        for sub in subs:
+            sub.undeclare()
+    finally:
+        robot.close()
+        relay.close()
+
+
+def test_a_robot_cannot_serve_under_another_name(pki: Pki, router: tuple[Any, str]) -> None:
+    _, endpoint = router
+    relay = _client(pki, endpoint, "relay")
+    robot2 = _client(pki, endpoint, "robot2")
+    try:
+        answered = robot2.declare_queryable("robot1/@graph", lambda q: q.reply(q.key_expr, b"lie"))
+        own = robot2.declare_queryable("robot2/@graph", lambda q: q.reply(q.key_expr, b"ok"))
+        # robot2's own queryable answers (so declarations have reached the relay) ...
+        own_querier = relay.declare_querier("robot2/@graph", timeout=DEADLINE)
+        _wait_matched(own_querier)
+        replies = [r.ok.payload.to_bytes() for r in own_querier.get() if r.ok]
+        assert replies == [b"ok"]
+        # ... and the one under robot1's name, declared before it, is not there at all.
+        querier = relay.declare_querier("robot1/@graph", timeout=DEADLINE)
+        assert not querier.matching_status.matching
+        assert [r for r in querier.get() if r.ok] == []
+        answered.undeclare()
+        own.undeclare()
+    finally:
+        robot2.close()
+        relay.close()
+
+
+def test_a_relay_as_the_router_hears_robots(pki: Pki, router: tuple[Any, str]) -> None:
+    session, endpoint = router
+    subs, got = _subscribe(session, "robot1/**")
+    robot = _client(pki, endpoint, "robot1")
+    try:
+        _put_when_heard(robot, "robot1/camera")
+        assert got.get(timeout=DEADLINE) == "robot1/camera"
+    finally:
+        subs[0].undeclare()
+        robot.close()
+
+
+@pytest.mark.parametrize("who", ["another CA", "no certificate"])
+def test_a_robot_without_a_good_certificate_is_refused(
+        pki: Pki, router: tuple[Any, str], who: str) -> None:
+    _, endpoint = router
+    with pytest.raises(zenoh.ZError, match="Unable to connect"):
+        if who == "another CA":
+            _client(pki, endpoint, "robot1", ca=trustme.CA(), wait=False)
+        else:
+            _client(pki, endpoint, None, wait=False)
+
+
+def test_plain_tls_without_client_certificates(pki: Pki) -> None:
+    endpoint = f"tls/127.0.0.1:{_free_port()}"
+    link = ZenohOptions(listen=[endpoint], tls_ca=str(pki.ca), tls_cert=str(pki.dir / "router.pem"),
+                        tls_key=str(pki.dir / "router.key"))
+    router = zenoh.open(link.config())
+    try:
+        config = ZenohOptions(connect=[endpoint], tls_ca=str(pki.ca)).config()
+        config.insert_json5("connect/timeout_ms", "5000")
+        config.insert_json5("connect/exit_on_failure", "true")
+        client = zenoh.open(config)
+        assert _reaches_router(client)
+        client.close()
+    finally:
+        router.close()
+
+
+@pytest.mark.parametrize(("link", "says"), [
+    (ZenohOptions(), "no Zenoh endpoint"),
+    (ZenohOptions(connect=["relay.example.com:7447"]),
+     "'relay.example.com:7447': not a Zenoh endpoint"),
+    (ZenohOptions(connect=["smtp/relay:25"]), "'smtp/relay:25': not a Zenoh endpoint"),
+    (ZenohOptions(connect=["tls/relay:7447"]), "needs --zenoh-tls-ca"),
+    (ZenohOptions(connect=["tcp/relay:7447"], tls_ca="/nonexistent/ca.pem"),
+     "--zenoh-tls-ca /nonexistent/ca.pem: not a readable file"),
+    (ZenohOptions(listen=["tcp/0.0.0.0:7447"], mtls=True), "needs a tls/ --zenoh-listen"),
+    (ZenohOptions(listen=["tcp/0.0.0.0:7447"], robots=["robot1"]), "they need --zenoh-mtls"),
+])
+def test_options_that_cannot_work_are_named(link: ZenohOptions, says: str) -> None:
+    with pytest.raises(BridgeError, match=re.escape(says)):
+        link.config()
+
+
+def test_a_robot_name_that_is_a_wildcard_is_refused(pki: Pki) -> None:
+    link = ZenohOptions(listen=["tls/127.0.0.1:7447"], tls_ca=str(pki.ca),
+                        tls_cert=str(pki.dir / "router.pem"), tls_key=str(pki.dir / "router.key"),
+                        mtls=True, robots=["*"])
+    with pytest.raises(BridgeError, match=r"--zenoh-robot: .*'\*'"):
+        link.config()
