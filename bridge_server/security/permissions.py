@@ -23,6 +23,11 @@ first owner keeps the name) and ``clients`` (see where other clients connect
 from, on the status page). ``all`` grants every capability. Deny wins over
 allow.
 
+On a relay, which serves many robots on one port, ``robots = ["robot1", "lab-*"]``
+limits a role to the robots whose names those globs match (a client of the role that
+names another robot in its URL is refused before the handshake); a role without it
+reaches every robot. A robot's own bridge serves one robot and ignores it.
+
 :func:`requirement` maps an op to the (capability, name) it needs, keyed by
 op type in one table, so new op classes are covered by adding a line.
 """
@@ -76,6 +81,8 @@ class Role:
     name: str
     allow: dict[str, tuple[str, ...]] = field(default_factory=dict)
     deny: dict[str, tuple[str, ...]] = field(default_factory=dict)
+    robots: tuple[str, ...] | None = None
+    """Globs of the robots a relay lets the role reach (``None``: every robot)."""
     _cache: dict[tuple[str, str], bool] = field(default_factory=dict, repr=False)
 
     @classmethod
@@ -83,7 +90,11 @@ class Role:
         """Build a role from its TOML table (see the module docstring)."""
         role = cls(name)
         for key, value in table.items():
-            if key == "deny":
+            if key == "robots":
+                if not isinstance(value, list) or not all(isinstance(v, str) for v in value):
+                    raise RoleError(f"role {name}: robots must be a list of robot name patterns")
+                role.robots = tuple(value)
+            elif key == "deny":
                 if not isinstance(value, Mapping):
                     raise RoleError(f"role {name}: 'deny' must be a table of capabilities")
                 for dkey, dvalue in value.items():
@@ -115,6 +126,10 @@ class Role:
             if len(self._cache) < 50_000:
                 self._cache[key] = found
         return found
+
+    def reaches(self, robot: str) -> bool:
+        """Whether a relay lets this role reach ``robot`` (see the module docstring)."""
+        return self.robots is None or _matches(self.robots, robot)
 
     def has(self, capability: str) -> bool:
         """Whether the role grants ``capability`` on some name (checks that name none).

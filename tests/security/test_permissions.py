@@ -8,10 +8,11 @@ import threading
 from collections.abc import Callable
 from typing import Any
 
+import pytest
 from std_msgs.msg import String
 from std_srvs.srv import SetBool
 
-from bridge_server.security.permissions import Role
+from bridge_server.security.permissions import Role, RoleError
 from tests.bridge.support import Inbox, publish_until_heard, roundtrip, wait_publishers
 from tests.helpers import BridgeProcess
 from tests.security.support import bridge_entities
@@ -220,6 +221,17 @@ def test_role_patterns_and_all() -> None:
     assert role.allows("subscribe", "/robot/camera") and role.allows("take_over", "/robot/x")
     assert not role.allows("subscribe", "/other")
     assert not role.allows("publish", "/robot/estop") and role.allows("publish", "/robot/cmd")
+
+
+def test_a_role_limited_to_robots() -> None:
+    """'robots' globs say which robots a relay lets the role reach; without it, all."""
+    lab = Role.from_table("lab", {"subscribe": ["*"], "robots": ["lab-*", "robot1"]})
+    assert lab.reaches("robot1") and lab.reaches("lab-7")
+    assert not lab.reaches("robot2") and not lab.reaches("robot10")
+    assert Role.from_table("any", {"subscribe": ["*"]}).reaches("robot2")
+    assert not Role.from_table("none", {"robots": []}).reaches("robot1")
+    with pytest.raises(RoleError, match="role bad: robots must be a list of robot name patterns"):
+        Role.from_table("bad", {"robots": "robot1"})
 
 
 _SEEN_HIDDEN: dict[str, dict[str, Any]] = {
