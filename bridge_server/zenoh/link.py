@@ -122,12 +122,12 @@ class ZenohOptions:
         if uses_tls and self.listen and self.tls_cert is None:
             raise BridgeError("a tls/ or quic/ --zenoh-listen endpoint needs --zenoh-tls-cert "
                               "and --zenoh-tls-key")
-        if uses_tls and self.tls_ca is None:
-            raise BridgeError("a tls/ or quic/ endpoint needs --zenoh-tls-ca (the authority "
-                              "that signs the other side's certificate)")
-        if self.mtls and not (self.listen and uses_tls):
-            raise BridgeError("--zenoh-mtls asks those who connect for certificates: it needs "
-                              "a tls/ --zenoh-listen endpoint")
+        if self.tls_ca is None and any(e.startswith(("tls/", "quic/")) for e in self.connect):
+            raise BridgeError("a tls/ or quic/ --zenoh-connect endpoint needs --zenoh-tls-ca "
+                              "(the authority that signs the router's certificate)")
+        if self.mtls and not (self.listen and uses_tls and self.tls_ca is not None):
+            raise BridgeError("--zenoh-mtls asks those who connect for certificates signed by "
+                              "--zenoh-tls-ca: it needs that and a tls/ --zenoh-listen endpoint")
         if (self.robots or self.relays) and not self.mtls:
             raise BridgeError("--zenoh-robot/--zenoh-relay name certificates: they need "
                               "--zenoh-mtls")

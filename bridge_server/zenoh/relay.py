@@ -162,6 +162,13 @@ class Relay:
                 404, f"no robot named {name!r} is connected to this relay's Zenoh network\n")
         connection.robot_bridge = bridge  # type: ignore[attr-defined]
         refusal: Response | None = await bridge.admit(connection, request)
+        principal = getattr(connection, "principal", None)
+        if refusal is None and principal is not None and not principal.role.reaches(name):
+            log.warning("refused principal %s (role %s) asking for robot %s: not among its "
+                        "robots", principal.name, principal.role.name, name)
+            bridge.metrics.connection_refused("robot_not_allowed")
+            return connection.respond(
+                403, f"role {principal.role.name} may not reach robot {name!r}\n")
         return refusal
 
     async def _handle(self, ws: ServerConnection) -> None:

@@ -209,7 +209,7 @@ def test_plain_tls_without_client_certificates(pki: Pki) -> None:
     (ZenohOptions(connect=["tls/relay:7447"]), "needs --zenoh-tls-ca"),
     (ZenohOptions(connect=["tcp/relay:7447"], tls_ca="/nonexistent/ca.pem"),
      "--zenoh-tls-ca /nonexistent/ca.pem: not a readable file"),
-    (ZenohOptions(listen=["tcp/0.0.0.0:7447"], mtls=True), "needs a tls/ --zenoh-listen"),
+    (ZenohOptions(listen=["tcp/0.0.0.0:7447"], mtls=True), "and a tls/ --zenoh-listen endpoint"),
     (ZenohOptions(listen=["tcp/0.0.0.0:7447"], robots=["robot1"]), "they need --zenoh-mtls"),
 ])
 def test_options_that_cannot_work_are_named(link: ZenohOptions, says: str) -> None:
