@@ -23,7 +23,6 @@ import socket
 import subprocess
 import sys
 import textwrap
-import threading
 from collections.abc import Iterator
 from dataclasses import dataclass
 
@@ -32,6 +31,7 @@ from websockets.exceptions import InvalidStatus
 
 import roslibpy_lite
 from tests.helpers import ROOT, WireClient, open_wire, ros_env
+from tests.relay.procs import Proc
 
 ROBOT = "natbot"
 READY = re.compile(r"relay listening on ws://127\.0\.0\.1:(\d+)")
@@ -113,49 +113,6 @@ def robot_netns() -> Iterator[Namespace]:
         with contextlib.suppress(subprocess.CalledProcessError):
             _ip("link", "del", host_end)  # takes its peer with it
         _ip("netns", "del", ns.name)
-
-
-class Proc:
-    """A child process whose output is kept (and shown when a test fails)."""
-
-    def __init__(self, argv: list[str], env: dict[str, str]) -> None:
-        self.lines: list[str] = []
-        self.seen = threading.Condition()
-        self.proc = subprocess.Popen(argv, cwd=ROOT, env=env, stdout=subprocess.PIPE,
-                                     stderr=subprocess.STDOUT, text=True)
-        threading.Thread(target=self._pump, daemon=True).start()
-
-    def _pump(self) -> None:
-        assert self.proc.stdout is not None
-        for line in self.proc.stdout:
-            with self.seen:
-                self.lines.append(line.rstrip())
-                self.seen.notify_all()
-
-    def wait_for(self, pattern: re.Pattern[str], timeout: float = 30.0) -> re.Match[str]:
-        """The first output line matching ``pattern`` (waiting for it)."""
-        def found() -> re.Match[str] | None:
-            return next((m for line in self.lines if (m := pattern.search(line))), None)
-
-        with self.seen:
-            if not self.seen.wait_for(lambda: found() is not None or self.proc.poll() is not None,
-                                      timeout):
-                raise AssertionError(f"no line like {pattern.pattern!r}:\n" + "\n".join(self.lines))
-        match = found()
-        assert match is not None, "exited:\n" + "\n".join(self.lines)
-        return match
-
-    def stop(self) -> None:
-        """SIGTERM, then SIGKILL."""
-        if self.proc.poll() is None:
-            self.proc.terminate()
-            try:
-                self.proc.wait(10)
-            except subprocess.TimeoutExpired:
-                self.proc.kill()
-                self.proc.wait()
-        if self.proc.stdout is not None:
-            self.proc.stdout.close()
 
 
 def _free_port() -> int:

@@ -223,3 +223,58 @@ def test_a_robot_name_that_is_a_wildcard_is_refused(pki: Pki) -> None:
                         mtls=True, robots=["*"])
     with pytest.raises(BridgeError, match=r"--zenoh-robot: .*'\*'"):
         link.config()
+
+
+RELAY_READY = re.compile(r"relay listening on ws://127\.0\.0\.1:(\d+)")
+
+
+async def _robot_served(port: int, robot: str) -> bool:
+    """Whether the relay serves ``robot`` (its liveliness reached the relay): a 404 until."""
+    from websockets.exceptions import InvalidStatus
+
+    from tests.helpers import open_wire
+
+    try:
+        wire = await open_wire(f"ws://127.0.0.1:{port}/{robot}")
+    except InvalidStatus as exc:
+        assert exc.response.status_code == 404
+        return False
+    await wire.close()
+    return True
+
+
+async def test_the_command_lines_hold_a_robot_to_its_name(pki: Pki) -> None:
+    """The relay's and the robot's command lines with mutual TLS: robot1's certificate
+    serves robot1; the same certificate claiming robot2 never appears as robot2."""
+    import asyncio
+    import sys
+
+    from tests.helpers import ros_env
+    from tests.relay.procs import Proc
+
+    endpoint = f"tls/127.0.0.1:{_free_port()}"
+    cert, key = (str(p) for p in pki.cert("robot1"))
+    tls = ["--zenoh-tls-ca", str(pki.ca), "--zenoh-tls-cert"]
+    relay = Proc([sys.executable, "-m", "bridge_server.zenoh.relay", "--port", "0",
+                  "--zenoh-listen", endpoint, *tls, str(pki.dir / "router.pem"),
+                  "--zenoh-tls-key", str(pki.dir / "router.key"), "--zenoh-mtls",
+                  "--zenoh-robot", "robot1", "--zenoh-robot", "robot2"], ros_env())
+    robots: list[Proc] = []
+    try:
+        port = int(relay.wait_for(RELAY_READY).group(1))
+        for claimed in ("robot1", "robot2"):
+            robots.append(Proc([sys.executable, "-m", "bridge_server", "--no-websocket",
+                                "--robot", claimed, "--zenoh-connect", endpoint, *tls, cert,
+                                "--zenoh-tls-key", key], ros_env()))
+        for robot in robots:
+            robot.wait_for(re.compile(r"robot \S+ is on Zenoh"))
+        deadline = asyncio.get_running_loop().time() + DEADLINE
+        while not await _robot_served(port, "robot1"):
+            assert asyncio.get_running_loop().time() < deadline, "robot1 never served"
+            await asyncio.sleep(0.1)
+        # Both robots' sessions are up and robot1's token reached the relay; robot2's,
+        # declared by a robot1 certificate, is refused by the router.
+        assert not await _robot_served(port, "robot2")
+    finally:
+        for p in (*robots, relay):
+            p.stop()
