@@ -1,0 +1,153 @@
+"""Stock roslib (npm, unchanged) in a real headless Chromium, through a relay (issue 26).
+
+The page loads roslib's own ES module build from ``tests/peers/node/node_modules`` (an
+import map names its dependencies' browser builds), connects to the relay with the robot in
+the URL's path, subscribes to an rclpy topic on the robot and calls its service. Debian's
+chromium and chromium-driver (scripts/setup.sh installs them); under CI their absence fails.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import functools
+import http.server
+import json
+import shutil
+import tempfile
+import threading
+from collections.abc import Iterator
+from typing import Any
+
+import pytest
+from std_msgs.msg import String
+from std_srvs.srv import SetBool
+
+from tests.helpers import ROOT
+from tests.relay.support import tier
+
+CHROMIUM = shutil.which("chromium")
+DRIVER = shutil.which("chromedriver")
+NODE_MODULES = ROOT / "tests" / "peers" / "node" / "node_modules"
+
+pytestmark = [
+    pytest.mark.timeout(120),
+    pytest.mark.skipif(CHROMIUM is None or DRIVER is None or not (NODE_MODULES / "roslib").is_dir(),
+                       reason="chromium, chromium-driver and the npm peer packages are needed "
+                              "(scripts/setup.sh installs them)"),
+]
+
+IMPORTS = {
+    "eventemitter3": "/eventemitter3/dist/eventemitter3.esm.js",
+    "uuid": "/uuid/dist/index.js",
+    "bson": "/bson/lib/bson.mjs",
+    "cbor2": "/cbor2/lib/index.js",
+    "cbor2/": "/cbor2/lib/",
+    "@cto.af/wtf8": "/@cto.af/wtf8/lib/index.js",
+    "fast-png": "/fast-png/lib/index.js",
+    "iobuffer": "/iobuffer/lib/iobuffer.js",
+    "fflate": "/fflate/esm/browser.js",
+}
+
+PAGE = """<!doctype html><meta charset="utf-8"><title>roslib through a relay</title>
+<script type="importmap">{"imports": %(imports)s}</script>
+<script type="module">
+import * as ROSLIB from "/roslib/dist/RosLib.js";
+window.got = []; window.answer = null; window.problem = null;
+const ros = new ROSLIB.Ros({url: %(url)s});
+ros.on("error", (e) => { window.problem = "error: " + (e && e.message || e); });
+ros.on("connection", () => {
+  new ROSLIB.Topic({ros, name: %(topic)s, messageType: "std_msgs/msg/String"})
+    .subscribe((m) => window.got.push(m.data));
+  new ROSLIB.Service({ros, name: %(service)s, serviceType: "std_srvs/srv/SetBool"})
+    .callService({data: true}, (r) => { window.answer = r; },
+                 (e) => { window.answer = {failed: String(e)}; });
+});
+</script>"""
+
+
+class _Files(http.server.SimpleHTTPRequestHandler):
+    """node_modules as static files (JavaScript as JavaScript), and the test's page."""
+
+    extensions_map = {".js": "text/javascript", ".mjs": "text/javascript",
+                      ".json": "application/json", "": "application/octet-stream"}
+    page = b""
+
+    def do_GET(self) -> None:
+        if self.path == "/page.html":
+            self.send_response(200)
+            self.send_header("Content-Type", "text/html; charset=utf-8")
+            self.send_header("Content-Length", str(len(self.page)))
+            self.end_headers()
+            self.wfile.write(self.page)
+            return
+        super().do_GET()
+
+    def log_message(self, *args: Any) -> None:
+        pass
+
+
+@pytest.fixture
+def file_server() -> Iterator[tuple[int, type[_Files]]]:
+    handler = type("Files", (_Files,), {})
+    server = http.server.ThreadingHTTPServer(
+        ("127.0.0.1", 0), functools.partial(handler, directory=str(NODE_MODULES)))
+    thread = threading.Thread(target=server.serve_forever, daemon=True)
+    thread.start()
+    try:
+        yield server.server_address[1], handler
+    finally:
+        server.shutdown()
+        server.server_close()
+
+
+def _chromium() -> Any:
+    from selenium import webdriver
+    from selenium.webdriver.chrome.service import Service
+
+    options = webdriver.ChromeOptions()
+    assert CHROMIUM is not None and DRIVER is not None
+    options.binary_location = CHROMIUM
+    profile = tempfile.mkdtemp(prefix="relay-chromium-")
+    for arg in ("--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
+                "--disable-component-update", "--disable-sync", "--no-first-run",
+                "--disable-dev-shm-usage", f"--user-data-dir={profile}"):
+        options.add_argument(arg)
+    driver = webdriver.Chrome(options=options, service=Service(executable_path=DRIVER))
+    driver.profile_dir = profile  # type: ignore[attr-defined]  # removed after quit
+    return driver
+
+
+async def test_roslib_in_a_browser_through_the_relay(
+        ros_node: Any, topic: str, file_server: tuple[int, type[_Files]]) -> None:
+    port, files = file_server
+    service = topic + "_set"
+    pub = ros_node.create_publisher(String, topic, 10)
+
+    def serve(request: Any, response: Any) -> Any:
+        response.success, response.message = request.data, "from the robot"
+        return response
+
+    ros_node.create_service(SetBool, service, serve)
+    async with tier() as t:
+        files.page = (PAGE % {"imports": json.dumps(IMPORTS), "url": json.dumps(t.url()),
+                              "topic": json.dumps(topic), "service": json.dumps(service)}
+                      ).encode()
+        driver = await asyncio.to_thread(_chromium)
+        try:
+            await asyncio.to_thread(driver.get, f"http://127.0.0.1:{port}/page.html")
+            state: dict[str, Any] = {}
+            deadline = asyncio.get_running_loop().time() + 60
+            while not (state.get("got") and state.get("answer")):
+                # rclpy publishes until the browser heard it (discovery has no event here)
+                pub.publish(String(data="to the browser"))
+                state = await asyncio.to_thread(
+                    driver.execute_script,
+                    "return {got: window.got, answer: window.answer, problem: window.problem}")
+                assert state.get("problem") is None, state
+                assert asyncio.get_running_loop().time() < deadline, state
+                await asyncio.sleep(0.1)
+            assert state["got"][0] == "to the browser"
+            assert state["answer"] == {"success": True, "message": "from the robot"}
+        finally:
+            await asyncio.to_thread(driver.quit)
+            shutil.rmtree(driver.profile_dir, ignore_errors=True)
