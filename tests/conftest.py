@@ -61,6 +61,24 @@ def pytest_make_collect_report(collector: pytest.Collector) -> Iterator[None]:
                            f"needs every test to run: {reason}")
 
 
+def pytest_unconfigure(config: pytest.Config) -> None:
+    """After the summary: a thread a test left running (a bridge or robot it did not close
+    keeps its ROS spin thread) would make the interpreter wait for it at exit, forever.
+    Name them and end the run as failed instead of hanging it."""
+    left = [t for t in threading.enumerate()
+            if t is not threading.main_thread() and not t.daemon and t.is_alive()]
+    for t in left:
+        t.join(5.0)
+    names = [t.name for t in left if t.is_alive()]
+    if names:
+        import sys
+
+        print(f"\nthreads still running after the tests, which a test did not close: "
+              f"{', '.join(names)}; exiting instead of waiting for them", file=sys.stderr,
+              flush=True)
+        os._exit(3)
+
+
 @pytest.fixture(scope="session")
 def bridge() -> Iterator[BridgeProcess]:
     """One running bridge shared by the session."""

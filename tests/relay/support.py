@@ -91,13 +91,19 @@ async def tier(tls: tuple[str, str] | None = None) -> AsyncIterator[Tier]:
     router = f"{scheme}/127.0.0.1:{free_port()}"
     relay = await start_relay(listen=router, cert=tls[1] if tls else None)
     robot, exporter = await start_robot(router, ca=tls[0] if tls else None)
+    t = Tier(relay, robot, exporter, router)
     try:
         await robot_reachable(relay)
-        yield Tier(relay, robot, exporter, router)
+        yield t
     finally:
+        # A test may have put a new robot in (a restarted one): close what is there now, and
+        # the first one too (closing twice is harmless); a robot left open keeps its ROS
+        # spin thread alive, and the interpreter waits for it at exit.
         await relay.close()
-        await exporter.close()
-        await robot.close()
+        for e in {id(x): x for x in (exporter, t.exporter)}.values():
+            await e.close()
+        for b in {id(x): x for x in (robot, t.robot)}.values():
+            await b.close()
 
 
 async def until(predicate: Any, what: str, timeout: float = 15.0) -> Any:
