@@ -3,8 +3,6 @@
 from __future__ import annotations
 
 import asyncio
-import shutil
-import tempfile
 from collections.abc import Callable
 from typing import Any
 
@@ -12,15 +10,13 @@ import pytest
 
 from tests.bridge.action_support import FIB, FibServer, bridge_sees_action, send_goal
 from tests.bridge.support import wait_subscribers
-from tests.helpers import ROOT, BridgeProcess, open_wire
+from tests.helpers import CHROMEDRIVER, CHROMIUM, ROOT, BridgeProcess, headless_chromium, open_wire
 
-CHROMIUM = shutil.which("chromium")
-DRIVER = shutil.which("chromedriver")
 ARTIFACTS = ROOT / "tests" / "artifacts"
 NO_VALUE = "\u2013"  # what the page shows for a rate not measured yet (an en dash)
 
 pytestmark = pytest.mark.skipif(
-    CHROMIUM is None or DRIVER is None,
+    CHROMIUM is None or CHROMEDRIVER is None,
     reason="chromium and chromium-driver are not installed (scripts/setup.sh installs them)",
 )
 
@@ -47,21 +43,10 @@ def _browse(url: str, missing: Callable[[dict[str, Any]], list[str]],
 
     The reading returned has ``missing``: what the page still lacked at the deadline.
     """
-    from selenium import webdriver
     from selenium.common.exceptions import TimeoutException
-    from selenium.webdriver.chrome.service import Service
     from selenium.webdriver.support.ui import WebDriverWait
 
-    options = webdriver.ChromeOptions()
-    assert CHROMIUM is not None and DRIVER is not None
-    options.binary_location = CHROMIUM
-    profile = tempfile.mkdtemp(prefix="status-page-chromium-")
-    for arg in ("--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
-                "--disable-component-update", "--disable-sync", "--no-first-run",
-                "--disable-dev-shm-usage", f"--user-data-dir={profile}"):
-        options.add_argument(arg)
-    driver = webdriver.Chrome(options=options, service=Service(executable_path=DRIVER))
-    try:
+    with headless_chromium("status-page") as driver:
         driver.set_window_size(1280, 900)
         driver.get(url)
 
@@ -97,9 +82,6 @@ def _browse(url: str, missing: Callable[[dict[str, Any]], list[str]],
         seen["phone_overflow"] = driver.execute_script(
             "return document.documentElement.scrollWidth > window.innerWidth + 1")
         return seen
-    finally:
-        driver.quit()
-        shutil.rmtree(profile, ignore_errors=True)
 
 
 def _missing(page: dict[str, Any], topic: str, gone: str, service: str, action: str,

@@ -12,8 +12,6 @@ import asyncio
 import functools
 import http.server
 import json
-import shutil
-import tempfile
 import threading
 from collections.abc import Iterator
 from typing import Any
@@ -22,16 +20,14 @@ import pytest
 from std_msgs.msg import String
 from std_srvs.srv import SetBool
 
-from tests.helpers import ROOT
+from tests.helpers import CHROMEDRIVER, CHROMIUM, ROOT, headless_chromium
 from tests.relay.support import tier
 
-CHROMIUM = shutil.which("chromium")
-DRIVER = shutil.which("chromedriver")
 NODE_MODULES = ROOT / "tests" / "peers" / "node" / "node_modules"
 
 pytestmark = [
     pytest.mark.timeout(120),
-    pytest.mark.skipif(CHROMIUM is None or DRIVER is None or not (NODE_MODULES / "roslib").is_dir(),
+    pytest.mark.skipif(CHROMIUM is None or CHROMEDRIVER is None or not (NODE_MODULES / "roslib").is_dir(),
                        reason="chromium, chromium-driver and the npm peer packages are needed "
                               "(scripts/setup.sh installs them)"),
 ]
@@ -100,23 +96,6 @@ def file_server() -> Iterator[tuple[int, type[_Files]]]:
         server.server_close()
 
 
-def _chromium() -> Any:
-    from selenium import webdriver
-    from selenium.webdriver.chrome.service import Service
-
-    options = webdriver.ChromeOptions()
-    assert CHROMIUM is not None and DRIVER is not None
-    options.binary_location = CHROMIUM
-    profile = tempfile.mkdtemp(prefix="relay-chromium-")
-    for arg in ("--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
-                "--disable-component-update", "--disable-sync", "--no-first-run",
-                "--disable-dev-shm-usage", f"--user-data-dir={profile}"):
-        options.add_argument(arg)
-    driver = webdriver.Chrome(options=options, service=Service(executable_path=DRIVER))
-    driver.profile_dir = profile  # type: ignore[attr-defined]  # removed after quit
-    return driver
-
-
 async def test_roslib_in_a_browser_through_the_relay(
         ros_node: Any, topic: str, file_server: tuple[int, type[_Files]]) -> None:
     port, files = file_server
@@ -132,8 +111,7 @@ async def test_roslib_in_a_browser_through_the_relay(
         files.page = (PAGE % {"imports": json.dumps(IMPORTS), "url": json.dumps(t.url()),
                               "topic": json.dumps(topic), "service": json.dumps(service)}
                       ).encode()
-        driver = await asyncio.to_thread(_chromium)
-        try:
+        with headless_chromium("relay") as driver:
             await asyncio.to_thread(driver.get, f"http://127.0.0.1:{port}/page.html")
             state: dict[str, Any] = {}
             deadline = asyncio.get_running_loop().time() + 60
@@ -148,6 +126,3 @@ async def test_roslib_in_a_browser_through_the_relay(
                 await asyncio.sleep(0.1)
             assert state["got"][0] == "to the browser"
             assert state["answer"] == {"success": True, "message": "from the robot"}
-        finally:
-            await asyncio.to_thread(driver.quit)
-            shutil.rmtree(driver.profile_dir, ignore_errors=True)
