@@ -12,9 +12,9 @@ A 640x480 rgb8 camera (random pixels, as incompressible as a real one) at 10 Hz,
 - **direct**: the viewers connect to the robot's bridge through the same kind of proxy:
   its bytes are what the robot sends them.
 
-Reported per set-up and number of viewers: the uplink in MiB/s and as a multiple of one
-viewer's, the frames each viewer got against those published (min and median), and the
-relay's and the robot bridge's CPU (% of one core). On a 2-core machine the viewers (this
+Reported per set-up and number of viewers: the uplink in MiB (and MiB/s), and per
+published frame as a multiple of one viewer's; the frames each viewer got against those
+published (min and median); the relay's and the robot bridge's CPU (% of one core). On a 2-core machine the viewers (this
 process), the relay and the robot share the cores, so delivered frames fall with many
 viewers for want of CPU; the uplink bytes do not depend on that. Nothing here asserts
 anything about time.
@@ -155,8 +155,13 @@ async def _direct(ctx: Ctx, counts: tuple[int, ...], seconds: float) -> list[dic
 
 
 def _with_ratio(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
-    one = rows[0]["uplink_mib_per_s"] or float("nan")
-    return [{**r, "x_one_viewer": round(r["uplink_mib_per_s"] / one, 2)} for r in rows]
+    """Each row's uplink bytes per published frame as a multiple of one viewer's (per frame,
+    not per second: with many viewers the last frames take longer to drain)."""
+    def per_frame(r: dict[str, Any]) -> float:
+        return float(r["uplink_mib"]) / max(int(r["published"]), 1)
+
+    one = per_frame(rows[0]) or float("nan")
+    return [{**r, "x_one_viewer": round(per_frame(r) / one, 2)} for r in rows]
 
 
 async def relay_uplink(ctx: Ctx) -> dict[str, Any]:
