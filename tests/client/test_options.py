@@ -22,9 +22,9 @@ def test_client_options_name_every_option_of_client_with_its_type() -> None:
 
 
 def test_connect_functions_take_client_options() -> None:
-    """``connect`` and ``sync.connect`` take the url and ``**ClientOptions`` (``sync.connect``
-    also its own ``replace``, whether to close an open client of the same URL)."""
-    for fn, own in ((roslibpy_lite.connect, []), (sync.connect, ["replace"])):
+    """``connect`` and ``sync.connect`` take the url and ``**ClientOptions``, and each its own
+    ``replace`` (whether to close an open client of the same URL)."""
+    for fn, own in ((roslibpy_lite.connect, ["replace"]), (sync.connect, ["replace"])):
         params = list(inspect.signature(fn).parameters.values())
         assert [(p.name, p.kind) for p in params] == [
             ("url", inspect.Parameter.POSITIONAL_OR_KEYWORD),
