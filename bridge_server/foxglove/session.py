@@ -41,6 +41,7 @@ from msgs.runtime import ValidationError
 from ..interfaces import BridgeError, ConversionError, canonical_name
 from ..security import POLICY_VIOLATION
 from ..security.names import InvalidNameError, check_name, full_name
+from ..session.calls import Calls
 from ..session.limits import over_cap
 from ..session.outbox import Outbox, Subscription
 from . import wire
@@ -119,7 +120,7 @@ class FoxgloveSession:
         self.config = bridge.session_config
         self.peer = ""
         self.connected_at = time.time()
-        self.calls: set[asyncio.Task[None]] = set()
+        self.calls = Calls(self.loop)
         self.outbox = Outbox(
             ws, sid, self.config.control_limit, bridge.security.config.max_queued_messages,
             self.config.drop_report_interval, lambda text: self.status("warning", text),
@@ -202,16 +203,11 @@ class FoxgloveSession:
             else:
                 self.graph.release_publisher(pub)
         self.topics.publishers.clear()
-        for task in list(self.calls):
-            task.cancel()
-        if self.calls:
-            await asyncio.gather(*self.calls, return_exceptions=True)
+        await self.calls.cancel_all()
 
     def spawn(self, coro: Coroutine[Any, Any, None]) -> None:
         """Run ``coro`` as a task of this client's, cancelled when it leaves."""
-        task = self.loop.create_task(coro)
-        self.calls.add(task)
-        task.add_done_callback(self.calls.discard)
+        self.calls.spawn(coro)
 
     # -- sending -------------------------------------------------------------------------------
 

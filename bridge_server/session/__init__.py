@@ -1,6 +1,7 @@
 """One client's session: the frame loop and op table (:mod:`.session`), the op
 groups (:mod:`.topics`, :mod:`.services`, :mod:`.actions`) with the handle they get
-(:mod:`.host`) and the limits they keep (:mod:`.limits`), the outbox (:mod:`.outbox`),
+(:mod:`.host`), the limits they keep (:mod:`.limits`) and the tasks their requests run in
+(:mod:`.calls`), the outbox (:mod:`.outbox`),
 who serves which name (:mod:`.ownership`), resumable sessions (:mod:`.resume`) and the
 ``/rosapi/*`` introspection services (:mod:`.rosapi`). ROS is reached only through the
 :class:`~bridge_server.graph.Graph`.

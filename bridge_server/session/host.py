@@ -20,6 +20,7 @@ if TYPE_CHECKING:
     from ..http.metrics import BridgeMetrics
     from ..security import Gate, SecurityConfig
     from .actions import ActionClients, SessionActions
+    from .calls import Calls
     from .outbox import Outbox
     from .ownership import Ownership
     from .services import SessionServices
@@ -56,7 +57,8 @@ class Host(Protocol):
     outbox: Outbox
     shared: Shared
     actions: SessionActions
-    calls: set[asyncio.Task[None]]
+    calls: Calls
+    """The tasks its requests run in (their number is the calls in flight)."""
     frame_len: int
     acks: bool
     """Whether the client asked for verdicts on its ops (``ACKS_HEADER``)."""

@@ -50,6 +50,7 @@ from roslibpy_lite.protocol import decode_frame
 
 from ..interfaces import BridgeError
 from .actions import SessionActions
+from .calls import Calls
 from .outbox import DEFAULT_QUEUE_LENGTH, Outbox
 from .resume import ACK_INTERVAL
 from .services import SessionServices
@@ -131,7 +132,7 @@ class Session:
         self.protocol = FrameProtocol(
             max_partial=16, max_fragment_bytes=bridge.config.max_message_size
         )
-        self.calls: set[asyncio.Task[None]] = set()
+        self.calls = Calls(self.loop)
         self.level = _LEVELS["warning"]
         request = getattr(ws, "request", None)
         self.acks = request is not None and request.headers.get(ACKS_HEADER) == "1"
@@ -293,16 +294,11 @@ class Session:
         self.gate.end()
         for capability in self.capabilities:
             await capability.close()
-        for task in list(self.calls):
-            task.cancel()
-        if self.calls:
-            await asyncio.gather(*self.calls, return_exceptions=True)
+        await self.calls.cancel_all()
 
     def spawn(self, coro: Coroutine[Any, Any, None]) -> None:
         """Run ``coro`` as a task of this client's, cancelled when it leaves."""
-        task = self.loop.create_task(coro)
-        self.calls.add(task)
-        task.add_done_callback(self.calls.discard)
+        self.calls.spawn(coro)
 
     # -- sending -------------------------------------------------------------------------------
 
