@@ -12,9 +12,12 @@ before anything can initialise rclpy.
 
 from __future__ import annotations
 
+import contextlib
+import faulthandler
 import itertools
 import os
 import re
+import sys
 import threading
 from collections.abc import AsyncIterator, Callable, Iterator
 from typing import Any
@@ -61,6 +64,35 @@ def pytest_make_collect_report(collector: pytest.Collector) -> Iterator[None]:
                            f"needs every test to run: {reason}")
 
 
+_TERMINAL: list[Any] = []
+"""The run's own standard error, kept before any test's output is captured."""
+
+# How long a node's teardown may take before the run is ended with every thread's stack.
+NODE_DESTROY_LIMIT = 60.0
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    """Keep a handle on the terminal's stderr (pytest captures fd 2 only around each test)
+    for :func:`stack_dump_if_stuck`."""
+    _TERMINAL.append(os.fdopen(os.dup(2), "w"))
+
+
+@contextlib.contextmanager
+def stack_dump_if_stuck(seconds: float) -> Iterator[None]:
+    """Run the block; if it has not returned after ``seconds``, print every thread's stack to
+    the terminal and end the run with exit status 1.
+
+    For rclpy teardown: a call into rclpy's C side holds the GIL, so pytest-timeout's signal
+    never runs and a stuck call would hang the run until CI's limit. faulthandler's watchdog is
+    a C thread that needs no GIL."""
+    out = _TERMINAL[0] if _TERMINAL else sys.stderr
+    faulthandler.dump_traceback_later(seconds, exit=True, file=out)
+    try:
+        yield
+    finally:
+        faulthandler.cancel_dump_traceback_later()
+
+
 def pytest_unconfigure(config: pytest.Config) -> None:
     """After the summary: a thread a test left running (a bridge or robot it did not close
     keeps its ROS spin thread) would make the interpreter wait for it at exit, forever.
@@ -71,8 +103,6 @@ def pytest_unconfigure(config: pytest.Config) -> None:
         t.join(5.0)
     names = [t.name for t in left if t.is_alive()]
     if names:
-        import sys
-
         print(f"\nthreads still running after the tests, which a test did not close: "
               f"{', '.join(names)}; exiting instead of waiting for them", file=sys.stderr,
               flush=True)
@@ -148,7 +178,8 @@ def ros_node(ros_runtime: _RosRuntime, request: pytest.FixtureRequest) -> Iterat
     stop.set()
     thread.join(10)
     settle_executor(executor)
-    node.destroy_node()
+    with stack_dump_if_stuck(NODE_DESTROY_LIMIT):
+        node.destroy_node()
     if errors:
         pytest.fail("this test's rclpy executor raised:\n" + errors[0])
 
