@@ -97,6 +97,8 @@ def pytest_unconfigure(config: pytest.Config) -> None:
     """After the summary: a thread a test left running (a bridge or robot it did not close
     keeps its ROS spin thread) would make the interpreter wait for it at exit, forever.
     Name them and end the run as failed instead of hanging it."""
+    while _TERMINAL:
+        _TERMINAL.pop().close()
     left = [t for t in threading.enumerate()
             if t is not threading.main_thread() and not t.daemon and t.is_alive()]
     for t in left:
