@@ -17,6 +17,7 @@ import faulthandler
 import itertools
 import os
 import re
+import signal
 import sys
 import threading
 from collections.abc import AsyncIterator, Callable, Iterator
@@ -73,8 +74,12 @@ NODE_DESTROY_LIMIT = 60.0
 
 def pytest_configure(config: pytest.Config) -> None:
     """Keep a handle on the terminal's stderr (pytest captures fd 2 only around each test)
-    for :func:`stack_dump_if_stuck`."""
+    for :func:`stack_dump_if_stuck`, and give child processes Ctrl+C as a terminal would."""
     _TERMINAL.append(os.fdopen(os.dup(2), "w"))
+    # A run started as a background job of a non-interactive shell (nohup ... &) has SIGINT
+    # ignored, and its children would inherit that: the Ctrl+C tests would see no Ctrl+C.
+    if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
 
 
 @contextlib.contextmanager

@@ -30,19 +30,19 @@ ROOT = Path(__file__).resolve().parents[2]
 def _interrupt(tmp_path: Path, url: str, runner: str) -> tuple[int, str]:
     script = tmp_path / "script.py"
     script.write_text(SCRIPT.format(runner=runner))
-    proc = subprocess.Popen(
+    with subprocess.Popen(  # closes its pipes however the test ends
         [sys.executable, str(script), url], cwd=ROOT, text=True,
         stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-    )
-    try:
-        assert proc.stdout is not None
-        assert proc.stdout.readline().strip() == "ready"
-        proc.send_signal(signal.SIGINT)
-        _, err = proc.communicate(timeout=30)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait()
+    ) as proc:
+        try:
+            assert proc.stdout is not None
+            assert proc.stdout.readline().strip() == "ready"
+            proc.send_signal(signal.SIGINT)
+            _, err = proc.communicate(timeout=30)
+        finally:
+            if proc.poll() is None:
+                proc.kill()
+                proc.wait()
     return proc.returncode, err
 
 
