@@ -23,6 +23,19 @@ key                                      what
 ``<pkg>/msg/<Name>/<topic>``             (``latch`` is ``latched`` or ``volatile``)
 ``<robot>/@in/<topic>``                  a client's message to publish: CDR bytes,
                                          attachment :class:`Meta` (type and latch)
+``<robot>/@goal/<action>``               queryable: a goal, :class:`GoalRequest` JSON
+                                         in; the replies stream :class:`GoalEvent` JSON
+                                         (accepted, feedback, ..., the result last)
+``<robot>/@running/<relay>/<goal>``      liveliness token of a goal a relay sent: the
+                                         robot cancels the goal when it goes
+``<robot>/@cancel/<relay>/<goal>``       queryable: cancel that goal (the answer comes
+                                         as a ``cancel`` event of the goal's query)
+``<robot>/@serve/<relay>/<pkg>/srv/``    liveliness token of a service a relay's client
+``<Name>/<service>``                     serves: the robot serves it in ROS meanwhile
+``<robot>/@serving/<relay>/<service>``   the relay's queryable: a ROS call's request
+                                         JSON in, the response JSON (or an error) out
+``<robot>/@param/<node>``                queryable: a node's parameters,
+                                         :class:`ParamRequest` JSON in, the answer JSON
 =======================================  ==============================================
 
 ``docs/guides/relay.md`` describes the contract for people; where it differs from
@@ -34,7 +47,7 @@ from __future__ import annotations
 import json
 import re
 from dataclasses import asdict, dataclass, field
-from typing import Any
+from typing import Any, ClassVar, cast
 
 from ..interfaces import BridgeError, canonical_name
 from ..security.names import check_name
@@ -43,12 +56,22 @@ __all__ = [
     "ADVERTISE",
     "ALIVE",
     "CALL",
+    "CANCEL",
+    "CONTROL",
     "DEMAND",
+    "GOAL",
     "GRAPH",
     "IN",
     "LATCHED",
+    "PARAM",
+    "RUNNING",
+    "SERVE",
+    "SERVING",
     "CallRequest",
+    "GoalEvent",
+    "GoalRequest",
     "Meta",
+    "ParamRequest",
     "Snapshot",
     "advertise_key",
     "check_relay",
@@ -57,6 +80,8 @@ __all__ = [
     "name_of",
     "parse_advertise",
     "parse_demand",
+    "parse_serve",
+    "serve_key",
 ]
 
 ALIVE = "@alive"
@@ -66,6 +91,17 @@ GRAPH = "@graph"
 CALL = "@call"
 ADVERTISE = "@advertise"
 IN = "@in"
+GOAL = "@goal"
+RUNNING = "@running"
+CANCEL = "@cancel"
+SERVE = "@serve"
+SERVING = "@serving"
+PARAM = "@param"
+
+CONTROL = (ALIVE, DEMAND, LATCHED, GRAPH, CALL, ADVERTISE, IN, GOAL, RUNNING, CANCEL, SERVE,
+           SERVING, PARAM)
+"""Every control chunk (Zenoh's verbatim chunks, which no wildcard matches: access rules
+name each)."""
 
 _CHUNK = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.-]*\Z")
 
@@ -118,8 +154,39 @@ def parse_advertise(key: str) -> tuple[str, str, bool, str]:
     return parts[2], "/" + parts[7], parts[3] == "latched", "/".join(parts[4:7])
 
 
+def serve_key(robot: str, relay: str, service: str, type_name: str) -> str:
+    """The key of a relay's served-service token (see the module's table)."""
+    pkg, kind, name = canonical_name(type_name, "srv").split("/")
+    return key_of(robot, service, f"{SERVE}/{relay}/{pkg}/{kind}/{name}")
+
+
+def parse_serve(key: str) -> tuple[str, str, str]:
+    """(relay id, service, type) of a served-service token's key."""
+    parts = key.split("/", 6)
+    return parts[2], "/" + parts[6], "/".join(parts[3:6])
+
+
+def _decode_json(data: bytes, what: str) -> dict[str, Any]:
+    """A JSON object from a payload; ``BridgeError`` naming ``what`` it should have been."""
+    try:
+        obj = json.loads(data)
+    except ValueError as exc:
+        raise BridgeError(f"{what} is not JSON ({exc})") from None
+    if not isinstance(obj, dict):
+        raise BridgeError(f"{what} is not a JSON object")
+    return obj
+
+
+class _Payload:
+    """A dataclass carried as compact JSON (a query's payload, a put's attachment)."""
+
+    def encode(self) -> bytes:
+        """As the payload's bytes."""
+        return json.dumps(asdict(cast(Any, self)), separators=(",", ":")).encode()
+
+
 @dataclass
-class Meta:
+class Meta(_Payload):
     """The attachment of a message's put: its type, whether the topic is latched (transient
     local), the robot's receive time, and its place in the topic's stream (``epoch``: the
     exporter's run; ``seq``: counted per topic from 1) so a relay that also asked for the
@@ -130,10 +197,6 @@ class Meta:
     stamp_ns: int = 0
     epoch: str = ""
     seq: int = 0
-
-    def encode(self) -> bytes:
-        """As the attachment's bytes."""
-        return json.dumps(asdict(self), separators=(",", ":")).encode()
 
     @classmethod
     def decode(cls, data: bytes | None) -> Meta:
@@ -148,17 +211,13 @@ class Meta:
 
 
 @dataclass
-class CallRequest:
+class CallRequest(_Payload):
     """A service call's query payload: what ``Graph.call_service`` takes, as JSON."""
 
     type: str | None
     args: Any
     timeout: float
     discovery_wait: float
-
-    def encode(self) -> bytes:
-        """As the query's payload."""
-        return json.dumps(asdict(self), separators=(",", ":")).encode()
 
     @classmethod
     def decode(cls, data: bytes) -> CallRequest:
@@ -172,14 +231,105 @@ class CallRequest:
 
 
 @dataclass
+class GoalRequest(_Payload):
+    """A goal's query payload: the action's type, the goal as rosbridge JSON, whether the
+    relay wants feedback, which relay sent it and its id there (its ``@running`` token), and
+    how long the robot waits for an action server to be ready."""
+
+    type: str
+    goal: Any
+    feedback: bool
+    relay: str
+    id: str
+    timeout: float
+
+    @classmethod
+    def decode(cls, data: bytes) -> GoalRequest:
+        """From a query's payload; ``BridgeError`` naming what is wrong."""
+        obj = _decode_json(data, "a goal's payload")
+        try:
+            return cls(type=str(obj["type"]), goal=obj["goal"], feedback=bool(obj["feedback"]),
+                       relay=check_relay(str(obj["relay"])), id=check_relay(str(obj["id"])),
+                       timeout=float(obj["timeout"]))
+        except (KeyError, TypeError, ValueError) as exc:
+            raise BridgeError(f"a goal's payload is not a GoalRequest ({exc!r})") from None
+
+
+@dataclass
+class GoalEvent:
+    """One reply to a goal's query: ``accepted`` (``uuid``: the goal's id in ROS, hex),
+    ``rejected``, ``feedback`` (``values``), ``cancel`` (``code``: the CancelGoal return
+    code), ``result`` (``status`` and ``values``, None if the goal never ran), or ``failed``
+    (``text``: why the goal could not be sent)."""
+
+    event: str
+    values: Any = None
+    status: int = 0
+    code: int = 0
+    uuid: str = ""
+    text: str = ""
+
+    EVENTS: ClassVar[tuple[str, ...]] = ("accepted", "rejected", "feedback", "cancel",
+                                         "result", "failed")
+
+    def encode(self) -> bytes:
+        """As a reply's payload (only the fields that are set)."""
+        obj = {k: v for k, v in asdict(self).items() if v or k == "event"}
+        return json.dumps(obj, separators=(",", ":")).encode()
+
+    @classmethod
+    def decode(cls, data: bytes) -> GoalEvent:
+        """From a reply's payload; ``BridgeError`` naming what is wrong."""
+        obj = _decode_json(data, "a goal's reply")
+        if obj.get("event") not in cls.EVENTS:
+            raise BridgeError(f"a goal's reply has no known event ({obj.get('event')!r})")
+        try:
+            return cls(event=obj["event"], values=obj.get("values"),
+                       status=int(obj.get("status", 0)), code=int(obj.get("code", 0)),
+                       uuid=str(obj.get("uuid", "")), text=str(obj.get("text", "")))
+        except (TypeError, ValueError) as exc:
+            raise BridgeError(f"a goal's reply is not a GoalEvent ({exc})") from None
+
+
+@dataclass
+class ParamRequest(_Payload):
+    """A parameter query's payload: ``op`` ``names`` (with ``timeout``), ``get`` (``name``)
+    or ``set`` (``name``, ``value``; None unsets it). The reply is the Graph method's answer
+    as JSON; an error reply is ``{"kind": "timeout"|"lookup"|"value"|"error", "text"}``."""
+
+    op: str
+    name: str = ""
+    value: Any = None
+    timeout: float = 0.0
+
+    OPS: ClassVar[tuple[str, ...]] = ("names", "get", "set")
+
+    @classmethod
+    def decode(cls, data: bytes) -> ParamRequest:
+        """From a query's payload; ``BridgeError`` naming what is wrong."""
+        obj = _decode_json(data, "a parameter request")
+        if obj.get("op") not in cls.OPS:
+            raise BridgeError(f"a parameter request's op {obj.get('op')!r} is not one of "
+                              f"{', '.join(cls.OPS)}")
+        try:
+            return cls(op=obj["op"], name=str(obj.get("name", "")), value=obj.get("value"),
+                       timeout=float(obj.get("timeout", 0.0)))
+        except (TypeError, ValueError) as exc:
+            raise BridgeError(f"a parameter request is not a ParamRequest ({exc})") from None
+
+
+@dataclass
 class Snapshot:
     """The robot's ROS graph as the relays see it (``@graph``).
 
     ``nodes`` maps ``/ns/name`` to ``{"name", "namespace", "subscribes", "publishes",
     "serves": [[service, [types]], ...]}``; ``publishers`` maps a topic to ``[[node,
     namespace, qos], ...]`` (the QoS in rosbag2's words); ``definitions`` maps every type
-    in the graph to its full ``ros2msg`` text; ``typedefs`` maps ``pkg/msg/Name`` (and a
-    service's ``pkg/srv/Name_Request``/``_Response``) to its rosapi typedefs.
+    in the graph to its full ``ros2msg`` text (an action server's ``pkg/action/Name``
+    too); ``typedefs`` maps ``pkg/msg/Name`` (and a service's ``pkg/srv/Name_Request``/
+    ``_Response``, an action's ``pkg/action/Name_Goal``/``_Result``/``_Feedback``) to its
+    rosapi typedefs; ``served`` maps a service the robot serves for a relay's client to
+    that relay's id.
     """
 
     node: str = ""
@@ -192,6 +342,7 @@ class Snapshot:
     definitions: dict[str, str] = field(default_factory=dict)
     typedefs: dict[str, list[dict[str, Any]]] = field(default_factory=dict)
     interfaces: list[str] = field(default_factory=list)
+    served: dict[str, str] = field(default_factory=dict)
 
     def encode(self) -> bytes:
         """As the ``@graph`` payload."""

@@ -39,8 +39,7 @@ __all__ = ["ZenohOptions", "add_arguments", "open_session", "options_from_args",
 
 _PROTOCOLS = ("tcp", "tls", "quic", "udp", "unixsock-stream")
 _ENDPOINT = re.compile(r"(?P<proto>[a-z-]+)/(?P<addr>[^#?]+)(?:[#?].*)?")
-_CONTROL = (keys.ALIVE, keys.DEMAND, keys.LATCHED, keys.GRAPH, keys.CALL, keys.ADVERTISE,
-            keys.IN)
+_CONTROL = keys.CONTROL
 """The robot's control chunks: Zenoh's verbatim chunks, which no wildcard matches, so the
 access rules name each."""
 # Everything a robot does on its own keys: puts its topics, declares its queryables and

@@ -162,6 +162,70 @@ def test_a_robot_cannot_serve_under_another_name(pki: Pki, router: tuple[Any, st
         relay.close()
 
 
+def _answered(querier_session: Any, key: str) -> list[bytes]:
+    """Every reply to one query of ``key`` (waiting until a queryable matches)."""
+    querier = querier_session.declare_querier(key, timeout=DEADLINE,
+                                              consolidation=zenoh.ConsolidationMode.NONE)
+    try:
+        _wait_matched(querier)
+        return sorted(r.ok.payload.to_bytes() for r in querier.get() if r.ok)
+    finally:
+        querier.undeclare()
+
+
+@pytest.mark.parametrize("chunk", ["@goal", "@cancel", "@param"])
+def test_a_robot_answers_goals_cancels_and_parameters_on_its_own_keys(
+        pki: Pki, router: tuple[Any, str], chunk: str) -> None:
+    """The chunks the relay queries for actions and parameters: robot1's queryable under its
+    own name answers the relay; robot2's under robot1's name is not there."""
+    _, endpoint = router
+    relay = _client(pki, endpoint, "relay")
+    robot1 = _client(pki, endpoint, "robot1")
+    robot2 = _client(pki, endpoint, "robot2")
+    try:
+        forged = robot2.declare_queryable(f"robot1/{chunk}/x", lambda q: q.reply(q.key_expr,
+                                                                                  b"lie"))
+        own = robot1.declare_queryable(f"robot1/{chunk}/x", lambda q: q.reply(q.key_expr,
+                                                                               b"ok"))
+        assert _answered(relay, f"robot1/{chunk}/x") == [b"ok"]
+        forged.undeclare()
+        own.undeclare()
+    finally:
+        for s in (robot2, robot1, relay):
+            s.close()
+
+
+def test_a_robot_reaches_its_relays_served_services_and_goal_tokens(
+        pki: Pki, router: tuple[Any, str]) -> None:
+    """The other way: robot1 queries a relay's @serving queryable under its name and follows
+    the relay's @serve and @running tokens there; robot2 reaches none of robot1's."""
+    _, endpoint = router
+    relay = _client(pki, endpoint, "relay")
+    robot1 = _client(pki, endpoint, "robot1")
+    robot2 = _client(pki, endpoint, "robot2")
+    try:
+        serving = relay.declare_queryable("robot1/@serving/r/svc",
+                                          lambda q: q.reply(q.key_expr, b"answer"))
+        tokens = [relay.liveliness().declare_token(k) for k in (
+            "robot1/@serve/r/std_srvs/srv/Empty/svc", "robot1/@running/r/g1")]
+        assert _answered(robot1, "robot1/@serving/r/svc") == [b"answer"]
+        for chunk in ("@serve", "@running"):
+            seen = [str(r.ok.key_expr) for r in robot1.liveliness().get(
+                f"robot1/{chunk}/**", timeout=DEADLINE) if r.ok]
+            assert len(seen) == 1 and seen[0].startswith(f"robot1/{chunk}/"), seen
+            assert [r for r in robot2.liveliness().get(f"robot1/{chunk}/**",
+                                                       timeout=DEADLINE) if r.ok] == []
+        querier = robot2.declare_querier("robot1/@serving/r/svc", timeout=DEADLINE)
+        assert [r for r in querier.get() if r.ok] == []
+        querier.undeclare()
+        serving.undeclare()
+        for token in tokens:
+            token.undeclare()
+    finally:
+        for s in (robot2, robot1, relay):
+            s.close()
+
+
 def test_a_relay_as_the_router_hears_robots(pki: Pki, router: tuple[Any, str]) -> None:
     session, endpoint = router
     subs, got = _subscribe(session, "robot1/**")
