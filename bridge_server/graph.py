@@ -193,6 +193,10 @@ class GoalListener(Protocol):
     def on_result(self, status: int, result: Any) -> None:
         """The goal ended with ``status`` (a :class:`Status`) and its result message."""
 
+    def on_failed(self, why: str) -> None:
+        """The goal could not be sent, for the reason ``why`` names (a Graph that reaches
+        the action server through another process: a relay's)."""
+
 
 class SentGoal(Protocol):
     """A goal sent through an :class:`ActionClient`."""

@@ -214,6 +214,11 @@ class _Goal:
                 self.id,
             )
 
+    def on_failed(self, why: str) -> None:
+        self._answered()
+        if self._live():
+            self.owner.fail(self, why)
+
     def on_result(self, status: int, result: Any) -> None:
         if not self._live():
             return

@@ -10,6 +10,9 @@ It dials out to the routers and offers the robot under ``r1/`` as :mod:`.keys` d
 - a relay's publisher token makes a shared publisher of the Graph, and the messages put
   under ``@in/`` are published through it, CDR bytes as they came;
 - service calls are queries, answered by the Graph's own ``call_service``;
+- a goal is a query whose replies stream what the Graph's own action client reports
+  (accepted, feedback, the result); a cancel is a query; a goal whose relay's ``@running``
+  token goes (the relay died) is canceled, as the bridge cancels a leaving client's goals;
 - the graph (topics, services, nodes and the definitions of their types) is put when it
   changes, and answers queries.
 
@@ -31,10 +34,17 @@ from typing import Any
 
 import zenoh
 
-from ..graph import Graph, Message, Publisher, TopicFeed
-from ..interfaces import BridgeError
+from ..graph import (
+    ActionClient,
+    Graph,
+    Message,
+    Publisher,
+    SentGoal,
+    TopicFeed,
+)
+from ..interfaces import BridgeError, args_mapping
 from . import keys
-from .keys import CallRequest, Meta, Snapshot
+from .keys import CallRequest, GoalEvent, GoalRequest, Meta, Snapshot
 from .link import ZenohOptions, open_session
 
 __all__ = ["Exporter"]
@@ -43,6 +53,7 @@ log = logging.getLogger("bridge_server.zenoh.exporter")
 
 SNAPSHOT_INTERVAL = 1.0
 """Seconds between two looks at the ROS graph (a changed one is put at once)."""
+
 
 
 @dataclass
@@ -54,6 +65,53 @@ class _Export:
     relays: set[str] = field(default_factory=set)
     seq: int = 0
     last: tuple[Message, bytes] | None = None
+
+
+class _RobotGoal:
+    """A relay's goal on the robot: what the Graph's action client reports goes back as
+    replies to the goal's query (the :class:`~bridge_server.graph.GoalListener`)."""
+
+    def __init__(self, exporter: Exporter, query: zenoh.Query, key: tuple[str, str],
+                 client: ActionClient) -> None:
+        self.exporter = exporter
+        self.query = query
+        self.key = key
+        self.client = client
+        self.sent: SentGoal | None = None
+
+    def _reply(self, event: GoalEvent, last: bool = False) -> None:
+        with contextlib.suppress(zenoh.ZError):
+            self.query.reply(self.query.key_expr, event.encode())
+        if last:
+            self.exporter.goals.pop(self.key, None)
+            self.query.drop()  # type: ignore[no-untyped-call]
+
+    def on_accepted(self) -> None:
+        """Accepted: the relay learns the goal's id in ROS."""
+        handle = self.sent.handle if self.sent is not None else None
+        uuid = bytes(handle.goal_id.uuid).hex() if handle is not None else ""
+        self._reply(GoalEvent("accepted", uuid=uuid))
+
+    def on_rejected(self) -> None:
+        """Rejected: the last reply."""
+        self._reply(GoalEvent("rejected"), last=True)
+
+    def on_feedback(self, feedback: Any) -> None:
+        """One feedback message, as rosbridge JSON."""
+        self._reply(GoalEvent("feedback", values=self.client.feedback_conv.to_obj(feedback)))
+
+    def on_cancel_answer(self, code: int) -> None:
+        """The server's answer to a cancel request."""
+        self._reply(GoalEvent("cancel", code=code))
+
+    def on_result(self, status: int, result: Any) -> None:
+        """The end: status and result (None: the goal never ran)."""
+        values = self.client.result_conv.to_obj(result) if result is not None else None
+        self._reply(GoalEvent("result", status=int(status), values=values), last=True)
+
+    def on_failed(self, why: str) -> None:
+        """Not called by the robot's Graph (its goals fail through ``on_result``)."""
+        self._reply(GoalEvent("failed", text=why), last=True)
 
 
 class Exporter:
@@ -71,6 +129,10 @@ class Exporter:
         self.session: zenoh.Session | None = None
         self.exports: dict[str, _Export] = {}
         self.publishers: dict[tuple[str, str, bool], tuple[Publisher, set[str]]] = {}
+        self.action_clients: dict[tuple[str, Any], ActionClient] = {}
+        self.goals: dict[tuple[str, str], _RobotGoal] = {}
+        """Relays' goals in flight by (relay id, goal id)."""
+        self._early_cancels: set[tuple[str, str]] = set()
         self.snapshot = Snapshot()
         self._snapshot_bytes = b""
         self._definitions: dict[str, str] = {}
@@ -99,6 +161,9 @@ class Exporter:
             session.declare_queryable(f"{r}/{keys.GRAPH}", here(self._answer_graph)),
             session.declare_queryable(f"{r}/{keys.LATCHED}/**", here(self._answer_latched)),
             session.declare_queryable(f"{r}/{keys.CALL}/**", here(self._answer_call)),
+            session.declare_queryable(f"{r}/{keys.GOAL}/**", here(self._answer_goal)),
+            session.declare_queryable(f"{r}/{keys.CANCEL}/**", here(self._answer_cancel)),
+            live.declare_subscriber(f"{r}/{keys.RUNNING}/**", here(self._on_running)),
             session.declare_subscriber(f"{r}/{keys.IN}/**", here(self._on_in)),
             live.declare_subscriber(f"{r}/{keys.DEMAND}/**", here(self._on_demand), history=True),
             live.declare_subscriber(f"{r}/{keys.ADVERTISE}/**", here(self._on_advertise),
@@ -134,6 +199,13 @@ class Exporter:
         for pub, _relays in self.publishers.values():
             self.graph.release_publisher(pub)
         self.publishers.clear()
+        for goal in list(self.goals.values()):
+            if goal.sent is not None:
+                goal.sent.cancel()
+        self.goals.clear()
+        for client in self.action_clients.values():
+            client.destroy()
+        self.action_clients.clear()
         for entity in self._entities:
             with contextlib.suppress(zenoh.ZError):
                 entity.undeclare()
@@ -250,7 +322,10 @@ class Exporter:
     # -- services ------------------------------------------------------------------------------
 
     def _answer_call(self, query: zenoh.Query) -> None:
-        task = self._loop.create_task(self._call(query))
+        self._spawn(self._call(query))
+
+    def _spawn(self, coro: Any) -> None:
+        task = self._loop.create_task(coro)
         self._tasks.add(task)
         task.add_done_callback(self._tasks.discard)
 
@@ -265,6 +340,74 @@ class Exporter:
                 query.reply_err(str(exc).encode())
                 return
             query.reply(query.key_expr, _json(response))
+
+    # -- actions -------------------------------------------------------------------------------
+
+    def _answer_goal(self, query: zenoh.Query) -> None:
+        self._spawn(self._goal(query))
+
+    async def _goal(self, query: zenoh.Query) -> None:
+        action = keys.name_of(str(query.key_expr), 2)
+        try:
+            req = GoalRequest.decode(query.payload.to_bytes() if query.payload else b"")
+            action_cls = self.graph.resolve_action(req.type)
+            conv = self.graph.converter(action_cls.Goal)
+            goal = conv.from_obj(args_mapping(req.goal, conv.fields, "goal"), "args")
+            client = await self._action_client(action, action_cls, req.timeout)
+        except BridgeError as exc:
+            with _answering(query):
+                query.reply(query.key_expr, GoalEvent("failed", text=str(exc)).encode())
+            return
+        key = (req.relay, req.id)
+        running = _RobotGoal(self, query, key, client)
+        self.goals[key] = running
+        running.sent = client.send(goal, running, req.feedback)
+        if key in self._early_cancels:
+            self._early_cancels.discard(key)
+            running.sent.cancel()
+
+    async def _action_client(self, name: str, action_cls: Any, timeout: float) -> ActionClient:
+        """The robot's shared client of ``name``, once a server is ready for it (at most
+        ``timeout`` s)."""
+        client = self.action_clients.get((name, action_cls))
+        if client is None:
+            client = self.action_clients[(name, action_cls)] = self.graph.action_client(
+                name, action_cls)
+        deadline = self._loop.time() + timeout
+        while not client.ready():
+            if self._loop.time() >= deadline:
+                raise BridgeError(f"action {name} has no action server ready on robot "
+                                  f"{self.robot} within {timeout} s")
+            await asyncio.sleep(0.02)
+        return client
+
+    def _answer_cancel(self, query: zenoh.Query) -> None:
+        with _answering(query):
+            try:
+                relay, gid = str(query.key_expr).split("/")[2:4]
+            except ValueError:
+                return
+            self._cancel((relay, gid))
+
+    def _cancel(self, key: tuple[str, str]) -> None:
+        running = self.goals.get(key)
+        if running is None:  # the cancel overtook its goal: canceled when it comes
+            self._early_cancels.add(key)
+            if len(self._early_cancels) > 1000:
+                self._early_cancels.pop()
+        elif running.sent is not None:
+            running.sent.cancel()
+
+    def _on_running(self, sample: zenoh.Sample) -> None:
+        if sample.kind == zenoh.SampleKind.PUT:
+            return
+        try:
+            relay, gid = str(sample.key_expr).split("/")[2:4]
+        except ValueError:
+            return
+        if (relay, gid) in self.goals:
+            log.info("relay %s went with goal %s in flight: canceling it", relay, gid)
+            self._cancel((relay, gid))
 
     # -- the graph -----------------------------------------------------------------------------
 
@@ -299,9 +442,14 @@ class Exporter:
                 "publishes": sorted(pubs), "serves": sorted(serves)}
         for type_name in {t for _, ts in topics for t in ts}:
             self._define(type_name, "msg")
-        for type_name in {t for _, ts in services for t in ts}:
+        actions = {t.removesuffix("_SendGoal") for _, ts in services for t in ts
+                   if t.endswith("_SendGoal") and "/action/" in t}
+        for type_name in {t for _, ts in services for t in ts} - {a + "_SendGoal"
+                                                                  for a in actions}:
             self._define(type_name, "srv")
-        wanted = {t for _, ts in [*topics, *services] for t in ts}
+        for type_name in actions:
+            self._define(type_name, "action")
+        wanted = {t for _, ts in [*topics, *services] for t in ts} | actions
         return Snapshot(
             node=g.name, own_node=g.own_node(), topics=topics, services=services, nodes=nodes,
             publishers={t: [(n, ns, q) for n, ns, q in g.topic_publishers_qos(t)]
@@ -327,9 +475,11 @@ class Exporter:
             if kind == "msg":
                 self._typedefs[type_name] = self.graph.typedefs(type_name, "msg")
             else:
-                for part in ("Request", "Response"):
+                parts = ("Request", "Response") if kind == "srv" else ("Goal", "Result",
+                                                                       "Feedback")
+                for part in parts:
                     self._typedefs[f"{type_name}_{part}"] = self.graph.typedefs(
-                        type_name, "srv", part)
+                        type_name, kind, part)
         except (BridgeError, LookupError, ValueError) as exc:
             self._definitions[type_name] = ""  # not installed here: asked once
             log.debug("no definition of %s: %s", type_name, exc)

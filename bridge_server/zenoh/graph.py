@@ -11,22 +11,28 @@ sessions, over one Zenoh session. What the sessions ask of ROS becomes the keys 
 - a shared publisher is a publisher token (the robot makes the ROS publisher) and one put
   of CDR bytes (``msgs.cdr``) per message;
 - a service call is one query answered by the robot's own ``call_service``;
+- a goal is one query whose replies stream its acceptance, feedback and result from the
+  robot's own action client, with a liveliness token of the goal's that takes it (canceled)
+  with the relay if the relay dies; a cancel is a query;
 - the graph, the types' definitions and typedefs come from the robot's snapshot (kept
   up to date by its puts), so the sessions' synchronous questions read a cache.
 
 Types are ``msgs`` classes: generated ones, or built at run time from the definitions the
 robot sent (:mod:`msgs.dynamic`), so a robot's own types need nothing installed on the
-relay. What the relay does not carry yet (actions, services served by clients, node
-parameters) raises :class:`~bridge_server.interfaces.BridgeError` naming the op and "not
-supported through a relay yet", which the sessions send to the client as a status error.
+relay. What the relay does not carry yet (services and actions served by clients,
+node parameters) raises
+:class:`~bridge_server.interfaces.BridgeError` naming the op and "not supported through a
+relay yet", which the sessions send to the client as a status error.
 """
 
 from __future__ import annotations
 
 import asyncio
 import contextlib
+import itertools
 import json
 import logging
+import secrets
 import time
 from collections.abc import Callable, Mapping
 from typing import Any
@@ -38,23 +44,31 @@ from msgs import cdr
 from msgs.parser import DefinitionError
 from msgs.runtime import Message as WireMessage
 from msgs.runtime import UnknownTypeError as WireUnknownType
-from msgs.runtime import ValidationError, lookup_message, lookup_service
+from msgs.runtime import ValidationError, lookup_action, lookup_message, lookup_service
 
 from ..codec.cdr_json import JsonFromCdr, wire_encoder
 from ..codec.publish import encode_publish_cbor, encode_publish_cbor_raw, encode_publish_json
-from ..graph import Listener, RosCall, ServedAction, ServedGoal, ServedService
+from ..graph import (
+    GoalListener,
+    Listener,
+    RosCall,
+    ServedAction,
+    ServedGoal,
+    ServedService,
+)
 from ..interfaces import (
     BridgeError,
     ConversionError,
     ServiceCallError,
     UnknownTypeError,
+    args_mapping,
     canonical_name,
 )
 from . import keys
-from .keys import CallRequest, Meta, Snapshot
+from .keys import CallRequest, GoalEvent, GoalRequest, Meta, Snapshot
 
-__all__ = ["NOT_YET", "RelayConverter", "ZenohFeed", "ZenohGraph", "ZenohMessage",
-           "ZenohPublisher"]
+__all__ = ["NOT_YET", "RelayConverter", "ZenohActionClient", "ZenohFeed", "ZenohGraph",
+           "ZenohMessage", "ZenohPublisher", "ZenohSentGoal"]
 
 log = logging.getLogger("bridge_server.zenoh.graph")
 
@@ -63,6 +77,17 @@ NOT_YET = "not supported through a relay yet"
 
 SNAPSHOT_WAIT = 5.0
 """Seconds a new robot's first graph snapshot is waited for."""
+
+GOAL_WAIT = 30 * 24 * 3600.0
+"""Seconds a goal's query stays open (a goal may run as long as it likes; the session's
+``goal_timeout`` cancels it sooner if set)."""
+
+SERVER_WAIT = 5.0
+"""Seconds the robot waits for its action client to be ready for a goal (the relay's
+session already waited for the robot's graph to list the action server)."""
+
+class Refused(BridgeError):
+    """The robot answered a query with an error (the text is its reason)."""
 
 
 class RelayConverter:
@@ -274,6 +299,137 @@ class ZenohPublisher:
             self.token.undeclare()  # type: ignore[no-untyped-call]
 
 
+class _GoalId:
+    """A goal's id in ROS, as the sessions read it (``handle.goal_id.uuid``)."""
+
+    def __init__(self, uuid: bytes) -> None:
+        self.uuid = uuid
+
+
+class _GoalHandle:
+    """The robot's answer to a goal, as far as the sessions look at it."""
+
+    def __init__(self, uuid: bytes) -> None:
+        self.goal_id = _GoalId(uuid)
+
+
+class ZenohSentGoal:
+    """A goal sent to the robot: one query, its replies the goal's events, and a liveliness
+    token (``@running``) that takes the goal (canceled by the robot) with this relay."""
+
+    def __init__(self, shared: ZenohActionClient, listener: GoalListener) -> None:
+        self.shared = shared
+        self.listener = listener
+        self.handle: _GoalHandle | None = None
+        self.finished = False
+        graph = shared.graph
+        self.id = f"{secrets.token_hex(4)}{next(graph.goal_ids)}"
+        self.token = graph.session.liveliness().declare_token(
+            f"{graph.robot}/{keys.RUNNING}/{graph.relay}/{self.id}")
+
+    def cancel(self) -> None:
+        """Ask the robot to cancel the goal (the answer comes among the goal's replies)."""
+        if not self.finished:
+            graph = self.shared.graph
+            graph.session.get(f"{graph.robot}/{keys.CANCEL}/{graph.relay}/{self.id}",
+                              _ignore_replies,
+                              timeout=SERVER_WAIT)
+
+    def on_reply(self, reply: zenoh.Reply) -> None:
+        """One of the robot's replies (on the loop)."""
+        if self.finished:
+            return
+        if reply.ok is None:
+            text = reply.err.payload.to_string() if reply.err is not None else "?"
+            self._end()
+            self.listener.on_failed(f"robot {self.shared.graph.robot}: {text}")
+            return
+        try:
+            event = GoalEvent.decode(reply.ok.payload.to_bytes())
+            self._dispatch(event)
+        except BridgeError as exc:
+            log.warning("a goal's reply from robot %s is dropped: %s", self.shared.graph.robot,
+                        exc)
+
+    def _dispatch(self, event: GoalEvent) -> None:
+        listener = self.listener
+        shared = self.shared
+        if event.event == "accepted":
+            self.handle = _GoalHandle(bytes.fromhex(event.uuid))
+            listener.on_accepted()
+        elif event.event == "feedback":
+            listener.on_feedback(shared.feedback_conv.from_obj(event.values, "feedback"))
+        elif event.event == "cancel":
+            listener.on_cancel_answer(event.code)
+        else:
+            self._end()
+            if event.event == "rejected":
+                listener.on_rejected()
+            elif event.event == "failed":
+                listener.on_failed(event.text)
+            else:
+                result = None
+                if event.values is not None:
+                    result = shared.result_conv.from_obj(event.values, "result")
+                listener.on_result(event.status, result)
+
+    def on_end(self) -> None:
+        """The query ended (on the loop): without a result, the robot went."""
+        if not self.finished:
+            self._end()
+            self.listener.on_failed(f"robot {self.shared.graph.robot} did not answer the goal "
+                                    "(is it connected to this relay's Zenoh network?)")
+
+    def _end(self) -> None:
+        self.finished = True
+        with contextlib.suppress(zenoh.ZError):
+            self.token.undeclare()  # type: ignore[no-untyped-call]
+
+
+def _ignore_replies(_reply: zenoh.Reply) -> None:
+    """A cancel's reply says nothing (the answer comes among the goal's replies)."""
+
+
+class ZenohActionClient:
+    """The relay's client of one action of the robot (the robot's own client sends goals)."""
+
+    def __init__(self, graph: ZenohGraph, name: str, action_cls: Any) -> None:
+        self.graph = graph
+        self.name = name
+        self.action_cls = action_cls
+        self.type_name = action_cls._type
+        self.goal_conv = graph.converter(action_cls.Goal)
+        self.feedback_conv = graph.converter(action_cls.Feedback)
+        self.result_conv = graph.converter(action_cls.Result)
+
+    def matched(self) -> bool:
+        """Whether the robot is here and its graph lists a server of the action."""
+        return self.graph.alive and bool(self.graph.server_types(
+            self.name + "/_action/send_goal"))
+
+    def ready(self) -> bool:
+        """As :meth:`matched`: the robot itself waits for its client to be ready."""
+        return self.matched()
+
+    def send(self, goal: Any, listener: GoalListener, feedback: bool) -> ZenohSentGoal:
+        """One query to the robot (see :class:`ZenohSentGoal`)."""
+        graph = self.graph
+        sent = ZenohSentGoal(self, listener)
+        request = GoalRequest(type=self.type_name, goal=self.goal_conv.to_obj(goal),
+                              feedback=feedback, relay=graph.relay, id=sent.id,
+                              timeout=SERVER_WAIT)
+        graph.session.get(keys.key_of(graph.robot, self.name, keys.GOAL),
+                          zenoh.handlers.Callback(graph.on_loop(sent.on_reply),
+                                                  lambda: graph.on_loop(
+                                                      lambda _: sent.on_end())(None)),
+                          payload=request.encode(), timeout=GOAL_WAIT,
+                          consolidation=zenoh.ConsolidationMode.NONE)
+        return sent
+
+    def destroy(self) -> None:
+        """Nothing to remove: each goal holds its own query and token."""
+
+
 class ZenohGraph:
     """The Graph of robot ``robot`` over a Zenoh session (see the module's text)."""
 
@@ -288,6 +444,7 @@ class ZenohGraph:
         """Called on the loop when the robot goes (False) or comes back (True)."""
         self.subscriptions: dict[str, ZenohFeed] = {}
         self.publishers: dict[tuple[str, str, bool], ZenohPublisher] = {}
+        self.goal_ids = itertools.count()
         self._converters: dict[type[Any], RelayConverter] = {}
         self._entities: list[Any] = []
         self._have_snapshot = asyncio.Event()
@@ -375,10 +532,11 @@ class ZenohGraph:
     def _load(self, name: str, kind: str) -> Any:
         canonical = canonical_name(name, kind)  # type: ignore[arg-type]
         text = self.snapshot.definitions.get(canonical)
+        lookup = {"msg": lookup_message, "srv": lookup_service, "action": lookup_action}[kind]
         try:
             if text:
                 return msgs.dynamic.load(canonical, text)
-            return lookup_message(canonical) if kind == "msg" else lookup_service(canonical)
+            return lookup(canonical)
         except (WireUnknownType, DefinitionError) as exc:
             raise UnknownTypeError(name, f"robot {self.robot} does not list it and msgs does "
                                    f"not generate it ({exc})") from None
@@ -393,8 +551,8 @@ class ZenohGraph:
         return self._load(name, "srv")
 
     def resolve_action(self, name: str) -> Any:
-        """Actions are not carried by relays yet."""
-        raise BridgeError(f"actions are {NOT_YET}")
+        """The ``msgs`` action type named ``name`` (the robot's definition if it sent one)."""
+        return self._load(name, "action")
 
     def converter(self, cls: Any) -> RelayConverter:
         """The converter of a ``msgs`` message class."""
@@ -405,13 +563,11 @@ class ZenohGraph:
 
     def typedefs(self, name: str, kind: str, part: str | None = None) -> list[dict[str, Any]]:
         """rosapi typedefs of a type in the robot's graph."""
-        if kind == "action":
-            raise BridgeError(f"actions are {NOT_YET}")
         key = canonical_name(name, kind) + (f"_{part}" if part else "")  # type: ignore[arg-type]
         found = self.snapshot.typedefs.get(key)
         if found is None:
-            raise BridgeError(f"no typedefs of {key}: robot {self.robot} has no topic or "
-                              "service of that type")
+            raise BridgeError(f"no typedefs of {key}: robot {self.robot} has no topic, "
+                              "service or action of that type")
         return found
 
     def installed_interfaces(self) -> list[str]:
@@ -420,7 +576,7 @@ class ZenohGraph:
 
     def interface_definition(self, name: str) -> dict[str, Any]:
         """The full definition text of a type in the robot's graph (or one msgs has)."""
-        for kind in ("msg", "srv"):
+        for kind in ("msg", "srv", "action"):
             with contextlib.suppress(BridgeError):
                 canonical = canonical_name(name, kind)
                 text = self.snapshot.definitions.get(canonical)
@@ -563,38 +719,58 @@ class ZenohGraph:
 
     # -- services ------------------------------------------------------------------------------
 
-    async def call_service(
-        self, service: str, srv_type: str | None, args: Mapping[str, Any] | list[Any] | None,
-        timeout: float, discovery_wait: float,
-        check: Callable[[Any], str | None] | None = None,
-    ) -> dict[str, Any]:
-        """One query to the robot, which calls the service itself (``check`` refuses an
-        action's cancel for a goal of the session's; relays carry no goals yet, so it is not
-        asked)."""
-        future: asyncio.Future[dict[str, Any]] = self.loop.create_future()
+    async def _ask(self, key: str, payload: bytes, timeout: float, what: str) -> bytes:
+        """One query to the robot: its reply's payload; ``ZenohGraph.Refused`` with an error
+        reply's text, ``TimeoutError`` naming ``what`` if nothing came."""
+        future: asyncio.Future[bytes] = self.loop.create_future()
 
         def answer(reply: zenoh.Reply) -> None:
             if future.done():
                 return
             if reply.ok is not None:
-                future.set_result(json.loads(reply.ok.payload.to_bytes()))
+                future.set_result(reply.ok.payload.to_bytes())
             elif reply.err is not None:
-                future.set_exception(ServiceCallError(reply.err.payload.to_string()))
+                future.set_exception(Refused(reply.err.payload.to_string()))
 
         def ended(_: Any = None) -> None:
             if not future.done():
-                future.set_exception(ServiceCallError(
-                    f"service {service}: robot {self.robot} did not answer (is it connected "
-                    "to this relay's Zenoh network?)"))
+                future.set_exception(TimeoutError(
+                    f"{what}: robot {self.robot} did not answer (is it connected to this "
+                    "relay's Zenoh network?)"))
 
+        self.session.get(key, zenoh.handlers.Callback(self.on_loop(answer),
+                                                      lambda: self.on_loop(ended)(None)),
+                         payload=payload, timeout=timeout)
+        return await future
+
+    async def call_service(
+        self, service: str, srv_type: str | None, args: Mapping[str, Any] | list[Any] | None,
+        timeout: float, discovery_wait: float,
+        check: Callable[[Any], str | None] | None = None,
+    ) -> dict[str, Any]:
+        """One query to the robot, which calls the service itself; ``check`` (an action's
+        cancel limited to the session's own goals) is asked here first, with the request
+        built from the robot's type of the service."""
+        if check is not None:
+            type_name = srv_type or next(iter(self.service_types(service)), None)
+            if type_name is not None:
+                conv = self.converter(self.resolve_service(type_name).Request)
+                try:
+                    request = conv.from_obj(args_mapping(args, conv.fields, "request"), "args")
+                except ConversionError as exc:
+                    raise ServiceCallError(f"{service}: bad request: {exc}") from None
+                refusal = check(request)
+                if refusal is not None:
+                    raise ServiceCallError(f"{service}: {refusal}")
         request = CallRequest(type=srv_type, args=args, timeout=timeout,
                               discovery_wait=discovery_wait)
-        self.session.get(keys.key_of(self.robot, service, keys.CALL),
-                         zenoh.handlers.Callback(self.on_loop(answer),
-                                                 lambda: self.on_loop(ended)(None)),
-                         payload=request.encode(),
-                         timeout=timeout + 2 * discovery_wait + 1.0)
-        return await future
+        try:
+            data = await self._ask(keys.key_of(self.robot, service, keys.CALL),
+                                   request.encode(), timeout + 2 * discovery_wait + 1.0,
+                                   f"service {service}")
+        except (Refused, TimeoutError) as exc:
+            raise ServiceCallError(str(exc)) from None
+        return json.loads(data)  # type: ignore[no-any-return]
 
     def serve(self, name: str, srv_cls: Any, on_request: Callable[[RosCall], None]
               ) -> ServedService:
@@ -615,16 +791,17 @@ class ZenohGraph:
         """Node parameters are not carried by relays yet."""
         raise BridgeError(f"node parameters are {NOT_YET}")
 
+
     # -- actions -------------------------------------------------------------------------------
 
-    def action_client(self, name: str, action_cls: Any) -> Any:
-        """Actions are not carried by relays yet."""
-        raise BridgeError(f"actions are {NOT_YET}")
+    def action_client(self, name: str, action_cls: Any) -> ZenohActionClient:
+        """A client of the robot's action ``name``."""
+        return ZenohActionClient(self, name, action_cls)
 
     def serve_action(
         self, name: str, action_cls: Any, on_goal: Callable[[ServedGoal], None],
         on_cancel: Callable[[ServedGoal], None],
     ) -> ServedAction:
-        """Actions are not carried by relays yet."""
-        raise BridgeError(f"actions are {NOT_YET}")
+        """Serving an action from a client is not carried by relays yet."""
+        raise BridgeError(f"serving an action from a client is {NOT_YET}")
 

@@ -1,0 +1,112 @@
+"""Actions through the relay tier (tests/relay/support.py): a relay client's goal reaches an
+rclpy action server on the robot, with feedback and the result coming back; a cancel, the
+client's leaving and the relay's death each cancel the goal on the robot."""
+
+from __future__ import annotations
+
+import asyncio
+from typing import Any
+
+import pytest
+
+from tests.bridge.action_support import FIB, FibServer, fib
+from tests.helpers import open_wire
+from tests.relay.support import ROBOT, Tier, tier, until
+
+pytestmark = pytest.mark.timeout(90)
+
+
+async def _relay_lists(t: Tier, action: str) -> None:
+    """Wait until the relay's graph of the robot lists ``action``'s server."""
+    graph = t.relay.robots[ROBOT].graph
+    await until(lambda: graph.server_types(action + "/_action/send_goal"),
+                f"the relay to list the action server of {action}")
+
+
+async def test_a_goal_gets_feedback_and_its_result(ros_node: Any, topic: str) -> None:
+    """A relay client's goal runs on an rclpy action server on the robot: its feedback and
+    result (SUCCEEDED, the sequence) come back as on the bridge; a goal that does not fit the
+    type is refused by the relay with the field named."""
+    server = FibServer(ros_node, topic)
+    try:
+        async with tier() as t:
+            ws = await open_wire(t.url())
+            try:
+                await _relay_lists(t, topic)
+                await ws.send({"op": "send_action_goal", "action": topic, "action_type": FIB,
+                               "args": {"order": 5}, "feedback": True, "id": "g1"})
+                feedback = await ws.expect(op="action_feedback", id="g1", timeout=20)
+                assert feedback["values"]["sequence"][:2] == [0, 1], feedback
+                result = await ws.expect(op="action_result", id="g1", timeout=20)
+                assert result["status"] == 4 and result["result"] is True, result
+                assert result["values"] == {"sequence": fib(5)}
+                assert server.goals == [5]
+
+                await ws.send({"op": "send_action_goal", "action": topic, "action_type": FIB,
+                               "args": {"order": "five"}, "id": "g2"})
+                error = await ws.expect(op="status", level="error", id="g2")
+                assert "args.order" in error["msg"], error
+                assert server.goals == [5]
+            finally:
+                await ws.close()
+    finally:
+        server.destroy()
+
+
+async def test_cancel_and_leaving_cancel_the_goal_on_the_robot(ros_node: Any, topic: str
+                                                               ) -> None:
+    """cancel_action_goal cancels the goal on the robot's action server (the client gets
+    CANCELED); a client that disconnects, and a relay that dies, take their goals with them:
+    the robot cancels each."""
+    server = FibServer(ros_node, topic, slow=True)
+    try:
+        async with tier() as t:
+            ws = await open_wire(t.url())
+            await _relay_lists(t, topic)
+            goal = {"op": "send_action_goal", "action": topic, "action_type": FIB,
+                    "args": {"order": 3}, "feedback": True}
+            await ws.send({**goal, "id": "c1"})
+            await ws.expect(op="action_feedback", id="c1", timeout=20)
+            await ws.send({"op": "cancel_action_goal", "action": topic, "id": "c1"})
+            result = await ws.expect(op="action_result", id="c1", timeout=20)
+            assert result["status"] == 5, result
+            assert server.cancel_requests.is_set()
+
+            for leaving in ("the client", "the relay"):
+                server.cancel_requests.clear()
+                ws = await open_wire(t.url())
+                await ws.send({**goal, "id": "c2"})
+                await ws.expect(op="action_feedback", id="c2", timeout=20)
+                assert not server.cancel_requests.is_set()
+                if leaving == "the client":
+                    await ws.close()
+                else:
+                    await t.relay.close()
+                    await ws.close()
+                await until(server.cancel_requests.is_set,
+                            f"the robot to cancel the goal of {leaving} that went")
+                await until(lambda: not t.exporter.goals, "the robot to forget the goal")
+    finally:
+        server.destroy()
+
+
+async def test_the_robot_names_what_is_wrong_with_a_request(topic: str) -> None:
+    """A goal query whose payload is not what the wire contract says gets an
+    answer naming what is wrong (a plain Zenoh session plays a faulty relay)."""
+    from bridge_server.zenoh import keys
+    from bridge_server.zenoh.keys import GoalEvent
+    from bridge_server.zenoh.link import ZenohOptions, open_session
+
+    async with tier() as t:
+        session = await open_session(ZenohOptions(connect=[t.router]))
+        try:
+            def ask(key: str, payload: bytes) -> list[Any]:
+                return [r.ok.payload.to_bytes() if r.ok else r.err.payload.to_string()
+                        for r in session.get(key, payload=payload, timeout=10)]
+
+            replies = await asyncio.to_thread(ask, f"{ROBOT}/{keys.GOAL}{topic}", b'{"goal": 1}')
+            event = GoalEvent.decode(replies[0])
+            assert event.event == "failed" and "is not a GoalRequest" in event.text, event
+            assert "'type'" in event.text
+        finally:
+            await asyncio.to_thread(session.close)
