@@ -13,6 +13,8 @@ It dials out to the routers and offers the robot under ``r1/`` as :mod:`.keys` d
 - a goal is a query whose replies stream what the Graph's own action client reports
   (accepted, feedback, the result); a cancel is a query; a goal whose relay's ``@running``
   token goes (the relay died) is canceled, as the bridge cancels a leaving client's goals;
+- a service a relay's client serves is served in ROS by the Graph's ``serve`` while its
+  ``@serve`` token lives; each ROS call is a query to the relay, the reply answers it;
 - the graph (topics, services, nodes and the definitions of their types) is put when it
   changes, and answers queries.
 
@@ -36,13 +38,16 @@ import zenoh
 
 from ..graph import (
     ActionClient,
+    Converter,
     Graph,
     Message,
     Publisher,
+    RosCall,
     SentGoal,
+    ServedService,
     TopicFeed,
 )
-from ..interfaces import BridgeError, args_mapping
+from ..interfaces import BridgeError, ConversionError, args_mapping
 from . import keys
 from .keys import CallRequest, GoalEvent, GoalRequest, Meta, Snapshot
 from .link import ZenohOptions, open_session
@@ -54,6 +59,10 @@ log = logging.getLogger("bridge_server.zenoh.exporter")
 SNAPSHOT_INTERVAL = 1.0
 """Seconds between two looks at the ROS graph (a changed one is put at once)."""
 
+SERVED_CALL_WAIT = 60.0
+"""Seconds a ROS call of a relay-served service waits for the relay's reply (the relay's
+session gives up sooner, after its ``served_call_timeout``; then the caller is not answered,
+as on the bridge)."""
 
 
 @dataclass
@@ -114,6 +123,16 @@ class _RobotGoal:
         self._reply(GoalEvent("failed", text=why), last=True)
 
 
+@dataclass
+class _Served:
+    """A service a relay's client serves, in ROS on the robot."""
+
+    relay: str
+    type_name: str
+    ros: ServedService
+    response_conv: Converter
+
+
 class Exporter:
     """The robot ``robot``'s Graph offered on Zenoh (see the module's text)."""
 
@@ -133,6 +152,8 @@ class Exporter:
         self.goals: dict[tuple[str, str], _RobotGoal] = {}
         """Relays' goals in flight by (relay id, goal id)."""
         self._early_cancels: set[tuple[str, str]] = set()
+        self.served: dict[str, _Served] = {}
+        """Services relays' clients serve, by name."""
         self.snapshot = Snapshot()
         self._snapshot_bytes = b""
         self._definitions: dict[str, str] = {}
@@ -164,6 +185,7 @@ class Exporter:
             session.declare_queryable(f"{r}/{keys.GOAL}/**", here(self._answer_goal)),
             session.declare_queryable(f"{r}/{keys.CANCEL}/**", here(self._answer_cancel)),
             live.declare_subscriber(f"{r}/{keys.RUNNING}/**", here(self._on_running)),
+            live.declare_subscriber(f"{r}/{keys.SERVE}/**", here(self._on_serve), history=True),
             session.declare_subscriber(f"{r}/{keys.IN}/**", here(self._on_in)),
             live.declare_subscriber(f"{r}/{keys.DEMAND}/**", here(self._on_demand), history=True),
             live.declare_subscriber(f"{r}/{keys.ADVERTISE}/**", here(self._on_advertise),
@@ -206,6 +228,9 @@ class Exporter:
         for client in self.action_clients.values():
             client.destroy()
         self.action_clients.clear()
+        for served in self.served.values():
+            served.ros.destroy()
+        self.served.clear()
         for entity in self._entities:
             with contextlib.suppress(zenoh.ZError):
                 entity.undeclare()
@@ -341,6 +366,69 @@ class Exporter:
                 return
             query.reply(query.key_expr, _json(response))
 
+    # -- services relays' clients serve --------------------------------------------------------
+
+    def _on_serve(self, sample: zenoh.Sample) -> None:
+        try:
+            relay, service, type_name = keys.parse_serve(str(sample.key_expr))
+        except IndexError:
+            return
+        served = self.served.get(service)
+        if sample.kind != zenoh.SampleKind.PUT:
+            if served is not None and served.relay == relay:
+                del self.served[service]
+                served.ros.destroy()
+                self._refresh_snapshot()
+                log.info("%s is no longer served through relay %s", service, relay)
+            return
+        if served is not None:
+            if served.relay != relay:
+                log.warning("relay %s serves %s, already served through relay %s: ignored",
+                            relay, service, served.relay)
+            return
+        try:
+            srv_cls = self.graph.resolve_service(type_name)
+            ros = self.graph.serve(service, srv_cls,
+                                   lambda call: self._forward(service, relay, call))
+        except (BridgeError, ValueError) as exc:
+            log.warning("relay %s's service %s (%s) cannot be served: %s", relay, service,
+                        type_name, exc)
+            return
+        self.served[service] = _Served(relay, type_name, ros,
+                                       self.graph.converter(srv_cls.Response))
+        self._refresh_snapshot()
+        log.info("%s is served through relay %s", service, relay)
+
+    def _forward(self, service: str, relay: str, call: RosCall) -> None:
+        """A ROS call of a relay-served service: one query to the relay; its reply answers
+        the caller, an error or no reply leaves it unanswered (as the bridge does)."""
+        served = self.served.get(service)
+        if served is None or served.relay != relay or self.session is None:
+            log.warning("a ROS call to %s arrived after it went: not answered", service)
+            return
+        try:
+            payload = _json(call.served.request_conv.to_obj(call.request))
+        except Exception:
+            log.exception("cannot convert a request to %s", service)
+            return
+
+        def answer(reply: zenoh.Reply) -> None:
+            if reply.ok is None:
+                text = reply.err.payload.to_string() if reply.err is not None else "?"
+                log.warning("relay %s failed a call of %s (%.200s): the ROS caller is not "
+                            "answered", relay, service, text)
+                return
+            try:
+                obj = json.loads(reply.ok.payload.to_bytes())
+                call.complete(served.response_conv.from_obj(obj, "response"))
+            except (ValueError, ConversionError) as exc:
+                log.warning("relay %s answered %s with a bad response (%s): the ROS caller "
+                            "is not answered", relay, service, exc)
+
+        self.session.get(keys.key_of(self.robot, service, f"{keys.SERVING}/{relay}"),
+                         zenoh.handlers.Callback(self._on_loop(answer)), payload=payload,
+                         timeout=SERVED_CALL_WAIT)
+
     # -- actions -------------------------------------------------------------------------------
 
     def _answer_goal(self, query: zenoh.Query) -> None:
@@ -458,7 +546,8 @@ class Exporter:
             definitions={t: d for t, d in self._definitions.items() if t in wanted and d},
             typedefs={t: d for t, d in self._typedefs.items()
                       if t in wanted or t.rsplit("_", 1)[0] in wanted},
-            interfaces=self._installed())
+            interfaces=self._installed(),
+            served={name: s.relay for name, s in self.served.items()})
 
     def _installed(self) -> list[str]:
         if self._interfaces is None:

@@ -14,13 +14,15 @@ sessions, over one Zenoh session. What the sessions ask of ROS becomes the keys 
 - a goal is one query whose replies stream its acceptance, feedback and result from the
   robot's own action client, with a liveliness token of the goal's that takes it (canceled)
   with the relay if the relay dies; a cancel is a query;
+- a service a client serves is a queryable the robot's ROS service forwards each call to,
+  and a token that keeps that ROS service up;
 - the graph, the types' definitions and typedefs come from the robot's snapshot (kept
   up to date by its puts), so the sessions' synchronous questions read a cache.
 
 Types are ``msgs`` classes: generated ones, or built at run time from the definitions the
 robot sent (:mod:`msgs.dynamic`), so a robot's own types need nothing installed on the
-relay. What the relay does not carry yet (services and actions served by clients,
-node parameters) raises
+relay. What the relay does not carry yet (actions served by clients, node parameters)
+raises
 :class:`~bridge_server.interfaces.BridgeError` naming the op and "not supported through a
 relay yet", which the sessions send to the client as a status error.
 """
@@ -48,14 +50,7 @@ from msgs.runtime import ValidationError, lookup_action, lookup_message, lookup_
 
 from ..codec.cdr_json import JsonFromCdr, wire_encoder
 from ..codec.publish import encode_publish_cbor, encode_publish_cbor_raw, encode_publish_json
-from ..graph import (
-    GoalListener,
-    Listener,
-    RosCall,
-    ServedAction,
-    ServedGoal,
-    ServedService,
-)
+from ..graph import GoalListener, Listener, RosCall, ServedAction, ServedGoal
 from ..interfaces import (
     BridgeError,
     ConversionError,
@@ -68,7 +63,8 @@ from . import keys
 from .keys import CallRequest, GoalEvent, GoalRequest, Meta, Snapshot
 
 __all__ = ["NOT_YET", "RelayConverter", "ZenohActionClient", "ZenohFeed", "ZenohGraph",
-           "ZenohMessage", "ZenohPublisher", "ZenohSentGoal"]
+           "ZenohMessage", "ZenohPublisher", "ZenohRosCall", "ZenohSentGoal",
+           "ZenohServedService"]
 
 log = logging.getLogger("bridge_server.zenoh.graph")
 
@@ -430,6 +426,71 @@ class ZenohActionClient:
         """Nothing to remove: each goal holds its own query and token."""
 
 
+class ZenohRosCall:
+    """A ROS caller on the robot waiting for a service this relay's client serves."""
+
+    def __init__(self, served: ZenohServedService, request: Any, query: zenoh.Query) -> None:
+        self.served = served
+        self.request = request
+        self.query: zenoh.Query | None = query
+
+    def complete(self, response: Any | None = None) -> bool:
+        """Answer the ROS caller (through the robot); False if already answered."""
+        query, self.query = self.query, None
+        if query is None:
+            return False
+        if response is None:
+            response = self.served.srv_cls.Response()
+        with contextlib.suppress(zenoh.ZError):
+            query.reply(query.key_expr, json.dumps(
+                self.served.response_conv.to_obj(response), separators=(",", ":")).encode())
+        query.drop()  # type: ignore[no-untyped-call]
+        return True
+
+
+class ZenohServedService:
+    """A service of the robot that a client of this relay serves: the relay's queryable the
+    robot forwards ROS calls to, and the token that makes the robot serve it in ROS."""
+
+    def __init__(self, graph: ZenohGraph, name: str, srv_cls: Any,
+                 on_request: Callable[[RosCall], None]) -> None:
+        self.graph = graph
+        self.name = name
+        self.srv_cls = srv_cls
+        self.request_conv = graph.converter(srv_cls.Request)
+        self.response_conv = graph.converter(srv_cls.Response)
+        self.on_request = on_request
+        session = graph.session
+        self._entities: list[Any] = [
+            session.declare_queryable(
+                keys.key_of(graph.robot, name, f"{keys.SERVING}/{graph.relay}"),
+                graph.on_loop(self._on_query)),
+            session.liveliness().declare_token(
+                keys.serve_key(graph.robot, graph.relay, name, srv_cls._type)),
+        ]
+
+    def _on_query(self, query: zenoh.Query) -> None:
+        try:
+            obj = json.loads(query.payload.to_bytes() if query.payload else b"")
+            request = self.request_conv.from_obj(obj, "request")
+        except (ValueError, ConversionError) as exc:
+            with contextlib.suppress(zenoh.ZError):
+                query.reply_err(f"a request to {self.name} that does not fit: {exc}".encode())
+            query.drop()  # type: ignore[no-untyped-call]
+            return
+        # Not answered (the session failed it or gave up): the query ends when the call is
+        # forgotten, and the robot leaves its ROS caller unanswered, as the bridge does.
+        self.on_request(ZenohRosCall(self, request, query))
+
+    def destroy(self) -> None:
+        """The robot's ROS service goes (with the token)."""
+        self.graph.served.pop(self.name, None)
+        for entity in self._entities:
+            with contextlib.suppress(zenoh.ZError):
+                entity.undeclare()
+        self._entities.clear()
+
+
 class ZenohGraph:
     """The Graph of robot ``robot`` over a Zenoh session (see the module's text)."""
 
@@ -444,6 +505,7 @@ class ZenohGraph:
         """Called on the loop when the robot goes (False) or comes back (True)."""
         self.subscriptions: dict[str, ZenohFeed] = {}
         self.publishers: dict[tuple[str, str, bool], ZenohPublisher] = {}
+        self.served: dict[str, ZenohServedService] = {}
         self.goal_ids = itertools.count()
         self._converters: dict[type[Any], RelayConverter] = {}
         self._entities: list[Any] = []
@@ -497,6 +559,8 @@ class ZenohGraph:
         for pub in self.publishers.values():
             pub.close()
         self.publishers.clear()
+        for served in list(self.served.values()):
+            served.destroy()
         for entity in self._entities:
             with contextlib.suppress(zenoh.ZError):
                 entity.undeclare()
@@ -656,9 +720,19 @@ class ZenohGraph:
         return len(self._servers(service))
 
     def other_servers(self, service: str) -> list[str]:
-        """The robot's servers of ``service`` (the relay serves none itself)."""
-        return ["the ROS node " + n["namespace"].rstrip("/") + "/" + n["name"]
-                for n in self._servers(service)]
+        """The robot's servers of ``service``. The robot's bridge serving it counts only when
+        its snapshot says another relay's client serves it (named then): serving it for this
+        relay's clients is not another server, and a client of this relay that serves a name
+        again soon after it left is not refused while the robot's graph still lists it."""
+        relay = self.snapshot.served.get(service)
+        own = tuple(self.own_node())
+        found = []
+        for n in self._servers(service):
+            if (n["name"], n["namespace"]) != own:
+                found.append("the ROS node " + n["namespace"].rstrip("/") + "/" + n["name"])
+            elif relay is not None and relay != self.relay:
+                found.append(f"a client of relay {relay}")
+        return found
 
     def server_types(self, service: str) -> list[str]:
         """Types of ``service`` as the robot's servers offer it."""
@@ -773,9 +847,14 @@ class ZenohGraph:
         return json.loads(data)  # type: ignore[no-any-return]
 
     def serve(self, name: str, srv_cls: Any, on_request: Callable[[RosCall], None]
-              ) -> ServedService:
-        """Serving a service from a client is not carried by relays yet."""
-        raise BridgeError(f"serving a service from a client is {NOT_YET}")
+              ) -> ZenohServedService:
+        """Serve ``name`` on the robot for a client of this relay (see
+        :class:`ZenohServedService`)."""
+        old = self.served.pop(name, None)
+        if old is not None:
+            old.destroy()
+        served = self.served[name] = ZenohServedService(self, name, srv_cls, on_request)
+        return served
 
     # -- parameters ----------------------------------------------------------------------------
 

@@ -226,7 +226,7 @@ async def test_a_path_naming_no_robot_is_refused() -> None:
 
 
 async def test_what_a_relay_cannot_do_yet_is_refused_clearly(topic: str) -> None:
-    """Client-served services and actions, and node parameters answer a status error naming the op and "not supported through a relay yet",
+    """Serving an action and node parameters answer a status error naming the op and "not supported through a relay yet",
     never a hang."""
     async with tier() as t:
         ws = await open_wire(t.url())
@@ -236,11 +236,6 @@ async def test_what_a_relay_cannot_do_yet_is_refused_clearly(topic: str) -> None
             error = await ws.expect(op="status", level="error")
             assert error["msg"].startswith("advertise_action") and "not supported through " \
                 "a relay yet" in error["msg"], error
-            await ws.send({"op": "advertise_service", "service": topic,
-                           "type": "std_srvs/srv/SetBool"})
-            error = await ws.expect(op="status", level="error")
-            assert error["msg"].startswith("advertise_service") and "not supported through " \
-                "a relay yet" in error["msg"], error
             await ws.send({"op": "call_service", "service": "/rosapi/get_param", "id": "p",
                            "args": {"name": "/some_node:x"}})
             reply = await ws.expect(op="service_response", id="p")
@@ -248,6 +243,65 @@ async def test_what_a_relay_cannot_do_yet_is_refused_clearly(topic: str) -> None
                 reply["values"], reply
         finally:
             await ws.close()
+
+
+async def _served_call(ros_node: Any, ws: Any, topic: str, data: bool) -> Any:
+    """An rclpy client on the robot calls ``topic``; the relay client ``ws`` answers it."""
+    client = ros_node.create_client(SetBool, topic)
+    try:
+        await until(client.service_is_ready, "the robot to serve the relay client's service")
+        future = client.call_async(SetBool.Request(data=data))
+        call = await ws.expect(op="call_service", service=topic, timeout=20)
+        assert call["args"] == {"data": data}, call
+        await ws.send({"op": "service_response", "service": topic, "id": call["id"],
+                       "result": True, "values": {"success": data, "message": "from the relay"}})
+        await until(future.done, "the ROS caller's answer")
+        return future.result()
+    finally:
+        ros_node.destroy_client(client)
+
+
+async def test_a_relay_client_serves_a_service_rclpy_calls(ros_node: Any, topic: str) -> None:
+    """A relay client's advertise_service is served in ROS on the robot: an rclpy client's
+    call reaches the relay client and its answer comes back; a client of another relay is
+    told who serves it; the service leaves ROS when the client goes and when the relay
+    dies."""
+    probe = ros_node.create_client(SetBool, topic)
+    async with tier() as t:
+        ws = await open_wire(t.url())
+        await ws.send({"op": "advertise_service", "service": topic,
+                       "type": "std_srvs/srv/SetBool"})
+        response = await _served_call(ros_node, ws, topic, True)
+        assert (response.success, response.message) == (True, "from the relay")
+        assert t.exporter.snapshot.served == {topic: t.relay.relay_id}
+        await ws.close()
+        await until(lambda: not probe.service_is_ready(), "the service to leave ROS with its "
+                    "client")
+
+        ws = await open_wire(t.url())
+        await ws.send({"op": "advertise_service", "service": topic,
+                       "type": "std_srvs/srv/SetBool"})
+        response = await _served_call(ros_node, ws, topic, False)
+        assert (response.success, response.message) == (False, "from the relay")
+        second = await start_relay(router=t.router)
+        try:
+            await robot_reachable(second)
+            other = await open_wire(f"ws://127.0.0.1:{second.port}/{ROBOT}")
+            graph = second.robots[ROBOT].graph
+            await until(lambda: graph.other_servers(topic), "the second relay to see it served")
+            await other.send({"op": "advertise_service", "service": topic,
+                              "type": "std_srvs/srv/SetBool"})
+            error = await other.expect(op="status", level="error")
+            assert f"already served by a client of relay {t.relay.relay_id}" in error["msg"]
+            await other.close()
+        finally:
+            await second.close()
+        await t.relay.close()
+        await until(lambda: not probe.service_is_ready(), "the service to leave ROS with the "
+                    "relay")
+        assert not t.exporter.served
+        await ws.close()
+    ros_node.destroy_client(probe)
 
 
 async def test_a_second_relay_on_the_first_ones_router(ros_node: Any, topic: str) -> None:
