@@ -15,6 +15,7 @@ It dials out to the routers and offers the robot under ``r1/`` as :mod:`.keys` d
   token goes (the relay died) is canceled, as the bridge cancels a leaving client's goals;
 - a service a relay's client serves is served in ROS by the Graph's ``serve`` while its
   ``@serve`` token lives; each ROS call is a query to the relay, the reply answers it;
+- node parameters are queries run by the Graph's parameter methods;
 - the graph (topics, services, nodes and the definitions of their types) is put when it
   changes, and answers queries.
 
@@ -49,7 +50,7 @@ from ..graph import (
 )
 from ..interfaces import BridgeError, ConversionError, args_mapping
 from . import keys
-from .keys import CallRequest, GoalEvent, GoalRequest, Meta, Snapshot
+from .keys import CallRequest, GoalEvent, GoalRequest, Meta, ParamRequest, Snapshot
 from .link import ZenohOptions, open_session
 
 __all__ = ["Exporter"]
@@ -184,6 +185,7 @@ class Exporter:
             session.declare_queryable(f"{r}/{keys.CALL}/**", here(self._answer_call)),
             session.declare_queryable(f"{r}/{keys.GOAL}/**", here(self._answer_goal)),
             session.declare_queryable(f"{r}/{keys.CANCEL}/**", here(self._answer_cancel)),
+            session.declare_queryable(f"{r}/{keys.PARAM}/**", here(self._answer_param)),
             live.declare_subscriber(f"{r}/{keys.RUNNING}/**", here(self._on_running)),
             live.declare_subscriber(f"{r}/{keys.SERVE}/**", here(self._on_serve), history=True),
             session.declare_subscriber(f"{r}/{keys.IN}/**", here(self._on_in)),
@@ -496,6 +498,36 @@ class Exporter:
         if (relay, gid) in self.goals:
             log.info("relay %s went with goal %s in flight: canceling it", relay, gid)
             self._cancel((relay, gid))
+
+    # -- parameters ----------------------------------------------------------------------------
+
+    def _answer_param(self, query: zenoh.Query) -> None:
+        self._spawn(self._param(query))
+
+    async def _param(self, query: zenoh.Query) -> None:
+        with _answering(query):
+            node = keys.name_of(str(query.key_expr), 2)
+            kind = "error"
+            try:
+                req = ParamRequest.decode(query.payload.to_bytes() if query.payload else b"")
+                answer: Any
+                if req.op == "names":
+                    answer = await self.graph.parameter_names(node, req.timeout)
+                elif req.op == "get":
+                    answer = await self.graph.get_parameter(node, req.name)
+                else:
+                    answer = await self.graph.set_parameter(node, req.name, req.value)
+                query.reply(query.key_expr, _json(answer))
+                return
+            except TimeoutError as exc:
+                kind, text = "timeout", str(exc) or f"node {node} did not answer in time"
+            except LookupError as exc:
+                kind, text = "lookup", str(exc)
+            except ValueError as exc:
+                kind, text = "value", str(exc)
+            except Exception as exc:  # the relay's caller gets the text, as the bridge's does
+                text = str(exc)
+            query.reply_err(_json({"kind": kind, "text": text}))
 
     # -- the graph -----------------------------------------------------------------------------
 

@@ -16,13 +16,13 @@ sessions, over one Zenoh session. What the sessions ask of ROS becomes the keys 
   with the relay if the relay dies; a cancel is a query;
 - a service a client serves is a queryable the robot's ROS service forwards each call to,
   and a token that keeps that ROS service up;
+- node parameters are queries run by the robot's own parameter methods;
 - the graph, the types' definitions and typedefs come from the robot's snapshot (kept
   up to date by its puts), so the sessions' synchronous questions read a cache.
 
 Types are ``msgs`` classes: generated ones, or built at run time from the definitions the
 robot sent (:mod:`msgs.dynamic`), so a robot's own types need nothing installed on the
-relay. What the relay does not carry yet (actions served by clients, node parameters)
-raises
+relay. What the relay does not carry yet (actions served by clients) raises
 :class:`~bridge_server.interfaces.BridgeError` naming the op and "not supported through a
 relay yet", which the sessions send to the client as a status error.
 """
@@ -60,7 +60,7 @@ from ..interfaces import (
     canonical_name,
 )
 from . import keys
-from .keys import CallRequest, GoalEvent, GoalRequest, Meta, Snapshot
+from .keys import CallRequest, GoalEvent, GoalRequest, Meta, ParamRequest, Snapshot
 
 __all__ = ["NOT_YET", "RelayConverter", "ZenohActionClient", "ZenohFeed", "ZenohGraph",
            "ZenohMessage", "ZenohPublisher", "ZenohRosCall", "ZenohSentGoal",
@@ -81,6 +81,10 @@ GOAL_WAIT = 30 * 24 * 3600.0
 SERVER_WAIT = 5.0
 """Seconds the robot waits for its action client to be ready for a goal (the relay's
 session already waited for the robot's graph to list the action server)."""
+
+PARAM_WAIT = 5.0
+"""Seconds a parameter query waits for the robot beyond the robot's own timeout."""
+
 
 class Refused(BridgeError):
     """The robot answered a query with an error (the text is its reason)."""
@@ -858,18 +862,36 @@ class ZenohGraph:
 
     # -- parameters ----------------------------------------------------------------------------
 
+    async def _param(self, node: str, request: ParamRequest, timeout: float) -> Any:
+        """One parameter query, the robot's exceptions raised again as the bridge's."""
+        try:
+            data = await self._ask(keys.key_of(self.robot, node, keys.PARAM), request.encode(),
+                                   timeout + PARAM_WAIT, f"parameters of {node}")
+        except Refused as exc:
+            try:
+                err = json.loads(str(exc))
+                kind, text = str(err["kind"]), str(err["text"])
+            except (ValueError, KeyError, TypeError):
+                kind, text = "error", str(exc)
+            raise {"timeout": TimeoutError, "lookup": LookupError,
+                   "value": ValueError}.get(kind, BridgeError)(text) from None
+        return json.loads(data)
+
     async def parameter_names(self, node: str, timeout: float) -> list[str]:
-        """Node parameters are not carried by relays yet."""
-        raise BridgeError(f"node parameters are {NOT_YET}")
+        """Names of a robot node's parameters."""
+        return [str(n) for n in await self._param(node, ParamRequest("names", timeout=timeout),
+                                                  timeout)]
 
     async def get_parameter(self, node: str, name: str) -> tuple[bool, Any]:
-        """Node parameters are not carried by relays yet."""
-        raise BridgeError(f"node parameters are {NOT_YET}")
+        """(is set, value) of a robot node's parameter."""
+        is_set, value = await self._param(node, ParamRequest("get", name=name), PARAM_WAIT)
+        return bool(is_set), value
 
     async def set_parameter(self, node: str, name: str, value: Any) -> tuple[bool, str]:
-        """Node parameters are not carried by relays yet."""
-        raise BridgeError(f"node parameters are {NOT_YET}")
-
+        """Set (``None``: unset) a robot node's parameter: (accepted, reason)."""
+        ok, reason = await self._param(node, ParamRequest("set", name=name, value=value),
+                                       PARAM_WAIT)
+        return bool(ok), str(reason)
 
     # -- actions -------------------------------------------------------------------------------
 

@@ -225,9 +225,9 @@ async def test_a_path_naming_no_robot_is_refused() -> None:
             pass
 
 
-async def test_what_a_relay_cannot_do_yet_is_refused_clearly(topic: str) -> None:
-    """Serving an action and node parameters answer a status error naming the op and "not supported through a relay yet",
-    never a hang."""
+async def test_serving_an_action_is_refused_clearly(topic: str) -> None:
+    """advertise_action, which a relay does not carry yet, answers a status error naming the op
+    and "not supported through a relay yet", never silence."""
     async with tier() as t:
         ws = await open_wire(t.url())
         try:
@@ -236,11 +236,6 @@ async def test_what_a_relay_cannot_do_yet_is_refused_clearly(topic: str) -> None
             error = await ws.expect(op="status", level="error")
             assert error["msg"].startswith("advertise_action") and "not supported through " \
                 "a relay yet" in error["msg"], error
-            await ws.send({"op": "call_service", "service": "/rosapi/get_param", "id": "p",
-                           "args": {"name": "/some_node:x"}})
-            reply = await ws.expect(op="service_response", id="p")
-            assert reply["result"] is False and "not supported through a relay yet" in \
-                reply["values"], reply
         finally:
             await ws.close()
 
@@ -302,6 +297,42 @@ async def test_a_relay_client_serves_a_service_rclpy_calls(ros_node: Any, topic:
         assert not t.exporter.served
         await ws.close()
     ros_node.destroy_client(probe)
+
+
+async def test_a_robot_nodes_parameters_through_the_relay(ros_node: Any) -> None:
+    """/rosapi/get_param_names, get_param and set_param through the relay read and write an
+    rclpy node's parameter on the robot; a value no parameter can hold and a node that is not
+    there are named as on the bridge."""
+    ros_node.declare_parameter("gain", 1.5)
+    node = ros_node.get_fully_qualified_name()
+    async with tier() as t:
+        ws = await open_wire(t.url())
+
+        async def call(service: str, args: dict[str, Any]) -> Any:
+            await ws.send({"op": "call_service", "service": f"/rosapi/{service}", "id": service,
+                           "args": args})
+            return await ws.expect(op="service_response", id=service, timeout=20)
+
+        try:
+            await until(lambda: node in [ns.rstrip("/") + "/" + n for n, ns in
+                                         t.relay.robots[ROBOT].graph.node_names()],
+                        "the relay to list the node")
+            reply = await call("get_param_names", {})
+            assert f"{node}:gain" in reply["values"]["names"], reply
+            reply = await call("get_param", {"name": f"{node}:gain"})
+            assert reply["values"]["value"] == "1.5", reply
+            reply = await call("set_param", {"name": f"{node}:gain", "value": "2.5"})
+            assert reply["result"] is True, reply
+            assert ros_node.get_parameter("gain").value == 2.5
+            reply = await call("set_param", {"name": f"{node}:gain", "value": '[1, "a"]'})
+            assert reply["result"] is False, reply
+            assert "a ROS 2 parameter is a bool, int, float, string or a list" in \
+                reply["values"], reply
+            reply = await call("get_param", {"name": "/no_such_node:gain"})
+            assert reply["result"] is False, reply
+            assert "node /no_such_node does not answer parameter requests" in reply["values"]
+        finally:
+            await ws.close()
 
 
 async def test_a_second_relay_on_the_first_ones_router(ros_node: Any, topic: str) -> None:

@@ -91,7 +91,7 @@ async def test_cancel_and_leaving_cancel_the_goal_on_the_robot(ros_node: Any, to
 
 
 async def test_the_robot_names_what_is_wrong_with_a_request(topic: str) -> None:
-    """A goal query whose payload is not what the wire contract says gets an
+    """A goal or parameter query whose payload is not what the wire contract says gets an
     answer naming what is wrong (a plain Zenoh session plays a faulty relay)."""
     from bridge_server.zenoh import keys
     from bridge_server.zenoh.keys import GoalEvent
@@ -108,5 +108,8 @@ async def test_the_robot_names_what_is_wrong_with_a_request(topic: str) -> None:
             event = GoalEvent.decode(replies[0])
             assert event.event == "failed" and "is not a GoalRequest" in event.text, event
             assert "'type'" in event.text
+            replies = await asyncio.to_thread(ask, f"{ROBOT}/{keys.PARAM}/some_node",
+                                              b'{"op": "drop"}')
+            assert "op 'drop' is not one of names, get, set" in replies[0], replies
         finally:
             await asyncio.to_thread(session.close)
