@@ -15,6 +15,8 @@ It dials out to the routers and offers the robot under ``r1/`` as :mod:`.keys` d
   token goes (the relay died) is canceled, as the bridge cancels a leaving client's goals;
 - a service a relay's client serves is served in ROS by the Graph's ``serve`` while its
   ``@serve`` token lives; each ROS call is a query to the relay, the reply answers it;
+- so is an action a relay's client serves (``serve_action``): each ROS goal is a query to
+  the relay whose replies stream the goal's feedback and its end; a ROS cancel is a query;
 - node parameters are queries run by the Graph's parameter methods;
 - the graph (topics, services, nodes and the definitions of their types) is put when it
   changes, and answers queries.
@@ -28,6 +30,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import itertools
 import json
 import logging
 import secrets
@@ -39,19 +42,31 @@ import zenoh
 
 from ..graph import (
     ActionClient,
-    Converter,
     Graph,
     Message,
     Publisher,
     RosCall,
     SentGoal,
+    ServedAction,
+    ServedGoal,
     ServedService,
+    Status,
     TopicFeed,
 )
 from ..interfaces import BridgeError, ConversionError, args_mapping
+from ..session.actions import ACTION_LINGER
 from . import keys
-from .keys import CallRequest, GoalEvent, GoalRequest, Meta, ParamRequest, Snapshot
-from .link import ZenohOptions, open_session
+from .keys import (
+    GOAL_WAIT,
+    CallRequest,
+    Execute,
+    GoalEvent,
+    GoalRequest,
+    Meta,
+    ParamRequest,
+    Snapshot,
+)
+from .link import ZenohOptions, answering, ignore_replies, open_session
 
 __all__ = ["Exporter"]
 
@@ -124,14 +139,18 @@ class _RobotGoal:
         self._reply(GoalEvent("failed", text=why), last=True)
 
 
+_GOAL_SERVICE = "/_action/send_goal"
+
+
 @dataclass
 class _Served:
-    """A service a relay's client serves, in ROS on the robot."""
+    """A service or action a relay's client serves, in ROS on the robot."""
 
     relay: str
     type_name: str
-    ros: ServedService
-    response_conv: Converter
+    ros: ServedService | ServedAction
+    goals: dict[int, ServedGoal] = field(default_factory=dict)
+    """An action's ROS goals in flight, by ``id()``."""
 
 
 class Exporter:
@@ -154,7 +173,10 @@ class Exporter:
         """Relays' goals in flight by (relay id, goal id)."""
         self._early_cancels: set[tuple[str, str]] = set()
         self.served: dict[str, _Served] = {}
-        """Services relays' clients serve, by name."""
+        """Services relays' clients serve by name; actions by their goal service's name."""
+        self._served_goals: dict[int, str] = {}  # id(ServedGoal) -> its id in its query
+        self._lingering: dict[str, ServedAction] = {}
+        self._served_goal_ids = itertools.count()
         self.snapshot = Snapshot()
         self._snapshot_bytes = b""
         self._definitions: dict[str, str] = {}
@@ -233,6 +255,9 @@ class Exporter:
         for served in self.served.values():
             served.ros.destroy()
         self.served.clear()
+        for action in self._lingering.values():
+            action.destroy()
+        self._lingering.clear()
         for entity in self._entities:
             with contextlib.suppress(zenoh.ZError):
                 entity.undeclare()
@@ -293,7 +318,7 @@ class Exporter:
         return msg.data, attachment
 
     def _answer_latched(self, query: zenoh.Query) -> None:
-        with _answering(query):
+        with answering(query):
             topic = keys.name_of(str(query.key_expr), 2)
             export = self.exports.get(topic)
             latched = export.feed.latched if export is not None else None
@@ -357,7 +382,7 @@ class Exporter:
         task.add_done_callback(self._tasks.discard)
 
     async def _call(self, query: zenoh.Query) -> None:
-        with _answering(query):
+        with answering(query):
             service = keys.name_of(str(query.key_expr), 2)
             try:
                 req = CallRequest.decode(query.payload.to_bytes() if query.payload else b"")
@@ -372,34 +397,66 @@ class Exporter:
 
     def _on_serve(self, sample: zenoh.Sample) -> None:
         try:
-            relay, service, type_name = keys.parse_serve(str(sample.key_expr))
+            relay, name, type_name = keys.parse_serve(str(sample.key_expr))
         except IndexError:
             return
-        served = self.served.get(service)
+        action = "/action/" in type_name
+        key = name + _GOAL_SERVICE if action else name
+        served = self.served.get(key)
+        what = "action" if action else "service"
         if sample.kind != zenoh.SampleKind.PUT:
             if served is not None and served.relay == relay:
-                del self.served[service]
-                served.ros.destroy()
+                del self.served[key]
+                self._unserve(key, served)
                 self._refresh_snapshot()
-                log.info("%s is no longer served through relay %s", service, relay)
+                log.info("%s %s is no longer served through relay %s", what, name, relay)
             return
         if served is not None:
             if served.relay != relay:
-                log.warning("relay %s serves %s, already served through relay %s: ignored",
-                            relay, service, served.relay)
+                log.warning("relay %s serves %s %s, already served through relay %s: ignored",
+                            relay, what, name, served.relay)
             return
+        old = self._lingering.pop(key, None)
+        if old is not None:  # two servers of one name would both answer each goal
+            old.destroy()
         try:
-            srv_cls = self.graph.resolve_service(type_name)
-            ros = self.graph.serve(service, srv_cls,
-                                   lambda call: self._forward(service, relay, call))
+            ros: ServedService | ServedAction
+            if action:
+                ros = self.graph.serve_action(
+                    name, self.graph.resolve_action(type_name),
+                    lambda goal: self._execute(name, relay, goal),
+                    lambda goal: self._cancel_served(name, relay, goal))
+            else:
+                ros = self.graph.serve(name, self.graph.resolve_service(type_name),
+                                       lambda call: self._forward(name, relay, call))
         except (BridgeError, ValueError) as exc:
-            log.warning("relay %s's service %s (%s) cannot be served: %s", relay, service,
+            log.warning("relay %s's %s %s (%s) cannot be served: %s", relay, what, name,
                         type_name, exc)
             return
-        self.served[service] = _Served(relay, type_name, ros,
-                                       self.graph.converter(srv_cls.Response))
+        self.served[key] = _Served(relay, type_name, ros)
         self._refresh_snapshot()
-        log.info("%s is served through relay %s", service, relay)
+        log.info("%s %s is served through relay %s", what, name, relay)
+
+    def _unserve(self, key: str, served: _Served) -> None:
+        """A relay's client stopped serving: a service leaves ROS at once; an action's goals
+        are aborted and its server lingers a moment, so ROS callers fetch those results (as
+        on the bridge)."""
+        ros = served.ros
+        if not key.endswith(_GOAL_SERVICE):
+            ros.destroy()
+            return
+        for goal in list(served.goals.values()):
+            goal.finish(Status.ABORTED)
+        served.goals.clear()
+        action: ServedAction = ros  # type: ignore[assignment]
+        action.alive = False
+        self._lingering[key] = action
+        self._loop.call_later(ACTION_LINGER, self._end_linger, key, action)
+
+    def _end_linger(self, key: str, action: ServedAction) -> None:
+        if self._lingering.get(key) is action:
+            del self._lingering[key]
+            action.destroy()
 
     def _forward(self, service: str, relay: str, call: RosCall) -> None:
         """A ROS call of a relay-served service: one query to the relay; its reply answers
@@ -422,7 +479,7 @@ class Exporter:
                 return
             try:
                 obj = json.loads(reply.ok.payload.to_bytes())
-                call.complete(served.response_conv.from_obj(obj, "response"))
+                call.complete(call.served.response_conv.from_obj(obj, "response"))
             except (ValueError, ConversionError) as exc:
                 log.warning("relay %s answered %s with a bad response (%s): the ROS caller "
                             "is not answered", relay, service, exc)
@@ -430,6 +487,59 @@ class Exporter:
         self.session.get(keys.key_of(self.robot, service, f"{keys.SERVING}/{relay}"),
                          zenoh.handlers.Callback(self._on_loop(answer)), payload=payload,
                          timeout=SERVED_CALL_WAIT)
+
+    def _execute(self, action: str, relay: str, goal: ServedGoal) -> None:
+        """A ROS goal of a relay-served action: one query to the relay, its replies the
+        goal's feedback and end; a query that ends without a result aborts the goal."""
+        if self.session is None:
+            goal.finish(Status.ABORTED)
+            return
+        gid = f"{self.epoch}{next(self._served_goal_ids)}"
+        self._served_goals[id(goal)] = gid
+        served = self.served.get(action + _GOAL_SERVICE)
+        if served is not None:
+            served.goals[id(goal)] = goal
+        conv = goal.served
+
+        def answer(reply: zenoh.Reply) -> None:
+            try:
+                if reply.ok is None:
+                    raise BridgeError(reply.err.payload.to_string() if reply.err else "?")
+                event = GoalEvent.decode(reply.ok.payload.to_bytes())
+                if event.event == "feedback":
+                    goal.feedback(conv.feedback_conv.from_obj(event.values, "feedback"))
+                elif event.event == "result":
+                    result = None
+                    if event.values is not None:
+                        result = conv.result_conv.from_obj(event.values, "result")
+                    goal.finish(event.status, result)
+            except BridgeError as exc:  # ConversionError too
+                log.warning("relay %s's goal %s of %s: %s; the goal is aborted", relay, gid,
+                            action, exc)
+                goal.finish(Status.ABORTED)
+
+        def ended(_: Any = None) -> None:
+            self._served_goals.pop(id(goal), None)
+            if served is not None:
+                served.goals.pop(id(goal), None)
+            if goal.finish(Status.ABORTED):
+                log.warning("relay %s ended goal %s of %s without a result: aborted", relay,
+                            gid, action)
+
+        self.session.get(keys.key_of(self.robot, action, f"{keys.EXECUTING}/{relay}"),
+                         zenoh.handlers.Callback(self._on_loop(answer),
+                                                 lambda: self._on_loop(ended)(None)),
+                         payload=Execute(gid, goal=conv.goal_conv.to_obj(goal.request)).encode(),
+                         timeout=GOAL_WAIT, consolidation=zenoh.ConsolidationMode.NONE)
+
+    def _cancel_served(self, action: str, relay: str, goal: ServedGoal) -> None:
+        """A ROS caller cancels a goal of a relay-served action: the relay's client hears it
+        (and decides how the goal ends)."""
+        gid = self._served_goals.get(id(goal))
+        if gid is not None and self.session is not None:
+            self.session.get(keys.key_of(self.robot, action, f"{keys.EXECUTING}/{relay}"),
+                             ignore_replies, payload=Execute(gid, cancel=True).encode(),
+                             timeout=SERVED_CALL_WAIT)
 
     # -- actions -------------------------------------------------------------------------------
 
@@ -445,7 +555,7 @@ class Exporter:
             goal = conv.from_obj(args_mapping(req.goal, conv.fields, "goal"), "args")
             client = await self._action_client(action, action_cls, req.timeout)
         except BridgeError as exc:
-            with _answering(query):
+            with answering(query):
                 query.reply(query.key_expr, GoalEvent("failed", text=str(exc)).encode())
             return
         key = (req.relay, req.id)
@@ -472,7 +582,7 @@ class Exporter:
         return client
 
     def _answer_cancel(self, query: zenoh.Query) -> None:
-        with _answering(query):
+        with answering(query):
             try:
                 relay, gid = str(query.key_expr).split("/")[2:4]
             except ValueError:
@@ -505,7 +615,7 @@ class Exporter:
         self._spawn(self._param(query))
 
     async def _param(self, query: zenoh.Query) -> None:
-        with _answering(query):
+        with answering(query):
             node = keys.name_of(str(query.key_expr), 2)
             kind = "error"
             try:
@@ -532,7 +642,7 @@ class Exporter:
     # -- the graph -----------------------------------------------------------------------------
 
     def _answer_graph(self, query: zenoh.Query) -> None:
-        with _answering(query):
+        with answering(query):
             query.reply(query.key_expr, self._snapshot_bytes)
 
     def _refresh_snapshot(self) -> None:
@@ -611,13 +721,6 @@ def _report(task: asyncio.Task[None]) -> None:
         log.error("the robot left Zenoh: %s", task.exception())
 
 
-@contextlib.contextmanager
-def _answering(query: zenoh.Query) -> Any:
-    """Finish the query when the block ends (the querier hears "no more replies")."""
-    try:
-        yield
-    finally:
-        query.drop()  # type: ignore[no-untyped-call]
 
 
 def _json(obj: Any) -> bytes:

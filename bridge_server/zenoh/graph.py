@@ -15,16 +15,15 @@ sessions, over one Zenoh session. What the sessions ask of ROS becomes the keys 
   robot's own action client, with a liveliness token of the goal's that takes it (canceled)
   with the relay if the relay dies; a cancel is a query;
 - a service a client serves is a queryable the robot's ROS service forwards each call to,
-  and a token that keeps that ROS service up;
+  and a token that keeps that ROS service up; an action a client serves likewise, each ROS
+  goal one query whose replies stream the goal's feedback and end;
 - node parameters are queries run by the robot's own parameter methods;
 - the graph, the types' definitions and typedefs come from the robot's snapshot (kept
   up to date by its puts), so the sessions' synchronous questions read a cache.
 
 Types are ``msgs`` classes: generated ones, or built at run time from the definitions the
 robot sent (:mod:`msgs.dynamic`), so a robot's own types need nothing installed on the
-relay. What the relay does not carry yet (actions served by clients) raises
-:class:`~bridge_server.interfaces.BridgeError` naming the op and "not supported through a
-relay yet", which the sessions send to the client as a status error.
+relay.
 """
 
 from __future__ import annotations
@@ -50,33 +49,37 @@ from msgs.runtime import ValidationError, lookup_action, lookup_message, lookup_
 
 from ..codec.cdr_json import JsonFromCdr, wire_encoder
 from ..codec.publish import encode_publish_cbor, encode_publish_cbor_raw, encode_publish_json
-from ..graph import GoalListener, Listener, RosCall, ServedAction, ServedGoal
+from ..graph import GoalListener, Listener, RosCall, ServedGoal, Status
 from ..interfaces import (
     BridgeError,
     ConversionError,
+    Kind,
     ServiceCallError,
     UnknownTypeError,
     args_mapping,
     canonical_name,
 )
 from . import keys
-from .keys import CallRequest, GoalEvent, GoalRequest, Meta, ParamRequest, Snapshot
+from .keys import (
+    GOAL_WAIT,
+    CallRequest,
+    Execute,
+    GoalEvent,
+    GoalRequest,
+    Meta,
+    ParamRequest,
+    Snapshot,
+)
+from .link import answering, ignore_replies
 
-__all__ = ["NOT_YET", "RelayConverter", "ZenohActionClient", "ZenohFeed", "ZenohGraph",
-           "ZenohMessage", "ZenohPublisher", "ZenohRosCall", "ZenohSentGoal",
-           "ZenohServedService"]
+__all__ = ["RelayConverter", "ZenohActionClient", "ZenohFeed", "ZenohGraph", "ZenohMessage",
+           "ZenohPublisher", "ZenohRosCall", "ZenohSentGoal", "ZenohServedAction",
+           "ZenohServedGoal", "ZenohServedService"]
 
 log = logging.getLogger("bridge_server.zenoh.graph")
 
-NOT_YET = "not supported through a relay yet"
-"""The words every refusal of what a relay cannot do yet ends with."""
-
 SNAPSHOT_WAIT = 5.0
 """Seconds a new robot's first graph snapshot is waited for."""
-
-GOAL_WAIT = 30 * 24 * 3600.0
-"""Seconds a goal's query stays open (a goal may run as long as it likes; the session's
-``goal_timeout`` cancels it sooner if set)."""
 
 SERVER_WAIT = 5.0
 """Seconds the robot waits for its action client to be ready for a goal (the relay's
@@ -332,7 +335,7 @@ class ZenohSentGoal:
         if not self.finished:
             graph = self.shared.graph
             graph.session.get(f"{graph.robot}/{keys.CANCEL}/{graph.relay}/{self.id}",
-                              _ignore_replies,
+                              ignore_replies,
                               timeout=SERVER_WAIT)
 
     def on_reply(self, reply: zenoh.Reply) -> None:
@@ -384,10 +387,6 @@ class ZenohSentGoal:
         self.finished = True
         with contextlib.suppress(zenoh.ZError):
             self.token.undeclare()  # type: ignore[no-untyped-call]
-
-
-def _ignore_replies(_reply: zenoh.Reply) -> None:
-    """A cancel's reply says nothing (the answer comes among the goal's replies)."""
 
 
 class ZenohActionClient:
@@ -452,26 +451,48 @@ class ZenohRosCall:
         return True
 
 
-class ZenohServedService:
-    """A service of the robot that a client of this relay serves: the relay's queryable the
-    robot forwards ROS calls to, and the token that makes the robot serve it in ROS."""
+class _ServedHere:
+    """What a client of this relay serves on the robot: the relay's queryable (under
+    ``where``) the robot forwards to, and the ``@serve`` token that makes the robot serve
+    it in ROS. Declared last (:meth:`_declare`), once the subclass can answer."""
+
+    def __init__(self, graph: ZenohGraph, name: str) -> None:
+        self.graph = graph
+        self.name = name
+        self._entities: list[Any] = []
+
+    def _declare(self, where: str, type_name: str, kind: Kind) -> None:
+        graph = self.graph
+        self._entities = [
+            graph.session.declare_queryable(
+                keys.key_of(graph.robot, self.name, f"{where}/{graph.relay}"),
+                graph.on_loop(self._on_query)),
+            graph.session.liveliness().declare_token(
+                keys.serve_key(graph.robot, graph.relay, self.name, type_name, kind)),
+        ]
+
+    def _on_query(self, query: zenoh.Query) -> None:
+        raise NotImplementedError
+
+    def _undeclare(self) -> None:
+        for entity in self._entities:
+            with contextlib.suppress(zenoh.ZError):
+                entity.undeclare()
+        self._entities.clear()
+
+
+class ZenohServedService(_ServedHere):
+    """A service of the robot that a client of this relay serves (``@serving``): each ROS
+    call's request comes as a query, the reply answers it."""
 
     def __init__(self, graph: ZenohGraph, name: str, srv_cls: Any,
                  on_request: Callable[[RosCall], None]) -> None:
-        self.graph = graph
-        self.name = name
+        super().__init__(graph, name)
         self.srv_cls = srv_cls
         self.request_conv = graph.converter(srv_cls.Request)
         self.response_conv = graph.converter(srv_cls.Response)
         self.on_request = on_request
-        session = graph.session
-        self._entities: list[Any] = [
-            session.declare_queryable(
-                keys.key_of(graph.robot, name, f"{keys.SERVING}/{graph.relay}"),
-                graph.on_loop(self._on_query)),
-            session.liveliness().declare_token(
-                keys.serve_key(graph.robot, graph.relay, name, srv_cls._type)),
-        ]
+        self._declare(keys.SERVING, srv_cls._type, "srv")
 
     def _on_query(self, query: zenoh.Query) -> None:
         try:
@@ -488,11 +509,94 @@ class ZenohServedService:
 
     def destroy(self) -> None:
         """The robot's ROS service goes (with the token)."""
-        self.graph.served.pop(self.name, None)
-        for entity in self._entities:
+        if self.graph.served.get(self.name) is self:
+            del self.graph.served[self.name]
+        self._undeclare()
+
+
+class ZenohServedGoal:
+    """A ROS goal on the robot that a client of this relay carries out: its feedback and end
+    are replies to the robot's query."""
+
+    def __init__(self, served: ZenohServedAction, gid: str, request: Any,
+                 query: zenoh.Query) -> None:
+        self.served = served
+        self.id = gid
+        self.request = request
+        self.query: zenoh.Query | None = query
+
+    def feedback(self, msg: Any) -> None:
+        """One feedback message to the robot, which publishes it."""
+        if self.query is not None:
             with contextlib.suppress(zenoh.ZError):
-                entity.undeclare()
-        self._entities.clear()
+                self.query.reply(self.query.key_expr, GoalEvent(
+                    "feedback", values=self.served.feedback_conv.to_obj(msg)).encode())
+
+    def finish(self, status: int, result: Any | None = None) -> bool:
+        """End the goal on the robot with ``status`` and ``result``; False if it had ended."""
+        query, self.query = self.query, None
+        if query is None:
+            return False
+        self.served.goals.pop(self.id, None)
+        values = self.served.result_conv.to_obj(result) if result is not None else None
+        with contextlib.suppress(zenoh.ZError):
+            query.reply(query.key_expr, GoalEvent("result", status=int(status),
+                                                  values=values).encode())
+        query.drop()  # type: ignore[no-untyped-call]
+        return True
+
+
+class ZenohServedAction(_ServedHere):
+    """An action of the robot that a client of this relay serves (``@executing``): each ROS
+    goal comes as a query whose replies are its feedback and end; a ROS cancel is a query."""
+
+    def __init__(self, graph: ZenohGraph, name: str, action_cls: Any,
+                 on_goal: Callable[[ServedGoal], None],
+                 on_cancel: Callable[[ServedGoal], None]) -> None:
+        super().__init__(graph, name)
+        self.alive = True
+        self.goal_conv = graph.converter(action_cls.Goal)
+        self.feedback_conv = graph.converter(action_cls.Feedback)
+        self.result_conv = graph.converter(action_cls.Result)
+        self.on_goal = on_goal
+        self.on_cancel = on_cancel
+        self.goals: dict[str, ZenohServedGoal] = {}
+        self._declare(keys.EXECUTING, action_cls._type, "action")
+
+    def _on_query(self, query: zenoh.Query) -> None:
+        try:
+            req = Execute.decode(query.payload.to_bytes() if query.payload else b"")
+        except BridgeError as exc:
+            with answering(query):
+                query.reply_err(str(exc).encode())
+            return
+        if req.cancel:
+            with answering(query):
+                goal = self.goals.get(req.id)
+                if goal is not None:
+                    self.on_cancel(goal)
+            return
+        try:
+            request = self.goal_conv.from_obj(req.goal, "goal")
+        except ConversionError as exc:
+            log.warning("a goal of %s from robot %s does not fit: %s", self.name,
+                        self.graph.robot, exc)
+            request = None
+        goal = ZenohServedGoal(self, req.id, request, query)
+        if request is None or not self.alive:
+            goal.finish(Status.ABORTED)
+            return
+        self.goals[req.id] = goal
+        self.on_goal(goal)
+
+    def destroy(self) -> None:
+        """The robot's action server goes (with the token); open goals are aborted."""
+        self.alive = False
+        for goal in list(self.goals.values()):
+            goal.finish(Status.ABORTED)
+        if self.graph.served_actions.get(self.name) is self:
+            del self.graph.served_actions[self.name]
+        self._undeclare()
 
 
 class ZenohGraph:
@@ -510,6 +614,7 @@ class ZenohGraph:
         self.subscriptions: dict[str, ZenohFeed] = {}
         self.publishers: dict[tuple[str, str, bool], ZenohPublisher] = {}
         self.served: dict[str, ZenohServedService] = {}
+        self.served_actions: dict[str, ZenohServedAction] = {}
         self.goal_ids = itertools.count()
         self._converters: dict[type[Any], RelayConverter] = {}
         self._entities: list[Any] = []
@@ -565,6 +670,8 @@ class ZenohGraph:
         self.publishers.clear()
         for served in list(self.served.values()):
             served.destroy()
+        for action in list(self.served_actions.values()):
+            action.destroy()
         for entity in self._entities:
             with contextlib.suppress(zenoh.ZError):
                 entity.undeclare()
@@ -902,7 +1009,12 @@ class ZenohGraph:
     def serve_action(
         self, name: str, action_cls: Any, on_goal: Callable[[ServedGoal], None],
         on_cancel: Callable[[ServedGoal], None],
-    ) -> ServedAction:
-        """Serving an action from a client is not carried by relays yet."""
-        raise BridgeError(f"serving an action from a client is {NOT_YET}")
-
+    ) -> ZenohServedAction:
+        """Serve action ``name`` on the robot for a client of this relay (see
+        :class:`ZenohServedAction`)."""
+        old = self.served_actions.pop(name, None)
+        if old is not None:
+            old.destroy()
+        served = self.served_actions[name] = ZenohServedAction(self, name, action_cls, on_goal,
+                                                               on_cancel)
+        return served

@@ -32,8 +32,14 @@ key                                      what
                                          as a ``cancel`` event of the goal's query)
 ``<robot>/@serve/<relay>/<pkg>/srv/``    liveliness token of a service a relay's client
 ``<Name>/<service>``                     serves: the robot serves it in ROS meanwhile
+                                         (``<pkg>/action/<Name>/<action>``: an action)
 ``<robot>/@serving/<relay>/<service>``   the relay's queryable: a ROS call's request
                                          JSON in, the response JSON (or an error) out
+``<robot>/@executing/<relay>/<action>``  the relay's queryable: a ROS goal of an action a
+                                         client serves, :class:`Execute` JSON in; the
+                                         replies stream :class:`GoalEvent` JSON (feedback,
+                                         the result last); a cancel is :class:`Execute`
+                                         with ``cancel`` set
 ``<robot>/@param/<node>``                queryable: a node's parameters,
                                          :class:`ParamRequest` JSON in, the answer JSON
 =======================================  ==============================================
@@ -49,7 +55,7 @@ import re
 from dataclasses import asdict, dataclass, field
 from typing import Any, ClassVar, cast
 
-from ..interfaces import BridgeError, canonical_name
+from ..interfaces import BridgeError, Kind, canonical_name
 from ..security.names import check_name
 
 __all__ = [
@@ -59,7 +65,9 @@ __all__ = [
     "CANCEL",
     "CONTROL",
     "DEMAND",
+    "EXECUTING",
     "GOAL",
+    "GOAL_WAIT",
     "GRAPH",
     "IN",
     "LATCHED",
@@ -68,6 +76,7 @@ __all__ = [
     "SERVE",
     "SERVING",
     "CallRequest",
+    "Execute",
     "GoalEvent",
     "GoalRequest",
     "Meta",
@@ -96,10 +105,15 @@ RUNNING = "@running"
 CANCEL = "@cancel"
 SERVE = "@serve"
 SERVING = "@serving"
+EXECUTING = "@executing"
 PARAM = "@param"
 
+GOAL_WAIT = 30 * 24 * 3600.0
+"""Seconds a goal's query (``@goal``, ``@executing``) stays open: a goal may run as long as
+it likes (a session's ``goal_timeout`` ends it sooner if set)."""
+
 CONTROL = (ALIVE, DEMAND, LATCHED, GRAPH, CALL, ADVERTISE, IN, GOAL, RUNNING, CANCEL, SERVE,
-           SERVING, PARAM)
+           SERVING, PARAM, EXECUTING)
 """Every control chunk (Zenoh's verbatim chunks, which no wildcard matches: access rules
 name each)."""
 
@@ -154,14 +168,16 @@ def parse_advertise(key: str) -> tuple[str, str, bool, str]:
     return parts[2], "/" + parts[7], parts[3] == "latched", "/".join(parts[4:7])
 
 
-def serve_key(robot: str, relay: str, service: str, type_name: str) -> str:
-    """The key of a relay's served-service token (see the module's table)."""
-    pkg, kind, name = canonical_name(type_name, "srv").split("/")
-    return key_of(robot, service, f"{SERVE}/{relay}/{pkg}/{kind}/{name}")
+def serve_key(robot: str, relay: str, name: str, type_name: str, kind: Kind = "srv") -> str:
+    """The key of a relay's served-service (``kind`` ``action``: served-action) token (see
+    the module's table)."""
+    pkg, _, short = canonical_name(type_name, kind).split("/")
+    return key_of(robot, name, f"{SERVE}/{relay}/{pkg}/{kind}/{short}")
 
 
 def parse_serve(key: str) -> tuple[str, str, str]:
-    """(relay id, service, type) of a served-service token's key."""
+    """(relay id, service or action, type: ``pkg/srv/Name`` or ``pkg/action/Name``) of a
+    served token's key."""
     parts = key.split("/", 6)
     return parts[2], "/" + parts[6], "/".join(parts[3:6])
 
@@ -289,6 +305,26 @@ class GoalEvent:
                        uuid=str(obj.get("uuid", "")), text=str(obj.get("text", "")))
         except (TypeError, ValueError) as exc:
             raise BridgeError(f"a goal's reply is not a GoalEvent ({exc})") from None
+
+
+@dataclass
+class Execute(_Payload):
+    """What the robot asks of a relay whose client serves an action: carry out the ROS goal
+    ``id`` (``goal``: rosbridge JSON), or (``cancel``) a ROS caller's cancel of it."""
+
+    id: str
+    goal: Any = None
+    cancel: bool = False
+
+    @classmethod
+    def decode(cls, data: bytes) -> Execute:
+        """From a query's payload; ``BridgeError`` naming what is wrong."""
+        obj = _decode_json(data, "a served goal's payload")
+        try:
+            return cls(id=check_relay(str(obj["id"])), goal=obj.get("goal"),
+                       cancel=bool(obj.get("cancel", False)))
+        except KeyError as exc:
+            raise BridgeError(f"a served goal's payload is not an Execute ({exc!r})") from None
 
 
 @dataclass

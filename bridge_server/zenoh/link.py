@@ -21,11 +21,12 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import contextlib
 import json
 import os
 import re
 import threading
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
@@ -35,7 +36,8 @@ from . import keys
 if TYPE_CHECKING:
     import zenoh
 
-__all__ = ["ZenohOptions", "add_arguments", "open_session", "options_from_args", "robot_acl"]
+__all__ = ["ZenohOptions", "add_arguments", "answering", "ignore_replies", "open_session",
+           "options_from_args", "robot_acl"]
 
 _PROTOCOLS = ("tcp", "tls", "quic", "udp", "unixsock-stream")
 _ENDPOINT = re.compile(r"(?P<proto>[a-z-]+)/(?P<addr>[^#?]+)(?:[#?].*)?")
@@ -195,6 +197,19 @@ async def open_session(options: ZenohOptions) -> zenoh.Session:
 
     threading.Thread(target=open_it, daemon=True, name="zenoh-open").start()
     return await opened
+
+
+@contextlib.contextmanager
+def answering(query: zenoh.Query) -> Iterator[None]:
+    """Finish ``query`` when the block ends (the querier hears "no more replies")."""
+    try:
+        yield
+    finally:
+        query.drop()  # type: ignore[no-untyped-call]
+
+
+def ignore_replies(_reply: zenoh.Reply) -> None:
+    """For a query whose replies say nothing (a cancel: its answer comes another way)."""
 
 
 def add_arguments(p: argparse.ArgumentParser, listen: bool) -> None:

@@ -225,21 +225,6 @@ async def test_a_path_naming_no_robot_is_refused() -> None:
             pass
 
 
-async def test_serving_an_action_is_refused_clearly(topic: str) -> None:
-    """advertise_action, which a relay does not carry yet, answers a status error naming the op
-    and "not supported through a relay yet", never silence."""
-    async with tier() as t:
-        ws = await open_wire(t.url())
-        try:
-            await ws.send({"op": "advertise_action", "action": topic,
-                           "type": "test_msgs/action/Fibonacci"})
-            error = await ws.expect(op="status", level="error")
-            assert error["msg"].startswith("advertise_action") and "not supported through " \
-                "a relay yet" in error["msg"], error
-        finally:
-            await ws.close()
-
-
 async def _served_call(ros_node: Any, ws: Any, topic: str, data: bool) -> Any:
     """An rclpy client on the robot calls ``topic``; the relay client ``ws`` answers it."""
     client = ros_node.create_client(SetBool, topic)

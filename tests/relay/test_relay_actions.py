@@ -1,6 +1,7 @@
 """Actions through the relay tier (tests/relay/support.py): a relay client's goal reaches an
 rclpy action server on the robot, with feedback and the result coming back; a cancel, the
-client's leaving and the relay's death each cancel the goal on the robot."""
+client's leaving and the relay's death each cancel the goal on the robot. And the other way:
+a relay client serves an action that an rclpy action client on the robot uses."""
 
 from __future__ import annotations
 
@@ -9,7 +10,7 @@ from typing import Any
 
 import pytest
 
-from tests.bridge.action_support import FIB, FibServer, fib
+from tests.bridge.action_support import FIB, FibServer, RosCaller, fib
 from tests.helpers import open_wire
 from tests.relay.support import ROBOT, Tier, tier, until
 
@@ -113,3 +114,49 @@ async def test_the_robot_names_what_is_wrong_with_a_request(topic: str) -> None:
             assert "op 'drop' is not one of names, get, set" in replies[0], replies
         finally:
             await asyncio.to_thread(session.close)
+
+
+async def test_a_relay_client_serves_an_action_rclpy_uses(ros_node: Any, topic: str) -> None:
+    """A relay client's advertise_action is served in ROS on the robot: an rclpy action
+    client's goal reaches the relay client, whose feedback and result reach the caller; a ROS
+    cancel reaches it as cancel_action_goal; when the relay dies the goal in flight is aborted
+    and the action leaves ROS."""
+    caller = RosCaller(ros_node, topic)
+    try:
+        async with tier() as t:
+            ws = await open_wire(t.url())
+            await ws.send({"op": "advertise_action", "action": topic, "type": FIB})
+            await caller.ready(20)
+
+            handle = await caller.send(3)
+            goal = await ws.expect(op="send_action_goal", action=topic, timeout=20)
+            assert goal["args"] == {"order": 3} and goal["action_type"] == FIB, goal
+            await ws.send({"op": "action_feedback", "id": goal["id"], "action": topic,
+                           "values": {"sequence": [0, 1]}})
+            assert await asyncio.wait_for(caller.feedback.get(), 20) == [0, 1]
+            await ws.send({"op": "action_result", "id": goal["id"], "action": topic,
+                           "values": {"sequence": fib(3)}, "status": 4, "result": True})
+            result = await caller.result(handle, 20)
+            assert result.status == 4 and list(result.result.sequence) == fib(3)
+
+            handle = await caller.send(4)
+            goal = await ws.expect(op="send_action_goal", action=topic, timeout=20)
+            canceling = handle.cancel_goal_async()
+            await ws.expect(op="cancel_action_goal", id=goal["id"], timeout=20)
+            await until(canceling.done, "the ROS caller's cancel to be answered")
+            await ws.send({"op": "action_result", "id": goal["id"], "action": topic,
+                           "values": {"sequence": [0]}, "status": 5, "result": True})
+            result = await caller.result(handle, 20)
+            assert result.status == 5 and list(result.result.sequence) == [0]
+
+            handle = await caller.send(5)
+            await ws.expect(op="send_action_goal", action=topic, timeout=20)
+            await t.relay.close()
+            result = await caller.result(handle, 20)  # asked after: the server lingers
+            assert result.status == 6, result
+            await until(lambda: not caller.client.server_is_ready(),
+                        "the action to leave ROS with the relay")
+            assert not t.exporter.served
+            await ws.close()
+    finally:
+        caller.destroy()

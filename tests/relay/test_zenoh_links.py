@@ -195,27 +195,29 @@ def test_a_robot_answers_goals_cancels_and_parameters_on_its_own_keys(
             s.close()
 
 
+@pytest.mark.parametrize("chunk", ["@serving", "@executing"])
 def test_a_robot_reaches_its_relays_served_services_and_goal_tokens(
-        pki: Pki, router: tuple[Any, str]) -> None:
-    """The other way: robot1 queries a relay's @serving queryable under its name and follows
-    the relay's @serve and @running tokens there; robot2 reaches none of robot1's."""
+        pki: Pki, router: tuple[Any, str], chunk: str) -> None:
+    """The other way: robot1 queries a relay's queryable for the services and actions its
+    clients serve under robot1's name, and follows the relay's @serve and @running tokens
+    there; robot2 reaches none of robot1's."""
     _, endpoint = router
     relay = _client(pki, endpoint, "relay")
     robot1 = _client(pki, endpoint, "robot1")
     robot2 = _client(pki, endpoint, "robot2")
     try:
-        serving = relay.declare_queryable("robot1/@serving/r/svc",
+        serving = relay.declare_queryable(f"robot1/{chunk}/r/name",
                                           lambda q: q.reply(q.key_expr, b"answer"))
         tokens = [relay.liveliness().declare_token(k) for k in (
             "robot1/@serve/r/std_srvs/srv/Empty/svc", "robot1/@running/r/g1")]
-        assert _answered(robot1, "robot1/@serving/r/svc") == [b"answer"]
-        for chunk in ("@serve", "@running"):
+        assert _answered(robot1, f"robot1/{chunk}/r/name") == [b"answer"]
+        for token_chunk in ("@serve", "@running"):
             seen = [str(r.ok.key_expr) for r in robot1.liveliness().get(
-                f"robot1/{chunk}/**", timeout=DEADLINE) if r.ok]
-            assert len(seen) == 1 and seen[0].startswith(f"robot1/{chunk}/"), seen
-            assert [r for r in robot2.liveliness().get(f"robot1/{chunk}/**",
+                f"robot1/{token_chunk}/**", timeout=DEADLINE) if r.ok]
+            assert len(seen) == 1 and seen[0].startswith(f"robot1/{token_chunk}/"), seen
+            assert [r for r in robot2.liveliness().get(f"robot1/{token_chunk}/**",
                                                        timeout=DEADLINE) if r.ok] == []
-        querier = robot2.declare_querier("robot1/@serving/r/svc", timeout=DEADLINE)
+        querier = robot2.declare_querier(f"robot1/{chunk}/r/name", timeout=DEADLINE)
         assert [r for r in querier.get() if r.ok] == []
         querier.undeclare()
         serving.undeclare()
