@@ -327,16 +327,15 @@ class ZenohSentGoal:
         self.finished = False
         graph = shared.graph
         self.id = f"{secrets.token_hex(4)}{next(graph.goal_ids)}"
-        self.token = graph.session.liveliness().declare_token(
-            f"{graph.robot}/{keys.RUNNING}/{graph.relay}/{self.id}")
+        self.token: Any = None
 
     def cancel(self) -> None:
         """Ask the robot to cancel the goal (the answer comes among the goal's replies)."""
         if not self.finished:
             graph = self.shared.graph
-            graph.session.get(f"{graph.robot}/{keys.CANCEL}/{graph.relay}/{self.id}",
-                              ignore_replies,
-                              timeout=SERVER_WAIT)
+            with contextlib.suppress(zenoh.ZError):  # the relay is closing: the robot cancels
+                graph.session.get(f"{graph.robot}/{keys.CANCEL}/{graph.relay}/{self.id}",
+                                  ignore_replies, timeout=SERVER_WAIT)
 
     def on_reply(self, reply: zenoh.Reply) -> None:
         """One of the robot's replies (on the loop)."""
@@ -385,8 +384,9 @@ class ZenohSentGoal:
 
     def _end(self) -> None:
         self.finished = True
-        with contextlib.suppress(zenoh.ZError):
-            self.token.undeclare()  # type: ignore[no-untyped-call]
+        if self.token is not None:
+            with contextlib.suppress(zenoh.ZError):
+                self.token.undeclare()
 
 
 class ZenohActionClient:
@@ -417,12 +417,17 @@ class ZenohActionClient:
         request = GoalRequest(type=self.type_name, goal=self.goal_conv.to_obj(goal),
                               feedback=feedback, relay=graph.relay, id=sent.id,
                               timeout=SERVER_WAIT)
-        graph.session.get(keys.key_of(graph.robot, self.name, keys.GOAL),
-                          zenoh.handlers.Callback(graph.on_loop(sent.on_reply),
-                                                  lambda: graph.on_loop(
-                                                      lambda _: sent.on_end())(None)),
-                          payload=request.encode(), timeout=GOAL_WAIT,
-                          consolidation=zenoh.ConsolidationMode.NONE)
+        try:
+            sent.token = graph.session.liveliness().declare_token(
+                f"{graph.robot}/{keys.RUNNING}/{graph.relay}/{sent.id}")
+            graph.session.get(keys.key_of(graph.robot, self.name, keys.GOAL),
+                              zenoh.handlers.Callback(graph.on_loop(sent.on_reply),
+                                                      lambda: graph.on_loop(
+                                                          lambda _: sent.on_end())(None)),
+                              payload=request.encode(), timeout=GOAL_WAIT,
+                              consolidation=zenoh.ConsolidationMode.NONE)
+        except zenoh.ZError:  # the relay's Zenoh session closed: the goal ends unsent
+            graph.loop.call_soon(sent.on_end)
         return sent
 
     def destroy(self) -> None:
@@ -923,9 +928,12 @@ class ZenohGraph:
                     f"{what}: robot {self.robot} did not answer (is it connected to this "
                     "relay's Zenoh network?)"))
 
-        self.session.get(key, zenoh.handlers.Callback(self.on_loop(answer),
-                                                      lambda: self.on_loop(ended)(None)),
-                         payload=payload, timeout=timeout)
+        try:
+            self.session.get(key, zenoh.handlers.Callback(self.on_loop(answer),
+                                                          lambda: self.on_loop(ended)(None)),
+                             payload=payload, timeout=timeout)
+        except zenoh.ZError as exc:  # the relay is closing
+            raise Refused(f"{what}: this relay's Zenoh session is closed ({exc})") from None
         return await future
 
     async def call_service(

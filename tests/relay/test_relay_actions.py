@@ -6,15 +6,31 @@ a relay client serves an action that an rclpy action client on the robot uses.""
 from __future__ import annotations
 
 import asyncio
+import importlib
+from pathlib import Path
 from typing import Any
 
 import pytest
 
+from bridge_server.security import SecurityConfig
+from bridge_server.server import BridgeConfig
+from bridge_server.zenoh.link import ZenohOptions
+from bridge_server.zenoh.relay import Relay
 from tests.bridge.action_support import FIB, FibServer, RosCaller, fib
 from tests.helpers import open_wire
-from tests.relay.support import ROBOT, Tier, tier, until
+from tests.relay.support import (
+    ROBOT,
+    Tier,
+    free_port,
+    robot_reachable,
+    start_robot,
+    tier,
+    until,
+)
 
 pytestmark = pytest.mark.timeout(90)
+
+_action: Any = importlib.import_module("rclpy.action")  # untyped API, used as Any
 
 
 async def _relay_lists(t: Tier, action: str) -> None:
@@ -160,3 +176,91 @@ async def test_a_relay_client_serves_an_action_rclpy_uses(ros_node: Any, topic: 
             await ws.close()
     finally:
         caller.destroy()
+
+
+async def test_a_goal_of_the_robots_own_action_type(ros_node: Any, topic: str) -> None:
+    """An action type only the robot has (example_interfaces, which msgs does not generate)
+    is built by the relay from the definition in the robot's graph: the goal, its feedback
+    and result convert both ways."""
+    from example_interfaces.action import Fibonacci
+
+    own = "example_interfaces/action/Fibonacci"
+
+    def execute(handle: Any) -> Any:
+        handle.publish_feedback(Fibonacci.Feedback(sequence=[0, 1]))
+        handle.succeed()
+        return Fibonacci.Result(sequence=fib(handle.request.order))
+
+    server = _action.ActionServer(ros_node, Fibonacci, topic, execute)
+    try:
+        async with tier() as t:
+            ws = await open_wire(t.url())
+            try:
+                await _relay_lists(t, topic)
+                assert own in t.relay.robots[ROBOT].graph.snapshot.definitions
+                await ws.send({"op": "send_action_goal", "action": topic, "action_type": own,
+                               "args": {"order": 4}, "feedback": True, "id": "own"})
+                feedback = await ws.expect(op="action_feedback", id="own", timeout=20)
+                assert feedback["values"] == {"sequence": [0, 1]}
+                result = await ws.expect(op="action_result", id="own", timeout=20)
+                assert result["status"] == 4 and result["values"] == {"sequence": fib(4)}
+            finally:
+                await ws.close()
+    finally:
+        server.destroy()
+
+
+async def test_a_relay_client_cancels_only_its_own_goals(ros_node: Any, topic: str,
+                                                         tmp_path: Path) -> None:
+    """Through a relay with roles, as on the bridge: bob (send_action_goal only) cannot cancel
+    every goal with a zero id through the action's cancel_goal service, and can cancel his own
+    by its id (the robot told the relay the goal's id in ROS)."""
+    from tests.security.test_cancel_goals import (
+        CANCELED,
+        _auth_file,
+        _cancel_raw,
+        _new_goal,
+        _RecordingServer,
+    )
+
+    tokens = _auth_file(tmp_path)
+    router = f"tcp/127.0.0.1:{free_port()}"
+    relay = Relay(BridgeConfig(port=0, node_name="relay",
+                               security=SecurityConfig(auth_file=str(tmp_path / "auth.toml"))),
+                  ZenohOptions(listen=[router]))
+    await relay.start()
+    bridge, exporter = await start_robot(router)
+    server = _RecordingServer(ros_node, topic)
+    try:
+        await robot_reachable(relay)
+        url = f"ws://127.0.0.1:{relay.port}/{ROBOT}?token="
+        alice, bob = await open_wire(url + tokens["alice"]), await open_wire(url + tokens["bob"])
+        graph = relay.robots[ROBOT].graph
+        await until(lambda: graph.server_types(topic + "/_action/send_goal"),
+                    "the relay to list the action server")
+        await bob.send({"op": "subscribe", "topic": topic + "/_action/status",
+                        "type": "action_msgs/msg/GoalStatusArray"})
+        await alice.send(_goal(topic, "a1"))
+        await alice.expect(op="action_feedback", id="a1", timeout=20)
+        alices = await _new_goal(bob, topic, set())
+        reply = await _cancel_raw(bob, topic, bytes(16), "zero")
+        assert reply["result"] is False and "forbidden" in reply["values"], reply
+        await bob.send(_goal(topic, "b1"))
+        await bob.expect(op="action_feedback", id="b1", timeout=20)
+        bobs = await _new_goal(bob, topic, {alices})
+        reply = await _cancel_raw(bob, topic, bobs, "mine")
+        assert reply["result"] is True, reply
+        assert (await bob.expect(op="action_result", id="b1", timeout=20))["status"] == CANCELED
+        assert server.canceled == [bobs]
+        await alice.close()
+        await bob.close()
+    finally:
+        server.destroy()
+        await relay.close()
+        await exporter.close()
+        await bridge.close()
+
+
+def _goal(action: str, id: str) -> dict[str, Any]:
+    return {"op": "send_action_goal", "action": action, "action_type": FIB,
+            "args": {"order": 5}, "feedback": True, "id": id}
