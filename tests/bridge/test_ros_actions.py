@@ -40,6 +40,9 @@ class _Listener:
         self.outcome = (status, result)
         self.done.set()
 
+    def on_failed(self, why: str) -> None:
+        self.done.set()
+
 
 @pytest.fixture
 async def bridge_ros() -> AsyncIterator[RosNode]:

@@ -14,6 +14,7 @@ import pytest
 
 from bridge_server.security import SecurityConfig
 from bridge_server.server import BridgeConfig
+from bridge_server.zenoh.graph import ZenohGraph
 from bridge_server.zenoh.link import ZenohOptions
 from bridge_server.zenoh.relay import Relay
 from tests.bridge.action_support import FIB, FibServer, RosCaller, fib
@@ -118,7 +119,7 @@ async def test_the_robot_names_what_is_wrong_with_a_request(topic: str) -> None:
         session = await open_session(ZenohOptions(connect=[t.router]))
         try:
             def ask(key: str, payload: bytes) -> list[Any]:
-                return [r.ok.payload.to_bytes() if r.ok else r.err.payload.to_string()
+                return [r.ok.payload.to_bytes() if r.ok else r.err.payload.to_string()  # type: ignore[union-attr]
                         for r in session.get(key, payload=payload, timeout=10)]
 
             replies = await asyncio.to_thread(ask, f"{ROBOT}/{keys.GOAL}{topic}", b'{"goal": 1}')
@@ -197,7 +198,8 @@ async def test_a_goal_of_the_robots_own_action_type(ros_node: Any, topic: str) -
             ws = await open_wire(t.url())
             try:
                 await _relay_lists(t, topic)
-                assert own in t.relay.robots[ROBOT].graph.snapshot.definitions
+                graph = t.relay.robots[ROBOT].graph
+                assert isinstance(graph, ZenohGraph) and own in graph.snapshot.definitions
                 await ws.send({"op": "send_action_goal", "action": topic, "action_type": own,
                                "args": {"order": 4}, "feedback": True, "id": "own"})
                 feedback = await ws.expect(op="action_feedback", id="own", timeout=20)
