@@ -15,6 +15,11 @@ one slice. Malformed or truncated input raises :class:`CdrError` naming the fiel
 :func:`encode` is the way back, from a typed message to the bytes rclpy's serializer
 gives (MockRos's ``cbor-raw`` and recordings made from it); it walks the fields
 rather than compiling, as it is not on a hot path.
+
+``decoder_for(cls, typed=cbor2.CBORTag)`` gives the form the bridge's ``compression: cbor``
+sends instead: numeric arrays as RFC 8746 typed arrays (``typed(tag, little-endian bytes)``,
+the CDR bytes as they are, no per-element work), ``octet`` arrays as ``bytes`` too. This
+module does not import cbor2: the caller passes the tag class.
 """
 
 from __future__ import annotations
@@ -28,7 +33,7 @@ from typing import Any
 
 from .runtime import Message, lookup_message
 
-__all__ = ["CdrError", "decode", "decoder_for", "encode"]
+__all__ = ["TYPED_ARRAY_TAGS", "CdrError", "Typed", "decode", "decoder_for", "encode"]
 
 _PRIMITIVES: dict[str, tuple[str, int]] = {  # rclpy's name -> (struct code, size)
     "boolean": ("?", 1),
@@ -48,6 +53,11 @@ _PRIMITIVES: dict[str, tuple[str, int]] = {  # rclpy's name -> (struct code, siz
 _ARRAY_CODES = {"int8": "b", "int16": "h", "uint16": "H", "int32": "i", "uint32": "I",
                 "int64": "q", "uint64": "Q", "float": "f", "double": "d"}
 _BYTES = ("uint8", "char")  # arrays of these are bytes, as in the CBOR wire form
+TYPED_ARRAY_TAGS = {"int8": 72, "int16": 77, "uint16": 69, "int32": 78, "uint32": 70,
+                    "int64": 79, "uint64": 71, "float": 85, "double": 86}
+"""RFC 8746 tags of little-endian typed arrays, by rclpy's element name."""
+Typed = Callable[[int, bytes], Any]
+"""What makes a typed array from its tag and bytes (``cbor2.CBORTag``)."""
 _LITTLE = sys.byteorder == "little"
 _TYPE = re.compile(r"^(?:sequence<(?P<seq>[^,>]+)(?:, *(?P<bound>\d+))?>|"
                    r"(?P<base>[^\[]+)(?:\[(?P<fixed>\d+)\])?)$")
@@ -86,12 +96,13 @@ def _wide(data: Any) -> str:
 class _Gen:
     """Writes the source of one type's decoder."""
 
-    def __init__(self) -> None:
+    def __init__(self, typed: Typed | None) -> None:
+        self.typed = typed
         self.lines: list[str] = []
         self.ns: dict[str, Any] = {
             "unpack_from": struct.unpack_from, "array": array.array, "bytes": bytes,
             "LITTLE": _LITTLE, "CdrError": CdrError, "StructError": struct.error,
-            "wide": _wide,
+            "wide": _wide, "typed": typed,
         }
         self.n = 0
 
@@ -164,7 +175,7 @@ class _Gen:
 
     def nested(self, type_name: str) -> str:
         name = "d_" + re.sub(r"\W", "_", type_name)
-        self.ns[name] = _decoder_with_offset(lookup_message(type_name))
+        self.ns[name] = _decoder_with_offset(lookup_message(type_name), self.typed)
         return name
 
     def field(self, depth: int, name: str, spec: str, target: str) -> None:
@@ -190,8 +201,10 @@ class _Gen:
             end = self.var()
             self.emit(depth, f"{end} = o + {count} * {size}")
             self.emit(depth, f"if {end} > len(b): raise IndexError")
-            if base in _BYTES:
+            if base in _BYTES or (self.typed is not None and base == "octet"):
                 self.emit(depth, f"{target} = bytes(b[o:{end}])")
+            elif self.typed is not None and base in TYPED_ARRAY_TAGS:  # CDR is little-endian
+                self.emit(depth, f"{target} = typed({TYPED_ARRAY_TAGS[base]}, bytes(b[o:{end}]))")
             elif base in ("octet", "boolean"):
                 cast = "bool" if base == "boolean" else ""
                 self.emit(depth, f"{target} = [{cast}(x) for x in bytes(b[o:{end}])]")
@@ -215,15 +228,18 @@ class _Gen:
         self.emit(depth, f"{target} = {items}")
 
 
-_DECODERS: dict[type[Message], Callable[[Any, int], tuple[dict[str, Any], int]]] = {}
+_Decoder = Callable[[Any, int], tuple[dict[str, Any], int]]
+_DECODERS: dict[tuple[type[Message], Typed | None], _Decoder] = {}
 
 
-def _decoder_with_offset(cls: type[Message]) -> Callable[[Any, int], tuple[dict[str, Any], int]]:
-    """``fn(buffer, offset) -> (wire dict, offset after it)`` for ``cls`` (compiled once)."""
-    found = _DECODERS.get(cls)
+def _decoder_with_offset(cls: type[Message], typed: Typed | None = None
+                         ) -> Callable[[Any, int], tuple[dict[str, Any], int]]:
+    """``fn(buffer, offset) -> (wire dict, offset after it)`` for ``cls`` (compiled once
+    per ``typed``)."""
+    found = _DECODERS.get((cls, typed))
     if found is not None:
         return found
-    gen = _Gen()
+    gen = _Gen(typed)
     gen.emit(0, "def decode(b, o):")
     gen.emit(1, "out = {}")
     gen.emit(1, "field = ''")
@@ -236,13 +252,15 @@ def _decoder_with_offset(cls: type[Message]) -> Callable[[Any, int], tuple[dict[
     gen.ns["TYPE"] = cls._type
     exec(compile("\n".join(gen.lines), f"<cdr {cls._type}>", "exec"), gen.ns)
     fn: Callable[[Any, int], tuple[dict[str, Any], int]] = gen.ns["decode"]
-    _DECODERS[cls] = fn
+    _DECODERS[(cls, typed)] = fn
     return fn
 
 
-def decoder_for(cls: type[Message]) -> Callable[[bytes | memoryview], dict[str, Any]]:
-    """``fn(serialized) -> wire dict`` for messages of ``cls`` (see the module docstring)."""
-    inner = _decoder_with_offset(cls)
+def decoder_for(cls: type[Message], typed: Typed | None = None
+                ) -> Callable[[bytes | memoryview], dict[str, Any]]:
+    """``fn(serialized) -> wire dict`` for messages of ``cls``; with ``typed``, numeric
+    arrays as typed arrays (see the module docstring)."""
+    inner = _decoder_with_offset(cls, typed)
 
     def decode_one(data: bytes | memoryview) -> dict[str, Any]:
         if len(data) < 4:

@@ -38,6 +38,7 @@ import time
 from collections.abc import Callable, Mapping
 from typing import Any
 
+import cbor2
 import zenoh
 
 import msgs.dynamic
@@ -100,6 +101,8 @@ class RelayConverter:
     def __init__(self, cls: type[WireMessage]) -> None:
         self.cls = cls
         self.decode = cdr.decoder_for(cls)
+        self.decode_cbor = cdr.decoder_for(cls, typed=cbor2.CBORTag)  # typed arrays, as the
+        # bridge's CBOR sends them (RFC 8746)
         self.json_from_cdr: JsonFromCdr = wire_encoder(cls)
 
     @property
@@ -122,8 +125,8 @@ class RelayConverter:
                           ensure_ascii=False)
 
     def to_cbor_obj(self, msg: Any) -> Any:
-        """The message as a CBOR-ready dict (byte strings for byte arrays)."""
-        return self.decode(cdr.encode(msg))
+        """The message as a CBOR-ready dict (byte strings, numeric arrays typed)."""
+        return self.decode_cbor(cdr.encode(msg))
 
     def from_obj(self, obj: Any, path: str = "") -> Any:
         """A new message from a decoded object; ``ConversionError`` naming the field."""
@@ -180,7 +183,7 @@ class ZenohMessage:
 
     def to_cbor_obj(self, data: bytes) -> Any:
         """The CBOR object of the message's bytes (for :func:`encode_publish_cbor`)."""
-        return self.conv.decode(data)
+        return self.conv.decode_cbor(data)
 
     def cbor_raw(self, name: str | None = None) -> bytes:
         """The whole ``publish`` op with the CDR bytes as they came."""

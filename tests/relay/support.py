@@ -61,11 +61,12 @@ async def start_relay(router: str | None = None, listen: str | None = None,
     return relay
 
 
-async def start_robot(router: str, robot: str = ROBOT, ca: str | None = None
-                      ) -> tuple[Bridge, Exporter]:
-    """The robot's bridge (rclpy, no listener) and its exporter, dialing out to ``router``
-    (``ca``: the CA of a tls/ router's certificate)."""
-    config = BridgeConfig(websocket=False, refresh_interval=0.1)
+async def start_robot(router: str, robot: str = ROBOT, ca: str | None = None,
+                      websocket: bool = False) -> tuple[Bridge, Exporter]:
+    """The robot's bridge (rclpy; a listener on an ephemeral port only with ``websocket``)
+    and its exporter, dialing out to ``router`` (``ca``: the CA of a tls/ router's
+    certificate)."""
+    config = BridgeConfig(websocket=websocket, port=0, refresh_interval=0.1)
     graph = RclpyGraph(asyncio.get_running_loop(), name=config.node_name)
     bridge = Bridge(config, graph)
     await bridge.start()
