@@ -28,17 +28,23 @@ What each fault does to the two TCP connections it joins:
   at 250 ms) so the sender, not the proxy, holds what the link cannot carry yet.
 - **cut**: every open connection is reset (``SO_LINGER`` 0), both sides see ECONNRESET.
 - **refuse**: new connections are accepted and reset at once while set (a bridge that is down).
+
+Given several targets, the proxy is also a round-robin TCP load balancer (what stands in
+front of several relays): each new connection goes to the next target in turn, and a target
+that refuses the connection is skipped for the next one, as a balancer's health check takes a
+dead backend out. :attr:`carried` counts the connections each target got.
 """
 
 from __future__ import annotations
 
 import asyncio
 import contextlib
+import itertools
 import socket
 import struct
 import threading
 import time
-from collections.abc import Coroutine
+from collections.abc import Coroutine, Sequence
 from typing import Any, Self
 
 __all__ = ["LinkProxy"]
@@ -114,11 +120,17 @@ class LinkProxy:
 
     Use as a context manager (or :meth:`start` / :meth:`close`). ``port`` 0 picks a free port;
     :attr:`port` tells which. ``rcvbuf`` bounds what the proxy itself accepts ahead of the
-    link (see the module docstring).
+    link (see the module docstring). ``target`` may be a list of addresses: connections are
+    then spread over them round-robin, skipping those that refuse.
     """
 
-    def __init__(self, target: tuple[str, int], port: int = 0, rcvbuf: int = 65536) -> None:
-        self.target = target
+    def __init__(self, target: tuple[str, int] | Sequence[tuple[str, int]], port: int = 0,
+                 rcvbuf: int = 65536) -> None:
+        targets = [target] if isinstance(target[0], str) else list(target)
+        self.targets: list[tuple[str, int]] = targets  # type: ignore[assignment]
+        self.carried: dict[tuple[str, int], int] = {t: 0 for t in self.targets}
+        """Connections carried to each target so far."""
+        self._turn = itertools.cycle(range(len(self.targets)))
         self.port = port
         self.rcvbuf = rcvbuf
         self.latency = 0.0
@@ -240,13 +252,9 @@ class LinkProxy:
             self._writers.discard(c_writer)
             _reset(c_writer)
             return
-        upstream = _socket(self.rcvbuf)
-        upstream.setblocking(False)
         try:
-            await asyncio.get_running_loop().sock_connect(upstream, self.target)
-            s_reader, s_writer = await asyncio.open_connection(sock=upstream, limit=_CHUNK)
+            s_reader, s_writer = await self._connect()
         except BaseException as exc:  # refused, or the proxy stops while connecting
-            upstream.close()
             self._writers.discard(c_writer)
             _reset(c_writer)
             if isinstance(exc, OSError):
@@ -261,6 +269,26 @@ class LinkProxy:
             if w in self._writers:
                 self._writers.discard(w)
                 w.close()
+
+
+    async def _connect(self) -> tuple[asyncio.StreamReader, asyncio.StreamWriter]:
+        """A connection to the next target in turn that takes one (OSError: none does)."""
+        first = next(self._turn)
+        order = self.targets[first:] + self.targets[:first]
+        for i, target in enumerate(order):
+            upstream = _socket(self.rcvbuf)
+            upstream.setblocking(False)
+            try:
+                await asyncio.get_running_loop().sock_connect(upstream, target)
+                pair = await asyncio.open_connection(sock=upstream, limit=_CHUNK)
+            except BaseException as exc:
+                upstream.close()
+                if isinstance(exc, OSError) and i + 1 < len(order):
+                    continue  # a dead backend: the next one
+                raise
+            self.carried[target] += 1
+            return pair
+        raise AssertionError("unreachable: the loop returns or raises")
 
 
 def _socket(rcvbuf: int) -> socket.socket:

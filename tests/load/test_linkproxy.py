@@ -16,6 +16,13 @@ from bench.linkproxy import LinkProxy
 @pytest.fixture
 def echo() -> Iterator[tuple[str, int]]:
     """A threaded TCP echo server on 127.0.0.1."""
+    with echo_server() as address:
+        yield address
+
+
+@contextlib.contextmanager
+def echo_server() -> Iterator[tuple[str, int]]:
+    """A threaded TCP echo server on 127.0.0.1 while the block runs."""
     srv = socket.create_server(("127.0.0.1", 0))
     stop = threading.Event()
 
@@ -125,3 +132,27 @@ def test_refuse_resets_new_connections(echo: tuple[str, int]) -> None:
         with socket.create_connection(("127.0.0.1", link.port), 5) as s:
             s.sendall(b"b")
             assert _recv_exactly(s, 1) == b"b"
+
+
+def _echo_once(port: int) -> None:
+    with socket.create_connection(("127.0.0.1", port), 5) as s:
+        s.sendall(b"hi")
+        assert _recv_exactly(s, 2) == b"hi"
+
+
+def test_several_targets_share_connections_round_robin() -> None:
+    """Given three targets the proxy is a round-robin balancer: six connections go two to
+    each; with a target down, new connections go to the one that is up and none is refused."""
+    with contextlib.ExitStack() as stack:
+        targets = [stack.enter_context(echo_server()) for _ in range(3)]
+        with LinkProxy(targets) as link:
+            for _ in range(6):
+                _echo_once(link.port)
+            assert list(link.carried.values()) == [2, 2, 2]
+    with socket.socket() as closed:
+        closed.bind(("127.0.0.1", 0))  # bound, never listening: connections are refused
+        down = closed.getsockname()
+        with echo_server() as up, LinkProxy([down, up]) as link:
+            for _ in range(4):
+                _echo_once(link.port)
+            assert link.carried == {down: 0, up: 4}
