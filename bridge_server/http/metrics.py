@@ -44,6 +44,9 @@ of an error is ``protocol`` (a frame that does not decode), ``request`` (a
 request the bridge refused, answered with a status error) or ``internal``.
 ``client`` is ``<worker>-<session id>``.
 
+A relay (:mod:`bridge_server.http.relay_web`) exports every robot's families at once with
+:func:`render_labelled`: each series carries one more label, ``robot``.
+
 Bounded labels
 --------------
 Every name-valued label (topic, service, action, reason, kind) admits at most
@@ -62,7 +65,7 @@ from __future__ import annotations
 
 import bisect
 import time
-from collections.abc import Iterator, Mapping
+from collections.abc import Iterable, Iterator, Mapping
 from typing import Any
 
 from prometheus_client.core import (
@@ -83,6 +86,7 @@ __all__ = [
     "LabelCap",
     "outcome",
     "render",
+    "render_labelled",
 ]
 
 PREFIX = "roslibpy_bridge_"
@@ -375,6 +379,37 @@ def new_caps() -> dict[str, LabelCap]:
 def render(snap: Mapping[str, Any], caps: Mapping[str, LabelCap]) -> bytes:
     """The Prometheus text exposition of a (merged) snapshot."""
     return generate_latest(_Families(snap, caps))
+
+
+class _Labelled:
+    """A collector over several bridges' snapshots: one family per metric name, each
+    bridge's series with one more label naming it (a relay's robots)."""
+
+    def __init__(self, snaps: Iterable[tuple[str, Mapping[str, Any], Mapping[str, LabelCap]]],
+                 label: str, extra: Iterable[Metric]) -> None:
+        self.snaps = list(snaps)
+        self.label = label
+        self.extra = list(extra)
+
+    def collect(self) -> Iterator[Metric]:
+        merged: dict[str, Metric] = {}
+        for value, snap, caps in self.snaps:
+            for family in _Families(snap, caps).collect():
+                acc = merged.get(family.name)
+                if acc is None:
+                    acc = merged[family.name] = Metric(family.name, family.documentation,
+                                                       family.type, family.unit)
+                acc.samples += [sample._replace(labels={self.label: value, **sample.labels})
+                                for sample in family.samples]
+        yield from self.extra
+        yield from merged.values()
+
+
+def render_labelled(snaps: Iterable[tuple[str, Mapping[str, Any], Mapping[str, LabelCap]]],
+                    label: str, extra: Iterable[Metric] = ()) -> bytes:
+    """The exposition of several bridges' ``(name, snapshot, caps)``: every series of each
+    carries ``label="<name>"`` (a relay's ``robot``), after the ``extra`` families."""
+    return generate_latest(_Labelled(snaps, label, extra))
 
 
 def outcome(result: bool, values: object) -> str:

@@ -52,7 +52,8 @@ if TYPE_CHECKING:
 
     from ..server import Bridge
 
-__all__ = ["Access", "Denied", "Reply", "Web", "visible"]
+__all__ = ["Access", "Denied", "Reply", "Web", "address_of", "open_route", "respond",
+           "static_files", "viewer", "visible"]
 
 log = logging.getLogger("bridge_server.http.web")
 
@@ -143,8 +144,11 @@ class Web:
         """Set by the worker machinery: fetches the other workers' snapshots."""
         self._ticker: asyncio.Task[None] | None = None
         self._servers: list[asyncio.Server] = []
-        self._static = {p.name: p for p in STATIC.iterdir() if p.is_file()}
+        self._static = static_files()
         self.metrics_port: int | None = None
+        self.serving: Callable[[], bool] = self._listening
+        """Whether the websocket port takes connections (a front that serves this bridge's
+        sessions on its own port, the relay, sets its own)."""
 
     async def start(self) -> None:
         """Measure rates; serve ``--metrics-port`` and (as a worker) the peer socket."""
@@ -193,10 +197,11 @@ class Web:
         trouble = self.bridge.graph.trouble()
         if trouble is not None:
             return trouble
+        return None if self.serving() else "not listening"
+
+    def _listening(self) -> bool:
         server = self.bridge._server
-        if server is None or not server.is_serving():
-            return "not listening"
-        return None
+        return server is not None and server.is_serving()
 
     # -- routing -------------------------------------------------------------------------------
 
@@ -206,19 +211,8 @@ class Web:
         """websockets' ``process_request``: answer a plain-HTTP route, or ``None`` to go on."""
         if any("upgrade" in v.lower() for v in request.headers.get_all("Connection")):
             return None
-        addr = connection.remote_address
-        reply = await self.answer(request, str(addr[0]) if isinstance(addr, tuple) else str(addr))
-        if reply is None:
-            return None
-        response = connection.respond(reply.status, "")
-        response.body = reply.body
-        headers = response.headers
-        del headers["Content-Length"], headers["Content-Type"]
-        headers["Content-Length"] = str(len(reply.body))
-        headers["Content-Type"] = reply.content_type
-        for name, value in reply.headers:
-            headers[name] = value
-        return response
+        reply = await self.answer(request, address_of(connection))
+        return None if reply is None else respond(connection, reply)
 
     def process_response(
         self, connection: ServerConnection, request: Request, response: Response
@@ -248,22 +242,12 @@ class Web:
             path.startswith("/static/") and path[8:] in self._static
         ):
             return None
-        if path == "/healthz":
-            return Reply(200, b"ok\n")
-        if path == "/readyz":
-            why = self.ready()
-            return Reply(200, b"ready\n") if why is None else Reply(503, f"{why}\n".encode())
-        if path.startswith("/static/"):  # the page and its assets: no data in them
-            file = self._static[path[8:]]
-            return Reply(200, file.read_bytes(),
-                         _TYPES.get(file.suffix, "application/octet-stream"),
-                         [("Cache-Control", "no-cache")])
-        try:
-            principal = self.access.principal(request, address)
-        except Denied as exc:
-            return Reply(exc.status, f"{exc.reason}\n".encode(), headers=exc.headers)
-        if not self.access.may_see(principal, "route", path):
-            return Reply(403, f"{path}: this role may not see it\n".encode())
+        reply = open_route(path, self._static, self.ready)
+        if reply is not None:
+            return reply
+        principal, refusal = viewer(self.access, request, address, path)
+        if refusal is not None:
+            return refusal
         nocache = [("Cache-Control", "no-store")]
         if path == "/status.json":
             data = visible(await self.whole(), principal, self.access)
@@ -273,6 +257,59 @@ class Web:
             return Reply(200, body, "application/json", nocache)
         body = metrics.render(visible(await self.whole(), principal, self.access), self.caps)
         return Reply(200, body, metrics.CONTENT_TYPE, nocache)
+
+
+def address_of(connection: ServerConnection) -> str:
+    """The client's address (its host, without the port)."""
+    addr = connection.remote_address
+    return str(addr[0]) if isinstance(addr, tuple) else str(addr)
+
+
+def respond(connection: ServerConnection, reply: Reply) -> Response:
+    """The websockets response carrying ``reply``."""
+    response = connection.respond(reply.status, "")
+    response.body = reply.body
+    headers = response.headers
+    del headers["Content-Length"], headers["Content-Type"]
+    headers["Content-Length"] = str(len(reply.body))
+    headers["Content-Type"] = reply.content_type
+    for name, value in reply.headers:
+        headers[name] = value
+    return response
+
+
+def static_files() -> dict[str, Path]:
+    """The page's files by name (``static/``)."""
+    return {p.name: p for p in STATIC.iterdir() if p.is_file()}
+
+
+def open_route(path: str, static: Mapping[str, Path], ready: Callable[[], str | None]
+               ) -> Reply | None:
+    """The routes that hold no data, so need no token: ``/healthz``, ``/readyz`` (``ready()``
+    says why not), the page's files in ``static`` (``None``: none of them)."""
+    if path == "/healthz":
+        return Reply(200, b"ok\n")
+    if path == "/readyz":
+        why = ready()
+        return Reply(200, b"ready\n") if why is None else Reply(503, f"{why}\n".encode())
+    file = static.get(path[8:]) if path.startswith("/static/") else None
+    if file is None:
+        return None
+    return Reply(200, file.read_bytes(), _TYPES.get(file.suffix, "application/octet-stream"),
+                 [("Cache-Control", "no-cache")])
+
+
+def viewer(access: Access, request: Request, address: str, path: str
+           ) -> tuple[Any, Reply | None]:
+    """Who asks for data route ``path`` and, if they may not see it, the refusal (401 without
+    a valid token, 429 locked out, 403 for a role that may not)."""
+    try:
+        principal = access.principal(request, address)
+    except Denied as exc:
+        return None, Reply(exc.status, f"{exc.reason}\n".encode(), headers=exc.headers)
+    if not access.may_see(principal, "route", path):
+        return principal, Reply(403, f"{path}: this role may not see it\n".encode())
+    return principal, None
 
 
 async def serve_metrics_port(web: Web, host: str, port: int) -> asyncio.Server:

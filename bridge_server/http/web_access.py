@@ -32,8 +32,11 @@ class WebAccess(Access):
     The page's own static files and ``/healthz``/``/readyz`` stay open.
     """
 
-    def __init__(self, security: Security) -> None:
+    def __init__(self, security: Security, robot: str | None = None) -> None:
+        """``robot``: the routes are one robot's on a relay (a role limited to other robots
+        may not see them)."""
         self.security = security
+        self.robot = robot
 
     def principal(self, request: Request, address: str) -> Any:
         """The principal of the request's token; 401 without a valid one.
@@ -64,8 +67,15 @@ class WebAccess(Access):
         sec.failures.succeeded(address)
         return principal
 
+    def may_reach(self, principal: Any, robot: str) -> bool:
+        """Whether ``principal`` may see robot ``robot`` of a relay at all."""
+        if self.security.auth is None:
+            return True
+        return isinstance(principal, Principal) and principal.role.reaches(robot)
+
     def may_see(self, principal: Any, kind: str, name: str) -> bool:
-        """Routes need introspection; names need introspection on them."""
+        """Routes need introspection (and, for a relay's robot, a role reaching it); names
+        need introspection on them."""
         if self.security.auth is None:
             return True
         if not isinstance(principal, Principal):
@@ -73,6 +83,8 @@ class WebAccess(Access):
         role = principal.role
         if kind == "address":  # where other clients connect from
             return role.has("clients")
+        if kind == "route" and self.robot is not None and not role.reaches(self.robot):
+            return False
         if kind in ("route", "client"):
             return role.has("introspection")
         return role.allows("introspection", name)

@@ -12,6 +12,9 @@ other relays connect to it); ``--zenoh-connect`` makes it a client of routers. T
 on one router serve the same robots: each robot's messages cross its uplink once, whatever
 the number of relays and viewers.
 
+Plain GETs on the same port show the relay's robots and each robot's bridge status page
+and metrics (:mod:`bridge_server.http.relay_web`).
+
 It logs ``relay listening on ws://HOST:PORT`` once ready and stops within about a second
 of SIGINT or SIGTERM.
 """
@@ -30,6 +33,8 @@ try:
     from websockets.asyncio.server import Server, ServerConnection, serve
 
     from .. import security
+    from ..http.relay_web import RelayWeb
+    from ..http.web import Reply, address_of, respond
     from ..http.web_access import WebAccess
     from ..interfaces import BridgeError
     from ..security import Security
@@ -69,6 +74,7 @@ class Relay:
         self.session: zenoh.Session | None = None
         self._server: Server | None = None
         self._opening: dict[str, asyncio.Task[Bridge | None]] = {}
+        self.web = RelayWeb(self, WebAccess(self.security))  # status page, /metrics
 
     @property
     def port(self) -> int:
@@ -90,10 +96,15 @@ class Relay:
         )
 
     async def robot(self, name: str) -> Bridge | None:
-        """The Bridge of robot ``name``, made on first use; ``None`` if it is not on Zenoh."""
+        """The Bridge of robot ``name``, made on first use; ``None`` if it is not on Zenoh
+        (or ``name`` is no robot name)."""
         bridge = self.robots.get(name)
         if bridge is not None:
             return bridge
+        try:
+            keys.check_robot(name)
+        except BridgeError:
+            return None
         opening = self._opening.get(name)
         if opening is None:  # one opening per robot, however many clients ask at once
             opening = self._opening[name] = asyncio.ensure_future(self._open_robot(name))
@@ -108,45 +119,73 @@ class Relay:
         bridge = Bridge(self.config, graph=graph)
         graph.presence_listeners.append(lambda here: _tell_presence(bridge, name, here))
         bridge.security = self.security  # one auth file, one SIGHUP, for every robot
-        bridge.web.access = WebAccess(self.security)
+        bridge.web.access = WebAccess(self.security, robot=name)
+        bridge.web.serving = self._serving
         graph.start()
         if not await graph.ready():
             log.warning("robot %s sent no graph snapshot in time: serving it without", name)
         bridge.start_graph()
+        await bridge.web.start()  # its rates, for its page
         self.robots[name] = bridge
         log.info("serving robot %s", name)
         return bridge
 
     async def _alive(self, name: str) -> bool:
         """Whether robot ``name``'s liveliness token is on the network."""
-        assert self.session is not None
+        return bool(await self._alive_tokens(name, first=True))
+
+    async def on_network(self) -> set[str]:
+        """The robots on the Zenoh network now (their liveliness tokens)."""
+        return await self._alive_tokens("*")
+
+    async def _alive_tokens(self, robots: str, first: bool = False) -> set[str]:
+        """The robots matching ``robots`` whose liveliness tokens are on the network (with
+        ``first``, as soon as one answers)."""
+        if self.session is None:
+            return set()
         import zenoh
 
         loop = asyncio.get_running_loop()
-        found: asyncio.Future[bool] = loop.create_future()
+        done: asyncio.Future[None] = loop.create_future()
+        found: set[str] = set()
 
-        def seen(_: Any) -> None:
-            if not found.done():
-                found.set_result(True)
+        def seen(key: str) -> None:
+            found.add(key.split("/", 1)[0])
+            if first and not done.done():
+                done.set_result(None)
 
         def ended() -> None:
-            if not found.done():
-                found.set_result(False)
+            if not done.done():
+                done.set_result(None)
 
         def reply(r: Any) -> None:
             if r.ok is not None:
-                loop.call_soon_threadsafe(seen, None)
+                loop.call_soon_threadsafe(seen, str(r.ok.key_expr))
 
         self.session.liveliness().get(
-            f"{name}/{keys.ALIVE}",
+            f"{robots}/{keys.ALIVE}",
             zenoh.handlers.Callback(reply, lambda: loop.call_soon_threadsafe(ended)),
             timeout=ALIVE_WAIT)
-        return await found
+        await done
+        return found
+
+    def _serving(self) -> bool:
+        return self._server is not None and self._server.is_serving()
+
+    def trouble(self) -> str | None:
+        """Why the relay does not serve (``None``: it does)."""
+        if self.session is None:
+            return "not joined to Zenoh"
+        return None if self._serving() else "not listening"
 
     async def _process_request(self, connection: ServerConnection, request: Request
                                ) -> Response | None:
-        """The path names the robot: refuse a path naming none on Zenoh, else hand the
-        request to that robot's Bridge (plain-HTTP routes, security, session resume)."""
+        """Plain GETs are the status routes (relay_web.py). A websocket's path names the
+        robot: refuse a path naming none on Zenoh, else hand the request to that robot's
+        Bridge (security, session resume)."""
+        if not any("upgrade" in v.lower() for v in request.headers.get_all("Connection")):
+            reply = await self.web.answer(request, address_of(connection))
+            return respond(connection, reply or Reply(404, b"no such page\n"))
         name = request.path.partition("?")[0].strip("/").split("/")[0]
         if not name:
             return connection.respond(

@@ -9,12 +9,16 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import re
 import socket
 from collections.abc import AsyncIterator
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 from bridge_server.rclpy_graph.graph import RclpyGraph
+from bridge_server.security import SecurityConfig
+from bridge_server.security.auth import hash_token, new_token
 from bridge_server.server import Bridge, BridgeConfig
 from bridge_server.zenoh.exporter import Exporter
 from bridge_server.zenoh.link import ZenohOptions
@@ -105,6 +109,36 @@ async def tier(tls: tuple[str, str] | None = None) -> AsyncIterator[Tier]:
             await e.close()
         for b in {id(x): x for x in (robot, t.robot)}.values():
             await b.close()
+
+
+@contextlib.asynccontextmanager
+async def relay_with_auth(auth: Path, roles: str, robots: tuple[str, ...] = ("robot1", "robot2")
+                          ) -> AsyncIterator[tuple[Relay, dict[str, str]]]:
+    """A relay (the router) with the auth file ``auth`` written from the ``[roles.*]`` text
+    ``roles`` and one principal, with a token of its own, per role; ``robots`` dialing out to
+    it. Yields the relay and the tokens by role name."""
+    names = re.findall(r"^\[roles\.(\w+)\]", roles, re.MULTILINE)
+    tokens = {role: new_token() for role in names}
+    auth.write_text(roles + "".join(
+        f'\n[principals.{role}_user]\nrole = "{role}"\ntoken_hash = "{hash_token(token)}"\n'
+        for role, token in tokens.items()))
+    router = f"tcp/127.0.0.1:{free_port()}"
+    relay = Relay(BridgeConfig(port=0, node_name="relay",
+                               security=SecurityConfig(auth_file=str(auth))),
+                  ZenohOptions(listen=[router]))
+    await relay.start()
+    started = []
+    try:
+        for name in robots:
+            started.append(await start_robot(router, robot=name))
+        for name in robots:
+            await robot_reachable(relay, name)
+        yield relay, tokens
+    finally:
+        await relay.close()
+        for bridge, exporter in started:
+            await exporter.close()
+            await bridge.close()
 
 
 async def until(predicate: Any, what: str, timeout: float = 15.0) -> Any:

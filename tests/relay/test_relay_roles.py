@@ -13,13 +13,9 @@ from pathlib import Path
 import pytest
 from websockets.exceptions import InvalidStatus
 
-from bridge_server.security import SecurityConfig
-from bridge_server.security.auth import hash_token, new_token
-from bridge_server.server import BridgeConfig
-from bridge_server.zenoh.link import ZenohOptions
 from bridge_server.zenoh.relay import Relay
 from tests.helpers import open_wire
-from tests.relay.support import free_port, robot_reachable, start_robot
+from tests.relay.support import relay_with_auth
 
 pytestmark = pytest.mark.timeout(90)
 
@@ -35,26 +31,9 @@ subscribe = ["*"]
 
 @pytest.fixture
 async def relay_with_roles(tmp_path: Path) -> AsyncIterator[tuple[Relay, dict[str, str]]]:
-    tokens = {role: new_token() for role in ("robot1_viewer", "fleet_viewer")}
-    auth = tmp_path / "auth.toml"
-    auth.write_text(ROLES + "".join(
-        f'\n[principals.{role}_user]\nrole = "{role}"\ntoken_hash = "{hash_token(token)}"\n'
-        for role, token in tokens.items()))
-    router = f"tcp/127.0.0.1:{free_port()}"
-    relay = Relay(BridgeConfig(port=0, node_name="relay",
-                               security=SecurityConfig(auth_file=str(auth))),
-                  ZenohOptions(listen=[router]))
-    await relay.start()
-    robots = [await start_robot(router, robot=name) for name in ("robot1", "robot2")]
-    try:
-        for name in ("robot1", "robot2"):
-            await robot_reachable(relay, name)
-        yield relay, tokens
-    finally:
-        await relay.close()
-        for bridge, exporter in robots:
-            await exporter.close()
-            await bridge.close()
+    """A relay with the roles above (a token each) serving robot1 and robot2."""
+    async with relay_with_auth(tmp_path / "auth.toml", ROLES) as served:
+        yield served
 
 
 async def _reaches(relay: Relay, robot: str, token: str) -> bool:

@@ -1,24 +1,10 @@
-// The live status page: polls /status.json once a second and redraws the tables.
+// The live status page: polls status.json once a second and redraws the tables.
 "use strict";
 (function () {
-  const POLL_MS = 1000;
-
-  function el(tag, text, cls) {
-    const e = document.createElement(tag);
-    if (text !== undefined) e.textContent = String(text);
-    if (cls) e.className = cls;
-    return e;
-  }
-
-  function duration(seconds) {
-    seconds = Math.max(0, Math.floor(seconds));
-    const d = Math.floor(seconds / 86400), h = Math.floor(seconds / 3600) % 24;
-    const m = Math.floor(seconds / 60) % 60, s = seconds % 60;
-    if (d) return d + "d " + h + "h";
-    if (h) return h + "h " + m + "m";
-    if (m) return m + "m " + s + "s";
-    return s + "s";
-  }
+  const { el, duration, poll } = window.statusPage;  // page.js
+  // Beside the page: /status.json on a bridge, /robot1/status.json for a relay's robot1
+  // (the page opened as /static/index.html asks the root).
+  const STATUS = location.pathname.startsWith("/static/") ? "/status.json" : "status.json";
 
   function fill(id, rows, empty) {
     const table = document.getElementById(id);
@@ -116,10 +102,6 @@
     }), "no actions");
     fill("workers", s.workers.map((w) => [w.index, w.pid, w.node, duration(s.now - w.started), w.clients]),
       "none");
-    const updated = document.getElementById("updated");
-    updated.textContent = "live · " + new Date().toLocaleTimeString();
-    updated.className = "";
-    document.body.dataset.updates = String(Number(document.body.dataset.updates || 0) + 1);
   }
 
   // The last PLOT_POINTS seconds of messages per second, in all: "is it still flowing?"
@@ -148,18 +130,5 @@
       `${out.toFixed(1)} /s to clients, ${inn.toFixed(1)} /s from clients (peak ${top.toFixed(0)})`;
   }
 
-  async function poll() {
-    try {
-      const r = await fetch("/status.json" + location.search, { cache: "no-store" });  // ?token=
-      if (!r.ok) throw new Error(r.status + " " + r.statusText);
-      render(await r.json());
-    } catch (err) {
-      const updated = document.getElementById("updated");
-      updated.textContent = "not updating: " + err.message;
-      updated.className = "stale";
-    }
-    setTimeout(poll, POLL_MS);
-  }
-
-  poll();
+  poll(STATUS, render);
 })();

@@ -1,0 +1,170 @@
+"""A relay's plain-HTTP routes: its robots at a glance, and each robot's bridge status page.
+
+The relay (``roslibpy-lite-relay``) serves each robot's sessions with one
+:class:`~bridge_server.server.Bridge`; these routes show them, with the bridge's own page,
+snapshot and metrics code, on the relay's websocket port (a websocket upgrade on any path
+goes on to the robot's handshake):
+
+===========================  ===========================================================
+``GET /``                    the relay's page (``static/relay.html``): its robots, each
+                             linking to its own page
+``GET /status.json``         the relay and, per robot: present on Zenoh or not, clients,
+                             the topics its clients watch, messages and bytes each way
+``GET /metrics``             every robot's bridge metrics (:mod:`.metrics`), each series
+                             labelled ``robot``, and ``roslibpy_relay_robot_present``
+``GET /healthz``, ``/readyz``  the process runs; Zenoh is joined and the port listens
+``GET /<robot>/``            the bridge's status page for that robot, and under it
+                             ``status.json``, ``metrics``, ``readyz`` (the robot is on
+                             Zenoh), exactly as a bridge serves them
+===========================  ===========================================================
+
+``/<robot>`` without the slash is redirected to ``/<robot>/``. A robot named like a route
+(``metrics``, ``static``) is still served over websockets, its page not.
+
+Who sees what is the bridge's :class:`~.web_access.WebAccess`: with an auth file the data
+routes need a token (``Authorization: Bearer`` or ``?token=``) of a role with
+``introspection``; a role limited to some robots (``robots = [...]``) sees only those, in
+the relay's lists, and is refused (403) another robot's page. A robot the relay does not
+know of is 404 before any token is asked for, as for its websocket.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from collections.abc import Awaitable, Mapping
+from typing import TYPE_CHECKING, Any, Protocol
+
+from prometheus_client.core import GaugeMetricFamily
+
+from . import metrics
+from .web import Reply, open_route, static_files, viewer, visible
+from .web_access import WebAccess
+
+if TYPE_CHECKING:
+    from websockets.http11 import Request
+
+    from ..server import Bridge
+
+__all__ = ["RelayFront", "RelayWeb"]
+
+RELAY_ROUTES = frozenset({"", "status.json", "metrics", "healthz", "readyz", "static"})
+"""First path chunks that are the relay's own routes, not a robot's."""
+
+
+class RelayFront(Protocol):
+    """What the routes need of the relay (``bridge_server.zenoh.relay.Relay``)."""
+
+    relay_id: str
+    robots: dict[str, Bridge]
+
+    def robot(self, name: str) -> Awaitable[Bridge | None]:
+        """Robot ``name``'s Bridge, opened on first use; ``None``: not on Zenoh."""
+
+    def on_network(self) -> Awaitable[set[str]]:
+        """The robots on Zenoh now (their liveliness tokens)."""
+
+    def trouble(self) -> str | None:
+        """Why the relay does not serve (``None``: it does)."""
+
+
+class RelayWeb:
+    """Answers the relay's plain GETs (see the module docstring)."""
+
+    def __init__(self, relay: RelayFront, access: WebAccess) -> None:
+        self.relay = relay
+        self.access = access
+        self.started = time.time()
+        self._static = static_files()
+        self.caps = metrics.new_caps()
+
+    async def answer(self, request: Request, address: str) -> Reply | None:
+        """The reply to a plain GET from ``address`` (``None``: no such route)."""
+        path, _, query = request.path.partition("?")
+        first, slash, rest = path.lstrip("/").partition("/")
+        if first in RELAY_ROUTES:
+            return await self._own(path, request, address)
+        if not slash:  # /robot1: the page's relative links need /robot1/
+            return Reply(308, b"", headers=[("Location", f"/{first}/" + (f"?{query}" if query
+                                                                         else ""))])
+        bridge = await self.relay.robot(first)
+        if bridge is None:
+            return Reply(404, f"no robot named {first!r} is connected to this relay's Zenoh "
+                         "network\n".encode())
+        inner = type(request)("/" + rest + (f"?{query}" if query else ""), request.headers)
+        return await bridge.web.answer(inner, address)
+
+    async def _own(self, path: str, request: Request, address: str) -> Reply | None:
+        if path == "/":
+            path = "/static/relay.html"
+        reply = open_route(path, self._static, self.relay.trouble)
+        if reply is not None or path.startswith("/static/"):
+            return reply
+        principal, refusal = viewer(self.access, request, address, path)
+        if refusal is not None:
+            return refusal
+        nocache = [("Cache-Control", "no-store")]
+        snaps = {name: visible(bridge.web.local(), principal, bridge.web.access)
+                 for name, bridge in sorted(self.relay.robots.items())
+                 if self.access.may_reach(principal, name)}
+        online = {name for name in await self.relay.on_network()
+                  if self.access.may_reach(principal, name)}
+        if path == "/status.json":
+            data = self._status(snaps, online)
+            return Reply(200, json.dumps(data, separators=(",", ":")).encode(),
+                         "application/json", nocache)
+        present = GaugeMetricFamily(
+            "roslibpy_relay_robot_present",
+            "1 while the robot is on this relay's Zenoh network, 0 once it went away.",
+            labels=["robot"])
+        for name in sorted(online | set(snaps)):
+            present.add_metric([name], 1 if self._present(name, online) else 0)
+        body = metrics.render_labelled(
+            ((name, snap, self.relay.robots[name].web.caps) for name, snap in snaps.items()),
+            "robot", [present])
+        return Reply(200, body, metrics.CONTENT_TYPE, nocache)
+
+    def _present(self, name: str, online: set[str]) -> bool:
+        bridge = self.relay.robots.get(name)
+        if bridge is not None:  # followed: its liveliness subscriber knows at once
+            return bridge.graph.trouble() is None
+        return name in online
+
+    def _status(self, snaps: Mapping[str, Mapping[str, Any]], online: set[str]
+                ) -> dict[str, Any]:
+        from roslibpy_lite import __version__
+
+        robots = []
+        for name in sorted(online | set(snaps)):
+            snap = snaps.get(name)
+            entry: dict[str, Any] = {"name": name, "present": self._present(name, online),
+                                     "served": snap is not None}
+            entry.update(summary(snap) if snap is not None else summary({}))
+            robots.append(entry)
+        return {"relay": self.relay.relay_id, "version": __version__, "started": self.started,
+                "now": time.time(), "ready": self.relay.trouble() is None, "robots": robots}
+
+
+def summary(snap: Mapping[str, Any]) -> dict[str, Any]:
+    """One robot's line on the relay's page from its bridge's (visible) snapshot: clients,
+    the topics its clients watch, messages and bytes from the robot and each way."""
+    topics: Mapping[str, Mapping[str, Any]] = snap.get("topics", {})
+
+    def total(field: str) -> int:
+        return int(sum(t.get(field, 0) for t in topics.values()))
+
+    clients = [c for c in snap.get("clients", []) if not c.get("parked")]
+    return {
+        "clients": len(clients),
+        "clients_by_protocol": {p: sum(1 for c in clients if c.get("protocol") == p)
+                                for p in sorted({c.get("protocol", "rosbridge")
+                                                 for c in clients})},
+        "topics_watched": sorted(name for name, t in topics.items() if t.get("subscribers")),
+        "messages_from_robot": total("ros_received"),
+        "messages_to_clients": total("sent"),
+        "bytes_to_clients": total("sent_bytes"),
+        "messages_from_clients": total("published"),
+        "bytes_from_clients": total("published_bytes"),
+        "drops": total("drops"),
+    }
+

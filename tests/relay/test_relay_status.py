@@ -1,0 +1,225 @@
+"""The relay's status page and /metrics (issue 26): its robots, and each robot's bridge page.
+
+Real HTTP against a real tier (tests/relay/support.py): the relay as Zenoh router, robots'
+rclpy bridges dialing out, websocket clients subscribing and publishing through it.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+from collections.abc import AsyncIterator
+from pathlib import Path
+from typing import Any
+
+import pytest
+from std_msgs.msg import String
+
+from bridge_server.security.auth import new_token
+from bridge_server.zenoh.relay import Relay
+from tests.helpers import CHROMEDRIVER, CHROMIUM, headless_chromium, open_wire
+from tests.ops.support import aget
+from tests.relay.support import ROBOT, relay_with_auth, tier, until
+
+pytestmark = pytest.mark.timeout(120)
+
+
+async def _json(url: str) -> Any:
+    code, _, body = await aget(url)
+    assert code == 200, (url, code, body)
+    return json.loads(body)
+
+
+async def _metrics(url: str) -> dict[tuple[str, frozenset[tuple[str, str]]], float]:
+    """``/metrics`` parsed: (sample name, labels) -> value."""
+    from prometheus_client.parser import text_string_to_metric_families
+
+    code, headers, body = await aget(url)
+    assert code == 200, (url, code, body)
+    assert headers["content-type"].startswith("text/plain")
+    return {(s.name, frozenset(s.labels.items())): s.value
+            for f in text_string_to_metric_families(body.decode()) for s in f.samples}
+
+
+def _robot(status: dict[str, Any], name: str) -> dict[str, Any]:
+    found = [r for r in status["robots"] if r["name"] == name]
+    assert found, f"robot {name} not listed: {status['robots']}"
+    return found[0]
+
+
+async def test_relay_status_and_metrics_per_robot_and_client(ros_node: Any, topic: str) -> None:
+    """/status.json lists the robot (present, clients, topics watched, messages and bytes each
+    way), /robot1/status.json is the bridge's snapshot with the client and its subscription,
+    /metrics carries every series with robot="robot1" and its presence; when the robot goes
+    away it shows as not present."""
+    pub = ros_node.create_publisher(String, topic, 10)
+    async with tier() as t:
+        base = f"http://127.0.0.1:{t.relay.port}"
+        ws = await open_wire(t.url())
+        try:
+            await ws.send({"op": "subscribe", "topic": topic, "type": "std_msgs/msg/String"})
+            back = topic + "_back"
+            await ws.send({"op": "advertise", "topic": back, "type": "std_msgs/msg/String"})
+            deadline = asyncio.get_running_loop().time() + 20
+            while True:  # until the robot's topic reached the client (discovery has no event)
+                pub.publish(String(data="x" * 100))
+                try:
+                    await ws.expect(op="publish", topic=topic, timeout=0.3)
+                    break
+                except AssertionError:
+                    assert asyncio.get_running_loop().time() < deadline, "never heard the robot"
+            for _ in range(3):
+                await ws.send({"op": "publish", "topic": back, "msg": {"data": "hi"}})
+            await ws.send({"op": "call_service", "service": "/rosapi/topics", "id": "sync"})
+            await ws.expect(op="service_response", id="sync")
+
+            status = await _json(base + "/status.json")
+            assert status["relay"] == t.relay.relay_id and status["ready"] is True
+            robot = _robot(status, ROBOT)
+            assert robot["present"] is True and robot["served"] is True
+            assert robot["clients"] == 1 and robot["clients_by_protocol"] == {"rosbridge": 1}
+            assert robot["topics_watched"] == [topic]
+            assert robot["messages_from_robot"] >= 1
+            assert robot["messages_to_clients"] >= 1 and robot["bytes_to_clients"] > 100
+            assert robot["messages_from_clients"] == 3 and robot["bytes_from_clients"] > 0
+
+            own = await _json(f"{base}/{ROBOT}/status.json")
+            (client,) = own["clients"]
+            assert client["address"].startswith("127.0.0.1:")
+            assert [s["topic"] for s in client["subscriptions"]] == [topic]
+            assert client["publishes"] == [back]
+            assert own["topics"][topic]["subscribers"] == 1
+
+            m = await _metrics(base + "/metrics")
+            on = frozenset({("robot", ROBOT)})
+            assert m[("roslibpy_relay_robot_present", on)] == 1
+            assert m[("roslibpy_bridge_clients", on)] == 1
+            assert m[("roslibpy_bridge_messages_total", on | {("topic", topic),
+                                                              ("direction", "ros_to_client")})] >= 1
+            assert m[("roslibpy_bridge_messages_total", on | {("topic", back),
+                                                              ("direction", "client_to_ros")})] == 3
+            assert m[("roslibpy_bridge_bytes_total", on | {("topic", topic),
+                                                           ("direction", "ros_to_client")})] > 100
+            own_metrics = await _metrics(f"{base}/{ROBOT}/metrics")  # the bridge's, unlabelled
+            assert own_metrics[("roslibpy_bridge_clients", frozenset())] == 1
+
+            code, _, _ = await aget(f"{base}/{ROBOT}")
+            assert code == 200  # redirected to /robot1/: the bridge's page
+            code, _, page = await aget(f"{base}/{ROBOT}/")
+            assert code == 200 and b"roslibpy-lite bridge" in page
+            code, _, page = await aget(base + "/")
+            assert code == 200 and b"roslibpy-lite relay" in page
+            assert (await aget(base + "/readyz"))[0] == 200
+            assert (await aget(f"{base}/{ROBOT}/readyz"))[0] == 200
+            code, _, body = await aget(f"{base}/robot2/status.json")
+            assert code == 404 and b"no robot named 'robot2'" in body
+
+            await t.exporter.close()  # the robot leaves the network
+            await until(lambda: t.relay.robots[ROBOT].web.ready() is not None,
+                        "the relay to see the robot go")
+            robot = _robot(await _json(base + "/status.json"), ROBOT)
+            assert robot["present"] is False and robot["clients"] == 1
+            m = await _metrics(base + "/metrics")
+            assert m[("roslibpy_relay_robot_present", on)] == 0
+            code, _, body = await aget(f"{base}/{ROBOT}/readyz")
+            assert code == 503 and b"robot1 is not connected" in body
+        finally:
+            await ws.close()
+
+
+ROLES = """
+[roles.robot1_viewer]
+subscribe = ["*"]
+introspection = ["*"]
+robots = ["robot1"]
+
+[roles.fleet_viewer]
+subscribe = ["*"]
+introspection = ["*"]
+
+[roles.driver]
+subscribe = ["*"]
+"""
+
+
+@pytest.fixture
+async def relay_with_roles(tmp_path: Path) -> AsyncIterator[tuple[Relay, dict[str, str]]]:
+    """A relay with the roles above (a token each) serving robot1 and robot2."""
+    async with relay_with_auth(tmp_path / "auth.toml", ROLES) as served:
+        yield served
+
+
+async def test_relay_pages_follow_tokens_roles_and_robots(
+        relay_with_roles: tuple[Relay, dict[str, str]]) -> None:
+    """With an auth file: no token or a wrong one is 401 (the token never in the answer), a
+    role without introspection 403; a role limited to robot1 sees robot1 alone in the lists
+    and metrics and is refused robot2's page; a fleet role sees both."""
+    relay, tokens = relay_with_roles
+    base = f"http://127.0.0.1:{relay.port}"
+    for path in ("/status.json", "/metrics", f"/{ROBOT}/status.json", f"/{ROBOT}/metrics"):
+        code, _, body = await aget(base + path)
+        assert code == 401 and b"authentication required" in body, (path, code, body)
+        wrong = new_token()
+        code, _, body = await aget(f"{base}{path}?token={wrong}")
+        assert code == 401 and wrong.encode() not in body, (path, code, body)
+        code, _, body = await aget(f"{base}{path}?token={tokens['driver']}")
+        assert code == 403, (path, code, body)
+    for path in ("/", "/static/relay.js", "/healthz", "/readyz"):  # no data: open
+        assert (await aget(base + path))[0] == 200, path
+
+    fleet = f"?token={tokens['fleet_viewer']}"
+    for name in ("robot1", "robot2"):  # each robot's page (the relay serves both now)
+        assert (await aget(f"{base}/{name}/status.json{fleet}"))[0] == 200
+    status = await _json(base + "/status.json" + fleet)
+    assert [(r["name"], r["present"], r["served"]) for r in status["robots"]] == [
+        ("robot1", True, True), ("robot2", True, True)]
+    m = await _metrics(base + "/metrics" + fleet)
+    assert {dict(labels).get("robot") for _, labels in m} == {"robot1", "robot2"}
+
+    one = f"?token={tokens['robot1_viewer']}"
+    status = await _json(base + "/status.json" + one)
+    assert [r["name"] for r in status["robots"]] == ["robot1"]
+    m = await _metrics(base + "/metrics" + one)
+    assert {dict(labels).get("robot") for _, labels in m} == {"robot1"}
+    assert (await aget(f"{base}/robot1/status.json{one}"))[0] == 200
+    code, _, body = await aget(f"{base}/robot2/status.json{one}")
+    assert code == 403 and b"may not see it" in body, body
+
+
+@pytest.mark.skipif(CHROMIUM is None or CHROMEDRIVER is None,
+                    reason="chromium and chromium-driver are not installed (scripts/setup.sh)")
+async def test_relay_page_in_a_browser(ros_node: Any, topic: str) -> None:
+    """Headless Chromium: the relay's page lists robot1 with its client and watched topic;
+    its link opens the bridge's page for robot1, which shows the client."""
+    async with tier() as t:
+        ws = await open_wire(t.url())
+        try:
+            await ws.send({"op": "subscribe", "topic": topic, "type": "std_msgs/msg/String"})
+            await until(lambda: topic in t.relay.robots[ROBOT].graph.subscriptions,
+                        "the relay's subscription")
+            seen = await asyncio.to_thread(_browse, f"http://127.0.0.1:{t.relay.port}/", topic)
+        finally:
+            await ws.close()
+    assert seen["robot"][:4] == [ROBOT, "yes", "1", topic], seen
+    assert seen["clients"] == "1" and topic in seen["client_row"], seen
+
+
+def _browse(url: str, topic: str) -> dict[str, Any]:
+    """The relay page's robot1 row, then (following its link) the robot page's client row."""
+    from selenium.webdriver.common.by import By
+    from selenium.webdriver.support.ui import WebDriverWait
+
+    with headless_chromium("relay-status") as driver:
+        driver.get(url)
+        row = ("return Array.from(document.querySelectorAll('#robots tr[data-robot]'))"
+               ".map((tr) => Array.from(tr.cells).map((td) => td.innerText.trim()))[0] || null")
+        robot = WebDriverWait(driver, 30, poll_frequency=0.1).until(
+            lambda d: (r := d.execute_script(row)) and topic in r and r)
+        driver.find_element(By.LINK_TEXT, ROBOT).click()
+        client = ("const r = document.querySelector('#clients tbody tr');"
+                  "return [document.getElementById('client-count').innerText,"
+                  " r ? r.innerText : '']")
+        count, client_row = WebDriverWait(driver, 30, poll_frequency=0.1).until(
+            lambda d: (c := d.execute_script(client)) and topic in c[1] and c)
+        return {"robot": robot, "clients": count, "client_row": client_row,
+                "robot_url": driver.current_url}
