@@ -15,8 +15,11 @@ the number of relays and viewers.
 Plain GETs on the same port show the relay's robots and each robot's bridge status page
 and metrics (:mod:`bridge_server.http.relay_web`).
 
-It logs ``relay listening on ws://HOST:PORT`` once ready and stops within about a second
-of SIGINT or SIGTERM.
+It listens at once; until its Zenoh router answers (``--zenoh-connect`` to a router that is
+not up yet) a client is refused with 503 naming why (``Retry-After: 1``) and ``/readyz``
+answers 503. It logs ``relay listening on ws://HOST:PORT`` once it serves (listening and
+on Zenoh) and stops within about a second of SIGINT or SIGTERM. A router that goes away
+later is reported to each robot's clients as a warning status, its return as info.
 """
 
 from __future__ import annotations
@@ -83,8 +86,16 @@ class Relay:
         return int(next(iter(self._server.sockets)).getsockname()[1])
 
     async def start(self) -> None:
-        """Join Zenoh, then listen."""
+        """Listen, then join Zenoh (until a router answers, clients are answered 503)."""
+        await self.listen()
+        await self.join()
+
+    async def join(self) -> None:
+        """Join the Zenoh network (a client of routers waits here until one answers)."""
         self.session = await zenoh_link.open_session(self.options)
+
+    async def listen(self) -> None:
+        """Open the websocket port (and its plain-HTTP routes)."""
         self._server = await serve(
             self._handle, self.config.host, self.config.port,
             max_size=self.config.max_message_size, write_limit=self.config.write_limit,
@@ -175,7 +186,8 @@ class Relay:
     def trouble(self) -> str | None:
         """Why the relay does not serve (``None``: it does)."""
         if self.session is None:
-            return "not joined to Zenoh"
+            return ("this relay has not reached its Zenoh router yet "
+                    f"({', '.join(self.options.connect)})")
         return None if self._serving() else "not listening"
 
     async def _process_request(self, connection: ServerConnection, request: Request
@@ -186,6 +198,11 @@ class Relay:
         if not any("upgrade" in v.lower() for v in request.headers.get_all("Connection")):
             reply = await self.web.answer(request, address_of(connection))
             return respond(connection, reply or Reply(404, b"no such page\n"))
+        if self.session is None:  # no router yet: say so, and when to ask again
+            log.info("refused a client: this relay has not reached its Zenoh router yet")
+            response = connection.respond(503, f"{self.trouble()}: try again shortly\n")
+            response.headers["Retry-After"] = "1"
+            return response
         name = request.path.partition("?")[0].strip("/").split("/")[0]
         if not name:
             return connection.respond(
@@ -282,15 +299,23 @@ async def _run(args: argparse.Namespace) -> int:
     loop = asyncio.get_running_loop()
     for sig in (signal.SIGINT, signal.SIGTERM):
         loop.add_signal_handler(sig, stop.set)
-    await relay.start()
+    await relay.listen()
     loop.add_signal_handler(signal.SIGHUP, relay.reload)
     scheme = "wss" if args.certfile else "ws"
     zenoh_where = (f"Zenoh router on {', '.join(args.zenoh_listen)}" if args.zenoh_listen
                    else f"Zenoh client of {', '.join(args.zenoh_connect)}")
-    log.info("relay %s (%s)", relay.relay_id, zenoh_where)
-    log.info("relay listening on %s://%s:%d", scheme, args.host, relay.port)
+    log.info("relay %s (%s): accepting on %s://%s:%d, joining Zenoh", relay.relay_id,
+             zenoh_where, scheme, args.host, relay.port)
     relay.security.startup_warnings(args.host)
-    await stop.wait()
+    joining = asyncio.ensure_future(relay.join())
+    stopping = asyncio.ensure_future(stop.wait())
+    await asyncio.wait({joining, stopping}, return_when=asyncio.FIRST_COMPLETED)
+    if joining.done():
+        joining.result()  # a session that cannot open (BridgeError) ends the relay
+        log.info("relay listening on %s://%s:%d", scheme, args.host, relay.port)
+        await stopping
+    else:
+        joining.cancel()
     log.info("relay shutting down")
     await relay.close()
     return 0

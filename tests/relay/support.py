@@ -25,6 +25,13 @@ from bridge_server.zenoh.link import ZenohOptions
 from bridge_server.zenoh.relay import Relay
 
 ROBOT = "robot1"
+ROBOT1_VIEWER = """
+[roles.robot1_viewer]
+subscribe = ["*"]
+introspection = ["*"]
+robots = ["robot1"]
+"""
+"""An auth file's role that sees robot1 alone (a relay's ``robots`` limit)."""
 
 
 def free_port() -> int:

@@ -49,9 +49,9 @@ async def test_a_dead_relay_hands_its_clients_to_the_next(ros_node: Any, topic: 
             await publish_until(lambda: got, "the first relay's client never heard the robot")
             assert ros.url == urls[0]
             await first.close()  # the relay dies
-            await publish_until(lambda: ros.state is ConnectionState.RECONNECTING,
-                                "the client never noticed")
-            await publish_until(lambda: ros.state is ConnectionState.CONNECTED,
+            # its second connection, up (RECONNECTING can be over between two looks)
+            await publish_until(lambda: ros.connects > 1
+                                and ros.state is ConnectionState.CONNECTED,
                                 "the client never reached the second relay")
             assert ros.url == urls[1]
             heard_before = len(got)

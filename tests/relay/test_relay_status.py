@@ -19,7 +19,7 @@ from bridge_server.security.auth import new_token
 from bridge_server.zenoh.relay import Relay
 from tests.helpers import CHROMEDRIVER, CHROMIUM, headless_chromium, open_wire
 from tests.ops.support import aget
-from tests.relay.support import ROBOT, relay_with_auth, tier, until
+from tests.relay.support import ROBOT, ROBOT1_VIEWER, relay_with_auth, tier, until
 
 pytestmark = pytest.mark.timeout(120)
 
@@ -127,12 +127,7 @@ async def test_relay_status_and_metrics_per_robot_and_client(ros_node: Any, topi
             await ws.close()
 
 
-ROLES = """
-[roles.robot1_viewer]
-subscribe = ["*"]
-introspection = ["*"]
-robots = ["robot1"]
-
+ROLES = ROBOT1_VIEWER + """
 [roles.fleet_viewer]
 subscribe = ["*"]
 introspection = ["*"]
