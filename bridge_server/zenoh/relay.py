@@ -36,6 +36,7 @@ try:
     from websockets.asyncio.server import Server, ServerConnection, serve
 
     from .. import security
+    from ..foxglove import select_subprotocol
     from ..http.relay_web import RelayWeb
     from ..http.web import Reply, address_of, respond
     from ..http.web_access import WebAccess
@@ -103,6 +104,7 @@ class Relay:
             ping_interval=self.config.keepalive_interval or None,
             ping_timeout=self.config.keepalive_timeout or None,
             process_request=self._process_request,
+            select_subprotocol=select_subprotocol,  # foxglove.websocket.v1, else rosbridge
             **self.security.serve_kwargs(),
         )
 
@@ -233,8 +235,9 @@ class Relay:
 
     def reload(self) -> bool:
         """SIGHUP: certificates and the auth file again, every robot's sessions rechecked."""
-        return self.security.reload(
-            s.gate for bridge in self.robots.values() for s in list(bridge.sessions))
+        gates = [s.gate for bridge in self.robots.values() for s in list(bridge.sessions)]
+        gates += [s.gate for bridge in self.robots.values() for s in list(bridge.foxglove.sessions)]
+        return self.security.reload(gates)
 
     async def close(self) -> None:
         """Close every robot's sessions, leave Zenoh."""
