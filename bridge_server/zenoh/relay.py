@@ -105,6 +105,7 @@ class Relay:
             ping_timeout=self.config.keepalive_timeout or None,
             process_request=self._process_request,
             select_subprotocol=select_subprotocol,  # foxglove.websocket.v1, else rosbridge
+            process_response=self._process_response,
             **self.security.serve_kwargs(),
         )
 
@@ -228,6 +229,14 @@ class Relay:
             return connection.respond(
                 403, f"role {principal.role.name} may not reach robot {name!r}\n")
         return refusal
+
+    def _process_response(self, connection: ServerConnection, request: Request,
+                          response: Response) -> None:
+        """The robot's Bridge names its session (resume), acknowledgements and a needed
+        ``auth`` op in the handshake answer, as on the bridge."""
+        bridge: Bridge | None = getattr(connection, "robot_bridge", None)
+        if bridge is not None:
+            bridge.web.process_response(connection, request, response)
 
     async def _handle(self, ws: ServerConnection) -> None:
         bridge: Bridge = ws.robot_bridge  # type: ignore[attr-defined]

@@ -34,6 +34,8 @@ from tests.relay.support import (
     robot_reachable,
     start_relay,
     start_robot,
+    tier,
+    until,
 )
 
 pytestmark = pytest.mark.timeout(120)
@@ -207,3 +209,46 @@ async def test_tokens_never_reach_a_relays_log_or_its_answers(tmp_path: Path) ->
             part = token[i:i + 6]
             assert part not in log and part.encode().hex() not in flat, part
             assert not [a for a in answers if part in a], part
+
+
+async def test_a_dropped_client_resumes_its_session_on_the_relay(ros_node: Any, topic: str
+                                                                 ) -> None:
+    """Our client's link to a relay is cut and stays down a moment: the relay keeps its
+    session, the client resumes it (the session token in the relay's handshake answer) and
+    gets every message the robot published meanwhile, once and in order."""
+    from bench.linkproxy import LinkProxy
+    from roslibpy_lite import ConnectionState, connect
+    from tests.client.support import fast_backoff
+
+    pub = ros_node.create_publisher(String, topic, 100)
+    async with tier() as t:
+        with LinkProxy(("127.0.0.1", t.relay.port)) as link:
+            async with connect(f"ws://127.0.0.1:{link.port}/{ROBOT}",
+                               backoff=fast_backoff()) as ros:
+                got: list[int] = []
+                ros.subscribe(topic, "std_msgs/msg/String", queue_length=100,
+                              callback=lambda m: got.append(int(m["data"])))
+                n = 0
+                deadline = asyncio.get_running_loop().time() + 30
+                while not got:  # until the relay's subscription hears the robot
+                    n += 1
+                    pub.publish(String(data=str(n)))
+                    await asyncio.sleep(0.02)
+                    assert asyncio.get_running_loop().time() < deadline, "never heard it"
+                link.refuse()
+                link.cut()
+                for _ in range(20):  # published while the client is away
+                    n += 1
+                    pub.publish(String(data=str(n)))
+                    await asyncio.sleep(0.02)
+                bridge = t.relay.robots[ROBOT]
+                await until(lambda: [s.parked for s in bridge.sessions] == [True],
+                            "the relay to keep the session")
+                link.restore()
+                last = n
+                deadline = asyncio.get_running_loop().time() + 30
+                while not (ros.state is ConnectionState.CONNECTED and got[-1] >= last):
+                    assert asyncio.get_running_loop().time() < deadline, got
+                    await asyncio.sleep(0.02)
+                assert bridge.resumable.resumed == 1
+                assert got == list(range(got[0], last + 1)), got
