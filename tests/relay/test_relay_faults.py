@@ -95,6 +95,30 @@ async def test_a_relay_before_its_router_answers_503_then_serves(ros_node: Any, 
             await robot.close()
 
 
+async def test_the_relay_command_waits_for_its_router_while_listening() -> None:
+    """``roslibpy-lite-relay --zenoh-connect`` to a router that is not up: it says it accepts
+    and joins, /readyz is 503 naming the router; the router comes and it logs that it is
+    listening (serving), /readyz 200; SIGTERM ends it cleanly."""
+    router = f"tcp/127.0.0.1:{free_port()}"
+    proc = Proc([sys.executable, "-m", "bridge_server.zenoh.relay", "--port", "0",
+                 "--zenoh-connect", router], ros_env())
+    hub = None
+    try:
+        port = int(proc.wait_for(re.compile(r"accepting on ws://127\.0\.0\.1:(\d+), joining "
+                                            "Zenoh")).group(1))
+        code, _, body = await aget(f"http://127.0.0.1:{port}/readyz")
+        assert code == 503 and router.encode() in body, body
+        assert not [line for line in proc.lines if "relay listening" in line]
+        hub = await start_relay(listen=router)
+        await asyncio.to_thread(proc.wait_for, re.compile(r"relay listening on ws://"))
+        assert (await aget(f"http://127.0.0.1:{port}/readyz"))[0] == 200
+    finally:
+        proc.stop()
+        if hub is not None:
+            await hub.close()
+    assert proc.proc.returncode == 0, "\n".join(proc.lines)
+
+
 async def test_a_relay_that_loses_its_router_tells_its_clients(ros_node: Any, topic: str
                                                                ) -> None:
     """The router (another relay) dies: the client of a relay that was its client is told
