@@ -11,8 +11,10 @@ goes on to the robot's handshake):
 ``GET /status.json``         the relay and, per robot: present on Zenoh or not, clients,
                              the topics its clients watch, messages and bytes each way
 ``GET /metrics``             every robot's bridge metrics (:mod:`.metrics`), each series
-                             labelled ``robot``, and ``roslibpy_relay_robot_present``
-``GET /healthz``, ``/readyz``  the process runs; Zenoh is joined and the port listens
+                             labelled ``robot``, ``roslibpy_relay_robot_present`` and
+                             ``roslibpy_relay_connections_refused_total`` (by reason)
+``GET /healthz``             the process runs
+``GET /readyz``              Zenoh is joined and the port listens (else 503 and why)
 ``GET /<robot>/``            the bridge's status page for that robot, and under it
                              ``status.json``, ``metrics``, ``readyz`` (the robot is on
                              Zenoh), exactly as a bridge serves them
@@ -35,7 +37,7 @@ import time
 from collections.abc import Awaitable, Mapping
 from typing import TYPE_CHECKING, Any, Protocol
 
-from prometheus_client.core import GaugeMetricFamily
+from prometheus_client.core import CounterMetricFamily, GaugeMetricFamily
 
 from . import metrics
 from .web import Reply, open_route, static_files, viewer, visible
@@ -57,6 +59,8 @@ class RelayFront(Protocol):
 
     relay_id: str
     robots: dict[str, Bridge]
+    refused: dict[str, int]
+    """Clients turned away before any robot's Bridge saw them, by reason."""
 
     def robot(self, name: str) -> Awaitable[Bridge | None]:
         """Robot ``name``'s Bridge, opened on first use; ``None``: not on Zenoh."""
@@ -119,9 +123,15 @@ class RelayWeb:
             labels=["robot"])
         for name in sorted(online | set(snaps)):
             present.add_metric([name], 1 if self._present(name, online) else 0)
+        refused = CounterMetricFamily(
+            "roslibpy_relay_connections_refused",
+            "Clients the relay turned away before any robot's bridge saw them, by reason "
+            "(no_router, unknown_robot, no_robot_named, invalid_robot_name).", labels=["reason"])
+        for reason, n in sorted(self.relay.refused.items()):
+            refused.add_metric([reason], n)
         body = metrics.render_labelled(
             ((name, snap, self.relay.robots[name].web.caps) for name, snap in snaps.items()),
-            "robot", [present])
+            "robot", [present, refused])
         return Reply(200, body, metrics.CONTENT_TYPE, nocache)
 
     def _present(self, name: str, online: set[str]) -> bool:
@@ -142,7 +152,8 @@ class RelayWeb:
             entry.update(summary(snap) if snap is not None else summary({}))
             robots.append(entry)
         return {"relay": self.relay.relay_id, "version": __version__, "started": self.started,
-                "now": time.time(), "ready": self.relay.trouble() is None, "robots": robots}
+                "now": time.time(), "ready": self.relay.trouble() is None,
+                "refused": dict(self.relay.refused), "robots": robots}
 
 
 def summary(snap: Mapping[str, Any]) -> dict[str, Any]:

@@ -78,6 +78,7 @@ class Relay:
         self.session: zenoh.Session | None = None
         self._server: Server | None = None
         self._opening: dict[str, asyncio.Task[Bridge | None]] = {}
+        self.refused: dict[str, int] = {}  # clients turned away before a robot, by reason
         self.web = RelayWeb(self, WebAccess(self.security))  # status page, /metrics
 
     @property
@@ -203,22 +204,23 @@ class Relay:
             return respond(connection, reply or Reply(404, b"no such page\n"))
         if self.session is None:  # no router yet: say so, and when to ask again
             log.info("refused a client: this relay has not reached its Zenoh router yet")
-            response = connection.respond(503, f"{self.trouble()}: try again shortly\n")
+            response = self._refuse(connection, "no_router", 503,
+                                    f"{self.trouble()}: try again shortly")
             response.headers["Retry-After"] = "1"
             return response
         name = request.path.partition("?")[0].strip("/").split("/")[0]
         if not name:
-            return connection.respond(
-                404, "name a robot in the path: ws://<relay>:<port>/<robot>\n")
+            return self._refuse(connection, "no_robot_named", 404,
+                                "name a robot in the path: ws://<relay>:<port>/<robot>")
         try:
             keys.check_robot(name)
         except BridgeError as exc:
-            return connection.respond(400, f"{exc}\n")
+            return self._refuse(connection, "invalid_robot_name", 400, str(exc))
         bridge = await self.robot(name)
         if bridge is None:
             log.info("refused a client asking for robot %s: not on Zenoh", name)
-            return connection.respond(
-                404, f"no robot named {name!r} is connected to this relay's Zenoh network\n")
+            return self._refuse(connection, "unknown_robot", 404, f"no robot named {name!r} "
+                                "is connected to this relay's Zenoh network")
         connection.robot_bridge = bridge  # type: ignore[attr-defined]
         refusal: Response | None = await bridge.admit(connection, request)
         principal = getattr(connection, "principal", None)
@@ -229,6 +231,13 @@ class Relay:
             return connection.respond(
                 403, f"role {principal.role.name} may not reach robot {name!r}\n")
         return refusal
+
+    def _refuse(self, connection: ServerConnection, reason: str, status: int, text: str
+                ) -> Response:
+        """Turn a client away before any robot's Bridge sees it, counted by ``reason`` (the
+        relay's /metrics)."""
+        self.refused[reason] = self.refused.get(reason, 0) + 1
+        return connection.respond(status, f"{text}\n")
 
     def _process_response(self, connection: ServerConnection, request: Request,
                           response: Response) -> None:

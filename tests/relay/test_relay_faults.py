@@ -12,6 +12,7 @@
 from __future__ import annotations
 
 import asyncio
+import json
 import re
 import sys
 from pathlib import Path
@@ -72,6 +73,8 @@ async def test_a_relay_before_its_router_answers_503_then_serves(ros_node: Any, 
         assert f"has not reached its Zenoh router yet ({router})" in response.body.decode()
         code, _, body = await aget(f"http://127.0.0.1:{relay.port}/readyz")
         assert code == 503 and router.encode() in body
+        code, _, body = await aget(f"http://127.0.0.1:{relay.port}/status.json")
+        assert code == 200 and json.loads(body)["refused"] == {"no_router": 1}, body
         assert not joining.done()
 
         hub = await start_relay(listen=router)

@@ -14,6 +14,7 @@ from typing import Any
 
 import pytest
 from std_msgs.msg import String
+from websockets.exceptions import InvalidStatus
 
 from bridge_server.security.auth import new_token
 from bridge_server.zenoh.relay import Relay
@@ -113,6 +114,12 @@ async def test_relay_status_and_metrics_per_robot_and_client(ros_node: Any, topi
             assert (await aget(f"{base}/{ROBOT}/readyz"))[0] == 200
             code, _, body = await aget(f"{base}/robot2/status.json")
             assert code == 404 and b"no robot named 'robot2'" in body
+            with pytest.raises(InvalidStatus):  # a websocket for a robot that is not there
+                await open_wire(t.url("robot2"))
+            assert (await _json(base + "/status.json"))["refused"] == {"unknown_robot": 1}
+            m = await _metrics(base + "/metrics")
+            assert m[("roslibpy_relay_connections_refused_total",
+                      frozenset({("reason", "unknown_robot")}))] == 1
 
             await t.exporter.close()  # the robot leaves the network
             await until(lambda: t.relay.robots[ROBOT].web.ready() is not None,
