@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+from collections.abc import Callable
 from typing import Any
 
 import pytest
@@ -26,6 +27,11 @@ from tests.relay.support import ROBOT, free_port, robot_reachable, start_relay, 
 pytestmark = pytest.mark.timeout(120)
 
 CLIENTS = 4
+
+
+def _collect(heard: list[int]) -> Callable[[Any], None]:
+    """A callback appending each message's number to ``heard``."""
+    return lambda msg: heard.append(int(msg["data"]))
 
 
 async def test_relays_behind_a_balancer_share_clients_and_take_over(ros_node: Any, topic: str
@@ -60,7 +66,7 @@ async def test_relays_behind_a_balancer_share_clients_and_take_over(ros_node: An
                 got: list[list[int]] = [[] for _ in clients]
                 for ros, heard in zip(clients, got, strict=True):
                     ros.subscribe(topic, "std_msgs/msg/String", queue_length=100,
-                                  callback=lambda m, heard=heard: heard.append(int(m["data"])))
+                                  callback=_collect(heard))
                 assert list(balancer.carried.values()) == [2, 2], balancer.carried
                 assert [len(r.robots[ROBOT].sessions) for r in relays] == [2, 2]
                 await publish_until(lambda: all(got), "a client never heard the robot")

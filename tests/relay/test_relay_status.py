@@ -43,7 +43,7 @@ async def _metrics(url: str) -> dict[tuple[str, frozenset[tuple[str, str]]], flo
 
 
 def _robot(status: dict[str, Any], name: str) -> dict[str, Any]:
-    found = [r for r in status["robots"] if r["name"] == name]
+    found: list[dict[str, Any]] = [r for r in status["robots"] if r["name"] == name]
     assert found, f"robot {name} not listed: {status['robots']}"
     return found[0]
 
