@@ -10,6 +10,7 @@ The relay runs in this process, so the blocking peer driver is called off the ev
 from __future__ import annotations
 
 import asyncio
+import base64
 import functools
 from typing import Any
 
@@ -75,8 +76,7 @@ async def test_foxglove_client_through_a_relay(ros_node: Any, topic: str) -> Non
                                      "frame_id": "camera"}
             assert (msg["height"], msg["width"], msg["encoding"], msg["step"]) == (
                 48, 64, "rgb8", 192)
-            assert msg["data"]["$typed"] == "Uint8Array"
-            assert bytes(msg["data"]["values"]) == bytes(img.data)
+            assert base64.b64decode(msg["data"]["$bytes"]) == bytes(img.data)
 
             await wire.send({"op": "subscribe", "topic": topic + "_chatter",
                              "type": "std_msgs/msg/String"})
