@@ -54,7 +54,7 @@ from ..graph import (
     TopicFeed,
 )
 from ..interfaces import BridgeError, ConversionError, args_mapping
-from ..session.actions import ACTION_LINGER
+from ..session.actions import ACTION_LINGER, CLIENT_IDLE
 from . import keys
 from .keys import (
     GOAL_WAIT,
@@ -169,6 +169,13 @@ class Exporter:
         self.exports: dict[str, _Export] = {}
         self.publishers: dict[tuple[str, str, bool], tuple[Publisher, set[str]]] = {}
         self.action_clients: dict[tuple[str, Any], ActionClient] = {}
+        """The robot's action clients of relays' goals by (action, type); one no goal used
+        for ``client_idle`` seconds is destroyed, as the bridge's are."""
+        self.client_idle = CLIENT_IDLE
+        self.sweeps = 0
+        """How many times idle action clients were looked for."""
+        self._client_used: dict[tuple[str, Any], float] = {}
+        self._sweeper: asyncio.TimerHandle | None = None
         self.goals: dict[tuple[str, str], _RobotGoal] = {}
         """Relays' goals in flight by (relay id, goal id)."""
         self._early_cancels: set[tuple[str, str]] = set()
@@ -249,9 +256,13 @@ class Exporter:
             if goal.sent is not None:
                 goal.sent.cancel()
         self.goals.clear()
+        if self._sweeper is not None:
+            self._sweeper.cancel()
+            self._sweeper = None
         for client in self.action_clients.values():
             client.destroy()
         self.action_clients.clear()
+        self._client_used.clear()
         for served in self.served.values():
             served.ros.destroy()
         self.served.clear()
@@ -569,17 +580,38 @@ class Exporter:
     async def _action_client(self, name: str, action_cls: Any, timeout: float) -> ActionClient:
         """The robot's shared client of ``name``, once a server is ready for it (at most
         ``timeout`` s)."""
-        client = self.action_clients.get((name, action_cls))
-        if client is None:
-            client = self.action_clients[(name, action_cls)] = self.graph.action_client(
-                name, action_cls)
+        key = (name, action_cls)
         deadline = self._loop.time() + timeout
-        while not client.ready():
+        while True:
+            client = self.action_clients.get(key)
+            if client is None:
+                client = self.action_clients[key] = self.graph.action_client(name, action_cls)
+            self._client_used[key] = self._loop.time()
+            if self._sweeper is None:
+                self._sweeper = self._loop.call_later(self.client_idle, self._sweep)
+            if client.ready():
+                return client
             if self._loop.time() >= deadline:
                 raise BridgeError(f"action {name} has no action server ready on robot "
                                   f"{self.robot} within {timeout} s")
             await asyncio.sleep(0.02)
-        return client
+
+    def _sweep(self) -> None:
+        """Destroy the action clients no goal used for ``client_idle`` seconds and none is
+        running through (each adds entities to every wait set of the robot's executor)."""
+        self._sweeper = None
+        self.sweeps += 1
+        now = self._loop.time()
+        busy = {id(goal.client) for goal in self.goals.values()}
+        for key, used in list(self._client_used.items()):
+            client = self.action_clients.get(key)
+            if client is None or (now - used >= self.client_idle and id(client) not in busy):
+                del self._client_used[key]
+                if client is not None:
+                    del self.action_clients[key]
+                    client.destroy()
+        if self._client_used:
+            self._sweeper = self._loop.call_later(self.client_idle, self._sweep)
 
     def _answer_cancel(self, query: zenoh.Query) -> None:
         with answering(query):

@@ -266,3 +266,46 @@ async def test_a_relay_client_cancels_only_its_own_goals(ros_node: Any, topic: s
 def _goal(action: str, id: str) -> dict[str, Any]:
     return {"op": "send_action_goal", "action": action, "action_type": FIB,
             "args": {"order": 5}, "feedback": True, "id": id}
+
+
+async def test_the_robot_destroys_an_action_client_no_goal_uses(ros_node: Any, topic: str
+                                                                ) -> None:
+    """The robot's action client of relays' goals is kept while a goal runs through it and
+    destroyed once none used it for the idle time (as the bridge's are), leaving ROS; the
+    next goal makes a new one."""
+    server = FibServer(ros_node, topic, slow=True)
+    try:
+        async with tier() as t:
+            t.exporter.client_idle = 0.3
+            name, ns = t.robot.graph.own_node()
+
+            def robot_clients() -> list[str]:
+                return [n for n, _ in _action.get_action_client_names_and_types_by_node(
+                    ros_node, name, ns)]
+
+            ws = await open_wire(t.url())
+            try:
+                await _relay_lists(t, topic)
+                goal = {"op": "send_action_goal", "action": topic, "action_type": FIB,
+                        "args": {"order": 3}, "feedback": True}
+                await ws.send({**goal, "id": "i1"})
+                await ws.expect(op="action_feedback", id="i1", timeout=20)
+                await until(lambda: robot_clients() == [topic], "the robot's action client in ROS")
+                sweeps = t.exporter.sweeps
+                await until(lambda: t.exporter.sweeps >= sweeps + 2,
+                            "two looks for idle clients while the goal runs")
+                assert len(t.exporter.action_clients) == 1, "a busy client was destroyed"
+                await ws.send({"op": "cancel_action_goal", "action": topic, "id": "i1"})
+                assert (await ws.expect(op="action_result", id="i1", timeout=20))["status"] == 5
+                await until(lambda: not t.exporter.action_clients,
+                            "the idle action client destroyed")
+                await until(lambda: not robot_clients(), "the action client gone from ROS")
+
+                server.slow = False
+                await ws.send({**goal, "id": "i2"})
+                result = await ws.expect(op="action_result", id="i2", timeout=20)
+                assert result["status"] == 4 and result["values"] == {"sequence": fib(3)}
+            finally:
+                await ws.close()
+    finally:
+        server.destroy()
