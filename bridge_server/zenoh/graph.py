@@ -373,9 +373,14 @@ class ZenohSentGoal:
             elif event.event == "failed":
                 listener.on_failed(event.text)
             else:
-                result = None
-                if event.values is not None:
-                    result = shared.result_conv.from_obj(event.values, "result")
+                try:
+                    result = None
+                    if event.values is not None:
+                        result = shared.result_conv.from_obj(event.values, "result")
+                except ConversionError as exc:  # the goal ended all the same: say why so
+                    listener.on_failed(f"robot {shared.graph.robot} sent a result that does "
+                                       f"not fit {shared.type_name}: {exc}")
+                    return
                 listener.on_result(event.status, result)
 
     def on_end(self) -> None:

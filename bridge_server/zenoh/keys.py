@@ -118,6 +118,7 @@ CONTROL = (ALIVE, DEMAND, LATCHED, GRAPH, CALL, ADVERTISE, IN, GOAL, RUNNING, CA
 name each)."""
 
 _CHUNK = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.-]*\Z")
+_HEX = re.compile(r"(?:[0-9a-f]{2})*\Z")
 
 
 def check_robot(robot: str) -> str:
@@ -300,11 +301,14 @@ class GoalEvent:
         if obj.get("event") not in cls.EVENTS:
             raise BridgeError(f"a goal's reply has no known event ({obj.get('event')!r})")
         try:
-            return cls(event=obj["event"], values=obj.get("values"),
-                       status=int(obj.get("status", 0)), code=int(obj.get("code", 0)),
-                       uuid=str(obj.get("uuid", "")), text=str(obj.get("text", "")))
+            event = cls(event=obj["event"], values=obj.get("values"),
+                        status=int(obj.get("status", 0)), code=int(obj.get("code", 0)),
+                        uuid=str(obj.get("uuid", "")), text=str(obj.get("text", "")))
         except (TypeError, ValueError) as exc:
             raise BridgeError(f"a goal's reply is not a GoalEvent ({exc})") from None
+        if not _HEX.match(event.uuid):
+            raise BridgeError(f"a goal's reply has a uuid that is not hex ({event.uuid!r:.40})")
+        return event
 
 
 @dataclass

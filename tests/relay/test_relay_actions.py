@@ -309,3 +309,64 @@ async def test_the_robot_destroys_an_action_client_no_goal_uses(ros_node: Any, t
                 await ws.close()
     finally:
         server.destroy()
+
+
+async def test_a_robots_faulty_goal_replies_end_the_goal_with_a_reason(
+        topic: str, caplog: pytest.LogCaptureFixture) -> None:
+    """A robot whose goal replies break the wire contract (a plain Zenoh session plays it):
+    an ``accepted`` whose id is not hex is dropped with a warning naming it and the goal goes
+    on; a result that does
+    not fit the action's type ends the goal with the field named, instead of leaving the
+    client waiting for ever; the relay serves the next goal."""
+    import zenoh
+
+    from bridge_server.zenoh import keys
+    from bridge_server.zenoh.keys import GoalEvent, GoalRequest, Snapshot
+    from bridge_server.zenoh.link import ZenohOptions, open_session
+
+    fake = "robot2"
+    send_goal = topic + "/_action/send_goal"
+    snap = Snapshot(node="fake", own_node=("fake", "/"),
+                    services=[(send_goal, [FIB + "_SendGoal"])],
+                    nodes={"/srv": {"name": "srv", "namespace": "/", "subscribes": [],
+                                    "publishes": [], "serves": [[send_goal, [FIB + "_SendGoal"]]]}})
+
+    def answer_graph(query: zenoh.Query) -> None:
+        query.reply(query.key_expr, snap.encode())
+
+    def answer_goal(query: zenoh.Query) -> None:
+        order = GoalRequest.decode(query.payload.to_bytes()).goal["order"]
+        if order == 1:
+            events = [GoalEvent("accepted", uuid="not hex"),
+                      GoalEvent("result", status=4, values={"sequence": [0, 1]})]
+        else:
+            events = [GoalEvent("accepted", uuid="00" * 16),
+                      GoalEvent("result", status=4, values={"sequence": "none"})]
+        for event in events:
+            query.reply(query.key_expr, event.encode())
+
+    async with tier() as t:
+        session = await open_session(ZenohOptions(connect=[t.router]))
+        entities = [session.declare_queryable(f"{fake}/{keys.GRAPH}", answer_graph),
+                    session.declare_queryable(f"{fake}/{keys.GOAL}/**", answer_goal,
+                                              complete=True),
+                    session.liveliness().declare_token(f"{fake}/{keys.ALIVE}")]
+        ws = await open_wire(t.url(fake))
+        try:
+            await robot_reachable(t.relay, fake)
+            goal = {"op": "send_action_goal", "action": topic, "action_type": FIB}
+            await ws.send({**goal, "args": {"order": 1}, "id": "f1"})
+            result = await ws.expect(op="action_result", id="f1", timeout=20)
+            assert result["status"] == 4 and result["values"] == {"sequence": [0, 1]}, result
+            assert any("uuid that is not hex ('not hex')" in r.getMessage()
+                       for r in caplog.records if r.name == "bridge_server.zenoh.graph")
+
+            await ws.send({**goal, "args": {"order": 2}, "id": "f2"})
+            result = await ws.expect(op="action_result", id="f2", timeout=20)
+            assert result["result"] is False and result["status"] == 6, result
+            assert "sequence" in result["values"] and fake in result["values"], result
+        finally:
+            await ws.close()
+            for entity in entities:
+                entity.undeclare()
+            await asyncio.to_thread(session.close)
