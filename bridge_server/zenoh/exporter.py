@@ -179,6 +179,8 @@ class Exporter:
         self.goals: dict[tuple[str, str], _RobotGoal] = {}
         """Relays' goals in flight by (relay id, goal id)."""
         self._early_cancels: set[tuple[str, str]] = set()
+        self._waiting: set[tuple[str, str]] = set()
+        """Relays' goals waiting for a ready action server (not sent yet)."""
         self.served: dict[str, _Served] = {}
         """Services relays' clients serve by name; actions by their goal service's name."""
         self._served_goals: dict[int, str] = {}  # id(ServedGoal) -> its id in its query
@@ -559,23 +561,30 @@ class Exporter:
 
     async def _goal(self, query: zenoh.Query) -> None:
         action = keys.name_of(str(query.key_expr), 2)
+        key: tuple[str, str] | None = None
         try:
             req = GoalRequest.decode(query.payload.to_bytes() if query.payload else b"")
             action_cls = self.graph.resolve_action(req.type)
             conv = self.graph.converter(action_cls.Goal)
             goal = conv.from_obj(args_mapping(req.goal, conv.fields, "goal"), "args")
+            key = (req.relay, req.id)
+            self._waiting.add(key)
             client = await self._action_client(action, action_cls, req.timeout)
         except BridgeError as exc:
             with answering(query):
                 query.reply(query.key_expr, GoalEvent("failed", text=str(exc)).encode())
             return
-        key = (req.relay, req.id)
+        finally:
+            if key is not None:
+                self._waiting.discard(key)
+        if key in self._early_cancels:  # canceled, or its relay went, while it waited
+            self._early_cancels.discard(key)
+            with answering(query):
+                query.reply(query.key_expr, GoalEvent("result", status=Status.CANCELED).encode())
+            return
         running = _RobotGoal(self, query, key, client)
         self.goals[key] = running
         running.sent = client.send(goal, running, req.feedback)
-        if key in self._early_cancels:
-            self._early_cancels.discard(key)
-            running.sent.cancel()
 
     async def _action_client(self, name: str, action_cls: Any, timeout: float) -> ActionClient:
         """The robot's shared client of ``name``, once a server is ready for it (at most
@@ -637,7 +646,7 @@ class Exporter:
             relay, gid = str(sample.key_expr).split("/")[2:4]
         except ValueError:
             return
-        if (relay, gid) in self.goals:
+        if (relay, gid) in self.goals or (relay, gid) in self._waiting:
             log.info("relay %s went with goal %s in flight: canceling it", relay, gid)
             self._cancel((relay, gid))
 

@@ -370,3 +370,46 @@ async def test_a_robots_faulty_goal_replies_end_the_goal_with_a_reason(
             for entity in entities:
                 entity.undeclare()
             await asyncio.to_thread(session.close)
+
+
+async def test_a_goal_whose_relay_went_while_it_waited_for_a_server_is_not_sent(
+        ros_node: Any, topic: str) -> None:
+    """A relay that dies while the robot still waits for the action's server (its
+    ``@running`` token goes) takes its goal with it: once the server is there the goal is not
+    sent (the query ends canceled), as one canceled while waiting is (a plain Zenoh session
+    plays the relay)."""
+    from bridge_server.zenoh import keys
+    from bridge_server.zenoh.keys import GoalEvent, GoalRequest
+    from bridge_server.zenoh.link import ZenohOptions, open_session
+
+    async with tier() as t:
+        session = await open_session(ZenohOptions(connect=[t.router]))
+        server = None
+        try:
+            def send(gid: str) -> list[GoalEvent]:
+                request = GoalRequest(type=FIB, goal={"order": 3}, feedback=False,
+                                      relay="gone", id=gid, timeout=30.0)
+                return [GoalEvent.decode(r.ok.payload.to_bytes()) if r.ok else
+                        GoalEvent("failed", text=r.err.payload.to_string())
+                        for r in session.get(f"{ROBOT}/{keys.GOAL}{topic}",
+                                             payload=request.encode(), timeout=60)]
+
+            token = session.liveliness().declare_token(f"{ROBOT}/{keys.RUNNING}/gone/g1")
+            first = asyncio.ensure_future(asyncio.to_thread(send, "g1"))
+            second = asyncio.ensure_future(asyncio.to_thread(send, "g2"))
+            await until(lambda: ("gone", "g2") in t.exporter._waiting
+                        and ("gone", "g1") in t.exporter._waiting,
+                        "the robot to wait for the action's server")
+            token.undeclare()
+            session.get(f"{ROBOT}/{keys.CANCEL}/gone/g2", lambda _reply: None, timeout=10)
+            await until(lambda: {("gone", "g1"), ("gone", "g2")} <= t.exporter._early_cancels,
+                        "the robot to hear the relay went and the cancel")
+            server = FibServer(ros_node, topic, slow=True)
+            for events in (await first, await second):
+                assert [(e.event, e.status) for e in events] == [("result", 5)], events
+            assert server.goals == []
+            assert not t.exporter.goals and not t.exporter._waiting
+        finally:
+            if server is not None:
+                server.destroy()
+            await asyncio.to_thread(session.close)
