@@ -51,6 +51,7 @@ zenoh-bridge-ros2dds it says why.
 from __future__ import annotations
 
 import json
+import math
 import re
 from dataclasses import asdict, dataclass, field
 from typing import Any, ClassVar, cast
@@ -183,6 +184,15 @@ def parse_serve(key: str) -> tuple[str, str, str]:
     return parts[2], "/" + parts[6], "/".join(parts[3:6])
 
 
+def _seconds(value: Any, what: str) -> float:
+    """``value`` as seconds to wait: a finite number, not negative; ``ValueError`` naming
+    ``what`` if not (a NaN would make a deadline nothing reaches)."""
+    seconds = float(value)
+    if not math.isfinite(seconds) or seconds < 0:
+        raise ValueError(f"{what} {value!r} is not a number of seconds")
+    return seconds
+
+
 def _decode_json(data: bytes, what: str) -> dict[str, Any]:
     """A JSON object from a payload; ``BridgeError`` naming ``what`` it should have been."""
     try:
@@ -241,8 +251,9 @@ class CallRequest(_Payload):
         """From a query's payload; ``BridgeError`` naming what is wrong."""
         try:
             obj = json.loads(data)
-            return cls(type=obj["type"], args=obj["args"], timeout=float(obj["timeout"]),
-                       discovery_wait=float(obj["discovery_wait"]))
+            return cls(type=obj["type"], args=obj["args"],
+                       timeout=_seconds(obj["timeout"], "timeout"),
+                       discovery_wait=_seconds(obj["discovery_wait"], "discovery_wait"))
         except (ValueError, KeyError, TypeError) as exc:
             raise BridgeError(f"a service call's payload is not a CallRequest ({exc})") from None
 
@@ -267,7 +278,7 @@ class GoalRequest(_Payload):
         try:
             return cls(type=str(obj["type"]), goal=obj["goal"], feedback=bool(obj["feedback"]),
                        relay=check_relay(str(obj["relay"])), id=check_relay(str(obj["id"])),
-                       timeout=float(obj["timeout"]))
+                       timeout=_seconds(obj["timeout"], "timeout"))
         except (KeyError, TypeError, ValueError) as exc:
             raise BridgeError(f"a goal's payload is not a GoalRequest ({exc!r})") from None
 
@@ -353,7 +364,7 @@ class ParamRequest(_Payload):
                               f"{', '.join(cls.OPS)}")
         try:
             return cls(op=obj["op"], name=str(obj.get("name", "")), value=obj.get("value"),
-                       timeout=float(obj.get("timeout", 0.0)))
+                       timeout=_seconds(obj.get("timeout", 0.0), "timeout"))
         except (TypeError, ValueError) as exc:
             raise BridgeError(f"a parameter request is not a ParamRequest ({exc})") from None
 

@@ -109,10 +109,10 @@ async def test_cancel_and_leaving_cancel_the_goal_on_the_robot(ros_node: Any, to
 
 
 async def test_the_robot_names_what_is_wrong_with_a_request(topic: str) -> None:
-    """A goal or parameter query whose payload is not what the wire contract says gets an
-    answer naming what is wrong (a plain Zenoh session plays a faulty relay)."""
+    """A goal, call or parameter query whose payload is not what the wire contract says gets
+    an answer naming what is wrong (a plain Zenoh session plays a faulty relay)."""
     from bridge_server.zenoh import keys
-    from bridge_server.zenoh.keys import GoalEvent
+    from bridge_server.zenoh.keys import CallRequest, GoalEvent, GoalRequest
     from bridge_server.zenoh.link import ZenohOptions, open_session
 
     async with tier() as t:
@@ -129,6 +129,18 @@ async def test_the_robot_names_what_is_wrong_with_a_request(topic: str) -> None:
             replies = await asyncio.to_thread(ask, f"{ROBOT}/{keys.PARAM}/some_node",
                                               b'{"op": "drop"}')
             assert "op 'drop' is not one of names, get, set" in replies[0], replies
+
+            # a wait that is not a number of seconds would make a deadline nothing reaches
+            goal = GoalRequest(type="test_msgs/action/Fibonacci", goal={"order": 1},
+                               feedback=False, relay="r", id="g", timeout=0.0).encode()
+            nan = goal.replace(b'"timeout":0.0', b'"timeout":NaN')
+            replies = await asyncio.to_thread(ask, f"{ROBOT}/{keys.GOAL}{topic}", nan)
+            event = GoalEvent.decode(replies[0])
+            assert event.event == "failed" and "timeout nan is not a number of seconds" in \
+                event.text, event
+            call = CallRequest(type=None, args={}, timeout=1.0, discovery_wait=-1.0).encode()
+            replies = await asyncio.to_thread(ask, f"{ROBOT}/{keys.CALL}{topic}", call)
+            assert "discovery_wait -1.0 is not a number of seconds" in replies[0], replies
         finally:
             await asyncio.to_thread(session.close)
 
