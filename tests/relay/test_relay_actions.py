@@ -41,6 +41,24 @@ async def _relay_lists(t: Tier, action: str) -> None:
                 f"the relay to list the action server of {action}")
 
 
+async def _goal_with_feedback(t: Tier, ws: Any, action: str, gid: str) -> dict[str, Any]:
+    """Send an order-3 Fibonacci goal ``gid`` once the relay lists ``action``'s server and
+    await its first feedback; the goal's op, for more goals like it."""
+    await _relay_lists(t, action)
+    goal = {"op": "send_action_goal", "action": action, "action_type": FIB,
+            "args": {"order": 3}, "feedback": True}
+    await ws.send({**goal, "id": gid})
+    await ws.expect(op="action_feedback", id=gid, timeout=20)
+    return goal
+
+
+async def _succeeds(ws: Any, goal: dict[str, Any], gid: str) -> None:
+    """Send ``goal`` (order 3) as ``gid`` and see it succeed with its sequence."""
+    await ws.send({**goal, "id": gid})
+    result = await ws.expect(op="action_result", id=gid, timeout=20)
+    assert result["status"] == 4 and result["values"] == {"sequence": fib(3)}, result
+
+
 async def test_a_goal_gets_feedback_and_its_result(ros_node: Any, topic: str) -> None:
     """A relay client's goal runs on an rclpy action server on the robot: its feedback and
     result (SUCCEEDED, the sequence) come back as on the bridge; a goal that does not fit the
@@ -297,11 +315,7 @@ async def test_the_robot_destroys_an_action_client_no_goal_uses(ros_node: Any, t
 
             ws = await open_wire(t.url())
             try:
-                await _relay_lists(t, topic)
-                goal = {"op": "send_action_goal", "action": topic, "action_type": FIB,
-                        "args": {"order": 3}, "feedback": True}
-                await ws.send({**goal, "id": "i1"})
-                await ws.expect(op="action_feedback", id="i1", timeout=20)
+                goal = await _goal_with_feedback(t, ws, topic, "i1")
                 await until(lambda: robot_clients() == [topic], "the robot's action client in ROS")
                 sweeps = t.exporter.sweeps
                 await until(lambda: t.exporter.sweeps >= sweeps + 2,
@@ -314,9 +328,7 @@ async def test_the_robot_destroys_an_action_client_no_goal_uses(ros_node: Any, t
                 await until(lambda: not robot_clients(), "the action client gone from ROS")
 
                 server.slow = False
-                await ws.send({**goal, "id": "i2"})
-                result = await ws.expect(op="action_result", id="i2", timeout=20)
-                assert result["status"] == 4 and result["values"] == {"sequence": fib(3)}
+                await _succeeds(ws, goal, "i2")
             finally:
                 await ws.close()
     finally:
@@ -425,3 +437,29 @@ async def test_a_goal_whose_relay_went_while_it_waited_for_a_server_is_not_sent(
             if server is not None:
                 server.destroy()
             await asyncio.to_thread(session.close)
+
+
+async def test_a_goal_ends_when_the_robot_goes(ros_node: Any, topic: str) -> None:
+    """The robot's bridge stops with a relay client's goal in flight: the goal's query ends
+    and the client gets a failed result naming the robot, not silence; the restarted robot
+    takes the next goal."""
+    server = FibServer(ros_node, topic, slow=True)
+    try:
+        async with tier() as t:
+            ws = await open_wire(t.url())
+            try:
+                goal = await _goal_with_feedback(t, ws, topic, "r1")
+                await t.exporter.close()
+                await t.robot.close()
+                result = await ws.expect(op="action_result", id="r1", timeout=20)
+                assert result["result"] is False and ROBOT in result["values"], result
+                t.robot, t.exporter = await start_robot(t.router)
+                await until(server.cancel_requests.is_set,
+                            "the stopped robot's goal canceled on the server")
+                server.slow = False
+                await _relay_lists(t, topic)
+                await _succeeds(ws, goal, "r2")
+            finally:
+                await ws.close()
+    finally:
+        server.destroy()
