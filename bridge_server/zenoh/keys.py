@@ -369,6 +369,56 @@ class ParamRequest(_Payload):
             raise BridgeError(f"a parameter request is not a ParamRequest ({exc})") from None
 
 
+_Shape = Any
+"""What :func:`_check_shape` checks: a type (``str``: a string), ``[shape]`` (a list of
+those), a tuple of shapes (a list of exactly those), ``{str: shape}`` (an object whose
+values are those) or a dict of field names to shapes (an object with those fields)."""
+
+_NAMES_TYPES = [(str, [str])]
+_SNAPSHOT: dict[str, _Shape] = {
+    "node": str, "own_node": (str, str), "topics": _NAMES_TYPES, "services": _NAMES_TYPES,
+    "nodes": {str: {"name": str, "namespace": str, "subscribes": [str], "publishes": [str],
+                    "serves": _NAMES_TYPES}},
+    "publishers": {str: [(str, str, {str: object})]}, "subscribers": {str: [(str, str)]},
+    "definitions": {str: str}, "typedefs": {str: [{str: object}]}, "interfaces": [str],
+    "served": {str: str},
+}
+
+
+def _check_shape(value: Any, shape: _Shape, where: str) -> None:
+    """``ValueError`` naming the place in ``value`` that does not have ``shape``."""
+    if isinstance(shape, type):
+        ok = isinstance(value, shape)
+    elif isinstance(shape, tuple):
+        ok = isinstance(value, list) and len(value) == len(shape)
+        for i, (item, each) in enumerate(zip(value, shape, strict=True) if ok else ()):
+            _check_shape(item, each, f"{where}[{i}]")
+    elif isinstance(shape, list):
+        ok = isinstance(value, list)
+        for i, item in enumerate(value if ok else ()):
+            _check_shape(item, shape[0], f"{where}[{i}]")
+    elif str in shape:
+        ok = isinstance(value, dict)
+        for k, item in (value.items() if ok else ()):
+            _check_shape(item, shape[str], f"{where}.{k}")
+    else:
+        ok = isinstance(value, dict) and set(shape) <= set(value)
+        for k in shape if ok else ():
+            _check_shape(value[k], shape[k], f"{where}.{k}")
+    if not ok:
+        raise ValueError(f"{where} is not {_shape_name(shape)}")
+
+
+def _shape_name(shape: _Shape) -> str:
+    if isinstance(shape, type):
+        return "a string" if shape is str else "a value"
+    if isinstance(shape, tuple):
+        return f"a list of {len(shape)} items"
+    if isinstance(shape, list):
+        return "a list"
+    return "an object" if str in shape else f"an object with {', '.join(shape)}"
+
+
 @dataclass
 class Snapshot:
     """The robot's ROS graph as the relays see it (``@graph``).
@@ -401,13 +451,17 @@ class Snapshot:
 
     @classmethod
     def decode(cls, data: bytes) -> Snapshot:
-        """From a ``@graph`` payload; ``BridgeError`` naming what is wrong."""
-        try:
-            obj = json.loads(data)
-            snap = cls(**obj)
-        except (ValueError, TypeError) as exc:
+        """From a ``@graph`` payload; ``BridgeError`` naming the field whose shape is wrong
+        (fields it does not know are left out)."""
+        obj = _decode_json(data, "a robot's @graph payload")
+        known = {name: value for name, value in obj.items() if name in _SNAPSHOT}
+        try:  # a newer robot's fields are left out; every known one must have its shape
+            for name, value in known.items():
+                _check_shape(value, _SNAPSHOT[name], name)
+        except ValueError as exc:
             raise BridgeError(f"a robot's @graph payload is not a Snapshot ({exc})") from None
-        snap.own_node = (str(snap.own_node[0]), str(snap.own_node[1]))
-        snap.topics = [(str(n), list(t)) for n, t in snap.topics]
-        snap.services = [(str(n), list(t)) for n, t in snap.services]
+        snap = cls(**known)
+        snap.own_node = (snap.own_node[0], snap.own_node[1])
+        snap.topics = [(n, t) for n, t in snap.topics]
+        snap.services = [(n, t) for n, t in snap.services]
         return snap

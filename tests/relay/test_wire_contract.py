@@ -3,6 +3,7 @@ plain Zenoh session of this test, with no ROS at all, puts what an exporter woul
 
 from __future__ import annotations
 
+import json
 from collections.abc import AsyncIterator
 from typing import Any
 
@@ -102,5 +103,38 @@ async def test_a_message_without_its_type_is_dropped_and_said(
         op = await ws.expect(op="publish", topic="/chatter")
         assert op["msg"] == {"data": "fine"}
         assert any("is not a Meta object" in r.getMessage() for r in caplog.records)
+    finally:
+        await ws.close()
+
+
+async def test_a_snapshot_of_the_wrong_shape_is_refused_and_said(
+        played: tuple[Any, zenoh.Session], caplog: pytest.LogCaptureFixture) -> None:
+    """A graph snapshot whose fields do not have their shapes (``served`` a list, a node
+    without its lists) is refused with the field named, and the relay goes on with the last
+    good one: a client's advertise_service and the rosapi topic list work; a field the relay
+    does not know (a newer robot's) is left out."""
+    relay, robot = played
+    ws = await open_wire(f"ws://127.0.0.1:{relay.port}/{ROBOT}")
+    try:
+        graph = relay.robots[ROBOT].graph
+        good = Snapshot(node="played_bridge", topics=[("/chatter", ["std_msgs/msg/String"])])
+        for bad, named in ((b'{"served": []}', "served is not an object"),
+                           (b'{"nodes": {"/n": {"name": "n"}}}', "nodes./n is not an object "
+                            "with name, namespace, subscribes, publishes, serves")):
+            robot.put(f"{ROBOT}/{keys.GRAPH}", bad)
+            await until(lambda named=named: any(
+                f"is not a Snapshot ({named})" in r.getMessage() for r in caplog.records),
+                f"the relay to refuse a snapshot whose {named}")
+        assert graph.snapshot == good
+        await ws.send({"op": "advertise_service", "service": "/served_here",
+                       "type": "std_srvs/srv/Trigger"})
+        await ws.send({"op": "call_service", "service": "/rosapi/topics", "id": "t"})
+        reply = await ws.expect(op="service_response", id="t")
+        assert reply["result"] is True and reply["values"]["topics"] == ["/chatter"], reply
+
+        newer = json.loads(good.encode()) | {"cameras": ["front"]}
+        newer["node"] = "newer_bridge"
+        robot.put(f"{ROBOT}/{keys.GRAPH}", json.dumps(newer).encode())
+        await until(lambda: graph.snapshot.node == "newer_bridge", "the newer robot's snapshot")
     finally:
         await ws.close()
