@@ -75,6 +75,12 @@ log = logging.getLogger("bridge_server.zenoh.exporter")
 SNAPSHOT_INTERVAL = 1.0
 """Seconds between two looks at the ROS graph (a changed one is put at once)."""
 
+UNHELD_PUBLISHER_WAIT = 10.0
+"""Seconds a publisher made for a message under ``@in/`` that no relay's ``@advertise``
+token holds is kept: the token may come after the first message (Zenoh carries
+declarations and data apart), or never (the message came after the token went, or from a
+relay that holds none); then the publisher goes."""
+
 SERVED_CALL_WAIT = 60.0
 """Seconds a ROS call of a relay-served service waits for the relay's reply (the relay's
 session gives up sooner, after its ``served_call_timeout``; then the caller is not answered,
@@ -168,6 +174,8 @@ class Exporter:
         self.session: zenoh.Session | None = None
         self.exports: dict[str, _Export] = {}
         self.publishers: dict[tuple[str, str, bool], tuple[Publisher, set[str]]] = {}
+        self.unheld_wait = UNHELD_PUBLISHER_WAIT
+        self._unheld: set[tuple[str, str, bool]] = set()
         self.action_clients: dict[tuple[str, Any], ActionClient] = {}
         """The robot's action clients of relays' goals by (action, type); one no goal used
         for ``client_idle`` seconds is destroyed, as the bridge's are."""
@@ -354,9 +362,7 @@ class Exporter:
         held = self.publishers.get(entry)
         if held is not None:
             held[1].discard(relay)
-            if not held[1]:
-                del self.publishers[entry]
-                self.graph.release_publisher(held[0])
+            self._release_unheld(entry)
 
     def _publisher(self, entry: tuple[str, str, bool]) -> Publisher | None:
         held = self.publishers.get(entry)
@@ -380,9 +386,29 @@ class Exporter:
         except BridgeError as exc:
             log.warning("a message for %s from a relay is dropped: %s", topic, exc)
             return
-        pub = self._publisher((topic, meta.type, meta.latched))
-        if pub is not None:
-            pub.publish(sample.payload.to_bytes())
+        entry = (topic, meta.type, meta.latched)
+        pub = self._publisher(entry)
+        if pub is None:
+            return
+        pub.publish(sample.payload.to_bytes())
+        if not self.publishers[entry][1] and entry not in self._unheld:
+            self._unheld.add(entry)
+            self._loop.call_later(self.unheld_wait, self._drop_unheld, entry)
+
+    def _drop_unheld(self, entry: tuple[str, str, bool]) -> None:
+        self._unheld.discard(entry)
+        if self._release_unheld(entry):
+            log.info("no relay advertises %s (%s): its publisher made for a message went",
+                     entry[0], entry[1])
+
+    def _release_unheld(self, entry: tuple[str, str, bool]) -> bool:
+        """Release ``entry``'s publisher if no relay's token holds it (True if it went)."""
+        held = self.publishers.get(entry)
+        if held is None or held[1]:
+            return False
+        del self.publishers[entry]
+        self.graph.release_publisher(held[0])
+        return True
 
     # -- services ------------------------------------------------------------------------------
 

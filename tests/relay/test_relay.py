@@ -87,6 +87,55 @@ async def test_a_client_publishes_to_the_robot(ros_node: Any, topic: str) -> Non
             await ws.close()
 
 
+async def test_a_message_no_relay_advertises_leaves_no_publisher(ros_node: Any, topic: str
+                                                                 ) -> None:
+    """A message under ``@in/`` that no relay's ``@advertise`` token holds (one that came after
+    its relay unadvertised, or from a relay that declares none; a plain Zenoh session plays
+    it) gets a publisher on the robot that leaves ROS after a while instead of staying for
+    good; one whose token comes after its first message stays while the token lives."""
+    from bridge_server.zenoh import keys
+    from bridge_server.zenoh.keys import Meta
+    from bridge_server.zenoh.link import ZenohOptions, open_session
+    from msgs import cdr
+    from msgs.std_msgs.msg import String as WireString
+
+    async with tier() as t:
+        t.exporter.unheld_wait = 0.5
+        session = await open_session(ZenohOptions(connect=[t.router]))
+        try:
+            entry = (topic, "std_msgs/msg/String", False)
+
+            def put(text: str) -> bool:
+                """Put a message (again until the exporter has its publisher: a session
+                just opened may not know the robot's subscriber yet)."""
+                if entry not in t.exporter.publishers:
+                    session.put(keys.key_of(ROBOT, topic, keys.IN),
+                                cdr.encode(WireString(data=text)),
+                                attachment=Meta(type="std_msgs/msg/String").encode())
+                return entry in t.exporter.publishers
+
+            await until(lambda: put("stray"), "the robot's publisher of the stray message")
+            await until(lambda: not t.exporter.publishers, "the unheld publisher to go")
+            await until(lambda: ros_node.count_publishers(topic) == 0,
+                        "the unheld publisher to leave ROS")
+
+            # the token comes after the first message: the publisher stays while it is held
+            t.exporter.unheld_wait = 2.0
+            await until(lambda: put("first"), "the robot's publisher of the first message")
+            token = session.liveliness().declare_token(
+                keys.advertise_key(ROBOT, "played", topic, "std_msgs/msg/String", False))
+            await until(lambda: "played" in t.exporter.publishers.get(entry, (None, set()))[1],
+                        "the relay's token to hold the publisher")
+            await until(lambda: ros_node.count_publishers(topic) == 1, "the publisher in ROS")
+            await until(lambda: entry not in t.exporter._unheld, "the unheld wait to end")
+            assert entry in t.exporter.publishers, "a held publisher went"
+            token.undeclare()
+            await until(lambda: ros_node.count_publishers(topic) == 0,
+                        "the publisher to go with its token")
+        finally:
+            await asyncio.to_thread(session.close)
+
+
 async def test_latched_both_ways(ros_node: Any, topic: str) -> None:
     """A latched rclpy topic's one message reaches relay clients that subscribe after it was
     sent (the first through the robot, the second from the relay's copy); a client's latched
