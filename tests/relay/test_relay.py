@@ -129,7 +129,7 @@ async def test_a_message_no_relay_advertises_leaves_no_publisher(ros_node: Any, 
             await until(lambda: ros_node.count_publishers(topic) == 1, "the publisher in ROS")
             await until(lambda: entry not in t.exporter._unheld, "the unheld wait to end")
             assert entry in t.exporter.publishers, "a held publisher went"
-            token.undeclare()
+            token.undeclare()  # type: ignore[no-untyped-call]
             await until(lambda: ros_node.count_publishers(topic) == 0,
                         "the publisher to go with its token")
         finally:

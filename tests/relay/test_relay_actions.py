@@ -359,7 +359,8 @@ async def test_a_robots_faulty_goal_replies_end_the_goal_with_a_reason(
         query.reply(query.key_expr, snap.encode())
 
     def answer_goal(query: zenoh.Query) -> None:
-        order = GoalRequest.decode(query.payload.to_bytes()).goal["order"]
+        payload = query.payload.to_bytes() if query.payload is not None else b""
+        order = GoalRequest.decode(payload).goal["order"]
         if order == 1:
             events = [GoalEvent("accepted", uuid="not hex"),
                       GoalEvent("result", status=4, values={"sequence": [0, 1]})]
@@ -371,26 +372,28 @@ async def test_a_robots_faulty_goal_replies_end_the_goal_with_a_reason(
 
     async with tier() as t:
         session = await open_session(ZenohOptions(connect=[t.router]))
-        entities = [session.declare_queryable(f"{fake}/{keys.GRAPH}", answer_graph),
-                    session.declare_queryable(f"{fake}/{keys.GOAL}/**", answer_goal,
-                                              complete=True),
-                    session.liveliness().declare_token(f"{fake}/{keys.ALIVE}")]
-        ws = await open_wire(t.url(fake))
+        entities: list[Any] = [
+            session.declare_queryable(f"{fake}/{keys.GRAPH}", answer_graph),
+            session.declare_queryable(f"{fake}/{keys.GOAL}/**", answer_goal, complete=True),
+            session.liveliness().declare_token(f"{fake}/{keys.ALIVE}")]
         try:
-            await robot_reachable(t.relay, fake)
-            goal = {"op": "send_action_goal", "action": topic, "action_type": FIB}
-            await ws.send({**goal, "args": {"order": 1}, "id": "f1"})
-            result = await ws.expect(op="action_result", id="f1", timeout=20)
-            assert result["status"] == 4 and result["values"] == {"sequence": [0, 1]}, result
-            assert any("uuid that is not hex ('not hex')" in r.getMessage()
-                       for r in caplog.records if r.name == "bridge_server.zenoh.graph")
+            await robot_reachable(t.relay, fake)  # before connecting: 404 until then
+            ws = await open_wire(t.url(fake))
+            try:
+                goal = {"op": "send_action_goal", "action": topic, "action_type": FIB}
+                await ws.send({**goal, "args": {"order": 1}, "id": "f1"})
+                result = await ws.expect(op="action_result", id="f1", timeout=20)
+                assert result["status"] == 4 and result["values"] == {"sequence": [0, 1]}, result
+                assert any("uuid that is not hex ('not hex')" in r.getMessage()
+                           for r in caplog.records if r.name == "bridge_server.zenoh.graph")
 
-            await ws.send({**goal, "args": {"order": 2}, "id": "f2"})
-            result = await ws.expect(op="action_result", id="f2", timeout=20)
-            assert result["result"] is False and result["status"] == 6, result
-            assert "sequence" in result["values"] and fake in result["values"], result
+                await ws.send({**goal, "args": {"order": 2}, "id": "f2"})
+                result = await ws.expect(op="action_result", id="f2", timeout=20)
+                assert result["result"] is False and result["status"] == 6, result
+                assert "sequence" in result["values"] and fake in result["values"], result
+            finally:
+                await ws.close()
         finally:
-            await ws.close()
             for entity in entities:
                 entity.undeclare()
             await asyncio.to_thread(session.close)
@@ -414,7 +417,7 @@ async def test_a_goal_whose_relay_went_while_it_waited_for_a_server_is_not_sent(
                 request = GoalRequest(type=FIB, goal={"order": 3}, feedback=False,
                                       relay="gone", id=gid, timeout=30.0)
                 return [GoalEvent.decode(r.ok.payload.to_bytes()) if r.ok else
-                        GoalEvent("failed", text=r.err.payload.to_string())
+                        GoalEvent("failed", text=str(r.err.payload.to_string() if r.err else ""))
                         for r in session.get(f"{ROBOT}/{keys.GOAL}{topic}",
                                              payload=request.encode(), timeout=60)]
 
@@ -424,7 +427,7 @@ async def test_a_goal_whose_relay_went_while_it_waited_for_a_server_is_not_sent(
             await until(lambda: ("gone", "g2") in t.exporter._waiting
                         and ("gone", "g1") in t.exporter._waiting,
                         "the robot to wait for the action's server")
-            token.undeclare()
+            token.undeclare()  # type: ignore[no-untyped-call]
             session.get(f"{ROBOT}/{keys.CANCEL}/gone/g2", lambda _reply: None, timeout=10)
             await until(lambda: {("gone", "g1"), ("gone", "g2")} <= t.exporter._early_cancels,
                         "the robot to hear the relay went and the cancel")
