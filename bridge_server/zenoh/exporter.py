@@ -427,8 +427,8 @@ class Exporter:
                 req = CallRequest.decode(query.payload.to_bytes() if query.payload else b"")
                 response = await self.graph.call_service(
                     service, req.type, req.args, req.timeout, req.discovery_wait)
-            except BridgeError as exc:
-                query.reply_err(str(exc).encode())
+            except Exception as exc:  # rclpy's own (a name it refuses) too: the relay's
+                query.reply_err(str(exc).encode())  # caller gets the text, not silence
                 return
             query.reply(query.key_expr, _json(response))
 
