@@ -17,7 +17,9 @@ import faulthandler
 import itertools
 import os
 import re
+import shutil
 import signal
+import subprocess
 import sys
 import threading
 from collections.abc import AsyncIterator, Callable, Iterator
@@ -72,10 +74,44 @@ _TERMINAL: list[Any] = []
 NODE_DESTROY_LIMIT = 60.0
 
 
+# Outside this process, so that it can look while a C call here holds the GIL: armed with a
+# number of seconds, it prints this process's native stacks (py-spy, if installed) to the
+# terminal when they pass before it is told "off". faulthandler shows Python frames only.
+_WATCHDOG = """
+import os, select, subprocess, sys, time
+pid, spy, deadline, buf = sys.argv[1], sys.argv[2], None, b""
+while True:
+    wait = None if deadline is None else max(0.0, deadline - time.monotonic())
+    if select.select([0], [], [], wait)[0]:
+        chunk = os.read(0, 4096)
+        if not chunk:
+            break
+        *lines, buf = (buf + chunk).split(b"\\n")
+        for line in lines:
+            deadline = None if line == b"off" else time.monotonic() + float(line)
+    elif deadline is not None:
+        deadline = None
+        subprocess.run([spy, "dump", "--native", "--pid", pid], stdout=2, check=False)
+"""
+_WATCHER: list[subprocess.Popen[bytes]] = []
+
+
+def _watch(line: str) -> None:
+    for watcher in _WATCHER:
+        with contextlib.suppress(OSError):
+            assert watcher.stdin is not None
+            watcher.stdin.write(line.encode() + b"\n")
+            watcher.stdin.flush()
+
+
 def pytest_configure(config: pytest.Config) -> None:
     """Keep a handle on the terminal's stderr (pytest captures fd 2 only around each test)
     for :func:`stack_dump_if_stuck`, and give child processes Ctrl+C as a terminal would."""
     _TERMINAL.append(os.fdopen(os.dup(2), "w"))
+    spy = shutil.which("py-spy")
+    if spy is not None:
+        _WATCHER.append(subprocess.Popen([sys.executable, "-c", _WATCHDOG, str(os.getpid()), spy],
+                                         stdin=subprocess.PIPE))
     # A run started as a background job of a non-interactive shell (nohup ... &) has SIGINT
     # ignored, and its children would inherit that: the Ctrl+C tests would see no Ctrl+C.
     if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
@@ -89,13 +125,16 @@ def stack_dump_if_stuck(seconds: float) -> Iterator[None]:
 
     For rclpy teardown: a call into rclpy's C side holds the GIL, so pytest-timeout's signal
     never runs and a stuck call would hang the run until CI's limit. faulthandler's watchdog is
-    a C thread that needs no GIL."""
+    a C thread that needs no GIL; the native stacks come from py-spy in a process outside
+    (:data:`_WATCHDOG`), after three quarters of the time."""
     out = _TERMINAL[0] if _TERMINAL else sys.stderr
+    _watch(str(seconds * 0.75))  # native stacks first, while this process still runs
     faulthandler.dump_traceback_later(seconds, exit=True, file=out)
     try:
         yield
     finally:
         faulthandler.cancel_dump_traceback_later()
+        _watch("off")
 
 
 def pytest_unconfigure(config: pytest.Config) -> None:
@@ -104,6 +143,11 @@ def pytest_unconfigure(config: pytest.Config) -> None:
     Name them and end the run as failed instead of hanging it."""
     while _TERMINAL:
         _TERMINAL.pop().close()
+    while _WATCHER:
+        watcher = _WATCHER.pop()
+        assert watcher.stdin is not None
+        watcher.stdin.close()  # it ends at end of input
+        watcher.wait(10)
     left = [t for t in threading.enumerate()
             if t is not threading.main_thread() and not t.daemon and t.is_alive()]
     for t in left:
