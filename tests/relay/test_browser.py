@@ -9,11 +9,12 @@ chromium and chromium-driver (scripts/setup.sh installs them); under CI their ab
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import functools
 import http.server
 import json
 import threading
-from collections.abc import Iterator
+from collections.abc import AsyncIterator, Awaitable, Callable
 from typing import Any
 
 import pytest
@@ -82,23 +83,54 @@ class _Files(http.server.SimpleHTTPRequestHandler):
         pass
 
 
-@pytest.fixture
-def file_server() -> Iterator[tuple[int, type[_Files]]]:
-    handler = type("Files", (_Files,), {})
+@contextlib.asynccontextmanager
+async def roslib_in_chromium(url: str, topic: str, service: str
+                             ) -> AsyncIterator[Callable[[], Awaitable[dict[str, Any]]]]:
+    """Stock roslib in headless Chromium on a page that connects to ``url``, subscribes to the
+    std_msgs/String ``topic`` and calls the std_srvs/SetBool ``service`` with ``data: true``;
+    yields an awaitable read of the page's ``{got, answer, problem}``."""
+    page = (PAGE % {"imports": json.dumps(IMPORTS), "url": json.dumps(url),
+                    "topic": json.dumps(topic), "service": json.dumps(service)}).encode()
+    handler = type("Files", (_Files,), {"page": page})
     server = http.server.ThreadingHTTPServer(
         ("127.0.0.1", 0), functools.partial(handler, directory=str(NODE_MODULES)))
-    thread = threading.Thread(target=server.serve_forever, daemon=True)
-    thread.start()
+    threading.Thread(target=server.serve_forever, daemon=True).start()
     try:
-        yield server.server_address[1], handler
+        with headless_chromium("relay") as driver:
+            await asyncio.to_thread(driver.get,
+                                    f"http://127.0.0.1:{server.server_address[1]}/page.html")
+
+            async def read() -> dict[str, Any]:
+                state: dict[str, Any] = await asyncio.to_thread(
+                    driver.execute_script,
+                    "return {got: window.got, answer: window.answer, problem: window.problem}")
+                return state
+
+            yield read
     finally:
         server.shutdown()
         server.server_close()
 
 
-async def test_roslib_in_a_browser_through_the_relay(
-        ros_node: Any, topic: str, file_server: tuple[int, type[_Files]]) -> None:
-    port, files = file_server
+async def heard_and_answered(read: Callable[[], Awaitable[dict[str, Any]]],
+                             nudge: Callable[[], object] = lambda: None,
+                             timeout: float = 60.0) -> dict[str, Any]:
+    """The page's state once it heard the topic and got the service's answer; ``nudge`` runs
+    before each look (an rclpy publish: discovery has no event here). Fails on the page's
+    error at once, and at the deadline naming what the page had."""
+    deadline = asyncio.get_running_loop().time() + timeout
+    while True:
+        nudge()
+        state = await read()
+        assert state.get("problem") is None, state
+        if state.get("got") and state.get("answer"):
+            return state
+        assert asyncio.get_running_loop().time() < deadline, state
+        await asyncio.sleep(0.1)
+
+
+async def test_roslib_in_a_browser_through_the_relay(ros_node: Any, topic: str) -> None:
+    """roslib hears an rclpy topic on the in-process tier's robot and calls its service."""
     service = topic + "_set"
     pub = ros_node.create_publisher(String, topic, 10)
 
@@ -107,22 +139,7 @@ async def test_roslib_in_a_browser_through_the_relay(
         return response
 
     ros_node.create_service(SetBool, service, serve)
-    async with tier() as t:
-        files.page = (PAGE % {"imports": json.dumps(IMPORTS), "url": json.dumps(t.url()),
-                              "topic": json.dumps(topic), "service": json.dumps(service)}
-                      ).encode()
-        with headless_chromium("relay") as driver:
-            await asyncio.to_thread(driver.get, f"http://127.0.0.1:{port}/page.html")
-            state: dict[str, Any] = {}
-            deadline = asyncio.get_running_loop().time() + 60
-            while not (state.get("got") and state.get("answer")):
-                # rclpy publishes until the browser heard it (discovery has no event here)
-                pub.publish(String(data="to the browser"))
-                state = await asyncio.to_thread(
-                    driver.execute_script,
-                    "return {got: window.got, answer: window.answer, problem: window.problem}")
-                assert state.get("problem") is None, state
-                assert asyncio.get_running_loop().time() < deadline, state
-                await asyncio.sleep(0.1)
-            assert state["got"][0] == "to the browser"
-            assert state["answer"] == {"success": True, "message": "from the robot"}
+    async with tier() as t, roslib_in_chromium(t.url(), topic, service) as read:
+        state = await heard_and_answered(read, lambda: pub.publish(String(data="to the browser")))
+        assert state["got"][0] == "to the browser"
+        assert state["answer"] == {"success": True, "message": "from the robot"}
