@@ -23,15 +23,24 @@ import socket
 import subprocess
 import sys
 import textwrap
+import time
+import urllib.error
+import urllib.request
 from collections.abc import Iterator
 from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
 
 import pytest
 from websockets.exceptions import InvalidStatus
 
 import roslibpy_lite
-from tests.helpers import ROOT, WireClient, open_wire, ros_env
+from roslibpy_lite.actions import GoalContext, GoalStatus
+from roslibpy_lite.bag import info, read
+from roslibpy_lite.handles import Publisher, Subscription
+from tests.helpers import CHROMEDRIVER, CHROMIUM, ROOT, WireClient, open_wire, ros_env
 from tests.relay.procs import Proc
+from tests.relay.test_browser import NODE_MODULES, heard_and_answered, roslib_in_chromium
 
 ROBOT = "natbot"
 READY = re.compile(r"relay listening on ws://127\.0\.0\.1:(\d+)")
@@ -40,15 +49,23 @@ READY = re.compile(r"relay listening on ws://127\.0\.0\.1:(\d+)")
 # publish, all in the robot's namespace.
 ROBOT_NODE = textwrap.dedent("""
     import rclpy, sys
+    from rclpy.action import ActionClient, ActionServer
     from rclpy.executors import ExternalShutdownException
+    from rclpy.qos import DurabilityPolicy, QoSProfile
+    from example_interfaces.action import Fibonacci
+    from robot_msgs.msg import Status, Wheel
     from std_msgs.msg import String
     from std_srvs.srv import SetBool
+    from test_msgs.action import Fibonacci as TestFibonacci
 
     rclpy.init()
     node = rclpy.create_node("nat_robot")
     talk = node.create_publisher(String, "/nat/chatter", 10)
     echo = node.create_publisher(String, "/nat/echo", 10)
     node.create_subscription(String, "/nat/cmd", lambda m: echo.publish(String(data="echo " + m.data)), 10)
+    latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+    node.create_publisher(String, "/nat/latched", latched).publish(String(data="said once"))
+    status = node.create_publisher(Status, "/nat/status", 10)
 
     def serve(request, response):
         response.success = request.data
@@ -56,11 +73,53 @@ ROBOT_NODE = textwrap.dedent("""
         return response
 
     node.create_service(SetBool, "/nat/set", serve)
+
+    def fibonacci(handle):
+        sequence = [0, 1]
+        for _ in range(1, handle.request.order):
+            handle.publish_feedback(Fibonacci.Feedback(sequence=sequence))
+            sequence.append(sequence[-1] + sequence[-2])
+        handle.succeed()
+        return Fibonacci.Result(sequence=sequence)
+
+    ActionServer(node, Fibonacci, "/nat/fib", fibonacci)
+
+    # What the relays' clients serve, called from inside: each answer is told on /nat/answered.
+    answered = node.create_publisher(String, "/nat/answered", 10)
+    asks = node.create_client(SetBool, "/nat/served")
+    goals = ActionClient(node, TestFibonacci, "/nat/served_fib")
+    pending = {"service": False, "action": False}
+
+    def told(what, text):
+        pending[what] = False
+        answered.publish(String(data=text))
+
+    def ask():
+        if not pending["service"] and asks.service_is_ready():
+            pending["service"] = True
+            asks.call_async(SetBool.Request(data=True)).add_done_callback(
+                lambda f: told("service", f"service {f.result().success} {f.result().message}"))
+        if not pending["action"] and goals.server_is_ready():
+            pending["action"] = True
+
+            def accepted(f):
+                f.result().get_result_async().add_done_callback(lambda r: told(
+                    "action", f"action {r.result().status} {list(r.result().result.sequence)}"))
+
+            goals.send_goal_async(
+                TestFibonacci.Goal(order=4), feedback_callback=lambda m: answered.publish(
+                    String(data=f"feedback {list(m.feedback.sequence)}")),
+            ).add_done_callback(accepted)
+
+    node.create_timer(0.1, ask)
     count = [0]
 
     def tick():
         count[0] += 1
         talk.publish(String(data=f"hello {count[0]}"))
+        status.publish(Status(mode=Status.MODE_DRIVE, label="natbot", blob=b"\\x07",
+                              battery_cells=[3.5, 3.75],
+                              wheels=[Wheel(name="left", speed=0.5, ticks=[count[0], 0, 0])]))
 
     node.create_timer(0.05, tick)
     print("robot node up", flush=True)
@@ -90,7 +149,7 @@ def _ip(*args: str) -> None:
     subprocess.run(["ip", *args], check=True, capture_output=True, text=True)
 
 
-@pytest.fixture
+@pytest.fixture(scope="module")
 def robot_netns() -> Iterator[Namespace]:
     """A namespace with only loopback and a /30 veth link to this namespace."""
     if os.geteuid() != 0 or shutil.which("ip") is None:
@@ -121,64 +180,118 @@ def _free_port() -> int:
         return int(s.getsockname()[1])  # the same number is free on the veth's address too
 
 
-def start_relay(ns: Namespace, zport: int, port: int) -> Proc:
-    """The relay, the Zenoh router on the veth's address, serving websockets on ``port``."""
+def start_relay(port: int, zenoh: str, endpoint: str) -> Proc:
+    """A relay serving websockets on ``port``; ``zenoh`` is ``--zenoh-listen`` (the router)
+    or ``--zenoh-connect`` (a client of it), at ``endpoint``."""
     relay = Proc([sys.executable, "-m", "bridge_server.zenoh.relay", "--port", str(port),
-                  "--zenoh-listen", f"tcp/{ns.router_ip}:{zport}"], ros_env())
+                  zenoh, endpoint], ros_env())
     relay.wait_for(READY)
     return relay
 
 
+def _until_robot_served(port: int, timeout: float = 30.0) -> None:
+    """Wait until the relay on ``port`` has the robot (its /ROBOT/readyz answers 200)."""
+    deadline = time.monotonic() + timeout
+    while True:
+        try:
+            with urllib.request.urlopen(f"http://127.0.0.1:{port}/{ROBOT}/readyz", timeout=5):
+                return
+        except (OSError, urllib.error.HTTPError):
+            if time.monotonic() > deadline:
+                raise
+            time.sleep(0.2)
+
+
+NODE_OFFERS = ({"/nat/chatter", "/nat/latched", "/nat/status"}, {"/nat/set"}, {"/nat/fib"})
+"""The robot node's topics, services and actions the tests use."""
+
+
+async def _lists_the_robots_node(url: str, timeout: float = 30.0) -> None:
+    """Wait until the relay at ``url`` lists what the robot's node offers (ROS discovery on
+    the robot, then its graph snapshot over Zenoh: no event here)."""
+    async with roslibpy_lite.connect(url) as ros:
+        deadline = asyncio.get_running_loop().time() + timeout
+        while True:
+            listed = ({t.name for t in await ros.graph.topics()},
+                      {s.name for s in await ros.graph.services()},
+                      {a.name for a in await ros.graph.actions()})
+            if all(want <= have for want, have in zip(NODE_OFFERS, listed, strict=True)):
+                return
+            assert asyncio.get_running_loop().time() < deadline, listed
+            await asyncio.sleep(0.2)
+
+
 @dataclass
 class Tier:
-    """The relay (``procs[0]``), the robot's bridge and node, and where clients connect."""
+    """The two relays, the robot's bridge and node, and where clients connect."""
 
-    url: str
     ns: Namespace
-    procs: list[Proc]
+    router: Proc
+    """The first relay, also the Zenoh router on the veth's address."""
+    second: Proc
+    """The second relay, here (outside the namespace), a Zenoh client of the first."""
+    robot: Proc
+    node: Proc
     zport: int
     port: int
+    second_port: int
 
-    def restart_relay(self) -> None:
-        """Stop the relay (the Zenoh router) and start it again on the same ports."""
-        self.procs[0].stop()
-        self.procs[0] = start_relay(self.ns, self.zport, self.port)
+    @property
+    def endpoint(self) -> str:
+        """The router's Zenoh endpoint, the only address the robot can reach."""
+        return f"tcp/{self.ns.router_ip}:{self.zport}"
 
+    @property
+    def url(self) -> str:
+        """The robot through the first relay."""
+        return f"ws://127.0.0.1:{self.port}/{ROBOT}"
 
-@pytest.fixture
-def relay_and_robot(robot_netns: Namespace) -> Iterator[Tier]:
-    """The relay here (the router on the veth's address), the robot's bridge and node in
-    the namespace; yields the robot's URL through the relay, the namespace, and the
-    processes (the relay first)."""
-    zport, port = _free_port(), _free_port()
-    env = ros_env()
-    procs: list[Proc] = []
-    try:
-        procs.append(start_relay(robot_netns, zport, port))
-        robot = Proc(robot_netns.exec(sys.executable, "-m", "bridge_server", "--no-websocket",
-                                      "--robot", ROBOT, "--zenoh-connect",
-                                      f"tcp/{robot_netns.router_ip}:{zport}"), env)
-        procs.append(robot)
-        robot.wait_for(re.compile(rf"robot {ROBOT} is on Zenoh"))
-        node = Proc(robot_netns.exec(sys.executable, "-c", ROBOT_NODE), env)
-        procs.append(node)
-        node.wait_for(re.compile("robot node up"))
-        yield Tier(f"ws://127.0.0.1:{port}/{ROBOT}", robot_netns, procs, zport, port)
-    finally:
-        for p in reversed(procs):
+    @property
+    def second_url(self) -> str:
+        """The robot through the second relay."""
+        return f"ws://127.0.0.1:{self.second_port}/{ROBOT}"
+
+    def restart_router(self) -> None:
+        """Stop the first relay (the Zenoh router) and start it again on the same ports."""
+        self.router.stop()
+        self.router = start_relay(self.port, "--zenoh-listen", self.endpoint)
+
+    def stop(self) -> None:
+        """Every process, the clients of the router first."""
+        for p in (self.node, self.robot, self.second, self.router):
             p.stop()
 
 
-async def _connect_when_there(url: str) -> roslibpy_lite.Client:
-    """The relay refuses a robot (404) until the robot's liveliness reached it."""
-    deadline = asyncio.get_running_loop().time() + 30
-    while True:
+@pytest.fixture(scope="module")
+def relay_and_robot(robot_netns: Namespace) -> Iterator[Tier]:
+    """The router relay here on the veth's address, a second relay here dialing it, the
+    robot's bridge and node in the namespace; both relays have the robot when it yields."""
+    zport, port, second_port = _free_port(), _free_port(), _free_port()
+    endpoint = f"tcp/{robot_netns.router_ip}:{zport}"
+    procs: list[Proc] = []
+    try:
+        procs.append(start_relay(port, "--zenoh-listen", endpoint))
+        procs.append(start_relay(second_port, "--zenoh-connect", endpoint))
+        robot = Proc(robot_netns.exec(sys.executable, "-m", "bridge_server", "--no-websocket",
+                                      "--robot", ROBOT, "--zenoh-connect", endpoint), ros_env())
+        procs.append(robot)
+        robot.wait_for(re.compile(rf"robot {ROBOT} is on Zenoh"))
+        node = Proc(robot_netns.exec(sys.executable, "-c", ROBOT_NODE), ros_env())
+        procs.append(node)
+        node.wait_for(re.compile("robot node up"))
+        _until_robot_served(port)
+        _until_robot_served(second_port)
+        t = Tier(robot_netns, procs[0], procs[1], robot, node, zport, port, second_port)
+        for url in (t.url, t.second_url):
+            asyncio.run(_lists_the_robots_node(url))
+        procs = []  # the tier's now: a restarted router is only there
         try:
-            return await roslibpy_lite.connect(url, open_timeout=5)
-        except roslibpy_lite.ConnectError:
-            if asyncio.get_running_loop().time() > deadline:
-                raise
-            await asyncio.sleep(0.2)
+            yield t
+        finally:
+            t.stop()
+    finally:
+        for p in reversed(procs):
+            p.stop()
 
 
 def test_nothing_can_connect_to_the_robot(relay_and_robot: Tier) -> None:
@@ -192,10 +305,25 @@ def test_nothing_can_connect_to_the_robot(relay_and_robot: Tier) -> None:
         s.connect((ns.robot_ip, 9090))
 
 
+async def _publish_until_heard(pub: Publisher[Any], text: str, *subs: Subscription[dict[str, Any]],
+                               expect: str) -> None:
+    """Publish ``text`` until each of ``subs`` heard ``expect`` (the robot's subscriber matches
+    a new publisher in its own time)."""
+    heard = [False] * len(subs)
+    deadline = asyncio.get_running_loop().time() + 30
+    while not all(heard):
+        await pub.publish({"data": text})
+        for i, sub in enumerate(subs):
+            with contextlib.suppress(TimeoutError):
+                while not heard[i]:
+                    heard[i] = (await sub.get(0.3))["data"] == expect
+        assert asyncio.get_running_loop().time() < deadline, f"{expect!r} heard by {heard}"
+
+
 async def test_a_client_reaches_the_robot_through_the_relay(relay_and_robot: Tier) -> None:
-    url = relay_and_robot.url
-    ros = await _connect_when_there(url)
-    try:
+    """Our client on the router's relay hears the robot's topic, calls its service and
+    publishes to it."""
+    async with roslibpy_lite.connect(relay_and_robot.url) as ros:
         sub = ros.subscribe("/nat/chatter", "std_msgs/msg/String")
         first = await sub.get(30)
         assert first["data"].startswith("hello ")
@@ -204,17 +332,77 @@ async def test_a_client_reaches_the_robot_through_the_relay(relay_and_robot: Tie
         assert answer == {"success": True, "message": "answered inside the namespace"}
         echoes = ros.subscribe("/nat/echo", "std_msgs/msg/String")
         pub = await ros.advertise("/nat/cmd", "std_msgs/msg/String")
+        await _publish_until_heard(pub, "from outside", echoes, expect="echo from outside")
+
+
+async def test_clients_of_both_relays(relay_and_robot: Tier) -> None:
+    """A client of the second relay (a Zenoh client of the router, outside the namespace)
+    publishes to the robot, and the robot's answer and its own topic reach clients of both
+    relays."""
+    t = relay_and_robot
+    async with roslibpy_lite.connect(t.url) as one, roslibpy_lite.connect(t.second_url) as two:
+        for ros in (one, two):
+            chatter = ros.subscribe("/nat/chatter", "std_msgs/msg/String")
+            assert (await chatter.get(30))["data"].startswith("hello ")
+        echoes = [ros.subscribe("/nat/echo", "std_msgs/msg/String") for ros in (one, two)]
+        pub = await two.advertise("/nat/cmd", "std_msgs/msg/String")
+        await _publish_until_heard(pub, "from relay two", *echoes, expect="echo from relay two")
+
+
+async def test_latched_and_the_robots_own_type(relay_and_robot: Tier) -> None:
+    """The robot's latched topic, said once when its node started, reaches a client of each
+    relay that subscribes long after; a message of a type only the robot has (robot_msgs)
+    arrives decoded by the relay from the robot's definition."""
+    t = relay_and_robot
+    async with roslibpy_lite.connect(t.url) as one, roslibpy_lite.connect(t.second_url) as two:
+        for ros in (one, two):
+            latched = ros.subscribe("/nat/latched", "std_msgs/msg/String")
+            assert (await latched.get(30))["data"] == "said once"
+        status = await two.subscribe("/nat/status", "robot_msgs/msg/Status").get(30)
+        assert status["label"] == "natbot" and status["mode"] == 1
+        assert status["battery_cells"] == [3.5, 3.75]
+        wheel = status["wheels"][0]
+        assert wheel["name"] == "left" and wheel["speed"] == 0.5 and len(wheel["ticks"]) == 3
+
+
+async def test_an_action_of_the_robots_own_type(relay_and_robot: Tier) -> None:
+    """A goal from a client of the second relay runs on the robot's action server
+    (example_interfaces, which msgs does not generate): feedback, then the result."""
+    async with roslibpy_lite.connect(relay_and_robot.second_url) as ros:
+        goal = await ros.send_goal("/nat/fib", "example_interfaces/action/Fibonacci",
+                                   {"order": 5})
+        feedback = [fb["sequence"] async for fb in goal]
+        outcome = await goal.result(timeout=30)
+        assert outcome.status is GoalStatus.SUCCEEDED
+        assert outcome.values == {"sequence": [0, 1, 1, 2, 3, 5]}
+        assert feedback and feedback[0] == [0, 1]
+
+
+async def test_the_robot_calls_what_relay_clients_serve(relay_and_robot: Tier) -> None:
+    """A service served by a client of the first relay and an action served by a client of
+    the second are served in ROS on the robot: its node's service and action clients call
+    them and get the answer, the feedback and the result (told on /nat/answered)."""
+    t = relay_and_robot
+
+    def answer(request: dict[str, Any]) -> dict[str, Any]:
+        return {"success": not request["data"], "message": "served through relay one"}
+
+    async def count(goal: dict[str, Any], ctx: GoalContext) -> dict[str, Any]:
+        ctx.publish_feedback({"sequence": [0, 1]})
+        return {"sequence": [0, 1, 1, 2, 3][:goal["order"] + 1]}
+
+    async with roslibpy_lite.connect(t.url) as one, roslibpy_lite.connect(t.second_url) as two:
+        told = one.subscribe("/nat/answered", "std_msgs/msg/String")
+        await one.advertise_service("/nat/served", "std_srvs/srv/SetBool", answer)
+        await two.advertise_action("/nat/served_fib", "test_msgs/action/Fibonacci", count)
+        wanted = {"service False served through relay one", "feedback [0, 1]",
+                  "action 4 [0, 1, 1, 2, 3]"}
+        heard: set[str] = set()
         deadline = asyncio.get_running_loop().time() + 30
-        while True:  # the robot's subscriber matches the new publisher in its own time
-            await pub.publish({"data": "from outside"})
-            try:
-                assert (await echoes.get(0.5))["data"] == "echo from outside"
-                break
-            except TimeoutError:
-                if asyncio.get_running_loop().time() > deadline:
-                    raise
-    finally:
-        await ros.close()
+        while not wanted <= heard:
+            with contextlib.suppress(TimeoutError):
+                heard.add((await told.get(0.5))["data"])
+            assert asyncio.get_running_loop().time() < deadline, heard
 
 
 # Stock roslibpy, unchanged, in a child process (Twisted's reactor runs once per process);
@@ -237,18 +425,43 @@ ROSLIBPY_SCRIPT = textwrap.dedent("""
 
 
 def test_stock_roslibpy_reaches_the_robot(relay_and_robot: Tier) -> None:
-    url = relay_and_robot.url
-
-    async def reachable() -> None:
-        await (await _connect_when_there(url)).close()
-
-    asyncio.run(reachable())
-    done = subprocess.run([sys.executable, "-c", ROSLIBPY_SCRIPT, url], cwd=ROOT, env=ros_env(),
-                          capture_output=True, text=True, timeout=90)
+    """roslibpy from PyPI, unchanged, on the second relay: the robot's topic and service."""
+    done = subprocess.run([sys.executable, "-c", ROSLIBPY_SCRIPT, relay_and_robot.second_url],
+                          cwd=ROOT, env=ros_env(), capture_output=True, text=True, timeout=90)
     assert done.returncode == 0, done.stdout + done.stderr
     result = json.loads(done.stdout.strip().splitlines()[-1])
     assert result["heard"] and result["heard"][0]["data"].startswith("hello ")
     assert result["answer"] == {"success": False, "message": "answered inside the namespace"}
+
+
+async def test_roslib_in_chromium_through_the_second_relay(relay_and_robot: Tier) -> None:
+    """Stock roslib in headless Chromium (tests/relay/test_browser.py's page) on the second
+    relay hears the robot's topic and calls its service."""
+    if CHROMIUM is None or CHROMEDRIVER is None or not (NODE_MODULES / "roslib").is_dir():
+        pytest.skip("chromium, chromium-driver and the npm peer packages are needed "
+                    "(scripts/setup.sh installs them)")
+    async with roslib_in_chromium(relay_and_robot.second_url, "/nat/chatter", "/nat/set") as page:
+        state = await heard_and_answered(page)
+    assert state["got"][0].startswith("hello ")
+    assert state["answer"] == {"success": True, "message": "answered inside the namespace"}
+
+
+async def test_bag_record_through_the_second_relay(relay_and_robot: Tier, tmp_path: Path) -> None:
+    """``roslibpy-lite bag record`` on the second relay records the robot's topic: its 20
+    messages in order, none lost or twice, with the type's schema."""
+    path = tmp_path / "natbot.mcap"
+    proc = await asyncio.create_subprocess_exec(
+        sys.executable, "-m", "roslibpy_lite.cli", "bag", "record", "/nat/chatter",
+        "-o", str(path), "--max", "20", "-q", "--url", relay_and_robot.second_url,
+        stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE)
+    out, err = await asyncio.wait_for(proc.communicate(), 60)
+    assert proc.returncode == 0, (out, err)
+    about = info(path)
+    assert about.complete and about.messages == 20
+    assert [(t.topic, t.type_name) for t in about.topics] == [("/nat/chatter",
+                                                                "std_msgs/msg/String")]
+    numbers = [int(m.decode().data.split()[1]) for m in read(path)]  # type: ignore[attr-defined]
+    assert numbers == list(range(numbers[0], numbers[0] + 20))
 
 
 async def _open_when_there(url: str) -> WireClient:
@@ -295,7 +508,7 @@ async def test_a_restarted_router_gets_its_robot_back(relay_and_robot: Tier) -> 
     await wire.send({"op": "subscribe", "topic": "/nat/chatter", "type": "std_msgs/msg/String"})
     await _hears_chatter(wire)
     await wire.close()
-    relay_and_robot.restart_relay()
+    relay_and_robot.restart_router()
     wire = await _open_when_there(url)
     try:
         await wire.send({"op": "subscribe", "topic": "/nat/chatter", "type": "std_msgs/msg/String"})
