@@ -52,6 +52,7 @@ import * as ROSLIB from "/roslib/dist/RosLib.js";
 window.got = []; window.answer = null; window.problem = null;
 const ros = new ROSLIB.Ros({url: %(url)s});
 ros.on("error", (e) => { window.problem = "error: " + (e && e.message || e); });
+ros.on("close", () => { window.problem = window.problem || "the connection closed"; });
 ros.on("connection", () => {
   new ROSLIB.Topic({ros, name: %(topic)s, messageType: "std_msgs/msg/String"})
     .subscribe((m) => window.got.push(m.data));
