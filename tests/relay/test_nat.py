@@ -1,14 +1,18 @@
-"""A robot nobody can reach, reached through a relay (issue 26).
+"""A robot nobody can reach, reached through two relays (issue 26).
 
 The robot's bridge and its rclpy node run in a network namespace this test makes: inside
 it, only loopback and one veth link whose far end (in this namespace, on an address the
-test gives it) is the Zenoh router of a relay. Nothing listens inside the robot's
-namespace, so nothing can connect in; the bridge dials out. Clients connect to the relay
-on 127.0.0.1 and name the robot in the URL path: our client and stock roslibpy subscribe,
-publish, and call the robot's service.
+test gives it) is the Zenoh router of the first relay. Nothing listens inside the robot's
+namespace, so nothing can connect in; the bridge dials out. A second relay, here, is a
+Zenoh client of that router. One set-up serves the module: clients connect to either relay
+on 127.0.0.1 and name the robot in the URL path. Our client, stock roslibpy and stock
+roslib in headless Chromium hear the robot's topics (latched too, and a type only the
+robot has), publish to it, call its service and its action (of its own type), serve a
+service and an action its node calls, and ``bag record`` records it. Then the robot's link
+is cut and the router restarted (these two last: they disturb the tier).
 
-Needs root and ``ip`` (iproute2); under CI (``CI=true``) their absence fails the run
-(tests/conftest.py), here it skips.
+Needs root and ``ip`` (iproute2), and Chromium for the browser; under CI (``CI=true``)
+their absence fails the run (tests/conftest.py), here it skips.
 """
 
 from __future__ import annotations
@@ -45,8 +49,10 @@ from tests.relay.test_browser import NODE_MODULES, heard_and_answered, roslib_in
 ROBOT = "natbot"
 READY = re.compile(r"relay listening on ws://127\.0\.0\.1:(\d+)")
 
-# The robot's own ROS side: a talker, a service and an echo of what the relay's clients
-# publish, all in the robot's namespace.
+# The robot's own ROS side, all in the robot's namespace: a talker, an echo of what the
+# relays' clients publish, a latched topic said once, a topic of its own type, a service,
+# an action of a type msgs does not generate, and a client and an action client that call
+# what the relays' clients serve as soon as it is there, telling each answer on /nat/answered.
 ROBOT_NODE = textwrap.dedent("""
     import rclpy, sys
     from rclpy.action import ActionClient, ActionServer
@@ -402,7 +408,7 @@ async def test_the_robot_calls_what_relay_clients_serve(relay_and_robot: Tier) -
         while not wanted <= heard:
             with contextlib.suppress(TimeoutError):
                 heard.add((await told.get(0.5))["data"])
-            assert asyncio.get_running_loop().time() < deadline, heard
+            assert asyncio.get_running_loop().time() < deadline, f"told only {heard}"
 
 
 # Stock roslibpy, unchanged, in a child process (Twisted's reactor runs once per process);
