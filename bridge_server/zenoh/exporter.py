@@ -95,6 +95,8 @@ class _Export:
     listener: Callable[[Message], None]
     relays: set[str] = field(default_factory=set)
     seq: int = 0
+    epoch: str = field(default_factory=lambda: secrets.token_hex(6))
+    """This stream of the topic: a topic watched anew starts again at seq 1, in a new epoch."""
     last: tuple[Message, bytes] | None = None
 
 
@@ -333,7 +335,7 @@ class Exporter:
             return msg.data, last[1]
         export.seq += 1
         meta = Meta(type=export.feed.type_name or "", latched=export.feed.latched is msg,
-                    stamp_ns=msg.stamp_ns, epoch=self.epoch, seq=export.seq)
+                    stamp_ns=msg.stamp_ns, epoch=export.epoch, seq=export.seq)
         attachment = meta.encode()
         export.last = (msg, attachment)
         return msg.data, attachment

@@ -215,9 +215,9 @@ class _Payload:
 @dataclass
 class Meta(_Payload):
     """The attachment of a message's put: its type, whether the topic is latched (transient
-    local), the robot's receive time, and its place in the topic's stream (``epoch``: the
-    exporter's run; ``seq``: counted per topic from 1) so a relay that also asked for the
-    latched message takes each message once."""
+    local), the robot's receive time, and its place in the topic's stream (``epoch``: this
+    stream, new each time the robot subscribes the topic anew; ``seq``: counted in it from 1)
+    so a relay that also asked for the latched message takes each message once."""
 
     type: str
     latched: bool = False

@@ -36,6 +36,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from websockets.asyncio.client import connect as ws_connect
 from websockets.exceptions import InvalidStatus
 
 import roslibpy_lite
@@ -470,12 +471,15 @@ async def test_bag_record_through_the_second_relay(relay_and_robot: Tier, tmp_pa
     assert numbers == list(range(numbers[0], numbers[0] + 20))
 
 
-async def _open_when_there(url: str) -> WireClient:
-    """A raw websocket client of the robot (the relay answers 404 until it is there)."""
+async def _open_when_there(url: str, **options: Any) -> WireClient:
+    """A raw websocket client of the robot (the relay answers 404 until it is there);
+    ``options`` for websockets' connect."""
     deadline = asyncio.get_running_loop().time() + 30
     while True:
         try:
-            return await open_wire(url)
+            if not options:
+                return await open_wire(url)
+            return WireClient(await ws_connect(url, max_size=None, open_timeout=10, **options))
         except (OSError, InvalidStatus):
             if asyncio.get_running_loop().time() > deadline:
                 raise
@@ -508,16 +512,34 @@ async def test_a_cut_robot_is_reported_and_comes_back(relay_and_robot: Tier) -> 
 
 
 async def test_a_restarted_router_gets_its_robot_back(relay_and_robot: Tier) -> None:
-    """The relay that is the Zenoh router restarts: the robot dials in again by itself."""
-    url = relay_and_robot.url
-    wire = await _open_when_there(url)
-    await wire.send({"op": "subscribe", "topic": "/nat/chatter", "type": "std_msgs/msg/String"})
-    await _hears_chatter(wire)
-    await wire.close()
-    relay_and_robot.restart_router()
-    wire = await _open_when_there(url)
+    """The relay that is the Zenoh router restarts: the robot dials in again by itself, and
+    so does the second relay, whose client, connected all along, hears the robot again."""
+    t = relay_and_robot
+    wire = await _open_when_there(t.url)
+    # not read while the router restarts: an unbounded queue keeps its reader (and so its
+    # pongs to the relay's keepalive) going meanwhile
+    second = await _open_when_there(t.second_url, max_queue=None)
     try:
+        for w in (wire, second):
+            await w.send({"op": "subscribe", "topic": "/nat/chatter",
+                          "type": "std_msgs/msg/String"})
+            await _hears_chatter(w)
+        # the robot's stream of the topic runs a while before the cut, so its count is well
+        # past where the robot's next stream of it, after the restart, starts again
+        for _ in range(40):
+            await _hears_chatter(second)
+        await wire.close()
+        await asyncio.to_thread(t.restart_router)  # the clients answer pings meanwhile
+        wire = await _open_when_there(t.url)
         await wire.send({"op": "subscribe", "topic": "/nat/chatter", "type": "std_msgs/msg/String"})
         await _hears_chatter(wire)
+        await second.expect(op="status", level="warning", timeout=40)  # the robot went away
+        # What the robot says now reaches both relays: each of the router relay's next
+        # messages reaches the second relay's client too.
+        said = [(await wire.expect(op="publish", topic="/nat/chatter"))["msg"]["data"]
+                for _ in range(5)]
+        for text in said:
+            await second.expect(op="publish", topic="/nat/chatter", msg={"data": text})
     finally:
         await wire.close()
+        await second.close()
