@@ -174,7 +174,11 @@ class Protocol:
         Raises:
             RemoteProtocolError: the frame, or the op it completes, is invalid.
         """
-        op = parse_op(decode_frame(data))
+        return self.receive_decoded(decode_frame(data))
+
+    def receive_decoded(self, obj: Any) -> Op | None:
+        """:meth:`receive` for a frame :func:`decode_frame` already decoded."""
+        op = parse_op(obj)
         if isinstance(op, Fragment):
             return self.receive_fragment(op)
         return op

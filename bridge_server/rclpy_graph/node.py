@@ -40,8 +40,9 @@ Served services
 A client-served service is a real ROS service whose response is deferred: it is
 sent from the loop when the client answers, fails, times out or goes away (see
 :class:`PendingRosCall`). With the loop reader the middleware wakes the loop for each
-request, which takes it itself (:class:`ServedService`); otherwise it is an rclpy
-service whose callback returns at once, so the executor is never blocked.
+request, which takes it itself and answers it on the loop (:class:`ServedService`,
+:class:`LoopRosCall`); otherwise it is an rclpy service whose callback returns at once, so the
+executor is never blocked.
 """
 
 from __future__ import annotations
@@ -70,6 +71,7 @@ if TYPE_CHECKING:
 
 __all__ = [
     "Incoming",
+    "LoopRosCall",
     "PendingRosCall",
     "RosNode",
     "ServedService",
@@ -407,6 +409,29 @@ class PendingRosCall:
         return True
 
 
+class LoopRosCall:
+    """A ROS caller of a service the loop reader serves: taken on the loop with its header,
+    answered on the loop, so unlike :class:`PendingRosCall` it needs no lock."""
+
+    __slots__ = ("done", "header", "request", "served")
+
+    def __init__(self, served: ServedService, request: Any, header: Any) -> None:
+        self.served = served
+        self.request = request
+        self.header = header
+        self.done = False
+
+    def complete(self, response: Any | None = None) -> bool:
+        """Answer the ROS caller (``None``: a default response). False if already answered."""
+        if self.done:
+            return False
+        self.done = True
+        served = self.served
+        served._send(response if response is not None else served.srv_cls.Response(),
+                     self.header)
+        return True
+
+
 class ServedService:
     """A ROS service whose requests are answered by a websocket client.
 
@@ -421,7 +446,7 @@ class ServedService:
         ros: RosNode,
         name: str,
         srv_cls: type[Any],
-        on_request: Callable[[PendingRosCall], None],
+        on_request: Callable[[PendingRosCall | LoopRosCall], None],
     ) -> None:
         self.ros = ros
         self.name = name
@@ -455,9 +480,7 @@ class ServedService:
         self.srv.send_response = send_response
 
     def _on_loop_request(self, request: Any, header: Any) -> None:
-        pending = PendingRosCall(self, request)
-        pending._attach(header)
-        self.on_request(pending)
+        self.on_request(LoopRosCall(self, request, header))
 
     def _send(self, response: Any, header: Any) -> None:
         try:
@@ -851,9 +874,11 @@ class RosNode:
         return result
 
     def serve(
-        self, name: str, srv_cls: type[Any], on_request: Callable[[PendingRosCall], None]
+        self, name: str, srv_cls: type[Any],
+        on_request: Callable[[PendingRosCall | LoopRosCall], None],
     ) -> ServedService:
-        """Create a ROS service answered through ``on_request`` (see :class:`PendingRosCall`)."""
+        """Create a ROS service answered through ``on_request`` (see :class:`PendingRosCall`
+        and :class:`LoopRosCall`)."""
         return ServedService(self, name, srv_cls, on_request)
 
     @staticmethod

@@ -66,14 +66,23 @@ log = logging.getLogger("bridge_server.session")
 
 
 class ClientService:
-    """A service one client serves, with the callers waiting on it."""
+    """A service one client serves, with the callers waiting on it.
+
+    ``pending`` holds the ROS callers, each with the loop time by which the client must
+    answer: they all get the same ``served_call_timeout``, so the dict (in the order they
+    came) is in the order of their deadlines too, and one timer per session, not one per
+    call, ends those the client leaves unanswered (:meth:`SessionServices._expire`).
+    ``direct`` holds the calls of other clients of this bridge, each with its own timer
+    (their timeouts differ).
+    """
 
     def __init__(self, name: str, type_name: str, wire: str | None = None) -> None:
         self.name = name
         self.wire = wire or name  # the name as the client spelled it
         self.type_name = type_name
         self.ros: ServedService | None = None
-        self.pending: dict[str, tuple[RosCall | _DirectCall, asyncio.TimerHandle]] = {}
+        self.pending: dict[str, tuple[RosCall, float]] = {}
+        self.direct: dict[str, tuple[_DirectCall, asyncio.TimerHandle]] = {}
 
 
 class _DirectCall:
@@ -107,6 +116,8 @@ class SessionServices:
     """The ops this capability carries out, and the method for each."""
     LIMITS: ClassVar[dict[type[ops.Op], str]] = {ops.AdvertiseService: "serve_limit"}
     """The ops that add to what the connection holds, and the method that checks each."""
+    RAW_OPS: ClassVar[dict[str, str]] = {"service_response": "answer_decoded"}
+    """The op carried out as decoded, in its usual shape (see :meth:`answer_decoded`)."""
 
     def serve_limit(self, op: ops.AdvertiseService) -> str | None:
         """Why serving one more service would pass the connection's limits."""
@@ -119,6 +130,7 @@ class SessionServices:
         self.served: dict[str, ClientService] = {}
         self._owners = session.shared.service_owners
         self._request_ids = itertools.count()
+        self._expiry: asyncio.TimerHandle | None = None  # the earliest ROS caller's deadline
 
     # -- calling -------------------------------------------------------------------------------
 
@@ -236,63 +248,71 @@ class SessionServices:
         except Exception:
             log.exception("cannot convert a request to %s", served.name)
             return
-        timer = session.loop.call_later(
-            session.config.served_call_timeout, self._served_timeout, served, rid
-        )
-        served.pending[rid] = (pending, timer)
+        deadline = session.loop.time() + session.config.served_call_timeout
+        served.pending[rid] = (pending, deadline)
+        if self._expiry is None:
+            self._expiry = session.loop.call_at(deadline, self._expire)
         session.outbox.send_text(text)
 
-    def _served_timeout(
-        self, served: ClientService, rid: str, timeout: float | None = None
-    ) -> None:
-        entry = served.pending.pop(rid, None)
-        if entry is None:
-            return
-        pending = entry[0]
-        if isinstance(pending, _DirectCall):
-            pending.fail(f"service {served.name} timed out after {timeout} s")
-            return
-        log.warning(
-            "session %d: no answer for %s within %s s; the ROS caller is not answered "
-            "(a ROS service cannot send an error, and the bridge never invents a response)",
-            self.session.sid,
-            rid,
-            self.session.config.served_call_timeout,
-        )
+    def _expire(self) -> None:
+        """Forget the ROS callers the client left unanswered past ``served_call_timeout``
+        (logged), and wait for the next deadline."""
+        self._expiry = None
+        now = self.session.loop.time()
+        after = None
+        for served in self.served.values():
+            pending = served.pending
+            while pending:
+                rid, (_call, deadline) = next(iter(pending.items()))
+                if deadline > now:
+                    after = deadline if after is None else min(after, deadline)
+                    break
+                del pending[rid]
+                log.warning(
+                    "session %d: no answer for %s within %s s; the ROS caller is not answered "
+                    "(a ROS service cannot send an error, and the bridge never invents a "
+                    "response)", self.session.sid, rid, self.session.config.served_call_timeout,
+                )
+        if after is not None:
+            self._expiry = self.session.loop.call_at(after, self._expire)
+
+    def _direct_timeout(self, served: ClientService, rid: str, timeout: float) -> None:
+        entry = served.direct.pop(rid, None)
+        if entry is not None:
+            entry[0].fail(f"service {served.name} timed out after {timeout} s")
 
     def service_response(self, op: ops.ServiceResponse) -> None:
-        """The client answers a ROS caller of a service it serves."""
+        """The client answers a ROS caller of a service it serves (or another client's call)."""
         session = self.session
         name = full_name(op.service)
+        rid = None if op.id is None else str(op.id)
         served = self.served.get(name)
-        entry = None
-        if served is not None and op.id is not None:
-            entry = served.pending.pop(str(op.id), None)
-        if entry is None:
-            for s in self.served.values():
-                if op.id is not None and str(op.id) in s.pending:
-                    served = s
-                    entry = s.pending.pop(str(op.id))
-                    break
-        if entry is None or served is None or served.ros is None:
+        if served is None or rid is None or (rid not in served.pending
+                                             and rid not in served.direct):
+            # the id names the call: answered under another (or no) service name, it is
+            # still that call's answer
+            served = next((s for s in self.served.values()
+                           if rid in s.pending or rid in s.direct), None)
+        if served is None or rid is None or served.ros is None:
             session.error(f"service_response: no ROS call {op.id!r} is waiting on {name}", op.id)
             return
-        pending, timer = entry
-        timer.cancel()
-        if isinstance(pending, _DirectCall):
+        direct = served.direct.pop(rid, None)
+        if direct is not None:
+            direct[1].cancel()
             if not op.result:
                 reason = op.values if isinstance(op.values, str) else "the serving client failed"
-                pending.fail(f"service {name} failed: {reason}")
+                direct[0].fail(f"service {name} failed: {reason}")
                 return
             conv = served.ros.response_conv
             try:
                 obj = conv.to_obj(conv.from_obj(op.values or {}, "values"))
             except ConversionError as exc:
                 session.error(f"service_response for {name}: {exc}", op.id)
-                pending.fail(f"service {name} answered with a bad response: {exc}")
+                direct[0].fail(f"service {name} answered with a bad response: {exc}")
                 return
-            pending.succeed(obj)
+            direct[0].succeed(obj)
             return
+        pending = served.pending.pop(rid)[0]
         if not op.result:
             log.warning(
                 "session %d: the client failed %s (%.200s); the ROS caller is not answered "
@@ -302,12 +322,40 @@ class SessionServices:
                 op.values if isinstance(op.values, str) else "no reason given",
             )
             return
-        values = op.values if isinstance(op.values, Mapping) else {}
+        self._answer(served, pending, op.values if isinstance(op.values, Mapping) else {},
+                     op.id)
+
+    def answer_decoded(self, obj: dict[str, Any]) -> bool:
+        """``service_response`` as decoded, when it answers a ROS caller in the usual shape
+        (``result`` true, ``values`` an object, the ``id`` of a waiting ROS call of that
+        service, as this bridge sent it): no op value is made, the generic parse being
+        about half of the answer's time in the bridge. Anything else returns False at once,
+        untouched, for the generic path (which names what is wrong)."""
+        rid = obj.get("id")
+        service = obj.get("service")
+        values = obj.get("values")
+        if (obj.get("result") is not True or type(values) is not dict
+                or type(rid) is not str or type(service) is not str):
+            return False
+        served = self.served.get(service if service[:1] == "/" else "/" + service)
+        if served is None or served.ros is None:
+            return False
+        entry = served.pending.pop(rid, None)
+        if entry is None:
+            return False
+        self._answer(served, entry[0], values, rid)
+        return True
+
+    def _answer(self, served: ClientService, pending: RosCall, values: Mapping[str, Any],
+                op_id: ops.Id | None) -> None:
+        """Answer a ROS caller with the client's ``values`` (one that does not convert is
+        reported to the client, and the caller left unanswered)."""
+        assert served.ros is not None
         try:
             response = served.ros.response_conv.from_obj(values, "values")
         except ConversionError as exc:
-            session.error(f"service_response for {name}: {exc}; the ROS caller is not answered",
-                          op.id)
+            self.session.error(f"service_response for {served.name}: {exc}; the ROS caller "
+                               "is not answered", op_id)
             return
         pending.complete(response)
 
@@ -331,13 +379,13 @@ class SessionServices:
         session = self.session
         rid = f"service_request:{name}:{next(self._request_ids)}"
         future: asyncio.Future[tuple[bool, Any]] = session.loop.create_future()
-        timer = session.loop.call_later(timeout, self._served_timeout, served, rid, timeout)
-        served.pending[rid] = (_DirectCall(future), timer)
+        timer = session.loop.call_later(timeout, self._direct_timeout, served, rid, timeout)
+        served.direct[rid] = (_DirectCall(future), timer)
         session.send_op(ops.CallService(service=served.wire, args=args, id=rid))
         try:
             return await future
         finally:
-            entry = served.pending.pop(rid, None)
+            entry = served.direct.pop(rid, None)
             if entry is not None:  # the caller went away first
                 entry[1].cancel()
 
@@ -347,13 +395,11 @@ class SessionServices:
 
     def remove_served(self, served: ClientService, why: str) -> None:
         """Stop serving ``served``: pending direct calls fail, the ROS service goes."""
-        unanswered = 0
-        for _rid, (pending, timer) in list(served.pending.items()):
+        for call, timer in list(served.direct.values()):
             timer.cancel()
-            if isinstance(pending, _DirectCall):
-                pending.fail(f"service {served.name} failed: {why}")
-            else:
-                unanswered += 1
+            call.fail(f"service {served.name} failed: {why}")
+        served.direct.clear()
+        unanswered = len(served.pending)
         served.pending.clear()
         if unanswered:
             log.warning("service %s went (%s): %d ROS caller(s) not answered", served.name, why,
@@ -379,6 +425,9 @@ class SessionServices:
         for served in list(self.served.values()):
             self.remove_served(served, "the client that served it disconnected")
         self.served.clear()
+        if self._expiry is not None:
+            self._expiry.cancel()
+            self._expiry = None
 
     def recheck(self, gate: Gate) -> int:
         """Stop serving what the role no longer allows; how many services ended."""

@@ -23,7 +23,12 @@ Write a class in a module of its own with ``OPS`` (op class -> method name),
 ``LIMITS`` (op class -> method saying why the op would pass a per-connection limit),
 ``__init__(session)``, ``async close()`` (the client left) and
 ``recheck(gate) -> int`` (the role changed: end what it no longer allows), and
-add it to :meth:`Session.__init__`'s ``capabilities`` line. It talks to the
+add it to :meth:`Session.__init__`'s ``capabilities`` line. A capability may also list
+``RAW_OPS`` (op name -> method): the method gets the op's decoded JSON object before any
+op value is made, and returns ``False`` at once, having done nothing, for anything but the
+usual shape, which then takes the generic path (that names what is wrong). Only for hot
+ops that need no permission of their own and add nothing the connection's limits count
+(``service_response``: a client's answer to a ROS caller). It talks to the
 session through its public members: ``send_op``/``send_text``, ``status``,
 ``error``, ``spawn`` (a task cancelled with the session), ``outbox``, ``gate``,
 ``graph`` (the ROS side: :class:`~bridge_server.graph.Graph`), ``limits``, ``bridge``,
@@ -158,11 +163,14 @@ class Session:
             ops.SetLevel: self.set_level, ops.SessionAck: self._on_session_ack,
         }
         self._limits: dict[type[ops.Op], Callable[[Any], str | None]] = {}
+        self._raw_ops: dict[str, Callable[[dict[str, Any]], bool]] = {}
         for capability in self.capabilities:
             for op_cls, method in capability.OPS.items():
                 self._handlers[op_cls] = getattr(capability, method)
             for op_cls, method in capability.LIMITS.items():
                 self._limits[op_cls] = getattr(capability, method)
+            for name, method in getattr(capability, "RAW_OPS", {}).items():
+                self._raw_ops[name] = getattr(capability, method)
 
     @property
     def limits(self) -> SecurityConfig:
@@ -330,17 +338,26 @@ class Session:
         self.frame_len = len(frame)
         if self.token is not None:  # confirm it soon (the client keeps it until then)
             self._count_received()
-        if not self.gate.admit_frame(len(frame)):
+        gate = self.gate
+        if not gate.admit_frame(len(frame)):
             return
         try:
-            # Before authentication a frame is one op: fragments are not held for reassembly
-            # (the gate refuses a fragment like any op but auth).
-            op = (self.protocol.receive(frame) if self.gate.authenticated
-                  else parse_op(decode_frame(frame)))
+            obj = decode_frame(frame)
+            if gate.authenticated:
+                # a hot op in its usual shape is carried out as decoded (see RAW_OPS above)
+                if type(obj) is dict and isinstance(name := obj.get("op"), str):
+                    raw = self._raw_ops.get(name)
+                    if raw is not None and self._carry_out(raw, obj, name, obj.get("id")):
+                        return
+                op = self.protocol.receive_decoded(obj)
+            else:
+                # Before authentication a frame is one op: fragments are not held for
+                # reassembly (the gate refuses a fragment like any op but auth).
+                op = parse_op(obj)
         except ProtocolError as exc:
-            if not self.gate.authenticated:  # one answer, not one per frame of a flood
-                self.gate.close(f"authentication required: the first op must be auth "
-                                f"({exc.message[:60]})")
+            if not gate.authenticated:  # one answer, not one per frame of a flood
+                gate.close(f"authentication required: the first op must be auth "
+                           f"({exc.message[:60]})")
                 return
             self.error(exc.message, exc.id, "protocol")
             return
@@ -362,31 +379,38 @@ class Session:
             self.refuse(op, why)
             return
         errors = self.errors_sent
-        try:
-            handler = self._handlers.get(type(op))
-            if handler is None:
-                self.error(f"{op.OP}: a client may not send this op", getattr(op, "id", None))
-            else:
-                handler(op)
-        except BridgeError as exc:
-            self.error(f"{op.OP}: {exc}", getattr(op, "id", None))
-        except UnicodeError:  # a JSON string with a lone surrogate ("\ud800") reached rclpy
-            self.error(
-                f"{op.OP}: a string in the op is not valid Unicode text (a lone surrogate "
-                "such as \\ud800?); ROS strings must be UTF-8",
-                getattr(op, "id", None),
-            )
-        except Exception:
-            log.exception("session %d: %s failed", self.sid, op.OP)
-            self.error(
-                f"{op.OP}: internal error (the bridge log has the details)",
-                getattr(op, "id", None), "internal",
-            )
+        handler = self._handlers.get(type(op))
+        if handler is None:
+            self.error(f"{op.OP}: a client may not send this op", getattr(op, "id", None))
+        else:
+            self._carry_out(handler, op, op.OP, getattr(op, "id", None))
         if self.acks and isinstance(op, _ACKED) and self.errors_sent == errors:
             # The client asked for verdicts (ACKS_HEADER): no error means accepted.
             name = (op.service if isinstance(op, ops.AdvertiseService)
                     else op.action if isinstance(op, ops.AdvertiseAction) else op.topic)
             self.send_op(ops.Status(level="info", msg=f"ok: {op.OP} {name}", id=op.id))
+
+    def _carry_out(self, handler: Callable[[Any], Any], arg: Any, name: str,
+                   op_id: Any) -> bool:
+        """``handler(arg)`` for the op ``name``; what it raises goes back to the client as an
+        error (an internal one logged). False only when a raw handler did not take the op."""
+        if not isinstance(op_id, str | int) or isinstance(op_id, bool):
+            op_id = None  # the id as parse_op reads it
+        try:
+            return handler(arg) is not False
+        except BridgeError as exc:
+            self.error(f"{name}: {exc}", op_id)
+        except UnicodeError:  # a JSON string with a lone surrogate ("\ud800") reached rclpy
+            self.error(
+                f"{name}: a string in the op is not valid Unicode text (a lone surrogate "
+                "such as \\ud800?); ROS strings must be UTF-8",
+                op_id,
+            )
+        except Exception:
+            log.exception("session %d: %s failed", self.sid, name)
+            self.error(f"{name}: internal error (the bridge log has the details)", op_id,
+                       "internal")
+        return True
 
     def _report_evicted(self) -> None:
         """Tell the sender which incomplete fragmented ops were dropped to make room."""

@@ -5,6 +5,7 @@ from __future__ import annotations
 import asyncio
 import json
 import threading
+import time
 from typing import Any
 
 from mult_msgs.srv import MultFloats
@@ -37,6 +38,14 @@ async def _bridge_sees_service(ws: Any, name: str) -> None:
             return
         assert n < 500, f"the bridge never saw {name}"
         await asyncio.sleep(0.02)
+
+
+async def _serve_set_bool(ws: Any, ros_node: Any, name: str) -> Any:
+    """Have the client ``ws`` serve SetBool as ``name``; an rclpy client that sees it."""
+    await ws.send({"op": "advertise_service", "service": name, "type": "std_srvs/srv/SetBool"})
+    client = ros_node.create_client(SetBool, name)
+    await wait_service(client)
+    return client
 
 
 async def test_call_service_args_object_with_type(ws_connect: Any, ros_node: Any, topic: str) -> None:
@@ -157,9 +166,7 @@ async def test_served_service_failure_is_not_answered_with_a_default(
 ) -> None:
     """A client answering result false leaves the ROS caller unanswered (no invented default)."""
     ws = await ws_connect()
-    await ws.send({"op": "advertise_service", "service": topic, "type": "std_srvs/srv/SetBool"})
-    client = ros_node.create_client(SetBool, topic)
-    await wait_service(client)
+    client = await _serve_set_bool(ws, ros_node, topic)
     failed = client.call_async(SetBool.Request(data=True))
     request = await ws.expect(op="call_service", service=topic)
     await ws.send({"op": "service_response", "service": topic, "id": request["id"],
@@ -274,3 +281,87 @@ async def test_client_to_client_call_keeps_failure(ws_connect: Any, topic: str) 
     await server.close()
     reply = await caller.expect(op="service_response", id="gone")
     assert reply["result"] is False and topic in reply["values"]
+
+
+async def test_answers_of_other_shapes_are_named_and_leave_the_caller_waiting(
+    ws_connect: Any, ros_node: Any, topic: str
+) -> None:
+    """A service_response not in the usual shape (taken as decoded) gets the generic path's
+    error naming what is wrong, and the ROS caller still waits for a good answer."""
+    ws = await ws_connect()
+    client = await _serve_set_bool(ws, ros_node, topic)
+    future = client.call_async(SetBool.Request(data=True))
+    request = await ws.expect(op="call_service", service=topic)
+    rid = request["id"]
+    wrong = [
+        ({"result": "yes", "values": {"success": True}}, "field 'result' must be true or false"),
+        ({"result": True, "values": [True]}, "field 'values' must be an object or a string"),
+        ({"result": True, "values": {"success": True}, "service": ""},
+         "field 'service' must be a non-empty string"),
+        ({"result": True, "values": {"success": True}, "id": rid + "x"}, "no ROS call"),
+        ({"result": True, "values": {"success": "very"}}, "the ROS caller is not answered"),
+    ]
+    for n, (fields, why) in enumerate(wrong):
+        await ws.send({"op": "service_response", "service": topic, "id": rid, **fields})
+        error = await ws.expect(op="status", level="error")
+        assert why in error["msg"], (n, error)
+        assert not future.done()
+    # a bad response (its value does not convert) took the call; the next call is answered
+    # with the service named as the client spelled it, without the leading slash
+    future = client.call_async(SetBool.Request(data=False))
+    request = await ws.expect(op="call_service", service=topic)
+    await ws.send({"op": "service_response", "service": topic.lstrip("/"), "id": request["id"],
+                   "result": True, "values": {"success": True, "message": "at last"}})
+    assert (await ros_future(future)).message == "at last"
+
+
+async def test_unanswered_ros_callers_are_forgotten_after_the_timeout(
+    make_bridge: Any, ws_connect: Any, ros_node: Any, topic: str
+) -> None:
+    """Each ROS call a client leaves unanswered is forgotten (and logged) once
+    --served-call-timeout has passed, one after the other (the second well after the first),
+    while the calls it answers in time are answered."""
+    bridge = make_bridge("--served-call-timeout", "1")
+    ws = await ws_connect(bridge.url)
+    client = await _serve_set_bool(ws, ros_node, topic)
+    first = client.call_async(SetBool.Request(data=True))
+    first_id = (await ws.expect(op="call_service", service=topic))["id"]
+    answered: list[str] = []
+    since = time.monotonic()
+    while time.monotonic() - since < 0.1 or len(answered) < 2:  # calls answered in time
+        future = client.call_async(SetBool.Request(data=False))
+        request = await ws.expect(op="call_service", service=topic)
+        await ws.send({"op": "service_response", "service": topic, "id": request["id"],
+                       "result": True, "values": {"success": True, "message": "in time"}})
+        assert (await ros_future(future)).message == "in time"
+        answered.append(request["id"])
+    second = client.call_async(SetBool.Request(data=True))
+    second_id = (await ws.expect(op="call_service", service=topic))["id"]
+    await asyncio.to_thread(bridge.wait_for_line, f"no answer for {first_id} within 1", 10)
+    await asyncio.to_thread(bridge.wait_for_line, f"no answer for {second_id} within 1", 10)
+    await ws.send({"op": "service_response", "service": topic, "id": first_id,
+                   "result": True, "values": {"success": True, "message": "late"}})
+    error = await ws.expect(op="status", level="error")
+    assert f"no ROS call {first_id!r}" in error["msg"]
+    assert not first.done() and not second.done()
+    assert not any(f"{rid} within" in line for rid in answered for line in bridge.lines)
+
+
+async def test_a_call_between_clients_times_out_with_its_own_timeout(
+    ws_connect: Any, topic: str
+) -> None:
+    """A call to a service another client serves fails after the call's own timeout when
+    that client does not answer; its late answer then finds no call waiting."""
+    server = await ws_connect()
+    await server.send({"op": "advertise_service", "service": topic, "type": "std_srvs/SetBool"})
+    await roundtrip(server)
+    caller = await ws_connect()
+    await caller.send({"op": "call_service", "service": topic, "args": {"data": True},
+                       "id": "slow", "timeout": 0.5})
+    request = await server.expect(op="call_service", service=topic)
+    reply = await caller.expect(op="service_response", id="slow")
+    assert reply["result"] is False and "timed out after 0.5 s" in reply["values"]
+    await server.send({"op": "service_response", "service": topic, "id": request["id"],
+                       "result": True, "values": {"success": True, "message": "late"}})
+    error = await server.expect(op="status", level="error")
+    assert "no ROS call" in error["msg"]
