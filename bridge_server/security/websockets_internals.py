@@ -12,6 +12,15 @@ the queue and a turn of the loop to wake the session's reading task: that was a 
 of a client's reply's time in the bridge on its way to a ROS caller. Anything else (a
 message in several frames, frames queued behind others, invalid UTF-8) takes websockets'
 own path, so the order of messages and the closing rules stay websockets'.
+
+While websockets' parser waits at a frame boundary with nothing buffered, the bytes read are
+not even given to it: :meth:`BridgeConnection.data_received` reads the whole, final, masked
+text and binary frames at their start itself (a header, a mask, websockets' own C unmasking)
+and hands each over; websockets' parser, its frame objects and its event list were most
+of the rest of that reply's Python. It stops at the first byte it does not take (a control
+or continuation frame, reserved bits, a frame too large or cut off by the read, invalid
+UTF-8, a handler that closed the connection) and gives websockets everything from there, at
+a frame boundary, so websockets decides about those bytes exactly as before.
 :func:`check_websockets_internals` fails at start-up, naming the version, if a websockets
 upgrade changed what this relies on: an upgrade touches this file and nothing else.
 """
@@ -29,6 +38,13 @@ from typing import TYPE_CHECKING, Any
 from websockets.asyncio.messages import Assembler, SimpleQueue
 from websockets.asyncio.server import ServerConnection
 from websockets.frames import BINARY, TEXT, Frame
+from websockets.protocol import OPEN
+from websockets.streams import StreamReader
+
+try:  # websockets' own unmasking, in C where it was built with it
+    from websockets.speedups import apply_mask
+except ImportError:  # pragma: no cover - a websockets without its C extension
+    from websockets.utils import apply_mask
 
 from ..interfaces import BridgeError
 
@@ -132,6 +148,72 @@ class BridgeConnection(ServerConnection):
         what it raises is logged and the connection closed (1011)."""
         self.on_frame = handler
 
+    def data_received(self, data: bytes) -> None:
+        """websockets' hook for the bytes read: at a frame boundary, the whole final masked
+        text and binary frames they start with go to the frame handler, read here; the rest,
+        from the first frame not taken, to websockets (see the module's docstring)."""
+        handler = self.on_frame
+        if handler is None or not self._at_frame_boundary():
+            super().data_received(data)
+            return
+        protocol = self.protocol
+        limit = protocol.max_message_size
+        end = len(data)
+        start = 0
+        while end - start >= 6:
+            head = data[start]
+            second = data[start + 1]
+            # FIN, no reserved bits, text (0x81) or binary (0x82); masked, as from a client
+            if (head != 0x81 and head != 0x82) or second < 0x80:
+                break
+            size = second & 0x7F
+            at = start + 2
+            if size == 126:
+                size = int.from_bytes(data[at:at + 2])
+                at += 2
+            elif size == 127:
+                size = int.from_bytes(data[at:at + 8])
+                at += 8
+            if (limit is not None and size > limit) or at + 4 + size > end:
+                break  # too large (websockets closes with 1009), or not all read yet
+            payload = apply_mask(data[at + 4:at + 4 + size], data[at:at + 4])
+            if head == 0x81:
+                try:
+                    message: str | bytes = payload.decode()
+                except UnicodeDecodeError:  # websockets closes the connection (1007) for it
+                    break
+            else:
+                message = payload
+            start = at + 4 + size
+            if not self._hand(handler, message) or self.on_frame is not handler \
+                    or protocol.state is not OPEN:
+                break
+        if start < end:
+            super().data_received(data[start:] if start else data)
+
+    def _at_frame_boundary(self) -> bool:
+        """Whether the next byte read starts a frame that :meth:`data_received` may read itself:
+        open, no extension, no fragmented message under way, no frame queued for ``recv``,
+        no debug log of frames, and websockets' parser waiting for a frame's first byte."""
+        protocol = self.protocol
+        if (protocol.state is not OPEN or protocol.extensions or protocol.debug
+                or protocol.current_size is not None or protocol.max_fragment_size is not None
+                or protocol.reader.buffer or self.recv_messages.frames.queue
+                or self.recv_messages.closed):
+            return False
+        return _innermost(protocol.parser) is _AT_EOF
+
+    def _hand(self, handler: Callable[[str | bytes], None], data: str | bytes) -> bool:
+        """``handler(data)``; False if it raised (logged, the connection closed with 1011)."""
+        try:
+            handler(data)
+        except Exception:
+            log.exception("a frame handler failed; closing the connection")
+            self.on_frame = None
+            self.loop.create_task(self.close(1011, "internal error"))
+            return False
+        return True
+
     def process_event(self, event: Any) -> None:
         """websockets' hook for each frame read: a whole text or binary message goes to the
         frame handler when nothing is queued before it; anything else to websockets."""
@@ -150,12 +232,7 @@ class BridgeConnection(ServerConnection):
             except UnicodeDecodeError:  # websockets closes the connection (1007) for it
                 super().process_event(event)
                 return
-            try:
-                handler(data)
-            except Exception:
-                log.exception("a frame handler failed; closing the connection")
-                self.on_frame = None
-                self.loop.create_task(self.close(1011, "internal error"))
+            self._hand(handler, data)
             return
         super().process_event(event)
 
@@ -189,6 +266,18 @@ class BridgeConnection(ServerConnection):
         """websockets' hook: no longer count this connection against the client limits."""
         super().connection_lost(exc)
         self.security.release(self)
+
+
+_AT_EOF = StreamReader.at_eof.__code__
+"""What websockets' parser waits in between two frames (``parse``: ``yield from at_eof()``)."""
+
+
+def _innermost(generator: Any) -> Any:
+    """The code of the generator ``generator`` waits in, through its ``yield from`` chain
+    (websockets' server parser: the handshake's, then the frames', then the reader's)."""
+    while (inner := getattr(generator, "gi_yieldfrom", None)) is not None:
+        generator = inner
+    return getattr(generator, "gi_code", None)
 
 
 TCP_NOTSENT_LOWAT = getattr(socket, "TCP_NOTSENT_LOWAT", 25)  # Linux's value; 3.11 lacks it
@@ -241,6 +330,8 @@ def check_websockets_internals() -> None:
             problem = "no process_event or Assembler.closed (the frames handed over as read)"
         elif not isinstance(getattr(ServerProtocol(), "max_message_size", None), int):
             problem = "no protocol.max_message_size (the pre-authentication frame limit)"
+        elif not _parser_waits_at_eof():
+            problem = "the parser does not wait in StreamReader.at_eof between frames"
     except Exception as exc:
         problem = f"{type(exc).__name__}: {exc}"
     if problem is not None:
@@ -251,3 +342,30 @@ def check_websockets_internals() -> None:
             f"websockets{WEBSOCKETS_TESTED} ({problem}); install "
             f"'websockets{WEBSOCKETS_TESTED}'"
         )
+
+
+def _parser_waits_at_eof() -> bool:
+    """Whether an open server protocol's parser waits where :meth:`BridgeConnection.
+    data_received` looks for a frame boundary, after a handshake and after a whole frame."""
+    from websockets.client import ClientProtocol
+    from websockets.http11 import Request
+    from websockets.server import ServerProtocol
+    from websockets.uri import parse_uri
+
+    client = ClientProtocol(parse_uri("ws://localhost/"))
+    server = ServerProtocol()
+    client.send_request(client.connect())
+    server.receive_data(b"".join(client.data_to_send()))
+    request = server.events_received()[0]
+    assert isinstance(request, Request)
+    server.send_response(server.accept(request))
+    client.receive_data(b"".join(server.data_to_send()))
+    client.send_text(b"{}")
+    server.receive_data(b"".join(client.data_to_send()))
+    return (
+        server.state is OPEN
+        and [getattr(e, "data", None) for e in server.events_received()] == [b"{}"]
+        and not server.reader.buffer and server.current_size is None
+        and server.max_fragment_size is None and not server.extensions
+        and _innermost(server.parser) is _AT_EOF
+    )

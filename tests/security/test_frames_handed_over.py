@@ -3,16 +3,21 @@ websocket connections to a server with the bridge's connection class.
 
 A whole message with nothing queued before it skips websockets' queue and the turn of the
 loop that wakes the reader; anything else keeps websockets' path, so messages stay in the
-order they were sent and invalid UTF-8 still closes the connection (1007).
+order they were sent and invalid UTF-8 still closes the connection (1007). At a frame
+boundary the bridge reads whole data frames itself (BridgeConnection.data_received): the
+bytes it reads are the frames websockets would have made, and what it does not take
+(control frames, a frame cut off by the read, what websockets refuses) is websockets' again.
 """
 
 from __future__ import annotations
 
 import asyncio
+import struct
 from collections.abc import AsyncIterator, Callable
 from contextlib import asynccontextmanager
 from typing import Any
 
+import pytest
 from websockets.asyncio.client import ClientConnection, connect
 from websockets.asyncio.server import ServerConnection, serve
 from websockets.exceptions import ConnectionClosed
@@ -39,7 +44,8 @@ class Seen(list[tuple[str, str | bytes]]):
 
 
 @asynccontextmanager
-async def _server(seen: Seen, handed: bool = True) -> AsyncIterator[tuple[str, asyncio.Event]]:
+async def _server(seen: Seen, handed: bool = True,
+                  max_size: int = 2**20) -> AsyncIterator[tuple[str, asyncio.Event]]:
     """A server whose connections record each message and how it came: ``direct`` (handed
     over as read) or ``loop`` (through ``recv``); the event is set when a connection ends."""
     ended = asyncio.Event()
@@ -59,7 +65,7 @@ async def _server(seen: Seen, handed: bool = True) -> AsyncIterator[tuple[str, a
 
     security = Security(SecurityConfig())
     async with serve(handler, "127.0.0.1", 0, create_connection=security.connection_class,
-                     compression=None) as server:
+                     compression=None, max_size=max_size) as server:
         port = next(iter(server.sockets)).getsockname()[1]
         yield f"ws://127.0.0.1:{port}", ended
 
@@ -146,3 +152,88 @@ async def test_a_handler_that_raises_closes_the_connection_with_1011() -> None:
                 await ws.wait_closed()
                 await ended.wait()
     assert ws.close_code == 1011
+
+
+def _client_frame(payload: bytes, head: int = 0x81, mask: bytes = b"\x00\x00\x00\x00") -> bytes:
+    """One frame as a client sends it (``head``: FIN, reserved bits, opcode), masked with
+    ``mask`` (all zeros: the payload shows as it is), or unmasked with ``mask=b""``."""
+    size = len(payload)
+    bit = 0x80 if mask else 0
+    if size < 126:
+        length = bytes((bit | size,))
+    elif size < 0x10000:
+        length = bytes((bit | 126,)) + struct.pack("!H", size)
+    else:
+        length = bytes((bit | 127,)) + struct.pack("!Q", size)
+    masked = bytes(b ^ mask[i % 4] for i, b in enumerate(payload)) if mask else payload
+    return bytes((head,)) + length + mask + masked
+
+
+async def test_several_whole_messages_read_at_once_are_each_handed_over() -> None:
+    """Messages of every length encoding (7, 16 and 64 bits), text and binary, written at once,
+    each reach the handler whole and in order."""
+    seen = Seen()
+    long_text = "é" * 100 + "x" * 20
+    big = bytes(range(256)) * 300
+    async with _server(seen) as (url, _), connect(url, compression=None) as ws:
+        def frames() -> None:
+            ws.protocol.send_text(b'{"op": "short"}')
+            ws.protocol.send_text(long_text.encode())
+            ws.protocol.send_binary(big)
+            ws.protocol.send_text(b"")
+        _write_at_once(ws, frames)
+        await seen.until(4)
+    assert seen == [("direct", '{"op": "short"}'), ("direct", long_text), ("direct", big),
+                    ("direct", "")]
+
+
+async def test_bytes_in_the_middle_of_a_frame_are_never_read_as_a_frame() -> None:
+    """A frame cut off by a read is finished by websockets: the rest of it, even when it looks
+    like a whole frame of its own, is that frame's payload; the next frame is read at once."""
+    seen = Seen()
+    inner = _client_frame(b"inner")
+    payload = b"0123456789" + inner
+    outer = _client_frame(payload, head=0x82)
+    cut = len(outer) - len(inner)  # the second read starts with the inner frame's bytes
+    async with _server(seen) as (url, _), connect(url, compression=None) as ws:
+        ws.transport.write(_client_frame(b"first") + outer[:cut])
+        await seen.until(1)
+        ws.transport.write(outer[cut:])
+        await seen.until(2)
+        await ws.send("last")
+        await seen.until(3)
+    assert seen == [("direct", "first"), ("direct", payload), ("direct", "last")]
+
+
+async def test_a_ping_between_messages_is_answered_and_keeps_them_in_order() -> None:
+    """A ping read between two messages goes to websockets, which answers it; the messages
+    around it arrive in order, the one after it too."""
+    seen = Seen()
+    async with _server(seen) as (url, _), connect(url, compression=None) as ws:
+        ws.transport.write(_client_frame(b"before") + _client_frame(b"", head=0x89)
+                           + _client_frame(b"after"))
+        await seen.until(2)
+        async with asyncio.timeout(10):
+            await (await ws.ping())
+        await ws.send("again")
+        await seen.until(3)
+    assert seen == [("direct", "before"), ("direct", "after"), ("direct", "again")]
+
+
+@pytest.mark.parametrize(("frame", "code"), [
+    (_client_frame(b"x" * 2000), 1009),  # over max_size
+    (_client_frame(b"x", mask=b""), 1002),  # not masked
+    (_client_frame(b"x", head=0xC1), 1002),  # a reserved bit without an extension
+], ids=["too-big", "unmasked", "reserved-bit"])
+async def test_frames_websockets_refuses_still_close_the_connection(frame: bytes,
+                                                                    code: int) -> None:
+    """A frame websockets would refuse is never handed over, and it closes the connection
+    with the code it always did."""
+    seen = Seen()
+    async with _server(seen, max_size=1000) as (url, ended), connect(url, compression=None) as ws:
+        ws.transport.write(frame)
+        async with asyncio.timeout(10):
+            await ended.wait()
+            await ws.wait_closed()
+    assert seen == []
+    assert ws.close_code == code

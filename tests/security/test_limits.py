@@ -152,6 +152,26 @@ async def test_websockets_internals_are_checked_at_start_up(monkeypatch: pytest.
         check_websockets_internals()
 
 
+async def test_the_frame_boundary_websockets_parser_waits_at_is_checked_at_start_up(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """If websockets' parser no longer waited in StreamReader.at_eof between frames (where the
+    bridge looks before reading frames itself), the start-up check says so."""
+    from websockets.streams import StreamReader
+
+    from bridge_server.rclpy_graph.types import BridgeError
+    from bridge_server.security import check_websockets_internals
+
+    def at_eof(self: StreamReader) -> Any:
+        while not self.buffer and not self.eof:
+            yield
+        return not self.buffer
+
+    monkeypatch.setattr(StreamReader, "at_eof", at_eof)
+    with pytest.raises(BridgeError, match=r"does not wait in StreamReader\.at_eof"):
+        check_websockets_internals()
+
+
 def test_rclpy_internals_are_checked_at_start_up(monkeypatch: pytest.MonkeyPatch) -> None:
     """The action code's rclpy internals pass the start-up check; if one is gone, it says so."""
     from rclpy.action.server import ServerGoalHandle
