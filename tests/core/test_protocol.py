@@ -133,3 +133,26 @@ def test_any_frame_gives_an_op_or_a_protocol_error(frame: Any) -> None:
         assert exc.message
     else:
         assert result is None or parse_op(json.loads(encode(result))) == result
+
+
+_JSON = st.recursive(
+    st.none() | st.booleans() | st.integers() | st.floats(allow_nan=False) | st.text(),
+    lambda inner: st.lists(inner, max_size=4) | st.dictionaries(st.text(), inner, max_size=4),
+    max_leaves=12,
+)
+
+
+@given(_JSON, st.sampled_from(["", " ", "\n", " \t"]), st.sampled_from(["", " ", "\n", "x",
+                                                                         "{}", ",", "]"]))
+def test_a_text_frame_decodes_as_json_loads_decodes_it(value: Any, before: str,
+                                                      after: str) -> None:
+    """Any JSON value, with whitespace or anything else around it: the same value as
+    json.loads, or the error naming where json.loads stops."""
+    text = before + json.dumps(value) + after
+    try:
+        expected = json.loads(text)
+    except json.JSONDecodeError as exc:
+        with pytest.raises(RemoteProtocolError, match=f"at line {exc.lineno} column {exc.colno}"):
+            decode_frame(text)
+        return
+    assert decode_frame(text) == expected
