@@ -293,7 +293,7 @@ async def test_answers_of_other_shapes_are_named_and_leave_the_caller_waiting(
     future = client.call_async(SetBool.Request(data=True))
     request = await ws.expect(op="call_service", service=topic)
     rid = request["id"]
-    wrong = [
+    wrong: list[tuple[dict[str, Any], str]] = [
         ({"result": "yes", "values": {"success": True}}, "field 'result' must be true or false"),
         ({"result": True, "values": [True]}, "field 'values' must be an object or a string"),
         ({"result": True, "values": {"success": True}, "service": ""},
