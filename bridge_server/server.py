@@ -244,8 +244,11 @@ class Bridge:
             if not self.ros.subscriptions:
                 self._graph_event.clear()
                 await self._graph_event.wait()
+            # asyncio.timeout, not wait_for: on 3.11 wait_for drops a cancel that comes as the
+            # event is set, and close() would wait for this task for ever.
             with contextlib.suppress(TimeoutError):
-                await asyncio.wait_for(self._graph_event.wait(), interval)
+                async with asyncio.timeout(interval):
+                    await self._graph_event.wait()
             self._graph_event.clear()
             self.ros.refresh()
 

@@ -190,8 +190,9 @@ class Hub:
 
     async def _run(self) -> None:
         while True:
-            with contextlib.suppress(TimeoutError):
-                await asyncio.wait_for(self._wake.wait(), REFRESH_S)
+            with contextlib.suppress(TimeoutError):  # not wait_for: see Bridge._refresh_loop
+                async with asyncio.timeout(REFRESH_S):
+                    await self._wake.wait()
             self._wake.clear()
             try:
                 self.refresh()

@@ -128,7 +128,8 @@ class SessionStore:
             event = self._parked_event.setdefault(token, asyncio.Event())
             session.ws.transport.abort()
             with contextlib.suppress(TimeoutError):
-                await asyncio.wait_for(event.wait(), CLAIM_WAIT)
+                async with asyncio.timeout(CLAIM_WAIT):  # keeps a cancel (3.11's wait_for may not)
+                    await event.wait()
         timer = self.parked.pop(token, None)
         if timer is None or self.live.get(token) is not session:
             return None

@@ -667,7 +667,8 @@ class ZenohGraph:
     async def ready(self, timeout: float = SNAPSHOT_WAIT) -> bool:
         """Whether the robot's first graph snapshot came within ``timeout`` s."""
         with contextlib.suppress(TimeoutError):
-            await asyncio.wait_for(self._have_snapshot.wait(), timeout)
+            async with asyncio.timeout(timeout):  # keeps a cancel (3.11's wait_for may not)
+                await self._have_snapshot.wait()
         return self._have_snapshot.is_set()
 
     def refresh(self) -> None:

@@ -148,7 +148,8 @@ class Recorder:
     async def wait(self, timeout: float | None = None) -> None:
         """Until ``max_messages`` are written or the recording fails (or ``timeout``)."""
         with contextlib.suppress(TimeoutError):
-            await asyncio.wait_for(self._done.wait(), timeout)
+            async with asyncio.timeout(timeout):  # keeps a cancel (3.11's wait_for may not)
+                await self._done.wait()
 
     async def stop(self) -> RecordStats:
         """Unsubscribe and finish the file properly (summary, index, footer)."""
