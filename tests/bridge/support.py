@@ -112,3 +112,14 @@ async def bridge_sees_topic(ws: Any, topic: str, timeout: float = 10.0) -> str:
         if asyncio.get_running_loop().time() > deadline:
             raise AssertionError(f"the bridge never saw {topic}")
         await asyncio.sleep(0.02)
+
+
+async def serve_set_bool(ws: Any, ros_node: Any, name: str) -> Any:
+    """Have the client ``ws`` serve ``std_srvs/SetBool`` as ``name``; an rclpy client of it
+    that sees it."""
+    from std_srvs.srv import SetBool
+
+    await ws.send({"op": "advertise_service", "service": name, "type": "std_srvs/srv/SetBool"})
+    client = ros_node.create_client(SetBool, name)
+    await wait_service(client)
+    return client

@@ -3,17 +3,19 @@
 from __future__ import annotations
 
 import json
+import os
 import signal
 import subprocess
 import sys
 import time
+from pathlib import Path
 from typing import Any
 
 import pytest
 from websockets.asyncio.client import connect
 from websockets.exceptions import ConnectionClosed
 
-from tests.bridge.support import roundtrip
+from tests.bridge.support import ros_future, roundtrip, serve_set_bool
 from tests.helpers import ROOT, ros_env
 
 
@@ -101,3 +103,38 @@ async def test_fragments_bounded_by_max_message_size(make_bridge: Any) -> None:
         await ws.send(json.dumps({"op": "call_service", "id": "v",
                                   "service": "/rosapi/get_ros_version"}))
         assert json.loads(await ws.recv())["result"] is True
+
+
+@pytest.mark.parametrize(("kind", "runs"), [("auto", "uvloop"), ("uvloop", "uvloop"),
+                                            ("asyncio", "asyncio")])
+async def test_the_bridge_runs_on_the_event_loop_asked_for(
+    kind: str, runs: str, make_bridge: Any, ws_connect: Any, ros_node: Any, topic: str
+) -> None:
+    """``--event-loop``: the bridge says which loop it runs (auto: uvloop, which the bridge
+    extra installs), and a ROS caller gets a client's answer through it."""
+    from std_srvs.srv import SetBool
+
+    bridge = make_bridge("--event-loop", kind)
+    assert bridge.wait_for_line(r"event loop: ").endswith(f"event loop: {runs}")
+    ws = await ws_connect(bridge.url)
+    client = await serve_set_bool(ws, ros_node, topic)
+    future = client.call_async(SetBool.Request(data=True))
+    request = await ws.expect(op="call_service", service=topic)
+    await ws.send({"op": "service_response", "service": topic, "id": request["id"],
+                   "result": True, "values": {"success": True, "message": runs}})
+    assert (await ros_future(future)).message == runs
+
+
+def test_uvloop_asked_for_where_it_cannot_be_imported_is_refused(tmp_path: Path) -> None:
+    """``--event-loop uvloop`` where uvloop does not import: the bridge does not start, and
+    says why."""
+    (tmp_path / "uvloop").mkdir()
+    (tmp_path / "uvloop" / "__init__.py").write_text('raise ImportError("no uvloop here")\n')
+    env = ros_env()
+    env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(tmp_path), env.get("PYTHONPATH")]))
+    out = subprocess.run(
+        [sys.executable, "-m", "bridge_server", "--port", "0", "--event-loop", "uvloop"],
+        cwd=ROOT, env=env, capture_output=True, text=True, timeout=60,
+    )
+    assert out.returncode == 1, out.stderr
+    assert "--event-loop uvloop: uvloop cannot be imported (no uvloop here)" in out.stderr

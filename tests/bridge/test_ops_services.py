@@ -13,7 +13,7 @@ from rclpy.callback_groups import ReentrantCallbackGroup
 from std_srvs.srv import SetBool
 
 from roslibpy_lite.protocol import split_fragments
-from tests.bridge.support import ros_future, roundtrip, wait_service
+from tests.bridge.support import ros_future, roundtrip, serve_set_bool, wait_service
 from tests.helpers import async_wait_until
 
 
@@ -38,14 +38,6 @@ async def _bridge_sees_service(ws: Any, name: str) -> None:
             return
         assert n < 500, f"the bridge never saw {name}"
         await asyncio.sleep(0.02)
-
-
-async def _serve_set_bool(ws: Any, ros_node: Any, name: str) -> Any:
-    """Have the client ``ws`` serve SetBool as ``name``; an rclpy client that sees it."""
-    await ws.send({"op": "advertise_service", "service": name, "type": "std_srvs/srv/SetBool"})
-    client = ros_node.create_client(SetBool, name)
-    await wait_service(client)
-    return client
 
 
 async def test_call_service_args_object_with_type(ws_connect: Any, ros_node: Any, topic: str) -> None:
@@ -166,7 +158,7 @@ async def test_served_service_failure_is_not_answered_with_a_default(
 ) -> None:
     """A client answering result false leaves the ROS caller unanswered (no invented default)."""
     ws = await ws_connect()
-    client = await _serve_set_bool(ws, ros_node, topic)
+    client = await serve_set_bool(ws, ros_node, topic)
     failed = client.call_async(SetBool.Request(data=True))
     request = await ws.expect(op="call_service", service=topic)
     await ws.send({"op": "service_response", "service": topic, "id": request["id"],
@@ -289,7 +281,7 @@ async def test_answers_of_other_shapes_are_named_and_leave_the_caller_waiting(
     """A service_response not in the usual shape (taken as decoded) gets the generic path's
     error naming what is wrong, and the ROS caller still waits for a good answer."""
     ws = await ws_connect()
-    client = await _serve_set_bool(ws, ros_node, topic)
+    client = await serve_set_bool(ws, ros_node, topic)
     future = client.call_async(SetBool.Request(data=True))
     request = await ws.expect(op="call_service", service=topic)
     rid = request["id"]
@@ -323,7 +315,7 @@ async def test_unanswered_ros_callers_are_forgotten_after_the_timeout(
     while the calls it answers in time are answered."""
     bridge = make_bridge("--served-call-timeout", "1")
     ws = await ws_connect(bridge.url)
-    client = await _serve_set_bool(ws, ros_node, topic)
+    client = await serve_set_bool(ws, ros_node, topic)
     first = client.call_async(SetBool.Request(data=True))
     first_id = (await ws.expect(op="call_service", service=topic))["id"]
     answered: list[str] = []
