@@ -50,6 +50,7 @@ zenoh-bridge-ros2dds it says why.
 
 from __future__ import annotations
 
+import base64
 import json
 import math
 import re
@@ -345,8 +346,10 @@ class Execute(_Payload):
 @dataclass
 class ParamRequest(_Payload):
     """A parameter query's payload: ``op`` ``names`` (with ``timeout``), ``get`` (``name``)
-    or ``set`` (``name``, ``value``; None unsets it). The reply is the Graph method's answer
-    as JSON; an error reply is ``{"kind": "timeout"|"lookup"|"value"|"error", "text"}``."""
+    or ``set`` (``name``, ``value``; None unsets it). A byte array ``value`` (JSON has no
+    bytes) goes as its base64 text with ``"binary": true`` beside it. The reply is the Graph
+    method's answer as JSON; an error reply is
+    ``{"kind": "timeout"|"lookup"|"value"|"error", "text"}``."""
 
     op: str
     name: str = ""
@@ -355,6 +358,13 @@ class ParamRequest(_Payload):
 
     OPS: ClassVar[tuple[str, ...]] = ("names", "get", "set")
 
+    def encode(self) -> bytes:
+        """As the payload's bytes (a byte array value as base64, flagged ``binary``)."""
+        obj = asdict(self)
+        if isinstance(self.value, bytes | bytearray):
+            obj["value"], obj["binary"] = base64.b64encode(self.value).decode(), True
+        return json.dumps(obj, separators=(",", ":")).encode()
+
     @classmethod
     def decode(cls, data: bytes) -> ParamRequest:
         """From a query's payload; ``BridgeError`` naming what is wrong."""
@@ -362,8 +372,17 @@ class ParamRequest(_Payload):
         if obj.get("op") not in cls.OPS:
             raise BridgeError(f"a parameter request's op {obj.get('op')!r} is not one of "
                               f"{', '.join(cls.OPS)}")
+        value = obj.get("value")
+        if obj.get("binary"):
+            try:
+                if not isinstance(value, str):
+                    raise ValueError(f"a {type(value).__name__}")
+                value = base64.b64decode(value, validate=True)
+            except ValueError as exc:
+                raise BridgeError(f"a parameter request's binary value is not base64 text "
+                                  f"({exc})") from None
         try:
-            return cls(op=obj["op"], name=str(obj.get("name", "")), value=obj.get("value"),
+            return cls(op=obj["op"], name=str(obj.get("name", "")), value=value,
                        timeout=_seconds(obj.get("timeout", 0.0), "timeout"))
         except (TypeError, ValueError) as exc:
             raise BridgeError(f"a parameter request is not a ParamRequest ({exc})") from None

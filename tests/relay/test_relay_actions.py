@@ -147,6 +147,10 @@ async def test_the_robot_names_what_is_wrong_with_a_request(topic: str) -> None:
             replies = await asyncio.to_thread(ask, f"{ROBOT}/{keys.PARAM}/some_node",
                                               b'{"op": "drop"}')
             assert "op 'drop' is not one of names, get, set" in replies[0], replies
+            replies = await asyncio.to_thread(
+                ask, f"{ROBOT}/{keys.PARAM}/some_node",
+                b'{"op": "set", "name": "blob", "value": "not base64!", "binary": true}')
+            assert "binary value is not base64 text" in replies[0], replies
 
             # a wait that is not a number of seconds would make a deadline nothing reaches
             goal = GoalRequest(type="test_msgs/action/Fibonacci", goal={"order": 1},
