@@ -54,6 +54,10 @@ class Tier:
         """The websocket URL of ``robot`` through the relay."""
         return f"ws://127.0.0.1:{self.relay.port}/{robot}"
 
+    def direct_url(self) -> str:
+        """The websocket URL of the robot's own bridge (a tier made with ``websocket``)."""
+        return f"ws://127.0.0.1:{self.robot.port}"
+
     def demand(self, topic: str) -> set[str]:
         """The relays watching ``topic`` as the robot's exporter knows them."""
         export = self.exporter.exports.get(topic)
@@ -96,13 +100,15 @@ async def robot_reachable(relay: Relay, robot: str = ROBOT, timeout: float = 20.
 
 
 @contextlib.asynccontextmanager
-async def tier(tls: tuple[str, str] | None = None) -> AsyncIterator[Tier]:
+async def tier(tls: tuple[str, str] | None = None, websocket: bool = False
+               ) -> AsyncIterator[Tier]:
     """A relay (the router) and a robot connected to it; all closed afterwards. ``tls``:
-    (CA file, the router's key and certificate file) for a tls/ link."""
+    (CA file, the router's key and certificate file) for a tls/ link; ``websocket``: the
+    robot's bridge listens too (:meth:`Tier.direct_url`), to hold the relay to it."""
     scheme = "tls" if tls else "tcp"
     router = f"{scheme}/127.0.0.1:{free_port()}"
     relay = await start_relay(listen=router, cert=tls[1] if tls else None)
-    robot, exporter = await start_robot(router, ca=tls[0] if tls else None)
+    robot, exporter = await start_robot(router, ca=tls[0] if tls else None, websocket=websocket)
     t = Tier(relay, robot, exporter, router)
     try:
         await robot_reachable(relay)

@@ -4,6 +4,12 @@
 their ``ros2msg`` schemas, and decodes the robot's CDR, carried over Zenoh untouched, to
 what rclpy published; a rosbridge client on the same relay at the same time.
 
+What the client sends goes the whole way too: its channels publish to an rclpy subscriber
+on the robot in order, its service calls reach rclpy services, its parameter reads, sets and
+updates reach the robot's nodes; every failure and refusal says what the robot's own bridge
+says to the same client connected to it directly (one tier for those tests, the robot's
+bridge listening too).
+
 The relay runs in this process, so the blocking peer driver is called off the event loop.
 """
 
@@ -11,16 +17,24 @@ from __future__ import annotations
 
 import asyncio
 import base64
+import contextlib
 import functools
+import re
+import threading
+from collections.abc import AsyncIterator
+from dataclasses import dataclass
 from typing import Any
 
 import pytest
+import pytest_asyncio
 from std_msgs.msg import String
 
+from bridge_server.foxglove.hub import foxglove_schema
+from msgs import dynamic
 from tests.helpers import open_wire
 from tests.peers import scenarios
-from tests.peers.peer import PeerProcess, foxglove_peer
-from tests.relay.support import ROBOT, tier
+from tests.peers.peer import PeerError, PeerProcess, foxglove_peer
+from tests.relay.support import ROBOT, Tier, tier, until
 
 pytestmark = pytest.mark.timeout(120)
 
@@ -94,3 +108,241 @@ async def test_foxglove_client_through_a_relay(ros_node: Any, topic: str) -> Non
         finally:
             await wire.close()
             await _call(fox.close)
+
+
+# -- what a Foxglove client sends: publishing, services, parameters -----------------------------
+#
+# One tier for these tests, whose robot bridge listens too: the same stock client on the
+# robot's own port is what the relay is held to.
+
+
+@dataclass
+class Pair:
+    """The tier, and one Foxglove client through the relay and one on the robot's bridge."""
+
+    tier: Tier
+    relay: PeerProcess
+    direct: PeerProcess
+
+    def begin_test(self) -> None:
+        """Events of earlier tests are no longer looked at."""
+        self.relay.begin_test()
+        self.direct.begin_test()
+
+
+@pytest_asyncio.fixture(scope="module", loop_scope="module")
+async def pair() -> AsyncIterator[Pair]:
+    """The module's tier (the robot's bridge listening) and its two Foxglove clients."""
+    async with tier(websocket=True) as t:
+        relay = await _call(foxglove_peer, t.url())
+        try:
+            direct = await _call(foxglove_peer, t.direct_url())
+            try:
+                yield Pair(t, relay, direct)
+            finally:
+                await _call(direct.close)
+        finally:
+            await _call(relay.close)
+
+
+def _schema(type_name: str) -> str:
+    """The definition text of a type as Foxglove clients give it."""
+    return foxglove_schema(dynamic.full_text(type_name))
+
+
+async def _error(fox: PeerProcess, part: str) -> str:
+    """The text of the first status error (this test's) containing ``part``."""
+    event = await _call(fox.wait_event, lambda e: e.get("event") == "status"
+                        and e.get("level") == 2 and part in e.get("message", ""), DEADLINE,
+                        f"a status error with {part!r}")
+    return str(event["message"])
+
+
+async def _failure(fox: PeerProcess, cmd: str, **params: Any) -> str:
+    """What a call command's ``serviceCallFailure`` said (it must fail)."""
+    try:
+        answer = await _call(fox.request, cmd, timeout=DEADLINE + 5, **params)
+    except PeerError as exc:
+        text = str(exc)
+        assert "serviceCallFailure: " in text, text
+        return text.split("serviceCallFailure: ", 1)[1]
+    raise AssertionError(f"the call was answered: {answer}")
+
+
+@pytest.mark.asyncio(loop_scope="module")
+async def test_a_foxglove_client_publishes_to_the_robot_through_a_relay(
+        pair: Pair, ros_node: Any, topic: str) -> None:
+    """clientAdvertise and CDR message data through the relay reach an rclpy subscriber on
+    the robot, every message in the order sent; clientUnadvertise takes the robot's ROS
+    publisher away."""
+    pair.begin_test()
+    fox = pair.relay
+    got: list[str] = []
+    ros_node.create_subscription(String, topic, lambda m: got.append(m.data), 100)
+    await _call(fox.request, "advertise", topic=topic, schemaName="std_msgs/msg/String",
+                schema=_schema("std_msgs/msg/String"))
+    deadline = asyncio.get_running_loop().time() + DEADLINE
+    while not got:  # until the robot's publisher matched the rclpy subscriber (no event)
+        assert asyncio.get_running_loop().time() < deadline, fox.diagnostics()
+        await _call(fox.request, "publish", topic=topic, msg={"data": "hello"})
+        with contextlib.suppress(AssertionError):
+            await until(lambda: got, "the first message", scenarios.ATTEMPT)
+    sent = [f"n{i}" for i in range(40)]
+    for text in sent:
+        await _call(fox.request, "publish", topic=topic, msg={"data": text})
+    await until(lambda: sent[-1] in got, "the last message on the robot", DEADLINE)
+    assert [m for m in got if m != "hello"] == sent
+    await _call(fox.request, "unadvertise", topic=topic)
+    await until(lambda: ros_node.count_publishers(topic) == 0, "the robot's publisher to go",
+                DEADLINE)
+
+
+@pytest.mark.asyncio(loop_scope="module")
+async def test_a_foxglove_client_calls_the_robots_services_through_a_relay(
+        pair: Pair, ros_node: Any, topic: str) -> None:
+    """serviceCallRequest through the relay calls an rclpy service on the robot and gets its
+    answer (CDR); an unknown service, a request that does not decode, arguments the type
+    does not take and a server that does not answer in time each get a serviceCallFailure
+    with the words the robot's own bridge uses."""
+    from std_srvs.srv import SetBool
+
+    pair.begin_test()
+    release = threading.Event()
+
+    def answer(request: Any, response: Any) -> Any:
+        response.success = request.data
+        response.message = f"rclpy got {request.data}"
+        return response
+
+    def stuck(request: Any, response: Any) -> Any:
+        release.wait(DEADLINE)
+        return response
+
+    ros_node.create_service(SetBool, topic, answer)
+    ros_node.create_service(SetBool, topic + "_stuck", stuck)
+    try:
+        reply = await _call(pair.relay.request, "call_service", service=topic,
+                            request={"data": True}, timeout_ms=int(DEADLINE * 1000),
+                            timeout=DEADLINE + 5)
+        assert reply == {"encoding": "cdr", "value": {"success": True,
+                                                      "message": "rclpy got True"}}
+        ids = {}
+        for name, fox in (("relay", pair.relay), ("direct", pair.direct)):
+            service = await _call(fox.request, "service", service=topic + "_stuck",
+                                  timeout_ms=int(DEADLINE * 1000), timeout=DEADLINE + 5)
+            ids[name] = (service["id"], (await _call(fox.request, "service", service=topic))["id"])
+        said: dict[str, list[str]] = {}
+        for name, fox in (("relay", pair.relay), ("direct", pair.direct)):
+            good = ids[name][1]
+            said[name] = [
+                await _failure(fox, "call_service_id", service_id=987654, hex="00010000"),
+                await _failure(fox, "call_service_id", service_id=good, hex="0001"),
+                await _failure(fox, "call_service_id", service_id=good, encoding="json",
+                               hex=b'{"data": "yes"}'.hex()),
+                await _failure(fox, "call_service_id", service_id=good, encoding="json",
+                               hex=b'{"nope": true}'.hex()),
+            ]
+        stuck_calls = [
+            _failure(fox, "call_service_id", service_id=ids[name][0], hex="0001000001")
+            for name, fox in (("relay", pair.relay), ("direct", pair.direct))]
+        timed_out = await asyncio.gather(*stuck_calls)
+    finally:
+        release.set()
+    assert said["relay"] == said["direct"]
+    assert "no service 987654" in said["relay"][0]
+    assert "does not decode as std_srvs/srv/SetBool" in said["relay"][1]
+    assert timed_out[0] == timed_out[1]
+
+
+async def _parameters(fox: PeerProcess, request_id: str, cmd: str, **params: Any
+                      ) -> list[dict[str, Any]]:
+    """Send a parameter command with ``request_id``; the ``parameterValues`` answering it."""
+    await _call(fox.request, cmd, id=request_id, **params)
+    event = await _call(fox.wait_event, lambda e: e.get("event") == "parameterValues"
+                        and e["id"] == request_id, DEADLINE, f"parameterValues {request_id}")
+    found: list[dict[str, Any]] = event["parameters"]
+    return found
+
+
+@pytest.mark.asyncio(loop_scope="module")
+async def test_a_foxglove_client_reads_sets_and_follows_parameters_through_a_relay(
+        pair: Pair, ros_node: Any) -> None:
+    """getParameters, setParameters (a float and a byte array) and parameter updates through
+    the relay reach an rclpy node's parameters on the robot; the list of all parameters
+    has it; a name that is not /node.param and a value no parameter holds get the errors
+    the robot's own bridge gives."""
+    from rclpy.parameter import Parameter
+
+    pair.begin_test()
+    fox = pair.relay
+    node = f"/{ros_node.get_name()}"
+    gain, blob = f"{node}.gain", f"{node}.blob"
+    ros_node.declare_parameter("gain", 1.5)
+    ros_node.declare_parameter("blob", Parameter.Type.BYTE_ARRAY)
+    await _call(fox.request, "subscribe_parameters", names=[gain])
+    deadline = asyncio.get_running_loop().time() + DEADLINE
+    n = 0
+    while not (values := await _parameters(fox, f"get{n}", "get_parameters", names=[gain])):
+        assert asyncio.get_running_loop().time() < deadline, "the robot never saw the node"
+        n += 1  # until the robot's bridge sees the new node (no event)
+    assert values == [{"name": gain, "value": 1.5, "type": "float64"}]
+    assert {"name": gain, "value": 1.5, "type": "float64"} in await _parameters(
+        fox, "all", "get_parameters", names=[])
+    assert await _parameters(fox, "set1", "set_parameters", parameters=[
+        {"name": gain, "value": 3, "type": "float64"}]) == [
+        {"name": gain, "value": 3.0, "type": "float64"}]
+    assert ros_node.get_parameter("gain").value == 3.0
+    await _call(fox.wait_event, lambda e: e.get("event") == "parameterValues"
+                and e["id"] is None and e["parameters"] == [
+                    {"name": gain, "value": 3.0, "type": "float64"}], DEADLINE, "the update")
+    answer = await _parameters(fox, "set2", "set_parameters", parameters=[
+        {"name": blob, "value": "aGk=", "type": "byte_array"}])
+    assert [p["name"] for p in answer] == [blob], fox.diagnostics()
+    assert ros_node.get_parameter("blob").value == [b"h", b"i"]
+
+    said: dict[str, list[str]] = {}
+    for name, peer in (("relay", pair.relay), ("direct", pair.direct)):
+        await _call(peer.request, "get_parameters", names=["no_dot"], id="bad")
+        await _call(peer.request, "set_parameters", id="bad", parameters=[
+            {"name": gain, "value": {"a": 1}}])
+        said[name] = [await _error(peer, "'no_dot'"), await _error(peer, f"{gain}:")]
+    assert said["relay"] == said["direct"]
+    assert ros_node.get_parameter("gain").value == 3.0
+
+
+@pytest.mark.asyncio(loop_scope="module")
+async def test_a_foxglove_clients_bad_publishing_gets_the_robots_bridges_errors(
+        pair: Pair, ros_node: Any, topic: str) -> None:
+    """What a client cannot publish through the relay (an encoding, a name or a type that
+    does not fit, CDR that does not decode, no such channel) gets the status error the
+    robot's own bridge gives it."""
+    pair.begin_test()
+    ros_node.create_publisher(String, topic + "_typed", 10)
+    await until(lambda: all(topic + "_typed" in dict(b.graph.topic_names_and_types())
+                            for b in (pair.tier.robot, *pair.tier.relay.robots.values())),
+                "the robot's topic in the relay's graph", DEADLINE)
+    string = _schema("std_msgs/msg/String")
+    said: dict[str, list[str]] = {}
+    for name, fox in (("relay", pair.relay), ("direct", pair.direct)):
+        for args, part in [
+                ({"topic": topic + "_p", "schemaName": "std_msgs/msg/String",
+                  "encoding": "protobuf"}, "encoding 'protobuf'"),
+                ({"topic": topic + " bad", "schemaName": "std_msgs/msg/String",
+                  "schema": string}, "bad):"),
+                ({"topic": topic + "_typed", "schemaName": "std_msgs/msg/Int32",
+                  "schema": _schema("std_msgs/msg/Int32")}, "not std_msgs/msg/Int32"),
+                ({"topic": topic, "schemaName": "std_msgs/msg/String", "schema": string},
+                 None)]:
+            await _call(fox.request, "advertise", **args)
+            if part is not None:
+                await _error(fox, part)
+        await _call(fox.request, "publish_bytes", topic=topic, hex="00010000ff000000")
+        await _error(fox, f"message data on {topic}")
+        await _call(fox.request, "send_binary", hex="01" + "39300000" + "00010000")
+        await _error(fox, "no client channel 12345")
+        said[name] = [re.sub(r"channel \d+ \(", "channel N (", e["message"])
+                      for e in fox.new_events()
+                      if e.get("event") == "status" and e.get("level") == 2]
+        await _call(fox.request, "unadvertise", topic=topic)
+    assert said["relay"] == said["direct"]
+    assert len(said["relay"]) == 5, said
