@@ -169,24 +169,31 @@ async def _failure(fox: PeerProcess, cmd: str, **params: Any) -> str:
     raise AssertionError(f"the call was answered: {answer}")
 
 
+async def _publish_until_heard(fox: PeerProcess, topic: str, text: str, got: list[str]
+                               ) -> None:
+    """Publish ``text`` on the client's channel of ``topic`` until the robot's subscriber
+    got something (its publisher matching the subscriber has no event here)."""
+    deadline = asyncio.get_running_loop().time() + DEADLINE
+    while not got:
+        assert asyncio.get_running_loop().time() < deadline, fox.diagnostics()
+        await _call(fox.request, "publish", topic=topic, msg={"data": text})
+        with contextlib.suppress(AssertionError):
+            await until(lambda: got, f"a message on {topic}", scenarios.ATTEMPT)
+
+
 @pytest.mark.asyncio(loop_scope="module")
 async def test_a_foxglove_client_publishes_to_the_robot_through_a_relay(
         pair: Pair, ros_node: Any, topic: str) -> None:
     """clientAdvertise and CDR message data through the relay reach an rclpy subscriber on
     the robot, every message in the order sent; clientUnadvertise takes the robot's ROS
-    publisher away."""
+    publisher away; a json channel's message reaches rclpy too."""
     pair.begin_test()
     fox = pair.relay
     got: list[str] = []
     ros_node.create_subscription(String, topic, lambda m: got.append(m.data), 100)
     await _call(fox.request, "advertise", topic=topic, schemaName="std_msgs/msg/String",
                 schema=_schema("std_msgs/msg/String"))
-    deadline = asyncio.get_running_loop().time() + DEADLINE
-    while not got:  # until the robot's publisher matched the rclpy subscriber (no event)
-        assert asyncio.get_running_loop().time() < deadline, fox.diagnostics()
-        await _call(fox.request, "publish", topic=topic, msg={"data": "hello"})
-        with contextlib.suppress(AssertionError):
-            await until(lambda: got, "the first message", scenarios.ATTEMPT)
+    await _publish_until_heard(fox, topic, "hello", got)
     sent = [f"n{i}" for i in range(40)]
     for text in sent:
         await _call(fox.request, "publish", topic=topic, msg={"data": text})
@@ -195,6 +202,13 @@ async def test_a_foxglove_client_publishes_to_the_robot_through_a_relay(
     await _call(fox.request, "unadvertise", topic=topic)
     await until(lambda: ros_node.count_publishers(topic) == 0, "the robot's publisher to go",
                 DEADLINE)
+
+    as_json: list[str] = []
+    ros_node.create_subscription(String, topic + "_json", lambda m: as_json.append(m.data), 10)
+    await _call(fox.request, "advertise", topic=topic + "_json",
+                schemaName="std_msgs/msg/String", encoding="json")
+    await _publish_until_heard(fox, topic + "_json", "as json", as_json)
+    assert as_json[0] == "as json"
 
 
 @pytest.mark.asyncio(loop_scope="module")
