@@ -6,9 +6,9 @@ what rclpy published; a rosbridge client on the same relay at the same time.
 
 What the client sends goes the whole way too: its channels publish to an rclpy subscriber
 on the robot in order, its service calls reach rclpy services, its parameter reads, sets and
-updates reach the robot's nodes; every failure and refusal says what the robot's own bridge
-says to the same client connected to it directly (one tier for those tests, the robot's
-bridge listening too).
+updates reach the robot's nodes, and it follows the robot's connection graph and /clock;
+every failure and refusal says what the robot's own bridge says to the same client
+connected to it directly (one tier for those tests, the robot's bridge listening too).
 
 The relay runs in this process, so the blocking peer driver is called off the event loop.
 """
@@ -110,7 +110,7 @@ async def test_foxglove_client_through_a_relay(ros_node: Any, topic: str) -> Non
             await _call(fox.close)
 
 
-# -- what a Foxglove client sends: publishing, services, parameters -----------------------------
+# -- publishing, services, parameters, the graph, the clock ------------------------------------
 #
 # One tier for these tests, whose robot bridge listens too: the same stock client on the
 # robot's own port is what the relay is held to.
@@ -360,3 +360,68 @@ async def test_a_foxglove_clients_bad_publishing_gets_the_robots_bridges_errors(
         await _call(fox.request, "unadvertise", topic=topic)
     assert said["relay"] == said["direct"]
     assert len(said["relay"]) == 5, said
+
+
+@pytest.mark.asyncio(loop_scope="module")
+async def test_a_foxglove_client_follows_the_robots_connection_graph_through_a_relay(
+        pair: Pair, ros_node: Any, topic: str) -> None:
+    """subscribeConnectionGraph through the relay: the update names the rclpy node on the
+    robot that publishes a topic, subscribes to one and serves a service."""
+    from std_srvs.srv import SetBool
+
+    pair.begin_test()
+    fox = pair.relay
+    ros_node.create_publisher(String, topic + "_out", 10)
+    ros_node.create_subscription(String, topic + "_in", lambda m: None, 10)
+    ros_node.create_service(SetBool, topic + "_srv", lambda req, res: res)
+    me = f"/{ros_node.get_name()}"
+    await _call(fox.request, "wait_channel", topic=topic + "_out",
+                timeout_ms=int(DEADLINE * 1000), timeout=DEADLINE + 5)
+    await _call(fox.request, "subscribe_graph")
+    seen: dict[str, bool] = {}
+
+    def names_me(event: dict[str, Any]) -> bool:
+        if event.get("event") != "connectionGraphUpdate":
+            return False
+        update = event["update"]
+        for key, ids, name in (("publishedTopics", "publisherIds", topic + "_out"),
+                               ("subscribedTopics", "subscriberIds", topic + "_in"),
+                               ("advertisedServices", "providerIds", topic + "_srv")):
+            if any(t["name"] == name and me in t[ids] for t in update.get(key, [])):
+                seen[key] = True
+        return len(seen) == 3
+
+    await _call(fox.wait_event, names_me, DEADLINE, "graph updates naming the robot's node")
+
+
+@pytest.mark.asyncio(loop_scope="module")
+async def test_a_foxglove_client_follows_the_robots_clock_through_a_relay(
+        pair: Pair, ros_node: Any) -> None:
+    """With /clock published on the robot, a Foxglove client that connects to the relay is
+    offered 'time' and sent the robot's clock."""
+    from rosgraph_msgs.msg import Clock  # type: ignore[import-untyped]
+
+    clock = ros_node.create_publisher(Clock, "/clock", 10)
+    try:
+        relayed = await pair.tier.relay.robot(ROBOT)
+        assert relayed is not None
+        await until(lambda: "/clock" in dict(relayed.graph.topic_names_and_types()),
+                    "/clock in the relay's graph of the robot", DEADLINE)
+        fox = await _call(foxglove_peer, pair.tier.url())
+        try:
+            assert "time" in fox.info["serverInfo"]["capabilities"]
+            msg = Clock()
+            msg.clock.sec, msg.clock.nanosec = 1234, 5678
+            deadline = asyncio.get_running_loop().time() + DEADLINE
+            while True:  # until the robot's /clock subscription matched (no event)
+                clock.publish(msg)
+                with contextlib.suppress(AssertionError):
+                    event = await _call(fox.wait_event, lambda e: e.get("event") == "time",
+                                        scenarios.ATTEMPT, "time")
+                    break
+                assert asyncio.get_running_loop().time() < deadline, fox.diagnostics()
+            assert event["timestamp"] == {"$bigint": str(1234 * 10**9 + 5678)}
+        finally:
+            await _call(fox.close)
+    finally:
+        ros_node.destroy_publisher(clock)
