@@ -11,7 +11,8 @@ goes on to the robot's handshake):
 ``GET /status.json``         the relay and, per robot: present on Zenoh or not, clients,
                              the topics its clients watch, messages and bytes each way
 ``GET /metrics``             every robot's bridge metrics (:mod:`.metrics`), each series
-                             labelled ``robot``, ``roslibpy_relay_robot_present`` and
+                             labelled ``robot``, ``roslibpy_relay_robot_present``,
+                             ``roslibpy_relay_bytes_from_robot_total`` (by robot) and
                              ``roslibpy_relay_connections_refused_total`` (by reason)
 ``GET /healthz``             the process runs
 ``GET /readyz``              Zenoh is joined and the port listens (else 503 and why)
@@ -129,9 +130,15 @@ class RelayWeb:
             "(no_router, unknown_robot, no_robot_named, invalid_robot_name).", labels=["reason"])
         for reason, n in sorted(self.relay.refused.items()):
             refused.add_metric([reason], n)
+        from_robot = CounterMetricFamily(
+            "roslibpy_relay_bytes_from_robot",
+            "Payload bytes of the robot's topic messages this relay received from Zenoh.",
+            labels=["robot"])
+        for name in snaps:
+            from_robot.add_metric([name], _bytes_from_robot(self.relay.robots[name]))
         body = metrics.render_labelled(
             ((name, snap, self.relay.robots[name].web.caps) for name, snap in snaps.items()),
-            "robot", [present, refused])
+            "robot", [present, from_robot, refused])
         return Reply(200, body, metrics.CONTENT_TYPE, nocache)
 
     def _present(self, name: str, online: set[str]) -> bool:
@@ -150,10 +157,19 @@ class RelayWeb:
             entry: dict[str, Any] = {"name": name, "present": self._present(name, online),
                                      "served": snap is not None}
             entry.update(summary(snap) if snap is not None else summary({}))
+            bridge = self.relay.robots.get(name)
+            entry["bytes_from_robot"] = (_bytes_from_robot(bridge) if snap is not None
+                                         and bridge is not None else 0)
             robots.append(entry)
         return {"relay": self.relay.relay_id, "version": __version__, "started": self.started,
                 "now": time.time(), "ready": self.relay.trouble() is None,
                 "refused": dict(self.relay.refused), "robots": robots}
+
+
+def _bytes_from_robot(bridge: Bridge) -> int:
+    """Payload bytes of the robot's topic messages as the relay received them from Zenoh
+    (counted by its :class:`~bridge_server.zenoh.graph.ZenohGraph`; 0 for another graph)."""
+    return int(getattr(bridge.graph, "received_bytes", 0))
 
 
 def summary(snap: Mapping[str, Any]) -> dict[str, Any]:

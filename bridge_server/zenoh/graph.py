@@ -246,7 +246,8 @@ class ZenohFeed:
             self.on_sample(reply.ok)
 
     def on_sample(self, sample: zenoh.Sample) -> None:
-        """One message the robot put (on the loop)."""
+        """One message the robot put (on the loop), its payload counted as received."""
+        self.graph.received_bytes += len(sample.payload)
         if self.graph.subscriptions.get(self.topic) is not self:
             return
         try:
@@ -624,6 +625,9 @@ class ZenohGraph:
         self.alive = False
         self.presence_listeners: list[Callable[[bool], None]] = []
         """Called on the loop when the robot goes (False) or comes back (True)."""
+        self.received_bytes = 0
+        """Payload bytes of the robot's topic messages as they came from Zenoh (every sample
+        of every feed, the latched replies and the ones dropped as already had too)."""
         self.subscriptions: dict[str, ZenohFeed] = {}
         self.publishers: dict[tuple[str, str, bool], ZenohPublisher] = {}
         self.served: dict[str, ZenohServedService] = {}

@@ -7,8 +7,9 @@ rclpy bridges dialing out, websocket clients subscribing and publishing through 
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import json
-from collections.abc import AsyncIterator
+from collections.abc import AsyncIterator, Callable
 from pathlib import Path
 from typing import Any
 
@@ -18,9 +19,9 @@ from websockets.exceptions import InvalidStatus
 
 from bridge_server.security.auth import new_token
 from bridge_server.zenoh.relay import Relay
-from tests.helpers import CHROMEDRIVER, CHROMIUM, headless_chromium, open_wire
+from tests.helpers import CHROMEDRIVER, CHROMIUM, WireClient, headless_chromium, open_wire
 from tests.ops.support import aget
-from tests.relay.support import ROBOT, ROBOT1_VIEWER, relay_with_auth, tier, until
+from tests.relay.support import ROBOT, ROBOT1_VIEWER, Tier, relay_with_auth, tier, until
 
 pytestmark = pytest.mark.timeout(120)
 
@@ -48,90 +49,135 @@ def _robot(status: dict[str, Any], name: str) -> dict[str, Any]:
     return found[0]
 
 
+@contextlib.asynccontextmanager
+async def _watching(pub: Any, topic: str, data: str) -> AsyncIterator[tuple[Tier, WireClient]]:
+    """A tier and a client of the relay subscribed to the robot's ``topic``, once it heard
+    a message: ``data`` is published on the robot (``pub``) until then (discovery has no
+    event)."""
+    async with tier() as t:
+        ws = await open_wire(t.url())
+        try:
+            await ws.send({"op": "subscribe", "topic": topic, "type": "std_msgs/msg/String"})
+            deadline = asyncio.get_running_loop().time() + 20
+            while True:
+                pub.publish(String(data=data))
+                try:
+                    await ws.expect(op="publish", topic=topic, timeout=0.3)
+                    break
+                except AssertionError:
+                    assert asyncio.get_running_loop().time() < deadline, "never heard the robot"
+            yield t, ws
+        finally:
+            await ws.close()
+
+
+def _carrying(data: str) -> Callable[[Any], bool]:
+    """A ``publish`` op's predicate: its message is ``{"data": data}``."""
+    return lambda op: bool(op.get("msg") == {"data": data})
+
+
 async def test_relay_status_and_metrics_per_robot_and_client(ros_node: Any, topic: str) -> None:
     """/status.json lists the robot (present, clients, topics watched, messages and bytes each
     way), /robot1/status.json is the bridge's snapshot with the client and its subscription,
     /metrics carries every series with robot="robot1" and its presence; when the robot goes
     away it shows as not present."""
     pub = ros_node.create_publisher(String, topic, 10)
-    async with tier() as t:
+    async with _watching(pub, topic, "x" * 100) as (t, ws):
         base = f"http://127.0.0.1:{t.relay.port}"
-        ws = await open_wire(t.url())
-        try:
-            await ws.send({"op": "subscribe", "topic": topic, "type": "std_msgs/msg/String"})
-            back = topic + "_back"
-            await ws.send({"op": "advertise", "topic": back, "type": "std_msgs/msg/String"})
-            deadline = asyncio.get_running_loop().time() + 20
-            while True:  # until the robot's topic reached the client (discovery has no event)
-                pub.publish(String(data="x" * 100))
-                try:
-                    await ws.expect(op="publish", topic=topic, timeout=0.3)
-                    break
-                except AssertionError:
-                    assert asyncio.get_running_loop().time() < deadline, "never heard the robot"
-            for _ in range(3):
-                await ws.send({"op": "publish", "topic": back, "msg": {"data": "hi"}})
-            await ws.send({"op": "call_service", "service": "/rosapi/topics", "id": "sync"})
-            await ws.expect(op="service_response", id="sync")
+        back = topic + "_back"
+        await ws.send({"op": "advertise", "topic": back, "type": "std_msgs/msg/String"})
+        for _ in range(3):
+            await ws.send({"op": "publish", "topic": back, "msg": {"data": "hi"}})
+        await ws.send({"op": "call_service", "service": "/rosapi/topics", "id": "sync"})
+        await ws.expect(op="service_response", id="sync")
 
-            status = await _json(base + "/status.json")
-            assert status["relay"] == t.relay.relay_id and status["ready"] is True
-            robot = _robot(status, ROBOT)
-            assert robot["present"] is True and robot["served"] is True
-            assert robot["clients"] == 1 and robot["clients_by_protocol"] == {"rosbridge": 1}
-            assert robot["topics_watched"] == [topic]
-            assert robot["messages_from_robot"] >= 1
-            assert robot["messages_to_clients"] >= 1 and robot["bytes_to_clients"] > 100
-            assert robot["messages_from_clients"] == 3 and robot["bytes_from_clients"] > 0
+        status = await _json(base + "/status.json")
+        assert status["relay"] == t.relay.relay_id and status["ready"] is True
+        robot = _robot(status, ROBOT)
+        assert robot["present"] is True and robot["served"] is True
+        assert robot["clients"] == 1 and robot["clients_by_protocol"] == {"rosbridge": 1}
+        assert robot["topics_watched"] == [topic]
+        assert robot["messages_from_robot"] >= 1
+        assert robot["messages_to_clients"] >= 1 and robot["bytes_to_clients"] > 100
+        assert robot["messages_from_clients"] == 3 and robot["bytes_from_clients"] > 0
 
-            own = await _json(f"{base}/{ROBOT}/status.json")
-            (client,) = own["clients"]
-            assert client["address"].startswith("127.0.0.1:")
-            assert [s["topic"] for s in client["subscriptions"]] == [topic]
-            assert client["publishes"] == [back]
-            assert own["topics"][topic]["subscribers"] == 1
+        own = await _json(f"{base}/{ROBOT}/status.json")
+        (client,) = own["clients"]
+        assert client["address"].startswith("127.0.0.1:")
+        assert [s["topic"] for s in client["subscriptions"]] == [topic]
+        assert client["publishes"] == [back]
+        assert own["topics"][topic]["subscribers"] == 1
 
-            m = await _metrics(base + "/metrics")
-            on = frozenset({("robot", ROBOT)})
-            assert m[("roslibpy_relay_robot_present", on)] == 1
-            assert m[("roslibpy_bridge_clients", on)] == 1
-            assert m[("roslibpy_bridge_messages_total", on | {("topic", topic),
-                                                              ("direction", "ros_to_client")})] >= 1
-            assert m[("roslibpy_bridge_messages_total", on | {("topic", back),
-                                                              ("direction", "client_to_ros")})] == 3
-            assert m[("roslibpy_bridge_bytes_total", on | {("topic", topic),
-                                                           ("direction", "ros_to_client")})] > 100
-            own_metrics = await _metrics(f"{base}/{ROBOT}/metrics")  # the bridge's, unlabelled
-            assert own_metrics[("roslibpy_bridge_clients", frozenset())] == 1
+        m = await _metrics(base + "/metrics")
+        on = frozenset({("robot", ROBOT)})
+        assert m[("roslibpy_relay_robot_present", on)] == 1
+        assert m[("roslibpy_bridge_clients", on)] == 1
+        assert m[("roslibpy_bridge_messages_total", on | {("topic", topic),
+                                                          ("direction", "ros_to_client")})] >= 1
+        assert m[("roslibpy_bridge_messages_total", on | {("topic", back),
+                                                          ("direction", "client_to_ros")})] == 3
+        assert m[("roslibpy_bridge_bytes_total", on | {("topic", topic),
+                                                       ("direction", "ros_to_client")})] > 100
+        own_metrics = await _metrics(f"{base}/{ROBOT}/metrics")  # the bridge's, unlabelled
+        assert own_metrics[("roslibpy_bridge_clients", frozenset())] == 1
 
-            code, _, _ = await aget(f"{base}/{ROBOT}")
-            assert code == 200  # redirected to /robot1/: the bridge's page
-            code, _, page = await aget(f"{base}/{ROBOT}/")
-            assert code == 200 and b"roslibpy-lite bridge" in page
-            code, _, page = await aget(base + "/")
-            assert code == 200 and b"roslibpy-lite relay" in page
-            assert (await aget(base + "/readyz"))[0] == 200
-            assert (await aget(f"{base}/{ROBOT}/readyz"))[0] == 200
-            code, _, body = await aget(f"{base}/robot2/status.json")
-            assert code == 404 and b"no robot named 'robot2'" in body
-            with pytest.raises(InvalidStatus):  # a websocket for a robot that is not there
-                await open_wire(t.url("robot2"))
-            assert (await _json(base + "/status.json"))["refused"] == {"unknown_robot": 1}
-            m = await _metrics(base + "/metrics")
-            assert m[("roslibpy_relay_connections_refused_total",
-                      frozenset({("reason", "unknown_robot")}))] == 1
+        code, _, _ = await aget(f"{base}/{ROBOT}")
+        assert code == 200  # redirected to /robot1/: the bridge's page
+        code, _, page = await aget(f"{base}/{ROBOT}/")
+        assert code == 200 and b"roslibpy-lite bridge" in page
+        code, _, page = await aget(base + "/")
+        assert code == 200 and b"roslibpy-lite relay" in page
+        assert (await aget(base + "/readyz"))[0] == 200
+        assert (await aget(f"{base}/{ROBOT}/readyz"))[0] == 200
+        code, _, body = await aget(f"{base}/robot2/status.json")
+        assert code == 404 and b"no robot named 'robot2'" in body
+        with pytest.raises(InvalidStatus):  # a websocket for a robot that is not there
+            await open_wire(t.url("robot2"))
+        assert (await _json(base + "/status.json"))["refused"] == {"unknown_robot": 1}
+        m = await _metrics(base + "/metrics")
+        assert m[("roslibpy_relay_connections_refused_total",
+                  frozenset({("reason", "unknown_robot")}))] == 1
 
-            await t.exporter.close()  # the robot leaves the network
-            await until(lambda: t.relay.robots[ROBOT].web.ready() is not None,
-                        "the relay to see the robot go")
-            robot = _robot(await _json(base + "/status.json"), ROBOT)
-            assert robot["present"] is False and robot["clients"] == 1
-            m = await _metrics(base + "/metrics")
-            assert m[("roslibpy_relay_robot_present", on)] == 0
-            code, _, body = await aget(f"{base}/{ROBOT}/readyz")
-            assert code == 503 and b"robot1 is not connected" in body
-        finally:
-            await ws.close()
+        await t.exporter.close()  # the robot leaves the network
+        await until(lambda: t.relay.robots[ROBOT].web.ready() is not None,
+                    "the relay to see the robot go")
+        robot = _robot(await _json(base + "/status.json"), ROBOT)
+        assert robot["present"] is False and robot["clients"] == 1
+        m = await _metrics(base + "/metrics")
+        assert m[("roslibpy_relay_robot_present", on)] == 0
+        code, _, body = await aget(f"{base}/{ROBOT}/readyz")
+        assert code == 503 and b"robot1 is not connected" in body
+
+
+async def test_relay_counts_bytes_from_each_robot(ros_node: Any, topic: str) -> None:
+    """Bytes from the robot: each message of a known size the robot publishes to a watched
+    topic adds exactly its CDR payload to the robot's ``bytes_from_robot`` on /status.json
+    and to ``roslibpy_relay_bytes_from_robot_total{robot}`` on /metrics."""
+    from rclpy.serialization import serialize_message
+
+    pub = ros_node.create_publisher(String, topic, 100)
+    async with _watching(pub, topic, "sync") as (t, ws):
+        base = f"http://127.0.0.1:{t.relay.port}"
+        # A fence: the sync messages still in flight come before it (one ordered stream).
+        pub.publish(String(data="fence"))
+        await ws.expect(_carrying("fence"), op="publish")
+
+        def figures(status: dict[str, Any], m: dict[Any, float]) -> tuple[int, float]:
+            return (_robot(status, ROBOT)["bytes_from_robot"],
+                    m[("roslibpy_relay_bytes_from_robot_total",
+                       frozenset({("robot", ROBOT)}))])
+
+        before = figures(await _json(base + "/status.json"), await _metrics(base + "/metrics"))
+        assert before[0] > 0 and before[0] == before[1]
+        count, sizes = 10, 0
+        for i in range(count):  # one at a time: none can be lost to a full queue
+            msg = String(data=f"{i:04d}" + "y" * 996)
+            sizes += len(serialize_message(msg))
+            pub.publish(msg)
+            await ws.expect(_carrying(msg.data), op="publish")
+        assert sizes > count * 1000
+        after = figures(await _json(base + "/status.json"), await _metrics(base + "/metrics"))
+        assert after == (before[0] + sizes, before[1] + sizes), (before, after, sizes)
 
 
 ROLES = ROBOT1_VIEWER + """

@@ -25,7 +25,8 @@
       const tr = el("tr");
       tr.dataset.robot = r.name;
       for (const v of [link, r.present ? "yes" : el("span", "gone", "warn"), r.clients,
-        r.topics_watched.join(", ") || "–", r.messages_from_robot, r.messages_to_clients,
+        r.topics_watched.join(", ") || "–", r.messages_from_robot, r.bytes_from_robot,
+        r.messages_to_clients,
         r.bytes_to_clients, r.messages_from_clients, r.bytes_from_clients, r.drops]) {
         tr.appendChild(cell(v));
       }
@@ -33,7 +34,7 @@
     }
     if (!s.robots.length) {
       const td = el("td", "no robot on this relay's Zenoh network", "empty");
-      td.colSpan = 10;
+      td.colSpan = 11;
       body.appendChild(el("tr")).appendChild(td);
     }
     const table = document.getElementById("robots");
