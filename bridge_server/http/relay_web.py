@@ -16,13 +16,19 @@ goes on to the robot's handshake):
                              ``roslibpy_relay_connections_refused_total`` (by reason)
 ``GET /healthz``             the process runs
 ``GET /readyz``              Zenoh is joined and the port listens (else 503 and why)
-``GET /<robot>/``            the bridge's status page for that robot, and under it
+``GET /robots/<robot>/``     the bridge's status page for that robot, and under it
                              ``status.json``, ``metrics``, ``readyz`` (the robot is on
-                             Zenoh), exactly as a bridge serves them
+                             Zenoh), exactly as a bridge serves them; the relay's page
+                             links here
+``GET /<robot>/``            the same, for a robot not named like one of the relay's own
+                             routes above (``metrics``, ``static``, ``robots``...)
 ===========================  ===========================================================
 
-``/<robot>`` without the slash is redirected to ``/<robot>/``. A robot named like a route
-(``metrics``, ``static``) is still served over websockets, its page not.
+``/<robot>`` and ``/robots/<robot>`` without the slash are redirected to the page with it.
+Every robot's page is reachable under ``/robots/``, whatever its name: robot names are
+not refused for looking like a route (a robot named ``metrics`` dialed in and served over
+websockets at ``ws://relay/metrics`` all along; a name refused when a robot joins would
+stop a working robot at a relay's upgrade, and each new route would refuse another name).
 
 Who sees what is the bridge's :class:`~.web_access.WebAccess`: with an auth file the data
 routes need a token (``Authorization: Bearer`` or ``?token=``) of a role with
@@ -51,7 +57,10 @@ if TYPE_CHECKING:
 
 __all__ = ["RelayFront", "RelayWeb"]
 
-RELAY_ROUTES = frozenset({"", "status.json", "metrics", "healthz", "readyz", "static"})
+ROBOTS = "robots"
+"""The first path chunk under which every robot's page is, by name (``/robots/<robot>/``)."""
+
+RELAY_ROUTES = frozenset({"", "status.json", "metrics", "healthz", "readyz", "static", ROBOTS})
 """First path chunks that are the relay's own routes, not a robot's."""
 
 
@@ -87,14 +96,24 @@ class RelayWeb:
         """The reply to a plain GET from ``address`` (``None``: no such route)."""
         path, _, query = request.path.partition("?")
         first, slash, rest = path.lstrip("/").partition("/")
+        if first == ROBOTS:  # /robots/<robot>/...: any robot's page, whatever its name
+            name, slash, rest = rest.partition("/")
+            if not name:
+                return _redirect("/", query)
+            return await self._robot_page(name, f"/{ROBOTS}/{name}/", slash, rest, query,
+                                          request, address)
         if first in RELAY_ROUTES:
             return await self._own(path, request, address)
+        return await self._robot_page(first, f"/{first}/", slash, rest, query, request, address)
+
+    async def _robot_page(self, name: str, home: str, slash: str, rest: str, query: str,
+                          request: Request, address: str) -> Reply | None:
+        """Robot ``name``'s bridge route ``rest`` (its page is at ``home``)."""
         if not slash:  # /robot1: the page's relative links need /robot1/
-            return Reply(308, b"", headers=[("Location", f"/{first}/" + (f"?{query}" if query
-                                                                         else ""))])
-        bridge = await self.relay.robot(first)
+            return _redirect(home, query)
+        bridge = await self.relay.robot(name)
         if bridge is None:
-            return Reply(404, f"no robot named {first!r} is connected to this relay's Zenoh "
+            return Reply(404, f"no robot named {name!r} is connected to this relay's Zenoh "
                          "network\n".encode())
         inner = type(request)("/" + rest + (f"?{query}" if query else ""), request.headers)
         return await bridge.web.answer(inner, address)
@@ -164,6 +183,11 @@ class RelayWeb:
         return {"relay": self.relay.relay_id, "version": __version__, "started": self.started,
                 "now": time.time(), "ready": self.relay.trouble() is None,
                 "refused": dict(self.relay.refused), "robots": robots}
+
+
+def _redirect(to: str, query: str) -> Reply:
+    """308 to ``to``, the query string (a ``?token=``) kept."""
+    return Reply(308, b"", headers=[("Location", to + (f"?{query}" if query else ""))])
 
 
 def _bytes_from_robot(bridge: Bridge) -> int:

@@ -135,9 +135,17 @@ async def relay_with_auth(auth: Path, roles: str, robots: tuple[str, ...] = ("ro
     auth.write_text(roles + "".join(
         f'\n[principals.{role}_user]\nrole = "{role}"\ntoken_hash = "{hash_token(token)}"\n'
         for role, token in tokens.items()))
+    async with relay_serving(robots, SecurityConfig(auth_file=str(auth))) as relay:
+        yield relay, tokens
+
+
+@contextlib.asynccontextmanager
+async def relay_serving(robots: tuple[str, ...], security: SecurityConfig | None = None
+                        ) -> AsyncIterator[Relay]:
+    """A relay (the router; ``security`` its options) with ``robots`` dialing out to it,
+    each reachable; all closed afterwards."""
     router = f"tcp/127.0.0.1:{free_port()}"
-    relay = Relay(BridgeConfig(port=0, node_name="relay",
-                               security=SecurityConfig(auth_file=str(auth))),
+    relay = Relay(BridgeConfig(port=0, node_name="relay", security=security or SecurityConfig()),
                   ZenohOptions(listen=[router]))
     await relay.start()
     started = []
@@ -146,7 +154,7 @@ async def relay_with_auth(auth: Path, roles: str, robots: tuple[str, ...] = ("ro
             started.append(await start_robot(router, robot=name))
         for name in robots:
             await robot_reachable(relay, name)
-        yield relay, tokens
+        yield relay
     finally:
         await relay.close()
         for bridge, exporter in started:

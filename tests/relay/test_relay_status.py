@@ -21,7 +21,15 @@ from bridge_server.security.auth import new_token
 from bridge_server.zenoh.relay import Relay
 from tests.helpers import CHROMEDRIVER, CHROMIUM, WireClient, headless_chromium, open_wire
 from tests.ops.support import aget
-from tests.relay.support import ROBOT, ROBOT1_VIEWER, Tier, relay_with_auth, tier, until
+from tests.relay.support import (
+    ROBOT,
+    ROBOT1_VIEWER,
+    Tier,
+    relay_serving,
+    relay_with_auth,
+    tier,
+    until,
+)
 
 pytestmark = pytest.mark.timeout(120)
 
@@ -180,6 +188,43 @@ async def test_relay_counts_bytes_from_each_robot(ros_node: Any, topic: str) -> 
         assert after == (before[0] + sizes, before[1] + sizes), (before, after, sizes)
 
 
+async def test_robots_named_like_the_relays_routes_have_their_pages() -> None:
+    """Robots named ``metrics`` and ``static`` (the relay's own routes): each one's page,
+    snapshot and metrics are under /robots/<name>/ (the relay's page links there), its
+    websocket at /<name> serves it, and /metrics and /static/ stay the relay's."""
+    names = ("metrics", "static")
+    async with relay_serving(names) as relay:
+        base = f"http://127.0.0.1:{relay.port}"
+        for name in names:
+            for path in (f"/robots/{name}/", f"/robots/{name}"):  # redirected to the first
+                code, _, page = await aget(base + path)
+                assert code == 200 and b"roslibpy-lite bridge" in page, (path, code, page)
+            own = await _json(f"{base}/robots/{name}/status.json")
+            assert own["clients"] == [] and "topics" in own, own
+            own_metrics = await _metrics(f"{base}/robots/{name}/metrics")
+            assert own_metrics[("roslibpy_bridge_clients", frozenset())] == 0
+            assert (await aget(f"{base}/robots/{name}/readyz"))[0] == 200
+            ws = await open_wire(f"ws://127.0.0.1:{relay.port}/{name}")
+            try:
+                await ws.send({"op": "call_service", "service": "/rosapi/nodes", "id": "n"})
+                reply = await ws.expect(op="service_response", id="n")
+                assert reply["result"] is True, reply
+                assert (await _json(f"{base}/robots/{name}/status.json"))["clients"]
+            finally:
+                await ws.close()
+        m = await _metrics(base + "/metrics")  # still the relay's, with both robots
+        assert {dict(labels).get("robot") for name, labels in m
+                if name == "roslibpy_relay_robot_present"} == set(names)
+        code, _, js = await aget(base + "/static/relay.js")  # still the relay's file
+        assert code == 200 and b'"/robots/" + encodeURIComponent' in js
+        assert [r["name"] for r in (await _json(base + "/status.json"))["robots"]] == sorted(
+            names)
+        code, _, body = await aget(f"{base}/robots/robot2/status.json")
+        assert code == 404 and b"no robot named 'robot2'" in body
+        code, _, page = await aget(f"{base}/robots/")  # redirected to the relay's page
+        assert code == 200 and b"roslibpy-lite relay" in page
+
+
 ROLES = ROBOT1_VIEWER + """
 [roles.fleet_viewer]
 subscribe = ["*"]
@@ -250,6 +295,7 @@ async def test_relay_page_in_a_browser(ros_node: Any, topic: str) -> None:
             await ws.close()
     assert seen["robot"][:4] == [ROBOT, "yes", "1", topic], seen
     assert seen["clients"] == "1" and topic in seen["client_row"], seen
+    assert seen["robot_url"].endswith(f"/robots/{ROBOT}/"), seen
 
 
 def _browse(url: str, topic: str) -> dict[str, Any]:

@@ -1,5 +1,5 @@
 // The relay's page: polls /status.json once a second and lists its robots, each linking to
-// its own status page (/<robot>/, the bridge's page).
+// its own status page (/robots/<robot>/, the bridge's page, whatever the robot's name).
 "use strict";
 (function () {
   const { el, duration, poll } = window.statusPage;  // page.js
@@ -21,7 +21,7 @@
     const body = document.createElement("tbody");
     for (const r of s.robots) {
       const link = el("a", r.name);
-      link.href = "/" + encodeURIComponent(r.name) + "/" + location.search;  // ?token=
+      link.href = "/robots/" + encodeURIComponent(r.name) + "/" + location.search;  // ?token=
       const tr = el("tr");
       tr.dataset.robot = r.name;
       for (const v of [link, r.present ? "yes" : el("span", "gone", "warn"), r.clients,
