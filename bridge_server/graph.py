@@ -407,9 +407,15 @@ class Graph(Protocol):
         """
 
     def serve(
-        self, name: str, srv_cls: Any, on_request: Callable[[RosCall], None]
+        self, name: str, srv_cls: Any, on_request: Callable[[RosCall], None],
+        on_refused: Callable[[str], None] | None = None,
     ) -> ServedService:
-        """Serve ``name`` in ROS; each ROS call is handed to ``on_request`` on the loop."""
+        """Serve ``name`` in ROS; each ROS call is handed to ``on_request`` on the loop.
+
+        ``on_refused`` is called on the loop, at most once, with the reason if the name
+        turns out to be served elsewhere after all, so that no call will come (a relay's
+        robot keeps another relay's client); the service is then destroyed by the caller.
+        ROS itself refuses nothing: the rclpy graph never calls it."""
 
     # -- parameters ----------------------------------------------------------------------------
 
@@ -432,5 +438,7 @@ class Graph(Protocol):
     def serve_action(
         self, name: str, action_cls: Any, on_goal: Callable[[ServedGoal], None],
         on_cancel: Callable[[ServedGoal], None],
+        on_refused: Callable[[str], None] | None = None,
     ) -> ServedAction:
-        """Serve action ``name`` in ROS; goals and cancel requests go to the callbacks."""
+        """Serve action ``name`` in ROS; goals and cancel requests go to the callbacks;
+        ``on_refused`` as for :meth:`serve`."""

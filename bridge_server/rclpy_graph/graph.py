@@ -213,8 +213,10 @@ class RclpyGraph(RosNode):
     def serve_action(
         self, name: str, action_cls: type[Any], on_goal: Callable[[ServedGoal], None],
         on_cancel: Callable[[ServedGoal], None],
+        on_refused: Callable[[str], None] | None = None,
     ) -> ServedAction:
-        """Serve action ``name`` in ROS (:mod:`.actions`)."""
+        """Serve action ``name`` in ROS (:mod:`.actions`); ``on_refused`` is never called
+        (ROS refuses no name)."""
         return ServedAction(self, name, action_cls, on_goal, on_cancel)
 
     # -- types ---------------------------------------------------------------------------------

@@ -876,9 +876,10 @@ class RosNode:
     def serve(
         self, name: str, srv_cls: type[Any],
         on_request: Callable[[PendingRosCall | LoopRosCall], None],
+        on_refused: Callable[[str], None] | None = None,
     ) -> ServedService:
         """Create a ROS service answered through ``on_request`` (see :class:`PendingRosCall`
-        and :class:`LoopRosCall`)."""
+        and :class:`LoopRosCall`); ``on_refused`` is never called (ROS refuses no name)."""
         return ServedService(self, name, srv_cls, on_request)
 
     @staticmethod

@@ -525,9 +525,18 @@ class SessionActions:
             name, action_cls,
             lambda goal: self._on_ros_goal(served, goal),
             lambda goal: self._on_ros_cancel(served, goal),
+            lambda why: self._refused(served, op, why),
         )
         self.served[name] = served
         self._owners.take(name, self)
+
+    def _refused(self, served: ClientAction, op: ops.AdvertiseAction, why: str) -> None:
+        """The graph refused the name after all (a relay's robot keeps another relay's
+        client): stop serving it, and refuse the advertise as a second client's is."""
+        if self.served.get(served.name) is served:
+            del self.served[served.name]
+            self.remove_served(served, why, linger=False)
+            self.session.error(f"{op.OP}: {why}", op.id)
 
     def _on_ros_goal(self, served: ClientAction, goal: ServedGoal) -> None:
         session = self.session

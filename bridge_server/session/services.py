@@ -231,9 +231,18 @@ class SessionServices:
             return
         served = ClientService(name, type_name, op.service)
         served.ros = graph.serve(name, srv_cls,
-                                 lambda pending: self._on_ros_request(served, pending))
+                                 lambda pending: self._on_ros_request(served, pending),
+                                 lambda why: self._refused(served, op, why))
         self.served[name] = served
         self._owners.take(name, self)
+
+    def _refused(self, served: ClientService, op: ops.AdvertiseService, why: str) -> None:
+        """The graph refused the name after all (a relay's robot keeps another relay's
+        client): stop serving it, and refuse the advertise as a second client's is."""
+        if self.served.get(served.name) is served:
+            del self.served[served.name]
+            self.remove_served(served, why)
+            self.session.error(f"{op.OP}: {why}", op.id)
 
     def _on_ros_request(self, served: ClientService, pending: RosCall) -> None:
         session = self.session

@@ -14,7 +14,9 @@ It dials out to the routers and offers the robot under ``r1/`` as :mod:`.keys` d
   (accepted, feedback, the result); a cancel is a query; a goal whose relay's ``@running``
   token goes (the relay died) is canceled, as the bridge cancels a leaving client's goals;
 - a service a relay's client serves is served in ROS by the Graph's ``serve`` while its
-  ``@serve`` token lives; each ROS call is a query to the relay, the reply answers it;
+  ``@serve`` token lives; each ROS call is a query to the relay, the reply answers it; the
+  first relay's token keeps a name, and a later one (another relay's client) is refused
+  with a put under ``@refused`` that its relay passes to the client;
 - so is an action a relay's client serves (``serve_action``): each ROS goal is a query to
   the relay whose replies stream the goal's feedback and its end; a ROS cancel is a query;
 - node parameters are queries run by the Graph's parameter methods;
@@ -53,7 +55,7 @@ from ..graph import (
     Status,
     TopicFeed,
 )
-from ..interfaces import BridgeError, ConversionError, args_mapping
+from ..interfaces import BridgeError, ConversionError, Kind, args_mapping
 from ..session.actions import ACTION_LINGER, CLIENT_IDLE
 from . import keys
 from .keys import (
@@ -452,10 +454,11 @@ class Exporter:
                 self._refresh_snapshot()
                 log.info("%s %s is no longer served through relay %s", what, name, relay)
             return
+        kind: Kind = "action" if action else "srv"
         if served is not None:
-            if served.relay != relay:
-                log.warning("relay %s serves %s %s, already served through relay %s: ignored",
-                            relay, what, name, served.relay)
+            if served.relay != relay:  # the first keeps it: the second relay's client is told
+                self._refuse(relay, name, kind, f"{name} is already served by a client of "
+                             f"relay {served.relay}; robot {self.robot} keeps the first")
             return
         old = self._lingering.pop(key, None)
         if old is not None:  # two servers of one name would both answer each goal
@@ -471,12 +474,21 @@ class Exporter:
                 ros = self.graph.serve(name, self.graph.resolve_service(type_name),
                                        lambda call: self._forward(name, relay, call))
         except (BridgeError, ValueError) as exc:
-            log.warning("relay %s's %s %s (%s) cannot be served: %s", relay, what, name,
-                        type_name, exc)
+            self._refuse(relay, name, kind, f"robot {self.robot} cannot serve {what} {name} "
+                         f"({type_name}): {exc}")
             return
         self.served[key] = _Served(relay, type_name, ros)
         self._refresh_snapshot()
         log.info("%s %s is served through relay %s", what, name, relay)
+
+    def _refuse(self, relay: str, name: str, kind: Kind, why: str) -> None:
+        """Tell ``relay`` that its client's ``@serve`` token of ``name`` is not taken
+        (``why``): its session stops serving the name and tells the client, who would
+        otherwise believe it serves and get no calls."""
+        log.warning("relay %s's client serves %s, refused: %s", relay, name, why)
+        if self.session is not None:
+            with contextlib.suppress(zenoh.ZError):
+                self.session.put(keys.refused_key(self.robot, relay, name, kind), why.encode())
 
     def _unserve(self, key: str, served: _Served) -> None:
         """A relay's client stopped serving: a service leaves ROS at once; an action's goals

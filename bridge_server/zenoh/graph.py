@@ -15,8 +15,9 @@ sessions, over one Zenoh session. What the sessions ask of ROS becomes the keys 
   robot's own action client, with a liveliness token of the goal's that takes it (canceled)
   with the relay if the relay dies; a cancel is a query;
 - a service a client serves is a queryable the robot's ROS service forwards each call to,
-  and a token that keeps that ROS service up; an action a client serves likewise, each ROS
-  goal one query whose replies stream the goal's feedback and end;
+  and a token that keeps that ROS service up (a token the robot refuses, another relay's
+  client serving the name, is reported to the session); an action a client serves
+  likewise, each ROS goal one query whose replies stream the goal's feedback and end;
 - node parameters are queries run by the robot's own parameter methods;
 - the graph, the types' definitions and typedefs come from the robot's snapshot (kept
   up to date by its puts), so the sessions' synchronous questions read a cache.
@@ -467,12 +468,16 @@ class ZenohRosCall:
 
 class _ServedHere:
     """What a client of this relay serves on the robot: the relay's queryable (under
-    ``where``) the robot forwards to, and the ``@serve`` token that makes the robot serve
-    it in ROS. Declared last (:meth:`_declare`), once the subclass can answer."""
+    ``where``) the robot forwards to, a subscriber of the robot's refusal (``@refused``:
+    another relay's client serves the name, handed to ``on_refused``), and the ``@serve``
+    token that makes the robot serve it in ROS. Declared last (:meth:`_declare`), once the
+    subclass can answer."""
 
-    def __init__(self, graph: ZenohGraph, name: str) -> None:
+    def __init__(self, graph: ZenohGraph, name: str,
+                 on_refused: Callable[[str], None] | None) -> None:
         self.graph = graph
         self.name = name
+        self.on_refused = on_refused
         self._entities: list[Any] = []
 
     def _declare(self, where: str, type_name: str, kind: Kind) -> None:
@@ -481,9 +486,21 @@ class _ServedHere:
             graph.session.declare_queryable(
                 keys.key_of(graph.robot, self.name, f"{where}/{graph.relay}"),
                 graph.on_loop(self._on_query)),
+            graph.session.declare_subscriber(
+                keys.refused_key(graph.robot, graph.relay, self.name, kind),
+                graph.on_loop(self._on_refused)),
             graph.session.liveliness().declare_token(
                 keys.serve_key(graph.robot, graph.relay, self.name, type_name, kind)),
         ]
+
+    def _on_refused(self, sample: zenoh.Sample) -> None:
+        """The robot does not take this relay's token (on the loop): say why, once."""
+        refused, self.on_refused = self.on_refused, None
+        if refused is None or not self._entities:
+            return
+        why = sample.payload.to_string()
+        log.warning("robot %s refused this relay's %s: %s", self.graph.robot, self.name, why)
+        refused(why)
 
     def _on_query(self, query: zenoh.Query) -> None:
         raise NotImplementedError
@@ -500,8 +517,9 @@ class ZenohServedService(_ServedHere):
     call's request comes as a query, the reply answers it."""
 
     def __init__(self, graph: ZenohGraph, name: str, srv_cls: Any,
-                 on_request: Callable[[RosCall], None]) -> None:
-        super().__init__(graph, name)
+                 on_request: Callable[[RosCall], None],
+                 on_refused: Callable[[str], None] | None = None) -> None:
+        super().__init__(graph, name, on_refused)
         self.srv_cls = srv_cls
         self.request_conv = graph.converter(srv_cls.Request)
         self.response_conv = graph.converter(srv_cls.Response)
@@ -566,8 +584,9 @@ class ZenohServedAction(_ServedHere):
 
     def __init__(self, graph: ZenohGraph, name: str, action_cls: Any,
                  on_goal: Callable[[ServedGoal], None],
-                 on_cancel: Callable[[ServedGoal], None]) -> None:
-        super().__init__(graph, name)
+                 on_cancel: Callable[[ServedGoal], None],
+                 on_refused: Callable[[str], None] | None = None) -> None:
+        super().__init__(graph, name, on_refused)
         self.alive = True
         self.goal_conv = graph.converter(action_cls.Goal)
         self.feedback_conv = graph.converter(action_cls.Feedback)
@@ -978,14 +997,15 @@ class ZenohGraph:
             raise ServiceCallError(str(exc)) from None
         return json.loads(data)  # type: ignore[no-any-return]
 
-    def serve(self, name: str, srv_cls: Any, on_request: Callable[[RosCall], None]
-              ) -> ZenohServedService:
+    def serve(self, name: str, srv_cls: Any, on_request: Callable[[RosCall], None],
+              on_refused: Callable[[str], None] | None = None) -> ZenohServedService:
         """Serve ``name`` on the robot for a client of this relay (see
-        :class:`ZenohServedService`)."""
+        :class:`ZenohServedService`); ``on_refused`` hears the robot's refusal."""
         old = self.served.pop(name, None)
         if old is not None:
             old.destroy()
-        served = self.served[name] = ZenohServedService(self, name, srv_cls, on_request)
+        served = self.served[name] = ZenohServedService(self, name, srv_cls, on_request,
+                                                        on_refused)
         return served
 
     # -- parameters ----------------------------------------------------------------------------
@@ -1030,12 +1050,13 @@ class ZenohGraph:
     def serve_action(
         self, name: str, action_cls: Any, on_goal: Callable[[ServedGoal], None],
         on_cancel: Callable[[ServedGoal], None],
+        on_refused: Callable[[str], None] | None = None,
     ) -> ZenohServedAction:
         """Serve action ``name`` on the robot for a client of this relay (see
-        :class:`ZenohServedAction`)."""
+        :class:`ZenohServedAction`); ``on_refused`` hears the robot's refusal."""
         old = self.served_actions.pop(name, None)
         if old is not None:
             old.destroy()
         served = self.served_actions[name] = ZenohServedAction(self, name, action_cls, on_goal,
-                                                               on_cancel)
+                                                               on_cancel, on_refused)
         return served

@@ -33,6 +33,10 @@ key                                      what
 ``<robot>/@serve/<relay>/<pkg>/srv/``    liveliness token of a service a relay's client
 ``<Name>/<service>``                     serves: the robot serves it in ROS meanwhile
                                          (``<pkg>/action/<Name>/<action>``: an action)
+``<robot>/@refused/<relay>/<kind>/``     the robot's put to a relay whose ``@serve``
+``<name>``                               token it does not take (another relay's client
+                                         serves the name, or the robot cannot serve it):
+                                         why, as text (``kind``: ``srv`` or ``action``)
 ``<robot>/@serving/<relay>/<service>``   the relay's queryable: a ROS call's request
                                          JSON in, the response JSON (or an error) out
 ``<robot>/@executing/<relay>/<action>``  the relay's queryable: a ROS goal of an action a
@@ -74,6 +78,7 @@ __all__ = [
     "IN",
     "LATCHED",
     "PARAM",
+    "REFUSED",
     "RUNNING",
     "SERVE",
     "SERVING",
@@ -92,6 +97,7 @@ __all__ = [
     "parse_advertise",
     "parse_demand",
     "parse_serve",
+    "refused_key",
     "serve_key",
 ]
 
@@ -109,13 +115,14 @@ SERVE = "@serve"
 SERVING = "@serving"
 EXECUTING = "@executing"
 PARAM = "@param"
+REFUSED = "@refused"
 
 GOAL_WAIT = 30 * 24 * 3600.0
 """Seconds a goal's query (``@goal``, ``@executing``) stays open: a goal may run as long as
 it likes (a session's ``goal_timeout`` ends it sooner if set)."""
 
 CONTROL = (ALIVE, DEMAND, LATCHED, GRAPH, CALL, ADVERTISE, IN, GOAL, RUNNING, CANCEL, SERVE,
-           SERVING, PARAM, EXECUTING)
+           SERVING, PARAM, EXECUTING, REFUSED)
 """Every control chunk (Zenoh's verbatim chunks, which no wildcard matches: access rules
 name each)."""
 
@@ -176,6 +183,12 @@ def serve_key(robot: str, relay: str, name: str, type_name: str, kind: Kind = "s
     the module's table)."""
     pkg, _, short = canonical_name(type_name, kind).split("/")
     return key_of(robot, name, f"{SERVE}/{relay}/{pkg}/{kind}/{short}")
+
+
+def refused_key(robot: str, relay: str, name: str, kind: Kind = "srv") -> str:
+    """The key of the robot's refusal of ``relay``'s served-service (``kind`` ``action``:
+    served-action) token of ``name`` (see the module's table)."""
+    return key_of(robot, name, f"{REFUSED}/{relay}/{kind}")
 
 
 def parse_serve(key: str) -> tuple[str, str, str]:
