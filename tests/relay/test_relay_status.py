@@ -61,7 +61,7 @@ def _robot(status: dict[str, Any], name: str) -> dict[str, Any]:
 async def _watching(pub: Any, topic: str, data: str) -> AsyncIterator[tuple[Tier, WireClient]]:
     """A tier and a client of the relay subscribed to the robot's ``topic``, once it heard
     a message: ``data`` is published on the robot (``pub``) until then (discovery has no
-    event)."""
+    event), then one ``fence`` message behind any still on their way."""
     async with tier() as t:
         ws = await open_wire(t.url())
         try:
@@ -74,6 +74,10 @@ async def _watching(pub: Any, topic: str, data: str) -> AsyncIterator[tuple[Tier
                     break
                 except AssertionError:
                     assert asyncio.get_running_loop().time() < deadline, "never heard the robot"
+            # A fence: the messages above still in flight come before it (one ordered
+            # stream), so nothing more comes after it unless the test publishes.
+            pub.publish(String(data="fence"))
+            await ws.expect(_carrying("fence"), op="publish")
             yield t, ws
         finally:
             await ws.close()
@@ -166,9 +170,6 @@ async def test_relay_counts_bytes_from_each_robot(ros_node: Any, topic: str) -> 
     pub = ros_node.create_publisher(String, topic, 100)
     async with _watching(pub, topic, "sync") as (t, ws):
         base = f"http://127.0.0.1:{t.relay.port}"
-        # A fence: the sync messages still in flight come before it (one ordered stream).
-        pub.publish(String(data="fence"))
-        await ws.expect(_carrying("fence"), op="publish")
 
         def figures(status: dict[str, Any], m: dict[Any, float]) -> tuple[int, float]:
             return (_robot(status, ROBOT)["bytes_from_robot"],
@@ -282,18 +283,17 @@ async def test_relay_pages_follow_tokens_roles_and_robots(
 @pytest.mark.skipif(CHROMIUM is None or CHROMEDRIVER is None,
                     reason="chromium and chromium-driver are not installed (scripts/setup.sh)")
 async def test_relay_page_in_a_browser(ros_node: Any, topic: str) -> None:
-    """Headless Chromium: the relay's page lists robot1 with its client and watched topic;
-    its link opens the bridge's page for robot1, which shows the client."""
-    async with tier() as t:
-        ws = await open_wire(t.url())
-        try:
-            await ws.send({"op": "subscribe", "topic": topic, "type": "std_msgs/msg/String"})
-            await until(lambda: topic in t.relay.robots[ROBOT].graph.subscriptions,
-                        "the relay's subscription")
-            seen = await asyncio.to_thread(_browse, f"http://127.0.0.1:{t.relay.port}/", topic)
-        finally:
-            await ws.close()
+    """Headless Chromium: the relay's page lists robot1 with its client, watched topic and
+    the bytes it received from the robot; its link opens the bridge's page for robot1, which
+    shows the client."""
+    pub = ros_node.create_publisher(String, topic, 10)
+    async with _watching(pub, topic, "seen") as (t, _):
+        status = await _json(f"http://127.0.0.1:{t.relay.port}/status.json")
+        received = _robot(status, ROBOT)["bytes_from_robot"]
+        assert received > 0
+        seen = await asyncio.to_thread(_browse, f"http://127.0.0.1:{t.relay.port}/", topic)
     assert seen["robot"][:4] == [ROBOT, "yes", "1", topic], seen
+    assert seen["robot"][5] == str(received), seen  # unless a late "seen" came meanwhile
     assert seen["clients"] == "1" and topic in seen["client_row"], seen
     assert seen["robot_url"].endswith(f"/robots/{ROBOT}/"), seen
 
