@@ -16,10 +16,12 @@ from typing import Any
 import pytest
 from std_srvs.srv import SetBool
 
+import roslibpy_lite
 from bridge_server.zenoh import keys
 from bridge_server.zenoh.graph import ZenohGraph
 from bridge_server.zenoh.link import ZenohOptions, open_session
 from bridge_server.zenoh.relay import Relay
+from roslibpy_lite.exceptions import StatusError
 from tests.helpers import WireClient, open_wire
 from tests.relay.support import ROBOT, free_port, robot_reachable, start_relay, start_robot, until
 
@@ -140,3 +142,26 @@ async def test_a_token_the_robot_cannot_serve_is_refused_to_its_relay(
         for entity in held:
             entity.undeclare()
         session.close()  # type: ignore[no-untyped-call]
+
+
+async def test_a_roslibpy_lite_server_refused_by_the_robot_fails_and_says_so(
+        two_relays: tuple[Any, Relay, Relay, str], topic: str) -> None:
+    """Our client's side: both clients' ``await advertise_service`` return (each relay
+    accepted it), then the loser's server handle fails with a StatusError naming the relay
+    that serves the name, and its ``on_error`` hears it; the winner's stays sound."""
+    exporter, first, second, _ = two_relays
+    urls = [f"ws://127.0.0.1:{r.port}/{ROBOT}" for r in (first, second)]
+    async with roslibpy_lite.connect(urls[0]) as one, roslibpy_lite.connect(urls[1]) as two:
+        heard: dict[str, list[Exception]] = {first.relay_id: [], second.relay_id: []}
+        one.on_error(heard[first.relay_id].append)
+        two.on_error(heard[second.relay_id].append)
+        servers = dict(zip(heard, await asyncio.gather(*(
+            ros.advertise_service(topic, "std_srvs/srv/SetBool", lambda _req: {"success": True})
+            for ros in (one, two))), strict=True))
+        served = await until(lambda: exporter.served.get(topic), "the robot to serve one")
+        (loser,) = set(heard) - {served.relay}
+        errors = await until(lambda: heard[loser], "the loser's on_error")
+        assert isinstance(errors[0], StatusError), errors
+        assert f"already served by a client of relay {served.relay}" in str(errors[0]), errors
+        assert servers[loser].error is errors[0]
+        assert servers[served.relay].error is None and not heard[served.relay]
