@@ -10,6 +10,7 @@ from typing import Any
 
 import pytest
 
+from msgs import runtime
 from tests.cli.conftest import Result, Run
 from tests.helpers import wait_until
 
@@ -379,8 +380,14 @@ def test_topic_echo_shows_nan(cli: Run, ros_node: Any, topic: str) -> None:
     assert (wire.code, wire.out) == (0, '{"data":null}\n'), wire
 
 
-def test_interface_show_asks_the_bridge_for_types_msgs_lacks(cli: Run) -> None:
+def test_interface_show_asks_the_bridge_for_types_msgs_lacks(
+    cli: Run, monkeypatch: pytest.MonkeyPatch
+) -> None:
     """A type msgs does not generate (but the robot has) is shown from the bridge's rosapi."""
+    # As in a fresh CLI process: an in-process bridge earlier in this run (a Foxglove hub
+    # building its channels) may have registered the package's types with msgs.dynamic.
+    monkeypatch.setattr(runtime, "_CACHE", {name: cls for name, cls in runtime._CACHE.items()
+                                            if not name.startswith("type_description_interfaces/")})
     shown = cli("interface", "show", "type_description_interfaces/msg/KeyValue")
     assert shown.code == 0, shown
     assert shown.lines == ["string key", "string value"]
