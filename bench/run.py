@@ -931,21 +931,22 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p = argparse.ArgumentParser(prog="python -m bench",
                                 description="End-to-end benchmarks of the bridge (JSON output).")
     p.add_argument("--scenario", nargs="+", default=["all"],
-                   help=f"all, or some of: {', '.join(SCENARIOS)}")
+                   help=f"all (the default), or some of: {', '.join(SCENARIOS)}")
     p.add_argument("--duration", type=float, default=None,
                    help="seconds per measurement step (default 3, --quick 1.5)")
     p.add_argument("--quick", action="store_true", help="short steps, fewer rates (~2 minutes)")
     p.add_argument("--profile", action="store_true",
                    help="py-spy the bridge during ros_to_client and image")
     p.add_argument("--domain", type=int, default=int(os.environ.get("BENCH_ROS_DOMAIN_ID", "42")),
-                   help="ROS_DOMAIN_ID for the bridge and ROS side (default 42)")
+                   help="ROS_DOMAIN_ID for the bridge and ROS side (default $BENCH_ROS_DOMAIN_ID, else 42)")
     p.add_argument("--ros-executor", choices=("events", "single"), default="events",
                    help="rclpy executor of the ROS-side processes (default events: much faster)")
     p.add_argument("--bridge-root", default=None,
                    help="run the bridge from another checkout (A/B comparisons); default: this one")
     p.add_argument("--peer", choices=("ours", "rs"), default="ours",
                    help="the server under test: ours, or rosbridge_server_rs (Rust; "
-                   "../shared/peers/rosbridge_server_rs.sh, no rosapi) for side-by-side figures")
+                   "../shared/peers/rosbridge_server_rs.sh, no rosapi) for side-by-side figures "
+                   "(default ours)")
     p.add_argument("--compare", metavar="REV", default=None,
                    help="A/B: this tree against git revision REV, alternating, one table "
                    "(bench/README.md); the scenarios default to the compare set")
@@ -954,7 +955,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p.add_argument("--compare-json", metavar="PATH", default=None,
                    help="--compare: where to write the table as JSON (default: the cache folder)")
     p.add_argument("--bridge-arg", action="append", default=[],
-                   help="extra bridge command-line argument (repeatable), e.g. --bridge-arg=--executor=events")
+                   help="extra bridge command-line argument (repeatable), e.g. --bridge-arg=--event-loop=asyncio")
     return p.parse_args(argv)
 
 

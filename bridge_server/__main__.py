@@ -43,7 +43,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         description="A rosbridge v2 protocol server on rclpy (ROS 2 Jazzy).",
     )
     p.add_argument("--host", default="127.0.0.1", help="address to bind (default 127.0.0.1)")
-    p.add_argument("--port", type=int, default=9090, help="port (0: any free port)")
+    p.add_argument("--port", type=int, default=9090, help="port (default 9090; 0: any free port)")
     p.add_argument(
         "--max-message-size",
         type=int,

@@ -288,7 +288,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         "Zenoh (roslibpy-lite-bridge --zenoh-connect ... --robot NAME) at ws://HOST:PORT/NAME.",
     )
     p.add_argument("--host", default="127.0.0.1", help="address to bind (default 127.0.0.1)")
-    p.add_argument("--port", type=int, default=9090, help="port (0: any free port)")
+    p.add_argument("--port", type=int, default=9090, help="port (default 9090; 0: any free port)")
     p.add_argument("--relay-id", default=None,
                    help="this relay's name on Zenoh (default: random; it names its demand "
                    "and publisher tokens)")

@@ -188,11 +188,12 @@ def add_parsers(groups: Any, kit: Kit) -> None:
     p.add_argument("file")
     p = kit.leaf(bsub, "play", cmd_bag_play, "publish a file through the bridge")
     p.add_argument("file")
-    p.add_argument("--rate", type=float, default=1.0, help="time scale (2: twice as fast)")
+    p.add_argument("--rate", type=float, default=1.0,
+                   help="time scale (default 1; 2: twice as fast)")
     p.add_argument("--loop", action="store_true", help="start over at the end")
     p.add_argument("--topics", nargs="+", default=None, metavar="TOPIC", help="only these")
     p.add_argument("--start", type=float, default=0.0, metavar="SEC",
-                   help="skip this many seconds from the start")
+                   help="skip this many seconds from the start (default 0)")
     p.add_argument("--duration", type=float, default=None, metavar="SEC",
                    help="play this many seconds")
     p.add_argument("--latch", nargs="+", default=None, metavar="TOPIC",

@@ -301,8 +301,10 @@ def add_parsers(groups: Any, kit: Kit) -> None:
     p.add_argument("--field", help="print only this field (a.b for nested ones), as ros2 does")
     p.add_argument("--duration", type=float, help="stop after this many seconds")
     p.add_argument("--no-arr", action="store_true", help="print sequences as their length")
-    p.add_argument("--throttle-ms", type=int, default=0, help="minimum ms between messages")
-    p.add_argument("--queue-length", type=int, default=0, help="the bridge's queue for us")
+    p.add_argument("--throttle-ms", type=int, default=0,
+                   help="minimum ms between messages (default 0: every one)")
+    p.add_argument("--queue-length", type=int, default=0,
+                   help="the bridge's queue for us (default 0: the bridge's --send-queue)")
     p = kit.leaf(tsub, "pub", cmd_topic_pub, "publish a message", )
     p.add_argument("topic")
     p.add_argument("type", help="message type, e.g. std_msgs/msg/String")
@@ -324,4 +326,5 @@ def add_parsers(groups: Any, kit: Kit) -> None:
                    help="messages the statistics cover (default 10000)")
     p.add_argument("--count", "-n", type=int, help="stop after this many messages")
     p.add_argument("--duration", type=float, help="stop after this many seconds")
-    p.add_argument("--queue-length", type=int, default=0, help="the bridge's queue for us")
+    p.add_argument("--queue-length", type=int, default=0,
+                   help="the bridge's queue for us (default 0: the bridge's --send-queue)")
