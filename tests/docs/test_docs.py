@@ -9,13 +9,17 @@ without one (MockRos). ``mkdocs build --strict`` itself runs in
 from __future__ import annotations
 
 import contextlib
+import functools
 import importlib.util
 import io
 import re
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import pytest
 
+from tests.docs.test_deploy_docs import SUBCOMMANDS as BRIDGE_SUBCOMMANDS
 from tests.helpers import ROOT, BridgeProcess, marked_blocks, run_snippet
 
 DOCS = ROOT / "docs"
@@ -42,33 +46,170 @@ def test_example_runs(kind: str, code: str, request: pytest.FixtureRequest) -> N
     run_snippet(code, bridge)
 
 
-def test_option_lists_come_from_the_tools() -> None:
-    """The help markers render each tool's real --help: every bridge option appears on the page."""
+# Where a user looks for each entry point's options (the pages render each --help).
+REFERENCE_PAGES = {
+    "roslibpy-lite": "cli.md",
+    "roslibpy-lite-bridge": "bridge.md",
+    "roslibpy-lite-relay": "bridge.md",
+    "python -m bench": "benchmarks.md",
+}
+
+
+def _run_for_help(program: str, args: list[str]) -> None:
+    """Parse ``args`` (ending in ``--help``) as ``program`` does, in this process."""
+    from bench.run import parse_args as bench_args
+    from bridge_server.__main__ import main as bridge_main
+    from bridge_server.zenoh.relay import parse_args as relay_args
+    from roslibpy_lite.cli import build_parser
+
+    tools: dict[str, Callable[[list[str]], object]] = {
+        "roslibpy-lite": build_parser().parse_args,
+        "roslibpy-lite-bridge": bridge_main,
+        "roslibpy-lite-relay": relay_args,
+        "python -m bench": bench_args,
+    }
+    tools[program](args)
+
+
+def _program(command: str) -> str:
+    """The entry point a command (``roslibpy-lite topic echo``) belongs to."""
+    return next(p for p in REFERENCE_PAGES if command == p or command.startswith(p + " "))
+
+
+def _tool_help(command: str) -> str:
+    """What ``COMMAND --help`` prints (one line per option: no wrapping)."""
+    program = _program(command)
+    out = io.StringIO()
+    with pytest.MonkeyPatch.context() as env:
+        env.setenv("COLUMNS", "1000")
+        with contextlib.redirect_stdout(out), pytest.raises(SystemExit):
+            _run_for_help(program, [*command[len(program):].split(), "--help"])
+    return out.getvalue()
+
+
+@functools.cache
+def _commands() -> dict[str, str]:
+    """Each entry point and every subcommand under it (as ``--help`` lists them), with the
+    text of its ``--help``."""
+    found: dict[str, str] = {}
+    todo = [*REFERENCE_PAGES, *(f"roslibpy-lite-bridge {c}" for c in BRIDGE_SUBCOMMANDS)]
+    while todo:
+        command = todo.pop(0)
+        found[command] = _tool_help(command)
+        choices = re.search(r"^positional arguments:\n  \{([\w,-]+)\}", found[command], re.M)
+        todo += [f"{command} {c}" for c in choices[1].split(",")] if choices else []
+    return found
+
+
+def _options(help_text: str) -> dict[str, str]:
+    """The long options a ``--help`` text lists (``-f, --feedback``: the second), each
+    with its help."""
+    found: dict[str, str] = {}
+    names: list[str] = []
+    for line in help_text.splitlines():
+        head = re.match(r"  (-\S.*?)(?:  +(.*))?$", line)
+        if head:
+            names = re.findall(r"--[a-z][\w-]*", head[1])
+            found |= {name: head[2] or "" for name in names if name != "--help"}
+        elif line.startswith("   ") and names:
+            found |= {name: found[name] + " " + line.strip() for name in names if name in found}
+        else:
+            names = []
+    return found
+
+
+def test_every_option_of_every_command_is_on_its_reference_page() -> None:
+    """Every entry point (pyproject's scripts and ``python -m bench``), each subcommand and
+    each of their options is on its reference page, in that command's own --help block."""
+    import tomllib
+
+    hooks = _load_hooks()
+    scripts = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["scripts"]
+    assert set(scripts) | {"python -m bench"} == set(REFERENCE_PAGES)
+    commands = _commands()
+    assert {"roslibpy-lite bag record", "roslibpy-lite-bridge healthcheck"} <= set(commands)
+    sections: dict[str, str] = {}
+    for page in set(REFERENCE_PAGES.values()):
+        rendered = hooks.on_page_markdown((DOCS / page).read_text())
+        assert "<!-- help:" not in rendered
+        parts = re.split(r"^\$ (.+?) --help$", rendered, flags=re.M)
+        sections |= {f"{page}: {c}": text for c, text in zip(parts[1::2], parts[2::2], strict=True)}
+    missing = {}
+    for command, help_text in commands.items():
+        page = REFERENCE_PAGES[_program(command)]
+        shown = sections.get(f"{page}: {command}")
+        if shown is None:
+            missing[command] = f"no {command} --help on {page}"
+            continue
+        absent = {o for o in _options(help_text) if not re.search(rf"{o}(?![\w-])", shown)}
+        if absent:
+            missing[command] = f"{page} lacks {sorted(absent)}"
+    assert missing == {}, "\n".join(missing.values())
+
+
+def _defaults(command: str) -> dict[str, object]:
+    """Each option of ``command`` with the value it takes when not given."""
+    import argparse
+
+    from bench.run import parse_args as bench_args
+    from bridge_server.__main__ import parse_args as bridge_args
+    from bridge_server.zenoh.relay import parse_args as relay_args
+    from roslibpy_lite.cli import build_parser
+
+    if _program(command) == "roslibpy-lite":
+        parser = build_parser()
+        for word in command.split()[1:]:
+            sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+            parser = sub.choices[word]
+        return {o: a.default for a in parser._actions for o in a.option_strings}
+    parse = {"roslibpy-lite-bridge": bridge_args, "roslibpy-lite-relay": relay_args,
+             "python -m bench": bench_args}[command]
+    return {"--" + dest.replace("_", "-"): value for dest, value in vars(parse([])).items()}
+
+
+def test_every_default_is_said() -> None:
+    """Each option that has a value when not given (not unset, off or empty) says its
+    default in its --help, so the reference pages show it."""
+    commands = {c: text for c, text in _commands().items() if not c.startswith(
+        tuple(f"roslibpy-lite-bridge {s}" for s in BRIDGE_SUBCOMMANDS))}
+    unsaid = []
+    for command, help_text in commands.items():
+        helps = _options(help_text)
+        for option, default in _defaults(command).items():
+            if default not in (None, [], "") and default is not False and option in helps \
+                    and "default" not in helps[option]:
+                unsaid.append(f"{command} {option} (default {default!r})")
+    assert unsaid == [], "\n".join(unsaid)
+
+
+def test_every_option_a_page_names_exists() -> None:
+    """No page, the README or bench's names an option that none of our tools has (nor the
+    other programs its commands run: pip, docker, systemctl, mypy, mkdocs, nbconvert...)."""
+    ours = set().union({"--help"}, *(_options(text) for text in _commands().values()))
+    others = {
+        "--no-deps": "pip wheel", "--now": "systemctl enable", "--network": "docker run",
+        "--build-context": "docker build", "--execute": "jupyter nbconvert",
+        "--strict": "mypy, mkdocs build", "--interfaces": "python -m msgs.generator",
+        "--share": "python -m msgs.generator", "--output": "python -m msgs.generator",
+        "--command": "python -m examples.multi_robot", "--seconds": "python -m bench.dataframe",
+    }
+    pages = [*sorted(DOCS.rglob("*.md")), ROOT / "README.md", ROOT / "SECURITY.md",
+             ROOT / "bench" / "README.md"]
+    unknown = [f"{page.relative_to(ROOT)}:{n}: {option}"
+               for page in pages
+               for n, line in enumerate(page.read_text().splitlines(), 1)
+               for option in re.findall(r"(?<![\w-])--[a-z][\w-]*", line)
+               if option not in ours and option not in others]
+    assert unknown == [], "\n".join(unknown)
+
+
+def _load_hooks() -> Any:
+    """docs/_hooks/generated.py, as mkdocs loads it."""
     spec = importlib.util.spec_from_file_location("docs_hooks", DOCS / "_hooks" / "generated.py")
     assert spec is not None and spec.loader is not None
     hooks = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(hooks)
-    from bridge_server.__main__ import parse_args
-
-    out = io.StringIO()
-    with contextlib.redirect_stdout(out), pytest.raises(SystemExit):
-        parse_args(["--help"])
-    options = set(re.findall(r"--[a-z][a-z-]+", out.getvalue()))
-    assert len(options) > 10
-    bridge_page = hooks.on_page_markdown((DOCS / "bridge.md").read_text())
-    assert "<!-- help:" not in bridge_page
-    assert {opt for opt in options if opt not in bridge_page} == set()
-    cli_page = hooks.on_page_markdown((DOCS / "cli.md").read_text())
-    assert "<!-- help:" not in cli_page
-    from roslibpy_lite.cli import build_parser
-
-    commands = {
-        name
-        for action in build_parser()._subparsers._group_actions  # type: ignore[union-attr]
-        for name in getattr(action, "choices", None) or ()
-    }
-    assert {"topic", "bag"} <= commands
-    assert {c for c in commands if f"roslibpy-lite {c} --help" not in cli_page} == set()
+    return hooks
 
 
 def test_api_pages_show_no_raw_sphinx_roles(tmp_path: Path) -> None:
