@@ -70,15 +70,17 @@ def marked_blocks(path: Path, tag: str) -> list[tuple[str, str]]:
     return marked.findall(path.read_text())
 
 
-def run_snippet(code: str, bridge: BridgeProcess | None = None, timeout: float = 60) -> str:
+def run_snippet(code: str, bridge: BridgeProcess | None = None, timeout: float = 60,
+                cwd: Path = ROOT) -> str:
     """Run a documentation example as a user would; returns its output (fails on an error).
 
     With ``bridge``, the example's ``ws://127.0.0.1:9090`` (or ``port=9090``) points at it.
+    In another ``cwd`` (where the example's own files are) this checkout is still imported.
     """
     if bridge is not None:
         code = code.replace("ws://127.0.0.1:9090", bridge.url)
         code = code.replace("port=9090", f"port={bridge.port}")
-    done = subprocess.run([sys.executable, "-c", code], cwd=ROOT, env=ros_env(),
+    done = subprocess.run([sys.executable, "-c", code], cwd=cwd, env=ros_env(PYTHONPATH=str(ROOT)),
                           capture_output=True, text=True, timeout=timeout)
     assert done.returncode == 0, done.stdout + done.stderr
     return done.stdout

@@ -20,13 +20,15 @@ from typing import Any
 import pytest
 
 from tests.docs.test_deploy_docs import SUBCOMMANDS as BRIDGE_SUBCOMMANDS
-from tests.helpers import ROOT, BridgeProcess, marked_blocks, run_snippet
+from tests.docs.test_deploy_docs import _bridge_commands as _commands_on
+from tests.helpers import ROOT, BridgeProcess, marked_blocks, ros_env, run_snippet
 
 DOCS = ROOT / "docs"
 EXAMPLES = [
     pytest.param(kind, code, id=f"{page.relative_to(DOCS)}:{n}:{kind}")
     for page in sorted(DOCS.rglob("*.md"))
     for n, (kind, code) in enumerate(marked_blocks(page, "docs-test"))
+    if kind != "generated"
 ]
 
 
@@ -53,6 +55,24 @@ REFERENCE_PAGES = {
     "roslibpy-lite-relay": "bridge.md",
     "python -m bench": "benchmarks.md",
 }
+
+
+def test_the_generated_package_example(bridge: BridgeProcess, tmp_path: Path) -> None:
+    """The custom-messages guide's ``interface gen`` command, run as written against the
+    bridge, writes the package that the guide's next example imports, and that example runs."""
+    import shlex
+    import subprocess
+    import sys
+
+    page = DOCS / "guides" / "custom-messages.md"
+    [code] = [code for kind, code in marked_blocks(page, "docs-test") if kind == "generated"]
+    command = re.search(r"^roslibpy-lite --url ws://robot:9090 interface gen .*$",
+                        page.read_text(), re.M)
+    assert command is not None and "from robot_types." in code
+    program, *args = shlex.split(command[0].replace("ws://robot:9090", bridge.url))
+    subprocess.run([str(Path(sys.executable).parent / program), *args], cwd=tmp_path,
+                   env=ros_env(PYTHONPATH=str(ROOT)), check=True, timeout=60)
+    run_snippet(code, bridge, cwd=tmp_path)
 
 
 def _run_for_help(program: str, args: list[str]) -> None:
@@ -201,6 +221,30 @@ def test_every_option_a_page_names_exists() -> None:
                for option in re.findall(r"(?<![\w-])--[a-z][\w-]*", line)
                if option not in ours and option not in others]
     assert unknown == [], "\n".join(unknown)
+
+
+def test_every_command_a_page_shows_parses() -> None:
+    """Each ``roslibpy-lite`` and ``python -m bench`` command in a page's shell blocks is
+    one its tool takes (the bridge's and relay's: tests/docs/test_deploy_docs.py)."""
+    from bench.run import parse_args as bench_args
+    from roslibpy_lite.cli import build_parser
+
+    pages = [*sorted(DOCS.rglob("*.md")), ROOT / "README.md", ROOT / "SECURITY.md",
+             ROOT / "bench" / "README.md"]
+    refused = []
+    shown = 0
+    for page in pages:
+        for program, parse in (("roslibpy-lite", build_parser().parse_args),
+                               ("python -m bench", bench_args)):
+            for argv in _commands_on(page, program):
+                shown += 1
+                with contextlib.redirect_stderr(io.StringIO()) as err:
+                    try:
+                        parse(argv)
+                    except SystemExit:
+                        refused.append(f"{page.relative_to(ROOT)}: {program} {' '.join(argv)}: "
+                                       f"{err.getvalue().strip().splitlines()[-1]}")
+    assert shown > 10 and refused == [], "\n".join(refused)
 
 
 def _load_hooks() -> Any:
