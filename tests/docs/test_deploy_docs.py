@@ -43,9 +43,9 @@ def _bridge_commands(page: Path, program: str = "roslibpy-lite-bridge") -> list[
         for line in re.sub(r"\\\n\s*", " ", block).splitlines():
             if not line.strip().startswith(program + " "):
                 continue
-            words = shlex.split(line.strip(), comments=True)
-            if words[1:2] not in ([s] for s in SUBCOMMANDS):
-                found.append(words[1:])
+            words = shlex.split(line.strip(), comments=True)[len(program.split()):]
+            if words[:1] not in ([s] for s in SUBCOMMANDS):
+                found.append(words)
     return found
 
 
