@@ -43,9 +43,12 @@ def test_the_guides_have_examples() -> None:
 
 @pytest.mark.parametrize(("kind", "code"), EXAMPLES)
 def test_example_runs(kind: str, code: str, request: pytest.FixtureRequest) -> None:
-    """The example exits cleanly (its own asserts hold) against the bridge or in memory."""
+    """The example exits cleanly (its own asserts hold) against the bridge or in memory, and
+    each of its prints ran (one in an ``except`` that nothing raised would not)."""
     bridge: BridgeProcess | None = request.getfixturevalue("bridge") if kind == "bridge" else None
-    run_snippet(code, bridge)
+    out = run_snippet(code, bridge)
+    said = {text.strip() for text in re.findall(r"\bprint\(f?[\"']([^\"'{]*)", code)} - {""}
+    assert {text for text in said if text not in out} == set(), out
 
 
 # Where a user looks for each entry point's options (the pages render each --help).
