@@ -20,6 +20,9 @@ name                                              type       labels
 ``start_time_seconds``                            gauge      (earliest worker start)
 ``clients``                                       gauge      (connected now)
 ``clients_by_protocol``                           gauge      protocol (rosbridge, foxglove)
+``sessions_kept``                                 gauge      (dropped clients' sessions)
+``sessions_resumed_total``                        counter
+``sessions_expired_total``                        counter
 ``connections_total``                             counter    (accepted websocket clients)
 ``connections_refused_total``                     counter    reason
 ``topic_subscribers``                             gauge      topic

@@ -250,6 +250,23 @@ def test_every_command_a_page_shows_parses() -> None:
     assert shown > 10 and refused == [], "\n".join(refused)
 
 
+def test_the_metrics_tables_are_the_bridges(bridge: BridgeProcess) -> None:
+    """The README's and the operations page's metrics tables name exactly the families the
+    bridge's /metrics exports."""
+    import urllib.request
+
+    with urllib.request.urlopen(f"http://127.0.0.1:{bridge.port}/metrics", timeout=10) as reply:
+        exported = reply.read().decode()
+    real = {name.removeprefix("roslibpy_bridge_")
+            for name in re.findall(r"^# TYPE (roslibpy_bridge_\w+)", exported, re.M)}
+    assert {"clients", "service_calls_total"} <= real
+    for page in (ROOT / "README.md", DOCS / "operations.md"):
+        table = page.read_text().split("Metrics (all `roslibpy_bridge_*`):\n\n")[1].split("\n\n")[0]
+        named = {name for row in table.splitlines()[2:]
+                 for name in re.findall(r"`(\w+)`", row.split("|")[1])}
+        assert (sorted(named - real), sorted(real - named)) == ([], []), page.name
+
+
 def _load_hooks() -> Any:
     """docs/_hooks/generated.py, as mkdocs loads it."""
     spec = importlib.util.spec_from_file_location("docs_hooks", DOCS / "_hooks" / "generated.py")
