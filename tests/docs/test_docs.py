@@ -360,14 +360,21 @@ def test_the_extras_named_in_the_docs_exist_and_are_all_listed() -> None:
     exist (docs/cli.md spoke of a `bag` extra)."""
     import tomllib
 
-    extras = set(tomllib.loads((ROOT / "pyproject.toml").read_text())["project"][
-        "optional-dependencies"])
+    extras = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"][
+        "optional-dependencies"]
     table = re.findall(r"^\| `([\w-]+)` \|", (DOCS / "getting-started.md").read_text(),
                        re.MULTILINE)
-    assert set(table) == extras - {"dev", "build-interfaces"}
+    assert set(table) == set(extras) - {"dev", "build-interfaces"}
+    rows = dict(re.findall(r"^\| `([\w-]+)` \| (.*?) \|", (DOCS / "getting-started.md").read_text(),
+                           re.MULTILINE))
+    for extra in table:  # each package it brings (ROS's by the words "ROS 2 Jazzy wheels")
+        brings = [re.split(r"[^\w.-]", r)[0] for r in extras[extra]]
+        unsaid = [n for n in brings if f"`{n}`" not in rows[extra] and not (
+            n.startswith("ros-") and "ROS 2 Jazzy wheels" in rows[extra])]
+        assert unsaid == [], f"the {extra} extra's row does not say {unsaid}"
     for page in [*sorted(DOCS.rglob("*.md")), ROOT / "README.md"]:
         text = page.read_text()
         named = re.findall(r"\bthe `([\w-]+)` extra", text) + re.findall(r"roslibpy-lite\[([\w,-]+)\]",
                                                                    text)
-        unknown = {e for group in named for e in group.split(",")} - extras
+        unknown = {e for group in named for e in group.split(",")} - set(extras)
         assert unknown == set(), f"{page.relative_to(ROOT)} names extras {unknown}"
