@@ -1,7 +1,7 @@
 """End-to-end benchmarks of the bridge, printed as JSON (one object per scenario, then a summary).
 
-Run: ``python bench/run.py [--scenario all|NAME ...] [--duration S] [--quick] [--profile]``
-or ``python -m bench ...``. Nothing here asserts anything about time.
+Run: ``python -m bench [--scenario all|NAME ...] [--duration S] [--quick] [--profile]``
+(every option: ``python -m bench --help``). Nothing here asserts anything about time.
 
 Each scenario starts its own bridge (``python -m bridge_server`` on
 127.0.0.1, ephemeral port, a private ``ROS_DOMAIN_ID``); the ROS side of each
@@ -40,6 +40,16 @@ Scenarios (targets; rosbridge_suite's figures in brackets):
 - ``relay_uplink`` (``bench/relay.py``): a 640x480 camera at 10 Hz to 1, 10, 50, 100
   viewers through a relay (the robot dials out over Zenoh) and straight to the bridge: the
   robot's uplink bytes against one viewer's, frames delivered, relay and robot CPU.
+- ``relay_service`` (``bench/relay.py``): call_service round trips to an rclpy SetBool
+  service through a relay and straight to the robot's bridge, in alternating blocks: p50/p99.
+- ``relay_imu`` (``bench/relay.py``): a 100 Hz sensor_msgs/Imu to 200 JSON viewers (50 with
+  ``--quick``) over two relays: the fraction delivered, latency p50/p99, the relays' CPU per
+  message.
+- ``tls`` (``bench/tls.py``): small messages, service round trips and CBOR images over ws://
+  and over wss://, side by side (reference only).
+- ``links`` (``bench/links.py``): through ``bench/linkproxy.py``: a silent link (how soon
+  each side notices), a 2 Mbit/s link (the age of the camera frames a client gets) and a
+  resume across an 8 s outage (what each side got).
 - ``record`` (``bench/bag.py``): ``roslibpy-lite bag record`` in its own process, a
   640x480 camera at 30 Hz plus an IMU at 200 Hz for 60 s: what the file holds against what
   was published, the recorder's CPU and write rate; then the camera alone at rising rates.
