@@ -356,8 +356,10 @@ def test_every_public_module_is_in_the_api_reference() -> None:
 
 def test_the_extras_named_in_the_docs_exist_and_are_all_listed() -> None:
     """Getting started's extras table lists every extra a user installs (not the
-    repository's own dev and build-interfaces), and no page names an extra that does not
-    exist (docs/cli.md spoke of a `bag` extra)."""
+    repository's own dev and build-interfaces) with what each brings, no page names an
+    extra that does not exist (docs/cli.md spoke of a `bag` extra), and none has pip
+    install roslibpy-lite by name: the project installs from its own wheel or checkout, and
+    a name on a package index could be anyone's."""
     import tomllib
 
     extras = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"][
@@ -374,7 +376,9 @@ def test_the_extras_named_in_the_docs_exist_and_are_all_listed() -> None:
         assert unsaid == [], f"the {extra} extra's row does not say {unsaid}"
     for page in [*sorted(DOCS.rglob("*.md")), ROOT / "README.md"]:
         text = page.read_text()
-        named = re.findall(r"\bthe `([\w-]+)` extra", text) + re.findall(r"roslibpy-lite\[([\w,-]+)\]",
-                                                                   text)
+        named = re.findall(r"\bthe `([\w-]+)` extra", text) + re.findall(
+            r"(?:roslibpy_lite-[\w.-]+\.whl|\.)\[([\w,-]+)\]", text)
+        from_an_index = re.findall(r"pip install [^`\n]*?'?\broslibpy[-_]lite\b(?!-|[\w.-]*\.whl)", text)
+        assert from_an_index == [], f"{page.relative_to(ROOT)}: {from_an_index} (install the wheel)"
         unknown = {e for group in named for e in group.split(",")} - set(extras)
         assert unknown == set(), f"{page.relative_to(ROOT)} names extras {unknown}"
