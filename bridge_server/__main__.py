@@ -6,6 +6,9 @@ status 0 within about a second of SIGINT or SIGTERM.
 
 DDS discovery is kept on this machine (``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST``)
 unless the environment already sets the variable.
+
+Subcommands, each with its own ``--help``: ``add-principal`` and ``remove-principal``
+(an auth file's principals) and ``healthcheck`` (exit 0 once the running bridge is ready).
 """
 
 from __future__ import annotations
@@ -41,6 +44,8 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p = argparse.ArgumentParser(
         prog="roslibpy-lite-bridge",
         description="A rosbridge v2 protocol server on rclpy (ROS 2 Jazzy).",
+        epilog="subcommands (each with its own --help): add-principal and remove-principal "
+        "(an auth file's principals), healthcheck (exit 0 once the running bridge is ready)",
     )
     p.add_argument("--host", default="127.0.0.1", help="address to bind (default 127.0.0.1)")
     p.add_argument("--port", type=int, default=9090, help="port (default 9090; 0: any free port)")
