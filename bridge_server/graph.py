@@ -41,6 +41,7 @@ __all__ = [
     "ServedService",
     "Status",
     "TopicFeed",
+    "parameter_value",
 ]
 
 
@@ -58,6 +59,31 @@ CANCEL_ANSWERS = {
     3: "it had already finished",
 }
 """``CancelGoal`` return codes other than 0 (ERROR_NONE), as text."""
+
+_PARAMETER_FIELDS = {
+    1: "bool_value", 2: "integer_value", 3: "double_value", 4: "string_value",
+    5: "byte_array_value", 6: "bool_array_value", 7: "integer_array_value",
+    8: "double_array_value", 9: "string_array_value",
+}
+
+
+def parameter_value(value: Any) -> Any:
+    """A ``rcl_interfaces/msg/ParameterValue`` as the plain value the Graph's parameter
+    methods give and take: ``bool``, ``int``, ``float``, ``str``, ``bytes`` for a byte
+    array (its type is kept: a list of ints would read as an integer array), a ``list``
+    for the other arrays, ``None`` when not set. ``value`` is an rclpy message or a
+    mapping (as decoded from CDR); a byte array's items are ints or 1-byte ``bytes``
+    (rclpy's)."""
+    def field(name: str) -> Any:
+        return value[name] if isinstance(value, Mapping) else getattr(value, name)
+
+    name = _PARAMETER_FIELDS.get(int(field("type")))
+    if name is None:
+        return None
+    found = field(name)
+    if name == "byte_array_value":
+        return b"".join(b if isinstance(b, bytes) else bytes((b,)) for b in found)
+    return [*found] if name.endswith("_array_value") else found
 
 
 class Converter(Protocol):
@@ -423,12 +449,14 @@ class Graph(Protocol):
         """Names of ``node``'s parameters (any failure raises)."""
 
     async def get_parameter(self, node: str, name: str) -> tuple[bool, Any]:
-        """(is set, value) of a node's parameter; ``TimeoutError``/``LookupError`` if the
-        node does not answer."""
+        """(is set, value) of a node's parameter (as :func:`parameter_value` gives it: a
+        byte array as ``bytes``); ``TimeoutError``/``LookupError`` if the node does not
+        answer."""
 
     async def set_parameter(self, node: str, name: str, value: Any) -> tuple[bool, str]:
-        """Set (``None``: unset) a node's parameter: (accepted, reason); ``ValueError`` for
-        a value a parameter cannot hold, ``TimeoutError``/``LookupError`` as above."""
+        """Set (``None``: unset; ``bytes``: a byte array) a node's parameter: (accepted,
+        reason); ``ValueError`` for a value a parameter cannot hold,
+        ``TimeoutError``/``LookupError`` as above."""
 
     # -- actions -------------------------------------------------------------------------------
 

@@ -28,6 +28,7 @@ from msgs.runtime import Message as MsgsMessage
 from msgs.runtime import Service as MsgsService
 from msgs.runtime import lookup
 
+from ..graph import parameter_value
 from ..interfaces import BridgeError
 from .wire import Channel
 
@@ -391,18 +392,3 @@ class Hub:
 
 def _node_id(name: str, namespace: str) -> str:
     return f"{namespace.rstrip('/')}/{name}"
-
-
-def parameter_value(value: dict[str, Any]) -> Any:
-    """A ``rcl_interfaces/msg/ParameterValue`` (as decoded from CDR) as a plain value."""
-    kind = value["type"]
-    fields = {1: "bool_value", 2: "integer_value", 3: "double_value", 4: "string_value",
-              5: "byte_array_value", 6: "bool_array_value", 7: "integer_array_value",
-              8: "double_array_value", 9: "string_array_value"}
-    name = fields.get(kind)
-    if name is None:
-        return None
-    found = value[name]
-    if kind == 5:
-        return bytes(found)
-    return list(found) if isinstance(found, list | tuple) else found

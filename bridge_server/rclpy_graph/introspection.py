@@ -18,6 +18,7 @@ from typing import TYPE_CHECKING, Any
 from rcl_interfaces.msg import Parameter, ParameterValue
 from rcl_interfaces.srv import GetParameters, ListParameters, SetParameters
 
+from ..graph import parameter_value
 from ..interfaces import BridgeError, canonical_name
 from .types import resolve_action, resolve_message, resolve_service, type_name_of
 
@@ -227,7 +228,7 @@ async def get_parameter(ros: RosNode, node: str, name: str) -> tuple[bool, Any]:
     values = list(response.values)
     if not values or values[0].type == 0:
         return False, None
-    return True, _from_parameter_value(values[0])
+    return True, parameter_value(values[0])
 
 
 async def set_parameter(ros: RosNode, node: str, name: str, value: Any) -> tuple[bool, str]:
@@ -241,29 +242,6 @@ async def set_parameter(ros: RosNode, node: str, name: str, value: Any) -> tuple
     )
     result = response.results[0]
     return bool(result.successful), str(result.reason)
-
-
-def _from_parameter_value(value: Any) -> Any:
-    kind = value.type
-    if kind == 1:
-        return bool(value.bool_value)
-    if kind == 2:
-        return int(value.integer_value)
-    if kind == 3:
-        return float(value.double_value)
-    if kind == 4:
-        return str(value.string_value)
-    if kind == 5:
-        return [int(b) if isinstance(b, int) else b[0] for b in value.byte_array_value]
-    if kind == 6:
-        return [bool(v) for v in value.bool_array_value]
-    if kind == 7:
-        return [int(v) for v in value.integer_array_value]
-    if kind == 8:
-        return [float(v) for v in value.double_array_value]
-    if kind == 9:
-        return [str(v) for v in value.string_array_value]
-    return None
 
 
 def _to_parameter_value(value: Any) -> Any:

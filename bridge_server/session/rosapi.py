@@ -526,6 +526,8 @@ async def get_param(bridge: Shared, args: Mapping[str, Any]) -> dict[str, Any]:
     if not is_set:
         return {"value": default if isinstance(default, str) else "", "successful": True,
                 "reason": f"{full} is not set"}
+    if isinstance(value, bytes):  # a byte array reads as its numbers, as it always has
+        value = list(value)
     return {"value": json.dumps(value), "successful": True, "reason": ""}
 
 

@@ -708,7 +708,7 @@ class Exporter:
                     answer = await self.graph.get_parameter(node, req.name)
                 else:
                     answer = await self.graph.set_parameter(node, req.name, req.value)
-                query.reply(query.key_expr, _json(answer))
+                query.reply(query.key_expr, req.answer(answer))
                 return
             except TimeoutError as exc:
                 kind, text = "timeout", str(exc) or f"node {node} did not answer in time"

@@ -1023,7 +1023,7 @@ class ZenohGraph:
                 kind, text = "error", str(exc)
             raise {"timeout": TimeoutError, "lookup": LookupError,
                    "value": ValueError}.get(kind, BridgeError)(text) from None
-        return json.loads(data)
+        return request.read_answer(data)
 
     async def parameter_names(self, node: str, timeout: float) -> list[str]:
         """Names of a robot node's parameters."""
@@ -1033,7 +1033,7 @@ class ZenohGraph:
     async def get_parameter(self, node: str, name: str) -> tuple[bool, Any]:
         """(is set, value) of a robot node's parameter."""
         is_set, value = await self._param(node, ParamRequest("get", name=name), PARAM_WAIT)
-        return bool(is_set), value
+        return is_set, value
 
     async def set_parameter(self, node: str, name: str, value: Any) -> tuple[bool, str]:
         """Set (``None``: unset) a robot node's parameter: (accepted, reason)."""

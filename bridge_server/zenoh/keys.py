@@ -356,12 +356,32 @@ class Execute(_Payload):
             raise BridgeError(f"a served goal's payload is not an Execute ({exc!r})") from None
 
 
+def _to_text(value: Any) -> tuple[Any, bool]:
+    """A parameter value as JSON takes it: a byte array as its base64 text and ``True``
+    (JSON has no bytes), anything else as it is and ``False``."""
+    if isinstance(value, bytes | bytearray):
+        return base64.b64encode(value).decode(), True
+    return value, False
+
+
+def _from_text(value: Any, what: str) -> bytes:
+    """The byte array a binary-flagged value's base64 text holds; ``BridgeError`` naming
+    ``what`` if it is not base64 text."""
+    try:
+        if not isinstance(value, str):
+            raise ValueError(f"a {type(value).__name__}")
+        return base64.b64decode(value, validate=True)
+    except ValueError as exc:
+        raise BridgeError(f"{what}'s binary value is not base64 text ({exc})") from None
+
+
 @dataclass
 class ParamRequest(_Payload):
     """A parameter query's payload: ``op`` ``names`` (with ``timeout``), ``get`` (``name``)
     or ``set`` (``name``, ``value``; None unsets it). A byte array ``value`` (JSON has no
     bytes) goes as its base64 text with ``"binary": true`` beside it. The reply is the Graph
-    method's answer as JSON; an error reply is
+    method's answer as JSON (:meth:`answer`), a ``get`` of a byte array as
+    ``[true, base64 text, true]``; an error reply is
     ``{"kind": "timeout"|"lookup"|"value"|"error", "text"}``."""
 
     op: str
@@ -374,8 +394,9 @@ class ParamRequest(_Payload):
     def encode(self) -> bytes:
         """As the payload's bytes (a byte array value as base64, flagged ``binary``)."""
         obj = asdict(self)
-        if isinstance(self.value, bytes | bytearray):
-            obj["value"], obj["binary"] = base64.b64encode(self.value).decode(), True
+        obj["value"], binary = _to_text(self.value)
+        if binary:
+            obj["binary"] = True
         return json.dumps(obj, separators=(",", ":")).encode()
 
     @classmethod
@@ -387,18 +408,39 @@ class ParamRequest(_Payload):
                               f"{', '.join(cls.OPS)}")
         value = obj.get("value")
         if obj.get("binary"):
-            try:
-                if not isinstance(value, str):
-                    raise ValueError(f"a {type(value).__name__}")
-                value = base64.b64decode(value, validate=True)
-            except ValueError as exc:
-                raise BridgeError(f"a parameter request's binary value is not base64 text "
-                                  f"({exc})") from None
+            value = _from_text(value, "a parameter request")
         try:
             return cls(op=obj["op"], name=str(obj.get("name", "")), value=value,
                        timeout=_seconds(obj.get("timeout", 0.0), "timeout"))
         except (TypeError, ValueError) as exc:
             raise BridgeError(f"a parameter request is not a ParamRequest ({exc})") from None
+
+    def answer(self, result: Any) -> bytes:
+        """The reply's payload: the Graph method's ``result`` for this request as JSON; a
+        ``get``'s byte array value as base64 text with ``true`` after it."""
+        if self.op == "get":
+            is_set, value = result
+            value, binary = _to_text(value)
+            result = [is_set, value, True] if binary else [is_set, value]
+        return json.dumps(result, separators=(",", ":")).encode()
+
+    def read_answer(self, data: bytes) -> Any:
+        """The Graph method's result from a reply's payload (:meth:`answer`'s);
+        ``BridgeError`` naming what is wrong."""
+        try:
+            result = json.loads(data)
+        except ValueError as exc:
+            raise BridgeError(f"the answer to a parameter {self.op} is not JSON ({exc})") \
+                from None
+        if self.op != "get":
+            return result
+        if not isinstance(result, list) or len(result) not in (2, 3):
+            raise BridgeError(f"the answer to a parameter get is not [is set, value]: "
+                              f"{str(result)[:80]}")
+        is_set, value, *binary = result
+        if binary and binary[0] is True:
+            value = _from_text(value, "the answer to a parameter get")
+        return bool(is_set), value
 
 
 _Shape = Any

@@ -257,9 +257,11 @@ async def test_message_details_unknown_type(ws_connect: Any) -> None:
 
 
 async def test_params_get_set_names(ws_connect: Any, ros_node: Any) -> None:
-    """Node parameters are listed, read and written as /node:param with JSON text values."""
+    """Node parameters are listed, read and written as /node:param with JSON text values (a
+    byte array as its numbers)."""
     ros_node.declare_parameter("speed", 1.5)
     ros_node.declare_parameter("names", ["a", "b"])
+    ros_node.declare_parameter("blob", [b"h", b"i"])
     full = _fq(ros_node)
     ws = await ws_connect()
     await _until(ws, "/rosapi/get_param_names", None,
@@ -268,6 +270,8 @@ async def test_params_get_set_names(ws_connect: Any, ros_node: Any) -> None:
     assert json.loads(got["value"]) == 1.5 and got["successful"] is True
     names = await _call(ws, "/rosapi/get_param", {"name": f"{full}:names"})
     assert json.loads(names["value"]) == ["a", "b"]
+    blob = await _call(ws, "/rosapi/get_param", {"name": f"{full}:blob"})
+    assert json.loads(blob["value"]) == [104, 105]
     await _call(ws, "/rosapi/set_param", {"name": f"{full}:speed", "value": "2.25"})
     assert ros_node.get_parameter("speed").value == 2.25
     assert (await _call(ws, "/rosapi/has_param", {"name": f"{full}:speed"}))["exists"] is True

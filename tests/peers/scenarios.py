@@ -558,6 +558,33 @@ def params(peer: PeerProcess, node: Any) -> None:
     assert peer.request("get_param", name=name) == 2.5
 
 
+FOXGLOVE_PARAMETERS: list[tuple[str, Any, dict[str, Any]]] = [
+    ("flag", True, {"value": True}),
+    ("count", 7, {"value": 7}),
+    ("gain", 1.5, {"value": 1.5, "type": "float64"}),
+    ("whole", 2.0, {"value": 2.0, "type": "float64"}),
+    ("label", "hi", {"value": "hi"}),
+    ("blob", [b"\x00", b"\xff", b"h"], {"value": "AP9o", "type": "byte_array"}),
+    ("flags", [True, False], {"value": [True, False]}),
+    ("counts", [1, 2], {"value": [1, 2]}),
+    ("gains", [1.5, 2.0], {"value": [1.5, 2.0], "type": "float64_array"}),
+    ("labels", ["a", "b"], {"value": ["a", "b"]}),
+]
+"""A parameter of each ROS 2 type (name, the value rclpy declares, the ``parameterValues``
+entry a Foxglove client must get for it, name left out): ws-protocol's spec types a byte
+array ``byte_array`` (base64 text), a double ``float64``, a double array ``float64_array``."""
+
+
+def declare_foxglove_parameters(node: Any, prefix: str) -> list[tuple[str, dict[str, Any]]]:
+    """Declare :data:`FOXGLOVE_PARAMETERS` on ``node`` as ``prefix`` + name; each one's
+    Foxglove name (``/node.param``) and the entry a client must get for it."""
+    full = node.get_fully_qualified_name()
+    for name, value, _ in FOXGLOVE_PARAMETERS:
+        node.declare_parameter(prefix + name, value)
+    return [(f"{full}.{prefix}{name}", {"name": f"{full}.{prefix}{name}", **entry})
+            for name, _, entry in FOXGLOVE_PARAMETERS]
+
+
 def message_details(peer: PeerProcess) -> None:
     """The peer gets rosapi typedefs for geometry_msgs/Twist, nested Vector3 included."""
     value = peer.request("get_message_details", type="geometry_msgs/Twist")

@@ -236,42 +236,62 @@ def test_what_goes_is_withdrawn(fox: PeerProcess, ros_node: Any, topic: str) -> 
                "the bridge's publisher to go")
 
 
+def _parameter_values(fox: PeerProcess, request_id: str, cmd: str, **params: Any
+                      ) -> list[dict[str, Any]]:
+    """Send a parameter command with ``request_id``; the ``parameterValues`` answering it."""
+    fox.request(cmd, id=request_id, **params)
+    event = fox.wait_event(lambda e: e.get("event") == "parameterValues"
+                           and e["id"] == request_id, DEADLINE, f"parameterValues {request_id}")
+    found: list[dict[str, Any]] = event["parameters"]
+    return found
+
+
+def _update(fox: PeerProcess, entry: dict[str, Any]) -> None:
+    """Wait for a parameter update event (no id) that holds ``entry``."""
+    fox.wait_event(lambda e: e.get("event") == "parameterValues" and e["id"] is None
+                   and entry in e["parameters"], DEADLINE, f"an update with {entry}")
+
+
 def test_parameters(fox: PeerProcess, ros_node: Any, topic: str) -> None:
-    """A node's parameter is read, set (the node sees it) and followed (/node.param names)."""
+    """A node's parameters of every type are read as the spec has them (one by one and all
+    at once), set (the node sees it) and followed (/node.param names); a byte array reads,
+    sets and follows as base64 text typed byte_array, whoever set it."""
     from rclpy.parameter import Parameter
 
-    gain, blob = "gain" + topic.replace("/", "_"), "blob" + topic.replace("/", "_")
-    node = f"/{ros_node.get_name()}"
-    full = f"{node}.{gain}"
-    ros_node.declare_parameter(gain, 1.5)
-    ros_node.declare_parameter(blob, Parameter.Type.BYTE_ARRAY)
+    prefix = topic.strip("/").replace("/", "_") + "_"
+    declared = scenarios.declare_foxglove_parameters(ros_node, prefix)
+    names = [name for name, _ in declared]
+    entries = [entry for _, entry in declared]
+    full, blob = (f"{ros_node.get_fully_qualified_name()}.{prefix}{short}"
+                  for short in ("gain", "blob"))
     try:
-        fox.request("subscribe_parameters", names=[full])
+        fox.request("subscribe_parameters", names=[full, blob])
         deadline = time.monotonic() + DEADLINE
-        values: list[Any] = []
-        while not values and time.monotonic() < deadline:  # until the bridge sees the node
-            fox.request("get_parameters", names=[full], id="get1")
-            event = fox.wait_event(lambda e: e.get("event") == "parameterValues"
-                                   and e["id"] == "get1", DEADLINE, "parameterValues")
-            values = event["parameters"]
-            fox.begin_test()
-        assert values == [{"name": full, "value": 1.5, "type": "float64"}]
-        fox.request("set_parameters", parameters=[{"name": full, "value": 3, "type": "float64"}],
-                    id="set1")
-        event = fox.wait_event(lambda e: e.get("event") == "parameterValues"
-                               and e["id"] == "set1", DEADLINE, "the set's answer")
-        assert event["parameters"] == [{"name": full, "value": 3.0, "type": "float64"}]
-        assert ros_node.get_parameter(gain).value == 3.0
-        fox.wait_event(lambda e: e.get("event") == "parameterValues" and e["id"] is None
-                       and e["parameters"][0]["name"] == full, DEADLINE, "the update")
-        fox.request("set_parameters", parameters=[
-            {"name": f"{node}.{blob}", "value": "aGk=", "type": "byte_array"}], id="set2")
-        fox.wait_event(lambda e: e.get("event") == "parameterValues" and e["id"] == "set2",
-                       DEADLINE, "the second set's answer")
-        assert ros_node.get_parameter(blob).value == [b"h", b"i"]
+        n = 0
+        while not (values := _parameter_values(fox, f"get{n}", "get_parameters", names=names)):
+            assert time.monotonic() < deadline, "the bridge never saw the node"
+            n += 1  # until the bridge sees the node (no event)
+        assert values == entries
+        every = _parameter_values(fox, "all", "get_parameters", names=[])
+        assert [p for p in every if p["name"] in names] == entries
+        assert _parameter_values(fox, "set1", "set_parameters", parameters=[
+            {"name": full, "value": 3, "type": "float64"}]) == [
+            {"name": full, "value": 3.0, "type": "float64"}]
+        assert ros_node.get_parameter(prefix + "gain").value == 3.0
+        _update(fox, {"name": full, "value": 3.0, "type": "float64"})
+        hi = {"name": blob, "value": "aGk=", "type": "byte_array"}
+        assert _parameter_values(fox, "set2", "set_parameters", parameters=[hi]) == [hi]
+        assert ros_node.get_parameter(prefix + "blob").value == [b"h", b"i"]
+        _update(fox, hi)
+        by_ros = Parameter(prefix + "blob", Parameter.Type.BYTE_ARRAY,  # type: ignore[no-untyped-call]
+                           [b"r", b"o", b"s"])
+        ros_node.set_parameters([by_ros])
+        ros = {"name": blob, "value": "cm9z", "type": "byte_array"}
+        _update(fox, ros)
+        assert _parameter_values(fox, "get_blob", "get_parameters", names=[blob]) == [ros]
     finally:
-        ros_node.undeclare_parameter(gain)
-        ros_node.undeclare_parameter(blob)
+        for name, _, _ in scenarios.FOXGLOVE_PARAMETERS:
+            ros_node.undeclare_parameter(prefix + name)
 
 
 def test_connection_graph(fox: PeerProcess, ros_node: Any, topic: str) -> None:

@@ -347,9 +347,10 @@ async def test_a_relay_client_serves_a_service_rclpy_calls(ros_node: Any, topic:
 
 async def test_a_robot_nodes_parameters_through_the_relay(ros_node: Any) -> None:
     """/rosapi/get_param_names, get_param and set_param through the relay read and write an
-    rclpy node's parameter on the robot; a value no parameter can hold and a node that is not
-    there are named as on the bridge."""
+    rclpy node's parameter on the robot (a byte array read as its numbers, as on the bridge); a
+    value no parameter can hold and a node that is not there are named as on the bridge."""
     ros_node.declare_parameter("gain", 1.5)
+    ros_node.declare_parameter("blob", [b"h", b"i"])
     node = ros_node.get_fully_qualified_name()
     async with tier() as t:
         ws = await open_wire(t.url())
@@ -367,6 +368,8 @@ async def test_a_robot_nodes_parameters_through_the_relay(ros_node: Any) -> None
             assert f"{node}:gain" in reply["values"]["names"], reply
             reply = await call("get_param", {"name": f"{node}:gain"})
             assert reply["values"]["value"] == "1.5", reply
+            reply = await call("get_param", {"name": f"{node}:blob"})
+            assert reply["values"]["value"] == "[104, 105]", reply
             reply = await call("set_param", {"name": f"{node}:gain", "value": "2.5"})
             assert reply["result"] is True, reply
             assert ros_node.get_parameter("gain").value == 2.5

@@ -278,41 +278,55 @@ async def _parameters(fox: PeerProcess, request_id: str, cmd: str, **params: Any
     return found
 
 
+async def _update(fox: PeerProcess, entry: dict[str, Any]) -> None:
+    """Wait for a parameter update event (no id) that holds ``entry``."""
+    await _call(fox.wait_event, lambda e: e.get("event") == "parameterValues"
+                and e["id"] is None and entry in e["parameters"], DEADLINE,
+                f"an update with {entry}")
+
+
 @pytest.mark.asyncio(loop_scope="module")
 async def test_a_foxglove_client_reads_sets_and_follows_parameters_through_a_relay(
         pair: Pair, ros_node: Any) -> None:
-    """getParameters, setParameters (a float and a byte array) and parameter updates through
-    the relay reach an rclpy node's parameters on the robot; the list of all parameters
-    has it; a name that is not /node.param and a value no parameter holds get the errors
+    """getParameters (one by one and all at once), setParameters (a float and a byte array)
+    and parameter updates through the relay reach an rclpy node's parameters of every type on
+    the robot, each as the spec has it (a byte array as base64 text typed byte_array, whoever
+    set it); a name that is not /node.param and a value no parameter holds get the errors
     the robot's own bridge gives."""
     from rclpy.parameter import Parameter
 
     pair.begin_test()
     fox = pair.relay
-    node = f"/{ros_node.get_name()}"
+    declared = scenarios.declare_foxglove_parameters(ros_node, "")
+    names = [name for name, _ in declared]
+    entries = [entry for _, entry in declared]
+    node = ros_node.get_fully_qualified_name()
     gain, blob = f"{node}.gain", f"{node}.blob"
-    ros_node.declare_parameter("gain", 1.5)
-    ros_node.declare_parameter("blob", Parameter.Type.BYTE_ARRAY)
-    await _call(fox.request, "subscribe_parameters", names=[gain])
+    await _call(fox.request, "subscribe_parameters", names=[gain, blob])
     deadline = asyncio.get_running_loop().time() + DEADLINE
     n = 0
-    while not (values := await _parameters(fox, f"get{n}", "get_parameters", names=[gain])):
+    while not (values := await _parameters(fox, f"get{n}", "get_parameters", names=names)):
         assert asyncio.get_running_loop().time() < deadline, "the robot never saw the node"
         n += 1  # until the robot's bridge sees the new node (no event)
-    assert values == [{"name": gain, "value": 1.5, "type": "float64"}]
-    assert {"name": gain, "value": 1.5, "type": "float64"} in await _parameters(
-        fox, "all", "get_parameters", names=[])
+    assert values == entries
+    assert await _parameters(pair.direct, "direct", "get_parameters", names=names) == entries
+    every = await _parameters(fox, "all", "get_parameters", names=[])
+    assert [p for p in every if p["name"] in names] == entries
     assert await _parameters(fox, "set1", "set_parameters", parameters=[
         {"name": gain, "value": 3, "type": "float64"}]) == [
         {"name": gain, "value": 3.0, "type": "float64"}]
     assert ros_node.get_parameter("gain").value == 3.0
-    await _call(fox.wait_event, lambda e: e.get("event") == "parameterValues"
-                and e["id"] is None and e["parameters"] == [
-                    {"name": gain, "value": 3.0, "type": "float64"}], DEADLINE, "the update")
-    answer = await _parameters(fox, "set2", "set_parameters", parameters=[
-        {"name": blob, "value": "aGk=", "type": "byte_array"}])
-    assert [p["name"] for p in answer] == [blob], fox.diagnostics()
+    await _update(fox, {"name": gain, "value": 3.0, "type": "float64"})
+    hi = {"name": blob, "value": "aGk=", "type": "byte_array"}
+    assert await _parameters(fox, "set2", "set_parameters", parameters=[hi]) == [hi]
     assert ros_node.get_parameter("blob").value == [b"h", b"i"]
+    await _update(fox, hi)
+    by_ros = Parameter("blob", Parameter.Type.BYTE_ARRAY,  # type: ignore[no-untyped-call]
+                       [b"r", b"o", b"s"])
+    ros_node.set_parameters([by_ros])
+    ros = {"name": blob, "value": "cm9z", "type": "byte_array"}
+    await _update(fox, ros)
+    assert await _parameters(fox, "get_blob", "get_parameters", names=[blob]) == [ros]
 
     said: dict[str, list[str]] = {}
     for name, peer in (("relay", pair.relay), ("direct", pair.direct)):

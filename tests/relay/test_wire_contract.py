@@ -138,3 +138,34 @@ async def test_a_snapshot_of_the_wrong_shape_is_refused_and_said(
         await until(lambda: graph.snapshot.node == "newer_bridge", "the newer robot's snapshot")
     finally:
         await ws.close()
+
+
+async def test_a_robots_parameter_answers_are_read_or_refused_by_name(
+        played: tuple[Any, zenoh.Session]) -> None:
+    """A get answer flagged binary is read as the byte array (rosapi's get_param gives its
+    numbers, as on the robot's own bridge); one that is not [is set, value], or whose binary
+    value is not base64 text, is refused with what is wrong named."""
+    relay, robot = played
+    answers = {"good": b'[true, "aGk=", true]', "shape": b'{"set": true}',
+               "b64": b'[true, "not base64!", true]'}
+
+    def answer(query: zenoh.Query) -> None:
+        name = json.loads(query.payload.to_bytes() if query.payload else b"{}").get("name")
+        query.reply(query.key_expr, answers[name])
+        query.drop()  # type: ignore[no-untyped-call]
+
+    queryable = robot.declare_queryable(f"{ROBOT}/{keys.PARAM}/some_node", answer)
+    ws = await open_wire(f"ws://127.0.0.1:{relay.port}/{ROBOT}")
+    try:
+        said = {}
+        for name in answers:
+            await ws.send({"op": "call_service", "service": "/rosapi/get_param", "id": name,
+                           "args": {"name": f"/some_node:{name}"}})
+            said[name] = (await ws.expect(op="service_response", id=name))["values"]
+        assert said["good"]["value"] == "[104, 105]", said
+        assert "the answer to a parameter get is not [is set, value]" in said["shape"], said
+        assert "the answer to a parameter get's binary value is not base64 text" in \
+            said["b64"], said
+    finally:
+        await ws.close()
+        queryable.undeclare()  # type: ignore[no-untyped-call]
