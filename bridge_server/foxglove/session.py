@@ -643,14 +643,21 @@ def _split(name: str) -> tuple[str, str]:
 
 
 def _parameter(name: str, value: Any) -> dict[str, Any]:
-    """One entry of ``parameterValues`` (byte arrays in base64, floats typed as such)."""
+    """One entry of ``parameterValues`` from a Graph parameter value, as the spec has it: a
+    byte array as base64 text typed ``byte_array``, a double typed ``float64``, a non-empty
+    double array typed ``float64_array`` (an empty one cannot be told from other empty
+    arrays), ``None`` (unset) with no value. JSON has no NaN or infinity: a double that is
+    one is its text (``"nan"``, ``"inf"``, ``"-inf"``) and the value is not typed as a
+    number, in an array too."""
     if isinstance(value, bytes | bytearray):
         return {"name": name, "value": base64.b64encode(value).decode(), "type": "byte_array"}
     if isinstance(value, float):
         if not math.isfinite(value):
-            return {"name": name, "value": str(value), "type": "float64"}
+            return {"name": name, "value": str(value)}
         return {"name": name, "value": value, "type": "float64"}
     if isinstance(value, list) and value and all(isinstance(v, float) for v in value):
+        if not all(math.isfinite(v) for v in value):
+            return {"name": name, "value": [v if math.isfinite(v) else str(v) for v in value]}
         return {"name": name, "value": value, "type": "float64_array"}
     if value is None:
         return {"name": name}

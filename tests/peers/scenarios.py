@@ -569,10 +569,13 @@ FOXGLOVE_PARAMETERS: list[tuple[str, Any, dict[str, Any]]] = [
     ("counts", [1, 2], {"value": [1, 2]}),
     ("gains", [1.5, 2.0], {"value": [1.5, 2.0], "type": "float64_array"}),
     ("labels", ["a", "b"], {"value": ["a", "b"]}),
+    ("odd", math.inf, {"value": "inf"}),
+    ("odds", [1.0, math.nan], {"value": [1.0, "nan"]}),
 ]
 """A parameter of each ROS 2 type (name, the value rclpy declares, the ``parameterValues``
 entry a Foxglove client must get for it, name left out): ws-protocol's spec types a byte
-array ``byte_array`` (base64 text), a double ``float64``, a double array ``float64_array``."""
+array ``byte_array`` (base64 text), a double ``float64``, a double array ``float64_array``;
+JSON has no NaN or infinity, so one is its text, untyped."""
 
 
 def declare_foxglove_parameters(node: Any, prefix: str) -> list[tuple[str, dict[str, Any]]]:
