@@ -170,9 +170,10 @@ class Hub:
     # -- sessions ------------------------------------------------------------------------------
 
     def attach(self, session: FoxgloveSession) -> None:
-        """A new Foxglove client: look at the graph now, and keep looking while it stays."""
-        if not self.sessions:
-            self.refresh()
+        """A new Foxglove client: look at the graph now (what it is offered, ``time`` among
+        it, is the graph as it is, not as the last periodic look saw it), and keep looking
+        while it stays."""
+        self.refresh()
         self.sessions.add(session)
         if self._task is None:
             self._task = asyncio.get_running_loop().create_task(self._run(), name="foxglove-hub")
