@@ -18,6 +18,10 @@ for sending again (older ones are dropped, and the client hears how many it
 missed). A session belongs to the principal that opened it: resuming needs the
 same principal at the handshake (a header or query token), and the token, 128
 random bits, is never logged.
+
+With ``--workers`` a session lives in the worker that opened it, and its token starts with
+that worker's index (``w1.`` and the random part): a worker that a resume reaches for
+another worker's token hands the connection over to it (:mod:`bridge_server.http.forward`).
 """
 
 from __future__ import annotations
@@ -25,6 +29,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
+import re
 import secrets
 from collections import deque
 from dataclasses import dataclass
@@ -33,7 +38,7 @@ from typing import TYPE_CHECKING
 if TYPE_CHECKING:
     from .session import Session
 
-__all__ = ["ACK_INTERVAL", "ResumeConfig", "SentFrames", "SessionStore"]
+__all__ = ["ACK_INTERVAL", "ResumeConfig", "SentFrames", "SessionStore", "worker_of"]
 
 log = logging.getLogger("bridge_server.session.resume")
 
@@ -94,11 +99,23 @@ class SentFrames:
         return again, missing
 
 
+_WORKER_PREFIX = re.compile(r"w([0-9]{1,4})\.")
+
+
+def worker_of(token: str) -> int | None:
+    """The index of the worker that keeps the session ``token`` names (``None``: the token
+    names no worker, as without ``--workers``)."""
+    match = _WORKER_PREFIX.match(token)
+    return None if match is None else int(match[1])
+
+
 class SessionStore:
     """The sessions that can be resumed, by token; the dropped ones wait here."""
 
-    def __init__(self, config: ResumeConfig) -> None:
+    def __init__(self, config: ResumeConfig, worker: int | None = None) -> None:
+        """``worker``: this worker's index, named in its tokens (``None``: no workers)."""
         self.config = config
+        self.prefix = "" if worker is None else f"w{worker}."
         self.live: dict[str, Session] = {}
         self.parked: dict[str, asyncio.TimerHandle] = {}
         self._parked_event: dict[str, asyncio.Event] = {}
@@ -112,7 +129,7 @@ class SessionStore:
 
     def new_token(self) -> str:
         """A fresh session token (not yet bound to a session)."""
-        return secrets.token_urlsafe(16)
+        return self.prefix + secrets.token_urlsafe(16)
 
     def register(self, token: str, session: Session) -> None:
         """``session`` (just opened) can be resumed with ``token``."""
