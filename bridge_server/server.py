@@ -33,6 +33,7 @@ from roslibpy_lite.ops import RECEIVED_HEADER, SESSION_HEADER, parse_received
 
 from .foxglove import SUBPROTOCOL, FoxgloveSession, Hub, select_subprotocol
 from .graph import Graph
+from .http.forward import Forwarder
 from .http.metrics import BridgeMetrics
 from .http.web import Web
 from .http.web_access import WebAccess
@@ -121,10 +122,12 @@ class Bridge:
         self.service_owners: Ownership[SessionServices] = Ownership("service")
         self.action_owners: Ownership[SessionActions] = Ownership("action")
         self.action_clients = ActionClients()
-        self.resumable = SessionStore(config.resume)  # sessions kept for a resume (resume.py)
+        self.resumable = SessionStore(  # sessions kept for a resume (resume.py)
+            config.resume, config.worker_index if config.worker_dir is not None else None)
         self.closing = False
         self._ids = itertools.count(1)
         self._server: Server | None = None
+        self.forwarder: Forwarder | None = None  # with --workers (http/forward.py)
         self._refresher: asyncio.Task[None] | None = None
         self._graph_event = asyncio.Event()
         self.ros: ServedGraph = graph
@@ -156,26 +159,38 @@ class Bridge:
         self._refresher = asyncio.create_task(self._refresh_loop(), name="bridge-refresh")
 
     async def listen(self) -> None:
-        """Open the websocket listener and the plain-HTTP routes."""
+        """Open the websocket listener and the plain-HTTP routes (as a worker, also the unix
+        socket that takes other workers' forwarded session resumes: http/forward.py)."""
         own_keepalive = bool(self.config.keepalive_interval) and keepalive.supported_here()
-        self._server = await serve(
-            self._handle,
-            self.config.host,
-            self.config.port,
+        kwargs: dict[str, Any] = dict(
             max_size=self.config.max_message_size,
             write_limit=self.config.write_limit,
             compression="deflate" if self.config.compression else None,
             max_queue=64,
             close_timeout=1.0,
-            # Sessions watch their links themselves where TCP can tell (keepalive.py);
-            # elsewhere websockets pings with the same figures.
-            ping_interval=None if own_keepalive else (self.config.keepalive_interval or None),
-            ping_timeout=None if own_keepalive else (self.config.keepalive_timeout or None),
-            process_request=self._process_request,
             select_subprotocol=select_subprotocol,  # foxglove.websocket.v1, else rosbridge
             process_response=self.web.process_response,
-            reuse_port=self.config.worker_dir is not None,
             **self.security.serve_kwargs(),
+        )
+        # Sessions watch their links themselves where TCP can tell (keepalive.py);
+        # elsewhere (and on a unix socket) websockets pings with the same figures.
+        pings = dict(ping_interval=self.config.keepalive_interval or None,
+                     ping_timeout=self.config.keepalive_timeout or None)
+        tcp_pings = dict(ping_interval=None, ping_timeout=None) if own_keepalive else pings
+        process_request = self._process_request
+        cfg = self.config
+        if cfg.worker_dir is not None:
+            self.forwarder = Forwarder(cfg.worker_dir, cfg.worker_index, self._process_request)
+            process_request = self.forwarder.process_request
+            await self.forwarder.serve(self._handle, **kwargs, **pings)
+        self._server = await serve(
+            self._handle,
+            cfg.host,
+            cfg.port,
+            process_request=process_request,
+            reuse_port=cfg.worker_dir is not None,
+            **kwargs,
+            **tcp_pings,
         )
         await self.web.start()
 
@@ -314,9 +329,14 @@ class Bridge:
                 await self._refresher
         await self.web.close()
         await self.foxglove.close()
-        if self._server is not None:
-            self._server.close(close_connections=True)
-            waiter: Awaitable[Any] = self._server.wait_closed()
+        servers = [] if self._server is None else [self._server]
+        if self.forwarder is not None:
+            self.forwarder.close()
+            servers += [] if self.forwarder.server is None else [self.forwarder.server]
+        for srv in servers:
+            srv.close(close_connections=True)
+        if servers:
+            waiter: Awaitable[Any] = asyncio.gather(*(srv.wait_closed() for srv in servers))
             try:
                 await asyncio.wait_for(waiter, 0.5)
             except TimeoutError:
@@ -324,7 +344,8 @@ class Bridge:
                 for ws in [s.ws for s in self.sessions] + [s.ws for s in self.foxglove.sessions]:
                     ws.transport.abort()
                 with contextlib.suppress(TimeoutError):
-                    await asyncio.wait_for(self._server.wait_closed(), 0.2)
+                    await asyncio.wait_for(
+                        asyncio.gather(*(srv.wait_closed() for srv in servers)), 0.2)
         self.ros.close()
 
 

@@ -23,6 +23,7 @@ name                                              type       labels
 ``sessions_kept``                                 gauge      (dropped clients' sessions)
 ``sessions_resumed_total``                        counter
 ``sessions_expired_total``                        counter
+``sessions_forwarded_total``                      counter    (resumes passed to another worker)
 ``connections_total``                             counter    (accepted websocket clients)
 ``connections_refused_total``                     counter    reason
 ``topic_subscribers``                             gauge      topic
@@ -264,6 +265,10 @@ class _Families:
         yield CounterMetricFamily(PREFIX + "sessions_expired",
                                   "Kept sessions that ended unresumed.",
                                   value=int(s.get("sessions_expired", 0)))
+        yield CounterMetricFamily(PREFIX + "sessions_forwarded",
+                                  "Session resumes a worker passed on to the worker keeping "
+                                  "the session (--workers).",
+                                  value=int(s.get("sessions_forwarded", 0)))
         yield CounterMetricFamily(PREFIX + "connections", "Websocket clients accepted.",
                                   value=int(s.get("connections", 0)))
         refused = c("connections_refused", "Connections turned away, by reason.", ["reason"])

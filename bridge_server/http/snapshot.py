@@ -162,6 +162,7 @@ def take(bridge: Bridge, rates: Mapping[str, Mapping[str, float]]) -> dict[str, 
         "connections": rec.connections,
         "sessions_resumed": bridge.resumable.resumed,
         "sessions_expired": bridge.resumable.expired,
+        "sessions_forwarded": 0 if bridge.forwarder is None else bridge.forwarder.forwarded,
         "refused": dict(rec.refused),
         "errors": dict(rec.errors),
         "service_calls": rec.services.data,
@@ -223,6 +224,7 @@ def merge(snaps: Iterable[Mapping[str, Any]]) -> dict[str, Any]:
         "connections": 0,
         "sessions_resumed": 0,
         "sessions_expired": 0,
+        "sessions_forwarded": 0,
         "refused": {},
         "errors": {},
         "service_calls": {},
@@ -236,6 +238,7 @@ def merge(snaps: Iterable[Mapping[str, Any]]) -> dict[str, Any]:
         out["connections"] += s["connections"]
         out["sessions_resumed"] += s.get("sessions_resumed", 0)
         out["sessions_expired"] += s.get("sessions_expired", 0)
+        out["sessions_forwarded"] += s.get("sessions_forwarded", 0)
         for key in ("workers", "clients", "services"):
             out[key].extend(s[key])
         _add_actions(out["actions"], s["actions"])

@@ -23,6 +23,12 @@ UTF-8, a handler that closed the connection) and gives websockets everything fro
 a frame boundary, so websockets decides about those bytes exactly as before.
 :func:`check_websockets_internals` fails at start-up, naming the version, if a websockets
 upgrade changed what this relies on: an upgrade touches this file and nothing else.
+
+With ``--workers``, a worker hands a session resume that another worker keeps to that
+worker before answering its handshake: :func:`take_transport` takes the (decrypted)
+transport from its websockets connection (tests/load/test_resume_workers.py holds it to
+websockets' handshake), and :attr:`BridgeConnection.forwarded_from` gives the owning
+worker's connection the client's real address.
 """
 
 from __future__ import annotations
@@ -60,6 +66,7 @@ __all__ = [
     "BudgetAssembler",
     "Inbound",
     "check_websockets_internals",
+    "take_transport",
 ]
 
 
@@ -141,6 +148,15 @@ class BridgeConnection(ServerConnection):
     principal: Principal | None = None
     counted: str | None = None
     on_frame: Callable[[str | bytes], None] | None = None
+    forwarded_from: tuple[str, int] | None = None
+    """The client's address, for a connection another worker forwarded (see
+    :mod:`bridge_server.http.forward`): set only by the forwarded listener."""
+
+    @property
+    def remote_address(self) -> Any:
+        """The client's address: the forwarding worker's word for a forwarded connection,
+        else the socket's peer."""
+        return self.forwarded_from or super().remote_address
 
     def hand_frames_to(self, handler: Callable[[str | bytes], None] | None) -> None:
         """Hand each whole message with nothing queued before it to ``handler`` as it is
@@ -266,6 +282,38 @@ class BridgeConnection(ServerConnection):
         """websockets' hook: no longer count this connection against the client limits."""
         super().connection_lost(exc)
         self.security.release(self)
+
+
+class _TakenAway(asyncio.Transport):
+    """What a websockets connection holds after :func:`take_transport`: writes, closes and
+    aborts go nowhere (the real transport serves another protocol now)."""
+
+    def write(self, data: Any) -> None:
+        """Dropped."""
+
+    def close(self) -> None:
+        """Nothing to close."""
+
+    def abort(self) -> None:
+        """Nothing to abort."""
+
+    def is_closing(self) -> bool:
+        """Always: nothing goes through here."""
+        return True
+
+
+def take_transport(connection: ServerConnection) -> asyncio.Transport:
+    """Take ``connection``'s transport during its handshake (from ``process_request``) for
+    another protocol, which the caller sets on it. websockets then sees a connection lost
+    before its handshake: it answers nothing and leaves the transport alone.
+
+    A client sends nothing after its handshake request until it is answered (RFC 6455,
+    4.1), so no byte read so far is left behind in websockets' buffers.
+    """
+    transport = connection.transport
+    connection.transport = _TakenAway()
+    connection.connection_lost(None)
+    return transport
 
 
 _AT_EOF = StreamReader.at_eof.__code__

@@ -1,0 +1,185 @@
+"""Sessions that survive a dropped link with --workers 2: the kernel hands each reconnect to
+either worker, and the one that does not keep the session forwards it to the one that does
+(bridge_server/http/forward.py), over ws:// and over wss:// with a token."""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import ssl
+import urllib.request
+from collections.abc import Iterator
+from functools import partial
+from typing import Any
+
+import pytest
+from std_msgs.msg import Int32
+from websockets.asyncio.client import ClientConnection
+from websockets.asyncio.client import connect as ws_connect
+
+import roslibpy_lite
+from bench.linkproxy import LinkProxy
+from roslibpy_lite.api import ConnectionState
+from roslibpy_lite.ops import RECEIVED_HEADER, SESSION_HEADER
+from roslibpy_lite.transports.websocket import WebSocketTransport
+from tests.bridge.support import wait_subscribers
+from tests.helpers import BridgeProcess, async_wait_until
+from tests.security.support import AuthFile, Certs, make_auth_file, make_certs
+
+
+class Workers:
+    """A --workers 2 bridge (wss:// with tokens, or ws://) and how to connect to it."""
+
+    def __init__(self, tls: bool, tmp: Any) -> None:
+        self.certs: Certs | None = make_certs(tmp) if tls else None
+        self.auth: AuthFile | None = make_auth_file(tmp) if tls else None
+        args = ["--workers", "2", "--session-keep", "60"]
+        if self.certs is not None and self.auth is not None:
+            args += ["--certfile", str(self.certs.server), "--auth-file", str(self.auth.path)]
+        self.bridge = BridgeProcess(args=args).start()
+
+    def url(self, port: int) -> str:
+        """The URL of ``port`` on 127.0.0.1 (the bridge's, or a proxy's in front of it)."""
+        return f"{'wss' if self.certs else 'ws'}://127.0.0.1:{port}"
+
+    def options(self) -> dict[str, Any]:
+        """The TLS context and token a client needs here."""
+        if self.certs is None or self.auth is None:
+            return {}
+        return {"ssl": self.certs.context(), "token": self.auth.tokens["tester"]}
+
+    def tls_context(self) -> ssl.SSLContext | None:
+        """The client TLS context (None for ws://)."""
+        return None if self.certs is None else self.certs.context()
+
+    def headers(self, role: str = "tester") -> dict[str, str]:
+        """The raw handshake's credentials."""
+        return {} if self.auth is None else {"Authorization": f"Bearer {self.auth.tokens[role]}"}
+
+    async def forwarded(self) -> int:
+        """How many resumes the workers forwarded so far (/status.json, every worker's)."""
+        scheme = "https" if self.certs else "http"
+        request = urllib.request.Request(
+            f"{scheme}://127.0.0.1:{self.bridge.port}/status.json", headers=self.headers("admin"))
+
+        def get() -> bytes:
+            with urllib.request.urlopen(request, context=self.tls_context(), timeout=10) as r:
+                body: bytes = r.read()
+                return body
+
+        return int(json.loads(await asyncio.to_thread(get))["sessions_forwarded"])
+
+
+@pytest.fixture(scope="module", params=["ws", "wss"])
+def workers(request: pytest.FixtureRequest,
+            tmp_path_factory: pytest.TempPathFactory) -> Iterator[Workers]:
+    """One --workers 2 bridge per scheme for this module."""
+    made = Workers(request.param == "wss", tmp_path_factory.mktemp("workers"))
+    yield made
+    made.bridge.stop()
+
+
+async def test_every_reconnect_resumes_whichever_worker_takes_it(
+    workers: Workers, ros_node: Any, topic: str
+) -> None:
+    """A subscriber whose link is cut again and again (at least 10 times, and until some
+    reconnects landed on each worker) gets its session back every time, the same token,
+    and every number ROS published, meanwhile too, exactly once and in order."""
+    bridge = workers.bridge
+    ros_pub = ros_node.create_publisher(Int32, topic, 1000)
+    seen = await workers.forwarded()
+    kinds = {"direct": 0, "forwarded": 0}
+    with LinkProxy(("127.0.0.1", bridge.port)) as proxy:
+        async with roslibpy_lite.connect(workers.url(proxy.port), **workers.options()) as ros:
+            ros.stable_after = 0.0  # each quick cut is a fresh reconnect, not a growing backoff
+            transport = ros._transport
+            assert isinstance(transport, WebSocketTransport) and transport.session is not None
+            token = transport.session.token
+            assert token is not None
+            sub = await ros.subscribe(topic, "std_msgs/msg/Int32", queue_length=1000,
+                                      buffer_size=1000)
+            await wait_subscribers(ros_pub)
+            published = 0
+            cuts = 0
+
+            def publish(n: int) -> None:
+                nonlocal published
+                for _ in range(n):
+                    ros_pub.publish(Int32(data=published))
+                    published += 1
+
+            def opened(connects: int) -> bool:
+                return ros.connects == connects and ros.state is ConnectionState.CONNECTED
+
+            # until both kinds happened: the odds of 40 landing on one worker are 2**-40
+            while cuts < 10 or not all(kinds.values()):
+                assert cuts < 40, f"{cuts} reconnects: {kinds}"
+                publish(5)
+                proxy.cut()
+                cuts += 1
+                publish(5)  # while the link is down: kept by the session for the client
+                await async_wait_until(partial(opened, cuts + 1), 20, f"reconnect {cuts}")
+                assert transport.session.token == token, f"reconnect {cuts}: a new session"
+                assert transport.session.resumes == cuts
+                now = await workers.forwarded()
+                kinds["forwarded" if now > seen else "direct"] += 1
+                seen = now
+            publish(5)
+            got = [(await sub.get(timeout=10))["data"] for _ in range(published)]
+            with pytest.raises(TimeoutError):  # and nothing more: no duplicate comes late
+                await sub.get(timeout=0.5)
+    assert got == list(range(published))
+    assert sub.dropped == 0 and transport.session.lost == 0
+
+
+async def test_a_token_naming_a_missing_worker_gets_a_new_session(workers: Workers) -> None:
+    """A resume whose token names a worker that is not there (as one restarting is not)
+    gets a new session from the worker it reached, promptly: no received count, a new
+    token naming that worker."""
+    made_up = "w7.AAAAAAAAAAAAAAAAAAAAAA"
+    async with asyncio.timeout(5):
+        ws = await ws_connect(workers.url(workers.bridge.port), ssl=workers.tls_context(),
+                              additional_headers={SESSION_HEADER: made_up, RECEIVED_HEADER: "0",
+                                                  **workers.headers()})
+    try:
+        assert ws.response is not None
+        answer = ws.response.headers
+        assert RECEIVED_HEADER not in answer
+        assert answer[SESSION_HEADER] != made_up
+        assert answer[SESSION_HEADER].startswith(f"w{answer['X-Bridge-Worker']}.")
+    finally:
+        await ws.close()
+    workers.bridge.wait_for_line("names worker 7, which cannot be reached")
+
+
+async def test_a_forged_forwarding_header_is_replaced(workers: Workers) -> None:
+    """A client that sends the workers' own X-Bridge-Forwarded-For header gains nothing: a
+    direct connection is logged with its socket's address, and a forwarded one with the
+    address the forwarding worker saw (its copy of the header replaced), never the forged
+    one."""
+    forged = {"X-Bridge-Forwarded-For": "10.9.8.7:1", **workers.headers()}
+    url = workers.url(workers.bridge.port)
+
+    async def open_(session: str) -> ClientConnection:
+        extra = {SESSION_HEADER: session} | ({} if session == "new" else {RECEIVED_HEADER: "0"})
+        ws = await ws_connect(url, ssl=workers.tls_context(), additional_headers=forged | extra)
+        assert ws.response is not None
+        return ws
+
+    ws = await open_("new")
+    assert ws.response is not None
+    token = ws.response.headers[SESSION_HEADER]
+    seen = await workers.forwarded()
+    for _ in range(40):  # until one resume was forwarded (the odds of none: 2**-40)
+        ws.transport.abort()
+        ws = await open_(token)
+        assert ws.response is not None and ws.response.headers[SESSION_HEADER] == token
+        if await workers.forwarded() > seen:
+            break
+    else:
+        raise AssertionError("no resume was forwarded in 40")
+    port = ws.local_address[1]
+    await ws.close()
+    workers.bridge.wait_for_line(rf"\[w\d\] .*forwarded a session resume from 127\.0\.0\.1:{port} ")
+    workers.bridge.wait_for_line(rf"reconnected from 127\.0\.0\.1:{port} and resumed")
+    assert not any("10.9.8.7" in line for line in workers.bridge.lines)
