@@ -47,6 +47,9 @@ Scenarios (targets; rosbridge_suite's figures in brackets):
   message.
 - ``tls`` (``bench/tls.py``): small messages, service round trips and CBOR images over ws://
   and over wss://, side by side (reference only).
+- ``workers_resume`` (``bench/workers.py``): with ``--workers 2``, call_service round trips
+  through a resumed connection that its worker forwarded to the session's worker, against
+  a direct one, over ws:// and wss://: p50/p99 of each (reference only).
 - ``links`` (``bench/links.py``): through ``bench/linkproxy.py``: a silent link (how soon
   each side notices), a 2 Mbit/s link (the age of the camera frames a client gets) and a
   resume across an 8 s outage (what each side got).
@@ -105,6 +108,7 @@ from bench.harness import (
 from bench.links import links
 from bench.relay import relay_imu, relay_service, relay_uplink
 from bench.tls import tls_scenario
+from bench.workers import workers_resume
 
 TARGETS: dict[str, str] = {
     "rclpy_ceiling": "reference only",
@@ -119,6 +123,7 @@ TARGETS: dict[str, str] = {
     "idle_cpu": "< 1 % of a core [rosbridge ~5 %]",
     "memory_stall": "bounded [rosbridge +400 MB in 6 s]",
     "tls": "reference only: the cost of wss:// against ws://",
+    "workers_resume": "reference: the forwarding hop of a resume on the wrong worker",
     "links": "reference: a silent link noticed in seconds; frame age flat over a 2 Mbit/s link",
     "pointcloud": "4 MiB PointCloud2 at 10 Hz to 5 clients: all delivered; bridge CPU, RSS",
     "foxglove": "the Foxglove path at least as fast as rosbridge cbor-raw on the same bridge; "
@@ -839,6 +844,7 @@ SCENARIOS: dict[str, Callable[[Ctx], Awaitable[dict[str, Any]]]] = {
     "image": image,
     "memory_stall": memory_stall,
     "tls": lambda ctx: tls_scenario(ctx, ros_to_client, service, image),
+    "workers_resume": workers_resume,
     "links": links,
     "record": record,
     "pointcloud": pointcloud,
@@ -894,6 +900,9 @@ def _headline(name: str, r: dict[str, Any]) -> Any:
         return {"recorded_pct": {t: v["recorded_pct"] for t, v in r["camera_imu"]["topics"].items()},
                 "recorder_cpu_pct": r["camera_imu"]["recorder_cpu_pct"],
                 "best_camera_rate_99pct": r["best_camera_rate_99pct"]}
+    if name == "workers_resume":
+        return {scheme: {kind: r[scheme][kind]["p50_ms"] for kind in ("direct", "forwarded")}
+                for scheme in ("ws", "wss")}
     if name == "tls":
         keys = ("ros_to_client_best_rate_99pct", "service_p50_ms", "image_cbor_frames_per_s")
         return {scheme: {k: r[scheme][k] for k in keys} for scheme in ("ws", "wss")}

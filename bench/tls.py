@@ -18,10 +18,10 @@ from typing import Any
 
 from bench.harness import Ctx, trust_tls
 
-__all__ = ["tls_scenario"]
+__all__ = ["make_certs", "tls_scenario"]
 
 
-def _make_certs() -> str:
+def make_certs() -> str:
     """A server certificate for 127.0.0.1 (key and chain in one PEM); trust it on the client."""
     import trustme
 
@@ -41,7 +41,7 @@ async def tls_scenario(
     ctx: Ctx, ros_to_client: Scenario, service: Scenario, image: Scenario
 ) -> dict[str, Any]:
     """The given ros_to_client, service and image scenarios over ws:// and over wss://."""
-    certfile = _make_certs()
+    certfile = make_certs()
     out: dict[str, Any] = {}
     for scheme, extra in (("ws", []), ("wss", ["--certfile", certfile])):
         c = dataclasses.replace(ctx, bridge_args=[*ctx.bridge_args, *extra])
