@@ -5,11 +5,11 @@ A kept session lives in the worker that opened it, and its token names that work
 worker. So each worker also serves websockets on a unix socket, ``D/forward-<i>.sock``,
 with the same handler and the same admission checks as its port. A worker whose port
 receives a resume naming another worker answers nothing itself (:meth:`Forwarder.
-process_request`): it takes the connection's transport from websockets before the
-handshake is answered (after TLS, so the bytes are plain), opens the owner's socket, writes
-the client's handshake request there as received, and from then on copies bytes both ways,
-closing each side when the other closes and pausing each side's reading while the other
-cannot take more.
+process_request`): it opens the owner's socket, writes the client's handshake request there
+as received, and once the owner has answered it takes the connection's transport from
+websockets (after TLS, so the bytes are plain) and copies bytes both ways, the owner's
+answer first, closing each side when the other closes and pausing each side's reading
+while the other cannot take more.
 
 The owner admits the forwarded request exactly as one from its own port (origin, client
 limits, lock-out, token, the session's principal), so a forged forward gains nothing a
@@ -18,10 +18,12 @@ which only the unix socket honours (the port never reads it; a client that sends
 it replaced); it is what the owner's logs and per-address limits see. The socket lives in
 the supervisor's private directory (mode 0700), so only the bridge's user can reach it.
 
-A resume naming a worker that is not there (none of that index, or restarting) is served
-where it landed, as any unknown token is: a new session, at once. Only resumes that land
-on the wrong worker take the extra hop; the token says where the session is, so nothing is
-shared between workers but these sockets.
+A resume naming a worker that is not there (none of that index, or restarting), or one that
+closes the forwarded connection unanswered (killed meanwhile) or does not answer within
+:data:`ANSWER_WAIT`, is served where it landed, as any unknown token is: a new session.
+
+Only resumes that land on the wrong worker take the extra hop; the token says where the
+session is, so nothing is shared between workers but these sockets.
 """
 
 from __future__ import annotations
@@ -39,16 +41,21 @@ from websockets.http11 import Request, Response
 from roslibpy_lite.ops import SESSION_HEADER
 
 from ..security.websockets_internals import BridgeConnection, take_transport
-from ..session.resume import worker_of
+from ..session.resume import CLAIM_WAIT, worker_of
 from .peers import PEER_TIMEOUT
 
-__all__ = ["FORWARDED_HEADER", "Forwarder", "forward_path"]
+__all__ = ["ANSWER_WAIT", "FORWARDED_HEADER", "Forwarder", "forward_path"]
 
 log = logging.getLogger("bridge_server.http.forward")
 
 FORWARDED_HEADER = "X-Bridge-Forwarded-For"
 """The client's ``address:port``, written by the forwarding worker; honoured only on the
 forwarded listener."""
+
+ANSWER_WAIT = CLAIM_WAIT + 2 * PEER_TIMEOUT
+"""Seconds a forwarded resume waits for the owner's answer (which may wait
+:data:`~bridge_server.session.resume.CLAIM_WAIT` for the session's old link) before it is
+served where it landed."""
 
 Admit = Callable[[ServerConnection, Request], Awaitable[Response | None]]
 
@@ -94,33 +101,45 @@ class Forwarder:
 
     async def _hand_over(self, connection: ServerConnection, request: Request,
                          owner: int) -> bool:
-        """Pipe ``connection`` to worker ``owner`` from its request on; False if that worker
-        cannot be reached (the resume is then served here)."""
+        """Pipe ``connection`` to worker ``owner`` once that worker has answered its request;
+        False if it cannot be reached or closes without an answer (the resume is then
+        served here)."""
         client = connection.transport
-        client.pause_reading()  # nothing is read until the pipe is in place
         loop = asyncio.get_running_loop()
-        try:
-            async with asyncio.timeout(PEER_TIMEOUT):
-                owner_side, _ = await loop.create_unix_connection(
-                    lambda: _Pipe(client), forward_path(self.directory, owner))
-        except (OSError, TimeoutError) as exc:
-            client.resume_reading()
-            log.info("a session resume names worker %d, which cannot be reached (%s): "
-                     "served here", owner, exc)
-            return False
-        if client.is_closing():  # the client left meanwhile
-            owner_side.close()
-            return False
         peer = connection.remote_address
         address = f"{peer[0]}:{peer[1]}" if isinstance(peer, tuple) else str(peer)
         headers = Headers([(k, v) for k, v in request.headers.raw_items()
                            if k.lower() != FORWARDED_HEADER.lower()])
         headers[FORWARDED_HEADER] = address
+        owner_side = _Pipe(None, loop)
+        try:
+            async with asyncio.timeout(PEER_TIMEOUT):
+                unix, _ = await loop.create_unix_connection(
+                    lambda: owner_side, forward_path(self.directory, owner))
+        except (OSError, TimeoutError) as exc:
+            log.info("a session resume names worker %d, which cannot be reached (%s): "
+                     "served here", owner, exc)
+            return False
+        answered = False
+        try:
+            unix.write(Request(request.path, headers).serialize())
+            async with asyncio.timeout(ANSWER_WAIT):
+                answered = await owner_side.answered
+        except TimeoutError:
+            pass
+        finally:
+            if not answered or client.is_closing():
+                unix.abort()
+        if not answered:
+            log.info("worker %d did not answer a forwarded session resume (stopping or "
+                     "stuck): served here", owner)
+            return False
+        if client.is_closing():  # the client left meanwhile
+            return True
         take_transport(connection)
         self.links.add(client)
-        client.set_protocol(_Pipe(owner_side, lambda: self.links.discard(client)))
-        owner_side.write(Request(request.path, headers).serialize())
-        client.resume_reading()
+        client.set_protocol(_Pipe(unix, loop, lambda: self.links.discard(client)))
+        owner_side.pipe_to(client)
         self.forwarded += 1
         log.info("forwarded a session resume from %s to worker %d", address, owner)
         return True
@@ -145,27 +164,49 @@ class Forwarder:
 
 
 class _Pipe(asyncio.Protocol):
-    """One side of a forwarded connection: what it reads goes to the other side's transport."""
+    """One side of a forwarded connection: what it reads goes to the other side's transport.
 
-    def __init__(self, to: asyncio.Transport, lost: Callable[[], None] | None = None) -> None:
+    The owner's side starts with no other side: it holds what it reads until the owner's
+    handshake answer is whole (:attr:`answered` True; False if the owner closes first),
+    and pipes from :meth:`pipe_to` on.
+    """
+
+    def __init__(self, to: asyncio.Transport | None, loop: asyncio.AbstractEventLoop,
+                 lost: Callable[[], None] | None = None) -> None:
         self.to = to
         self.lost = lost
+        self.held = bytearray()
+        self.answered: asyncio.Future[bool] = loop.create_future()
+
+    def pipe_to(self, to: asyncio.Transport) -> None:
+        """From now on write to ``to``, first what was held."""
+        self.to = to
+        to.write(bytes(self.held))
+        self.held.clear()
 
     def data_received(self, data: bytes) -> None:
-        self.to.write(data)
+        if self.to is not None:
+            self.to.write(data)
+            return
+        self.held += data
+        if not self.answered.done() and b"\r\n\r\n" in self.held:
+            self.answered.set_result(True)
 
     def eof_received(self) -> bool:
         return False  # the transport closes; connection_lost closes the other side
 
     def connection_lost(self, exc: Exception | None) -> None:
-        self.to.close()  # after writing what it holds (a close frame, say)
+        if not self.answered.done():
+            self.answered.set_result(False)
+        if self.to is not None:
+            self.to.close()  # after writing what it holds (a close frame, say)
         if self.lost is not None:
             self.lost()
 
     def pause_writing(self) -> None:  # this side cannot take more: stop reading the other
-        if not self.to.is_closing():
+        if self.to is not None and not self.to.is_closing():
             self.to.pause_reading()
 
     def resume_writing(self) -> None:
-        if not self.to.is_closing():
+        if self.to is not None and not self.to.is_closing():
             self.to.resume_reading()

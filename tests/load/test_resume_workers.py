@@ -6,12 +6,14 @@ from __future__ import annotations
 
 import asyncio
 import json
+import os
 import ssl
 import urllib.request
 from collections.abc import Iterator
 from functools import partial
 from typing import Any
 
+import psutil
 import pytest
 from std_msgs.msg import Int32
 from websockets.asyncio.client import ClientConnection
@@ -56,18 +58,22 @@ class Workers:
         """The raw handshake's credentials."""
         return {} if self.auth is None else {"Authorization": f"Bearer {self.auth.tokens[role]}"}
 
-    async def forwarded(self) -> int:
-        """How many resumes the workers forwarded so far (/status.json, every worker's)."""
+    async def status(self) -> dict[str, Any]:
+        """The whole bridge's /status.json (every worker's, merged), seen as admin."""
         scheme = "https" if self.certs else "http"
         request = urllib.request.Request(
             f"{scheme}://127.0.0.1:{self.bridge.port}/status.json", headers=self.headers("admin"))
 
-        def get() -> bytes:
+        def get() -> dict[str, Any]:
             with urllib.request.urlopen(request, context=self.tls_context(), timeout=10) as r:
-                body: bytes = r.read()
-                return body
+                data: dict[str, Any] = json.load(r)
+                return data
 
-        return int(json.loads(await asyncio.to_thread(get))["sessions_forwarded"])
+        return await asyncio.to_thread(get)
+
+    async def forwarded(self) -> int:
+        """How many resumes the workers forwarded so far."""
+        return int((await self.status())["sessions_forwarded"])
 
 
 @pytest.fixture(scope="module", params=["ws", "wss"])
@@ -152,6 +158,38 @@ async def test_a_token_naming_a_missing_worker_gets_a_new_session(workers: Worke
     workers.bridge.wait_for_line("names worker 7, which cannot be reached")
 
 
+async def test_a_worker_that_closes_unanswered_leaves_the_resume_served_here(
+    workers: Workers,
+) -> None:
+    """A forwarded resume that the other end closes without an answer (a worker killed while
+    the request was on its way) gets a new session from the worker it reached."""
+    assert workers.bridge.proc is not None
+    supervisor = psutil.Process(workers.bridge.proc.pid)
+    argv = supervisor.children()[0].cmdline()
+    directory = argv[argv.index("--worker-dir") + 1]
+    took: list[bytes] = []
+
+    async def hang_up(reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+        took.append(await reader.readuntil(b"\r\n\r\n"))
+        writer.close()
+
+    server = await asyncio.start_unix_server(hang_up, os.path.join(directory, "forward-8.sock"))
+    try:
+        async with asyncio.timeout(5):
+            ws = await ws_connect(workers.url(workers.bridge.port), ssl=workers.tls_context(),
+                                  additional_headers={SESSION_HEADER: "w8.AAAAAAAAAAAAAAAAAAAAAA",
+                                                      RECEIVED_HEADER: "0", **workers.headers()})
+        assert ws.response is not None
+        answer = ws.response.headers
+        assert RECEIVED_HEADER not in answer
+        assert answer[SESSION_HEADER].startswith(f"w{answer['X-Bridge-Worker']}.")
+        await ws.close()
+    finally:
+        server.close()
+        os.unlink(os.path.join(directory, "forward-8.sock"))
+    assert len(took) == 1 and b"\r\nX-Bridge-Forwarded-For: 127.0.0.1:" in took[0]
+
+
 async def test_a_forged_forwarding_header_is_replaced(workers: Workers) -> None:
     """A client that sends the workers' own X-Bridge-Forwarded-For header gains nothing: a
     direct connection is logged with its socket's address, and a forwarded one with the
@@ -183,3 +221,33 @@ async def test_a_forged_forwarding_header_is_replaced(workers: Workers) -> None:
     workers.bridge.wait_for_line(rf"\[w\d\] .*forwarded a session resume from 127\.0\.0\.1:{port} ")
     workers.bridge.wait_for_line(rf"reconnected from 127\.0\.0\.1:{port} and resumed")
     assert not any("10.9.8.7" in line for line in workers.bridge.lines)
+
+
+async def test_a_resume_of_a_killed_workers_session_gets_a_new_session(
+    workers: Workers,
+) -> None:
+    """The worker that keeps a session is killed (the supervisor restarts it, with none of its
+    sessions): once it is gone, the client's resume gets a new session within 5 s, whichever
+    worker takes it and whether the restarted one listens yet. Last in the module: it kills
+    a worker."""
+    import signal
+
+    headers = workers.headers()
+    url = workers.url(workers.bridge.port)
+    ws = await ws_connect(url, ssl=workers.tls_context(),
+                          additional_headers={SESSION_HEADER: "new", **headers})
+    assert ws.response is not None
+    token = ws.response.headers[SESSION_HEADER]
+    pids = {w["index"]: w["pid"] for w in (await workers.status())["workers"]}
+    dying = psutil.Process(pids[int(token[1])])
+    os.kill(dying.pid, signal.SIGKILL)
+    # until then the kernel may still hand a connection to its socket, which is then reset
+    await asyncio.to_thread(dying.wait, 10)
+    async with asyncio.timeout(5):
+        again = await ws_connect(url, ssl=workers.tls_context(), additional_headers={
+            SESSION_HEADER: token, RECEIVED_HEADER: "0", **headers})
+    assert again.response is not None
+    assert again.response.headers[SESSION_HEADER] != token
+    assert RECEIVED_HEADER not in again.response.headers
+    await again.close()
+    ws.transport.abort()
