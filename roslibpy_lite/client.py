@@ -115,6 +115,7 @@ class ClientOptions(TypedDict, total=False):
     token: str | None
     ssl: _ssl.SSLContext | str | None
     resume: bool
+    wait_for_robot: bool
 
 
 class Client(RosBase):
@@ -158,6 +159,10 @@ class Client(RosBase):
             request): after a reconnect nothing this client sent is lost or published
             twice, and messages that arrived meanwhile are delivered
             (:mod:`roslibpy_lite.transports.resumable`).
+        wait_for_robot: through a relay (``roslibpy-lite-relay``), keep trying while the
+            relay answers that the robot is not connected, until ``open_timeout`` (a robot
+            still starting). By default that answer fails :func:`connect` at once with
+            the relay's words: a misspelt or offline robot is not worth waiting for.
     """
 
     _receive: Callable[[str | bytes], None]
@@ -181,13 +186,14 @@ class Client(RosBase):
         token: str | None = None,
         ssl: _ssl.SSLContext | str | None = None,
         resume: bool = True,
+        wait_for_robot: bool = False,
     ) -> None:
         self._ws = WebSocketTransport(
             url, reconnect=reconnect, backoff=backoff, open_timeout=open_timeout,
             max_size=max_size, ping_interval=ping_interval, ping_timeout=ping_timeout,
             ws_compression=ws_compression, proxy=proxy, token=token,
             ssl_context=_ssl_context([url] if isinstance(url, str) else url, ssl),
-            resume=resume,
+            resume=resume, wait_for_robot=wait_for_robot,
         )
         super().__init__(self._ws, offline_buffer=offline_buffer, max_pending=max_pending,
                          validate=validate, strict=strict)

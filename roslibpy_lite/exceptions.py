@@ -170,7 +170,16 @@ class ConnectionClosed(RosLibError):
 
 
 class ConnectError(ConnectionClosed):
-    """The connection could not be opened (refused, unreachable, handshake failed)."""
+    """The connection could not be opened (refused, unreachable, handshake failed).
+
+    ``refused`` is the HTTP status with which a server that did answer said no (401, 403,
+    404 or 429: a token, a role, a robot or a path it does not have); ``None`` when no
+    server answered as one (nothing listening, a timeout, TLS).
+    """
+
+    def __init__(self, *args: object, refused: int | None = None) -> None:
+        super().__init__(*args)
+        self.refused = refused
 
 
 class NotAuthenticated(ConnectError):

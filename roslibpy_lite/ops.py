@@ -25,6 +25,7 @@ __all__ = [
     "ACKS_HEADER",
     "AUTH_HEADER",
     "RECEIVED_HEADER",
+    "RELAY_HEADER",
     "SESSION_HEADER",
     "ActionFeedback",
     "ActionResultOp",
@@ -69,6 +70,12 @@ AUTH_HEADER = "X-Rosbridge-Auth"
 """Handshake response header of our bridge: ``required`` when it requires a token and this
 connection brought none (it must then send an ``auth`` op first). A client that has no token
 to send can fail at once, saying so, instead of failing at its first op."""
+
+RELAY_HEADER = "X-Rosbridge-Relay"
+"""Handshake response header of our relay (``roslibpy-lite-relay``): the robot the path
+named (empty when it named none). Its refusals say the robot is not connected, or the role may
+not reach it, so a client can say "relay" and, for an offline robot, fail at once (or wait for
+it when asked) instead of retrying a bare 404."""
 
 SESSION_HEADER = "X-Rosbridge-Session"
 """Handshake header of our extension for sessions that survive a dropped link. A client

@@ -35,6 +35,8 @@ from typing import TYPE_CHECKING, Any
 try:
     from websockets.asyncio.server import Server, ServerConnection, serve
 
+    from roslibpy_lite.ops import RELAY_HEADER
+
     from .. import security
     from ..foxglove import select_subprotocol
     from ..http.relay_web import RelayWeb
@@ -242,7 +244,11 @@ class Relay:
     def _process_response(self, connection: ServerConnection, request: Request,
                           response: Response) -> None:
         """The robot's Bridge names its session (resume), acknowledgements and a needed
-        ``auth`` op in the handshake answer, as on the bridge."""
+        ``auth`` op in the handshake answer, as on the bridge; every websocket answer, a
+        refusal too, names the robot asked for (:data:`RELAY_HEADER`), so a client knows a
+        relay answered."""
+        if any("upgrade" in v.lower() for v in request.headers.get_all("Connection")):
+            response.headers[RELAY_HEADER] = _robot_named(request)
         bridge: Bridge | None = getattr(connection, "robot_bridge", None)
         if bridge is not None:
             bridge.web.process_response(connection, request, response)
@@ -278,6 +284,15 @@ def _tell_presence(bridge: Bridge, robot: str, here: bool) -> None:
         else:
             session.status("warning", f"robot {robot} went away: its link to the Zenoh network "
                            "(or this relay's) is gone; subscriptions resume when it is back")
+
+
+def _robot_named(request: Request) -> str:
+    """The robot a websocket request's path names, if it is a valid name ('' if not)."""
+    name = request.path.partition("?")[0].strip("/").split("/")[0]
+    try:
+        return keys.check_robot(name)
+    except BridgeError:
+        return ""
 
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:

@@ -280,9 +280,10 @@ async def with_session(args: argparse.Namespace, body: Callable[[CliSession], Aw
         raise CliError(EXIT_CONNECT, text) from None
     except TLSError as exc:
         raise CliError(EXIT_CONNECT, str(exc)) from None  # its text names --cafile where it helps
-    except ConnectError as exc:
-        raise CliError(EXIT_CONNECT, f"{exc} (is the bridge running? set --url or "
-                                     "$ROSLIBPY_LITE_URL)") from None
+    except ConnectError as exc:  # a server that answered "no" was running: no such question
+        hint = "" if exc.refused is not None else (
+            " (is the bridge running? set --url or $ROSLIBPY_LITE_URL)")
+        raise CliError(EXIT_CONNECT, f"{exc}{hint}") from None
     except UsageError as exc:
         raise CliError(EXIT_USAGE, str(exc)) from None
     try:

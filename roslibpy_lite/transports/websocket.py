@@ -36,7 +36,7 @@ from ..exceptions import (
     TLSError,
     UsageError,
 )
-from ..ops import ACKS_HEADER, AUTH_HEADER
+from ..ops import ACKS_HEADER, AUTH_HEADER, RELAY_HEADER
 from ..protocol import Protocol
 from .resumable import ACK_INTERVAL, ClientSession
 
@@ -67,6 +67,7 @@ class WebSocketTransport:
         ssl_context: ssl.SSLContext | None = None,
         resume: bool = True,
         resume_frames: int = 1000,
+        wait_for_robot: bool = False,
     ) -> None:
         self.urls = tuple(with_default_port(u) for u in ([url] if isinstance(url, str) else url))
         if not self.urls:
@@ -75,6 +76,7 @@ class WebSocketTransport:
         self.reconnect = reconnect
         self.backoff = backoff or Backoff()
         self.open_timeout = open_timeout
+        self.wait_for_robot = wait_for_robot
         self.stable_after = 1.0
         self.acks = False
         self.connects = 0
@@ -192,6 +194,11 @@ class WebSocketTransport:
                         if not self._fail_first(refused):
                             log.error("%s", refused)
                             link.shut_down(refused)
+                        return
+                    missing = _not_found(self.url, exc)  # a first connection only: not there
+                    if (missing is not None and len(self.urls) == 1
+                            and not (self.wait_for_robot and _relay_of(exc) is not None)
+                            and self._fail_first(missing)):
                         return
                     now = loop.time()
                     give_up = not self.reconnect or now >= deadline or _tls_mismatch(self.url, exc)
@@ -468,21 +475,47 @@ def _unbound(op: ops.Op) -> None:
     raise RuntimeError("the transport has no client yet")
 
 
+def _relay_of(exc: BaseException) -> str | None:
+    """The robot named by a relay's handshake answer (:data:`RELAY_HEADER`); ``None`` when
+    no relay answered."""
+    if not isinstance(exc, InvalidStatus):
+        return None
+    value: str | None = exc.response.headers.get(RELAY_HEADER)
+    return value
+
+
+def _server(url: str, exc: BaseException) -> str:
+    """Who answered: "the relay at URL" (for robot R) or "the bridge at URL"."""
+    robot = _relay_of(exc)
+    if robot is None:
+        return f"the bridge at {url}"
+    return f"the relay at {url}" + (f" (robot {robot!r})" if robot else "")
+
+
+def _answer(exc: InvalidStatus) -> str:
+    """The server's own words in a refused handshake: its body's first line, shortened."""
+    text = bytes(exc.response.body or b"").decode(errors="replace").strip()
+    line = text.splitlines()[0] if text else ""
+    return line if len(line) <= 200 else line[:200] + "..."
+
+
 def _refusal(url: str, exc: BaseException) -> ConnectError | None:
     """A refusal that another attempt would only repeat: a token, an origin, a certificate."""
     if isinstance(exc, InvalidStatus):
         code = exc.response.status_code
-        text = bytes(exc.response.body or b"").decode(errors="replace").strip()
+        text = _answer(exc)
         if code == 429 and "authentication" in text:
             retry = exc.response.headers.get("Retry-After", "a few")
             return NotAuthenticated(
-                f"the bridge at {url} refuses this address for now: too many failed "
+                f"{_server(url, exc)} refuses this address for now: too many failed "
                 f"authentication attempts came from it; retry after {retry} s (this is no "
-                "verdict on the token given)")
+                "verdict on the token given)", refused=code)
         if code == 401:
-            return NotAuthenticated(f"the bridge at {url} refused our token (HTTP {code}): {text}")
+            return NotAuthenticated(f"{_server(url, exc)} refused our token (HTTP {code}): "
+                                    f"{text}", refused=code)
         if code == 403:
-            return ConnectError(f"the bridge at {url} refused the connection (HTTP 403): {text}")
+            return ConnectError(f"{_server(url, exc)} refused the connection (HTTP 403): {text}",
+                                refused=code)
         return None
     if isinstance(exc, ssl.SSLCertVerificationError) and exc.verify_code in _NAME_MISMATCH:
         host = urlsplit(url).hostname
@@ -575,16 +608,33 @@ def _tls_mismatch(url: str, exc: BaseException) -> bool:
     return url.startswith("wss://") and isinstance(exc, ssl.SSLError | ConnectionResetError)
 
 
+def _not_found(url: str, exc: BaseException) -> ConnectError | None:
+    """An HTTP 404 at the handshake: the robot the path names is not on the relay, or no
+    websocket server is at that path. Said at once with the server's own words."""
+    if not isinstance(exc, InvalidStatus) or exc.response.status_code != 404:
+        return None
+    return ConnectError(f"{_server(url, exc)} answered HTTP 404: {_answer(exc) or 'not found'}; "
+                        f"{_hint(url, exc)}", refused=404)
+
+
 def _hint(url: str, exc: BaseException) -> str:
     """What to check after a failed connection attempt."""
     if _tls_mismatch(url, exc):
         return ("the TLS handshake failed: if the bridge serves plain websockets, use "
                 f"ws://{url.split('://', 1)[1]}")
+    if _relay_of(exc) is not None:
+        return ("check the robot's name in the URL's path, and that the robot's bridge is up "
+                "and connected to the relay (wait_for_robot=True waits for a robot starting)")
     if isinstance(exc, InvalidHandshake):
         return "something answers there, but not as a websocket server: is the port right?"
     return "check that a rosbridge server is running there and the host and port are right"
 
 
 def _why(exc: BaseException) -> str:
+    if isinstance(exc, InvalidStatus):  # the status and the server's words, not only the code
+        answer = _answer(exc)
+        code = exc.response.status_code
+        return f"HTTP {code} from {'the relay' if _relay_of(exc) is not None else 'the server'}" \
+            + (f": {answer}" if answer else "")
     text = str(exc)
     return f"{type(exc).__name__}: {text}" if text else type(exc).__name__
