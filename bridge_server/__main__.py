@@ -336,6 +336,8 @@ def main(argv: list[str] | None = None) -> int:
             check_robot(args.robot)
         except BridgeError as exc:
             refusal = f"--robot: {exc}"
+    if refusal is None and args.zenoh_connect:
+        refusal = zenoh_link.options_from_args(args).refusal()
     if refusal is not None:
         print(f"roslibpy-lite-bridge: refusing to start: {refusal}", file=sys.stderr)
         return 2

@@ -23,6 +23,7 @@ import argparse
 import asyncio
 import contextlib
 import json
+import logging
 import os
 import re
 import threading
@@ -36,6 +37,8 @@ from . import keys
 if TYPE_CHECKING:
     import zenoh
 
+log = logging.getLogger("bridge_server.zenoh.link")
+
 __all__ = ["ZenohOptions", "add_arguments", "answering", "ignore_replies", "open_session",
            "options_from_args", "robot_acl"]
 
@@ -48,6 +51,25 @@ access rules name each."""
 # answers them, holds its liveliness token, follows the relays' tokens, takes their puts.
 _MESSAGES = ["put", "delete", "declare_subscriber", "query", "declare_queryable", "reply",
              "liveliness_token", "declare_liveliness_subscriber", "liveliness_query"]
+
+
+_LOOPBACK = re.compile(r"(?:127(?:\.\d{1,3}){3}|localhost|\[?::1\]?)")
+
+
+def _host(endpoint: str) -> str:
+    """The host of ``PROTO/HOST:PORT`` (an IPv6 address keeps its brackets)."""
+    m = _ENDPOINT.fullmatch(endpoint)
+    return (m["addr"] if m else endpoint).rpartition(":")[0]
+
+
+def _local(endpoint: str) -> bool:
+    """Whether ``endpoint`` stays on this machine: loopback, or a unix socket."""
+    return endpoint.startswith("unixsock-stream/") or bool(_LOOPBACK.fullmatch(_host(endpoint)))
+
+
+def _tls(endpoint: str) -> bool:
+    """Whether ``endpoint``'s protocol is TLS (tls/, or quic/, which is TLS too)."""
+    return endpoint.startswith(("tls/", "quic/"))
 
 
 def _under(prefix: str) -> list[str]:
@@ -92,6 +114,38 @@ class ZenohOptions:
     """With ``mtls``: robots let in by their certificates' common names, each on its keys."""
     relays: list[str] = field(default_factory=list)
     """With ``mtls``: relays let in by their certificates' common names, on every key."""
+    insecure: bool = False
+    """Allow links beyond this machine without (mutual) TLS (:meth:`exposure` says what
+    that exposes; logged as a warning when the session opens)."""
+
+    def exposure(self) -> str | None:
+        """What these options expose beyond this machine (``None``: nothing).
+
+        A router listening on an address other than loopback without mutual TLS lets
+        anyone who reaches it pose as any robot, or, through a relay of their own, call
+        every robot's services and publish on its topics; a client dialing beyond loopback
+        without TLS sends everything in clear to whoever answers."""
+        for e in self.listen:
+            if not _local(e) and not (self.mtls and _tls(e)):
+                return (f"--zenoh-listen {e} listens beyond this machine without mutual TLS: "
+                        "anyone who reaches it can pose as a robot, or drive one through a "
+                        "relay of their own")
+        for e in self.connect:
+            if not _local(e) and not _tls(e):
+                return (f"--zenoh-connect {e} dials beyond this machine without TLS: the "
+                        "link is in clear and anyone on the way can pose as the router")
+        return None
+
+    def refusal(self) -> str | None:
+        """Why these options must not start (their :meth:`exposure`, without
+        ``--zenoh-insecure``), naming what to do instead; ``None``: they may."""
+        exposed = self.exposure()
+        if exposed is None or self.insecure:
+            return None
+        return (f"{exposed}. Use tls/ endpoints with certificates (a router: --zenoh-mtls "
+                "and --zenoh-tls-ca/-cert/-key; a robot: --zenoh-tls-ca/-cert/-key; "
+                "'roslibpy-lite-relay certs' makes them), or give --zenoh-insecure to accept "
+                "that")
 
     @property
     def mode(self) -> str:
@@ -119,11 +173,11 @@ class ZenohOptions:
                 raise BridgeError(f"{what} {path}: not a readable file")
         if (self.tls_cert is None) != (self.tls_key is None):
             raise BridgeError("--zenoh-tls-cert and --zenoh-tls-key go together")
-        uses_tls = any(e.startswith(("tls/", "quic/")) for e in [*self.connect, *self.listen])
+        uses_tls = any(_tls(e) for e in [*self.connect, *self.listen])
         if uses_tls and self.listen and self.tls_cert is None:
             raise BridgeError("a tls/ or quic/ --zenoh-listen endpoint needs --zenoh-tls-cert "
                               "and --zenoh-tls-key")
-        if self.tls_ca is None and any(e.startswith(("tls/", "quic/")) for e in self.connect):
+        if self.tls_ca is None and any(_tls(e) for e in self.connect):
             raise BridgeError("a tls/ or quic/ --zenoh-connect endpoint needs --zenoh-tls-ca "
                               "(the authority that signs the router's certificate)")
         if self.mtls and not (self.listen and uses_tls and self.tls_ca is not None):
@@ -137,6 +191,9 @@ class ZenohOptions:
                 keys.check_robot(robot)
             except BridgeError as exc:
                 raise BridgeError(f"--zenoh-robot: {exc}") from None
+        refusal = self.refusal()
+        if refusal is not None:
+            raise BridgeError(refusal)
         conf = zenoh.Config()
         conf.insert_json5("mode", json.dumps(self.mode))
         conf.insert_json5("scouting/multicast/enabled", "false")
@@ -172,6 +229,9 @@ async def open_session(options: ZenohOptions) -> zenoh.Session:
     import zenoh
 
     conf = options.config()
+    exposed = options.exposure()
+    if exposed is not None:  # config() allowed it: --zenoh-insecure
+        log.warning("--zenoh-insecure: %s", exposed)
     loop = asyncio.get_running_loop()
     opened: asyncio.Future[zenoh.Session] = loop.create_future()
 
@@ -228,6 +288,10 @@ def add_arguments(p: argparse.ArgumentParser, listen: bool) -> None:
                    help="this side's TLS certificate (a router's for tls/ listen endpoints)")
     g.add_argument("--zenoh-tls-key", default=None, metavar="FILE",
                    help="the private key of --zenoh-tls-cert")
+    g.add_argument("--zenoh-insecure", action="store_true",
+                   help="allow Zenoh links beyond this machine without TLS (a robot) or "
+                   "without mutual TLS (a relay listening): anyone who reaches them can pose "
+                   "as a robot or drive one; refused without this, and warned with it")
     if listen:
         g.add_argument("--zenoh-mtls", action="store_true",
                        help="ask whoever connects for a certificate signed by --zenoh-tls-ca "
@@ -247,4 +311,5 @@ def options_from_args(args: argparse.Namespace) -> ZenohOptions:
                         tls_ca=args.zenoh_tls_ca, tls_cert=args.zenoh_tls_cert,
                         tls_key=args.zenoh_tls_key, mtls=getattr(args, "zenoh_mtls", False),
                         robots=list(getattr(args, "zenoh_robot", []) or []),
-                        relays=list(getattr(args, "zenoh_relay", []) or []))
+                        relays=list(getattr(args, "zenoh_relay", []) or []),
+                        insecure=args.zenoh_insecure)

@@ -301,6 +301,8 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         prog="roslibpy-lite-relay",
         description="A rosbridge v2 server without ROS: serves the robots that dial out to "
         "Zenoh (roslibpy-lite-bridge --zenoh-connect ... --robot NAME) at ws://HOST:PORT/NAME.",
+        epilog="subcommand (with its own --help): certs (a fleet's CA and the mutual-TLS "
+        "certificates of its relays and robots)",
     )
     p.add_argument("--host", default="127.0.0.1", help="address to bind (default 127.0.0.1)")
     p.add_argument("--port", type=int, default=9090, help="port (default 9090; 0: any free port)")
@@ -358,9 +360,15 @@ async def _run(args: argparse.Namespace) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Entry point of ``roslibpy-lite-relay`` and ``python -m bridge_server.zenoh.relay``."""
+    """Entry point of ``roslibpy-lite-relay`` and ``python -m bridge_server.zenoh.relay``
+    (``roslibpy-lite-relay certs ...``: :mod:`bridge_server.zenoh.certs`)."""
+    given = sys.argv[1:] if argv is None else argv
+    if given[:1] == ["certs"]:
+        from .certs import main as certs
+
+        return certs(given[1:])
     args = parse_args(argv)
-    refusal = security.exposure_refusal(args)
+    refusal = security.exposure_refusal(args) or zenoh_link.options_from_args(args).refusal()
     if refusal is not None:
         print(f"roslibpy-lite-relay: refusing to start: {refusal}", file=sys.stderr)
         return 2

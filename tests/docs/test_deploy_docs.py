@@ -12,10 +12,12 @@ import pytest
 
 from bridge_server.__main__ import parse_args
 from bridge_server.security import exposure_refusal, is_loopback
+from bridge_server.zenoh.link import options_from_args
 from tests.helpers import ROOT
 
 PAGES = [ROOT / "README.md", ROOT / "SECURITY.md", *sorted((ROOT / "docs").rglob("*.md"))]
 SUBCOMMANDS = ("add-principal", "remove-principal", "healthcheck")
+RELAY_SUBCOMMANDS = ("certs",)
 
 
 def _shell_blocks(page: Path) -> list[str]:
@@ -44,7 +46,7 @@ def _bridge_commands(page: Path, program: str = "roslibpy-lite-bridge") -> list[
             if not line.strip().startswith(program + " "):
                 continue
             words = shlex.split(line.strip(), comments=True)[len(program.split()):]
-            if words[:1] not in ([s] for s in SUBCOMMANDS):
+            if words[:1] not in ([s] for s in (*SUBCOMMANDS, *RELAY_SUBCOMMANDS)):
                 found.append(words)
     return found
 
@@ -63,6 +65,7 @@ def test_every_bridge_command_starts_and_the_first_is_safe(page: Path) -> None:
     for argv in commands:
         args = parse_args(argv)
         assert exposure_refusal(args) is None, f"{page.name}: {' '.join(argv)}"
+        assert options_from_args(args).refusal() is None, f"{page.name}: {' '.join(argv)}"
     if commands:
         first = parse_args(commands[0])
         assert is_loopback(first.host) or (first.auth_file and first.certfile), \
@@ -70,15 +73,17 @@ def test_every_bridge_command_starts_and_the_first_is_safe(page: Path) -> None:
 
 
 def test_every_relay_command_starts() -> None:
-    """Every relay command shown has the relay's options and passes its start checks (the
-    README's and the relay guide's, at least)."""
+    """Every relay command shown has the relay's options and passes its start checks, Zenoh's
+    too: no plain link beyond loopback (the README's and the relay guide's, at least)."""
     from bridge_server.zenoh.relay import parse_args as relay_args
 
     pages = {p.name: _bridge_commands(p, "roslibpy-lite-relay") for p in PAGES}
     assert pages["README.md"] and pages["relay.md"], pages
     for name, commands in pages.items():
         for argv in commands:
-            assert exposure_refusal(relay_args(argv)) is None, f"{name}: {' '.join(argv)}"
+            args = relay_args(argv)
+            assert exposure_refusal(args) is None, f"{name}: {' '.join(argv)}"
+            assert options_from_args(args).refusal() is None, f"{name}: {' '.join(argv)}"
 
 
 def test_one_folder_for_the_bridges_files() -> None:

@@ -19,6 +19,7 @@ from typing import Any
 
 import pytest
 
+from tests.docs.test_deploy_docs import RELAY_SUBCOMMANDS
 from tests.docs.test_deploy_docs import SUBCOMMANDS as BRIDGE_SUBCOMMANDS
 from tests.docs.test_deploy_docs import _bridge_commands as _commands_on
 from tests.helpers import ROOT, BridgeProcess, marked_blocks, ros_env, run_snippet
@@ -82,13 +83,13 @@ def _run_for_help(program: str, args: list[str]) -> None:
     """Parse ``args`` (ending in ``--help``) as ``program`` does, in this process."""
     from bench.run import parse_args as bench_args
     from bridge_server.__main__ import main as bridge_main
-    from bridge_server.zenoh.relay import parse_args as relay_args
+    from bridge_server.zenoh.relay import main as relay_main
     from roslibpy_lite.cli import build_parser
 
     tools: dict[str, Callable[[list[str]], object]] = {
         "roslibpy-lite": build_parser().parse_args,
         "roslibpy-lite-bridge": bridge_main,
-        "roslibpy-lite-relay": relay_args,
+        "roslibpy-lite-relay": relay_main,
         "python -m bench": bench_args,
     }
     tools[program](args)
@@ -115,7 +116,8 @@ def _commands() -> dict[str, str]:
     """Each entry point and every subcommand under it (as ``--help`` lists them), with the
     text of its ``--help``."""
     found: dict[str, str] = {}
-    todo = [*REFERENCE_PAGES, *(f"roslibpy-lite-bridge {c}" for c in BRIDGE_SUBCOMMANDS)]
+    todo = [*REFERENCE_PAGES, *(f"roslibpy-lite-bridge {c}" for c in BRIDGE_SUBCOMMANDS),
+            *(f"roslibpy-lite-relay {c}" for c in RELAY_SUBCOMMANDS)]
     while todo:
         command = todo.pop(0)
         found[command] = _tool_help(command)
@@ -194,7 +196,8 @@ def test_every_default_is_said() -> None:
     """Each option that has a value when not given (not unset, off or empty) says its
     default in its --help, so the reference pages show it."""
     commands = {c: text for c, text in _commands().items() if not c.startswith(
-        tuple(f"roslibpy-lite-bridge {s}" for s in BRIDGE_SUBCOMMANDS))}
+        (*(f"roslibpy-lite-bridge {s}" for s in BRIDGE_SUBCOMMANDS),
+         *(f"roslibpy-lite-relay {s}" for s in RELAY_SUBCOMMANDS)))}
     unsaid = []
     for command, help_text in commands.items():
         helps = _options(help_text)

@@ -187,11 +187,40 @@ def _free_port() -> int:
         return int(s.getsockname()[1])  # the same number is free on the veth's address too
 
 
-def start_relay(port: int, zenoh: str, endpoint: str) -> Proc:
+@dataclass
+class Fleet:
+    """The fleet's certificates, made by ``roslibpy-lite-relay certs`` as the relay guide's
+    quick start makes them: relay1 (the router), relay2 (a client of it) and the robot."""
+
+    dir: Path
+
+    @classmethod
+    def make(cls, folder: Path, router_ip: str) -> Fleet:
+        """Run the command (the relays named by the router's address on the veth)."""
+        done = subprocess.run(
+            [sys.executable, "-m", "bridge_server.zenoh.relay", "certs", "--dir", str(folder),
+             "--relay", "relay1", "--relay", "relay2", "--relay-host", router_ip,
+             "--robot", ROBOT], cwd=ROOT, env=ros_env(), capture_output=True, text=True)
+        assert done.returncode == 0, done.stderr
+        return cls(folder)
+
+    def tls(self, name: str) -> list[str]:
+        """The Zenoh TLS options of ``name`` (a relay or the robot)."""
+        return ["--zenoh-tls-ca", str(self.dir / "ca.pem"),
+                "--zenoh-tls-cert", str(self.dir / f"{name}.pem"),
+                "--zenoh-tls-key", str(self.dir / f"{name}.key")]
+
+    def router(self) -> list[str]:
+        """relay1 as the router: it asks for certificates, lets in the robot and relay2."""
+        return [*self.tls("relay1"), "--zenoh-mtls", "--zenoh-robot", ROBOT,
+                "--zenoh-relay", "relay2"]
+
+
+def start_relay(port: int, zenoh: str, endpoint: str, tls: list[str]) -> Proc:
     """A relay serving websockets on ``port``; ``zenoh`` is ``--zenoh-listen`` (the router)
-    or ``--zenoh-connect`` (a client of it), at ``endpoint``."""
+    or ``--zenoh-connect`` (a client of it), at ``endpoint``, with the ``tls`` options."""
     relay = Proc([sys.executable, "-m", "bridge_server.zenoh.relay", "--port", str(port),
-                  zenoh, endpoint], ros_env())
+                  zenoh, endpoint, *tls], ros_env())
     relay.wait_for(READY)
     return relay
 
@@ -233,6 +262,7 @@ class Tier:
     """The two relays, the robot's bridge and node, and where clients connect."""
 
     ns: Namespace
+    fleet: Fleet
     router: Proc
     """The first relay, also the Zenoh router on the veth's address."""
     second: Proc
@@ -246,7 +276,7 @@ class Tier:
     @property
     def endpoint(self) -> str:
         """The router's Zenoh endpoint, the only address the robot can reach."""
-        return f"tcp/{self.ns.router_ip}:{self.zport}"
+        return f"tls/{self.ns.router_ip}:{self.zport}"
 
     @property
     def url(self) -> str:
@@ -261,7 +291,8 @@ class Tier:
     def restart_router(self) -> None:
         """Stop the first relay (the Zenoh router) and start it again on the same ports."""
         self.router.stop()
-        self.router = start_relay(self.port, "--zenoh-listen", self.endpoint)
+        self.router = start_relay(self.port, "--zenoh-listen", self.endpoint,
+                                  self.fleet.router())
 
     def stop(self) -> None:
         """Every process, the clients of the router first."""
@@ -270,17 +301,21 @@ class Tier:
 
 
 @pytest.fixture(scope="module")
-def relay_and_robot(robot_netns: Namespace) -> Iterator[Tier]:
+def relay_and_robot(robot_netns: Namespace, tmp_path_factory: pytest.TempPathFactory
+                    ) -> Iterator[Tier]:
     """The router relay here on the veth's address, a second relay here dialing it, the
-    robot's bridge and node in the namespace; both relays have the robot when it yields."""
+    robot's bridge and node in the namespace, every Zenoh link mutual TLS with certificates
+    from ``roslibpy-lite-relay certs``; both relays have the robot when it yields."""
     zport, port, second_port = _free_port(), _free_port(), _free_port()
-    endpoint = f"tcp/{robot_netns.router_ip}:{zport}"
+    fleet = Fleet.make(tmp_path_factory.mktemp("fleet") / "certs", robot_netns.router_ip)
+    endpoint = f"tls/{robot_netns.router_ip}:{zport}"
     procs: list[Proc] = []
     try:
-        procs.append(start_relay(port, "--zenoh-listen", endpoint))
-        procs.append(start_relay(second_port, "--zenoh-connect", endpoint))
+        procs.append(start_relay(port, "--zenoh-listen", endpoint, fleet.router()))
+        procs.append(start_relay(second_port, "--zenoh-connect", endpoint, fleet.tls("relay2")))
         robot = Proc(robot_netns.exec(sys.executable, "-m", "bridge_server", "--no-websocket",
-                                      "--robot", ROBOT, "--zenoh-connect", endpoint), ros_env())
+                                      "--robot", ROBOT, "--zenoh-connect", endpoint,
+                                      *fleet.tls(ROBOT)), ros_env())
         procs.append(robot)
         robot.wait_for(re.compile(rf"robot {ROBOT} is on Zenoh"))
         node = Proc(robot_netns.exec(sys.executable, "-c", ROBOT_NODE), ros_env())
@@ -288,7 +323,7 @@ def relay_and_robot(robot_netns: Namespace) -> Iterator[Tier]:
         node.wait_for(re.compile("robot node up"))
         _until_robot_served(port)
         _until_robot_served(second_port)
-        t = Tier(robot_netns, procs[0], procs[1], robot, node, zport, port, second_port)
+        t = Tier(robot_netns, fleet, procs[0], procs[1], robot, node, zport, port, second_port)
         for url in (t.url, t.second_url):
             asyncio.run(_lists_the_robots_node(url))
         procs = []  # the tier's now: a restarted router is only there
