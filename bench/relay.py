@@ -34,7 +34,7 @@ from typing import Any
 from bench.harness import READY, Bridge, Ctx, close_clients, percentile, send_op, ws_open
 from bench.linkproxy import LinkProxy
 
-__all__ = ["relay_imu", "relay_service", "relay_uplink"]
+__all__ = ["relay_dead_link", "relay_imu", "relay_service", "relay_uplink"]
 
 TOPIC = "/bench_camera"
 ROBOT = "benchbot"
@@ -316,3 +316,61 @@ async def relay_imu(ctx: Ctx) -> dict[str, Any]:
         "latency_p99_ms": round(percentile(lat, 0.99), 3),
         "relay_cpu_us_per_message": round(1e6 * busy / delivered, 1) if delivered else None,
     }
+
+
+async def _presence(ws: Any, words: str, timeout: float = 60.0) -> None:
+    """Read ``ws`` until a ``status`` op containing ``words`` arrives."""
+    async with asyncio.timeout(timeout):
+        while True:
+            op = json.loads(await ws.recv())
+            if op.get("op") == "status" and words in op.get("msg", ""):
+                return
+
+
+async def relay_dead_link(ctx: Ctx) -> dict[str, Any]:
+    """``relay_dead_link``: how long a relay takes to tell its clients that a robot's link
+    died. The robot dials the relay (the Zenoh router) through a TCP proxy; a viewer of the
+    robot through the relay asks for ``info`` statuses; the proxy then drops every byte both
+    ways (a cut cable, no FIN), and the time to the viewer's "went away" status is taken; the
+    link is restored and the "is back" status awaited; repeated. With the default lease
+    (``--zenoh-lease 3``) and with Zenoh's own default (10 s), for comparison."""
+    rounds = 2 if ctx.quick else 4
+    results: dict[str, Any] = {}
+    for lease in (3.0, 10.0):
+        lease_args = ["--zenoh-lease", f"{lease:g}"]
+        zport = _free_port()
+        relay = Bridge(ctx.domain, ["--zenoh-listen", f"tcp/127.0.0.1:{zport}", *lease_args],
+                       ctx.bridge_root, module="bridge_server.zenoh.relay", ready=RELAY_READY)
+        await relay.start()
+        noticed: list[float] = []
+        back: list[float] = []
+        try:
+            with LinkProxy(("127.0.0.1", zport)) as link:
+                robot = Bridge(ctx.domain, ["--no-websocket", "--robot", ROBOT, "--zenoh-connect",
+                                            f"tcp/127.0.0.1:{link.port}", *lease_args],
+                               ctx.bridge_root, ready=ROBOT_READY)
+                await robot.start()
+                try:
+                    ws = await _viewers_at(_url(relay))
+                    try:
+                        await send_op(ws, {"op": "set_level", "level": "info"})
+                        for _ in range(rounds):
+                            link.blackhole()
+                            cut = time.perf_counter()
+                            await _presence(ws, "went away")
+                            noticed.append(time.perf_counter() - cut)
+                            link.restore()
+                            restored = time.perf_counter()
+                            await _presence(ws, "is back")
+                            back.append(time.perf_counter() - restored)
+                    finally:
+                        await ws.close()
+                finally:
+                    await robot.stop()
+        finally:
+            await relay.stop()
+        results[f"lease_{lease:g}s"] = {
+            "noticed_s": [round(x, 2) for x in noticed],
+            "noticed_max_s": round(max(noticed), 2),
+            "back_s": [round(x, 2) for x in back]}
+    return results

@@ -45,6 +45,9 @@ Scenarios (targets; rosbridge_suite's figures in brackets):
 - ``relay_imu`` (``bench/relay.py``): a 100 Hz sensor_msgs/Imu to 200 JSON viewers (50 with
   ``--quick``) over two relays: the fraction delivered, latency p50/p99, the relays' CPU per
   message.
+- ``relay_dead_link`` (``bench/relay.py``): a robot's Zenoh link blackholed (no FIN) while a
+  viewer watches through the relay: seconds until the viewer's "went away" status, and until
+  "is back" once restored, with ``--zenoh-lease 3`` (the default) and 10 (Zenoh's own).
 - ``tls`` (``bench/tls.py``): small messages, service round trips and CBOR images over ws://
   and over wss://, side by side (reference only).
 - ``workers_resume`` (``bench/workers.py``): with ``--workers 2``, call_service round trips
@@ -106,7 +109,7 @@ from bench.harness import (
     ws_open,
 )
 from bench.links import links
-from bench.relay import relay_imu, relay_service, relay_uplink
+from bench.relay import relay_dead_link, relay_imu, relay_service, relay_uplink
 from bench.tls import tls_scenario
 from bench.workers import workers_resume
 
@@ -132,6 +135,7 @@ TARGETS: dict[str, str] = {
                     "straight to the bridge N times",
     "relay_service": "reference: service round trip through a relay against straight",
     "relay_imu": "200 viewers of a 100 Hz IMU over two relays: all delivered; latency, relay CPU",
+    "relay_dead_link": "a dead robot link told to its relay's clients within the lease (3 s)",
     "record": "camera 30 Hz + IMU 200 Hz for 60 s recorded without a loss; recorder CPU",
     "action_ros_server": "reference: goal round trip p50/p99, feedback msg/s at >= 99 %",
     "action_client_served": "reference: goal round trip p50/p99, feedback msg/s at >= 99 %",
@@ -852,6 +856,7 @@ SCENARIOS: dict[str, Callable[[Ctx], Awaitable[dict[str, Any]]]] = {
     "relay_uplink": relay_uplink,
     "relay_service": relay_service,
     "relay_imu": relay_imu,
+    "relay_dead_link": relay_dead_link,
     "action_ros_server": action_ros_server,
     "action_client_served": action_client_served,
 }
@@ -893,6 +898,8 @@ def _headline(name: str, r: dict[str, Any]) -> Any:
         return {way: {r["viewers"]: r["x_one_viewer"] for r in r[way]} for way in ("relay", "direct")}
     if name == "relay_service":
         return r
+    if name == "relay_dead_link":
+        return {k: v["noticed_max_s"] for k, v in r.items() if k.startswith("lease_")}
     if name == "relay_imu":
         return {k: r[k] for k in ("delivered_fraction", "latency_p50_ms", "latency_p99_ms",
                                   "relay_cpu_us_per_message")}

@@ -114,6 +114,9 @@ class ZenohOptions:
     """With ``mtls``: robots let in by their certificates' common names, each on its keys."""
     relays: list[str] = field(default_factory=list)
     """With ``mtls``: relays let in by their certificates' common names, on every key."""
+    lease: float = 3.0
+    """Seconds of silence after which a link counts as dead (Zenoh's lease; each side sends
+    keep-alives four times per lease): the robot's liveliness goes, and its clients are told."""
     insecure: bool = False
     """Allow links beyond this machine without (mutual) TLS (:meth:`exposure` says what
     that exposes; logged as a warning when the session opens)."""
@@ -194,8 +197,11 @@ class ZenohOptions:
         refusal = self.refusal()
         if refusal is not None:
             raise BridgeError(refusal)
+        if not 0.1 <= self.lease <= 3600:
+            raise BridgeError(f"--zenoh-lease {self.lease:g}: expected 0.1 to 3600 seconds")
         conf = zenoh.Config()
         conf.insert_json5("mode", json.dumps(self.mode))
+        conf.insert_json5("transport/link/tx/lease", json.dumps(round(self.lease * 1000)))
         conf.insert_json5("scouting/multicast/enabled", "false")
         conf.insert_json5("scouting/gossip/enabled", "false" if not self.listen else "true")
         conf.insert_json5("connect/endpoints", json.dumps(self.connect))
@@ -288,6 +294,9 @@ def add_arguments(p: argparse.ArgumentParser, listen: bool) -> None:
                    help="this side's TLS certificate (a router's for tls/ listen endpoints)")
     g.add_argument("--zenoh-tls-key", default=None, metavar="FILE",
                    help="the private key of --zenoh-tls-cert")
+    g.add_argument("--zenoh-lease", type=float, default=3.0, metavar="SECONDS",
+                   help="a Zenoh link silent this long counts as dead (default 3): a robot "
+                   "gone is told to its clients within it")
     g.add_argument("--zenoh-insecure", action="store_true",
                    help="allow Zenoh links beyond this machine without TLS (a robot) or "
                    "without mutual TLS (a relay listening): anyone who reaches them can pose "
@@ -312,4 +321,4 @@ def options_from_args(args: argparse.Namespace) -> ZenohOptions:
                         tls_key=args.zenoh_tls_key, mtls=getattr(args, "zenoh_mtls", False),
                         robots=list(getattr(args, "zenoh_robot", []) or []),
                         relays=list(getattr(args, "zenoh_relay", []) or []),
-                        insecure=args.zenoh_insecure)
+                        lease=args.zenoh_lease, insecure=args.zenoh_insecure)

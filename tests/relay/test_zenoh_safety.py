@@ -151,3 +151,20 @@ def test_the_certs_command_makes_what_mutual_tls_needs(fleet: Path) -> None:
     assert more.returncode == 0, more.stderr
     load("robot2").verify_directly_issued_by(ca)
     assert load("ca") == ca
+
+
+@pytest.mark.parametrize(("argv", "ms"), [([], 3000), (["--zenoh-lease", "0.5"], 500)])
+def test_the_lease_reaches_zenoh(argv: list[str], ms: int) -> None:
+    """--zenoh-lease (default 3 s, Zenoh's own is 10) is the links' lease in the session's
+    configuration, on the relay's command line and the robot's; a lease out of range is named.
+    (How soon a cut link is told: ``python -m bench --scenario relay_dead_link``.)"""
+    from bridge_server.__main__ import parse_args as bridge_args
+    from bridge_server.zenoh.link import options_from_args
+    from bridge_server.zenoh.relay import parse_args as relay_args
+
+    for args in (relay_args(["--zenoh-listen", "tcp/127.0.0.1:7447", *argv]),
+                 bridge_args(["--robot", "r1", "--zenoh-connect", "tcp/127.0.0.1:7447", *argv])):
+        conf = options_from_args(args).config()
+        assert conf.get_json("transport/link/tx/lease") == str(ms)
+    with pytest.raises(BridgeError, match=r"--zenoh-lease 0: expected 0\.1 to 3600 seconds"):
+        ZenohOptions(connect=["tcp/127.0.0.1:7447"], lease=0).config()
