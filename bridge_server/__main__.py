@@ -21,6 +21,7 @@ import os
 import signal
 import sys
 from collections.abc import Callable
+from typing import TYPE_CHECKING
 
 try:
     from . import security
@@ -33,6 +34,10 @@ except ModuleNotFoundError as _missing:  # a client-only install: say which extr
     from ._requires import missing_dependency
 
     missing_dependency(_missing)
+
+if TYPE_CHECKING:
+    from .security.permissions import Role
+    from .server import Bridge
 
 __all__ = ["main", "parse_args"]
 
@@ -188,6 +193,14 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         default=None,
         help="this robot's name on Zenoh (its keys are under NAME/; with --zenoh-connect)",
     )
+    p.add_argument(
+        "--relay-role",
+        default=None,
+        metavar="ROLE",
+        help="with --zenoh-connect: the role of --auth-file that every relay is held to on "
+        "this robot (what topics, services, actions and parameters relays may reach, and "
+        "take_over of names ROS nodes serve); default: everything but take_over",
+    )
     p.add_argument("--worker-index", type=int, default=None, help=argparse.SUPPRESS)
     p.add_argument("--worker-dir", default=None, help=argparse.SUPPRESS)
     p.add_argument(
@@ -290,7 +303,8 @@ async def _run(args: argparse.Namespace) -> int:
         from .zenoh.exporter import Exporter
 
         exporter = Exporter(bridge.graph, args.robot, zenoh_link.options_from_args(args),
-                            graph_changed=bridge.graph_changed)
+                            graph_changed=bridge.graph_changed,
+                            policy=relay_policy(bridge, args.relay_role))
         exporter.start()
         log.info("robot %s dialing out to Zenoh at %s", args.robot, ", ".join(args.zenoh_connect))
     # SIGHUP (systemctl reload): certificates and the auth file are read again.
@@ -316,6 +330,26 @@ async def _run(args: argparse.Namespace) -> int:
     return 0
 
 
+def relay_policy(bridge: Bridge, role: str | None) -> Callable[[], Role | None]:
+    """The robot's relay policy: ``role`` of the bridge's auth file, looked up at each
+    request (SIGHUP reads the file again), or the exporter's default without one.
+    ``BridgeError`` at start if the file has no such role."""
+    from .zenoh.exporter import DEFAULT_POLICY
+
+    if role is None:
+        return lambda: DEFAULT_POLICY
+    auth = bridge.security.auth
+    if auth is None or role not in auth.roles:
+        known = ", ".join(auth.roles) if auth is not None else "none"
+        raise BridgeError(f"--relay-role {role}: no such role in the auth file (roles: {known})")
+    log.info("relays are held to role %s of the auth file on this robot", role)
+    def current() -> Role | None:
+        reloaded = bridge.security.auth
+        return reloaded.roles.get(role) if reloaded is not None else None
+
+    return current
+
+
 def main(argv: list[str] | None = None) -> int:
     """Entry point of ``python -m bridge_server`` and ``roslibpy-lite-bridge``."""
     command = (sys.argv[1:] if argv is None else argv)[:1]
@@ -338,6 +372,10 @@ def main(argv: list[str] | None = None) -> int:
             refusal = f"--robot: {exc}"
     if refusal is None and args.zenoh_connect:
         refusal = zenoh_link.options_from_args(args).refusal()
+    if refusal is None and args.relay_role is not None and not (
+            args.zenoh_connect and args.auth_file):
+        refusal = ("--relay-role names a role of --auth-file that relays are held to: it "
+                   "needs --auth-file and --zenoh-connect")
     if refusal is not None:
         print(f"roslibpy-lite-bridge: refusing to start: {refusal}", file=sys.stderr)
         return 2

@@ -23,6 +23,13 @@ It dials out to the routers and offers the robot under ``r1/`` as :mod:`.keys` d
 - the graph (topics, services, nodes and the definitions of their types) is put when it
   changes, and answers queries.
 
+What a relay may ask is the robot's decision: every request above is held to the robot's
+relay policy, a role in the auth file's format (``--relay-role``; :data:`DEFAULT_POLICY`
+without one: everything but taking over a name a ROS node serves). A refused call, goal,
+parameter or served name is answered with the reason; a refused topic is logged and left
+unwatched or unpublished. A relay with a valid certificate, compromised or misconfigured,
+can do no more than the policy lets it.
+
 It talks to ROS only through the Graph protocol, so it knows nothing of rclpy. Zenoh calls
 back on its own threads: every callback crosses to the event loop with
 ``call_soon_threadsafe`` and the Graph is used there only.
@@ -56,6 +63,7 @@ from ..graph import (
     TopicFeed,
 )
 from ..interfaces import BridgeError, ConversionError, Kind, args_mapping
+from ..security.permissions import Role
 from ..session.actions import ACTION_LINGER, CLIENT_IDLE
 from . import keys
 from .keys import (
@@ -151,6 +159,11 @@ class _RobotGoal:
 
 _GOAL_SERVICE = "/_action/send_goal"
 
+DEFAULT_POLICY = Role.from_table("relays (default)", {"all": ["*"], "deny": {"take_over": ["*"]}})
+"""What relays may ask of a robot that names no ``--relay-role``: every topic, service,
+action and parameter, but not serving a name that a ROS node of the robot already serves
+(two servers of one name would answer its callers by chance)."""
+
 
 @dataclass
 class _Served:
@@ -168,8 +181,14 @@ class Exporter:
 
     def __init__(self, graph: Graph, robot: str, options: ZenohOptions,
                  graph_changed: Callable[[], None] = lambda: None,
-                 snapshot_interval: float = SNAPSHOT_INTERVAL) -> None:
+                 snapshot_interval: float = SNAPSHOT_INTERVAL,
+                 policy: Callable[[], Role | None] = lambda: DEFAULT_POLICY) -> None:
         self.graph = graph
+        self.policy = policy
+        """The role relays are held to, looked up at each request (an auth file read again on
+        SIGHUP changes it at once); ``None``: the role is gone, and every request is refused."""
+        self.policy_refused: dict[tuple[str, str], int] = {}
+        """Requests refused by the policy, by (capability, name): logged the first time."""
         self.robot = keys.check_robot(robot)
         self.options = options
         self.graph_changed = graph_changed
@@ -291,6 +310,29 @@ class Exporter:
             session, self.session = self.session, None
             await self._loop.run_in_executor(None, session.close)
 
+    # -- the robot's relay policy --------------------------------------------------------------
+
+    def refusal(self, capability: str, name: str, relay: str | None = None) -> str | None:
+        """Why the policy does not let relays (``relay``, where the request says which) use
+        ``capability`` on ``name`` (``None``: they may). Logged at WARNING the first time for
+        each (capability, name), then counted."""
+        role = self.policy()
+        if role is not None and role.allows(capability, name):
+            return None
+        which = f"role {role.name}" if role is not None else "its role, which is gone"
+        why = (f"robot {self.robot}'s relay policy ({which}) does not let relays "
+               f"{capability.replace('_', ' ')} {name}")
+        key = (capability, name)
+        self.policy_refused[key] = self.policy_refused.get(key, 0) + 1
+        if self.policy_refused[key] == 1:
+            log.warning("refused %s: %s", f"relay {relay}" if relay else "a relay", why)
+        return why
+
+    def _served_in_ros(self, key: str) -> bool:
+        """Whether a ROS node (not a relay's client through this robot) serves ``key``."""
+        return key not in self.served and any(
+            name == key for name, _ in self.graph.service_names_and_types())
+
     # -- topics: demand-driven -----------------------------------------------------------------
 
     def _on_demand(self, sample: zenoh.Sample) -> None:
@@ -300,6 +342,8 @@ class Exporter:
             return
         export = self.exports.get(topic)
         if sample.kind == zenoh.SampleKind.PUT:
+            if self.refusal("subscribe", topic, relay) is not None:
+                return
             if export is None:
                 export = self._export(topic)
                 if export is None:
@@ -360,6 +404,8 @@ class Exporter:
             return
         entry = (topic, type_name, latch)
         if sample.kind == zenoh.SampleKind.PUT:
+            if self.refusal("publish", topic, relay) is not None:
+                return
             if self._publisher(entry) is not None:
                 self.publishers[entry][1].add(relay)
             return
@@ -389,6 +435,8 @@ class Exporter:
             meta = Meta.decode(sample.attachment.to_bytes() if sample.attachment else None)
         except BridgeError as exc:
             log.warning("a message for %s from a relay is dropped: %s", topic, exc)
+            return
+        if self.refusal("publish", topic) is not None:
             return
         entry = (topic, meta.type, meta.latched)
         pub = self._publisher(entry)
@@ -429,6 +477,9 @@ class Exporter:
             service = keys.name_of(str(query.key_expr), 2)
             try:
                 req = CallRequest.decode(query.payload.to_bytes() if query.payload else b"")
+                refused = self.refusal("call_service", service)
+                if refused is not None:
+                    raise BridgeError(refused)
                 response = await self.graph.call_service(
                     service, req.type, req.args, req.timeout, req.discovery_wait)
             except Exception as exc:  # rclpy's own (a name it refuses) too: the relay's
@@ -459,6 +510,16 @@ class Exporter:
             if served.relay != relay:  # the first keeps it: the second relay's client is told
                 self._refuse(relay, name, kind, f"{name} is already served by a client of "
                              f"relay {served.relay}; robot {self.robot} keeps the first")
+            return
+        refused = self.refusal("serve_action" if action else "serve_service", name, relay)
+        if refused is None and self._served_in_ros(key):
+            refused = self.refusal("take_over", name, relay)
+            if refused is not None:
+                refused = (f"{what} {name} is served by a ROS node of robot {self.robot}, and "
+                           f"{refused.split('(', 1)[1].split(')', 1)[0]} lets no relay take "
+                           "it over (take_over)")
+        if refused is not None:
+            self._refuse(relay, name, kind, refused)
             return
         old = self._lingering.pop(key, None)
         if old is not None:  # two servers of one name would both answer each goal
@@ -604,6 +665,9 @@ class Exporter:
         key: tuple[str, str] | None = None
         try:
             req = GoalRequest.decode(query.payload.to_bytes() if query.payload else b"")
+            refused = self.refusal("send_action_goal", action, req.relay)
+            if refused is not None:
+                raise BridgeError(refused)
             action_cls = self.graph.resolve_action(req.type)
             conv = self.graph.converter(action_cls.Goal)
             goal = conv.from_obj(args_mapping(req.goal, conv.fields, "goal"), "args")
@@ -702,8 +766,14 @@ class Exporter:
             try:
                 req = ParamRequest.decode(query.payload.to_bytes() if query.payload else b"")
                 answer: Any
+                if req.op != "names":
+                    refused = self.refusal("params", f"{node}:{req.name}")
+                    if refused is not None:
+                        raise PermissionError(refused)
                 if req.op == "names":
-                    answer = await self.graph.parameter_names(node, req.timeout)
+                    role = self.policy()  # names the policy hides are left out, unlogged
+                    answer = [n for n in await self.graph.parameter_names(node, req.timeout)
+                              if role is not None and role.allows("params", f"{node}:{n}")]
                 elif req.op == "get":
                     answer = await self.graph.get_parameter(node, req.name)
                 else:
@@ -716,6 +786,8 @@ class Exporter:
                 kind, text = "lookup", str(exc)
             except ValueError as exc:
                 kind, text = "value", str(exc)
+            except PermissionError as exc:
+                kind, text = "forbidden", str(exc)
             except Exception as exc:  # the relay's caller gets the text, as the bridge's does
                 text = str(exc)
             query.reply_err(_json({"kind": kind, "text": text}))
