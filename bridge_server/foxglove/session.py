@@ -403,7 +403,7 @@ class FoxgloveSession:
         if ch.encoding == "cdr":
             decode: Callable[[bytes], Any] = cdr.decoder_for(message_class(self.graph, type_name))
         else:
-            decode = json.loads
+            decode = wire.parse_json
         pub = self.topics.publishers.get(topic)
         if pub is None:
             pub = self.topics.publishers[topic] = self.graph.acquire_publisher(topic, cls, False,
@@ -459,7 +459,7 @@ class FoxgloveSession:
             return
         try:
             args = (cdr.decode(op.payload, entry.srv.Request) if op.encoding == "cdr"
-                    else json.loads(op.payload))
+                    else wire.parse_json(op.payload))
         except (cdr.CdrError, ValueError) as exc:
             self._call_failed(op, f"the request does not decode as {entry.type_name} "
                               f"({op.encoding}): {exc}")

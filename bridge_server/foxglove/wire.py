@@ -19,6 +19,9 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
+from roslibpy_lite.exceptions import RemoteProtocolError
+from roslibpy_lite.protocol import decode_frame
+
 __all__ = [
     "SUBPROTOCOL",
     "Channel",
@@ -41,6 +44,7 @@ __all__ = [
     "json_frame",
     "message_data_header",
     "parse_binary",
+    "parse_json",
     "parse_text",
     "service_response_frame",
     "time_frame",
@@ -317,12 +321,23 @@ _PARSERS: dict[str, Any] = {
 }
 
 
+def parse_json(data: str | bytes) -> Any:
+    """JSON text (a frame, or a payload in the ``json`` encoding) as a value, read as
+    rosbridge frames are (:func:`roslibpy_lite.protocol.decode_frame`); what is wrong (where
+    it is malformed, nested too deeply, not UTF-8) is a :class:`WireError` in rosbridge's
+    words."""
+    try:
+        return decode_frame(data if isinstance(data, str) else data.decode())
+    except UnicodeDecodeError as exc:
+        raise WireError(f"the JSON text is not UTF-8 ({exc.reason} at byte {exc.start})"
+                        ) from None
+    except RemoteProtocolError as exc:
+        raise WireError(exc.message) from None
+
+
 def parse_text(text: str) -> ClientOp:
     """One JSON frame from a client as its op; :class:`WireError` says what is wrong."""
-    try:
-        obj = json.loads(text)
-    except ValueError as exc:
-        raise WireError(f"the frame is not JSON ({exc})") from None
+    obj = parse_json(text)
     if not isinstance(obj, dict):
         raise WireError(f"a JSON frame must be an object with an 'op', got {type(obj).__name__}")
     op = obj.get("op")

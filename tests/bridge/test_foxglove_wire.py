@@ -27,7 +27,9 @@ def test_subscribe_parses_pairs() -> None:
 
 @pytest.mark.parametrize(("text", "error"), [
     ("[1]", "must be an object"),
-    ("{", "not JSON"),
+    ("{", "malformed JSON at line 1 column 2"),
+    ('{"op":"subscribe","subscriptions":' + "[" * 5000 + "]" * 5000 + "}",
+     "malformed JSON: nested too deeply"),
     ('{"op":"nope"}', "unknown op 'nope'"),
     ('{"op":"subscribe"}', "subscribe: 'subscriptions' is missing"),
     ('{"op":"subscribe","subscriptions":[{"id":-1,"channelId":1}]}',
@@ -90,6 +92,15 @@ def test_graph_update_is_the_difference() -> None:
         "publishedTopics": [{"name": "/b", "publisherIds": ["/n3"]}], "subscribedTopics": [],
         "advertisedServices": [], "removedTopics": ["/gone"], "removedServices": ["/s"]}
     assert new.update_since(new) is None
+
+
+def test_json_payloads_are_read_as_rosbridge_reads_frames() -> None:
+    """A json-encoded payload nested too deeply or not UTF-8 is a WireError saying so."""
+    assert wire.parse_json(b'{"data": "hi"}') == {"data": "hi"}
+    with pytest.raises(wire.WireError, match=r"^malformed JSON: nested too deeply$"):
+        wire.parse_json(b"[" * 5000 + b"]" * 5000)
+    with pytest.raises(wire.WireError, match="not UTF-8"):
+        wire.parse_json(b"\"\xff\"")
 
 
 _JSON = st.recursive(

@@ -343,7 +343,7 @@ def test_bad_frames_get_status_errors(fox: PeerProcess, ros_node: Any, topic: st
     """Malformed JSON, an unknown op, bad binary opcodes, unknown channel, subscription and
     service ids: each answered with a status error naming it; the connection serves on."""
     cases: list[tuple[str, dict[str, Any], str]] = [
-        ("send_text", {"text": "{not json"}, "not JSON"),
+        ("send_text", {"text": "{not json"}, "malformed JSON at line 1 column 2"),
         ("send_text", {"text": '{"op": "frobnicate"}'}, "unknown op 'frobnicate'"),
         ("send_text", {"text": '{"op": "subscribe", "subscriptions": [{"id": "x"}]}'},
          "subscribe.subscriptions[0].id"),
@@ -361,6 +361,28 @@ def test_bad_frames_get_status_errors(fox: PeerProcess, ros_node: Any, topic: st
     with pytest.raises(Exception, match="no service 777"):
         fox.request("call_service_id", service_id=777, hex="00010000")
     _serving_on(fox, ros_node, topic)
+
+
+def test_deep_nesting_is_a_status_error(fox: PeerProcess, bridge: BridgeProcess,
+                                        ros_node: Any, topic: str) -> None:
+    """JSON nested 5,000 deep, as a frame or as a json client channel's message, is answered
+    with a status error in rosbridge's words ("nested too deeply"); no traceback is logged,
+    and that client and another one serve on."""
+    other = foxglove_peer(bridge.url, bridge)
+    try:
+        start = len(bridge.lines)
+        deep = "[" * 5000 + "]" * 5000
+        fox.request("send_text", text='{"op": "subscribe", "subscriptions": ' + deep + "}")
+        assert _wait_error(fox, "nested too deeply") == "malformed JSON: nested too deeply"
+        fox.request("advertise", topic=topic, schemaName="std_msgs/msg/String", encoding="json")
+        fox.request("publish_bytes", topic=topic, hex=deep.encode().hex())
+        _wait_error(fox, f"message data on {topic} (std_msgs/msg/String, json): not published: "
+                         "malformed JSON: nested too deeply")
+        assert not [line for line in bridge.lines[start:] if "Traceback" in line]
+        _serving_on(fox, ros_node, topic)
+        _serving_on(other, ros_node, topic + "_other")
+    finally:
+        other.close()
 
 
 def test_bad_cdr_is_not_published(fox: PeerProcess, ros_node: Any, topic: str) -> None:
