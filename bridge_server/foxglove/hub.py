@@ -37,8 +37,8 @@ if TYPE_CHECKING:
     from ..graph import Message as RosMessage
     from .session import FoxgloveSession
 
-__all__ = ["REFRESH_S", "GraphState", "Hub", "ServiceEntry", "foxglove_schema", "message_class",
-           "service_class"]
+__all__ = ["CLOCK", "REFRESH_S", "GraphState", "Hub", "ServiceEntry", "foxglove_schema",
+           "message_class", "service_class"]
 
 log = logging.getLogger("bridge_server.foxglove")
 
@@ -46,6 +46,7 @@ REFRESH_S = 0.5
 """Seconds between two looks at the ROS graph while Foxglove clients are connected."""
 
 CLOCK = "/clock"
+"""The topic whose ticks are the ``time`` op (to clients whose role may subscribe it)."""
 PARAMETER_EVENTS = "/parameter_events"
 _CLOCK = struct.Struct("<iI")  # builtin_interfaces/Time after the 4-byte CDR header
 
@@ -111,6 +112,14 @@ class GraphState:
     published: dict[str, list[str]] = field(default_factory=dict)
     subscribed: dict[str, list[str]] = field(default_factory=dict)
     services: dict[str, list[str]] = field(default_factory=dict)
+
+    def seen_by(self, sees: Callable[[str], bool]) -> GraphState:
+        """The graph with only the names ``sees`` lets through: topics and services by their
+        names, node ids by theirs (a topic shown keeps its entry when none of its nodes is)."""
+        def keep(entries: dict[str, list[str]]) -> dict[str, list[str]]:
+            return {k: [n for n in v if sees(n)] for k, v in entries.items() if sees(k)}
+
+        return GraphState(keep(self.published), keep(self.subscribed), keep(self.services))
 
     def update_since(self, old: GraphState) -> dict[str, Any] | None:
         """The ``connectionGraphUpdate`` fields that bring ``old`` to this (None: same)."""
@@ -314,23 +323,20 @@ class Hub:
 
     def follow_graph(self, session: FoxgloveSession) -> None:
         """``session`` follows the connection graph: the followers so far hear what changed
-        since they were told, and ``session`` hears the whole graph as it is now."""
+        since they were told, and ``session`` hears the whole graph as it is now (each of
+        what its role lets it see)."""
         if session.wants_graph:
             return
         self._refresh_connection_graph(self.graph.topic_names_and_types())
-        session.wants_graph = True
-        whole = self.connection_graph.update_since(GraphState())
-        if whole is not None:
-            session.send_graph_update(whole)
+        session.graph_seen = GraphState()
+        session.show_graph(self.connection_graph)
 
     def _refresh_connection_graph(self, topics: list[tuple[str, list[str]]]) -> None:
         new = self.current_graph(topics)
-        update = new.update_since(self.connection_graph)
-        self.connection_graph = new
-        if update is not None:
+        changed, self.connection_graph = new != self.connection_graph, new
+        if changed:
             for session in list(self.sessions):
-                if session.wants_graph:
-                    session.send_graph_update(update)
+                session.show_graph(new)
 
     # -- watches (/clock, /parameter_events) -----------------------------------------------------
 

@@ -41,11 +41,12 @@ from msgs.runtime import ValidationError
 from ..interfaces import BridgeError, ConversionError, canonical_name
 from ..security import POLICY_VIOLATION
 from ..security.names import InvalidNameError, check_name, full_name
+from ..security.permissions import LISTING
 from ..session.calls import Calls
 from ..session.limits import over_cap
 from ..session.outbox import Outbox, Subscription
 from . import wire
-from .hub import message_class
+from .hub import CLOCK, GraphState, message_class
 
 if TYPE_CHECKING:
     from websockets.asyncio.server import ServerConnection
@@ -132,7 +133,7 @@ class FoxgloveSession:
         self._publisher_refs: dict[str, int] = {}
         self._listeners: dict[Subscription, Callable[[RosMessage], None]] = {}
         self.parameter_names: set[str] | None = None  # None: not following; empty: all
-        self.wants_graph = False
+        self.graph_seen: GraphState | None = None  # what it was told; None: not following
         self.uses_time = False
         self.gate = bridge.security.gate(self)
 
@@ -140,6 +141,11 @@ class FoxgloveSession:
     def limits(self) -> SecurityConfig:
         """The bridge's per-connection limits (as configured now)."""
         return self.bridge.security.config
+
+    @property
+    def wants_graph(self) -> bool:
+        """Whether the client follows the connection graph."""
+        return self.graph_seen is not None
 
     @property
     def closed(self) -> bool:
@@ -176,9 +182,10 @@ class FoxgloveSession:
         """``serverInfo``, then the channels and services the client may use."""
         hub = self.hub
         hub.attach(self)  # the first client's look at the graph happens now
-        capabilities = ["clientPublish", "parameters", "parametersSubscribe", "services",
-                        "connectionGraph"]
-        if "/clock" in hub.channels:
+        capabilities = ["clientPublish", "parameters", "parametersSubscribe", "services"]
+        if self.gate.forbids(*LISTING) is None:  # as for rosbridge's rosapi lists
+            capabilities.append("connectionGraph")
+        if CLOCK in hub.channels and self.gate.forbids("subscribe", CLOCK) is None:
             self.uses_time = True
             capabilities.append("time")
         self.send_text(wire.json_frame(
@@ -255,9 +262,17 @@ class FoxgloveSession:
         if services:
             self.send_text(wire.json_frame("advertiseServices", services=services))
 
-    def send_graph_update(self, update: dict[str, Any]) -> None:
-        """A ``connectionGraphUpdate``."""
-        self.send_text(wire.json_frame("connectionGraphUpdate", **update))
+    def show_graph(self, state: GraphState) -> None:
+        """The connection graph is now ``state``: if the client follows it, a
+        ``connectionGraphUpdate`` with what changed of what its role lets it see (the names
+        rosbridge's rosapi lists would give it)."""
+        if self.graph_seen is None:
+            return
+        seen = state.seen_by(self.gate.sees)
+        update = seen.update_since(self.graph_seen)
+        self.graph_seen = seen
+        if update is not None:
+            self.send_text(wire.json_frame("connectionGraphUpdate", **update))
 
     def parameters_changed(self, changed: list[tuple[str, Any]]) -> None:
         """Parameters changed in ROS: tell the client of those it follows."""
@@ -585,10 +600,11 @@ class FoxgloveSession:
     # -- connection graph, assets ----------------------------------------------------------------
 
     def _follow_graph(self, op: wire.SubscribeConnectionGraph) -> None:
-        self.hub.follow_graph(self)
+        if self.gate.allowed(op, *LISTING):
+            self.hub.follow_graph(self)
 
     def _unfollow_graph(self, op: wire.UnsubscribeConnectionGraph) -> None:
-        self.wants_graph = False
+        self.graph_seen = None
 
     def _fetch_asset(self, op: wire.FetchAsset) -> None:
         self.error(f"fetchAsset {op.uri}: this server has no assets (no 'assets' capability)")

@@ -17,7 +17,7 @@ import json
 import struct
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, ClassVar
 
 from roslibpy_lite.exceptions import RemoteProtocolError
 from roslibpy_lite.protocol import decode_frame
@@ -164,6 +164,8 @@ class UnsubscribeParameterUpdates:
 @dataclass(frozen=True)
 class SubscribeConnectionGraph:
     """``subscribeConnectionGraph``."""
+
+    OP: ClassVar[str] = "subscribeConnectionGraph"
 
 
 @dataclass(frozen=True)

@@ -28,6 +28,7 @@ from .permissions import (
     hidden_requirement,
     requirement,
     rosapi_requirement,
+    sees,
 )
 from .websockets_internals import BridgeConnection
 
@@ -164,27 +165,31 @@ class Gate:
         ``used`` is the name the op named, when ``name`` is what governs it (an action's
         internal service, a node's parameter service).
         """
-        role = self.role
-        if role is None:
-            return True
-        ok = role.has(capability) if name == "*" else role.allows(capability, name)
-        if not ok:
-            what = "any name" if name == "*" else name
-            why = f"forbidden: role {role.name} may not {capability} on {what}"
+        why = self._refusal(capability, name)
+        if why is not None:
+            why = f"forbidden: {why}"
             if used is not None and used != name and not used.startswith("/rosapi/"):
                 why += f" ({used} is part of it)"
             self.deny(op, why)
-        return ok
+        return why is None
 
     def forbids(self, capability: str, name: str) -> str | None:
-        """Why the role may not use ``capability`` on ``name`` now (``None``: it may)."""
+        """Why the role may not use ``capability`` on ``name`` now (``None``: it may);
+        ``*`` asks for some name (see :meth:`Role.has`)."""
+        return self._refusal(*hidden_requirement(capability, name))
+
+    def _refusal(self, capability: str, name: str) -> str | None:
         role = self.role
         if role is None:
             return None
-        capability, governing = hidden_requirement(capability, name)
-        if role.allows(capability, governing):
+        if role.has(capability) if name == "*" else role.allows(capability, name):
             return None
-        return f"role {role.name} may not {capability} on {governing}"
+        return f"role {role.name} may not {capability} on {'any name' if name == '*' else name}"
+
+    def sees(self, name: str) -> bool:
+        """Whether an answer about the ROS graph may name ``name`` to this client
+        (:func:`~bridge_server.security.permissions.sees`)."""
+        return sees(self.role, name)
 
     def deny(self, op: Any, why: str) -> None:
         """Refuse ``op`` (:meth:`Session.refuse <bridge_server.session.session.Session.refuse>`)."""

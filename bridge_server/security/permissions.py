@@ -46,6 +46,7 @@ from ..interfaces import BridgeError
 
 __all__ = [
     "CAPABILITIES",
+    "LISTING",
     "Role",
     "RoleError",
     "UnsafeNameError",
@@ -53,6 +54,7 @@ __all__ = [
     "hidden_requirement",
     "requirement",
     "rosapi_requirement",
+    "sees",
 ]
 
 CAPABILITIES = (
@@ -227,6 +229,18 @@ def hidden_requirement(capability: str, name: str) -> tuple[str, str]:
 
 # -- rosapi: which capability a call needs, and filtering of the lists it answers ------------
 
+LISTING: tuple[str, str] = ("introspection", "*")
+"""What listing the ROS graph needs (rosapi's lists, Foxglove's connection graph):
+``introspection`` on some name (``*`` is checked as "any pattern at all", see
+:meth:`Role.has`). A list answered holds only the names :func:`sees` lets the role see."""
+
+
+def sees(role: Role | None, name: str) -> bool:
+    """Whether an answer about the ROS graph may name ``name`` (a topic, service, action or
+    node) to ``role``: ``introspection`` on it (no role: every name)."""
+    return role is None or role.allows(LISTING[0], name)
+
+
 _CONTROL = re.compile(r"[\x00-\x1f\x7f-\x9f\u2028\u2029]")
 
 
@@ -265,8 +279,8 @@ def rosapi_requirement(service: str, args: Mapping[str, Any]) -> tuple[str, str]
     for key in _NAME_ARGS:
         value = args.get(key)
         if isinstance(value, str):
-            return "introspection", _abs(value)
-    return "introspection", "*"
+            return LISTING[0], _abs(value)
+    return LISTING
 
 
 # service -> (capability, list fields filtered by the first one's names, parallel fields)
@@ -305,7 +319,7 @@ def filter_rosapi(role: Role, service: str, values: dict[str, Any]) -> dict[str,
     field_name = _LOOKUPS.get(service)
     if field_name is not None:
         found = values.get(field_name)
-        if isinstance(found, str) and found and not role.allows("introspection", found):
+        if isinstance(found, str) and found and not sees(role, found):
             values = {**values, field_name: ""}
         return values
     independent = _INDEPENDENT.get(service)
@@ -314,5 +328,5 @@ def filter_rosapi(role: Role, service: str, values: dict[str, Any]) -> dict[str,
         for f in independent:
             column = values.get(f)
             if isinstance(column, list):
-                values[f] = [n for n in column if role.allows("introspection", str(n))]
+                values[f] = [n for n in column if sees(role, str(n))]
     return values

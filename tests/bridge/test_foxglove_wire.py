@@ -94,6 +94,20 @@ def test_graph_update_is_the_difference() -> None:
     assert new.update_since(new) is None
 
 
+def test_graph_seen_by_a_role_keeps_only_its_names() -> None:
+    """The graph a role sees keeps topics, services and node ids it may see (a topic it sees
+    stays when its nodes are hidden); from there an update removes what went out of view."""
+    graph = GraphState({"/seen/a": ["/seen_n", "/other"], "/b": ["/seen_n"]},
+                       {"/seen/a": ["/other"]}, {"/seen/s": ["/seen_n"], "/s": ["/other"]})
+    seen = graph.seen_by(lambda name: name.startswith("/seen"))
+    assert seen == GraphState({"/seen/a": ["/seen_n"]}, {"/seen/a": []},
+                              {"/seen/s": ["/seen_n"]})
+    assert graph.seen_by(lambda name: True) == graph
+    assert GraphState().update_since(seen) == {
+        "publishedTopics": [], "subscribedTopics": [], "advertisedServices": [],
+        "removedTopics": ["/seen/a"], "removedServices": ["/seen/s"]}
+
+
 def test_json_payloads_are_read_as_rosbridge_reads_frames() -> None:
     """A json-encoded payload nested too deeply or not UTF-8 is a WireError saying so."""
     assert wire.parse_json(b'{"data": "hi"}') == {"data": "hi"}

@@ -549,6 +549,124 @@ def test_sighup_ends_what_the_role_no_longer_allows(tmp_path: Path, ros_node: An
         bridge.stop()
 
 
+# -- what a role sees and reaches, as over rosbridge ------------------------------------------------
+
+
+def _as(secured: tuple[BridgeProcess, Any], role: str) -> PeerProcess:
+    """A Foxglove client of the ``secured`` bridge with the token of ``role``'s principal."""
+    bridge, auth = secured
+    return foxglove_peer(f"{bridge.url}/?token={auth.tokens[role]}", bridge)
+
+
+def _all_sent(peer: PeerProcess) -> list[dict[str, Any]]:
+    """The client's events once it has the answer to a frame sent now: all that the bridge
+    sent it before that frame (it answers each client's frames in order)."""
+    peer.request("send_text", text='{"op": "barrier"}')
+    _wait_error(peer, "unknown op 'barrier'")
+    return peer.new_events()
+
+
+def _graph_names(events: list[dict[str, Any]]) -> set[str]:
+    """Every topic, service and node named by the connection graph updates among ``events``."""
+    names: set[str] = set()
+    for event in events:
+        if event.get("event") != "connectionGraphUpdate":
+            continue
+        update = event["update"]
+        for key, ids in (("publishedTopics", "publisherIds"), ("subscribedTopics",
+                                                               "subscriberIds"),
+                         ("advertisedServices", "providerIds")):
+            for entry in update[key]:
+                names.add(entry["name"])
+                names.update(entry[ids])
+        names.update(update["removedTopics"], update["removedServices"])
+    return names
+
+
+def _rosbridge_refusal(bridge: BridgeProcess, token: str, service: str) -> str:
+    """The status error a rosbridge client with ``token`` gets for calling ``service``."""
+    from websockets.sync.client import connect
+
+    with connect(bridge.url, additional_headers={"Authorization": f"Bearer {token}"},
+                 open_timeout=DEADLINE) as ws:
+        ws.send(json.dumps({"op": "call_service", "service": service, "id": "r"}))
+        while True:
+            reply = json.loads(ws.recv(DEADLINE))
+            if reply.get("op") == "status" and reply.get("level") == "error":
+                return str(reply["msg"])
+
+
+def _published_by(topic: str, node: str) -> Any:
+    """A predicate: a graph update in which ``node`` publishes ``topic``."""
+    return lambda e: e.get("event") == "connectionGraphUpdate" and any(
+        t["name"] == topic and node in t["publisherIds"]
+        for t in e["update"]["publishedTopics"])
+
+
+def test_connection_graph_needs_introspection(secured: tuple[BridgeProcess, Any],
+                                              ros_node: Any, topic: str) -> None:
+    """A role without introspection (it may subscribe to anything) is not offered
+    connectionGraph, and its subscribeConnectionGraph is refused in the words rosbridge
+    refuses it /rosapi/nodes in: no graph update reaches it; admin's follows the graph."""
+    from std_msgs.msg import String
+
+    bridge, auth = secured
+    ros_node.create_publisher(String, topic, 10)
+    why = "forbidden: role tester may not introspection on any name"
+    assert why in _rosbridge_refusal(bridge, auth.tokens["tester"], "/rosapi/nodes")
+    tester = _as(secured, "tester")
+    try:
+        assert "connectionGraph" not in tester.info["serverInfo"]["capabilities"]
+        tester.request("wait_channel", topic=topic, timeout_ms=int(DEADLINE * 1000))
+        tester.request("subscribe_graph")
+        assert f"subscribeConnectionGraph: {why}" in _wait_error(tester, why)
+        assert _graph_names(_all_sent(tester)) == set()
+    finally:
+        tester.close()
+    admin = _as(secured, "admin")
+    try:
+        assert "connectionGraph" in admin.info["serverInfo"]["capabilities"]
+        admin.request("subscribe_graph")
+        admin.wait_event(_published_by(topic, ros_node.get_fully_qualified_name()), DEADLINE,
+                         "a graph update with the topic")
+    finally:
+        admin.close()
+
+
+def test_connection_graph_shows_only_what_the_role_sees(secured: tuple[BridgeProcess, Any],
+                                                        ros_node: Any, topic: str) -> None:
+    """A role with introspection on /seen* only follows a connection graph that names its
+    /seen* topics, services and nodes and nothing else (not the /seen node's other topic,
+    nor the node subscribing from outside /seen*), as rosapi's lists would."""
+    import rclpy
+    from std_msgs.msg import String
+    from std_srvs.srv import SetBool
+
+    seen_node = rclpy.create_node("seen" + topic.replace("/", "_"), context=ros_node.context)
+    try:
+        seen_id = seen_node.get_fully_qualified_name()
+        seen_node.create_publisher(String, "/seen" + topic, 10)
+        seen_node.create_publisher(String, topic, 10)
+        seen_node.create_service(SetBool, "/seen" + topic + "_srv", lambda req, res: res)
+        ros_node.create_subscription(String, "/seen" + topic, lambda msg: None, 10)
+        narrow = _as(secured, "narrow")
+        try:
+            assert "connectionGraph" in narrow.info["serverInfo"]["capabilities"]
+            narrow.request("subscribe_graph")
+            narrow.wait_event(_published_by("/seen" + topic, seen_id), DEADLINE,
+                              "a graph update with the /seen topic")
+            narrow.wait_event(lambda e: e.get("event") == "connectionGraphUpdate" and any(
+                s["name"] == "/seen" + topic + "_srv" and seen_id in s["providerIds"]
+                for s in e["update"]["advertisedServices"]), DEADLINE, "the /seen service")
+            names = _graph_names(_all_sent(narrow))
+            assert {"/seen" + topic, "/seen" + topic + "_srv", seen_id} <= names
+            assert [n for n in names if not n.startswith("/seen")] == []
+        finally:
+            narrow.close()
+    finally:
+        seen_node.destroy_node()  # type: ignore[no-untyped-call]
+
+
 # -- slow clients, time ----------------------------------------------------------------------------
 
 
@@ -668,5 +786,41 @@ def test_time_from_clock(make_bridge: Any, ros_node: Any, topic: str) -> None:
             assert event["timestamp"] == {"$bigint": str(1234 * 10**9 + 5678)}
         finally:
             peer.close()
+    finally:
+        ros_node.destroy_publisher(clock)
+
+
+def test_time_only_for_roles_that_may_subscribe_clock(secured: tuple[BridgeProcess, Any],
+                                                      ros_node: Any) -> None:
+    """With /clock published, a role that may not subscribe to /clock is not offered 'time' and
+    gets no tick, while an admin client is offered it and gets the ticks."""
+    from rosgraph_msgs.msg import Clock
+
+    clock = ros_node.create_publisher(Clock, "/clock", 10)
+    try:
+        tester = _as(secured, "tester")  # it may subscribe to anything: it is told of /clock
+        try:
+            tester.request("wait_channel", topic="/clock", timeout_ms=int(DEADLINE * 1000))
+        finally:
+            tester.close()
+        admin, prober = _as(secured, "admin"), _as(secured, "prober")
+        try:
+            assert "time" in admin.info["serverInfo"]["capabilities"]
+            assert "time" not in prober.info["serverInfo"]["capabilities"]
+            msg = Clock()
+            msg.clock.sec = 4321
+            deadline = time.monotonic() + DEADLINE
+            while True:  # until the bridge's /clock reader is matched
+                clock.publish(msg)
+                try:
+                    admin.wait_event(lambda e: e.get("event") == "time", scenarios.ATTEMPT,
+                                     "time")
+                    break
+                except AssertionError:
+                    assert time.monotonic() < deadline, admin.diagnostics()
+            assert not [e for e in _all_sent(prober) if e.get("event") == "time"]
+        finally:
+            admin.close()
+            prober.close()
     finally:
         ros_node.destroy_publisher(clock)
