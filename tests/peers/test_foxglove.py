@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import base64
 import functools
+import itertools
 import json
 import queue
 import time
@@ -246,10 +247,10 @@ def _parameter_values(fox: PeerProcess, request_id: str, cmd: str, **params: Any
     return found
 
 
-def _update(fox: PeerProcess, entry: dict[str, Any]) -> None:
+def _update(fox: PeerProcess, entry: dict[str, Any], timeout: float = DEADLINE) -> None:
     """Wait for a parameter update event (no id) that holds ``entry``."""
     fox.wait_event(lambda e: e.get("event") == "parameterValues" and e["id"] is None
-                   and entry in e["parameters"], DEADLINE, f"an update with {entry}")
+                   and entry in e["parameters"], timeout, f"an update with {entry}")
 
 
 def test_parameters(fox: PeerProcess, ros_node: Any, topic: str) -> None:
@@ -665,6 +666,64 @@ def test_connection_graph_shows_only_what_the_role_sees(secured: tuple[BridgePro
             narrow.close()
     finally:
         seen_node.destroy_node()  # type: ignore[no-untyped-call]
+
+
+def test_call_the_role_may_not_make_never_runs(secured: tuple[BridgeProcess, Any],
+                                               ros_node: Any, topic: str) -> None:
+    """A role that may call only /probe/* services calls another service by the id an admin
+    connection learnt: a serviceCallFailure says forbidden and the rclpy handler never runs
+    (it does for the admin's call)."""
+    from std_srvs.srv import SetBool
+
+    calls: list[bool] = []
+
+    def answer(request: Any, response: Any) -> Any:
+        calls.append(request.data)
+        response.success = True
+        return response
+
+    ros_node.create_service(SetBool, topic, answer)
+    admin = _as(secured, "admin")
+    try:
+        service = admin.request("service", service=topic, timeout_ms=int(DEADLINE * 1000))
+        prober = _as(secured, "prober")
+        try:
+            with pytest.raises(Exception, match=f"forbidden: role prober may not call_service "
+                                                f"on {topic}"):
+                prober.request("call_service_id", service_id=service["id"], hex="0001000001",
+                               timeout=DEADLINE)
+        finally:
+            prober.close()
+        assert admin.request("call_service", service=topic, request={"data": False},
+                             timeout=DEADLINE)["value"]["success"] is True
+        assert calls == [False]  # only the admin's call reached the service
+    finally:
+        admin.close()
+
+
+def test_follow_all_parameters(bridge: BridgeProcess, ros_node: Any, topic: str) -> None:
+    """subscribeParameterUpdates with no names follows every parameter: a parameter changed
+    in ROS comes as an update, named /node.param."""
+    from rclpy.parameter import Parameter
+
+    name = topic.strip("/").replace("/", "_") + "_gain"
+    ros_node.declare_parameter(name, 0.0)
+    full = f"{ros_node.get_fully_qualified_name()}.{name}"
+    peer = foxglove_peer(bridge.url, bridge)
+    try:
+        peer.request("subscribe_parameters", names=[])
+        deadline = time.monotonic() + DEADLINE
+        for n in itertools.count(1):  # until the bridge's /parameter_events reader is matched
+            ros_node.set_parameters([Parameter(name, value=float(n))])  # type: ignore[no-untyped-call]
+            entry = {"name": full, "value": float(n), "type": "float64"}
+            try:
+                _update(peer, entry, scenarios.ATTEMPT)
+                break
+            except AssertionError:
+                assert time.monotonic() < deadline, f"no update of {full}\n{peer.diagnostics()}"
+    finally:
+        peer.close()
+        ros_node.undeclare_parameter(name)
 
 
 # -- slow clients, time ----------------------------------------------------------------------------
