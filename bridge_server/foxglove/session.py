@@ -644,6 +644,17 @@ class FoxgloveSession:
                 self._unadvertise(wire.ClientUnadvertise((channel_id,)))
                 self.error(f"client channel {channel_id} to {ch.topic} ended: {why}")
                 ended += 1
+        if self.uses_time and (why := self.gate.forbids("subscribe", CLOCK)) is not None:
+            self.uses_time = False
+            self.error(f"time from {CLOCK} ended: {why}")
+            ended += 1
+        if self.graph_seen is not None:
+            if (why := self.gate.forbids(*LISTING)) is None:
+                self.show_graph(self.hub.connection_graph)  # what it no longer sees goes
+            else:
+                self.graph_seen = None
+                self.error(f"connection graph updates ended: {why}")
+                ended += 1
         return ended
 
 

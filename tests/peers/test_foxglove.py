@@ -883,3 +883,87 @@ def test_time_only_for_roles_that_may_subscribe_clock(secured: tuple[BridgeProce
             prober.close()
     finally:
         ros_node.destroy_publisher(clock)
+
+
+def test_sighup_ends_time_and_narrows_the_graph(tmp_path: Path, ros_node: Any,
+                                                topic: str) -> None:
+    """After SIGHUP takes /clock and most introspection from a role, its Foxglove client hears
+    that time ended and gets no more ticks (a client of another role still does), and its
+    connection graph drops what it may no longer see; when introspection goes too, graph
+    updates end. The client hears each."""
+    import signal
+
+    from rosgraph_msgs.msg import Clock
+    from std_msgs.msg import String
+
+    from bridge_server.security.auth import hash_token, new_token
+
+    tokens = {"dora": new_token(), "root": new_token()}
+    principals = "".join(f'\n[principals.{n}]\nrole = "{"all" if n == "root" else "watcher"}"\n'
+                         f'token_hash = "{hash_token(t)}"\n' for n, t in tokens.items())
+    path = tmp_path / "auth.toml"
+
+    def roles(watcher: str) -> None:
+        path.write_text('[roles.all]\nall = ["*"]\n[roles.watcher]\nsubscribe = ["*"]\n'
+                        + watcher + principals)
+
+    def reload() -> str:
+        start = len(bridge.lines)
+        assert bridge.proc is not None
+        bridge.proc.send_signal(signal.SIGHUP)
+        return bridge.wait_for_line(r"reloaded the auth file", start=start)
+
+    roles('introspection = ["*"]\n')
+    clock = ros_node.create_publisher(Clock, "/clock", 10)
+    ros_node.create_publisher(String, topic, 10)
+    bridge = BridgeProcess(args=["--auth-file", str(path)]).start()
+    peers: list[PeerProcess] = []
+    try:
+        def connect(name: str) -> PeerProcess:
+            peers.append(foxglove_peer(f"{bridge.url}/?token={tokens[name]}", bridge))
+            return peers[-1]
+
+        connect("root").request("wait_channel", topic="/clock", timeout_ms=int(DEADLINE * 1000))
+        dora, root = connect("dora"), connect("root")
+        assert "time" in dora.info["serverInfo"]["capabilities"]
+        dora.request("subscribe_graph")
+        dora.wait_event(_published_by(topic, ros_node.get_fully_qualified_name()), DEADLINE,
+                        "the topic in the graph")
+
+        def tick(sec: int) -> None:
+            """Publish /clock until root has the tick (so dora's would have been sent too)."""
+            msg = Clock()
+            msg.clock.sec = sec
+            deadline = time.monotonic() + DEADLINE
+            while True:
+                clock.publish(msg)
+                try:
+                    root.wait_event(lambda e: e.get("event") == "time" and e["timestamp"] == {
+                        "$bigint": str(sec * 10**9)}, scenarios.ATTEMPT, f"tick {sec}")
+                    return
+                except AssertionError:
+                    assert time.monotonic() < deadline, root.diagnostics()
+
+        def ticks(peer: PeerProcess) -> list[int]:
+            return [int(e["timestamp"]["$bigint"]) // 10**9 for e in _all_sent(peer)
+                    if e.get("event") == "time"]
+
+        tick(1)
+        assert 1 in ticks(dora)
+        roles('introspection = ["/seen*"]\ndeny.subscribe = ["/clock"]\n')
+        assert "1 grant(s) the new roles no longer allow ended" in reload()
+        _wait_error(dora, "time from /clock ended: role watcher may not subscribe on /clock")
+        dora.wait_event(lambda e: e.get("event") == "connectionGraphUpdate"
+                        and topic in e["update"]["removedTopics"], DEADLINE,
+                        "the topic removed from the graph")
+        tick(2)
+        assert 2 not in ticks(dora)
+        roles('deny.subscribe = ["/clock"]\n')
+        assert "1 grant(s) the new roles no longer allow ended" in reload()
+        _wait_error(dora, "connection graph updates ended: role watcher may not introspection "
+                          "on any name")
+    finally:
+        for peer in peers:
+            peer.close()
+        bridge.stop()
+        ros_node.destroy_publisher(clock)
