@@ -41,7 +41,7 @@ from msgs.runtime import ValidationError
 from ..interfaces import BridgeError, ConversionError, canonical_name
 from ..security import POLICY_VIOLATION
 from ..security.names import InvalidNameError, check_name, full_name
-from ..security.permissions import LISTING
+from ..security.permissions import LISTING, PARAMETER_LISTING
 from ..session.calls import Calls
 from ..session.limits import over_cap
 from ..session.outbox import Outbox, Subscription
@@ -182,7 +182,9 @@ class FoxgloveSession:
         """``serverInfo``, then the channels and services the client may use."""
         hub = self.hub
         hub.attach(self)  # the first client's look at the graph happens now
-        capabilities = ["clientPublish", "parameters", "parametersSubscribe", "services"]
+        capabilities = ["clientPublish", "services"]
+        if self.gate.forbids(*PARAMETER_LISTING) is None:  # as for rosapi's get_param_names
+            capabilities += ["parameters", "parametersSubscribe"]
         if self.gate.forbids(*LISTING) is None:  # as for rosbridge's rosapi lists
             capabilities.append("connectionGraph")
         if CLOCK in hub.channels and self.gate.forbids("subscribe", CLOCK) is None:
@@ -507,7 +509,10 @@ class FoxgloveSession:
     def _get_parameters(self, op: wire.GetParameters) -> None:
         for name in op.names:
             _split(name)  # a name that is not /node.param is refused now
-        self.spawn(self._answer_parameters(list(op.names), op.id))
+        if op.names or self.gate.allowed(op, *PARAMETER_LISTING):
+            self.spawn(self._answer_parameters(list(op.names), op.id))
+        elif op.id is not None:  # refused (the client was told): no values for the id
+            self.send_text(wire.json_frame("parameterValues", parameters=[], id=op.id))
 
     async def _answer_parameters(self, names: list[str], request_id: str | None) -> None:
         if not names:
@@ -578,6 +583,8 @@ class FoxgloveSession:
                 wire.json_frame("parameterValues", parameters=[], id=op.id))
 
     def _follow_parameters(self, op: wire.SubscribeParameterUpdates) -> None:
+        if not self.gate.allowed(op, *PARAMETER_LISTING):
+            return
         current = self.parameter_names
         if not op.names:
             self.parameter_names = set()

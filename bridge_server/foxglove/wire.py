@@ -135,6 +135,8 @@ class ClientUnadvertise:
 class GetParameters:
     """``getParameters``: names (empty: all), and the id to answer with."""
 
+    OP: ClassVar[str] = "getParameters"
+
     names: tuple[str, ...]
     id: str | None
 
@@ -150,6 +152,8 @@ class SetParameters:
 @dataclass(frozen=True)
 class SubscribeParameterUpdates:
     """``subscribeParameterUpdates``: names (empty: all known)."""
+
+    OP: ClassVar[str] = "subscribeParameterUpdates"
 
     names: tuple[str, ...]
 

@@ -47,6 +47,7 @@ from ..interfaces import BridgeError
 __all__ = [
     "CAPABILITIES",
     "LISTING",
+    "PARAMETER_LISTING",
     "Role",
     "RoleError",
     "UnsafeNameError",
@@ -234,6 +235,11 @@ LISTING: tuple[str, str] = ("introspection", "*")
 ``introspection`` on some name (``*`` is checked as "any pattern at all", see
 :meth:`Role.has`). A list answered holds only the names :func:`sees` lets the role see."""
 
+PARAMETER_LISTING: tuple[str, str] = ("params", "*")
+"""What listing the parameters of every node needs (rosapi's ``get_param_names``,
+Foxglove's ``getParameters`` and ``subscribeParameterUpdates`` with no names): ``params``
+on some name; the answer holds only the ``/node:param`` names the role's ``params`` match."""
+
 
 def sees(role: Role | None, name: str) -> bool:
     """Whether an answer about the ROS graph may name ``name`` (a topic, service, action or
@@ -275,7 +281,7 @@ def rosapi_requirement(service: str, args: Mapping[str, Any]) -> tuple[str, str]
             return "params", f"{_abs(node)}:{param}"
         return "params", "*"
     if service == "/rosapi/get_param_names":
-        return "params", "*"
+        return PARAMETER_LISTING
     for key in _NAME_ARGS:
         value = args.get(key)
         if isinstance(value, str):

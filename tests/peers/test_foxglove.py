@@ -701,6 +701,48 @@ def test_call_the_role_may_not_make_never_runs(secured: tuple[BridgeProcess, Any
         admin.close()
 
 
+def test_parameter_lists_need_params(secured: tuple[BridgeProcess, Any], ros_node: Any,
+                                     topic: str) -> None:
+    """A role without params is not offered the parameter capabilities, and its
+    getParameters and subscribeParameterUpdates of every parameter are refused in the words
+    rosbridge refuses it /rosapi/get_param_names in (the request's id answered with no
+    values); a role with params on *_display names gets those names only."""
+    bridge, auth = secured
+    why = "forbidden: role tester may not params on any name"
+    assert why in _rosbridge_refusal(bridge, auth.tokens["tester"], "/rosapi/get_param_names")
+    tester = _as(secured, "tester")
+    try:
+        assert not {"parameters", "parametersSubscribe"} & set(
+            tester.info["serverInfo"]["capabilities"])
+        assert _parameter_values(tester, "all", "get_parameters", names=[]) == []
+        assert f"getParameters: {why}" in _wait_error(tester, "getParameters")
+        tester.request("subscribe_parameters", names=[])
+        assert f"subscribeParameterUpdates: {why}" in _wait_error(tester,
+                                                                  "subscribeParameterUpdates")
+    finally:
+        tester.close()
+    prefix = topic.strip("/").replace("/", "_")
+    ros_node.declare_parameter(prefix + "_display", 1.0)
+    ros_node.declare_parameter(prefix + "_secret", 2.0)
+    node = ros_node.get_fully_qualified_name()
+    prober = _as(secured, "prober")
+    try:
+        assert {"parameters", "parametersSubscribe"} <= set(
+            prober.info["serverInfo"]["capabilities"])
+        deadline = time.monotonic() + DEADLINE
+        for n in itertools.count():  # until the bridge sees the node's parameters
+            names = {p["name"] for p in _parameter_values(prober, f"all{n}", "get_parameters",
+                                                          names=[])}
+            if f"{node}.{prefix}_display" in names:
+                break
+            assert time.monotonic() < deadline, names
+        assert names and all(name.endswith("_display") for name in names), names
+    finally:
+        prober.close()
+        ros_node.undeclare_parameter(prefix + "_display")
+        ros_node.undeclare_parameter(prefix + "_secret")
+
+
 def test_follow_all_parameters(bridge: BridgeProcess, ros_node: Any, topic: str) -> None:
     """subscribeParameterUpdates with no names follows every parameter: a parameter changed
     in ROS comes as an update, named /node.param."""
