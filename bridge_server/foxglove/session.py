@@ -134,6 +134,8 @@ class FoxgloveSession:
         self._listeners: dict[Subscription, Callable[[RosMessage], None]] = {}
         self.parameter_names: set[str] | None = None  # None: not following; empty: all
         self.graph_seen: GraphState | None = None  # what it was told; None: not following
+        self.shown_channels: set[int] = set()  # the ids of the channels it was told of
+        self.shown_services: set[int] = set()
         self.uses_time = False
         self.gate = bridge.security.gate(self)
 
@@ -196,7 +198,7 @@ class FoxgloveSession:
             metadata={"ROS_DISTRO": "jazzy", "protocols": "rosbridge v2, foxglove.websocket.v1"},
             sessionId=f"{self.bridge.metrics.started:.0f}",
         ))
-        self.graph_changed(list(hub.channels.values()), [], list(hub.services.values()), [])
+        self.show_lists()
 
     async def cleanup(self) -> None:
         """Release subscriptions at once, publishers after the bridge's grace."""
@@ -246,23 +248,32 @@ class FoxgloveSession:
 
     def graph_changed(self, added: list[wire.Channel], removed: list[wire.Channel],
                       s_added: list[ServiceEntry], s_removed: list[ServiceEntry]) -> None:
-        """Channels and services came or went: tell the client of those its role allows."""
+        """Channels and services came or went: subscriptions to those gone end, and the
+        client's lists follow (:meth:`show_lists`)."""
+        for sub_id, (sub, channel) in list(self.subscriptions.items()):
+            if channel in removed:
+                del self.subscriptions[sub_id]
+                self._drop(sub)
+        self.show_lists()
+
+    def show_lists(self) -> None:
+        """Bring the client's channels and services to those of the hub its role lets it
+        see now (``subscribe`` on the topic, ``call_service`` on the service): withdraw what
+        it was told of that went or that it may no longer see, advertise the rest."""
         gate = self.gate
-        if removed:
-            self.send_text(wire.json_frame("unadvertise", channelIds=[c.id for c in removed]))
-            for sub_id, (sub, channel) in list(self.subscriptions.items()):
-                if channel in removed:
-                    del self.subscriptions[sub_id]
-                    self._drop(sub)
-        if s_removed:
-            self.send_text(wire.json_frame("unadvertiseServices",
-                                           serviceIds=[e.id for e in s_removed]))
-        shown = [c.to_json() for c in added if gate.forbids("subscribe", c.topic) is None]
-        if shown:
-            self.send_text(wire.json_frame("advertise", channels=shown))
-        services = [e.to_json() for e in s_added if gate.forbids("call_service", e.name) is None]
-        if services:
-            self.send_text(wire.json_frame("advertiseServices", services=services))
+        channels = {c.id: c for c in self.hub.channels.values()
+                    if gate.forbids("subscribe", c.topic) is None}
+        services = {e.id: e for e in self.hub.services.values()
+                    if gate.forbids("call_service", e.name) is None}
+        if gone := sorted(self.shown_channels - channels.keys()):
+            self.send_text(wire.json_frame("unadvertise", channelIds=gone))
+        if gone := sorted(self.shown_services - services.keys()):
+            self.send_text(wire.json_frame("unadvertiseServices", serviceIds=gone))
+        if new := [c.to_json() for i, c in channels.items() if i not in self.shown_channels]:
+            self.send_text(wire.json_frame("advertise", channels=new))
+        if new := [e.to_json() for i, e in services.items() if i not in self.shown_services]:
+            self.send_text(wire.json_frame("advertiseServices", services=new))
+        self.shown_channels, self.shown_services = set(channels), set(services)
 
     def show_graph(self, state: GraphState) -> None:
         """The connection graph is now ``state``: if the client follows it, a
@@ -635,8 +646,9 @@ class FoxgloveSession:
     # -- grants --------------------------------------------------------------------------------
 
     def recheck_grants(self) -> int:
-        """The role changed (SIGHUP): end the subscriptions and publishers it no longer
-        allows; how many ended."""
+        """The role changed (SIGHUP): end the subscriptions, publishers, time and graph
+        updates it no longer allows, and bring the client's channels and services to it; how
+        many ended."""
         ended = 0
         for sub_id, (sub, channel) in list(self.subscriptions.items()):
             why = self.gate.forbids("subscribe", channel.topic)
@@ -651,6 +663,7 @@ class FoxgloveSession:
                 self._unadvertise(wire.ClientUnadvertise((channel_id,)))
                 self.error(f"client channel {channel_id} to {ch.topic} ended: {why}")
                 ended += 1
+        self.show_lists()
         if self.uses_time and (why := self.gate.forbids("subscribe", CLOCK)) is not None:
             self.uses_time = False
             self.error(f"time from {CLOCK} ended: {why}")

@@ -927,46 +927,104 @@ def test_time_only_for_roles_that_may_subscribe_clock(secured: tuple[BridgeProce
         ros_node.destroy_publisher(clock)
 
 
+class _ReloadedRoles:
+    """A bridge whose auth file a test rewrites and reloads with SIGHUP: role ``watcher`` (whose
+    table the test writes) for principal ``dora``, role ``all`` for ``root``."""
+
+    def __init__(self, directory: Path, watcher: str) -> None:
+        from bridge_server.security.auth import hash_token, new_token
+
+        self.tokens = {"dora": new_token(), "root": new_token()}
+        self.path = directory / "auth.toml"
+        self._principals = "".join(
+            f'\n[principals.{n}]\nrole = "{"all" if n == "root" else "watcher"}"\n'
+            f'token_hash = "{hash_token(t)}"\n' for n, t in self.tokens.items())
+        self.write(watcher)
+        self.bridge = BridgeProcess(args=["--auth-file", str(self.path)]).start()
+        self.peers: list[PeerProcess] = []
+
+    def write(self, watcher: str) -> None:
+        """Give role ``watcher`` the table ``watcher`` (TOML lines) in the file."""
+        self.path.write_text('[roles.all]\nall = ["*"]\n[roles.watcher]\n' + watcher
+                             + self._principals)
+
+    def reload(self, watcher: str) -> str:
+        """Write ``watcher``'s table, send the bridge SIGHUP; its reload log line."""
+        import signal
+
+        self.write(watcher)
+        start = len(self.bridge.lines)
+        assert self.bridge.proc is not None
+        self.bridge.proc.send_signal(signal.SIGHUP)
+        return self.bridge.wait_for_line(r"reloaded the auth file", start=start)
+
+    def connect(self, name: str) -> PeerProcess:
+        """A Foxglove client with the token of ``name`` (closed by :meth:`close`)."""
+        self.peers.append(foxglove_peer(f"{self.bridge.url}/?token={self.tokens[name]}",
+                                        self.bridge))
+        return self.peers[-1]
+
+    def close(self) -> None:
+        """Close the clients and stop the bridge."""
+        for peer in self.peers:
+            peer.close()
+        self.bridge.stop()
+
+
+def test_sighup_brings_channels_and_services_to_the_role(tmp_path: Path, ros_node: Any,
+                                                         topic: str) -> None:
+    """When SIGHUP takes a topic and a service from a role, its Foxglove client is told they
+    went (unadvertise, unadvertiseServices); when a later SIGHUP gives them back, they are
+    advertised again with the same ids."""
+    from std_msgs.msg import String
+    from std_srvs.srv import SetBool
+
+    ros_node.create_publisher(String, topic, 10)
+    ros_node.create_service(SetBool, topic + "_srv", lambda req, res: res)
+    allowed = 'subscribe = ["*"]\ncall_service = ["*"]\n'
+    roles = _ReloadedRoles(tmp_path, allowed)
+    try:
+        dora = roles.connect("dora")
+        channel = dora.request("wait_channel", topic=topic, timeout_ms=int(DEADLINE * 1000))
+        service = dora.request("service", service=topic + "_srv",
+                               timeout_ms=int(DEADLINE * 1000))
+        line = roles.reload(allowed + f'deny.subscribe = ["{topic}"]\n'
+                            f'deny.call_service = ["{topic}_srv"]\n')
+        assert "0 grant(s)" in line  # nothing it held ended: it was only told of them
+        dora.wait_event(lambda e: e.get("event") == "unadvertise"
+                        and channel["id"] in e["channelIds"], DEADLINE, "unadvertise")
+        dora.wait_event(lambda e: e.get("event") == "unadvertiseServices"
+                        and service["id"] in e["serviceIds"], DEADLINE, "unadvertiseServices")
+        roles.reload(allowed)
+
+        def told(kind: str, key: str, id: int) -> int:
+            return sum(1 for e in dora.new_events() if e.get("event") == kind
+                       and any(x["id"] == id for x in e[key]))
+
+        wait_until(lambda: told("advertise", "channels", channel["id"]) == 2, DEADLINE,
+                   "the channel advertised again")
+        wait_until(lambda: told("advertiseServices", "services", service["id"]) == 2,
+                   DEADLINE, "the service advertised again")
+    finally:
+        roles.close()
+
+
 def test_sighup_ends_time_and_narrows_the_graph(tmp_path: Path, ros_node: Any,
                                                 topic: str) -> None:
     """After SIGHUP takes /clock and most introspection from a role, its Foxglove client hears
     that time ended and gets no more ticks (a client of another role still does), and its
     connection graph drops what it may no longer see; when introspection goes too, graph
     updates end. The client hears each."""
-    import signal
-
     from rosgraph_msgs.msg import Clock
     from std_msgs.msg import String
 
-    from bridge_server.security.auth import hash_token, new_token
-
-    tokens = {"dora": new_token(), "root": new_token()}
-    principals = "".join(f'\n[principals.{n}]\nrole = "{"all" if n == "root" else "watcher"}"\n'
-                         f'token_hash = "{hash_token(t)}"\n' for n, t in tokens.items())
-    path = tmp_path / "auth.toml"
-
-    def roles(watcher: str) -> None:
-        path.write_text('[roles.all]\nall = ["*"]\n[roles.watcher]\nsubscribe = ["*"]\n'
-                        + watcher + principals)
-
-    def reload() -> str:
-        start = len(bridge.lines)
-        assert bridge.proc is not None
-        bridge.proc.send_signal(signal.SIGHUP)
-        return bridge.wait_for_line(r"reloaded the auth file", start=start)
-
-    roles('introspection = ["*"]\n')
     clock = ros_node.create_publisher(Clock, "/clock", 10)
     ros_node.create_publisher(String, topic, 10)
-    bridge = BridgeProcess(args=["--auth-file", str(path)]).start()
-    peers: list[PeerProcess] = []
+    roles = _ReloadedRoles(tmp_path, 'subscribe = ["*"]\nintrospection = ["*"]\n')
     try:
-        def connect(name: str) -> PeerProcess:
-            peers.append(foxglove_peer(f"{bridge.url}/?token={tokens[name]}", bridge))
-            return peers[-1]
-
-        connect("root").request("wait_channel", topic="/clock", timeout_ms=int(DEADLINE * 1000))
-        dora, root = connect("dora"), connect("root")
+        roles.connect("root").request("wait_channel", topic="/clock",
+                                      timeout_ms=int(DEADLINE * 1000))
+        dora, root = roles.connect("dora"), roles.connect("root")
         assert "time" in dora.info["serverInfo"]["capabilities"]
         dora.request("subscribe_graph")
         dora.wait_event(_published_by(topic, ros_node.get_fully_qualified_name()), DEADLINE,
@@ -992,20 +1050,18 @@ def test_sighup_ends_time_and_narrows_the_graph(tmp_path: Path, ros_node: Any,
 
         tick(1)
         assert 1 in ticks(dora)
-        roles('introspection = ["/seen*"]\ndeny.subscribe = ["/clock"]\n')
-        assert "1 grant(s) the new roles no longer allow ended" in reload()
+        assert "1 grant(s) the new roles no longer allow ended" in roles.reload(
+            'subscribe = ["*"]\nintrospection = ["/seen*"]\ndeny.subscribe = ["/clock"]\n')
         _wait_error(dora, "time from /clock ended: role watcher may not subscribe on /clock")
         dora.wait_event(lambda e: e.get("event") == "connectionGraphUpdate"
                         and topic in e["update"]["removedTopics"], DEADLINE,
                         "the topic removed from the graph")
         tick(2)
         assert 2 not in ticks(dora)
-        roles('deny.subscribe = ["/clock"]\n')
-        assert "1 grant(s) the new roles no longer allow ended" in reload()
+        assert "1 grant(s) the new roles no longer allow ended" in roles.reload(
+            'subscribe = ["*"]\ndeny.subscribe = ["/clock"]\n')
         _wait_error(dora, "connection graph updates ended: role watcher may not introspection "
                           "on any name")
     finally:
-        for peer in peers:
-            peer.close()
-        bridge.stop()
+        roles.close()
         ros_node.destroy_publisher(clock)
