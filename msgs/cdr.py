@@ -12,6 +12,14 @@ One decoder is generated per type from ``_fields_and_types`` and compiled once
 ``array.frombytes`` (no Python object per element until ``tolist``), byte arrays are
 one slice. Malformed or truncated input raises :class:`CdrError` naming the field.
 
+Decoding costs time and memory in proportion to the bytes given, whatever they claim:
+a sequence's count (read from the bytes) or a fixed array's size is checked once, before
+any element is read, against what the bytes left could hold at the fewest bytes an
+element takes (:func:`min_size`: an empty message counts its one placeholder byte, a
+string its length and NUL), so a count of 2^32-1 in a few bytes fails at once
+("claims N elements ...") rather than looping without consuming input. A bounded
+sequence's count is checked against its bound too.
+
 :func:`encode` is the way back, from a typed message to the bytes rclpy's serializer
 gives (MockRos's ``cbor-raw`` and recordings made from it); it walks the fields
 rather than compiling, as it is not on a hot path.
@@ -33,7 +41,8 @@ from typing import Any
 
 from .runtime import Message, lookup_message
 
-__all__ = ["TYPED_ARRAY_TAGS", "CdrError", "Typed", "decode", "decoder_for", "encode"]
+__all__ = ["TYPED_ARRAY_TAGS", "CdrError", "Typed", "decode", "decoder_for", "encode",
+           "min_size"]
 
 _PRIMITIVES: dict[str, tuple[str, int]] = {  # rclpy's name -> (struct code, size)
     "boolean": ("?", 1),
@@ -59,7 +68,7 @@ TYPED_ARRAY_TAGS = {"int8": 72, "int16": 77, "uint16": 69, "int32": 78, "uint32"
 Typed = Callable[[int, bytes], Any]
 """What makes a typed array from its tag and bytes (``cbor2.CBORTag``)."""
 _LITTLE = sys.byteorder == "little"
-_TYPE = re.compile(r"^(?:sequence<(?P<seq>[^,>]+)(?:, *(?P<bound>\d+))?>|"
+_TYPE = re.compile(r"^(?:sequence<(?P<seq>[^,<>]+(?:<\d+>)?)(?:, *(?P<bound>\d+))?>|"
                    r"(?P<base>[^\[]+)(?:\[(?P<fixed>\d+)\])?)$")
 
 
@@ -83,12 +92,49 @@ def _fail(type_name: str, field: str, exc: Exception) -> CdrError:
     return CdrError(type_name, field, why)
 
 
+def min_size(spec: str, _depth: int = 0) -> int:
+    """The fewest bytes a field of IDL type ``spec`` takes in CDR, alignment aside (a lower
+    bound: padding only adds). An empty message takes its one placeholder byte, so every
+    type takes at least one; this is what a sequence's count is checked against."""
+    m = _TYPE.match(spec)
+    if m is None:
+        raise CdrError("?", "", f"unknown field type {spec!r}")
+    if m["seq"] is not None:
+        return 4
+    base, fixed = m["base"], m["fixed"]
+    count = int(fixed) if fixed is not None else 1
+    if base in _PRIMITIVES:
+        one = _PRIMITIVES[base][1]
+    elif base.startswith("wstring"):
+        one = 4  # the length; no terminator
+    elif base.startswith("string"):
+        one = 5  # the length and the NUL it counts
+    else:
+        if _depth > 32:  # ROS types do not nest this deep, and never in themselves
+            raise CdrError(base, "", "nested more than 32 levels deep")
+        fields = lookup_message(base)._fields_and_types
+        one = sum(min_size(f, _depth + 1) for f in fields.values()) if fields else 1
+    return count * max(one, 1)
+
+
+def _claims(count: int, each: int, left: int) -> ValueError:
+    """The error of a sequence or array whose elements cannot all be in the bytes left."""
+    return ValueError(f"claims {count} elements of at least {each} byte"
+                      f"{'s' if each > 1 else ''} each, but {max(left, 0)} bytes are left")
+
+
+def _over_bound(count: int, bound: int) -> ValueError:
+    return ValueError(f"claims {count} elements, over the sequence's bound of {bound}")
+
+
 def _wide(data: Any) -> str:
     """A wstring's characters: UTF-16 code units stored in 4 bytes each."""
     units = array.array("I")
     units.frombytes(bytes(data))
     if not _LITTLE:
         units.byteswap()
+    if units and max(units) > 0xFFFF:
+        raise ValueError(f"a wide character's code unit 0x{max(units):x} is over 0xffff")
     return array.array("H", units.tolist()).tobytes().decode("utf-16-le" if _LITTLE
                                                              else "utf-16-be")
 
@@ -102,7 +148,7 @@ class _Gen:
         self.ns: dict[str, Any] = {
             "unpack_from": struct.unpack_from, "array": array.array, "bytes": bytes,
             "LITTLE": _LITTLE, "CdrError": CdrError, "StructError": struct.error,
-            "wide": _wide, "typed": typed,
+            "wide": _wide, "typed": typed, "claims": _claims, "over_bound": _over_bound,
         }
         self.n = 0
 
@@ -144,6 +190,7 @@ class _Gen:
         """Decode ``fields`` into the dict ``out``: runs of same-size primitives with one
         ``unpack_from``, nested messages inline (no call per nested message)."""
         if not fields:  # an empty message has one placeholder byte
+            self.emit(depth, "if o >= len(b): raise IndexError")
             self.emit(depth, "o += 1")
         items = list(fields.items())
         i = 0
@@ -189,6 +236,9 @@ class _Gen:
             count = self.var()
             self.emit(depth, f"{count} = unpack_from('<I', b, o)[0]")
             self.emit(depth, "o += 4")
+            if m["bound"] is not None:
+                self.emit(depth, f"if {count} > {m['bound']}: "
+                                 f"raise over_bound({count}, {m['bound']})")
         elif m["fixed"] is not None:
             count = m["fixed"]
         if count is None:
@@ -200,7 +250,7 @@ class _Gen:
                 self.emit(depth, f"if {count}: o += (4 - o) % {size}")
             end = self.var()
             self.emit(depth, f"{end} = o + {count} * {size}")
-            self.emit(depth, f"if {end} > len(b): raise IndexError")
+            self.emit(depth, f"if {end} > len(b): raise claims({count}, {size}, len(b) - o)")
             if base in _BYTES or (self.typed is not None and base == "octet"):
                 self.emit(depth, f"{target} = bytes(b[o:{end}])")
             elif self.typed is not None and base in TYPED_ARRAY_TAGS:  # CDR is little-endian
@@ -219,6 +269,9 @@ class _Gen:
                 self.emit(depth, f"{target} = {arr}.tolist()")
             self.emit(depth, f"o = {end}")
             return
+        each = min_size(base)  # checked once, so the loop below ends within the bytes
+        self.emit(depth, f"if {count} * {each} > len(b) - o: "
+                         f"raise claims({count}, {each}, len(b) - o)")
         items = self.var()
         self.emit(depth, f"{items} = []")
         self.emit(depth, f"for _ in range({count}):")

@@ -90,7 +90,7 @@ def _scalar(base: str) -> st.SearchStrategy[Any]:
 
 
 def _field(spec: str) -> st.SearchStrategy[Any]:
-    seq = re.match(r"^sequence<([^,>]+)(?:, *(\d+))?>$", spec)
+    seq = re.match(r"^sequence<([^,<>]+(?:<\d+>)?)(?:, *(\d+))?>$", spec)
     fixed = re.match(r"^(.+)\[(\d+)\]$", spec)
     if seq:
         most = min(int(seq[2]), 3) if seq[2] else 3
