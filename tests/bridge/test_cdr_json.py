@@ -91,6 +91,29 @@ def test_a_nested_type_with_another_layout_has_no_fast_path(
     assert cdr_json.encoder_for(header, "std_msgs/msg/Header") is None
 
 
+@pytest.mark.parametrize(("type_name", "item"), [
+    ("sensor_msgs/msg/PointCloud2", "PointField"),  # sequence<sensor_msgs/PointField>
+    ("test_msgs/msg/Arrays", "BasicTypes"),  # test_msgs/BasicTypes[3]
+])
+def test_an_item_type_of_a_sequence_or_array_with_another_layout_has_no_fast_path(
+    monkeypatch: pytest.MonkeyPatch, type_name: str, item: str,
+) -> None:
+    """Items of sequences and fixed arrays of messages are compared too: the installed
+    PointCloud2 (or Arrays) on a robot whose PointField (BasicTypes) differs gets no fast
+    encoder, which would read its items with msgs' layout."""
+    rclpy_cls = _rclpy_class(type_name)
+    assert cdr_json.encoder_for(rclpy_cls, type_name) is not None
+    package = type_name.split("/msg/")[0] + ".msg"
+    real = sys.modules[package]
+    module = types.ModuleType(package)
+    module.__getattr__ = lambda name: getattr(real, name)  # type: ignore[method-assign]
+    setattr(module, item, _fake_rclpy_class({
+        **_rclpy_class(f"{package.replace('.', '/')}/{item}").get_fields_and_field_types(),
+        "extra": "uint8"}))
+    monkeypatch.setitem(sys.modules, package, module)
+    assert cdr_json.encoder_for(rclpy_cls, type_name) is None
+
+
 @pytest.mark.parametrize("size", [0, 1, 2, 3, 57, 4096, 640 * 480 * 3])
 def test_b64_text_is_standard_base64(size: int) -> None:
     """The SIMD base64 gives the standard library's text for bytes, arrays and views."""
