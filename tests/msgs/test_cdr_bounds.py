@@ -152,7 +152,7 @@ def test_any_bytes_against_any_type_decode_within_a_multiple_of_their_size(
 # -- the attacks of issue 39 ------------------------------------------------------------------
 
 
-def _bomb(count: int) -> bytes:
+def bomb(count: int) -> bytes:
     """The 73 bytes of an UnboundedSequences whose constants_values (of test_msgs/Constants,
     which has no fields) claims ``count`` elements."""
     before = list(UnboundedSequences._fields_and_types).index("constants_values")
@@ -163,7 +163,7 @@ def _bomb(count: int) -> bytes:
 def test_a_huge_count_of_empty_messages_fails_at_once_naming_the_field(count: int) -> None:
     """The Foxglove bomb: 73 bytes claiming 3x10^7 (or 2^32-1) empty messages fail at once,
     naming the field and the count, within the memory bound."""
-    data = _bomb(count)
+    data = bomb(count)
     assert len(data) == 73
     with bounded(PER_BYTE * len(data) + SLACK), pytest.raises(
             cdr.CdrError, match=rf"UnboundedSequences: cannot decode field 'constants_values' "
