@@ -13,7 +13,7 @@ from typing import Any
 
 from bridge_server.foxglove.hub import foxglove_schema
 from msgs import dynamic
-from tests.helpers import BridgeProcess
+from tests.helpers import BridgeProcess, peak_rss
 from tests.msgs.test_cdr_bounds import bomb
 from tests.peers import scenarios
 from tests.peers.peer import foxglove_peer
@@ -25,14 +25,6 @@ here; the issue's 3x10^7 took it to 1.9 GB and stalled it 6.7 s)."""
 RSS_BOUND = 64 * 2**20
 """How far the bridge's peak RSS may rise while it handles the bomb."""
 DEADLINE = scenarios.DEADLINE
-
-
-def _peak_rss(pid: int) -> int:
-    """The process's peak resident set size so far (VmHWM), in bytes."""
-    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
-        if line.startswith("VmHWM:"):
-            return int(line.split()[1]) * 1024
-    raise AssertionError("no VmHWM in /proc/<pid>/status")
 
 
 def test_cdr_bomb_gets_an_error_and_costs_the_bridge_no_memory(
@@ -67,7 +59,7 @@ def test_cdr_bomb_gets_an_error_and_costs_the_bridge_no_memory(
                              "test_msgs/msg/UnboundedSequences")))
         data = bomb(COUNT)
         assert len(data) == 73
-        peak_before = _peak_rss(bridge.proc.pid)
+        peak_before = peak_rss(bridge.proc.pid)
         attacker.request("publish_bytes", topic=bomb_topic, hex=data.hex())
         error = attacker.wait_event(lambda e: e.get("event") == "status"
                                     and e.get("level") == 2, DEADLINE, "a status error")
@@ -76,7 +68,7 @@ def test_cdr_bomb_gets_an_error_and_costs_the_bridge_no_memory(
             "published: test_msgs/msg/UnboundedSequences: cannot decode field "
             f"'constants_values' from CDR: claims {COUNT} elements of at least 1 byte each, "
             "but 5 bytes are left")
-        rise = _peak_rss(bridge.proc.pid) - peak_before
+        rise = peak_rss(bridge.proc.pid) - peak_before
         assert rise < RSS_BOUND, f"the bridge's peak RSS rose by {rise / 2**20:.0f} MiB"
         after = sent[0]
         viewer.wait_event(lambda e: e.get("event") == "message" and e["topic"] == beat_topic
