@@ -226,6 +226,10 @@ class Exporter:
         self._tasks: set[asyncio.Task[None]] = set()
         self._loop = asyncio.get_running_loop()
         self._runner: asyncio.Task[None] | None = None
+        self.uplinks: set[str] = set()
+        """The Zenoh ids of the routers this robot has a transport to now."""
+        self.uplink_lost = 0
+        """How many times the robot lost its last router."""
 
     # -- life ----------------------------------------------------------------------------------
 
@@ -255,11 +259,32 @@ class Exporter:
             live.declare_subscriber(f"{r}/{keys.ADVERTISE}/**", here(self._on_advertise),
                                     history=True),
             live.declare_token(f"{r}/{keys.ALIVE}"),
+            session.info.declare_transport_events_listener(here(self._on_transport),
+                                                           history=True),
         ]
         log.info("robot %s is on Zenoh (session %s)", self.robot, session.zid())
         while True:
             await asyncio.sleep(self.snapshot_interval)
             self._refresh_snapshot()
+
+    def _on_transport(self, event: zenoh.TransportEvent) -> None:
+        """The robot's own log says when its uplink goes and comes back (its last router
+        gone, or the first back): the relays' clients are told by their relays."""
+        zid = str(event.transport.zid)
+        if event.kind == zenoh.SampleKind.PUT:
+            first = not self.uplinks
+            self.uplinks.add(zid)
+            if first and self.uplink_lost:
+                log.info("robot %s: its uplink to the Zenoh network is back (router %s)",
+                         self.robot, zid)
+        elif zid in self.uplinks:
+            self.uplinks.discard(zid)
+            if not self.uplinks:
+                self.uplink_lost += 1
+                log.warning("robot %s: its uplink to the Zenoh network is gone (router %s "
+                            "closed or silent for the lease): ROS is served meanwhile, relays' "
+                            "clients are told it went away, and it dials again", self.robot,
+                            zid)
 
     def _on_loop(self, fn: Callable[[Any], None]) -> Callable[[Any], None]:
         """A Zenoh callback that hands its argument to ``fn`` on the event loop."""
