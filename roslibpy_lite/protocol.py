@@ -28,12 +28,13 @@ import sys
 from collections import OrderedDict
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, NoReturn
 
 from .exceptions import RemoteProtocolError
 from .ops import Fragment, Id, Op, encode, parse_op
 
 __all__ = [
+    "PIECE_COST",
     "TYPED_ARRAY_TAGS",
     "Protocol",
     "decode_frame",
@@ -162,6 +163,12 @@ class _Partial:
     size: int = 0
 
 
+PIECE_COST = 128
+"""The least a held fragment piece counts against ``max_fragment_bytes``, however short its
+data: a piece's own objects take about that much, so many one-character pieces are held to
+the bound as much as a few large ones (a piece of 128 characters or more counts its length)."""
+
+
 class Protocol:
     """One side of a rosbridge conversation, without I/O.
 
@@ -169,13 +176,16 @@ class Protocol:
         max_partial: how many fragmented ops may be incomplete at once; the
             oldest is dropped past that, and recorded in :attr:`evicted` as
             ``(id, pieces received, total)`` so the caller can tell the sender.
-        max_fragment_bytes: how large a reassembled op may grow.
+        max_fragment_bytes: how many characters of fragment data may be held, for all the
+            incomplete ops together (each piece counts at least :data:`PIECE_COST`); a piece
+            that would take them past it is refused, and its op dropped.
     """
 
     def __init__(self, *, max_partial: int = 64, max_fragment_bytes: int = 256 * 1024 * 1024):
         self.max_partial = max_partial
         self.max_fragment_bytes = max_fragment_bytes
         self._partial: OrderedDict[Id, _Partial] = OrderedDict()
+        self._held = 0  # what the pieces of every incomplete op count, together
         self.evicted: list[tuple[Id, int, int]] = []
 
     def receive(self, data: str | bytes) -> Op | None:
@@ -196,33 +206,34 @@ class Protocol:
         return op
 
     def receive_fragment(self, frag: Fragment) -> Op | None:
-        """Add one fragment; return the reassembled op once all pieces are in."""
+        """Add one fragment; return the reassembled op once all pieces are in.
+
+        Raises:
+            RemoteProtocolError: naming the fragment id (and the piece): a piece sent twice,
+                a ``total`` that changed, more held than ``max_fragment_bytes``, or a
+                reassembled op that is invalid. The op's pieces held so far are dropped.
+        """
         partial = self._partial.get(frag.id)
         if partial is None:
             partial = self._partial[frag.id] = _Partial(frag.total)
             while len(self._partial) > self.max_partial:
-                old_id, old = self._partial.popitem(last=False)
+                old_id = next(iter(self._partial))
+                old = self._drop(old_id)
                 self.evicted.append((old_id, len(old.pieces), old.total))
         elif partial.total != frag.total:
-            del self._partial[frag.id]
-            raise RemoteProtocolError(
-                f"fragment {frag.id!r}: total changed from {partial.total} to {frag.total}",
-                op="fragment",
-                id=frag.id,
-            )
-        if frag.num not in partial.pieces:
-            partial.size += len(frag.data)
+            self._fail(frag, f"total changed from {partial.total} to {frag.total}")
+        elif frag.num in partial.pieces:
+            self._fail(frag, f"piece {frag.num} of {frag.total} was sent twice")
+        cost = max(len(frag.data), PIECE_COST)
+        if self._held + cost > self.max_fragment_bytes:
+            self._fail(frag, f"piece {frag.num} would take the fragments held for this "
+                       f"connection past {self.max_fragment_bytes} bytes")
         partial.pieces[frag.num] = frag.data
-        if partial.size > self.max_fragment_bytes:
-            del self._partial[frag.id]
-            raise RemoteProtocolError(
-                f"fragment {frag.id!r}: reassembled op exceeds {self.max_fragment_bytes} bytes",
-                op="fragment",
-                id=frag.id,
-            )
+        partial.size += cost
+        self._held += cost
         if len(partial.pieces) < partial.total:
             return None
-        del self._partial[frag.id]
+        self._drop(frag.id)
         text = "".join(partial.pieces[i] for i in range(partial.total))
         try:
             inner = parse_op(decode_frame(text))
@@ -239,6 +250,23 @@ class Protocol:
                 id=frag.id,
             )
         return inner
+
+    def _drop(self, frag_id: Id) -> _Partial:
+        """Forget the pieces of ``frag_id``'s op (held: it is in ``_partial``)."""
+        partial = self._partial.pop(frag_id)
+        self._held -= partial.size
+        return partial
+
+    def _fail(self, frag: Fragment, why: str) -> NoReturn:
+        """Drop ``frag``'s op and raise the error naming it."""
+        if frag.id in self._partial:
+            self._drop(frag.id)
+        raise RemoteProtocolError(f"fragment {frag.id!r}: {why}", op="fragment", id=frag.id)
+
+    @property
+    def held_fragment_bytes(self) -> int:
+        """What the pieces of the incomplete ops count against ``max_fragment_bytes``."""
+        return self._held
 
     @property
     def pending_fragments(self) -> int:

@@ -13,7 +13,13 @@ from hypothesis import strategies as st
 
 from roslibpy_lite.exceptions import RemoteProtocolError
 from roslibpy_lite.ops import Fragment, Publish, encode, parse_op
-from roslibpy_lite.protocol import Protocol, decode_frame, decode_typed_array, split_fragments
+from roslibpy_lite.protocol import (
+    PIECE_COST,
+    Protocol,
+    decode_frame,
+    decode_typed_array,
+    split_fragments,
+)
 
 
 def test_text_frame_gives_an_op() -> None:
@@ -104,8 +110,50 @@ def test_partial_fragments_are_bounded() -> None:
 def test_reassembled_size_is_bounded() -> None:
     """A fragmented op may not grow past max_fragment_bytes."""
     proto = Protocol(max_fragment_bytes=10)
-    with pytest.raises(RemoteProtocolError, match="exceeds 10 bytes"):
+    with pytest.raises(RemoteProtocolError, match="past 10 bytes"):
         proto.receive_fragment(Fragment("f", "x" * 11, 0, 2))
+    assert proto.pending_fragments == 0 and proto.held_fragment_bytes == 0
+
+
+def test_a_piece_sent_twice_is_refused_naming_the_id_and_the_piece() -> None:
+    """A repeated piece number is an error naming the fragment id and the number; the op's
+    pieces are dropped, so nothing sent again is held without being counted."""
+    proto = Protocol(max_fragment_bytes=10_000)
+    proto.receive_fragment(Fragment("f", "x", 0, 3))
+    with pytest.raises(RemoteProtocolError, match="fragment 'f': piece 0 of 3 was sent twice") \
+            as info:
+        proto.receive_fragment(Fragment("f", "y" * 5000, 0, 3))
+    assert info.value.id == "f" and info.value.op == "fragment"
+    assert proto.pending_fragments == 0 and proto.held_fragment_bytes == 0
+
+
+def test_every_piece_held_counts_whatever_the_ids_and_numbers() -> None:
+    """The bound covers all incomplete ops together, each piece counted (tiny ones at least
+    PIECE_COST): pieces sent small then again large, under many ids, never hold more."""
+    limit = 64 * 1024
+    proto = Protocol(max_partial=16, max_fragment_bytes=limit)
+    refused = 0
+    for i in range(200):
+        for data in ("x", "y" * 4000):  # the attack of issue 39: small, then the same num big
+            try:
+                proto.receive_fragment(Fragment(f"f{i % 4}", data, i, 1000))
+            except RemoteProtocolError:
+                refused += 1
+            held = sum(len(p) for part in proto._partial.values() for p in part.pieces.values())
+            pieces = sum(len(part.pieces) for part in proto._partial.values())
+            assert held <= limit and pieces * PIECE_COST <= limit
+            assert proto.held_fragment_bytes <= limit
+    assert refused == 200
+
+
+def test_fragments_within_the_bound_still_reassemble() -> None:
+    """An op exactly as large as the bound, in many pieces, reassembles."""
+    op = Publish("/a", {"data": "x" * 5000})
+    text = encode(op)
+    pieces = split_fragments(text, PIECE_COST, "big")
+    proto = Protocol(max_fragment_bytes=len(pieces) * PIECE_COST)
+    results = [proto.receive(p) for p in pieces]
+    assert results[-1] == op and proto.held_fragment_bytes == 0
 
 
 _json = st.recursive(
