@@ -176,7 +176,7 @@ async def test_tokens_never_reach_the_log(make_bridge: Any, auth: AuthFile) -> N
 
 def test_redact_scrubs_every_carrier() -> None:
     """The log filter hides bearer headers, query tokens, auth-op macs and received frames."""
-    text = "Authorization: Bearer abc123 GET /?token=xyz&x=1 {'mac': 'm1'} {\"mac\": \"m2\"}"
+    text = "Authorization: Bearer abc123\nGET /?token=xyz&x=1 {'mac': 'm1'} {\"mac\": \"m2\"}"
     clean = redact(text)
     for secret in ("abc123", "xyz", "m1", "m2"):
         assert secret not in clean

@@ -1,0 +1,134 @@
+"""No secret reaches the bridge's log, at DEBUG too (where websockets logs each request line
+and header): query tokens however the key is spelled, Authorization values of any scheme,
+session tokens, and a refused request line quoted in a traceback."""
+
+from __future__ import annotations
+
+import asyncio
+from collections.abc import Iterator
+
+import pytest
+from websockets.asyncio.client import connect
+from websockets.exceptions import InvalidStatus
+
+from bridge_server.security import redact
+from roslibpy_lite.ops import RECEIVED_HEADER, SESSION_HEADER
+from tests.bridge.support import roundtrip
+from tests.helpers import BridgeProcess, WireClient
+from tests.security.support import AuthFile, wire
+
+
+def pieces(secret: str, size: int = 8) -> list[str]:
+    """Every ``size``-character slice of ``secret``."""
+    return [secret[i:i + size] for i in range(len(secret) - size + 1)]
+
+
+def assert_nowhere(secret: str, text: str) -> None:
+    """No 8-character piece of ``secret`` is in ``text``."""
+    leaked = [p for p in pieces(secret) if p in text]
+    assert not leaked, f"{len(leaked)} pieces of a secret in the log, e.g. {leaked[0]!r}"
+
+
+@pytest.fixture(scope="module")
+def debug_bridge(auth: AuthFile) -> Iterator[BridgeProcess]:
+    """A bridge requiring tokens, logging at DEBUG (websockets' request lines and headers)."""
+    proc = BridgeProcess(args=["--auth-file", str(auth.path), "--log-level", "DEBUG"]).start()
+    yield proc
+    proc.stop()
+
+
+async def test_query_tokens_in_any_spelling_never_reach_the_log(
+    debug_bridge: BridgeProcess, auth: AuthFile
+) -> None:
+    """``?%74oken=`` (accepted: the key is decoded) and ``&token=`` after another parameter
+    open sessions, and no piece of either token is in the DEBUG log."""
+    encoded, later = auth.tokens["viewer"], auth.tokens["tester"]
+    start = len(debug_bridge.lines)
+    for url in (f"{debug_bridge.url}/?%74oken={encoded}",
+                f"{debug_bridge.url}/?robot=r1&token={later}"):
+        client = WireClient(await connect(url, open_timeout=10))
+        await roundtrip(client)
+        await client.close()
+    log = "\n".join(debug_bridge.lines[start:])
+    assert "%74oken=<redacted>" in log and "&token=<redacted>" in log  # logged, scrubbed
+    assert "authenticated as viewer_user" in log and "authenticated as tester_user" in log
+    for token in (encoded, later):
+        assert_nowhere(token, log)
+
+
+async def test_authorization_values_of_any_scheme_never_reach_the_log(
+    debug_bridge: BridgeProcess, auth: AuthFile
+) -> None:
+    """A token under a scheme other than Bearer is refused (401) and not logged, and neither
+    is a Bearer token that was accepted."""
+    refused, accepted = auth.tokens["nothing"], auth.tokens["narrow"]
+    start = len(debug_bridge.lines)
+    with pytest.raises(InvalidStatus) as info:
+        await connect(debug_bridge.url, additional_headers={"Authorization": f"Token {refused}"},
+                      open_timeout=10)
+    assert info.value.response.status_code == 401
+    client = await wire(debug_bridge.url, accepted)
+    await roundtrip(client)
+    await client.close()
+    debug_bridge.wait_for_line("wrong token in the Authorization header", start=start)
+    log = "\n".join(debug_bridge.lines[start:])
+    assert "< Authorization: <redacted>" in log
+    assert_nowhere(refused, log)
+    assert_nowhere(accepted, log)
+
+
+async def test_session_tokens_never_reach_the_log(
+    debug_bridge: BridgeProcess, auth: AuthFile
+) -> None:
+    """The session token the bridge hands out, and the one a client resumes with, are in
+    neither direction's DEBUG header lines."""
+    token = auth.tokens["admin"]
+    start = len(debug_bridge.lines)
+    headers = {"Authorization": f"Bearer {token}", SESSION_HEADER: "new"}
+    first = await connect(debug_bridge.url, additional_headers=headers, open_timeout=10)
+    assert first.response is not None
+    session = first.response.headers[SESSION_HEADER]
+    assert len(session) >= 16
+    await roundtrip(WireClient(first))
+    first.transport.abort()  # the link drops: the session is kept for a resume
+    debug_bridge.wait_for_line("its session is kept", start=start)
+    headers.update({SESSION_HEADER: session, RECEIVED_HEADER: "1"})
+    again = await connect(debug_bridge.url, additional_headers=headers, open_timeout=10)
+    assert again.response is not None and RECEIVED_HEADER in again.response.headers
+    await roundtrip(WireClient(again), id="after")
+    await again.close()
+    debug_bridge.wait_for_line("resumed its session", start=start)
+    log = "\n".join(debug_bridge.lines[start:])
+    assert f"> {SESSION_HEADER}: <redacted>" in log and f"< {SESSION_HEADER}: <redacted>" in log
+    assert_nowhere(session, log)
+    assert_nowhere(token, log)
+
+
+async def test_a_refused_request_line_is_not_logged_with_its_token(
+    debug_bridge: BridgeProcess, auth: AuthFile
+) -> None:
+    """websockets refuses an HTTP/2.0 request quoting its request line in the exception it
+    logs with a traceback; the token in that line is scrubbed from the traceback too."""
+    token = auth.tokens["prober"]
+    start = len(debug_bridge.lines)
+    reader, writer = await asyncio.open_connection("127.0.0.1", debug_bridge.port)
+    writer.write(f"GET /?token={token} HTTP/2.0\r\nHost: x\r\n\r\n".encode())
+    await writer.drain()
+    async with asyncio.timeout(10):
+        await reader.read()  # the bridge answers and closes
+    writer.close()
+    line = debug_bridge.wait_for_line("unsupported protocol", start=start)
+    assert "token=<redacted>" in line
+    assert_nowhere(token, "\n".join(debug_bridge.lines[start:]))
+
+
+@pytest.mark.parametrize("url", [
+    "GET /?robot=r1&token=SECRET-0123456789abcdef HTTP/1.1",
+    "GET /?a=1&b=2&%74oken=SECRET-0123456789abcdef&c=3 HTTP/1.1",
+    "GET /?x=%26&TOKEN=SECRET-0123456789abcdef HTTP/1.1",
+], ids=["second", "encoded-third", "upper-case"])
+def test_redact_finds_a_query_token_in_any_position(url: str) -> None:
+    """A token parameter that is not first in the query is redacted, whole."""
+    clean = redact(url)
+    assert_nowhere("SECRET-0123456789abcdef", clean)
+    assert clean.endswith(("HTTP/1.1",)) and "=<redacted>" in clean
