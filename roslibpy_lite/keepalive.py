@@ -11,10 +11,17 @@ peer that is slowly receiving a large frame acknowledges it as it arrives, and a
 sends to us is evidently there; the few bytes of a ping being acknowledged are not counted,
 since whatever sits between us (a NAT box, a proxy, the far kernel of a hung link) may
 acknowledge those. Only when the peer has shown nothing for ``interval`` seconds is it
-pinged (its pong is data); when it has shown nothing for ``interval + timeout`` seconds the
-link is declared dead and the connection aborted, which the usual disconnect path handles
-(reconnect on the client, cleanup on the bridge). So a dead link is noticed within about
-``interval + timeout`` seconds, plus one check period (``interval / 2``).
+pinged (its pong is data); when it has then shown nothing for ``timeout`` seconds *since the
+ping was sent*, the link is declared dead and the connection aborted, which the usual
+disconnect path handles (reconnect on the client, cleanup on the bridge). So a dead link is
+noticed within about ``interval + timeout`` seconds, plus one check period (``interval / 2``).
+
+A silence is never judged before the peer has been asked: when our own side stalled (the
+event loop blocked, the process stopped) every peer looks silent for as long as the stall
+lasted, though none of them was asked anything. After such a stall each silent peer is
+pinged first, and dropped only if it then answers nothing for ``timeout`` seconds (a ping
+that was waiting to be sent when the stall came has its ``timeout`` counted again from the
+stall's end, once).
 
 Where ``TCP_INFO`` is not available (not Linux, not TCP), :func:`watch` returns ``False``
 and the caller keeps websockets' own ping/pong keepalive with the same figures.
@@ -82,8 +89,9 @@ async def watch(
     timeout: float = DEFAULT_TIMEOUT,
 ) -> bool:
     """Watch one connection until it dies (``on_dead(silence)`` is called and the transport
-    aborted) or this task is cancelled. ``ping`` sends a websocket ping; its pong is not
-    waited for here: it arrives as data, which :func:`tcp_state` sees.
+    aborted) or this task is cancelled. ``ping`` sends a websocket ping (websockets' ``ping``:
+    what it returns, or the future that gives, is resolved by the pong); its answer, or any
+    data the kernel saw arrive after it, shows the peer is there.
 
     Returns ``False`` at once if the transport cannot be judged (see the module docstring).
     """
@@ -95,37 +103,62 @@ async def watch(
     period = max(0.05, interval / 2)
     heard = loop.time()
     acked = state[1]
+    pinged: float | None = None  # when the ping not answered yet was sent
+    restarted = False  # whether its clock was restarted after a stall of ours
+    answered = [heard]  # when a pong last came
+    checked = heard
+
+    def pong() -> None:
+        answered[0] = loop.time()
+
     while not transport.is_closing():
         await asyncio.sleep(period)
         state = tcp_state(sock)
         if state is None:
             return True  # the socket is gone: the connection is ending anyway
         now = loop.time()
+        stalled = now - checked >= 2 * period  # our side was late: the loop was held up
+        checked = now
         data_age, now_acked = state
-        heard = max(heard, now - data_age)
+        heard = max(heard, now - data_age, answered[0])
         if now_acked - acked >= PROGRESS_BYTES:  # the peer is taking our data: busy, alive
             heard = now
         acked = now_acked
+        if pinged is not None and heard > pinged:
+            pinged = None  # heard of since the ping: it answered
         silence = now - heard
-        if silence >= interval + timeout:
-            on_dead(silence)
-            transport.abort()
-            return True
-        if silence >= interval:
+        if pinged is not None:
+            if stalled and not restarted:
+                # The ping may have left only now (it was queued behind the stall): its
+                # clock starts again, once, so a stall that goes on does not hide a dead peer.
+                pinged, restarted = now, True
+            elif now - pinged >= timeout:
+                on_dead(silence)
+                transport.abort()
+                return True
+        elif silence >= interval:
+            pinged, restarted = now, False
             with contextlib.suppress(Exception):
-                waiter = ping()
-                if asyncio.isfuture(waiter) or asyncio.iscoroutine(waiter):
-                    _retrieve(asyncio.ensure_future(waiter))
+                _retrieve(ping(), pong)
     return True
 
 
-def _retrieve(future: asyncio.Future[Any]) -> None:
-    """Collect a ping's outcome so that a connection closing meanwhile warns nobody."""
-    def done(f: asyncio.Future[Any]) -> None:
+def _retrieve(waiter: Any, pong: Callable[[], None]) -> None:
+    """Call ``pong`` when the answer to the ping ``waiter`` stands for comes (a future the
+    pong resolves, or a coroutine giving one, as websockets' ``ping``), and collect the
+    outcomes so that a connection closing meanwhile warns nobody."""
+    def answer(g: asyncio.Future[Any]) -> None:
+        if not g.cancelled() and g.exception() is None:
+            pong()
+
+    def sent(f: asyncio.Future[Any]) -> None:
         if f.cancelled() or f.exception() is not None:
             return
         inner = f.result()
-        if asyncio.isfuture(inner):  # websockets' ping() gives the pong's future
-            inner.add_done_callback(lambda g: g.cancelled() or g.exception())
+        if asyncio.isfuture(inner):
+            inner.add_done_callback(answer)
 
-    future.add_done_callback(done)
+    if asyncio.isfuture(waiter):
+        waiter.add_done_callback(answer)
+    elif asyncio.iscoroutine(waiter):
+        asyncio.ensure_future(waiter).add_done_callback(sent)

@@ -292,8 +292,8 @@ class Session:
         return received is not None and received.code in (1000, 1001)
 
     def _link_dead(self, silence: float) -> None:
-        log.warning("client %d: no sign of it for %.1f s (a silent link): dropping it and "
-                    "what it owned", self.sid, silence)
+        log.warning("client %d: no sign of it for %.1f s, nor an answer to a ping (a silent "
+                    "link): dropping it and what it owned", self.sid, silence)
 
     async def cleanup(self) -> None:
         """Release what this client owned: each capability's, then the calls in flight."""
