@@ -296,6 +296,20 @@ async def test_large_frames_before_auth_close_the_connection(auth_bridge: Bridge
     assert "16384" in info.value.rcvd.reason
 
 
+async def test_frames_up_to_the_message_size_once_an_auth_op_succeeded(
+    auth_bridge: BridgeProcess, auth: AuthFile
+) -> None:
+    """After a successful auth op (roslib's authenticate()), a frame over the 16 KiB
+    pre-authentication limit is read and answered, as with a token at the handshake."""
+    ws = await wire(auth_bridge.url)
+    await ws.send({"op": "auth", "mac": auth.tokens["viewer"]})
+    await ws.send({"op": "call_service", "service": "/rosapi/get_ros_version", "id": "big",
+                   "padding": "x" * 40_000})  # a frame of about 40 kB
+    response = await ws.expect(op="service_response", id="big")
+    assert response["result"] is True
+    await ws.close()
+
+
 async def test_fragments_before_auth_are_refused(auth_bridge: BridgeProcess) -> None:
     """Without a token, a fragment is not held for reassembly: the connection closes (1008)."""
     ws = await wire(auth_bridge.url)

@@ -237,3 +237,24 @@ async def test_frames_websockets_refuses_still_close_the_connection(frame: bytes
             await ws.wait_closed()
     assert seen == []
     assert ws.close_code == code
+
+
+async def test_a_new_message_inside_a_fragmented_one_closes_the_connection_with_1002() -> None:
+    """A text frame that is not final, then (read apart from it) a new whole text frame
+    instead of its continuation: websockets' protocol error (1002), and neither frame is
+    handed to the session, though the second looks like a whole message at a frame start."""
+    seen = Seen()
+    async with _server(seen) as (url, ended), connect(url, compression=None) as ws:
+        ws.transport.write(_client_frame(b'{"op": "first', head=0x01))  # text, FIN not set
+        async with asyncio.timeout(10):
+            await (await ws.ping())  # the fragment has been read: the new frame is read apart
+        ws.transport.write(_client_frame(b'{"op": "second"}'))
+        closed = asyncio.ensure_future(ended.wait())
+        handed = asyncio.ensure_future(seen.until(1))
+        await asyncio.wait([closed, handed], timeout=10, return_when=asyncio.FIRST_COMPLETED)
+        handed.cancel()
+        assert seen == []
+        async with asyncio.timeout(10):
+            await closed
+            await ws.wait_closed()
+    assert ws.close_code == 1002

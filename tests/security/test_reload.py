@@ -19,7 +19,7 @@ from bridge_server.security.auth import (
     remove_principal,
 )
 from tests.bridge.support import roundtrip
-from tests.helpers import ROOT, BridgeProcess, ros_env
+from tests.helpers import ROOT, BridgeProcess, WireClient, ros_env
 from tests.security.support import ROLES, wire
 
 TWIST = "geometry_msgs/msg/Twist"
@@ -50,6 +50,18 @@ def reload(bridge: BridgeProcess, pattern: str) -> str:
     return bridge.wait_for_line(pattern, start=start)
 
 
+async def reload_revoking(bridge: BridgeProcess, client: WireClient, name: str) -> None:
+    """SIGHUP the bridge, whose new file has 2 principals: ``client``'s session, principal
+    ``name``'s, is the one closed as revoked (1008)."""
+    line = reload(bridge, r"reloaded the auth file")
+    assert "2 principal(s)" in line and "1 session(s) closed as revoked" in line
+    with pytest.raises(ConnectionClosed) as closed:
+        while True:
+            await client.recv()
+    assert closed.value.rcvd is not None and closed.value.rcvd.code == 1008
+    assert f"credentials revoked: principal {name}" in closed.value.rcvd.reason
+
+
 async def test_sighup_reloads_principals_and_roles(auth_path: Path, bridges: list[BridgeProcess]) -> None:
     """A removed principal's session is closed, a changed role applies at once, a new token works."""
     alice = add_principal(auth_path, "alice", "tester")
@@ -71,13 +83,7 @@ async def test_sighup_reloads_principals_and_roles(auth_path: Path, bridges: lis
     auth_path.write_text(text.replace('[principals.bob]\nrole = "viewer"',
                                       '[principals.bob]\nrole = "tester"'))
 
-    line = reload(bridge, r"reloaded the auth file")
-    assert "2 principal(s)" in line and "1 session(s) closed as revoked" in line
-    with pytest.raises(ConnectionClosed) as closed:
-        while True:
-            await a.recv()
-    assert closed.value.rcvd is not None and closed.value.rcvd.code == 1008
-    assert "credentials revoked: principal alice" in closed.value.rcvd.reason
+    await reload_revoking(bridge, a, "alice")
     await b.send({"op": "advertise", "topic": "/cmd_vel", "type": TWIST, "id": "after"})
     await roundtrip(b)
     assert not [op for op in b.backlog if op.get("id") == "after"]  # now a tester: allowed
@@ -87,6 +93,40 @@ async def test_sighup_reloads_principals_and_roles(auth_path: Path, bridges: lis
     assert not any(token[:12] in log for token in (alice, bob, carol))
     await b.close()
     await c.close()
+
+
+async def test_a_token_rotated_under_the_same_name_revokes_the_old_sessions(
+    auth_path: Path, bridges: list[BridgeProcess]
+) -> None:
+    """alice's token replaced (remove-principal, then add-principal alice with the same role)
+    and SIGHUP: her session on the old token is closed as revoked, bob's goes on, the new
+    token opens a session and the old one is refused."""
+    old = add_principal(auth_path, "alice", "tester")
+    bob = add_principal(auth_path, "bob", "viewer")
+    bridge = BridgeProcess(args=["--auth-file", str(auth_path)]).start()
+    bridges.append(bridge)
+    a = await wire(bridge.url, old)
+    b = await wire(bridge.url, bob)
+    await roundtrip(a)
+
+    def cli(*args: str) -> str:
+        done = subprocess.run([sys.executable, "-m", "bridge_server", *args, "--auth-file",
+                               str(auth_path)], cwd=ROOT, env=ros_env(), capture_output=True,
+                              text=True, timeout=60, check=True)
+        return done.stdout.strip()
+
+    cli("remove-principal", "alice")
+    new = cli("add-principal", "alice", "--role", "tester")
+    assert new and new != old
+    await reload_revoking(bridge, a, "alice")
+    await roundtrip(b)
+    again = await wire(bridge.url, new)
+    await roundtrip(again)
+    with pytest.raises(InvalidStatus) as refused:
+        await wire(bridge.url, old)
+    assert refused.value.response.status_code == 401
+    await again.close()
+    await b.close()
 
 
 async def test_an_auth_file_that_does_not_load_changes_nothing(
