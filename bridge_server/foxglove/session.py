@@ -44,6 +44,7 @@ from ..security.names import InvalidNameError, check_name, full_name
 from ..security.permissions import LISTING, PARAMETER_LISTING
 from ..session.calls import Calls
 from ..session.limits import over_cap
+from ..session.liveness import watch_link
 from ..session.outbox import Outbox, Subscription
 from . import wire
 from .hub import CLOCK, GraphState, message_class
@@ -167,6 +168,8 @@ class FoxgloveSession:
         if limit_frames is not None:  # frames a little over the limit get a status, not a close
             limit_frames(self.bridge.config.max_message_size + OVERSIZE_GRACE)
         writer = asyncio.create_task(self.outbox.writer(), name=f"foxglove-{self.sid}-writer")
+        cfg = self.bridge.config
+        watcher = watch_link(self.ws, self.sid, cfg.keepalive_interval, cfg.keepalive_timeout)
         try:
             self._hello()
             async for frame in self.ws:
@@ -174,6 +177,8 @@ class FoxgloveSession:
         except ConnectionClosed:
             pass
         finally:
+            if watcher is not None:
+                watcher.cancel()
             writer.cancel()
             with contextlib.suppress(asyncio.CancelledError, ConnectionClosed):
                 await writer

@@ -47,7 +47,7 @@ from typing import TYPE_CHECKING, Any, ClassVar, Protocol
 
 from websockets.exceptions import ConnectionClosed
 
-from roslibpy_lite import keepalive, ops
+from roslibpy_lite import ops
 from roslibpy_lite.exceptions import ProtocolError
 from roslibpy_lite.ops import ACKS_HEADER, parse_op
 from roslibpy_lite.protocol import Protocol as FrameProtocol
@@ -56,6 +56,7 @@ from roslibpy_lite.protocol import decode_frame
 from ..interfaces import BridgeError
 from .actions import SessionActions
 from .calls import Calls
+from .liveness import watch_link
 from .outbox import DEFAULT_QUEUE_LENGTH, Outbox
 from .resume import ACK_INTERVAL
 from .services import SessionServices
@@ -213,12 +214,7 @@ class Session:
         """Read and carry out the frames of the current connection until it closes."""
         writer = asyncio.create_task(self.outbox.writer(), name=f"session-{self.sid}-writer")
         cfg = self.bridge.config
-        watcher = None
-        transport = getattr(self.ws, "transport", None)
-        if cfg.keepalive_interval and keepalive.supported_here() and transport is not None:
-            watcher = asyncio.create_task(keepalive.watch(
-                transport, self.ws.ping, self._link_dead, cfg.keepalive_interval,
-                cfg.keepalive_timeout), name=f"session-{self.sid}-keepalive")
+        watcher = watch_link(self.ws, self.sid, cfg.keepalive_interval, cfg.keepalive_timeout)
         # Each whole message with nothing queued before it is handled as it is read (no
         # turn of the loop to wake this task); the others come through the loop below.
         hand_over = getattr(self.ws, "hand_frames_to", None)
@@ -290,10 +286,6 @@ class Session:
         protocol = getattr(self.ws, "protocol", None)
         received = getattr(protocol, "close_rcvd", None)
         return received is not None and received.code in (1000, 1001)
-
-    def _link_dead(self, silence: float) -> None:
-        log.warning("client %d: no sign of it for %.1f s, nor an answer to a ping (a silent "
-                    "link): dropping it and what it owned", self.sid, silence)
 
     async def cleanup(self) -> None:
         """Release what this client owned: each capability's, then the calls in flight."""

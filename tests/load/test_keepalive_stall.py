@@ -12,6 +12,7 @@ from typing import Any
 
 from websockets.asyncio.client import connect as ws_connect
 from websockets.asyncio.server import ServerConnection, serve
+from websockets.typing import Subprotocol
 
 import roslibpy_lite
 from bench.linkproxy import LinkProxy
@@ -76,6 +77,26 @@ async def test_a_stall_of_the_bridge_drops_only_the_client_that_does_not_answer(
             assert not [x for x in later if "connected from" in x], "a client reconnected"
             await raw.close()
             gone.transport.abort()
+
+
+async def test_the_bridge_drops_a_foxglove_client_behind_a_silent_link(
+    make_bridge: Any,
+) -> None:
+    """A Foxglove client (foxglove.websocket.v1 on the same port) behind a blackholed link is
+    pinged and dropped by the bridge's keepalive like a rosbridge client."""
+    bridge = make_bridge()
+    with LinkProxy(("127.0.0.1", bridge.port)) as proxy:
+        start = len(bridge.lines)
+        ws = await ws_connect(f"ws://127.0.0.1:{proxy.port}", ping_interval=None,
+                              subprotocols=[Subprotocol("foxglove.websocket.v1")],
+                              open_timeout=10)
+        assert '"serverInfo"' in str(await asyncio.wait_for(ws.recv(), 10))
+        sid = await _sid(bridge, start)
+        start = len(bridge.lines)
+        proxy.blackhole()
+        await asyncio.to_thread(bridge.wait_for_line, rf"client {sid}: no sign of it", 20, start)
+        await asyncio.to_thread(bridge.wait_for_line, rf"client {sid} .*disconnected", 10, start)
+        ws.transport.abort()
 
 
 async def test_a_ping_held_up_by_a_stall_of_ours_gets_its_whole_timeout() -> None:
