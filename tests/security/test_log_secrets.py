@@ -5,6 +5,8 @@ session tokens, and a refused request line quoted in a traceback."""
 from __future__ import annotations
 
 import asyncio
+import re
+import sys
 from collections.abc import Iterator
 
 import pytest
@@ -14,7 +16,9 @@ from websockets.exceptions import InvalidStatus
 from bridge_server.security import redact
 from roslibpy_lite.ops import RECEIVED_HEADER, SESSION_HEADER
 from tests.bridge.support import roundtrip
-from tests.helpers import BridgeProcess, WireClient
+from tests.helpers import BridgeProcess, WireClient, ros_env
+from tests.relay.procs import Proc
+from tests.relay.support import free_port
 from tests.security.support import AuthFile, wire
 
 
@@ -120,6 +124,43 @@ async def test_a_refused_request_line_is_not_logged_with_its_token(
     line = debug_bridge.wait_for_line("unsupported protocol", start=start)
     assert "token=<redacted>" in line
     assert_nowhere(token, "\n".join(debug_bridge.lines[start:]))
+
+
+async def test_the_relay_logs_no_secret_either(auth: AuthFile) -> None:
+    """roslibpy-lite-relay at DEBUG (the same log filter): a percent-encoded query token, a
+    token after another parameter, a non-Bearer Authorization and a session token, each sent
+    to it, are nowhere in its log."""
+    relay = Proc([sys.executable, "-m", "bridge_server.zenoh.relay", "--port", "0",
+                  "--zenoh-listen", f"tcp/127.0.0.1:{free_port()}", "--auth-file",
+                  str(auth.path), "--log-level", "DEBUG"], ros_env())
+    try:
+        ready = re.compile(r"relay listening on ws://127\.0\.0\.1:(\d+)")
+        port = int((await asyncio.to_thread(relay.wait_for, ready)).group(1))
+        base = f"ws://127.0.0.1:{port}/robot1"
+        secrets = {"query": auth.tokens["viewer"], "later": auth.tokens["tester"],
+                   "scheme": auth.tokens["nothing"], "session": "Zq3vLr8TnW2xKp5sYb7dHc"}
+        attempts = [
+            (f"{base}/?%74oken={secrets['query']}", {}),
+            (f"{base}/?x=1&token={secrets['later']}", {}),
+            (base, {"Authorization": f"Token {secrets['scheme']}"}),
+            (base, {"Authorization": f"Bearer {secrets['later']}",
+                    SESSION_HEADER: secrets["session"], RECEIVED_HEADER: "0"}),
+        ]
+        for url, headers in attempts:
+            with pytest.raises(InvalidStatus):  # no robot1 on this relay's Zenoh (or 401)
+                await connect(url, additional_headers=headers, open_timeout=10)
+
+        def answered() -> bool:  # the relay has logged all four handshakes, to the end
+            return sum("HTTP response sent" in line for line in relay.lines) >= len(attempts)
+
+        with relay.seen:
+            assert relay.seen.wait_for(answered, 10), "\n".join(relay.lines)
+        log = "\n".join(relay.lines)
+        assert "%74oken=<redacted>" in log and f"< {SESSION_HEADER}: <redacted>" in log
+        for secret in secrets.values():
+            assert_nowhere(secret, log)
+    finally:
+        relay.stop()
 
 
 @pytest.mark.parametrize("url", [
