@@ -47,8 +47,9 @@ _TOKEN_PATTERNS = (
     re.compile(r"(?m)^(< (?:TEXT|BINARY|CONT) ).+?(?= \[[^\]]*\]$)"),
 )
 
-_QUERY_PARAM = re.compile(r"([?&;])([^=&;?\s'\"#]*)=([^&;\s'\"#]*)")
-"""One ``key=value`` of a query string (the key as sent, percent-encoded or not)."""
+_QUERY_PARAM = re.compile(r"([?&;])([^=&;?\s'\"#]*)=([^&# \r\n]*)")
+"""One ``key=value`` of a query string (the key as sent, percent-encoded or not). The value
+runs to the next ``&`` as the bridge reads it: a ``;``, a quote or a tab is part of it."""
 
 
 def _redact_param(match: re.Match[str]) -> str:

@@ -163,13 +163,18 @@ async def test_the_relay_logs_no_secret_either(auth: AuthFile) -> None:
         relay.stop()
 
 
-@pytest.mark.parametrize("url", [
-    "GET /?robot=r1&token=SECRET-0123456789abcdef HTTP/1.1",
-    "GET /?a=1&b=2&%74oken=SECRET-0123456789abcdef&c=3 HTTP/1.1",
-    "GET /?x=%26&TOKEN=SECRET-0123456789abcdef HTTP/1.1",
-], ids=["second", "encoded-third", "upper-case"])
-def test_redact_finds_a_query_token_in_any_position(url: str) -> None:
-    """A token parameter that is not first in the query is redacted, whole."""
+SECRET = "SECRET-0123456789abcdef"
+
+
+@pytest.mark.parametrize(("url", "secret"), [
+    (f"GET /?robot=r1&token={SECRET} HTTP/1.1", SECRET),
+    (f"GET /?a=1&b=2&%74oken={SECRET}&c=3 HTTP/1.1", SECRET),
+    (f"GET /?x=%26&TOKEN={SECRET} HTTP/1.1", SECRET),
+    ("GET /?a=1&token=SECRET;0123'456789\tabcdef HTTP/1.1", "SECRET;0123'456789\tabcdef"),
+], ids=["second", "encoded-third", "upper-case", "semicolon-quote-tab"])
+def test_redact_finds_a_query_token_in_any_position(url: str, secret: str) -> None:
+    """A token parameter that is not first in the query is redacted, its whole value as the
+    bridge reads it (to the next ``&``)."""
     clean = redact(url)
-    assert_nowhere("SECRET-0123456789abcdef", clean)
-    assert clean.endswith(("HTTP/1.1",)) and "=<redacted>" in clean
+    assert_nowhere(secret, clean)
+    assert clean.endswith("HTTP/1.1") and "=<redacted>" in clean
