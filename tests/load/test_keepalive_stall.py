@@ -101,8 +101,8 @@ async def test_the_bridge_drops_a_foxglove_client_behind_a_silent_link(
 
 async def test_a_ping_held_up_by_a_stall_of_ours_gets_its_whole_timeout() -> None:
     """keepalive.watch over a real link with 0.2 s latency each way: a ping asked for just
-    before our event loop stalls 1.5 s leaves only when the stall ends, and the peer's answer,
-    0.4 s later, keeps it (the timeout, 1 s, counts again from the stall's end)."""
+    before our event loop stalls 2.5 s leaves only when the stall ends, and the peer's answer,
+    0.4 s later, keeps it (the timeout, 2 s, counts again from the stall's end)."""
     accepted: asyncio.Queue[ServerConnection] = asyncio.Queue()
 
     async def handler(ws: ServerConnection) -> None:
@@ -124,7 +124,7 @@ async def test_a_ping_held_up_by_a_stall_of_ours_gets_its_whole_timeout() -> Non
                 nonlocal pings
                 pings += 1
                 if pings == 1:
-                    time.sleep(1.5)  # the loop held up between the ping's asking and sending
+                    time.sleep(2.5)  # the loop held up between the ping's asking and sending
                 elif pings == 2:
                     judged.set()
                 return await ws.ping()
@@ -133,7 +133,7 @@ async def test_a_ping_held_up_by_a_stall_of_ours_gets_its_whole_timeout() -> Non
                 dead.append(silence)
                 judged.set()
 
-            watcher = asyncio.create_task(keepalive.watch(ws.transport, ping, on_dead, 0.4, 1.0))
+            watcher = asyncio.create_task(keepalive.watch(ws.transport, ping, on_dead, 0.4, 2.0))
             try:
                 async with asyncio.timeout(10):
                     await judged.wait()
