@@ -75,6 +75,30 @@ async def test_images_and_clouds_from_rclpy_are_the_same_arrays(
         np.testing.assert_array_equal(points[name], POINTS[name])
 
 
+BAYER = np.random.default_rng(5).integers(0, 65535, size=(H, W), endpoint=True,
+                                          dtype=np.uint16)
+BAYER[0, :4] = [0x0102, 0xFF00, 0x00FF, 0xFFFF]  # both bytes of each pixel matter
+
+
+@pytest.mark.parametrize(("compression", "typed", "big"), [
+    ("none", False, False), ("cbor", True, False), ("none", False, True)])
+async def test_a_16_bit_bayer_image_is_uint16_pixels(
+    client: Client, ros_node: Any, topic: str, compression: str, typed: bool, big: bool
+) -> None:
+    """An rclpy bayer_rggb16 Image reaches to_numpy as one uint16 per pixel with the values
+    published (little- and big-endian), not as its bytes read as 8-bit pixels."""
+    pub = ros_node.create_publisher(RosImage, topic, 10)
+    frame = RosImage(height=H, width=W, encoding="bayer_rggb16", step=W * 2,
+                     is_bigendian=int(big))
+    frame.data = BAYER.astype(">u2" if big else "<u2").tobytes()
+    image_type: Any = Image if typed else "sensor_msgs/msg/Image"
+    async with client.subscribe(topic, image_type, compression=compression) as sub:
+        image = await first_message(lambda: pub.publish(frame), sub)
+    pixels = to_numpy(image)
+    assert pixels.shape == (H, W) and pixels.dtype.kind == "u" and pixels.dtype.itemsize == 2
+    np.testing.assert_array_equal(pixels, BAYER)
+
+
 def test_a_topic_of_another_tools_mcap_file_as_a_table(tmp_path: Path) -> None:
     """bag_to_dataframe reads one topic of a file mcap_ros2 wrote: header stamps index the
     IMU's rows; a topic without headers is indexed by when it was recorded."""
