@@ -190,6 +190,17 @@ def test_to_dataframe_indexes_by_header_stamp_else_the_times_given() -> None:
         to_dataframe(plain, times=[1.0, 2.0])
 
 
+def test_messages_with_and_without_a_header_are_indexed_by_the_times_given() -> None:
+    """When only some messages have a header stamp, the index is the given times, all of
+    them (not the stamps with gaps); without times it is 0..n."""
+    mixed = [_imu(0), {"angular_velocity": {"x": 5.0}}, _imu(2).to_json()]
+    frame = to_dataframe(mixed, ["angular_velocity.x"], times=[5.0, 6.0, 7.5])
+    assert list(frame.index) == [pd.Timestamp(t, unit="s", tz="UTC") for t in (5.0, 6.0, 7.5)]
+    assert frame.index.name == "time"
+    assert list(frame["angular_velocity.x"]) == [0.0, 5.0, 2.0]
+    assert list(to_dataframe(mixed, ["angular_velocity.x"]).index) == [0, 1, 2]
+
+
 def test_stamps_as_seconds_and_datetimes() -> None:
     """A Time (typed, dict, or ROS 1's secs/nsecs) as seconds and as a UTC datetime."""
     stamp = _imu(0, 1_700_000_000).header.stamp
