@@ -190,6 +190,28 @@ async def test_the_same_callback_subscribed_again_runs_once() -> None:
         assert newer in ros.subscriptions() and new not in ros.subscriptions()
 
 
+async def test_the_same_method_of_two_objects_is_two_callbacks() -> None:
+    """``a.on_msg`` and ``b.on_msg`` (one class, two instances) on one topic are different
+    callbacks: no warning, both subscriptions stay and each runs."""
+
+    class Counter:
+        def __init__(self) -> None:
+            self.got: list[int] = []
+
+        def on_msg(self, msg: dict[str, Any]) -> None:
+            self.got.append(msg["data"])
+
+    a, b = Counter(), Counter()
+    async with MockRos() as ros:
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            first = await ros.subscribe("/n", INT, a.on_msg)
+            second = await ros.subscribe("/n", INT, b.on_msg)
+        ros.inject("/n", {"data": 3})
+        assert (a.got, b.got) == ([3], [3])
+        assert ros.subscriptions() == [first, second]
+
+
 async def test_byte_arrays_are_bytes_under_json() -> None:
     """A uint8[] field arrives as bytes in a dict (JSON carries base64 text); such a dict
     can be published again as it is."""
