@@ -138,6 +138,27 @@ def test_rerun_connect_leaves_one_client_on_the_bridge(
     assert threading.active_count() == threads
 
 
+async def test_connect_after_close_replaces_nothing(bridge: BridgeProcess) -> None:
+    """Connect, close, connect again to the same URL (replace on, as in a notebook): the
+    closed client is not reported as replaced, no warning."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        closed = await roslibpy_lite.connect(bridge.url, replace=True)
+        await closed.close()
+        async with roslibpy_lite.connect(bridge.url, replace=True) as again:
+            assert again.is_connected and closed.state is ConnectionState.CLOSED
+
+
+def test_blocking_connect_after_close_replaces_nothing(bridge: BridgeProcess) -> None:
+    """sync.connect, close, sync.connect again (a notebook's cells): no warning."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        closed = sync.connect(bridge.url)
+        closed.close()
+        with sync.connect(bridge.url) as again:
+            assert again.is_connected and closed.state is ConnectionState.CLOSED
+
+
 @pytest.mark.parametrize("compression", ["none", "cbor", "cbor-raw"])
 async def test_byte_arrays_are_bytes_whatever_the_compression(
     bridge: BridgeProcess, ros_node: Any, topic: str, compression: str
