@@ -2,13 +2,16 @@
 
 from __future__ import annotations
 
+import contextlib
 import json
 import re
 import shutil
 import signal
+import socket
 import subprocess
 import sys
 import tomllib
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
@@ -257,28 +260,16 @@ def _unit_command(tmp: Path, port: int, with_log_dirs: bool = True) -> tuple[lis
 
 
 def _free_port() -> int:
-    import socket
-
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         return int(s.getsockname()[1])
 
 
-def test_unit_command_serves_as_a_user_without_a_home(tmp_path: Path) -> None:
-    """The unit's exact ExecStart, with its Environment and log directories, starts the bridge
-    when HOME is not writable (a system user without a home), serves wss with a token, and
-    ROS writes its logs to LogsDirectory; without those directories rclpy dies as reported."""
-    import asyncio
-    import signal
-    import ssl
-
-    import roslibpy_lite
-
-    port = _free_port()
-    argv, env = _unit_command(tmp_path, port)
-    assert "--auth-file" in argv and "--certfile" in argv  # safe as shipped
-    assert env["ROS_AUTOMATIC_DISCOVERY_RANGE"] == "LOCALHOST"
-    proc = subprocess.Popen(argv, cwd=tmp_path, env=env, stdout=subprocess.PIPE,
+@contextlib.contextmanager
+def _serving(argv: list[str], env: dict[str, str], cwd: Path) -> Iterator[subprocess.Popen[str]]:
+    """``argv`` (the unit's command) running, once it printed its ready line (every worker
+    listens); stopped with SIGTERM afterwards."""
+    proc = subprocess.Popen(argv, cwd=cwd, env=env, stdout=subprocess.PIPE,
                             stderr=subprocess.STDOUT, text=True)
     try:
         assert proc.stdout is not None
@@ -289,6 +280,49 @@ def test_unit_command_serves_as_a_user_without_a_home(tmp_path: Path) -> None:
                 break
         else:
             pytest.fail("the unit's command exited:\n" + "".join(lines))
+        yield proc
+    finally:
+        proc.send_signal(signal.SIGTERM)
+        proc.wait(15)
+        if proc.stdout is not None:
+            proc.stdout.close()
+
+
+def test_unit_allows_the_address_families_its_command_uses(tmp_path: Path) -> None:
+    """The unit's exact ExecStart serving (with --workers: the workers' own sockets are unix
+    sockets): every address family its processes hold sockets of, AF_UNIX among them, is in
+    RestrictAddressFamilies, which systemd would refuse them otherwise."""
+    import psutil
+
+    service = _unit_sections(UNIT.read_text())["Service"]
+    allowed = set(" ".join(service["RestrictAddressFamilies"]).split())
+    argv, env = _unit_command(tmp_path, _free_port())
+    with _serving(argv, env, tmp_path) as proc:
+        top = psutil.Process(proc.pid)
+        held = [c for p in [top, *top.children(recursive=True)]
+                for c in p.net_connections(kind="all")]
+    used = {socket.AddressFamily(c.family).name for c in held}
+    assert used <= allowed, f"the bridge uses {sorted(used - allowed)}, the unit refuses them"
+    if "--workers" in argv:
+        workers = [c.laddr for c in held if c.family == socket.AF_UNIX
+                   and re.search(r"/(worker|forward)-\d+\.sock$", str(c.laddr))]
+        assert workers, f"no worker's unix socket among {sorted(map(str, held))}"
+
+
+def test_unit_command_serves_as_a_user_without_a_home(tmp_path: Path) -> None:
+    """The unit's exact ExecStart, with its Environment and log directories, starts the bridge
+    when HOME is not writable (a system user without a home), serves wss with a token, and
+    ROS writes its logs to LogsDirectory; without those directories rclpy dies as reported."""
+    import asyncio
+    import ssl
+
+    import roslibpy_lite
+
+    port = _free_port()
+    argv, env = _unit_command(tmp_path, port)
+    assert "--auth-file" in argv and "--certfile" in argv  # safe as shipped
+    assert env["ROS_AUTOMATIC_DISCOVERY_RANGE"] == "LOCALHOST"
+    with _serving(argv, env, tmp_path):
 
         async def call() -> object:
             ctx = ssl.create_default_context(cafile=str(tmp_path / "ca.pem"))
@@ -299,11 +333,6 @@ def test_unit_command_serves_as_a_user_without_a_home(tmp_path: Path) -> None:
 
         assert asyncio.run(call())["version"] == 2  # type: ignore[index]
         assert any((tmp_path / "log" / "roslibpy-lite-bridge").rglob("*")), "no ROS log files"
-    finally:
-        proc.send_signal(signal.SIGTERM)
-        proc.wait(15)
-        if proc.stdout is not None:
-            proc.stdout.close()
     (tmp_path / "bare").mkdir()
     argv, env = _unit_command(tmp_path / "bare", _free_port(), with_log_dirs=False)
     failed = subprocess.run(argv, cwd=tmp_path, env=env, capture_output=True, text=True,
