@@ -11,7 +11,7 @@ from typing import Any
 import pytest
 
 from msgs import runtime
-from tests.cli.conftest import Result, Run
+from tests.cli.conftest import Result, Run, one_error_line
 from tests.helpers import wait_until
 
 
@@ -293,6 +293,15 @@ def test_interface_list_remote_adds_the_bridges_types_marked(cli: Run) -> None:
         line.startswith("robot_msgs/") and line.endswith(BRIDGE_ONLY) for line in robot.lines)
     local = cli("interface", "list", "robot_msgs", url=None)
     assert local.code == 4 and "--remote asks the bridge" in local.err, local
+
+
+def test_interface_list_remote_filters_by_whole_package_name(cli: Run) -> None:
+    """interface list PACKAGE -r takes PACKAGE as a whole package name, not a prefix:
+    'robot' lists none of the bridge's robot_msgs types and is an unknown package."""
+    assert any(line.startswith("robot_msgs/") for line in cli("interface", "list", "-r").lines)
+    robot = cli("interface", "list", "robot", "-r")
+    assert not any(line.startswith("robot_msgs/") for line in robot.lines), robot
+    one_error_line(robot, 4, "unknown interface package robot here or on the bridge")
 
 
 def test_list_hides_hidden_topics_and_services(cli: Run, ros_node: Any, topic: str) -> None:
