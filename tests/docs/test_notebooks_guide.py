@@ -16,15 +16,17 @@ import pytest
 from nbclient import NotebookClient
 from sensor_msgs.msg import Image, Imu
 
+from roslibpy_lite import sync
 from tests import notebooks
-from tests.helpers import ROOT, BridgeProcess, marked_blocks
+from tests.helpers import ROOT, BridgeProcess, marked_blocks, wait_until
 
 GUIDE = ROOT / "docs" / "guides" / "notebooks.md"
 
 
 @pytest.fixture
-def robot(ros_node: Any, topic: str) -> tuple[str, str]:
-    """rclpy publishing a 10 Hz IMU (frame imu_link) and a 10 Hz 32x24 rgb8 camera."""
+def robot(bridge: BridgeProcess, ros_node: Any, topic: str) -> tuple[str, str]:
+    """rclpy publishing a 10 Hz IMU (frame imu_link) and a 10 Hz 32x24 rgb8 camera, once the
+    bridge's graph lists both (as a robot's topics are when a user opens the notebook)."""
     imu_pub = ros_node.create_publisher(Imu, topic + "_imu", 10)
     cam_pub = ros_node.create_publisher(Image, topic + "_camera", 10)
     count = 0
@@ -43,6 +45,10 @@ def robot(ros_node: Any, topic: str) -> tuple[str, str]:
         cam_pub.publish(frame)
 
     ros_node.create_timer(0.1, tick)
+    names = {topic + "_imu": "sensor_msgs/msg/Imu", topic + "_camera": "sensor_msgs/msg/Image"}
+    with sync.connect(bridge.url, replace=False) as ros:
+        wait_until(lambda: names.items() <= {(t.name, t.type) for t in ros.graph.topics()},
+                   20, "the bridge's graph listing the robot's topics")
     return topic + "_imu", topic + "_camera"
 
 
