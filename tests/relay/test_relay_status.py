@@ -288,12 +288,15 @@ async def test_relay_page_in_a_browser(ros_node: Any, topic: str) -> None:
     shows the client."""
     pub = ros_node.create_publisher(String, topic, 10)
     async with _watching(pub, topic, "seen") as (t, _):
-        status = await _json(f"http://127.0.0.1:{t.relay.port}/status.json")
-        received = _robot(status, ROBOT)["bytes_from_robot"]
+        # Past the fence nothing more comes from the robot: the count is final, the same
+        # before and after the page is read, and the page shows it.
+        status = f"http://127.0.0.1:{t.relay.port}/status.json"
+        received = _robot(await _json(status), ROBOT)["bytes_from_robot"]
         assert received > 0
         seen = await asyncio.to_thread(_browse, f"http://127.0.0.1:{t.relay.port}/", topic)
+        assert _robot(await _json(status), ROBOT)["bytes_from_robot"] == received
     assert seen["robot"][:4] == [ROBOT, "yes", "1", topic], seen
-    assert seen["robot"][5] == str(received), seen  # unless a late "seen" came meanwhile
+    assert seen["robot"][5] == str(received), seen
     assert seen["clients"] == "1" and topic in seen["client_row"], seen
     assert seen["robot_url"].endswith(f"/robots/{ROBOT}/"), seen
 
