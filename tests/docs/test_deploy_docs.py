@@ -118,3 +118,15 @@ def test_resume_docs_say_what_resume_covers_and_cannot() -> None:
     assert "Messages ROS published while the bridge process was stopped, frozen or " \
            "restarting are gone" in text
     assert "Resume works without an auth file." in text
+
+
+def test_the_mutation_command_names_what_exists() -> None:
+    """Each scripts/mutate.sh command on a page names a module and test files that exist."""
+    shown = [shlex.split(line.strip())[2:]
+             for page in PAGES for block in _shell_blocks(page)
+             for line in block.splitlines() if line.strip().startswith("bash scripts/mutate.sh ")]
+    assert shown, "no page shows scripts/mutate.sh"
+    for module, *tests in shown:
+        assert (ROOT / module).is_file() and module.endswith(".py"), module
+        files = [t.split("::")[0] for t in tests if t.startswith("tests/")]
+        assert files and all((ROOT / f).is_file() for f in files), tests
