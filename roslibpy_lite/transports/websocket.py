@@ -17,7 +17,7 @@ import ssl
 from collections import deque
 from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING, Any
-from urllib.parse import urlsplit
+from urllib.parse import unquote, urlsplit
 
 from websockets.asyncio.client import ClientConnection
 from websockets.asyncio.client import connect as ws_connect
@@ -36,7 +36,7 @@ from ..exceptions import (
     TLSError,
     UsageError,
 )
-from ..ops import ACKS_HEADER, AUTH_HEADER, RELAY_HEADER
+from ..ops import ACKS_HEADER, AUTH_HEADER, RELAY_HEADER, SESSION_HEADER
 from ..protocol import Protocol
 from .resumable import ACK_INTERVAL, ClientSession
 
@@ -69,7 +69,9 @@ class WebSocketTransport:
         resume_frames: int = 1000,
         wait_for_robot: bool = False,
     ) -> None:
-        self.urls = tuple(with_default_port(u) for u in ([url] if isinstance(url, str) else url))
+        self._dial = tuple(with_default_port(u) for u in ([url] if isinstance(url, str) else url))
+        self.urls = tuple(shown_url(u) for u in self._dial)
+        """The URLs as logs and error texts show them: a ``token`` in a query is ``***``."""
         if not self.urls:
             raise UsageError("no URL to connect to")
         self._at = 0  # the URL connected to, or tried next
@@ -94,6 +96,7 @@ class WebSocketTransport:
             "compression": ws_compression,
             "proxy": proxy,
             "additional_headers": {ACKS_HEADER: "1"},
+            "logger": _WS_LOG,
         }
         self._has_token = token is not None
         if token is not None:  # never logged: it is only ever in this header
@@ -186,7 +189,8 @@ class WebSocketTransport:
                     if self.session is not None:
                         options = {**options, "additional_headers": {
                             **options["additional_headers"], **self.session.headers()}}
-                    ws = await ws_connect(self.url, open_timeout=self._attempt_timeout(deadline),
+                    ws = await ws_connect(self._dial[self._at],
+                                          open_timeout=self._attempt_timeout(deadline),
                                           **options)
                 except (OSError, InvalidHandshake, TimeoutError) as exc:
                     refused = _refusal(self.url, exc) or await _plain_to_tls(self.url, exc)
@@ -544,6 +548,46 @@ def _refusal(url: str, exc: BaseException) -> ConnectError | None:
                         "probably requires a client certificate (mutual TLS); load one into "
                         "the ssl context (SSLContext.load_cert_chain)")
     return None
+
+
+_SECRET_HEADERS = frozenset({"authorization", "proxy-authorization", SESSION_HEADER.lower()})
+
+
+class _Redact(logging.Filter):
+    """websockets' DEBUG lines of our connections without secrets: the request line's
+    ``token`` (:func:`shown_url`) and the values of ``Authorization`` and the session
+    header, both ways."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        args = record.args
+        if isinstance(args, tuple) and isinstance(record.msg, str):
+            if record.msg.startswith("> GET %s") and args:
+                record.args = (shown_url(str(args[0])), *args[1:])
+            elif record.msg in ("> %s: %s", "< %s: %s") and len(args) == 2 \
+                    and str(args[0]).lower() in _SECRET_HEADERS:
+                record.args = (args[0], "***")
+        return True
+
+
+_WS_LOG = logging.getLogger("roslibpy_lite.websockets")
+"""The logger websockets writes our connections' lines to (DEBUG: the handshake, frames)."""
+_WS_LOG.addFilter(_Redact())
+
+
+def shown_url(url: str) -> str:
+    """``url`` as logs and error texts may show it: the value of a ``token`` query parameter
+    (its name matched as servers read it: percent-decoded, any case) is ``***``. A browser
+    client must put its token there; ours takes ``token=`` but a URL may still carry one."""
+    base, mark, query = url.partition("?")
+    if not mark:
+        return url
+    query, hash_mark, fragment = query.partition("#")
+    pairs = []
+    for pair in query.split("&"):
+        name, eq, _ = pair.partition("=")
+        pairs.append(f"{name}{eq}***" if eq and unquote(name).strip().lower() == "token"
+                     else pair)
+    return f"{base}?{'&'.join(pairs)}{hash_mark}{fragment}"
 
 
 ROSBRIDGE_PORT = 9090

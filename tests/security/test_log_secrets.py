@@ -5,6 +5,7 @@ session tokens, and a refused request line quoted in a traceback."""
 from __future__ import annotations
 
 import asyncio
+import logging
 import re
 import sys
 from collections.abc import Iterator
@@ -178,3 +179,31 @@ def test_redact_finds_a_query_token_in_any_position(url: str, secret: str) -> No
     clean = redact(url)
     assert_nowhere(secret, clean)
     assert clean.endswith("HTTP/1.1") and "=<redacted>" in clean
+
+
+async def test_our_client_logs_and_errors_hold_no_secret(
+    debug_bridge: BridgeProcess, auth: AuthFile, caplog: pytest.LogCaptureFixture
+) -> None:
+    """roslibpy_lite at DEBUG (websockets' handshake lines of its connections included): a
+    token given as ``token=``, one in the URL's query and the session token appear in no log
+    line, and a refused token's error text shows the URL with ``token=***``."""
+    import roslibpy_lite
+    from roslibpy_lite.exceptions import NotAuthenticated
+
+    caplog.set_level(logging.DEBUG)
+    given, in_query, wrong = auth.tokens["viewer"], auth.tokens["tester"], auth.tokens["blind"]
+    async with roslibpy_lite.connect(debug_bridge.url, token=given) as ros:
+        session = ros._ws.session
+        assert session is not None and session.token
+        assert await ros.graph.topics() is not None
+    async with roslibpy_lite.connect(f"{debug_bridge.url}/?robot=r1&token={in_query}") as ros:
+        assert ros.url.endswith("/?robot=r1&token=***")  # connected: the token was taken
+    with pytest.raises(NotAuthenticated) as refused:
+        await roslibpy_lite.connect(f"{debug_bridge.url}/?%74oken={wrong[:-2]}xx",
+                                    open_timeout=10)
+    assert "?%74oken=***" in str(refused.value)
+    log = caplog.text
+    assert "> GET /?robot=r1&token=*** HTTP/1.1" in log and "> Authorization: ***" in log
+    for secret in (given, in_query, wrong, session.token):
+        assert_nowhere(secret, log)
+        assert_nowhere(secret, str(refused.value))
