@@ -158,6 +158,9 @@ class _RobotGoal:
 
 
 _GOAL_SERVICE = "/_action/send_goal"
+DIAL_WARNING = 5.0
+"""Seconds the robot dials without any router answering before it says so (and again
+after each as many)."""
 
 DEFAULT_POLICY = Role.from_table("relays (default)", {"all": ["*"], "deny": {"take_over": ["*"]}})
 """What relays may ask of a robot that names no ``--relay-role``: every topic, service,
@@ -239,7 +242,33 @@ class Exporter:
         self._runner.add_done_callback(_report)
 
     async def _run(self) -> None:
-        self.session = session = await open_session(self.options)
+        opening = asyncio.ensure_future(open_session(self.options))
+        waited, wait = 0.0, DIAL_WARNING
+        try:
+            while not (await asyncio.wait({opening}, timeout=wait))[0]:
+                waited += wait
+                wait = min(wait * 2, 300.0)  # said again, ever less often
+                self._dialing(waited)
+        except asyncio.CancelledError:
+            opening.cancel()
+            raise
+        self.session = opening.result()
+        await self._joined(self.session)
+
+    def _dialing(self, waited: float) -> None:
+        """Say that no router has answered for ``waited`` s, and what to check."""
+        tls = any(e.startswith(("tls/", "quic/")) for e in self.options.connect)
+        log.warning(
+            "robot %s: no Zenoh router has answered at %s for %.0f s (ROS is served "
+            "meanwhile); %s", self.robot, ", ".join(self.options.connect), waited,
+            "if the router is up, it may refuse this robot's certificate: its log says why; "
+            "with --zenoh-mtls the robot's certificate must be signed by the router's CA, "
+            "allow client authentication (extendedKeyUsage=clientAuth) and have "
+            f"{self.robot} as its common name ('roslibpy-lite-relay certs' makes one)"
+            if tls else "check that the router is up and reachable there")
+
+    async def _joined(self, session: zenoh.Session) -> None:
+        """Offer the robot on the open ``session``, then keep its graph snapshot fresh."""
         r = self.robot
         here = self._on_loop
         live = session.liveliness()

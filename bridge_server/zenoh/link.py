@@ -228,6 +228,30 @@ class ZenohOptions:
         return conf
 
 
+ZENOH_LOG = "error,zenoh_link_tls=warn"
+"""What of Zenoh's own log (written by Zenoh to stderr) a process shows unless ``RUST_LOG``
+says otherwise: errors, and why a TLS link was refused (a certificate from another CA, or
+without the key usage its side needs), which nothing else tells."""
+
+_zenoh_log_on = False
+
+
+def _zenoh_log() -> None:
+    """Turn Zenoh's own log on, once per process (plain text where stderr is no terminal)."""
+    global _zenoh_log_on
+    if _zenoh_log_on:
+        return
+    import sys
+
+    import zenoh
+
+    _zenoh_log_on = True
+    if not sys.stderr.isatty():
+        os.environ.setdefault("NO_COLOR", "1")
+    with contextlib.suppress(Exception):  # another part of the process set it up first
+        zenoh.init_log_from_env_or(ZENOH_LOG)
+
+
 async def open_session(options: ZenohOptions) -> zenoh.Session:
     """Open the session in a thread of its own (a client waits there until a router
     answers); cancelled meanwhile, the session is closed as soon as it opens. The thread is a
@@ -235,6 +259,7 @@ async def open_session(options: ZenohOptions) -> zenoh.Session:
     import zenoh
 
     conf = options.config()
+    _zenoh_log()
     exposed = options.exposure()
     if exposed is not None:  # config() allowed it: --zenoh-insecure
         log.warning("--zenoh-insecure: %s", exposed)

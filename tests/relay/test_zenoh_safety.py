@@ -24,6 +24,7 @@ from bridge_server.interfaces import BridgeError
 from bridge_server.zenoh.link import ZenohOptions
 from tests.helpers import ROOT, ros_env
 from tests.relay.procs import Proc
+from tests.relay.support import free_port
 
 INSECURE = "--zenoh-insecure"
 TLS_FILES = {"tls_ca": "ca.pem", "tls_cert": "relay1.pem", "tls_key": "relay1.key"}
@@ -168,3 +169,68 @@ def test_the_lease_reaches_zenoh(argv: list[str], ms: int) -> None:
         assert conf.get_json("transport/link/tx/lease") == str(ms)
     with pytest.raises(BridgeError, match=r"--zenoh-lease 0: expected 0\.1 to 3600 seconds"):
         ZenohOptions(connect=["tcp/127.0.0.1:7447"], lease=0).config()
+
+
+def _server_only_cert(fleet: Path, name: str) -> tuple[Path, Path]:
+    """A certificate for ``name`` signed by the fleet's CA but usable only to serve
+    (``serverAuth``, as a websocket server's recipe makes): wrong for a dialing robot."""
+    import datetime
+
+    from cryptography.hazmat.primitives import hashes, serialization
+    from cryptography.hazmat.primitives.asymmetric import ec
+
+    ca = x509.load_pem_x509_certificate((fleet / "ca.pem").read_bytes())
+    ca_key = serialization.load_pem_private_key((fleet / "ca.key").read_bytes(), None)
+    assert isinstance(ca_key, ec.EllipticCurvePrivateKey)
+    key = ec.generate_private_key(ec.SECP256R1())
+    now = datetime.datetime.now(datetime.UTC)
+    cert = (x509.CertificateBuilder()
+            .subject_name(x509.Name([x509.NameAttribute(NameOID.COMMON_NAME, name)]))
+            .issuer_name(ca.subject).public_key(key.public_key())
+            .serial_number(x509.random_serial_number())
+            .not_valid_before(now - datetime.timedelta(minutes=5))
+            .not_valid_after(now + datetime.timedelta(days=1))
+            .add_extension(x509.ExtendedKeyUsage([ExtendedKeyUsageOID.SERVER_AUTH]), False)
+            .sign(ca_key, hashes.SHA256()))
+    pem, key_path = fleet / f"{name}-server-only.pem", fleet / f"{name}-server-only.key"
+    pem.write_bytes(cert.public_bytes(serialization.Encoding.PEM))
+    key_path.write_bytes(key.private_bytes(serialization.Encoding.PEM,
+                                           serialization.PrivateFormat.PKCS8,
+                                           serialization.NoEncryption()))
+    return pem, key_path
+
+
+def test_a_robot_certificate_without_client_auth_is_said_on_both_sides(fleet: Path) -> None:
+    """A robot whose certificate allows only server authentication is refused at the TLS
+    handshake: the relay's log says why (Zenoh's own line), and the robot, which hears no
+    reason, says after a few seconds that no router answered and what its certificate
+    needs."""
+    from bridge_server.zenoh.exporter import DIAL_WARNING
+
+    endpoint = f"tls/127.0.0.1:{free_port()}"
+    cert, key = _server_only_cert(fleet, "robot1")
+    ca = str(fleet / "ca.pem")
+    relay = Proc([sys.executable, "-m", "bridge_server.zenoh.relay", "--port", "0",
+                  "--zenoh-listen", endpoint, "--zenoh-tls-ca", ca,
+                  "--zenoh-tls-cert", str(fleet / "relay1.pem"),
+                  "--zenoh-tls-key", str(fleet / "relay1.key"), "--zenoh-mtls",
+                  "--zenoh-robot", "robot1"], ros_env())
+    robot = None
+    try:
+        relay.wait_for(re.compile(r"relay listening on"))
+        robot = Proc([sys.executable, "-m", "bridge_server", "--no-websocket", "--robot",
+                      "robot1", "--zenoh-connect", endpoint, "--zenoh-tls-ca", ca,
+                      "--zenoh-tls-cert", str(cert), "--zenoh-tls-key", str(key)], ros_env())
+        relay.wait_for(re.compile(r"WARN .*zenoh_link_tls.*certificate does not allow extended "
+                                  r"key usage for client authentication"))
+        said = robot.wait_for(re.compile(r"WARNING \S+: robot robot1: no Zenoh router has "
+                                         r"answered at tls/\S+ for (\d+) s"),
+                              timeout=DIAL_WARNING + 20)
+        assert int(said.group(1)) == DIAL_WARNING
+        line = next(x for x in robot.lines if "no Zenoh router has answered" in x)
+        assert "extendedKeyUsage=clientAuth" in line and "roslibpy-lite-relay certs" in line
+        assert "\x1b[" not in "\n".join(relay.lines)  # plain text, not a terminal's colours
+    finally:
+        for p in (robot, relay):
+            if p is not None:
+                p.stop()
