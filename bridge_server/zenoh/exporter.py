@@ -383,9 +383,9 @@ class Exporter:
         return why
 
     def _served_in_ros(self, key: str) -> bool:
-        """Whether a ROS node (not a relay's client through this robot) serves ``key``."""
-        return key not in self.served and any(
-            name == key for name, _ in self.graph.service_names_and_types())
+        """Whether a ROS node other than the robot's own bridge serves ``key`` (the Graph's
+        own count of servers, as the bridge's ownership rule asks it)."""
+        return key not in self.served and bool(self.graph.other_servers(key))
 
     # -- topics: demand-driven -----------------------------------------------------------------
 
@@ -566,12 +566,12 @@ class Exporter:
                              f"relay {served.relay}; robot {self.robot} keeps the first")
             return
         refused = self.refusal("serve_action" if action else "serve_service", name, relay)
-        if refused is None and self._served_in_ros(key):
-            refused = self.refusal("take_over", name, relay)
-            if refused is not None:
-                refused = (f"{what} {name} is served by a ROS node of robot {self.robot}, and "
-                           f"{refused.split('(', 1)[1].split(')', 1)[0]} lets no relay take "
-                           "it over (take_over)")
+        if refused is None and self._served_in_ros(key) \
+                and self.refusal("take_over", name, relay) is not None:
+            role = self.policy()
+            refused = (f"{what} {name} is served by a ROS node of robot {self.robot}, and its "
+                       f"relay policy (role {role.name if role else 'gone'}) lets no relay take "
+                       "it over (take_over)")
         if refused is not None:
             self._refuse(relay, name, kind, refused)
             return
