@@ -2,7 +2,9 @@
 
 It logs ``bridge_server listening on ws://HOST:PORT`` to stderr once it is
 ready, one line per client connection and disconnection, and exits with
-status 0 within about a second of SIGINT or SIGTERM.
+status 0 within about a second of SIGINT or SIGTERM. A start it refuses exits 1 (2 for an
+exposed port without --auth-file or --insecure, or a bad --robot); whatever rclpy's threads
+do as the process ends, that status is the process's (:mod:`bridge_server._exit`).
 
 DDS discovery is kept on this machine (``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST``)
 unless the environment already sets the variable.
@@ -22,6 +24,8 @@ import signal
 import sys
 from collections.abc import Callable
 from typing import TYPE_CHECKING
+
+from ._exit import ends_process
 
 try:
     from . import security
@@ -297,14 +301,22 @@ async def _run(args: argparse.Namespace) -> int:
         watch_supervisor(stop)  # a worker stops with its supervisor, even a killed one
     graph = RclpyGraph(loop, name=config.node_name, topic_reader=config.topic_reader)
     bridge = Bridge(config, graph)
-    await bridge.start()
+    try:
+        await bridge.start()
+    except BaseException:  # a port in use: ROS already runs, stop it before saying so
+        await bridge.close()
+        raise
     exporter = None
     if args.zenoh_connect:  # the robot dials out to Zenoh routers (bridge_server/zenoh/)
         from .zenoh.exporter import Exporter
 
+        try:
+            policy = relay_policy(bridge, args.relay_role)
+        except BridgeError:  # ROS already runs: stop it before saying so
+            await bridge.close()
+            raise
         exporter = Exporter(bridge.graph, args.robot, zenoh_link.options_from_args(args),
-                            graph_changed=bridge.graph_changed,
-                            policy=relay_policy(bridge, args.relay_role))
+                            graph_changed=bridge.graph_changed, policy=policy)
         exporter.start()
         log.info("robot %s dialing out to Zenoh at %s", args.robot, ", ".join(args.zenoh_connect))
     # SIGHUP (systemctl reload): certificates and the auth file are read again.
@@ -350,8 +362,11 @@ def relay_policy(bridge: Bridge, role: str | None) -> Callable[[], Role | None]:
     return current
 
 
+@ends_process
 def main(argv: list[str] | None = None) -> int:
-    """Entry point of ``python -m bridge_server`` and ``roslibpy-lite-bridge``."""
+    """Entry point of ``python -m bridge_server`` and ``roslibpy-lite-bridge``: without
+    ``argv`` it ends the process with its status (:func:`~bridge_server._exit.ends_process`),
+    with one it returns the status."""
     command = (sys.argv[1:] if argv is None else argv)[:1]
     if command in (["add-principal"], ["remove-principal"]):
         from .security.auth import main as principals
@@ -389,7 +404,10 @@ def main(argv: list[str] | None = None) -> int:
     if args.log_level != "DEBUG":
         logging.getLogger("websockets").setLevel(logging.WARNING)
     try:
-        security.check_readable(security.config_from_args(args))  # names the file and user
+        checked = security.config_from_args(args)
+        security.check_readable(checked)  # names the file and user
+        # A file that is no certificate (or auth file) is named before ROS starts.
+        security.Security(checked).ssl_context()
         if args.workers > 1 and args.worker_index is None:
             from .http.workers import Supervisor
 

@@ -32,6 +32,8 @@ import signal
 import sys
 from typing import TYPE_CHECKING, Any
 
+from .._exit import ends_process
+
 try:
     from websockets.asyncio.server import Server, ServerConnection, serve
 
@@ -359,6 +361,7 @@ async def _run(args: argparse.Namespace) -> int:
     return 0
 
 
+@ends_process  # as the program: its own status, whatever Zenoh's threads do at exit
 def main(argv: list[str] | None = None) -> int:
     """Entry point of ``roslibpy-lite-relay`` and ``python -m bridge_server.zenoh.relay``
     (``roslibpy-lite-relay certs ...``: :mod:`bridge_server.zenoh.certs`)."""
