@@ -21,7 +21,7 @@ from __future__ import annotations
 
 from .player import PlayStats, play
 from .reader import BagInfo, BagMessage, TopicInfo, info, read
-from .recorder import Recorder, RecordStats
+from .recorder import Recorder, RecordStats, empty_recording
 
 __all__ = [
     "BagInfo",
@@ -30,6 +30,7 @@ __all__ = [
     "RecordStats",
     "Recorder",
     "TopicInfo",
+    "empty_recording",
     "info",
     "play",
     "read",

@@ -24,7 +24,7 @@ if TYPE_CHECKING:
     from ..api import Ros
     from ..handles import Subscription
 
-__all__ = ["RecordStats", "Recorder"]
+__all__ = ["RecordStats", "Recorder", "empty_recording"]
 
 log = logging.getLogger("roslibpy_lite.bag")
 
@@ -81,7 +81,9 @@ class Recorder:
     A connection that drops and comes back goes on in the same file (the gap is in
     :attr:`stats` and in the file's ``roslibpy_lite`` metadata). A write that fails
     (disk full, file gone) ends the recording with :attr:`RecordStats.error` set and the
-    file closed as far as it can be.
+    file closed as far as it can be. :meth:`stop` leaves a finished file whenever it is
+    called: also after a :meth:`start` that failed or was cancelled half-way (an empty
+    file if it had not opened one yet).
     """
 
     def __init__(
@@ -152,23 +154,33 @@ class Recorder:
                 await self._done.wait()
 
     async def stop(self) -> RecordStats:
-        """Unsubscribe and finish the file properly (summary, index, footer)."""
+        """Finish the file properly (summary, index, footer), then unsubscribe.
+
+        The file is finished before anything waits, so a stop that is itself cut short
+        still leaves it whole; a recorder stopped before it opened its file (a
+        :meth:`start` cancelled at once) writes an empty one.
+        """
+        if not self.stats.files and self.stats.error is None:
+            self.stats.started = self.stats.started or time.monotonic()
+            with contextlib.suppress(UsageError):  # cannot write it: stats.error says why
+                self._open(self.path)
         if self._discovery is not None:
             self._discovery.cancel()
-            with contextlib.suppress(asyncio.CancelledError):
-                await self._discovery
-            self._discovery = None
         if self._unwatch is not None:
             self._unwatch()
             self._unwatch = None
+        self._close()
+        self.stats.ended = time.monotonic()
+        self.stats.file_bytes = sum(f.stat().st_size for f in self.stats.files if f.exists())
+        if self._discovery is not None:
+            with contextlib.suppress(asyncio.CancelledError):
+                await self._discovery
+            self._discovery = None
         for sub in self._subs.values():
             self.stats.dropped += sub.dropped + sub.decode_errors
             with contextlib.suppress(RosLibError):
                 await sub.close()
         self._subs.clear()
-        self._close()
-        self.stats.ended = time.monotonic()
-        self.stats.file_bytes = sum(f.stat().st_size for f in self.stats.files if f.exists())
         return self.stats
 
     async def __aenter__(self) -> Self:
@@ -242,13 +254,8 @@ class Recorder:
     # -- the file --------------------------------------------------------------------------
 
     def _open(self, path: Path) -> None:
-        from mcap.writer import CompressionType, Writer
-
         try:
-            self._file = path.open("wb")
-            self._writer = Writer(self._file, chunk_size=self.chunk_size,
-                                  compression=CompressionType.ZSTD)
-            self._writer.start(profile=ROS2_PROFILE, library="roslibpy-lite")
+            self._file, self._writer = _start_file(path, self.chunk_size)
         except OSError as exc:
             self._fail(f"cannot write {path}: {exc.strerror or exc}")
             raise UsageError(self.stats.error or "") from None
@@ -342,3 +349,32 @@ class Recorder:
             self.stats.gaps.append(gap)
             log.warning("recording: the connection was down for %.1f s; going on in %s",
                         gap, self.stats.files[-1] if self.stats.files else self.path)
+
+
+def _start_file(path: Path, chunk_size: int) -> tuple[IO[bytes], Writer]:
+    """``path`` opened for writing, with an MCAP writer that has written its header."""
+    from mcap import writer as mcap
+
+    file = path.open("wb")
+    try:
+        writer = mcap.Writer(file, chunk_size=chunk_size, compression=mcap.CompressionType.ZSTD)
+        writer.start(profile=ROS2_PROFILE, library="roslibpy-lite")
+    except BaseException:
+        file.close()
+        raise
+    return file, writer
+
+
+def empty_recording(path: str | Path) -> RecordStats:
+    """Write a finished MCAP file with no messages at ``path``: what a recording stopped
+    before it had a connection to subscribe on leaves (readable as any other). Raises
+    :class:`OSError` if the file cannot be written."""
+    need_mcap()
+    path = Path(path)
+    stats = RecordStats(files=[path], started=time.monotonic())
+    file, writer = _start_file(path, 1024)
+    with file:
+        writer.finish()  # type: ignore[no-untyped-call]
+    stats.ended = time.monotonic()
+    stats.file_bytes = path.stat().st_size
+    return stats

@@ -7,8 +7,8 @@ import asyncio
 import contextlib
 import signal
 import sys
-from collections.abc import Iterator
-from typing import Any
+from collections.abc import Awaitable, Iterator
+from typing import TYPE_CHECKING, Any
 
 from ..exceptions import UsageError
 from .common import (
@@ -22,6 +22,9 @@ from .common import (
     Out,
     with_session,
 )
+
+if TYPE_CHECKING:
+    from ..bag import Recorder
 
 
 def _size(text: str) -> int:
@@ -45,24 +48,61 @@ def _need_mcap() -> None:
 
 
 async def cmd_bag_record(args: argparse.Namespace, out: Out) -> int:
-    """``bag record TOPIC... | --all -o FILE``: until Ctrl+C or SIGTERM, --duration, --max."""
-    from ..bag import Recorder
+    """``bag record TOPIC... | --all -o FILE``: until Ctrl+C or SIGTERM, --duration, --max.
+
+    SIGINT and SIGTERM end it properly from its first line on (``recording to FILE``),
+    whatever it is doing: connecting, waiting for a topic, writing. The file is finished
+    (an empty one if no connection came) and the ``recorded FILE: ...`` line says what it
+    holds.
+    """
+    from ..bag import Recorder, empty_recording
 
     _need_mcap()
 
     if not args.topics and not args.all:
         raise CliError(EXIT_USAGE, "name topics (or patterns such as '/camera/*'), or pass --all")
 
-    async def body(s: CliSession) -> int:
+    with _stop_signals() as stopped:
+        _say(f"recording to {args.output}: connecting to {args.url}")
+        made: list[Recorder] = []
+
+        async def body(s: CliSession) -> int:
+            try:
+                rec = Recorder(s.ros, args.output, topics=args.topics, all_topics=args.all,
+                               max_messages=args.max, split_size=args.split_size,
+                               split_duration=args.split_duration)
+            except UsageError as exc:
+                raise CliError(EXIT_USAGE, str(exc)) from None
+            made.append(rec)
+            return await _record(rec, args, stopped, out)
+
+        session = asyncio.ensure_future(with_session(args, body, reconnect=True))
+        if await _until_stopped(asyncio.shield(session), stopped) or made:
+            return await session  # over, or recording (which ends on the signal itself)
+        session.cancel()  # stopped while connecting: nothing to subscribe on yet
+        with contextlib.suppress(asyncio.CancelledError):
+            await session
         try:
-            rec = Recorder(s.ros, args.output, topics=args.topics, all_topics=args.all,
-                           max_messages=args.max, split_size=args.split_size,
-                           split_duration=args.split_duration)
-        except UsageError as exc:
-            raise CliError(EXIT_USAGE, str(exc)) from None
-        live = sys.stderr.isatty() and not args.quiet
-        await rec.start()
-        try:
+            stats = empty_recording(args.output)
+        except OSError as exc:
+            raise CliError(EXIT_ERROR, f"cannot write {args.output}: "
+                           f"{exc.strerror or exc}") from None
+        out.line(f"recorded {args.output}: {stats.line()}")
+        return EXIT_OK
+
+
+async def _record(rec: Recorder, args: argparse.Namespace, stopped: asyncio.Event, out: Out) -> int:
+    """Run ``rec`` until ``stopped``, --duration or --max; finish its file and
+    say what it holds, however it ends."""
+    live = sys.stderr.isatty() and not args.quiet
+    ticker: asyncio.Task[None] | None = None
+    try:
+        if await _until_stopped(rec.start(), stopped):
+            waiting = [t for t in args.topics
+                       if not set("*?[") & set(t) and t not in rec.stats.per_topic]
+            _say(f"recording {len(rec.stats.per_topic)} topic(s)"
+                 + (f"; waiting for {', '.join(waiting)}" if waiting else ""))
+
             async def show() -> None:
                 while True:
                     await asyncio.sleep(1.0)
@@ -71,29 +111,44 @@ async def cmd_bag_record(args: argparse.Namespace, out: Out) -> int:
                               flush=True)
 
             ticker = asyncio.get_running_loop().create_task(show())
-            try:
-                with _stop_signals() as stopped:
-                    waiting = asyncio.ensure_future(rec.wait(args.duration))
-                    signalled = asyncio.ensure_future(stopped.wait())
-                    await asyncio.wait({waiting, signalled}, return_when=asyncio.FIRST_COMPLETED)
-                    for task in (waiting, signalled):
-                        task.cancel()
-                        with contextlib.suppress(asyncio.CancelledError):
-                            await task
-            finally:
-                ticker.cancel()
-                with contextlib.suppress(asyncio.CancelledError):
-                    await ticker
-        finally:
-            stats = await asyncio.shield(rec.stop())
-            if live:
-                print(file=sys.stderr)
-            out.line(f"recorded {', '.join(str(f) for f in stats.files)}: {stats.line()}")
-        if stats.error is not None:
-            raise CliError(EXIT_ERROR, f"recording stopped: {stats.error} (the file is "
-                           "readable up to there)")
-        return EXIT_OK
-    return await with_session(args, body, reconnect=True)
+            await _until_stopped(rec.wait(args.duration), stopped)
+    finally:
+        if ticker is not None:
+            ticker.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await ticker
+        stats = await asyncio.shield(rec.stop())
+        if live:
+            print(file=sys.stderr)
+        out.line(f"recorded {', '.join(str(f) for f in stats.files)}: {stats.line()}")
+    if stats.error is not None:
+        raise CliError(EXIT_ERROR, f"recording stopped: {stats.error} (the file is "
+                       "readable up to there)")
+    return EXIT_OK
+
+
+async def _until_stopped(work: Awaitable[Any], stopped: asyncio.Event) -> bool:
+    """Await ``work`` unless ``stopped`` is set first (then ``work`` is cancelled); True if
+    ``work`` ended (its exception raised here)."""
+    task = asyncio.ensure_future(work)
+    signalled = asyncio.ensure_future(stopped.wait())
+    try:
+        await asyncio.wait({task, signalled}, return_when=asyncio.FIRST_COMPLETED)
+    finally:
+        signalled.cancel()
+        if not task.done():
+            task.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await task
+    if task.cancelled():
+        return False
+    task.result()
+    return True
+
+
+def _say(line: str) -> None:
+    """A line about the recording's progress on stderr (stdout keeps the result)."""
+    print(line, file=sys.stderr, flush=True)
 
 
 @contextlib.contextmanager
