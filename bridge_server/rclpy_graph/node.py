@@ -52,6 +52,7 @@ import contextlib
 import importlib
 import logging
 import threading
+import warnings
 from collections import deque
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
@@ -432,6 +433,26 @@ class LoopRosCall:
         return True
 
 
+UNMATCHED_CALLER = "client will not receive response"
+"""rmw_fastrtps's words when it drops an answer: the service's reply writer has not matched
+the caller's reply reader within its ``max_blocking_time`` (100 ms); rclpy says so with a
+RuntimeWarning, not an exception."""
+
+ANSWER_RETRIES = (0.1, 0.2, 0.4, 0.8, 1.6, 3.2)
+"""Seconds before each new attempt to answer a ROS caller whose reply reader the bridge has
+not matched yet (6.3 s in all; each attempt may wait 100 ms in rmw_fastrtps).
+
+A caller's ``wait_for_service`` is true once the caller's side has matched the service's
+two topics, which says nothing of the bridge's side (it is true even while the bridge is
+stopped with SIGSTOP); a caller that calls at once can get its answer sent before the
+bridge's discovery has seen the caller's reply reader, and on a loaded machine that takes
+more than the 100 ms rmw_fastrtps waits: the answer was lost and the caller waited for
+ever (issue 43, test_served_service_comes_back_after_bridge_restart)."""
+
+_SENDING = threading.Lock()
+"""Held while an answer is sent with the warnings caught (catch_warnings is process-wide)."""
+
+
 class ServedService:
     """A ROS service whose requests are answered by a websocket client.
 
@@ -482,11 +503,27 @@ class ServedService:
     def _on_loop_request(self, request: Any, header: Any) -> None:
         self.on_request(LoopRosCall(self, request, header))
 
-    def _send(self, response: Any, header: Any) -> None:
-        try:
-            self._real_send(response, header)
-        except Exception as exc:  # destroyed meanwhile, or the caller went away
-            log.debug("could not answer a ROS caller of %s: %s", self.name, exc)
+    def _send(self, response: Any, header: Any, attempt: int = 0) -> None:
+        """Answer a ROS caller; again later while its reply reader is not matched here yet
+        (see :data:`ANSWER_RETRIES`), from the loop."""
+        with _SENDING, warnings.catch_warnings(record=True) as warned:
+            warnings.simplefilter("always", RuntimeWarning)
+            try:
+                self._real_send(response, header)
+            except Exception as exc:  # destroyed meanwhile, or the caller went away
+                log.debug("could not answer a ROS caller of %s: %s", self.name, exc)
+                return
+        if not any(UNMATCHED_CALLER in str(w.message) for w in warned):
+            return
+        if attempt < len(ANSWER_RETRIES):
+            loop = self.ros.loop
+            with contextlib.suppress(RuntimeError):  # the loop closed while shutting down
+                loop.call_soon_threadsafe(loop.call_later, ANSWER_RETRIES[attempt], self._send,
+                                          response, header, attempt + 1)
+            return
+        log.warning("could not answer a ROS caller of %s: its reply reader never matched "
+                    "the bridge's reply writer (%d tries over %.1f s; incompatible QoS?)",
+                    self.name, attempt + 1, sum(ANSWER_RETRIES))
 
     def destroy(self) -> None:
         """Remove the ROS service."""
