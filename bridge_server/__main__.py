@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import contextlib
 import faulthandler
 import logging
 import os
@@ -304,7 +305,8 @@ async def _run(args: argparse.Namespace) -> int:
     try:
         await bridge.start()
     except BaseException:  # a port in use: ROS already runs, stop it before saying so
-        await bridge.close()
+        with contextlib.suppress(Exception):  # what failed to start may not close cleanly
+            await bridge.close()
         raise
     exporter = None
     if args.zenoh_connect:  # the robot dials out to Zenoh routers (bridge_server/zenoh/)
