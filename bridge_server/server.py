@@ -194,10 +194,13 @@ class Bridge:
         )
         await self.web.start()
 
-    async def admit(self, connection: ServerConnection, request: Request) -> Any:
+    async def admit(self, connection: ServerConnection, request: Request,
+                    secured: bool = False) -> Any:
         """The checks before a connection's handshake (plain-HTTP routes, security, session
-        resume), for a front that serves this bridge's sessions on its own port."""
-        return await self._process_request(connection, request)
+        resume), for a front that serves this bridge's sessions on its own port; with
+        ``secured`` the front ran the security checks itself (a relay, before it opens the
+        robot) and only the session resume is planned here."""
+        return await self._admit(connection, request, secured)
 
     async def serve_connection(self, ws: ServerConnection) -> None:
         """Serve one admitted connection until it ends (for such a front)."""
@@ -205,11 +208,19 @@ class Bridge:
 
     async def _process_request(self, connection: ServerConnection, request: Request) -> Any:
         """Before the handshake: plain-HTTP routes first (web.py), then the security checks."""
+        return await self._admit(connection, request, False)
+
+    async def _admit(self, connection: ServerConnection, request: Request, secured: bool
+                     ) -> Any:
+        """As :meth:`_process_request`; the routes and security checks only if not
+        ``secured`` (done by the front)."""
         try:
-            response = await self.web.process_request(connection, request)
-            if response is not None:
-                return response
-            refusal = await self.security.process_request(connection, request)
+            refusal = None
+            if not secured:
+                response = await self.web.process_request(connection, request)
+                if response is not None:
+                    return response
+                refusal = await self.security.process_request(connection, request)
             if refusal is None and self.resumable.enabled and SESSION_HEADER in request.headers:
                 refusal = await self._plan_session(connection, request)
         except MultipleValuesError as exc:  # a header given twice that must be given once
@@ -218,7 +229,7 @@ class Bridge:
             refusal = connection.respond(400, f"header {exc} sent more than once\n")
         if refusal is not None:  # counted by reason for /metrics
             code = refusal.status_code
-            self.metrics.connection_refused(_REFUSALS.get(code, f"http_{code}"))
+            self.metrics.connection_refused(REFUSALS.get(code, f"http_{code}"))
         return refusal
 
     async def _plan_session(self, connection: ServerConnection, request: Request
@@ -349,7 +360,7 @@ class Bridge:
         self.ros.close()
 
 
-_REFUSALS = {401: "auth", 403: "origin", 429: "too_many", 503: "max_clients"}
+REFUSALS = {401: "auth", 403: "origin", 429: "too_many", 503: "max_clients"}
 """``connections_refused_total`` reasons, by the HTTP status of the refusal."""
 
 

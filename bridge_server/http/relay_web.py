@@ -34,7 +34,8 @@ Who sees what is the bridge's :class:`~.web_access.WebAccess`: with an auth file
 routes need a token (``Authorization: Bearer`` or ``?token=``) of a role with
 ``introspection``; a role limited to some robots (``robots = [...]``) sees only those, in
 the relay's lists, and is refused (403) another robot's page. A robot the relay does not
-know of is 404 before any token is asked for, as for its websocket.
+know of is 404. A robot no client has opened yet is opened (followed on Zenoh) only for a
+viewer whose token may see its pages: 401/403 before anything of the robot is touched.
 """
 
 from __future__ import annotations
@@ -111,6 +112,11 @@ class RelayWeb:
         """Robot ``name``'s bridge route ``rest`` (its page is at ``home``)."""
         if not slash:  # /robot1: the page's relative links need /robot1/
             return _redirect(home, query)
+        if name not in self.relay.robots:  # opened only for a viewer who may see its pages
+            _, refusal = viewer(WebAccess(self.access.security, robot=name), request, address,
+                                "/status.json")
+            if refusal is not None:
+                return refusal
         bridge = await self.relay.robot(name)
         if bridge is None:
             return Reply(404, f"no robot named {name!r} is connected to this relay's Zenoh "
@@ -146,7 +152,8 @@ class RelayWeb:
         refused = CounterMetricFamily(
             "roslibpy_relay_connections_refused",
             "Clients the relay turned away before any robot's bridge saw them, by reason "
-            "(no_router, unknown_robot, no_robot_named, invalid_robot_name).", labels=["reason"])
+            "(no_router, unknown_robot, no_robot_named, invalid_robot_name, robot_not_allowed, "
+            "auth, origin, too_many, max_clients).", labels=["reason"])
         for reason, n in sorted(self.relay.refused.items()):
             refused.add_metric([reason], n)
         from_robot = CounterMetricFamily(

@@ -52,8 +52,8 @@ if TYPE_CHECKING:
 
     from ..server import Bridge
 
-__all__ = ["Access", "Denied", "Reply", "Web", "address_of", "open_route", "respond",
-           "static_files", "viewer", "visible"]
+__all__ = ["Access", "Denied", "Reply", "Web", "address_of", "handshake_headers", "open_route",
+           "respond", "static_files", "viewer", "visible"]
 
 log = logging.getLogger("bridge_server.http.web")
 
@@ -220,17 +220,13 @@ class Web:
         """websockets' ``process_response``: name the worker on every response."""
         if "X-Bridge-Worker" not in response.headers:
             response.headers["X-Bridge-Worker"] = str(self.bridge.config.worker_index)
-        if "1" in request.headers.get_all(ACKS_HEADER):  # we confirm requests (session.py)
-            response.headers[ACKS_HEADER] = "1"
         plan = getattr(connection, "session_plan", None)
         if plan is not None and response.status_code == 101:  # resume.py
             token, kept = plan
             response.headers[SESSION_HEADER] = token
             if kept is not None:
                 response.headers[RECEIVED_HEADER] = str(kept.received)
-        if (response.status_code == 101 and self.bridge.security.auth is not None
-                and getattr(connection, "principal", None) is None):
-            response.headers[AUTH_HEADER] = "required"  # no token yet: the first op must be auth
+        handshake_headers(connection, request, response, self.bridge.security.auth is not None)
 
     async def answer(self, request: Request, address: str) -> Reply | None:
         """The reply to a plain GET of one of the routes from client ``address`` (``None``:
@@ -263,6 +259,18 @@ def address_of(connection: ServerConnection) -> str:
     """The client's address (its host, without the port)."""
     addr = connection.remote_address
     return str(addr[0]) if isinstance(addr, tuple) else str(addr)
+
+
+def handshake_headers(connection: ServerConnection, request: Request, response: Response,
+                      auth: bool) -> None:
+    """What any rosbridge handshake answer says (a bridge's, or a relay's before it knows
+    the robot): acknowledgements confirmed if asked for (session.py), and with an auth file
+    (``auth``) and no token yet that the first op must be ``auth``."""
+    if "1" in request.headers.get_all(ACKS_HEADER):  # we confirm requests (session.py)
+        response.headers[ACKS_HEADER] = "1"
+    if (response.status_code == 101 and auth
+            and getattr(connection, "principal", None) is None):
+        response.headers[AUTH_HEADER] = "required"  # no token yet: the first op must be auth
 
 
 def respond(connection: ServerConnection, reply: Reply) -> Response:

@@ -196,29 +196,18 @@ class Gate:
         self.session.refuse(op, why)
 
     def _auth(self, op: ops.Auth) -> None:
-        auth = self.security.auth
-        if auth is None:
+        if self.security.auth is None:
             return  # no auth file: everyone is welcome, the op changes nothing
-        address = client_address(self.session.ws)
-        locked = self.security.locked_out(address)
-        if locked is not None:  # connections opened before the lock-out get no guess either
-            log.warning("session %d: auth op from %s refused: locked out after failed attempts",
-                        self.session.sid, address)
-            self.close(locked[0])
+        principal = self.security.verify_auth_op(client_address(self.session.ws), op.mac,
+                                                 f"session {self.session.sid}")
+        if isinstance(principal, str):
+            self.close(principal)
             return
-        principal = auth.verify(op.mac)
-        if principal is not None and self.principal not in (None, principal):
+        if self.principal not in (None, principal):
             log.warning("session %d: auth op for another principal refused", self.session.sid)
             self.close(f"this connection is authenticated as {self.principal.name} already; "
                        "open a new connection to use another token")
             return
-        if principal is None:
-            count = self.security.failures.failed(address)
-            log.warning("session %d: auth op from %s with a wrong token (failure %d)",
-                        self.session.sid, address, count)
-            self.close("authentication failed: the auth op's token (mac) is not valid")
-            return
-        self.security.failures.succeeded(address)
         if self.principal is None:
             self.principal, self.role, self.authenticated = principal, principal.role, True
             if isinstance(self.session.ws, BridgeConnection):

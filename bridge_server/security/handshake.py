@@ -16,7 +16,7 @@ from websockets.asyncio.server import ServerConnection
 from websockets.http11 import Request, Response
 
 from ..interfaces import BridgeError
-from .auth import AuthConfig, AuthFileError, FailureTracker, load_auth_file
+from .auth import AuthConfig, AuthFileError, FailureTracker, Principal, load_auth_file
 from .credentials import client_address, is_loopback, token_of
 from .gate import PRE_AUTH_FRAME_LIMIT, Gate
 from .options import SecurityConfig
@@ -218,6 +218,25 @@ class Security:
         if isinstance(connection, BridgeConnection):
             connection.principal = principal
         return None
+
+    def verify_auth_op(self, address: str, mac: str, who: str) -> Principal | str:
+        """The principal of an ``auth`` op's token (``mac``) from ``address``, or why it is
+        refused (locked out; a wrong token, counted toward the lock-out). ``who`` names the
+        connection in the log (never the token)."""
+        assert self.auth is not None
+        locked = self.locked_out(address)
+        if locked is not None:  # connections opened before the lock-out get no guess either
+            log.warning("%s: auth op from %s refused: locked out after failed attempts", who,
+                        address)
+            return locked[0]
+        principal = self.auth.verify(mac)
+        if principal is None:
+            count = self.failures.failed(address)
+            log.warning("%s: auth op from %s with a wrong token (failure %d)", who, address,
+                        count)
+            return "authentication failed: the auth op's token (mac) is not valid"
+        self.failures.succeeded(address)
+        return principal
 
     def locked_out(self, address: str) -> tuple[str, str] | None:
         """Why ``address`` may not try a token now, and its ``Retry-After`` (``None``: it may)."""

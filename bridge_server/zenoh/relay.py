@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import contextlib
 import logging
 import secrets
 import signal
@@ -36,17 +37,27 @@ from .._exit import ends_process
 
 try:
     from websockets.asyncio.server import Server, ServerConnection, serve
+    from websockets.datastructures import MultipleValuesError
+    from websockets.exceptions import ConnectionClosed
 
-    from roslibpy_lite.ops import RELAY_HEADER
+    from roslibpy_lite import ops
+    from roslibpy_lite.exceptions import ProtocolError
+    from roslibpy_lite.ops import RELAY_HEADER, parse_op
+    from roslibpy_lite.protocol import decode_frame
 
     from .. import security
+    from ..foxglove import SUBPROTOCOL as FOXGLOVE
     from ..foxglove import select_subprotocol
     from ..http.relay_web import RelayWeb
-    from ..http.web import Reply, address_of, respond
+    from ..http.web import Reply, address_of, handshake_headers, respond
     from ..http.web_access import WebAccess
     from ..interfaces import BridgeError
     from ..security import Security
-    from ..server import Bridge, BridgeConfig
+    from ..security.auth import Principal
+    from ..security.credentials import client_address
+    from ..security.gate import POLICY_VIOLATION
+    from ..security.websockets_internals import BridgeConnection
+    from ..server import REFUSALS, Bridge, BridgeConfig
     from ..session.resume import ResumeConfig
     from ..session.session import SessionConfig
     from . import keys
@@ -60,6 +71,9 @@ except ModuleNotFoundError as _missing:  # an install without the relay extra
 if TYPE_CHECKING:
     import zenoh
     from websockets.http11 import Request, Response
+
+    from ..foxglove.session import FoxgloveSession
+    from ..session.session import Session
 
 __all__ = ["Relay", "main", "parse_args"]
 
@@ -220,44 +234,119 @@ class Relay:
             keys.check_robot(name)
         except BridgeError as exc:
             return self._refuse(connection, "invalid_robot_name", 400, str(exc))
+        try:
+            refusal = await self.security.process_request(connection, request)
+        except MultipleValuesError as exc:  # a header given twice that must be given once
+            refusal = connection.respond(400, f"header {exc} sent more than once\n")
+        if refusal is not None:  # origin, client limits, lock-out, a wrong token
+            self._count(REFUSALS.get(refusal.status_code, f"http_{refusal.status_code}"))
+            return refusal
+        principal = getattr(connection, "principal", None)
+        if principal is None and self.security.auth is not None:
+            # No token yet: the robot is opened only once its first op authenticates a
+            # principal that may reach it (_handle); nothing of the robot's is touched now.
+            connection.robot_name = name  # type: ignore[attr-defined]
+            return None
+        if principal is not None and not principal.role.reaches(name):
+            return self._not_allowed(connection, principal, name)
         bridge = await self.robot(name)
         if bridge is None:
             log.info("refused a client asking for robot %s: not on Zenoh", name)
-            return self._refuse(connection, "unknown_robot", 404, f"no robot named {name!r} "
-                                "is connected to this relay's Zenoh network")
+            return self._refuse(connection, "unknown_robot", 404, _unknown(name))
         connection.robot_bridge = bridge  # type: ignore[attr-defined]
-        refusal: Response | None = await bridge.admit(connection, request)
-        principal = getattr(connection, "principal", None)
-        if refusal is None and principal is not None and not principal.role.reaches(name):
-            log.warning("refused principal %s (role %s) asking for robot %s: not among its "
-                        "robots", principal.name, principal.role.name, name)
-            bridge.metrics.connection_refused("robot_not_allowed")
-            return connection.respond(
-                403, f"role {principal.role.name} may not reach robot {name!r}\n")
-        return refusal
+        answer: Response | None = await bridge.admit(connection, request, secured=True)
+        return answer
+
+    def _not_allowed(self, connection: ServerConnection, principal: Principal, name: str
+                     ) -> Response:
+        """403: ``principal``'s role does not reach robot ``name`` (which stays unopened)."""
+        log.warning("refused principal %s (role %s) asking for robot %s: not among its robots",
+                    principal.name, principal.role.name, name)
+        return self._refuse(connection, "robot_not_allowed", 403,
+                            f"role {principal.role.name} may not reach robot {name!r}")
 
     def _refuse(self, connection: ServerConnection, reason: str, status: int, text: str
                 ) -> Response:
         """Turn a client away before any robot's Bridge sees it, counted by ``reason`` (the
         relay's /metrics)."""
-        self.refused[reason] = self.refused.get(reason, 0) + 1
+        self._count(reason)
         return connection.respond(status, f"{text}\n")
+
+    def _count(self, reason: str) -> None:
+        """One more client turned away for ``reason``."""
+        self.refused[reason] = self.refused.get(reason, 0) + 1
 
     def _process_response(self, connection: ServerConnection, request: Request,
                           response: Response) -> None:
         """The robot's Bridge names its session (resume), acknowledgements and a needed
-        ``auth`` op in the handshake answer, as on the bridge; every websocket answer, a
-        refusal too, names the robot asked for (:data:`RELAY_HEADER`), so a client knows a
-        relay answered."""
+        ``auth`` op in the handshake answer, as on the bridge (a connection whose robot waits
+        for its ``auth`` op gets the last two); every websocket answer, a refusal too, names
+        the robot asked for (:data:`RELAY_HEADER`), so a client knows a relay answered."""
         if any("upgrade" in v.lower() for v in request.headers.get_all("Connection")):
             response.headers[RELAY_HEADER] = _robot_named(request)
         bridge: Bridge | None = getattr(connection, "robot_bridge", None)
         if bridge is not None:
             bridge.web.process_response(connection, request, response)
+        else:
+            handshake_headers(connection, request, response, self.security.auth is not None)
 
     async def _handle(self, ws: ServerConnection) -> None:
-        bridge: Bridge = ws.robot_bridge  # type: ignore[attr-defined]
+        bridge: Bridge | None = getattr(ws, "robot_bridge", None)
+        if bridge is None:
+            bridge = await self._authenticated_robot(ws, ws.robot_name)  # type: ignore[attr-defined]
+            if bridge is None:
+                return
         await bridge.serve_connection(ws)
+
+    async def _authenticated_robot(self, ws: ServerConnection, name: str) -> Bridge | None:
+        """A connection that gave no token at the handshake: its first op must be ``auth``
+        (within the handshake timeout), with a token whose role reaches robot ``name``; only
+        then is the robot opened (``None``: the connection was closed, saying why)."""
+        why: Principal | str
+        if ws.subprotocol == FOXGLOVE:  # it has no auth op: a token at the handshake or none
+            why = ("authentication required: give the token in the URL (?token=...) or an "
+                   "Authorization header")
+        else:
+            why = await self._auth_op(ws)
+        if isinstance(why, Principal):
+            principal = why
+            if not principal.role.reaches(name):
+                log.warning("closed the connection of principal %s (role %s), authenticated "
+                            "by an auth op, asking for robot %s: not among its robots",
+                            principal.name, principal.role.name, name)
+                self._count("robot_not_allowed")
+                why = f"role {principal.role.name} may not reach robot {name!r}"
+            else:
+                bridge = await self.robot(name)
+                if bridge is not None:
+                    ws.principal = principal  # type: ignore[attr-defined]
+                    if isinstance(ws, BridgeConnection):
+                        ws.limit_frames(None)  # frames up to --max-message-size again
+                    return bridge
+                self._count("unknown_robot")
+                why = _unknown(name)
+        if why:
+            with contextlib.suppress(ConnectionClosed):
+                await ws.close(POLICY_VIOLATION, why[:120])
+        return None
+
+    async def _auth_op(self, ws: ServerConnection) -> Principal | str:
+        """The principal the connection's first op (``auth``) proves, or why it does not
+        (empty: the connection is gone)."""
+        try:
+            async with asyncio.timeout(self.config.security.handshake_timeout or 10.0):
+                op = parse_op(decode_frame(await ws.recv()))
+        except TimeoutError:
+            return ("authentication required: send a token (Authorization: Bearer, ?token= "
+                    "or an auth op) within the handshake timeout")
+        except ProtocolError as exc:
+            return f"authentication required: the first op must be auth ({exc.message[:60]})"
+        except ConnectionClosed:
+            return ""
+        if not isinstance(op, ops.Auth):
+            return f"authentication required before {op.OP!r}: send the auth op first"
+        return self.security.verify_auth_op(client_address(ws), op.mac,
+                                            f"a client of {ws.robot_name}")  # type: ignore[attr-defined]
 
     def reload(self) -> bool:
         """SIGHUP: certificates and the auth file again, every robot's sessions rechecked."""
@@ -277,10 +366,16 @@ class Relay:
             await asyncio.get_running_loop().run_in_executor(None, session.close)
 
 
+def _unknown(name: str) -> str:
+    return f"no robot named {name!r} is connected to this relay's Zenoh network"
+
+
 def _tell_presence(bridge: Bridge, robot: str, here: bool) -> None:
-    """Tell every client of ``robot`` that it went away (its link, or this relay's link to
-    the router, is gone: what it does now waits) or that it is back."""
-    for session in list(bridge.sessions):
+    """Tell every client of ``robot`` (rosbridge and Foxglove) that it went away (its link,
+    or this relay's link to the router, is gone: what it does now waits) or that it is
+    back."""
+    sessions: list[Session | FoxgloveSession] = [*bridge.sessions, *bridge.foxglove.sessions]
+    for session in sessions:
         if here:
             session.status("info", f"robot {robot} is back: its topics flow again")
         else:

@@ -91,10 +91,12 @@ async def start_robot(router: str, robot: str = ROBOT, ca: str | None = None,
     return bridge, exporter
 
 
-async def robot_reachable(relay: Relay, robot: str = ROBOT, timeout: float = 20.0) -> None:
-    """Wait until ``relay`` serves ``robot`` (its liveliness reached the relay)."""
+async def robot_reachable(relay: Relay, robot: str = ROBOT, timeout: float = 20.0,
+                          open_it: bool = True) -> None:
+    """Wait until ``relay`` serves ``robot`` (its liveliness reached the relay); without
+    ``open_it`` only until the robot is on the relay's Zenoh network (left unopened)."""
     deadline = asyncio.get_running_loop().time() + timeout
-    while await relay.robot(robot) is None:
+    while not (await relay.robot(robot) if open_it else robot in await relay.on_network()):
         if asyncio.get_running_loop().time() > deadline:
             raise AssertionError(f"robot {robot} never reached the relay")
 
@@ -125,25 +127,28 @@ async def tier(tls: tuple[str, str] | None = None, websocket: bool = False
 
 
 @contextlib.asynccontextmanager
-async def relay_with_auth(auth: Path, roles: str, robots: tuple[str, ...] = ("robot1", "robot2")
+async def relay_with_auth(auth: Path, roles: str, robots: tuple[str, ...] = ("robot1", "robot2"),
+                          open_robots: bool = True
                           ) -> AsyncIterator[tuple[Relay, dict[str, str]]]:
     """A relay (the router) with the auth file ``auth`` written from the ``[roles.*]`` text
     ``roles`` and one principal, with a token of its own, per role; ``robots`` dialing out to
-    it. Yields the relay and the tokens by role name."""
+    it (opened by the relay unless not ``open_robots``). Yields the relay and the tokens by
+    role name."""
     names = re.findall(r"^\[roles\.(\w+)\]", roles, re.MULTILINE)
     tokens = {role: new_token() for role in names}
     auth.write_text(roles + "".join(
         f'\n[principals.{role}_user]\nrole = "{role}"\ntoken_hash = "{hash_token(token)}"\n'
         for role, token in tokens.items()))
-    async with relay_serving(robots, SecurityConfig(auth_file=str(auth))) as relay:
+    async with relay_serving(robots, SecurityConfig(auth_file=str(auth)),
+                             open_robots) as relay:
         yield relay, tokens
 
 
 @contextlib.asynccontextmanager
-async def relay_serving(robots: tuple[str, ...], security: SecurityConfig | None = None
-                        ) -> AsyncIterator[Relay]:
+async def relay_serving(robots: tuple[str, ...], security: SecurityConfig | None = None,
+                        open_robots: bool = True) -> AsyncIterator[Relay]:
     """A relay (the router; ``security`` its options) with ``robots`` dialing out to it,
-    each reachable; all closed afterwards."""
+    each reachable (and opened, unless not ``open_robots``); all closed afterwards."""
     router = f"tcp/127.0.0.1:{free_port()}"
     relay = Relay(BridgeConfig(port=0, node_name="relay", security=security or SecurityConfig()),
                   ZenohOptions(listen=[router]))
@@ -153,7 +158,7 @@ async def relay_serving(robots: tuple[str, ...], security: SecurityConfig | None
         for name in robots:
             started.append(await start_robot(router, robot=name))
         for name in robots:
-            await robot_reachable(relay, name)
+            await robot_reachable(relay, name, open_it=open_robots)
         yield relay
     finally:
         await relay.close()

@@ -439,3 +439,27 @@ async def test_a_foxglove_client_follows_the_robots_clock_through_a_relay(
             await _call(fox.close)
     finally:
         ros_node.destroy_publisher(clock)
+
+
+async def test_a_foxglove_client_is_told_its_robot_went_away_and_is_back() -> None:
+    """The robot's link to the relay's network goes (its exporter closed) and comes back (a
+    new one): the stock Foxglove client through the relay gets a warning status naming the
+    robot and that it went away, then an info status that it is back."""
+    from bridge_server.zenoh.exporter import Exporter
+    from bridge_server.zenoh.link import ZenohOptions
+
+    async with tier() as t:
+        fox = await _call(foxglove_peer, t.url())
+        try:
+            await t.exporter.close()
+            gone = await _call(fox.wait_event, lambda e: e.get("event") == "status"
+                               and e.get("level") == 1, DEADLINE, "a warning status")
+            assert f"robot {ROBOT} went away" in gone["message"], gone
+            t.exporter = Exporter(t.robot.graph, ROBOT, ZenohOptions(connect=[t.router]),
+                                  graph_changed=t.robot.graph_changed, snapshot_interval=0.2)
+            t.exporter.start()
+            back = await _call(fox.wait_event, lambda e: e.get("event") == "status"
+                               and e.get("level") == 0, DEADLINE, "an info status")
+            assert f"robot {ROBOT} is back" in back["message"], back
+        finally:
+            await _call(fox.close)

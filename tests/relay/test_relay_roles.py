@@ -52,7 +52,7 @@ async def test_a_role_reaches_only_its_robots(relay_with_roles: tuple[Relay, dic
     relay, tokens = relay_with_roles
     assert await _reaches(relay, "robot1", tokens["robot1_viewer"])
     assert not await _reaches(relay, "robot2", tokens["robot1_viewer"])
-    # counted as the robot's refusal (roslibpy_bridge_connections_refused_total{robot=...})
-    assert relay.robots["robot2"].metrics.refused == {"robot_not_allowed": 1}
+    # counted as the relay's refusal (roslibpy_relay_connections_refused_total{reason=...})
+    assert relay.refused == {"robot_not_allowed": 1}
     assert await _reaches(relay, "robot1", tokens["fleet_viewer"])
     assert await _reaches(relay, "robot2", tokens["fleet_viewer"])
