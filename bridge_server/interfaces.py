@@ -36,6 +36,7 @@ __all__ = [
     "BridgeError",
     "ConversionError",
     "Kind",
+    "ReportedError",
     "ServiceCallError",
     "TypeName",
     "TypeNameError",
@@ -58,6 +59,11 @@ TYPE_RE: Final = re.compile(r"[A-Za-z][A-Za-z0-9_]*\Z")
 
 class BridgeError(Exception):
     """Root of the errors raised by the bridge's own code."""
+
+
+class ReportedError(BridgeError):
+    """A failure its source has counted and logged already (a relay's robot that sent bytes
+    that do not decode): whoever meets it drops the item without logging it again."""
 
 
 class ServiceCallError(BridgeError):

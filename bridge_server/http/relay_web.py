@@ -12,7 +12,9 @@ goes on to the robot's handshake):
                              the topics its clients watch, messages and bytes each way
 ``GET /metrics``             every robot's bridge metrics (:mod:`.metrics`), each series
                              labelled ``robot``, ``roslibpy_relay_robot_present``,
-                             ``roslibpy_relay_bytes_from_robot_total`` (by robot) and
+                             ``roslibpy_relay_bytes_from_robot_total`` and
+                             ``roslibpy_relay_robot_dropped_total`` (by robot; the latter
+                             by kind too: what a robot sent that was dropped) and
                              ``roslibpy_relay_connections_refused_total`` (by reason)
 ``GET /healthz``             the process runs
 ``GET /readyz``              Zenoh is joined and the port listens (else 503 and why)
@@ -160,11 +162,18 @@ class RelayWeb:
             "roslibpy_relay_bytes_from_robot",
             "Payload bytes of the robot's topic messages this relay received from Zenoh.",
             labels=["robot"])
+        dropped = CounterMetricFamily(
+            "roslibpy_relay_robot_dropped",
+            "What a robot sent that the relay dropped, by kind: messages_dropped (oldest, over "
+            "its queue), replies_dropped, graph_too_large, graph_superseded, bad_graph, "
+            "bad_messages, bad_replies, handling_failed.", labels=["robot", "kind"])
         for name in snaps:
             from_robot.add_metric([name], _bytes_from_robot(self.relay.robots[name]))
+            for kind, n in sorted(_dropped(self.relay.robots[name]).items()):
+                dropped.add_metric([name, kind], n)
         body = metrics.render_labelled(
             ((name, snap, self.relay.robots[name].web.caps) for name, snap in snaps.items()),
-            "robot", [present, from_robot, refused])
+            "robot", [present, from_robot, dropped, refused])
         return Reply(200, body, metrics.CONTENT_TYPE, nocache)
 
     def _present(self, name: str, online: set[str]) -> bool:
@@ -186,6 +195,7 @@ class RelayWeb:
             bridge = self.relay.robots.get(name)
             entry["bytes_from_robot"] = (_bytes_from_robot(bridge) if snap is not None
                                          and bridge is not None else 0)
+            entry["dropped"] = _dropped(bridge) if snap is not None and bridge is not None else {}
             robots.append(entry)
         return {"relay": self.relay.relay_id, "version": __version__, "started": self.started,
                 "now": time.time(), "ready": self.relay.trouble() is None,
@@ -201,6 +211,13 @@ def _bytes_from_robot(bridge: Bridge) -> int:
     """Payload bytes of the robot's topic messages as the relay received them from Zenoh
     (counted by its :class:`~bridge_server.zenoh.graph.ZenohGraph`; 0 for another graph)."""
     return int(getattr(bridge.graph, "received_bytes", 0))
+
+
+def _dropped(bridge: Bridge) -> dict[str, int]:
+    """What the robot sent that its :class:`~bridge_server.zenoh.graph.ZenohGraph` dropped,
+    by kind (:class:`~bridge_server.zenoh.inbox.Faults`; empty for another graph)."""
+    faults = getattr(bridge.graph, "faults", None)
+    return dict(faults.counts) if faults is not None else {}
 
 
 def summary(snap: Mapping[str, Any]) -> dict[str, Any]:

@@ -50,6 +50,8 @@ from websockets.protocol import State
 from roslibpy_lite import ops
 from roslibpy_lite.protocol import split_fragments
 
+from ..interfaces import ReportedError
+
 if TYPE_CHECKING:
     from websockets.asyncio.server import ServerConnection
 
@@ -428,6 +430,8 @@ class Outbox:
             self.queued -= 1
             try:
                 encoded = self._frames(sub, inc)
+            except ReportedError:  # counted and logged where it came from (a relay's robot)
+                continue
             except Exception:
                 log.exception("session %d: cannot encode a message of %s", self.sid, sub.topic)
                 continue

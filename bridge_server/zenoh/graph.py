@@ -56,12 +56,14 @@ from ..interfaces import (
     BridgeError,
     ConversionError,
     Kind,
+    ReportedError,
     ServiceCallError,
     UnknownTypeError,
     args_mapping,
     canonical_name,
 )
 from . import keys
+from .inbox import Faults, Inbox
 from .keys import (
     GOAL_WAIT,
     CallRequest,
@@ -82,6 +84,13 @@ log = logging.getLogger("bridge_server.zenoh.graph")
 
 SNAPSHOT_WAIT = 5.0
 """Seconds a new robot's first graph snapshot is waited for."""
+
+GRAPH_INTERVAL = 0.25
+"""Seconds between two graph documents of a robot that the relay reads (at most four a
+second; one coming sooner waits for its turn, and a newer one replaces it)."""
+
+STAMP_END = 1 << 63
+"""A message's stamp (ns since the epoch) is below this (an int64 for every encoding)."""
 
 SERVER_WAIT = 5.0
 """Seconds the robot waits for its action client to be ready for a goal (the relay's
@@ -148,14 +157,17 @@ class RelayConverter:
 class ZenohMessage:
     """One message the robot put, encoded for clients lazily and once per encoding."""
 
-    __slots__ = ("_cbor", "_cbor_raw", "_json", "_msg_json", "conv", "data", "stamp_ns",
-                 "topic")
+    __slots__ = ("_bad", "_cbor", "_cbor_raw", "_json", "_msg_json", "conv", "data", "faults",
+                 "stamp_ns", "topic")
 
-    def __init__(self, topic: str, data: bytes, conv: RelayConverter, stamp_ns: int) -> None:
+    def __init__(self, topic: str, data: bytes, conv: RelayConverter, stamp_ns: int,
+                 faults: Faults) -> None:
         self.topic = topic
         self.data = data
         self.conv = conv
         self.stamp_ns = stamp_ns
+        self.faults = faults
+        self._bad = False
         self._msg_json: str | None = None
         self._json: str | None = None
         self._cbor: bytes | None = None
@@ -163,8 +175,21 @@ class ZenohMessage:
 
     def _text(self) -> str:
         if self._msg_json is None:
-            self._msg_json = self.conv.text_of(self.data)
+            try:
+                self._msg_json = self.conv.text_of(self.data)
+            except Exception as exc:
+                raise self._undecodable(exc) from None
         return self._msg_json
+
+    def _undecodable(self, exc: Exception) -> ReportedError:
+        """The robot's bytes do not decode as the type it named: counted once per message
+        (whatever the number of viewers) as the robot's fault."""
+        if not self._bad:
+            self._bad = True
+            self.faults.add("bad_messages", f"messages of {self.topic} that do not decode as "
+                            f"{self.conv.type_name} dropped ({type(exc).__name__}: "
+                            f"{str(exc)[:200]})")
+        return ReportedError(f"a message of {self.topic} does not decode")
 
     def json_text(self, name: str | None = None) -> str:
         """The whole ``publish`` op as JSON text."""
@@ -184,7 +209,10 @@ class ZenohMessage:
 
     def to_cbor_obj(self, data: bytes) -> Any:
         """The CBOR object of the message's bytes (for :func:`encode_publish_cbor`)."""
-        return self.conv.decode_cbor(data)
+        try:
+            return self.conv.decode_cbor(data)
+        except Exception as exc:
+            raise self._undecodable(exc) from None
 
     def cbor_raw(self, name: str | None = None) -> bytes:
         """The whole ``publish`` op with the CDR bytes as they came."""
@@ -208,7 +236,6 @@ class ZenohFeed:
         self._type: str | None = msg_cls._type if msg_cls is not None else None
         self._place = ("", 0)  # (epoch, seq) of the last message taken
         self._entities: list[Any] = []
-        self._warned = False
 
     @property
     def latched(self) -> ZenohMessage | None:
@@ -225,7 +252,7 @@ class ZenohFeed:
         latched message."""
         g = self.graph
         session = g.session
-        here = g.on_loop
+        here = g.inbox.sample  # latest-only: past the robot's bound its oldest go
         self._entities = [
             session.declare_subscriber(keys.key_of(g.robot, self.topic), here(self.on_sample)),
             session.liveliness().declare_token(
@@ -247,18 +274,19 @@ class ZenohFeed:
             self.on_sample(reply.ok)
 
     def on_sample(self, sample: zenoh.Sample) -> None:
-        """One message the robot put (on the loop), its payload counted as received."""
-        self.graph.received_bytes += len(sample.payload)
-        if self.graph.subscriptions.get(self.topic) is not self:
+        """One message the robot put (on the loop), its payload counted as received; one
+        that cannot be read is dropped and counted as the robot's fault (logged once)."""
+        graph = self.graph
+        graph.received_bytes += len(sample.payload)
+        if graph.subscriptions.get(self.topic) is not self:
             return
         try:
             meta = Meta.decode(sample.attachment.to_bytes() if sample.attachment else None)
-            conv = self.graph.converter(self.graph.resolve_message(meta.type))
+            if not 0 <= meta.stamp_ns < STAMP_END:
+                raise BridgeError(f"its stamp {meta.stamp_ns} ns is out of range")
+            conv = graph.converter(graph.resolve_message(meta.type))
         except BridgeError as exc:
-            if not self._warned:
-                self._warned = True
-                log.warning("messages of %s on robot %s are dropped: %s", self.topic,
-                            self.graph.robot, exc)
+            graph.faults.add("bad_messages", f"messages of {self.topic} dropped: {exc}")
             return
         epoch, seq = self._place
         if meta.epoch == epoch and meta.seq <= seq:
@@ -267,14 +295,19 @@ class ZenohFeed:
         self._type = conv.type_name
         self.received += 1
         msg = ZenohMessage(self.topic, sample.payload.to_bytes(), conv,
-                           meta.stamp_ns or time.time_ns())
+                           meta.stamp_ns or time.time_ns(), graph.faults)
         if meta.latched:
             self._latched = msg
+        failed: Exception | None = None
         for listener in list(self.listeners):
             try:
                 listener(msg)
-            except Exception:
-                log.exception("listener failed on %s", self.topic)
+            except Exception as exc:  # its bytes do not decode as its type, for any viewer
+                failed = exc
+        if failed is not None:  # once per message, whatever the number of viewers
+            graph.faults.add("bad_messages", f"a message of {self.topic} could not be sent "
+                             f"to its viewers ({type(failed).__name__}: {str(failed)[:200]})",
+                             exc=failed)
 
 
 class ZenohPublisher:
@@ -355,8 +388,7 @@ class ZenohSentGoal:
             event = GoalEvent.decode(reply.ok.payload.to_bytes())
             self._dispatch(event)
         except BridgeError as exc:
-            log.warning("a goal's reply from robot %s is dropped: %s", self.shared.graph.robot,
-                        exc)
+            self.shared.graph.faults.add("bad_replies", f"a goal's reply dropped: {exc}")
 
     def _dispatch(self, event: GoalEvent) -> None:
         listener = self.listener
@@ -432,8 +464,7 @@ class ZenohActionClient:
                 f"{graph.robot}/{keys.RUNNING}/{graph.relay}/{sent.id}")
             graph.session.get(keys.key_of(graph.robot, self.name, keys.GOAL),
                               zenoh.handlers.Callback(graph.on_loop(sent.on_reply),
-                                                      lambda: graph.on_loop(
-                                                          lambda _: sent.on_end())(None)),
+                                                      graph.inbox.end(sent.on_end)),
                               payload=request.encode(), timeout=GOAL_WAIT,
                               consolidation=zenoh.ConsolidationMode.NONE)
         except zenoh.ZError:  # the relay's Zenoh session closed: the goal ends unsent
@@ -640,6 +671,10 @@ class ZenohGraph:
         self.robot = keys.check_robot(robot)
         self.relay = keys.check_relay(relay)
         self.loop = asyncio.get_running_loop()
+        self.inbox = Inbox(self.loop, self.robot)
+        """What the robot's Zenoh callbacks hand to the loop, bounded (inbox.py)."""
+        self.faults = self.inbox.faults
+        """What the robot sent that was dropped, by kind."""
         self.snapshot = Snapshot()
         self.alive = False
         self.presence_listeners: list[Callable[[bool], None]] = []
@@ -655,6 +690,8 @@ class ZenohGraph:
         self._converters: dict[type[Any], RelayConverter] = {}
         self._entities: list[Any] = []
         self._have_snapshot = asyncio.Event()
+        self._graph_next = 0.0  # loop time from which the next graph document is read
+        self._graph_waiting: zenoh.Sample | None = None  # one come too soon (the newest)
 
     @property
     def name(self) -> str:
@@ -662,14 +699,9 @@ class ZenohGraph:
         return self.snapshot.node or f"relay_{self.relay}_{self.robot}"
 
     def on_loop(self, fn: Callable[[Any], None]) -> Callable[[Any], None]:
-        """A Zenoh callback that hands its argument to ``fn`` on the event loop."""
-        loop = self.loop
-
-        def cross(arg: Any) -> None:
-            with contextlib.suppress(RuntimeError):  # the loop closed meanwhile
-                loop.call_soon_threadsafe(fn, arg)
-
-        return cross
+        """A Zenoh callback that hands its argument to ``fn`` on the event loop, in order,
+        through the robot's bounded inbox (reliable data: counted and told if dropped)."""
+        return self.inbox.reliable(fn)
 
     # -- life ----------------------------------------------------------------------------------
 
@@ -682,10 +714,11 @@ class ZenohGraph:
         self._entities = [
             self.session.liveliness().declare_subscriber(
                 f"{r}/{keys.ALIVE}", self.on_loop(self._on_alive), history=True),
-            self.session.declare_subscriber(f"{r}/{keys.GRAPH}", self.on_loop(self._on_graph)),
+            self.session.declare_subscriber(f"{r}/{keys.GRAPH}",
+                                            self.inbox.graph(self._on_graph)),
         ]
         self.session.get(f"{r}/{keys.GRAPH}",
-                         zenoh.handlers.Callback(self.on_loop(self._on_graph_reply)))
+                         zenoh.handlers.Callback(self.inbox.graph(self._on_graph_reply)))
 
     async def ready(self, timeout: float = SNAPSHOT_WAIT) -> bool:
         """Whether the robot's first graph snapshot came within ``timeout`` s."""
@@ -728,12 +761,30 @@ class ZenohGraph:
                 listener(self.alive)
 
     def _on_graph(self, sample: zenoh.Sample) -> None:
+        """A graph document: read now, or, at most one each ``GRAPH_INTERVAL`` s, when its
+        turn comes (a newer one coming meanwhile replaces it)."""
+        now = self.loop.time()
+        if now < self._graph_next:
+            if self._graph_waiting is None:
+                self.loop.call_at(self._graph_next, self._graph_turn)
+            else:
+                self.faults.add("graph_superseded", "graph documents replaced by a newer one "
+                                f"before this relay read them (it reads one each "
+                                f"{GRAPH_INTERVAL:g} s at most)")
+            self._graph_waiting = sample
+            return
+        self._graph_next = now + GRAPH_INTERVAL
         try:
             self.snapshot = Snapshot.decode(sample.payload.to_bytes())
-        except BridgeError as exc:
-            log.warning("robot %s: %s", self.robot, exc)
+        except (BridgeError, RecursionError) as exc:  # too deep for json: not one either
+            self.faults.add("bad_graph", f"a graph document dropped: {str(exc)[:200]}")
             return
         self._have_snapshot.set()
+
+    def _graph_turn(self) -> None:
+        sample, self._graph_waiting = self._graph_waiting, None
+        if sample is not None:
+            self._on_graph(sample)
 
     def _on_graph_reply(self, reply: zenoh.Reply) -> None:
         if reply.ok is not None:
@@ -954,7 +1005,7 @@ class ZenohGraph:
             elif reply.err is not None:
                 future.set_exception(Refused(reply.err.payload.to_string()))
 
-        def ended(_: Any = None) -> None:
+        def ended() -> None:
             if not future.done():
                 future.set_exception(TimeoutError(
                     f"{what}: robot {self.robot} did not answer (is it connected to this "
@@ -962,7 +1013,7 @@ class ZenohGraph:
 
         try:
             self.session.get(key, zenoh.handlers.Callback(self.on_loop(answer),
-                                                          lambda: self.on_loop(ended)(None)),
+                                                          self.inbox.end(ended)),
                              payload=payload, timeout=timeout)
         except zenoh.ZError as exc:  # the relay is closing
             raise Refused(f"{what}: this relay's Zenoh session is closed ({exc})") from None

@@ -151,6 +151,7 @@ class Relay:
         graph = ZenohGraph(self.session, name, self.relay_id)
         bridge = Bridge(self.config, graph=graph)
         graph.presence_listeners.append(lambda here: _tell_presence(bridge, name, here))
+        graph.inbox.told.append(lambda text: _tell(bridge, "warning", text))
         bridge.security = self.security  # one auth file, one SIGHUP, for every robot
         bridge.web.access = WebAccess(self.security, robot=name)
         bridge.web.serving = self._serving
@@ -371,16 +372,20 @@ def _unknown(name: str) -> str:
 
 
 def _tell_presence(bridge: Bridge, robot: str, here: bool) -> None:
-    """Tell every client of ``robot`` (rosbridge and Foxglove) that it went away (its link,
-    or this relay's link to the router, is gone: what it does now waits) or that it is
-    back."""
+    """Tell every client of ``robot`` that it went away (its link, or this relay's link to
+    the router, is gone: what it does now waits) or that it is back."""
+    if here:
+        _tell(bridge, "info", f"robot {robot} is back: its topics flow again")
+    else:
+        _tell(bridge, "warning", f"robot {robot} went away: its link to the Zenoh network "
+              "(or this relay's) is gone; subscriptions resume when it is back")
+
+
+def _tell(bridge: Bridge, level: str, text: str) -> None:
+    """A status to every client of a robot's bridge, rosbridge and Foxglove."""
     sessions: list[Session | FoxgloveSession] = [*bridge.sessions, *bridge.foxglove.sessions]
     for session in sessions:
-        if here:
-            session.status("info", f"robot {robot} is back: its topics flow again")
-        else:
-            session.status("warning", f"robot {robot} went away: its link to the Zenoh network "
-                           "(or this relay's) is gone; subscriptions resume when it is back")
+        session.status(level, text)
 
 
 def _robot_named(request: Request) -> str:

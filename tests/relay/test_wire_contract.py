@@ -110,7 +110,8 @@ async def test_a_message_without_its_type_is_dropped_and_said(
 async def test_a_snapshot_of_the_wrong_shape_is_refused_and_said(
         played: tuple[Any, zenoh.Session], caplog: pytest.LogCaptureFixture) -> None:
     """A graph snapshot whose fields do not have their shapes (``served`` a list, a node
-    without its lists) is refused with the field named, and the relay goes on with the last
+    without its lists) is refused with the field named (logged once, then counted for the
+    relay's page), and the relay goes on with the last
     good one: a client's advertise_service and the rosapi topic list work; a field the relay
     does not know (a newer robot's) is left out."""
     relay, robot = played
@@ -118,13 +119,19 @@ async def test_a_snapshot_of_the_wrong_shape_is_refused_and_said(
     try:
         graph = relay.robots[ROBOT].graph
         good = Snapshot(node="played_bridge", topics=[("/chatter", ["std_msgs/msg/String"])])
-        for bad, named in ((b'{"served": []}', "served is not an object"),
-                           (b'{"nodes": {"/n": {"name": "n"}}}', "nodes./n is not an object "
-                            "with name, namespace, subscribes, publishes, serves")):
+        for n, (bad, named) in enumerate((
+                (b'{"served": []}', "served is not an object"),
+                (b'{"nodes": {"/n": {"name": "n"}}}', "nodes./n is not an object with name, "
+                 "namespace, subscribes, publishes, serves")), 1):
             robot.put(f"{ROBOT}/{keys.GRAPH}", bad)
-            await until(lambda named=named: any(
-                f"is not a Snapshot ({named})" in r.getMessage() for r in caplog.records),
-                f"the relay to refuse a snapshot whose {named}")
+            await until(lambda n=n: graph.faults.counts.get("bad_graph") == n,
+                        f"the relay to refuse a snapshot whose {named}")
+            assert f"is not a Snapshot ({named})" in graph.faults.last["bad_graph"]
+        # logged once, naming the first (the second is counted)
+        assert [r.getMessage() for r in caplog.records if "is not a Snapshot" in r.getMessage()
+                ] == [f"robot {ROBOT}: a graph document dropped: a robot's @graph payload is "
+                      "not a Snapshot (served is not an object) (bad_graph: 1 so far; counted "
+                      "on the relay's page, not logged each time)"]
         assert graph.snapshot == good
         await ws.send({"op": "advertise_service", "service": "/served_here",
                        "type": "std_srvs/srv/Trigger"})

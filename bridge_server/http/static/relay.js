@@ -11,6 +11,13 @@
     return td;
   }
 
+  // What a robot sent that the relay dropped (over its limits, or unreadable), by kind.
+  function over(dropped) {
+    const kinds = Object.entries(dropped || {});
+    if (!kinds.length) return "–";
+    return el("span", kinds.map(([k, n]) => k + " " + n).join(", "), "warn");
+  }
+
   function render(s) {
     document.getElementById("relay-id").textContent = s.relay;
     document.getElementById("version").textContent = s.version;
@@ -27,14 +34,15 @@
       for (const v of [link, r.present ? "yes" : el("span", "gone", "warn"), r.clients,
         r.topics_watched.join(", ") || "–", r.messages_from_robot, r.bytes_from_robot,
         r.messages_to_clients,
-        r.bytes_to_clients, r.messages_from_clients, r.bytes_from_clients, r.drops]) {
+        r.bytes_to_clients, r.messages_from_clients, r.bytes_from_clients, r.drops,
+        over(r.dropped)]) {
         tr.appendChild(cell(v));
       }
       body.appendChild(tr);
     }
     if (!s.robots.length) {
       const td = el("td", "no robot on this relay's Zenoh network", "empty");
-      td.colSpan = 11;
+      td.colSpan = 12;
       body.appendChild(el("tr")).appendChild(td);
     }
     const table = document.getElementById("robots");
