@@ -50,7 +50,12 @@ def main() -> None:
     n = 0
     if mode == "steady":
         stop = threading.Event()
-        threading.Thread(target=lambda: (sys.stdin.read(), stop.set()), daemon=True).start()
+
+        def until_stdin_closes() -> None:
+            sys.stdin.read()
+            stop.set()
+
+        threading.Thread(target=until_stdin_closes, daemon=True).start()
         key = keys.key_of(robot, "/steady")
         while not stop.wait(0.05):
             n += 1
@@ -86,9 +91,9 @@ def main() -> None:
     print(f"done {n}", flush=True)
     if mode != "steady":
         sys.stdin.read()  # stay on the network until told to go
-    token.undeclare()
-    queryable.undeclare()
-    session.close()
+    token.undeclare()  # type: ignore[no-untyped-call]
+    queryable.undeclare()  # type: ignore[no-untyped-call]
+    session.close()  # type: ignore[no-untyped-call]
 
 
 if __name__ == "__main__":

@@ -28,6 +28,7 @@ import psutil
 import pytest
 from websockets.asyncio.client import ClientConnection, connect
 
+from bridge_server.zenoh.graph import ZenohGraph
 from bridge_server.zenoh.relay import Relay
 from tests.helpers import ROOT, ros_env
 from tests.ops.support import aget
@@ -217,6 +218,7 @@ async def test_a_robot_putting_huge_graph_documents_does_not_starve_another() ->
         assert before >= 5 and during >= 0.9 * before, (before, during)
         assert s.viewer.close_code is None
         graph = s.relay.robots["robot2"].graph
+        assert isinstance(graph, ZenohGraph)
         await until(lambda: graph.snapshot.node == "played49", "the newest graph")
         robots = await _robots(s.relay)
         dropped = robots["robot2"]["dropped"]
@@ -239,7 +241,9 @@ async def test_bad_messages_are_logged_once_per_robot_with_a_count(
         try:
             robot2.go()
             assert (await robot2.line()) == "done 200"
-            faults = s.relay.robots["robot2"].graph.faults.counts
+            graph = s.relay.robots["robot2"].graph
+            assert isinstance(graph, ZenohGraph)
+            faults = graph.faults.counts
             await until(lambda: faults.get("bad_messages") == 200, "robot2's 200 messages")
         finally:
             await second.close()
