@@ -12,7 +12,7 @@ A :class:`Inbox` per robot stands between them, so that no robot can starve anot
   liveliness) is reliable: it waits in a queue of at most ``RELIABLE_LIMIT`` items and
   ``RELIABLE_BYTES`` bytes in order; past that a new item is dropped, counted, and the
   robot's clients are told (:attr:`Inbox.told`). A query's end is never dropped (one per
-  query the relay asked).
+  query the relay asked) and comes after the query's replies.
 
 The loop takes at most ``BATCH`` items of one robot at a time, then lets the other robots'
 inboxes and the websockets run: a flooding robot gets its turn, not the loop.
@@ -140,8 +140,7 @@ class Inbox:
                     dropped += 1
                 lane.items.append((fn, sample, size))
                 lane.bytes += size
-                wake = not self._scheduled
-                self._scheduled = True
+                wake = self._schedule()
             if dropped:
                 self.faults.add("messages_dropped", "topic messages dropped, the oldest "
                                 "first: it sends faster than this relay handles (at most "
@@ -158,17 +157,14 @@ class Inbox:
             size = _size(arg)
             lane = self._reliable
             with self._lock:
-                if lane.full_with(size):
-                    self._lost += 1
-                    wake = not self._scheduled
-                    self._scheduled = True
-                else:
+                kept = not lane.full_with(size)
+                if kept:
                     lane.items.append((fn, arg, size))
                     lane.bytes += size
-                    wake = not self._scheduled
-                    self._scheduled = True
-                    size = -1
-            if size >= 0:
+                else:
+                    self._lost += 1
+                wake = self._schedule()
+            if not kept:
                 self.faults.add("replies_dropped", "replies or requests dropped: it sends "
                                 f"more than this relay handles (at most {RELIABLE_LIMIT} wait)")
             if wake:
@@ -188,8 +184,7 @@ class Inbox:
             with self._lock:
                 replaced = self._graph is not None
                 self._graph = (fn, sample)
-                wake = not self._scheduled
-                self._scheduled = True
+                wake = self._schedule()
             if replaced:
                 self.faults.add("graph_superseded", "graph documents replaced by a newer one "
                                 "before this relay read them")
@@ -199,14 +194,22 @@ class Inbox:
         return cross
 
     def end(self, fn: Callable[[], None]) -> Callable[[], None]:
-        """A query's end (one per query the relay asked): never dropped."""
-        loop = self.loop
-
+        """A query's end (one per query the relay asked): after the query's replies, in the
+        same queue, and never dropped."""
         def cross() -> None:
-            with contextlib.suppress(RuntimeError):  # the loop closed meanwhile
-                loop.call_soon_threadsafe(fn)
+            with self._lock:
+                self._reliable.items.append((lambda _: fn(), None, 0))
+                wake = self._schedule()
+            if wake:
+                self._wake()
 
         return cross
+
+    def _schedule(self) -> bool:
+        """(Under the lock.) A drain will run: whether the loop must be woken for it."""
+        wake = not self._scheduled
+        self._scheduled = True
+        return wake
 
     def _wake(self) -> None:
         with contextlib.suppress(RuntimeError):  # the loop closed meanwhile

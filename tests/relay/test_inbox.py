@@ -119,3 +119,15 @@ def test_a_count_is_logged_once_then_at_each_hundredfold() -> None:
     """1, 100 and 10000 are where a kind's count is logged again."""
     assert [n for n in range(1, 20001) if inbox._hundreds(n) > inbox._hundreds(n - 1)] == [
         100, 10000]
+
+
+async def test_a_querys_end_comes_after_its_replies() -> None:
+    """300 replies of a query and then its end, while the loop is busy: the end is handled
+    after every reply (a goal's result is not taken for a robot that did not answer)."""
+    box = Inbox(asyncio.get_running_loop(), "robot9")
+    seen: list[Any] = []
+    reply = box.reliable(lambda item: seen.append(item.n))
+    end = box.end(lambda: seen.append("end"))
+    _from_zenohs_thread(lambda: [*(reply(Item(n)) for n in range(300)), end()])
+    await _settled(box)
+    assert seen == [*range(300), "end"]
