@@ -11,7 +11,8 @@ for a line on stdin, then plays MODE and prints ``done N`` (N: what it put):
   as JSON) as fast as it can for SECONDS;
 - ``graphs``: ten 20 MB graph documents over SECONDS, one nested 100 000 deep, then 50
   small ones at once (the last names the node ``played49``);
-- ``bad``: 200 messages on ``/flood`` whose CDR bytes are no String.
+- ``bad``: 200 messages on ``/flood`` whose CDR bytes are no String, then a String whose
+  stamp is 2**70 ns.
 """
 
 from __future__ import annotations
@@ -88,6 +89,9 @@ def main() -> None:
             n += 1
             session.put(key, b"\x00\x01\x00\x00\xff\xff\xff\x7f",  # a string of 2 GB
                         attachment=Meta(type=STRING, epoch="e", seq=n).encode())
+        n += 1  # and a good one whose stamp no encoding holds
+        session.put(key, _cdr_string("late"),
+                    attachment=Meta(type=STRING, stamp_ns=1 << 70, epoch="e", seq=n).encode())
     print(f"done {n}", flush=True)
     if mode != "steady":
         sys.stdin.read()  # stay on the network until told to go

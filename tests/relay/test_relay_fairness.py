@@ -232,19 +232,20 @@ async def test_a_robot_putting_huge_graph_documents_does_not_starve_another() ->
 
 async def test_bad_messages_are_logged_once_per_robot_with_a_count(
         caplog: pytest.LogCaptureFixture) -> None:
-    """robot2 puts 200 messages whose bytes are no String, watched by two viewers (one that
-    reads nothing): at most two log lines, each naming robot2 and the count, and no
-    traceback per message or viewer; the relay's page counts 200."""
+    """robot2 puts 200 messages whose bytes are no String and one whose stamp is out of
+    range, watched by two viewers (one that reads nothing): at most two log lines, each
+    naming robot2 and the count, and no traceback per message or viewer; the relay's page
+    counts 201."""
     caplog.set_level(logging.INFO)
     async with scene("bad") as (s, robot2):
         second = await _viewer(f"ws://127.0.0.1:{s.relay.port}/robot2", "/flood", 1000)
         try:
             robot2.go()
-            assert (await robot2.line()) == "done 200"
+            assert (await robot2.line()) == "done 201"
             graph = s.relay.robots["robot2"].graph
             assert isinstance(graph, ZenohGraph)
             faults = graph.faults.counts
-            await until(lambda: faults.get("bad_messages") == 200, "robot2's 200 messages")
+            await until(lambda: faults.get("bad_messages") == 201, "robot2's 201 messages")
         finally:
             await second.close()
         lines = [r for r in caplog.records if r.levelno >= logging.WARNING
@@ -253,4 +254,4 @@ async def test_bad_messages_are_logged_once_per_robot_with_a_count(
         for r in lines:
             assert "robot robot2" in r.getMessage() and "so far" in r.getMessage(), r
         robots = await _robots(s.relay)
-        assert robots["robot2"]["dropped"] == {"bad_messages": 200}, robots
+        assert robots["robot2"]["dropped"] == {"bad_messages": 201}, robots
