@@ -20,9 +20,12 @@ Nothing here imports ROS; a test keeps it so.
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping
-from typing import Any, Protocol
+from typing import TYPE_CHECKING, Any, Protocol
 
 from roslibpy_lite.actions import GoalStatus
+
+if TYPE_CHECKING:
+    from msgs.dynamic import TypeStore
 
 __all__ = [
     "ACTIVE",
@@ -324,6 +327,12 @@ class Graph(Protocol):
         """Why the ROS side is not serving (``None``: it is)."""
 
     # -- types ---------------------------------------------------------------------------------
+
+    @property
+    def wire_types(self) -> TypeStore:
+        """Where the ``msgs`` classes of this ROS side's types are found and built (CDR
+        without rclpy, Foxglove): the process-wide store on rclpy, the robot's own on a
+        relay (:mod:`msgs.dynamic`)."""
 
     def resolve_message(self, name: str) -> Any:
         """The message type named ``pkg/[msg/]Type``; ``TypeNameError``, ``UnknownTypeError``."""

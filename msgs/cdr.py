@@ -36,10 +36,11 @@ import array
 import re
 import struct
 import sys
+import weakref
 from collections.abc import Callable
 from typing import Any
 
-from .runtime import Message, lookup_message
+from .runtime import Message
 
 __all__ = ["TYPED_ARRAY_TAGS", "CdrError", "Typed", "decode", "decoder_for", "encode",
            "min_size"]
@@ -142,8 +143,9 @@ def _wide(data: Any) -> str:
 class _Gen:
     """Writes the source of one type's decoder."""
 
-    def __init__(self, typed: Typed | None) -> None:
+    def __init__(self, typed: Typed | None, find: Callable[[str], type[Message]]) -> None:
         self.typed = typed
+        self.find = find  # the nested types' classes: the decoded class's own lookup
         self.lines: list[str] = []
         self.ns: dict[str, Any] = {
             "unpack_from": struct.unpack_from, "array": array.array, "bytes": bytes,
@@ -214,7 +216,7 @@ class _Gen:
             if _TYPE.match(spec) and "/" in spec and "[" not in spec and "<" not in spec:
                 inner = self.var()
                 self.emit(depth, f"{inner} = {out}[{name!r}] = {{}}")
-                self.members(depth, lookup_message(spec)._fields_and_types, inner,
+                self.members(depth, self.find(spec)._fields_and_types, inner,
                              f"{prefix}{name}.")
             else:
                 self.field(depth, name, spec, f"{out}[{name!r}]")
@@ -222,7 +224,7 @@ class _Gen:
 
     def nested(self, type_name: str) -> str:
         name = "d_" + re.sub(r"\W", "_", type_name)
-        self.ns[name] = _decoder_with_offset(lookup_message(type_name), self.typed)
+        self.ns[name] = _decoder_with_offset(self.find(type_name), self.typed)
         return name
 
     def field(self, depth: int, name: str, spec: str, target: str) -> None:
@@ -282,17 +284,19 @@ class _Gen:
 
 
 _Decoder = Callable[[Any, int], tuple[dict[str, Any], int]]
-_DECODERS: dict[tuple[type[Message], Typed | None], _Decoder] = {}
+_DECODERS: weakref.WeakKeyDictionary[type[Message], dict[Typed | None, _Decoder]] = (
+    weakref.WeakKeyDictionary())  # a class a relay released takes its decoders along
 
 
 def _decoder_with_offset(cls: type[Message], typed: Typed | None = None
                          ) -> Callable[[Any, int], tuple[dict[str, Any], int]]:
     """``fn(buffer, offset) -> (wire dict, offset after it)`` for ``cls`` (compiled once
     per ``typed``)."""
-    found = _DECODERS.get((cls, typed))
+    mine = _DECODERS.setdefault(cls, {})
+    found = mine.get(typed)
     if found is not None:
         return found
-    gen = _Gen(typed)
+    gen = _Gen(typed, cls._lookup)
     gen.emit(0, "def decode(b, o):")
     gen.emit(1, "out = {}")
     gen.emit(1, "field = ''")
@@ -305,7 +309,7 @@ def _decoder_with_offset(cls: type[Message], typed: Typed | None = None
     gen.ns["TYPE"] = cls._type
     exec(compile("\n".join(gen.lines), f"<cdr {cls._type}>", "exec"), gen.ns)
     fn: Callable[[Any, int], tuple[dict[str, Any], int]] = gen.ns["decode"]
-    _DECODERS[(cls, typed)] = fn
+    mine[typed] = fn
     return fn
 
 

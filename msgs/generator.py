@@ -480,15 +480,18 @@ def render_module(
     messages: Sequence[MessageSpec],
     namespaces: Sequence[ServiceSpec | ActionSpec] = (),
     root: Callable[[str], str] | None = None,
+    register: bool | None = None,
 ) -> str:
     """The source of one module: ``messages`` (topologically ordered for ``msg``), then
     for ``srv``/``action`` each namespace's parts and the namespace class.
 
     ``root`` names the Python package each ROS package's modules live under (default:
     ``msgs`` for all); a module rendered with one ends by registering its classes with
-    :func:`msgs.runtime.register`, so that lookup by type name finds them.
+    :func:`msgs.runtime.register`, so that lookup by type name finds them, unless
+    ``register`` is False (a :class:`msgs.dynamic.TypeStore` of its own keeps them).
     """
-    module = _Module(package, kind) if root is None else _Module(package, kind, root, True)
+    module = (_Module(package, kind) if root is None
+              else _Module(package, kind, root, register is not False))
     for message in _topo_order(messages, package) if kind == "msg" else messages:
         module.add_message(message)
     for ns in sorted(namespaces, key=lambda n: n.name):

@@ -58,6 +58,7 @@ from typing import Any, ClassVar, Self
 
 __all__ = [
     "Action",
+    "Find",
     "Message",
     "Service",
     "UnknownTypeError",
@@ -66,6 +67,7 @@ __all__ = [
     "available_types",
     "lookup",
     "lookup_action",
+    "lookup_generated",
     "lookup_message",
     "lookup_service",
     "register",
@@ -135,6 +137,7 @@ def _describe(value: object) -> str:
 _Conv = Callable[[Any], Any]
 # An encoder turns a Python-side value into its JSON form.
 _Enc = Callable[[Any], Any]
+_Find = Callable[[str], "type[Message]"]
 
 
 def _bool_conv(value: Any) -> bool:
@@ -197,12 +200,12 @@ def _string_conv(base: str, bound: int | None) -> _Conv:
     return conv
 
 
-def _nested_conv(type_name: str, wire: bool, deep: bool = True) -> _Conv:
+def _nested_conv(type_name: str, wire: bool, deep: bool, find: _Find) -> _Conv:
     cls_box: list[type[Message]] = []
 
     def conv(value: Any) -> Message:
         if not cls_box:
-            cls_box.append(lookup_message(type_name))
+            cls_box.append(find(type_name))
         cls = cls_box[0]
         if isinstance(value, cls):
             if not wire and deep:
@@ -319,7 +322,7 @@ _FIXED_RE = re.compile(r"^(?P<elem>.+)\[(?P<size>\d+)\]$")
 _STRING_RE = re.compile(r"^(?P<base>w?string)(?:<(?P<bound>\d+)>)?$")
 
 
-def _scalar_conv(idl: str, wire: bool, deep: bool = True) -> _Conv:
+def _scalar_conv(idl: str, wire: bool, deep: bool, find: _Find) -> _Conv:
     if idl == "boolean":
         return _bool_conv
     if idl in _INT_RANGES:
@@ -331,7 +334,7 @@ def _scalar_conv(idl: str, wire: bool, deep: bool = True) -> _Conv:
         bound = match["bound"]
         return _string_conv(match["base"], int(bound) if bound else None)
     if "/" in idl:
-        return _nested_conv(idl, wire, deep)
+        return _nested_conv(idl, wire, deep, find)
     raise ValueError(f"unsupported field type {idl!r}")
 
 
@@ -350,9 +353,10 @@ def _expected_name(idl: str) -> str:
     return _MSG_NAMES.get(idl, idl)
 
 
-def _field_conv(idl: str, wire: bool, deep: bool = True) -> _Conv:
+def _field_conv(idl: str, wire: bool, find: _Find, deep: bool = True) -> _Conv:
     """The converter (``wire``: from the wire form) or checker of a field; ``deep=False``
-    takes a nested message instance as it is (checked when it was built)."""
+    takes a nested message instance as it is (checked when it was built); ``find`` gives
+    the class of a nested message type (the field's class's ``_lookup``)."""
     fixed: int | None = None
     bound: int | None = None
     elem: str | None = None
@@ -366,11 +370,11 @@ def _field_conv(idl: str, wire: bool, deep: bool = True) -> _Conv:
             elem = match["elem"]
             fixed = int(match["size"])
     if elem is None:
-        return _scalar_conv(idl, wire, deep)
+        return _scalar_conv(idl, wire, deep, find)
     expected = _expected_name(idl)
     if elem == "uint8":
         return _bytes_conv(expected, fixed, bound, wire)
-    return _list_conv(_scalar_conv(elem, wire, deep), elem, expected, fixed, bound, wire)
+    return _list_conv(_scalar_conv(elem, wire, deep, find), elem, expected, fixed, bound, wire)
 
 
 def _float_enc(value: Any) -> Any:
@@ -422,22 +426,25 @@ def _field_enc(idl: str) -> _Enc | None:
 class _Codec:
     """The converters of one message class, built once from ``_fields_and_types``."""
 
-    __slots__ = ("build", "check", "decode", "encode", "fields", "on_build")
+    __slots__ = ("build", "check", "cls", "decode", "encode", "fields", "on_build")
 
     def __init__(self, cls: type[Message]) -> None:
+        self.cls = cls
         fields_and_types = cls._fields_and_types
+        find = cls._lookup
         self.decode: dict[str, _Conv] = {
-            name: _field_conv(idl, True) for name, idl in fields_and_types.items()
+            name: _field_conv(idl, True, find) for name, idl in fields_and_types.items()
         }
         self.check: tuple[tuple[str, _Conv], ...] = tuple(
-            (name, _field_conv(idl, False)) for name, idl in fields_and_types.items()
+            (name, _field_conv(idl, False, find)) for name, idl in fields_and_types.items()
         )
         self.encode: tuple[tuple[str, _Enc | None], ...] = tuple(
             (name, _field_enc(idl)) for name, idl in fields_and_types.items()
         )
         # at construction: nested instances were checked when they were built
         self.build: tuple[tuple[str, _Conv], ...] = tuple(
-            (name, _field_conv(idl, False, deep=False)) for name, idl in fields_and_types.items()
+            (name, _field_conv(idl, False, find, deep=False))
+            for name, idl in fields_and_types.items()
         )
         self.on_build = _build_check(cls, dict(self.build))
         # from_json's way to an instance without checking twice: (name, default, factory)
@@ -471,19 +478,19 @@ _ELEMENT_TYPES = {"boolean": bool, "double": float, "string": str, "wstring": st
                   **{idl: int for idl in _INT_RANGES}}
 
 
-def _fast_list_test(idl: str, key: str, types: dict[str, Any]) -> str | None:
+def _fast_list_test(idl: str, key: str, types: dict[str, Any], find: _Find) -> str | None:
     """The fast test of a nested message or a list field (see _fast_test); the classes
-    and element types it names are put in ``types`` under ``key``."""
+    (``find`` gives them) and element types it names are put in ``types`` under ``key``."""
     match = _SEQUENCE_RE.match(idl) or _FIXED_RE.match(idl)
     if match is None:
         if "/" not in idl:
             return None
-        types[key] = lookup_message(idl)  # a nested message: its own class
+        types[key] = find(idl)  # a nested message: its own class
         return f"type(v) is {key}"
     elem = match["elem"]
     size = match.groupdict().get("size")
     bound = match.groupdict().get("bound")
-    kind = lookup_message(elem) if "/" in elem else _ELEMENT_TYPES.get(elem)
+    kind = find(elem) if "/" in elem else _ELEMENT_TYPES.get(elem)
     if kind is None:
         return None
     types[key] = frozenset({kind})
@@ -509,7 +516,7 @@ def _build_check(cls: type[Message], convs: dict[str, _Conv]) -> Callable[[Messa
         lines.append(f"    v = self.{name}")
         test = _fast_test(idl, "v")
         if test is None:
-            test = _fast_list_test(idl, f"T_{name}", nested)
+            test = _fast_list_test(idl, f"T_{name}", nested, cls._lookup)
         if test is None:
             lines.append(f"    slow(self, {name!r}, v)")
         else:
@@ -531,14 +538,13 @@ def _build_check(cls: type[Message], convs: dict[str, _Conv]) -> Callable[[Messa
     return check
 
 
-_CODECS: dict[type[Message], _Codec] = {}
-
-
 def _codec(cls: type[Message]) -> _Codec:
-    codec = _CODECS.get(cls)
-    if codec is None:
+    """``cls``'s converters, built on first use and kept on the class itself (so they go
+    with it: a robot's types that a relay releases take their converters along)."""
+    codec: _Codec | None = getattr(cls, "_codec_", None)
+    if codec is None or codec.cls is not cls:  # (a subclass finds its base's)
         codec = _Codec(cls)
-        _CODECS[cls] = codec
+        type.__setattr__(cls, "_codec_", codec)
     return codec
 
 
@@ -554,6 +560,9 @@ class Message:
     _type: ClassVar[str]
     _definition: ClassVar[str]
     _fields_and_types: ClassVar[dict[str, str]]
+    _lookup: ClassVar[_Find]
+    """How the class finds the message types its fields name: :func:`lookup_message` (set
+    below); a :class:`msgs.dynamic.TypeStore`'s own lookup for the classes it built."""
 
     def __init_subclass__(cls, **kwargs: Any) -> None:
         super().__init_subclass__(**kwargs)
@@ -739,13 +748,28 @@ def _case_fixed(type_name: str) -> str | None:
 
 
 def lookup(type_name: str) -> type[Message] | type[Service] | type[Action]:
-    """The generated class for ``pkg/Name`` or ``pkg/{msg,srv,action}/Name``.
+    """The generated class for ``pkg/Name`` or ``pkg/{msg,srv,action}/Name`` (or the class
+    :func:`register` made findable under that name).
 
     ``pkg/Name`` is searched as a message, then a service, then an action. Service and
     action parts are found too (``pkg/srv/Name_Request``, ``pkg/action/Name_Goal``).
     Raises :class:`UnknownTypeError` (a LookupError) for unknown or malformed names.
     """
     cached = _CACHE.get(type_name)
+    if cached is not None:
+        return cached
+    found = lookup_generated(type_name)
+    _CACHE[type_name] = found
+    return found
+
+
+_GENERATED: dict[str, type[Message] | type[Service] | type[Action]] = {}
+
+
+def lookup_generated(type_name: str) -> type[Message] | type[Service] | type[Action]:
+    """Like :func:`lookup`, among the types ``msgs`` generates only (not the classes
+    :func:`register` made findable): what every robot's types share on a relay."""
+    cached = _GENERATED.get(type_name)
     if cached is not None:
         return cached
     match = _NAME_RE.match(type_name) if isinstance(type_name, str) else None
@@ -763,7 +787,7 @@ def lookup(type_name: str) -> type[Message] | type[Service] | type[Action]:
     for candidate in (kind,) if kind else _KINDS:
         found = _find(package, candidate, name)
         if found is not None:
-            _CACHE[type_name] = found
+            _GENERATED[type_name] = found
             return found
     where = f"{package}/{kind}" if kind else package
     raise UnknownTypeError(type_name, f"no type {name!r} in {where} among the generated types")
@@ -786,29 +810,37 @@ def register(*classes: type[Message] | type[Service] | type[Action]) -> None:
             _CACHE.setdefault(f"{package}/{name}", cls)
 
 
-def lookup_message(type_name: str) -> type[Message]:
-    """Like :func:`lookup`, for message types (including service and action parts)."""
-    found = lookup(type_name)
+Find = Callable[[str], "type[Message] | type[Service] | type[Action]"]
+"""A lookup by type name: :func:`lookup`, or a :class:`msgs.dynamic.TypeStore`'s."""
+
+
+def lookup_message(type_name: str, among: Find | None = None) -> type[Message]:
+    """Like :func:`lookup` (``among``: another lookup), for message types (including
+    service and action parts)."""
+    found = (among or lookup)(type_name)
     if not (isinstance(found, type) and issubclass(found, Message)):
         raise UnknownTypeError(type_name, f"{found._type} is not a message type")
     return found
 
 
-def lookup_service(type_name: str) -> type[Service]:
-    """Like :func:`lookup`, for service types."""
+Message._lookup = staticmethod(lookup_message)
+
+
+def lookup_service(type_name: str, among: Find | None = None) -> type[Service]:
+    """Like :func:`lookup` (``among``: another lookup), for service types."""
     if _NAME_RE.match(type_name) and type_name.count("/") == 1:
         type_name = type_name.replace("/", "/srv/")
-    found = lookup(type_name)
+    found = (among or lookup)(type_name)
     if not (isinstance(found, type) and issubclass(found, Service)):
         raise UnknownTypeError(type_name, f"{found._type} is not a service type")
     return found
 
 
-def lookup_action(type_name: str) -> type[Action]:
-    """Like :func:`lookup`, for action types."""
+def lookup_action(type_name: str, among: Find | None = None) -> type[Action]:
+    """Like :func:`lookup` (``among``: another lookup), for action types."""
     if _NAME_RE.match(type_name) and type_name.count("/") == 1:
         type_name = type_name.replace("/", "/action/")
-    found = lookup(type_name)
+    found = (among or lookup)(type_name)
     if not (isinstance(found, type) and issubclass(found, Action)):
         raise UnknownTypeError(type_name, f"{found._type} is not an action type")
     return found

@@ -65,12 +65,14 @@ def service_class(graph: Graph, type_name: str) -> type[MsgsService]:
 
 
 def _loaded(graph: Graph, type_name: str, kind: Any) -> Any:
+    """The class from the graph's own store (a relay's robot has its own types)."""
+    types = graph.wire_types
     found: Any = None
     with contextlib.suppress(Exception):
-        found = lookup(type_name)
+        found = types.lookup(type_name)
     if found is None:
         try:
-            found = dynamic.load(type_name, graph.interface_definition(type_name)["definition"])
+            found = types.load(type_name, graph.interface_definition(type_name)["definition"])
         except BridgeError:
             raise
         except Exception as exc:
@@ -93,8 +95,8 @@ class ServiceEntry:
     def to_json(self) -> dict[str, Any]:
         """The service as ``advertiseServices`` lists it (the ``request``/``response``
         objects, and the older ``requestSchema``/``responseSchema`` beside them)."""
-        req = foxglove_schema(dynamic.full_text(self.srv.Request._type))
-        res = foxglove_schema(dynamic.full_text(self.srv.Response._type))
+        req = foxglove_schema(dynamic.full_text(self.srv.Request))
+        res = foxglove_schema(dynamic.full_text(self.srv.Response))
         return {
             "id": self.id, "name": self.name, "type": self.type_name,
             "request": {"encoding": "cdr", "schemaName": self.srv.Request._type,

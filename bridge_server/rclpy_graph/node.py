@@ -63,6 +63,8 @@ from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message
 
+from msgs import dynamic
+
 from . import convert
 from .reader import FailureLog, LoopReader, Reader, ReaderService, open_reader
 from .types import resolve_message, resolve_service
@@ -541,6 +543,9 @@ class RosNode:
 
     All public methods are called from the asyncio loop thread.
     """
+
+    wire_types: dynamic.TypeStore = dynamic.DEFAULT
+    """The ``msgs`` classes of the ROS types (Foxglove's CDR): one ROS graph, one store."""
 
     def __init__(
         self,

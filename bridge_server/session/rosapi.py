@@ -56,6 +56,7 @@ from __future__ import annotations
 
 import asyncio
 import json
+import weakref
 from collections.abc import Awaitable, Callable, Mapping
 from typing import TYPE_CHECKING, Any
 
@@ -335,18 +336,20 @@ def service_response_details(bridge: Shared, args: Mapping[str, Any]) -> dict[st
     return {"typedefs": bridge.graph.typedefs(_str_field(args, "type"), "srv", "Response")}
 
 
-_full_texts: dict[str, str] = {}
+_full_texts: weakref.WeakKeyDictionary[Graph, dict[str, str]] = weakref.WeakKeyDictionary()
+"""Per graph: a relay's robots may each define a name their own way."""
 
 
 def _full_text(graph: Graph, type_name: str) -> str:
     """A topic type's definition with its dependencies' ("" if not installed; cached)."""
-    text = _full_texts.get(type_name)
+    texts = _full_texts.setdefault(graph, {})
+    text = texts.get(type_name)
     if text is None:
         try:
             text = graph.interface_definition(type_name)["definition"]
         except BridgeError:
             text = ""
-        _full_texts[type_name] = text
+        texts[type_name] = text
     return text
 
 

@@ -24,7 +24,11 @@ sessions, over one Zenoh session. What the sessions ask of ROS becomes the keys 
 
 Types are ``msgs`` classes: generated ones, or built at run time from the definitions the
 robot sent (:mod:`msgs.dynamic`), so a robot's own types need nothing installed on the
-relay.
+relay. Each robot's are its own (:attr:`ZenohGraph.wire_types`, a
+:class:`~msgs.dynamic.TypeStore`): two robots may define one name differently and each
+robot's samples are decoded, and the publishes to it encoded, in its own layout. A
+definition is built once per text (not per sample), within :class:`TypeLimits`; a robot's
+types are released when it has left and none of this relay's clients uses them.
 """
 
 from __future__ import annotations
@@ -37,17 +41,18 @@ import logging
 import secrets
 import time
 from collections.abc import Callable, Mapping
+from dataclasses import dataclass
 from typing import Any
 
 import cbor2
 import zenoh
 
-import msgs.dynamic
 from msgs import cdr
+from msgs.dynamic import LimitError, TypeStore
 from msgs.parser import DefinitionError
 from msgs.runtime import Message as WireMessage
 from msgs.runtime import UnknownTypeError as WireUnknownType
-from msgs.runtime import ValidationError, lookup_action, lookup_message, lookup_service
+from msgs.runtime import ValidationError
 
 from ..codec.cdr_json import JsonFromCdr, wire_encoder
 from ..codec.publish import encode_publish_cbor, encode_publish_cbor_raw, encode_publish_json
@@ -76,7 +81,8 @@ from .keys import (
 )
 from .link import answering, ignore_replies
 
-__all__ = ["RelayConverter", "ZenohActionClient", "ZenohFeed", "ZenohGraph", "ZenohMessage",
+__all__ = ["MAX_DEFINITION_BYTES", "MAX_TYPES_PER_ROBOT", "RelayConverter", "TypeLimits",
+           "TypeRefused", "ZenohActionClient", "ZenohFeed", "ZenohGraph", "ZenohMessage",
            "ZenohPublisher", "ZenohRosCall", "ZenohSentGoal", "ZenohServedAction",
            "ZenohServedGoal", "ZenohServedService"]
 
@@ -100,8 +106,36 @@ PARAM_WAIT = 5.0
 """Seconds a parameter query waits for the robot beyond the robot's own timeout."""
 
 
+MAX_DEFINITION_BYTES = 256 * 1024
+"""Largest definition text (UTF-8 bytes, a type with its dependencies) the relay builds a
+robot's type from (``--max-definition-bytes``). The largest of the standard types
+(``visualization_msgs/msg/MarkerArray`` with its dependencies) is under 20 KB; a robot's
+1.2 MB text made the relay spend 70 ms per sample before types were built once per text."""
+
+MAX_TYPES_PER_ROBOT = 1000
+"""Most messages, services and actions the relay builds from one robot's definitions
+(``--max-types-per-robot``); each costs about 30 KB of the relay's memory (3,000 types took
+100 MB), so a robot's types stay under ~30 MB. Types ``msgs`` generates are not counted."""
+
+
+@dataclass(frozen=True)
+class TypeLimits:
+    """What the relay takes of each robot's type definitions (see the constants)."""
+
+    definition_bytes: int = MAX_DEFINITION_BYTES
+    types: int = MAX_TYPES_PER_ROBOT
+
+
+_LIMIT_OPTIONS = {"max_definition_bytes": "--max-definition-bytes",
+                  "max_types": "--max-types-per-robot"}
+
+
 class Refused(BridgeError):
     """The robot answered a query with an error (the text is its reason)."""
+
+
+class TypeRefused(UnknownTypeError):
+    """A robot's type over one of the relay's :class:`TypeLimits` (its messages dropped)."""
 
 
 class RelayConverter:
@@ -286,6 +320,8 @@ class ZenohFeed:
                 raise BridgeError(f"its stamp {meta.stamp_ns} ns is out of range")
             conv = graph.converter(graph.resolve_message(meta.type))
         except BridgeError as exc:
+            reason = "type_refused" if isinstance(exc, TypeRefused) else "undecodable"
+            graph.dropped[reason] = graph.dropped.get(reason, 0) + 1
             graph.faults.add("bad_messages", f"messages of {self.topic} dropped: {exc}")
             return
         epoch, seq = self._place
@@ -575,6 +611,7 @@ class ZenohServedService(_ServedHere):
         if self.graph.served.get(self.name) is self:
             del self.graph.served[self.name]
         self._undeclare()
+        self.graph.release_types()
 
 
 class ZenohServedGoal:
@@ -661,15 +698,25 @@ class ZenohServedAction(_ServedHere):
         if self.graph.served_actions.get(self.name) is self:
             del self.graph.served_actions[self.name]
         self._undeclare()
+        self.graph.release_types()
 
 
 class ZenohGraph:
     """The Graph of robot ``robot`` over a Zenoh session (see the module's text)."""
 
-    def __init__(self, session: zenoh.Session, robot: str, relay: str) -> None:
+    def __init__(self, session: zenoh.Session, robot: str, relay: str,
+                 type_limits: TypeLimits | None = None) -> None:
         self.session = session
         self.robot = keys.check_robot(robot)
         self.relay = keys.check_relay(relay)
+        self.type_limits = type_limits or TypeLimits()
+        self.wire_types = self._new_types()
+        """The robot's own types (released when it left and nothing here uses them)."""
+        self._built: dict[str, tuple[str, Any]] = {}  # type -> (its text, class or refusal)
+        self._limits_said: set[str] = set()
+        self.dropped: dict[str, int] = {}
+        """The robot's topic messages not delivered, by reason (``type_refused``: its type
+        is over a limit; ``undecodable``: no type for it or no Meta)."""
         self.loop = asyncio.get_running_loop()
         self.inbox = Inbox(self.loop, self.robot)
         """What the robot's Zenoh callbacks hand to the loop, bounded (inbox.py)."""
@@ -759,6 +806,7 @@ class ZenohGraph:
         if self.alive != was:
             for listener in list(self.presence_listeners):
                 listener(self.alive)
+        self.release_types()
 
     def _on_graph(self, sample: zenoh.Sample) -> None:
         """A graph document: read now, or, at most one each ``GRAPH_INTERVAL`` s, when its
@@ -792,17 +840,57 @@ class ZenohGraph:
 
     # -- types ---------------------------------------------------------------------------------
 
+    def _new_types(self) -> TypeStore:
+        limits = self.type_limits
+        return TypeStore(f"robot {self.robot}", max_types=limits.types,
+                         max_definition_bytes=limits.definition_bytes)
+
+    def release_types(self) -> None:
+        """Drop the robot's types once it has left and nothing of this relay's uses them (no
+        subscription, publisher or served name; a class a session still holds keeps its
+        own store alive until it lets go)."""
+        if (self.alive or self.subscriptions or self.publishers or self.served
+                or self.served_actions or not (len(self.wire_types) or self._built)):
+            return
+        old, self.wire_types = self.wire_types, self._new_types()
+        self._built.clear()
+        self._converters.clear()
+        old.close()
+        log.info("robot %s has left: its %d types are released", self.robot, len(old))
+
     def _load(self, name: str, kind: str) -> Any:
+        """The class of ``name``: built from the robot's definition once per text (the same
+        snapshot's text is a dict lookup), else the generated one."""
         canonical = canonical_name(name, kind)  # type: ignore[arg-type]
         text = self.snapshot.definitions.get(canonical)
-        lookup = {"msg": lookup_message, "srv": lookup_service, "action": lookup_action}[kind]
+        types = self.wire_types
         try:
-            if text:
-                return msgs.dynamic.load(canonical, text)
-            return lookup(canonical)
+            if not text:
+                return {"msg": types.lookup_message, "srv": types.lookup_service,
+                        "action": types.lookup_action}[kind](canonical)
+            built = self._built.get(canonical)
+            if built is None or not (built[0] is text or built[0] == text):
+                try:
+                    built = (text, types.load(canonical, text))
+                except LimitError as exc:
+                    built = (text, self._refuse(exc))
+                self._built[canonical] = built
+            if isinstance(built[1], TypeRefused):  # a new one: raising one again grows it
+                raise TypeRefused(built[1].name, built[1].reason)
+            return built[1]
         except (WireUnknownType, DefinitionError) as exc:
             raise UnknownTypeError(name, f"robot {self.robot} does not list it and msgs does "
                                    f"not generate it ({exc})") from None
+
+    def _refuse(self, exc: LimitError) -> TypeRefused:
+        """The refusal of a type over a limit, said in the log once per limit and robot."""
+        option = _LIMIT_OPTIONS.get(exc.limit, exc.limit)
+        why = f"{exc.what} ({exc.got}) is over this relay's {option} ({exc.allowed})"
+        if exc.limit not in self._limits_said:
+            self._limits_said.add(exc.limit)
+            log.warning("robot %s: type %s refused: %s; its messages are dropped (counted, "
+                        "not logged again for this limit)", self.robot, exc.type_name, why)
+        return TypeRefused(exc.type_name, f"robot {self.robot}'s definition is refused: {why}")
 
     def resolve_message(self, name: str) -> Any:
         """The ``msgs`` class of message type ``name`` (the robot's definition if it sent
@@ -847,7 +935,7 @@ class ZenohGraph:
                     return {"type": canonical, "definition": text}
         try:
             canonical = canonical_name(name, "msg")
-            return {"type": canonical, "definition": msgs.dynamic.full_text(canonical)}
+            return {"type": canonical, "definition": self.wire_types.full_text(canonical)}
         except (BridgeError, WireUnknownType):
             raise BridgeError(f"no definition of {name!r}: robot {self.robot} has no topic "
                               "or service of that type") from None
@@ -970,6 +1058,7 @@ class ZenohGraph:
         if not feed.listeners and self.subscriptions.get(feed.topic) is feed:
             del self.subscriptions[feed.topic]
             feed.close()
+            self.release_types()
 
     def acquire_publisher(self, topic: str, msg_cls: Any, latch: bool, depth: int
                           ) -> ZenohPublisher:
@@ -989,6 +1078,7 @@ class ZenohGraph:
         if mine.refs <= 0 and self.publishers.get(key) is mine:
             del self.publishers[key]
             mine.close()
+            self.release_types()
 
     # -- services ------------------------------------------------------------------------------
 

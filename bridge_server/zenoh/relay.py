@@ -62,7 +62,7 @@ try:
     from ..session.session import SessionConfig
     from . import keys
     from . import link as zenoh_link
-    from .graph import ZenohGraph
+    from .graph import MAX_DEFINITION_BYTES, MAX_TYPES_PER_ROBOT, TypeLimits, ZenohGraph
 except ModuleNotFoundError as _missing:  # an install without the relay extra
     from .._requires import missing_dependency
 
@@ -87,9 +87,10 @@ class Relay:
     """The relay: one websocket port, one Zenoh session, one Bridge per robot served."""
 
     def __init__(self, config: BridgeConfig, options: zenoh_link.ZenohOptions,
-                 relay_id: str | None = None) -> None:
+                 relay_id: str | None = None, type_limits: TypeLimits | None = None) -> None:
         self.config = config
         self.options = options
+        self.type_limits = type_limits or TypeLimits()  # of each robot's own types
         self.relay_id = keys.check_relay(relay_id or secrets.token_hex(6))
         self.security = Security(config.security)
         self.robots: dict[str, Bridge] = {}
@@ -148,7 +149,7 @@ class Relay:
         assert self.session is not None
         if not await self._alive(name):
             return None
-        graph = ZenohGraph(self.session, name, self.relay_id)
+        graph = ZenohGraph(self.session, name, self.relay_id, self.type_limits)
         bridge = Bridge(self.config, graph=graph)
         graph.presence_listeners.append(lambda here: _tell_presence(bridge, name, here))
         graph.inbox.told.append(lambda text: _tell(bridge, "warning", text))
@@ -418,6 +419,13 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p.add_argument("--session-keep", type=float, default=30.0,
                    help="seconds a dropped client's session is kept for it to resume "
                    "(default 30; 0: off)")
+    p.add_argument("--max-definition-bytes", type=int, default=MAX_DEFINITION_BYTES,
+                   help="largest type definition (with its dependencies) the relay builds a "
+                   f"robot's type from, in bytes (default {MAX_DEFINITION_BYTES}); a robot's "
+                   "type over it is refused and its messages dropped")
+    p.add_argument("--max-types-per-robot", type=int, default=MAX_TYPES_PER_ROBOT,
+                   help="most messages, services and actions the relay builds from one "
+                   f"robot's definitions (default {MAX_TYPES_PER_ROBOT})")
     p.add_argument("--log-level", default="INFO",
                    choices=("DEBUG", "INFO", "WARNING", "ERROR"),
                    help="logging level (default INFO)")
@@ -434,7 +442,8 @@ async def _run(args: argparse.Namespace) -> int:
         resume=ResumeConfig(session_keep=args.session_keep),
         security=security.config_from_args(args),
     )
-    relay = Relay(config, zenoh_link.options_from_args(args), args.relay_id)
+    relay = Relay(config, zenoh_link.options_from_args(args), args.relay_id,
+                  TypeLimits(args.max_definition_bytes, args.max_types_per_robot))
     stop = asyncio.Event()
     loop = asyncio.get_running_loop()
     for sig in (signal.SIGINT, signal.SIGTERM):

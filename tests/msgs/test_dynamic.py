@@ -5,6 +5,7 @@ a test fixture built into the venv)."""
 from __future__ import annotations
 
 import json
+import sys
 
 import pytest
 from rclpy.serialization import deserialize_message, serialize_message
@@ -98,3 +99,49 @@ def test_a_new_type_in_a_generated_package_is_refused_clearly() -> None:
     """msgs' own packages cannot take runtime types: the error says to regenerate."""
     with pytest.raises(DefinitionError, match="regenerate msgs"):
         dynamic.load("std_msgs/msg/Novel", "int32 x\n")
+
+
+def test_two_stores_keep_two_layouts_of_one_name_nested_types_too() -> None:
+    """Two stores define the same names differently: each class (and its nested type, found
+    through its own store) encodes, decodes CDR and checks in its own layout; the
+    process-wide lookup knows neither; a closed store's modules are gone."""
+    inner = f"{dynamic.DELIMITER}\nMSG: two_msgs/msg/Inner\n"
+    one, two = dynamic.TypeStore("one"), dynamic.TypeStore("two")
+    a = one.load("two_msgs/msg/Outer", "Inner inner\n" + inner + "int32 x\n")
+    b = two.load("two_msgs/msg/Outer", "Inner inner\n" + inner + "string name\n")
+    assert one.lookup("two_msgs/Inner")._fields_and_types == {"x": "int32"}
+    assert two.lookup("two_msgs/msg/Inner")._fields_and_types == {"name": "string"}
+    msg_a = a.from_json({"inner": {"x": 5}})
+    msg_b = b.from_json({"inner": {"name": "five"}})
+    assert a.from_json(cdr.decode(cdr.encode(msg_a), a)) == msg_a
+    assert b.from_json(cdr.decode(cdr.encode(msg_b), b)) == msg_b
+    with pytest.raises(ValidationError, match=r"inner\.name"):
+        a.from_json({"inner": {"name": "five"}})
+    assert dynamic.full_text(b).endswith("string name\n") and len(one) == len(two) == 2
+    with pytest.raises(UnknownTypeError):
+        lookup("two_msgs/msg/Outer")
+    module = a.__module__
+    assert module in sys.modules
+    one.close()
+    assert module not in sys.modules and b.__module__ in sys.modules
+    with pytest.raises(DefinitionError, match="released"):
+        one.load("two_msgs/msg/Other", "int32 y\n")
+
+
+def test_a_store_builds_a_text_once_and_refuses_what_is_over_its_limits(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """The same (name, text) again is neither split nor parsed; a definition over the size
+    or type-count limit raises LimitError naming the limit, and defines nothing."""
+    store = dynamic.TypeStore("limited", max_types=2, max_definition_bytes=120)
+    first = store.load("lim_msgs/msg/A", "int32 a\n")
+    splits: list[str] = []
+    real_split = dynamic.split
+    monkeypatch.setattr(dynamic, "split", lambda n, t: splits.append(n) or real_split(n, t))
+    assert store.load("lim_msgs/msg/A", "int32 a\n") is first and splits == []
+    with pytest.raises(dynamic.LimitError, match="max_definition_bytes") as big:
+        store.load("lim_msgs/msg/B", "int32 b\n" + "# pad\n" * 20)
+    assert (big.value.allowed, big.value.got) == (120, 128)
+    with pytest.raises(dynamic.LimitError, match="max_types"):
+        store.load("lim_msgs/msg/C", "D d\n" + dynamic.DELIMITER + "\nMSG: lim_msgs/msg/D\n"
+                   "int32 d\n")
+    assert len(store) == 1 and splits == ["lim_msgs/msg/C"]  # B was refused unsplit

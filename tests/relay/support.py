@@ -21,6 +21,7 @@ from bridge_server.security import SecurityConfig
 from bridge_server.security.auth import hash_token, new_token
 from bridge_server.server import Bridge, BridgeConfig
 from bridge_server.zenoh.exporter import Exporter
+from bridge_server.zenoh.graph import TypeLimits
 from bridge_server.zenoh.link import ZenohOptions
 from bridge_server.zenoh.relay import Relay
 
@@ -65,13 +66,15 @@ class Tier:
 
 
 async def start_relay(router: str | None = None, listen: str | None = None,
-                      relay_id: str | None = None, cert: str | None = None) -> Relay:
+                      relay_id: str | None = None, cert: str | None = None,
+                      type_limits: TypeLimits | None = None) -> Relay:
     """A relay on an ephemeral port: the router (``listen``; ``cert`` a PEM with the key and
-    the certificate chain for a tls/ endpoint) or a client of ``router``."""
+    the certificate chain for a tls/ endpoint) or a client of ``router``; ``type_limits``
+    what it takes of each robot's types."""
     options = ZenohOptions(listen=[listen] if listen else [],
                            connect=[router] if router and not listen else [],
                            tls_cert=cert, tls_key=cert)
-    relay = Relay(BridgeConfig(port=0, node_name="relay"), options, relay_id)
+    relay = Relay(BridgeConfig(port=0, node_name="relay"), options, relay_id, type_limits)
     await relay.start()
     return relay
 
@@ -177,3 +180,56 @@ async def until(predicate: Any, what: str, timeout: float = 15.0) -> Any:
         if asyncio.get_running_loop().time() > deadline:
             raise AssertionError(f"timed out after {timeout} s waiting for {what}")
         await asyncio.sleep(0.02)
+
+
+@dataclass
+class PlayedRobot:
+    """A robot played by a plain Zenoh session (no ROS): alive, answering the relay's graph
+    query with ``snapshot``; what it puts is up to the test (a malicious robot is easy)."""
+
+    name: str
+    session: Any
+    snapshot: Any
+    held: list[Any]
+
+    def put(self, topic: str, data: bytes, type_name: str, seq: int) -> None:
+        """One message on ``topic`` as an exporter puts it (CDR bytes and its Meta)."""
+        from bridge_server.zenoh import keys
+        from bridge_server.zenoh.keys import Meta
+
+        self.session.put(keys.key_of(self.name, topic), data,
+                         attachment=Meta(type=type_name, stamp_ns=1, epoch="e", seq=seq).encode())
+
+    def leave(self) -> None:
+        """Go away: the liveliness token and the graph queryable go."""
+        for entity in self.held:
+            entity.undeclare()
+        self.held.clear()
+
+
+@contextlib.asynccontextmanager
+async def played_robot(relay: Relay | None, router: str, name: str, snapshot: Any
+                       ) -> AsyncIterator[PlayedRobot]:
+    """Robot ``name`` played on ``router`` (see :class:`PlayedRobot`), reachable by ``relay``
+    (``None``: a relay in another process, not waited for)."""
+    import zenoh
+
+    from bridge_server.zenoh import keys
+    from bridge_server.zenoh.link import open_session
+
+    session = await open_session(ZenohOptions(connect=[router]))
+
+    def answer(query: zenoh.Query) -> None:
+        query.reply(query.key_expr, snapshot.encode())
+        query.drop()  # type: ignore[no-untyped-call]
+
+    robot = PlayedRobot(name, session, snapshot, [
+        session.declare_queryable(f"{name}/{keys.GRAPH}", answer),
+        session.liveliness().declare_token(f"{name}/{keys.ALIVE}")])
+    try:
+        if relay is not None:
+            await robot_reachable(relay, name)
+        yield robot
+    finally:
+        robot.leave()
+        session.close()  # type: ignore[no-untyped-call]
