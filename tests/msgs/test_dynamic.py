@@ -107,10 +107,11 @@ def test_two_stores_keep_two_layouts_of_one_name_nested_types_too() -> None:
     process-wide lookup knows neither; a closed store's modules are gone."""
     inner = f"{dynamic.DELIMITER}\nMSG: two_msgs/msg/Inner\n"
     one, two = dynamic.TypeStore("one"), dynamic.TypeStore("two")
-    a = one.load("two_msgs/msg/Outer", "Inner inner\n" + inner + "int32 x\n")
-    b = two.load("two_msgs/msg/Outer", "Inner inner\n" + inner + "string name\n")
-    assert one.lookup("two_msgs/Inner")._fields_and_types == {"x": "int32"}
-    assert two.lookup("two_msgs/msg/Inner")._fields_and_types == {"name": "string"}
+    one.load("two_msgs/msg/Outer", "Inner inner\n" + inner + "int32 x\n")
+    two.load("two_msgs/msg/Outer", "Inner inner\n" + inner + "string name\n")
+    a, b = one.lookup_message("two_msgs/msg/Outer"), two.lookup_message("two_msgs/Outer")
+    assert one.lookup_message("two_msgs/Inner")._fields_and_types == {"x": "int32"}
+    assert two.lookup_message("two_msgs/msg/Inner")._fields_and_types == {"name": "string"}
     msg_a = a.from_json({"inner": {"x": 5}})
     msg_b = b.from_json({"inner": {"name": "five"}})
     assert a.from_json(cdr.decode(cdr.encode(msg_a), a)) == msg_a
@@ -136,7 +137,12 @@ def test_a_store_builds_a_text_once_and_refuses_what_is_over_its_limits(
     first = store.load("lim_msgs/msg/A", "int32 a\n")
     splits: list[str] = []
     real_split = dynamic.split
-    monkeypatch.setattr(dynamic, "split", lambda n, t: splits.append(n) or real_split(n, t))
+
+    def counted(name: str, text: str) -> list[tuple[str, str]]:
+        splits.append(name)
+        return real_split(name, text)
+
+    monkeypatch.setattr(dynamic, "split", counted)
     assert store.load("lim_msgs/msg/A", "int32 a\n") is first and splits == []
     with pytest.raises(dynamic.LimitError, match="max_definition_bytes") as big:
         store.load("lim_msgs/msg/B", "int32 b\n" + "# pad\n" * 20)

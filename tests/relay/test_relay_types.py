@@ -54,7 +54,7 @@ async def test_two_robots_each_get_their_own_layout_of_one_type_name(ros_node: A
     encoded in that robot's layout (rclpy reads robot1's; robot2's bytes decode with its)."""
     from robot_msgs.msg import Status, Wheel
 
-    theirs = TypeStore("robot2 as this test knows it").load(STATUS, THEIRS)
+    theirs: Any = TypeStore("robot2 as this test knows it").load(STATUS, THEIRS)
     router = f"tcp/127.0.0.1:{free_port()}"
     relay = await start_relay(listen=router)
     bridge, exporter = await start_robot(router, robot="robot1")
@@ -80,7 +80,7 @@ async def test_two_robots_each_get_their_own_layout_of_one_type_name(ros_node: A
             assert got2["msg"] == {"hijacked_field": "mine", "mode": 7}
 
             pub = ros_node.create_publisher(Status, topic, 10)
-            graph1 = relay.robots["robot1"].graph
+            graph1: Any = relay.robots["robot1"].graph
             await until(lambda: STATUS in graph1.snapshot.definitions, "robot1's definition")
             await ws1.send({"op": "subscribe", "topic": topic, "type": STATUS})
             got1 = await _first(ws1, lambda: pub.publish(Status(
@@ -138,7 +138,7 @@ async def test_a_robots_huge_definition_does_not_slow_another_robots_viewer(
     proc = Proc(argv, ros_env())
     bridge, exporter = await start_robot(router, robot="robot1")
     snap = Snapshot(node="flood_bridge", definitions={"flood_msgs/msg/Big": big})
-    big_cls = TypeStore("the flooder as this test knows it").load("flood_msgs/msg/Big", big)
+    big_cls: Any = TypeStore("the flooder as this test knows it").load("flood_msgs/msg/Big", big)
     clients: list[Any] = []
     try:
         port = int(proc.wait_for(re.compile(r"relay listening on ws://127\.0\.0\.1:(\d+)"))
@@ -222,7 +222,7 @@ async def test_a_robots_types_go_when_it_left_and_no_client_uses_them(topic: str
         async with played_robot(relay, router, "many", snap) as robot:
             gc.collect()
             before = _rss_mb()
-            graph = relay.robots["many"].graph
+            graph: Any = relay.robots["many"].graph
             ws = await open_wire(f"ws://127.0.0.1:{relay.port}/many")
             await ws.send({"op": "subscribe", "topic": topic, "type": top, "id": "s"})
             await until(lambda: topic in graph.subscriptions, "the relay's subscription")
@@ -263,7 +263,7 @@ async def test_a_robot_over_the_relays_type_limits_is_refused_by_name(
     ws = None
     try:
         async with played_robot(relay, router, "greedy", snap) as robot:
-            graph = relay.robots["greedy"].graph
+            graph: Any = relay.robots["greedy"].graph
             ws = await open_wire(f"ws://127.0.0.1:{relay.port}/greedy")
             for name, option in ((big, "--max-definition-bytes"),
                                  (wide, "--max-types-per-robot")):
@@ -273,7 +273,7 @@ async def test_a_robot_over_the_relays_type_limits_is_refused_by_name(
                 assert [r for r in caplog.records if re.search(
                     f"robot greedy: type {name} refused: .*{option}", r.getMessage())]
             await ws.send({"op": "subscribe", "topic": "/unlisted"})
-            small_cls = TypeStore("greedy as this test knows it").load(small, "int32 value\n")
+            small_cls: Any = TypeStore("greedy as this test knows it").load(small, "int32 value\n")
             seq = iter(range(1, 10_000))
 
             def put_both() -> None:
