@@ -17,6 +17,7 @@ from typing import Any
 
 import pytest
 
+from bridge_server.foxglove.hub import message_class
 from bridge_server.zenoh import keys
 from bridge_server.zenoh.graph import TypeLimits
 from bridge_server.zenoh.keys import Snapshot
@@ -51,7 +52,8 @@ async def test_two_robots_each_get_their_own_layout_of_one_type_name(ros_node: A
                                                                       topic: str) -> None:
     """robot2 defines robot_msgs/msg/Status its own way first; robot1 (rclpy) has the real
     one: each robot's clients get that robot's layout, and a client's publish to each is
-    encoded in that robot's layout (rclpy reads robot1's; robot2's bytes decode with its)."""
+    encoded in that robot's layout (rclpy reads robot1's; robot2's bytes decode with its);
+    rosapi's full texts and the Foxglove hub's classes are each robot's own."""
     from robot_msgs.msg import Status, Wheel
 
     theirs: Any = TypeStore("robot2 as this test knows it").load(STATUS, THEIRS)
@@ -107,6 +109,16 @@ async def test_two_robots_each_get_their_own_layout_of_one_type_name(ros_node: A
                 await asyncio.sleep(0.1)
             assert (ros_got[0].label, ros_got[0].mode) == ("to robot1", 1)
             listener.undeclare()
+
+            texts = {}  # how each robot's clients see the type described
+            for name, ws in (("robot2", ws2), ("robot1", ws1)):
+                await ws.send({"op": "call_service", "service": "/rosapi/topics_and_raw_types",
+                               "id": "raw"})
+                values = (await ws.expect(op="service_response", id="raw"))["values"]
+                texts[name] = values["typedefs_full_text"][values["topics"].index(topic)]
+                foxglove = message_class(relay.robots[name].graph, STATUS)  # Foxglove's CDR
+                assert ("hijacked_field" in foxglove._fields_and_types) == (name == "robot2")
+            assert texts["robot2"] == THEIRS and "label" in texts["robot1"]
     finally:
         for ws in clients:
             await ws.close()
