@@ -870,15 +870,19 @@ class ZenohGraph:
                         "action": types.lookup_action}[kind](canonical)
             built = self._built.get(canonical)
             if built is None or not (built[0] is text or built[0] == text):
+                found: Any
                 try:
-                    built = (text, types.load(canonical, text))
+                    found = types.load(canonical, text)
                 except LimitError as exc:
-                    built = (text, self._refuse(exc))
-                self._built[canonical] = built
-            if isinstance(built[1], TypeRefused):  # a new one: raising one again grows it
-                raise TypeRefused(built[1].name, built[1].reason)
+                    found = self._refuse(exc)
+                except (WireUnknownType, DefinitionError) as exc:  # not parsed again either
+                    found = UnknownTypeError(name, f"robot {self.robot}'s definition of it "
+                                             f"does not build ({exc})")
+                built = self._built[canonical] = (text, found)
+            if isinstance(built[1], UnknownTypeError):  # a new one: raising one again grows it
+                raise type(built[1])(built[1].name, built[1].reason)
             return built[1]
-        except (WireUnknownType, DefinitionError) as exc:
+        except WireUnknownType as exc:
             raise UnknownTypeError(name, f"robot {self.robot} does not list it and msgs does "
                                    f"not generate it ({exc})") from None
 

@@ -133,24 +133,28 @@ def _big_definition(size: int) -> str:
     return "int32 value\n" + "# pad\n" * (size // 6)
 
 
-@pytest.mark.parametrize("limit", ["refused by the default limit", "within a raised limit"])
+@pytest.mark.parametrize("case", ["1.2 MB, refused by the default limit",
+                                  "1.2 MB, within a raised limit",
+                                  "250 KB that do not parse, within the default limit"])
 async def test_a_robots_huge_definition_does_not_slow_another_robots_viewer(
-        ros_node: Any, topic: str, limit: str) -> None:
-    """A relay process; a played robot with a 1.2 MB definition puts 5 of its 8-byte samples
+        ros_node: Any, topic: str, case: str) -> None:
+    """A relay process; a played robot with a huge definition puts 5 of its 8-byte samples
     for every message of robot1's 10/s topic: robot1's viewer gets at least 90 % of the 40
     messages and stays connected (refused: the relay says so once; raised: its client gets
-    the samples)."""
+    the samples; one that does not parse: the relay says why once)."""
     from std_msgs.msg import String
 
-    big = _big_definition(1_200_000)
-    raised = limit.startswith("within")
+    big = _big_definition(1_200_000 if case.startswith("1.2") else 250_000)
+    big_cls: Any = TypeStore("the flooder as this test knows it").load("flood_msgs/msg/Big", big)
+    raised = "raised" in case
+    if "parse" in case:
+        big += "float77 broken\n"
     router = f"tcp/127.0.0.1:{free_port()}"
     argv = [sys.executable, "-m", "bridge_server.zenoh.relay", "--port", "0",
             "--zenoh-listen", router] + (["--max-definition-bytes", "2000000"] if raised else [])
     proc = Proc(argv, ros_env())
     bridge, exporter = await start_robot(router, robot="robot1")
     snap = Snapshot(node="flood_bridge", definitions={"flood_msgs/msg/Big": big})
-    big_cls: Any = TypeStore("the flooder as this test knows it").load("flood_msgs/msg/Big", big)
     clients: list[Any] = []
     try:
         port = int(proc.wait_for(re.compile(r"relay listening on ws://127\.0\.0\.1:(\d+)"))
@@ -201,6 +205,9 @@ async def test_a_robots_huge_definition_does_not_slow_another_robots_viewer(
             if raised:
                 got = await flood_client.expect(op="publish", topic="/flood")
                 assert got["msg"] == {"value": 1}
+            elif "parse" in case:
+                proc.wait_for(re.compile(r"messages of /flood on robot flooder are dropped: .*"
+                                         r"does not build .*float77"))
             else:
                 proc.wait_for(re.compile(r"robot flooder: type flood_msgs/msg/Big refused: .*"
                                          r"--max-definition-bytes"))
