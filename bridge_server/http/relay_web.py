@@ -166,7 +166,8 @@ class RelayWeb:
             "roslibpy_relay_robot_dropped",
             "What a robot sent that the relay dropped, by kind: messages_dropped (oldest, over "
             "its queue), replies_dropped, graph_too_large, graph_superseded, bad_graph, "
-            "bad_messages, bad_replies, handling_failed.", labels=["robot", "kind"])
+            "bad_messages, type_refused (its type over --max-definition-bytes or "
+            "--max-types-per-robot), bad_replies, handling_failed.", labels=["robot", "kind"])
         for name in snaps:
             from_robot.add_metric([name], _bytes_from_robot(self.relay.robots[name]))
             for kind, n in sorted(_dropped(self.relay.robots[name]).items()):

@@ -320,9 +320,8 @@ class ZenohFeed:
                 raise BridgeError(f"its stamp {meta.stamp_ns} ns is out of range")
             conv = graph.converter(graph.resolve_message(meta.type))
         except BridgeError as exc:
-            reason = "type_refused" if isinstance(exc, TypeRefused) else "undecodable"
-            graph.dropped[reason] = graph.dropped.get(reason, 0) + 1
-            graph.faults.add("bad_messages", f"messages of {self.topic} dropped: {exc}")
+            graph.faults.add("type_refused" if isinstance(exc, TypeRefused) else "bad_messages",
+                             f"messages of {self.topic} dropped: {exc}")
             return
         epoch, seq = self._place
         if meta.epoch == epoch and meta.seq <= seq:
@@ -714,9 +713,6 @@ class ZenohGraph:
         """The robot's own types (released when it left and nothing here uses them)."""
         self._built: dict[str, tuple[str, Any]] = {}  # type -> (its text, class or refusal)
         self._limits_said: set[str] = set()
-        self.dropped: dict[str, int] = {}
-        """The robot's topic messages not delivered, by reason (``type_refused``: its type
-        is over a limit; ``undecodable``: no type for it or no Meta)."""
         self.loop = asyncio.get_running_loop()
         self.inbox = Inbox(self.loop, self.robot)
         """What the robot's Zenoh callbacks hand to the loop, bounded (inbox.py)."""

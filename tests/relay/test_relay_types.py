@@ -24,6 +24,7 @@ from bridge_server.zenoh.keys import Snapshot
 from msgs import cdr
 from msgs.dynamic import DELIMITER, TypeStore
 from tests.helpers import open_wire, ros_env
+from tests.ops.support import aget
 from tests.relay.procs import Proc
 from tests.relay.support import (
     free_port,
@@ -269,8 +270,8 @@ async def test_a_robot_over_the_relays_type_limits_is_refused_by_name(
         topic: str, caplog: pytest.LogCaptureFixture) -> None:
     """A relay taking 16 KB definitions and 50 types per robot: a robot's 20 KB definition and
     its 60-type one are refused (its client is told which limit, the log names the robot
-    and the limit once), its samples of them are dropped and counted, and its small type
-    still works."""
+    and the limit once), its samples of them are dropped and counted (/metrics too), and its
+    small type still works."""
     caplog.set_level(logging.WARNING)
     router = f"tcp/127.0.0.1:{free_port()}"
     relay = await start_relay(listen=router,
@@ -301,10 +302,13 @@ async def test_a_robot_over_the_relays_type_limits_is_refused_by_name(
 
             got = await _first(ws, put_both, "/unlisted")
             assert got["msg"] == {"value": 5}
-            dropped = graph.dropped.get("type_refused", 0)
+            dropped = graph.faults.counts.get("type_refused", 0)
             put_both()  # in order: the refused one is taken before the small one comes
             assert (await ws.expect(op="publish", topic="/unlisted"))["msg"] == {"value": 5}
-            assert graph.dropped.get("type_refused", 0) == dropped + 1, graph.dropped
+            assert graph.faults.counts.get("type_refused", 0) == dropped + 1, graph.faults.counts
+            _, _, scraped = await aget(f"http://127.0.0.1:{relay.port}/metrics")
+            assert (f'roslibpy_relay_robot_dropped_total{{kind="type_refused",robot="greedy"}}'
+                    f" {dropped + 1}.0") in scraped.decode()
             assert len(graph.wire_types) == 1  # the small one; nothing of the refused ones
             said = [r for r in caplog.records if ": type greedy_msgs/" in r.getMessage()]
             assert len(said) == 2, [r.getMessage() for r in said]  # once per limit
