@@ -40,7 +40,7 @@ import weakref
 from collections.abc import Callable
 from typing import Any
 
-from .runtime import Message
+from .runtime import Message, lookup_message
 
 __all__ = ["TYPED_ARRAY_TAGS", "CdrError", "Typed", "decode", "decoder_for", "encode",
            "min_size"]
@@ -93,10 +93,13 @@ def _fail(type_name: str, field: str, exc: Exception) -> CdrError:
     return CdrError(type_name, field, why)
 
 
-def min_size(spec: str, _depth: int = 0) -> int:
+def min_size(spec: str, find: Callable[[str], type[Message]] | None = None,
+             _depth: int = 0) -> int:
     """The fewest bytes a field of IDL type ``spec`` takes in CDR, alignment aside (a lower
     bound: padding only adds). An empty message takes its one placeholder byte, so every
-    type takes at least one; this is what a sequence's count is checked against."""
+    type takes at least one; this is what a sequence's count is checked against. ``find``
+    gives a nested type's class (default: the process-wide lookup; a decoder passes its
+    class's own, so a robot's types are read in that robot's store)."""
     m = _TYPE.match(spec)
     if m is None:
         raise CdrError("?", "", f"unknown field type {spec!r}")
@@ -113,8 +116,8 @@ def min_size(spec: str, _depth: int = 0) -> int:
     else:
         if _depth > 32:  # ROS types do not nest this deep, and never in themselves
             raise CdrError(base, "", "nested more than 32 levels deep")
-        fields = lookup_message(base)._fields_and_types
-        one = sum(min_size(f, _depth + 1) for f in fields.values()) if fields else 1
+        fields = (find or lookup_message)(base)._fields_and_types
+        one = sum(min_size(f, find, _depth + 1) for f in fields.values()) if fields else 1
     return count * max(one, 1)
 
 
@@ -271,7 +274,7 @@ class _Gen:
                 self.emit(depth, f"{target} = {arr}.tolist()")
             self.emit(depth, f"o = {end}")
             return
-        each = min_size(base)  # checked once, so the loop below ends within the bytes
+        each = min_size(base, self.find)  # checked once: the loop ends within the bytes
         self.emit(depth, f"if {count} * {each} > len(b) - o: "
                          f"raise claims({count}, {each}, len(b) - o)")
         items = self.var()
