@@ -37,6 +37,7 @@ import contextlib
 import inspect
 import logging
 import time
+import traceback
 from collections import deque
 from collections.abc import Awaitable, Callable, Coroutine, Generator, Mapping
 from typing import TYPE_CHECKING, Any, Generic, NamedTuple, Protocol, Self, TypeVar, cast
@@ -53,7 +54,7 @@ from .exceptions import (
     RosTimeoutError,
     UsageError,
 )
-from .jupyter import in_cell
+from .jupyter import in_cell, write_in_cell
 from .messages import Completeness, RawMessage, check_dict, from_wire, to_wire
 
 if TYPE_CHECKING:
@@ -75,6 +76,12 @@ log = logging.getLogger("roslibpy_lite.client")
 
 T = TypeVar("T")
 _SKIP: Any = object()
+
+REPORT_WINDOW = 10.0
+"""Seconds over which a failing callback's further failures are counted into one line."""
+PAUSE_AFTER = 1000
+"""Failures in a row after which a subscription pauses a callback
+(:meth:`Subscription.resume_callbacks` runs it again)."""
 
 
 # --- the backend hooks -----------------------------------------------------------------------
@@ -323,6 +330,26 @@ class _Tap:
         self.times: list[float] = []
 
 
+class _Failures:
+    """One callback's failures on one subscription: the first of a burst is reported in
+    full, the others counted into one line per :data:`REPORT_WINDOW` seconds."""
+
+    __slots__ = ("callback", "in_row", "last", "more", "since", "timer")
+
+    def __init__(self, callback: Callable[[Any], Any]) -> None:
+        self.callback = callback
+        self.in_row = 0  # failures since its last success
+        self.more = 0  # failures of this burst not reported yet
+        self.since = 0.0  # when this window of the burst began (0: no burst)
+        self.last = ""  # the last failure, "Type: text"
+        self.timer: asyncio.TimerHandle | None = None
+
+
+def _callback_name(callback: Any) -> str:
+    name = getattr(callback, "__qualname__", None)
+    return name if isinstance(name, str) else repr(callback)
+
+
 class Subscription(_BridgeHandle, Generic[T]):
     """A subscription to one topic (made by ``ros.subscribe``).
 
@@ -333,6 +360,12 @@ class Subscription(_BridgeHandle, Generic[T]):
     drop: the "Buffers" section of the Publish and subscribe guide. Counters: :attr:`received`,
     :attr:`dropped` (buffer overflow), :attr:`decode_errors` (typed messages
     that did not fit their class; skipped), :attr:`callback_errors`.
+
+    A callback that raises is reported once per burst: the first traceback (in Jupyter under
+    the cell that subscribed, elsewhere on the ``roslibpy_lite.client`` log), then one line
+    per :data:`REPORT_WINDOW` seconds with the count of further failures; after
+    :data:`PAUSE_AFTER` failures in a row it is paused (:attr:`paused`;
+    :meth:`resume_callbacks` runs it again).
     """
 
     _backend: TopicBackend
@@ -397,6 +430,9 @@ class Subscription(_BridgeHandle, Generic[T]):
         self._latest_at = 0.0  # time.monotonic() of receipt
         self._since = time.monotonic()
         self._taps: list[_Tap] = []
+        self._failing: dict[int, _Failures] = {}  # by id() of the callback
+        self.paused: list[Callable[[Any], Any]] = []
+        """Callbacks paused after :data:`PAUSE_AFTER` failures in a row."""
 
     def __repr__(self) -> str:
         return f"<Subscription {self.topic} {self.type_name}{' closed' if self.closed else ''}>"
@@ -469,13 +505,14 @@ class Subscription(_BridgeHandle, Generic[T]):
                 for cb in self._sync_cbs:
                     try:
                         result = cb(msg)
-                    except Exception:
-                        self.callback_errors += 1
-                        log.exception("callback for %s raised", self.topic)
+                    except Exception as exc:
+                        self._callback_failed(cb, exc)
                         continue
                     if inspect.isawaitable(result):
                         # A sync-looking callable returned an awaitable: run it anyway.
-                        self._run_stray(result)
+                        self._run_stray(cb, result)
+                    elif self._failing:
+                        self._callback_ok(cb)
             if not self._buffering:
                 return
         queue = self._queue
@@ -503,17 +540,112 @@ class Subscription(_BridgeHandle, Generic[T]):
             if not tap.wait_connected and tap.future is not None and not tap.future.done():
                 tap.future.set_exception(error)
 
-    def _run_stray(self, awaitable: Awaitable[Any]) -> None:
+    def _run_stray(self, cb: Callable[[Any], Any], awaitable: Awaitable[Any]) -> None:
         async def run() -> None:
             try:
                 await awaitable
-            except Exception:
-                self.callback_errors += 1
-                log.exception("callback for %s raised", self.topic)
+            except Exception as exc:
+                self._callback_failed(cb, exc)
+            else:
+                if self._failing:
+                    self._callback_ok(cb)
 
         task = asyncio.get_running_loop().create_task(run())
         _STRAY.add(task)
         task.add_done_callback(_STRAY.discard)
+
+    # -- callbacks that raise ------------------------------------------------------------------
+
+    def _callback_failed(self, cb: Callable[[Any], Any], exc: Exception) -> None:
+        """``cb`` raised ``exc``: count it, report the first of a burst in full and the rest
+        as one line per window, pause it after PAUSE_AFTER in a row."""
+        self.callback_errors += 1
+        failures = self._failing.get(id(cb))
+        if failures is None:
+            failures = self._failing[id(cb)] = _Failures(cb)
+        failures.in_row += 1
+        failures.last = f"{type(exc).__name__}: {exc}"
+        now = time.monotonic()
+        if failures.since == 0.0 or (failures.more == 0 and now - failures.since >= REPORT_WINDOW):
+            failures.since = now  # a new burst: this one in full
+            self._report(cb, f"callback {_callback_name(cb)} for {self.topic} raised (further "
+                             f"failures within {REPORT_WINDOW:g} s are counted, not shown):",
+                         exc)
+            loop = running_loop()
+            if loop is not None and failures.timer is None:
+                failures.timer = loop.call_later(REPORT_WINDOW, self._window_ended, failures)
+        else:
+            failures.more += 1
+            if now - failures.since >= REPORT_WINDOW:  # no timer (no loop): count here
+                self._summarise(failures)
+        if failures.in_row >= PAUSE_AFTER:
+            self._pause(failures)
+
+    def _callback_ok(self, cb: Callable[[Any], Any]) -> None:
+        failures = self._failing.get(id(cb))
+        if failures is not None:
+            failures.in_row = 0
+
+    def _window_ended(self, failures: _Failures) -> None:
+        failures.timer = None
+        if failures.more:
+            self._summarise(failures)
+            loop = running_loop()
+            if loop is not None and not self.closed:
+                failures.timer = loop.call_later(REPORT_WINDOW, self._window_ended, failures)
+        elif self._failing.get(id(failures.callback)) is failures:
+            del self._failing[id(failures.callback)]  # the burst is over
+
+    def _summarise(self, failures: _Failures) -> None:
+        """Report the failures counted since the last report, as one line."""
+        now = time.monotonic()
+        if failures.more:
+            n = failures.more
+            self._report(failures.callback, (
+                f"callback {_callback_name(failures.callback)} for {self.topic} raised {n} more "
+                f"time{'s' * (n != 1)} in the last {now - failures.since:.1f} s "
+                f"(the last: {failures.last})"))
+        failures.more = 0
+        failures.since = now
+
+    def _pause(self, failures: _Failures) -> None:
+        cb = failures.callback
+        self._summarise(failures)
+        if failures.timer is not None:
+            failures.timer.cancel()
+        del self._failing[id(cb)]
+        self._sync_cbs = [c for c in self._sync_cbs if c is not cb]  # a new list: the
+        self._async_cbs = [c for c in self._async_cbs if c is not cb]  # loop goes on
+        self._buffering = bool(self._async_cbs)
+        self.paused.append(cb)
+        self._report(cb, f"callback {_callback_name(cb)} for {self.topic} raised "
+                         f"{failures.in_row} times in a row: paused (sub.resume_callbacks() "
+                         "runs it again)")
+
+    def resume_callbacks(self) -> int:
+        """Run the callbacks paused after failing :data:`PAUSE_AFTER` times in a row again;
+        returns how many."""
+        paused, self.paused = self.paused, []
+        for cb in paused:
+            self.on_message(cb)
+        return len(paused)
+
+    def _report(self, cb: Callable[[Any], Any], text: str, exc: Exception | None = None) -> None:
+        """Under the cell that subscribed ``cb`` in Jupyter, else on the log."""
+        if exc is not None:
+            shown = text + "\n" + "".join(traceback.format_exception(exc))
+            if not write_in_cell(cb, shown):
+                log.error("%s", text, exc_info=exc)
+        elif not write_in_cell(cb, text):
+            log.warning("%s", text)
+
+    def _end_failures(self) -> None:
+        """Closing: say what was counted and not yet reported."""
+        for failures in list(self._failing.values()):
+            if failures.timer is not None:
+                failures.timer.cancel()
+            self._summarise(failures)
+        self._failing.clear()
 
     def _decode(self, raw: Mapping[str, Any] | RawMessage) -> Any:
         cls = self.msg_cls
@@ -561,9 +693,11 @@ class Subscription(_BridgeHandle, Generic[T]):
                 for cb in self._async_cbs:
                     try:
                         await cb(msg)
-                    except Exception:
-                        self.callback_errors += 1
-                        log.exception("callback for %s raised", self.topic)
+                    except Exception as exc:
+                        self._callback_failed(cb, exc)
+                    else:
+                        if self._failing:
+                            self._callback_ok(cb)
             self._idle.set()
             if self.closed:
                 return
@@ -744,6 +878,8 @@ class Subscription(_BridgeHandle, Generic[T]):
     def mark_closed(self) -> None:
         """Mark closed and wake readers (the backend closes too; no message to the server)."""
         self.closed = True
+        if self._failing:
+            self._end_failures()
         self._wake()
         for tap in self._taps:
             if tap.future is not None and not tap.future.done():

@@ -19,19 +19,21 @@ Two helpers for the notebook, each safe to run again (the earlier one is replace
 from __future__ import annotations
 
 import contextlib
+import contextvars
 import datetime
 import functools
 import logging
 import sys
 from collections.abc import Callable, Iterator
-from typing import TYPE_CHECKING, Any, Protocol, TypeVar
+from typing import TYPE_CHECKING, Any, NamedTuple, Protocol, TypeVar
 
 from ._aio import is_async_callable
 
 if TYPE_CHECKING:
     from ._api_types import ConnectionState, StateCallback
 
-__all__ = ["in_cell", "in_kernel", "show_log", "show_state"]
+__all__ = ["Cell", "current_cell", "in_cell", "in_kernel", "show_log", "show_state",
+           "write_in_cell"]
 
 F = TypeVar("F", bound=Callable[..., Any])
 
@@ -117,6 +119,69 @@ class _Attributed:
 
     def __repr__(self) -> str:
         return f"<in_cell {self.__wrapped__!r}>"
+
+
+def write_in_cell(callback: Any, text: str) -> bool:
+    """Write ``text`` to stderr under the cell that ``callback`` was made for by
+    :func:`in_cell`; False (nothing written) when it was not made so (outside a kernel)."""
+    captured = getattr(callback, "_captured", None)
+    if not getattr(callback, "__roslibpy_lite_cell__", False) or captured is None:
+        return False
+    with _parents(captured):
+        sys.stderr.write(text if text.endswith("\n") else text + "\n")
+    return True
+
+
+class Cell(NamedTuple):
+    """The notebook cell a call was made from (:func:`current_cell`)."""
+
+    key: str
+    """The same for every run of the cell: the id the front end gives it, else its code."""
+    run: str
+    """This run's request id (a re-run has another)."""
+    number: int | None
+    """This run's execution count (``In [count]``), where the kernel says."""
+
+
+_CELL: contextvars.ContextVar[Cell | None] = contextvars.ContextVar(
+    "roslibpy_lite_cell", default=None)
+"""The cell a blocking client's call came from, set on its loop thread for that call."""
+
+
+def current_cell() -> Cell | None:
+    """The cell running now (None outside a kernel, or outside a cell's execution).
+
+    On a blocking client's loop thread it is the cell whose call is being served there
+    (handed over by the client)."""
+    given = _CELL.get()
+    if given is not None or "ipykernel" not in sys.modules:
+        return given
+    ipython = sys.modules.get("IPython")
+    shell = ipython.get_ipython() if ipython is not None else None
+    kernel = getattr(shell, "kernel", None)
+    try:
+        parent: dict[str, Any] = kernel.get_parent("shell") if kernel is not None else {}
+    except Exception:  # an older or other kernel: no cell to name
+        return None
+    header = parent.get("header") or {}
+    if header.get("msg_type") != "execute_request":
+        return None
+    cell_id = (parent.get("metadata") or {}).get("cellId")
+    code = (parent.get("content") or {}).get("code", "")
+    count = getattr(shell, "execution_count", None)
+    return Cell(str(cell_id or code), str(header.get("msg_id", "")),
+                count if isinstance(count, int) else None)
+
+
+@contextlib.contextmanager
+def from_cell(cell: Cell | None) -> Iterator[None]:
+    """Within it, :func:`current_cell` is ``cell`` (a blocking client hands its caller's
+    cell over to its loop thread so)."""
+    token = _CELL.set(cell)
+    try:
+        yield
+    finally:
+        _CELL.reset(token)
 
 
 class _AttributedAsync(_Attributed):

@@ -242,6 +242,18 @@ class Subscription(_BlockingHandle["handles.Subscription[Any]"], Generic[T]):
         """Also deliver every message to ``callback`` (it runs on the loop thread)."""
         self._loop.call(f"on_message {self.topic}", self.handle.on_message, in_cell(callback))
 
+    @property
+    def paused(self) -> list[Callable[[Any], Any]]:
+        """Callbacks paused after failing many times in a row (see
+        :class:`roslibpy_lite.handles.Subscription`)."""
+        return list(self.handle.paused)
+
+    def resume_callbacks(self) -> int:
+        """Run the paused callbacks again; returns how many."""
+        count: int = self._loop.call(f"resume_callbacks {self.topic}",
+                                     self.handle.resume_callbacks)
+        return count
+
     def unsubscribe(self) -> None:
         """Stop the subscription."""
         self.close()

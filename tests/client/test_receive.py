@@ -135,6 +135,37 @@ async def test_callback_errors_are_counted_not_fatal(client: Client) -> None:
     assert seen == [1] and sub.callback_errors == 1
 
 
+async def test_a_failing_callback_is_logged_once_per_burst_then_paused(
+        client: Client, caplog: pytest.LogCaptureFixture, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Outside Jupyter a callback raising on every message logs one traceback, then one line
+    with the count; after PAUSE_AFTER in a row it is paused, and resume_callbacks() runs it."""
+    from roslibpy_lite import handles
+
+    monkeypatch.setattr(handles, "PAUSE_AFTER", 30)
+    calls: list[int] = []
+
+    def cb(msg: dict[str, Any]) -> None:
+        calls.append(msg["data"])
+        raise ValueError(f"bad {msg['data']}")
+
+    sub = client.subscribe("/burst", "std_msgs/msg/Int32", cb)
+    with caplog.at_level(logging.INFO, logger="roslibpy_lite"):
+        for i in range(20):
+            client._receive(_pub("/burst", {"data": i}))
+        assert [r.exc_info is not None for r in caplog.records] == [True]
+        for i in range(20, 40):
+            client._receive(_pub("/burst", {"data": i}))
+        assert len(calls) == 30 and sub.paused == [cb] and sub.callback_errors == 30
+        texts = [r.getMessage() for r in caplog.records]
+        assert texts[1].endswith("raised 29 more times in the last 0.0 s (the last: "
+                                 "ValueError: bad 29)"), texts
+        assert "raised 30 times in a row: paused (sub.resume_callbacks()" in texts[2], texts
+        assert len(texts) == 3
+        assert sub.resume_callbacks() == 1
+        client._receive(_pub("/burst", {"data": 99}))
+    assert calls[-1] == 99 and sub.paused == []
+
+
 async def test_fragments_are_reassembled(client: Client) -> None:
     """A publish split into fragments arrives once, whole."""
     sub = client.subscribe("/frag", "std_msgs/msg/String")

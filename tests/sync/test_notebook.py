@@ -190,3 +190,49 @@ def test_an_asyncio_connect_cell_run_again_replaces_its_client(
         wait_until(lambda: value(asyncio.run(scrape(bridge.port)),
                                  "roslibpy_bridge_clients") == 1, 10, "one client on the bridge")
         notebooks.run_cell(kc, "await ros.close()")
+
+
+def _streams_by_cell(seen: list[dict[str, Any]]) -> dict[str, str]:
+    """The text of every stream message, joined per request (cell run) it is attributed to."""
+    out: dict[str, str] = {}
+    for m in seen:
+        if m["msg_type"] == "stream":
+            parent = m["parent_header"].get("msg_id", "")
+            out[parent] = out.get(parent, "") + m["content"]["text"]
+    return out
+
+
+@pytest.mark.usefixtures("kernel_env")
+def test_a_raising_callback_is_reported_once_under_its_cell(tmp_path: Path) -> None:
+    """Callbacks raising at 50 Hz (a blocking call in the blocking client's, 1/0 in the asyncio
+    client's) leave under the cell that subscribed one traceback and one count line each,
+    and nothing under the connect cell."""
+    with notebooks.running_kernel(tmp_path) as (_, kc):
+        connected = notebooks.executed(
+            kc, CELLS[0] + "\nimport asyncio\nimport roslibpy_lite\nfrom roslibpy_lite import sync\n"
+                "ros = sync.connect(URL)\naros = await roslibpy_lite.connect(URL)\n"
+                "pub = ros.advertise(NAME, 'std_msgs/msg/Int32')")
+        subscribed = notebooks.executed(
+            kc, "def on_blocking(msg):\n    ros.graph.topics()  # blocking: raises UsageError\n"
+                "def on_async(msg):\n    1 / 0\n"
+                "bsub = ros.subscribe(NAME, 'std_msgs/msg/Int32', on_blocking)\n"
+                "asub = await aros.subscribe(NAME, 'std_msgs/msg/Int32', on_async)")
+        # Published at 50 Hz until each callback failed 100 times (discovery has no event).
+        seen = notebooks.run_collecting_all(
+            kc, "for i in range(1500):\n    pub.publish({'data': i})\n"
+                "    await asyncio.sleep(0.02)\n"
+                "    if min(bsub.handle.callback_errors, asub.callback_errors) >= 100:\n"
+                "        break\n"
+                "bsub.close()\nawait asub.close()\n"
+                "print('failures:', bsub.handle.callback_errors >= 100, asub.callback_errors >= 100)"
+                "\nros.close()\nawait aros.close()", timeout=90)
+    text = _streams_by_cell(seen)
+    assert connected not in text, text.get(connected, "")[:2000]
+    under = text[subscribed]
+    assert under.count("Traceback (most recent call last)") == 2, under[:3000]
+    assert under.count("UsageError") >= 1 and under.count("ZeroDivisionError") >= 1, under
+    counts = [line for line in under.splitlines() if " more times in the last " in line]
+    assert len(counts) == 2, under
+    assert {c.split()[1] for c in counts} == {"on_blocking", "on_async"}, counts
+    assert len(under) < 10_000
+    assert "failures: True True\n" in text.values()
