@@ -228,6 +228,11 @@ class DuplicateCallbackWarning(RosLibWarning):
     same code from a re-run cell): it moved to the new subscription instead of running twice."""
 
 
+class ReplacedSubscriptionWarning(RosLibWarning):
+    """A notebook cell run again subscribed to a topic it had subscribed to in its earlier
+    run: that earlier subscription was closed, so a re-run keeps one."""
+
+
 class PartialMessageWarning(RosLibWarning):
     """A dict of a type the client knows misses fields; the bridge fills in their defaults.
 

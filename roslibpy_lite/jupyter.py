@@ -32,7 +32,7 @@ from ._aio import is_async_callable
 if TYPE_CHECKING:
     from ._api_types import ConnectionState, StateCallback
 
-__all__ = ["Cell", "current_cell", "in_cell", "in_kernel", "show_log", "show_state",
+__all__ = ["Cell", "current_cell", "from_cell", "in_cell", "in_kernel", "show_log", "show_state",
            "write_in_cell"]
 
 F = TypeVar("F", bound=Callable[..., Any])

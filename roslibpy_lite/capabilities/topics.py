@@ -25,10 +25,12 @@ from ..exceptions import (
     Disconnected,
     DuplicateCallbackWarning,
     NotConnected,
+    ReplacedSubscriptionWarning,
     RosLibError,
     UsageError,
 )
 from ..handles import Publisher, Subscription
+from ..jupyter import Cell, current_cell
 from ..messages import (
     RawMessage,
     bytes_fixer,
@@ -59,6 +61,8 @@ class Topics:
         # Handles, in creation order (dicts keep it) for restoring after a reconnect.
         self.publishers: dict[str, list[Publisher[Any]]] = {}
         self.subscriptions: dict[str, Subscription[Any]] = {}  # by request id
+        # A notebook cell's latest open subscription of a topic, and the run that made it.
+        self._by_cell: dict[tuple[str, str], tuple[Subscription[Any], str]] = {}
         self.by_topic: dict[str, tuple[Subscription[Any], ...]] = {}
         self._decoders: dict[str, Callable[[bytes], dict[str, Any]]] = {}
         host.route(ops.Publish, self._deliver)
@@ -204,6 +208,9 @@ class Topics:
             compression=compression, fragment_size=fragment_size, buffer_size=buffer_size,
             id=host.new_id("subscribe", topic), raw=raw,
         )
+        cell = current_cell()
+        if cell is not None:
+            self._replace_from_cell(cell, sub)
         if callback is not None:
             sub.on_message(callback)
             self._move_callback(topic, callback)
@@ -212,6 +219,30 @@ class Topics:
         host.request(Tracked(topic, handle=sub, forget=lambda: self._forget_sub(sub)),
                      sub.request_op())
         return sub
+
+    def _replace_from_cell(self, cell: Cell, sub: Subscription[Any]) -> None:
+        """A notebook cell run again subscribes to a topic it subscribed to in an earlier
+        run: that subscription closes (ReplacedSubscriptionWarning), so a re-run keeps one.
+        Several subscriptions made by one run of a cell are all kept."""
+        key = (cell.key, sub.topic)
+        earlier = self._by_cell.get(key)
+        self._by_cell[key] = (sub, cell.run)
+        if earlier is None or earlier[1] == cell.run or earlier[0].closed:
+            return
+        old = earlier[0]
+        self._close_quietly(old)
+        run = f" (In [{cell.number}])" if cell.number is not None else ""
+        warn_user(ReplacedSubscriptionWarning(
+            f"subscribe {sub.topic}: this cell{run} subscribed to {sub.topic} when it ran "
+            f"before; that subscription was closed ({old.received} received, {old.pending} "
+            "buffered), so a re-run keeps one; ros.subscriptions() lists what is open"))
+
+    def _close_quietly(self, sub: Subscription[Any]) -> None:
+        """Close ``sub`` from inside a (non-async) subscribe call."""
+        self.forget_subscription(sub)
+        sub.mark_closed()
+        if sub.consumer is not None:
+            sub.consumer.cancel()
 
     def _move_callback(self, topic: str, callback: MessageCallback) -> None:
         """An open subscription of ``topic`` that already calls ``callback`` (or the same
@@ -223,10 +254,7 @@ class Topics:
                 continue
             left = earlier.has_callbacks()
             if not left:
-                self.forget_subscription(earlier)
-                earlier.mark_closed()
-                if earlier.consumer is not None:
-                    earlier.consumer.cancel()
+                self._close_quietly(earlier)
             name = getattr(callback, "__qualname__", repr(callback))
             warn_user(DuplicateCallbackWarning(
                 f"subscribe {topic}: callback {name} already ran for an earlier subscription "
@@ -316,6 +344,10 @@ class Topics:
         if self.subscriptions.pop(sub.id, None) is None:
             return False
         self.host.untrack(sub.id)
+        if self._by_cell:
+            for key, (made, _) in list(self._by_cell.items()):
+                if made is sub:
+                    del self._by_cell[key]
         left = tuple(s for s in self.by_topic.get(sub.topic, ()) if s is not sub)
         if left:
             self.by_topic[sub.topic] = left

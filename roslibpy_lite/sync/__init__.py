@@ -62,7 +62,7 @@ from .. import connect as _aio_connect
 from .._aio import is_async_callable
 from ..api import DEFAULT_CALL_TIMEOUT, ConnectionState, StateCallback
 from ..exceptions import ReplacedClientWarning, UsageError
-from ..jupyter import in_cell
+from ..jupyter import Cell, current_cell, from_cell, in_cell
 from ..messages import held_warnings
 from .actions import ActionServer, GoalHandle
 from .handles import PUBLISH_WINDOW, Publisher, ServiceServer, StateChanges, Subscription
@@ -191,7 +191,7 @@ class _Front:
         if callback is not None:  # in Jupyter: its output under this cell, not the loop's
             callback = in_cell(callback)
         handle, held = self._loop.call(f"subscribe {topic}", self._subscribe, topic, type,
-                                       callback, options)
+                                       callback, options, current_cell())
         for warning in held:  # given here, on the caller's thread (a notebook's cell)
             warnings.warn(warning, stacklevel=2)
         return Subscription(self._loop, handle)
@@ -203,9 +203,9 @@ class _Front:
         return [Subscription(self._loop, h) for h in found]
 
     async def _subscribe(
-        self, topic: str, type: Any, callback: Any, options: dict[str, Any]
+        self, topic: str, type: Any, callback: Any, options: dict[str, Any], cell: Cell | None
     ) -> tuple[handles.Subscription[Any], list[Warning]]:
-        with held_warnings() as held:
+        with held_warnings() as held, from_cell(cell):  # the caller's cell, on this thread
             sub = self.aio.subscribe(topic, type, callback, **options)
         return await sub, held
 

@@ -236,3 +236,31 @@ def test_a_raising_callback_is_reported_once_under_its_cell(tmp_path: Path) -> N
     assert {c.split()[1] for c in counts} == {"on_blocking", "on_async"}, counts
     assert len(under) < 10_000
     assert "failures: True True\n" in text.values()
+
+
+@pytest.mark.usefixtures("kernel_env")
+def test_a_subscribe_cell_run_again_keeps_one_subscription(tmp_path: Path) -> None:
+    """A ``msgs = []; ros.subscribe(topic, type, msgs.append)`` cell (and one without a
+    callback), run 5 times on either client, leaves one live subscription per line: the
+    earlier runs' lists get nothing, and each re-run says what it closed."""
+    cell = ("msgs, amsgs = [], []\nruns.append(msgs)\n"
+            "sub = ros.subscribe(NAME, 'std_msgs/msg/Int32', msgs.append)\n"
+            "asub = await aros.subscribe(NAME, 'std_msgs/msg/Int32', amsgs.append)\n"
+            "plain = ros.subscribe(NAME + '_plain', 'std_msgs/msg/Int32')\n"
+            "print('open:', len(ros.subscriptions()), len(aros.subscriptions()))")
+    with notebooks.running_kernel(tmp_path) as (_, kc):
+        notebooks.run_cell(kc, CELLS[0] + "\nimport asyncio\nimport roslibpy_lite\n"
+                           "from roslibpy_lite import sync\nros = sync.connect(URL)\n"
+                           "aros = await roslibpy_lite.connect(URL)\nruns = []\n"
+                           "pub = ros.advertise(NAME, 'std_msgs/msg/Int32')")
+        outputs = [notebooks.run_collecting_all(kc, cell) for _ in range(5)]
+        heard = notebooks.run_cell(
+            kc, "for i in range(300):\n    pub.publish({'data': i})\n"
+                "    await asyncio.sleep(0.05)\n    if msgs and amsgs:\n        break\n"
+                "print([len(m) > 0 for m in runs])\nros.close()\nawait aros.close()")
+    texts = ["".join(m["content"].get("text", "") for m in out) for out in outputs]
+    assert all("open: 2 1\n" in text for text in texts), texts
+    assert "ReplacedSubscriptionWarning" not in texts[0]
+    for text in texts[1:]:
+        assert text.count("ReplacedSubscriptionWarning") == 3, text
+    assert heard == "[False, False, False, False, True]\n"
