@@ -124,11 +124,24 @@ class UnknownTypeError(LookupError):
 
 
 def _describe(value: object) -> str:
-    """A short description of a bad value for error messages (type and a clipped repr)."""
+    """A short description of a bad value for error messages (type and a clipped repr).
+
+    A type from outside the builtins is named with its module (``numpy.float32``), so it
+    never reads as the field's own type name."""
     text = repr(value)
     if len(text) > _REPR_LIMIT:
         text = text[: _REPR_LIMIT - 3] + "..."
-    return f"got {type(value).__name__} {text}"
+    kind = type(value)
+    name = kind.__name__ if kind.__module__ == "builtins" else f"{kind.__module__}.{kind.__name__}"
+    return f"got {name} {text}"
+
+
+def _scalar(value: Any) -> Any:
+    """A numpy scalar or 0-d array as its Python number or bool (``value.item()``); any
+    other value as it is. Only on the slow path of the checks: numpy is not imported."""
+    if getattr(value, "ndim", None) == 0 and type(value).__module__ == "numpy":
+        return value.item()
+    return value
 
 
 # A converter checks one value and returns its Python-side form. It raises
@@ -143,6 +156,9 @@ _Find = Callable[[str], "type[Message]"]
 def _bool_conv(value: Any) -> bool:
     if value is True or value is False:
         return bool(value)
+    plain = _scalar(value)
+    if plain is True or plain is False:
+        return plain
     raise ValidationError("", "bool", _describe(value))
 
 
@@ -152,10 +168,11 @@ def _int_conv(idl: str) -> _Conv:
 
     def conv(value: Any) -> int:
         if type(value) is not int:
-            if (isinstance(value, float) and value.is_integer()) or (
-                isinstance(value, int) and not isinstance(value, bool)
+            plain = _scalar(value)
+            if (isinstance(plain, float) and plain.is_integer()) or (
+                isinstance(plain, int) and not isinstance(plain, bool)
             ):
-                value = int(value)
+                value = int(plain)
             else:
                 raise ValidationError("", expected, _describe(value))
         if not low <= value <= high:
@@ -175,7 +192,10 @@ def _float_conv(idl: str, wire: bool) -> _Conv:
         if value is None and wire:
             return math.nan
         if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise ValidationError("", expected, _describe(value))
+            plain = _scalar(value)  # numpy's: its Python value
+            if isinstance(plain, bool) or not isinstance(plain, (int, float)):
+                raise ValidationError("", expected, _describe(value))
+            value = plain
         try:
             result = float(value)
         except OverflowError:

@@ -564,7 +564,8 @@ def encode(op: Op) -> str:
     """The JSON text of ``op`` for one websocket text frame.
 
     Non-finite floats (NaN, ±Inf) go out as ``null``, since JSON has none; bytes
-    (a ``uint8[]`` field as a subscription gives it) as base64 text, rosbridge's JSON form.
+    (a ``uint8[]`` field as a subscription gives it) as base64 text, rosbridge's JSON form;
+    a numpy scalar (or 0-d array) as its Python number or bool.
 
     Raises:
         LocalProtocolError: a value cannot be expressed in JSON.
@@ -579,9 +580,12 @@ def encode(op: Op) -> str:
         raise LocalProtocolError(f"{op.OP}: cannot encode as JSON: {exc}", op=op.OP) from None
 
 
-def _base64(value: Any) -> str:
+def _base64(value: Any) -> Any:
     if isinstance(value, bytes | bytearray | memoryview):
         return base64.b64encode(value).decode("ascii")
+    if getattr(value, "ndim", None) == 0 and type(value).__module__ == "numpy":
+        plain = value.item()  # a numpy scalar: its Python value (numpy is not imported)
+        return plain if not isinstance(plain, float) or math.isfinite(plain) else None
     raise TypeError(f"Object of type {type(value).__name__} is not JSON serializable")
 
 
