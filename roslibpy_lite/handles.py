@@ -77,6 +77,9 @@ log = logging.getLogger("roslibpy_lite.client")
 T = TypeVar("T")
 _SKIP: Any = object()
 
+_HINTS = {"next": "await sub.next(timeout) waits for one",
+          "wait_connected": "await ros.wait_connected() first"}
+
 REPORT_WINDOW = 10.0
 """Seconds over which a failing callback's further failures are counted into one line."""
 PAUSE_AFTER = 1000
@@ -433,6 +436,10 @@ class Subscription(_BridgeHandle, Generic[T]):
         self._failing: dict[int, _Failures] = {}  # by id() of the callback
         self.paused: list[Callable[[Any], Any]] = []
         """Callbacks paused after :data:`PAUSE_AFTER` failures in a row."""
+        self.blocking = False
+        """Made for the blocking client: its error texts give that client's calls."""
+        self.collected: Collected[T] = Collected([], [])
+        """What the last :meth:`collect` collected, also when it was interrupted."""
 
     def __repr__(self) -> str:
         return f"<Subscription {self.topic} {self.type_name}{' closed' if self.closed else ''}>"
@@ -779,8 +786,7 @@ class Subscription(_BridgeHandle, Generic[T]):
         if raw is None:
             raise NoMessageYet(
                 f"no message on {self.topic} yet (subscribed "
-                f"{time.monotonic() - self._since:.1f} s ago); await sub.next(timeout) "
-                "waits for one"
+                f"{time.monotonic() - self._since:.1f} s ago); {self._hint('next')}"
             )
         msg = self._decode(raw)
         if msg is _SKIP:
@@ -827,6 +833,9 @@ class Subscription(_BridgeHandle, Generic[T]):
         """Every message that arrives during the next ``seconds`` seconds, oldest first,
         with when each arrived (:class:`Collected`; the buffer is left as it is).
 
+        Interrupted (cancelled, Ctrl+C, a notebook's stop button), it keeps what it had
+        collected in :attr:`collected`.
+
         Raises:
             NotConnected: the link is down when it starts.
             UsageError: ``seconds`` is negative, or the subscription is closed.
@@ -834,21 +843,27 @@ class Subscription(_BridgeHandle, Generic[T]):
         if not seconds >= 0:
             raise UsageError(f"collect from {self.topic}: seconds must be >= 0, got {seconds!r}")
         self._check_readable()
-        self._backend.require_link(f"collect from {self.topic}", "await ros.wait_connected() first")
+        self._backend.require_link(f"collect from {self.topic}", self._hint("wait_connected"))
         tap = _Tap(None, True)
         self._taps.append(tap)
         try:
             await asyncio.sleep(seconds)  # a window of time is what was asked for
         finally:
             self._taps.remove(tap)
-        messages: list[T] = []
-        times: list[float] = []
-        for raw, when in zip(tap.messages, tap.times, strict=True):
-            msg = self._decode(raw)
-            if msg is not _SKIP:
-                messages.append(msg)
-                times.append(when)
-        return Collected(messages, times)
+            messages: list[T] = []
+            times: list[float] = []
+            for raw, when in zip(tap.messages, tap.times, strict=True):
+                msg = self._decode(raw)
+                if msg is not _SKIP:
+                    messages.append(msg)
+                    times.append(when)
+            self.collected = Collected(messages, times)
+        return self.collected
+
+    def _hint(self, kind: str) -> str:
+        """The call that helps (``next``, ``wait_connected``), spelt for this handle's client."""
+        text = _HINTS[kind]
+        return text.removeprefix("await ") if self.blocking else text
 
     def _check_readable(self) -> None:
         if self.error is not None:

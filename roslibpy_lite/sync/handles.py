@@ -208,12 +208,27 @@ class Subscription(_BlockingHandle["handles.Subscription[Any]"], Generic[T]):
                                 f"next on {self.topic}")
         return msg
 
+    def __init__(self, loop: LoopThread, handle: handles.Subscription[Any]) -> None:
+        super().__init__(loop, handle)
+        handle.blocking = True  # its errors name this client's calls
+
     def collect(self, seconds: float) -> handles.Collected[T]:
         """Every message that arrives during the next ``seconds`` seconds, with when each
-        arrived (see :meth:`roslibpy_lite.handles.Subscription.collect`)."""
-        found: handles.Collected[T] = self._loop.run(self.handle.collect(seconds),
-                                                      f"collect from {self.topic}")
+        arrived (see :meth:`roslibpy_lite.handles.Subscription.collect`). Interrupted
+        (Ctrl+C, a notebook's stop button), it keeps what it had in :attr:`collected`."""
+        try:
+            found: handles.Collected[T] = self._loop.run(self.handle.collect(seconds),
+                                                          f"collect from {self.topic}")
+        except KeyboardInterrupt as exc:
+            exc.add_note(f"collect from {self.topic} was interrupted: the "
+                         f"{len(self.handle.collected)} messages it had are in sub.collected")
+            raise
         return found
+
+    @property
+    def collected(self) -> handles.Collected[T]:
+        """What the last :meth:`collect` collected, also when it was interrupted."""
+        return self.handle.collected
 
     def messages(self, timeout: float | None = None) -> Iterator[T]:
         """Iterate the messages until the subscription closes.

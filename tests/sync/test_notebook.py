@@ -264,3 +264,66 @@ def test_a_subscribe_cell_run_again_keeps_one_subscription(tmp_path: Path) -> No
     for text in texts[1:]:
         assert text.count("ReplacedSubscriptionWarning") == 3, text
     assert heard == "[False, False, False, False, True]\n"
+
+
+@pytest.mark.usefixtures("kernel_env")
+def test_numpy_scalars_publish_and_call(tmp_path: Path, topic: str) -> None:
+    """np.float32, np.int64, np.bool_ and a 0-d array publish and call through the bridge as
+    Python numbers do; a value out of range is refused naming numpy's type."""
+    with notebooks.running_kernel(tmp_path) as (_, kc):
+        out = notebooks.run_cell(
+            kc, CELLS[0] + "\nimport numpy as np\nfrom roslibpy_lite import sync, RosTimeoutError\n"
+                "from roslibpy_lite import InvalidMessageError\nros = sync.connect(URL)\n"
+                "server = ros.advertise_service(NAME, 'mult_msgs/srv/MultFloats',\n"
+                "    lambda req: {'result': req['x'] * req['y']})\n"
+                "print('call:', ros.call_service(NAME, 'mult_msgs/srv/MultFloats',\n"
+                "    {'x': np.float32(1.5), 'y': np.int64(4)}, timeout=30)['result'])\n"
+                "sub = ros.subscribe(NAME + '_v', 'geometry_msgs/msg/Vector3')\n"
+                "flag = ros.subscribe(NAME + '_b', 'std_msgs/msg/Bool')\n"
+                "pub = ros.advertise(NAME + '_v', 'geometry_msgs/msg/Vector3')\n"
+                "bpub = ros.advertise(NAME + '_b', 'std_msgs/msg/Bool')\n"
+                "for _ in range(60):\n"
+                "    pub.publish({'x': np.float32(1.0), 'y': np.int64(3), 'z': np.array(2.5)})\n"
+                "    bpub.publish({'data': np.bool_(True)})\n"
+                "    try:\n        print('heard:', sub.get(timeout=0.25), flag.get(timeout=0.25))\n"
+                "        break\n    except RosTimeoutError:\n        pass\n"
+                "f32 = ros.advertise(NAME + '_f', 'std_msgs/msg/Float32')\n"
+                "try:\n    f32.publish({'data': np.str_('1')})\n"
+                "except InvalidMessageError as exc:\n    print(exc)\nros.close()", timeout=90)
+    assert out.splitlines() == [
+        "call: 6.0",
+        "heard: {'x': 1.0, 'y': 3.0, 'z': 2.5} {'data': True}",
+        f"publish to {topic}_f: data: expected float32, got numpy.str_ np.str_('1')",
+    ]
+
+
+@pytest.mark.usefixtures("kernel_env")
+def test_an_interrupted_collect_keeps_its_messages(tmp_path: Path) -> None:
+    """Interrupting a cell waiting in ``sub.collect(60)`` (Jupyter's stop button) keeps the
+    messages it had collected in ``sub.collected``, and the interruption says so."""
+    with notebooks.running_kernel(tmp_path) as (km, kc):
+        notebooks.run_cell(kc, CELLS[0] + "\nimport threading, time\nfrom roslibpy_lite import sync\n"
+                           "ros = sync.connect(URL)\npub = ros.advertise(NAME, 'std_msgs/msg/Int32')\n"
+                           "count, armed = 0, None\n"
+                           "def on_msg(msg):\n    global count\n    count += 1\n"
+                           "    if armed is not None and count == armed + 5:\n"
+                           "        print('five during collect', flush=True)\n"
+                           "sub = ros.subscribe(NAME, 'std_msgs/msg/Int32', on_msg)\n"
+                           "stop = threading.Event()\n"
+                           "def publish():\n    i = 0\n    while not stop.is_set():\n"
+                           "        pub.publish({'data': i})\n        i += 1\n        time.sleep(0.02)\n"
+                           "threading.Thread(target=publish, daemon=True).start()\n"
+                           "sub.next(timeout=30)")
+        msg_id = kc.execute("armed = count\nsub.collect(60)", stop_on_error=False)
+        while True:  # five messages arrived while collect waits
+            msg = kc.get_iopub_msg(timeout=30)
+            if msg["msg_type"] == "stream" and "five during collect" in msg["content"]["text"]:
+                break
+        km.interrupt_kernel()
+        reply = kc.get_shell_msg(timeout=30)
+        assert reply["parent_header"]["msg_id"] == msg_id
+        assert reply["content"]["ename"] == "KeyboardInterrupt"
+        assert "are in sub.collected" in "".join(reply["content"]["traceback"])
+        out = notebooks.run_cell(kc, "stop.set()\nprint(len(sub.collected) >= 5, "
+                                     "sub.collected[0]['data'] >= 0)\nros.close()")
+    assert out == "True True\n"

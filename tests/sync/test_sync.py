@@ -223,3 +223,18 @@ def test_many_publishes_keep_their_order(ros: Ros, topic: str) -> None:
     pub.close()
     with pytest.raises(UsageError, match="closed"):
         pub.publish({"data": 1})
+
+
+def test_blocking_errors_hint_at_blocking_calls() -> None:
+    """The blocking client's errors name its own calls (``sub.next(timeout)``,
+    ``ros.wait_connected()``), not the asyncio client's ``await ...``."""
+    from roslibpy_lite import NoMessageYet, NotConnected
+
+    with sync.MockRos() as mock:
+        sub = mock.subscribe("/hint", "std_msgs/msg/Int32")
+        with pytest.raises(NoMessageYet, match=r"; sub\.next\(timeout\) waits for one$"):
+            sub.latest()
+        mock.disconnect()
+        with pytest.raises(NotConnected, match=r"ros\.wait_connected\(\) first") as caught:
+            sub.collect(0.1)
+        assert "await" not in str(caught.value)
