@@ -32,6 +32,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from .exceptions import UsageError
+from .messages import name_hint
 
 if TYPE_CHECKING:
     import numpy
@@ -354,7 +355,7 @@ def bag_to_dataframe(path: str | Path, topic: str,
                      fields: Iterable[str] | None = None) -> pandas.DataFrame:
     """One topic of an MCAP file (ours, rosbag2's) as a DataFrame (see :func:`to_dataframe`;
     a message without a header stamp is indexed by when it was recorded)."""
-    from .bag import read
+    from .bag import info, read
 
     chosen = list(fields) if fields is not None else None
     rows: list[dict[str, Any]] = []
@@ -366,5 +367,7 @@ def bag_to_dataframe(path: str | Path, topic: str,
         stamps.append(_header_stamp_ns(msg))
         times_ns.append(rec.log_time_ns)
     if not rows:
-        raise UsageError(f"{path}: no message on {topic}")
+        in_file = [t.topic for t in info(path).topics]
+        where = "" if topic in in_file else f"; {name_hint(topic, in_file)}"
+        raise UsageError(f"{path}: no message on {topic}{where}")
     return _frame(rows, stamps, times_ns)

@@ -51,11 +51,12 @@ from .exceptions import (
     InvalidMessageError,
     NoMessageYet,
     RosLibError,
+    RosLibWarning,
     RosTimeoutError,
     UsageError,
 )
 from .jupyter import in_cell, write_in_cell
-from .messages import Completeness, RawMessage, check_dict, from_wire, to_wire
+from .messages import Completeness, RawMessage, check_dict, from_wire, to_wire, warn_user
 
 if TYPE_CHECKING:
     from types import TracebackType
@@ -123,6 +124,10 @@ class TopicBackend(Backend, Protocol):
 
     def link_note(self) -> str:
         """``""`` while connected, else `` (state reconnecting)`` for an error text."""
+        ...
+
+    async def silence_note(self, topic: str) -> str:
+        """``"; nothing publishes /Imu in the graph; did you mean '/imu'?"`` or ``""``."""
         ...
 
 
@@ -438,6 +443,8 @@ class Subscription(_BridgeHandle, Generic[T]):
         """Callbacks paused after :data:`PAUSE_AFTER` failures in a row."""
         self.blocking = False
         """Made for the blocking client: its error texts give that client's calls."""
+        self.held_warnings: list[Warning] = []
+        """Warnings of a blocking client's call, for it to give on the caller's thread."""
         self.collected: Collected[T] = Collected([], [])
         """What the last :meth:`collect` collected, also when it was interrupted."""
 
@@ -761,9 +768,7 @@ class Subscription(_BridgeHandle, Generic[T]):
         except StopAsyncIteration:
             raise UsageError(f"subscription to {self.topic} is closed") from None
         except TimeoutError:
-            raise RosTimeoutError(
-                f"no message on {self.topic} within {timeout} s{self._backend.link_note()}"
-            ) from None
+            raise await self._silence(timeout) from None
 
     def latest(self, *, allow_stale: bool = False) -> Latest[T]:
         """The newest message received (whatever the buffer holds) and its age in seconds.
@@ -823,11 +828,11 @@ class Subscription(_BridgeHandle, Generic[T]):
                             return result
                     tap.future = asyncio.get_running_loop().create_future()
         except TimeoutError:
-            raise RosTimeoutError(
-                f"no message on {self.topic} within {timeout} s{self._backend.link_note()}"
-            ) from None
-        finally:
             self._taps.remove(tap)
+            raise await self._silence(timeout) from None
+        finally:
+            if tap in self._taps:
+                self._taps.remove(tap)
 
     async def collect(self, seconds: float) -> Collected[T]:
         """Every message that arrives during the next ``seconds`` seconds, oldest first,
@@ -858,7 +863,18 @@ class Subscription(_BridgeHandle, Generic[T]):
                     messages.append(msg)
                     times.append(when)
             self.collected = Collected(messages, times)
+        if not self.collected and (note := await self._backend.silence_note(self.topic)):
+            warning = RosLibWarning(f"collect from {self.topic}: no message in {seconds} s{note}")
+            if self.blocking:
+                self.held_warnings.append(warning)  # given on the caller's thread
+            else:
+                warn_user(warning)
         return self.collected
+
+    async def _silence(self, timeout: float | None) -> RosTimeoutError:
+        """The error of a wait that ended empty, naming a misspelt topic."""
+        note = self._backend.link_note() or await self._backend.silence_note(self.topic)
+        return RosTimeoutError(f"no message on {self.topic} within {timeout} s{note}")
 
     def _hint(self, kind: str) -> str:
         """The call that helps (``next``, ``wait_connected``), spelt for this handle's client."""

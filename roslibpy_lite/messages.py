@@ -113,6 +113,19 @@ def _check_known(name: str, kind: str) -> None:
 _PACKAGES: list[frozenset[str]] = []
 
 
+def name_hint(name: str, names: Iterable[str], kind: str = "topics") -> str:
+    """``"did you mean '/imu'?"`` for a misspelt ``name`` among ``names`` (the same name in
+    other letter case first), else the list of ``names`` (at most 12); ``""`` for none."""
+    known = sorted({str(n) for n in names} - {name})
+    same = [n for n in known if n.lower() == name.lower()]
+    close = same or difflib.get_close_matches(name, known, n=3, cutoff=0.6)
+    if close:
+        return f"did you mean {' or '.join(repr(c) for c in close)}?"
+    if not known:
+        return f"there are no {kind}"
+    return f"the {kind} are: {', '.join(known[:12])}{', ...' if len(known) > 12 else ''}"
+
+
 def _packages() -> frozenset[str]:
     if not _PACKAGES:
         _PACKAGES.append(frozenset(available_packages()))

@@ -372,6 +372,7 @@ class RosBase:
         self._services = Services(host)
         self._actions = Actions(host)
         self._graph = Introspection(self)
+        self._topics.graph = self._graph  # a wait that ends empty asks it for a misspelling
         host.on_restore(self._topics.flush_offline)  # messages go after every request
         transport.bind(host)
 

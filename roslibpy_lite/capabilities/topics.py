@@ -37,6 +37,7 @@ from ..messages import (
     check_name,
     lookup_message_class,
     message_type,
+    name_hint,
     warn_user,
 )
 from . import TopicsHost, Tracked
@@ -47,8 +48,12 @@ if TYPE_CHECKING:
     from msgs.runtime import Message
 
     from .._api_types import MessageCallback
+    from .introspection import Introspection
 
-__all__ = ["Topics"]
+__all__ = ["GRAPH_HINT_TIMEOUT", "Topics"]
+
+GRAPH_HINT_TIMEOUT = 2.0
+"""Seconds an empty wait spends asking the graph whether its topic is misspelt."""
 
 
 class Topics:
@@ -61,6 +66,8 @@ class Topics:
         # Handles, in creation order (dicts keep it) for restoring after a reconnect.
         self.publishers: dict[str, list[Publisher[Any]]] = {}
         self.subscriptions: dict[str, Subscription[Any]] = {}  # by request id
+        self.graph: Introspection | None = None
+        """Asked why a wait ended empty (set by the client)."""
         # A notebook cell's latest open subscription of a topic, and the run that made it.
         self._by_cell: dict[tuple[str, str], tuple[Subscription[Any], str]] = {}
         self.by_topic: dict[str, tuple[Subscription[Any], ...]] = {}
@@ -243,6 +250,24 @@ class Topics:
         sub.mark_closed()
         if sub.consumer is not None:
             sub.consumer.cancel()
+
+    async def silence_note(self, topic: str) -> str:
+        """Why nothing may have come on ``topic``, for an error text: ``"; nothing publishes
+        /Imu; did you mean '/imu'?"`` when no node publishes it; ``""`` when one does, or the
+        graph cannot be asked (no rosapi, the link down) within GRAPH_HINT_TIMEOUT."""
+        graph = self.graph
+        if graph is None or self.host.state is not ConnectionState.CONNECTED:
+            return ""
+        try:
+            async with asyncio.timeout(GRAPH_HINT_TIMEOUT):
+                found = await graph.rosapi("publishers", {"topic": topic},
+                                           timeout=GRAPH_HINT_TIMEOUT)
+                if found.get("publishers"):
+                    return ""
+                names = [t.name for t in await graph.topics(timeout=GRAPH_HINT_TIMEOUT)]
+        except (RosLibError, TimeoutError):
+            return ""
+        return f"; nothing publishes {topic} in the graph; {name_hint(topic, names)}"
 
     def _move_callback(self, topic: str, callback: MessageCallback) -> None:
         """An open subscription of ``topic`` that already calls ``callback`` (or the same

@@ -11,6 +11,7 @@ import asyncio
 import concurrent.futures
 import logging
 import threading
+import warnings
 from collections import deque
 from collections.abc import Callable, Iterator, Mapping
 from typing import TYPE_CHECKING, Any, Generic, Protocol, Self, TypeVar
@@ -223,6 +224,9 @@ class Subscription(_BlockingHandle["handles.Subscription[Any]"], Generic[T]):
             exc.add_note(f"collect from {self.topic} was interrupted: the "
                          f"{len(self.handle.collected)} messages it had are in sub.collected")
             raise
+        held, self.handle.held_warnings = self.handle.held_warnings, []
+        for warning in held:
+            warnings.warn(warning, stacklevel=2)
         return found
 
     @property

@@ -128,8 +128,11 @@ def test_a_topic_of_another_tools_mcap_file_as_a_table(tmp_path: Path) -> None:
     notes = bag_to_dataframe(path, "/note")
     assert list(notes["data"]) == [f"note {i}" for i in range(0, 50, 10)]
     assert notes.index[1] == pd.Timestamp(t0 + 50_000_000, unit="ns", tz="UTC")
-    with pytest.raises(roslibpy_lite.UsageError, match="no message on /nothing"):
-        bag_to_dataframe(path, "/nothing")
+    with pytest.raises(roslibpy_lite.UsageError,
+                       match=r"no message on /camera/info; the topics are: /imu, /note$"):
+        bag_to_dataframe(path, "/camera/info")
+    with pytest.raises(roslibpy_lite.UsageError, match="no message on /Imu; did you mean '/imu'"):
+        bag_to_dataframe(path, "/Imu")
 
 
 def test_a_table_of_frames_does_not_hold_the_frames(tmp_path: Path) -> None:

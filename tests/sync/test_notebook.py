@@ -327,3 +327,38 @@ def test_an_interrupted_collect_keeps_its_messages(tmp_path: Path) -> None:
         out = notebooks.run_cell(kc, "stop.set()\nprint(len(sub.collected) >= 5, "
                                      "sub.collected[0]['data'] >= 0)\nros.close()")
     assert out == "True True\n"
+
+
+@pytest.mark.usefixtures("kernel_env")
+def test_a_misspelt_topic_names_the_right_one(tmp_path: Path) -> None:
+    """``next()`` and ``get()`` timing out, and ``collect()`` ending empty, on a topic no
+    node publishes name the published topic it resembles (either client)."""
+    with notebooks.running_kernel(tmp_path) as (_, kc):
+        out = notebooks.run_cell(
+            kc, CELLS[0] + "\nimport warnings\nimport roslibpy_lite\nfrom roslibpy_lite import sync\n"
+                "ros = sync.connect(URL)\naros = await roslibpy_lite.connect(URL)\n"
+                "pub = ros.advertise(NAME + '_imu', 'std_msgs/msg/Int32')\n"
+                "wrong = NAME + '_IMU'\n"
+                "for _ in range(100):  # the graph shows the publisher (discovery has no event)\n"
+                "    if (NAME + '_imu') in [t.name for t in ros.graph.topics()]:\n        break\n"
+                "sub = ros.subscribe(wrong, 'std_msgs/msg/Int32')\n"
+                "asub = await aros.subscribe(wrong, 'std_msgs/msg/Int32')\n"
+                "for call in (lambda: sub.next(timeout=0.5), lambda: sub.get(timeout=0.5)):\n"
+                "    try:\n        call()\n    except roslibpy_lite.RosTimeoutError as exc:\n"
+                "        print(str(exc).replace(NAME, 'N'))\n"
+                "try:\n    await asub.next(timeout=0.5)\n"
+                "except roslibpy_lite.RosTimeoutError as exc:\n    print(str(exc).replace(NAME, 'N'))\n"
+                "with warnings.catch_warnings(record=True) as caught:\n"
+                "    warnings.simplefilter('always')\n"
+                "    print(len(sub.collect(0.5)), len(await asub.collect(0.5)))\n"
+                "for w in caught:\n    print(str(w.message).replace(NAME, 'N'))\n"
+                "ros.close()\nawait aros.close()", timeout=90)
+    hint = "nothing publishes N_IMU in the graph; did you mean 'N_imu'?"
+    assert out.splitlines() == [
+        f"no message on N_IMU within 0.5 s; {hint}",
+        f"no message on N_IMU within 0.5 s; {hint}",
+        f"no message on N_IMU within 0.5 s; {hint}",
+        "0 0",
+        f"collect from N_IMU: no message in 0.5 s; {hint}",
+        f"collect from N_IMU: no message in 0.5 s; {hint}",
+    ]
