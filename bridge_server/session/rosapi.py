@@ -487,14 +487,15 @@ def _json_arg(args: Mapping[str, Any], name: str) -> Any:
 
 
 async def get_param_names(bridge: Shared, args: Mapping[str, Any]) -> dict[str, Any]:
-    """Every parameter of every node that offers parameter services, as ``/node:param``."""
+    """Every parameter of every node that offers parameter services, as ``/node:param``
+    (a node the graph lists no ``list_parameters`` service of is skipped at once)."""
     graph = bridge.graph
     own = _full(*graph.own_node())
     nodes = [_full(n, ns) for n, ns in _node_names(bridge)]
 
     async def one(node: str) -> list[str]:
-        if node == own:
-            return []
+        if node == own or graph.server_count(f"{node}/list_parameters") == 0:
+            return []  # no parameter services (start_parameter_services=False): not asked
         try:
             names = await graph.parameter_names(node, PARAM_TIMEOUT)
         except Exception:

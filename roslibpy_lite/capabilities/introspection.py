@@ -23,7 +23,7 @@ import asyncio
 import json
 from collections.abc import Awaitable, Mapping
 from dataclasses import dataclass
-from typing import Any, Protocol, TypeVar
+from typing import Any, Protocol, TypeVar, overload
 
 from .._api_types import DEFAULT_CALL_TIMEOUT
 from ..exceptions import ServiceError, UsageError
@@ -188,10 +188,27 @@ class Introspection:
 
     # -- parameters ------------------------------------------------------------------------------
 
-    async def params(self, *, timeout: float | None = DEFAULT_CALL_TIMEOUT) -> list[str]:
-        """Every parameter's name (``/node:param``), sorted."""
+    @overload
+    async def params(self, node: None = None, *,
+                     timeout: float | None = DEFAULT_CALL_TIMEOUT) -> list[str]: ...
+
+    @overload
+    async def params(self, node: str, *,
+                     timeout: float | None = DEFAULT_CALL_TIMEOUT) -> dict[str, Any]: ...
+
+    async def params(self, node: str | None = None, *,
+                     timeout: float | None = DEFAULT_CALL_TIMEOUT) -> list[str] | dict[str, Any]:
+        """Every parameter's name (``/node:param``), sorted; with ``node``, that node's
+        parameters and their values (``{"gain": 0.5}``, by name)."""
         reply = await self.rosapi("get_param_names", timeout=timeout)
-        return sorted(str(n) for n in reply["names"])
+        names = sorted(str(n) for n in reply["names"])
+        if node is None:
+            return names
+        _check_name(node, "node")
+        prefix = ("/" + node.lstrip("/")) + ":"
+        mine = [n for n in names if n.startswith(prefix)]
+        values = await asyncio.gather(*(self.get_param(n, timeout=timeout) for n in mine))
+        return {n[len(prefix):]: v for n, v in zip(mine, values, strict=True)}
 
     async def get_param(self, name: str, default: Any = None, *,
                         timeout: float | None = DEFAULT_CALL_TIMEOUT) -> Any:

@@ -9,7 +9,7 @@
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, overload
 
 from .._api_types import DEFAULT_CALL_TIMEOUT
 
@@ -74,9 +74,20 @@ class Graph:
         """Every node with its interfaces, sorted by name."""
         return self._loop.run(self.aio.nodes(timeout=timeout), "graph.nodes")
 
-    def params(self, *, timeout: Timeout = DEFAULT_CALL_TIMEOUT) -> list[str]:
-        """Every parameter's name (``/node:param``), sorted."""
-        return self._loop.run(self.aio.params(timeout=timeout), "graph.params")
+    @overload
+    def params(self, node: None = None, *,
+               timeout: Timeout = DEFAULT_CALL_TIMEOUT) -> list[str]: ...
+
+    @overload
+    def params(self, node: str, *, timeout: Timeout = DEFAULT_CALL_TIMEOUT) -> dict[str, Any]: ...
+
+    def params(self, node: str | None = None, *,
+               timeout: Timeout = DEFAULT_CALL_TIMEOUT) -> list[str] | dict[str, Any]:
+        """Every parameter's name (``/node:param``); with ``node``, its parameters' values
+        by name."""
+        if node is None:
+            return self._loop.run(self.aio.params(timeout=timeout), "graph.params")
+        return self._loop.run(self.aio.params(node, timeout=timeout), f"graph.params {node}")
 
     def get_param(self, name: str, default: Any = None, *,
                   timeout: Timeout = DEFAULT_CALL_TIMEOUT) -> Any:

@@ -95,3 +95,25 @@ def test_blocking_graph_on_mock() -> None:
         assert ros.graph.actions() == []
         ros.graph.delete_param("/n:gain")
         assert not ros.graph.has_param("/n:gain")
+
+
+def test_params_skip_a_node_without_parameter_services(
+        bridge: BridgeProcess, ros_runtime: Any, rclpy_robot: Any, topic: str) -> None:
+    """A node started without parameter services is skipped at once, so a warm params()
+    answers within a timeout shorter than the bridge's wait for a node's parameter service
+    (PARAM_TIMEOUT, 2 s); params(node) gives one node's parameters with their values."""
+    quiet = ros_runtime.rclpy.create_node(topic.strip("/") + "_quiet", context=ros_runtime.context,
+                                          start_parameter_services=False)
+    fq = str(rclpy_robot.get_fully_qualified_name())
+    try:
+        with sync.connect(bridge.url) as ros:
+            wait_until(lambda: quiet.get_fully_qualified_name() in ros.graph.node_names(), 15,
+                       "the quiet node")
+            wait_until(lambda: f"{fq}:gain" in ros.graph.params(), 30, "the parameter")
+            names = ros.graph.params(timeout=1.5)
+            assert f"{fq}:gain" in names
+            assert not any(n.startswith(quiet.get_fully_qualified_name() + ":") for n in names)
+            mine = ros.graph.params(fq, timeout=5)
+            assert mine["gain"] == 0.5 and mine["use_sim_time"] is False, mine
+    finally:
+        quiet.destroy_node()
