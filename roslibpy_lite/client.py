@@ -78,6 +78,7 @@ from collections.abc import Callable, Coroutine, Generator, Sequence
 from typing import TYPE_CHECKING, Any, TypedDict, TypeVar, Unpack
 
 from . import jupyter
+from ._aio import running_loop
 from ._api_types import ConnectionState
 from ._backoff import Backoff
 from .exceptions import ReplacedClientWarning, UsageError
@@ -360,6 +361,10 @@ def _ssl_context(urls: Sequence[str], ssl: _ssl.SSLContext | str | None
         raise UsageError(f"ssl={ssl!r}: cannot load it as a CA file: {exc}") from None
 
 
+class _RunInALoop(UsageError, RuntimeError):
+    """run() inside a running loop (a RuntimeError too, as asyncio.run's own refusal is)."""
+
+
 def run(main: Coroutine[Any, Any, T], *, debug: bool | None = None) -> T:
     """Run a script's ``main()`` coroutine; Ctrl+C ends it cleanly, with no traceback.
 
@@ -379,7 +384,15 @@ def run(main: Coroutine[Any, Any, T], *, debug: bool | None = None) -> T:
 
     Raises:
         SystemExit: with status 130 after Ctrl+C (KeyboardInterrupt).
+        UsageError: called inside a running event loop (a Jupyter cell's): ``await main()``
+            there instead.
     """
+    if running_loop() is not None:
+        main.close()  # never started: no "never awaited" warning on top
+        raise _RunInALoop(
+            "roslibpy_lite.run() cannot start an event loop inside a running one (a Jupyter "
+            "notebook's cell runs in one): write `await main()` at the top level of the cell "
+            "instead")
     try:
         return asyncio.run(main, debug=debug)
     except KeyboardInterrupt:

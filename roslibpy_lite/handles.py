@@ -311,7 +311,29 @@ class Latest(NamedTuple, Generic[T]):
     msg: T
     """The message, as the subscription gives it (dict, typed instance or RawMessage)."""
     age: float
-    """Seconds since this client received it."""
+    """Seconds since this client received it (when :meth:`Subscription.latest` was called)."""
+
+    @property
+    def stamp_age(self) -> float | None:
+        """Seconds from the message's ``header.stamp`` to now, by this machine's clock (so
+        it includes any offset between the robot's clock and this one, and a simulated
+        clock's stamps give nonsense); None for a message without a header stamp."""
+        stamp = _header_stamp(self.msg)
+        return None if stamp is None else time.time() - stamp
+
+
+def _header_stamp(msg: Any) -> float | None:
+    """``header.stamp`` in seconds since the epoch, of a dict or typed message (None: none)."""
+    if isinstance(msg, Mapping):
+        stamp = (msg.get("header") or {}).get("stamp")
+        sec, nanosec = (stamp.get("sec"), stamp.get("nanosec")) if isinstance(
+            stamp, Mapping) else (None, None)
+    else:
+        stamp = getattr(getattr(msg, "header", None), "stamp", None)
+        sec, nanosec = getattr(stamp, "sec", None), getattr(stamp, "nanosec", None)
+    if not isinstance(sec, int) or not isinstance(nanosec, int):
+        return None
+    return sec + nanosec / 1e9
 
 
 class Collected(list[T]):
@@ -771,7 +793,8 @@ class Subscription(_BridgeHandle, Generic[T]):
             raise await self._silence(timeout) from None
 
     def latest(self, *, allow_stale: bool = False) -> Latest[T]:
-        """The newest message received (whatever the buffer holds) and its age in seconds.
+        """The newest message received (whatever the buffer holds) and its age in seconds
+        since this client received it (``.stamp_age``: since its header stamp).
 
         Reads without waiting and takes nothing from the buffer. ``allow_stale=True`` also
         answers while the link is down (the age then says how stale it is).

@@ -278,6 +278,22 @@ def show_state(ros: _Watched, *, label: str = "") -> Callable[[], None]:
     earlier = _STATE_WATCHES.pop(id(ros), None)
     if earlier is not None:
         earlier()
-    stop = ros.on_state_change(in_cell(changed))
+    stop = _Quiet(ros.on_state_change(in_cell(changed)))
     _STATE_WATCHES[id(ros)] = stop
     return stop
+
+
+class _Quiet:
+    """A function that a notebook cell ending with it does not show (no ``Out[n]``)."""
+
+    def __init__(self, fn: Callable[[], None]) -> None:
+        self._fn = fn
+
+    def __call__(self) -> None:
+        self._fn()
+
+    def _ipython_display_(self) -> None:
+        """Shown as nothing."""
+
+    def __repr__(self) -> str:
+        return "<stop showing the state>"

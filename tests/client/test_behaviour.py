@@ -12,6 +12,8 @@ from typing import Any
 
 import pytest
 
+from msgs.sensor_msgs.msg import Imu
+from msgs.std_msgs.msg import Header
 from roslibpy_lite import (
     DuplicateCallbackWarning,
     InvalidMessageError,
@@ -43,6 +45,28 @@ async def test_latest_is_the_newest_and_get_the_oldest() -> None:
         assert 0 <= age < 1.0
         assert await sub.get() == {"data": 0}
         assert sub.pending == 4  # latest() took nothing from the buffer
+
+
+async def test_latest_gives_the_age_since_receipt_and_since_the_stamp() -> None:
+    """latest().age counts from receipt, .stamp_age from the header stamp (5 s before here);
+    a message without a header has no stamp age."""
+    import time
+
+    async with MockRos() as ros:
+        sub = await ros.subscribe("/h", "std_msgs/msg/Header")
+        typed = await ros.subscribe("/h", Header)
+        then = time.time() - 5.0
+        ros.inject("/h", {"stamp": {"sec": int(then), "nanosec": 0}, "frame_id": "f"})
+        found = sub.latest()
+        assert 0 <= found.age < 1.0
+        assert found.stamp_age is None  # a Header is no message with a header
+        imu = await ros.subscribe("/imu", "sensor_msgs/msg/Imu")
+        ros.inject("/imu", {"header": {"stamp": {"sec": int(then), "nanosec": 500_000_000}}})
+        assert 4.0 < imu.latest().stamp_age < 6.0  # type: ignore[operator]
+        assert typed.latest().stamp_age is None
+        typed_imu = await ros.subscribe("/imu", Imu)
+        ros.inject("/imu", {"header": {"stamp": {"sec": int(then), "nanosec": 0}}})
+        assert 4.0 < typed_imu.latest().stamp_age < 7.0  # type: ignore[operator]
 
 
 async def test_next_is_the_first_message_after_the_call() -> None:

@@ -362,3 +362,26 @@ def test_a_misspelt_topic_names_the_right_one(tmp_path: Path) -> None:
         f"collect from N_IMU: no message in 0.5 s; {hint}",
         f"collect from N_IMU: no message in 0.5 s; {hint}",
     ]
+
+
+@pytest.mark.usefixtures("kernel_env")
+def test_run_in_a_cell_says_await_and_show_state_leaves_no_value(tmp_path: Path) -> None:
+    """In a kernel, ``roslibpy_lite.run(main())`` says to write ``await main()`` instead, and a
+    cell ending with ``jupyter.show_state(ros)`` shows the state line and no ``Out`` value."""
+    def outputs(kc: Any, code: str) -> list[dict[str, Any]]:
+        seen: list[dict[str, Any]] = []
+        reply = kc.execute_interactive(code, timeout=60, output_hook=seen.append)
+        assert reply["content"]["status"] == "ok", reply["content"]
+        return [m for m in seen if m["msg_type"] in ("stream", "display_data", "execute_result")]
+
+    with notebooks.running_kernel(tmp_path) as (_, kc):
+        ran = outputs(kc, CELLS[0] + "\nimport roslibpy_lite\nasync def main():\n    return 1\n"
+                          "try:\n    roslibpy_lite.run(main())\n"
+                          "except RuntimeError as exc:\n    print(exc)")
+        shown = outputs(kc, "from roslibpy_lite import jupyter, sync\nros = sync.connect(URL)\n"
+                            "jupyter.show_state(ros, label='robot')")
+        notebooks.run_cell(kc, "ros.close()")
+    assert [m["msg_type"] for m in ran] == ["stream"]
+    assert "write `await main()` at the top level of the cell" in ran[0]["content"]["text"]
+    assert [m["msg_type"] for m in shown] == ["display_data"], shown
+    assert shown[0]["content"]["data"]["text/plain"].startswith("robot: connected since ")
