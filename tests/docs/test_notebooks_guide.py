@@ -94,6 +94,10 @@ def test_the_guide_runs_in_a_kernel(bridge: BridgeProcess, robot: tuple[str, str
     assert "ReplacedClientWarning" in _stderr(again) and bridge.url in _stderr(again)
     assert printed("ticks = []") == "open subscriptions: 1\n"
     assert "DuplicateCallbackWarning" in _stderr(out["ticks = []"])
+    broken = out["def broken(msg):"]  # one traceback, then one count (issue 42)
+    assert _stderr(broken).count("Traceback") == 1 and " more time" in _stderr(broken)
+    assert f"did you mean '{imu}'?" in printed("typo = await ros.subscribe(IMU.upper(), "
+                                              "\"sensor_msgs/msg/Imu\")")
     assert notebooks.stdout_of(nb.cells[-1]) == "state: closed\n"
 
 
