@@ -53,6 +53,9 @@ Scenarios (targets; rosbridge_suite's figures in brackets):
 - ``workers_resume`` (``bench/workers.py``): with ``--workers 2``, call_service round trips
   through a resumed connection that its worker forwarded to the session's worker, against
   a direct one, over ws:// and wss://: p50/p99 of each (reference only).
+- ``params`` (``bench/params.py``): ``ros.graph.params()`` on a graph with a node lacking
+  parameter services: the first call and the median of the next (targets: warm < 50 ms,
+  cold < 300 ms) [2.03 s on every call].
 - ``links`` (``bench/links.py``): through ``bench/linkproxy.py``: a silent link (how soon
   each side notices), a 2 Mbit/s link (the age of the camera frames a client gets) and a
   resume across an 8 s outage (what each side got).
@@ -109,6 +112,7 @@ from bench.harness import (
     ws_open,
 )
 from bench.links import links
+from bench.params import params_scenario
 from bench.relay import relay_dead_link, relay_imu, relay_service, relay_uplink
 from bench.tls import tls_scenario
 from bench.workers import workers_resume
@@ -127,6 +131,8 @@ TARGETS: dict[str, str] = {
     "memory_stall": "bounded [rosbridge +400 MB in 6 s]",
     "tls": "reference only: the cost of wss:// against ws://",
     "workers_resume": "reference: the forwarding hop of a resume on the wrong worker",
+    "params": "graph.params() warm < 50 ms, cold < 300 ms, a node without parameter "
+              "services in the graph [2.03 s every call]",
     "links": "reference: a silent link noticed in seconds; frame age flat over a 2 Mbit/s link",
     "pointcloud": "4 MiB PointCloud2 at 10 Hz to 5 clients: all delivered; bridge CPU, RSS",
     "foxglove": "the Foxglove path at least as fast as rosbridge cbor-raw on the same bridge; "
@@ -849,6 +855,7 @@ SCENARIOS: dict[str, Callable[[Ctx], Awaitable[dict[str, Any]]]] = {
     "memory_stall": memory_stall,
     "tls": lambda ctx: tls_scenario(ctx, ros_to_client, service, image),
     "workers_resume": workers_resume,
+    "params": params_scenario,
     "links": links,
     "record": record,
     "pointcloud": pointcloud,
@@ -907,6 +914,8 @@ def _headline(name: str, r: dict[str, Any]) -> Any:
         return {"recorded_pct": {t: v["recorded_pct"] for t, v in r["camera_imu"]["topics"].items()},
                 "recorder_cpu_pct": r["camera_imu"]["recorder_cpu_pct"],
                 "best_camera_rate_99pct": r["best_camera_rate_99pct"]}
+    if name == "params":
+        return {k: r[k] for k in ("cold_ms", "warm_median_ms")}
     if name == "workers_resume":
         return {scheme: {kind: r[scheme][kind]["p50_ms"] for kind in ("direct", "forwarded")}
                 for scheme in ("ws", "wss")}

@@ -214,7 +214,8 @@ _TYPE_NAME = re.compile(
 async def parameter_names(ros: RosNode, node: str, timeout: float) -> list[str]:
     """Names of ``node``'s parameters (any failure raises)."""
     response = await ros.call_when_ready(
-        f"{node}/list_parameters", ListParameters, ListParameters.Request(), timeout
+        f"{node}/list_parameters", ListParameters, ListParameters.Request(), timeout,
+        read_only=True,
     )
     return list(response.result.names)
 
@@ -223,7 +224,7 @@ async def get_parameter(ros: RosNode, node: str, name: str) -> tuple[bool, Any]:
     """(is set, value) of one parameter of ``node``."""
     response = await ros.call_when_ready(
         f"{node}/get_parameters", GetParameters, GetParameters.Request(names=[name]),
-        PARAM_CALL_TIMEOUT, discovery_wait=PARAM_DISCOVERY,
+        PARAM_CALL_TIMEOUT, discovery_wait=PARAM_DISCOVERY, read_only=True,
     )
     values = list(response.values)
     if not values or values[0].type == 0:

@@ -107,6 +107,11 @@ REPLAY_MEMORY = 1000
 to replace it (its publishers turned out transient local) skips the history it already
 handed out when the writers replay it."""
 
+RESEND_S = 0.1
+"""Seconds a read-only request on a newly matched client waits for its answer before it is
+sent again (see call_when_ready): a server drops an answer when it has not matched our
+response reader within 100 ms of the request."""
+
 SETTLE_S = 1.2
 """Seconds a newly matched service client waits before its first request (see settled).
 
@@ -854,11 +859,16 @@ class RosNode:
         request: Any,
         timeout: float,
         discovery_wait: float | None = None,
+        *,
+        read_only: bool = False,
     ) -> Any:
         """Call ``service`` once a server is matched; ``TimeoutError`` after ``timeout`` s.
 
         With ``discovery_wait``, a service the ROS graph still does not list after that
         many seconds fails then (``LookupError``), not after the whole timeout.
+        ``read_only`` (a request that may run twice, such as listing or reading parameters):
+        a newly matched client sends at once and again after :data:`RESEND_S` (backing off)
+        until an answer comes, instead of waiting :data:`SETTLE_S` before its first request.
         """
         loop = self.loop
         deadline = loop.time() + timeout
@@ -872,6 +882,8 @@ class RosNode:
                 raise TimeoutError(f"service {service} is not available")
             await asyncio.sleep(delay)
             delay = min(delay * 2, 0.05)
+        if read_only and getattr(client, "_bridge_ready_at", None) is None:
+            return await self._resent(client, request, deadline, service)
         await self.settled(client)
         future = self.call(client, request)
         timer = loop.call_at(deadline, _fail_timeout, future)
@@ -879,6 +891,27 @@ class RosNode:
             return await future
         finally:
             timer.cancel()
+
+    async def _resent(self, client: Any, request: Any, deadline: float, service: str) -> Any:
+        """The answer to a read-only ``request`` on a client not settled yet: sent again
+        after RESEND_S, then twice as long each time up to 1 s (an answer the server sent
+        before it matched our reader is lost) until one comes; the client counts as settled
+        from then on."""
+        loop = self.loop
+        every = RESEND_S
+        while True:
+            future = self.call(client, request)
+            wait = min(every, deadline - loop.time())
+            every = min(every * 2, 1.0)  # a server that is slow, not deaf: ask less often
+            try:
+                response = await asyncio.wait_for(asyncio.shield(future), max(wait, 0.0))
+            except TimeoutError:
+                future.cancel()  # forgets the request: a late answer to it is dropped
+                if loop.time() >= deadline:
+                    raise TimeoutError(f"service {service} did not answer") from None
+                continue
+            client._bridge_ready_at = loop.time() - SETTLE_S  # answered: settled
+            return response
 
     def drop_client(self, service: str, srv_cls: type[Any]) -> None:
         """Destroy the cached client (after a call found no server)."""

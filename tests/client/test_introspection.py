@@ -117,3 +117,16 @@ def test_params_skip_a_node_without_parameter_services(
             assert mine["gain"] == 0.5 and mine["use_sim_time"] is False, mine
     finally:
         quiet.destroy_node()
+
+
+def test_params_of_a_new_node_need_no_settling_wait(bridge: BridgeProcess, rclpy_robot: Any) -> None:
+    """The first params() that reaches a node (its parameter service listed, never called
+    by the bridge) answers within a timeout shorter than the bridge's SETTLE_S (1.2 s) wait
+    for a newly matched client: listing and reading are sent again if an answer is lost."""
+    fq = str(rclpy_robot.get_fully_qualified_name())
+    with sync.connect(bridge.url) as ros:
+        wait_until(lambda: fq in ros.graph.node_names() and {
+            f"{fq}/list_parameters", f"{fq}/get_parameters"} <= set(ros.graph.node(fq).services),
+                   15, "the node and its parameter services")
+        assert f"{fq}:gain" in ros.graph.params(timeout=1.0)
+        assert ros.graph.params(fq, timeout=1.0)["gain"] == 0.5
