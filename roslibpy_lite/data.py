@@ -322,8 +322,11 @@ def to_dataframe(messages: Iterable[Any], fields: Iterable[str] | None = None, *
     times_ns = None if times is None else [round(t * 1e9) for t in times]
     chosen = list(fields) if fields is not None else None
     msgs = list(messages)
-    return _frame([flatten(m, chosen) for m in msgs], [_header_stamp_ns(m) for m in msgs],
-                  times_ns)
+    frame = _frame([flatten(m, chosen) for m in msgs], [_header_stamp_ns(m) for m in msgs],
+                   times_ns)
+    if not msgs and chosen:  # no message (a silent topic): still the columns asked for
+        frame = frame.reindex(columns=chosen)
+    return frame
 
 
 def _frame(rows: list[dict[str, Any]], stamps: list[int | None],

@@ -210,3 +210,13 @@ def test_stamps_as_seconds_and_datetimes() -> None:
     assert when == datetime.datetime(2023, 11, 14, 22, 13, 20, 250000, tzinfo=datetime.UTC)
     with pytest.raises(UsageError, match="sec and nanosec"):
         stamp_seconds({"seconds": 1})
+
+
+def test_an_empty_table_keeps_the_columns_asked_for() -> None:
+    """No message (a collect() on a silent topic) gives an empty table with the columns asked
+    for, indexed by time, so a column lookup finds an empty column."""
+    from roslibpy_lite.handles import Collected
+
+    frame = to_dataframe(Collected([], []), ["linear_acceleration.z"])
+    assert list(frame.columns) == ["linear_acceleration.z"] and len(frame) == 0
+    assert frame["linear_acceleration.z"].empty and frame.index.name == "time"
