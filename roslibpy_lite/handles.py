@@ -876,6 +876,10 @@ class Subscription(_BridgeHandle, Generic[T]):
         self._taps.append(tap)
         try:
             await asyncio.sleep(seconds)  # a window of time is what was asked for
+        except asyncio.CancelledError as exc:  # a notebook's stop button, a task's cancel
+            exc.add_note(f"collect from {self.topic} was interrupted: the "
+                         f"{len(tap.messages)} messages it had are in sub.collected")
+            raise
         finally:
             self._taps.remove(tap)
             messages: list[T] = []

@@ -300,7 +300,8 @@ def test_numpy_scalars_publish_and_call(tmp_path: Path, topic: str) -> None:
 @pytest.mark.usefixtures("kernel_env")
 def test_an_interrupted_collect_keeps_its_messages(tmp_path: Path) -> None:
     """Interrupting a cell waiting in ``sub.collect(60)`` (Jupyter's stop button) keeps the
-    messages it had collected in ``sub.collected``, and the interruption says so."""
+    messages it had collected in ``sub.collected``, and the interruption says so (the
+    blocking client's, then ``await asub.collect(60)`` on the asyncio client)."""
     with notebooks.running_kernel(tmp_path) as (km, kc):
         notebooks.run_cell(kc, CELLS[0] + "\nimport threading, time\nfrom roslibpy_lite import sync\n"
                            "ros = sync.connect(URL)\npub = ros.advertise(NAME, 'std_msgs/msg/Int32')\n"
@@ -313,20 +314,25 @@ def test_an_interrupted_collect_keeps_its_messages(tmp_path: Path) -> None:
                            "def publish():\n    i = 0\n    while not stop.is_set():\n"
                            "        pub.publish({'data': i})\n        i += 1\n        time.sleep(0.02)\n"
                            "threading.Thread(target=publish, daemon=True).start()\n"
-                           "sub.next(timeout=30)")
-        msg_id = kc.execute("armed = count\nsub.collect(60)", stop_on_error=False)
-        while True:  # five messages arrived while collect waits
-            msg = kc.get_iopub_msg(timeout=30)
-            if msg["msg_type"] == "stream" and "five during collect" in msg["content"]["text"]:
-                break
-        km.interrupt_kernel()
-        reply = kc.get_shell_msg(timeout=30)
-        assert reply["parent_header"]["msg_id"] == msg_id
-        assert reply["content"]["ename"] == "KeyboardInterrupt"
-        assert "are in sub.collected" in "".join(reply["content"]["traceback"])
+                           "import roslibpy_lite\naros = await roslibpy_lite.connect(URL)\n"
+                           "asub = await aros.subscribe(NAME, 'std_msgs/msg/Int32')\n"
+                           "sub.next(timeout=30)\nawait asub.next(timeout=30)")
+        for cell, stopped in (("sub.collect(60)", "KeyboardInterrupt"),
+                              ("await asub.collect(60)", "CancelledError")):
+            msg_id = kc.execute("armed = count\n" + cell, stop_on_error=False)
+            while True:  # five messages arrived while collect waits
+                msg = kc.get_iopub_msg(timeout=30)
+                if msg["msg_type"] == "stream" and "five during collect" in msg["content"]["text"]:
+                    break
+            km.interrupt_kernel()
+            reply = kc.get_shell_msg(timeout=30)
+            assert reply["parent_header"]["msg_id"] == msg_id
+            assert reply["content"]["ename"] == stopped
+            assert "are in sub.collected" in "".join(reply["content"]["traceback"])
         out = notebooks.run_cell(kc, "stop.set()\nprint(len(sub.collected) >= 5, "
-                                     "sub.collected[0]['data'] >= 0)\nros.close()")
-    assert out == "True True\n"
+                                     "sub.collected[0]['data'] >= 0, len(asub.collected) >= 5)\n"
+                                     "ros.close()\nawait aros.close()")
+    assert out == "True True True\n"
 
 
 @pytest.mark.usefixtures("kernel_env")
