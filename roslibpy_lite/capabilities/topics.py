@@ -27,6 +27,7 @@ from ..exceptions import (
     NotConnected,
     ReplacedSubscriptionWarning,
     RosLibError,
+    ServiceError,
     UsageError,
 )
 from ..handles import Publisher, Subscription
@@ -254,7 +255,8 @@ class Topics:
     async def silence_note(self, topic: str) -> str:
         """Why nothing may have come on ``topic``, for an error text: ``"; nothing publishes
         /Imu; did you mean '/imu'?"`` when no node publishes it; ``""`` when one does, or the
-        graph cannot be asked (no rosapi, the link down) within GRAPH_HINT_TIMEOUT."""
+        graph cannot be asked (the link down, no answer within GRAPH_HINT_TIMEOUT; a bridge
+        without rosapi is not asked again)."""
         graph = self.graph
         if graph is None or self.host.state is not ConnectionState.CONNECTED:
             return ""
@@ -265,6 +267,9 @@ class Topics:
                 if found.get("publishers"):
                     return ""
                 names = [t.name for t in await graph.topics(timeout=GRAPH_HINT_TIMEOUT)]
+        except ServiceError:
+            self.graph = None  # a bridge without rosapi (or this call): not asked again
+            return ""
         except (RosLibError, TimeoutError):
             return ""
         return f"; nothing publishes {topic} in the graph; {name_hint(topic, names)}"
