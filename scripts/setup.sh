@@ -26,7 +26,7 @@ if [ "$(cat .venv/.deps-stamp 2>/dev/null)" != "$dep_stamp" ]; then
   # (grep drops pip's notes about this machine's missing local index folders)
   if ! { python -m pip install -q --disable-pip-version-check --upgrade pip \
       && python -m pip install -q --disable-pip-version-check \
-        -e ".[bridge,build-interfaces,cbor,cli,dev,mcap]"; } 2>&1 \
+        -e ".[bridge,build-interfaces,cbor,cli,dev,mcap,mcp]"; } 2>&1 \
     | { grep -v "^WARNING: Location .* is ignored" || true; }; then
     log "pip install failed"
     exit 1

@@ -47,6 +47,7 @@ from ..interfaces import BridgeError
 __all__ = [
     "CAPABILITIES",
     "LISTING",
+    "MAY",
     "PARAMETER_LISTING",
     "Role",
     "RoleError",
@@ -274,6 +275,8 @@ def rosapi_requirement(service: str, args: Mapping[str, Any]) -> tuple[str, str]
                 f"{service}: {key} {value!r} contains a control character (such as NUL); "
                 "ROS names never do"
             )
+    if service in MAY:  # asking about one's own role: the capability on some name
+        return MAY[service], "*"
     if service in _PARAM_SERVICES:
         name = args.get("name")
         if isinstance(name, str):
@@ -303,6 +306,11 @@ _LISTS: dict[str, tuple[str, tuple[str, ...]]] = {
     "/rosapi/action_servers": ("introspection", ("action_servers",)),
     "/rosapi/get_param_names": ("params", ("names",)),
 }
+MAY = {f"/rosapi/may_{c}": c for c in ("publish", "call_service", "send_action_goal", "params")}
+"""rosapi services answering which of the names asked the role may use with one capability
+(an MCP server offers tools for those only): the handler echoes the names and
+:func:`filter_rosapi` keeps those the gate would let through (read-only; asking needs the
+capability on some name, so a role without it is refused at once)."""
 _INDEPENDENT = {"/rosapi/node_details": ("subscribing", "publishing", "services")}
 _LOOKUPS = {"/rosapi/service_node": "node"}
 """Answers naming one node: blanked (as for an unknown name) if the role may not see it."""
@@ -310,6 +318,13 @@ _LOOKUPS = {"/rosapi/service_node": "node"}
 
 def filter_rosapi(role: Role, service: str, values: dict[str, Any]) -> dict[str, Any]:
     """A rosapi answer with only the names ``role`` may see."""
+    asked = MAY.get(service)
+    if asked is not None:
+        names = values.get("names")
+        if isinstance(names, list):
+            values = {**values, "names": [
+                n for n in names if role.allows(*hidden_requirement(asked, str(n)))]}
+        return values
     entry = _LISTS.get(service)
     if entry is not None:
         capability, fields = entry

@@ -62,6 +62,7 @@ from typing import TYPE_CHECKING, Any
 
 from ..interfaces import BridgeError, canonical_name
 from ..security.names import InvalidNameError, check_name
+from ..security.permissions import MAY
 
 if TYPE_CHECKING:
     from ..graph import Graph
@@ -407,6 +408,28 @@ FIELDS.update(
         "/rosapi/service_response_details": ("type",),
     }
 )
+
+
+# -- what the caller's role may use (permissions.MAY; the gate's filter keeps those) ----------
+
+MAX_ASKED_NAMES = 10_000
+"""The most names one ``/rosapi/may_*`` request may ask about."""
+
+
+def may_use(bridge: Shared, args: Mapping[str, Any]) -> dict[str, Any]:
+    """The names asked (``names``), of which the session's gate keeps the allowed ones."""
+    names = args.get("names", [])
+    if not isinstance(names, list) or not all(isinstance(n, str) for n in names):
+        raise RosapiError("names: expected a list of names (strings)")
+    if len(names) > MAX_ASKED_NAMES:
+        raise RosapiError(f"names: {len(names)} names, at most {MAX_ASKED_NAMES} a request")
+    return {"names": names}
+
+
+for _service in MAY:
+    HANDLERS[_service] = may_use
+    TYPES[_service] = "rosapi_msgs/srv/MayUse"
+    FIELDS[_service] = ("names",)
 
 
 # -- actions ---------------------------------------------------------------------------------

@@ -12,7 +12,7 @@ import pytest
 from std_msgs.msg import String
 from std_srvs.srv import SetBool
 
-from bridge_server.security.permissions import Role, RoleError
+from bridge_server.security.permissions import MAY, Role, RoleError
 from tests.bridge.support import Inbox, publish_until_heard, roundtrip, wait_publishers
 from tests.helpers import BridgeProcess
 from tests.security.support import bridge_entities
@@ -275,7 +275,27 @@ def test_every_rosapi_answer_naming_things_is_filtered() -> None:
                       "get_param", "has_param", "set_param", "delete_param", "get_param_names",
                       "interface_definition", "interfaces"}
     every = set(rosapi.HANDLERS) | set(rosapi.ASYNC_HANDLERS)
-    assert every == set(_SEEN_HIDDEN) | {"/rosapi/" + n for n in naming_nothing}
+    assert every == set(_SEEN_HIDDEN) | {"/rosapi/" + n for n in naming_nothing} | set(MAY)
+
+
+def test_may_answers_what_the_gate_lets_through() -> None:
+    """/rosapi/may_* keep the names the role may use with that capability, as the gate checks
+    them (an action's internals and a node's parameter services by what governs them)."""
+    from bridge_server.security.permissions import filter_rosapi
+
+    role = Role.from_table("r", {"publish": ["/cmd*"], "call_service": ["*"],
+                                 "send_action_goal": ["/fib"], "params": ["/n:*"]})
+    asked = {"names": ["/cmd_vel", "/other", "/n/set_parameters", "/m/set_parameters",
+                       "/fib/_action/send_goal", "/fib", "/n:x"]}
+    kept = {MAY[s]: filter_rosapi(role, s, asked)["names"] for s in MAY}
+    assert kept == {"publish": ["/cmd_vel"],
+                    "call_service": ["/cmd_vel", "/other", "/n/set_parameters",
+                                     "/fib/_action/send_goal", "/fib", "/n:x"],
+                    "send_action_goal": ["/fib"],
+                    "params": ["/n:x"]}
+    # asking needs the capability on some name (a role without it is refused at once)
+    from bridge_server.security.permissions import rosapi_requirement
+    assert rosapi_requirement("/rosapi/may_publish", asked) == ("publish", "*")
 
 
 async def test_a_vanished_owner_loses_its_service(

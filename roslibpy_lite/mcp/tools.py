@@ -1,0 +1,486 @@
+"""The robot's tools: what an MCP client may list and call, from the live ROS graph.
+
+:class:`RobotTools` holds one roslibpy-lite client (a :class:`~roslibpy_lite.Client` to a
+bridge or a relay, or :class:`~roslibpy_lite.MockRos`) and answers ``tools/list`` and
+``tools/call``. It knows nothing of MCP's transport; :mod:`roslibpy_lite.mcp.server` wires
+it to the SDK. Tools:
+
+- ``list_topics``, ``list_services``, ``list_actions``, ``list_nodes``, ``list_params``,
+  ``describe_type``, ``read_topic`` (the next message, bounded wait; an image as an image),
+  ``get_param``: reading, offered to every role that may introspect;
+- ``publish__<topic>``, ``call__<service>``, ``send_goal__<action>`` (each typed: the input
+  schema is the robot's own definition, :mod:`roslibpy_lite.mcp.schema`), ``cancel_goal``
+  and ``set_param``: offered only for the names the connection's role may use (asked of the
+  bridge, ``/rosapi/may_*``; a bridge that cannot answer is taken at its word when it
+  refuses: the tool is withdrawn), and never in read-only mode.
+
+Every call has a timeout; an error (a refusal, a dropped link, a field that does not fit)
+is a tool error whose text is the client's own (it names the field or the link's state).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import base64
+import contextlib
+import hashlib
+import io
+import json
+import re
+from collections.abc import Awaitable, Callable, Mapping
+from dataclasses import dataclass
+from typing import Any
+
+import mcp_types as types
+
+from ..exceptions import Forbidden, RosLibError, RosTimeoutError, ServiceError
+from ..handles import Publisher
+from ..messages import from_wire
+from ..ros import RosBase
+from .schema import message_schema
+
+__all__ = ["MAX_WAIT", "Options", "RobotTools"]
+
+MAX_WAIT = 120.0
+"""The longest any one tool call may wait (seconds), whatever the caller asks."""
+
+_IMAGE_TYPES = {"sensor_msgs/msg/Image": "PNG", "sensor_msgs/msg/CompressedImage": "JPEG"}
+_SHORT_LIST = 32
+_SHORT_BYTES = 64
+_NAME_RE = re.compile(r"[^A-Za-z0-9_-]")
+
+
+@dataclass
+class Options:
+    """How the MCP server serves the robot."""
+
+    read_only: bool = False
+    """Offer no tool that changes anything (publish, call, goals, set_param)."""
+    timeout: float = 10.0
+    """A tool call's default wait (seconds); a call may ask for up to :data:`MAX_WAIT`."""
+    image_size: int = 512
+    """The longest side of an image handed back (pixels; a call may ask for less or more)."""
+    max_text: int = 32_768
+    """The most characters of text one tool result carries (longer text is cut, and says so)."""
+
+
+@dataclass
+class _Typed:
+    kind: str  # "publish", "call", "send_goal"
+    name: str  # the ROS name
+    type_name: str
+    cls: Any
+
+
+@dataclass
+class _Tool:
+    tool: types.Tool
+    run: Callable[[dict[str, Any]], Awaitable[list[types.ContentBlock]]]
+
+
+_CAPABILITY = {"publish": "publish", "call": "call_service", "send_goal": "send_action_goal",
+               "params": "params"}
+_TYPED = ("publish", "call", "send_goal")
+
+
+def tool_name(prefix: str, ros_name: str, taken: set[str]) -> str:
+    """An MCP tool name (``[A-Za-z0-9_-]{1,64}``) for ``ros_name``, unique in ``taken``."""
+    base = f"{prefix}__{_NAME_RE.sub('_', ros_name.strip('/').replace('/', '__'))}"
+    if len(base) > 64 or base in taken:
+        digest = hashlib.sha1(ros_name.encode()).hexdigest()[:8]
+        base = f"{base[:55]}_{digest}"
+    taken.add(base)
+    return base
+
+
+def _obj(properties: dict[str, Any], required: tuple[str, ...] = ()) -> dict[str, Any]:
+    return {"type": "object", "properties": properties, "required": list(required),
+            "additionalProperties": False}
+
+
+_TIMEOUT = {"type": "number", "exclusiveMinimum": 0, "maximum": MAX_WAIT,
+            "description": "seconds to wait at most"}
+
+
+def summarize(value: Any) -> Any:
+    """``value`` (a message as a dict) with long arrays and byte strings summarized."""
+    if isinstance(value, Mapping):
+        return {k: summarize(v) for k, v in value.items()}
+    if isinstance(value, bytes | bytearray | memoryview):
+        if len(value) <= _SHORT_BYTES:
+            return list(bytes(value))
+        return f"<{len(value)} bytes>"
+    if isinstance(value, list):
+        if len(value) <= _SHORT_LIST:
+            return [summarize(v) for v in value]
+        text = f"<{len(value)} items; first 8: {json.dumps(summarize(value[:8]))}"
+        if all(isinstance(v, int | float) and not isinstance(v, bool) for v in value):
+            text += f"; min {min(value)}, max {max(value)}"
+        return text + ">"
+    return value
+
+
+def _json(value: Any) -> str:
+    return json.dumps(value, default=repr, allow_nan=True)
+
+
+class RobotTools:
+    """The tools of one robot, served through ``ros`` (see the module docstring)."""
+
+    def __init__(self, ros: RosBase, options: Options | None = None,
+                 on_change: Callable[[], Awaitable[None]] | None = None) -> None:
+        """``on_change`` is awaited when a tool is withdrawn (the bridge refused it)."""
+        self.ros = ros
+        self.options = options or Options()
+        self._on_change = on_change
+        self._tools: dict[str, _Tool] = {}
+        self._refused: set[tuple[str, str]] = set()
+        self._publishers: dict[str, Publisher[Any]] = {}
+        self._goals: dict[str, Any] = {}
+        self._generic = self._generic_tools()
+
+    # -- the list -------------------------------------------------------------------------------
+
+    async def list_tools(self) -> list[types.Tool]:
+        """The tools for the graph as it is now, held to the role (asked of the bridge)."""
+        tools = dict(self._generic)
+        if not await self._may_params():
+            for name in ("get_param", "set_param", "list_params"):
+                tools.pop(name)
+        if self.options.read_only:
+            tools = {n: t for n, t in tools.items()
+                     if t.tool.annotations is not None and t.tool.annotations.read_only_hint}
+        else:
+            entries = await self._typed_entries()
+            if not any(e.kind == "send_goal" for e in entries) and not self._goals:
+                tools.pop("follow_goal")
+                tools.pop("cancel_goal")
+            for entry in entries:
+                tool = self._typed_tool(entry, set(tools))
+                tools[tool.tool.name] = tool
+        self._tools = tools
+        return [t.tool for t in tools.values()]
+
+    async def _may_params(self) -> bool:
+        """Whether the role may use some parameter (the bridge refuses the listing if not)."""
+        try:
+            names = await self.ros.graph.params(timeout=self.options.timeout)
+        except Forbidden:
+            return False
+        return not names or bool(await self._may("params", names))
+
+    async def _typed_entries(self) -> list[_Typed]:
+        graph, wait = self.ros.graph, self.options.timeout
+        found: list[tuple[str, str, str]] = []
+        for kind, listing in (("publish", graph.topics), ("call", graph.services),
+                              ("send_goal", graph.actions)):
+            # a role that may not list, a bridge without action listing: no such tools
+            with contextlib.suppress(Forbidden, ServiceError):
+                found += [(kind, x.name, x.type) for x in await listing(timeout=wait)]
+        found = [f for f in found if f[2] and not _internal(f[1])]
+        allowed: set[tuple[str, str]] = set()
+        for kind in _TYPED:
+            names = [n for k, n, _ in found if k == kind]
+            may = await self._may(kind, names)
+            allowed.update((kind, n) for n in may)
+        entries = []
+        for kind, name, type_name in found:
+            if (kind, name) not in allowed or (kind, name) in self._refused:
+                continue
+            try:
+                (cls,) = await self.ros.load_types(type_name, timeout=wait)
+            except (RosLibError, ValueError):
+                continue  # a type the robot cannot describe: no typed tool for it
+            entries.append(_Typed(kind, name, type_name, cls))
+        return entries
+
+    async def _may(self, kind: str, names: list[str]) -> list[str]:
+        """The names the role may use for ``kind``, as the bridge says; all of them when it
+        has no ``/rosapi/may_*`` (a refusal then withdraws the tool)."""
+        if not names:
+            return []
+        capability = _CAPABILITY[kind]
+        try:
+            answer = await self.ros.call_service(
+                f"/rosapi/may_{capability}", "rosapi_msgs/srv/MayUse", {"names": names},
+                timeout=self.options.timeout)
+        except Forbidden:
+            return []  # may not even ask: a role without introspection
+        except ServiceError:
+            return names
+        return [n for n in answer.get("names", []) if isinstance(n, str)]
+
+    def _typed_tool(self, entry: _Typed, taken: set[str]) -> _Tool:
+        name = tool_name(entry.kind, entry.name, taken)
+        if entry.kind == "publish":
+            schema = message_schema(entry.cls)
+            props = {"message": _body(schema, "the message to publish")}
+            desc = f"Publish one {entry.type_name} message on {entry.name}."
+            run = self._publisher(entry)
+            required: tuple[str, ...] = ("message",)
+        elif entry.kind == "call":
+            schema = message_schema(entry.cls.Request)
+            props = {"request": _body(schema, "the request"), "timeout": _TIMEOUT}
+            desc = f"Call the service {entry.name} ({entry.type_name}); returns its response."
+            run = self._caller(entry)
+            required = ()
+        else:
+            schema = message_schema(entry.cls.Goal)
+            props = {"goal": _body(schema, "the goal"), "timeout": {
+                **_TIMEOUT, "description": "seconds to wait for the result; the goal goes on "
+                                           "after it (follow it with follow_goal)"}}
+            desc = (f"Send a goal to the action {entry.name} ({entry.type_name}); returns its "
+                    "result, or its goal id if it is still running after the timeout.")
+            run = self._goal_sender(entry)
+            required = ()
+        input_schema = _obj(props, required)
+        defs = {k: v for s in (schema,) for k, v in s.pop("$defs", {}).items()}
+        if defs:
+            input_schema["$defs"] = defs
+        tool = types.Tool(name=name, description=desc, input_schema=input_schema,
+                          annotations=types.ToolAnnotations(read_only_hint=False))
+        return _Tool(tool, self._guarded(entry, run))
+
+    # -- calling --------------------------------------------------------------------------------
+
+    async def call(self, name: str, arguments: dict[str, Any] | None) -> types.CallToolResult:
+        """Run tool ``name``; any failure is a tool error with the client's own text."""
+        if not self._tools:
+            await self.list_tools()
+        tool = self._tools.get(name)
+        if tool is None:
+            return _error(f"no tool {name!r} here (not in the graph, not allowed to this role, or "
+                          "read-only; list the tools again: the graph may have changed)")
+        try:
+            content = await tool.run(dict(arguments or {}))
+        except TimeoutError:
+            return _error(f"{name}: no answer within the timeout")
+        except RosLibError as exc:
+            return _error(f"{type(exc).__name__}: {exc}")
+        except (KeyError, TypeError, ValueError) as exc:
+            return _error(f"{name}: bad arguments: {exc}")
+        return types.CallToolResult(content=content)
+
+    def _wait(self, args: Mapping[str, Any]) -> float:
+        wait = args.get("timeout", self.options.timeout)
+        if not isinstance(wait, int | float) or isinstance(wait, bool) or wait <= 0:
+            raise ValueError(f"timeout must be a positive number of seconds, got {wait!r}")
+        return min(float(wait), MAX_WAIT)
+
+    def _text(self, value: Any) -> list[types.ContentBlock]:
+        text = value if isinstance(value, str) else _json(value)
+        limit = self.options.max_text
+        if len(text) > limit:
+            text = text[:limit] + f"\n... [cut: {len(text)} characters in all]"
+        return [types.TextContent(text=text)]
+
+    def _guarded(self, entry: _Typed, run: Callable[[dict[str, Any]], Awaitable[Any]]
+                 ) -> Callable[[dict[str, Any]], Awaitable[list[types.ContentBlock]]]:
+        async def guarded(args: dict[str, Any]) -> list[types.ContentBlock]:
+            try:
+                return self._text(await run(args))
+            except Forbidden:
+                self._refused.add((entry.kind, entry.name))
+                if self._on_change is not None:
+                    await self._on_change()
+                raise
+        return guarded
+
+    def _publisher(self, entry: _Typed) -> Callable[[dict[str, Any]], Awaitable[Any]]:
+        async def publish(args: dict[str, Any]) -> Any:
+            msg = from_wire(args.get("message") or {}, entry.cls, f"publish {entry.name}")
+            pub = self._publishers.get(entry.name)
+            if pub is None or pub.closed:
+                pub = self.ros.advertise(entry.name, entry.cls)
+                async with asyncio.timeout(self.options.timeout):
+                    await pub
+                self._publishers[entry.name] = pub
+            async with asyncio.timeout(self.options.timeout):
+                await pub.publish(msg)
+            return f"published one {entry.type_name} on {entry.name}"
+        return publish
+
+    def _caller(self, entry: _Typed) -> Callable[[dict[str, Any]], Awaitable[Any]]:
+        async def call(args: dict[str, Any]) -> Any:
+            request = from_wire(args.get("request") or {}, entry.cls.Request,
+                                f"call {entry.name}")
+            response = await self.ros.call_service(entry.name, entry.cls, request,
+                                                   timeout=self._wait(args))
+            return summarize(response.to_json())
+        return call
+
+    def _goal_sender(self, entry: _Typed) -> Callable[[dict[str, Any]], Awaitable[Any]]:
+        async def send(args: dict[str, Any]) -> Any:
+            goal = from_wire(args.get("goal") or {}, entry.cls.Goal, f"goal {entry.name}")
+            wait = self._wait(args)
+            handle = await self.ros.send_goal(entry.name, entry.cls, goal)
+            self._goals[handle.id] = handle
+            return await self._follow(handle, wait)
+        return send
+
+    async def _follow(self, handle: Any, wait: float) -> Any:
+        try:
+            result = await handle.result(wait)
+        except RosTimeoutError:
+            return {"goal_id": handle.id, "status": handle.status.name,
+                    "last_feedback": summarize(_plain(handle.last_feedback))}
+        self._goals.pop(handle.id, None)
+        out = {"goal_id": handle.id, "status": result.status.name,
+               "result": summarize(_plain(result.values))}
+        if result.text:
+            out["text"] = result.text
+        return out
+
+    # -- the generic tools ------------------------------------------------------------------------
+
+    def _generic_tools(self) -> dict[str, _Tool]:
+        name_arg = {"type": "string", "description": "a ROS name, such as /chatter"}
+        table: list[tuple[str, str, dict[str, Any], Callable[[dict[str, Any]], Awaitable[
+            list[types.ContentBlock]]], bool]] = [
+            ("list_topics", "The robot's topics and their types.", _obj({}),
+             self._list_topics, True),
+            ("list_services", "The robot's services and their types.", _obj({}),
+             self._list_services, True),
+            ("list_actions", "The robot's actions and their types.", _obj({}),
+             self._list_actions, True),
+            ("list_nodes", "The robot's nodes.", _obj({}), self._list_nodes, True),
+            ("list_params", "The robot's parameters (/node:name).", _obj({}),
+             self._list_params, True),
+            ("describe_type", "The JSON Schema and the definition of a message, service or "
+             "action type (pkg/msg/Name, pkg/srv/Name, pkg/action/Name).",
+             _obj({"type": {"type": "string"}}, ("type",)), self._describe, True),
+            ("read_topic", "The next message on a topic (waits at most timeout seconds). "
+             "An Image or CompressedImage is returned as an image, scaled so its longer side "
+             "is at most max_size pixels; long arrays are summarized.",
+             _obj({"topic": name_arg, "timeout": _TIMEOUT,
+                   "max_size": {"type": "integer", "minimum": 16, "maximum": 4096}},
+                  ("topic",)), self._read_topic, True),
+            ("get_param", "A parameter's value (name: /node:param).",
+             _obj({"name": {"type": "string"}}, ("name",)), self._get_param, True),
+            ("set_param", "Set a parameter (name: /node:param) to a value.",
+             _obj({"name": {"type": "string"}, "value": {}}, ("name", "value")),
+             self._set_param, False),
+            ("follow_goal", "Wait for the result of a goal this server sent (by goal_id).",
+             _obj({"goal_id": {"type": "string"}, "timeout": _TIMEOUT}, ("goal_id",)),
+             self._follow_goal, True),
+            ("cancel_goal", "Cancel a goal this server sent (by goal_id).",
+             _obj({"goal_id": {"type": "string"}}, ("goal_id",)), self._cancel_goal, False),
+        ]
+        return {name: _Tool(types.Tool(name=name, description=desc, input_schema=schema,
+                                       annotations=types.ToolAnnotations(read_only_hint=ro)),
+                            run)
+                for name, desc, schema, run, ro in table}
+
+    async def _pairs(self, listing: Awaitable[list[Any]]) -> list[types.ContentBlock]:
+        return self._text([{"name": x.name, "type": x.type} for x in await listing])
+
+    async def _list_topics(self, args: dict[str, Any]) -> list[types.ContentBlock]:
+        return await self._pairs(self.ros.graph.topics(timeout=self.options.timeout))
+
+    async def _list_services(self, args: dict[str, Any]) -> list[types.ContentBlock]:
+        return await self._pairs(self.ros.graph.services(timeout=self.options.timeout))
+
+    async def _list_actions(self, args: dict[str, Any]) -> list[types.ContentBlock]:
+        return await self._pairs(self.ros.graph.actions(timeout=self.options.timeout))
+
+    async def _list_nodes(self, args: dict[str, Any]) -> list[types.ContentBlock]:
+        return self._text(await self.ros.graph.node_names(timeout=self.options.timeout))
+
+    async def _list_params(self, args: dict[str, Any]) -> list[types.ContentBlock]:
+        return self._text(await self.ros.graph.params(timeout=self.options.timeout))
+
+    async def _describe(self, args: dict[str, Any]) -> list[types.ContentBlock]:
+        (cls,) = await self.ros.load_types(args["type"], timeout=self.options.timeout)
+        parts = {n: getattr(cls, n) for n in ("Request", "Response", "Goal", "Result",
+                                              "Feedback") if hasattr(cls, n)}
+        schemas = ({n: message_schema(p) for n, p in parts.items()} if parts
+                   else message_schema(cls))  # type: ignore[arg-type]  # a message type
+        return self._text({"type": cls._type, "definition": cls._definition,
+                           "schema": schemas})
+
+    async def _read_topic(self, args: dict[str, Any]) -> list[types.ContentBlock]:
+        topic, wait = args["topic"], self._wait(args)
+        type_name = await self.ros.graph.topic_type(topic, timeout=self.options.timeout)
+        if not type_name:
+            raise ValueError(f"topic {topic} is not in the ROS graph (see list_topics)")
+        async with asyncio.timeout(wait):
+            async with self.ros.subscribe(topic, type_name, buffer_size=1) as sub:
+                msg = await sub.get()
+        image_format = _IMAGE_TYPES.get(type_name)
+        if image_format is not None:
+            size = int(args.get("max_size", self.options.image_size))
+            return _image(msg, image_format, size, topic, type_name)
+        return self._text({"topic": topic, "type": type_name, "message": summarize(msg)})
+
+    async def _get_param(self, args: dict[str, Any]) -> list[types.ContentBlock]:
+        return self._text(await self.ros.graph.get_param(args["name"],
+                                                         timeout=self.options.timeout))
+
+    async def _set_param(self, args: dict[str, Any]) -> list[types.ContentBlock]:
+        await self.ros.graph.set_param(args["name"], args["value"], timeout=self.options.timeout)
+        return self._text(f"set {args['name']}")
+
+    def _goal(self, args: dict[str, Any]) -> Any:
+        handle = self._goals.get(args["goal_id"])
+        if handle is None:
+            raise ValueError(f"no running goal {args['goal_id']!r} sent by this server")
+        return handle
+
+    async def _follow_goal(self, args: dict[str, Any]) -> list[types.ContentBlock]:
+        return self._text(await self._follow(self._goal(args), self._wait(args)))
+
+    async def _cancel_goal(self, args: dict[str, Any]) -> list[types.ContentBlock]:
+        handle = self._goal(args)
+        await handle.cancel()
+        return self._text(f"cancel of goal {handle.id} sent")
+
+
+def _internal(name: str) -> bool:
+    """The bridge's own ``/rosapi`` services, hidden names and nodes' parameter services
+    (reached through get_param/set_param instead)."""
+    return (name.startswith("/rosapi/") or any(p.startswith("_") for p in name.split("/"))
+            or name.rsplit("/", 1)[-1] in _PARAMETER_SERVICES or name == "/parameter_events")
+
+
+_PARAMETER_SERVICES = frozenset({"describe_parameters", "get_parameter_types", "get_parameters",
+                                 "list_parameters", "set_parameters",
+                                 "set_parameters_atomically", "get_type_description"})
+
+
+def _body(schema: dict[str, Any], what: str) -> dict[str, Any]:
+    return {**schema, "description": f"{what}: {schema.get('description', '')}"}
+
+
+def _plain(value: Any) -> Any:
+    return value.to_json() if hasattr(value, "to_json") else value
+
+
+def _error(text: str) -> types.CallToolResult:
+    return types.CallToolResult(content=[types.TextContent(text=text)], is_error=True)
+
+
+def _image(msg: Any, fmt: str, size: int, topic: str, type_name: str
+           ) -> list[types.ContentBlock]:
+    from PIL import Image
+
+    from ..data import to_numpy
+
+    array = to_numpy(msg)
+    encoding = str(msg.get("encoding", "")) if fmt == "PNG" else "rgb8"
+    if array.ndim == 3 and encoding.startswith("bgr"):
+        array = array[..., 2::-1] if array.shape[2] == 3 else array[..., [2, 1, 0, 3]]
+    if array.dtype.itemsize > 1:  # 16-bit depth and the like: scaled to 8 bits to be seen
+        peak = float(array.max()) or 1.0
+        array = (array.astype("float64") * (255.0 / peak)).astype("uint8")
+    picture = Image.fromarray(array)
+    height, width = array.shape[:2]
+    picture.thumbnail((size, size))
+    buf = io.BytesIO()
+    picture.save(buf, format=fmt)
+    mime = "image/png" if fmt == "PNG" else "image/jpeg"
+    note = (f"{topic} ({type_name}): {width}x{height} {encoding or 'compressed'}, "
+            f"shown at {picture.width}x{picture.height}")
+    return [types.ImageContent(data=base64.b64encode(buf.getvalue()).decode("ascii"),
+                               mime_type=mime),
+            types.TextContent(text=note)]
+
