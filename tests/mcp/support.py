@@ -11,6 +11,7 @@ from pathlib import Path
 from typing import Any
 
 from mcp import Client, StdioServerParameters
+from std_srvs.srv import SetBool
 
 from tests.helpers import ROOT, ros_env
 
@@ -59,3 +60,17 @@ async def until_listed(client: Client, tool: str, name: str, timeout: float = 15
         if time.monotonic() > deadline:
             raise AssertionError(f"timed out after {timeout} s waiting for {name} in {tool}")
         await asyncio.sleep(0.05)
+
+
+def serve_setbool(ros_node: Any, name: str) -> list[bool]:
+    """An rclpy std_srvs/SetBool service at ``name``; the list of the requests it got."""
+    calls: list[bool] = []
+
+    def handle(request: Any, response: Any) -> Any:
+        calls.append(request.data)
+        response.success = True
+        response.message = f"set to {request.data}"
+        return response
+
+    ros_node.create_service(SetBool, name, handle)
+    return calls

@@ -10,26 +10,13 @@ from typing import Any
 
 import jsonschema
 from std_msgs.msg import String
-from std_srvs.srv import SetBool
 
 from tests.helpers import BridgeProcess, async_wait_until
-from tests.mcp.support import mcp_stdio, text, tool_names, until_listed, until_tool
+from tests.mcp.support import mcp_stdio, serve_setbool, text, tool_names, until_listed, until_tool
 from tests.security.support import AuthFile
 
 MUTATING = ("publish__", "call__", "send_goal__")
 
-
-def _serve_setbool(ros_node: Any, name: str) -> list[bool]:
-    calls: list[bool] = []
-
-    def handle(request: Any, response: Any) -> Any:
-        calls.append(request.data)
-        response.success = True
-        response.message = f"set to {request.data}"
-        return response
-
-    ros_node.create_service(SetBool, name, handle)
-    return calls
 
 
 async def test_a_service_is_a_typed_tool_and_a_bad_request_names_its_field(
@@ -37,7 +24,7 @@ async def test_a_service_is_a_typed_tool_and_a_bad_request_names_its_field(
 ) -> None:
     """call__<service> has the request's schema from its definition, calls the rclpy server, and
     a request that does not fit is an error naming the field that never reaches ROS."""
-    calls = _serve_setbool(ros_node, topic)
+    calls = serve_setbool(ros_node, topic)
     async with mcp_stdio(auth_bridge.url, auth.tokens["admin"], tmp_path) as client:
         tool = await until_tool(client, "call__" + topic.strip("/"))
         schema = tool.input_schema
@@ -89,7 +76,7 @@ async def test_a_viewer_is_offered_nothing_that_changes_the_robot(
 ) -> None:
     """A viewer token sees the service listed but gets no call, publish, goal or parameter tool
     (the bridge says what its role may use); calling one anyway reaches nothing."""
-    calls = _serve_setbool(ros_node, topic)
+    calls = serve_setbool(ros_node, topic)
     ros_node.create_publisher(String, topic + "_pub", 10)
     async with mcp_stdio(auth_bridge.url, auth.tokens["viewer"], tmp_path) as client:
         await until_listed(client, "list_services", topic)
@@ -127,7 +114,7 @@ async def test_read_only_offers_no_tool_that_changes_anything(
 ) -> None:
     """--read-only: even an admin token gets no publish, call, goal or set_param tool, and a
     call to one by name reaches nothing."""
-    calls = _serve_setbool(ros_node, topic)
+    calls = serve_setbool(ros_node, topic)
     async with mcp_stdio(auth_bridge.url, auth.tokens["admin"], tmp_path,
                          "--read-only") as client:
         await until_listed(client, "list_services", topic)
