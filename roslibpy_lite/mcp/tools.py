@@ -137,6 +137,7 @@ class RobotTools:
         self._refused: set[tuple[str, str]] = set()
         self._publishers: dict[str, Publisher[Any]] = {}
         self._goals: dict[str, Any] = {}
+        self._schemas: dict[str, tuple[dict[str, Any], dict[str, Any]]] = {}
         self._generic = self._generic_tools()
 
     # -- the list -------------------------------------------------------------------------------
@@ -162,12 +163,16 @@ class RobotTools:
         return [t.tool for t in tools.values()]
 
     async def _may_params(self) -> bool:
-        """Whether the role may use some parameter (the bridge refuses the listing if not)."""
+        """Whether the role may use some parameter: asking the bridge's may_params needs
+        ``params`` on some name, so the question alone answers it (a bridge without it:
+        yes, and its refusals say the rest)."""
         try:
-            names = await self.ros.graph.params(timeout=self.options.timeout)
+            await self._ask_may("params", [])
         except Forbidden:
             return False
-        return not names or bool(await self._may("params", names))
+        except ServiceError:
+            return True
+        return True
 
     async def _typed_entries(self) -> list[_Typed]:
         graph, wait = self.ros.graph, self.options.timeout
@@ -199,33 +204,44 @@ class RobotTools:
         has no ``/rosapi/may_*`` (a refusal then withdraws the tool)."""
         if not names:
             return []
-        capability = _CAPABILITY[kind]
         try:
-            answer = await self.ros.call_service(
-                f"/rosapi/may_{capability}", "rosapi_msgs/srv/MayUse", {"names": names},
-                timeout=self.options.timeout)
+            return await self._ask_may(kind, names)
         except Forbidden:
-            return []  # may not even ask: a role without introspection
+            return []  # may not even ask: the role has the capability on no name
         except ServiceError:
             return names
+
+    async def _ask_may(self, kind: str, names: list[str]) -> list[str]:
+        answer = await self.ros.call_service(
+            f"/rosapi/may_{_CAPABILITY[kind]}", "rosapi_msgs/srv/MayUse", {"names": names},
+            timeout=self.options.timeout)
         return [n for n in answer.get("names", []) if isinstance(n, str)]
+
+    def _schema(self, cls: Any) -> tuple[dict[str, Any], dict[str, Any]]:
+        """A message type's schema and its ``$defs`` (for the tool schema's root), built once
+        per type (the tools share them; nothing changes them)."""
+        found = self._schemas.get(cls._type)
+        if found is None:
+            schema = message_schema(cls)
+            found = self._schemas[cls._type] = (schema, schema.pop("$defs", {}))
+        return found
 
     def _typed_tool(self, entry: _Typed, taken: set[str]) -> _Tool:
         name = tool_name(entry.kind, entry.name, taken)
         if entry.kind == "publish":
-            schema = message_schema(entry.cls)
+            schema, defs = self._schema(entry.cls)
             props = {"message": _body(schema, "the message to publish")}
             desc = f"Publish one {entry.type_name} message on {entry.name}."
             run = self._publisher(entry)
             required: tuple[str, ...] = ("message",)
         elif entry.kind == "call":
-            schema = message_schema(entry.cls.Request)
+            schema, defs = self._schema(entry.cls.Request)
             props = {"request": _body(schema, "the request"), "timeout": _TIMEOUT}
             desc = f"Call the service {entry.name} ({entry.type_name}); returns its response."
             run = self._caller(entry)
             required = ()
         else:
-            schema = message_schema(entry.cls.Goal)
+            schema, defs = self._schema(entry.cls.Goal)
             props = {"goal": _body(schema, "the goal"), "timeout": {
                 **_TIMEOUT, "description": "seconds to wait for the result; the goal goes on "
                                            "after it (follow it with follow_goal)"}}
@@ -234,7 +250,6 @@ class RobotTools:
             run = self._goal_sender(entry)
             required = ()
         input_schema = _obj(props, required)
-        defs = {k: v for s in (schema,) for k, v in s.pop("$defs", {}).items()}
         if defs:
             input_schema["$defs"] = defs
         tool = types.Tool(name=name, description=desc, input_schema=input_schema,
