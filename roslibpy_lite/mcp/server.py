@@ -46,7 +46,7 @@ def build_server(ros: RosBase, options: Options | None = None) -> Server[Any]:
 
     async def call_tool(ctx: ServerRequestContext[Any],
                         params: types.CallToolRequestParams) -> types.CallToolResult:
-        return await robot.call(params.name, params.arguments)
+        return await robot.call(params.name, params.arguments, ctx.session.report_progress)
 
     server: Server[Any] = Server("roslibpy-lite", version=__version__,
                                  instructions=INSTRUCTIONS, on_list_tools=list_tools,

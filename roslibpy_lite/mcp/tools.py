@@ -23,6 +23,7 @@ from __future__ import annotations
 import asyncio
 import base64
 import contextlib
+import contextvars
 import hashlib
 import io
 import json
@@ -77,6 +78,15 @@ class _Tool:
     tool: types.Tool
     run: Callable[[dict[str, Any]], Awaitable[list[types.ContentBlock]]]
 
+
+Progress = Callable[[float, "float | None", "str | None"], Awaitable[None]]
+"""Reports a call's progress to the MCP client (``progress, total, message``)."""
+
+_PROGRESS: contextvars.ContextVar[Progress | None] = contextvars.ContextVar(
+    "roslibpy_lite_mcp_progress", default=None)
+
+MAX_COLLECT = 1000
+"""The most messages one collect_topic call gathers."""
 
 _CAPABILITY = {"publish": "publish", "call": "call_service", "send_goal": "send_action_goal",
                "params": "params"}
@@ -258,8 +268,11 @@ class RobotTools:
 
     # -- calling --------------------------------------------------------------------------------
 
-    async def call(self, name: str, arguments: dict[str, Any] | None) -> types.CallToolResult:
-        """Run tool ``name``; any failure is a tool error with the client's own text."""
+    async def call(self, name: str, arguments: dict[str, Any] | None,
+                   progress: Progress | None = None) -> types.CallToolResult:
+        """Run tool ``name``; any failure is a tool error with the client's own text.
+        ``progress`` hears how a long call (collect_topic) goes."""
+        _PROGRESS.set(progress)
         if not self._tools:
             await self.list_tools()
         tool = self._tools.get(name)
@@ -370,6 +383,13 @@ class RobotTools:
              _obj({"topic": name_arg, "timeout": _TIMEOUT,
                    "max_size": {"type": "integer", "minimum": 16, "maximum": 4096}},
                   ("topic",)), self._read_topic, True),
+            ("collect_topic", "The messages of a topic for a while: at most seconds (up to "
+             f"{MAX_WAIT:g}), max_messages (up to {MAX_COLLECT}) and max_bytes of summarized "
+             "text, whichever comes first; progress is reported as they arrive.",
+             _obj({"topic": name_arg, "seconds": _TIMEOUT,
+                   "max_messages": {"type": "integer", "minimum": 1, "maximum": MAX_COLLECT},
+                   "max_bytes": {"type": "integer", "minimum": 1}}, ("topic", "seconds")),
+             self._collect, True),
             ("get_param", "A parameter's value (name: /node:param).",
              _obj({"name": {"type": "string"}}, ("name",)), self._get_param, True),
             ("set_param", "Set a parameter (name: /node:param) to a value.",
@@ -415,9 +435,7 @@ class RobotTools:
 
     async def _read_topic(self, args: dict[str, Any]) -> list[types.ContentBlock]:
         topic, wait = args["topic"], self._wait(args)
-        type_name = await self.ros.graph.topic_type(topic, timeout=self.options.timeout)
-        if not type_name:
-            raise ValueError(f"topic {topic} is not in the ROS graph (see list_topics)")
+        type_name = await self._topic_type(topic)
         async with asyncio.timeout(wait):
             async with self.ros.subscribe(topic, type_name, buffer_size=1) as sub:
                 msg = await sub.get()
@@ -426,6 +444,47 @@ class RobotTools:
             size = int(args.get("max_size", self.options.image_size))
             return _image(msg, image_format, size, topic, type_name)
         return self._text({"topic": topic, "type": type_name, "message": summarize(msg)})
+
+    async def _collect(self, args: dict[str, Any]) -> list[types.ContentBlock]:
+        topic = args["topic"]
+        seconds = self._wait({"timeout": args["seconds"]})
+        most = min(int(args.get("max_messages", 100)), MAX_COLLECT)
+        budget = min(int(args.get("max_bytes", self.options.max_text)), self.options.max_text)
+        type_name = await self._topic_type(topic)
+        report = _PROGRESS.get()
+        got: list[dict[str, Any]] = []
+        used, why = 0, "seconds"
+        loop = asyncio.get_running_loop()
+        start = loop.time()
+        async with self.ros.subscribe(topic, type_name, buffer_size=most) as sub:
+            while len(got) < most:
+                left = seconds - (loop.time() - start)
+                if left <= 0:
+                    break
+                try:
+                    async with asyncio.timeout(left):
+                        msg = await sub.get()
+                except TimeoutError:
+                    break
+                entry = {"t": round(loop.time() - start, 3), "message": summarize(msg)}
+                used += len(_json(entry))
+                if used > budget:
+                    why = "max_bytes"
+                    break
+                got.append(entry)
+                if report is not None:
+                    await report(len(got), float(most),
+                                 f"{len(got)} messages in {entry['t']} s")
+            else:
+                why = "max_messages"
+        return self._text({"topic": topic, "type": type_name, "count": len(got),
+                           "stopped_by": why, "messages": got})
+
+    async def _topic_type(self, topic: str) -> str:
+        type_name = await self.ros.graph.topic_type(topic, timeout=self.options.timeout)
+        if not type_name:
+            raise ValueError(f"topic {topic} is not in the ROS graph (see list_topics)")
+        return type_name
 
     async def _get_param(self, args: dict[str, Any]) -> list[types.ContentBlock]:
         return self._text(await self.ros.graph.get_param(args["name"],

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import asyncio
 import json
+from typing import Any
 
 import jsonschema
 from mcp import Client
@@ -82,3 +83,38 @@ async def test_a_long_array_is_summarized_and_a_silent_topic_times_out() -> None
         assert result.is_error and "timeout" in text(result)
 
 
+
+
+async def test_collect_is_bounded_by_count_bytes_and_time_and_reports_progress() -> None:
+    """collect_topic stops at max_messages (reporting progress per message), at max_bytes,
+    and at its seconds on a quiet topic."""
+    ros = MockRos()
+    pub = await ros.advertise("/chatter", "std_msgs/msg/String")
+    reports: list[tuple[float, float | None]] = []
+
+    async def on_progress(progress: float, total: float | None, message: str | None) -> None:
+        reports.append((progress, total))
+
+    async with Client(build_server(ros)) as client:
+        async def collect(**bounds: Any) -> dict[str, Any]:
+            call = asyncio.create_task(client.call_tool(
+                "collect_topic", {"topic": "/chatter", "seconds": 30, **bounds},
+                progress_callback=on_progress))
+            while not ros.subscribers("/chatter"):  # the collection has subscribed
+                await asyncio.sleep(0)
+            for i in range(5):
+                await pub.publish({"data": f"m{i}" * 20})
+            result = await call
+            assert not result.is_error, text(result)
+            return dict(json.loads(text(result)))
+
+        by_count = await collect(max_messages=3)
+        assert (by_count["count"], by_count["stopped_by"]) == (3, "max_messages")
+        # in order, from the burst (a burst longer than max_messages keeps its newest)
+        data = [m["message"]["data"] for m in by_count["messages"]]
+        assert data == sorted(data) and set(data) <= {f"m{i}" * 20 for i in range(5)}
+        assert reports == [(1.0, 3.0), (2.0, 3.0), (3.0, 3.0)]
+        by_bytes = await collect(max_bytes=150)
+        assert (by_bytes["count"], by_bytes["stopped_by"]) == (2, "max_bytes")
+        quiet = await client.call_tool("collect_topic", {"topic": "/chatter", "seconds": 0.2})
+        assert json.loads(text(quiet))["stopped_by"] == "seconds"
