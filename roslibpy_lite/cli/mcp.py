@@ -30,7 +30,7 @@ async def cmd_mcp(args: argparse.Namespace, out: Out) -> int:
         raise CliError(EXIT_USAGE, str(exc)) from None
     _token(args)
     options = Options(read_only=args.read_only, timeout=args.call_timeout,
-                      image_size=args.image_size)
+                      image_size=args.image_size, confirm=args.confirm)
 
     async def body(s: CliSession) -> int:
         if args.http is not None:
@@ -52,6 +52,9 @@ def add_parsers(groups: Any, kit: Kit) -> None:
     p.add_argument("--read-only", action="store_true",
                    help="offer no tool that changes anything (no publish, service call, goal "
                         "or parameter change), whatever the role allows")
+    p.add_argument("--confirm", action="store_true",
+                   help="ask the MCP client's user to confirm each change (publish, service "
+                        "call, goal, cancel, parameter) before it is made (MCP elicitation)")
     p.add_argument("--call-timeout", type=float, default=10.0, metavar="SEC",
                    help="a tool call's default wait in seconds; a call may ask for up to "
                         "120 (default 10)")

@@ -8,10 +8,11 @@ from typing import Any
 import mcp_types as types
 from mcp.server.context import ServerRequestContext
 from mcp.server.lowlevel import NotificationOptions, Server
+from mcp.shared.exceptions import NoBackChannelError
 
 from .. import __version__
 from ..ros import RosBase
-from .tools import Options, RobotTools
+from .tools import ConfirmationPending, Options, RobotTools
 
 __all__ = ["build_server", "serve_http", "serve_stdio"]
 
@@ -22,6 +23,15 @@ INSTRUCTIONS = (
     "type's fields. Typed tools (publish__*, call__*, send_goal__*) take the message as the "
     "robot defines it; a field that does not fit is named in the error."
 )
+
+
+_CONFIRM_KEY = "confirm"
+_CONFIRM_FORM: Any = {"type": "object", "required": ["confirm"], "properties": {
+    "confirm": {"type": "boolean", "title": "Allow this change on the robot"}}}
+
+
+def _allowed(answer: types.ElicitResult) -> bool:
+    return answer.action == "accept" and bool((answer.content or {}).get("confirm"))
 
 
 def build_server(ros: RosBase, options: Options | None = None) -> Server[Any]:
@@ -44,9 +54,25 @@ def build_server(ros: RosBase, options: Options | None = None) -> Server[Any]:
             sessions.append(session)
         return types.ListToolsResult(tools=await robot.list_tools())
 
-    async def call_tool(ctx: ServerRequestContext[Any],
-                        params: types.CallToolRequestParams) -> types.CallToolResult:
-        return await robot.call(params.name, params.arguments, ctx.session.report_progress)
+    async def call_tool(ctx: ServerRequestContext[Any], params: types.CallToolRequestParams
+                        ) -> types.CallToolResult | types.InputRequiredResult:
+        answered = (params.input_responses or {}).get(_CONFIRM_KEY)
+
+        async def confirm(question: str) -> bool:
+            if isinstance(answered, types.ElicitResult):  # the retry, with the user's answer
+                return _allowed(answered)
+            try:
+                return _allowed(await ctx.session.elicit_form(question, _CONFIRM_FORM))
+            except NoBackChannelError:  # 2026-07-28: ask in the answer, the client retries
+                raise ConfirmationPending(question) from None
+
+        try:
+            return await robot.call(params.name, params.arguments,
+                                    ctx.session.report_progress, confirm)
+        except ConfirmationPending as pending:
+            ask = types.ElicitRequest(params=types.ElicitRequestFormParams(
+                message=pending.question, requested_schema=_CONFIRM_FORM))
+            return types.InputRequiredResult(input_requests={_CONFIRM_KEY: ask})
 
     server: Server[Any] = Server("roslibpy-lite", version=__version__,
                                  instructions=INSTRUCTIONS, on_list_tools=list_tools,

@@ -40,7 +40,7 @@ from ..messages import from_wire
 from ..ros import RosBase
 from .schema import message_schema
 
-__all__ = ["MAX_WAIT", "Options", "RobotTools"]
+__all__ = ["MAX_WAIT", "ConfirmationPending", "Options", "RobotTools"]
 
 MAX_WAIT = 120.0
 """The longest any one tool call may wait (seconds), whatever the caller asks."""
@@ -63,6 +63,9 @@ class Options:
     """The longest side of an image handed back (pixels; a call may ask for less or more)."""
     max_text: int = 32_768
     """The most characters of text one tool result carries (longer text is cut, and says so)."""
+    confirm: bool = False
+    """Ask the MCP client's user to confirm each change (publish, call, goal, cancel,
+    set_param) before it is made (MCP elicitation); declined, nothing is sent."""
 
 
 @dataclass
@@ -84,6 +87,19 @@ Progress = Callable[[float, "float | None", "str | None"], Awaitable[None]]
 
 _PROGRESS: contextvars.ContextVar[Progress | None] = contextvars.ContextVar(
     "roslibpy_lite_mcp_progress", default=None)
+
+Confirm = Callable[[str], Awaitable[bool]]
+"""Asks the MCP client's user to allow a change (the question); True: allowed. It may
+raise :class:`ConfirmationPending` to have the question sent as the call's answer."""
+
+
+class ConfirmationPending(Exception):
+    """The confirmation is to be asked in the call's answer (MCP 2026-07-28's
+    ``InputRequiredResult``); the client retries the call with the user's answer."""
+
+    def __init__(self, question: str) -> None:
+        super().__init__(question)
+        self.question = question
 
 MAX_COLLECT = 1000
 """The most messages one collect_topic call gathers."""
@@ -269,9 +285,11 @@ class RobotTools:
     # -- calling --------------------------------------------------------------------------------
 
     async def call(self, name: str, arguments: dict[str, Any] | None,
-                   progress: Progress | None = None) -> types.CallToolResult:
+                   progress: Progress | None = None, confirm: Confirm | None = None
+                   ) -> types.CallToolResult:
         """Run tool ``name``; any failure is a tool error with the client's own text.
-        ``progress`` hears how a long call (collect_topic) goes."""
+        ``progress`` hears how a long call (collect_topic) goes; ``confirm`` asks the user
+        to allow a change when :attr:`Options.confirm` is on."""
         _PROGRESS.set(progress)
         if not self._tools:
             await self.list_tools()
@@ -279,6 +297,18 @@ class RobotTools:
         if tool is None:
             return _error(f"no tool {name!r} here (not in the graph, not allowed to this role, or "
                           "read-only; list the tools again: the graph may have changed)")
+        annotations = tool.tool.annotations
+        if self.options.confirm and annotations is not None and not annotations.read_only_hint:
+            question = _cut(f"Allow {name} with {_json(arguments or {})}?", 500)
+            try:
+                allowed = confirm is not None and await confirm(question)
+            except ConfirmationPending:
+                raise
+            except Exception as exc:  # the client could not ask (no elicitation)
+                return _error(f"{name}: changes need the user's confirmation and it could not "
+                              f"be asked ({type(exc).__name__}: {exc}); nothing was sent")
+            if not allowed:
+                return _error(f"{name}: not confirmed by the user; nothing was sent")
         try:
             content = await tool.run(dict(arguments or {}))
         except TimeoutError:
@@ -297,10 +327,7 @@ class RobotTools:
 
     def _text(self, value: Any) -> list[types.ContentBlock]:
         text = value if isinstance(value, str) else _json(value)
-        limit = self.options.max_text
-        if len(text) > limit:
-            text = text[:limit] + f"\n... [cut: {len(text)} characters in all]"
-        return [types.TextContent(text=text)]
+        return [types.TextContent(text=_cut(text, self.options.max_text))]
 
     def _guarded(self, entry: _Typed, run: Callable[[dict[str, Any]], Awaitable[Any]]
                  ) -> Callable[[dict[str, Any]], Awaitable[list[types.ContentBlock]]]:
@@ -527,6 +554,12 @@ def _body(schema: dict[str, Any], what: str) -> dict[str, Any]:
 
 def _plain(value: Any) -> Any:
     return value.to_json() if hasattr(value, "to_json") else value
+
+
+def _cut(text: str, limit: int) -> str:
+    if len(text) <= limit:
+        return text
+    return text[:limit] + f"\n... [cut: {len(text)} characters in all]"
 
 
 def _error(text: str) -> types.CallToolResult:

@@ -5,10 +5,12 @@ from __future__ import annotations
 
 import asyncio
 import json
-from typing import Any
+from typing import Any, Literal
 
 import jsonschema
-from mcp import Client
+import mcp_types as types
+import pytest
+from mcp import Client, MCPError
 
 from roslibpy_lite import MockRos
 from roslibpy_lite.mcp import Options, build_server
@@ -118,3 +120,46 @@ async def test_collect_is_bounded_by_count_bytes_and_time_and_reports_progress()
         assert (by_bytes["count"], by_bytes["stopped_by"]) == (2, "max_bytes")
         quiet = await client.call_tool("collect_topic", {"topic": "/chatter", "seconds": 0.2})
         assert json.loads(text(quiet))["stopped_by"] == "seconds"
+
+
+@pytest.mark.parametrize("mode", ["auto", "legacy"])
+async def test_confirm_asks_the_user_before_a_change_and_a_no_sends_nothing(mode: str) -> None:
+    """With confirm on, a service call is made only once the client's user accepts (MCP
+    elicitation naming the tool and its arguments; in the call's answer on 2026-07-28, as a
+    request to the client on the handshake era); declined, or a client that cannot answer,
+    nothing reaches the service; reading tools are not asked about."""
+    ros = MockRos()
+    calls: list[float] = []
+
+    def scale(req: dict[str, Any]) -> dict[str, Any]:
+        calls.append(req["x"])
+        return {"result": req["x"] * req["y"]}
+
+    await ros.advertise_service("/scale", "mult_msgs/srv/MultFloats", scale)
+    asked: list[str] = []
+    answers: list[Literal["accept", "decline"]] = ["accept", "decline"]
+
+    async def user(context: Any, params: Any) -> types.ElicitResult:
+        asked.append(params.message)
+        action = answers.pop(0)
+        return types.ElicitResult(action=action, content={"confirm": True}
+                                  if action == "accept" else None)
+
+    server = build_server(ros, Options(confirm=True))
+    request = {"request": {"x": 2.0, "y": 4.0}}
+    async with Client(server, elicitation_callback=user, mode=mode) as client:
+        assert not (await client.call_tool("list_topics", {})).is_error
+        assert asked == []
+        result = await client.call_tool("call__scale", request)
+        assert not result.is_error and '"result": 8.0' in text(result)
+        assert asked == ['Allow call__scale with {"request": {"x": 2.0, "y": 4.0}}?']
+        result = await client.call_tool("call__scale", request)
+        assert result.is_error and "not confirmed by the user; nothing was sent" in text(result)
+    async with Client(server, mode=mode) as client:  # no elicitation callback
+        try:  # the SDK's client refuses the question itself on 2026-07-28
+            result = await client.call_tool("call__scale", request)
+        except MCPError as exc:
+            assert "Elicitation not supported" in str(exc)
+        else:
+            assert result.is_error and "could not be asked" in text(result)
+    assert calls == [2.0]
