@@ -17,8 +17,10 @@ from tests.helpers import ROOT, ros_env
 
 
 @contextlib.asynccontextmanager
-async def mcp_stdio(url: str, token: str | None, tmp: Path, *extra: str) -> AsyncIterator[Client]:
-    """An MCP client of ``python -m roslibpy_lite.cli mcp --url URL`` (the token in a file)."""
+async def mcp_stdio(url: str, token: str | None, tmp: Path, *extra: str,
+                    **client: Any) -> AsyncIterator[Client]:
+    """An MCP client of ``python -m roslibpy_lite.cli mcp --url URL`` (the token in a file;
+    ``client``: more options of the SDK's ``Client``)."""
     args = ["-m", "roslibpy_lite.cli", "mcp", "--url", url, *extra]
     if token is not None:
         token_file = tmp / "agent.token"
@@ -26,8 +28,8 @@ async def mcp_stdio(url: str, token: str | None, tmp: Path, *extra: str) -> Asyn
         args += ["--token-file", str(token_file)]
     params = StdioServerParameters(command=sys.executable, args=args, cwd=ROOT,
                                    env=ros_env(PYTHONPATH=str(ROOT)))
-    async with Client(params, read_timeout_seconds=60) as client:
-        yield client
+    async with Client(params, read_timeout_seconds=60, **client) as session:
+        yield session
 
 
 def text(result: Any) -> str:

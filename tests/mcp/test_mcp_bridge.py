@@ -4,6 +4,7 @@ over stdio: typed tools from the robot's definitions, held to the token's role."
 from __future__ import annotations
 
 import asyncio
+import signal
 import threading
 from pathlib import Path
 from typing import Any
@@ -11,6 +12,7 @@ from typing import Any
 import jsonschema
 from std_msgs.msg import String
 
+from bridge_server.security.auth import hash_token, new_token
 from tests.helpers import BridgeProcess, async_wait_until
 from tests.mcp.support import mcp_stdio, serve_setbool, text, tool_names, until_listed, until_tool
 from tests.security.support import AuthFile
@@ -146,3 +148,40 @@ async def test_a_dropped_link_is_a_tool_error_naming_its_state_and_recovers(
                 break
             await asyncio.sleep(0.1)
         assert not result.is_error, text(result)
+
+
+async def test_a_tool_the_role_lost_is_refused_by_the_bridge_and_withdrawn(
+    make_bridge: Any, ros_node: Any, topic: str, tmp_path: Path
+) -> None:
+    """After SIGHUP takes call_service from the agent's role, the tool listed before is
+    refused by the bridge (Forbidden, the rclpy handler never runs), the server tells the
+    client its tool list changed (tools/list_changed, on the handshake era hosts speak), and
+    the next listing lacks it."""
+    roles = '[roles.agent]\nintrospection = ["*"]\n'
+    token = new_token()
+    principal = f'\n[principals.agent]\nrole = "agent"\ntoken_hash = "{hash_token(token)}"\n'
+    auth_file = tmp_path / "auth.toml"
+    auth_file.write_text(roles + 'call_service = ["*"]\n' + principal)
+    bridge = make_bridge("--auth-file", str(auth_file))
+    calls = serve_setbool(ros_node, topic)
+    changed = asyncio.Event()
+
+    async def on_message(message: Any) -> None:
+        if getattr(getattr(message, "root", message), "method", "") == \
+                "notifications/tools/list_changed":
+            changed.set()
+
+    async with mcp_stdio(bridge.url, token, tmp_path, message_handler=on_message,
+                         mode="legacy") as client:
+        tool = await until_tool(client, "call__" + topic.strip("/"))
+        auth_file.write_text(roles + principal)
+        start = len(bridge.lines)
+        assert bridge.proc is not None
+        bridge.proc.send_signal(signal.SIGHUP)
+        await asyncio.to_thread(bridge.wait_for_line, r"reloaded the auth file", 10, start)
+        result = await client.call_tool(tool.name, {"request": {"data": True}})
+        assert result.is_error
+        assert "Forbidden" in text(result) and "role agent may not call_service" in text(result)
+        await asyncio.wait_for(changed.wait(), 10)
+        assert tool.name not in await tool_names(client)
+    assert calls == []
