@@ -15,7 +15,7 @@ import numpy as np
 from PIL import Image as PILImage
 from rclpy.action import ActionServer, CancelResponse  # type: ignore[attr-defined]
 from rclpy.callback_groups import ReentrantCallbackGroup
-from sensor_msgs.msg import Image
+from sensor_msgs.msg import CompressedImage, Image
 from test_msgs.action import Fibonacci
 
 from tests.helpers import BridgeProcess
@@ -29,23 +29,35 @@ def _image(encoding: str, pixels: np.ndarray[Any, Any]) -> Image:
                  data=pixels.tobytes())
 
 
-def _decoded(result: Any) -> np.ndarray[Any, Any]:
+def _decoded(result: Any, mime: str = "image/png") -> np.ndarray[Any, Any]:
     (image,) = [b for b in result.content if b.type == "image"]
-    assert image.mime_type == "image/png"
+    assert image.mime_type == mime
     return np.asarray(PILImage.open(io.BytesIO(base64.b64decode(image.data))))
+
+
+def _png(pixels: np.ndarray[Any, Any]) -> bytes:
+    buf = io.BytesIO()
+    PILImage.fromarray(pixels).save(buf, format="PNG")
+    return buf.getvalue()
 
 
 async def test_an_image_topic_reads_as_an_image(
     bridge: BridgeProcess, ros_node: Any, topic: str, tmp_path: Path
 ) -> None:
     """read_topic on an rgb8 and a bgr8 Image gives PNG image content whose pixels are the
-    published ones (in RGB), and max_size scales it down."""
+    published ones (in RGB), max_size scales it down, and a CompressedImage comes back as a
+    JPEG of its pixels."""
     rgb = ros_node.create_publisher(Image, topic + "_rgb", 1)
     bgr = ros_node.create_publisher(Image, topic + "_bgr", 1)
+    packed = ros_node.create_publisher(CompressedImage, topic + "_packed", 1)
+    columns, rows = np.meshgrid(np.arange(64) * 4, np.arange(48) * 5)
+    smooth = np.stack([columns, rows, np.full((48, 64), 90)], axis=-1).astype(np.uint8)
+    png = _png(smooth)
 
     def tick() -> None:
         rgb.publish(_image("rgb8", PIXELS))
         bgr.publish(_image("bgr8", np.ascontiguousarray(PIXELS[..., ::-1])))
+        packed.publish(CompressedImage(format="png", data=png))
 
     ros_node.create_timer(0.05, tick)
     async with mcp_stdio(bridge.url, None, tmp_path) as client:
@@ -59,6 +71,11 @@ async def test_an_image_topic_reads_as_an_image(
         result = await client.call_tool("read_topic", {"topic": topic + "_rgb", "max_size": 32,
                                                        "timeout": 10})
         assert _decoded(result).shape == (24, 32, 3)
+        result = await client.call_tool("read_topic", {"topic": topic + "_packed",
+                                                       "timeout": 10})
+        assert not result.is_error, text(result)
+        jpeg = _decoded(result, "image/jpeg").astype(int)
+        assert jpeg.shape == (48, 64, 3) and np.abs(jpeg - smooth).mean() < 4
 
 
 def _fibonacci_server(ros_node: Any, name: str) -> threading.Event:
