@@ -46,6 +46,7 @@ MAX_WAIT = 120.0
 """The longest any one tool call may wait (seconds), whatever the caller asks."""
 
 _IMAGE_TYPES = {"sensor_msgs/msg/Image": "PNG", "sensor_msgs/msg/CompressedImage": "JPEG"}
+_CLOUD = "sensor_msgs/msg/PointCloud2"
 _SHORT_LIST = 32
 _SHORT_BYTES = 64
 _NAME_RE = re.compile(r"[^A-Za-z0-9_-]")
@@ -470,7 +471,10 @@ class RobotTools:
         if image_format is not None:
             size = int(args.get("max_size", self.options.image_size))
             return _image(msg, image_format, size, topic, type_name)
-        return self._text({"topic": topic, "type": type_name, "message": summarize(msg)})
+        summary = summarize(msg)
+        if type_name == _CLOUD:
+            summary["points"] = _cloud_summary(msg)
+        return self._text({"topic": topic, "type": type_name, "message": summary})
 
     async def _collect(self, args: dict[str, Any]) -> list[types.ContentBlock]:
         topic = args["topic"]
@@ -554,6 +558,25 @@ def _body(schema: dict[str, Any], what: str) -> dict[str, Any]:
 
 def _plain(value: Any) -> Any:
     return value.to_json() if hasattr(value, "to_json") else value
+
+
+def _cloud_summary(msg: Any) -> dict[str, Any]:
+    """A point cloud in a few numbers: its count and each numeric field's finite range and
+    mean (its data is summarized away)."""
+    import numpy as np
+
+    from ..data import to_numpy
+
+    points = to_numpy(msg)
+    fields: dict[str, Any] = {}
+    for name in points.dtype.names or ():
+        column = points[name]
+        if column.dtype.kind not in "iuf":
+            continue
+        finite = column[np.isfinite(column)] if column.dtype.kind == "f" else column
+        fields[name] = ({"min": float(finite.min()), "max": float(finite.max()),
+                         "mean": round(float(finite.mean()), 6)} if finite.size else None)
+    return {"count": int(points.size), "fields": fields}
 
 
 def _cut(text: str, limit: int) -> str:

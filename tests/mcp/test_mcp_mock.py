@@ -9,6 +9,7 @@ from typing import Any, Literal
 
 import jsonschema
 import mcp_types as types
+import numpy as np
 import pytest
 from mcp import Client, MCPError
 
@@ -163,3 +164,30 @@ async def test_confirm_asks_the_user_before_a_change_and_a_no_sends_nothing(mode
         else:
             assert result.is_error and "could not be asked" in text(result)
     assert calls == [2.0]
+
+
+async def test_a_point_cloud_is_summarized_by_its_numbers() -> None:
+    """read_topic on a PointCloud2 gives its point count and each field's finite range and
+    mean (a NaN point left out), not its bytes."""
+    ros = MockRos()
+    pub = await ros.advertise("/cloud", "sensor_msgs/msg/PointCloud2")
+    xyz = np.array([[0.0, 1.0, 2.0], [4.0, -1.0, 2.0], [np.nan, 0.0, 2.0]] + [[2.0, 0.0, 2.0]] * 5,
+                   np.float32)
+    fields = [{"name": n, "offset": 4 * i, "datatype": 7, "count": 1}
+              for i, n in enumerate("xyz")]
+    cloud = {"header": {"stamp": {"sec": 0, "nanosec": 0}, "frame_id": "lidar"},
+             "height": 1, "width": 8, "fields": fields, "is_bigendian": False,
+             "point_step": 12, "row_step": 96, "data": list(xyz.tobytes()), "is_dense": False}
+    async with Client(build_server(ros)) as client:
+        reading = asyncio.create_task(client.call_tool("read_topic", {"topic": "/cloud"}))
+        while not ros.subscribers("/cloud"):  # the read has subscribed
+            await asyncio.sleep(0)
+        await pub.publish(cloud)
+        result = await reading
+        assert not result.is_error, text(result)
+        message = json.loads(text(result))["message"]
+        assert message["data"] == "<96 bytes>"
+        assert message["points"] == {"count": 8, "fields": {
+            "x": {"min": 0.0, "max": 4.0, "mean": 2.0},
+            "y": {"min": -1.0, "max": 1.0, "mean": 0.0},
+            "z": {"min": 2.0, "max": 2.0, "mean": 2.0}}}
