@@ -47,6 +47,7 @@ MAX_WAIT = 120.0
 
 _IMAGE_TYPES = {"sensor_msgs/msg/Image": "PNG", "sensor_msgs/msg/CompressedImage": "JPEG"}
 _CLOUD = "sensor_msgs/msg/PointCloud2"
+_ASK_AT_ONCE = 5000
 _SHORT_LIST = 32
 _SHORT_BYTES = 64
 _NAME_RE = re.compile(r"[^A-Za-z0-9_-]")
@@ -239,10 +240,13 @@ class RobotTools:
             return names
 
     async def _ask_may(self, kind: str, names: list[str]) -> list[str]:
-        answer = await self.ros.call_service(
-            f"/rosapi/may_{_CAPABILITY[kind]}", "rosapi_msgs/srv/MayUse", {"names": names},
-            timeout=self.options.timeout)
-        return [n for n in answer.get("names", []) if isinstance(n, str)]
+        allowed: list[str] = []
+        for i in range(0, max(len(names), 1), _ASK_AT_ONCE):  # the bridge takes 10 000 a time
+            answer = await self.ros.call_service(
+                f"/rosapi/may_{_CAPABILITY[kind]}", "rosapi_msgs/srv/MayUse",
+                {"names": names[i:i + _ASK_AT_ONCE]}, timeout=self.options.timeout)
+            allowed += [n for n in answer.get("names", []) if isinstance(n, str)]
+        return allowed
 
     def _schema(self, cls: Any) -> tuple[dict[str, Any], dict[str, Any]]:
         """A message type's schema and its ``$defs`` (for the tool schema's root), built once

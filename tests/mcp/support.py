@@ -13,6 +13,7 @@ from typing import Any
 from mcp import Client, StdioServerParameters
 from std_srvs.srv import SetBool
 
+from bridge_server.security.auth import hash_token, new_token
 from tests.helpers import ROOT, ros_env
 
 
@@ -76,3 +77,15 @@ def serve_setbool(ros_node: Any, name: str) -> list[bool]:
 
     ros_node.create_service(SetBool, name, handle)
     return calls
+
+
+AGENT_ROLE = '[roles.agent]\nintrospection = ["*"]\n'
+
+
+def agent_auth(path: Path, grants: str) -> str:
+    """Write an auth file at ``path`` whose one principal has the role ``agent``
+    (introspection on everything, plus ``grants``: TOML lines); its token."""
+    token = new_token()
+    path.write_text(AGENT_ROLE + grants + f'\n[principals.agent]\nrole = "agent"\n'
+                    f'token_hash = "{hash_token(token)}"\n')
+    return token

@@ -10,11 +10,23 @@ from pathlib import Path
 from typing import Any
 
 import jsonschema
+import pytest
+from mcp import Client
 from std_msgs.msg import String
 
-from bridge_server.security.auth import hash_token, new_token
+import roslibpy_lite
+from roslibpy_lite.mcp import build_server, tools
+from roslibpy_lite.mcp.tools import tool_name
 from tests.helpers import BridgeProcess, async_wait_until
-from tests.mcp.support import mcp_stdio, serve_setbool, text, tool_names, until_listed, until_tool
+from tests.mcp.support import (
+    agent_auth,
+    mcp_stdio,
+    serve_setbool,
+    text,
+    tool_names,
+    until_listed,
+    until_tool,
+)
 from tests.security.support import AuthFile
 
 MUTATING = ("publish__", "call__", "send_goal__")
@@ -157,11 +169,8 @@ async def test_a_tool_the_role_lost_is_refused_by_the_bridge_and_withdrawn(
     refused by the bridge (Forbidden, the rclpy handler never runs), the server tells the
     client its tool list changed (tools/list_changed, on the handshake era hosts speak), and
     the next listing lacks it."""
-    roles = '[roles.agent]\nintrospection = ["*"]\n'
-    token = new_token()
-    principal = f'\n[principals.agent]\nrole = "agent"\ntoken_hash = "{hash_token(token)}"\n'
     auth_file = tmp_path / "auth.toml"
-    auth_file.write_text(roles + 'call_service = ["*"]\n' + principal)
+    token = agent_auth(auth_file, 'call_service = ["*"]\n')
     bridge = make_bridge("--auth-file", str(auth_file))
     calls = serve_setbool(ros_node, topic)
     changed = asyncio.Event()
@@ -174,7 +183,7 @@ async def test_a_tool_the_role_lost_is_refused_by_the_bridge_and_withdrawn(
     async with mcp_stdio(bridge.url, token, tmp_path, message_handler=on_message,
                          mode="legacy") as client:
         tool = await until_tool(client, "call__" + topic.strip("/"))
-        auth_file.write_text(roles + principal)
+        auth_file.write_text(auth_file.read_text().replace('call_service = ["*"]\n', ""))
         start = len(bridge.lines)
         assert bridge.proc is not None
         bridge.proc.send_signal(signal.SIGHUP)
@@ -185,3 +194,26 @@ async def test_a_tool_the_role_lost_is_refused_by_the_bridge_and_withdrawn(
         await asyncio.wait_for(changed.wait(), 10)
         assert tool.name not in await tool_names(client)
     assert calls == []
+
+
+async def test_the_role_is_asked_in_batches(
+    make_bridge: Any, ros_node: Any, topic: str, tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The bridge takes a bounded number of names per may_* question: asked one name at a
+    time, a role that may publish on /zz* only is still offered exactly those topics (the
+    server in process on our client, the SDK's client in memory)."""
+    monkeypatch.setattr(tools, "_ASK_AT_ONCE", 1)
+    auth_file = tmp_path / "auth.toml"
+    token = agent_auth(auth_file, 'publish = ["/zz*"]\n')
+    bridge = make_bridge("--auth-file", str(auth_file))
+    for name in ("/zz" + topic + "_a", "/zz" + topic + "_b", topic + "_no"):
+        ros_node.create_publisher(String, name, 10)
+    expected = {tool_name("publish", "/zz" + topic + s, set()) for s in ("_a", "_b")}
+    async with roslibpy_lite.connect(bridge.url, token=token) as ros, \
+            Client(build_server(ros)) as client:
+        await until_listed(client, "list_topics", topic + "_no")
+        for name in expected:
+            await until_tool(client, name)
+        offered = {n for n in await tool_names(client) if n.startswith("publish__")}
+    assert offered == expected
