@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import asyncio
 import json
+import subprocess
+import sys
 from typing import Any, Literal
 
 import jsonschema
@@ -15,6 +17,7 @@ from mcp import Client, MCPError
 
 from roslibpy_lite import MockRos
 from roslibpy_lite.mcp import Options, build_server
+from tests.helpers import ROOT, ros_env
 from tests.mcp.support import text
 
 
@@ -191,3 +194,15 @@ async def test_a_point_cloud_is_summarized_by_its_numbers() -> None:
             "x": {"min": 0.0, "max": 4.0, "mean": 2.0},
             "y": {"min": -1.0, "max": 1.0, "mean": 0.0},
             "z": {"min": 2.0, "max": 2.0, "mean": 2.0}}}
+
+
+def test_without_the_extra_the_client_imports_and_mcp_says_what_to_install() -> None:
+    """With the mcp SDK absent, roslibpy_lite and its CLI import, and 'roslibpy-lite mcp'
+    exits with a usage error naming the mcp extra."""
+    code = ("import sys; sys.modules['mcp'] = None\n"
+            "import roslibpy_lite, roslibpy_lite.cli\n"
+            "sys.exit(roslibpy_lite.cli.main(['mcp', '--url', 'ws://127.0.0.1:9']))")
+    done = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True,
+                          text=True, timeout=60, env=ros_env(PYTHONPATH=str(ROOT)))
+    assert done.returncode == 2, done.stderr
+    assert "install roslibpy-lite with its mcp extra" in done.stderr
