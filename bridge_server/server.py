@@ -108,6 +108,16 @@ def default_node_name() -> str:
     return f"{NODE_NAME_PREFIX}_{os.getpid()}"
 
 
+def websockets_pings(config: BridgeConfig, tcp: bool = True) -> dict[str, Any]:
+    """websockets' own ping options for a listener: none on TCP where the sessions watch
+    their links themselves (keepalive.py: a silent peer is pinged first, a pong late behind
+    a big frame or a stall of our own drops nobody), the keepalive figures elsewhere."""
+    if tcp and config.keepalive_interval and keepalive.supported_here():
+        return {"ping_interval": None, "ping_timeout": None}
+    return {"ping_interval": config.keepalive_interval or None,
+            "ping_timeout": config.keepalive_timeout or None}
+
+
 class Bridge:
     """The running bridge: the ROS node, the websocket server and the live sessions."""
 
@@ -161,7 +171,6 @@ class Bridge:
     async def listen(self) -> None:
         """Open the websocket listener and the plain-HTTP routes (as a worker, also the unix
         socket that takes other workers' forwarded session resumes: http/forward.py)."""
-        own_keepalive = bool(self.config.keepalive_interval) and keepalive.supported_here()
         kwargs: dict[str, Any] = dict(
             max_size=self.config.max_message_size,
             write_limit=self.config.write_limit,
@@ -174,9 +183,8 @@ class Bridge:
         )
         # Sessions watch their links themselves where TCP can tell (keepalive.py);
         # elsewhere (and on a unix socket) websockets pings with the same figures.
-        pings = dict(ping_interval=self.config.keepalive_interval or None,
-                     ping_timeout=self.config.keepalive_timeout or None)
-        tcp_pings = dict(ping_interval=None, ping_timeout=None) if own_keepalive else pings
+        pings = websockets_pings(self.config, tcp=False)
+        tcp_pings = websockets_pings(self.config)
         process_request = self._process_request
         cfg = self.config
         if cfg.worker_dir is not None:

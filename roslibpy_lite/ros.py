@@ -278,7 +278,9 @@ class _Host:
                     return
                 if op.level == "info":
                     return  # an acknowledgement after a reconnect
-            log.info("bridge status %s: %s", op.level, op.msg)
+            # a warning the bridge sends of itself (a relay's robot went away) is one
+            log.log(logging.WARNING if op.level == "warning" else logging.INFO,
+                    "bridge status %s: %s", op.level, op.msg)
             return
         error = status_error(op.msg, level=op.level, id=op.id)  # Forbidden when it says so
         if key is not None and record is not None:

@@ -231,7 +231,7 @@ class FoxgloveSession:
         """Queue one control frame (JSON text or a binary op)."""
         self.outbox.send_text(frame)
 
-    def status(self, level: str, msg: str, id: Any = None) -> None:
+    def status(self, level: str, msg: str, id: Any = None, *, always: bool = True) -> None:
         """A ``status`` op (``level``: info, warning or error, as the gate says them)."""
         self.send_text(wire.json_frame("status", level=_LEVELS.get(level, wire.STATUS_ERROR),
                                        message=msg))

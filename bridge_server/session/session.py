@@ -310,9 +310,11 @@ class Session:
         """Queue one op as JSON text."""
         self.outbox.send_text(ops.encode(op))
 
-    def status(self, level: str, msg: str, id: ops.Id | None = None) -> None:
-        """Send a ``status`` op if the client's level admits it."""
-        if _LEVELS.get(level, 1) > self.level:
+    def status(self, level: str, msg: str, id: ops.Id | None = None, *,
+               always: bool = False) -> None:
+        """Send a ``status`` op if the client's level admits it (``always``: whatever level
+        it set; for what every client must hear, as a relay's robot going and coming back)."""
+        if not always and _LEVELS.get(level, 1) > self.level:
             return
         self.send_op(ops.Status(level=level, msg=msg, id=id))
 

@@ -57,7 +57,7 @@ try:
     from ..security.credentials import client_address
     from ..security.gate import POLICY_VIOLATION
     from ..security.websockets_internals import BridgeConnection
-    from ..server import REFUSALS, Bridge, BridgeConfig
+    from ..server import REFUSALS, Bridge, BridgeConfig, websockets_pings
     from ..session.resume import ResumeConfig
     from ..session.session import SessionConfig
     from . import keys
@@ -121,8 +121,7 @@ class Relay:
             self._handle, self.config.host, self.config.port,
             max_size=self.config.max_message_size, write_limit=self.config.write_limit,
             compression=None, max_queue=64, close_timeout=1.0,
-            ping_interval=self.config.keepalive_interval or None,
-            ping_timeout=self.config.keepalive_timeout or None,
+            **websockets_pings(self.config),
             process_request=self._process_request,
             select_subprotocol=select_subprotocol,  # foxglove.websocket.v1, else rosbridge
             process_response=self._process_response,
@@ -383,10 +382,11 @@ def _tell_presence(bridge: Bridge, robot: str, here: bool) -> None:
 
 
 def _tell(bridge: Bridge, level: str, text: str) -> None:
-    """A status to every client of a robot's bridge, rosbridge and Foxglove."""
+    """A status to every client of a robot's bridge, rosbridge and Foxglove, whatever status
+    level a rosbridge client set (rosbridge's default, ``error``, would hide it)."""
     sessions: list[Session | FoxgloveSession] = [*bridge.sessions, *bridge.foxglove.sessions]
     for session in sessions:
-        session.status(level, text)
+        session.status(level, text, always=True)
 
 
 def _robot_named(request: Request) -> str:

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import asyncio
 import json
+import logging
 import re
 import sys
 from pathlib import Path
@@ -22,6 +23,7 @@ import pytest
 from std_msgs.msg import String
 from websockets.exceptions import ConnectionClosed, InvalidStatus
 
+import roslibpy_lite
 from bridge_server.server import BridgeConfig
 from bridge_server.zenoh.link import ZenohOptions
 from bridge_server.zenoh.relay import Relay
@@ -122,21 +124,27 @@ async def test_the_relay_command_waits_for_its_router_while_listening() -> None:
     assert proc.proc.returncode == 0, "\n".join(proc.lines)
 
 
-async def test_a_relay_that_loses_its_router_tells_its_clients(ros_node: Any, topic: str
-                                                               ) -> None:
-    """The router (another relay) dies: the client of a relay that was its client is told
-    the robot went away; the router comes back on its address, and the client is told the
-    robot is back and hears it again, on the same connection."""
+async def test_a_relay_that_loses_its_router_tells_its_clients(
+        ros_node: Any, topic: str, caplog: pytest.LogCaptureFixture) -> None:
+    """The router (another relay) dies: the clients of a relay that was its client are told
+    the robot went away; the router comes back on its address, and they are told the robot
+    is back and hear it again, on the same connection. A raw client is told whatever status
+    level it left (rosbridge's default, error); ours logs the first at WARNING and the
+    second at INFO, and gives both to on_status."""
     router = f"tcp/127.0.0.1:{free_port()}"
     hub = await start_relay(listen=router)
     robot, exporter = await start_robot(router)
     relay = await start_relay(router=router)
     pub = ros_node.create_publisher(String, topic, 10)
+    caplog.set_level(logging.INFO, logger="roslibpy_lite.client")
     try:
         await robot_reachable(relay)
-        wire = await open_wire(f"ws://127.0.0.1:{relay.port}/{ROBOT}")
+        url = f"ws://127.0.0.1:{relay.port}/{ROBOT}"
+        wire = await open_wire(url)
+        ours = await roslibpy_lite.connect(url)
+        heard: list[tuple[str, str]] = []
+        ours.on_status(lambda op: heard.append((op.level, op.msg)))
         try:
-            await wire.send({"op": "set_level", "level": "info"})  # the return is info
             await wire.send({"op": "subscribe", "topic": topic, "type": "std_msgs/msg/String"})
             await _hears(wire, pub, topic)
             await hub.close()
@@ -147,8 +155,15 @@ async def test_a_relay_that_loses_its_router_tells_its_clients(ros_node: Any, to
             assert ROBOT in back["msg"] and "back" in back["msg"], back
             wire.backlog.clear()
             await _hears(wire, pub, topic)
+            await until(lambda: len(heard) >= 2, "our client to hear both")
+            assert [level for level, _ in heard] == ["warning", "info"], heard
+            said = [(r.levelno, r.getMessage()) for r in caplog.records
+                    if r.name == "roslibpy_lite.client" and "bridge status" in r.getMessage()]
+            assert [level for level, _ in said] == [logging.WARNING, logging.INFO], said
+            assert "went away" in said[0][1] and "is back" in said[1][1]
         finally:
             await wire.close()
+            await ours.close()
     finally:
         await relay.close()
         await hub.close()
@@ -279,3 +294,23 @@ async def test_a_dropped_client_resumes_its_session_on_the_relay(ros_node: Any, 
                     await asyncio.sleep(0.02)
                 assert bridge.resumable.resumed == 1
                 assert got == list(range(got[0], last + 1)), got
+
+
+async def test_the_relay_leaves_pings_to_its_sessions_keepalive() -> None:
+    """Like the bridge, the relay turns websockets' own ping timeout off where its sessions
+    watch their links (keepalive.py pings a silent client first; a pong late behind a big
+    frame, or after a stall of the relay's own, drops nobody)."""
+    from roslibpy_lite import keepalive
+
+    async with tier() as t:
+        wire = await open_wire(t.url())
+        try:
+            await wire.send({"op": "call_service", "service": "/rosapi/topics", "id": "up"})
+            await wire.expect(op="service_response", id="up")
+            server = t.relay._server
+            assert server is not None
+            (connection,) = server.connections
+            expected = None if keepalive.supported_here() else t.relay.config.keepalive_interval
+            assert connection.ping_interval == expected
+        finally:
+            await wire.close()
