@@ -79,19 +79,24 @@ def test_bag_example_records_reads_and_plays(bridge: BridgeProcess, ros_node: An
     assert lines[6] == "5 messages"
 
 
-def _relay_commands() -> tuple[list[str], list[str]]:
-    """The README's relay and robot commands (their options), from its relay section."""
+def _relay_commands() -> tuple[list[str], list[str], list[str]]:
+    """The README's certificates, relay and robot commands (their words after the program),
+    from its relay section (lines continued with a backslash joined)."""
     section = (ROOT / "README.md").read_text().split("### Robots behind NAT")[1]
-    lines = [line.strip() for line in section.split("```bash")[1].split("```")[0].splitlines()]
-    relay = next(line for line in lines if line.startswith("roslibpy-lite-relay "))
+    block = re.sub(r"\\\n\s*", " ", section.split("```bash")[1].split("```")[0])
+    lines = [line.strip() for line in block.splitlines()]
+    certs = next(line for line in lines if line.startswith("roslibpy-lite-relay certs "))
+    relay = next(line for line in lines
+                 if line.startswith("roslibpy-lite-relay ") and line != certs)
     robot = next(line for line in lines if line.startswith("roslibpy-lite-bridge "))
-    return shlex.split(relay)[1:], shlex.split(robot)[1:]
+    return shlex.split(certs)[1:], shlex.split(relay)[1:], shlex.split(robot)[1:]
 
 
 def test_relay_example_runs_through_a_relay(ros_node: Any, tmp_path: Path) -> None:
-    """The README's two commands run as written (the relay's ports, host and auth file put
-    on this machine): the robot's bridge, with no listener, dials out to the relay, and the
-    client example hears the robot's /chatter through the relay with a token."""
+    """The README's three commands run as written (the relay's ports, host and files put on
+    this machine): the fleet's certificates made, the robot's bridge, with no listener, dials
+    out to the relay over mutual TLS, and the client example hears the robot's /chatter
+    through the relay with a token."""
     import subprocess
     import sys
 
@@ -99,15 +104,23 @@ def test_relay_example_runs_through_a_relay(ros_node: Any, tmp_path: Path) -> No
     from tests.relay.support import free_port
     from tests.security.support import make_auth_file
 
-    relay_args, robot_args = _relay_commands()
+    certs_args, relay_args, robot_args = _relay_commands()
     zport = free_port()
     auth = make_auth_file(tmp_path)
-    swap = {"0.0.0.0": "127.0.0.1", "auth.toml": str(auth.path),
-            "tcp/0.0.0.0:7447": f"tcp/127.0.0.1:{zport}",
-            "tcp/relay.example.com:7447": f"tcp/127.0.0.1:{zport}"}
-    relay_cmd = [sys.executable, "-m", "bridge_server.zenoh.relay",
-                 *[swap.get(a, a) for a in relay_args], "--port", "0"]
-    robot_cmd = [sys.executable, "-m", "bridge_server", *[swap.get(a, a) for a in robot_args]]
+    swap = {"0.0.0.0": "127.0.0.1", "auth.toml": str(auth.path), "fleet": str(tmp_path / "fleet"),
+            "relay.example.com": "127.0.0.1",
+            "tls/0.0.0.0:7447": f"tls/127.0.0.1:{zport}",
+            "tls/relay.example.com:7447": f"tls/127.0.0.1:{zport}"}
+
+    def here(args: list[str]) -> list[str]:  # this machine's ports, host, files
+        return [swap.get(a, str(tmp_path / a) if a.startswith("fleet/") else a) for a in args]
+
+    made = subprocess.run([sys.executable, "-m", "bridge_server.zenoh.relay", *here(certs_args)],
+                          cwd=ROOT, env=ros_env(), capture_output=True, text=True, timeout=60)
+    assert made.returncode == 0, made.stderr
+    relay_cmd = [sys.executable, "-m", "bridge_server.zenoh.relay", *here(relay_args),
+                 "--port", "0"]
+    robot_cmd = [sys.executable, "-m", "bridge_server", *here(robot_args)]
     logs = [tmp_path / "relay.log", tmp_path / "robot.log"]
     procs = []
     for cmd, log in zip((relay_cmd, robot_cmd), logs, strict=True):

@@ -162,6 +162,10 @@ def test_demo_runs_secured(tmp_path: Path) -> None:
                      "--cafile", str(tmp_path / "ca.pem"))
         assert (called.returncode, called.stdout) == (0, "result: 10.0\n"), called.stderr
         assert demo.interrupt(timeout=60) == 0, demo.dump()
+        # The script exits before its children are done: wait for them, or the kill below
+        # would end the bridge mid-shutdown, and its DDS participant, with the action the
+        # sample program served, would stay in the next tests' ROS graph for its lease.
+        wait_until(lambda: group_gone(demo.proc.pid), timeout=10, what="every demo process to exit")
         assert not any(app_token in line or cli_token in line for line in demo.out + demo.err)
     finally:
         demo.kill()
