@@ -9,7 +9,7 @@ for a line on stdin, then plays MODE and prints ``done N`` (N: what it put):
   until stdin closes;
 - ``flood``: ``/flood`` Float64MultiArray messages of 1000 values (8 KiB, costly to write
   as JSON) as fast as it can for SECONDS;
-- ``graphs``: ten 20 MB graph documents over SECONDS, one nested 100 000 deep, then 50
+- ``graphs``: one graph document nested 100 000 deep, ten 20 MB ones over SECONDS, then 50
   small ones at once (the last names the node ``played49``);
 - ``bad``: 200 messages on ``/flood`` whose CDR bytes are no String, then a String whose
   stamp is 2**70 ns.
@@ -73,13 +73,15 @@ def main() -> None:
             n += 1
             session.put(key, body, attachment=Meta(type=ARRAY, epoch="e", seq=n).encode())
     elif mode == "graphs":
+        # The deep one first: the big ones after it are dropped before they are queued, so
+        # nothing replaces it for SECONDS and it is read (and counted) whatever the load.
+        session.put(f"{robot}/{keys.GRAPH}", b"[" * 100_000 + b"]" * 100_000)
+        n += 1
         big = b'{"definitions": {"a/msg/B": "' + b"x" * (20 * 1000 * 1000) + b'"}}'
         for _ in range(10):
             n += 1
             session.put(f"{robot}/{keys.GRAPH}", big)
             time.sleep(seconds / 10)
-        session.put(f"{robot}/{keys.GRAPH}", b"[" * 100_000 + b"]" * 100_000)
-        n += 1
         for i in range(50):  # faster than the relay reads them: the newest is kept
             n += 1
             session.put(f"{robot}/{keys.GRAPH}", Snapshot(node=f"played{i}").encode())

@@ -209,7 +209,7 @@ async def test_a_robot_flooding_messages_does_not_starve_another_robots_viewer()
 
 
 async def test_a_robot_putting_huge_graph_documents_does_not_starve_another() -> None:
-    """robot2 puts ten 20 MB graph documents in 4 s, one nested 100 000 deep and 50 small
+    """robot2 puts one graph document nested 100 000 deep, ten 20 MB ones in 4 s and 50 small
     ones at once: robot1's viewer keeps 90 % of its rate and its connection, the relay's
     memory stays bounded, the relay's page counts them as dropped for robot2 (too large; not
     a graph; replaced by a newer one before read), and the newest is the robot's graph."""
