@@ -21,8 +21,12 @@ from roslibpy_lite.api import ConnectionState
 from tests.bridge.support import roundtrip
 from tests.helpers import BridgeProcess, WireClient
 
-STALL = 6.0
-"""Seconds the bridge is stopped: longer than its keepalive's interval + timeout (2 + 3)."""
+STALL = 8.0
+"""Seconds the bridge is stopped: longer than its keepalive's interval + timeout."""
+KEEPALIVE = ("--keepalive-interval", "1", "--keepalive-timeout", "5")
+"""The stalled bridge's keepalive: a silence of 6 s (1 + 5) drops a client without a ping
+first, which the STALL exceeds; 5 s for the pong leave room for a test process busy with
+what earlier tests left running (its pong once came later than 3 s in a full run)."""
 
 
 async def _sid(bridge: BridgeProcess, start: int) -> int:
@@ -36,10 +40,11 @@ async def _sid(bridge: BridgeProcess, start: int) -> int:
 async def test_a_stall_of_the_bridge_drops_only_the_client_that_does_not_answer(
     make_bridge: Any,
 ) -> None:
-    """The bridge process stopped (SIGSTOP) for 6 s, then continued: an idle roslibpy-lite
+    """The bridge process stopped (SIGSTOP) for 8 s, longer than its keepalive's interval
+    and timeout together, then continued: an idle roslibpy-lite
     client and an idle raw websockets client, which send nothing but answer pings, stay
     connected and served; a client behind a blackholed link is pinged and dropped."""
-    bridge = make_bridge()
+    bridge = make_bridge(*KEEPALIVE)
     assert bridge.proc is not None
     pid = bridge.proc.pid
     with LinkProxy(("127.0.0.1", bridge.port)) as proxy:
