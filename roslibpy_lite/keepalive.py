@@ -6,8 +6,13 @@ large frame on a slow link can take longer than any sensible timeout, so a pong 
 alone either notices dead links late or drops busy ones.
 
 The evidence used here is the kernel's (``TCP_INFO``): data received from the peer, or our
-own data being acknowledged by it in bulk (at least :data:`PROGRESS_BYTES` per check). A
-peer that is slowly receiving a large frame acknowledges it as it arrives, and a peer that
+own data being acknowledged by it in bulk (at least :data:`PROGRESS_BYTES` per check). Whether
+the peer sent anything *after* a ping is read from the kernel's count of bytes received, not
+from the time of the last data it reports, which counts in whole clock ticks (4 ms at
+``HZ=250``): a pong on loopback comes back within a tick and could read as older than the
+ping.
+
+A peer that is slowly receiving a large frame acknowledges it as it arrives, and a peer that
 sends to us is evidently there; the few bytes of a ping being acknowledged are not counted,
 since whatever sits between us (a NAT box, a proxy, the far kernel of a hung link) may
 acknowledge those. Only when the peer has shown nothing for ``interval`` seconds is it
@@ -58,6 +63,8 @@ _LAST_DATA_RECV = struct.Struct("=I")  # tcpi_last_data_recv, in milliseconds
 _LAST_DATA_RECV_OFFSET = 52  # after 8 one-byte fields and 11 u32 fields of struct tcp_info
 _BYTES_ACKED = struct.Struct("=Q")  # tcpi_bytes_acked
 _BYTES_ACKED_OFFSET = 120
+_BYTES_RECEIVED = struct.Struct("=Q")  # tcpi_bytes_received
+_BYTES_RECEIVED_OFFSET = 128
 
 
 def supported_here() -> bool:
@@ -65,9 +72,9 @@ def supported_here() -> bool:
     return _TCP_INFO is not None
 
 
-def tcp_state(sock: socket.socket) -> tuple[float, int] | None:
-    """(seconds since the peer last sent us data, bytes of ours it acknowledged in all), or
-    ``None`` where the kernel does not tell."""
+def tcp_state(sock: socket.socket) -> tuple[float, int, int] | None:
+    """(seconds since the peer last sent us data, bytes of ours it acknowledged in all, bytes
+    of its we received in all), or ``None`` where the kernel does not tell."""
     if _TCP_INFO is None:
         return None
     try:
@@ -78,7 +85,8 @@ def tcp_state(sock: socket.socket) -> tuple[float, int] | None:
         return None
     (data_ms,) = _LAST_DATA_RECV.unpack_from(info, _LAST_DATA_RECV_OFFSET)
     (acked,) = _BYTES_ACKED.unpack_from(info, _BYTES_ACKED_OFFSET)
-    return float(data_ms) / 1000.0, int(acked)
+    (received,) = _BYTES_RECEIVED.unpack_from(info, _BYTES_RECEIVED_OFFSET)
+    return float(data_ms) / 1000.0, int(acked), int(received)
 
 
 async def watch(
@@ -104,6 +112,7 @@ async def watch(
     heard = loop.time()
     acked = state[1]
     pinged: float | None = None  # when the ping not answered yet was sent
+    received_then = 0  # the bytes received from the peer in all when it was sent
     restarted = False  # whether its clock was restarted after a stall of ours
     answered = [heard]  # when a pong last came
     checked = heard
@@ -119,12 +128,13 @@ async def watch(
         now = loop.time()
         stalled = now - checked >= 2 * period  # our side was late: the loop was held up
         checked = now
-        data_age, now_acked = state
+        data_age, now_acked, received = state
         heard = max(heard, now - data_age, answered[0])
         if now_acked - acked >= PROGRESS_BYTES:  # the peer is taking our data: busy, alive
             heard = now
         acked = now_acked
-        if pinged is not None and heard > pinged:
+        if pinged is not None and (heard > pinged or received > received_then):
+            heard = max(heard, pinged)
             pinged = None  # heard of since the ping: it answered
         silence = now - heard
         if pinged is not None:
@@ -137,7 +147,7 @@ async def watch(
                 transport.abort()
                 return True
         elif silence >= interval:
-            pinged, restarted = now, False
+            pinged, restarted, received_then = now, False, received
             with contextlib.suppress(Exception):
                 _retrieve(ping(), pong)
     return True

@@ -147,3 +147,59 @@ async def test_a_ping_held_up_by_a_stall_of_ours_gets_its_whole_timeout() -> Non
             assert not dead, f"dropped after {dead[0]:.1f} s of silence"
             assert pings == 2
             await client.close()
+
+
+class _Transport:
+    """Just enough of an asyncio transport for :func:`keepalive.watch` (its socket is read
+    through the patched ``tcp_state``)."""
+
+    def __init__(self) -> None:
+        self.aborted = False
+
+    def get_extra_info(self, name: str) -> object:
+        return object() if name == "socket" else None
+
+    def is_closing(self) -> bool:
+        return self.aborted
+
+    def abort(self) -> None:
+        self.aborted = True
+
+
+async def test_a_pong_within_a_clock_tick_of_its_ping_counts_as_an_answer(
+    monkeypatch: Any,
+) -> None:
+    """The kernel tells when data last came in whole clock ticks (4 ms at HZ=250), so a pong
+    on loopback can read as a little older than its ping: that it came is read from the
+    count of bytes received, and a peer that answers every ping is never dropped, even when
+    websockets' own answer to the ping never reaches the watch."""
+    loop = asyncio.get_running_loop()
+    pings: list[float] = []
+
+    def tcp_state(sock: object) -> tuple[float, int, int]:
+        last = pings[-1] - 0.004 if pings else started  # the tick puts it before the ping
+        return loop.time() - last, 0, 6 * len(pings)  # each pong's 6 bytes came in
+
+    judged = asyncio.Event()  # the fifth ping (four were answered), or a drop
+
+    def ping() -> asyncio.Future[float]:
+        pings.append(loop.time())
+        if len(pings) == 5:
+            judged.set()
+        return loop.create_future()  # never resolved: only the kernel's evidence counts
+
+    dead: list[float] = []
+
+    def on_dead(silence: float) -> None:
+        dead.append(silence)
+        judged.set()
+
+    started = loop.time()
+    monkeypatch.setattr(keepalive, "tcp_state", tcp_state)
+    watcher = asyncio.create_task(keepalive.watch(_Transport(), ping, on_dead, 0.2, 0.3))
+    try:
+        async with asyncio.timeout(10):
+            await judged.wait()
+    finally:
+        watcher.cancel()
+    assert not dead, f"dropped after {dead[0]:.2f} s of silence, though every ping was answered"
