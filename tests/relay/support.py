@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import queue
 import re
 import socket
 from collections.abc import AsyncIterator
@@ -233,3 +234,28 @@ async def played_robot(relay: Relay | None, router: str, name: str, snapshot: An
     finally:
         robot.leave()
         session.close()  # type: ignore[no-untyped-call]
+
+
+def wait_matched(entity: Any, timeout: float = 20.0) -> None:
+    """Wait until a Zenoh publisher has a subscriber, or a querier a queryable, that matches
+    it (declarations travel apart from data: one declared a moment ago elsewhere may not
+    have reached this session yet)."""
+    matched: queue.Queue[bool] = queue.Queue()
+    listener = entity.declare_matching_listener(lambda status: matched.put(status.matching))
+    try:
+        if not entity.matching_status.matching:
+            while not matched.get(timeout=timeout):
+                pass
+    finally:
+        listener.undeclare()
+
+
+async def relay_reaches(relay: Relay, key: str) -> None:
+    """Wait until ``relay``'s own Zenoh session has a queryable for ``key`` to ask (one a
+    test just declared on a played robot's session)."""
+    assert relay.session is not None
+    querier = relay.session.declare_querier(key)
+    try:
+        await asyncio.to_thread(wait_matched, querier)
+    finally:
+        querier.undeclare()  # type: ignore[no-untyped-call]

@@ -16,7 +16,7 @@ from bridge_server.zenoh.link import ZenohOptions, open_session
 from msgs import cdr
 from msgs.std_msgs.msg import String
 from tests.helpers import open_wire
-from tests.relay.support import free_port, robot_reachable, start_relay, until
+from tests.relay.support import free_port, relay_reaches, robot_reachable, start_relay, until
 
 pytestmark = pytest.mark.timeout(60)
 
@@ -162,6 +162,7 @@ async def test_a_robots_parameter_answers_are_read_or_refused_by_name(
         query.drop()  # type: ignore[no-untyped-call]
 
     queryable = robot.declare_queryable(f"{ROBOT}/{keys.PARAM}/some_node", answer)
+    await relay_reaches(relay, f"{ROBOT}/{keys.PARAM}/some_node")
     ws = await open_wire(f"ws://127.0.0.1:{relay.port}/{ROBOT}")
     try:
         said = {}

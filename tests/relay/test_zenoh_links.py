@@ -21,6 +21,7 @@ trustme = pytest.importorskip("trustme")
 
 from bridge_server.interfaces import BridgeError  # noqa: E402
 from bridge_server.zenoh.link import ZenohOptions  # noqa: E402
+from tests.relay.support import wait_matched  # noqa: E402
 
 DEADLINE = 10.0
 
@@ -98,20 +99,9 @@ def _subscribe(session: Any, *keyexprs: str) -> tuple[list[Any], queue.Queue[str
     return subs, got
 
 
-def _wait_matched(entity: Any) -> None:
-    """Wait until a publisher has a subscriber, or a querier a queryable, that matches it
-    (declarations travel apart from data)."""
-    matched: queue.Queue[bool] = queue.Queue()
-    listener = entity.declare_matching_listener(lambda status: matched.put(status.matching))
-    if not entity.matching_status.matching:
-        while not matched.get(timeout=DEADLINE):
-            pass
-    listener.undeclare()
-
-
 def _put_when_heard(session: Any, key: str) -> None:
     pub = session.declare_publisher(key)
-    _wait_matched(pub)
+    wait_matched(pub)
     pub.put(b"x")
     pub.undeclare()
 
@@ -148,7 +138,7 @@ def test_a_robot_cannot_serve_under_another_name(pki: Pki, router: tuple[Any, st
         own = robot2.declare_queryable("robot2/@graph", lambda q: q.reply(q.key_expr, b"ok"))
         # robot2's own queryable answers (so declarations have reached the relay) ...
         own_querier = relay.declare_querier("robot2/@graph", timeout=DEADLINE)
-        _wait_matched(own_querier)
+        wait_matched(own_querier)
         replies = [r.ok.payload.to_bytes() for r in own_querier.get() if r.ok]
         assert replies == [b"ok"]
         # ... and the one under robot1's name, declared before it, is not there at all.
@@ -167,7 +157,7 @@ def _answered(querier_session: Any, key: str) -> list[bytes]:
     querier = querier_session.declare_querier(key, timeout=DEADLINE,
                                               consolidation=zenoh.ConsolidationMode.NONE)
     try:
-        _wait_matched(querier)
+        wait_matched(querier)
         return sorted(r.ok.payload.to_bytes() for r in querier.get() if r.ok)
     finally:
         querier.undeclare()
