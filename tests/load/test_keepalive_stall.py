@@ -8,7 +8,7 @@ import os
 import re
 import signal
 import time
-from typing import Any
+from typing import Any, cast
 
 from websockets.asyncio.client import connect as ws_connect
 from websockets.asyncio.server import ServerConnection, serve
@@ -196,7 +196,8 @@ async def test_a_pong_within_a_clock_tick_of_its_ping_counts_as_an_answer(
 
     started = loop.time()
     monkeypatch.setattr(keepalive, "tcp_state", tcp_state)
-    watcher = asyncio.create_task(keepalive.watch(_Transport(), ping, on_dead, 0.2, 0.3))
+    watcher = asyncio.create_task(keepalive.watch(cast(asyncio.Transport, _Transport()), ping,
+                                                  on_dead, 0.2, 0.3))
     try:
         async with asyncio.timeout(10):
             await judged.wait()
