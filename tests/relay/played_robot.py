@@ -73,18 +73,23 @@ def main() -> None:
             n += 1
             session.put(key, body, attachment=Meta(type=ARRAY, epoch="e", seq=n).encode())
     elif mode == "graphs":
+        # Every document is put blocking, not dropped by this robot's own Zenoh when its
+        # queue is full (a loaded machine): the relay counts each of them, whatever the load.
         # The deep one first: the big ones after it are dropped before they are queued, so
         # nothing replaces it for SECONDS and it is read (and counted) whatever the load.
-        session.put(f"{robot}/{keys.GRAPH}", b"[" * 100_000 + b"]" * 100_000)
+        block = zenoh.CongestionControl.BLOCK
+        session.put(f"{robot}/{keys.GRAPH}", b"[" * 100_000 + b"]" * 100_000,
+                    congestion_control=block)
         n += 1
         big = b'{"definitions": {"a/msg/B": "' + b"x" * (20 * 1000 * 1000) + b'"}}'
         for _ in range(10):
             n += 1
-            session.put(f"{robot}/{keys.GRAPH}", big)
+            session.put(f"{robot}/{keys.GRAPH}", big, congestion_control=block)
             time.sleep(seconds / 10)
         for i in range(50):  # faster than the relay reads them: the newest is kept
             n += 1
-            session.put(f"{robot}/{keys.GRAPH}", Snapshot(node=f"played{i}").encode())
+            session.put(f"{robot}/{keys.GRAPH}", Snapshot(node=f"played{i}").encode(),
+                        congestion_control=block)
     elif mode == "bad":
         key = keys.key_of(robot, "/flood")
         for _ in range(200):
