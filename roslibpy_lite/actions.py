@@ -79,7 +79,6 @@ from typing import TYPE_CHECKING, Any, Protocol, Self, cast
 
 from msgs.runtime import Action, Message, UnknownTypeError, lookup_action
 
-from . import ops
 from ._aio import is_async_callable, running_loop
 from .exceptions import (
     ConnectionClosed,
@@ -91,6 +90,7 @@ from .exceptions import (
 )
 from .handles import Backend, _BridgeHandle
 from .messages import _check_type_string, _packages, canonical_type, check_dict, from_wire, to_wire
+from .protocol import ops
 
 if TYPE_CHECKING:
     from collections.abc import Coroutine

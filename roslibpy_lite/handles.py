@@ -44,7 +44,6 @@ from typing import TYPE_CHECKING, Any, Generic, NamedTuple, Protocol, Self, Type
 
 from msgs.runtime import Message, Service, ValidationError
 
-from . import ops
 from ._aio import is_async_callable, running_loop
 from ._api_types import MessageCallback, ServiceHandler
 from .exceptions import (
@@ -57,6 +56,7 @@ from .exceptions import (
 )
 from .jupyter import in_cell, write_in_cell
 from .messages import Completeness, RawMessage, check_dict, from_wire, to_wire, warn_user
+from .protocol import ops
 
 if TYPE_CHECKING:
     from types import TracebackType

@@ -20,7 +20,7 @@ from dataclasses import dataclass
 from typing import Any, ClassVar
 
 from roslibpy_lite.exceptions import RemoteProtocolError
-from roslibpy_lite.protocol import decode_frame
+from roslibpy_lite.protocol.frames import decode_frame
 
 __all__ = [
     "SUBPROTOCOL",

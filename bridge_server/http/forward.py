@@ -38,7 +38,7 @@ from websockets.asyncio.server import Server, ServerConnection, unix_serve
 from websockets.datastructures import Headers
 from websockets.http11 import Request, Response
 
-from roslibpy_lite.ops import SESSION_HEADER
+from roslibpy_lite.protocol.ops import SESSION_HEADER
 
 from ..security.websockets_internals import BridgeConnection, take_transport
 from ..session.resume import CLAIM_WAIT, worker_of

@@ -41,7 +41,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from roslibpy_lite.ops import ACKS_HEADER, AUTH_HEADER, RECEIVED_HEADER, SESSION_HEADER
+from roslibpy_lite.protocol.ops import ACKS_HEADER, AUTH_HEADER, RECEIVED_HEADER, SESSION_HEADER
 
 from . import metrics, snapshot
 from .peers import serve_peer_socket

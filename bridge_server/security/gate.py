@@ -15,7 +15,7 @@ import time
 from collections.abc import Mapping
 from typing import TYPE_CHECKING, Any
 
-from roslibpy_lite import ops
+from roslibpy_lite.protocol import ops
 
 from ..session import rosapi
 from .auth import Principal

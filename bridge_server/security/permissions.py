@@ -40,7 +40,7 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
-from roslibpy_lite import ops
+from roslibpy_lite.protocol import ops
 
 from ..interfaces import BridgeError
 

@@ -33,7 +33,7 @@ def escape_controls(text: str) -> str:
 _SECRET_HEADERS = r"(?:proxy-)?authorization|x-rosbridge-session"
 """Headers whose whole value is a secret, whatever its scheme: an ``Authorization`` of any
 scheme (a token under ``Token``/``Basic`` is refused, yet it is a token), and the session
-token of :data:`~roslibpy_lite.ops.SESSION_HEADER` (which resumes the session it names)."""
+token of :data:`~roslibpy_lite.protocol.ops.SESSION_HEADER` (which resumes the session it names)."""
 
 _TOKEN_PATTERNS = (
     # a header line as websockets logs it at DEBUG (``< Authorization: Token abc``), and

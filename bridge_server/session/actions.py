@@ -70,7 +70,7 @@ from typing import TYPE_CHECKING, Any, ClassVar
 
 import cbor2
 
-from roslibpy_lite import ops
+from roslibpy_lite.protocol import ops
 
 from ..graph import ACTIVE, CANCEL_ANSWERS, Status
 from ..interfaces import BridgeError, ConversionError, args_mapping, canonical_name

@@ -14,7 +14,7 @@ from collections.abc import Collection, Coroutine
 from typing import TYPE_CHECKING, Any, Protocol
 
 if TYPE_CHECKING:
-    from roslibpy_lite import ops
+    from roslibpy_lite.protocol import ops
 
     from ..graph import Graph
     from ..http.metrics import BridgeMetrics

@@ -1,8 +1,9 @@
 """The keepalive every client connection of the bridge runs, whatever protocol it speaks.
 
-Where TCP tells when the peer was last heard (:func:`roslibpy_lite.keepalive.supported_here`),
-a session watches its link itself (:func:`roslibpy_lite.keepalive.watch`: a silent client is
-pinged, and dropped with what it owned only if it then answers nothing within the timeout);
+Where TCP tells when the peer was last heard
+(:func:`roslibpy_lite.protocol.keepalive.supported_here`), a session watches its link itself
+(:func:`roslibpy_lite.protocol.keepalive.watch`: a silent client is pinged, and dropped with what
+it owned only if it then answers nothing within the timeout);
 elsewhere the bridge leaves websockets' own ping keepalive on, with the same figures.
 """
 
@@ -12,7 +13,7 @@ import asyncio
 import logging
 from typing import Any
 
-from roslibpy_lite import keepalive
+from roslibpy_lite.protocol import keepalive
 
 __all__ = ["watch_link"]
 

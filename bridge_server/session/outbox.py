@@ -47,8 +47,8 @@ from typing import TYPE_CHECKING
 from websockets.exceptions import ConnectionClosed
 from websockets.protocol import State
 
-from roslibpy_lite import ops
-from roslibpy_lite.protocol import split_fragments
+from roslibpy_lite.protocol import ops
+from roslibpy_lite.protocol.frames import split_fragments
 
 from ..interfaces import ReportedError
 

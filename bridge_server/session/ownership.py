@@ -23,7 +23,7 @@ from typing import TYPE_CHECKING, Any, Generic, Protocol, TypeVar
 
 from websockets.exceptions import ConnectionClosed
 
-from roslibpy_lite import ops
+from roslibpy_lite.protocol import ops
 
 if TYPE_CHECKING:
     from ..security import Gate

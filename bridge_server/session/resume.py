@@ -1,11 +1,12 @@
 """Sessions that outlive their connection (our extension; stock clients never see it).
 
-A client that sends ``X-Rosbridge-Session: new`` (:data:`~roslibpy_lite.ops.SESSION_HEADER`)
-gets a session token back. When its link drops, the bridge keeps the session
+A client that sends ``X-Rosbridge-Session: new``
+(:data:`~roslibpy_lite.protocol.ops.SESSION_HEADER`) gets a session token back. When its link
+drops, the bridge keeps the session
 (subscriptions with their bounded queues, publishers, served services and
 actions, the frames it wrote that the client has not confirmed) for
 ``session_keep`` seconds. A client that reconnects with the token and the number of
-frames it received (:data:`~roslibpy_lite.ops.RECEIVED_HEADER`) gets the session back:
+frames it received (:data:`~roslibpy_lite.protocol.ops.RECEIVED_HEADER`) gets the session back:
 the bridge answers with the number of frames it received, and each side sends
 again what the other missed. Both sides confirm what they received with a
 ``session_ack`` op every :data:`ACK_INTERVAL` seconds, so each keeps only what

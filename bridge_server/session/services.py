@@ -41,7 +41,7 @@ import time
 from collections.abc import Callable, Mapping
 from typing import TYPE_CHECKING, Any, ClassVar
 
-from roslibpy_lite import ops
+from roslibpy_lite.protocol import ops
 
 from ..http.metrics import outcome
 from ..interfaces import (

@@ -14,7 +14,7 @@ from __future__ import annotations
 import dataclasses
 from typing import TYPE_CHECKING, Any, ClassVar
 
-from roslibpy_lite import ops
+from roslibpy_lite.protocol import ops
 
 from ..interfaces import ConversionError, canonical_name
 from ..security.names import full_name

@@ -40,10 +40,10 @@ try:
     from websockets.datastructures import MultipleValuesError
     from websockets.exceptions import ConnectionClosed
 
-    from roslibpy_lite import ops
     from roslibpy_lite.exceptions import ProtocolError
-    from roslibpy_lite.ops import RELAY_HEADER, parse_op
-    from roslibpy_lite.protocol import decode_frame
+    from roslibpy_lite.protocol import ops
+    from roslibpy_lite.protocol.frames import decode_frame
+    from roslibpy_lite.protocol.ops import RELAY_HEADER, parse_op
 
     from .. import security
     from ..foxglove import SUBPROTOCOL as FOXGLOVE

@@ -30,10 +30,10 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Protocol
 
 if TYPE_CHECKING:
-    from .. import ops
     from .._api_types import ConnectionState
     from ..exceptions import ConnectionClosed, RosLibError
     from ..messages import Completeness
+    from ..protocol import ops
     from ..transports.base import Transport
 
 __all__ = ["Host", "ServingHost", "TopicsHost", "Tracked"]

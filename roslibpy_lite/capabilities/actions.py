@@ -14,7 +14,6 @@ from typing import Any
 
 from msgs.runtime import Action, Message
 
-from .. import ops
 from .._api_types import DEFAULT_CALL_TIMEOUT, ConnectionState
 from ..actions import (
     ActionHandler,
@@ -29,6 +28,7 @@ from ..actions import (
 )
 from ..exceptions import ConnectionClosed, Disconnected, UsageError
 from ..messages import check_dict, check_name, to_wire
+from ..protocol import ops
 from . import ServingHost, Tracked
 
 __all__ = ["Actions"]

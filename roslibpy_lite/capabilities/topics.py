@@ -18,7 +18,6 @@ from typing import TYPE_CHECKING, Any
 from msgs.cdr import CdrError, decoder_for, encode
 from msgs.runtime import ValidationError
 
-from .. import ops
 from .._api_types import ConnectionState
 from ..exceptions import (
     ConnectionClosed,
@@ -41,6 +40,7 @@ from ..messages import (
     name_hint,
     warn_user,
 )
+from ..protocol import ops
 from . import TopicsHost, Tracked
 
 log = logging.getLogger("roslibpy_lite.client")

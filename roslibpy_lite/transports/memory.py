@@ -13,7 +13,7 @@ part, played by :mod:`.memory_actions`. With ``validate`` on, messages, requests
 and responses are checked against the ``msgs`` class of their type, as the
 bridge checks them against the ROS type.
 
-Every op is copied through its JSON form (:func:`~roslibpy_lite.ops.encode`),
+Every op is copied through its JSON form (:func:`~roslibpy_lite.protocol.ops.encode`),
 so subscribers never share objects with publishers, and what JSON cannot carry
 fails as it does on a socket.
 """
@@ -25,9 +25,9 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
-from .. import ops
 from ..exceptions import InvalidMessageError, UsageError
 from ..messages import canonical_type, from_wire, lookup_message_class
+from ..protocol import ops
 from .memory_actions import ACTION_OPS, MemoryActions
 from .memory_rosapi import MemoryRosapi, RosapiRefusal
 

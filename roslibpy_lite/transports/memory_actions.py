@@ -21,8 +21,8 @@ from typing import TYPE_CHECKING, Any, Protocol
 
 from msgs.runtime import UnknownTypeError, lookup_action
 
-from .. import ops
 from ..messages import canonical_type
+from ..protocol import ops
 
 if TYPE_CHECKING:
     from msgs.runtime import Action

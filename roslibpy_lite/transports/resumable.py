@@ -17,7 +17,7 @@ from __future__ import annotations
 from collections import deque
 from collections.abc import Mapping
 
-from ..ops import RECEIVED_HEADER, SESSION_HEADER, parse_received
+from ..protocol.ops import RECEIVED_HEADER, SESSION_HEADER, parse_received
 
 __all__ = ["ACK_INTERVAL", "ClientSession"]
 

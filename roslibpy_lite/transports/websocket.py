@@ -24,7 +24,6 @@ from websockets.asyncio.client import connect as ws_connect
 from websockets.exceptions import ConnectionClosed as WsConnectionClosed
 from websockets.exceptions import InvalidHandshake, InvalidMessage, InvalidStatus, InvalidURI
 
-from .. import keepalive, ops
 from .._backoff import Backoff
 from ..exceptions import (
     ConnectError,
@@ -36,8 +35,9 @@ from ..exceptions import (
     TLSError,
     UsageError,
 )
-from ..ops import ACKS_HEADER, AUTH_HEADER, RELAY_HEADER, SESSION_HEADER
-from ..protocol import Protocol
+from ..protocol import keepalive, ops
+from ..protocol.frames import Protocol
+from ..protocol.ops import ACKS_HEADER, AUTH_HEADER, RELAY_HEADER, SESSION_HEADER
 from .resumable import ACK_INTERVAL, ClientSession
 
 if TYPE_CHECKING:

@@ -22,9 +22,9 @@ from roslibpy_lite import (
     NotConnected,
     PartialMessageWarning,
     RosTimeoutError,
-    ops,
     sync,
 )
+from roslibpy_lite.protocol import ops
 
 INT = "std_msgs/msg/Int32"
 TWIST = "geometry_msgs/msg/Twist"

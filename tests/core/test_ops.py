@@ -8,7 +8,7 @@ from typing import Any
 import pytest
 
 from roslibpy_lite.exceptions import RemoteProtocolError
-from roslibpy_lite.ops import (
+from roslibpy_lite.protocol.ops import (
     Advertise,
     AdvertiseService,
     CallService,

@@ -12,14 +12,14 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from roslibpy_lite.exceptions import RemoteProtocolError
-from roslibpy_lite.ops import Fragment, Publish, encode, parse_op
-from roslibpy_lite.protocol import (
+from roslibpy_lite.protocol.frames import (
     PIECE_COST,
     Protocol,
     decode_frame,
     decode_typed_array,
     split_fragments,
 )
+from roslibpy_lite.protocol.ops import Fragment, Publish, encode, parse_op
 
 
 def test_text_frame_gives_an_op() -> None:

@@ -300,7 +300,7 @@ async def test_the_relay_leaves_pings_to_its_sessions_keepalive() -> None:
     """Like the bridge, the relay turns websockets' own ping timeout off where its sessions
     watch their links (keepalive.py pings a silent client first; a pong late behind a big
     frame, or after a stall of the relay's own, drops nobody)."""
-    from roslibpy_lite import keepalive
+    from roslibpy_lite.protocol import keepalive
 
     async with tier() as t:
         wire = await open_wire(t.url())

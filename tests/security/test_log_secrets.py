@@ -15,7 +15,7 @@ from websockets.asyncio.client import connect
 from websockets.exceptions import InvalidStatus
 
 from bridge_server.security import redact
-from roslibpy_lite.ops import RECEIVED_HEADER, SESSION_HEADER
+from roslibpy_lite.protocol.ops import RECEIVED_HEADER, SESSION_HEADER
 from tests.bridge.support import roundtrip
 from tests.helpers import BridgeProcess, WireClient, ros_env
 from tests.relay.procs import Proc

@@ -118,7 +118,7 @@ async def test_forbidden_ops_in_fragments_cbor_and_rosapi_params(
     the node, whose parameter keeps its value."""
     import cbor2
 
-    from roslibpy_lite.protocol import split_fragments
+    from roslibpy_lite.protocol.frames import split_fragments
 
     ros_node.declare_parameter("speed", 1.0)
     node = ros_node.get_fully_qualified_name()

@@ -1,0 +1,20 @@
+"""The rosbridge v2 protocol core, shared by the client and the bridge.
+
+Sans-I/O and standard library only (``cbor2`` once a binary frame arrives): it imports no
+other module of the client, so the bridge (``bridge_server``) and the relay use it without
+loading the client. A test keeps it so (``tests/core/test_protocol_core.py``).
+
+- :mod:`~roslibpy_lite.protocol.ops`: every op as a frozen dataclass, parsed and serialized
+  in one place, and the handshake headers;
+- :mod:`~roslibpy_lite.protocol.frames`: websocket frames in (JSON text, CBOR binary with
+  RFC 8746 typed arrays), ``fragment`` ops reassembled and made (:class:`Protocol`);
+- :mod:`~roslibpy_lite.protocol.keepalive`: how a link notices its peer went silent.
+
+The frame API is re-exported here, where it has always been found
+(``roslibpy_lite.protocol.Protocol``, ``roslibpy_lite.protocol.decode_frame``).
+"""
+
+from __future__ import annotations
+
+from .frames import *  # noqa: F403  (the frame API, as frames.__all__ lists it)
+from .frames import __all__ as __all__
