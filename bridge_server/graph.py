@@ -22,7 +22,7 @@ from __future__ import annotations
 from collections.abc import Callable, Mapping
 from typing import TYPE_CHECKING, Any, Protocol
 
-from roslibpy_lite.actions import GoalStatus
+from roslibpy_lite.protocol.goal_status import GoalStatus
 
 if TYPE_CHECKING:
     from msgs.dynamic import TypeStore
@@ -49,8 +49,9 @@ __all__ = [
 
 
 Status = GoalStatus
-"""``action_msgs/msg/GoalStatus`` numbers: the client's :class:`~roslibpy_lite.actions.GoalStatus`
-(an ``IntEnum``, so rclpy takes its members as the numbers they are)."""
+"""``action_msgs/msg/GoalStatus`` numbers: the protocol core's
+:class:`~roslibpy_lite.protocol.goal_status.GoalStatus` (an ``IntEnum``, so rclpy takes its
+members as the numbers they are)."""
 
 
 ACTIVE = frozenset({Status.ACCEPTED, Status.EXECUTING, Status.CANCELING})

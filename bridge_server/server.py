@@ -27,8 +27,8 @@ from typing import TYPE_CHECKING, Any, Protocol
 from websockets.asyncio.server import Server, ServerConnection, serve
 from websockets.datastructures import MultipleValuesError
 
-from roslibpy_lite.exceptions import RemoteProtocolError
 from roslibpy_lite.protocol import keepalive
+from roslibpy_lite.protocol.errors import RemoteProtocolError
 from roslibpy_lite.protocol.ops import RECEIVED_HEADER, SESSION_HEADER, parse_received
 
 from .foxglove import SUBPROTOCOL, FoxgloveSession, Hub, select_subprotocol

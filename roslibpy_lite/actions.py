@@ -70,7 +70,6 @@ from __future__ import annotations
 import asyncio
 import collections
 import concurrent.futures
-import enum
 import inspect
 import logging
 from collections.abc import AsyncIterator, Awaitable, Callable, Mapping
@@ -91,6 +90,7 @@ from .exceptions import (
 from .handles import Backend, _BridgeHandle
 from .messages import _check_type_string, _packages, canonical_type, check_dict, from_wire, to_wire
 from .protocol import ops
+from .protocol.goal_status import GoalStatus
 
 if TYPE_CHECKING:
     from collections.abc import Coroutine
@@ -117,33 +117,6 @@ ActionHandler = Callable[[Any, "GoalContext"], Any]
 
 FeedbackCallback = Callable[[Any], "Awaitable[None] | None"]
 """Called with each feedback of a goal: ``fn(feedback)``, sync or ``async``."""
-
-class GoalStatus(enum.IntEnum):
-    """The status of a goal: the numbers of ``action_msgs/msg/GoalStatus``.
-
-    It equals its number (``GoalStatus.SUCCEEDED == 4``) and prints as its name
-    (``print(result.status)`` shows ``SUCCEEDED``).
-    """
-
-    UNKNOWN = 0
-    ACCEPTED = 1
-    EXECUTING = 2
-    CANCELING = 3
-    SUCCEEDED = 4
-    CANCELED = 5
-    ABORTED = 6
-
-    def __str__(self) -> str:
-        return self.name
-
-    def __format__(self, spec: str) -> str:
-        return format(self.name, spec) if not spec or spec[-1] not in "dxXobn" else \
-            format(int(self), spec)
-
-    @property
-    def final(self) -> bool:
-        """True for SUCCEEDED, CANCELED and ABORTED."""
-        return self >= GoalStatus.SUCCEEDED
 
 
 @dataclass(frozen=True, slots=True)

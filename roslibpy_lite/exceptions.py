@@ -36,12 +36,18 @@ them errors)::
     └── PartialMessageWarning        a dict of a known type misses fields (the bridge
                                      fills in defaults); once per type and field set
 
+The root and the protocol errors are declared in the protocol core
+(:mod:`roslibpy_lite.protocol.errors`, which the bridge uses without the client) and
+belong to this tree as they are.
+
 Remote failures (the other side said no) are kept apart from local misuse
 (we asked for something invalid), as h11 does. Exceptions from websockets and
 the operating system are translated into this tree at the client's edge only.
 """
 
 from __future__ import annotations
+
+from .protocol.errors import LocalProtocolError, ProtocolError, RemoteProtocolError, RosLibError
 
 __all__ = [
     "ConnectError",
@@ -67,33 +73,6 @@ __all__ = [
     "TLSError",
     "UsageError",
 ]
-
-
-class RosLibError(Exception):
-    """Root of every exception raised by roslibpy_lite."""
-
-
-class ProtocolError(RosLibError):
-    """A frame or op that breaks the rosbridge v2 protocol.
-
-    ``op`` is the op name when it could be read, ``id`` the request id when
-    it could be read, so a server can answer the sender with a ``status``
-    naming the request.
-    """
-
-    def __init__(self, message: str, *, op: str | None = None, id: str | int | None = None) -> None:
-        super().__init__(message)
-        self.message = message
-        self.op = op
-        self.id = id
-
-
-class LocalProtocolError(ProtocolError):
-    """We were about to send an op that the protocol does not allow."""
-
-
-class RemoteProtocolError(ProtocolError):
-    """The peer sent a frame or op that the protocol does not allow."""
 
 
 class UsageError(RosLibError):

@@ -19,7 +19,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
-from roslibpy_lite.exceptions import RemoteProtocolError
+from roslibpy_lite.protocol.errors import RemoteProtocolError
 from roslibpy_lite.protocol.frames import decode_frame
 
 __all__ = [

@@ -47,8 +47,8 @@ from typing import TYPE_CHECKING, Any, ClassVar, Protocol
 
 from websockets.exceptions import ConnectionClosed
 
-from roslibpy_lite.exceptions import ProtocolError
 from roslibpy_lite.protocol import ops
+from roslibpy_lite.protocol.errors import ProtocolError
 from roslibpy_lite.protocol.frames import Protocol as FrameProtocol
 from roslibpy_lite.protocol.frames import decode_frame
 from roslibpy_lite.protocol.ops import ACKS_HEADER, parse_op

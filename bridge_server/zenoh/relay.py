@@ -40,8 +40,8 @@ try:
     from websockets.datastructures import MultipleValuesError
     from websockets.exceptions import ConnectionClosed
 
-    from roslibpy_lite.exceptions import ProtocolError
     from roslibpy_lite.protocol import ops
+    from roslibpy_lite.protocol.errors import ProtocolError
     from roslibpy_lite.protocol.frames import decode_frame
     from roslibpy_lite.protocol.ops import RELAY_HEADER, parse_op
 

@@ -30,7 +30,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any, NoReturn
 
-from ..exceptions import RemoteProtocolError
+from .errors import RemoteProtocolError
 from .ops import Fragment, Id, Op, encode, parse_op
 
 __all__ = [
