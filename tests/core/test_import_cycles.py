@@ -1,5 +1,6 @@
-"""No module imports another that imports it back: at run time in every package, and in
-roslibpy_lite even counting the imports made only for type checking."""
+"""No module imports another that imports it back: at run time in every package, and even
+counting the imports made only for type checking in roslibpy_lite and bridge_server (but for
+bridge_server's one known cycle)."""
 
 from __future__ import annotations
 
@@ -132,9 +133,31 @@ def test_the_type_level_graph_counts_type_checking_imports() -> None:
     assert "roslibpy_lite.api" not in _graph()["roslibpy_lite.bag.player"]
 
 
-def test_no_type_level_import_cycles_in_roslibpy_lite() -> None:
-    """Counting the imports made only for type checking, roslibpy_lite's modules still import
-    each other in one direction only (each seam a small protocol, not a reach back)."""
+KNOWN_TYPE_LEVEL_CYCLES: dict[str, list[list[str]]] = {
+    "bridge_server": [[
+        "bridge_server.foxglove", "bridge_server.foxglove.hub", "bridge_server.foxglove.session",
+        "bridge_server.http.forward", "bridge_server.http.peers", "bridge_server.http.snapshot",
+        "bridge_server.http.web", "bridge_server.http.web_access", "bridge_server.security",
+        "bridge_server.security.gate", "bridge_server.security.handshake",
+        "bridge_server.security.websockets_internals", "bridge_server.server",
+        "bridge_server.session.actions", "bridge_server.session.host",
+        "bridge_server.session.outbox", "bridge_server.session.ownership",
+        "bridge_server.session.resume", "bridge_server.session.rosapi",
+        "bridge_server.session.services", "bridge_server.session.session",
+        "bridge_server.session.topics",
+    ]],
+}
+"""The type-level cycles known today, to be cut (issue 40, item 3: sessions that take a small
+link and the shared state instead of the ``Bridge`` and the connection, which the session,
+security, http and foxglove modules name for their types). A new cycle, or this one grown,
+fails; when it shrinks, write the smaller one here."""
+
+
+@pytest.mark.parametrize("package", ["roslibpy_lite", "bridge_server"])
+def test_no_type_level_import_cycles(package: str) -> None:
+    """Counting the imports made only for type checking, each package's modules import each
+    other in one direction only (each seam a small protocol, not a reach back), but for the
+    cycles listed as known."""
     cycles = [c for c in _cycles(_graph(type_level=True))
-              if any(m.split(".")[0] == "roslibpy_lite" for m in c)]
-    assert not cycles, f"type-level import cycles: {cycles}"
+              if any(m.split(".")[0] == package for m in c)]
+    assert cycles == KNOWN_TYPE_LEVEL_CYCLES.get(package, []), f"type-level import cycles: {cycles}"
