@@ -296,7 +296,7 @@ async def _run(args: argparse.Namespace) -> int:
     for sig in (signal.SIGINT, signal.SIGTERM):
         loop.add_signal_handler(sig, stop.set)
     if args.worker_index is not None:
-        from .http.workers import watch_supervisor
+        from .workers.supervisor import watch_supervisor
 
         config.node_name = f"{config.node_name}_w{args.worker_index}"
         watch_supervisor(stop)  # a worker stops with its supervisor, even a killed one
@@ -411,7 +411,7 @@ def main(argv: list[str] | None = None) -> int:
         # A file that is no certificate (or auth file) is named before ROS starts.
         security.Security(checked).ssl_context()
         if args.workers > 1 and args.worker_index is None:
-            from .http.workers import Supervisor
+            from .workers.supervisor import Supervisor
 
             argv = sys.argv[1:] if argv is None else argv
             return Supervisor(argv, args.workers, args.host, args.port, args.metrics_port).run()

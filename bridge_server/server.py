@@ -33,7 +33,6 @@ from roslibpy_lite.protocol.ops import RECEIVED_HEADER, SESSION_HEADER, parse_re
 
 from .foxglove import SUBPROTOCOL, FoxgloveSession, Hub, select_subprotocol
 from .graph import Graph
-from .http.forward import Forwarder
 from .http.metrics import BridgeMetrics
 from .http.web import Web
 from .http.web_access import WebAccess
@@ -42,6 +41,7 @@ from .session.actions import ActionClients, SessionActions
 from .session.ownership import Ownership
 from .session.resume import ResumeConfig, SentFrames, SessionStore
 from .session.session import Session, SessionConfig, wait_ended
+from .workers.forward import Forwarder
 
 if TYPE_CHECKING:
     from collections.abc import Awaitable
@@ -137,7 +137,7 @@ class Bridge:
         self.closing = False
         self._ids = itertools.count(1)
         self._server: Server | None = None
-        self.forwarder: Forwarder | None = None  # with --workers (http/forward.py)
+        self.forwarder: Forwarder | None = None  # with --workers (workers/forward.py)
         self._refresher: asyncio.Task[None] | None = None
         self._graph_event = asyncio.Event()
         self.ros: ServedGraph = graph
@@ -170,7 +170,7 @@ class Bridge:
 
     async def listen(self) -> None:
         """Open the websocket listener and the plain-HTTP routes (as a worker, also the unix
-        socket that takes other workers' forwarded session resumes: http/forward.py)."""
+        socket that takes other workers' forwarded session resumes: workers/forward.py)."""
         kwargs: dict[str, Any] = dict(
             max_size=self.config.max_message_size,
             write_limit=self.config.write_limit,

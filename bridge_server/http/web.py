@@ -43,8 +43,8 @@ from typing import TYPE_CHECKING, Any
 
 from roslibpy_lite.protocol.ops import ACKS_HEADER, AUTH_HEADER, RECEIVED_HEADER, SESSION_HEADER
 
+from ..workers.peers import serve_peer_socket
 from . import metrics, snapshot
-from .peers import serve_peer_socket
 
 if TYPE_CHECKING:
     from websockets.asyncio.server import ServerConnection

@@ -150,7 +150,7 @@ class BridgeConnection(ServerConnection):
     on_frame: Callable[[str | bytes], None] | None = None
     forwarded_from: tuple[str, int] | None = None
     """The client's address, for a connection another worker forwarded (see
-    :mod:`bridge_server.http.forward`): set only by the forwarded listener."""
+    :mod:`bridge_server.workers.forward`): set only by the forwarded listener."""
 
     @property
     def remote_address(self) -> Any:

@@ -30,7 +30,6 @@ import sys
 from collections.abc import Sequence
 from typing import TextIO
 
-from .._cli_format import have_yaml
 from ..exceptions import (
     ConnectError,
     ConnectionClosed,
@@ -56,6 +55,7 @@ from .common import (
     Out,
     Parser,
 )
+from .format import have_yaml
 
 __all__ = [
     "DEFAULT_URL",

@@ -18,7 +18,6 @@ from typing import Any
 
 from msgs.runtime import Action
 
-from .._cli_format import to_yaml
 from ..actions import ActionError, GoalHandle, GoalStatus
 from .common import (
     EXIT_INTERRUPTED,
@@ -40,6 +39,7 @@ from .common import (
     type_parts,
     with_session,
 )
+from .format import to_yaml
 
 
 async def cmd_action_list(args: argparse.Namespace, out: Out) -> int:

@@ -19,7 +19,6 @@ from typing import Any, NoReturn, TextIO
 
 from msgs.runtime import Message, UnknownTypeError, ValidationError, lookup
 
-from .._cli_format import ArgumentError, parse_values, to_yaml
 from ..client import Client, connect
 from ..exceptions import (
     ConnectError,
@@ -27,6 +26,7 @@ from ..exceptions import (
     TLSError,
     UsageError,
 )
+from .format import ArgumentError, parse_values, to_yaml
 
 DEFAULT_URL = "ws://127.0.0.1:9090"
 

@@ -8,7 +8,6 @@ from typing import Any
 
 from msgs.runtime import Service
 
-from .._cli_format import to_yaml
 from ..exceptions import (
     ServiceError,
 )
@@ -28,6 +27,7 @@ from .common import (
     type_parts,
     with_session,
 )
+from .format import to_yaml
 
 
 async def cmd_service_list(args: argparse.Namespace, out: Out) -> int:

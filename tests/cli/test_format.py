@@ -11,7 +11,7 @@ import yaml
 from hypothesis import given
 from hypothesis import strategies as st
 
-from roslibpy_lite._cli_format import ArgumentError, have_yaml, parse_values, to_yaml
+from roslibpy_lite.cli.format import ArgumentError, have_yaml, parse_values, to_yaml
 
 
 def test_parse_values_reads_yaml_flow_and_block_mappings() -> None:

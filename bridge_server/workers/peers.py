@@ -2,7 +2,7 @@
 
 With ``--workers N`` every worker's status page and ``/metrics`` show the whole bridge: the
 web routes (:mod:`bridge_server.http.web`) merge this worker's snapshot with the ones fetched
-here. The supervisor itself is :mod:`bridge_server.http.workers`.
+here. The supervisor itself is :mod:`bridge_server.workers.supervisor`.
 """
 
 from __future__ import annotations
@@ -15,7 +15,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
-    from .web import Web
+    from ..http.web import Web
 
 __all__ = ["PEER_TIMEOUT", "serve_peer_socket"]
 
