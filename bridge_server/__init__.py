@@ -12,6 +12,7 @@ Run it with ``python -m bridge_server --host 127.0.0.1 --port 9090`` (or the
   ``publish`` envelopes);
 - :mod:`bridge_server.zenoh`: the relay tier (the robot's exporter, the relay's Graph,
   ``roslibpy-lite-relay``), without ROS;
-- :mod:`bridge_server.http`: the status page, metrics, health, peers, workers;
+- :mod:`bridge_server.http`: the status page, metrics, health, the relay's pages;
+- :mod:`bridge_server.workers`: ``--workers``, several bridge processes behind one port;
 - :mod:`bridge_server.security`: handshake, gate, credentials, roles, names.
 """

@@ -31,6 +31,7 @@ from ._exit import ends_process
 try:
     from . import security
     from .interfaces import BridgeError
+    from .security.options import MAX_MESSAGE_SIZE
     from .session.resume import ResumeConfig
     from .session.session import DEFAULT_QUEUE_LENGTH, SessionConfig
     from .zenoh import link as zenoh_link
@@ -62,9 +63,9 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p.add_argument(
         "--max-message-size",
         type=int,
-        default=16 * 1024 * 1024,
-        help="largest inbound frame in bytes (default 16 MiB; raise it for large point "
-        "clouds or maps)",
+        default=MAX_MESSAGE_SIZE,
+        help=f"largest inbound frame in bytes (default {MAX_MESSAGE_SIZE // 2**20} MiB; raise it "
+        "for large point clouds or maps)",
     )
     p.add_argument(
         "--keepalive-interval",
@@ -135,8 +136,8 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p.add_argument(
         "--call-timeout",
         type=float,
-        default=5.0,
-        help="default call_service timeout in seconds (default 5)",
+        default=SessionConfig.call_timeout,
+        help=f"default call_service timeout in seconds (default {SessionConfig.call_timeout:g})",
     )
     p.add_argument(
         "--served-call-timeout",
@@ -173,7 +174,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     )
     p.add_argument(
         "--topic-reader",
-        choices=("auto", "thread"),  # ros_reader.READERS (which imports rclpy)
+        choices=("auto", "thread"),  # rclpy_graph.reader.READERS (that module imports rclpy)
         default="auto",
         help="what waits on the topics: auto (the middleware wakes the event loop itself, on "
         "Linux x86-64 and AArch64 with rmw_fastrtps; a thread elsewhere) or thread "

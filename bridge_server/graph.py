@@ -4,9 +4,12 @@ The sessions (:mod:`bridge_server.session`), the status page (:mod:`bridge_serve
 and the ``/rosapi/*`` services hold a :class:`Graph` and never an rclpy object: what
 they do to ROS (subscribe, publish, call and serve services, send and serve action
 goals, ask the graph what is there, read type definitions) goes through these
-methods. :class:`bridge_server.rclpy_graph.node.RosNode` is the Graph on rclpy, the
-only place that imports rclpy; another Graph (on Zenoh, for a relay where there is
-no ROS) can take its place without the sessions knowing.
+methods. Two Graphs take that place without the sessions knowing which:
+:class:`bridge_server.rclpy_graph.graph.RclpyGraph`, the Graph on rclpy (the bridge's node,
+:class:`~bridge_server.rclpy_graph.node.RosNode`, with its executor thread; the
+``rclpy_graph`` package is the only place that imports rclpy), and
+:class:`bridge_server.zenoh.graph.ZenohGraph`, the relay's Graph on Zenoh, where there is
+no ROS.
 
 Types are opaque handles: :meth:`Graph.resolve_message` (and its ``srv``/``action``
 siblings) give whatever the Graph uses for a type, and the session only passes them
@@ -30,6 +33,7 @@ if TYPE_CHECKING:
 __all__ = [
     "ACTIVE",
     "CANCEL_ANSWERS",
+    "PARAMETER_EVENTS",
     "ActionClient",
     "Converter",
     "GoalListener",
@@ -63,6 +67,9 @@ CANCEL_ANSWERS = {
     3: "it had already finished",
 }
 """``CancelGoal`` return codes other than 0 (ERROR_NONE), as text."""
+
+PARAMETER_EVENTS = "/parameter_events"
+"""The topic on which every node reports changes to its parameters."""
 
 _PARAMETER_FIELDS = {
     1: "bool_value", 2: "integer_value", 3: "double_value", 4: "string_value",

@@ -1,8 +1,9 @@
 """The vocabulary every ROS side of the bridge shares: type names, the error roots, request args.
 
-Nothing here imports ROS: the session layer, security and any :class:`~bridge_server.graph.Graph`
-(the rclpy one in :mod:`bridge_server.rclpy_graph`, a Zenoh one later) use the same names
-and raise the same errors.
+Nothing here imports ROS: the session layer, security and each
+:class:`~bridge_server.graph.Graph` (the rclpy one in :mod:`bridge_server.rclpy_graph`, the
+relay's on Zenoh in :mod:`bridge_server.zenoh.graph`) use the same names and raise the same
+errors.
 
 Type strings arrive from clients in two spellings, ``pkg/Type`` and
 ``pkg/<kind>/Type`` with kind one of ``msg``, ``srv``, ``action``. Both are

@@ -37,6 +37,7 @@ from .http.metrics import BridgeMetrics
 from .http.web import Web
 from .http.web_access import WebAccess
 from .security import Security, SecurityConfig
+from .security.options import MAX_MESSAGE_SIZE
 from .session.actions import ActionClients, SessionActions
 from .session.ownership import Ownership
 from .session.resume import ResumeConfig, SentFrames, SessionStore
@@ -61,13 +62,13 @@ class BridgeConfig:
 
     host: str = "127.0.0.1"
     port: int = 9090
-    max_message_size: int = 16 * 1024 * 1024
+    max_message_size: int = MAX_MESSAGE_SIZE
     write_limit: int = 256 * 1024
     compression: bool = False
     publisher_grace: float = 2.0
     node_name: str = field(default_factory=lambda: default_node_name())  # see default_node_name
     refresh_interval: float = 0.5
-    topic_reader: str = "auto"  # who waits on the topics (ros_reader.open_reader)
+    topic_reader: str = "auto"  # who waits on the topics (rclpy_graph.reader.open_reader)
     keepalive_interval: float = keepalive.DEFAULT_INTERVAL  # 0: no keepalive of our own
     keepalive_timeout: float = keepalive.DEFAULT_TIMEOUT
     session: SessionConfig = field(default_factory=SessionConfig)

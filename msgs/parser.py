@@ -25,7 +25,10 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
 
+from ._primitives import FLOAT32_MAX, INTEGER_RANGES
+
 __all__ = [
+    "FLOAT32_MAX",
     "FLOAT_TYPES",
     "INTEGER_RANGES",
     "PRIMITIVE_TYPES",
@@ -44,25 +47,9 @@ __all__ = [
     "parse_service",
 ]
 
-#: Inclusive value range of every integer primitive (``byte`` and ``char`` are octets).
-INTEGER_RANGES: dict[str, tuple[int, int]] = {
-    "byte": (0, 255),
-    "char": (0, 255),
-    "int8": (-(2**7), 2**7 - 1),
-    "uint8": (0, 2**8 - 1),
-    "int16": (-(2**15), 2**15 - 1),
-    "uint16": (0, 2**16 - 1),
-    "int32": (-(2**31), 2**31 - 1),
-    "uint32": (0, 2**32 - 1),
-    "int64": (-(2**63), 2**63 - 1),
-    "uint64": (0, 2**64 - 1),
-}
 FLOAT_TYPES = frozenset({"float32", "float64"})
 STRING_TYPES = frozenset({"string", "wstring"})
 PRIMITIVE_TYPES = frozenset({"bool", *INTEGER_RANGES, *FLOAT_TYPES, *STRING_TYPES})
-
-#: Largest finite float32 magnitude.
-FLOAT32_MAX = 3.4028234663852886e38
 
 # The names rclpy's get_fields_and_field_types() uses for the .msg primitive names.
 _IDL_NAMES = {

@@ -56,6 +56,8 @@ from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any, ClassVar, Self
 
+from ._primitives import FLOAT32_MAX, INTEGER_RANGES, SIZED_INTEGER_RANGES
+
 __all__ = [
     "Action",
     "Find",
@@ -73,20 +75,10 @@ __all__ = [
     "register",
 ]
 
-_INT_RANGES: dict[str, tuple[int, int]] = {
-    "octet": (0, 255),
-    "int8": (-(2**7), 2**7 - 1),
-    "uint8": (0, 2**8 - 1),
-    "int16": (-(2**15), 2**15 - 1),
-    "uint16": (0, 2**16 - 1),
-    "int32": (-(2**31), 2**31 - 1),
-    "uint32": (0, 2**32 - 1),
-    "int64": (-(2**63), 2**63 - 1),
-    "uint64": (0, 2**64 - 1),
-}
+_INT_RANGES = {"octet": INTEGER_RANGES["byte"], **SIZED_INTEGER_RANGES}
+"""The integer types by rclpy's names for them."""
 # The .msg spelling of rclpy's type names, for error messages.
 _MSG_NAMES = {"boolean": "bool", "octet": "byte", "float": "float32", "double": "float64"}
-_FLOAT32_MAX = 3.4028234663852886e38
 _REPR_LIMIT = 40
 _MISSING = object()
 
@@ -200,7 +192,7 @@ def _float_conv(idl: str, wire: bool) -> _Conv:
             result = float(value)
         except OverflowError:
             raise ValidationError("", expected, f"{value} is out of range") from None
-        if single and math.isfinite(result) and abs(result) > _FLOAT32_MAX:
+        if single and math.isfinite(result) and abs(result) > FLOAT32_MAX:
             raise ValidationError("", expected, f"{value} is out of the float32 range")
         return result
 
@@ -285,7 +277,7 @@ def _fast_float(values: list[Any] | tuple[Any, ...], single: bool) -> bool:
         return False
     if single and values:
         top = max(map(abs, values))
-        return not (math.isfinite(top) and top > _FLOAT32_MAX)
+        return not (math.isfinite(top) and top > FLOAT32_MAX)
     return True
 
 
@@ -486,7 +478,7 @@ def _fast_test(idl: str, var: str) -> str | None:
     if idl == "double":
         return f"type({var}) is float"
     if idl == "float":
-        return f"(type({var}) is float and -{_FLOAT32_MAX!r} <= {var} <= {_FLOAT32_MAX!r})"
+        return f"(type({var}) is float and -{FLOAT32_MAX!r} <= {var} <= {FLOAT32_MAX!r})"
     if idl in ("string", "wstring"):
         return f"type({var}) is str"
     if idl in ("sequence<uint8>", "sequence<octet>"):

@@ -28,7 +28,7 @@ from msgs.runtime import Message as MsgsMessage
 from msgs.runtime import Service as MsgsService
 from msgs.runtime import lookup
 
-from ..graph import parameter_value
+from ..graph import PARAMETER_EVENTS, parameter_value
 from ..interfaces import BridgeError
 from .wire import Channel
 
@@ -47,7 +47,6 @@ REFRESH_S = 0.5
 
 CLOCK = "/clock"
 """The topic whose ticks are the ``time`` op (to clients whose role may subscribe it)."""
-PARAMETER_EVENTS = "/parameter_events"
 _CLOCK = struct.Struct("<iI")  # builtin_interfaces/Time after the 4-byte CDR header
 
 

@@ -107,6 +107,7 @@ from bridge_server.interfaces import MISSING as _MISSING
 from bridge_server.interfaces import ConversionError, args_mapping
 from bridge_server.interfaces import describe as _describe
 from bridge_server.rclpy_graph.types import type_name_of
+from msgs._primitives import FLOAT32_MAX, SIZED_INTEGER_RANGES
 
 __all__ = [
     "ConversionError",
@@ -125,19 +126,9 @@ __all__ = [
 
 now_ns: Callable[[], int] = time.time_ns
 
-_FLT_MAX: Final = 3.4028234663852886e38
 _LITTLE: Final = sys.byteorder == "little"
 
-_INT_RANGES: Final[dict[str, tuple[int, int]]] = {
-    "int8": (-(2**7), 2**7 - 1),
-    "uint8": (0, 2**8 - 1),
-    "int16": (-(2**15), 2**15 - 1),
-    "uint16": (0, 2**16 - 1),
-    "int32": (-(2**31), 2**31 - 1),
-    "uint32": (0, 2**32 - 1),
-    "int64": (-(2**63), 2**63 - 1),
-    "uint64": (0, 2**64 - 1),
-}
+_INT_RANGES: Final = SIZED_INTEGER_RANGES
 # IDL names of the non-explicit integer types map onto explicit ones.
 _INT_ALIASES: Final = {
     "short": "int16",
@@ -319,7 +310,7 @@ def _float_checker(name: str) -> Callable[[Any, str], float]:
                 ) from None
         else:
             raise ConversionError(path, name, v)
-        if f32 and abs(f) > _FLT_MAX and f not in (float("inf"), float("-inf")):
+        if f32 and abs(f) > FLOAT32_MAX and f not in (float("inf"), float("-inf")):
             raise ConversionError(path, name, v, f"value {f!r} out of range for float32")
         return f
 
@@ -867,7 +858,7 @@ class Converter:
             elif e == "float64":
                 cond = "type(v) is float"
             elif e == "float32":
-                cond = f"type(v) is float and -{_FLT_MAX!r} <= v <= {_FLT_MAX!r}"
+                cond = f"type(v) is float and -{FLOAT32_MAX!r} <= v <= {FLOAT32_MAX!r}"
             elif e == "bool":
                 cond = "v is True or v is False"
             elif e == "string" and f.bound is None:

@@ -562,7 +562,7 @@ class RosNode:
         self.loop = loop
         self.name = name
         self.topic_reader = topic_reader
-        """Who waits on the topics: ``auto`` or ``thread`` (:func:`ros_reader.open_reader`)."""
+        """Who waits on the topics: ``auto`` or ``thread`` (:func:`.reader.open_reader`)."""
         self.context = Context()
         self._inbox: deque[tuple[Callable[..., None], tuple[Any, ...]]] = deque()
         self._scheduled = False
@@ -617,7 +617,7 @@ class RosNode:
         client made while the executor waits: ros2/rclpy#1589, #1455), surfaces
         here as an exception from ``spin``. Spinning goes on after it, or every
         client would lose ROS for good; the error is logged with its traceback,
-        at most once per :data:`ros_reader.ERROR_LOG_INTERVAL` seconds (the rest counted).
+        at most once per :data:`.reader.ERROR_LOG_INTERVAL` seconds (the rest counted).
         """
         while True:
             try:

@@ -11,6 +11,7 @@ from ..interfaces import BridgeError
 from .credentials import is_loopback
 
 __all__ = [
+    "MAX_MESSAGE_SIZE",
     "SecurityConfig",
     "add_arguments",
     "check_readable",
@@ -19,6 +20,11 @@ __all__ = [
     "parse_origins",
     "user_name",
 ]
+
+MAX_MESSAGE_SIZE = 16 * 1024 * 1024
+"""The largest inbound frame in bytes by default (``--max-message-size``, of the bridge and
+the relay): a larger one closes the connection (1009), and the pieces of a client's
+incomplete ops are held to it all together."""
 
 
 @dataclass

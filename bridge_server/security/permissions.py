@@ -42,6 +42,7 @@ from typing import Any
 
 from roslibpy_lite.protocol import ops
 
+from ..graph import PARAMETER_EVENTS
 from ..interfaces import BridgeError
 
 __all__ = [
@@ -192,7 +193,6 @@ PARAMETER_SERVICES = (
     "set_parameters_atomically",
 )
 """The services every rclpy/rclcpp node offers under its own name for its parameters."""
-PARAMETER_EVENTS = "/parameter_events"
 
 
 def hidden_requirement(capability: str, name: str) -> tuple[str, str]:

@@ -65,12 +65,7 @@ def _runtime_imports(path: Path, name: str, modules: set[str]) -> set[str]:
 
 
 def _graph(type_level: bool = False) -> dict[str, set[str]]:
-    files = {
-        _module_name(p): p
-        for pkg in PACKAGES
-        for p in (ROOT / pkg).rglob("*.py")
-        if "generated" not in p.parts
-    }
+    files = {_module_name(p): p for pkg in PACKAGES for p in (ROOT / pkg).rglob("*.py")}
     modules = set(files)
     graph = {name: _imports(path, name, modules, type_level) for name, path in files.items()}
     for name in graph:  # a package's __init__ is not a cycle partner of its own submodules
