@@ -5,6 +5,7 @@
 - ``ros_node``: an rclpy node in this process, spun by a background executor.
 - ``topic``: a name no other test uses (for topics and services).
 - ``ws_connect``: raw websocket peers for wire-level tests (closed after the test).
+- ``client``: a roslibpy_lite client connected to ``bridge`` (closed after the test).
 
 DDS stays on loopback and every run gets its own ROS_DOMAIN_ID, set here
 before anything can initialise rclpy.
@@ -23,7 +24,7 @@ import subprocess
 import sys
 import threading
 from collections.abc import AsyncIterator, Callable, Iterator
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import pytest
 
@@ -35,6 +36,9 @@ os.environ.setdefault(
 )
 
 from tests.helpers import BridgeProcess, WireClient, open_wire, settle_executor, spin_executor
+
+if TYPE_CHECKING:
+    from roslibpy_lite import Client
 
 _names = itertools.count()
 
@@ -254,3 +258,12 @@ async def ws_connect(bridge: BridgeProcess) -> AsyncIterator[Callable[..., Any]]
     yield connect
     for client in opened:
         await client.close()
+
+
+@pytest.fixture
+async def client(bridge: BridgeProcess) -> AsyncIterator[Client]:
+    """A client connected to the session's bridge, closed after the test."""
+    import roslibpy_lite
+
+    async with roslibpy_lite.connect(bridge.url) as ros:
+        yield ros

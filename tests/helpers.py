@@ -12,6 +12,7 @@ import os
 import re
 import shutil
 import signal
+import socket
 import subprocess
 import sys
 import tempfile
@@ -36,6 +37,24 @@ def ros_env(**extra: str) -> dict[str, str]:
     env["PYTHONUNBUFFERED"] = "1"
     env.update(extra)
     return env
+
+
+def free_port() -> int:
+    """A TCP port nobody listens on now on 127.0.0.1 (for a program that reports no bound
+    port, or a test that must know it first; the same number is free on a namespace's own
+    address too)."""
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def ros_image(width: int, height: int, encoding: str, data: bytes, frame_id: str = "") -> Any:
+    """An rclpy ``sensor_msgs/msg/Image`` of 3-byte pixels (``rgb8``, ``bgr8``)."""
+    from sensor_msgs.msg import Image
+
+    msg = Image(height=height, width=width, encoding=encoding, step=width * 3, data=data)
+    msg.header.frame_id = frame_id
+    return msg
 
 
 def wait_until(predicate: Callable[[], Any], timeout: float = 10.0, what: str = "condition") -> Any:

@@ -100,8 +100,7 @@ def test_relay_example_runs_through_a_relay(ros_node: Any, tmp_path: Path) -> No
     import subprocess
     import sys
 
-    from tests.helpers import ros_env, wait_until
-    from tests.relay.support import free_port
+    from tests.helpers import free_port, ros_env, wait_until
     from tests.security.support import make_auth_file
 
     certs_args, relay_args, robot_args = _relay_commands()

@@ -9,7 +9,6 @@ import signal
 import subprocess
 import sys
 import time
-from collections.abc import AsyncIterator
 from pathlib import Path
 from typing import Any
 
@@ -28,16 +27,10 @@ from msgs.dynamic import full_text
 from msgs.sensor_msgs.msg import Imu
 from roslibpy_lite import Client, MockRos
 from roslibpy_lite.bag import Recorder, info, play, read
-from tests.helpers import BridgeProcess
+from tests.helpers import BridgeProcess, ros_image
 
 W, H = 64, 48
 
-
-@pytest.fixture
-async def client(bridge: BridgeProcess) -> AsyncIterator[Client]:
-    """A client on the session's bridge."""
-    async with roslibpy_lite.connect(bridge.url) as ros:
-        yield ros
 
 
 def _theirs(path: Path, topics: list[str] | None = None) -> list[Any]:
@@ -48,10 +41,7 @@ def _theirs(path: Path, topics: list[str] | None = None) -> list[Any]:
 
 
 def _image(i: int) -> RosImage:
-    msg = RosImage(height=H, width=W, encoding="rgb8", step=W * 3)
-    msg.header.frame_id = f"cam{i}"
-    msg.data = bytes((i + k) % 251 for k in range(W * H * 3))
-    return msg
+    return ros_image(W, H, "rgb8", bytes((i + k) % 251 for k in range(W * H * 3)), f"cam{i}")
 
 
 def _imu(i: int) -> RosImu:

@@ -24,8 +24,7 @@ from sensor_msgs.msg import Image as RosImage
 from websockets.asyncio.server import ServerConnection, serve
 
 from roslibpy_lite.bag import info, read
-from tests.helpers import ROOT, BridgeProcess, ros_env
-from tests.relay.support import free_port
+from tests.helpers import ROOT, BridgeProcess, free_port, ros_env
 
 SIGNALS = {"sigint": signal.SIGINT, "sigterm": signal.SIGTERM}
 RECORDED = re.compile(r"^recorded (\S+): (\d+) topics, (\d+) msgs")

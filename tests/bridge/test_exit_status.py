@@ -14,9 +14,8 @@ from pathlib import Path
 
 import pytest
 
-from tests.helpers import ROOT, ros_env
+from tests.helpers import ROOT, free_port, ros_env
 from tests.relay.procs import Proc
-from tests.relay.support import free_port
 
 ABORT = "terminate called without an active exception"
 BATCH = 4

@@ -112,12 +112,6 @@ async def test_mock_bad_feedback_and_result_raise_in_the_handler() -> None:
 # -- rclpy peers through the real bridge --------------------------------------------------------
 
 
-@pytest.fixture
-async def client(bridge: BridgeProcess) -> AsyncIterator[Client]:
-    """The client on the session's bridge."""
-    async with roslibpy_lite.connect(bridge.url) as ros:
-        yield ros
-
 
 async def listed(client: Client, name: str, timeout: float = 20.0) -> None:
     """Wait until the bridge's graph lists the action server ``name`` (discovery has no event)."""

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import asyncio
 import warnings
-from collections.abc import AsyncIterator, Callable
+from collections.abc import Callable
 from typing import Any
 
 import pytest
@@ -13,7 +13,6 @@ import roslibpy_lite
 from msgs.sensor_msgs.msg import Image
 from msgs.std_msgs.msg import Float32MultiArray
 from roslibpy_lite import Client, RosTimeoutError, Subscription
-from tests.helpers import BridgeProcess
 
 with warnings.catch_warnings():
     warnings.filterwarnings("ignore", "module 'sre_.*' is deprecated", DeprecationWarning)
@@ -22,15 +21,11 @@ with warnings.catch_warnings():
 from sensor_msgs.msg import Image as RosImage
 from std_msgs.msg import Float32MultiArray as RosFloats
 
+from tests.helpers import ros_image
+
 W, H = 64, 48
 PIXELS = bytes(i % 251 for i in range(W * H * 3))
 
-
-@pytest.fixture
-async def client(bridge: BridgeProcess) -> AsyncIterator[Client]:
-    """A client on the session's bridge."""
-    async with roslibpy_lite.connect(bridge.url) as ros:
-        yield ros
 
 
 async def first_message(publish: Callable[[], None], sub: Subscription[Any], timeout: float = 15) -> Any:
@@ -45,20 +40,13 @@ async def first_message(publish: Callable[[], None], sub: Subscription[Any], tim
                 raise
 
 
-def _image() -> Any:
-    msg = RosImage(height=H, width=W, encoding="rgb8", step=W * 3)
-    msg.header.frame_id = "cam"
-    msg.data = PIXELS
-    return msg
-
-
 @pytest.mark.parametrize("compression", ["none", "cbor", "cbor-raw"])
 async def test_image_arrives_typed(client: Client, ros_node: Any, topic: str, compression: str) -> None:
     """An rclpy rgb8 image reaches a typed subscription with its bytes intact (JSON, CBOR, and
     cbor-raw: the CDR bytes from ROS, decoded here)."""
     pub = ros_node.create_publisher(RosImage, topic, 10)
     async with client.subscribe(topic, Image, compression=compression) as sub:
-        msg = await first_message(lambda: pub.publish(_image()), sub)
+        msg = await first_message(lambda: pub.publish(ros_image(W, H, "rgb8", PIXELS, "cam")), sub)
     assert isinstance(msg, Image)
     assert (msg.width, msg.height, msg.encoding, msg.header.frame_id) == (W, H, "rgb8", "cam")
     assert msg.data == PIXELS
@@ -71,13 +59,13 @@ async def test_image_as_dict_json_is_base64_cbor_is_bytes(
     here) as over CBOR."""
     pub = ros_node.create_publisher(RosImage, topic, 10)
     async with client.subscribe(topic, "sensor_msgs/msg/Image") as as_json:
-        msg = await first_message(lambda: pub.publish(_image()), as_json)
+        msg = await first_message(lambda: pub.publish(ros_image(W, H, "rgb8", PIXELS, "cam")), as_json)
     assert type(msg["data"]) is bytes and msg["data"] == PIXELS
     # Another topic: frames of the JSON subscription may still be in flight on this one.
     pub2 = ros_node.create_publisher(RosImage, topic + "_cbor", 10)
     async with client.subscribe(topic + "_cbor", "sensor_msgs/msg/Image",
                                 compression="cbor") as as_cbor:
-        msg = await first_message(lambda: pub2.publish(_image()), as_cbor)
+        msg = await first_message(lambda: pub2.publish(ros_image(W, H, "rgb8", PIXELS, "cam")), as_cbor)
     assert msg["data"] == PIXELS
 
 
@@ -94,7 +82,7 @@ async def test_fragmented_messages_are_reassembled(client: Client, ros_node: Any
     """With fragment_size the bridge splits each image into fragments; the client reassembles them."""
     pub = ros_node.create_publisher(RosImage, topic, 10)
     async with client.subscribe(topic, Image, fragment_size=1000) as sub:
-        msg = await first_message(lambda: pub.publish(_image()), sub)
+        msg = await first_message(lambda: pub.publish(ros_image(W, H, "rgb8", PIXELS, "cam")), sub)
     assert msg.data == PIXELS
     assert client._ws._protocol.pending_fragments == 0
 
@@ -109,7 +97,7 @@ async def test_cbor_raw_gives_what_cbor_gives(client: Client, ros_node: Any, top
     imu.angular_velocity.z = -1.25
     imu.linear_acceleration_covariance = [float(i) for i in range(9)]
     for ros_cls, msg, type_name in ((RosImu, imu, "sensor_msgs/msg/Imu"),
-                                    (RosImage, _image(), "sensor_msgs/msg/Image")):
+                                    (RosImage, ros_image(W, H, "rgb8", PIXELS, "cam"), "sensor_msgs/msg/Image")):
         name = f"{topic}_{ros_cls.__name__}"
         pub = ros_node.create_publisher(ros_cls, name, 10)
         got = []

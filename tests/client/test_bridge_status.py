@@ -3,20 +3,10 @@
 from __future__ import annotations
 
 import asyncio
-from collections.abc import AsyncIterator
 
 import pytest
 
-import roslibpy_lite
 from roslibpy_lite import Client, RemoteError, StatusError
-from tests.helpers import BridgeProcess
-
-
-@pytest.fixture
-async def client(bridge: BridgeProcess) -> AsyncIterator[Client]:
-    """A client on the session's bridge."""
-    async with roslibpy_lite.connect(bridge.url) as ros:
-        yield ros
 
 
 async def test_refused_subscribe_fails_its_iteration(client: Client, topic: str) -> None:

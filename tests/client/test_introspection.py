@@ -3,7 +3,6 @@ parameters, with the types ROS gives them; the blocking client's ``graph`` says 
 
 from __future__ import annotations
 
-from collections.abc import AsyncIterator
 from typing import Any
 
 import pytest
@@ -12,7 +11,6 @@ from std_msgs.msg import Int32, String
 from std_srvs.srv import SetBool
 from test_msgs.action import Fibonacci
 
-import roslibpy_lite
 from roslibpy_lite import Client, sync
 from roslibpy_lite.capabilities.introspection import (
     GraphAction,
@@ -22,13 +20,6 @@ from roslibpy_lite.capabilities.introspection import (
 )
 from tests.conformance.test_introspection import until
 from tests.helpers import BridgeProcess, wait_until
-
-
-@pytest.fixture
-async def client(bridge: BridgeProcess) -> AsyncIterator[Client]:
-    """The client on the session's bridge."""
-    async with roslibpy_lite.connect(bridge.url) as ros:
-        yield ros
 
 
 @pytest.fixture

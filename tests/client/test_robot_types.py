@@ -4,7 +4,6 @@ classes built here, raw subscriptions with the robot's CDR bytes; MockRos with t
 from __future__ import annotations
 
 import time
-from collections.abc import AsyncIterator
 from typing import Any
 
 import pytest
@@ -16,15 +15,7 @@ import roslibpy_lite
 from msgs.runtime import Message
 from roslibpy_lite import Client, MockRos, RawMessage, ServiceError, UsageError
 from tests.client.test_bridge_formats import first_message
-from tests.helpers import BridgeProcess
 from tests.msgs.test_dynamic import _definition
-
-
-@pytest.fixture
-async def client(bridge: BridgeProcess) -> AsyncIterator[Client]:
-    """A client on the session's bridge."""
-    async with roslibpy_lite.connect(bridge.url) as ros:
-        yield ros
 
 
 def _ros_status() -> RosStatus:

@@ -26,18 +26,14 @@ from sensor_msgs.msg import Image as RosImage
 from sensor_msgs.msg import PointCloud2 as RosCloud
 from sensor_msgs.msg import PointField as RosField
 
+from tests.helpers import ros_image
+
 H, W = 24, 32
 PIXELS = np.random.default_rng(3).integers(0, 255, size=(H, W, 3), dtype=np.uint8)
 POINTS = np.zeros(H * W, dtype=[("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("ring", "<u2")])
 POINTS["x"] = np.arange(H * W) * 0.5
 POINTS["z"] = -1.25
 POINTS["ring"] = np.arange(H * W) % 16
-
-
-def _image() -> Any:
-    msg = RosImage(height=H, width=W, encoding="bgr8", step=W * 3)
-    msg.data = PIXELS.tobytes()
-    return msg
 
 
 def _cloud() -> Any:
@@ -63,7 +59,7 @@ async def test_images_and_clouds_from_rclpy_are_the_same_arrays(
     image_type: Any = Image if typed else "sensor_msgs/msg/Image"
     cloud_type: Any = PointCloud2 if typed else "sensor_msgs/msg/PointCloud2"
     async with client.subscribe(f"{topic}/image", image_type, compression=compression) as sub:
-        image = await first_message(lambda: image_pub.publish(_image()), sub)
+        image = await first_message(lambda: image_pub.publish(ros_image(W, H, "bgr8", PIXELS.tobytes())), sub)
     async with client.subscribe(f"{topic}/cloud", cloud_type, compression=compression) as sub:
         cloud = await first_message(lambda: cloud_pub.publish(_cloud()), sub)
     pixels = to_numpy(image)

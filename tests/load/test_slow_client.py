@@ -14,6 +14,7 @@ from sensor_msgs.msg import Image
 from std_msgs.msg import String
 
 from tests.bridge.support import roundtrip, wait_subscribers
+from tests.helpers import ros_image
 from tests.load.support import StalledClient, qos
 
 pytestmark = pytest.mark.asyncio
@@ -22,13 +23,6 @@ IMAGES = 500
 RATE_HZ = 100
 MB = 1024 * 1024
 BOUND_MB = 300  # 500 images of 0.9 MB kept for the stalled client would be ~440 MB
-
-
-def _image() -> Image:
-    msg = Image()
-    msg.height, msg.width, msg.encoding, msg.step = 480, 640, "rgb8", 640 * 3
-    msg.data = bytes(range(256)) * (640 * 480 * 3 // 256)
-    return msg
 
 
 class Flood:
@@ -89,7 +83,7 @@ async def _flood(make_bridge: Any, ws_connect: Any, ros_node: Any, topic: str) -
                         out.notes.append(op)
 
         tasks = [asyncio.create_task(read_images()), asyncio.create_task(read_strings())]
-        msg = _image()
+        msg = ros_image(640, 480, "rgb8", bytes(range(256)) * (640 * 480 * 3 // 256))
         start = peak = rss().rss
         try:
             for i in range(IMAGES):

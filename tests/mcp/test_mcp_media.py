@@ -18,15 +18,10 @@ from rclpy.callback_groups import ReentrantCallbackGroup
 from sensor_msgs.msg import CompressedImage, Image
 from test_msgs.action import Fibonacci
 
-from tests.helpers import BridgeProcess
+from tests.helpers import BridgeProcess, ros_image
 from tests.mcp.support import mcp_stdio, text, until_listed, until_tool
 
 PIXELS = np.arange(48 * 64 * 3, dtype=np.uint32).reshape(48, 64, 3).__mod__(251).astype(np.uint8)
-
-
-def _image(encoding: str, pixels: np.ndarray[Any, Any]) -> Image:
-    return Image(height=48, width=64, encoding=encoding, is_bigendian=0, step=64 * 3,
-                 data=pixels.tobytes())
 
 
 def _decoded(result: Any, mime: str = "image/png") -> np.ndarray[Any, Any]:
@@ -55,8 +50,8 @@ async def test_an_image_topic_reads_as_an_image(
     png = _png(smooth)
 
     def tick() -> None:
-        rgb.publish(_image("rgb8", PIXELS))
-        bgr.publish(_image("bgr8", np.ascontiguousarray(PIXELS[..., ::-1])))
+        rgb.publish(ros_image(64, 48, "rgb8", PIXELS.tobytes()))
+        bgr.publish(ros_image(64, 48, "bgr8", np.ascontiguousarray(PIXELS[..., ::-1]).tobytes()))
         packed.publish(CompressedImage(format="png", data=png))
 
     ros_node.create_timer(0.05, tick)

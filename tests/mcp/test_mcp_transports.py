@@ -14,9 +14,9 @@ from typing import Any
 
 from mcp import Client
 
-from tests.helpers import ROOT, BridgeProcess, ros_env
+from tests.helpers import ROOT, BridgeProcess, free_port, ros_env
 from tests.mcp.support import mcp_stdio, serve_setbool, text, tool_names, until_listed, until_tool
-from tests.relay.support import free_port, relay_with_auth
+from tests.relay.support import relay_with_auth
 
 
 @contextlib.contextmanager

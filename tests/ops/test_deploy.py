@@ -16,7 +16,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.helpers import ROOT, ros_env
+from tests.helpers import ROOT, free_port, ros_env
 
 DEPLOY = ROOT / "deploy"
 UNIT = DEPLOY / "roslibpy-lite-bridge.service"
@@ -191,7 +191,7 @@ def test_dockerfile_healthcheck_follows_the_port_and_scheme(tmp_path: Path) -> N
     health = json.loads(next(rest for w, rest in steps if w == "HEALTHCHECK").partition("CMD")[2])
     bin_dir = Path(sys.executable).parent
     files = _docker_files(tmp_path)
-    argv = [str(bin_dir / entry[0]), *[files.get(a, a) for a in cmd], "--port", str(_free_port())]
+    argv = [str(bin_dir / entry[0]), *[files.get(a, a) for a in cmd], "--port", str(free_port())]
     result = _container_run(tmp_path, argv, [str(bin_dir / health[0]), *health[1:]])
     assert any("listening on wss://0.0.0.0:" in line for line in result["lines"]), result  # type: ignore[attr-defined]
     assert result["serving"] == [0, ""], result
@@ -259,12 +259,6 @@ def _unit_command(tmp: Path, port: int, with_log_dirs: bool = True) -> tuple[lis
     return argv, env
 
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
-
-
 @contextlib.contextmanager
 def _serving(argv: list[str], env: dict[str, str], cwd: Path) -> Iterator[subprocess.Popen[str]]:
     """``argv`` (the unit's command) running, once it printed its ready line (every worker
@@ -296,7 +290,7 @@ def test_unit_allows_the_address_families_its_command_uses(tmp_path: Path) -> No
 
     service = _unit_sections(UNIT.read_text())["Service"]
     allowed = set(" ".join(service["RestrictAddressFamilies"]).split())
-    argv, env = _unit_command(tmp_path, _free_port())
+    argv, env = _unit_command(tmp_path, free_port())
     with _serving(argv, env, tmp_path) as proc:
         top = psutil.Process(proc.pid)
         held = [c for p in [top, *top.children(recursive=True)]
@@ -318,7 +312,7 @@ def test_unit_command_serves_as_a_user_without_a_home(tmp_path: Path) -> None:
 
     import roslibpy_lite
 
-    port = _free_port()
+    port = free_port()
     argv, env = _unit_command(tmp_path, port)
     assert "--auth-file" in argv and "--certfile" in argv  # safe as shipped
     assert env["ROS_AUTOMATIC_DISCOVERY_RANGE"] == "LOCALHOST"
@@ -334,7 +328,7 @@ def test_unit_command_serves_as_a_user_without_a_home(tmp_path: Path) -> None:
         assert asyncio.run(call())["version"] == 2  # type: ignore[index]
         assert any((tmp_path / "log" / "roslibpy-lite-bridge").rglob("*")), "no ROS log files"
     (tmp_path / "bare").mkdir()
-    argv, env = _unit_command(tmp_path / "bare", _free_port(), with_log_dirs=False)
+    argv, env = _unit_command(tmp_path / "bare", free_port(), with_log_dirs=False)
     failed = subprocess.run(argv, cwd=tmp_path, env=env, capture_output=True, text=True,
                             timeout=60)
     assert failed.returncode != 0
@@ -395,7 +389,7 @@ def test_unit_install_steps_run_as_written(tmp_path: Path) -> None:
     assert stat.S_IMODE(auth.stat().st_mode) == 0o600 and auth.stat().st_uid == nobody.pw_uid
     assert stat.S_IMODE(etc.stat().st_mode) == 0o750 and etc.stat().st_gid == nobody.pw_gid
     assert (etc / "server.key").stat().st_uid == nobody.pw_uid
-    port = _free_port()
+    port = free_port()
     service = _unit_sections(UNIT.read_text())["Service"]
     argv = [here(a) for a in service["ExecStart"][0].split()]
     argv[argv.index("--port") + 1] = str(port)

@@ -11,7 +11,6 @@ import asyncio
 import contextlib
 import queue
 import re
-import socket
 from collections.abc import AsyncIterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -25,6 +24,8 @@ from bridge_server.zenoh.exporter import Exporter
 from bridge_server.zenoh.graph import TypeLimits
 from bridge_server.zenoh.link import ZenohOptions
 from bridge_server.zenoh.relay import Relay
+from tests.helpers import async_wait_until
+from tests.helpers import free_port as free_port  # where the relay tests have found it
 
 ROBOT = "robot1"
 ROBOT1_VIEWER = """
@@ -34,13 +35,6 @@ introspection = ["*"]
 robots = ["robot1"]
 """
 """An auth file's role that sees robot1 alone (a relay's ``robots`` limit)."""
-
-
-def free_port() -> int:
-    """A TCP port nobody listens on now (for the Zenoh router, which reports no bound port)."""
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 @dataclass
@@ -172,15 +166,9 @@ async def relay_serving(robots: tuple[str, ...], security: SecurityConfig | None
 
 
 async def until(predicate: Any, what: str, timeout: float = 15.0) -> Any:
-    """Await ``predicate()`` being truthy (Zenoh and ROS discovery have no event here)."""
-    deadline = asyncio.get_running_loop().time() + timeout
-    while True:
-        value = predicate()
-        if value:
-            return value
-        if asyncio.get_running_loop().time() > deadline:
-            raise AssertionError(f"timed out after {timeout} s waiting for {what}")
-        await asyncio.sleep(0.02)
+    """Await ``predicate()`` being truthy (Zenoh and ROS discovery have no event here):
+    :func:`tests.helpers.async_wait_until` with the relay tests' order and deadline."""
+    return await async_wait_until(predicate, timeout, what)
 
 
 @dataclass

@@ -43,7 +43,15 @@ import roslibpy_lite
 from roslibpy_lite.actions import GoalContext, GoalStatus
 from roslibpy_lite.bag import info, read
 from roslibpy_lite.handles import Publisher, Subscription
-from tests.helpers import CHROMEDRIVER, CHROMIUM, ROOT, WireClient, open_wire, ros_env
+from tests.helpers import (
+    CHROMEDRIVER,
+    CHROMIUM,
+    ROOT,
+    WireClient,
+    free_port,
+    open_wire,
+    ros_env,
+)
 from tests.relay.procs import Proc
 from tests.relay.test_browser import NODE_MODULES, heard_and_answered, roslib_in_chromium
 
@@ -181,12 +189,6 @@ def robot_netns() -> Iterator[Namespace]:
         _ip("netns", "del", ns.name)
 
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])  # the same number is free on the veth's address too
-
-
 @dataclass
 class Fleet:
     """The fleet's certificates, made by ``roslibpy-lite-relay certs`` as the relay guide's
@@ -306,7 +308,7 @@ def relay_and_robot(robot_netns: Namespace, tmp_path_factory: pytest.TempPathFac
     """The router relay here on the veth's address, a second relay here dialing it, the
     robot's bridge and node in the namespace, every Zenoh link mutual TLS with certificates
     from ``roslibpy-lite-relay certs``; both relays have the robot when it yields."""
-    zport, port, second_port = _free_port(), _free_port(), _free_port()
+    zport, port, second_port = free_port(), free_port(), free_port()
     fleet = Fleet.make(tmp_path_factory.mktemp("fleet") / "certs", robot_netns.router_ip)
     endpoint = f"tls/{robot_netns.router_ip}:{zport}"
     procs: list[Proc] = []

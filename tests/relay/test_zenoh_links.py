@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import queue
 import re
-import socket
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -21,15 +20,10 @@ trustme = pytest.importorskip("trustme")
 
 from bridge_server.interfaces import BridgeError  # noqa: E402
 from bridge_server.zenoh.link import ZenohOptions  # noqa: E402
+from tests.helpers import free_port  # noqa: E402
 from tests.relay.support import wait_matched  # noqa: E402
 
 DEADLINE = 10.0
-
-
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 @dataclass
@@ -64,7 +58,7 @@ def pki(tmp_path: Path) -> Pki:
 @pytest.fixture
 def router(pki: Pki) -> Iterator[tuple[Any, str]]:
     """A router asking for certificates: robot1 and robot2 on their own keys, relay on all."""
-    endpoint = f"tls/127.0.0.1:{_free_port()}"
+    endpoint = f"tls/127.0.0.1:{free_port()}"
     link = ZenohOptions(listen=[endpoint], tls_ca=str(pki.ca), tls_cert=str(pki.dir / "router.pem"),
                         tls_key=str(pki.dir / "router.key"), mtls=True,
                         robots=["robot1", "robot2"], relays=["relay"])
@@ -242,7 +236,7 @@ def test_a_robot_without_a_good_certificate_is_refused(
 
 
 def test_plain_tls_without_client_certificates(pki: Pki) -> None:
-    endpoint = f"tls/127.0.0.1:{_free_port()}"
+    endpoint = f"tls/127.0.0.1:{free_port()}"
     link = ZenohOptions(listen=[endpoint], tls_ca=str(pki.ca), tls_cert=str(pki.dir / "router.pem"),
                         tls_key=str(pki.dir / "router.key"))
     router = zenoh.open(link.config())
@@ -308,7 +302,7 @@ async def test_the_command_lines_hold_a_robot_to_its_name(pki: Pki) -> None:
     from tests.helpers import ros_env
     from tests.relay.procs import Proc
 
-    endpoint = f"tls/127.0.0.1:{_free_port()}"
+    endpoint = f"tls/127.0.0.1:{free_port()}"
     cert, key = (str(p) for p in pki.cert("robot1"))
     tls = ["--zenoh-tls-ca", str(pki.ca), "--zenoh-tls-cert"]
     relay = Proc([sys.executable, "-m", "bridge_server.zenoh.relay", "--port", "0",

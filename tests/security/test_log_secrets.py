@@ -17,9 +17,8 @@ from websockets.exceptions import InvalidStatus
 from bridge_server.security import redact
 from roslibpy_lite.protocol.ops import RECEIVED_HEADER, SESSION_HEADER
 from tests.bridge.support import roundtrip
-from tests.helpers import BridgeProcess, WireClient, ros_env
+from tests.helpers import BridgeProcess, WireClient, free_port, ros_env
 from tests.relay.procs import Proc
-from tests.relay.support import free_port
 from tests.security.support import AuthFile, wire
 
 
