@@ -1,7 +1,7 @@
 """What a stock client must be able to do through our bridge, with rclpy on the other side.
 
 Each function is one scenario, written once and run against every stock client
-(``test_roslibpy.py``, ``test_roslibjs.py``). ``peer`` is a started
+(``test_stock.py``, parametrized by the client). ``peer`` is a started
 :class:`~tests.peers.peer.PeerProcess`; ``node`` is the test's rclpy node.
 Waiting on the ROS graph (a publisher or subscriber being discovered) polls
 with a deadline, because discovery has no event; everything else waits on
