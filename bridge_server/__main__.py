@@ -29,6 +29,8 @@ from typing import TYPE_CHECKING
 from ._exit import ends_process
 
 try:
+    from roslibpy_lite.protocol import keepalive
+
     from . import security
     from .interfaces import BridgeError
     from .security.options import MAX_MESSAGE_SIZE
@@ -70,43 +72,45 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p.add_argument(
         "--keepalive-interval",
         type=float,
-        default=2.0,
-        help="seconds a client may be silent before the bridge pings it (default 2; 0: off)",
+        default=keepalive.DEFAULT_INTERVAL,
+        help="seconds a client may be silent before the bridge pings it "
+        f"(default {keepalive.DEFAULT_INTERVAL:g}; 0: off)",
     )
     p.add_argument(
         "--keepalive-timeout",
         type=float,
-        default=3.0,
+        default=keepalive.DEFAULT_TIMEOUT,
         help="further seconds without any sign of a pinged client before its link counts as "
-        "dead and everything it owned is dropped (default 3)",
+        f"dead and everything it owned is dropped (default {keepalive.DEFAULT_TIMEOUT:g})",
     )
     p.add_argument(
         "--session-keep",
         type=float,
-        default=30.0,
+        default=ResumeConfig.session_keep,
         help="seconds the session of a client whose link dropped is kept for it to resume "
         "(subscriptions with their queues, services, actions, unconfirmed frames; our client "
-        "asks for this, stock clients never do; default 30; 0: off)",
+        f"asks for this, stock clients never do; default {ResumeConfig.session_keep:g}; 0: off)",
     )
     p.add_argument(
         "--sessions-per-principal",
         type=int,
-        default=4,
+        default=ResumeConfig.sessions_per_principal,
         help="most kept sessions per principal (or of unauthenticated clients); the oldest "
-        "goes first (default 4)",
+        f"goes first (default {ResumeConfig.sessions_per_principal})",
     )
     p.add_argument(
         "--resume-frames",
         type=int,
-        default=1000,
+        default=ResumeConfig.resume_frames,
         help="most frames a session keeps until its client confirms them, to send again after "
-        "a resume (default 1000)",
+        f"a resume (default {ResumeConfig.resume_frames})",
     )
     p.add_argument(
         "--resume-bytes",
         type=int,
-        default=8 * 1024 * 1024,
-        help="most bytes of such frames per session (default 8 MiB)",
+        default=ResumeConfig.resume_bytes,
+        help=f"most bytes of such frames per session (default {ResumeConfig.resume_bytes // 2**20} "
+        "MiB)",
     )
     p.add_argument(
         "--node-name",
@@ -142,13 +146,14 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p.add_argument(
         "--served-call-timeout",
         type=float,
-        default=10.0,
-        help="seconds a ROS caller waits for a client-served service (default 10)",
+        default=SessionConfig.served_call_timeout,
+        help="seconds a ROS caller waits for a client-served service "
+        f"(default {SessionConfig.served_call_timeout:g})",
     )
     p.add_argument(
         "--goal-timeout",
         type=float,
-        default=0.0,
+        default=SessionConfig.goal_timeout,
         help="seconds an action goal may run through the bridge before it is canceled "
         "(goals clients send) or aborted (goals clients serve); default 0: no limit",
     )
