@@ -8,7 +8,10 @@ loading the client. A test keeps it so (``tests/core/test_protocol_core.py``).
   in one place, and the handshake headers;
 - :mod:`~roslibpy_lite.protocol.frames`: websocket frames in (JSON text, CBOR binary with
   RFC 8746 typed arrays), ``fragment`` ops reassembled and made (:class:`Protocol`);
-- :mod:`~roslibpy_lite.protocol.keepalive`: how a link notices its peer went silent.
+- :mod:`~roslibpy_lite.protocol.keepalive`: how a link notices its peer went silent;
+- :mod:`~roslibpy_lite.protocol.errors`: the root of every roslibpy_lite error and the
+  protocol errors (the client's other errors grow from it in :mod:`roslibpy_lite.exceptions`);
+- :mod:`~roslibpy_lite.protocol.goal_status`: :class:`GoalStatus`, a goal's status numbers.
 
 The frame API is re-exported here, where it has always been found
 (``roslibpy_lite.protocol.Protocol``, ``roslibpy_lite.protocol.decode_frame``).
