@@ -36,11 +36,9 @@ from __future__ import annotations
 
 import fnmatch
 import re
-from collections.abc import Callable, Mapping
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
-
-from roslibpy_lite.protocol import ops
 
 from ..graph import PARAMETER_EVENTS
 from ..interfaces import BridgeError
@@ -155,28 +153,15 @@ def _abs(name: str) -> str:
 
 
 # op class -> (capability, function giving the name it acts on)
-_NEEDS: dict[type[Any], tuple[str, Callable[[Any], str]]] = {
-    ops.Subscribe: ("subscribe", lambda op: _abs(op.topic)),
-    ops.Advertise: ("publish", lambda op: _abs(op.topic)),
-    ops.Publish: ("publish", lambda op: _abs(op.topic)),
-    ops.CallService: ("call_service", lambda op: _abs(op.service)),
-    ops.AdvertiseService: ("serve_service", lambda op: _abs(op.service)),
-    ops.SendActionGoal: ("send_action_goal", lambda op: _abs(op.action)),
-    ops.CancelActionGoal: ("send_action_goal", lambda op: _abs(op.action)),
-    ops.AdvertiseAction: ("serve_action", lambda op: _abs(op.action)),
-    ops.ActionFeedback: ("serve_action", lambda op: _abs(op.action)),
-    ops.ActionResultOp: ("serve_action", lambda op: _abs(op.action)),
-}
-"""Ops not listed (unsubscribe, unadvertise*, service_response, set_level, ...) only touch
-what the client already owns, so they need no capability of their own."""
-
-
 def requirement(op: Any) -> tuple[str, str] | None:
-    """The (capability, name) an op needs, or ``None`` if it needs none."""
-    entry = _NEEDS.get(type(op))
-    if entry is None:
+    """The (capability, name) an op needs, or ``None`` if it needs none (its class declares
+    both: :attr:`~roslibpy_lite.protocol.ops._OpFacts.NEEDS` and ``TARGET``). Ops that need
+    none (unsubscribe, unadvertise*, service_response, set_level, ...) only touch what the
+    client already owns."""
+    capability = op.NEEDS
+    if capability is None:
         return None
-    return entry[0], entry[1](op)
+    return capability, _abs(op.target())
 
 
 # -- names that belong to another capability --------------------------------------------------

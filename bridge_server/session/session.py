@@ -76,9 +76,6 @@ log = logging.getLogger("bridge_server.session")
 
 _LEVELS = {"none": 0, "error": 1, "warning": 2, "info": 3}
 
-_ACKED = (ops.Advertise, ops.Subscribe, ops.AdvertiseService, ops.AdvertiseAction)
-
-
 @dataclass
 class SessionConfig:
     """Per-session limits and defaults (set from the command line)."""
@@ -180,14 +177,10 @@ class Session:
 
     def refuse(self, op: Any, why: str) -> None:
         """Refuse ``op``: a status error, plus the failure shape a stock client waits for."""
-        op_id = getattr(op, "id", None)
-        self.error(f"{op.OP}: {why}", op_id)
-        if isinstance(op, ops.CallService):
-            self.send_op(ops.ServiceResponse(
-                service=op.service, result=False, values=f"{op.OP}: {why}", id=op_id))
-        elif isinstance(op, ops.SendActionGoal) and op_id is not None:
-            self.send_op(ops.ActionResultOp(
-                id=op_id, action=op.action, values=f"{op.OP}: {why}", result=False, status=6))
+        self.error(f"{op.OP}: {why}", getattr(op, "id", None))
+        answer = op.refusal(why)
+        if answer is not None:
+            self.send_op(answer)
 
     # -- running -------------------------------------------------------------------------------
 
@@ -378,11 +371,10 @@ class Session:
             self.error(f"{op.OP}: a client may not send this op", getattr(op, "id", None))
         else:
             self._carry_out(handler, op, op.OP, getattr(op, "id", None))
-        if self.acks and isinstance(op, _ACKED) and self.errors_sent == errors:
+        if self.acks and op.ACKED and self.errors_sent == errors:
             # The client asked for verdicts (ACKS_HEADER): no error means accepted.
-            name = (op.service if isinstance(op, ops.AdvertiseService)
-                    else op.action if isinstance(op, ops.AdvertiseAction) else op.topic)
-            self.send_op(ops.Status(level="info", msg=f"ok: {op.OP} {name}", id=op.id))
+            self.send_op(ops.Status(level="info", msg=f"ok: {op.OP} {op.target()}",
+                                    id=getattr(op, "id", None)))
 
     def _carry_out(self, handler: Callable[[Any], Any], arg: Any, name: str,
                    op_id: Any) -> bool:

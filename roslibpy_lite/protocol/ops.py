@@ -16,10 +16,19 @@ import base64
 import json
 import math
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, fields
-from typing import Any, ClassVar, TypeAlias
+from dataclasses import MISSING, dataclass, fields
+from typing import (
+    Annotated,
+    Any,
+    ClassVar,
+    NamedTuple,
+    TypeAlias,
+    get_args,
+    get_type_hints,
+)
 
 from .errors import LocalProtocolError, RemoteProtocolError
+from .goal_status import GoalStatus
 
 __all__ = [
     "ACKS_HEADER",
@@ -119,41 +128,125 @@ COMPRESSIONS = ("none", "cbor", "cbor-raw", "png")
 """Compression names a subscribe may ask for (png is legacy and refused by our bridge)."""
 
 
+# --- the ops' fields and what they may hold -------------------------------------------
+
+class _Kind(NamedTuple):
+    """What a field of an op may hold: its description in errors, a check, a normaliser.
+    Each field names its kind in its annotation (``Annotated[str, _NAME]``); a field with
+    no default is required."""
+
+    expected: str
+    check: Callable[[Any], bool]
+    normalise: Callable[[Any], Any]
+
+
+def _same(value: Any) -> Any:
+    return value
+
+
+def _is_int(value: Any) -> bool:
+    return isinstance(value, int) and not isinstance(value, bool)
+
+
+def _is_number(value: Any) -> bool:
+    return (isinstance(value, int | float)) and not isinstance(value, bool)
+
+
+def _as_ms(value: Any) -> int:
+    return int(value)
+
+
+_STR = _Kind("a string", lambda v: isinstance(v, str), _same)
+_NAME = _Kind("a non-empty string", lambda v: isinstance(v, str) and v != "", _same)
+_ID = _Kind("a string or an integer", lambda v: isinstance(v, str) or _is_int(v), _same)
+_BOOL = _Kind("true or false", lambda v: isinstance(v, bool), _same)
+_INT = _Kind("an integer", _is_int, _same)
+_COUNT = _Kind("an integer >= 0", lambda v: _is_int(v) and v >= 0, _same)
+_SIZE = _Kind("an integer > 0", lambda v: _is_int(v) and v > 0, _same)
+_MS = _Kind("a number of milliseconds >= 0", lambda v: _is_number(v) and v >= 0, _as_ms)
+_SECONDS = _Kind(
+    "a number of seconds > 0",
+    lambda v: _is_number(v) and v > 0 and math.isfinite(v),
+    float,
+)
+_OBJECT = _Kind("an object", lambda v: isinstance(v, Mapping), _same)
+_ARGS = _Kind("an object or a list", lambda v: isinstance(v, Mapping | list), _same)
+_VALUES = _Kind("an object or a string", lambda v: isinstance(v, Mapping | str), _same)
+_COMPRESSION = _Kind(
+    "one of " + ", ".join(COMPRESSIONS),
+    lambda v: v in COMPRESSIONS,
+    _same,
+)
+
+_ANY = _Kind("anything", lambda v: True, _same)
+
+
+class _OpFacts:
+    """What the bridge and the client derive from an op's class, declared on it once.
+
+    ``NEEDS``: the role capability the op needs (None: it only touches what the sender
+    already owns); ``TARGET``: the field naming what it acts on (a topic, service or
+    action); ``ACKED``: whether a client that asked for verdicts (:data:`ACKS_HEADER`) is
+    told ``ok`` when the op is accepted.
+    """
+
+    __slots__ = ()
+    OP: ClassVar[str]
+    NEEDS: ClassVar[str | None] = None
+    TARGET: ClassVar[str | None] = None
+    ACKED: ClassVar[bool] = False
+
+    def target(self) -> str | None:
+        """The name this op acts on (its :attr:`TARGET` field), if it names one."""
+        return getattr(self, self.TARGET) if self.TARGET else None
+
+    def refusal(self, why: str) -> Op | None:
+        """The answer a peer waits for when this op is refused (besides the status error),
+        if it waits for one."""
+        return None
+
+
 @dataclass(frozen=True, slots=True)
-class Advertise:
+class Advertise(_OpFacts):
     """C→S: announce that this client will publish ``type`` messages on ``topic``."""
 
     OP: ClassVar[str] = "advertise"
-    topic: str
-    type: str
-    id: Id | None = None
-    latch: bool = False
-    queue_size: int = 100
+    NEEDS = "publish"
+    TARGET = "topic"
+    ACKED = True
+    topic: Annotated[str, _NAME]
+    type: Annotated[str, _NAME]
+    id: Annotated[Id | None, _ID] = None
+    latch: Annotated[bool, _BOOL] = False
+    queue_size: Annotated[int, _COUNT] = 100
 
 
 @dataclass(frozen=True, slots=True)
-class Unadvertise:
+class Unadvertise(_OpFacts):
     """C→S: this client stops publishing on ``topic``."""
 
     OP: ClassVar[str] = "unadvertise"
-    topic: str
-    id: Id | None = None
+    TARGET = "topic"
+    topic: Annotated[str, _NAME]
+    id: Annotated[Id | None, _ID] = None
 
 
 @dataclass(frozen=True, slots=True)
-class Publish:
+class Publish(_OpFacts):
     """Both ways: one message on a topic (the server's copies carry no id)."""
 
     OP: ClassVar[str] = "publish"
-    topic: str
-    msg: Mapping[str, Any]
-    id: Id | None = None
-    latch: bool | None = None
-    queue_size: int | None = None
+    NEEDS = "publish"
+    TARGET = "topic"
+    topic: Annotated[str, _NAME]
+    msg: Annotated[Mapping[str, Any], _OBJECT]
+    id: Annotated[Id | None, _ID] = None
+    latch: Annotated[bool | None, _BOOL] = None
+    queue_size: Annotated[int | None, _COUNT] = None
 
 
 @dataclass(frozen=True, slots=True)
-class Subscribe:
+class Subscribe(_OpFacts):
     """C→S: deliver the messages of ``topic`` to this client.
 
     ``throttle_rate`` is the least time between two messages in milliseconds,
@@ -163,26 +256,30 @@ class Subscribe:
     """
 
     OP: ClassVar[str] = "subscribe"
-    topic: str
-    type: str | None = None
-    id: Id | None = None
-    throttle_rate: int = 0
-    queue_length: int = 0
-    fragment_size: int | None = None
-    compression: str = "none"
+    NEEDS = "subscribe"
+    TARGET = "topic"
+    ACKED = True
+    topic: Annotated[str, _NAME]
+    type: Annotated[str | None, _NAME] = None
+    id: Annotated[Id | None, _ID] = None
+    throttle_rate: Annotated[int, _MS] = 0
+    queue_length: Annotated[int, _COUNT] = 0
+    fragment_size: Annotated[int | None, _SIZE] = None
+    compression: Annotated[str, _COMPRESSION] = "none"
 
 
 @dataclass(frozen=True, slots=True)
-class Unsubscribe:
+class Unsubscribe(_OpFacts):
     """C→S: end the subscription ``id`` (without id: all of this client's on ``topic``)."""
 
     OP: ClassVar[str] = "unsubscribe"
-    topic: str
-    id: Id | None = None
+    TARGET = "topic"
+    topic: Annotated[str, _NAME]
+    id: Annotated[Id | None, _ID] = None
 
 
 @dataclass(frozen=True, slots=True)
-class CallService:
+class CallService(_OpFacts):
     """Both ways: call ``service`` with ``args``.
 
     C→S: the client calls a ROS service (``args`` an object, or a list zipped
@@ -192,17 +289,24 @@ class CallService:
     """
 
     OP: ClassVar[str] = "call_service"
-    service: str
-    args: Mapping[str, Any] | list[Any] | None = None
-    type: str | None = None
-    id: Id | None = None
-    timeout: float | None = None
-    fragment_size: int | None = None
-    compression: str | None = None
+    NEEDS = "call_service"
+    TARGET = "service"
+    service: Annotated[str, _NAME]
+    args: Annotated[Mapping[str, Any] | list[Any] | None, _ARGS] = None
+    type: Annotated[str | None, _NAME] = None
+    id: Annotated[Id | None, _ID] = None
+    timeout: Annotated[float | None, _SECONDS] = None
+    fragment_size: Annotated[int | None, _SIZE] = None
+    compression: Annotated[str | None, _COMPRESSION] = None
+
+    def refusal(self, why: str) -> Op | None:
+        """A failed :class:`ServiceResponse`: what a stock caller waits for."""
+        return ServiceResponse(service=self.service, result=False, values=f"{self.OP}: {why}",
+                               id=self.id)
 
 
 @dataclass(frozen=True, slots=True)
-class ServiceResponse:
+class ServiceResponse(_OpFacts):
     """Both ways: the answer to a :class:`CallService` with the same ``id``.
 
     On success ``result`` is true and ``values`` the response object; on
@@ -210,150 +314,176 @@ class ServiceResponse:
     """
 
     OP: ClassVar[str] = "service_response"
-    service: str
-    result: bool
-    values: Mapping[str, Any] | str | None = None
-    id: Id | None = None
+    TARGET = "service"
+    service: Annotated[str, _NAME]
+    result: Annotated[bool, _BOOL]
+    values: Annotated[Mapping[str, Any] | str | None, _VALUES] = None
+    id: Annotated[Id | None, _ID] = None
 
 
 @dataclass(frozen=True, slots=True)
-class AdvertiseService:
+class AdvertiseService(_OpFacts):
     """C→S: this client serves ``service`` of ``type`` to ROS callers."""
 
     OP: ClassVar[str] = "advertise_service"
-    service: str
-    type: str
-    id: Id | None = None
+    NEEDS = "serve_service"
+    TARGET = "service"
+    ACKED = True
+    service: Annotated[str, _NAME]
+    type: Annotated[str, _NAME]
+    id: Annotated[Id | None, _ID] = None
 
 
 @dataclass(frozen=True, slots=True)
-class UnadvertiseService:
+class UnadvertiseService(_OpFacts):
     """C→S: this client stops serving ``service``."""
 
     OP: ClassVar[str] = "unadvertise_service"
-    service: str
-    id: Id | None = None
+    TARGET = "service"
+    service: Annotated[str, _NAME]
+    id: Annotated[Id | None, _ID] = None
 
 
 @dataclass(frozen=True, slots=True)
-class SendActionGoal:
+class SendActionGoal(_OpFacts):
     """Both ways: send a goal to an action server (``args`` an object, or a list zipped onto
     the goal's fields)."""
 
     OP: ClassVar[str] = "send_action_goal"
-    action: str
-    action_type: str
-    args: Mapping[str, Any] | list[Any] | None = None
-    id: Id | None = None
-    feedback: bool | None = None
-    fragment_size: int | None = None
-    compression: str | None = None
+    NEEDS = "send_action_goal"
+    TARGET = "action"
+    action: Annotated[str, _NAME]
+    action_type: Annotated[str, _NAME]
+    args: Annotated[Mapping[str, Any] | list[Any] | None, _ARGS] = None
+    id: Annotated[Id | None, _ID] = None
+    feedback: Annotated[bool | None, _BOOL] = None
+    fragment_size: Annotated[int | None, _SIZE] = None
+    compression: Annotated[str | None, _COMPRESSION] = None
+
+    def refusal(self, why: str) -> Op | None:
+        """An aborted :class:`ActionResultOp` for the goal's id: what a stock sender waits
+        for (none without an id to name)."""
+        if self.id is None:
+            return None
+        return ActionResultOp(id=self.id, action=self.action, values=f"{self.OP}: {why}",
+                              result=False, status=int(GoalStatus.ABORTED))
 
 
 @dataclass(frozen=True, slots=True)
-class CancelActionGoal:
+class CancelActionGoal(_OpFacts):
     """Both ways: cancel the goal ``id`` of ``action``."""
 
     OP: ClassVar[str] = "cancel_action_goal"
-    id: Id
-    action: str
+    NEEDS = "send_action_goal"
+    TARGET = "action"
+    id: Annotated[Id, _ID]
+    action: Annotated[str, _NAME]
 
 
 @dataclass(frozen=True, slots=True)
-class ActionFeedback:
+class ActionFeedback(_OpFacts):
     """Both ways: feedback for the goal ``id``."""
 
     OP: ClassVar[str] = "action_feedback"
-    id: Id
-    action: str
-    values: Mapping[str, Any]
+    NEEDS = "serve_action"
+    TARGET = "action"
+    id: Annotated[Id, _ID]
+    action: Annotated[str, _NAME]
+    values: Annotated[Mapping[str, Any], _OBJECT]
 
 
 @dataclass(frozen=True, slots=True)
-class ActionResultOp:
+class ActionResultOp(_OpFacts):
     """Both ways: the result of the goal ``id`` (``status`` is a GoalStatus int)."""
 
     OP: ClassVar[str] = "action_result"
-    id: Id
-    action: str
-    result: bool
-    values: Mapping[str, Any] | str | None = None  # roslib's setFailed sends none
-    status: int | None = None
+    NEEDS = "serve_action"
+    TARGET = "action"
+    id: Annotated[Id, _ID]
+    action: Annotated[str, _NAME]
+    result: Annotated[bool, _BOOL]
+    # roslib's setFailed sends no values
+    values: Annotated[Mapping[str, Any] | str | None, _VALUES] = None
+    status: Annotated[int | None, _INT] = None
 
 
 @dataclass(frozen=True, slots=True)
-class AdvertiseAction:
+class AdvertiseAction(_OpFacts):
     """C→S: this client serves ``action`` of ``type``."""
 
     OP: ClassVar[str] = "advertise_action"
-    action: str
-    type: str
-    id: Id | None = None
+    NEEDS = "serve_action"
+    TARGET = "action"
+    ACKED = True
+    action: Annotated[str, _NAME]
+    type: Annotated[str, _NAME]
+    id: Annotated[Id | None, _ID] = None
 
 
 @dataclass(frozen=True, slots=True)
-class UnadvertiseAction:
+class UnadvertiseAction(_OpFacts):
     """C→S: this client stops serving ``action``."""
 
     OP: ClassVar[str] = "unadvertise_action"
-    action: str
-    id: Id | None = None
+    TARGET = "action"
+    action: Annotated[str, _NAME]
+    id: Annotated[Id | None, _ID] = None
 
 
 @dataclass(frozen=True, slots=True)
-class Fragment:
+class Fragment(_OpFacts):
     """Both ways: piece ``num`` (from 0) of ``total`` of a large op's JSON text."""
 
     OP: ClassVar[str] = "fragment"
-    id: Id
-    data: str
-    num: int
-    total: int
+    id: Annotated[Id, _ID]
+    data: Annotated[str, _STR]
+    num: Annotated[int, _COUNT]
+    total: Annotated[int, _SIZE]
 
 
 @dataclass(frozen=True, slots=True)
-class Status:
+class Status(_OpFacts):
     """S→C: a report about the server or about the request ``id``."""
 
     OP: ClassVar[str] = "status"
-    level: str
-    msg: str
-    id: Id | None = None
+    level: Annotated[str, _STR]
+    msg: Annotated[str, _STR]
+    id: Annotated[Id | None, _ID] = None
 
 
 @dataclass(frozen=True, slots=True)
-class SetLevel:
+class SetLevel(_OpFacts):
     """C→S: the least ``status`` level the client wants to hear."""
 
     OP: ClassVar[str] = "set_level"
-    level: str
-    id: Id | None = None
+    level: Annotated[str, _STR]
+    id: Annotated[Id | None, _ID] = None
 
 
 @dataclass(frozen=True, slots=True)
-class SessionAck:
+class SessionAck(_OpFacts):
     """C↔S, in a session negotiated with :data:`SESSION_HEADER` only: the sender has
     received ``count`` frames of this session; the other side may forget those it sent."""
 
     OP: ClassVar[str] = "session_ack"
-    count: int
+    count: Annotated[int, _COUNT]
 
 
 @dataclass(frozen=True, slots=True)
-class Auth:
+class Auth(_OpFacts):
     """C→S: rosauth's shape, sent first by roslib's ``authenticate()``; ``mac`` carries a token.
 
     Never print or log an ``Auth`` op whole: its ``mac`` is a secret.
     """
 
     OP: ClassVar[str] = "auth"
-    mac: str
-    client: Any = None
-    dest: Any = None
-    rand: Any = None
-    t: Any = None
-    level: Any = None
-    end: Any = None
+    mac: Annotated[str, _STR]
+    client: Annotated[Any, _ANY] = None
+    dest: Annotated[Any, _ANY] = None
+    rand: Annotated[Any, _ANY] = None
+    t: Annotated[Any, _ANY] = None
+    level: Annotated[Any, _ANY] = None
+    end: Annotated[Any, _ANY] = None
 
     def __repr__(self) -> str:
         return "Auth(mac=<hidden>)"
@@ -385,88 +515,24 @@ Op: TypeAlias = (
 
 # --- parsing -------------------------------------------------------------------
 
-# A kind is (what it is called in errors, a check, a normaliser).
-_Kind: TypeAlias = tuple[str, Callable[[Any], bool], Callable[[Any], Any]]
-
-
-def _same(value: Any) -> Any:
-    return value
-
-
-def _is_int(value: Any) -> bool:
-    return isinstance(value, int) and not isinstance(value, bool)
-
-
-def _is_number(value: Any) -> bool:
-    return (isinstance(value, int | float)) and not isinstance(value, bool)
-
-
-def _as_ms(value: Any) -> int:
-    return int(value)
-
-
-_STR: _Kind = ("a string", lambda v: isinstance(v, str), _same)
-_NAME: _Kind = ("a non-empty string", lambda v: isinstance(v, str) and v != "", _same)
-_ID: _Kind = ("a string or an integer", lambda v: isinstance(v, str) or _is_int(v), _same)
-_BOOL: _Kind = ("true or false", lambda v: isinstance(v, bool), _same)
-_INT: _Kind = ("an integer", _is_int, _same)
-_COUNT: _Kind = ("an integer >= 0", lambda v: _is_int(v) and v >= 0, _same)
-_SIZE: _Kind = ("an integer > 0", lambda v: _is_int(v) and v > 0, _same)
-_MS: _Kind = ("a number of milliseconds >= 0", lambda v: _is_number(v) and v >= 0, _as_ms)
-_SECONDS: _Kind = (
-    "a number of seconds > 0",
-    lambda v: _is_number(v) and v > 0 and math.isfinite(v),
-    float,
-)
-_OBJECT: _Kind = ("an object", lambda v: isinstance(v, Mapping), _same)
-_ARGS: _Kind = ("an object or a list", lambda v: isinstance(v, Mapping | list), _same)
-_VALUES: _Kind = ("an object or a string", lambda v: isinstance(v, Mapping | str), _same)
-_COMPRESSION: _Kind = (
-    "one of " + ", ".join(COMPRESSIONS),
-    lambda v: v in COMPRESSIONS,
-    _same,
-)
-
-# op name -> (class, {field: (kind, required)})
+# op name -> (class, {field: (kind, required)}), read from the classes' annotations
 _Rules: TypeAlias = dict[str, tuple[_Kind, bool]]
-_RULES: dict[str, tuple[type[Any], _Rules]] = {}
 
 
-def _rule(cls: type[Any], **rules: tuple[_Kind, bool]) -> None:
-    _RULES[cls.OP] = (cls, rules)
+def _rules_of(cls: type[Any]) -> _Rules:
+    hints = get_type_hints(cls, include_extras=True)
+    rules: _Rules = {}
+    for f in fields(cls):
+        kinds = [m for m in getattr(hints[f.name], "__metadata__", ()) if isinstance(m, _Kind)]
+        if len(kinds) != 1:
+            raise TypeError(f"{cls.__name__}.{f.name}: annotate it with its kind, once")
+        rules[f.name] = (kinds[0], f.default is MISSING and f.default_factory is MISSING)
+    return rules
 
 
-REQ, OPT = True, False
-_rule(Advertise, topic=(_NAME, REQ), type=(_NAME, REQ), id=(_ID, OPT), latch=(_BOOL, OPT),
-      queue_size=(_COUNT, OPT))
-_rule(Unadvertise, topic=(_NAME, REQ), id=(_ID, OPT))
-_rule(Publish, topic=(_NAME, REQ), msg=(_OBJECT, REQ), id=(_ID, OPT), latch=(_BOOL, OPT),
-      queue_size=(_COUNT, OPT))
-_rule(Subscribe, topic=(_NAME, REQ), type=(_NAME, OPT), id=(_ID, OPT), throttle_rate=(_MS, OPT),
-      queue_length=(_COUNT, OPT), fragment_size=(_SIZE, OPT), compression=(_COMPRESSION, OPT))
-_rule(Unsubscribe, topic=(_NAME, REQ), id=(_ID, OPT))
-_rule(CallService, service=(_NAME, REQ), args=(_ARGS, OPT), type=(_NAME, OPT), id=(_ID, OPT),
-      timeout=(_SECONDS, OPT), fragment_size=(_SIZE, OPT), compression=(_COMPRESSION, OPT))
-_rule(ServiceResponse, service=(_NAME, REQ), result=(_BOOL, REQ), values=(_VALUES, OPT),
-      id=(_ID, OPT))
-_rule(AdvertiseService, service=(_NAME, REQ), type=(_NAME, REQ), id=(_ID, OPT))
-_rule(UnadvertiseService, service=(_NAME, REQ), id=(_ID, OPT))
-_rule(SendActionGoal, action=(_NAME, REQ), action_type=(_NAME, REQ), args=(_ARGS, OPT),
-      id=(_ID, OPT), feedback=(_BOOL, OPT), fragment_size=(_SIZE, OPT),
-      compression=(_COMPRESSION, OPT))
-_rule(CancelActionGoal, id=(_ID, REQ), action=(_NAME, REQ))
-_rule(ActionFeedback, id=(_ID, REQ), action=(_NAME, REQ), values=(_OBJECT, REQ))
-_rule(ActionResultOp, id=(_ID, REQ), action=(_NAME, REQ), values=(_VALUES, OPT),
-      result=(_BOOL, REQ), status=(_INT, OPT))
-_rule(AdvertiseAction, action=(_NAME, REQ), type=(_NAME, REQ), id=(_ID, OPT))
-_rule(UnadvertiseAction, action=(_NAME, REQ), id=(_ID, OPT))
-_rule(Fragment, id=(_ID, REQ), data=(_STR, REQ), num=(_COUNT, REQ), total=(_SIZE, REQ))
-_rule(Status, level=(_STR, REQ), msg=(_STR, REQ), id=(_ID, OPT))
-_rule(SetLevel, level=(_STR, REQ), id=(_ID, OPT))
-_rule(SessionAck, count=(_COUNT, REQ))
-_ANY: _Kind = ("anything", lambda v: True, _same)
-_rule(Auth, mac=(_STR, REQ), client=(_ANY, OPT), dest=(_ANY, OPT), rand=(_ANY, OPT),
-      t=(_ANY, OPT), level=(_ANY, OPT), end=(_ANY, OPT))
+_RULES: dict[str, tuple[type[Any], _Rules]] = {
+    cls.OP: (cls, _rules_of(cls)) for cls in get_args(Op)
+}
 
 OP_NAMES: frozenset[str] = frozenset(_RULES)
 """Every op name this module parses."""

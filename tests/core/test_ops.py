@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import json
-from typing import Any
+from typing import Any, ClassVar
 
 import pytest
 
@@ -124,3 +124,39 @@ def test_ops_round_trip(op: Any) -> None:
     """Parsing what encode wrote gives the same value back."""
     assert parse_op(json.loads(encode(op))) == op
     assert to_obj(op)["op"] == op.OP
+
+
+def test_every_op_declares_its_facts_on_its_class() -> None:
+    """Each op's TARGET names one of its own fields, every op that needs a capability names
+    what it acts on, and a field whose kind is not declared is refused where the op is."""
+    from dataclasses import dataclass, fields
+    from typing import get_args
+
+    from roslibpy_lite.protocol import ops
+
+    for cls in get_args(ops.Op):
+        names = {f.name for f in fields(cls)}
+        assert cls.TARGET is None or cls.TARGET in names, cls
+        assert cls.NEEDS is None or cls.TARGET is not None, cls
+        assert not cls.ACKED or cls.NEEDS is not None, cls
+
+    @dataclass(frozen=True, slots=True)
+    class Sloppy(ops._OpFacts):
+        OP: ClassVar[str] = "sloppy"
+        topic: str
+
+    with pytest.raises(TypeError, match=r"Sloppy\.topic: annotate it with its kind"):
+        ops._rules_of(Sloppy)
+
+
+def test_a_refused_call_or_goal_gets_the_answer_a_stock_peer_waits_for() -> None:
+    """A refused call_service is answered by a failed service_response, a refused goal with
+    an id by an aborted action_result; other ops by the status error alone."""
+    from roslibpy_lite.protocol import ops
+
+    call = ops.CallService("/s", id="c1").refusal("forbidden")
+    assert call == ops.ServiceResponse("/s", False, "call_service: forbidden", "c1")
+    goal = ops.SendActionGoal("/a", "x/action/Y", id="g1").refusal("forbidden")
+    assert goal == ops.ActionResultOp("g1", "/a", False, "send_action_goal: forbidden", 6)
+    assert ops.SendActionGoal("/a", "x/action/Y").refusal("forbidden") is None
+    assert ops.Subscribe("/t").refusal("forbidden") is None
