@@ -38,6 +38,7 @@ try:
     from .session.session import DEFAULT_QUEUE_LENGTH, SessionConfig
     from .zenoh import link as zenoh_link
     from .zenoh.keys import check_robot
+    from .zenoh.replay import DEFAULT_REPLAY_BYTES, DEFAULT_REPLAY_COUNT, ReplayWindow
 except ModuleNotFoundError as _missing:  # a client-only install: say which extra to add
     from ._requires import missing_dependency
 
@@ -212,6 +213,22 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         "this robot (what topics, services, actions and parameters relays may reach, and "
         "take_over of names ROS nodes serve); default: everything but take_over",
     )
+    p.add_argument(
+        "--relay-replay-count",
+        type=int,
+        default=DEFAULT_REPLAY_COUNT,
+        metavar="N",
+        help="with --zenoh-connect: messages of each reliable topic kept for relays whose "
+        "link drops, sent to them once it is back (default %(default)s; 0: none)",
+    )
+    p.add_argument(
+        "--relay-replay-bytes",
+        type=int,
+        default=DEFAULT_REPLAY_BYTES,
+        metavar="BYTES",
+        help="with --zenoh-connect: payload bytes of each reliable topic kept so at most "
+        "(default %(default)s, 8 MiB)",
+    )
     p.add_argument("--worker-index", type=int, default=None, help=argparse.SUPPRESS)
     p.add_argument("--worker-dir", default=None, help=argparse.SUPPRESS)
     p.add_argument(
@@ -324,7 +341,10 @@ async def _run(args: argparse.Namespace) -> int:
             await bridge.close()
             raise
         exporter = Exporter(bridge.graph, args.robot, zenoh_link.options_from_args(args),
-                            graph_changed=bridge.graph_changed, policy=policy)
+                            graph_changed=bridge.graph_changed, policy=policy,
+                            replay=ReplayWindow(args.relay_replay_count,
+                                                args.relay_replay_bytes))
+        bridge.web.extra_metrics.append(exporter.metrics)
         exporter.start()
         log.info("robot %s dialing out to Zenoh at %s", args.robot, ", ".join(args.zenoh_connect))
     # SIGHUP (systemctl reload): certificates and the auth file are read again.
@@ -395,6 +415,11 @@ def main(argv: list[str] | None = None) -> int:
             refusal = f"--robot: {exc}"
     if refusal is None and args.zenoh_connect:
         refusal = zenoh_link.options_from_args(args).refusal()
+    if refusal is None:
+        try:
+            ReplayWindow(args.relay_replay_count, args.relay_replay_bytes)
+        except ValueError as exc:
+            refusal = str(exc)
     if refusal is None and args.relay_role is not None and not (
             args.zenoh_connect and args.auth_file):
         refusal = ("--relay-role names a role of --auth-file that relays are held to: it "

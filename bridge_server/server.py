@@ -157,10 +157,13 @@ class Bridge:
         return int(sock.getsockname()[1])
 
     async def start(self) -> None:
-        """Start ROS and listen (unless ``config.websocket`` is off)."""
+        """Start ROS and listen (unless ``config.websocket`` is off: then only the rates and
+        ``--metrics-port``, a robot reached through relays)."""
         self.start_graph()
         if self.config.websocket:
             await self.listen()
+        else:
+            await self.web.start()
 
     def start_graph(self) -> None:
         """Start the ROS side and its refresh loop, without listening: a front that serves

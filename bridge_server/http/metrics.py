@@ -384,9 +384,23 @@ def new_caps() -> dict[str, LabelCap]:
     return {name: LabelCap() for name in ("topic", "service", "action", "reason", "kind")}
 
 
-def render(snap: Mapping[str, Any], caps: Mapping[str, LabelCap]) -> bytes:
-    """The Prometheus text exposition of a (merged) snapshot."""
-    return generate_latest(_Families(snap, caps))
+def render(snap: Mapping[str, Any], caps: Mapping[str, LabelCap],
+           extra: Iterable[Metric] = ()) -> bytes:
+    """The Prometheus text exposition of a (merged) snapshot, and the ``extra`` families
+    (a robot's replay windows)."""
+    return generate_latest(_Then(_Families(snap, caps), extra))
+
+
+class _Then:
+    """A collector of ``first``'s families, then the ``extra`` ones."""
+
+    def __init__(self, first: _Families, extra: Iterable[Metric]) -> None:
+        self.first = first
+        self.extra = list(extra)
+
+    def collect(self) -> Iterator[Metric]:
+        yield from self.first.collect()
+        yield from self.extra
 
 
 class _Labelled:

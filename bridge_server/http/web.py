@@ -36,7 +36,7 @@ import contextlib
 import json
 import logging
 import time
-from collections.abc import Awaitable, Callable, Mapping
+from collections.abc import Awaitable, Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -47,6 +47,7 @@ from ..workers.peers import serve_peer_socket
 from . import metrics, snapshot
 
 if TYPE_CHECKING:
+    from prometheus_client.core import Metric
     from websockets.asyncio.server import ServerConnection
     from websockets.http11 import Request, Response
 
@@ -146,6 +147,9 @@ class Web:
         self._servers: list[asyncio.Server] = []
         self._static = static_files()
         self.metrics_port: int | None = None
+        self.extra_metrics: list[Callable[[Callable[[str], bool]], Iterable[Metric]]] = []
+        """More families for ``/metrics``, each given whether the viewer may see a topic
+        (a robot's replay windows)."""
         self.serving: Callable[[], bool] = self._listening
         """Whether the websocket port takes connections (a front that serves this bridge's
         sessions on its own port, the relay, sets its own)."""
@@ -251,7 +255,10 @@ class Web:
             data["answered_by"] = self.bridge.config.worker_index
             body = json.dumps(data, separators=(",", ":")).encode()
             return Reply(200, body, "application/json", nocache)
-        body = metrics.render(visible(await self.whole(), principal, self.access), self.caps)
+        extra = [family for families in self.extra_metrics for family in families(
+            lambda topic: self.access.may_see(principal, "topic", topic))]
+        body = metrics.render(visible(await self.whole(), principal, self.access), self.caps,
+                              extra)
         return Reply(200, body, metrics.CONTENT_TYPE, nocache)
 
 

@@ -6,7 +6,9 @@ It dials out to the routers and offers the robot under ``r1/`` as :mod:`.keys` d
 
 - a topic is subscribed in ROS only while some relay's demand token for it exists (an
   unwatched robot sends nothing); each message is put once, as the CDR bytes that came,
-  however many relays and viewers watch it;
+  however many relays and viewers watch it; a reliable topic's through an advanced
+  publisher that keeps a bounded window of its last messages for relays whose link
+  dropped (:mod:`.replay`: nothing lost in an outage within the window);
 - a relay's publisher token makes a shared publisher of the Graph, and the messages put
   under ``@in/`` are published through it, CDR bytes as they came;
 - service calls are queries, answered by the Graph's own ``call_service``;
@@ -45,7 +47,7 @@ import logging
 import secrets
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import zenoh
 
@@ -77,6 +79,10 @@ from .keys import (
     Snapshot,
 )
 from .link import ZenohOptions, answering, ignore_replies, open_session
+from .replay import DEMAND_LINGER, ReplayPublisher, ReplayWindow, window_metrics
+
+if TYPE_CHECKING:
+    from prometheus_client.core import Metric
 
 __all__ = ["Exporter"]
 
@@ -108,6 +114,10 @@ class _Export:
     epoch: str = field(default_factory=lambda: secrets.token_hex(6))
     """This stream of the topic: a topic watched anew starts again at seq 1, in a new epoch."""
     last: tuple[Message, bytes] | None = None
+    replay: ReplayPublisher | None = None
+    """The topic's advanced publisher with its window (made at its first reliable message)."""
+    lingering: bool = False
+    """No relay watches it, and it stays a while (:data:`~.replay.DEMAND_LINGER`)."""
 
 
 class _RobotGoal:
@@ -185,8 +195,12 @@ class Exporter:
     def __init__(self, graph: Graph, robot: str, options: ZenohOptions,
                  graph_changed: Callable[[], None] = lambda: None,
                  snapshot_interval: float = SNAPSHOT_INTERVAL,
-                 policy: Callable[[], Role | None] = lambda: DEFAULT_POLICY) -> None:
+                 policy: Callable[[], Role | None] = lambda: DEFAULT_POLICY,
+                 replay: ReplayWindow | None = None) -> None:
         self.graph = graph
+        self.replay = replay or ReplayWindow()
+        """How much of each reliable topic is kept for relays whose link dropped."""
+        self.demand_linger = DEMAND_LINGER
         self.policy = policy
         """The role relays are held to, looked up at each request (an auth file read again on
         SIGHUP changes it at once); ``None``: the role is gone, and every request is refused."""
@@ -233,6 +247,7 @@ class Exporter:
         """The Zenoh ids of the routers this robot has a transport to now."""
         self.uplink_lost = 0
         """How many times the robot lost its last router."""
+        self._uplink_since = 0.0  # loop time the uplink came (back)
 
     # -- life ----------------------------------------------------------------------------------
 
@@ -303,6 +318,8 @@ class Exporter:
         if event.kind == zenoh.SampleKind.PUT:
             first = not self.uplinks
             self.uplinks.add(zid)
+            if first:
+                self._uplink_since = self._loop.time()
             if first and self.uplink_lost:
                 log.info("robot %s: its uplink to the Zenoh network is back (router %s)",
                          self.robot, zid)
@@ -334,7 +351,7 @@ class Exporter:
         for task in list(self._tasks):
             task.cancel()
         for export in self.exports.values():
-            self.graph.unsubscribe(export.feed, export.listener)
+            self._unexport(export)
         self.exports.clear()
         for pub, _relays in self.publishers.values():
             self.graph.release_publisher(pub)
@@ -406,16 +423,48 @@ class Exporter:
         elif export is not None:
             export.relays.discard(relay)
             if not export.relays:
-                del self.exports[topic]
-                self.graph.unsubscribe(export.feed, export.listener)
-                log.info("nobody watches %s through a relay now: unsubscribed", topic)
+                if export.replay is None:
+                    self._unwatched(topic)
+                elif not export.lingering:  # its relays may be cut off: keep its window
+                    export.lingering = True
+                    self._loop.call_later(self.demand_linger, self._linger, topic, export)
+
+    def _linger(self, topic: str, export: _Export) -> None:
+        """A replayed topic no relay watched for a while: unsubscribed once the link has
+        been up ``demand_linger`` s with no relay asking for it again."""
+        if self.exports.get(topic) is not export or export.relays:
+            export.lingering = False
+            return
+        wait = self._uplink_since + self.demand_linger - self._loop.time()
+        if not self.uplinks or wait > 0:  # its relays cannot say whether they still watch
+            self._loop.call_later(max(wait, self.demand_linger if not self.uplinks else 0.0),
+                                  self._linger, topic, export)
+            return
+        self._unwatched(topic)
+
+    def _unwatched(self, topic: str) -> None:
+        export = self.exports.pop(topic)
+        self._unexport(export)
+        log.info("nobody watches %s through a relay now: unsubscribed", topic)
+
+    def _unexport(self, export: _Export) -> None:
+        self.graph.unsubscribe(export.feed, export.listener)
+        if export.replay is not None:
+            export.replay.close()
+            export.replay = None
 
     def _export(self, topic: str) -> _Export | None:
         key = f"{self.robot}/{topic[1:]}"
 
         def listener(msg: Message) -> None:
-            if self.session is not None:
-                payload, attachment = self._stamp(export, msg)
+            if self.session is None:
+                return
+            payload, attachment = self._stamp(export, msg)
+            if self._replayed(export, msg):
+                if export.replay is None:
+                    export.replay = ReplayPublisher(self.session, key, self.replay, topic)
+                export.replay.put(payload, attachment)
+            else:
                 self.session.put(key, payload, attachment=attachment)
 
         try:
@@ -427,6 +476,23 @@ class Exporter:
         self.graph_changed()  # the type may be learned later: the bridge's refresh does it
         log.info("a relay watches %s: subscribed", topic)
         return export
+
+    def _replayed(self, export: _Export, msg: Message) -> bool:
+        """Whether ``msg`` goes through the topic's window: a reliable, volatile topic's
+        (a best-effort or latched one's latest wins), with a window."""
+        feed = export.feed
+        return (self.replay.count > 0 and feed.latched is not msg
+                and bool(getattr(feed, "reliable", True))
+                and not getattr(feed, "transient_local", False))
+
+    def replay_windows(self) -> dict[str, tuple[int, int]]:
+        """What each replayed topic's window holds now: (messages, payload bytes)."""
+        return {topic: (e.replay.held, e.replay.held_bytes)
+                for topic, e in self.exports.items() if e.replay is not None}
+
+    def metrics(self, may_see: Callable[[str], bool]) -> list[Metric]:
+        """The robot's ``/metrics`` families of its replay windows (topics ``may_see``)."""
+        return window_metrics(self.replay_windows(), may_see)
 
     def _stamp(self, export: _Export, msg: Message) -> tuple[bytes, bytes]:
         """The payload and attachment of ``msg``, numbered in its topic's stream."""

@@ -4,8 +4,11 @@ A relay holds one :class:`ZenohGraph` per robot its clients ask for, shared by t
 sessions, over one Zenoh session. What the sessions ask of ROS becomes the keys of
 :mod:`.keys`:
 
-- a topic's shared subscription is a Zenoh subscriber plus a demand token (so the robot
-  subscribes in ROS), and each message is built from the CDR bytes the robot put: JSON
+- a topic's shared subscription is a Zenoh advanced subscriber with recovery (what a
+  robot's reliable topic published while its link was down comes from its window once
+  the link is back, in order; what the window no longer held is counted and told to the
+  robot's clients: :mod:`.replay`) plus a demand token (so the robot subscribes in ROS),
+  and each message is built from the CDR bytes the robot put: JSON
   straight from CDR (:mod:`bridge_server.codec.cdr_json`), CBOR from ``msgs.cdr``'s
   decoding, ``cbor-raw`` the bytes as they came, each at most once per message;
 - a shared publisher is a publisher token (the robot makes the ROS publisher) and one put
@@ -80,6 +83,7 @@ from .keys import (
     Snapshot,
 )
 from .link import answering, ignore_replies
+from .replay import recovering_subscriber
 
 __all__ = ["MAX_DEFINITION_BYTES", "MAX_TYPES_PER_ROBOT", "RelayConverter", "TypeLimits",
            "TypeRefused", "ZenohActionClient", "ZenohFeed", "ZenohGraph", "ZenohMessage",
@@ -288,7 +292,8 @@ class ZenohFeed:
         session = g.session
         here = g.inbox.sample  # latest-only: past the robot's bound its oldest go
         self._entities = [
-            session.declare_subscriber(keys.key_of(g.robot, self.topic), here(self.on_sample)),
+            *recovering_subscriber(session, keys.key_of(g.robot, self.topic),
+                                   here(self.on_sample), g.on_loop(self.on_miss)),
             session.liveliness().declare_token(
                 keys.key_of(g.robot, self.topic, f"{keys.DEMAND}/{g.relay}")),
         ]
@@ -301,6 +306,18 @@ class ZenohFeed:
             with contextlib.suppress(zenoh.ZError):
                 entity.undeclare()
         self._entities.clear()
+
+    def on_miss(self, lost: int) -> None:
+        """``lost`` messages in a row the robot published (while its link was down) and its
+        window no longer held (on the loop): counted, and every client of the robot told."""
+        graph = self.graph
+        graph.faults.add("messages_lost", f"messages of {self.topic} lost in a link outage "
+                         "(beyond the robot's replay window)", lost)
+        text = (f"robot {graph.robot}: {lost} messages of {self.topic} were lost while its "
+                "link was down (more than its replay window holds: --relay-replay-count, "
+                "--relay-replay-bytes)")
+        for tell in list(graph.inbox.told):
+            tell(text)
 
     def on_reply(self, reply: zenoh.Reply) -> None:
         """The robot's latched message, asked for at :meth:`open`."""

@@ -46,6 +46,9 @@ key                                      what
                                          with ``cancel`` set
 ``<robot>/@param/<node>``                queryable: a node's parameters,
                                          :class:`ParamRequest` JSON in, the answer JSON
+``<robot>/<topic>/@adv/...``             ``zenoh.ext``'s own keys of a reliable topic's
+                                         advanced publisher (its cache's queryable, its
+                                         liveliness token and heartbeat: :mod:`.replay`)
 =======================================  ==============================================
 
 ``docs/guides/relay.md`` describes the contract for people; where it differs from
@@ -65,6 +68,7 @@ from ..interfaces import BridgeError, Kind, canonical_name
 from ..security.names import check_name
 
 __all__ = [
+    "ADV",
     "ADVERTISE",
     "ALIVE",
     "CALL",
@@ -116,6 +120,9 @@ SERVING = "@serving"
 EXECUTING = "@executing"
 PARAM = "@param"
 REFUSED = "@refused"
+ADV = "@adv"
+"""``zenoh.ext``'s chunk after a topic's key: its advanced publisher's cache, token and
+heartbeat (not a control chunk of ours: it comes after the topic, not the robot)."""
 
 GOAL_WAIT = 30 * 24 * 3600.0
 """Seconds a goal's query (``@goal``, ``@executing``) stays open: a goal may run as long as

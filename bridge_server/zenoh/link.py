@@ -74,7 +74,7 @@ def _tls(endpoint: str) -> bool:
 
 def _under(prefix: str) -> list[str]:
     return [f"{prefix}/**", *(f"{prefix}/{c}" for c in _CONTROL),
-            *(f"{prefix}/{c}/**" for c in _CONTROL)]
+            *(f"{prefix}/{c}/**" for c in _CONTROL), f"{prefix}/**/{keys.ADV}/**"]
 
 
 def robot_acl(robots: Sequence[str], relays: Sequence[str]) -> dict[str, Any]:

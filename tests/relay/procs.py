@@ -5,10 +5,13 @@ from __future__ import annotations
 import re
 import subprocess
 import threading
+import time
+import urllib.error
+import urllib.request
 
 from tests.helpers import ROOT
 
-__all__ = ["Proc"]
+__all__ = ["Proc", "until_robot_served"]
 
 
 class Proc:
@@ -52,3 +55,17 @@ class Proc:
                 self.proc.wait()
         if self.proc.stdout is not None:
             self.proc.stdout.close()
+
+
+def until_robot_served(port: int, robot: str, timeout: float = 30.0) -> None:
+    """Wait until the relay on ``port`` has ``robot`` (its /ROBOT/readyz answers 200: a
+    relay in another process gives no event for it)."""
+    deadline = time.monotonic() + timeout
+    while True:
+        try:
+            with urllib.request.urlopen(f"http://127.0.0.1:{port}/{robot}/readyz", timeout=5):
+                return
+        except (OSError, urllib.error.HTTPError):
+            if time.monotonic() > deadline:
+                raise
+            time.sleep(0.2)

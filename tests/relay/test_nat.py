@@ -28,8 +28,6 @@ import subprocess
 import sys
 import textwrap
 import time
-import urllib.error
-import urllib.request
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -52,7 +50,7 @@ from tests.helpers import (
     open_wire,
     ros_env,
 )
-from tests.relay.procs import Proc
+from tests.relay.procs import Proc, until_robot_served
 from tests.relay.test_browser import NODE_MODULES, heard_and_answered, roslib_in_chromium
 
 ROBOT = "natbot"
@@ -227,19 +225,6 @@ def start_relay(port: int, zenoh: str, endpoint: str, tls: list[str]) -> Proc:
     return relay
 
 
-def _until_robot_served(port: int, timeout: float = 30.0) -> None:
-    """Wait until the relay on ``port`` has the robot (its /ROBOT/readyz answers 200)."""
-    deadline = time.monotonic() + timeout
-    while True:
-        try:
-            with urllib.request.urlopen(f"http://127.0.0.1:{port}/{ROBOT}/readyz", timeout=5):
-                return
-        except (OSError, urllib.error.HTTPError):
-            if time.monotonic() > deadline:
-                raise
-            time.sleep(0.2)
-
-
 NODE_OFFERS = ({"/nat/chatter", "/nat/latched", "/nat/status"}, {"/nat/set"}, {"/nat/fib"})
 """The robot node's topics, services and actions the tests use."""
 
@@ -323,8 +308,8 @@ def relay_and_robot(robot_netns: Namespace, tmp_path_factory: pytest.TempPathFac
         node = Proc(robot_netns.exec(sys.executable, "-c", ROBOT_NODE), ros_env())
         procs.append(node)
         node.wait_for(re.compile("robot node up"))
-        _until_robot_served(port)
-        _until_robot_served(second_port)
+        until_robot_served(port, ROBOT)
+        until_robot_served(second_port, ROBOT)
         t = Tier(robot_netns, fleet, procs[0], procs[1], robot, node, zport, port, second_port)
         for url in (t.url, t.second_url):
             asyncio.run(_lists_the_robots_node(url))
@@ -527,23 +512,35 @@ async def _hears_chatter(wire: WireClient) -> None:
     await wire.expect(op="publish", topic="/nat/chatter", timeout=30)
 
 
+def _hello(op: dict[str, Any]) -> int:
+    return int(op["msg"]["data"].split()[1])
+
+
 async def test_a_cut_robot_is_reported_and_comes_back(relay_and_robot: Tier) -> None:
-    """Blackhole the robot's only link: the relay's clients are told it went away (a status,
-    not silence), then that it is back, and its messages flow again."""
+    """Blackhole the robot's only link past the lease: the relay's clients are told it went
+    away (a status, not silence), then that it is back, and every message its reliable
+    20 Hz topic published meanwhile reaches them, in order (its replay window, over these
+    mutual-TLS links and the router's access rules), before the new ones."""
     url, ns = relay_and_robot.url, relay_and_robot.ns
-    wire = await _open_when_there(url)
+    wire = await _open_when_there(url, max_queue=None)
     try:
         await wire.send({"op": "set_level", "level": "info"})  # the return is news, not a warning
-        await wire.send({"op": "subscribe", "topic": "/nat/chatter", "type": "std_msgs/msg/String"})
-        await _hears_chatter(wire)
+        await wire.send({"op": "subscribe", "topic": "/nat/chatter", "type": "std_msgs/msg/String",
+                         "queue_length": 1000})
+        last = _hello(await wire.expect(op="publish", topic="/nat/chatter", timeout=30))
         _ip("link", "set", ns.host_end, "down")
+        cut = time.monotonic()
         gone = await wire.expect(op="status", level="warning", timeout=40)
         assert ROBOT in gone["msg"] and "went away" in gone["msg"]
         _ip("link", "set", ns.host_end, "up")
+        published = int(20 * 0.8 * (time.monotonic() - cut))  # at least, at 20 Hz
         back = await wire.expect(op="status", level="info", timeout=60)
         assert ROBOT in back["msg"] and "back" in back["msg"]
-        wire.backlog.clear()
-        await _hears_chatter(wire)
+        heard = [last]
+        while heard[-1] < last + published:
+            heard.append(_hello(await wire.expect(op="publish", topic="/nat/chatter",
+                                                  timeout=30)))
+        assert heard == list(range(last, heard[-1] + 1)), heard
     finally:
         await wire.close()
 

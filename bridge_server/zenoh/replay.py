@@ -1,0 +1,191 @@
+"""Nothing lost in a robot-link outage, within a bounded window: Zenoh's own machinery.
+
+A robot's link to its relays may drop (a tunnel, a dead Wi-Fi cell) for longer than the
+lease; meanwhile its reliable topics keep being published in ROS. The exporter puts each
+message of a **reliable** topic through a ``zenoh.ext`` advanced publisher
+(:class:`ReplayPublisher`) with a cache of its last messages and sample-miss detection
+(sequence numbers, and a sporadic heartbeat so a topic that fell silent during the outage
+is caught up too). The relay takes every topic through an advanced subscriber with
+recovery (:func:`recovering_subscriber`): when the link is back, the first message after
+the gap (or the heartbeat) shows the gap, the subscriber asks the robot's cache for what
+it missed and hands everything on once and in order; what the cache no longer holds is
+reported by its miss listener with the count, and the relay tells the robot's clients.
+
+The window is per topic: at most ``count`` messages and ``bytes`` payload bytes
+(:class:`ReplayWindow`, the robot's ``--relay-replay-count`` and ``--relay-replay-bytes``);
+its memory is in the robot's ``/metrics``. Best-effort and latched (transient local) topics
+are put plainly: latest wins, nothing is replayed.
+
+While its link is down the robot cannot hear that a relay stopped watching (its demand
+tokens vanish with the link): a replayed topic is kept subscribed, and caching, until the
+link has been back :data:`DEMAND_LINGER` seconds without a relay asking for it again.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+from collections import deque
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:  # zenoh is imported when used: the bridge's options parse without it
+    import zenoh
+    from prometheus_client.core import Metric
+
+__all__ = ["DEFAULT_REPLAY_BYTES", "DEFAULT_REPLAY_COUNT", "DEMAND_LINGER", "HEARTBEAT",
+           "ReplayPublisher", "ReplayWindow", "recovering_subscriber", "window_metrics"]
+
+log = logging.getLogger("bridge_server.zenoh.replay")
+
+DEFAULT_REPLAY_COUNT = 300
+"""Messages of one reliable topic the robot keeps for its relays (30 s of a 10 Hz topic)."""
+
+DEFAULT_REPLAY_BYTES = 8 * 1024 * 1024
+"""Payload bytes of one reliable topic the robot keeps for its relays at most."""
+
+HEARTBEAT = 1.0
+"""Seconds between two heartbeats of a replayed topic that published since the last one
+(the relay learns of messages it missed at the end of a burst, with nothing after them)."""
+
+DEMAND_LINGER = 5.0
+"""Seconds a replayed topic that no relay watches any more stays subscribed once the
+robot's link is up (the relays' demand comes back within a second or two of the link)."""
+
+
+@dataclass(frozen=True)
+class ReplayWindow:
+    """How much of each reliable topic the robot keeps for relays that lost their link:
+    ``count`` messages and ``bytes`` payload bytes at most (``count`` 0: none, every topic
+    is put plainly)."""
+
+    count: int = DEFAULT_REPLAY_COUNT
+    bytes: int = DEFAULT_REPLAY_BYTES
+
+    def __post_init__(self) -> None:
+        if self.count < 0:
+            raise ValueError(f"--relay-replay-count {self.count}: expected 0 or more messages")
+        if self.bytes < 1:
+            raise ValueError(f"--relay-replay-bytes {self.bytes}: expected 1 or more bytes")
+
+    def depth(self, largest: int) -> int:
+        """How many messages of at most ``largest`` bytes fit (at least one)."""
+        return max(1, min(self.count, self.bytes // max(largest, 1)))
+
+
+class ReplayPublisher:
+    """One reliable topic's advanced publisher on the robot, with a cache of its last
+    messages (see the module's text).
+
+    Zenoh's cache counts messages, not bytes: its depth is what fits the byte cap at the
+    size of the largest message seen (:meth:`ReplayWindow.depth`). A message larger than
+    any before that would take the cache over the cap makes a new, shallower cache (what
+    the old one held is dropped then, logged); :attr:`held` and :attr:`held_bytes` mirror
+    what the cache holds."""
+
+    def __init__(self, session: zenoh.Session, key: str, window: ReplayWindow,
+                 topic: str) -> None:
+        self.session = session
+        self.key = key
+        self.window = window
+        self.topic = topic
+        self.largest = 0
+        self.resized = 0
+        """How many times a larger message made a shallower cache."""
+        self._sizes: deque[int] = deque()
+        self._held_bytes = 0
+        self._pub: Any = None
+
+    @property
+    def held(self) -> int:
+        """Messages the cache holds now."""
+        return len(self._sizes)
+
+    @property
+    def held_bytes(self) -> int:
+        """Payload bytes the cache holds now."""
+        return self._held_bytes
+
+    def _declare(self, depth: int) -> None:
+        import zenoh.ext
+
+        if self._pub is not None:
+            with contextlib.suppress(zenoh.ZError):
+                self._pub.undeclare()
+        self._sizes = deque(maxlen=depth)
+        self._held_bytes = 0
+        self._pub = zenoh.ext.declare_advanced_publisher(
+            self.session, self.key, reliability=zenoh.Reliability.RELIABLE,
+            cache=zenoh.ext.CacheConfig(depth),
+            sample_miss_detection=zenoh.ext.MissDetectionConfig(
+                heartbeat=None, sporadic_heartbeat=HEARTBEAT),
+            publisher_detection=True)
+
+    def put(self, payload: bytes, attachment: bytes) -> None:
+        """Publish one message (kept in the cache, the oldest going past the window)."""
+        size = len(payload)
+        if size > self.largest:
+            self.largest = size
+            depth = self.window.depth(size)
+            if self._pub is None or depth < (self._sizes.maxlen or 0):
+                if self._sizes:
+                    self.resized += 1
+                    log.warning("%s: a message of %d bytes makes its replay window %d "
+                                "messages (--relay-replay-bytes %d); the %d it held are "
+                                "dropped", self.topic, size, depth, self.window.bytes,
+                                len(self._sizes))
+                self._declare(depth)
+        sizes = self._sizes
+        if len(sizes) == sizes.maxlen:
+            self._held_bytes -= sizes[0]
+        sizes.append(size)
+        self._held_bytes += size
+        self._pub.put(payload, attachment=attachment)
+
+    def close(self) -> None:
+        """Undeclare it (its cache goes)."""
+        import zenoh
+
+        if self._pub is not None:
+            with contextlib.suppress(zenoh.ZError):
+                self._pub.undeclare()
+            self._pub = None
+        self._sizes.clear()
+        self._held_bytes = 0
+
+
+def recovering_subscriber(session: zenoh.Session, key: str, on_sample: Callable[[Any], None],
+                          on_miss: Callable[[int], None]) -> list[Any]:
+    """An advanced subscriber of ``key`` that asks a robot's cache for the messages it
+    missed and hands every message to ``on_sample`` once and in order (a plain put too, as
+    it comes); ``on_miss`` hears how many in a row the cache no longer had. Returns what to
+    undeclare (the subscriber and its miss listener)."""
+    import zenoh.ext
+
+    sub = zenoh.ext.declare_advanced_subscriber(
+        session, key, on_sample,
+        recovery=zenoh.ext.RecoveryConfig(periodic_queries=None, heartbeat=True))
+    missed = sub.sample_miss_listener(lambda miss: on_miss(int(miss.nb)))
+    return [missed, sub]
+
+
+def window_metrics(windows: Mapping[str, tuple[int, int]], may_see: Callable[[str], bool]
+                   ) -> list[Metric]:
+    """The robot's ``/metrics`` families of its replay windows (``windows``: messages and
+    payload bytes held, by topic), the topics a viewer may not see left out."""
+    from prometheus_client.core import GaugeMetricFamily
+
+    held = GaugeMetricFamily(
+        "roslibpy_bridge_relay_replay_messages",
+        "Messages of a reliable topic the robot holds for relays whose link drops (its "
+        "replay window, at most --relay-replay-count).", labels=["topic"])
+    held_bytes = GaugeMetricFamily(
+        "roslibpy_bridge_relay_replay_bytes",
+        "Payload bytes of those messages (at most --relay-replay-bytes per topic).",
+        labels=["topic"])
+    for topic, (n, size) in sorted(windows.items()):
+        if may_see(topic):
+            held.add_metric([topic], n)
+            held_bytes.add_metric([topic], size)
+    return [held, held_bytes]
