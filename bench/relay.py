@@ -34,7 +34,7 @@ from typing import Any
 from bench.harness import READY, Bridge, Ctx, close_clients, percentile, send_op, ws_open
 from bench.linkproxy import LinkProxy
 
-__all__ = ["relay_dead_link", "relay_imu", "relay_service", "relay_uplink"]
+__all__ = ["relay_dead_link", "relay_imu", "relay_outage", "relay_service", "relay_uplink"]
 
 TOPIC = "/bench_camera"
 ROBOT = "benchbot"
@@ -374,3 +374,118 @@ async def relay_dead_link(ctx: Ctx) -> dict[str, Any]:
             "noticed_max_s": round(max(noticed), 2),
             "back_s": [round(x, 2) for x in back]}
     return results
+
+
+OUTAGE_TOPIC = "/bench_outage"
+
+
+async def _robot_rss_and_window(pid: int, metrics_url: str) -> tuple[float, int]:
+    """The robot's RSS (MiB) and the payload bytes its replay window holds (its /metrics)."""
+    import urllib.request
+
+    import psutil
+
+    rss = psutil.Process(pid).memory_info().rss / 2**20
+
+    def window() -> int:
+        with urllib.request.urlopen(metrics_url, timeout=5) as reply:
+            text = reply.read().decode()
+        return int(sum(float(line.rpartition(" ")[2]) for line in text.splitlines()
+                       if line.startswith("roslibpy_bridge_relay_replay_bytes{")))
+
+    return rss, await asyncio.to_thread(window)
+
+
+async def relay_outage(ctx: Ctx) -> dict[str, Any]:
+    """``relay_outage``: a robot's Zenoh link blackholed (no FIN) for 5, 15 and 60 s (5 and
+    15 with ``--quick``) while a reliable 10 Hz topic flows to a viewer through the relay,
+    with the default replay window (300 messages, 8 MiB): per outage, the messages published
+    meanwhile, those lost (never delivered), the seconds from the link's restore to the last
+    message published during the outage being delivered, and the robot's RSS and replay
+    window bytes during the outage (sampled each 0.5 s)."""
+    outages = (5.0, 15.0) if ctx.quick else (5.0, 15.0, 60.0)
+    zport, mport = _free_port(), _free_port()
+    relay = Bridge(ctx.domain, ["--zenoh-listen", f"tcp/127.0.0.1:{zport}"], ctx.bridge_root,
+                   module="bridge_server.zenoh.relay", ready=RELAY_READY)
+    await relay.start()
+    got: list[tuple[int, int, int]] = []  # (received, number, published), monotonic ns
+    results: list[dict[str, Any]] = []
+    try:
+        with LinkProxy(("127.0.0.1", zport)) as link:
+            robot = Bridge(ctx.domain, ["--no-websocket", "--robot", ROBOT, "--zenoh-connect",
+                                        f"tcp/127.0.0.1:{link.port}", "--metrics-port",
+                                        str(mport)], ctx.bridge_root, ready=ROBOT_READY)
+            await robot.start()
+            pub = None
+            ws = await _viewers_at(_url(relay))
+            try:
+                await send_op(ws, {"op": "subscribe", "topic": OUTAGE_TOPIC,
+                                   "type": "std_msgs/msg/String", "queue_length": 5000})
+
+                async def reader() -> None:
+                    with contextlib.suppress(Exception):
+                        async for frame in ws:
+                            op = json.loads(frame)
+                            if op.get("op") == "publish":
+                                n, sent = op["msg"]["data"].split()
+                                got.append((time.monotonic_ns(), int(n), int(sent)))
+
+                reading = asyncio.create_task(reader())
+                total = sum(outages) + 30 * len(outages) + 30
+                pub = await ctx.ros("publish", "--topic", OUTAGE_TOPIC, "--kind", "stamp",
+                                    "--rate", "10", "--duration", str(total), "--depth", "10",
+                                    "--linger", "0").start()
+                await pub.event("matched", 60)
+                for seconds in outages:
+                    results.append(await _one_outage(link, seconds, got, robot.pid,
+                                                     f"http://127.0.0.1:{mport}/metrics"))
+                reading.cancel()
+            finally:
+                await ws.close()
+                if pub is not None:
+                    await pub.close()
+                await robot.stop()
+    finally:
+        await relay.stop()
+    return {"rate_hz": 10, "window": "300 messages, 8 MiB (the defaults)",
+            "outages": results}
+
+
+async def _one_outage(link: LinkProxy, seconds: float, got: list[tuple[int, int, int]],
+                      robot_pid: int, metrics_url: str) -> dict[str, Any]:
+    """Cut the link for ``seconds``, restore it, and measure (see :func:`relay_outage`)."""
+    deadline = time.monotonic() + 60
+    while not got or got[-1][0] < time.monotonic_ns() - 500_000_000:  # messages flow
+        if time.monotonic() > deadline:
+            raise RuntimeError("the viewer hears nothing from the robot")
+        await asyncio.sleep(0.1)
+    rss0, window0 = await _robot_rss_and_window(robot_pid, metrics_url)
+    peak_rss, peak_window = rss0, window0
+    link.blackhole()
+    cut = time.monotonic_ns()
+    end = time.monotonic() + seconds
+    while time.monotonic() < end:  # the outage itself: its length is what is measured
+        rss, window = await _robot_rss_and_window(robot_pid, metrics_url)
+        peak_rss, peak_window = max(peak_rss, rss), max(peak_window, window)
+        await asyncio.sleep(0.5)
+    link.restore()
+    restored = time.monotonic_ns()
+    deadline = time.monotonic() + 60
+    while not got or got[-1][2] < restored + 2_000_000_000:  # live messages again
+        if time.monotonic() > deadline:
+            raise RuntimeError("the robot's messages did not come back")
+        await asyncio.sleep(0.1)
+    before = max(n for _, n, sent in got if sent < cut)
+    after = min(n for _, n, sent in got if sent >= restored)
+    during = set(range(before + 1, after))
+    heard = {n for _, n, _ in got}
+    late = [t for t, n, sent in got if n in during]
+    return {
+        "outage_s": seconds,
+        "published_during": len(during),
+        "lost": len(during - heard),
+        "duplicates": len(got) - len(heard),
+        "recover_s": round((max(late) - restored) / 1e9, 2) if late else None,
+        "robot_rss_mib": {"before": round(rss0, 1), "peak": round(peak_rss, 1)},
+        "window_bytes": {"before": window0, "peak": peak_window},
+    }

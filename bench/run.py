@@ -48,6 +48,10 @@ Scenarios (targets; rosbridge_suite's figures in brackets):
 - ``relay_dead_link`` (``bench/relay.py``): a robot's Zenoh link blackholed (no FIN) while a
   viewer watches through the relay: seconds until the viewer's "went away" status, and until
   "is back" once restored, with ``--zenoh-lease 3`` (the default) and 10 (Zenoh's own).
+- ``relay_outage`` (``bench/relay.py``): a robot's Zenoh link blackholed for 5, 15 and 60 s
+  (5 and 15 with ``--quick``) while a reliable 10 Hz topic flows through a relay, with the
+  default replay window (300 messages): messages lost, seconds from the restore to the last
+  missed message delivered, the robot's RSS and window bytes during the outage.
 - ``tls`` (``bench/tls.py``): small messages, service round trips and CBOR images over ws://
   and over wss://, side by side (reference only).
 - ``workers_resume`` (``bench/workers.py``): with ``--workers 2``, call_service round trips
@@ -113,7 +117,7 @@ from bench.harness import (
 )
 from bench.links import links
 from bench.params import params_scenario
-from bench.relay import relay_dead_link, relay_imu, relay_service, relay_uplink
+from bench.relay import relay_dead_link, relay_imu, relay_outage, relay_service, relay_uplink
 from bench.tls import tls_scenario
 from bench.workers import workers_resume
 
@@ -142,6 +146,8 @@ TARGETS: dict[str, str] = {
     "relay_service": "reference: service round trip through a relay against straight",
     "relay_imu": "200 viewers of a 100 Hz IMU over two relays: all delivered; latency, relay CPU",
     "relay_dead_link": "a dead robot link told to its relay's clients within the lease (3 s)",
+    "relay_outage": "nothing lost in a robot-link outage within the window (300 messages: "
+                    "30 s at 10 Hz); what is past it counted; robot memory bounded",
     "record": "camera 30 Hz + IMU 200 Hz for 60 s recorded without a loss; recorder CPU",
     "action_ros_server": "reference: goal round trip p50/p99, feedback msg/s at >= 99 %",
     "action_client_served": "reference: goal round trip p50/p99, feedback msg/s at >= 99 %",
@@ -864,6 +870,7 @@ SCENARIOS: dict[str, Callable[[Ctx], Awaitable[dict[str, Any]]]] = {
     "relay_service": relay_service,
     "relay_imu": relay_imu,
     "relay_dead_link": relay_dead_link,
+    "relay_outage": relay_outage,
     "action_ros_server": action_ros_server,
     "action_client_served": action_client_served,
 }
@@ -907,6 +914,9 @@ def _headline(name: str, r: dict[str, Any]) -> Any:
         return r
     if name == "relay_dead_link":
         return {k: v["noticed_max_s"] for k, v in r.items() if k.startswith("lease_")}
+    if name == "relay_outage":
+        return {f"{o['outage_s']:g}s": {"lost": o["lost"], "recover_s": o["recover_s"]}
+                for o in r["outages"]}
     if name == "relay_imu":
         return {k: r[k] for k in ("delivered_fraction", "latency_p50_ms", "latency_p99_ms",
                                   "relay_cpu_us_per_message")}

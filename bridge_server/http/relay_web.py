@@ -165,7 +165,8 @@ class RelayWeb:
         dropped = CounterMetricFamily(
             "roslibpy_relay_robot_dropped",
             "What a robot sent that the relay dropped, by kind: messages_dropped (oldest, over "
-            "its queue), replies_dropped, graph_too_large, graph_superseded, bad_graph, "
+            "its queue), messages_lost (past its replay window in a link outage), "
+            "replies_dropped, graph_too_large, graph_superseded, bad_graph, "
             "bad_messages, type_refused (its type over --max-definition-bytes or "
             "--max-types-per-robot), bad_replies, handling_failed.", labels=["robot", "kind"])
         for name in snaps:
