@@ -21,6 +21,7 @@ import textwrap
 import urllib.request
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import pytest
@@ -40,6 +41,7 @@ TOPIC = "/outage/count"
 READY = re.compile(r"relay listening on ws://127\.0\.0\.1:(\d+)")
 
 COUNTER = textwrap.dedent("""
+    import os
     import sys
 
     import rclpy
@@ -50,8 +52,14 @@ COUNTER = textwrap.dedent("""
     node = rclpy.create_node("outage_counter")
     pub = node.create_publisher(String, sys.argv[1], 10)  # reliable, volatile: replayed
     n = [0]
+    stop = sys.argv[2] if len(sys.argv) > 2 else None  # a file: there, the counter stops
 
     def tick():
+        if stop is not None and os.path.exists(stop):
+            if n[0] >= 0:
+                print(f"stopped after {n[0]}", flush=True)
+                n[0] = -1
+            return
         n[0] += 1
         pub.publish(String(data=str(n[0])))
         print(f"sent {n[0]}", flush=True)
@@ -99,9 +107,10 @@ class Outage:
 
 
 @contextlib.contextmanager
-def outage_tier(*robot_options: str) -> Iterator[Outage]:
+def outage_tier(*robot_options: str, stop_file: str | None = None) -> Iterator[Outage]:
     """A relay, a robot's bridge (``robot_options`` added) dialing it through a LinkProxy,
-    and the robot's counter node; the robot is served by the relay when it yields."""
+    and the robot's counter node (which stops once ``stop_file`` exists); the robot is
+    served by the relay when it yields."""
     zport, port = free_port(), free_port()
     procs: list[Proc] = []
     try:
@@ -113,7 +122,8 @@ def outage_tier(*robot_options: str) -> Iterator[Outage]:
                                "--robot", ROBOT, "--zenoh-connect",
                                f"tcp/127.0.0.1:{link.port}", *robot_options], ros_env()))
             procs[1].wait_for(re.compile(rf"robot {ROBOT} is on Zenoh"))
-            procs.append(Proc([sys.executable, "-c", COUNTER, TOPIC], ros_env()))
+            procs.append(Proc([sys.executable, "-c", COUNTER, TOPIC,
+                               *([stop_file] if stop_file else [])], ros_env()))
             procs[2].wait_for(re.compile("sent 1$"))
             until_robot_served(port, ROBOT)
             yield Outage(procs[0], link, procs[1], procs[2], port)
@@ -167,10 +177,12 @@ async def clients(t: Outage) -> Any:
             fox.close()
 
 
-async def _cut(t: Outage, statuses: list[ops.Status], published: int) -> tuple[int, int]:
+async def _cut(t: Outage, statuses: list[ops.Status], published: int,
+               stop: Path | None = None) -> tuple[int, int]:
     """Blackhole the robot's link until the relay told our client the robot went away (its
-    lease ran out) and the counter published ``published`` more; restore it. Returns the
-    counter's last number before the cut and at the restore."""
+    lease ran out) and the counter published ``published`` more (then, given ``stop``, it
+    is stopped); restore it. Returns the counter's last number before the cut and at the
+    restore."""
     before = t.sent()
     t.link.blackhole()
     try:
@@ -178,6 +190,10 @@ async def _cut(t: Outage, statuses: list[ops.Status], published: int) -> tuple[i
                     "the relay to tell our client the robot went away", 20)
         gone = t.sent()
         await until(lambda: t.sent() >= gone + published, "the counter to go on", 20)
+        if stop is not None:
+            stop.touch()
+            await until(lambda: any(line.startswith("stopped") for line in t.counter.lines),
+                        "the counter to stop", 10)
     finally:
         t.link.restore()
     return before, t.sent()
@@ -202,6 +218,23 @@ async def test_a_cut_longer_than_the_lease_loses_nothing() -> None:
                 assert _gaps(numbers) == [] and len(set(numbers)) == len(numbers), (
                     name, numbers)
                 assert numbers[0] <= before, (name, numbers[:5], before)
+
+
+async def test_what_a_topic_said_last_in_an_outage_arrives_though_it_fell_silent(
+        tmp_path: Path) -> None:
+    """The counter stops during the cut: nothing after the gap shows it, yet its last
+    numbers reach every client once the link is back (the robot's heartbeat tells the relay
+    what it missed)."""
+    stop = tmp_path / "stop"
+    with outage_tier(stop_file=str(stop)) as t:
+        async with clients(t) as (heard, statuses, _fox):
+            _before, last = await _cut(t, statuses, published=10, stop=stop)
+            await until(lambda: all(h()[-1] == last for h in heard.values()),
+                        f"every client to hear the counter's last number, {last}", 30)
+            for name, h in heard.items():
+                numbers = h()
+                assert _gaps(numbers) == [] and len(set(numbers)) == len(numbers), (
+                    name, numbers)
 
 
 async def test_a_cut_beyond_the_window_tells_how_many_were_lost() -> None:
