@@ -212,6 +212,11 @@ class ZenohOptions:
         conf.insert_json5("transport/shared_memory/enabled", "false")
         # a client waits for its routers (in open_session's thread) instead of failing
         conf.insert_json5("connect/timeout_ms", json.dumps({"client": -1, "router": 0}))
+        # a client whose link dropped dials again each second at most (Zenoh's default
+        # backs off to 4 s): a robot's outage ends, and its replay window drains, that much
+        # sooner once the link is back (a 15 s veth cut: 1.5 s to recover instead of 4.4 s)
+        conf.insert_json5("connect/retry", json.dumps(
+            {"period_init_ms": 500, "period_max_ms": 1000, "period_increase_factor": 2}))
         tls = "transport/link/tls"
         if self.tls_ca is not None:
             conf.insert_json5(f"{tls}/root_ca_certificate", json.dumps(self.tls_ca))
