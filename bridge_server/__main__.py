@@ -38,7 +38,12 @@ try:
     from .session.session import DEFAULT_QUEUE_LENGTH, SessionConfig
     from .zenoh import link as zenoh_link
     from .zenoh.keys import check_robot
-    from .zenoh.replay import DEFAULT_REPLAY_BYTES, DEFAULT_REPLAY_COUNT, ReplayWindow
+    from .zenoh.replay import (
+        DEFAULT_REPLAY_BYTES,
+        DEFAULT_REPLAY_COUNT,
+        DEFAULT_REPLAY_TOTAL_BYTES,
+        ReplayWindow,
+    )
 except ModuleNotFoundError as _missing:  # a client-only install: say which extra to add
     from ._requires import missing_dependency
 
@@ -229,6 +234,14 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         help="with --zenoh-connect: payload bytes of each reliable topic kept so at most "
         "(default %(default)s, 8 MiB)",
     )
+    p.add_argument(
+        "--relay-replay-total-bytes",
+        type=int,
+        default=DEFAULT_REPLAY_TOTAL_BYTES,
+        metavar="BYTES",
+        help="with --zenoh-connect: payload bytes kept so at most, all reliable topics "
+        "together (default %(default)s, 64 MiB; a topic with no room left is not replayed)",
+    )
     p.add_argument("--worker-index", type=int, default=None, help=argparse.SUPPRESS)
     p.add_argument("--worker-dir", default=None, help=argparse.SUPPRESS)
     p.add_argument(
@@ -342,8 +355,7 @@ async def _run(args: argparse.Namespace) -> int:
             raise
         exporter = Exporter(bridge.graph, args.robot, zenoh_link.options_from_args(args),
                             graph_changed=bridge.graph_changed, policy=policy,
-                            replay=ReplayWindow(args.relay_replay_count,
-                                                args.relay_replay_bytes))
+                            replay=replay_window(args))
         bridge.web.extra_metrics.append(exporter.metrics)
         exporter.start()
         log.info("robot %s dialing out to Zenoh at %s", args.robot, ", ".join(args.zenoh_connect))
@@ -368,6 +380,13 @@ async def _run(args: argparse.Namespace) -> int:
         await exporter.close()
     await bridge.close()
     return 0
+
+
+def replay_window(args: argparse.Namespace) -> ReplayWindow:
+    """The replay window the ``--relay-replay-*`` options give; ``ValueError`` naming one
+    that does not fit."""
+    return ReplayWindow(args.relay_replay_count, args.relay_replay_bytes,
+                        args.relay_replay_total_bytes)
 
 
 def relay_policy(bridge: Bridge, role: str | None) -> Callable[[], Role | None]:
@@ -417,7 +436,7 @@ def main(argv: list[str] | None = None) -> int:
         refusal = zenoh_link.options_from_args(args).refusal()
     if refusal is None:
         try:
-            ReplayWindow(args.relay_replay_count, args.relay_replay_bytes)
+            replay_window(args)
         except ValueError as exc:
             refusal = str(exc)
     if refusal is None and args.relay_role is not None and not (

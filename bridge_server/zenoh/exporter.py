@@ -79,7 +79,7 @@ from .keys import (
     Snapshot,
 )
 from .link import ZenohOptions, answering, ignore_replies, open_session
-from .replay import DEMAND_LINGER, ReplayPublisher, ReplayWindow, window_metrics
+from .replay import DEMAND_LINGER, ReplayBudget, ReplayPublisher, ReplayWindow, window_metrics
 
 if TYPE_CHECKING:
     from prometheus_client.core import Metric
@@ -200,6 +200,7 @@ class Exporter:
         self.graph = graph
         self.replay = replay or ReplayWindow()
         """How much of each reliable topic is kept for relays whose link dropped."""
+        self.replay_budget = ReplayBudget(self.replay.total)
         self.demand_linger = DEMAND_LINGER
         self.policy = policy
         """The role relays are held to, looked up at each request (an auth file read again on
@@ -462,7 +463,8 @@ class Exporter:
             payload, attachment = self._stamp(export, msg)
             if self._replayed(export, msg):
                 if export.replay is None:
-                    export.replay = ReplayPublisher(self.session, key, self.replay, topic)
+                    export.replay = ReplayPublisher(self.session, key, self.replay, topic,
+                                                    self.replay_budget)
                 export.replay.put(payload, attachment)
             else:
                 self.session.put(key, payload, attachment=attachment)

@@ -34,8 +34,9 @@ if TYPE_CHECKING:  # zenoh is imported when used: the bridge's options parse wit
     import zenoh
     from prometheus_client.core import Metric
 
-__all__ = ["DEFAULT_REPLAY_BYTES", "DEFAULT_REPLAY_COUNT", "DEMAND_LINGER", "HEARTBEAT",
-           "ReplayPublisher", "ReplayWindow", "recovering_subscriber", "window_metrics"]
+__all__ = ["DEFAULT_REPLAY_BYTES", "DEFAULT_REPLAY_COUNT", "DEFAULT_REPLAY_TOTAL_BYTES",
+           "DEMAND_LINGER", "HEARTBEAT", "ReplayBudget", "ReplayPublisher", "ReplayWindow",
+           "recovering_subscriber", "window_metrics"]
 
 log = logging.getLogger("bridge_server.zenoh.replay")
 
@@ -44,6 +45,10 @@ DEFAULT_REPLAY_COUNT = 300
 
 DEFAULT_REPLAY_BYTES = 8 * 1024 * 1024
 """Payload bytes of one reliable topic the robot keeps for its relays at most."""
+
+DEFAULT_REPLAY_TOTAL_BYTES = 64 * 1024 * 1024
+"""Payload bytes the robot keeps for its relays at most, all reliable topics together (the
+relays' clients choose how many topics are watched)."""
 
 HEARTBEAT = 1.0
 """Seconds between two heartbeats of a replayed topic that published since the last one
@@ -58,20 +63,32 @@ robot's link is up (the relays' demand comes back within a second or two of the 
 class ReplayWindow:
     """How much of each reliable topic the robot keeps for relays that lost their link:
     ``count`` messages and ``bytes`` payload bytes at most (``count`` 0: none, every topic
-    is put plainly)."""
+    is put plainly), and ``total`` bytes all topics together."""
 
     count: int = DEFAULT_REPLAY_COUNT
     bytes: int = DEFAULT_REPLAY_BYTES
+    total: int = DEFAULT_REPLAY_TOTAL_BYTES
 
     def __post_init__(self) -> None:
         if self.count < 0:
             raise ValueError(f"--relay-replay-count {self.count}: expected 0 or more messages")
-        if self.bytes < 1:
-            raise ValueError(f"--relay-replay-bytes {self.bytes}: expected 1 or more bytes")
+        for option, value in (("--relay-replay-bytes", self.bytes),
+                              ("--relay-replay-total-bytes", self.total)):
+            if value < 1:
+                raise ValueError(f"{option} {value}: expected 1 or more bytes")
 
     def depth(self, largest: int) -> int:
         """How many messages of at most ``largest`` bytes fit (at least one)."""
         return max(1, min(self.count, self.bytes // max(largest, 1)))
+
+
+class ReplayBudget:
+    """The bytes all of a robot's replay windows may reserve together (``total``): a
+    window reserves its depth times the largest message it has seen."""
+
+    def __init__(self, total: int) -> None:
+        self.total = total
+        self.reserved = 0
 
 
 class ReplayPublisher:
@@ -79,17 +96,22 @@ class ReplayPublisher:
     messages (see the module's text).
 
     Zenoh's cache counts messages, not bytes: its depth is what fits the byte cap at the
-    size of the largest message seen (:meth:`ReplayWindow.depth`). A message larger than
-    any before that would take the cache over the cap makes a new, shallower cache (what
-    the old one held is dropped then, logged); :attr:`held` and :attr:`held_bytes` mirror
-    what the cache holds."""
+    size of the largest message seen (:meth:`ReplayWindow.depth`), and what is left of the
+    robot's ``budget``. A message larger than any before that would take the cache over
+    either makes a new, shallower cache (what the old one held is dropped then, logged);
+    with no room left for one message the topic is put plainly from then on (logged).
+    :attr:`held` and :attr:`held_bytes` mirror what the cache holds."""
 
     def __init__(self, session: zenoh.Session, key: str, window: ReplayWindow,
-                 topic: str) -> None:
+                 topic: str, budget: ReplayBudget) -> None:
         self.session = session
         self.key = key
         self.window = window
         self.topic = topic
+        self.budget = budget
+        self._reserved = 0
+        self.plain = False
+        """No room in the budget: the topic is put plainly (not replayed)."""
         self.largest = 0
         self.resized = 0
         """How many times a larger message made a shallower cache."""
@@ -122,20 +144,41 @@ class ReplayPublisher:
                 heartbeat=None, sporadic_heartbeat=HEARTBEAT),
             publisher_detection=True)
 
+    def _reserve(self, size: int) -> int:
+        """The depth for messages of ``size`` bytes within the window, the cache's depth
+        now (a cache only shrinks) and what the budget has left (0: not one), reserved."""
+        budget = self.budget
+        free = budget.total - budget.reserved + self._reserved
+        depth = min(self.window.depth(size), free // max(size, 1))
+        if self._pub is not None:
+            depth = min(depth, self._sizes.maxlen or 0)
+        budget.reserved += depth * size - self._reserved
+        self._reserved = depth * size
+        return depth
+
     def put(self, payload: bytes, attachment: bytes) -> None:
         """Publish one message (kept in the cache, the oldest going past the window)."""
         size = len(payload)
-        if size > self.largest:
+        if size > self.largest and not self.plain:
             self.largest = size
-            depth = self.window.depth(size)
-            if self._pub is None or depth < (self._sizes.maxlen or 0):
+            depth = self._reserve(size)
+            if depth == 0:
+                self.close()
+                self.plain = True
+                log.warning("%s: no room for its replay window (--relay-replay-total-bytes %d "
+                            "reserved by other topics): put plainly, not replayed",
+                            self.topic, self.budget.total)
+            elif self._pub is None or depth < (self._sizes.maxlen or 0):
                 if self._sizes:
                     self.resized += 1
                     log.warning("%s: a message of %d bytes makes its replay window %d "
-                                "messages (--relay-replay-bytes %d); the %d it held are "
-                                "dropped", self.topic, size, depth, self.window.bytes,
-                                len(self._sizes))
+                                "messages (--relay-replay-bytes %d, --relay-replay-total-bytes "
+                                "%d); the %d it held are dropped", self.topic, size, depth,
+                                self.window.bytes, self.budget.total, len(self._sizes))
                 self._declare(depth)
+        if self.plain:
+            self.session.put(self.key, payload, attachment=attachment)
+            return
         sizes = self._sizes
         if len(sizes) == sizes.maxlen:
             self._held_bytes -= sizes[0]
@@ -153,6 +196,8 @@ class ReplayPublisher:
             self._pub = None
         self._sizes.clear()
         self._held_bytes = 0
+        self.budget.reserved -= self._reserved
+        self._reserved = 0
 
 
 def recovering_subscriber(session: zenoh.Session, key: str, on_sample: Callable[[Any], None],

@@ -278,13 +278,14 @@ def _metric(url: str, name: str, **labels: str) -> float | None:
     return None
 
 
-async def test_the_window_is_bounded_in_bytes_and_shown_in_metrics() -> None:
-    """A byte cap of 60 bytes (a counter's message is 12 to 13 bytes of CDR) bounds the
-    window to what fits, however many messages it may hold: the robot's /metrics (on
-    ``--metrics-port``: it has no websocket listener) shows its messages and bytes, at most
-    the cap."""
+@pytest.mark.parametrize("option", ["--relay-replay-bytes", "--relay-replay-total-bytes"])
+async def test_the_window_is_bounded_in_bytes_and_shown_in_metrics(option: str) -> None:
+    """A byte cap of 60 bytes, the topic's or all topics' (a counter's message is 12 to 13
+    bytes of CDR), bounds the window to what fits, however many messages it may hold: the
+    robot's /metrics (on ``--metrics-port``: it has no websocket listener) shows its
+    messages and bytes, at most the cap."""
     mport = free_port()
-    with outage_tier("--relay-replay-bytes", "60", "--metrics-port", str(mport)) as t:
+    with outage_tier(option, "60", "--metrics-port", str(mport)) as t:
         async with clients(t):
             robot = f"http://127.0.0.1:{mport}/metrics"
             topic = {"topic": TOPIC}
@@ -301,7 +302,9 @@ async def test_the_window_is_bounded_in_bytes_and_shown_in_metrics() -> None:
 
 @pytest.mark.parametrize(("option", "value", "said"), [
     ("--relay-replay-count", "-1", "--relay-replay-count -1: expected 0 or more messages"),
-    ("--relay-replay-bytes", "0", "--relay-replay-bytes 0: expected 1 or more bytes")])
+    ("--relay-replay-bytes", "0", "--relay-replay-bytes 0: expected 1 or more bytes"),
+    ("--relay-replay-total-bytes", "0", "--relay-replay-total-bytes 0: expected 1 or more "
+     "bytes")])
 def test_a_window_that_cannot_be_is_refused_naming_its_option(option: str, value: str,
                                                                said: str) -> None:
     """A robot's bridge given a negative replay count or no bytes refuses to start (status
@@ -312,3 +315,39 @@ def test_a_window_that_cannot_be_is_refused_naming_its_option(option: str, value
                            ROBOT, "--zenoh-connect", "tcp/127.0.0.1:7447", option, value],
                           env=ros_env(), capture_output=True, text=True, timeout=60)
     assert done.returncode == 2 and said in done.stderr, done.stderr
+
+
+def test_the_robots_windows_share_one_budget() -> None:
+    """Windows reserve their depth times their largest message from the robot's total: a
+    topic with no room left is put plainly (not replayed), and a closed window's room goes
+    to the next (a real Zenoh session, alone: no scouting, no endpoints)."""
+    import zenoh
+
+    from bridge_server.zenoh.replay import ReplayBudget, ReplayPublisher, ReplayWindow
+
+    conf = zenoh.Config()
+    conf.insert_json5("scouting/multicast/enabled", "false")
+    conf.insert_json5("listen/endpoints", "[]")
+    session = zenoh.open(conf)
+    try:
+        window = ReplayWindow(count=300, bytes=1000, total=100)
+        budget = ReplayBudget(window.total)
+        a = ReplayPublisher(session, "r/a", window, "/a", budget)
+        b = ReplayPublisher(session, "r/b", window, "/b", budget)
+        for _ in range(5):
+            a.put(b"x" * 30, b"{}")
+            b.put(b"y" * 20, b"{}")
+        assert (a.held, a.held_bytes, a.plain) == (3, 90, False)  # 100 // 30
+        assert (b.held, b.plain, budget.reserved) == (0, True, 90)  # 10 left: not one
+        a.close()
+        assert budget.reserved == 0
+        c = ReplayPublisher(session, "r/c", window, "/c", budget)
+        for _ in range(7):
+            c.put(b"z" * 20, b"{}")
+        assert (c.held, c.held_bytes, budget.reserved) == (5, 100, 100)
+        c.put(b"z" * 40, b"{}")  # larger: a shallower window, what it held dropped
+        assert (c.held, c.held_bytes, c.resized, budget.reserved) == (1, 40, 1, 80)
+        c.close()
+        b.close()
+    finally:
+        session.close()  # type: ignore[no-untyped-call]
