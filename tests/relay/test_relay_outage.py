@@ -351,3 +351,48 @@ def test_the_robots_windows_share_one_budget() -> None:
         b.close()
     finally:
         session.close()  # type: ignore[no-untyped-call]
+
+
+async def test_a_replayed_topic_is_let_go_once_the_link_is_back_and_nobody_asks(
+        ros_node: Any, topic: str) -> None:
+    """The robot keeps a replayed topic subscribed, and caching, while its link is down
+    (its relays cannot say whether they still watch), past the linger; once the link is
+    back and no relay asks for the topic for the linger, it unsubscribes (an in-process
+    tier: a relay that is the router, stopped and started again without clients)."""
+    from std_msgs.msg import String
+
+    from tests.relay.support import ROBOT as ROBOT1
+    from tests.relay.support import robot_reachable, start_relay, start_robot
+
+    pub = ros_node.create_publisher(String, topic, 10)
+    router = f"tcp/127.0.0.1:{free_port()}"
+    relay = await start_relay(listen=router)
+    robot, exporter = await start_robot(router)
+    exporter.demand_linger = 0.5
+    try:
+        await robot_reachable(relay)
+        async with roslibpy_lite.connect(f"ws://127.0.0.1:{relay.port}/{ROBOT1}") as ros:
+            sub = ros.subscribe(topic, "std_msgs/msg/String")
+            while True:  # the robot's subscription matches the publisher in its own time
+                pub.publish(String(data="kept"))
+                with contextlib.suppress(TimeoutError):
+                    await sub.get(0.2)
+                    break
+            await relay.close()  # the link goes with the router
+            await until(lambda: exporter.uplink_lost == 1, "the robot to see its uplink go")
+        export = exporter.exports[topic]
+        assert export.replay is not None
+        held = export.replay.held
+        for _ in range(4):  # four lingers with the link down: kept, and caching
+            await asyncio.sleep(exporter.demand_linger)
+            pub.publish(String(data="while the link is down"))
+        await until(lambda: export.replay is not None and export.replay.held > held,
+                    "the window to take what is published while the link is down")
+        assert exporter.exports.get(topic) is export and not export.relays
+        relay = await start_relay(listen=router)  # back, and nobody asks for the topic
+        await until(lambda: exporter.uplinks, "the robot to dial its router again", 30)
+        await until(lambda: topic not in exporter.exports, "the topic to be let go", 10)
+    finally:
+        await relay.close()
+        await exporter.close()
+        await robot.close()
