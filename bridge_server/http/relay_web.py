@@ -14,8 +14,11 @@ goes on to the robot's handshake):
                              labelled ``robot``, ``roslibpy_relay_robot_present``,
                              ``roslibpy_relay_bytes_from_robot_total`` and
                              ``roslibpy_relay_robot_dropped_total`` (by robot; the latter
-                             by kind too: what a robot sent that was dropped) and
-                             ``roslibpy_relay_connections_refused_total`` (by reason)
+                             by kind too: what a robot sent that was dropped),
+                             ``roslibpy_relay_connections_refused_total`` (by reason) and
+                             ``roslibpy_relay_robot_names_refused_total`` (by robot name:
+                             robots refused a name another robot held; ``status.json``
+                             has them as ``names_refused``, with the Zenoh ids)
 ``GET /healthz``             the process runs
 ``GET /readyz``              Zenoh is joined and the port listens (else 503 and why)
 ``GET /robots/<robot>/``     the bridge's status page for that robot, and under it
@@ -74,6 +77,9 @@ class RelayFront(Protocol):
     robots: dict[str, Bridge]
     refused: dict[str, int]
     """Clients turned away before any robot's Bridge saw them, by reason."""
+    names_refused: dict[str, dict[str, Any]]
+    """Robots refused a name another robot held, by name (``count``, ``holder``,
+    ``refused``)."""
 
     def robot(self, name: str) -> Awaitable[Bridge | None]:
         """Robot ``name``'s Bridge, opened on first use; ``None``: not on Zenoh."""
@@ -143,6 +149,9 @@ class RelayWeb:
                   if self.access.may_reach(principal, name)}
         if path == "/status.json":
             data = self._status(snaps, online)
+            data["names_refused"] = {name: entry for name, entry
+                                     in sorted(self.relay.names_refused.items())
+                                     if self.access.may_reach(principal, name)}
             return Reply(200, json.dumps(data, separators=(",", ":")).encode(),
                          "application/json", nocache)
         present = GaugeMetricFamily(
@@ -158,6 +167,13 @@ class RelayWeb:
             "auth, origin, too_many, max_clients).", labels=["reason"])
         for reason, n in sorted(self.relay.refused.items()):
             refused.add_metric([reason], n)
+        names = CounterMetricFamily(
+            "roslibpy_relay_robot_names_refused",
+            "Robots refused a name another robot held (one robot per name), by the name.",
+            labels=["robot"])
+        for name, entry in sorted(self.relay.names_refused.items()):
+            if self.access.may_reach(principal, name):
+                names.add_metric([name], entry["count"])
         from_robot = CounterMetricFamily(
             "roslibpy_relay_bytes_from_robot",
             "Payload bytes of the robot's topic messages this relay received from Zenoh.",
@@ -175,7 +191,7 @@ class RelayWeb:
                 dropped.add_metric([name, kind], n)
         body = metrics.render_labelled(
             ((name, snap, self.relay.robots[name].web.caps) for name, snap in snaps.items()),
-            "robot", [present, from_robot, dropped, refused])
+            "robot", [present, from_robot, dropped, refused, names])
         return Reply(200, body, metrics.CONTENT_TYPE, nocache)
 
     def _present(self, name: str, online: set[str]) -> bool:

@@ -44,6 +44,7 @@ import contextlib
 import itertools
 import json
 import logging
+import random
 import secrets
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -78,7 +79,7 @@ from .keys import (
     ParamRequest,
     Snapshot,
 )
-from .link import ZenohOptions, answering, ignore_replies, open_session
+from .link import ZenohOptions, answering, ignore_replies, open_session, tokens
 from .replay import DEMAND_LINGER, ReplayBudget, ReplayPublisher, ReplayWindow, window_metrics
 
 if TYPE_CHECKING:
@@ -168,6 +169,10 @@ class _RobotGoal:
 
 
 _GOAL_SERVICE = "/_action/send_goal"
+CLAIM_WAIT = 1.0
+"""Seconds the robot waits for the tokens of its name when it announces itself (and at
+most between one holding it leaving and trying again)."""
+
 DIAL_WARNING = 5.0
 """Seconds the robot dials without any router answering before it says so (and again
 after each as many)."""
@@ -249,6 +254,15 @@ class Exporter:
         self.uplink_lost = 0
         """How many times the robot lost its last router."""
         self._uplink_since = 0.0  # loop time the uplink came (back)
+        self.zid = ""
+        """This robot's Zenoh session id (once the session is open)."""
+        self.holding = False
+        """Whether this robot holds its name on Zenoh (and serves there)."""
+        self.refused_by: set[str] = set()
+        """The Zenoh ids of the robots holding this robot's name while it waits for it."""
+        self.name_refusals = 0
+        """Robots refused this robot's name while it held it."""
+        self._claim_changed = asyncio.Event()
 
     # -- life ----------------------------------------------------------------------------------
 
@@ -284,13 +298,22 @@ class Exporter:
             if tls else "check that the router is up and reachable there")
 
     async def _joined(self, session: zenoh.Session) -> None:
-        """Offer the robot on the open ``session``, then keep its graph snapshot fresh."""
+        """Hold the robot's name on the open ``session`` (:meth:`_claim`), offer the robot,
+        then keep its graph snapshot fresh."""
         r = self.robot
         here = self._on_loop
         live = session.liveliness()
+        self.zid = str(session.zid())
+        self._entities = [
+            session.info.declare_transport_events_listener(here(self._on_transport),
+                                                           history=True),
+            live.declare_subscriber(f"{r}/{keys.CLAIM}/*", here(self._on_claim)),
+        ]
+        self._entities.append(await self._claim(session))
+        self.holding = True
         self.snapshot = self._take_snapshot()
         self._snapshot_bytes = self.snapshot.encode()
-        self._entities = [
+        self._entities += [
             session.declare_queryable(f"{r}/{keys.GRAPH}", here(self._answer_graph)),
             session.declare_queryable(f"{r}/{keys.LATCHED}/**", here(self._answer_latched)),
             session.declare_queryable(f"{r}/{keys.CALL}/**", here(self._answer_call)),
@@ -303,14 +326,60 @@ class Exporter:
             live.declare_subscriber(f"{r}/{keys.DEMAND}/**", here(self._on_demand), history=True),
             live.declare_subscriber(f"{r}/{keys.ADVERTISE}/**", here(self._on_advertise),
                                     history=True),
-            live.declare_token(f"{r}/{keys.ALIVE}"),
-            session.info.declare_transport_events_listener(here(self._on_transport),
-                                                           history=True),
+            live.declare_token(keys.alive_key(r, self.zid)),  # last: all above answers
         ]
-        log.info("robot %s is on Zenoh (session %s)", self.robot, session.zid())
+        log.info("robot %s is on Zenoh (session %s)", self.robot, self.zid)
         while True:
             await asyncio.sleep(self.snapshot_interval)
             self._refresh_snapshot()
+
+    async def _claim(self, session: zenoh.Session) -> Any:
+        """Announce the robot's name (its ``@claim`` token) and hold it: the token of another
+        robot there already means that robot holds the name, and this one withdraws its
+        token, says why (an error, with both Zenoh ids) and, serving nothing on Zenoh, waits
+        for that robot to leave (a robot restarted before its old session's lease ended
+        waits for that lease). The token held, returned."""
+        live = session.liveliness()
+        told: set[str] = set()
+        while True:
+            self._claim_changed.clear()
+            token = live.declare_token(keys.claim_key(self.robot, self.zid))
+            found = await tokens(session, f"{self.robot}/{keys.CLAIM}/*", CLAIM_WAIT)
+            others = {keys.parse_alive(key)[1] for key in found} - {self.zid}
+            if not others:
+                if told:
+                    log.info("robot %s: the robot that held its name left; this robot "
+                             "(Zenoh id %s) takes it", self.robot, self.zid)
+                self.refused_by = set()
+                return token
+            token.undeclare()  # type: ignore[no-untyped-call]
+            self.refused_by = others
+            if others - told:
+                told |= others
+                log.error("robot %s: another robot holds this name on the Zenoh network "
+                          "(Zenoh id %s): this robot (Zenoh id %s) is refused and serves "
+                          "nothing on Zenoh until that one leaves (ROS is served meanwhile); "
+                          "stop the other robot, or give this one another --robot name",
+                          self.robot, ", ".join(sorted(others)), self.zid)
+            await self._claim_changed.wait()
+            # Two robots that announced the name at once each withdrew for the other: they
+            # try again at different times.
+            await asyncio.sleep(random.uniform(0, CLAIM_WAIT))
+
+    def _on_claim(self, sample: zenoh.Sample) -> None:
+        """Another session's token of the robot's name came or went: one gone may free the
+        name for a robot waiting for it; one come while this robot holds the name is a robot
+        refused (it withdraws when it sees this one's), said here too."""
+        zid = keys.parse_alive(str(sample.key_expr))[1]
+        if zid == self.zid:
+            return
+        if sample.kind != zenoh.SampleKind.PUT:
+            self._claim_changed.set()
+        elif self.holding:
+            self.name_refusals += 1
+            log.warning("robot %s: another robot (Zenoh id %s) announced this robot's name, "
+                        "which this robot (Zenoh id %s) holds: it is refused, this one goes on "
+                        "serving", self.robot, zid, self.zid)
 
     def _on_transport(self, event: zenoh.TransportEvent) -> None:
         """The robot's own log says when its uplink goes and comes back (its last router

@@ -736,7 +736,8 @@ class ZenohGraph:
         self.faults = self.inbox.faults
         """What the robot sent that was dropped, by kind."""
         self.snapshot = Snapshot()
-        self.alive = False
+        self.claims = keys.Claims()
+        """The sessions announcing the robot's name: the first holds it (the one served)."""
         self.presence_listeners: list[Callable[[bool], None]] = []
         """Called on the loop when the robot goes (False) or comes back (True)."""
         self.received_bytes = 0
@@ -773,7 +774,7 @@ class ZenohGraph:
         r = self.robot
         self._entities = [
             self.session.liveliness().declare_subscriber(
-                f"{r}/{keys.ALIVE}", self.on_loop(self._on_alive), history=True),
+                f"{r}/{keys.ALIVE}/**", self.on_loop(self._on_alive), history=True),
             self.session.declare_subscriber(f"{r}/{keys.GRAPH}",
                                             self.inbox.graph(self._on_graph)),
         ]
@@ -813,12 +814,29 @@ class ZenohGraph:
             return f"robot {self.robot} is not connected to this relay's Zenoh network"
         return None
 
+    @property
+    def alive(self) -> bool:
+        """Whether a robot holds the name (its liveliness token is on the network)."""
+        return self.claims.holder is not None
+
     def _on_alive(self, sample: zenoh.Sample) -> None:
-        was, self.alive = self.alive, sample.kind == zenoh.SampleKind.PUT
-        log.info("robot %s %s", self.robot, "is here" if self.alive else "went away")
-        if self.alive != was:
+        """A token of the robot's name came or went. Only the holder's count: a robot
+        refused the name (the relay's log says so) changes nothing here; the holder gone, a
+        robot announcing the name meanwhile is the robot from then on."""
+        before = self.claims.holder
+        self.claims.seen(keys.parse_alive(str(sample.key_expr))[1],
+                         sample.kind == zenoh.SampleKind.PUT)
+        after = self.claims.holder
+        if after == before:
+            return
+        if before is not None:
+            log.info("robot %s went away", self.robot)
             for listener in list(self.presence_listeners):
-                listener(self.alive)
+                listener(False)
+        if after is not None:
+            log.info("robot %s is here", self.robot)
+            for listener in list(self.presence_listeners):
+                listener(True)
         self.release_types()
 
     def _on_graph(self, sample: zenoh.Sample) -> None:

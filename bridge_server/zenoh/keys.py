@@ -11,7 +11,12 @@ key                                      what
 =======================================  ==============================================
 ``<robot>/<topic>``                      one put per ROS message: its CDR bytes as they
                                          came; attachment :class:`Meta` (JSON)
-``<robot>/@alive``                       liveliness token: the robot is there
+``<robot>/@claim/<zid>``                 liveliness token of a robot announcing its name
+                                         (``zid``: its Zenoh session's id), before anything
+                                         else; one robot per name: a robot that finds
+                                         another's withdraws it and waits (:class:`Claims`)
+``<robot>/@alive/<zid>``                 liveliness token of the robot holding the name,
+                                         once it serves: the robot is there
 ``<robot>/@demand/<relay>/<topic>``      liveliness token of a relay watching ``topic``:
                                          the robot subscribes while one exists
 ``<robot>/@latched/<topic>``             queryable: the last message of a latched topic
@@ -58,6 +63,7 @@ zenoh-bridge-ros2dds it says why.
 from __future__ import annotations
 
 import base64
+import contextlib
 import json
 import math
 import re
@@ -73,6 +79,7 @@ __all__ = [
     "ALIVE",
     "CALL",
     "CANCEL",
+    "CLAIM",
     "CONTROL",
     "DEMAND",
     "EXECUTING",
@@ -87,6 +94,7 @@ __all__ = [
     "SERVE",
     "SERVING",
     "CallRequest",
+    "Claims",
     "Execute",
     "GoalEvent",
     "GoalRequest",
@@ -94,11 +102,14 @@ __all__ = [
     "ParamRequest",
     "Snapshot",
     "advertise_key",
+    "alive_key",
     "check_relay",
     "check_robot",
+    "claim_key",
     "key_of",
     "name_of",
     "parse_advertise",
+    "parse_alive",
     "parse_demand",
     "parse_serve",
     "refused_key",
@@ -106,6 +117,7 @@ __all__ = [
 ]
 
 ALIVE = "@alive"
+CLAIM = "@claim"
 DEMAND = "@demand"
 LATCHED = "@latched"
 GRAPH = "@graph"
@@ -128,7 +140,7 @@ GOAL_WAIT = 30 * 24 * 3600.0
 """Seconds a goal's query (``@goal``, ``@executing``) stays open: a goal may run as long as
 it likes (a session's ``goal_timeout`` ends it sooner if set)."""
 
-CONTROL = (ALIVE, DEMAND, LATCHED, GRAPH, CALL, ADVERTISE, IN, GOAL, RUNNING, CANCEL, SERVE,
+CONTROL = (ALIVE, CLAIM, DEMAND, LATCHED, GRAPH, CALL, ADVERTISE, IN, GOAL, RUNNING, CANCEL, SERVE,
            SERVING, PARAM, EXECUTING, REFUSED)
 """Every control chunk (Zenoh's verbatim chunks, which no wildcard matches: access rules
 name each)."""
@@ -164,6 +176,47 @@ def key_of(robot: str, name: str, where: str = "") -> str:
 def name_of(key: str, skip: int) -> str:
     """The ROS name in ``key`` after its first ``skip`` chunks (``r1/@in/a/b``, 2: ``/a/b``)."""
     return "/" + key.split("/", skip)[skip]
+
+
+def alive_key(robot: str, zid: str) -> str:
+    """The liveliness token of robot ``robot`` announced by the Zenoh session ``zid``."""
+    return f"{robot}/{ALIVE}/{zid}"
+
+
+def claim_key(robot: str, zid: str) -> str:
+    """The token of the Zenoh session ``zid`` announcing robot name ``robot``."""
+    return f"{robot}/{CLAIM}/{zid}"
+
+
+def parse_alive(key: str) -> tuple[str, str]:
+    """(robot, Zenoh id) of a robot's ``@alive`` or ``@claim`` token (the id ``""`` for a
+    bare ``<robot>/@alive``, a robot that names no session)."""
+    robot, _, rest = key.partition("/")
+    return robot, rest.partition("/")[2]
+
+
+class Claims:
+    """The sessions announcing one robot name (their ``@alive`` tokens), in the order their
+    tokens came: the first holds the name, the others are refused while it does."""
+
+    def __init__(self) -> None:
+        self.order: list[str] = []
+
+    @property
+    def holder(self) -> str | None:
+        """The Zenoh id holding the name (``None``: no robot announces it)."""
+        return self.order[0] if self.order else None
+
+    def seen(self, zid: str, here: bool) -> bool:
+        """A token of ``zid`` came (``here``) or went; whether it is one refused now (it
+        came while another holds the name)."""
+        if not here:
+            with contextlib.suppress(ValueError):
+                self.order.remove(zid)
+            return False
+        if zid not in self.order:
+            self.order.append(zid)
+        return self.order[0] != zid
 
 
 def parse_demand(key: str) -> tuple[str, str]:

@@ -40,7 +40,7 @@ if TYPE_CHECKING:
 log = logging.getLogger("bridge_server.zenoh.link")
 
 __all__ = ["ZenohOptions", "add_arguments", "answering", "ignore_replies", "open_session",
-           "options_from_args", "robot_acl"]
+           "options_from_args", "robot_acl", "tokens"]
 
 _PROTOCOLS = ("tcp", "tls", "quic", "udp", "unixsock-stream")
 _ENDPOINT = re.compile(r"(?P<proto>[a-z-]+)/(?P<addr>[^#?]+)(?:[#?].*)?")
@@ -293,6 +293,39 @@ async def open_session(options: ZenohOptions) -> zenoh.Session:
 
     threading.Thread(target=open_it, daemon=True, name="zenoh-open").start()
     return await opened
+
+
+async def tokens(session: zenoh.Session, key: str, timeout: float, first: bool = False
+                 ) -> set[str]:
+    """The keys of the liveliness tokens matching ``key`` on the network now (with
+    ``first``, as soon as one answers; at most ``timeout`` s)."""
+    import zenoh
+
+    loop = asyncio.get_running_loop()
+    done: asyncio.Future[None] = loop.create_future()
+    found: set[str] = set()
+
+    def seen(key: str) -> None:
+        found.add(key)
+        if first and not done.done():
+            done.set_result(None)
+
+    def ended() -> None:
+        if not done.done():
+            done.set_result(None)
+
+    def reply(r: zenoh.Reply) -> None:
+        if r.ok is not None:
+            with contextlib.suppress(RuntimeError):  # the loop closed meanwhile
+                loop.call_soon_threadsafe(seen, str(r.ok.key_expr))
+
+    def end() -> None:
+        with contextlib.suppress(RuntimeError):
+            loop.call_soon_threadsafe(ended)
+
+    session.liveliness().get(key, zenoh.handlers.Callback(reply, end), timeout=timeout)
+    await done
+    return found
 
 
 @contextlib.contextmanager

@@ -98,6 +98,13 @@ class Relay:
         self._server: Server | None = None
         self._opening: dict[str, asyncio.Task[Bridge | None]] = {}
         self.refused: dict[str, int] = {}  # clients turned away before a robot, by reason
+        self.claims: dict[str, keys.Claims] = {}
+        """The sessions announcing each robot name (their ``@claim`` tokens), in order."""
+        self.names_refused: dict[str, dict[str, Any]] = {}
+        """Robots refused a name another robot held, by name: how many, and the last
+        (``holder``, ``refused``: Zenoh ids with their addresses where this relay knows
+        them)."""
+        self._watch: Any = None
         self.web = RelayWeb(self, WebAccess(self.security))  # status page, /metrics
 
     @property
@@ -114,6 +121,42 @@ class Relay:
     async def join(self) -> None:
         """Join the Zenoh network (a client of routers waits here until one answers)."""
         self.session = await zenoh_link.open_session(self.options)
+        loop = asyncio.get_running_loop()
+
+        def cross(sample: zenoh.Sample) -> None:
+            with contextlib.suppress(RuntimeError):  # the loop closed meanwhile
+                loop.call_soon_threadsafe(self._on_claim, sample)
+
+        self._watch = self.session.liveliness().declare_subscriber(
+            f"*/{keys.CLAIM}/*", cross, history=True)
+
+    def _on_claim(self, sample: zenoh.Sample) -> None:
+        """A robot's ``@claim`` token came or went: one coming while another robot holds its name is
+        refused (the holder is served; the refused robot withdraws when it sees the holder's
+        token): logged with both Zenoh ids and addresses, and counted."""
+        import zenoh
+
+        robot, zid = keys.parse_alive(str(sample.key_expr))
+        claims = self.claims.setdefault(robot, keys.Claims())
+        if not claims.seen(zid, sample.kind == zenoh.SampleKind.PUT):
+            if claims.holder is None:
+                del self.claims[robot]
+            return
+        holder, refused = self._whom(claims.holder or ""), self._whom(zid)
+        entry = self.names_refused.setdefault(robot, {"count": 0})
+        entry.update(count=entry["count"] + 1, holder=holder, refused=refused)
+        log.warning("refused robot %s (%s): robot %s (%s) holds that name; this relay goes on "
+                    "serving it", robot, refused, robot, holder)
+
+    def _whom(self, zid: str) -> str:
+        """A robot's Zenoh id, with its address (and certificate's name) where this relay
+        has a link to it (it is the robot's router)."""
+        assert self.session is not None
+        for link in self.session.info.links():
+            if str(link.zid) == zid:
+                cn = f", certificate {link.auth_identifier}" if link.auth_identifier else ""
+                return f"Zenoh id {zid} at {link.dst}{cn}"
+        return f"Zenoh id {zid or '(none)'}"
 
     async def listen(self) -> None:
         """Open the websocket port (and its plain-HTTP routes)."""
@@ -177,31 +220,9 @@ class Relay:
         ``first``, as soon as one answers)."""
         if self.session is None:
             return set()
-        import zenoh
-
-        loop = asyncio.get_running_loop()
-        done: asyncio.Future[None] = loop.create_future()
-        found: set[str] = set()
-
-        def seen(key: str) -> None:
-            found.add(key.split("/", 1)[0])
-            if first and not done.done():
-                done.set_result(None)
-
-        def ended() -> None:
-            if not done.done():
-                done.set_result(None)
-
-        def reply(r: Any) -> None:
-            if r.ok is not None:
-                loop.call_soon_threadsafe(seen, str(r.ok.key_expr))
-
-        self.session.liveliness().get(
-            f"{robots}/{keys.ALIVE}",
-            zenoh.handlers.Callback(reply, lambda: loop.call_soon_threadsafe(ended)),
-            timeout=ALIVE_WAIT)
-        await done
-        return found
+        found = await zenoh_link.tokens(self.session, f"{robots}/{keys.ALIVE}/**", ALIVE_WAIT,
+                                        first)
+        return {keys.parse_alive(key)[0] for key in found}
 
     def _serving(self) -> bool:
         return self._server is not None and self._server.is_serving()
@@ -362,6 +383,10 @@ class Relay:
         for bridge in list(self.robots.values()):
             await bridge.close()
         self.robots.clear()
+        if self._watch is not None:
+            with contextlib.suppress(Exception):  # the session closed first
+                self._watch.undeclare()
+            self._watch = None
         if self.session is not None:
             session, self.session = self.session, None
             await asyncio.get_running_loop().run_in_executor(None, session.close)
