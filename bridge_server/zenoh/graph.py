@@ -106,6 +106,9 @@ SERVER_WAIT = 5.0
 """Seconds the robot waits for its action client to be ready for a goal (the relay's
 session already waited for the robot's graph to list the action server)."""
 
+GONE_WAIT = 2.0
+"""Seconds a query to the robot that ended unanswered waits for the robot's token to go."""
+
 PARAM_WAIT = 5.0
 """Seconds a parameter query waits for the robot beyond the robot's own timeout."""
 
@@ -470,14 +473,23 @@ class ZenohSentGoal:
                 listener.on_result(event.status, result)
 
     def on_end(self) -> None:
-        """The query ended (on the loop): without a result, the robot went."""
+        """The query ended (on the loop): without a result, the robot went (or is not
+        there: :meth:`ZenohGraph.unanswered` says which)."""
         if not self.finished:
             self._end()
-            self.listener.on_failed(f"robot {self.shared.graph.robot} did not answer the goal "
-                                    "(is it connected to this relay's Zenoh network?)")
+            told = self.shared.graph.loop.create_task(self.shared.graph.unanswered("goal"))
+            told.add_done_callback(lambda task: self.listener.on_failed(task.result()))
+
+    def gone(self) -> None:
+        """The robot went with the goal in flight (:meth:`ZenohGraph.went`): it fails now,
+        and the robot, if it comes back, cancels it (this relay's ``@running`` token goes)."""
+        if not self.finished:
+            self._end()
+            self.listener.on_failed(self.shared.graph.went("goal"))
 
     def _end(self) -> None:
         self.finished = True
+        self.shared.graph.in_flight.discard(self.gone)
         if self.token is not None:
             with contextlib.suppress(zenoh.ZError):
                 self.token.undeclare()
@@ -521,6 +533,8 @@ class ZenohActionClient:
                               consolidation=zenoh.ConsolidationMode.NONE)
         except zenoh.ZError:  # the relay's Zenoh session closed: the goal ends unsent
             graph.loop.call_soon(sent.on_end)
+            return sent
+        graph.in_flight.add(sent.gone)
         return sent
 
     def destroy(self) -> None:
@@ -738,6 +752,9 @@ class ZenohGraph:
         self.snapshot = Snapshot()
         self.claims = keys.Claims()
         """The sessions announcing the robot's name: the first holds it (the one served)."""
+        self.in_flight: set[Callable[[], None]] = set()
+        """Each call, parameter request and goal waiting on the robot: failed when the robot
+        goes (:meth:`went` says why)."""
         self.presence_listeners: list[Callable[[bool], None]] = []
         """Called on the loop when the robot goes (False) or comes back (True)."""
         self.received_bytes = 0
@@ -821,8 +838,9 @@ class ZenohGraph:
 
     def _on_alive(self, sample: zenoh.Sample) -> None:
         """A token of the robot's name came or went. Only the holder's count: a robot
-        refused the name (the relay's log says so) changes nothing here; the holder gone, a
-        robot announcing the name meanwhile is the robot from then on."""
+        refused the name (the relay's log says so) changes nothing here; the holder gone,
+        what waits on it fails at once, and a robot announcing the name meanwhile is the
+        robot from then on."""
         before = self.claims.holder
         self.claims.seen(keys.parse_alive(str(sample.key_expr))[1],
                          sample.kind == zenoh.SampleKind.PUT)
@@ -831,6 +849,9 @@ class ZenohGraph:
             return
         if before is not None:
             log.info("robot %s went away", self.robot)
+            waiting, self.in_flight = self.in_flight, set()
+            for fail in waiting:
+                fail()
             for listener in list(self.presence_listeners):
                 listener(False)
         if after is not None:
@@ -838,6 +859,32 @@ class ZenohGraph:
             for listener in list(self.presence_listeners):
                 listener(True)
         self.release_types()
+
+    def went(self, what: str) -> str:
+        """Why a ``what`` (call, goal) in flight fails when the robot goes (its link's
+        lease ended, or it left): it will not be answered, so nobody waits for their own
+        timeout."""
+        return (f"robot {self.robot} went away (its link to the Zenoh network ended) while "
+                f"this {what} was in flight")
+
+    async def unanswered(self, what: str) -> str:
+        """Why a query to the robot (a ``what``) ended without an answer: the robot went
+        (Zenoh ends the queries of a link it closes just before the robot's token is seen to
+        go: that is waited for, at most ``GONE_WAIT`` s), or, still there, it did not
+        answer."""
+        if self.alive:
+            gone = asyncio.Event()
+            self.in_flight.add(gone.set)
+            try:
+                with contextlib.suppress(TimeoutError):
+                    async with asyncio.timeout(GONE_WAIT):
+                        await gone.wait()
+            finally:
+                self.in_flight.discard(gone.set)
+            if not gone.is_set():
+                return (f"robot {self.robot} did not answer the {what} (is it connected to "
+                        "this relay's Zenoh network?)")
+        return self.went(what)
 
     def _on_graph(self, sample: zenoh.Sample) -> None:
         """A graph document: read now, or, at most one each ``GRAPH_INTERVAL`` s, when its
@@ -1120,7 +1167,7 @@ class ZenohGraph:
     async def _ask(self, key: str, payload: bytes, timeout: float, what: str) -> bytes:
         """One query to the robot: its reply's payload; ``ZenohGraph.Refused`` with an error
         reply's text, ``TimeoutError`` naming ``what`` if nothing came."""
-        future: asyncio.Future[bytes] = self.loop.create_future()
+        future: asyncio.Future[bytes | None] = self.loop.create_future()
 
         def answer(reply: zenoh.Reply) -> None:
             if future.done():
@@ -1132,9 +1179,11 @@ class ZenohGraph:
 
         def ended() -> None:
             if not future.done():
-                future.set_exception(TimeoutError(
-                    f"{what}: robot {self.robot} did not answer (is it connected to this "
-                    "relay's Zenoh network?)"))
+                future.set_result(None)
+
+        def went() -> None:
+            if not future.done():
+                future.set_exception(Refused(f"{what}: {self.went('call')}"))
 
         try:
             self.session.get(key, zenoh.handlers.Callback(self.on_loop(answer),
@@ -1142,7 +1191,14 @@ class ZenohGraph:
                              payload=payload, timeout=timeout)
         except zenoh.ZError as exc:  # the relay is closing
             raise Refused(f"{what}: this relay's Zenoh session is closed ({exc})") from None
-        return await future
+        self.in_flight.add(went)
+        try:
+            data = await future
+        finally:
+            self.in_flight.discard(went)
+        if data is None:
+            raise TimeoutError(f"{what}: {await self.unanswered('call')}")
+        return data
 
     async def call_service(
         self, service: str, srv_type: str | None, args: Mapping[str, Any] | list[Any] | None,
