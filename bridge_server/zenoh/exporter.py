@@ -126,10 +126,12 @@ class _RobotGoal:
     replies to the goal's query (the :class:`~bridge_server.graph.GoalListener`)."""
 
     def __init__(self, exporter: Exporter, query: zenoh.Query, key: tuple[str, str],
-                 client: ActionClient) -> None:
+                 action: str, client: ActionClient) -> None:
         self.exporter = exporter
         self.query = query
         self.key = key
+        """(the id of the relay that sent it, the goal's id there)"""
+        self.action = action
         self.client = client
         self.sent: SentGoal | None = None
 
@@ -169,6 +171,7 @@ class _RobotGoal:
 
 
 _GOAL_SERVICE = "/_action/send_goal"
+_CANCEL_SERVICE = "/_action/cancel_goal"
 CLAIM_WAIT = 1.0
 """Seconds the robot waits for the tokens of its name when it announces itself (and at
 most between one holding it leaving and trying again)."""
@@ -665,18 +668,43 @@ class Exporter:
 
     async def _call(self, query: zenoh.Query) -> None:
         with answering(query):
-            service = keys.name_of(str(query.key_expr), 2)
             try:
+                relay = keys.check_relay(str(query.key_expr).split("/", 3)[2])
+                service = keys.name_of(str(query.key_expr), 3)
                 req = CallRequest.decode(query.payload.to_bytes() if query.payload else b"")
-                refused = self.refusal("call_service", service)
+                refused = self.refusal("call_service", service, relay)
                 if refused is not None:
                     raise BridgeError(refused)
                 response = await self.graph.call_service(
-                    service, req.type, req.args, req.timeout, req.discovery_wait)
+                    service, req.type, req.args, req.timeout, req.discovery_wait,
+                    check=lambda request: self._not_its_goal(relay, service, request))
             except Exception as exc:  # rclpy's own (a name it refuses) too: the relay's
                 query.reply_err(str(exc).encode())  # caller gets the text, not silence
                 return
             query.reply(query.key_expr, _json(response))
+
+    def _not_its_goal(self, relay: str, service: str, request: Any) -> str | None:
+        """Why ``relay`` may not send ``request`` to ``service``: a call of an action's
+        ``cancel_goal`` that reaches a goal another relay sent (a relay acts on its own goals
+        only; a zero goal id or a stamp cancels every goal, theirs too). ``None``: it may
+        (the robot's relay policy decides the rest)."""
+        action = service.removesuffix(_CANCEL_SERVICE)
+        theirs = [g for g in self.goals.values() if g.action == action and g.key[0] != relay]
+        if action == service or not theirs:
+            return None
+        info = getattr(request, "goal_info", None)
+        uuid = bytes(info.goal_id.uuid) if info is not None else b""
+        if info is None or info.stamp.sec or info.stamp.nanosec or not any(uuid):
+            owners = ", ".join(sorted({g.key[0] for g in theirs}))
+            return (f"relay {relay} may not cancel every goal of {action}: a zero goal id or a "
+                    f"stamp would cancel goals relay {owners} sent, and a relay acts on its own "
+                    "goals only (give one goal's id and a zero stamp)")
+        for goal in theirs:
+            handle = goal.sent.handle if goal.sent is not None else None
+            if handle is not None and bytes(handle.goal_id.uuid) == uuid:
+                return (f"goal {uuid.hex()} of {action} was sent through relay {goal.key[0]}: "
+                        f"relay {relay} may not cancel it (a relay acts on its own goals only)")
+        return None
 
     # -- services relays' clients serve --------------------------------------------------------
 
@@ -877,7 +905,7 @@ class Exporter:
             with answering(query):
                 query.reply(query.key_expr, GoalEvent("result", status=Status.CANCELED).encode())
             return
-        running = _RobotGoal(self, query, key, client)
+        running = _RobotGoal(self, query, key, action, client)
         self.goals[key] = running
         running.sent = client.send(goal, running, req.feedback)
 

@@ -478,7 +478,11 @@ class ZenohSentGoal:
         if not self.finished:
             self._end()
             told = self.shared.graph.loop.create_task(self.shared.graph.unanswered("goal"))
-            told.add_done_callback(lambda task: self.listener.on_failed(task.result()))
+            told.add_done_callback(self._told)
+
+    def _told(self, task: asyncio.Task[str]) -> None:
+        if not task.cancelled():  # cancelled: the relay is closing
+            self.listener.on_failed(task.result())
 
     def gone(self) -> None:
         """The robot went with the goal in flight (:meth:`ZenohGraph.went`): it fails now,
@@ -1222,7 +1226,7 @@ class ZenohGraph:
         request = CallRequest(type=srv_type, args=args, timeout=timeout,
                               discovery_wait=discovery_wait)
         try:
-            data = await self._ask(keys.key_of(self.robot, service, keys.CALL),
+            data = await self._ask(keys.key_of(self.robot, service, f"{keys.CALL}/{self.relay}"),
                                    request.encode(), timeout + 2 * discovery_wait + 1.0,
                                    f"service {service}")
         except (Refused, TimeoutError) as exc:

@@ -22,8 +22,9 @@ key                                      what
 ``<robot>/@latched/<topic>``             queryable: the last message of a latched topic
 ``<robot>/@graph``                       :class:`Snapshot` JSON: put on change, and a
                                          queryable answering the current one
-``<robot>/@call/<service>``              queryable: a service call, :class:`CallRequest`
-                                         JSON in, the response dict (JSON) or an error
+``<robot>/@call/<relay>/<service>``      queryable: a service call of relay ``relay``,
+                                         :class:`CallRequest` JSON in, the response dict
+                                         (JSON) or an error
 ``<robot>/@advertise/<relay>/<latch>/``  liveliness token of a relay's publisher
 ``<pkg>/msg/<Name>/<topic>``             (``latch`` is ``latched`` or ``volatile``)
 ``<robot>/@in/<topic>``                  a client's message to publish: CDR bytes,

@@ -161,11 +161,11 @@ async def test_the_robot_names_what_is_wrong_with_a_request(topic: str) -> None:
             assert event.event == "failed" and "timeout nan is not a number of seconds" in \
                 event.text, event
             call = CallRequest(type=None, args={}, timeout=1.0, discovery_wait=-1.0).encode()
-            replies = await asyncio.to_thread(ask, f"{ROBOT}/{keys.CALL}{topic}", call)
+            replies = await asyncio.to_thread(ask, f"{ROBOT}/{keys.CALL}/r{topic}", call)
             assert "discovery_wait -1.0 is not a number of seconds" in replies[0], replies
             call = CallRequest(type="std_srvs/srv/Trigger", args={}, timeout=1.0,
                                discovery_wait=0.0).encode()
-            replies = await asyncio.to_thread(ask, f"{ROBOT}/{keys.CALL}/9bad", call)
+            replies = await asyncio.to_thread(ask, f"{ROBOT}/{keys.CALL}/r/9bad", call)
             assert "9bad" in replies[0] and "must not start with a number" in replies[0], replies
         finally:
             await asyncio.to_thread(session.close)
