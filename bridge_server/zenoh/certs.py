@@ -125,6 +125,14 @@ def _builder(subject: x509.Name, issuer: x509.Name, public_key: ec.EllipticCurve
             .not_valid_after(now + datetime.timedelta(days=days)))
 
 
+def common_name(path: str | Path) -> str | None:
+    """The common name of the (first) certificate in the PEM file ``path`` (``None``: it has
+    none); ``ValueError`` if the file holds no certificate."""
+    cert = x509.load_pem_x509_certificate(Path(path).read_bytes())
+    names = cert.subject.get_attributes_for_oid(NameOID.COMMON_NAME)
+    return str(names[0].value) if names else None
+
+
 def _key_pem(key: ec.EllipticCurvePrivateKey) -> bytes:
     return key.private_bytes(serialization.Encoding.PEM, serialization.PrivateFormat.PKCS8,
                              serialization.NoEncryption())

@@ -669,8 +669,7 @@ class Exporter:
     async def _call(self, query: zenoh.Query) -> None:
         with answering(query):
             try:
-                relay = keys.check_relay(str(query.key_expr).split("/", 3)[2])
-                service = keys.name_of(str(query.key_expr), 3)
+                relay, service = keys.parse_scoped(str(query.key_expr))
                 req = CallRequest.decode(query.payload.to_bytes() if query.payload else b"")
                 refused = self.refusal("call_service", service, relay)
                 if refused is not None:
@@ -880,10 +879,15 @@ class Exporter:
         self._spawn(self._goal(query))
 
     async def _goal(self, query: zenoh.Query) -> None:
-        action = keys.name_of(str(query.key_expr), 2)
         key: tuple[str, str] | None = None
         try:
+            relay, action = keys.parse_scoped(str(query.key_expr))
             req = GoalRequest.decode(query.payload.to_bytes() if query.payload else b"")
+            if req.relay != relay:  # the key's is the relay's own (the router's rules)
+                raise BridgeError(f"a goal of relay {relay} names relay {req.relay} as its "
+                                  "sender: a relay sends its own goals only")
+            if (relay, req.id) in self.goals or (relay, req.id) in self._waiting:
+                raise BridgeError(f"relay {relay}'s goal {req.id} is in flight already")
             refused = self.refusal("send_action_goal", action, req.relay)
             if refused is not None:
                 raise BridgeError(refused)

@@ -530,7 +530,7 @@ class ZenohActionClient:
         try:
             sent.token = graph.session.liveliness().declare_token(
                 f"{graph.robot}/{keys.RUNNING}/{graph.relay}/{sent.id}")
-            graph.session.get(keys.key_of(graph.robot, self.name, keys.GOAL),
+            graph.session.get(keys.key_of(graph.robot, self.name, f"{keys.GOAL}/{graph.relay}"),
                               zenoh.handlers.Callback(graph.on_loop(sent.on_reply),
                                                       graph.inbox.end(sent.on_end)),
                               payload=request.encode(), timeout=GOAL_WAIT,

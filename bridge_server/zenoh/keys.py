@@ -29,9 +29,10 @@ key                                      what
 ``<pkg>/msg/<Name>/<topic>``             (``latch`` is ``latched`` or ``volatile``)
 ``<robot>/@in/<topic>``                  a client's message to publish: CDR bytes,
                                          attachment :class:`Meta` (type and latch)
-``<robot>/@goal/<action>``               queryable: a goal, :class:`GoalRequest` JSON
-                                         in; the replies stream :class:`GoalEvent` JSON
-                                         (accepted, feedback, ..., the result last)
+``<robot>/@goal/<relay>/<action>``       queryable: a goal of relay ``relay``,
+                                         :class:`GoalRequest` JSON in; the replies
+                                         stream :class:`GoalEvent` JSON (accepted,
+                                         feedback, ..., the result last)
 ``<robot>/@running/<relay>/<goal>``      liveliness token of a goal a relay sent: the
                                          robot cancels the goal when it goes
 ``<robot>/@cancel/<relay>/<goal>``       queryable: cancel that goal (the answer comes
@@ -91,6 +92,7 @@ __all__ = [
     "LATCHED",
     "PARAM",
     "REFUSED",
+    "RELAY_SCOPED",
     "RUNNING",
     "SERVE",
     "SERVING",
@@ -112,6 +114,7 @@ __all__ = [
     "parse_advertise",
     "parse_alive",
     "parse_demand",
+    "parse_scoped",
     "parse_serve",
     "refused_key",
     "serve_key",
@@ -145,6 +148,12 @@ CONTROL = (ALIVE, CLAIM, DEMAND, LATCHED, GRAPH, CALL, ADVERTISE, IN, GOAL, RUNN
            SERVING, PARAM, EXECUTING, REFUSED)
 """Every control chunk (Zenoh's verbatim chunks, which no wildcard matches: access rules
 name each)."""
+
+RELAY_SCOPED = (DEMAND, ADVERTISE, RUNNING, CANCEL, SERVE, REFUSED, SERVING, EXECUTING, CALL,
+                GOAL)
+"""The control chunks whose next chunk names a relay (``<robot>/<chunk>/<relay>/...``): a
+router's access rules hold each relay to its own (its certificate's common name), so what
+the robot takes as a relay's id there is that relay's."""
 
 _CHUNK = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.-]*\Z")
 _HEX = re.compile(r"(?:[0-9a-f]{2})*\Z")
@@ -218,6 +227,15 @@ class Claims:
         if zid not in self.order:
             self.order.append(zid)
         return self.order[0] != zid
+
+
+def parse_scoped(key: str) -> tuple[str, str]:
+    """(relay id, ROS name) of a key that names a relay (``<robot>/<chunk>/<relay>/<name>``,
+    :data:`RELAY_SCOPED`); ``BridgeError`` naming the key if it does not."""
+    parts = key.split("/", 3)
+    if len(parts) < 4:
+        raise BridgeError(f"key {key!r} names no relay and name")
+    return check_relay(parts[2]), "/" + parts[3]
 
 
 def parse_demand(key: str) -> tuple[str, str]:

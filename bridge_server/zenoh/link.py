@@ -13,7 +13,8 @@ Every link can be TLS, and a router can ask each side for a certificate
 (``--zenoh-mtls``): then a robot proves who it is by its certificate's common name, and
 the router lets it use only the keys under that name (:func:`robot_acl`), so no robot can
 publish, serve or answer as another. Relays, named by their certificates too
-(``--zenoh-relay``), may use every robot's keys; which viewer may reach which robot is the
+(``--zenoh-relay``), may use every robot's keys, but where a key names a relay (its goals,
+cancels, calls and tokens) only their own name; which viewer may reach which robot is the
 relay's roles' business (``robots = [...]`` in a role).
 """
 
@@ -79,8 +80,10 @@ def _under(prefix: str) -> list[str]:
 
 def robot_acl(robots: Sequence[str], relays: Sequence[str]) -> dict[str, Any]:
     """A router's access control: each robot (by its certificate's common name, which is its
-    robot name) only on keys under its name, each relay on every robot's, anyone else on
-    nothing."""
+    robot name) only on keys under its name; each relay (by its certificate's common name,
+    which is its relay id) on every robot's, but where a key names a relay
+    (:data:`keys.RELAY_SCOPED`: its goals, cancels, calls, tokens) only under its own name;
+    anyone else on nothing."""
     rules: list[dict[str, Any]] = []
     subjects: list[dict[str, Any]] = []
     policies: list[dict[str, Any]] = []
@@ -93,8 +96,11 @@ def robot_acl(robots: Sequence[str], relays: Sequence[str]) -> dict[str, Any]:
 
     for i, robot in enumerate(robots):
         allow(f"robot{i}", [robot], [robot, *_under(robot)])
-    if relays:
-        allow("relays", list(relays), ["**", *_under("*")[1:]])
+    shared = [c for c in _CONTROL if c not in keys.RELAY_SCOPED]
+    for i, relay in enumerate(relays):
+        allow(f"relay{i}", [relay], ["**", *(f"*/{c}" for c in shared),
+                                     *(f"*/{c}/**" for c in shared),
+                                     *(f"*/{c}/{relay}/**" for c in keys.RELAY_SCOPED)])
     return {"enabled": True, "default_permission": "deny", "rules": rules,
             "subjects": subjects, "policies": policies}
 
@@ -113,7 +119,8 @@ class ZenohOptions:
     robots: list[str] = field(default_factory=list)
     """With ``mtls``: robots let in by their certificates' common names, each on its keys."""
     relays: list[str] = field(default_factory=list)
-    """With ``mtls``: relays let in by their certificates' common names, on every key."""
+    """With ``mtls``: relays let in by their certificates' common names, on every robot's
+    keys (those naming a relay: under their own name only)."""
     lease: float = 3.0
     """Seconds of silence after which a link counts as dead (Zenoh's lease; each side sends
     keep-alives four times per lease): the robot's liveliness goes, and its clients are told."""
@@ -373,7 +380,8 @@ def add_arguments(p: argparse.ArgumentParser, listen: bool) -> None:
                        "under its own name only (may be given several times)")
         g.add_argument("--zenoh-relay", action="append", default=[], metavar="NAME",
                        help="with --zenoh-mtls: another relay let in by its certificate's "
-                       "common name, on every robot's keys (may be given several times)")
+                       "common name, on every robot's keys (those naming a relay: under its "
+                       "own name only; may be given several times)")
 
 
 def options_from_args(args: argparse.Namespace) -> ZenohOptions:

@@ -91,7 +91,7 @@ class Relay:
         self.config = config
         self.options = options
         self.type_limits = type_limits or TypeLimits()  # of each robot's own types
-        self.relay_id = keys.check_relay(relay_id or secrets.token_hex(6))
+        self.relay_id = keys.check_relay(_relay_id(options, relay_id))
         self.security = Security(config.security)
         self.robots: dict[str, Bridge] = {}
         self.session: zenoh.Session | None = None
@@ -392,6 +392,21 @@ class Relay:
             await asyncio.get_running_loop().run_in_executor(None, session.close)
 
 
+def _relay_id(options: zenoh_link.ZenohOptions, given: str | None) -> str:
+    """The relay's id on Zenoh: ``given`` (``--relay-id``), else its certificate's common
+    name, else a random one. A relay that dials a router with a certificate is that
+    certificate's name there (the router's access rules hold it to the keys naming it):
+    another ``given`` is refused, naming both."""
+    from .certs import common_name
+
+    name = common_name(options.tls_cert) if options.tls_cert else None
+    if given and name and options.connect and not options.listen and given != name:
+        raise BridgeError(f"--relay-id {given}: a relay dialing with a certificate is its "
+                          f"certificate's common name on Zenoh ({name}); leave --relay-id out "
+                          "or give that")
+    return given or name or secrets.token_hex(6)
+
+
 def _unknown(name: str) -> str:
     return f"no robot named {name!r} is connected to this relay's Zenoh network"
 
@@ -435,8 +450,9 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p.add_argument("--host", default="127.0.0.1", help="address to bind (default 127.0.0.1)")
     p.add_argument("--port", type=int, default=9090, help="port (default 9090; 0: any free port)")
     p.add_argument("--relay-id", default=None,
-                   help="this relay's name on Zenoh (default: random; it names its demand "
-                   "and publisher tokens)")
+                   help="this relay's name on Zenoh (default: its certificate's common name "
+                   "with --zenoh-tls-cert, else random; it names its tokens, goals and calls, "
+                   "and a robot's goals answer to it alone)")
     p.add_argument("--max-message-size", type=int, default=16 * 1024 * 1024,
                    help="largest inbound frame in bytes (default 16 MiB)")
     p.add_argument("--call-timeout", type=float, default=5.0,

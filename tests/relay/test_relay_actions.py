@@ -140,7 +140,8 @@ async def test_the_robot_names_what_is_wrong_with_a_request(topic: str) -> None:
                 return [r.ok.payload.to_bytes() if r.ok else r.err.payload.to_string()  # type: ignore[union-attr]
                         for r in session.get(key, payload=payload, timeout=10)]
 
-            replies = await asyncio.to_thread(ask, f"{ROBOT}/{keys.GOAL}{topic}", b'{"goal": 1}')
+            replies = await asyncio.to_thread(ask, f"{ROBOT}/{keys.GOAL}/r{topic}",
+                                              b'{"goal": 1}')
             event = GoalEvent.decode(replies[0])
             assert event.event == "failed" and "is not a GoalRequest" in event.text, event
             assert "'type'" in event.text
@@ -156,7 +157,7 @@ async def test_the_robot_names_what_is_wrong_with_a_request(topic: str) -> None:
             goal = GoalRequest(type="test_msgs/action/Fibonacci", goal={"order": 1},
                                feedback=False, relay="r", id="g", timeout=0.0).encode()
             nan = goal.replace(b'"timeout":0.0', b'"timeout":NaN')
-            replies = await asyncio.to_thread(ask, f"{ROBOT}/{keys.GOAL}{topic}", nan)
+            replies = await asyncio.to_thread(ask, f"{ROBOT}/{keys.GOAL}/r{topic}", nan)
             event = GoalEvent.decode(replies[0])
             assert event.event == "failed" and "timeout nan is not a number of seconds" in \
                 event.text, event
@@ -426,7 +427,7 @@ async def test_a_goal_whose_relay_went_while_it_waited_for_a_server_is_not_sent(
                                       relay="gone", id=gid, timeout=30.0)
                 return [GoalEvent.decode(r.ok.payload.to_bytes()) if r.ok else
                         GoalEvent("failed", text=str(r.err.payload.to_string() if r.err else ""))
-                        for r in session.get(f"{ROBOT}/{keys.GOAL}{topic}",
+                        for r in session.get(f"{ROBOT}/{keys.GOAL}/gone{topic}",
                                              payload=request.encode(), timeout=60)]
 
             token = session.liveliness().declare_token(f"{ROBOT}/{keys.RUNNING}/gone/g1")

@@ -167,11 +167,10 @@ def test_a_robot_answers_goals_cancels_and_parameters_on_its_own_keys(
     robot1 = _client(pki, endpoint, "robot1")
     robot2 = _client(pki, endpoint, "robot2")
     try:
-        forged = robot2.declare_queryable(f"robot1/{chunk}/x", lambda q: q.reply(q.key_expr,
-                                                                                  b"lie"))
-        own = robot1.declare_queryable(f"robot1/{chunk}/x", lambda q: q.reply(q.key_expr,
-                                                                               b"ok"))
-        assert _answered(relay, f"robot1/{chunk}/x") == [b"ok"]
+        key = f"robot1/{chunk}/relay/x"  # under the relay's own name where a key names one
+        forged = robot2.declare_queryable(key, lambda q: q.reply(q.key_expr, b"lie"))
+        own = robot1.declare_queryable(key, lambda q: q.reply(q.key_expr, b"ok"))
+        assert _answered(relay, key) == [b"ok"]
         forged.undeclare()
         own.undeclare()
     finally:
@@ -190,18 +189,18 @@ def test_a_robot_reaches_its_relays_served_services_and_goal_tokens(
     robot1 = _client(pki, endpoint, "robot1")
     robot2 = _client(pki, endpoint, "robot2")
     try:
-        serving = relay.declare_queryable(f"robot1/{chunk}/r/name",
+        serving = relay.declare_queryable(f"robot1/{chunk}/relay/name",
                                           lambda q: q.reply(q.key_expr, b"answer"))
         tokens = [relay.liveliness().declare_token(k) for k in (
-            "robot1/@serve/r/std_srvs/srv/Empty/svc", "robot1/@running/r/g1")]
-        assert _answered(robot1, f"robot1/{chunk}/r/name") == [b"answer"]
+            "robot1/@serve/relay/std_srvs/srv/Empty/svc", "robot1/@running/relay/g1")]
+        assert _answered(robot1, f"robot1/{chunk}/relay/name") == [b"answer"]
         for token_chunk in ("@serve", "@running"):
             seen = [str(r.ok.key_expr) for r in robot1.liveliness().get(
                 f"robot1/{token_chunk}/**", timeout=DEADLINE) if r.ok]
             assert len(seen) == 1 and seen[0].startswith(f"robot1/{token_chunk}/"), seen
             assert [r for r in robot2.liveliness().get(f"robot1/{token_chunk}/**",
                                                        timeout=DEADLINE) if r.ok] == []
-        querier = robot2.declare_querier(f"robot1/{chunk}/r/name", timeout=DEADLINE)
+        querier = robot2.declare_querier(f"robot1/{chunk}/relay/name", timeout=DEADLINE)
         assert [r for r in querier.get() if r.ok] == []
         querier.undeclare()
         serving.undeclare()
@@ -210,6 +209,53 @@ def test_a_robot_reaches_its_relays_served_services_and_goal_tokens(
     finally:
         for s in (robot2, robot1, relay):
             s.close()
+
+
+@pytest.mark.parametrize("chunk", ["@goal", "@cancel", "@call"])
+def test_a_relay_asks_under_its_own_name_only(pki: Pki, router: tuple[Any, str], chunk: str
+                                              ) -> None:
+    """Where a key names a relay (its goals, cancels, calls, goal tokens), the router holds a
+    relay to its certificate's name: under another relay's name its query reaches no robot
+    and its goal token is not there, so no relay can cancel or call as another."""
+    _, endpoint = router
+    relay = _client(pki, endpoint, "relay")
+    robot1 = _client(pki, endpoint, "robot1")
+    try:
+        asked: list[str] = []
+        # another relay's first: once the relay's own answers, both reached the router
+        queryables = [robot1.declare_queryable(f"robot1/{chunk}/{name}/g1", lambda q: (
+            asked.append(str(q.key_expr)), q.reply(q.key_expr, b"ok")))
+            for name in ("other", "relay")]
+        tokens = [relay.liveliness().declare_token(f"robot1/@running/{name}/g1")
+                  for name in ("other", "relay")]
+        assert _answered(relay, f"robot1/{chunk}/relay/g1") == [b"ok"]
+        assert [r for r in relay.get(f"robot1/{chunk}/other/g1", timeout=DEADLINE)
+                if r.ok] == []
+        assert asked == [f"robot1/{chunk}/relay/g1"]
+        # the relay's tokens came before its query: the router has both, or refused one
+        seen = [str(r.ok.key_expr) for r in robot1.liveliness().get(
+            "robot1/@running/**", timeout=DEADLINE) if r.ok]
+        assert seen == ["robot1/@running/relay/g1"], seen
+        for entity in queryables + tokens:
+            entity.undeclare()
+    finally:
+        for s in (robot1, relay):
+            s.close()
+
+
+def test_a_relay_is_its_certificates_name(pki: Pki) -> None:
+    """A relay with a certificate is its common name on Zenoh; one dialing with it refuses
+    another --relay-id, naming both (the router would hold it to the certificate's)."""
+    from bridge_server.server import BridgeConfig
+    from bridge_server.zenoh.relay import Relay
+
+    cert, key = (str(p) for p in pki.cert("relay"))
+    dialing = ZenohOptions(connect=["tls/127.0.0.1:7447"], tls_ca=str(pki.ca), tls_cert=cert,
+                           tls_key=key)
+    assert Relay(BridgeConfig(port=0), dialing).relay_id == "relay"
+    with pytest.raises(BridgeError, match=r"--relay-id relay9: a relay dialing with a "
+                       r"certificate is its certificate's common name on Zenoh \(relay\)"):
+        Relay(BridgeConfig(port=0), dialing, "relay9")
 
 
 def test_a_relay_as_the_router_hears_robots(pki: Pki, router: tuple[Any, str]) -> None:
