@@ -91,6 +91,7 @@ __all__ = [
     "IN",
     "LATCHED",
     "PARAM",
+    "PRESENCE",
     "REFUSED",
     "RELAY_SCOPED",
     "RUNNING",
@@ -148,6 +149,10 @@ CONTROL = (ALIVE, CLAIM, DEMAND, LATCHED, GRAPH, CALL, ADVERTISE, IN, GOAL, RUNN
            SERVING, PARAM, EXECUTING, REFUSED)
 """Every control chunk (Zenoh's verbatim chunks, which no wildcard matches: access rules
 name each)."""
+
+PRESENCE = (ALIVE, CLAIM)
+"""The chunks of a robot's own presence tokens: a robot declares them, relays follow them (a
+router's access rules let no relay announce a robot, nor block its name)."""
 
 RELAY_SCOPED = (DEMAND, ADVERTISE, RUNNING, CANCEL, SERVE, REFUSED, SERVING, EXECUTING, CALL,
                 GOAL)

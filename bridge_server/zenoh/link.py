@@ -82,25 +82,35 @@ def robot_acl(robots: Sequence[str], relays: Sequence[str]) -> dict[str, Any]:
     """A router's access control: each robot (by its certificate's common name, which is its
     robot name) only on keys under its name; each relay (by its certificate's common name,
     which is its relay id) on every robot's, but where a key names a relay
-    (:data:`keys.RELAY_SCOPED`: its goals, cancels, calls, tokens) only under its own name;
-    anyone else on nothing."""
+    (:data:`keys.RELAY_SCOPED`: its goals, cancels, calls, tokens) only under its own name,
+    and robots' presence tokens (:data:`keys.PRESENCE`) followed, not declared; anyone else on
+    nothing."""
     rules: list[dict[str, Any]] = []
     subjects: list[dict[str, Any]] = []
     policies: list[dict[str, Any]] = []
 
-    def allow(rule: str, names: list[str], key_exprs: list[str]) -> None:
-        rules.append({"id": rule, "messages": _MESSAGES, "flows": ["ingress", "egress"],
-                      "permission": "allow", "key_exprs": key_exprs})
-        subjects.append({"id": rule, "cert_common_names": names})
-        policies.append({"rules": [rule], "subjects": [rule]})
+    def allow(subject: str, names: list[str],
+              *grants: tuple[list[str], list[str], list[str]]) -> None:
+        """``names`` may use each grant's (key expressions, messages, flows)."""
+        ids = [f"{subject}.{n}" for n in range(len(grants))]
+        for rule, (key_exprs, messages, flows) in zip(ids, grants, strict=True):
+            rules.append({"id": rule, "messages": messages, "flows": flows,
+                          "permission": "allow", "key_exprs": key_exprs})
+        subjects.append({"id": subject, "cert_common_names": names})
+        policies.append({"rules": ids, "subjects": [subject]})
 
+    both = ["ingress", "egress"]
     for i, robot in enumerate(robots):
-        allow(f"robot{i}", [robot], [robot, *_under(robot)])
-    shared = [c for c in _CONTROL if c not in keys.RELAY_SCOPED]
+        allow(f"robot{i}", [robot], ([robot, *_under(robot)], _MESSAGES, both))
+    shared = [c for c in _CONTROL if c not in keys.RELAY_SCOPED + keys.PRESENCE]
+    presence = [k for c in keys.PRESENCE for k in (f"*/{c}", f"*/{c}/**")]
     for i, relay in enumerate(relays):
-        allow(f"relay{i}", [relay], ["**", *(f"*/{c}" for c in shared),
-                                     *(f"*/{c}/**" for c in shared),
-                                     *(f"*/{c}/{relay}/**" for c in keys.RELAY_SCOPED)])
+        allow(f"relay{i}", [relay],
+              (["**", *(f"*/{c}" for c in shared), *(f"*/{c}/**" for c in shared),
+                *(f"*/{c}/{relay}/**" for c in keys.RELAY_SCOPED)], _MESSAGES, both),
+              # robots' presence: followed, never announced (no relay holds a robot's name)
+              (presence, ["declare_liveliness_subscriber", "liveliness_query"], ["ingress"]),
+              (presence, _MESSAGES, ["egress"]))
     return {"enabled": True, "default_permission": "deny", "rules": rules,
             "subjects": subjects, "policies": policies}
 

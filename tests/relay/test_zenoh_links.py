@@ -243,6 +243,34 @@ def test_a_relay_asks_under_its_own_name_only(pki: Pki, router: tuple[Any, str],
             s.close()
 
 
+def test_a_relay_follows_robots_presence_and_cannot_announce_one(
+        pki: Pki, router: tuple[Any, str]) -> None:
+    """A relay hears a robot's presence tokens (@claim, @alive) but cannot declare one: it
+    could otherwise pose as a robot or, claiming its name, keep the robot from serving."""
+    _, endpoint = router
+    relay = _client(pki, endpoint, "relay")
+    robot1 = _client(pki, endpoint, "robot1")
+    try:
+        heard: queue.Queue[str] = queue.Queue()
+        sub = relay.liveliness().declare_subscriber(
+            "*/@claim/*", lambda s: heard.put(str(s.key_expr)), history=True)
+        forged = [relay.liveliness().declare_token(k)
+                  for k in ("robot1/@claim/fake", "robot1/@alive/fake")]
+        own = robot1.liveliness().declare_token("robot1/@claim/real")
+        while heard.get(timeout=DEADLINE) != "robot1/@claim/real":  # its own come too
+            pass
+        # a query of the relay's after its tokens: the router has taken or refused them
+        list(relay.liveliness().get("robot1/@alive/**", timeout=DEADLINE))
+        seen = {str(r.ok.key_expr) for key in ("robot1/@claim/*", "robot1/@alive/**")
+                for r in robot1.liveliness().get(key, timeout=DEADLINE) if r.ok}
+        assert seen == {"robot1/@claim/real"}, seen
+        for entity in [sub, own, *forged]:
+            entity.undeclare()
+    finally:
+        for s in (robot1, relay):
+            s.close()
+
+
 def test_a_relay_is_its_certificates_name(pki: Pki) -> None:
     """A relay with a certificate is its common name on Zenoh; one dialing with it refuses
     another --relay-id, naming both (the router would hold it to the certificate's)."""
