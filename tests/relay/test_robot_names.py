@@ -41,8 +41,11 @@ async def test_a_second_robot_with_a_held_name_is_refused(
     with their addresses and counts the refusal in /status.json and /metrics; a client's call
     through the relay is answered by the first robot's ROS graph. Once the first leaves, the
     second takes the name."""
-    ros_node.create_service(Trigger, topic,
-                            lambda _req, resp: setattr(resp, "message", "first") or resp)
+    def answer(_request: Any, response: Any) -> Any:
+        response.message = "first"
+        return response
+
+    ros_node.create_service(Trigger, topic, answer)
     router = f"tcp/127.0.0.1:{free_port()}"
     relay = await start_relay(listen=router)
     first = robot_process(router)

@@ -222,10 +222,14 @@ def test_a_relay_asks_under_its_own_name_only(pki: Pki, router: tuple[Any, str],
     robot1 = _client(pki, endpoint, "robot1")
     try:
         asked: list[str] = []
+
+        def answer(query: Any) -> None:
+            asked.append(str(query.key_expr))
+            query.reply(query.key_expr, b"ok")
+
         # another relay's first: once the relay's own answers, both reached the router
-        queryables = [robot1.declare_queryable(f"robot1/{chunk}/{name}/g1", lambda q: (
-            asked.append(str(q.key_expr)), q.reply(q.key_expr, b"ok")))
-            for name in ("other", "relay")]
+        queryables = [robot1.declare_queryable(f"robot1/{chunk}/{name}/g1", answer)
+                      for name in ("other", "relay")]
         tokens = [relay.liveliness().declare_token(f"robot1/@running/{name}/g1")
                   for name in ("other", "relay")]
         assert _answered(relay, f"robot1/{chunk}/relay/g1") == [b"ok"]
