@@ -76,14 +76,17 @@ _TYPE = re.compile(r"^(?:sequence<(?P<seq>[^,<>]+(?:<\d+>)?)(?:, *(?P<bound>\d+)
 class CdrError(ValueError):
     """Serialized bytes that do not decode as the type says (malformed or truncated).
 
-    ``path`` is the field that could not be read (``header.frame_id``), ``why`` the cause.
+    ``path`` is the field that could not be read (``header.frame_id``), ``why`` the cause,
+    ``where`` (when given) which message it was, put first in the text.
     """
 
-    def __init__(self, type_name: str, path: str, why: str, action: str = "decode") -> None:
+    def __init__(self, type_name: str, path: str, why: str, action: str = "decode", *,
+                 where: str = "") -> None:
         self.type_name, self.path, self.why, self.action = type_name, path, why, action
-        where = f"field {path!r}" if path else "the message"
+        field = f"field {path!r}" if path else "the message"
         way = "from" if action == "decode" else "to"
-        super().__init__(f"{type_name}: cannot {action} {where} {way} CDR: {why}")
+        lead = f"{where}: " if where else ""  # which message: a file's, a topic's
+        super().__init__(f"{lead}{type_name}: cannot {action} {field} {way} CDR: {why}")
 
 
 def _fail(type_name: str, field: str, exc: Exception) -> CdrError:

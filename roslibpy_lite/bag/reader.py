@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import functools
 import logging
+import struct
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -140,7 +141,7 @@ def _records(path: Path, topics: Iterable[str] | None, start_ns: int | None,
                     continue
                 count += 1
                 yield schema, channel, message
-        except (McapError, EOFError, ValueError) as exc:
+        except (McapError, EOFError, ValueError, struct.error) as exc:  # cut mid-record
             log.warning("%s ends early (%s): %d messages read up to there", path,
                         type(exc).__name__, count)
 
