@@ -1,21 +1,26 @@
-"""A recording as a table: ``roslibpy_lite.data.bag_to_dataframe`` against rosbags' reader.
+"""Recordings as tables: ``roslibpy_lite.data.bag_to_dataframe`` against rosbags and
+mcap-ros2-support, on the same files.
 
-Run: ``python -m bench.dataframe [--seconds 60] [--file run.mcap] [--keep]``. Writes (or
-reuses) an MCAP of ``--seconds`` of a 200 Hz ``sensor_msgs/Imu`` and a 30 Hz 640x480 rgb8
-camera, as our recorder writes them (zstd chunks of 256 KiB, ROS 2 profile, CDR), then
-loads each topic into a pandas DataFrame twice, each time in a fresh process:
+Run: ``python -m bench.dataframe [--seconds 20] [--imu-seconds 600] [--dir DIR] [--keep]``.
+Writes (or reuses, in ``--dir``) two MCAP files as our recorder writes them (zstd chunks of
+256 KiB, ROS 2 profile, CDR): ``imu.mcap``, ``--imu-seconds`` of a 200 Hz
+``sensor_msgs/Imu`` (600 s: 120,000 rows, 5.5 MB), and ``mixed.mcap``, ``--seconds`` of the
+same IMU beside a 30 Hz 640x480 rgb8 camera. Each topic is loaded into a pandas DataFrame
+with and without a field list, by each reader in a fresh process:
 
 - ``ours``: ``bag_to_dataframe(path, topic, fields)``, one call.
-- ``rosbags``: rosbags' ``AnyReader`` on the same file, each message deserialized and its
-  fields gathered into the same columns and time index (rosbags 0.11 has no
-  ``get_dataframe`` any more; this is the glue a user writes).
+- ``rosbags``: rosbags' ``AnyReader``, each message deserialized and its fields gathered
+  into the same columns and time index (rosbags 0.11 has no ``get_dataframe`` any more;
+  this is the glue a user writes).
+- ``mcap_ros2``: mcap's reader with mcap-ros2-support's decoder, the same glue.
 
-The IMU table has every field; the camera table the header and the image's shape, not the
-pixels (what a table of frames is for), so both readers still read every frame's bytes.
-Reported per case: seconds and CPU seconds (reading and building the table, after the
-imports; the CPU figure is the steadier on a shared machine), peak RSS
-and its rise over the process's RSS after the imports, rows and columns. Printed as one
-JSON object. It asserts nothing about time.
+The IMU's field list is two columns (``angular_velocity.x``, ``.z``); the camera's is the
+header and the image's shape, not the pixels (what a table of frames is for); without a
+list, every field (the camera's table then holds every frame's pixels). Reported per case:
+seconds and CPU seconds (reading and building the table, after the imports; the CPU figure
+is the steadier on a shared machine), peak RSS and its rise over the process's RSS after
+the imports, rows and columns; then a table of CPU seconds side by side. Printed as JSON.
+It asserts nothing about time.
 """
 
 from __future__ import annotations
@@ -35,10 +40,12 @@ from typing import Any
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 IMU, CAMERA = "/bench_imu", "/bench_camera"
-FIELDS: dict[str, list[str] | None] = {
-    IMU: None,
+FIELDS: dict[str, list[str]] = {
+    IMU: ["angular_velocity.x", "angular_velocity.z"],
     CAMERA: ["header", "height", "width", "encoding", "step"],
 }
+CASES = [("imu", IMU), ("mixed", IMU), ("mixed", CAMERA)]
+"""(file, topic) pairs, each read with its field list and without."""
 
 
 def write_recording(path: Path, seconds: float, imu_hz: float = 200.0,
@@ -98,35 +105,63 @@ def _ours(path: str, topic: str, fields: list[str] | None) -> Any:
     return bag_to_dataframe(path, topic, fields)
 
 
-def _rosbags(path: str, topic: str, fields: list[str] | None) -> Any:
-    import pandas as pd
-    from rosbags.highlevel import AnyReader
+def _flat(prefix: str, value: Any, out: dict[str, Any], names: Any) -> None:
+    """The glue: a decoded message's fields under dotted names, ``names(value)`` listing a
+    message's fields (None for a leaf)."""
+    fields = names(value)
+    if fields is None:
+        out[prefix] = value
+        return
+    for name in fields:
+        _flat(f"{prefix}.{name}" if prefix else name, getattr(value, name), out, names)
 
-    def flat(prefix: str, value: Any, out: dict[str, Any]) -> None:
-        names = getattr(value, "__dataclass_fields__", None)
-        if names is None or value.__class__.__name__ == "ndarray":
-            out[prefix] = value
-            return
-        for name in names:
-            if name != "__msgtype__":
-                flat(f"{prefix}.{name}" if prefix else name, getattr(value, name), out)
+
+def _table(messages: Any, fields: list[str] | None, names: Any) -> Any:
+    """The glue's DataFrame of decoded messages, indexed by their header stamps."""
+    import pandas as pd
 
     rows, stamps = [], []
-    with AnyReader([Path(path)]) as reader:
-        conns = [c for c in reader.connections if c.topic == topic]
-        for conn, _t, raw in reader.messages(connections=conns):
-            msg: Any = reader.deserialize(raw, conn.msgtype)
-            row: dict[str, Any] = {}
-            if fields is None:
-                flat("", msg, row)
-            else:
-                for name in fields:
-                    flat(name, _dig(msg, name), row)
-            rows.append(row)
-            stamps.append(msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec)
+    for msg in messages:
+        row: dict[str, Any] = {}
+        if fields is None:
+            _flat("", msg, row, names)
+        else:
+            for name in fields:
+                _flat(name, _dig(msg, name), row, names)
+        rows.append(row)
+        stamps.append(msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec)
     frame = pd.DataFrame(rows)
     frame.index = pd.to_datetime(stamps, unit="ns", utc=True).rename("time")
     return frame
+
+
+def _rosbags(path: str, topic: str, fields: list[str] | None) -> Any:
+    from rosbags.highlevel import AnyReader
+
+    def names(value: Any) -> Any:
+        found = getattr(value, "__dataclass_fields__", None)
+        if found is None or value.__class__.__name__ == "ndarray":
+            return None
+        return [name for name in found if name != "__msgtype__"]
+
+    with AnyReader([Path(path)]) as reader:
+        conns = [c for c in reader.connections if c.topic == topic]
+        return _table((reader.deserialize(raw, conn.msgtype)
+                       for conn, _t, raw in reader.messages(connections=conns)), fields, names)
+
+
+def _mcap_ros2(path: str, topic: str, fields: list[str] | None) -> Any:
+    from mcap.reader import make_reader
+    from mcap_ros2.decoder import DecoderFactory
+
+    def names(value: Any) -> Any:
+        return None if isinstance(value, list | bytes | str) else getattr(value, "__slots__",
+                                                                          None)
+
+    with open(path, "rb") as f:
+        reader = make_reader(f, decoder_factories=[DecoderFactory()])
+        return _table((decoded for _s, _c, _m, decoded in
+                       reader.iter_decoded_messages(topics=[topic])), fields, names)
 
 
 def _dig(msg: Any, dotted: str) -> Any:
@@ -135,12 +170,13 @@ def _dig(msg: Any, dotted: str) -> Any:
     return msg
 
 
-READERS = {"ours": _ours, "rosbags": _rosbags}
+READERS = {"ours": _ours, "rosbags": _rosbags, "mcap_ros2": _mcap_ros2}
 
 
-def _child(reader: str, path: str, topic: str) -> None:
+def _child(reader: str, path: str, topic: str, fields: str) -> None:
     """One case in this (fresh) process: import first, then time and measure the load."""
     import mcap  # noqa: F401  - imports are not the load
+    import mcap_ros2.decoder  # noqa: F401
     import pandas  # noqa: F401
     import rosbags.highlevel  # noqa: F401
 
@@ -148,50 +184,77 @@ def _child(reader: str, path: str, topic: str) -> None:
 
     before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
     t0, cpu0 = time.perf_counter(), time.process_time()
-    frame = READERS[reader](path, topic, FIELDS[topic])
+    frame = READERS[reader](path, topic, json.loads(fields))
     seconds, cpu = time.perf_counter() - t0, time.process_time() - cpu0
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
-    print(json.dumps({"seconds": round(seconds, 2), "cpu_s": round(cpu, 2), "peak_rss_mb": round(peak / 1024, 1),
+    print(json.dumps({"seconds": round(seconds, 2), "cpu_s": round(cpu, 2),
+                      "peak_rss_mb": round(peak / 1024, 1),
                       "rise_mb": round((peak - before) / 1024, 1), "rows": len(frame),
-                      "columns": len(frame.columns),
-                      "table_mb": round(frame.memory_usage(deep=True).sum() / 2**20, 1)}))
+                      "columns": len(frame.columns)}))
 
 
 def main() -> None:
-    """Write the file (unless given), run each reader on each topic, print JSON."""
+    """Write the files (unless there), run each reader on each case, print JSON."""
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--seconds", type=float, default=60.0, help="length of the recording")
-    ap.add_argument("--file", type=Path, help="use (or make) this file")
-    ap.add_argument("--keep", action="store_true", help="keep the file made here")
-    ap.add_argument("--child", nargs=3, metavar=("READER", "PATH", "TOPIC"),
+    ap.add_argument("--seconds", type=float, default=20.0,
+                    help="length of the mixed camera and IMU recording")
+    ap.add_argument("--imu-seconds", type=float, default=600.0,
+                    help="length of the IMU recording (200 Hz)")
+    ap.add_argument("--dir", type=Path, help="use (or make) the files in this directory")
+    ap.add_argument("--keep", action="store_true", help="keep the files made here")
+    ap.add_argument("--readers", nargs="+", default=list(READERS), choices=list(READERS))
+    ap.add_argument("--child", nargs=4, metavar=("READER", "PATH", "TOPIC", "FIELDS"),
                     help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.child:
         _child(*args.child)
         return
-    path: Path = args.file or Path(tempfile.mkdtemp(prefix="bench-df-")) / "run.mcap"
-    result: dict[str, Any] = {"scenario": "dataframe", "seconds_recorded": args.seconds,
-                              "python": platform.python_version()}
-    if not path.exists():
-        t0 = time.perf_counter()
-        result["messages"] = write_recording(path, args.seconds)
-        result["write_s"] = round(time.perf_counter() - t0, 1)
-    result["file_mb"] = round(path.stat().st_size / 2**20, 1)
+    folder: Path = args.dir or Path(tempfile.mkdtemp(prefix="bench-df-"))
+    folder.mkdir(parents=True, exist_ok=True)
+    files = {"imu": (folder / "imu.mcap", args.imu_seconds, 0.0),
+             "mixed": (folder / "mixed.mcap", args.seconds, 30.0)}
+    result: dict[str, Any] = {"scenario": "dataframe", "python": platform.python_version()}
+    for kind, (path, seconds, camera_hz) in files.items():
+        if not path.exists():
+            t0 = time.perf_counter()
+            counts = write_recording(path, seconds, camera_hz=camera_hz)
+            result[f"{kind}_messages"] = counts
+            result[f"{kind}_write_s"] = round(time.perf_counter() - t0, 1)
+        result[f"{kind}_mb"] = round(path.stat().st_size / 2**20, 1)
     cases: dict[str, Any] = {}
-    for topic in (IMU, CAMERA):
-        for reader in READERS:
-            out = subprocess.run(
-                [sys.executable, "-m", "bench.dataframe", "--child", reader, str(path), topic],
-                capture_output=True, text=True, check=False,
-                cwd=Path(__file__).resolve().parent.parent, env=dict(os.environ))
-            cases[f"{topic.removeprefix('/bench_')} {reader}"] = (
-                json.loads(out.stdout) if out.returncode == 0
-                else {"error": out.stderr.strip().splitlines()[-1:]})
+    for kind, topic in CASES:
+        for fields in (FIELDS[topic], None):
+            label = f"{kind} {topic.removeprefix('/bench_')} " + (
+                f"{len(fields)} fields" if fields else "all fields")
+            for reader in args.readers:
+                out = subprocess.run(
+                    [sys.executable, "-m", "bench.dataframe", "--child", reader,
+                     str(files[kind][0]), topic, json.dumps(fields)],
+                    capture_output=True, text=True, check=False,
+                    cwd=Path(__file__).resolve().parent.parent, env=dict(os.environ))
+                cases.setdefault(label, {})[reader] = (
+                    json.loads(out.stdout) if out.returncode == 0
+                    else {"error": out.stderr.strip().splitlines()[-1:]})
     result["cases"] = cases
-    if args.file is None and not args.keep:
-        path.unlink()
-        path.parent.rmdir()
+    if args.dir is None and not args.keep:
+        for path, _, _ in files.values():
+            path.unlink()
+        folder.rmdir()
     print(json.dumps(result, indent=2))
+    print(_side_by_side(cases, args.readers), file=sys.stderr)
+
+
+def _side_by_side(cases: dict[str, Any], readers: list[str]) -> str:
+    """CPU seconds of each case, a column per reader (wall seconds in brackets)."""
+    lines = [f"{'case':34} " + " ".join(f"{r:>16}" for r in readers)]
+    for label, by in cases.items():
+        cells = []
+        for r in readers:
+            got = by.get(r, {})
+            cells.append(f"{got['cpu_s']:>7.2f} ({got['seconds']:>6.2f})" if "cpu_s" in got
+                         else f"{'error':>16}")
+        lines.append(f"{label:34} " + " ".join(cells))
+    return "\n".join(lines)
 
 
 if __name__ == "__main__":
