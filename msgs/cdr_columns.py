@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import re
 import struct
+import weakref
 from collections.abc import Callable, Sequence
 from typing import Any
 
@@ -207,15 +208,16 @@ class _RowGen(cdr._Gen):
         self.field(1, path, m.string, "_")
 
 
-_ROWS: dict[tuple[type[Message], tuple[str, ...]], RowDecoder] = {}
+_ROWS: weakref.WeakKeyDictionary[type[Message], dict[tuple[str, ...], RowDecoder]] = (
+    weakref.WeakKeyDictionary())  # a class a relay released takes its decoders along
 
 
 def row_decoder(cls: type[Message], wanted: Sequence[str]) -> RowDecoder:
     """The compiled ``row(serialized) -> tuple`` of the leaves ``wanted`` (names from
     :func:`leaf_names`, repeats allowed) of messages of ``cls``; ``#name`` for a string
     ``name`` is its length in the bytes (its NUL included)."""
-    key = (cls, tuple(wanted))
-    found = _ROWS.get(key)
+    mine = _ROWS.setdefault(cls, {})
+    found = mine.get(tuple(wanted))
     if found is not None:
         return found
     known = {name for name, _ in leaf_names(cls)}
@@ -232,9 +234,9 @@ def row_decoder(cls: type[Message], wanted: Sequence[str]) -> RowDecoder:
     gen.emit(1, f"return ({', '.join(gen.values)}{',' if len(gen.values) == 1 else ''})")
     exec(compile("\n".join(gen.lines), f"<cdr rows {cls._type}>", "exec"), gen.ns)
     fn: RowDecoder = gen.ns["row"]
-    if len(_ROWS) > 256:
-        _ROWS.clear()
-    _ROWS[key] = fn
+    if len(mine) > 64:  # the lists of fields one type was read with: a few
+        mine.clear()
+    mine[tuple(wanted)] = fn
     return fn
 
 

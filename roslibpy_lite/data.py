@@ -455,7 +455,10 @@ def _bag_columns(path: Path, topic: str, chosen: list[str] | None) -> pandas.Dat
     except Exception:
         return None
     leaves = dict(leaf_names(cls))
-    names = list(leaves) if chosen is None else _chosen(leaves, chosen)
+    try:
+        names = list(leaves) if chosen is None else _chosen(leaves, chosen)
+    except UsageError:  # said by the general path, at the first message (if there is one)
+        return None
     stamp = _stamp_leaves(cls)
     if not names or stamp is None:
         return None
