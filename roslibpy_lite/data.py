@@ -562,15 +562,17 @@ class _Layouts:
             self.parts[name].append([v[i] for v in values])
         if not self.numbers:
             return
-        layouts: dict[tuple[int, ...], list[int]] = {}
-        for i, (v, (_, data)) in enumerate(zip(values, batch, strict=True)):
-            layouts.setdefault((len(data), *v[texts:]), []).append(i)
-        if len(layouts) == 1:
-            (key, _), = layouts.items()
-            arr = np.frombuffer(b"".join([data for _, data in batch]), self.dtype(key))
+        keys = [(len(data), *v[texts:]) for v, (_, data) in zip(values, batch, strict=True)]
+        if not keys:  # a chunk without an index of its messages may hold none of the topic
+            return
+        if keys.count(keys[0]) == len(keys):  # the usual case: one layout in the chunk
+            arr = np.frombuffer(b"".join([data for _, data in batch]), self.dtype(keys[0]))
             for name in self.numbers:
                 self.parts[name].append(arr[name])
             return
+        layouts: dict[tuple[int, ...], list[int]] = {}
+        for i, key in enumerate(keys):
+            layouts.setdefault(key, []).append(i)
         chunk = {name: None for name in self.numbers}
         for key, where in layouts.items():
             arr = np.frombuffer(b"".join([batch[i][1] for i in where]), self.dtype(key))

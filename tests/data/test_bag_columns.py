@@ -12,7 +12,7 @@ import pandas as pd
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
-from mcap.writer import CompressionType, Writer
+from mcap.writer import CompressionType, IndexType, Writer
 
 import roslibpy_lite
 import roslibpy_lite.data as data
@@ -57,11 +57,12 @@ def _same(monkeypatch: pytest.MonkeyPatch, path: Path, topic: str,
 
 
 def _write(path: Path, messages: list[tuple[str, int, Message | bytes, str]],
-           chunk_size: int = 1024) -> None:
+           chunk_size: int = 1024, index: IndexType = IndexType.ALL) -> None:
     """An MCAP file as our recorder lays it out: (topic, log time, message or raw bytes,
     type); small chunks, so that a topic spans several."""
     with path.open("wb") as f:
-        writer = Writer(f, chunk_size=chunk_size, compression=CompressionType.ZSTD)
+        writer = Writer(f, chunk_size=chunk_size, compression=CompressionType.ZSTD,
+                        index_types=index)
         writer.start(profile=ROS2_PROFILE, library="test")
         channels: dict[str, int] = {}
         for topic, t, msg, type_name in messages:
@@ -262,3 +263,19 @@ def test_a_recording_cut_short_is_read_message_by_message(tmp_path: Path,
     pd.testing.assert_frame_equal(frame, _general(monkeypatch, cut, "/imu",
                                                   ["header.stamp.nanosec"]))
     assert 0 < len(frame) < 100
+
+
+def test_chunks_without_message_indexes_are_read_whole(tmp_path: Path,
+                                                      monkeypatch: pytest.MonkeyPatch) -> None:
+    """A file whose chunk index does not say which topics a chunk holds (no message
+    indexes): every chunk is read, those with none of the topic's messages included."""
+    path = tmp_path / "unindexed.mcap"
+    messages: list[tuple[str, int, Message | bytes, str]] = []
+    for i in range(60):
+        imu = Imu()
+        imu.header.stamp.sec = i
+        messages.append(("/imu", T0 + i, imu, Imu._type) if i % 20 < 5 else
+                        ("/joints", T0 + i, JointState(name=["a"] * 8), JointState._type))
+    _write(path, messages, chunk_size=512, index=IndexType.CHUNK)
+    frame = _same(monkeypatch, path, "/imu", ["header.stamp.sec"])
+    assert list(frame["header.stamp.sec"]) == [i for i in range(60) if i % 20 < 5]
