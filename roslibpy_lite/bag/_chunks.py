@@ -3,7 +3,10 @@
 :func:`topic_chunks` reads the chunks that hold the topic (the summary's chunk index says
 which), decompresses each once and walks its records with one ``unpack_from`` per record,
 keeping ``(log time, payload)`` of the topic's messages as views of the chunk's bytes: no
-record objects, no copies. A chunk's payloads are handed over as one batch, so that only
+record objects, no copies. A zstd chunk is decompressed only up to the end of the topic's
+last message in it, which the chunk's message index places: in a recording of an IMU
+beside a camera, each chunk's IMU messages come before the frame that filled it, and a
+table of the IMU decompresses none of the frames. A chunk's payloads are handed over as one batch, so that only
 one chunk's bytes are held at a time. The order is the file's (chunks by offset, records
 as written); :func:`roslibpy_lite.bag.read` gives log-time order, which a stable sort by
 log time of this order reproduces (the mcap reader breaks ties by chunk offset, then by
@@ -16,8 +19,10 @@ reads the file with :func:`roslibpy_lite.bag.read`.
 
 from __future__ import annotations
 
+import array
 import io
 import struct
+import sys
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -29,6 +34,7 @@ from ._mcap import MESSAGE_ENCODING
 _RECORD = struct.Struct("<BQ")  # opcode, length
 _MESSAGE = struct.Struct("<H4xQ")  # channel id, (sequence), log time
 _MESSAGE_OP = 0x05
+_MESSAGE_INDEX_OP = 0x07
 _MESSAGE_HEAD = 2 + 4 + 8 + 8
 
 
@@ -60,41 +66,81 @@ def topic_chunks(path: Path, topic: str) -> TopicChunks | None:
     if len(schemas) != 1:
         return None
     (name, text), = schemas
-    chunks = sorted(ci.chunk_start_offset for ci in summary.chunk_indexes
-                     if not ci.message_index_offsets
-                     or not mine.isdisjoint(ci.message_index_offsets))
+    chunks = sorted((ci.chunk_start_offset,
+                     [at for cid, at in ci.message_index_offsets.items() if cid in mine])
+                    for ci in summary.chunk_indexes
+                    if not ci.message_index_offsets
+                    or not mine.isdisjoint(ci.message_index_offsets))
     return TopicChunks(name, text.decode("utf-8", "replace"),
                        _batches(path, chunks, frozenset(mine)))
 
 
-def _batches(path: Path, chunks: list[int], channels: frozenset[int]
+def _batches(path: Path, chunks: list[tuple[int, list[int]]], channels: frozenset[int]
              ) -> Iterator[list[tuple[int, memoryview]]]:
     from mcap.data_stream import ReadDataStream
     from mcap.records import Chunk
 
     with path.open("rb") as stream:
-        for at in chunks:
-            stream.seek(at + 1 + 8, io.SEEK_SET)  # past the record's opcode and length
+        for at, indexes in chunks:
             try:
-                data = _decompress(Chunk.read(ReadDataStream(stream)))
+                end = _last_record(stream, indexes) if indexes else None
+                stream.seek(at + 1 + 8, io.SEEK_SET)  # past the record's opcode and length
+                data = _decompress(Chunk.read(ReadDataStream(stream)), end)
             except Exception as exc:
                 raise UsageError(f"{path}: the chunk at byte {at} cannot be read: "
                                  f"{type(exc).__name__}: {exc}") from None
             yield _messages(path, at, memoryview(data), channels)
 
 
-def _decompress(chunk: Any) -> bytes:
+def _last_record(stream: Any, indexes: list[int]) -> int:
+    """Where the last of the topic's records starts in the chunk's records, from the
+    chunk's message indexes of the topic's channels (-1: it holds none)."""
+    last = -1
+    for at in indexes:
+        stream.seek(at, io.SEEK_SET)
+        op, length = _RECORD.unpack(stream.read(_RECORD.size))
+        body = stream.read(length)
+        if op != _MESSAGE_INDEX_OP or len(body) != length or length < 6:
+            raise ValueError(f"no message index at byte {at}")
+        offsets = array.array("Q", body[6:6 + (len(body) - 6) // 8 * 8])
+        if sys.byteorder != "little":
+            offsets.byteswap()
+        if len(offsets) > 1:
+            last = max(last, max(offsets[1::2]))  # (log time, offset) pairs
+    return last
+
+
+def _decompress(chunk: Any, end: int | None = None) -> bytes:
+    """A chunk's records; with ``end`` (where the last record wanted starts), a zstd chunk
+    only up to the end of that record: what follows it is never decompressed."""
     if chunk.compression == "zstd":
         import zstandard
 
-        data: bytes = zstandard.decompress(chunk.data, chunk.uncompressed_size)
-    elif chunk.compression == "lz4":
+        if end is None:
+            return zstandard.decompress(chunk.data, chunk.uncompressed_size)
+        if end < 0:
+            return b""
+        reader = zstandard.ZstdDecompressor().stream_reader(chunk.data)
+        head = _read(reader, end + _RECORD.size)
+        length = _RECORD.unpack_from(head, end)[1]
+        return head + _read(reader, length)
+    if chunk.compression == "lz4":
         import lz4.frame  # type: ignore[import-untyped]
 
-        data = lz4.frame.decompress(chunk.data)
-    else:  # as mcap's reader takes it: stored as it is
-        data = chunk.data
-    return data
+        return lz4.frame.decompress(chunk.data)  # type: ignore[no-any-return]
+    return chunk.data  # type: ignore[no-any-return]  # as mcap's reader takes it: stored
+
+
+def _read(reader: Any, n: int) -> bytes:
+    """``n`` bytes of a decompressing reader (less only where the data ends)."""
+    parts, got = [], 0
+    while got < n:
+        part = reader.read(n - got)
+        if not part:
+            raise ValueError(f"the records end {n - got} bytes short of the message index")
+        parts.append(part)
+        got += len(part)
+    return b"".join(parts)
 
 
 def _messages(path: Path, at: int, data: memoryview, channels: frozenset[int]

@@ -279,3 +279,25 @@ def test_chunks_without_message_indexes_are_read_whole(tmp_path: Path,
     _write(path, messages, chunk_size=512, index=IndexType.CHUNK)
     frame = _same(monkeypatch, path, "/imu", ["header.stamp.sec"])
     assert list(frame["header.stamp.sec"]) == [i for i in range(60) if i % 20 < 5]
+
+
+def test_the_imu_of_a_camera_file_is_read_without_decompressing_the_frames(
+        tmp_path: Path) -> None:
+    """Each chunk is decompressed only up to the topic's last message in it (its message
+    index says where): the IMU table of a second of 30 Hz 640x480 camera beside a 200 Hz
+    IMU peaks below the size of one frame, which follows the IMU messages in its chunk."""
+    import tracemalloc
+
+    from bench.dataframe import CAMERA, IMU, write_recording
+
+    path = tmp_path / "mixed.mcap"
+    assert write_recording(path, seconds=1.0)[CAMERA] == 30
+    tracemalloc.start()
+    try:
+        frame = bag_to_dataframe(path, IMU, ["linear_acceleration.z"])
+        _, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    assert len(frame) == 200
+    one_frame = 640 * 480 * 3
+    assert peak < one_frame / 2, f"peak {peak / 2**10:.0f} KiB, a frame is {one_frame / 2**10:.0f}"
