@@ -116,7 +116,7 @@ def _decompress(chunk: Any, end: int | None = None) -> bytes:
     if chunk.compression == "zstd":
         import zstandard
 
-        if end is None:
+        if end is None or end > chunk.uncompressed_size // 2:  # most of it: in one go
             return zstandard.decompress(chunk.data, chunk.uncompressed_size)
         if end < 0:
             return b""
