@@ -6,11 +6,11 @@ keeping ``(log time, payload)`` of the topic's messages as views of the chunk's 
 record objects, no copies. A zstd chunk is decompressed only up to the end of the topic's
 last message in it, which the chunk's message index places: in a recording of an IMU
 beside a camera, each chunk's IMU messages come before the frame that filled it, and a
-table of the IMU decompresses none of the frames. A chunk's payloads are handed over as one batch, so that only
-one chunk's bytes are held at a time. The order is the file's (chunks by offset, records
-as written); :func:`roslibpy_lite.bag.read` gives log-time order, which a stable sort by
-log time of this order reproduces (the mcap reader breaks ties by chunk offset, then by
-place in the chunk).
+table of the IMU decompresses none of the frames. A chunk's payloads are handed over as
+one batch, so that only one chunk's bytes are held at a time. The order is the file's
+(chunks by offset, records as written); :func:`roslibpy_lite.bag.read` gives log-time
+order, which a stable sort by log time of this order reproduces (the mcap reader breaks
+ties by chunk offset, then by place in the chunk).
 
 It answers None when the file is not one it reads this way (no summary or no chunk index,
 as a recording cut short; the topic's channels of more than one schema), and the caller
