@@ -97,11 +97,12 @@ def _last_record(stream: Any, indexes: list[int]) -> int:
     chunk's message indexes of the topic's channels (-1: it holds none)."""
     last = -1
     for at in indexes:
+        size = stream.seek(0, io.SEEK_END)
         stream.seek(at, io.SEEK_SET)
         op, length = _RECORD.unpack(stream.read(_RECORD.size))
-        body = stream.read(length)
-        if op != _MESSAGE_INDEX_OP or len(body) != length or length < 6:
+        if op != _MESSAGE_INDEX_OP or not 6 <= length <= size - at:  # read no more than is there
             raise ValueError(f"no message index at byte {at}")
+        body = stream.read(length)
         offsets = array.array("Q", body[6:6 + (len(body) - 6) // 8 * 8])
         if sys.byteorder != "little":
             offsets.byteswap()
@@ -123,6 +124,9 @@ def _decompress(chunk: Any, end: int | None = None) -> bytes:
         reader = zstandard.ZstdDecompressor().stream_reader(chunk.data)
         head = _read(reader, end + _RECORD.size)
         length = _RECORD.unpack_from(head, end)[1]
+        if end + _RECORD.size + length > chunk.uncompressed_size:
+            raise ValueError(f"a record at {end} claims {length} bytes, past the chunk's "
+                             f"{chunk.uncompressed_size}")
         return head + _read(reader, length)
     if chunk.compression == "lz4":
         import lz4.frame  # type: ignore[import-untyped]

@@ -301,3 +301,22 @@ def test_the_imu_of_a_camera_file_is_read_without_decompressing_the_frames(
     assert len(frame) == 200
     one_frame = 640 * 480 * 3
     assert peak < one_frame / 2, f"peak {peak / 2**10:.0f} KiB, a frame is {one_frame / 2**10:.0f}"
+
+
+def test_a_message_index_claiming_more_than_the_file_is_refused(tmp_path: Path) -> None:
+    """A message index whose length claims more bytes than the file holds fails naming its
+    chunk, before anything of that size is read."""
+    from mcap.reader import make_reader
+
+    path = tmp_path / "index.mcap"
+    _write(path, [("/imu", T0 + i, Imu(), Imu._type) for i in range(50)], chunk_size=4096)
+    with path.open("rb") as f:
+        summary = make_reader(f).get_summary()
+    assert summary is not None
+    at = next(iter(summary.chunk_indexes[0].message_index_offsets.values()))
+    raw = bytearray(path.read_bytes())
+    raw[at + 1:at + 9] = (2**40).to_bytes(8, "little")  # a terabyte
+    path.write_bytes(bytes(raw))
+    with pytest.raises(roslibpy_lite.UsageError, match=r"the chunk at byte \d+ cannot be read: "
+                                                       r"ValueError: no message index at byte"):
+        bag_to_dataframe(path, "/imu", ["header.stamp.sec"])
