@@ -33,6 +33,7 @@ from roslibpy_lite import MockRos
 from roslibpy_lite.bag import Recorder
 from roslibpy_lite.bag._mcap import ROS2_PROFILE, SCHEMA_ENCODING
 from roslibpy_lite.data import bag_to_dataframe
+from roslibpy_lite.handles import Publisher
 from tests.msgs.test_cdr import _message
 
 T0 = 1_700_000_000 * 10**9
@@ -109,7 +110,8 @@ async def test_our_recorders_file_gives_the_same_table(tmp_path: Path,
     topics = {"/imu": "sensor_msgs/msg/Imu", "/camera": "sensor_msgs/msg/Image",
               "/joints": "sensor_msgs/msg/JointState"}
     async with MockRos() as ros, Recorder(ros, path, topics=topics, max_messages=3 * 40) as rec:
-        pubs = {t: await ros.advertise(t, ty) for t, ty in topics.items()}
+        pubs: dict[str, Publisher[Any]] = {
+            t: await ros.advertise(t, ty) for t, ty in topics.items()}
         for i in range(40):
             imu = Imu()
             imu.header.stamp.sec, imu.header.frame_id = 100 + i, "imu" + "_" * (i % 7)
