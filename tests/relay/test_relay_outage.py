@@ -147,11 +147,27 @@ def _foxglove() -> bool:
     return (NODE_DIR / "node_modules" / "@foxglove" / "ws-protocol").is_dir()
 
 
+@contextlib.contextmanager
+def explained(t: Outage, heard: dict[str, Callable[[], list[int]]],
+              statuses: list[ops.Status]) -> Iterator[None]:
+    """A failure inside says what each client heard last, our client's statuses, what the
+    counter sent and the relay's and the robot's logs."""
+    try:
+        yield
+    except AssertionError as exc:
+        said = [f"{name} heard (last 15): {h()[-15:]}" for name, h in heard.items()]
+        said += [f"our client's statuses: {[(s.level, s.msg) for s in statuses]}",
+                 f"counter sent up to {t.sent()}"]
+        for name, proc in (("relay", t.relay), ("robot", t.robot)):
+            said += [f"--- {name}'s log (last 40 lines):", *list(proc.lines)[-40:]]
+        raise AssertionError(f"{exc}\n" + "\n".join(said)) from None
+
+
 @contextlib.asynccontextmanager
 async def clients(t: Outage) -> Any:
     """Our client, stock roslibpy and (where npm's packages are) the Foxglove client, each
     subscribed to the counter and hearing it; yields the three ways to read what each heard
-    and our client's statuses."""
+    and our client's statuses (a failure meanwhile is :func:`explained`)."""
     ours: list[int] = []
     statuses: list[ops.Status] = []
     stock = Proc([sys.executable, "-c", ROSLIBPY, t.url, TOPIC], ros_env())
@@ -170,7 +186,8 @@ async def clients(t: Outage) -> Any:
                 heard["foxglove"] = lambda: heard_by_foxglove(fox)
             await until(lambda: all(h() for h in heard.values()), "every client to hear "
                         "the counter", 30)
-            yield heard, statuses, fox
+            with explained(t, heard, statuses):
+                yield heard, statuses, fox
     finally:
         stock.stop()
         if fox is not None:
@@ -180,20 +197,24 @@ async def clients(t: Outage) -> Any:
 async def _cut(t: Outage, statuses: list[ops.Status], published: int,
                stop: Path | None = None) -> tuple[int, int]:
     """Blackhole the robot's link until the relay told our client the robot went away (its
-    lease ran out) and the counter published ``published`` more (then, given ``stop``, it
-    is stopped); restore it. Returns the counter's last number before the cut and at the
-    restore."""
+    lease ran out) and the counter published ``published`` more; restore it. Given ``stop``,
+    the counter is stopped once it published ``published`` more in the cut, before the lease
+    ran out: the topic is then silent in the cut for most of the lease (3 s), longer than the
+    robot's heartbeat period (1 s). Returns the counter's last number before the cut and at
+    the restore."""
     before = t.sent()
     t.link.blackhole()
     try:
-        await until(lambda: any("went away" in s.msg for s in statuses),
-                    "the relay to tell our client the robot went away", 20)
-        gone = t.sent()
-        await until(lambda: t.sent() >= gone + published, "the counter to go on", 20)
         if stop is not None:
+            await until(lambda: t.sent() >= before + published, "the counter to go on", 20)
             stop.touch()
             await until(lambda: any(line.startswith("stopped") for line in t.counter.lines),
                         "the counter to stop", 10)
+        await until(lambda: any("went away" in s.msg for s in statuses),
+                    "the relay to tell our client the robot went away", 20)
+        if stop is None:
+            gone = t.sent()
+            await until(lambda: t.sent() >= gone + published, "the counter to go on", 20)
     finally:
         t.link.restore()
     return before, t.sent()
@@ -222,13 +243,14 @@ async def test_a_cut_longer_than_the_lease_loses_nothing() -> None:
 
 async def test_what_a_topic_said_last_in_an_outage_arrives_though_it_fell_silent(
         tmp_path: Path) -> None:
-    """The counter stops during the cut: nothing after the gap shows it, yet its last
-    numbers reach every client once the link is back (the robot's heartbeat tells the relay
-    what it missed)."""
+    """The counter stops early in the cut, silent for longer than a heartbeat period before
+    the link is back: nothing after the gap shows it, yet its last numbers reach every
+    client once the link is back (the robot's heartbeat, sent each period whether or not
+    the topic published, tells the relay what it missed)."""
     stop = tmp_path / "stop"
     with outage_tier(stop_file=str(stop)) as t:
         async with clients(t) as (heard, statuses, _fox):
-            _before, last = await _cut(t, statuses, published=10, stop=stop)
+            _before, last = await _cut(t, statuses, published=5, stop=stop)
             await until(lambda: all(h()[-1] == last for h in heard.values()),
                         f"every client to hear the counter's last number, {last}", 30)
             for name, h in heard.items():
