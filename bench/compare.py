@@ -64,6 +64,16 @@ def _delivered(r: dict[str, Any]) -> float:
     return 100.0 * float(min(r["per_client"])) / float(max(r["published"], 1))
 
 
+def _step(steps: list[dict[str, Any]], viewers: int) -> dict[str, Any] | None:
+    """The step of a fan-out result with ``viewers`` viewers (``None``: not run)."""
+    return next((s for s in steps if s["viewers"] == viewers), None)
+
+
+def _per_message(part: str, viewers: int) -> Callable[[dict[str, Any]], Any]:
+    """The server's CPU per delivered message of one fan-out step."""
+    return lambda r: (_step(r[part], viewers) or {}).get("server_cpu_us_per_message")
+
+
 def _service(prefix: str) -> list[Figure]:
     return [Figure(f"{prefix} p50 ms", lambda r: r["p50_ms"], "lower"),
             Figure(f"{prefix} p99 ms", lambda r: r["p99_ms"], "lower"),
@@ -91,7 +101,9 @@ FIGURES: dict[str, list[Figure]] = {
     "client_to_ros": [Figure("client->ROS msg/s at 99 %", lambda r: r["best_rate_99pct"],
                              "higher")],
     "service": _service("service (ROS server)"),
-    "client_service": _service("service (client server)"),
+    "client_service": [*_service("service (client server)"),
+                       Figure("service (client server) bridge CPU us/call",
+                              lambda r: r["bridge_cpu_us_per_call"], "lower")],
     "latency": [Figure("latency p50 ms", lambda r: r["p50_ms"], "lower"),
                 Figure("latency p99 ms", lambda r: r["p99_ms"], "lower")],
     "image": [*_image("json"), *_image("cbor"), *_image("cbor-raw"),
@@ -106,6 +118,11 @@ FIGURES: dict[str, list[Figure]] = {
         Figure("record recorder CPU %", lambda r: r["camera_imu"]["recorder_cpu_pct"], "lower"),
         Figure("record camera Hz at 99 %", lambda r: r["best_camera_rate_99pct"], "higher"),
     ],
+    "fanout": [Figure(f"fanout {part}, {n} viewers: CPU us/message", _per_message(part, n),
+                      "lower")
+               for part in ("bridge", "relay") for n in (100, 200)]
+    + [Figure("fanout camera, 100 viewers of a relay: delivered %",
+              lambda r: 100.0 * r["camera_relay"]["delivered_fraction"], "higher")],
     "idle_cpu": [Figure("idle bridge CPU %", lambda r: r["connected_pct_of_core"], "lower")],
 }
 """The figures of each scenario the table shows (scenarios not here show none)."""

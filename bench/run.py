@@ -45,6 +45,10 @@ Scenarios (targets; rosbridge_suite's figures in brackets):
 - ``relay_imu`` (``bench/relay.py``): a 100 Hz sensor_msgs/Imu to 200 JSON viewers (50 with
   ``--quick``) over two relays: the fraction delivered, latency p50/p99, the relays' CPU per
   message.
+- ``fanout`` (``bench/fanout.py``): a 50 Hz topic to 100 and 200 JSON viewers (100 with
+  ``--quick``) of one bridge and of one relay, and a 10 Hz 640x480 camera to 100 cbor-raw
+  viewers of one relay; the viewers run in processes of their own and count frames without
+  decoding them: delivered, the server's CPU per delivered message (target <= 10 us).
 - ``relay_dead_link`` (``bench/relay.py``): a robot's Zenoh link blackholed (no FIN) while a
   viewer watches through the relay: seconds until the viewer's "went away" status, and until
   "is back" once restored, with ``--zenoh-lease 3`` (the default) and 10 (Zenoh's own).
@@ -101,6 +105,7 @@ from bench.actions import action_client_served, action_ros_server
 from bench.bag import record
 from bench.cloud import pointcloud
 from bench.compare import COMPARE_SCENARIOS, compare
+from bench.fanout import fanout
 from bench.foxglove import foxglove
 from bench.harness import (
     CODE_ROOT,
@@ -144,6 +149,8 @@ TARGETS: dict[str, str] = {
     "relay_uplink": "robot uplink through a relay flat in viewers (<= 1.1x one viewer's); "
                     "straight to the bridge N times",
     "relay_service": "reference: service round trip through a relay against straight",
+    "fanout": "<= 10 us of server CPU per delivered message to 100-200 viewers, bridge and "
+              "relay; 100 viewers of a 10 Hz camera through one relay get every frame",
     "relay_imu": "200 viewers of a 100 Hz IMU over two relays: all delivered; latency, relay CPU",
     "relay_dead_link": "a dead robot link told to its relay's clients within the lease (3 s)",
     "relay_outage": "nothing lost in a robot-link outage within the window (300 messages: "
@@ -523,6 +530,8 @@ async def client_service(ctx: Ctx) -> dict[str, Any]:
     """An rclpy client calls a SetBool service a websocket client serves through the bridge:
     round trips of sequential calls (ROS request -> bridge -> client -> bridge -> ROS reply)
     and calls/s with 16 in flight; runs with ``--peer rs`` too."""
+    import psutil
+
     name = "/bench/client_srv"
     bridge = await ctx.bridge().start()
     ws = await ws_open(bridge.url)
@@ -543,20 +552,26 @@ async def client_service(ctx: Ctx) -> dict[str, Any]:
                                               "message": "ok"}})
 
     stask = asyncio.create_task(serve())
+    proc = psutil.Process(bridge.pid)
     try:
         caller = await ctx.ros("call", "--service", name, "--calls",
                                str(300 if ctx.quick else 1000), "--in-flight", "16",
                                "--duration", str(ctx.duration), "--match-timeout", "20").start()
+        await caller.event("matched", 30)
+        cpu0, served0 = proc.cpu_times(), served[0]
         done = await caller.event("done", 120 + ctx.duration)
+        cpu1, calls = proc.cpu_times(), served[0] - served0
         await caller.close()
     finally:
         await close_clients([ws], [stask])
         await bridge.stop()
     q = done["latency_ms"] or {}
+    busy = cpu1.user - cpu0.user + cpu1.system - cpu0.system
     return {"sequential_calls": done["calls"], "p50_ms": q.get("p50"), "p90_ms": q.get("p90"),
             "p99_ms": q.get("p99"), "in_flight": done["in_flight"],
             "calls_per_s": round(done["calls_per_s"]), "failures": done["failed"],
-            "unanswered": done["unanswered"], "served_by_client": served[0]}
+            "unanswered": done["unanswered"], "served_by_client": served[0],
+            "bridge_cpu_us_per_call": round(1e6 * busy / calls, 1) if calls else None}
 
 
 async def _read_stamped(ws: ClientConnection, lat: list[float], skip: int) -> None:
@@ -869,6 +884,7 @@ SCENARIOS: dict[str, Callable[[Ctx], Awaitable[dict[str, Any]]]] = {
     "relay_uplink": relay_uplink,
     "relay_service": relay_service,
     "relay_imu": relay_imu,
+    "fanout": fanout,
     "relay_dead_link": relay_dead_link,
     "relay_outage": relay_outage,
     "action_ros_server": action_ros_server,
@@ -912,6 +928,10 @@ def _headline(name: str, r: dict[str, Any]) -> Any:
         return {way: {r["viewers"]: r["x_one_viewer"] for r in r[way]} for way in ("relay", "direct")}
     if name == "relay_service":
         return r
+    if name == "fanout":
+        return {part: [(s["viewers"], s["delivered_fraction"], s["server_cpu_us_per_message"])
+                       for s in (r[part] if isinstance(r[part], list) else [r[part]])]
+                for part in ("bridge", "relay", "camera_relay")}
     if name == "relay_dead_link":
         return {k: v["noticed_max_s"] for k, v in r.items() if k.startswith("lease_")}
     if name == "relay_outage":

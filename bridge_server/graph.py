@@ -125,6 +125,10 @@ class Converter(Protocol):
 class Message(Protocol):
     """One message received on a topic, encoded for clients lazily and once per encoding."""
 
+    framed: dict[tuple[str, str | None], Any] | None
+    """Its websocket frames by (compression, topic spelling), made by the first client's
+    outbox and shared by the others (:func:`bridge_server.session.outbox.wire`)."""
+
     @property
     def topic(self) -> str:
         """The topic it came on."""

@@ -131,7 +131,8 @@ class Incoming:
     text is made from the bytes directly where it can be (:mod:`bridge_server.codec.cdr_json`).
     """
 
-    __slots__ = ("_cbor", "_cbor_raw", "_json", "_msg_json", "conv", "data", "stamp_ns", "topic")
+    __slots__ = ("_cbor", "_cbor_raw", "_json", "_msg_json", "conv", "data", "framed", "stamp_ns",
+                 "topic")
 
     def __init__(self, topic: str, data: bytes, conv: convert.Converter, stamp_ns: int) -> None:
         self.topic = topic
@@ -142,6 +143,7 @@ class Incoming:
         self._msg_json: str | None = None
         self._cbor: bytes | None = None
         self._cbor_raw: bytes | None = None
+        self.framed: dict[tuple[str, str | None], Any] | None = None  # see graph.Message
 
     @property
     def msg(self) -> Any:

@@ -18,9 +18,22 @@ silences these warnings.
 
 The writer gathers whatever is ready (up to :data:`BATCH_FRAMES` frames or
 :data:`BATCH_BYTES` bytes) and writes it with one socket write. When it is
-idle, the first message or reply queued is written at once, without waiting
-for the writer's turn of the loop (:meth:`Outbox._kick`); the writer is woken
-only if more follows in the same turn.
+idle, the first message or reply queued in a turn of the loop is written at
+once, without waiting for the writer's turn (:meth:`Outbox._kick`); the writer
+is woken only if more follows in the same turn.
+
+A message costs a viewer one write
+----------------------------------
+A message is encoded once per encoding, and framed once per encoding and topic
+spelling: its websocket frame, header included, is kept on the message
+(``framed``) and the same bytes go to every client that gets it that way
+(:func:`wire`). When nothing of a client's is waiting and its socket takes
+data, :meth:`Outbox.push` writes those bytes at once, without queueing them:
+a viewer of a topic costs the server a socket write and a few checks. A
+subscription with a ``fragment_size`` or another protocol's framing
+(Foxglove) frames its messages per client; a resumable session keeps its
+frames unframed (to send them again) and takes the queue; with an extension
+(``--compression deflate``) websockets frames them.
 
 Merged subscriptions
 --------------------
@@ -40,6 +53,7 @@ import itertools
 import logging
 import struct
 import time
+import weakref
 from collections import deque
 from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING
@@ -54,6 +68,7 @@ from ..interfaces import ReportedError
 
 if TYPE_CHECKING:
     from websockets.asyncio.server import ServerConnection
+    from websockets.server import ServerProtocol
 
     from ..graph import Message as Incoming
     from ..graph import TopicFeed as _Shared
@@ -63,10 +78,14 @@ __all__ = [
     "BATCH_BYTES",
     "BATCH_FRAMES",
     "DEFAULT_QUEUE_LENGTH",
+    "JOINED_BYTES",
     "Frame",
     "Outbox",
     "Subscription",
+    "Wire",
     "frame_bytes",
+    "frame_parts",
+    "wire",
 ]
 
 log = logging.getLogger("bridge_server.session")
@@ -79,6 +98,11 @@ BATCH_FRAMES = 128
 
 BATCH_BYTES = 256 * 1024
 """Most bytes the writer gathers for one socket write (a large frame goes alone)."""
+
+JOINED_BYTES = 64 * 1024
+"""Largest payload whose shared frame (:class:`Wire`) is one ``bytes`` of header and payload;
+a bigger one is its header and the encoding's own bytes (written one after the other: a
+copy of a camera frame per client costs more than a second piece in one write)."""
 
 
 class Subscription:
@@ -106,6 +130,7 @@ class Subscription:
         self.report_timer: asyncio.TimerHandle | None = None
         self.active = True
         self.encode: Callable[[Incoming], Frame] | None = None  # a frame of its own
+        self.key: tuple[str, str | None] = (self.compression, self.wire)  # see wire()
 
     def configure(self, default_len: int, max_len: int = 0, min_fragment: int = 0) -> None:
         """Merge the options of every id: least throttle, largest queue, least fragment size
@@ -117,6 +142,7 @@ class Subscription:
         sizes = [s.fragment_size for s in subs if s.fragment_size]
         self.fragment_size = max(min(sizes), min_fragment) if sizes else None
         self.compression = subs[-1].compression
+        self.key = (self.compression, self.wire)
         while len(self.queue) > self.maxlen:
             self.queue.popleft()
             self.outbox.queued -= 1
@@ -155,9 +181,23 @@ class Subscription:
             self.timer = None
 
 
-Frame = str | bytes | tuple[bytes, bytes]
-"""One websocket frame to write: text (``str``), binary (``bytes``), or binary in two parts
-(a header and a payload shared with other clients, joined only into the socket write)."""
+class Wire:
+    """A whole websocket frame as it goes on the socket: its header and payload joined, or
+    for a big frame the header and then the payload, the encoding's own bytes (not copied).
+    Shared by every client that gets the message in one encoding and spelling (:func:`wire`).
+    """
+
+    __slots__ = ("parts", "size")
+
+    def __init__(self, parts: tuple[bytes, ...]) -> None:
+        self.parts = parts
+        self.size = sum(map(len, parts))
+
+
+Frame = str | bytes | tuple[bytes, bytes] | Wire
+"""One websocket frame to write: text (``str``), binary (``bytes``), binary in two parts
+(a header and a payload shared with other clients, joined only into the socket write), or
+one framed already (:class:`Wire`)."""
 
 
 def frame_bytes(frames: Sequence[Frame]) -> bytes:
@@ -170,35 +210,37 @@ def frame_bytes(frames: Sequence[Frame]) -> bytes:
     few operations instead of a frame object and a buffer each: on the way from ROS to a
     client, framing was a sixth of the bridge's time for a small message.
     """
+    return b"".join(frame_parts(frames))
+
+
+def frame_parts(frames: Sequence[Frame]) -> list[bytes]:
+    """:func:`frame_bytes`, not joined: the pieces to write one after the other."""
     parts: list[bytes] = []
     add = parts.append
     for frame in frames:
-        if isinstance(frame, str):
+        if isinstance(frame, Wire):
+            parts.extend(frame.parts)
+        elif isinstance(frame, str):
             data = frame.encode()
-            head = 0x81  # FIN, text
+            add(_header(0x81, len(data)))  # FIN, text
+            add(data)
         elif isinstance(frame, tuple):  # a binary frame in two parts, not joined before
-            size = len(frame[0]) + len(frame[1])
-            if size < 126:
-                add(bytes((0x82, size)))
-            elif size < 0x10000:
-                add(_HEAD16(0x82, 126, size))
-            else:
-                add(_HEAD64(0x82, 127, size))
+            add(_header(0x82, len(frame[0]) + len(frame[1])))
             add(frame[0])
             add(frame[1])
-            continue
         else:
-            data = frame
-            head = 0x82  # FIN, binary
-        size = len(data)
-        if size < 126:
-            add(bytes((head, size)))
-        elif size < 0x10000:
-            add(_HEAD16(head, 126, size))
-        else:
-            add(_HEAD64(head, 127, size))
-        add(data)
-    return b"".join(parts)
+            add(_header(0x82, len(frame)))  # FIN, binary
+            add(frame)
+    return parts
+
+
+def _header(first: int, size: int) -> bytes:
+    """A server frame's header: its first byte (FIN and opcode), the payload's length."""
+    if size < 126:
+        return bytes((first, size))
+    if size < 0x10000:
+        return _HEAD16(first, 126, size)
+    return _HEAD64(first, 127, size)
 
 
 _HEAD16 = struct.Struct("!BBH").pack
@@ -206,8 +248,97 @@ _HEAD64 = struct.Struct("!BBQ").pack
 
 
 def _joined(frame: Frame) -> str | bytes:
-    """The frame as one ``str`` or ``bytes`` (a two-part frame joined)."""
+    """The frame as one ``str`` or ``bytes`` (a two-part frame joined; never a :class:`Wire`,
+    which only a connection that frames its own writes gets)."""
+    assert not isinstance(frame, Wire), "a framed frame where a payload was expected"
     return b"".join(frame) if isinstance(frame, tuple) else frame
+
+
+def _size(frame: Frame) -> int:
+    if isinstance(frame, Wire):
+        return frame.size
+    return len(frame) if not isinstance(frame, tuple) else len(frame[0]) + len(frame[1])
+
+
+def wire(sub: Subscription, inc: Incoming) -> Wire | None:
+    """The message's frame for ``sub`` as it goes on the socket, made once per encoding and
+    topic spelling and kept on the message for every other client (``None`` when ``sub``
+    frames per client: fragments, another protocol's framing)."""
+    if sub.encode is not None or sub.fragment_size is not None:
+        return None
+    key = sub.key
+    cache = inc.framed
+    if cache is None:
+        cache = inc.framed = {}
+    else:
+        made: Wire | None = cache.get(key)
+        if made is not None:
+            return made
+    comp = sub.compression
+    if comp == "cbor":
+        data = inc.cbor(sub.wire)
+        first = 0x82  # FIN, binary
+    elif comp == "cbor-raw":
+        data = inc.cbor_raw(sub.wire)
+        first = 0x82
+    else:
+        text = inc.json_text(sub.wire)
+        if len(text) > JOINED_BYTES:  # not kept twice (text and bytes): encoded per client
+            return None
+        data = text.encode()
+        first = 0x81  # FIN, text
+    head = _header(first, len(data))
+    made = cache[key] = Wire((head + data,) if len(data) <= JOINED_BYTES else (head, data))
+    return made
+
+
+def _raw_ok(protocol: ServerProtocol) -> bool:
+    """Whether the outbox may frame what it writes on this connection itself (no extension,
+    open, websockets not in the middle of a fragmented message and holding nothing back, and
+    not logging each frame)."""
+    return (
+        not protocol.extensions
+        and protocol.state is State.OPEN
+        and not protocol.expect_continuation_frame
+        and not protocol.writes
+        and not protocol.debug  # websockets logs each frame it makes
+    )
+
+
+class _Turn:
+    """Tells a turn of the event loop from the next (one per loop): ``n`` changes after a
+    turn in which some outbox wrote at once, so the next message in that turn waits for its
+    writer, which gathers it with what follows into one write; one callback per turn for
+    every client, not one per client."""
+
+    __slots__ = ("armed", "loop", "n")
+
+    def __init__(self, loop: asyncio.AbstractEventLoop) -> None:
+        self.loop = loop
+        self.n = 0
+        self.armed = False
+
+    def mark(self) -> int:
+        """A direct write happened in this turn: the turn's number."""
+        if not self.armed:
+            self.armed = True
+            self.loop.call_soon(self._next)
+        return self.n
+
+    def _next(self) -> None:
+        self.armed = False
+        self.n += 1
+
+
+_TURNS: weakref.WeakKeyDictionary[asyncio.AbstractEventLoop, _Turn] = (
+    weakref.WeakKeyDictionary())
+
+
+def _turn_of(loop: asyncio.AbstractEventLoop) -> _Turn:
+    turn = _TURNS.get(loop)
+    if turn is None:
+        turn = _TURNS[loop] = _Turn(loop)
+    return turn
 
 
 class Outbox:
@@ -243,6 +374,21 @@ class Outbox:
         self.frag_ids = itertools.count()
         self.sent: SentFrames | None = None  # kept until confirmed, in a resumable session
         self.ack: str | None = None  # a session_ack to write first (not counted, not kept)
+        self.turn = _turn_of(self.loop)
+        self.wrote_in = -1  # the turn of this outbox's last direct write
+        self.direct = False  # whether the outbox may write between the writer's rounds
+        self.framing = False  # and frame what it writes itself (see _connection)
+        self._connection(ws)
+
+    def _connection(self, ws: ServerConnection) -> None:
+        """Write to ``ws`` from now on: whether the outbox may write to its transport between
+        the writer's rounds (:meth:`_kick`), and frame messages itself (no extension, no
+        frame logging), which :meth:`push` needs to write a message at once."""
+        self.ws = ws
+        self.direct = getattr(ws, "transport", None) is not None and hasattr(ws, "send_context")
+        protocol = getattr(ws, "protocol", None)
+        self.framing = (self.direct and protocol is not None and not protocol.extensions
+                        and not protocol.debug)
 
     # -- filling -------------------------------------------------------------------------------
 
@@ -264,8 +410,20 @@ class Outbox:
         self._kick()
 
     def push(self, sub: Subscription, inc: Incoming) -> None:
-        """Queue one message of ``sub``, dropping its oldest when full (or when the client's
-        queues hold ``max_queued`` messages in all)."""
+        """Write one message of ``sub`` at once when nothing of this client's waits and its
+        socket takes data (the first in this turn of the loop); else queue it, dropping the
+        subscription's oldest when full (or when the client's queues hold ``max_queued``
+        messages in all)."""
+        if (
+            self.idle
+            and not self.queued
+            and not self.control
+            and self.framing
+            and self.wrote_in != self.turn.n
+            and self.sent is None
+            and self._write_now(sub, inc)
+        ):
+            return
         q = sub.queue
         if len(q) >= sub.maxlen or (self.queued >= self.max_queued and q):
             q.popleft()
@@ -283,6 +441,50 @@ class Outbox:
         q.append(inc)
         self._kick()
 
+    def _write_now(self, sub: Subscription, inc: Incoming) -> bool:
+        """Write the message to the socket if it takes data now (nothing buffered, open, and
+        framed here); whether it was written (or dropped as one that does not encode)."""
+        ws = self.ws
+        transport = ws.transport
+        protocol = ws.protocol
+        if (
+            self.closed
+            or transport.get_write_buffer_size()
+            or protocol.state is not State.OPEN
+            or protocol.writes
+            or protocol.expect_continuation_frame
+            or transport.is_closing()
+        ):
+            return False
+        cache = inc.framed
+        framed = cache.get(sub.key) if cache is not None and sub.encode is None else None
+        if framed is None or sub.fragment_size is not None:
+            try:
+                framed = wire(sub, inc)
+                if framed is None:
+                    parts = tuple(frame_parts(self._frames(sub, inc)))
+                    size = sum(map(len, parts))
+                else:
+                    parts, size = framed.parts, framed.size
+            except ReportedError:  # counted and logged where it came from (a relay's robot)
+                return True
+            except Exception:
+                log.exception("session %d: cannot encode a message of %s", self.sid, sub.topic)
+                return True
+        else:
+            parts, size = framed.parts, framed.size
+        if len(parts) == 1:
+            transport.write(parts[0])
+        else:
+            transport.writelines(parts)
+        turn = self.turn
+        if not turn.armed:
+            turn.mark()
+        self.wrote_in = turn.n
+        sub.sent += 1
+        sub.sent_bytes += size
+        return True
+
     def send_ack(self, text: str) -> None:
         """Write this ``session_ack`` ahead of everything (it replaces one not yet written)."""
         self.ack = text
@@ -296,7 +498,7 @@ class Outbox:
     def resume(self, ws: ServerConnection, count: int) -> int:
         """Write to ``ws`` from now on, starting with the frames after the client's ``count``;
         returns how many of those were no longer kept."""
-        self.ws = ws
+        self._connection(ws)
         if self.sent is None:
             return 0
         again, missing = self.sent.since(count)
@@ -341,14 +543,11 @@ class Outbox:
         a lone message's or reply's largest share of its time in the bridge. What else is
         queued in the same turn waits for the writer, which gathers it into one write.
         """
-        if self.idle and not self.closed:
-            self.idle = False
+        if self.idle and not self.closed and self.direct and self.wrote_in != self.turn.n:
             ws = self.ws
-            transport = getattr(ws, "transport", None)
+            transport = ws.transport
             if (
-                transport is not None
-                and hasattr(ws, "send_context")
-                and ws.protocol.state is State.OPEN
+                ws.protocol.state is State.OPEN
                 and not transport.is_closing()
                 and not transport.get_write_buffer_size()
             ):
@@ -357,19 +556,15 @@ class Outbox:
                 except Exception:
                     log.exception("session %d: a write failed; closing the connection", self.sid)
                     self.closed = True
+                    self.idle = False
                     self.loop.create_task(ws.close(1011, "internal error"))
                 else:
-                    self.loop.call_soon(self._settle)
+                    # what is queued after it in this turn wakes the writer; with nothing
+                    # more, the writer stays parked and the next message (in a later turn)
+                    # is written at once again, without a task's wake-up
+                    self.wrote_in = self.turn.mark()
                     return
         self.wake.set()
-
-    def _settle(self) -> None:
-        """The turn of a direct write is over. What was queued after it in that turn woke
-        the writer; with nothing more, the writer stays parked and the next message is
-        written at once again, without a task's wake-up and an empty round of the writer
-        loop after every lone reply or message."""
-        if not self.wake.is_set():
-            self.idle = True
 
     async def writer(self) -> None:
         """Write what is queued until the outbox is closed (run as the client's task)."""
@@ -402,8 +597,8 @@ class Outbox:
     def _take(self) -> list[Frame]:
         """The frames to write next (:meth:`_collect`), kept in a resumable session until the
         client confirms them, after a ``session_ack`` to send first."""
-        frames = self._collect()
         sent = self.sent
+        frames = self._collect(sent is None and self.framing and _raw_ok(self.ws.protocol))
         if sent is not None:  # kept until the client confirms them
             for frame in frames:
                 sent.add(_joined(frame))
@@ -412,8 +607,9 @@ class Outbox:
                 self.ack = None
         return frames
 
-    def _collect(self) -> list[Frame]:
-        """Take the frames ready to go: replies first, then messages in arrival order."""
+    def _collect(self, framed: bool = False) -> list[Frame]:
+        """Take the frames ready to go: replies first, then messages in arrival order
+        (``framed``: each message's frame as it goes on the socket, where it can be shared)."""
         frames: list[Frame] = []
         size = 0
         control = self.control
@@ -429,7 +625,8 @@ class Outbox:
             inc = sub.queue.popleft()
             self.queued -= 1
             try:
-                encoded = self._frames(sub, inc)
+                shared = wire(sub, inc) if framed else None
+                encoded = [shared] if shared is not None else self._frames(sub, inc)
             except ReportedError:  # counted and logged where it came from (a relay's robot)
                 continue
             except Exception:
@@ -438,7 +635,7 @@ class Outbox:
             before = size
             for piece in encoded:
                 frames.append(piece)
-                size += len(piece) if not isinstance(piece, tuple) else sum(map(len, piece))
+                size += _size(piece)
             sub.sent += 1
             sub.sent_bytes += size - before
         return frames
@@ -456,20 +653,19 @@ class Outbox:
         if not frames:
             return
         protocol = ws.protocol
-        if (
-            not protocol.extensions
-            and protocol.state is State.OPEN
-            and not protocol.expect_continuation_frame
-            and not protocol.writes
-            and not protocol.debug  # websockets logs each frame it makes
-        ):
-            ws.transport.write(frame_bytes(frames))
+        if _raw_ok(protocol):
+            parts = frame_parts(frames)
+            if len(parts) == 1 or sum(map(len, parts)) <= JOINED_BYTES:
+                ws.transport.write(b"".join(parts))
+            else:  # a big frame's payload is not copied into a joined buffer (uvloop)
+                ws.transport.writelines(parts)
             return
         for frame in frames:
-            if isinstance(frame, str):
-                protocol.send_text(frame.encode())
+            payload = _joined(frame)
+            if isinstance(payload, str):
+                protocol.send_text(payload.encode())
             else:
-                protocol.send_binary(frame if isinstance(frame, bytes) else b"".join(frame))
+                protocol.send_binary(payload)  # never a Wire: framed only for _raw_ok
         chunks = protocol.data_to_send()
         if all(chunks):
             ws.transport.write(b"".join(chunks))

@@ -199,7 +199,7 @@ class ZenohMessage:
     """One message the robot put, encoded for clients lazily and once per encoding."""
 
     __slots__ = ("_bad", "_cbor", "_cbor_raw", "_json", "_msg_json", "conv", "data", "faults",
-                 "stamp_ns", "topic")
+                 "framed", "stamp_ns", "topic")
 
     def __init__(self, topic: str, data: bytes, conv: RelayConverter, stamp_ns: int,
                  faults: Faults) -> None:
@@ -213,6 +213,7 @@ class ZenohMessage:
         self._json: str | None = None
         self._cbor: bytes | None = None
         self._cbor_raw: bytes | None = None
+        self.framed: dict[tuple[str, str | None], Any] | None = None  # see graph.Message
 
     def _text(self) -> str:
         if self._msg_json is None:

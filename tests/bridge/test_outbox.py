@@ -17,14 +17,17 @@ from websockets.frames import Frame, Opcode
 
 from bridge_server.session.outbox import Frame as OutFrame
 from bridge_server.session.outbox import Outbox, Subscription, frame_bytes
+from roslibpy_lite.protocol import ops
 from tests.helpers import async_wait_until
 
 
 class _Text:
-    """Stands for an Incoming: the outbox only asks it for its JSON text."""
+    """Stands for an Incoming: the outbox only asks it for its JSON text (and keeps its frame
+    on it)."""
 
     def __init__(self, text: str) -> None:
         self.text = text
+        self.framed: dict[tuple[str, str | None], object] | None = None
 
     def json_text(self, _name: str | None = None) -> str:
         return self.text
@@ -141,3 +144,68 @@ async def test_a_lone_message_written_at_once_leaves_the_writer_parked() -> None
         await async_wait_until(lambda: box.idle, 5.0, "parked after the burst")
         box.close()
         await asyncio.wait_for(writer, 5.0)
+
+
+class _Raw(_Text):
+    """Stands for an Incoming with a cbor-raw encoding too (the bytes it hands out are kept,
+    as an Incoming keeps its encodings)."""
+
+    def __init__(self, text: str, raw: bytes) -> None:
+        super().__init__(text)
+        self.raw = raw
+
+    def cbor_raw(self, _name: str | None = None) -> bytes:
+        return self.raw
+
+
+def _record_writes(ws: ServerConnection) -> list[tuple[bytes, ...]]:
+    """What the outbox hands the connection's transport, one tuple of pieces per call."""
+    calls: list[tuple[bytes, ...]] = []
+    transport: Any = ws.transport
+    real_write, real_writelines = transport.write, transport.writelines
+
+    def write(data: bytes) -> None:
+        calls.append((data,))
+        real_write(data)
+
+    def writelines(parts: Any) -> None:
+        parts = tuple(parts)
+        calls.append(parts)
+        transport.write = real_write  # asyncio's writelines writes them joined: not a call
+        try:
+            real_writelines(parts)
+        finally:
+            transport.write = write
+
+    transport.write, transport.writelines = write, writelines
+    return calls
+
+
+async def test_a_message_is_framed_once_and_its_bytes_written_to_every_viewer() -> None:
+    """Two clients' idle outboxes write the very same frame bytes of a message (made once,
+    kept on the message); a big cbor-raw payload goes out as the encoding's own bytes after
+    its header, not copied into a frame per client."""
+    async with _parked_outbox(None) as (box1, client1, ws1, w1), \
+            _parked_outbox(None) as (box2, client2, ws2, w2):
+        calls1, calls2 = _record_writes(ws1), _record_writes(ws2)
+        small = _Text("a small message")
+        box1.push(Subscription(box1, "/t", "/t"), small)  # type: ignore[arg-type]
+        box2.push(Subscription(box2, "/t", "/t"), small)  # type: ignore[arg-type]
+        assert len(calls1) == len(calls2) == 1
+        assert calls1[0][0] is calls2[0][0], "one frame's bytes for both clients"
+        assert small.framed is not None and len(small.framed) == 1
+        assert [await client1.recv(), await client2.recv()] == ["a small message"] * 2
+        await async_wait_until(lambda: box1.idle and box2.idle, 5.0, "both parked")
+
+        payload = bytes(range(256)) * 1024  # 256 KiB, a frame of the 64-bit length form
+        big = _Raw("unused", payload)
+        for box in (box1, box2):
+            sub = Subscription(box, "/img", "/img")
+            sub.ids["i"] = ops.Subscribe(topic="/img", compression="cbor-raw")
+            sub.configure(10)
+            box.push(sub, big)  # type: ignore[arg-type]  # written at once: both parked
+        assert calls1[-1][-1] is payload and calls2[-1][-1] is payload, "the payload not copied"
+        assert [await client1.recv(), await client2.recv()] == [payload] * 2
+        for box, writer in ((box1, w1), (box2, w2)):
+            box.close()
+            await asyncio.wait_for(writer, 5.0)
