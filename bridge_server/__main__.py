@@ -31,7 +31,7 @@ from ._exit import ends_process
 try:
     from roslibpy_lite.protocol import keepalive
 
-    from . import security
+    from . import eventloop, security
     from .interfaces import BridgeError
     from .security.options import MAX_MESSAGE_SIZE
     from .session.resume import ResumeConfig
@@ -191,14 +191,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         "Linux x86-64 and AArch64 with rmw_fastrtps; a thread elsewhere) or thread "
         "(default auto)",
     )
-    p.add_argument(
-        "--event-loop",
-        choices=EVENT_LOOPS,
-        default="auto",
-        help="the event loop the bridge runs on: uvloop (libuv's, its loop and sockets in C), "
-        "asyncio (the standard library's) or auto (uvloop where it is installed, as the "
-        "bridge extra does on Linux and macOS; default auto)",
-    )
+    eventloop.add_argument(p, "bridge")
     p.add_argument(
         "--no-websocket",
         action="store_true",
@@ -266,32 +259,6 @@ callback needs (the spin is Fast-DDS issue #6513). It takes another ROS process'
 coming or going at that moment, such as the other workers stopping with the same supervisor;
 CI saw a worker stuck that way. The watchdog is faulthandler's own thread, which needs no GIL
 (the stuck thread holds it)."""
-
-
-EVENT_LOOPS = ("auto", "asyncio", "uvloop")
-"""What ``--event-loop`` may ask for (see :func:`event_loop_factory`)."""
-
-
-def event_loop_factory(kind: str) -> Callable[[], asyncio.AbstractEventLoop] | None:
-    """What makes the loop for ``--event-loop kind`` (``None``: asyncio's own).
-
-    uvloop runs the loop, its timers and the sockets' reads and writes in C, where asyncio
-    runs each turn of the loop and each callback's handle in Python: that was a third of
-    the Python a client-served service call cost the bridge. ``auto`` takes it where it is
-    installed. Raises :class:`BridgeError` if ``uvloop`` is asked for and not installed.
-    """
-    if kind not in EVENT_LOOPS:
-        raise BridgeError(f"--event-loop {kind!r}: expected one of {', '.join(EVENT_LOOPS)}")
-    if kind == "asyncio":
-        return None
-    try:
-        import uvloop
-    except ImportError as exc:
-        if kind == "uvloop":
-            raise BridgeError(f"--event-loop uvloop: uvloop cannot be imported ({exc}); "
-                              "install it (pip install uvloop, or the bridge extra)") from None
-        return None
-    return uvloop.new_event_loop
 
 
 async def _run(args: argparse.Namespace) -> int:
@@ -368,7 +335,7 @@ async def _run(args: argparse.Namespace) -> int:
     else:
         scheme = "wss" if args.certfile else "ws"
         log.info("bridge_server listening on %s://%s:%d", scheme, args.host, bridge.port)
-    log.info("event loop: %s", type(loop).__module__.partition(".")[0])
+    log.info("event loop: %s", eventloop.loop_name(loop))
     log.info("ROS node /%s on ROS_DOMAIN_ID %s (topic reader: %s)", config.node_name,
              os.environ.get("ROS_DOMAIN_ID", "0"), graph.reader_kind)
     bridge.security.startup_warnings(args.host)
@@ -465,7 +432,7 @@ def main(argv: list[str] | None = None) -> int:
 
             argv = sys.argv[1:] if argv is None else argv
             return Supervisor(argv, args.workers, args.host, args.port, args.metrics_port).run()
-        with asyncio.Runner(loop_factory=event_loop_factory(args.event_loop)) as runner:
+        with asyncio.Runner(loop_factory=eventloop.event_loop_factory(args.event_loop)) as runner:
             return runner.run(_run(args))
     except (OSError, BridgeError) as exc:  # a port in use, an unreadable auth/cert file, ...
         log.error("cannot start: %s", exc)

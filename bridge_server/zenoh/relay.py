@@ -45,7 +45,7 @@ try:
     from roslibpy_lite.protocol.frames import decode_frame
     from roslibpy_lite.protocol.ops import RELAY_HEADER, parse_op
 
-    from .. import security
+    from .. import eventloop, security
     from ..foxglove import SUBPROTOCOL as FOXGLOVE
     from ..foxglove import select_subprotocol
     from ..http.relay_web import RelayWeb
@@ -470,6 +470,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p.add_argument("--log-level", default="INFO",
                    choices=("DEBUG", "INFO", "WARNING", "ERROR"),
                    help="logging level (default INFO)")
+    eventloop.add_argument(p, "relay")
     security.add_arguments(p)
     zenoh_link.add_arguments(p, listen=True)
     return p.parse_args(argv)
@@ -496,6 +497,7 @@ async def _run(args: argparse.Namespace) -> int:
                    else f"Zenoh client of {', '.join(args.zenoh_connect)}")
     log.info("relay %s (%s): accepting on %s://%s:%d, joining Zenoh", relay.relay_id,
              zenoh_where, scheme, args.host, relay.port)
+    log.info("event loop: %s", eventloop.loop_name(loop))
     relay.security.startup_warnings(args.host)
     joining = asyncio.ensure_future(relay.join())
     stopping = asyncio.ensure_future(stop.wait())
@@ -533,7 +535,8 @@ def main(argv: list[str] | None = None) -> int:
     try:
         security.check_readable(security.config_from_args(args))
         zenoh_link.options_from_args(args).config()  # a bad option named before anything
-        return asyncio.run(_run(args))
+        with asyncio.Runner(loop_factory=eventloop.event_loop_factory(args.event_loop)) as runner:
+            return runner.run(_run(args))
     except (OSError, BridgeError) as exc:
         log.error("cannot start: %s", exc)
         return 1
