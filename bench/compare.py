@@ -122,7 +122,9 @@ FIGURES: dict[str, list[Figure]] = {
                       "lower")
                for part in ("bridge", "relay") for n in (100, 200)]
     + [Figure("fanout camera, 100 viewers of a relay: delivered %",
-              lambda r: 100.0 * r["camera_relay"]["delivered_fraction"], "higher")],
+              lambda r: 100.0 * r["camera_relay"]["delivered_fraction"], "higher"),
+       Figure("fanout write floor, 100 sockets: CPU us/send",
+              lambda r: r["write_floor_us"]["100"], "info")],
     "idle_cpu": [Figure("idle bridge CPU %", lambda r: r["connected_pct_of_core"], "lower")],
 }
 """The figures of each scenario the table shows (scenarios not here show none)."""

@@ -7,7 +7,10 @@ The viewers run in processes of their own and count frames without decoding them
 - **bridge**: a 50 Hz stamped ``std_msgs/String`` to 100 and 200 JSON viewers of one bridge
   (100 with ``--quick``);
 - **relay**: the same through one relay (the robot's bridge dials out to it);
-- **camera_relay**: a 640x480 rgb8 camera at 10 Hz to 100 cbor-raw viewers of one relay.
+- **camera_relay**: a 640x480 rgb8 camera at 10 Hz to 100 cbor-raw viewers of one relay;
+- **write_floor_us**: the floor, in the same run: the CPU one thread spends per ``send`` of a
+  small message's bytes to as many loopback connections (:func:`write_floor`), read by another
+  process; the kernel's share of a write is most of it.
 
 Reported per step: messages published and delivered (the fraction of published x viewers,
 the viewers that missed any, min and median per viewer), the server's CPU per delivered
@@ -22,6 +25,7 @@ from __future__ import annotations
 import asyncio
 import itertools
 import os
+import socket
 import statistics
 import time
 from typing import Any
@@ -103,6 +107,58 @@ async def _step(ctx: Ctx, url: str, server: Bridge, n: int, *, topic: str, kind:
     }
 
 
+_RECEIVER = """
+import selectors, socket, sys
+port, n = int(sys.argv[1]), int(sys.argv[2])
+socks = [socket.create_connection(("127.0.0.1", port)) for _ in range(n)]
+sel = selectors.DefaultSelector()
+for s in socks:
+    s.setblocking(False)
+    sel.register(s, selectors.EVENT_READ)
+open_ = n
+while open_:
+    for key, _ in sel.select():
+        try:
+            data = key.fileobj.recv(1 << 16)
+        except BlockingIOError:
+            continue
+        if not data:
+            sel.unregister(key.fileobj)
+            open_ -= 1
+"""
+"""The write floor's readers: ``n`` connections read (and dropped) in one process."""
+
+
+def write_floor(n: int, size: int, rounds: int, rate_hz: float) -> float:
+    """CPU microseconds one thread spends per ``send`` of ``size`` bytes to each of ``n``
+    loopback TCP connections (read by another process), ``rounds`` times at ``rate_hz``: what
+    the kernel and a bare Python loop cost per delivered message, the floor of any server's
+    fan-out on this machine (a ceiling figure, as the ROS ceiling of the image scenario)."""
+    import subprocess
+    import sys
+
+    with socket.socket() as listener:
+        listener.bind(("127.0.0.1", 0))
+        listener.listen(n)
+        reader = subprocess.Popen([sys.executable, "-c", _RECEIVER,
+                                   str(listener.getsockname()[1]), str(n)])
+        conns = [listener.accept()[0] for _ in range(n)]
+    try:
+        for c in conns:
+            c.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)  # as asyncio and uvloop do
+        payload = b"x" * size
+        cpu0 = time.thread_time()
+        for _ in range(rounds):
+            for c in conns:
+                c.send(payload)
+            time.sleep(1.0 / rate_hz)  # pacing as the publisher does, not synchronisation
+        return 1e6 * (time.thread_time() - cpu0) / (rounds * n)
+    finally:
+        for c in conns:
+            c.close()
+        reader.wait(10)
+
+
 SMALL: dict[str, Any] = {"kind": "stamp", "rate": 50.0, "subscribe": {"type": "std_msgs/msg/String",
                                                        "queue_length": 100}}
 CAMERA: dict[str, Any] = {"kind": "image", "rate": 10.0, "subscribe": {"type": "sensor_msgs/msg/Image",
@@ -115,6 +171,8 @@ async def fanout(ctx: Ctx) -> dict[str, Any]:
     counts = (100,) if ctx.quick else (100, 200)
     seconds = 5.0 if ctx.quick else 10.0
     out: dict[str, Any] = {"bridge": [], "relay": []}
+    out["write_floor_us"] = {
+        str(n): round(await asyncio.to_thread(write_floor, n, 90, 100, 50.0), 2) for n in counts}
     bridge = await ctx.bridge().start()
     try:
         for n in counts:
