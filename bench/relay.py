@@ -25,6 +25,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import json
+import os
 import re
 import socket
 import statistics
@@ -264,51 +265,42 @@ async def _call_until_answered(ws: Any, service: str) -> None:
 async def relay_imu(ctx: Ctx) -> dict[str, Any]:
     """``relay_imu``: a 100 Hz sensor_msgs/Imu to 200 JSON viewers spread over two relays (50
     with ``--quick``): the fraction delivered, the latency from the rclpy publisher's stamp to
-    each viewer (p50/p99, ms), and the relays' CPU per message delivered."""
-    import psutil
+    the decoding viewers (p50/p99, ms), and the relays' CPU per message delivered. The
+    viewers run in processes of their own and count frames without decoding them
+    (:class:`bench.viewers.ViewerPool`; the first of each process decodes and times them)."""
+    from bench.fanout import _cpu
+    from bench.viewers import ViewerPool
 
     viewers = 50 if ctx.quick else 200
     seconds = 5.0 if ctx.quick else 10.0
-    topic = "/bench_imu"
-    lat: list[float] = []
-    got = [0] * viewers
+    topic = f"/bench_imu_{os.getpid()}"
+    subscribe = {"op": "subscribe", "topic": topic, "type": "sensor_msgs/msg/Imu",
+                 "queue_length": 100}
     async with _tier(ctx, relays=2) as (relays, _robot):
-        sockets = []
-        for i in range(viewers):
-            ws = await _viewers_at(_url(relays[i % 2]))
-            await send_op(ws, {"op": "subscribe", "topic": topic, "type": "sensor_msgs/msg/Imu",
-                               "queue_length": 100})
-            sockets.append(ws)
-
-        async def reader(i: int) -> None:
-            with contextlib.suppress(Exception):
-                async for frame in sockets[i]:
-                    now = time.monotonic_ns()
-                    op = json.loads(frame)
-                    if op.get("op") == "publish":
-                        seq, stamp = op["msg"]["header"]["frame_id"].split(" ")
-                        got[i] += 1
-                        if int(seq) >= 20:  # skip the warm-up
-                            lat.append((now - int(stamp)) / 1e6)
-
-        readers = [asyncio.create_task(reader(i)) for i in range(viewers)]
-        procs = [psutil.Process(r.pid) for r in relays]
+        pools = [await ViewerPool(_url(relay), viewers // 2, subscribe, processes=2).start()
+                 for relay in relays]
         try:
             pub = await ctx.ros("publish", "--topic", topic, "--kind", "imu", "--rate", "100",
                                 "--duration", str(seconds), "--depth", "100", "--settle", "0.5",
                                 "--linger", "2").start()
             await pub.event("matched", 60)
-            cpu0 = [p.cpu_times() for p in procs]
-            sent = (await pub.event("done", seconds + 60))["sent"]
+            pids = [r.pid for r in relays]
+            cpu0 = _cpu(pids)
+            sent = int((await pub.event("done", seconds + 60))["sent"])
             deadline = time.monotonic() + 5
-            while min(got) < sent and time.monotonic() < deadline:
-                await asyncio.sleep(0.1)
-            cpu1 = [p.cpu_times() for p in procs]
+            while True:  # the last messages in flight; bounded
+                counts = [await pool.counts() for pool in pools]
+                got = [f for c in counts for f in c["frames"]]
+                if min(got) >= sent or time.monotonic() > deadline:
+                    break
+                await asyncio.sleep(0.2)
+            busy = _cpu(pids) - cpu0
             await pub.close()
         finally:
-            await close_clients(sockets, readers)
+            for pool in pools:
+                await pool.close()
     delivered = sum(got)
-    busy = sum(b.user - a.user + b.system - a.system for a, b in zip(cpu0, cpu1, strict=True))
+    lat = [x for c in counts for x in c["latencies_ms"]]
     return {
         "viewers": viewers, "relays": 2, "rate_hz": 100, "published": sent,
         "delivered_fraction": round(delivered / (sent * viewers), 4) if sent else None,

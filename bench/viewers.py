@@ -37,6 +37,8 @@ __all__ = ["ViewerPool"]
 _SYNC = json.dumps({"op": "publish", "msg": {}})  # no topic: an error status comes back
 PREFIX = 24
 """Bytes of each frame a counting viewer looks at: the op's name is in them (JSON or CBOR)."""
+WARM_UP = 20
+"""Messages numbered below this are not timed (the publisher's and the server's start)."""
 _STAMP = re.compile(rb"(\d+) (\d{6,})")  # "<seq> <monotonic ns>" of the bench publishers
 
 
@@ -169,7 +171,8 @@ class Viewer(asyncio.Protocol):
             self.out_of_order += 1
         self.last_seq = seq
         self.seqs.append(seq)
-        self.latencies.append((now - stamp) / 1e6)
+        if seq >= WARM_UP:
+            self.latencies.append((now - stamp) / 1e6)
 
 
 async def _open(url: str, subscribe: str, decode: bool) -> Viewer:
