@@ -14,10 +14,11 @@ A 640x480 rgb8 camera (random pixels, as incompressible as a real one) at 10 Hz,
 
 Reported per set-up and number of viewers: the uplink in MiB (and MiB/s), and per
 published frame as a multiple of one viewer's; the frames each viewer got against those
-published (min and median); the relay's and the robot bridge's CPU (% of one core). On a 2-core machine the viewers (this
-process), the relay and the robot share the cores, so delivered frames fall with many
-viewers for want of CPU; the uplink bytes do not depend on that. Nothing here asserts
-anything about time.
+published (min and median); the relay's and the robot bridge's CPU (% of one core). The
+viewers run in processes of their own and count frames without decoding them
+(``bench/viewers.py``); on a 2-core machine they, the relay and the robot share the cores,
+so delivered frames may fall with many viewers for want of CPU; the uplink bytes do not
+depend on that. Nothing here asserts anything about time.
 """
 
 from __future__ import annotations
@@ -32,7 +33,7 @@ import statistics
 import time
 from typing import Any
 
-from bench.harness import READY, Bridge, Ctx, close_clients, percentile, send_op, ws_open
+from bench.harness import READY, Bridge, Ctx, percentile, send_op, ws_open
 from bench.linkproxy import LinkProxy
 
 __all__ = ["relay_dead_link", "relay_imu", "relay_outage", "relay_service", "relay_uplink"]
@@ -51,40 +52,18 @@ def _free_port() -> int:
         return int(s.getsockname()[1])
 
 
-async def _viewers(url: str, n: int, timeout: float = 30.0) -> list[Any]:
-    """``n`` raw websocket clients subscribed to the camera with cbor-raw (a relay answers
-    404 until the robot's liveliness reached it: retried until ``timeout``)."""
-    deadline = time.monotonic() + timeout
-    sockets: list[Any] = []
-    while len(sockets) < n:
-        try:
-            ws = await ws_open(url)
-        except Exception:
-            if time.monotonic() > deadline:
-                raise
-            await asyncio.sleep(0.2)
-            continue
-        await send_op(ws, {"op": "subscribe", "topic": TOPIC, "type": "sensor_msgs/msg/Image",
-                           "compression": "cbor-raw", "queue_length": 2})
-        sockets.append(ws)
-    return sockets
-
-
 async def _watch(ctx: Ctx, url: str, n: int, link: LinkProxy, pids: dict[str, int],
                  seconds: float) -> dict[str, Any]:
-    """Subscribe ``n`` viewers at ``url``, publish the camera, count what crossed ``link``."""
+    """Subscribe ``n`` viewers at ``url``, publish the camera, count what crossed ``link``.
+    The viewers run in processes of their own and count frames without decoding them
+    (:class:`bench.viewers.ViewerPool`)."""
     import psutil
 
-    sockets = await _viewers(url, n)
-    got = [0] * n
+    from bench.viewers import ViewerPool
 
-    async def reader(i: int) -> None:
-        with contextlib.suppress(Exception):
-            async for frame in sockets[i]:
-                if isinstance(frame, bytes) and len(frame) > FRAME_BYTES:
-                    got[i] += 1
-
-    readers = [asyncio.create_task(reader(i)) for i in range(n)]
+    pool = await ViewerPool(url, n, {"op": "subscribe", "topic": TOPIC,
+                                     "type": "sensor_msgs/msg/Image",
+                                     "compression": "cbor-raw", "queue_length": 2}).start()
     procs = {name: psutil.Process(pid) for name, pid in pids.items()}
     try:
         pub = await ctx.ros("publish", "--topic", TOPIC, "--kind", "image", "--noise",
@@ -96,14 +75,17 @@ async def _watch(ctx: Ctx, url: str, n: int, link: LinkProxy, pids: dict[str, in
         t0 = time.monotonic()
         sent = (await pub.event("done", seconds + 60))["sent"]
         deadline = time.monotonic() + 5
-        while min(got) < sent and time.monotonic() < deadline:
-            await asyncio.sleep(0.1)  # the last frames in flight; bounded
+        while True:  # the last frames in flight; bounded
+            got = (await pool.counts())["frames"]
+            if min(got) >= sent or time.monotonic() > deadline:
+                break
+            await asyncio.sleep(0.1)
         wall = time.monotonic() - t0
         uplink = link.bytes_forwarded - before
         cpu1 = {name: p.cpu_times() for name, p in procs.items()}
         await pub.close()
     finally:
-        await close_clients(sockets, readers)
+        await pool.close()
     cpu = {f"{name}_cpu_pct": round(100.0 * (cpu1[name].user - cpu0[name].user
                                             + cpu1[name].system - cpu0[name].system) / wall, 1)
            for name in procs}
