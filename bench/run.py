@@ -45,10 +45,10 @@ Scenarios (targets; rosbridge_suite's figures in brackets):
 - ``relay_imu`` (``bench/relay.py``): a 100 Hz sensor_msgs/Imu to 200 JSON viewers (50 with
   ``--quick``) over two relays: the fraction delivered, latency p50/p99, the relays' CPU per
   message.
-- ``fanout`` (``bench/fanout.py``): a 50 Hz topic to 100 and 200 JSON viewers (100 with
-  ``--quick``) of one bridge and of one relay, and a 10 Hz 640x480 camera to 100 cbor-raw
-  viewers of one relay; the viewers run in processes of their own and count frames without
-  decoding them: delivered, the server's CPU per delivered message (target <= 10 us).
+- ``fanout`` (``bench/fanout.py``): a 50 Hz topic to 100 and 200 JSON viewers of one
+  bridge and of one relay, and a 10 Hz 640x480 camera to 100 cbor-raw viewers of one relay;
+  the viewers run in processes of their own and count frames without decoding them:
+  delivered, the server's CPU per delivered message (target <= 10 us), the write floor.
 - ``relay_dead_link`` (``bench/relay.py``): a robot's Zenoh link blackholed (no FIN) while a
   viewer watches through the relay: seconds until the viewer's "went away" status, and until
   "is back" once restored, with ``--zenoh-lease 3`` (the default) and 10 (Zenoh's own).
