@@ -125,6 +125,10 @@ FIGURES: dict[str, list[Figure]] = {
               lambda r: 100.0 * r["camera_relay"]["delivered_fraction"], "higher"),
        Figure("fanout write floor, 100 sockets: CPU us/send",
               lambda r: r["write_floor_us"]["100"], "info")],
+    "relay_imu": [Figure("relay_imu relay CPU us/message",
+                         lambda r: r["relay_cpu_us_per_message"], "lower"),
+                  Figure("relay_imu delivered %", lambda r: 100.0 * r["delivered_fraction"],
+                         "higher")],
     "idle_cpu": [Figure("idle bridge CPU %", lambda r: r["connected_pct_of_core"], "lower")],
 }
 """The figures of each scenario the table shows (scenarios not here show none)."""
