@@ -100,7 +100,8 @@ def test_compare_head_end_to_end(tmp_path: Path) -> None:
         assert "this venv" in done.stderr  # HEAD declares this tree's dependencies
         assert [r["figure"] for r in table["rows"]] == [
             "service (client server) p50 ms", "service (client server) p99 ms",
-            "service (client server) calls/s, 16 in flight"]
+            "service (client server) calls/s, 16 in flight",
+            "service (client server) bridge CPU us/call"]
         for r in table["rows"]:
             assert all(isinstance(v, float) and v > 0 for v in r["this"] + r["rev"]), r
         (this,), (rev,) = table["runs"]["this"], table["runs"]["rev"]
