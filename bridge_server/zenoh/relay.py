@@ -56,6 +56,7 @@ try:
     from ..security.auth import Principal
     from ..security.credentials import client_address
     from ..security.gate import POLICY_VIOLATION
+    from ..security.options import MAX_MESSAGE_SIZE
     from ..security.websockets_internals import BridgeConnection
     from ..server import REFUSALS, Bridge, BridgeConfig, websockets_pings
     from ..session.resume import ResumeConfig
@@ -453,10 +454,12 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                    help="this relay's name on Zenoh (default: its certificate's common name "
                    "with --zenoh-tls-cert, else random; it names its tokens, goals and calls, "
                    "and a robot's goals answer to it alone)")
-    p.add_argument("--max-message-size", type=int, default=16 * 1024 * 1024,
-                   help="largest inbound frame in bytes (default 16 MiB)")
-    p.add_argument("--call-timeout", type=float, default=5.0,
-                   help="default call_service timeout in seconds (default 5)")
+    p.add_argument("--max-message-size", type=int, default=MAX_MESSAGE_SIZE,
+                   help=f"largest inbound frame in bytes (default {MAX_MESSAGE_SIZE // 2**20} "
+                   "MiB)")
+    p.add_argument("--call-timeout", type=float, default=SessionConfig.call_timeout,
+                   help=f"default call_service timeout in seconds (default "
+                   f"{SessionConfig.call_timeout:g})")
     p.add_argument("--session-keep", type=float, default=30.0,
                    help="seconds a dropped client's session is kept for it to resume "
                    "(default 30; 0: off)")
