@@ -32,24 +32,13 @@ from typing import Any
 
 from bench.harness import Bridge, Ctx, percentile
 from bench.relay import _tier, _url
-from bench.viewers import ViewerPool
+from bench.viewers import ViewerPool, cpu_seconds
 
 __all__ = ["fanout"]
 
 _steps = itertools.count()
 SMALL_TOPIC = "/bench_fanout"
 CAMERA_TOPIC = "/bench_fanout_camera"
-
-
-def _cpu(pids: list[int], system: bool = False) -> float:
-    """CPU seconds of the processes so far (``system``: the kernel's share only)."""
-    import psutil
-
-    total = 0.0
-    for pid in pids:
-        t = psutil.Process(pid).cpu_times()
-        total += t.system if system else t.user + t.system
-    return total
 
 
 async def _step(ctx: Ctx, url: str, server: Bridge, n: int, *, topic: str, kind: str,
@@ -65,9 +54,9 @@ async def _step(ctx: Ctx, url: str, server: Bridge, n: int, *, topic: str, kind:
                             "--linger", "2").start()
         await pub.event("matched", 60)
         others = {"robot": robot.pid} if robot is not None else {}
-        cpu0, sys0 = _cpu([server.pid]), _cpu([server.pid], system=True)
-        other0 = {k: _cpu([pid]) for k, pid in others.items()}
-        view0 = _cpu(pool.pids)
+        cpu0, sys0 = cpu_seconds([server.pid]), cpu_seconds([server.pid], system=True)
+        other0 = {k: cpu_seconds([pid]) for k, pid in others.items()}
+        view0 = cpu_seconds(pool.pids)
         t0 = time.monotonic()
         sent = int((await pub.event("done", seconds + 60))["sent"])
         deadline = time.monotonic() + 5
@@ -77,11 +66,11 @@ async def _step(ctx: Ctx, url: str, server: Bridge, n: int, *, topic: str, kind:
                 break
             await asyncio.sleep(0.2)
         wall = time.monotonic() - t0
-        cpu = _cpu([server.pid]) - cpu0
-        kernel = _cpu([server.pid], system=True) - sys0
-        other = {f"{k}_cpu_pct": round(100 * (_cpu([pid]) - other0[k]) / wall, 1)
+        cpu = cpu_seconds([server.pid]) - cpu0
+        kernel = cpu_seconds([server.pid], system=True) - sys0
+        other = {f"{k}_cpu_pct": round(100 * (cpu_seconds([pid]) - other0[k]) / wall, 1)
                  for k, pid in others.items()}
-        viewers_cpu = _cpu(pool.pids) - view0
+        viewers_cpu = cpu_seconds(pool.pids) - view0
         await pub.close()
     finally:
         await pool.close()

@@ -40,19 +40,13 @@ from bench.harness import (
     send_op,
     ws_open,
 )
+from bench.viewers import cpu_seconds
 
 __all__ = ["foxglove"]
 
 PATHS = ("foxglove", "cbor-raw")
 VIEWERS = 10
 _sub_ids = itertools.count(1)
-
-
-def _cpu(pid: int) -> float:
-    import psutil
-
-    t = psutil.Process(pid).cpu_times()
-    return float(t.user + t.system)
 
 
 async def _client(bridge: Bridge, path: str, topic: str, type_name: str) -> ClientConnection:
@@ -133,10 +127,10 @@ async def _image(ctx: Ctx, bridge: Bridge, path: str) -> dict[str, Any]:
 
     async def body(pub: Any, counts: list[_Count]) -> dict[str, Any]:
         await pub.event("matched")
-        cpu0 = _cpu(bridge.pid)
+        cpu0 = cpu_seconds([bridge.pid])
         done = await pub.event("done", ctx.duration + 30)
         await _settle(counts, done["sent"], IMAGE_GRACE)
-        cpu = _cpu(bridge.pid) - cpu0
+        cpu = cpu_seconds([bridge.pid]) - cpu0
         c = counts[0]
         return {"frames_per_s": round(c.in_order / done["elapsed"], 1), "in_order": c.in_order,
                 "frames": c.frames, "published": done["sent"],
@@ -155,10 +149,10 @@ async def _small(ctx: Ctx, bridge: Bridge, path: str) -> dict[str, Any]:
     for rate in ladder:
         async def body(pub: Any, counts: list[_Count], rate: int = rate) -> dict[str, Any]:
             await pub.event("matched")
-            cpu0 = _cpu(bridge.pid)
+            cpu0 = cpu_seconds([bridge.pid])
             done = await pub.event("done", ctx.duration + 30)
             await _settle(counts, done["sent"])
-            cpu = _cpu(bridge.pid) - cpu0
+            cpu = cpu_seconds([bridge.pid]) - cpu0
             got = counts[0].frames
             return {"target_rate": rate, "publisher_rate": round(done["rate"]),
                     "sent": done["sent"], "received": got,
@@ -179,10 +173,10 @@ async def _small(ctx: Ctx, bridge: Bridge, path: str) -> dict[str, Any]:
 async def _viewers(ctx: Ctx, bridge: Bridge, path: str) -> dict[str, Any]:
     async def body(pub: Any, counts: list[_Count]) -> dict[str, Any]:
         await pub.event("matched")
-        cpu0 = _cpu(bridge.pid)
+        cpu0 = cpu_seconds([bridge.pid])
         done = await pub.event("done", ctx.duration + 30)
         await _settle(counts, done["sent"], 3.0)
-        cpu = _cpu(bridge.pid) - cpu0
+        cpu = cpu_seconds([bridge.pid]) - cpu0
         delivered = sum(c.frames for c in counts)
         return {"published": done["sent"], "per_viewer": [c.frames for c in counts],
                 "bridge_cpu_ms_per_published_frame": round(1e3 * cpu / max(done["sent"], 1), 2),

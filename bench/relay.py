@@ -250,8 +250,7 @@ async def relay_imu(ctx: Ctx) -> dict[str, Any]:
     the decoding viewers (p50/p99, ms), and the relays' CPU per message delivered. The
     viewers run in processes of their own and count frames without decoding them
     (:class:`bench.viewers.ViewerPool`; the first of each process decodes and times them)."""
-    from bench.fanout import _cpu
-    from bench.viewers import ViewerPool
+    from bench.viewers import ViewerPool, cpu_seconds
 
     viewers = 50 if ctx.quick else 200
     seconds = 5.0 if ctx.quick else 10.0
@@ -267,7 +266,7 @@ async def relay_imu(ctx: Ctx) -> dict[str, Any]:
                                 "--linger", "2").start()
             await pub.event("matched", 60)
             pids = [r.pid for r in relays]
-            cpu0 = _cpu(pids)
+            cpu0 = cpu_seconds(pids)
             sent = int((await pub.event("done", seconds + 60))["sent"])
             deadline = time.monotonic() + 5
             while True:  # the last messages in flight; bounded
@@ -276,7 +275,7 @@ async def relay_imu(ctx: Ctx) -> dict[str, Any]:
                 if min(got) >= sent or time.monotonic() > deadline:
                     break
                 await asyncio.sleep(0.2)
-            busy = _cpu(pids) - cpu0
+            busy = cpu_seconds(pids) - cpu0
             await pub.close()
         finally:
             for pool in pools:

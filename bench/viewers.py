@@ -32,7 +32,7 @@ from urllib.parse import urlsplit
 
 from websockets.frames import Frame, Opcode
 
-__all__ = ["ViewerPool"]
+__all__ = ["ViewerPool", "cpu_seconds"]
 
 _SYNC = json.dumps({"op": "publish", "msg": {}})  # no topic: an error status comes back
 PREFIX = 24
@@ -293,3 +293,14 @@ class ViewerPool:
 
 if __name__ == "__main__":
     asyncio.run(_serve(sys.argv[1], int(sys.argv[2]), sys.argv[3]))
+
+
+def cpu_seconds(pids: list[int], system: bool = False) -> float:
+    """CPU seconds of the processes so far (``system``: the kernel's share only)."""
+    import psutil
+
+    total = 0.0
+    for pid in pids:
+        t = psutil.Process(pid).cpu_times()
+        total += t.system if system else t.user + t.system
+    return total
