@@ -43,6 +43,7 @@ from ..security import POLICY_VIOLATION
 from ..security.names import InvalidNameError, check_name, full_name
 from ..security.permissions import LISTING, PARAMETER_LISTING
 from ..session.calls import Calls
+from ..session.client_status import ClientStatus, client_status
 from ..session.limits import over_cap
 from ..session.liveness import watch_link
 from ..session.outbox import Outbox, Subscription
@@ -89,28 +90,18 @@ class _ClientChannel:
 
 
 class _Topics:
-    """What the status page and ``/metrics`` read of a client: subscriptions by topic and
-    publishers by topic (the shape rosbridge sessions' op groups have)."""
+    """A client's subscriptions and publishers by topic (what the bridge's per-topic
+    counts read of every session kind)."""
 
     def __init__(self) -> None:
         self.subs: dict[str, Subscription] = {}
         self.publishers: dict[str, Publisher] = {}
 
 
-class _Services:
-    """What the status page reads of a client's served services: a Foxglove client serves
-    none."""
-
-    def __init__(self) -> None:
-        self.served: dict[str, Any] = {}
-
-
 class FoxgloveSession:
     """One Foxglove client (see the module's text)."""
 
     protocol_name = "foxglove"
-    parked = False  # not resumable
-    token = None
 
     def __init__(self, bridge: Bridge, hub: Hub, ws: ServerConnection, sid: int) -> None:
         self.bridge = bridge
@@ -128,7 +119,6 @@ class FoxgloveSession:
             self.config.drop_report_interval, lambda text: self.status("warning", text),
         )
         self.topics = _Topics()
-        self.services = _Services()
         self.subscriptions: dict[int, tuple[Subscription, wire.Channel]] = {}
         self.client_channels: dict[int, _ClientChannel] = {}
         self._publisher_refs: dict[str, int] = {}
@@ -220,6 +210,15 @@ class FoxgloveSession:
                 self.graph.release_publisher(pub)
         self.topics.publishers.clear()
         await self.calls.cancel_all()
+
+    def describe(self, worker: int) -> ClientStatus:
+        """This client's typed status (its entry in ``/status.json``) in worker ``worker``: a
+        Foxglove client serves nothing and is never kept to resume."""
+        return client_status(
+            sid=self.sid, worker=worker, protocol=self.protocol_name, address=self.peer,
+            connected_at=self.connected_at, subs=self.topics.subs.values(), outbox=self.outbox,
+            publishes=self.topics.publishers, serves=(), calls_in_flight=len(self.calls),
+            parked=False)
 
     def spawn(self, coro: Coroutine[Any, Any, None]) -> None:
         """Run ``coro`` as a task of this client's, cancelled when it leaves."""

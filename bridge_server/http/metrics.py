@@ -80,6 +80,8 @@ from prometheus_client.core import (
 )
 from prometheus_client.exposition import CONTENT_TYPE_LATEST, generate_latest
 
+from .status import COUNTERS
+
 __all__ = [
     "CLIENT_LIMIT",
     "CONTENT_TYPE",
@@ -260,17 +262,9 @@ class _Families:
         yield GaugeMetricFamily(PREFIX + "sessions_kept",
                                 "Sessions of dropped clients kept for them to resume.",
                                 value=len([c for c in clients if c.get("parked")]))
-        yield CounterMetricFamily(PREFIX + "sessions_resumed", "Sessions resumed by a client.",
-                                  value=int(s.get("sessions_resumed", 0)))
-        yield CounterMetricFamily(PREFIX + "sessions_expired",
-                                  "Kept sessions that ended unresumed.",
-                                  value=int(s.get("sessions_expired", 0)))
-        yield CounterMetricFamily(PREFIX + "sessions_forwarded",
-                                  "Session resumes a worker passed on to the worker keeping "
-                                  "the session (--workers).",
-                                  value=int(s.get("sessions_forwarded", 0)))
-        yield CounterMetricFamily(PREFIX + "connections", "Websocket clients accepted.",
-                                  value=int(s.get("connections", 0)))
+        for count in COUNTERS:  # the bridge status's count fields (status.py)
+            yield CounterMetricFamily(PREFIX + count.name, count.help,
+                                      value=int(s.get(count.name, 0)))
         refused = c("connections_refused", "Connections turned away, by reason.", ["reason"])
         for reason, n in _folded(s.get("refused", {}), self.caps["reason"]):
             refused.add_metric([reason], n)

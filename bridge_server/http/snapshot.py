@@ -23,6 +23,7 @@ from collections.abc import Iterable, Mapping
 from typing import TYPE_CHECKING, Any
 
 from .metrics import add_timing
+from .status import COUNTERS, BridgeStatus
 
 if TYPE_CHECKING:
     from ..foxglove.session import FoxgloveSession
@@ -104,52 +105,17 @@ def take(bridge: Bridge, rates: Mapping[str, Mapping[str, float]]) -> dict[str, 
     for name, r in rates.items():
         if name in topics:
             topics[name].update(r)
-    clients = []
     every: list[Session | FoxgloveSession] = [*bridge.sessions, *bridge.foxglove.sessions]
-    for session in sorted(every, key=lambda s: s.sid):
-        subs = [
-            {
-                "topic": sub.topic,
-                "type": sub.shared.type_name if sub.shared is not None else None,
-                "queued": len(sub.queue),
-                "queue_length": sub.maxlen,
-                "dropped": sub.dropped_total,
-                "sent": sub.sent,
-            }
-            for sub in session.topics.subs.values()
-        ]
-        queued = sum(len(sub.queue) for sub in session.topics.subs.values())
-        dropped = sum(sub.dropped_total for sub in session.topics.subs.values())
-        clients.append(
-            {
-                "id": f"{worker}-{session.sid}",
-                "sid": session.sid,
-                "worker": worker,
-                "protocol": session.protocol_name,  # rosbridge or foxglove
-                "address": getattr(session, "peer", ""),
-                "connected_at": getattr(session, "connected_at", 0.0),
-                "subscriptions": subs,
-                "publishes": sorted(session.topics.publishers),
-                "serves": sorted(session.services.served),
-                "calls_in_flight": len(session.calls),
-                "parked": session.parked,  # kept for its client to resume (resume.py)
-                "queued": queued + len(session.outbox.control),
-                "dropped": dropped + session.outbox.control_dropped,
-                # frames written and not yet confirmed by the client (resume.py): about what
-                # is in flight on a live link, growing while its link is down
-                "resume_kept": (len(session.outbox.sent.frames)
-                                if session.outbox.sent is not None else 0),
-            }
-        )
+    clients = tuple(session.describe(worker) for session in sorted(every, key=lambda s: s.sid))
     services = [
         {"name": name, "type": served.type_name, "served_by": f"{worker}-{owner.session.sid}"}
         for name, owner in bridge.service_owners.items()
         if (served := owner.served.get(name)) is not None
     ]
-    return {
-        "version": __version__,
-        "worker": worker,
-        "workers": [
+    return BridgeStatus(
+        version=__version__,
+        worker=worker,
+        workers=[
             {
                 "index": worker,
                 "pid": os.getpid(),
@@ -158,20 +124,20 @@ def take(bridge: Bridge, rates: Mapping[str, Mapping[str, float]]) -> dict[str, 
                 "clients": len(clients),
             }
         ],
-        "started": rec.started,
-        "connections": rec.connections,
-        "sessions_resumed": bridge.resumable.resumed,
-        "sessions_expired": bridge.resumable.expired,
-        "sessions_forwarded": 0 if bridge.forwarder is None else bridge.forwarder.forwarded,
-        "refused": dict(rec.refused),
-        "errors": dict(rec.errors),
-        "service_calls": rec.services.data,
-        "action_goals": rec.actions.data,
-        "topics": topics,
-        "clients": clients,
-        "services": services,
-        "actions": _actions(bridge),
-    }
+        started=rec.started,
+        connections=rec.connections,
+        sessions_resumed=bridge.resumable.resumed,
+        sessions_expired=bridge.resumable.expired,
+        sessions_forwarded=0 if bridge.forwarder is None else bridge.forwarder.forwarded,
+        refused=dict(rec.refused),
+        errors=dict(rec.errors),
+        service_calls=rec.services.data,
+        action_goals=rec.actions.data,
+        topics=topics,
+        clients=clients,
+        services=services,
+        actions=_actions(bridge),
+    ).to_json()
 
 
 def _actions(bridge: Bridge) -> list[dict[str, Any]]:
@@ -221,10 +187,7 @@ def merge(snaps: Iterable[Mapping[str, Any]]) -> dict[str, Any]:
         "worker": snaps[0]["worker"],
         "workers": [],
         "started": min(s["started"] for s in snaps),
-        "connections": 0,
-        "sessions_resumed": 0,
-        "sessions_expired": 0,
-        "sessions_forwarded": 0,
+        **dict.fromkeys((c.name for c in COUNTERS), 0),
         "refused": {},
         "errors": {},
         "service_calls": {},
@@ -235,10 +198,8 @@ def merge(snaps: Iterable[Mapping[str, Any]]) -> dict[str, Any]:
         "actions": [],
     }
     for s in snaps:
-        out["connections"] += s["connections"]
-        out["sessions_resumed"] += s.get("sessions_resumed", 0)
-        out["sessions_expired"] += s.get("sessions_expired", 0)
-        out["sessions_forwarded"] += s.get("sessions_forwarded", 0)
+        for c in COUNTERS:
+            out[c.name] += s.get(c.name, 0)
         for key in ("workers", "clients", "services"):
             out[key].extend(s[key])
         _add_actions(out["actions"], s["actions"])

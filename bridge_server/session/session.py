@@ -56,6 +56,7 @@ from roslibpy_lite.protocol.ops import ACKS_HEADER, parse_op
 from ..interfaces import BridgeError
 from .actions import SessionActions
 from .calls import Calls
+from .client_status import ClientStatus, client_status
 from .liveness import watch_link
 from .outbox import DEFAULT_QUEUE_LENGTH, Outbox
 from .resume import ACK_INTERVAL
@@ -255,6 +256,14 @@ class Session:
     def parked(self) -> bool:
         """Whether the session is kept without a connection, waiting for its client."""
         return self.token is not None and self.token in self.bridge.resumable.parked
+
+    def describe(self, worker: int) -> ClientStatus:
+        """This client's typed status (its entry in ``/status.json``) in worker ``worker``."""
+        return client_status(
+            sid=self.sid, worker=worker, protocol=self.protocol_name, address=self.peer,
+            connected_at=self.connected_at, subs=self.topics.subs.values(), outbox=self.outbox,
+            publishes=self.topics.publishers, serves=self.services.served,
+            calls_in_flight=len(self.calls), parked=self.parked)
 
     def _count_received(self) -> None:
         self.received += 1
