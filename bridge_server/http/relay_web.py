@@ -50,9 +50,10 @@ import time
 from collections.abc import Awaitable, Mapping
 from typing import TYPE_CHECKING, Any, Protocol
 
-from prometheus_client.core import CounterMetricFamily, GaugeMetricFamily
+from prometheus_client.core import CounterMetricFamily
 
 from . import metrics
+from .relay_status import RobotStatus, robot_families, robot_status
 from .web import Reply, open_route, static_files, viewer, visible
 from .web_access import WebAccess
 
@@ -147,19 +148,14 @@ class RelayWeb:
                  if self.access.may_reach(principal, name)}
         online = {name for name in await self.relay.on_network()
                   if self.access.may_reach(principal, name)}
+        robots = self._robots(snaps, online)
         if path == "/status.json":
-            data = self._status(snaps, online)
+            data = self._status(robots)
             data["names_refused"] = {name: entry for name, entry
                                      in sorted(self.relay.names_refused.items())
                                      if self.access.may_reach(principal, name)}
             return Reply(200, json.dumps(data, separators=(",", ":")).encode(),
                          "application/json", nocache)
-        present = GaugeMetricFamily(
-            "roslibpy_relay_robot_present",
-            "1 while the robot is on this relay's Zenoh network, 0 once it went away.",
-            labels=["robot"])
-        for name in sorted(online | set(snaps)):
-            present.add_metric([name], 1 if self._present(name, online) else 0)
         refused = CounterMetricFamily(
             "roslibpy_relay_connections_refused",
             "Clients the relay turned away before any robot's bridge saw them, by reason "
@@ -174,24 +170,9 @@ class RelayWeb:
         for name, entry in sorted(self.relay.names_refused.items()):
             if self.access.may_reach(principal, name):
                 names.add_metric([name], entry["count"])
-        from_robot = CounterMetricFamily(
-            "roslibpy_relay_bytes_from_robot",
-            "Payload bytes of the robot's topic messages this relay received from Zenoh.",
-            labels=["robot"])
-        dropped = CounterMetricFamily(
-            "roslibpy_relay_robot_dropped",
-            "What a robot sent that the relay dropped, by kind: messages_dropped (oldest, over "
-            "its queue), messages_lost (past its replay window in a link outage), "
-            "replies_dropped, graph_too_large, graph_superseded, bad_graph, "
-            "bad_messages, type_refused (its type over --max-definition-bytes or "
-            "--max-types-per-robot), bad_replies, handling_failed.", labels=["robot", "kind"])
-        for name in snaps:
-            from_robot.add_metric([name], _bytes_from_robot(self.relay.robots[name]))
-            for kind, n in sorted(_dropped(self.relay.robots[name]).items()):
-                dropped.add_metric([name, kind], n)
         body = metrics.render_labelled(
             ((name, snap, self.relay.robots[name].web.caps) for name, snap in snaps.items()),
-            "robot", [present, from_robot, dropped, refused, names])
+            "robot", [*robot_families(robots), refused, names])
         return Reply(200, body, metrics.CONTENT_TYPE, nocache)
 
     def _present(self, name: str, online: set[str]) -> bool:
@@ -200,24 +181,25 @@ class RelayWeb:
             return bridge.graph.trouble() is None
         return name in online
 
-    def _status(self, snaps: Mapping[str, Mapping[str, Any]], online: set[str]
-                ) -> dict[str, Any]:
-        from roslibpy_lite import __version__
-
+    def _robots(self, snaps: Mapping[str, Mapping[str, Any]], online: set[str]
+                ) -> list[RobotStatus]:
+        """The robots on Zenoh or served, with their bridges' (visible) snapshots."""
         robots = []
         for name in sorted(online | set(snaps)):
-            snap = snaps.get(name)
-            entry: dict[str, Any] = {"name": name, "present": self._present(name, online),
-                                     "served": snap is not None}
-            entry.update(summary(snap) if snap is not None else summary({}))
-            bridge = self.relay.robots.get(name)
-            entry["bytes_from_robot"] = (_bytes_from_robot(bridge) if snap is not None
-                                         and bridge is not None else 0)
-            entry["dropped"] = _dropped(bridge) if snap is not None and bridge is not None else {}
-            robots.append(entry)
+            bridge = self.relay.robots.get(name) if name in snaps else None  # served
+            robots.append(robot_status(
+                name, present=self._present(name, online), snap=snaps.get(name),
+                bytes_from_robot=_bytes_from_robot(bridge) if bridge is not None else 0,
+                dropped=_dropped(bridge) if bridge is not None else {}))
+        return robots
+
+    def _status(self, robots: list[RobotStatus]) -> dict[str, Any]:
+        from roslibpy_lite import __version__
+
         return {"relay": self.relay.relay_id, "version": __version__, "started": self.started,
                 "now": time.time(), "ready": self.relay.trouble() is None,
-                "refused": dict(self.relay.refused), "robots": robots}
+                "refused": dict(self.relay.refused),
+                "robots": [robot.to_json() for robot in robots]}
 
 
 def _redirect(to: str, query: str) -> Reply:
@@ -236,28 +218,3 @@ def _dropped(bridge: Bridge) -> dict[str, int]:
     by kind (:class:`~bridge_server.zenoh.inbox.Faults`; empty for another graph)."""
     faults = getattr(bridge.graph, "faults", None)
     return dict(faults.counts) if faults is not None else {}
-
-
-def summary(snap: Mapping[str, Any]) -> dict[str, Any]:
-    """One robot's line on the relay's page from its bridge's (visible) snapshot: clients,
-    the topics its clients watch, messages and bytes from the robot and each way."""
-    topics: Mapping[str, Mapping[str, Any]] = snap.get("topics", {})
-
-    def total(field: str) -> int:
-        return int(sum(t.get(field, 0) for t in topics.values()))
-
-    clients = [c for c in snap.get("clients", []) if not c.get("parked")]
-    return {
-        "clients": len(clients),
-        "clients_by_protocol": {p: sum(1 for c in clients if c.get("protocol") == p)
-                                for p in sorted({c.get("protocol", "rosbridge")
-                                                 for c in clients})},
-        "topics_watched": sorted(name for name, t in topics.items() if t.get("subscribers")),
-        "messages_from_robot": total("ros_received"),
-        "messages_to_clients": total("sent"),
-        "bytes_to_clients": total("sent_bytes"),
-        "messages_from_clients": total("published"),
-        "bytes_from_clients": total("published_bytes"),
-        "drops": total("drops"),
-    }
-

@@ -1,15 +1,21 @@
 """The bridge's typed status (bridge_server/http/status.py) is the one place a status field is
-declared: /status.json's keys, the workers' merge and /metrics all follow its fields, with no
-bridge running (the live output is checked by test_status_json.py and test_metrics.py)."""
+declared: /status.json's keys, the workers' merge and /metrics all follow its fields, and so
+do a relay's per-robot entries and families (bridge_server/http/relay_status.py), with no
+bridge running (the live output is checked by test_status_json.py, test_metrics.py and
+tests/relay/test_relay_status.py)."""
 
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Iterator
 from typing import Any
 
+from prometheus_client.core import Metric
+from prometheus_client.exposition import generate_latest
 from prometheus_client.parser import text_string_to_metric_families
 
 from bridge_server.http import metrics, snapshot
+from bridge_server.http.relay_status import EXPORTED, RobotStatus, robot_families, robot_status
 from bridge_server.http.status import COUNTERS, BridgeStatus
 from bridge_server.session.client_status import ClientStatus, SubscriptionStatus
 from tests.helpers import ROOT
@@ -75,3 +81,48 @@ def test_a_client_status_is_its_json_entry() -> None:
     text = metrics.render(snap, metrics.new_caps()).decode()
     assert f'{P}client_queued_messages{{client="0-1"}} 1.0' in text
     assert f'{P}resume_kept_frames{{client="0-1"}} 4.0' in text
+
+
+def _robot(name: str, *, served: bool, base: int) -> RobotStatus:
+    """A robot whose exported numbers are values of their own (base + 1, base + 2, ...)."""
+    return robot_status(name, present=True, snap={} if served else None,
+                        bytes_from_robot=base + 1 if served else 0,
+                        dropped={"bad_graph": base + 2, "messages_lost": base + 3}
+                        if served else {})
+
+
+def test_every_exported_robot_field_reaches_the_relays_json_and_metrics() -> None:
+    """Each field of the relay's RobotStatus is a key of its robots' entries, in order, and
+    each one made with robot_metric is the family it names, with its help, one series per
+    robot (and per kind), for every robot or only the served ones as it says."""
+    robots = [_robot("a", served=True, base=10), _robot("b", served=False, base=20)]
+    assert list(robots[0].to_json()) == [f.name for f in dataclasses.fields(RobotStatus)]
+    exported = {family.name: family for family in text_string_to_metric_families(
+        generate_latest(_Families(robots)).decode())}
+    assert len(EXPORTED) >= 3
+    for field, m in EXPORTED:
+        family = exported.get("roslibpy_relay_" + m.name)
+        assert family is not None, f"{field} is not in /metrics"
+        assert (family.type, family.documentation) == (m.kind, m.help), field
+        names = ["robot"] if m.label is None else ["robot", m.label]
+        got = {tuple(s.labels[n] for n in names): s.value for s in family.samples
+               if not s.name.endswith("_created")}
+        want: dict[tuple[str, ...], float] = {}
+        for robot in robots:
+            if m.every_robot or robot.served:
+                value = getattr(robot, field)
+                if m.label is None:
+                    want[(robot.name,)] = int(value)
+                else:
+                    want.update({(robot.name, k): n for k, n in value.items()})
+        assert got == want, field
+
+
+class _Families:
+    """A collector of the relay's per-robot families (what generate_latest asks for)."""
+
+    def __init__(self, robots: list[RobotStatus]) -> None:
+        self.robots = robots
+
+    def collect(self) -> Iterator[Metric]:
+        return robot_families(self.robots)
