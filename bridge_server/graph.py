@@ -123,10 +123,11 @@ class Converter(Protocol):
 
 
 class Message(Protocol):
-    """One message received on a topic, encoded for clients lazily and once per encoding."""
+    """One message received on a topic, encoded for clients lazily and once per encoding
+    (:class:`bridge_server.codec.encodings.EncodedMessage` is what both ROS sides give)."""
 
     framed: dict[tuple[str, str | None], Any] | None
-    """Its websocket frames by (compression, topic spelling), made by the first client's
+    """Its websocket frames by (encoding, topic spelling), made by the first client's
     outbox and shared by the others (:func:`bridge_server.session.outbox.wire`)."""
 
     @property
@@ -141,14 +142,12 @@ class Message(Protocol):
     def stamp_ns(self) -> int:
         """When the ROS side received it (nanoseconds since the epoch)."""
 
+    def encoded(self, encoding: str, name: str | None = None) -> str | bytes:
+        """The whole ``publish`` op in ``encoding`` (``name``: the topic as the client spelt
+        it; see :data:`bridge_server.codec.encodings.ENCODINGS`)."""
+
     def json_text(self, name: str | None = None) -> str:
-        """The whole ``publish`` op as JSON text (``name``: the topic as the client spelt it)."""
-
-    def cbor(self, name: str | None = None) -> bytes:
-        """The whole ``publish`` op CBOR-encoded."""
-
-    def cbor_raw(self, name: str | None = None) -> bytes:
-        """The whole ``publish`` op with the message's CDR bytes (compression ``cbor-raw``)."""
+        """The whole ``publish`` op as JSON text."""
 
 
 Listener = Callable[[Message], None]

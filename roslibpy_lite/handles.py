@@ -421,11 +421,10 @@ class Subscription(_BridgeHandle, Generic[T]):
             raise UsageError(f"subscribe {topic}: throttle_rate and queue_length must be >= 0")
         if fragment_size is not None and fragment_size < 1:
             raise UsageError(f"subscribe {topic}: fragment_size must be >= 1, got {fragment_size}")
-        if compression not in ("none", "cbor", "cbor-raw"):
-            raise UsageError(
-                f"subscribe {topic}: compression must be 'none', 'cbor' or 'cbor-raw', "
-                f"got {compression!r}"
-            )
+        if compression not in ops.ENCODINGS:
+            *most, last = map(repr, ops.ENCODINGS)
+            raise UsageError(f"subscribe {topic}: compression must be {', '.join(most)} or "
+                             f"{last}, got {compression!r}")
         self._backend = backend
         self.topic = topic
         self.type_name = type_name

@@ -13,8 +13,8 @@ from typing import Any, Protocol
 
 import cbor2
 
-__all__ = ["CborConverter", "encode_publish_cbor", "encode_publish_cbor_raw",
-           "encode_publish_json"]
+__all__ = ["CborConverter", "encode_publish_cbor", "encode_publish_cbor_obj",
+           "encode_publish_cbor_raw", "encode_publish_json"]
 
 _encode_str: Callable[[str], str] = json.encoder.encode_basestring
 _cbor_dumps: Callable[[Any], bytes] = cbor2.dumps
@@ -52,7 +52,13 @@ def encode_publish_cbor(topic: str, ros_msg: Any, conv: CborConverter) -> bytes:
     Identical to ``cbor2.dumps({"op": "publish", "topic": topic, "msg": obj})``
     with ``obj = conv.to_cbor_obj(ros_msg)``; the envelope bytes are cached per topic.
     """
-    return _cbor_prefix(topic) + _cbor_dumps(conv.to_cbor_obj(ros_msg))
+    return encode_publish_cbor_obj(topic, conv.to_cbor_obj(ros_msg))
+
+
+def encode_publish_cbor_obj(topic: str, obj: Any) -> bytes:
+    """The CBOR bytes of a whole publish op around a message already made a CBOR-ready
+    object (the envelope bytes are cached per topic)."""
+    return _cbor_prefix(topic) + _cbor_dumps(obj)
 
 
 def encode_publish_cbor_raw(topic: str, serialized: bytes, stamp_ns: int) -> bytes:

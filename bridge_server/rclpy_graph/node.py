@@ -65,6 +65,7 @@ from rclpy.serialization import deserialize_message
 
 from msgs import dynamic
 
+from ..codec.encodings import EncodedMessage
 from . import convert
 from .reader import FailureLog, LoopReader, Reader, ReaderService, open_reader
 from .types import resolve_message, resolve_service
@@ -122,7 +123,7 @@ heartbeat (1 s, answered after 100 ms): 0.5 s did not cover that, and CI lost fi
 that way. Paid once per service and type for the bridge's life (clients are kept)."""
 
 
-class Incoming:
+class Incoming(EncodedMessage):
     """One ROS message received on a topic, encoded lazily and once per encoding.
 
     It arrives serialized (CDR, ``data``): ``cbor-raw`` subscribers get those bytes as they
@@ -131,19 +132,12 @@ class Incoming:
     text is made from the bytes directly where it can be (:mod:`bridge_server.codec.cdr_json`).
     """
 
-    __slots__ = ("_cbor", "_cbor_raw", "_json", "_msg_json", "conv", "data", "framed", "stamp_ns",
-                 "topic")
+    __slots__ = ("_msg_json", "conv")
 
     def __init__(self, topic: str, data: bytes, conv: convert.Converter, stamp_ns: int) -> None:
-        self.topic = topic
-        self.data = data
+        super().__init__(topic, data, stamp_ns)
         self.conv = conv
-        self.stamp_ns = stamp_ns
-        self._json: str | None = None
         self._msg_json: str | None = None
-        self._cbor: bytes | None = None
-        self._cbor_raw: bytes | None = None
-        self.framed: dict[tuple[str, str | None], Any] | None = None  # see graph.Message
 
     @property
     def msg(self) -> Any:
@@ -152,20 +146,8 @@ class Incoming:
         message costs its bytes and its encodings, not a third copy)."""
         return deserialize_message(self.data, self.conv.msg_cls)
 
-    def json_text(self, name: str | None = None) -> str:
-        """The whole ``publish`` op as JSON text (built on first use, then shared).
-
-        ``name`` is the topic as the client spelled it (``chatter`` for ``/chatter``);
-        the message itself is still encoded once.
-        """
-        if name is None or name == self.topic:
-            text = self._json
-            if text is None:
-                text = self._json = convert.encode_publish_json(self.topic, self._msg_text())
-            return text
-        return convert.encode_publish_json(name, self._msg_text())
-
-    def _msg_text(self) -> str:
+    def message_json(self) -> str:
+        """The message as JSON text, straight from its CDR bytes where it can be."""
         msg_json = self._msg_json
         if msg_json is None:
             fast = self.conv.json_from_cdr
@@ -176,24 +158,9 @@ class Incoming:
             self._msg_json = msg_json
         return msg_json
 
-    def cbor(self, name: str | None = None) -> bytes:
-        """The whole ``publish`` op as CBOR (compression ``cbor``)."""
-        if name is not None and name != self.topic:
-            return convert.encode_publish_cbor(name, self.msg, self.conv)
-        data = self._cbor
-        if data is None:
-            data = self._cbor = convert.encode_publish_cbor(self.topic, self.msg, self.conv)
-        return data
-
-    def cbor_raw(self, name: str | None = None) -> bytes:
-        """The ``publish`` op with the CDR bytes as they came (compression ``cbor-raw``)."""
-        if name is not None and name != self.topic:
-            return convert.encode_publish_cbor_raw(name, self.data, self.stamp_ns)
-        data = self._cbor_raw
-        if data is None:
-            data = self._cbor_raw = convert.encode_publish_cbor_raw(
-                self.topic, self.data, self.stamp_ns)
-        return data
+    def cbor_obj(self) -> Any:
+        """The message as a CBOR-ready object."""
+        return self.conv.to_cbor_obj(self.msg)
 
 
 def _qos(reliable: bool, transient_local: bool, depth: int) -> Any:

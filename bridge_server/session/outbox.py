@@ -274,19 +274,15 @@ def wire(sub: Subscription, inc: Incoming) -> Wire | None:
         made: Wire | None = cache.get(key)
         if made is not None:
             return made
-    comp = sub.compression
-    if comp == "cbor":
-        data = inc.cbor(sub.wire)
-        first = 0x82  # FIN, binary
-    elif comp == "cbor-raw":
-        data = inc.cbor_raw(sub.wire)
-        first = 0x82
-    else:
-        text = inc.json_text(sub.wire)
-        if len(text) > JOINED_BYTES:  # not kept twice (text and bytes): encoded per client
+    encoded = inc.encoded(sub.compression, sub.wire)
+    if isinstance(encoded, str):
+        if len(encoded) > JOINED_BYTES:  # not kept twice (text and bytes): encoded per client
             return None
-        data = text.encode()
+        data = encoded.encode()
         first = 0x81  # FIN, text
+    else:
+        data = encoded
+        first = 0x82  # FIN, binary
     head = _header(first, len(data))
     made = cache[key] = Wire((head + data,) if len(data) <= JOINED_BYTES else (head, data))
     return made
@@ -679,16 +675,11 @@ class Outbox:
     def _frames(self, sub: Subscription, inc: Incoming) -> list[Frame]:
         if sub.encode is not None:  # another protocol's framing (bridge_server.foxglove)
             return [sub.encode(inc)]
-        comp = sub.compression
-        if comp == "cbor":
-            return [inc.cbor(sub.wire)]
-        if comp == "cbor-raw":
-            return [inc.cbor_raw(sub.wire)]
-        text = inc.json_text(sub.wire)
+        encoded = inc.encoded(sub.compression, sub.wire)
         size = sub.fragment_size
-        if size is not None and len(text) > size:
-            return list(split_fragments(text, size, f"{sub.topic}:{next(self.frag_ids)}"))
-        return [text]
+        if size is not None and isinstance(encoded, str) and len(encoded) > size:
+            return list(split_fragments(encoded, size, f"{sub.topic}:{next(self.frag_ids)}"))
+        return [encoded]
 
     def send_split(
         self, text: str, size: int | None, frag_id: ops.Id | None, prefix: str

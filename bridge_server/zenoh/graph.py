@@ -58,7 +58,7 @@ from msgs.runtime import UnknownTypeError as WireUnknownType
 from msgs.runtime import ValidationError
 
 from ..codec.cdr_json import JsonFromCdr, wire_encoder
-from ..codec.publish import encode_publish_cbor, encode_publish_cbor_raw, encode_publish_json
+from ..codec.encodings import EncodedMessage
 from ..graph import GoalListener, Listener, RosCall, ServedGoal, Status
 from ..interfaces import (
     BridgeError,
@@ -195,33 +195,35 @@ class RelayConverter:
         return text
 
 
-class ZenohMessage:
-    """One message the robot put, encoded for clients lazily and once per encoding."""
+class ZenohMessage(EncodedMessage):
+    """One message the robot put, encoded for clients lazily and once per encoding; bytes
+    that do not decode as the type the robot named are the robot's fault, counted once."""
 
-    __slots__ = ("_bad", "_cbor", "_cbor_raw", "_json", "_msg_json", "conv", "data", "faults",
-                 "framed", "stamp_ns", "topic")
+    __slots__ = ("_bad", "_msg_json", "conv", "faults")
 
     def __init__(self, topic: str, data: bytes, conv: RelayConverter, stamp_ns: int,
                  faults: Faults) -> None:
-        self.topic = topic
-        self.data = data
+        super().__init__(topic, data, stamp_ns)
         self.conv = conv
-        self.stamp_ns = stamp_ns
         self.faults = faults
         self._bad = False
         self._msg_json: str | None = None
-        self._json: str | None = None
-        self._cbor: bytes | None = None
-        self._cbor_raw: bytes | None = None
-        self.framed: dict[tuple[str, str | None], Any] | None = None  # see graph.Message
 
-    def _text(self) -> str:
+    def message_json(self) -> str:
+        """The message as JSON text."""
         if self._msg_json is None:
             try:
                 self._msg_json = self.conv.text_of(self.data)
             except Exception as exc:
                 raise self._undecodable(exc) from None
         return self._msg_json
+
+    def cbor_obj(self) -> Any:
+        """The message as a CBOR-ready object."""
+        try:
+            return self.conv.decode_cbor(self.data)
+        except Exception as exc:
+            raise self._undecodable(exc) from None
 
     def _undecodable(self, exc: Exception) -> ReportedError:
         """The robot's bytes do not decode as the type it named: counted once per message
@@ -232,37 +234,6 @@ class ZenohMessage:
                             f"{self.conv.type_name} dropped ({type(exc).__name__}: "
                             f"{str(exc)[:200]})")
         return ReportedError(f"a message of {self.topic} does not decode")
-
-    def json_text(self, name: str | None = None) -> str:
-        """The whole ``publish`` op as JSON text."""
-        if name is not None and name != self.topic:
-            return encode_publish_json(name, self._text())
-        if self._json is None:
-            self._json = encode_publish_json(self.topic, self._text())
-        return self._json
-
-    def cbor(self, name: str | None = None) -> bytes:
-        """The whole ``publish`` op CBOR-encoded."""
-        if name is not None and name != self.topic:
-            return encode_publish_cbor(name, self.data, self)
-        if self._cbor is None:
-            self._cbor = encode_publish_cbor(self.topic, self.data, self)
-        return self._cbor
-
-    def to_cbor_obj(self, data: bytes) -> Any:
-        """The CBOR object of the message's bytes (for :func:`encode_publish_cbor`)."""
-        try:
-            return self.conv.decode_cbor(data)
-        except Exception as exc:
-            raise self._undecodable(exc) from None
-
-    def cbor_raw(self, name: str | None = None) -> bytes:
-        """The whole ``publish`` op with the CDR bytes as they came."""
-        if name is not None and name != self.topic:
-            return encode_publish_cbor_raw(name, self.data, self.stamp_ns)
-        if self._cbor_raw is None:
-            self._cbor_raw = encode_publish_cbor_raw(self.topic, self.data, self.stamp_ns)
-        return self._cbor_raw
 
 
 class ZenohFeed:

@@ -33,6 +33,8 @@ from .goal_status import GoalStatus
 __all__ = [
     "ACKS_HEADER",
     "AUTH_HEADER",
+    "COMPRESSIONS",
+    "ENCODINGS",
     "RECEIVED_HEADER",
     "RELAY_HEADER",
     "SESSION_HEADER",
@@ -124,8 +126,12 @@ def parse_received(value: str | None, limit: int | None) -> int:
                                   f"sent ({limit} frames)")
     return count
 
-COMPRESSIONS = ("none", "cbor", "cbor-raw", "png")
-"""Compression names a subscribe may ask for (png is legacy and refused by our bridge)."""
+ENCODINGS = ("none", "cbor", "cbor-raw")
+"""The encodings a subscribe's ``compression`` may ask our bridge for: JSON text, CBOR, and
+CBOR around the message's CDR bytes (the bridge's codecs: ``bridge_server.codec.encodings``)."""
+COMPRESSIONS = (*ENCODINGS, "png")
+"""Every ``compression`` a subscribe may carry (png is legacy: parsed, and answered by our
+bridge with plain JSON and a warning)."""
 
 
 # --- the ops' fields and what they may hold -------------------------------------------

@@ -22,14 +22,15 @@ from tests.helpers import async_wait_until
 
 
 class _Text:
-    """Stands for an Incoming: the outbox only asks it for its JSON text (and keeps its frame
-    on it)."""
+    """Stands for an Incoming: the outbox only asks it for its JSON text (``encoded("none")``,
+    and keeps its frame on it)."""
 
     def __init__(self, text: str) -> None:
         self.text = text
         self.framed: dict[tuple[str, str | None], object] | None = None
 
-    def json_text(self, _name: str | None = None) -> str:
+    def encoded(self, encoding: str, _name: str | None = None) -> str | bytes:
+        assert encoding == "none", encoding
         return self.text
 
 
@@ -154,8 +155,8 @@ class _Raw(_Text):
         super().__init__(text)
         self.raw = raw
 
-    def cbor_raw(self, _name: str | None = None) -> bytes:
-        return self.raw
+    def encoded(self, encoding: str, _name: str | None = None) -> str | bytes:
+        return self.raw if encoding == "cbor-raw" else super().encoded(encoding)
 
 
 def _record_writes(ws: ServerConnection) -> list[tuple[bytes, ...]]:
