@@ -18,5 +18,8 @@ trap 'rm -rf "$SITE"' EXIT
 NO_MKDOCS_2_WARNING=1 mkdocs build --strict --quiet --site-dir "$SITE"
 # The docs tests read this site instead of building their own (the same build, half a minute).
 export ROSLIBPY_LITE_BUILT_SITE="$SITE"
-echo "[test] pytest (ROS_DOMAIN_ID=$ROS_DOMAIN_ID)"
-python -m pytest "$@"
+# Two workers (pytest-xdist), each with its own DDS domain (tests/conftest.py), a file's tests
+# on one worker: most of a test's time is waiting on another process, so two share the cores.
+WORKERS="${ROSLIBPY_LITE_TEST_WORKERS:-2}"
+echo "[test] pytest (ROS_DOMAIN_ID=$ROS_DOMAIN_ID, $WORKERS workers)"
+python -m pytest -n "$WORKERS" --dist loadfile "$@"

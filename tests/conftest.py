@@ -30,6 +30,11 @@ import pytest
 
 os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
 os.environ.setdefault("ROS_DOMAIN_ID", str(os.getpid() % 100 + 1))
+# Under pytest-xdist (scripts/test.sh runs two workers), each worker is a DDS world of its own:
+# the run's domain for worker gw0, shifted by 101 per worker after it (Fast DDS takes 0-232).
+os.environ["ROS_DOMAIN_ID"] = str(
+    (int(os.environ["ROS_DOMAIN_ID"])
+     + 101 * int(os.environ.get("PYTEST_XDIST_WORKER", "gw0").removeprefix("gw") or 0)) % 233)
 # a 5 s participant lease: bridges the tests kill are forgotten in seconds (see the file)
 os.environ.setdefault(
     "FASTRTPS_DEFAULT_PROFILES_FILE", os.path.join(os.path.dirname(__file__), "dds_profile.xml")
