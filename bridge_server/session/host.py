@@ -21,10 +21,10 @@ if TYPE_CHECKING:
     from ..security import Gate, SecurityConfig
     from .actions import ActionClients, SessionActions
     from .calls import Calls
+    from .config import SessionConfig
     from .outbox import Outbox
     from .ownership import Ownership
     from .services import SessionServices
-    from .session import SessionConfig
 
 __all__ = ["Host", "Shared"]
 

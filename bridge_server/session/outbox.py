@@ -51,11 +51,10 @@ from __future__ import annotations
 import asyncio
 import itertools
 import logging
-import struct
 import time
 import weakref
 from collections import deque
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from typing import TYPE_CHECKING
 
 from websockets.exceptions import ConnectionClosed
@@ -65,6 +64,7 @@ from roslibpy_lite.protocol import ops
 from roslibpy_lite.protocol.frames import split_fragments
 
 from ..interfaces import ReportedError
+from .frames import JOINED_BYTES, Frame, Wire, frame_bytes, frame_parts, header, joined
 
 if TYPE_CHECKING:
     from websockets.asyncio.server import ServerConnection
@@ -99,10 +99,6 @@ BATCH_FRAMES = 128
 BATCH_BYTES = 256 * 1024
 """Most bytes the writer gathers for one socket write (a large frame goes alone)."""
 
-JOINED_BYTES = 64 * 1024
-"""Largest payload whose shared frame (:class:`Wire`) is one ``bytes`` of header and payload;
-a bigger one is its header and the encoding's own bytes (written one after the other: a
-copy of a camera frame per client costs more than a second piece in one write)."""
 
 
 class Subscription:
@@ -181,79 +177,6 @@ class Subscription:
             self.timer = None
 
 
-class Wire:
-    """A whole websocket frame as it goes on the socket: its header and payload joined, or
-    for a big frame the header and then the payload, the encoding's own bytes (not copied).
-    Shared by every client that gets the message in one encoding and spelling (:func:`wire`).
-    """
-
-    __slots__ = ("parts", "size")
-
-    def __init__(self, parts: tuple[bytes, ...]) -> None:
-        self.parts = parts
-        self.size = sum(map(len, parts))
-
-
-Frame = str | bytes | tuple[bytes, bytes] | Wire
-"""One websocket frame to write: text (``str``), binary (``bytes``), binary in two parts
-(a header and a payload shared with other clients, joined only into the socket write), or
-one framed already (:class:`Wire`)."""
-
-
-def frame_bytes(frames: Sequence[Frame]) -> bytes:
-    """Unmasked, unfragmented websocket frames (RFC 6455 5.2, as a server sends them): text
-    for ``str``, binary for ``bytes`` (or a pair of ``bytes``: one frame of both), one after
-    the other.
-
-    What websockets' ``send_text``/``send_binary`` would write for the same frames on a
-    connection without extensions (``tests/bridge/test_outbox.py`` compares them), in a
-    few operations instead of a frame object and a buffer each: on the way from ROS to a
-    client, framing was a sixth of the bridge's time for a small message.
-    """
-    return b"".join(frame_parts(frames))
-
-
-def frame_parts(frames: Sequence[Frame]) -> list[bytes]:
-    """:func:`frame_bytes`, not joined: the pieces to write one after the other."""
-    parts: list[bytes] = []
-    add = parts.append
-    for frame in frames:
-        if isinstance(frame, Wire):
-            parts.extend(frame.parts)
-        elif isinstance(frame, str):
-            data = frame.encode()
-            add(_header(0x81, len(data)))  # FIN, text
-            add(data)
-        elif isinstance(frame, tuple):  # a binary frame in two parts, not joined before
-            add(_header(0x82, len(frame[0]) + len(frame[1])))
-            add(frame[0])
-            add(frame[1])
-        else:
-            add(_header(0x82, len(frame)))  # FIN, binary
-            add(frame)
-    return parts
-
-
-def _header(first: int, size: int) -> bytes:
-    """A server frame's header: its first byte (FIN and opcode), the payload's length."""
-    if size < 126:
-        return bytes((first, size))
-    if size < 0x10000:
-        return _HEAD16(first, 126, size)
-    return _HEAD64(first, 127, size)
-
-
-_HEAD16 = struct.Struct("!BBH").pack
-_HEAD64 = struct.Struct("!BBQ").pack
-
-
-def _joined(frame: Frame) -> str | bytes:
-    """The frame as one ``str`` or ``bytes`` (a two-part frame joined; never a :class:`Wire`,
-    which only a connection that frames its own writes gets)."""
-    assert not isinstance(frame, Wire), "a framed frame where a payload was expected"
-    return b"".join(frame) if isinstance(frame, tuple) else frame
-
-
 def _size(frame: Frame) -> int:
     if isinstance(frame, Wire):
         return frame.size
@@ -283,7 +206,7 @@ def wire(sub: Subscription, inc: Incoming) -> Wire | None:
     else:
         data = encoded
         first = 0x82  # FIN, binary
-    head = _header(first, len(data))
+    head = header(first, len(data))
     made = cache[key] = Wire((head + data,) if len(data) <= JOINED_BYTES else (head, data))
     return made
 
@@ -583,7 +506,7 @@ class Outbox:
                         self._write(ws, frames)
                 else:  # pragma: no cover - websockets without send_context
                     for frame in frames:
-                        await ws.send(_joined(frame))
+                        await ws.send(joined(frame))
         except ConnectionClosed:
             pass
         except Exception:
@@ -597,7 +520,7 @@ class Outbox:
         frames = self._collect(sent is None and self.framing and _raw_ok(self.ws.protocol))
         if sent is not None:  # kept until the client confirms them
             for frame in frames:
-                sent.add(_joined(frame))
+                sent.add(joined(frame))
             if self.ack is not None:
                 frames.insert(0, self.ack)
                 self.ack = None
@@ -657,7 +580,7 @@ class Outbox:
                 ws.transport.writelines(parts)
             return
         for frame in frames:
-            payload = _joined(frame)
+            payload = joined(frame)
             if isinstance(payload, str):
                 protocol.send_text(payload.encode())
             else:

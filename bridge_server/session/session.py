@@ -42,7 +42,6 @@ import contextlib
 import logging
 import time
 from collections.abc import Callable, Coroutine
-from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, ClassVar, Protocol
 
 from websockets.exceptions import ConnectionClosed
@@ -57,6 +56,7 @@ from ..interfaces import BridgeError
 from .actions import SessionActions
 from .calls import Calls
 from .client_status import ClientStatus, client_status
+from .config import SessionConfig
 from .liveness import watch_link
 from .outbox import DEFAULT_QUEUE_LENGTH, Outbox
 from .resume import ACK_INTERVAL
@@ -76,20 +76,6 @@ __all__ = ["DEFAULT_QUEUE_LENGTH", "Capability", "Session", "SessionConfig"]
 log = logging.getLogger("bridge_server.session")
 
 _LEVELS = {"none": 0, "error": 1, "warning": 2, "info": 3}
-
-@dataclass
-class SessionConfig:
-    """Per-session limits and defaults (set from the command line)."""
-
-    default_queue_length: int = DEFAULT_QUEUE_LENGTH
-    control_limit: int = 10_000
-    call_timeout: float = 5.0
-    served_call_timeout: float = 10.0
-    drop_report_interval: float = 5.0
-    discovery_wait: float = 2.0
-    max_calls_in_flight: int = 1024
-    goal_timeout: float = 0.0  # action goals: seconds before one is canceled/aborted, 0 = never
-
 
 _ENDING: set[asyncio.Task[None]] = set()
 """Clean-ups of kept sessions that were not resumed in time."""
