@@ -21,6 +21,7 @@ import itertools
 import logging
 import os
 import time
+import weakref
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, Protocol
 
@@ -36,9 +37,10 @@ from .graph import Graph
 from .http.metrics import BridgeMetrics
 from .http.web import Web
 from .http.web_access import WebAccess
-from .security import Security, SecurityConfig
+from .security import Security, SecurityConfig, WebSocketLink
 from .security.options import MAX_MESSAGE_SIZE
 from .session.actions import ActionClients, SessionActions
+from .session.link import LinkConfig
 from .session.ownership import Ownership
 from .session.resume import ResumeConfig, SentFrames, SessionStore
 from .session.session import Session, SessionConfig, wait_ended
@@ -49,6 +51,7 @@ if TYPE_CHECKING:
 
     from websockets.http11 import Request, Response
 
+    from .session.host import Host
     from .session.services import SessionServices
 
 __all__ = ["Bridge", "BridgeConfig", "ServedGraph"]
@@ -127,13 +130,19 @@ class Bridge:
         in a relay); the server itself imports no ROS."""
         self.config = config
         self.session_config = config.session
+        self.link_config = LinkConfig(config.max_message_size, config.keepalive_interval,
+                                      config.keepalive_timeout)
         self.publisher_grace = config.publisher_grace
         self.sessions: set[Session] = set()
+        # the session each handshake was given (a resume, or a new one): planned before the
+        # handshake's answer (which names it), taken when the connection is served
+        self.session_plans: weakref.WeakKeyDictionary[
+            ServerConnection, tuple[str, Session | None]] = weakref.WeakKeyDictionary()
         # which client serves each client-served name (ownership.py)
         self.service_owners: Ownership[SessionServices] = Ownership("service")
         self.action_owners: Ownership[SessionActions] = Ownership("action")
         self.action_clients = ActionClients()
-        self.resumable = SessionStore(  # sessions kept for a resume (resume.py)
+        self.resumable: SessionStore[Session] = SessionStore(  # kept for a resume (resume.py)
             config.resume, config.worker_index if config.worker_dir is not None else None)
         self.closing = False
         self._ids = itertools.count(1)
@@ -266,10 +275,15 @@ class Bridge:
                 return connection.respond(400, f"{exc}\n")
             session = await self.resumable.claim(asked, principal)
         token = asked if session is not None else self.resumable.new_token()
-        connection.session_plan = (token, session)  # type: ignore[attr-defined]
+        self.session_plans[connection] = (token, session)
         if session is not None:
             session.resume_from = received
         return None
+
+    def session_ended(self, session: Host) -> None:
+        """A session kept for a resume ended without one."""
+        if isinstance(session, Session):
+            self.sessions.discard(session)
 
     def graph_changed(self) -> None:
         """Something needs the periodic graph check (a new subscription): run it soon."""
@@ -291,23 +305,25 @@ class Bridge:
             self.ros.refresh()
 
     async def _handle(self, ws: ServerConnection) -> None:
-        peer = _peer(ws)
+        if not isinstance(ws, WebSocketLink):  # every listener's create_connection makes one
+            raise TypeError(f"a {type(ws).__name__} is no session link")
+        link = ws
+        peer = link.address
         if ws.subprotocol == SUBPROTOCOL:
-            await self._handle_foxglove(ws, peer)
+            await self._handle_foxglove(link, peer)
             return
-        plan: tuple[str, Session | None] | None = getattr(ws, "session_plan", None)
+        plan = self.session_plans.pop(ws, None)
         token, kept = plan if plan is not None else ("", None)
         if kept is not None:  # a resumed session: the same client on a new connection
             log.info("client %d reconnected from %s and resumed its session", kept.sid, peer)
-            kept.peer = peer
             self.resumable.register(token, kept)
             session = kept
-            running = session.resume(ws, session.resume_from)
+            running = session.resume(link, session.resume_from)
         else:
             sid = next(self._ids)
             log.info("client %d connected from %s", sid, peer)
-            session = Session(self, ws, sid)
-            session.peer, session.connected_at = peer, time.time()
+            session = Session(self, link, sid)
+            session.connected_at = time.time()
             self.sessions.add(session)
             if plan is not None:
                 r = self.resumable.config
@@ -323,12 +339,11 @@ class Bridge:
                 self.sessions.discard(session)
                 log.info("client %d (%s) disconnected", session.sid, peer)
 
-    async def _handle_foxglove(self, ws: ServerConnection, peer: str) -> None:
+    async def _handle_foxglove(self, link: WebSocketLink, peer: str) -> None:
         """A Foxglove client: its own session type, the same graph, limits and gate."""
         sid = next(self._ids)
         log.info("client %d connected from %s (foxglove.websocket.v1)", sid, peer)
-        session = FoxgloveSession(self, self.foxglove, ws, sid)
-        session.peer = peer
+        session = FoxgloveSession(self, self.foxglove, link, sid)
         self.metrics.connections += 1
         try:
             await session.run()
@@ -364,8 +379,9 @@ class Bridge:
                 await asyncio.wait_for(waiter, 0.5)
             except TimeoutError:
                 # Peers that do not answer the closing handshake are cut off.
-                for ws in [s.ws for s in self.sessions] + [s.ws for s in self.foxglove.sessions]:
-                    ws.transport.abort()
+                for link in [s.link for s in self.sessions] + [
+                        s.link for s in self.foxglove.sessions]:
+                    link.abort()
                 with contextlib.suppress(TimeoutError):
                     await asyncio.wait_for(
                         asyncio.gather(*(srv.wait_closed() for srv in servers)), 0.2)

@@ -33,13 +33,11 @@ from collections.abc import Callable, Coroutine
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
-from websockets.exceptions import ConnectionClosed
-
 from msgs import cdr
 from msgs.runtime import ValidationError
 
 from ..interfaces import BridgeError, ConversionError, canonical_name
-from ..security import POLICY_VIOLATION
+from ..security.gate import POLICY_VIOLATION
 from ..security.names import InvalidNameError, check_name, full_name
 from ..security.permissions import LISTING, PARAMETER_LISTING
 from ..session.calls import Calls
@@ -51,12 +49,11 @@ from . import wire
 from .hub import CLOCK, GraphState, message_class
 
 if TYPE_CHECKING:
-    from websockets.asyncio.server import ServerConnection
-
     from ..graph import Message as RosMessage
     from ..graph import Publisher
-    from ..security import SecurityConfig
-    from ..server import Bridge
+    from ..security.options import SecurityConfig
+    from ..session.host import Shared
+    from ..session.link import ClientLink
     from .hub import Hub, ServiceEntry
 
 __all__ = ["ENCODINGS", "OVERSIZE_GRACE", "QUEUE_BYTES", "FoxgloveSession"]
@@ -103,19 +100,21 @@ class FoxgloveSession:
 
     protocol_name = "foxglove"
 
-    def __init__(self, bridge: Bridge, hub: Hub, ws: ServerConnection, sid: int) -> None:
-        self.bridge = bridge
+    def __init__(self, shared: Shared, hub: Hub, link: ClientLink, sid: int) -> None:
+        """Client ``sid``'s session over ``link``, sharing ``shared`` with the other sessions
+        of its server and ``hub`` with the other Foxglove ones."""
+        self.shared = shared
         self.hub = hub
-        self.graph = bridge.graph
-        self.ws = ws
+        self.graph = shared.graph
+        self.link = link
         self.sid = sid
         self.loop = asyncio.get_running_loop()
-        self.config = bridge.session_config
-        self.peer = ""
+        self.config = shared.session_config
+        self.peer = link.address
         self.connected_at = time.time()
         self.calls = Calls(self.loop)
         self.outbox = Outbox(
-            ws, sid, self.config.control_limit, bridge.security.config.max_queued_messages,
+            link, sid, self.config.control_limit, shared.security.config.max_queued_messages,
             self.config.drop_report_interval, lambda text: self.status("warning", text),
         )
         self.topics = _Topics()
@@ -128,12 +127,12 @@ class FoxgloveSession:
         self.shown_channels: set[int] = set()  # the ids of the channels it was told of
         self.shown_services: set[int] = set()
         self.uses_time = False
-        self.gate = bridge.security.gate(self)
+        self.gate = shared.security.gate(self)
 
     @property
     def limits(self) -> SecurityConfig:
         """The bridge's per-connection limits (as configured now)."""
-        return self.bridge.security.config
+        return self.shared.security.config
 
     @property
     def wants_graph(self) -> bool:
@@ -151,26 +150,25 @@ class FoxgloveSession:
         """Serve the client until it leaves, then release what it owned."""
         if not self.gate.authenticated:  # a Foxglove client has no auth op: token or nothing
             self.gate.end()
-            await self.ws.close(POLICY_VIOLATION, "authentication required: give the token "
+            await self.link.close(POLICY_VIOLATION, "authentication required: give the token "
                                 "in the URL (?token=...) or an Authorization header")
             return
-        limit_frames = getattr(self.ws, "limit_frames", None)
-        if limit_frames is not None:  # frames a little over the limit get a status, not a close
-            limit_frames(self.bridge.config.max_message_size + OVERSIZE_GRACE)
+        link = self.link
+        # frames a little over the limit get a status, not a close
+        link.limit_frames(self.shared.link_config.max_message_size + OVERSIZE_GRACE)
         writer = asyncio.create_task(self.outbox.writer(), name=f"foxglove-{self.sid}-writer")
-        cfg = self.bridge.config
-        watcher = watch_link(self.ws, self.sid, cfg.keepalive_interval, cfg.keepalive_timeout)
+        watcher = watch_link(link, self.sid, self.shared.link_config)
         try:
             self._hello()
-            async for frame in self.ws:
+            async for frame in link:
                 self.handle_frame(frame)
-        except ConnectionClosed:
+        except link.closed_errors:
             pass
         finally:
             if watcher is not None:
                 watcher.cancel()
             writer.cancel()
-            with contextlib.suppress(asyncio.CancelledError, ConnectionClosed):
+            with contextlib.suppress(asyncio.CancelledError, *link.closed_errors):
                 await writer
             self.outbox.close()
             await self.cleanup()
@@ -191,7 +189,7 @@ class FoxgloveSession:
             "serverInfo", name=f"roslibpy-lite bridge ({self.graph.name})",
             capabilities=capabilities, supportedEncodings=list(ENCODINGS),
             metadata={"ROS_DISTRO": "jazzy", "protocols": "rosbridge v2, foxglove.websocket.v1"},
-            sessionId=f"{self.bridge.metrics.started:.0f}",
+            sessionId=f"{self.shared.metrics.started:.0f}",
         ))
         self.show_lists()
 
@@ -202,7 +200,7 @@ class FoxgloveSession:
         for sub, _ in list(self.subscriptions.values()):
             self._drop(sub)
         self.subscriptions.clear()
-        grace = self.bridge.publisher_grace
+        grace = self.shared.publisher_grace
         for pub in self.topics.publishers.values():
             if grace > 0:
                 self.loop.call_later(grace, self.graph.release_publisher, pub)
@@ -238,7 +236,7 @@ class FoxgloveSession:
     def error(self, msg: str, kind: str = "request") -> None:
         """Tell the client of a refused or failed request; count it by kind."""
         log.info("foxglove client %d: %s", self.sid, msg)
-        self.bridge.metrics.error(kind)
+        self.shared.metrics.error(kind)
         self.status("error", msg)
 
     def refuse(self, op: Any, why: str) -> None:
@@ -308,7 +306,7 @@ class FoxgloveSession:
         """Parse one frame and carry out its op; whatever is wrong goes back as ``status``."""
         if not self.gate.admit_frame(len(frame)):
             return
-        cap = self.bridge.config.max_message_size
+        cap = self.shared.link_config.max_message_size
         if len(frame) > cap:
             self.error(f"a frame of {len(frame)} bytes is over this bridge's limit of {cap} "
                        "bytes (--max-message-size); it was dropped", "protocol")
@@ -376,7 +374,7 @@ class FoxgloveSession:
             return
         self.subscriptions[sub_id] = (sub, channel)
         self.topics.subs[topic] = sub
-        self.bridge.graph_changed()
+        self.shared.graph_changed()
         latched = sub.shared.latched
         if latched is not None:
             self.outbox.push(sub, latched)
@@ -392,7 +390,7 @@ class FoxgloveSession:
     def _drop(self, sub: Subscription) -> None:
         self.topics.subs.pop(sub.topic, None)
         sub.close()
-        metrics = self.bridge.metrics
+        metrics = self.shared.metrics
         metrics.retire_subscription(sub.topic, sub.sent, sub.sent_bytes, sub.dropped_total)
         if sub.shared is not None:
             shared, sub.shared = sub.shared, None
@@ -470,7 +468,7 @@ class FoxgloveSession:
                        f"not published: {exc}")
             return
         pub.publish(msg)
-        self.bridge.metrics.published(ch.topic, len(op.payload) + 5)
+        self.shared.metrics.published(ch.topic, len(op.payload) + 5)
 
     # -- services ------------------------------------------------------------------------------
 
@@ -515,7 +513,7 @@ class FoxgloveSession:
 
     def _call_failed(self, op: wire.ServiceCall, why: str) -> None:
         log.info("foxglove client %d: service call %d failed: %s", self.sid, op.call_id, why)
-        self.bridge.metrics.error("request")
+        self.shared.metrics.error("request")
         self.send_text(wire.json_frame("serviceCallFailure", serviceId=op.service_id,
                                        callId=op.call_id, message=why))
 

@@ -224,7 +224,7 @@ class Web:
         """websockets' ``process_response``: name the worker on every response."""
         if "X-Bridge-Worker" not in response.headers:
             response.headers["X-Bridge-Worker"] = str(self.bridge.config.worker_index)
-        plan = getattr(connection, "session_plan", None)
+        plan = self.bridge.session_plans.get(connection)
         if plan is not None and response.status_code == 101:  # resume.py
             token, kept = plan
             response.headers[SESSION_HEADER] = token

@@ -50,7 +50,7 @@ from .options import (
     user_name,
 )
 from .redaction import RedactTokens, install_log_redaction, redact
-from .websockets_internals import BridgeConnection, check_websockets_internals
+from .websockets_internals import BridgeConnection, WebSocketLink, check_websockets_internals
 
 __all__ = [
     "POLICY_VIOLATION",
@@ -60,6 +60,7 @@ __all__ = [
     "RedactTokens",
     "Security",
     "SecurityConfig",
+    "WebSocketLink",
     "add_arguments",
     "check_readable",
     "check_websockets_internals",

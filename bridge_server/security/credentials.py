@@ -3,15 +3,23 @@
 from __future__ import annotations
 
 import ipaddress
+from typing import Any, Protocol
 from urllib.parse import parse_qs, urlsplit
 
-from websockets.asyncio.server import ServerConnection
 from websockets.http11 import Request
 
 __all__ = ["client_address", "is_loopback", "token_of"]
 
 
-def client_address(connection: ServerConnection) -> str:
+class Addressed(Protocol):
+    """A connection (or a session's link), as far as its address goes."""
+
+    @property
+    def remote_address(self) -> Any:
+        """The peer's address as the socket gives it."""
+
+
+def client_address(connection: Addressed) -> str:
     """The IP address a connection comes from (the key of per-address limits)."""
     addr = connection.remote_address
     if isinstance(addr, tuple) and addr:

@@ -13,7 +13,7 @@ import asyncio
 import logging
 import time
 from collections.abc import Mapping
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Protocol
 
 from roslibpy_lite.protocol import ops
 
@@ -30,14 +30,14 @@ from .permissions import (
     rosapi_requirement,
     sees,
 )
-from .websockets_internals import BridgeConnection
 
 if TYPE_CHECKING:
-    from ..foxglove.session import FoxgloveSession
-    from ..session.session import Session
-    from .handshake import Security
+    from ..session.link import ClientLink
+    from .auth import AuthConfig
+    from .options import SecurityConfig
 
-__all__ = ["POLICY_VIOLATION", "PRE_AUTH_FRAME_LIMIT", "Gate"]
+__all__ = ["POLICY_VIOLATION", "PRE_AUTH_FRAME_LIMIT", "Gate", "GateFactory", "Guarded",
+           "Verifier"]
 
 log = logging.getLogger("bridge_server.security")
 
@@ -48,10 +48,55 @@ POLICY_VIOLATION = 1008
 """Close code for a failed ``auth`` op, ops before authentication and op floods."""
 
 
+class Guarded(Protocol):
+    """The session a gate guards (a rosbridge or a Foxglove one)."""
+
+    sid: int
+    loop: asyncio.AbstractEventLoop
+    link: ClientLink
+
+    @property
+    def closed(self) -> bool:
+        """Whether the connection has ended."""
+
+    def status(self, level: str, msg: str, id: ops.Id | None = None) -> None:
+        """Tell the client (a ``status`` op, or the protocol's own)."""
+
+    def refuse(self, op: Any, why: str) -> None:
+        """Refuse ``op``: an error, and the failure answer a stock client waits for."""
+
+    def recheck_grants(self) -> int:
+        """The role changed: end what it no longer allows; how many ended."""
+        ...
+
+
+class Verifier(Protocol):
+    """What a gate needs of the bridge's security (:class:`~.handshake.Security`)."""
+
+    auth: AuthConfig | None
+    config: SecurityConfig
+
+    def verify_auth_op(self, address: str, mac: str, who: str) -> Principal | str:
+        """The principal of an ``auth`` op's token, or why it is refused."""
+        ...
+
+
+class GateFactory(Protocol):
+    """Where a session gets its gate (:class:`~.handshake.Security`)."""
+
+    @property
+    def config(self) -> SecurityConfig:
+        """The per-connection limits as configured now."""
+
+    def gate(self, session: Guarded) -> Gate:
+        """The gate for a new session."""
+        ...
+
+
 class Gate:
     """What one session may do: consulted for every frame and every op."""
 
-    def __init__(self, security: Security, session: Session | FoxgloveSession,
+    def __init__(self, security: Verifier, session: Guarded,
                  principal: Principal | None) -> None:
         self.security = security
         self.session = session
@@ -123,7 +168,8 @@ class Gate:
         if self._timer is not None:
             self._timer.cancel()
         log.warning("session %d: closing: %s", self.session.sid, reason)
-        task = self.session.loop.create_task(self.session.ws.close(POLICY_VIOLATION, reason[:120]))
+        task = self.session.loop.create_task(
+            self.session.link.close(POLICY_VIOLATION, reason[:120]))
         _CLOSING.add(task)  # a strong reference until it is done (the loop keeps only weak ones)
         task.add_done_callback(_CLOSING.discard)
 
@@ -192,13 +238,13 @@ class Gate:
         return sees(self.role, name)
 
     def deny(self, op: Any, why: str) -> None:
-        """Refuse ``op`` (:meth:`Session.refuse <bridge_server.session.session.Session.refuse>`)."""
+        """Refuse ``op`` (:meth:`Guarded.refuse`)."""
         self.session.refuse(op, why)
 
     def _auth(self, op: ops.Auth) -> None:
         if self.security.auth is None:
             return  # no auth file: everyone is welcome, the op changes nothing
-        principal = self.security.verify_auth_op(client_address(self.session.ws), op.mac,
+        principal = self.security.verify_auth_op(client_address(self.session.link), op.mac,
                                                  f"session {self.session.sid}")
         if isinstance(principal, str):
             self.close(principal)
@@ -210,8 +256,7 @@ class Gate:
             return
         if self.principal is None:
             self.principal, self.role, self.authenticated = principal, principal.role, True
-            if isinstance(self.session.ws, BridgeConnection):
-                self.session.ws.limit_frames(None)  # frames up to --max-message-size again
+            self.session.link.limit_frames(None)  # frames up to --max-message-size again
             if self._timer is not None:
                 self._timer.cancel()
                 self._timer = None

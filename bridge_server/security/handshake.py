@@ -10,7 +10,7 @@ from __future__ import annotations
 import logging
 import ssl
 from collections.abc import Iterable
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from websockets.asyncio.server import ServerConnection
 from websockets.http11 import Request, Response
@@ -18,13 +18,9 @@ from websockets.http11 import Request, Response
 from ..interfaces import BridgeError
 from .auth import AuthConfig, AuthFileError, FailureTracker, Principal, load_auth_file
 from .credentials import client_address, is_loopback, token_of
-from .gate import PRE_AUTH_FRAME_LIMIT, Gate
+from .gate import PRE_AUTH_FRAME_LIMIT, Gate, Guarded
 from .options import SecurityConfig
 from .websockets_internals import BridgeConnection, Inbound, check_websockets_internals
-
-if TYPE_CHECKING:
-    from ..foxglove.session import FoxgloveSession
-    from ..session.session import Session
 
 __all__ = ["Security"]
 
@@ -258,7 +254,6 @@ class Security:
         else:
             self.per_address.pop(address, None)
 
-    def gate(self, session: Session | FoxgloveSession) -> Gate:
+    def gate(self, session: Guarded) -> Gate:
         """The gate for a new session."""
-        principal = getattr(session.ws, "principal", None)
-        return Gate(self, session, principal)
+        return Gate(self, session, session.link.principal)

@@ -39,13 +39,16 @@ import logging
 import socket
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Protocol
 
 from websockets.asyncio.messages import Assembler, SimpleQueue
 from websockets.asyncio.server import ServerConnection
+from websockets.exceptions import ConnectionClosed
 from websockets.frames import BINARY, TEXT, Frame
 from websockets.protocol import OPEN
 from websockets.streams import StreamReader
+
+from roslibpy_lite.protocol import keepalive
 
 try:  # websockets' own unmasking, in C where it was built with it
     from websockets.speedups import apply_mask
@@ -53,18 +56,33 @@ except ImportError:  # pragma: no cover - a websockets without its C extension
     from websockets.utils import apply_mask
 
 from ..interfaces import BridgeError
+from ..session.frames import JOINED_BYTES, frame_parts, joined
 
 log = logging.getLogger("bridge_server.security")
 
 if TYPE_CHECKING:
+    from ..session.frames import Frame as OutFrame
     from .auth import Principal
-    from .handshake import Security
+    from .options import SecurityConfig
+
+
+class ConnectionLimits(Protocol):
+    """What a connection needs of the bridge's security: its limits, the bytes held by every
+    connection, and being told when it ends (:class:`~.handshake.Security`)."""
+
+    config: SecurityConfig
+    inbound: Inbound
+
+    def release(self, connection: BridgeConnection) -> None:
+        """A counted connection ended."""
 
 __all__ = [
     "WEBSOCKETS_TESTED",
     "BridgeConnection",
     "BudgetAssembler",
+    "ConnectionLimits",
     "Inbound",
+    "WebSocketLink",
     "check_websockets_internals",
     "take_transport",
 ]
@@ -140,14 +158,150 @@ class BudgetAssembler(Assembler):
             self.resume()
 
 
-class BridgeConnection(ServerConnection):
-    """A server connection with an inbound byte budget and the principal it proved to be."""
+_CLOSED_ERRORS: tuple[type[BaseException], ...] = (ConnectionClosed,)
 
-    security: Security
+
+class WebSocketLink(ServerConnection):
+    """A websockets server connection as a session's
+    :class:`~bridge_server.session.link.ClientLink`: frames straight to the transport, one
+    write for a batch (:meth:`write`), the keepalive (:meth:`watch`)."""
 
     principal: Principal | None = None
-    counted: str | None = None
     on_frame: Callable[[str | bytes], None] | None = None
+
+    def hand_frames_to(self, handler: Callable[[str | bytes], None] | None) -> None:
+        """Hand each whole message with nothing queued before it to ``handler`` as it is
+        read (``None``: every message waits for ``recv`` again). ``handler`` must not block;
+        what it raises is logged and the connection closed (1011)."""
+        self.on_frame = handler
+
+    def limit_frames(self, size: int | None) -> None:
+        """Refuse frames over ``size`` bytes from the next frame header on (``None``: the
+        configured ``max_size`` again). Set before the handshake response, it covers the
+        first frame too: a client announcing a bigger frame is closed (1009) at its header,
+        before the bridge holds any of it."""
+        protocol = self.protocol
+        if not hasattr(self, "_max_size"):
+            self._max_size = protocol.max_message_size
+        protocol.max_message_size = self._max_size if size is None else size
+
+    # -- the link port (bridge_server.session.link.ClientLink) ---------------------------------
+
+    closed_errors = _CLOSED_ERRORS
+
+    @property
+    def address(self) -> str:
+        """The client's address, ``host:port``."""
+        addr = self.remote_address
+        if isinstance(addr, tuple) and len(addr) >= 2:
+            return f"{addr[0]}:{addr[1]}"
+        return str(addr)
+
+    @property
+    def direct(self) -> bool:
+        """Frames may be written between the writer's rounds (straight to the transport)."""
+        return self.transport is not None
+
+    @property
+    def framing(self) -> bool:
+        """Frames may be framed by the outbox (no extension, no frame logging)."""
+        return not self.protocol.extensions and not self.protocol.debug
+
+    @property
+    def closed_by_client(self) -> bool:
+        """Whether the client sent a close frame with 1000 or 1001."""
+        received = self.protocol.close_rcvd
+        return received is not None and received.code in (1000, 1001)
+
+    def header(self, name: str) -> str | None:
+        """A header of the handshake request."""
+        request = self.request
+        return None if request is None else request.headers.get(name)
+
+    def writable(self) -> bool:
+        """Open, websockets holding nothing back, the transport's buffer empty."""
+        protocol = self.protocol
+        transport = self.transport
+        return not (
+            protocol.state is not OPEN
+            or protocol.writes
+            or protocol.expect_continuation_frame
+            or transport.get_write_buffer_size()
+            or transport.is_closing()
+        )
+
+    def raw_ok(self) -> bool:
+        """Whether frames may be written framed here (no extension, open, websockets not in
+        the middle of a fragmented message and holding nothing back, and not logging each
+        frame)."""
+        protocol = self.protocol
+        return (
+            not protocol.extensions
+            and protocol.state is OPEN
+            and not protocol.expect_continuation_frame
+            and not protocol.writes
+            and not protocol.debug  # websockets logs each frame it makes
+        )
+
+    def write(self, frames: list[OutFrame]) -> None:
+        """Write several frames with one socket write (one system call, not one per frame).
+
+        The outbox's writer calls it inside websockets' own send context, so its state
+        checks, flow control (``write_limit``) and closing rules apply as for ``send``; the
+        outbox otherwise only when :meth:`writable`. Without an extension
+        (``--compression deflate``) the frames are made here
+        (:func:`~bridge_server.session.frames.frame_parts`), with one websockets makes them.
+        """
+        if not frames:
+            return
+        transport = self.transport
+        if self.raw_ok():
+            parts = frame_parts(frames)
+            if len(parts) == 1 or sum(map(len, parts)) <= JOINED_BYTES:
+                transport.write(b"".join(parts))
+            else:  # a big frame's payload is not copied into a joined buffer (uvloop)
+                transport.writelines(parts)
+            return
+        protocol = self.protocol
+        for frame in frames:
+            payload = joined(frame)
+            if isinstance(payload, str):
+                protocol.send_text(payload.encode())
+            else:
+                protocol.send_binary(payload)  # never a Wire: framed only for raw_ok
+        chunks = protocol.data_to_send()
+        if all(chunks):
+            transport.write(b"".join(chunks))
+        else:  # an end-of-stream marker: let websockets handle these chunks itself
+            for chunk in chunks:
+                if chunk:
+                    transport.write(chunk)
+                elif transport.can_write_eof():
+                    transport.write_eof()
+
+    def abort(self) -> None:
+        """Drop the connection at once."""
+        self.transport.abort()
+
+    def watch(self, interval: float, timeout: float, dead: Callable[[float], None]
+              ) -> asyncio.Task[bool] | None:
+        """The keepalive where TCP tells when the peer was last heard
+        (:func:`roslibpy_lite.protocol.keepalive.watch`); ``None`` elsewhere, or with
+        ``interval`` 0."""
+        transport = self.transport
+        if not interval or transport is None or not keepalive.supported_here():
+            return None
+        return asyncio.create_task(keepalive.watch(transport, self.ping, dead, interval,
+                                                   timeout))
+
+
+class BridgeConnection(WebSocketLink):
+    """A server connection with an inbound byte budget and the principal it proved to be,
+    which hands the frames it reads to its session as they are read."""
+
+    security: ConnectionLimits
+
+    counted: str | None = None
     forwarded_from: tuple[str, int] | None = None
     """The client's address, for a connection another worker forwarded (see
     :mod:`bridge_server.workers.forward`): set only by the forwarded listener."""
@@ -157,12 +311,6 @@ class BridgeConnection(ServerConnection):
         """The client's address: the forwarding worker's word for a forwarded connection,
         else the socket's peer."""
         return self.forwarded_from or super().remote_address
-
-    def hand_frames_to(self, handler: Callable[[str | bytes], None] | None) -> None:
-        """Hand each whole message with nothing queued before it to ``handler`` as it is
-        read (``None``: every message waits for ``recv`` again). ``handler`` must not block;
-        what it raises is logged and the connection closed (1011)."""
-        self.on_frame = handler
 
     def data_received(self, data: bytes) -> None:
         """websockets' hook for the bytes read: at a frame boundary, the whole final masked
@@ -267,16 +415,6 @@ class BridgeConnection(ServerConnection):
             pause=self.transport.pause_reading,
             resume=self.transport.resume_reading,
         )
-
-    def limit_frames(self, size: int | None) -> None:
-        """Refuse frames over ``size`` bytes from the next frame header on (``None``: the
-        configured ``max_size`` again). Set before the handshake response, it covers the
-        first frame too: a client announcing a bigger frame is closed (1009) at its header,
-        before the bridge holds any of it."""
-        protocol = self.protocol
-        if not hasattr(self, "_max_size"):
-            self._max_size = protocol.max_message_size
-        protocol.max_message_size = self._max_size if size is None else size
 
     def connection_lost(self, exc: Exception | None) -> None:
         """websockets' hook: no longer count this connection against the client limits."""

@@ -11,25 +11,22 @@ from __future__ import annotations
 
 import asyncio
 import logging
-from typing import Any
+from typing import TYPE_CHECKING
 
-from roslibpy_lite.protocol import keepalive
+if TYPE_CHECKING:
+    from .link import ClientLink, LinkConfig
 
 __all__ = ["watch_link"]
 
 log = logging.getLogger("bridge_server.session")
 
 
-def watch_link(ws: Any, sid: int, interval: float, timeout: float) -> asyncio.Task[bool] | None:
-    """Start watching client ``sid``'s connection ``ws`` (``interval`` 0: no keepalive of our
-    own); ``None`` where it cannot be watched. Cancel the task when the connection ends."""
-    transport = getattr(ws, "transport", None)
-    if not interval or transport is None or not keepalive.supported_here():
-        return None
+def watch_link(link: ClientLink, sid: int, config: LinkConfig) -> asyncio.Task[bool] | None:
+    """Start watching client ``sid``'s ``link`` (``config.keepalive_interval`` 0: no keepalive
+    of our own); ``None`` where it cannot be watched. Cancel the task when the link ends."""
 
     def dead(silence: float) -> None:
         log.warning("client %d: no sign of it for %.1f s, nor an answer to a ping (a silent "
                     "link): dropping it and what it owned", sid, silence)
 
-    return asyncio.create_task(keepalive.watch(transport, ws.ping, dead, interval, timeout),
-                               name=f"session-{sid}-keepalive")
+    return link.watch(config.keepalive_interval, config.keepalive_timeout, dead)

@@ -57,9 +57,6 @@ from collections import deque
 from collections.abc import Callable
 from typing import TYPE_CHECKING
 
-from websockets.exceptions import ConnectionClosed
-from websockets.protocol import State
-
 from roslibpy_lite.protocol import ops
 from roslibpy_lite.protocol.frames import split_fragments
 
@@ -67,11 +64,9 @@ from ..interfaces import ReportedError
 from .frames import JOINED_BYTES, Frame, Wire, frame_bytes, frame_parts, header, joined
 
 if TYPE_CHECKING:
-    from websockets.asyncio.server import ServerConnection
-    from websockets.server import ServerProtocol
-
     from ..graph import Message as Incoming
     from ..graph import TopicFeed as _Shared
+    from .link import ClientLink
     from .resume import SentFrames
 
 __all__ = [
@@ -211,19 +206,6 @@ def wire(sub: Subscription, inc: Incoming) -> Wire | None:
     return made
 
 
-def _raw_ok(protocol: ServerProtocol) -> bool:
-    """Whether the outbox may frame what it writes on this connection itself (no extension,
-    open, websockets not in the middle of a fragmented message and holding nothing back, and
-    not logging each frame)."""
-    return (
-        not protocol.extensions
-        and protocol.state is State.OPEN
-        and not protocol.expect_continuation_frame
-        and not protocol.writes
-        and not protocol.debug  # websockets logs each frame it makes
-    )
-
-
 class _Turn:
     """Tells a turn of the event loop from the next (one per loop): ``n`` changes after a
     turn in which some outbox wrote at once, so the next message in that turn waits for its
@@ -269,14 +251,14 @@ class Outbox:
 
     def __init__(
         self,
-        ws: ServerConnection,
+        link: ClientLink,
         sid: int,
         control_limit: int,
         max_queued: int,
         drop_report_interval: float,
         warn: Callable[[str], None],
     ) -> None:
-        self.ws = ws
+        self.link = link
         self.sid = sid
         self.loop = asyncio.get_running_loop()
         self.control_limit = control_limit
@@ -297,17 +279,15 @@ class Outbox:
         self.wrote_in = -1  # the turn of this outbox's last direct write
         self.direct = False  # whether the outbox may write between the writer's rounds
         self.framing = False  # and frame what it writes itself (see _connection)
-        self._connection(ws)
+        self._connection(link)
 
-    def _connection(self, ws: ServerConnection) -> None:
-        """Write to ``ws`` from now on: whether the outbox may write to its transport between
-        the writer's rounds (:meth:`_kick`), and frame messages itself (no extension, no
-        frame logging), which :meth:`push` needs to write a message at once."""
-        self.ws = ws
-        self.direct = getattr(ws, "transport", None) is not None and hasattr(ws, "send_context")
-        protocol = getattr(ws, "protocol", None)
-        self.framing = (self.direct and protocol is not None and not protocol.extensions
-                        and not protocol.debug)
+    def _connection(self, link: ClientLink) -> None:
+        """Write to ``link`` from now on: whether the outbox may write to it between the
+        writer's rounds (:meth:`_kick`), and frame messages itself (no extension, no frame
+        logging), which :meth:`push` needs to write a message at once."""
+        self.link = link
+        self.direct = link.direct
+        self.framing = self.direct and link.framing
 
     # -- filling -------------------------------------------------------------------------------
 
@@ -340,8 +320,38 @@ class Outbox:
             and self.framing
             and self.wrote_in != self.turn.n
             and self.sent is None
-            and self._write_now(sub, inc)
+            and not self.closed
+            and self.link.writable()
         ):
+            # written at once (or dropped as one that does not encode)
+            cache = inc.framed
+            framed = cache.get(sub.key) if cache is not None and sub.encode is None else None
+            if framed is None or sub.fragment_size is not None:
+                try:
+                    framed = wire(sub, inc)
+                    if framed is None:
+                        parts = tuple(frame_parts(self._frames(sub, inc)))
+                        size = sum(map(len, parts))
+                    else:
+                        parts, size = framed.parts, framed.size
+                except ReportedError:  # counted and logged where it came from (a relay's robot)
+                    return
+                except Exception:
+                    log.exception("session %d: cannot encode a message of %s", self.sid,
+                                  sub.topic)
+                    return
+            else:
+                parts, size = framed.parts, framed.size
+            if len(parts) == 1:
+                self.link.transport.write(parts[0])
+            else:
+                self.link.transport.writelines(parts)
+            turn = self.turn
+            if not turn.armed:
+                turn.mark()
+            self.wrote_in = turn.n
+            sub.sent += 1
+            sub.sent_bytes += size
             return
         q = sub.queue
         if len(q) >= sub.maxlen or (self.queued >= self.max_queued and q):
@@ -360,50 +370,6 @@ class Outbox:
         q.append(inc)
         self._kick()
 
-    def _write_now(self, sub: Subscription, inc: Incoming) -> bool:
-        """Write the message to the socket if it takes data now (nothing buffered, open, and
-        framed here); whether it was written (or dropped as one that does not encode)."""
-        ws = self.ws
-        transport = ws.transport
-        protocol = ws.protocol
-        if (
-            self.closed
-            or transport.get_write_buffer_size()
-            or protocol.state is not State.OPEN
-            or protocol.writes
-            or protocol.expect_continuation_frame
-            or transport.is_closing()
-        ):
-            return False
-        cache = inc.framed
-        framed = cache.get(sub.key) if cache is not None and sub.encode is None else None
-        if framed is None or sub.fragment_size is not None:
-            try:
-                framed = wire(sub, inc)
-                if framed is None:
-                    parts = tuple(frame_parts(self._frames(sub, inc)))
-                    size = sum(map(len, parts))
-                else:
-                    parts, size = framed.parts, framed.size
-            except ReportedError:  # counted and logged where it came from (a relay's robot)
-                return True
-            except Exception:
-                log.exception("session %d: cannot encode a message of %s", self.sid, sub.topic)
-                return True
-        else:
-            parts, size = framed.parts, framed.size
-        if len(parts) == 1:
-            transport.write(parts[0])
-        else:
-            transport.writelines(parts)
-        turn = self.turn
-        if not turn.armed:
-            turn.mark()
-        self.wrote_in = turn.n
-        sub.sent += 1
-        sub.sent_bytes += size
-        return True
-
     def send_ack(self, text: str) -> None:
         """Write this ``session_ack`` ahead of everything (it replaces one not yet written)."""
         self.ack = text
@@ -414,10 +380,10 @@ class Outbox:
         if self.sent is not None:
             self.sent.acked(count)
 
-    def resume(self, ws: ServerConnection, count: int) -> int:
-        """Write to ``ws`` from now on, starting with the frames after the client's ``count``;
-        returns how many of those were no longer kept."""
-        self._connection(ws)
+    def resume(self, link: ClientLink, count: int) -> int:
+        """Write to ``link`` from now on, starting with the frames after the client's
+        ``count``; returns how many of those were no longer kept."""
+        self._connection(link)
         if self.sent is None:
             return 0
         again, missing = self.sent.since(count)
@@ -463,20 +429,15 @@ class Outbox:
         queued in the same turn waits for the writer, which gathers it into one write.
         """
         if self.idle and not self.closed and self.direct and self.wrote_in != self.turn.n:
-            ws = self.ws
-            transport = ws.transport
-            if (
-                ws.protocol.state is State.OPEN
-                and not transport.is_closing()
-                and not transport.get_write_buffer_size()
-            ):
+            link = self.link
+            if link.writable():
                 try:
-                    self._write(ws, self._take())
+                    link.write(self._take())
                 except Exception:
                     log.exception("session %d: a write failed; closing the connection", self.sid)
                     self.closed = True
                     self.idle = False
-                    self.loop.create_task(ws.close(1011, "internal error"))
+                    self.loop.create_task(link.close(1011, "internal error"))
                 else:
                     # what is queued after it in this turn wakes the writer; with nothing
                     # more, the writer stays parked and the next message (in a later turn)
@@ -487,9 +448,8 @@ class Outbox:
 
     async def writer(self) -> None:
         """Write what is queued until the outbox is closed (run as the client's task)."""
-        ws = self.ws
+        link = self.link
         wake = self.wake
-        batched = hasattr(ws, "send_context") and hasattr(ws, "protocol")
         try:
             while not self.closed:
                 frames = self._take()
@@ -501,23 +461,19 @@ class Outbox:
                     finally:
                         self.idle = False
                     continue
-                if batched:
-                    async with ws.send_context():
-                        self._write(ws, frames)
-                else:  # pragma: no cover - websockets without send_context
-                    for frame in frames:
-                        await ws.send(joined(frame))
-        except ConnectionClosed:
+                async with link.send_context():
+                    link.write(frames)
+        except link.closed_errors:
             pass
         except Exception:
             log.exception("session %d: the writer failed; closing the connection", self.sid)
-            await ws.close(1011, "internal error")
+            await link.close(1011, "internal error")
 
     def _take(self) -> list[Frame]:
         """The frames to write next (:meth:`_collect`), kept in a resumable session until the
         client confirms them, after a ``session_ack`` to send first."""
         sent = self.sent
-        frames = self._collect(sent is None and self.framing and _raw_ok(self.ws.protocol))
+        frames = self._collect(sent is None and self.framing and self.link.raw_ok())
         if sent is not None:  # kept until the client confirms them
             for frame in frames:
                 sent.add(joined(frame))
@@ -558,42 +514,6 @@ class Outbox:
             sub.sent += 1
             sub.sent_bytes += size - before
         return frames
-
-    @staticmethod
-    def _write(ws: ServerConnection, frames: list[Frame]) -> None:
-        """Write several frames with one socket write (one system call, not one per frame).
-
-        The writer calls it inside websockets' own send context, so its state checks,
-        flow control (``write_limit``) and closing rules apply as for ``send``;
-        :meth:`_kick` only when the connection is open and nothing waits to be written.
-        Without an extension (``--compression deflate``) the frames are made here
-        (:func:`frame_bytes`), with one; websockets makes them.
-        """
-        if not frames:
-            return
-        protocol = ws.protocol
-        if _raw_ok(protocol):
-            parts = frame_parts(frames)
-            if len(parts) == 1 or sum(map(len, parts)) <= JOINED_BYTES:
-                ws.transport.write(b"".join(parts))
-            else:  # a big frame's payload is not copied into a joined buffer (uvloop)
-                ws.transport.writelines(parts)
-            return
-        for frame in frames:
-            payload = joined(frame)
-            if isinstance(payload, str):
-                protocol.send_text(payload.encode())
-            else:
-                protocol.send_binary(payload)  # never a Wire: framed only for _raw_ok
-        chunks = protocol.data_to_send()
-        if all(chunks):
-            ws.transport.write(b"".join(chunks))
-        else:  # an end-of-stream marker: let websockets handle these chunks itself
-            for chunk in chunks:
-                if chunk:
-                    ws.transport.write(chunk)
-                elif ws.transport.can_write_eof():
-                    ws.transport.write_eof()
 
     def _frames(self, sub: Subscription, inc: Incoming) -> list[Frame]:
         if sub.encode is not None:  # another protocol's framing (bridge_server.foxglove)

@@ -18,16 +18,14 @@ from __future__ import annotations
 
 import asyncio
 import logging
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Coroutine, Iterator
 from typing import TYPE_CHECKING, Any, Generic, Protocol, TypeVar
-
-from websockets.exceptions import ConnectionClosed
 
 from roslibpy_lite.protocol import ops
 
 if TYPE_CHECKING:
-    from ..security import Gate
-    from .session import Session
+    from ..security.gate import Gate
+    from .link import ClientLink
 
 __all__ = ["OWNER_PING_TIMEOUT", "Ownership", "Provider"]
 
@@ -37,6 +35,27 @@ OWNER_PING_TIMEOUT = 2.0
 """Seconds an owner has to answer a ping before another client may claim its name."""
 
 
+class Claimant(Protocol):
+    """The session of a client that serves, or claims, a name."""
+
+    sid: int
+    gate: Gate
+    link: ClientLink
+
+    @property
+    def closed(self) -> bool:
+        """Whether the connection has ended."""
+
+    def error(self, msg: str, id: ops.Id | None = None, kind: str = "request") -> None:
+        """Send an error ``status`` and count it."""
+
+    def handle_op(self, op: ops.Op) -> None:
+        """Carry out one parsed op."""
+
+    def spawn(self, coro: Coroutine[Any, Any, None]) -> None:
+        """Run ``coro`` as a task ended with the session."""
+
+
 class Provider(Protocol):
     """One client's side of a registry: what it serves of one kind (services or actions)."""
 
@@ -44,7 +63,7 @@ class Provider(Protocol):
     """What the client serves, by full name."""
 
     @property
-    def session(self) -> Session:
+    def session(self) -> Claimant:
         """The client's session."""
         ...
 
@@ -150,11 +169,12 @@ class Ownership(Generic[P]):
         A connection whose client vanished should not hold the name until the keepalive
         gives up, or the client could never serve it again after it reconnects.
         """
+        gone: tuple[type[BaseException], ...] = (TimeoutError, *owner.session.link.closed_errors)
         try:
-            pong = await owner.session.ws.ping()
+            pong = await owner.session.link.ping()
             await asyncio.wait_for(pong, OWNER_PING_TIMEOUT)
             alive = True
-        except (TimeoutError, ConnectionClosed):
+        except gone:
             alive = False
         session = provider.session
         if session.closed:

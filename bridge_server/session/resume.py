@@ -34,12 +34,13 @@ import re
 import secrets
 from collections import deque
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Generic, Protocol, TypeVar
 
 if TYPE_CHECKING:
-    from .session import Session
+    from ..security.gate import Gate
+    from .link import ClientLink
 
-__all__ = ["ACK_INTERVAL", "ResumeConfig", "SentFrames", "SessionStore", "worker_of"]
+__all__ = ["ACK_INTERVAL", "Keepable", "ResumeConfig", "SentFrames", "SessionStore", "worker_of"]
 
 log = logging.getLogger("bridge_server.session.resume")
 
@@ -110,18 +111,34 @@ def worker_of(token: str) -> int | None:
     return None if match is None else int(match[1])
 
 
-class SessionStore:
+class Keepable(Protocol):
+    """A session the store can keep for a resume
+    (:class:`~bridge_server.session.session.Session`)."""
+
+    sid: int
+    gate: Gate
+    link: ClientLink
+
+    def end_parked(self) -> None:
+        """The kept session was not resumed in time: release what it owned."""
+
+
+S = TypeVar("S", bound=Keepable)
+
+
+class SessionStore(Generic[S]):
     """The sessions that can be resumed, by token; the dropped ones wait here."""
 
     def __init__(self, config: ResumeConfig, worker: int | None = None) -> None:
         """``worker``: this worker's index, named in its tokens (``None``: no workers)."""
         self.config = config
         self.prefix = "" if worker is None else f"w{worker}."
-        self.live: dict[str, Session] = {}
+        self.live: dict[str, S] = {}
         self.parked: dict[str, asyncio.TimerHandle] = {}
         self._parked_event: dict[str, asyncio.Event] = {}
         self.resumed = 0
         self.expired = 0
+        self.closing = False  # the bridge stops: no session is kept any more
 
     @property
     def enabled(self) -> bool:
@@ -132,11 +149,11 @@ class SessionStore:
         """A fresh session token (not yet bound to a session)."""
         return self.prefix + secrets.token_urlsafe(16)
 
-    def register(self, token: str, session: Session) -> None:
+    def register(self, token: str, session: S) -> None:
         """``session`` (just opened) can be resumed with ``token``."""
         self.live[token] = session
 
-    async def claim(self, token: str, principal: object) -> Session | None:
+    async def claim(self, token: str, principal: object) -> S | None:
         """The session ``token`` names, given up by its old connection and held for the new
         one; None if there is none (expired, unknown) or it belongs to another principal."""
         session = self.live.get(token)
@@ -144,7 +161,7 @@ class SessionStore:
             return None
         if token not in self.parked:  # its old link is dead but not noticed yet: give it up
             event = self._parked_event.setdefault(token, asyncio.Event())
-            session.ws.transport.abort()
+            session.link.abort()
             with contextlib.suppress(TimeoutError):
                 async with asyncio.timeout(CLAIM_WAIT):  # keeps a cancel (3.11's wait_for may not)
                     await event.wait()
@@ -155,10 +172,10 @@ class SessionStore:
         self.resumed += 1
         return session
 
-    def park(self, token: str, session: Session) -> bool:
+    def park(self, token: str, session: S) -> bool:
         """``session`` lost its connection: keep it for ``session_keep`` s (False: it may not
         be kept, and ends now)."""
-        if self.live.get(token) is not session or session.bridge.closing:
+        if self.live.get(token) is not session or self.closing:
             self.live.pop(token, None)
             return False
         mine = [t for t, s in self.live.items()
@@ -184,7 +201,7 @@ class SessionStore:
             log.info("client %d: session ended (%s)", session.sid, why)
             session.end_parked()
 
-    def forget(self, token: str, session: Session) -> None:
+    def forget(self, token: str, session: S) -> None:
         """``session`` ended for good (closed by the client, or not resumable)."""
         if self.live.get(token) is session:
             del self.live[token]
@@ -193,6 +210,7 @@ class SessionStore:
             timer.cancel()
 
     def close(self) -> None:
-        """The bridge stops: end every kept session."""
+        """The bridge stops: end every kept session, and keep none from now on."""
+        self.closing = True
         for token in list(self.parked):
             self.drop(token, "the bridge stopped")

@@ -31,8 +31,9 @@ ops that need no permission of their own and add nothing the connection's limits
 (``service_response``: a client's answer to a ROS caller). It talks to the
 session through its public members: ``send_op``/``send_text``, ``status``,
 ``error``, ``spawn`` (a task cancelled with the session), ``outbox``, ``gate``,
-``graph`` (the ROS side: :class:`~bridge_server.graph.Graph`), ``limits``, ``bridge``,
-``config``, ``loop`` and ``closed``.
+``graph`` (the ROS side: :class:`~bridge_server.graph.Graph`), ``limits``, ``shared``
+(what every session shares: :class:`~bridge_server.session.host.Shared`), ``config``,
+``loop`` and ``closed``.
 """
 
 from __future__ import annotations
@@ -43,8 +44,6 @@ import logging
 import time
 from collections.abc import Callable, Coroutine
 from typing import TYPE_CHECKING, Any, ClassVar, Protocol
-
-from websockets.exceptions import ConnectionClosed
 
 from roslibpy_lite.protocol import ops
 from roslibpy_lite.protocol.errors import ProtocolError
@@ -64,12 +63,11 @@ from .services import SessionServices
 from .topics import SessionTopics
 
 if TYPE_CHECKING:
-    from websockets.asyncio.server import ServerConnection
-
     from ..graph import Graph
-    from ..security import Gate, SecurityConfig
-    from ..server import Bridge
+    from ..security.gate import Gate
+    from ..security.options import SecurityConfig
     from .host import Shared
+    from .link import ClientLink
 
 __all__ = ["DEFAULT_QUEUE_LENGTH", "Capability", "Session", "SessionConfig"]
 
@@ -110,28 +108,28 @@ class Session:
     protocol_name = "rosbridge"
     """The protocol the client speaks (the status page and /metrics show it)."""
 
-    def __init__(self, bridge: Bridge, ws: ServerConnection, sid: int) -> None:
-        self.bridge = bridge
-        self.graph: Graph = bridge.graph
-        self.shared: Shared = bridge  # what the op groups share with the other sessions
-        self.ws = ws
+    def __init__(self, shared: Shared, link: ClientLink, sid: int) -> None:
+        """Client ``sid``'s session over ``link``, sharing ``shared`` with the other
+        sessions of its server (the bridge, or a test's)."""
+        self.shared = shared  # what the op groups share with the other sessions
+        self.graph: Graph = shared.graph
+        self.link = link
         self.sid = sid
-        self.config: SessionConfig = bridge.session_config
+        self.config: SessionConfig = shared.session_config
         self.loop = asyncio.get_running_loop()
         # Reassembled fragments are held to the same bound as a single frame.
         self.protocol = FrameProtocol(
-            max_partial=16, max_fragment_bytes=bridge.config.max_message_size
+            max_partial=16, max_fragment_bytes=shared.link_config.max_message_size
         )
         self.calls = Calls(self.loop)
         self.level = _LEVELS["warning"]
-        request = getattr(ws, "request", None)
-        self.acks = request is not None and request.headers.get(ACKS_HEADER) == "1"
+        self.acks = link.header(ACKS_HEADER) == "1"
         self.errors_sent = 0
         self.outbox = Outbox(
-            ws, sid, self.config.control_limit, bridge.security.config.max_queued_messages,
+            link, sid, self.config.control_limit, shared.security.config.max_queued_messages,
             self.config.drop_report_interval, lambda text: self.status("warning", text),
         )
-        self.peer = ""  # the client's address, and since when (for the status page)
+        self.peer = link.address  # the client's address, and since when (for the status page)
         self.connected_at = time.time()
         self.frame_len = 0  # the size of the frame being handled (for /metrics)
         self.token: str | None = None  # a session that outlives its connection (resume.py)
@@ -139,7 +137,7 @@ class Session:
         self.resume_from = 0  # frames the resuming client had received (its handshake said)
         self._acked_received = 0
         self._ack_timer: asyncio.TimerHandle | None = None
-        self.gate = bridge.security.gate(self)  # auth, rate, names, permissions (security/gate.py)
+        self.gate = shared.security.gate(self)  # auth, rate, names, permissions (security/gate.py)
         self.topics = SessionTopics(self)
         self.services = SessionServices(self)
         self.actions = SessionActions(self)
@@ -160,7 +158,7 @@ class Session:
     @property
     def limits(self) -> SecurityConfig:
         """The bridge's per-connection limits (as configured now: SIGHUP may change them)."""
-        return self.bridge.security.config
+        return self.shared.security.config
 
     def refuse(self, op: Any, why: str) -> None:
         """Refuse ``op``: a status error, plus the failure shape a stock client waits for."""
@@ -180,9 +178,9 @@ class Session:
         """Serve the client until it disconnects; then release what it owned, unless the
         session is kept for the client to resume (resume.py)."""
         await self._serve()
-        store = self.bridge.resumable
+        store = self.shared.resumable
         if self.token is not None:
-            if not self._closed_by_client() and store.park(self.token, self):
+            if not self.link.closed_by_client and store.park(self.token, self):
                 log.info("client %d: its link is gone; its session is kept for %g s",
                          self.sid, store.config.session_keep)
                 return
@@ -193,35 +191,33 @@ class Session:
     async def _serve(self) -> None:
         """Read and carry out the frames of the current connection until it closes."""
         writer = asyncio.create_task(self.outbox.writer(), name=f"session-{self.sid}-writer")
-        cfg = self.bridge.config
-        watcher = watch_link(self.ws, self.sid, cfg.keepalive_interval, cfg.keepalive_timeout)
+        link = self.link
+        watcher = watch_link(link, self.sid, self.shared.link_config)
         # Each whole message with nothing queued before it is handled as it is read (no
         # turn of the loop to wake this task); the others come through the loop below.
-        hand_over = getattr(self.ws, "hand_frames_to", None)
-        if hand_over is not None:
-            hand_over(self.handle_frame)
+        link.hand_frames_to(self.handle_frame)
         try:
-            async for frame in self.ws:
+            async for frame in link:
                 self.handle_frame(frame)
-        except ConnectionClosed:
+        except link.closed_errors:
             pass
         finally:
-            if hand_over is not None:
-                hand_over(None)
+            link.hand_frames_to(None)
             if watcher is not None:
                 watcher.cancel()
             writer.cancel()
-            with contextlib.suppress(asyncio.CancelledError, ConnectionClosed):
+            with contextlib.suppress(asyncio.CancelledError, *link.closed_errors):
                 await writer
 
-    async def resume(self, ws: ServerConnection, client_received: int) -> None:
+    async def resume(self, link: ClientLink, client_received: int) -> None:
         """Carry on over a new connection: first what the client missed, then as before."""
-        self.ws = ws
+        self.link = link
+        self.peer = link.address
         # Fragments of an op cut off with the old connection cannot be completed now.
         self.protocol = FrameProtocol(
-            max_partial=16, max_fragment_bytes=self.bridge.config.max_message_size
+            max_partial=16, max_fragment_bytes=self.shared.link_config.max_message_size
         )
-        missing = self.outbox.resume(ws, client_received)
+        missing = self.outbox.resume(link, client_received)
         log.info("client %d: session resumed (%d frames sent again)", self.sid,
                  len(self.outbox.control))
         if missing:
@@ -236,12 +232,12 @@ class Session:
         task = self.loop.create_task(self.cleanup())
         _ENDING.add(task)
         task.add_done_callback(_ENDING.discard)
-        self.bridge.sessions.discard(self)
+        self.shared.session_ended(self)
 
     @property
     def parked(self) -> bool:
         """Whether the session is kept without a connection, waiting for its client."""
-        return self.token is not None and self.token in self.bridge.resumable.parked
+        return self.token is not None and self.token in self.shared.resumable.parked
 
     def describe(self, worker: int) -> ClientStatus:
         """This client's typed status (its entry in ``/status.json``) in worker ``worker``."""
@@ -267,13 +263,6 @@ class Session:
         if self.received != self._acked_received and not self.outbox.closed:
             self._acked_received = self.received
             self.outbox.send_ack(ops.encode(ops.SessionAck(self.received)))
-
-    def _closed_by_client(self) -> bool:
-        """Whether the client ended the connection itself (a close frame, 1000 or 1001): its
-        session ends with it; only a lost link keeps a session for a resume."""
-        protocol = getattr(self.ws, "protocol", None)
-        received = getattr(protocol, "close_rcvd", None)
-        return received is not None and received.code in (1000, 1001)
 
     async def cleanup(self) -> None:
         """Release what this client owned: each capability's, then the calls in flight."""
@@ -310,7 +299,7 @@ class Session:
         """Report a failed request to the client (``status`` level error); count it by kind."""
         log.info("session %d: %s", self.sid, msg)
         self.errors_sent += 1
-        self.bridge.metrics.error(kind)
+        self.shared.metrics.error(kind)
         self.status("error", msg, id)
 
     # -- receiving -----------------------------------------------------------------------------

@@ -15,6 +15,7 @@ from websockets.asyncio.client import ClientConnection, connect
 from websockets.asyncio.server import ServerConnection, serve
 from websockets.frames import Frame, Opcode
 
+from bridge_server.security import WebSocketLink
 from bridge_server.session.outbox import Frame as OutFrame
 from bridge_server.session.outbox import Outbox, Subscription, frame_bytes
 from roslibpy_lite.protocol import ops
@@ -46,10 +47,12 @@ async def _parked_outbox(
         await conns.put(ws)
         await ws.wait_closed()
 
-    async with serve(handler, "127.0.0.1", 0, compression=compression) as server:
+    async with serve(handler, "127.0.0.1", 0, compression=compression,
+                     create_connection=WebSocketLink) as server:
         port = next(iter(server.sockets)).getsockname()[1]
         async with connect(f"ws://127.0.0.1:{port}", compression=compression) as client:
             ws = await conns.get()
+            assert isinstance(ws, WebSocketLink)
             box = Outbox(ws, 1, 100, 0, 5.0, warn=lambda _msg: None)
             writer = asyncio.create_task(box.writer())
             await async_wait_until(lambda: box.idle, 5.0, "the writer idle")
