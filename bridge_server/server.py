@@ -156,7 +156,8 @@ class Bridge:
         self.web = Web(self)  # plain-HTTP routes: status page, /metrics, health (web.py)
         self.security = Security(config.security)  # TLS, auth, origins, limits (security/)
         self.web.access = WebAccess(self.security)  # who sees the plain-HTTP routes
-        self.foxglove = Hub(self.graph, self.graph_changed)  # Foxglove clients (foxglove/)
+        # Foxglove clients (foxglove/)
+        self.foxglove: Hub[FoxgloveSession] = Hub(self.graph, self.graph_changed)
 
     @property
     def port(self) -> int:
@@ -164,6 +165,10 @@ class Bridge:
         assert self._server is not None
         sock = next(iter(self._server.sockets))
         return int(sock.getsockname()[1])
+
+    def listening(self) -> bool:
+        """Whether the websocket port takes connections."""
+        return self._server is not None and self._server.is_serving()
 
     async def start(self) -> None:
         """Start ROS and listen (unless ``config.websocket`` is off: then only the rates and

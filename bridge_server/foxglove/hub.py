@@ -21,7 +21,7 @@ import re
 import struct
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Generic, Protocol, TypeVar
 
 from msgs import cdr, dynamic
 from msgs.runtime import Message as MsgsMessage
@@ -35,9 +35,8 @@ from .wire import Channel
 if TYPE_CHECKING:
     from ..graph import Graph, Listener, TopicFeed
     from ..graph import Message as RosMessage
-    from .session import FoxgloveSession
 
-__all__ = ["CLOCK", "REFRESH_S", "GraphState", "Hub", "ServiceEntry", "foxglove_schema",
+__all__ = ["CLOCK", "REFRESH_S", "GraphState", "Hub", "ServiceEntry", "Viewer", "foxglove_schema",
            "message_class", "service_class"]
 
 log = logging.getLogger("bridge_server.foxglove")
@@ -155,13 +154,43 @@ def _hidden(name: str) -> bool:
     return any(part.startswith("_") for part in name.split("/"))
 
 
-class Hub:
+class Viewer(Protocol):
+    """A Foxglove client as its hub tells it of the graph
+    (:class:`~bridge_server.foxglove.session.FoxgloveSession`)."""
+
+    graph_seen: GraphState | None
+    """The connection graph it was told of (``None``: it does not follow it)."""
+    parameter_names: set[str] | None
+    """The parameters it follows (``None``: none; empty: all)."""
+
+    @property
+    def wants_graph(self) -> bool:
+        """Whether the client follows the connection graph."""
+
+    def graph_changed(self, added: list[Channel], removed: list[Channel],
+                      s_added: list[ServiceEntry], s_removed: list[ServiceEntry]) -> None:
+        """Channels and services came and went."""
+
+    def show_graph(self, state: GraphState) -> None:
+        """The connection graph is now ``state``."""
+
+    def send_time(self, stamp_ns: int) -> None:
+        """The ROS clock's time now."""
+
+    def parameters_changed(self, changed: list[tuple[str, Any]]) -> None:
+        """Parameters changed in ROS."""
+
+
+V = TypeVar("V", bound=Viewer)
+
+
+class Hub(Generic[V]):
     """The Foxglove side of one bridge (see the module's text)."""
 
     def __init__(self, graph: Graph, graph_changed: Callable[[], None]) -> None:
         self.graph = graph
         self.graph_changed = graph_changed
-        self.sessions: set[FoxgloveSession] = set()
+        self.sessions: set[V] = set()
         self.channels: dict[str, Channel] = {}  # by topic
         self.by_id: dict[int, Channel] = {}
         self.services: dict[str, ServiceEntry] = {}  # by name
@@ -179,7 +208,7 @@ class Hub:
 
     # -- sessions ------------------------------------------------------------------------------
 
-    def attach(self, session: FoxgloveSession) -> None:
+    def attach(self, session: V) -> None:
         """A new Foxglove client: look at the graph now (what it is offered, ``time`` among
         it, is the graph as it is, not as the last periodic look saw it), and keep looking
         while it stays."""
@@ -188,7 +217,7 @@ class Hub:
         if self._task is None:
             self._task = asyncio.get_running_loop().create_task(self._run(), name="foxglove-hub")
 
-    def detach(self, session: FoxgloveSession) -> None:
+    def detach(self, session: V) -> None:
         """The client left; the hub's watches go with the last one that wanted them."""
         self.sessions.discard(session)
         self.update_watches()
@@ -322,7 +351,7 @@ class Hub:
             providers.sort()
         return state
 
-    def follow_graph(self, session: FoxgloveSession) -> None:
+    def follow_graph(self, session: V) -> None:
         """``session`` follows the connection graph: the followers so far hear what changed
         since they were told, and ``session`` hears the whole graph as it is now (each of
         what its role lets it see)."""

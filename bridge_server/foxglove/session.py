@@ -100,7 +100,8 @@ class FoxgloveSession:
 
     protocol_name = "foxglove"
 
-    def __init__(self, shared: Shared, hub: Hub, link: ClientLink, sid: int) -> None:
+    def __init__(self, shared: Shared, hub: Hub[FoxgloveSession], link: ClientLink, sid: int
+                 ) -> None:
         """Client ``sid``'s session over ``link``, sharing ``shared`` with the other sessions
         of its server and ``hub`` with the other Foxglove ones."""
         self.shared = shared

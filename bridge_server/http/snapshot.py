@@ -19,24 +19,109 @@ from __future__ import annotations
 
 import os
 import time
-from collections.abc import Iterable, Mapping
-from typing import TYPE_CHECKING, Any
+from collections.abc import Collection, Iterable, Mapping
+from typing import TYPE_CHECKING, Any, Protocol
 
 from .metrics import add_timing
 from .status import COUNTERS, BridgeStatus
 
 if TYPE_CHECKING:
-    from ..foxglove.session import FoxgloveSession
-    from ..server import Bridge
-    from ..session.session import Session
+    from ..graph import Graph
+    from ..session.client_status import ClientStatus
+    from ..session.outbox import Subscription
+    from ..session.ownership import Ownership
+    from ..session.resume import SessionStore
+    from .metrics import BridgeMetrics
 
-__all__ = ["RateMeter", "merge", "take", "topic_totals"]
+__all__ = ["Observed", "RateMeter", "Reporting", "merge", "take", "topic_totals"]
+
+
+class Subscribed(Protocol):
+    """A session's topics, as far as the status goes."""
+
+    @property
+    def subs(self) -> Mapping[str, Subscription]:
+        """Its subscriptions, by topic."""
+
+
+class Reporting(Protocol):
+    """A session as the status reads it (a rosbridge or a Foxglove one)."""
+
+    @property
+    def sid(self) -> int:
+        """The client's id."""
+
+    @property
+    def topics(self) -> Subscribed:
+        """What it subscribes to."""
+
+    def describe(self, worker: int) -> ClientStatus:
+        """Its typed status in worker ``worker``."""
+
+
+class Sessions(Protocol):
+    """Where a kind of session is kept (the Foxglove hub)."""
+
+    @property
+    def sessions(self) -> Collection[Reporting]:
+        """The live sessions."""
+
+
+class Forwarding(Protocol):
+    """The worker machinery, as far as the status goes."""
+
+    forwarded: int
+    """Session resumes handed to the worker that keeps them."""
+
+
+class Worker(Protocol):
+    """The settings the status names."""
+
+    @property
+    def worker_index(self) -> int:
+        """This process's index among the workers."""
+
+
+class Observed(Protocol):
+    """What the status reads of a bridge (:class:`~bridge_server.server.Bridge`)."""
+
+    @property
+    def metrics(self) -> BridgeMetrics:
+        """The counters."""
+
+    @property
+    def graph(self) -> Graph:
+        """The ROS side."""
+
+    @property
+    def config(self) -> Worker:
+        """The settings."""
+
+    @property
+    def sessions(self) -> Collection[Reporting]:
+        """The rosbridge sessions."""
+
+    @property
+    def foxglove(self) -> Sessions:
+        """The Foxglove sessions."""
+
+    @property
+    def service_owners(self) -> Ownership[Any]:
+        """Who serves which service."""
+
+    @property
+    def resumable(self) -> SessionStore[Any]:
+        """The sessions kept for a resume."""
+
+    @property
+    def forwarder(self) -> Forwarding | None:
+        """With ``--workers``: the hand-over of resumes."""
 
 RATE_FIELDS = ("ros_received", "sent", "published")
 _GOAL_SERVICE = "/_action/send_goal"
 
 
-def topic_totals(bridge: Bridge) -> dict[str, dict[str, Any]]:
+def topic_totals(bridge: Observed) -> dict[str, dict[str, Any]]:
     """Per-topic counters of this process (closed objects' counts included; ``in_use``
     marks topics a client or the bridge's ROS side uses now)."""
     topics: dict[str, dict[str, Any]] = {}
@@ -55,7 +140,7 @@ def topic_totals(bridge: Bridge) -> dict[str, dict[str, Any]]:
         topics[name]["in_use"] = True
     for name, _type, _latch in bridge.graph.publishers:
         topics[name]["in_use"] = True
-    every: list[Session | FoxgloveSession] = [*bridge.sessions, *bridge.foxglove.sessions]
+    every: list[Reporting] = [*bridge.sessions, *bridge.foxglove.sessions]
     for session in every:
         for sub in session.topics.subs.values():
             t = topics.setdefault(sub.topic, {})
@@ -95,7 +180,7 @@ class RateMeter:
         self.rates = rates
 
 
-def take(bridge: Bridge, rates: Mapping[str, Mapping[str, float]]) -> dict[str, Any]:
+def take(bridge: Observed, rates: Mapping[str, Mapping[str, float]]) -> dict[str, Any]:
     """This process's snapshot (see the module docstring)."""
     from roslibpy_lite import __version__
 
@@ -105,7 +190,7 @@ def take(bridge: Bridge, rates: Mapping[str, Mapping[str, float]]) -> dict[str, 
     for name, r in rates.items():
         if name in topics:
             topics[name].update(r)
-    every: list[Session | FoxgloveSession] = [*bridge.sessions, *bridge.foxglove.sessions]
+    every: list[Reporting] = [*bridge.sessions, *bridge.foxglove.sessions]
     clients = tuple(session.describe(worker) for session in sorted(every, key=lambda s: s.sid))
     services = [
         {"name": name, "type": served.type_name, "served_by": f"{worker}-{owner.session.sid}"}
@@ -140,7 +225,7 @@ def take(bridge: Bridge, rates: Mapping[str, Mapping[str, float]]) -> dict[str, 
     ).to_json()
 
 
-def _actions(bridge: Bridge) -> list[dict[str, Any]]:
+def _actions(bridge: Observed) -> list[dict[str, Any]]:
     """Actions in use through this process: served by a client, or called by one."""
     worker = bridge.config.worker_index
     found: dict[str, dict[str, Any]] = {}
@@ -163,7 +248,7 @@ def _actions(bridge: Bridge) -> list[dict[str, Any]]:
     return [found[k] for k in sorted(found)]
 
 
-def _graph_action_types(bridge: Bridge) -> dict[str, str]:
+def _graph_action_types(bridge: Observed) -> dict[str, str]:
     """Action name -> type of the actions the ROS graph lists a goal service of (served,
     or only called)."""
     types = {}

@@ -39,7 +39,7 @@ import time
 from collections.abc import Awaitable, Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Protocol
 
 from roslibpy_lite.protocol.ops import ACKS_HEADER, AUTH_HEADER, RECEIVED_HEADER, SESSION_HEADER
 
@@ -51,10 +51,10 @@ if TYPE_CHECKING:
     from websockets.asyncio.server import ServerConnection
     from websockets.http11 import Request, Response
 
-    from ..server import Bridge
+    from ..security.auth import AuthConfig
 
-__all__ = ["Access", "Denied", "Reply", "Web", "address_of", "handshake_headers", "open_route",
-           "respond", "static_files", "viewer", "visible"]
+__all__ = ["Access", "Denied", "Reply", "Served", "Web", "address_of", "handshake_headers",
+           "open_route", "respond", "static_files", "viewer", "visible"]
 
 log = logging.getLogger("bridge_server.http.web")
 
@@ -133,10 +133,61 @@ class Reply:
     headers: list[tuple[str, str]] = field(default_factory=list)
 
 
+class WebConfig(snapshot.Worker, Protocol):
+    """The settings the routes follow (:class:`~bridge_server.server.BridgeConfig`)."""
+
+    @property
+    def host(self) -> str:
+        """Where ``--metrics-port`` listens."""
+
+    @property
+    def metrics_port(self) -> int | None:
+        """The plain-HTTP routes' own port, if any."""
+
+    @property
+    def worker_dir(self) -> str | None:
+        """With ``--workers``: where the workers' sockets are."""
+
+
+class Authenticating(Protocol):
+    """The security, as far as the handshake's answer goes."""
+
+    @property
+    def auth(self) -> AuthConfig | None:
+        """The auth file's principals (``None``: no authentication)."""
+
+
+class Received(Protocol):
+    """A session resumed by a handshake: the frames it received, told in the answer."""
+
+    @property
+    def received(self) -> int:
+        """Frames received in the session."""
+
+
+class Served(snapshot.Observed, Protocol):
+    """What the routes read of a bridge (:class:`~bridge_server.server.Bridge`)."""
+
+    @property
+    def config(self) -> WebConfig:
+        """The settings."""
+
+    @property
+    def security(self) -> Authenticating:
+        """The security."""
+
+    @property
+    def session_plans(self) -> Mapping[ServerConnection, tuple[str, Received | None]]:
+        """The session each handshake under way was given (resume.py)."""
+
+    def listening(self) -> bool:
+        """Whether the websocket port takes connections."""
+
+
 class Web:
     """The routes, the rate meter, and (with workers) the view of the other workers."""
 
-    def __init__(self, bridge: Bridge) -> None:
+    def __init__(self, bridge: Served) -> None:
         self.bridge = bridge
         self.access = Access()
         self.caps = metrics.new_caps()
@@ -150,7 +201,7 @@ class Web:
         self.extra_metrics: list[Callable[[Callable[[str], bool]], Iterable[Metric]]] = []
         """More families for ``/metrics``, each given whether the viewer may see a topic
         (a robot's replay windows)."""
-        self.serving: Callable[[], bool] = self._listening
+        self.serving: Callable[[], bool] = bridge.listening
         """Whether the websocket port takes connections (a front that serves this bridge's
         sessions on its own port, the relay, sets its own)."""
 
@@ -202,10 +253,6 @@ class Web:
         if trouble is not None:
             return trouble
         return None if self.serving() else "not listening"
-
-    def _listening(self) -> bool:
-        server = self.bridge._server
-        return server is not None and server.is_serving()
 
     # -- routing -------------------------------------------------------------------------------
 

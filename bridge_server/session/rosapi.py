@@ -57,8 +57,8 @@ from __future__ import annotations
 import asyncio
 import json
 import weakref
-from collections.abc import Awaitable, Callable, Mapping
-from typing import TYPE_CHECKING, Any
+from collections.abc import Awaitable, Callable, Iterator, Mapping
+from typing import TYPE_CHECKING, Any, Protocol
 
 from ..interfaces import BridgeError, canonical_name
 from ..security.names import InvalidNameError, check_name
@@ -66,9 +66,17 @@ from ..security.permissions import MAY
 
 if TYPE_CHECKING:
     from ..graph import Graph
-    from .host import Shared
 
-__all__ = ["ASYNC_HANDLERS", "FIELDS", "HANDLERS", "TYPES", "RosapiError", "request_args"]
+__all__ = [
+    "ASYNC_HANDLERS",
+    "FIELDS",
+    "HANDLERS",
+    "TYPES",
+    "BridgeView",
+    "Owners",
+    "RosapiError",
+    "request_args",
+]
 
 DISTRO = "jazzy"
 
@@ -77,7 +85,38 @@ class RosapiError(BridgeError):
     """A rosapi request was invalid (the text says which field and why)."""
 
 
-Handler = Callable[["Shared", Mapping[str, Any]], dict[str, Any]]
+class Owners(Protocol):
+    """The names the bridge's clients serve, and who serves each
+    (:class:`~bridge_server.session.ownership.Ownership`)."""
+
+    def __contains__(self, name: object) -> bool:
+        """Whether a client serves ``name``."""
+
+    def __iter__(self) -> Iterator[str]:
+        """The names served."""
+
+    def get(self, name: str) -> Any:
+        """The client's provider serving ``name`` (``None``: none does)."""
+
+
+class BridgeView(Protocol):
+    """What rosapi reads of the bridge (:class:`~bridge_server.session.host.Shared` is it
+    all): the ROS graph, and the names its clients serve."""
+
+    @property
+    def graph(self) -> Graph:
+        """The ROS side."""
+
+    @property
+    def service_owners(self) -> Owners:
+        """The services the bridge's clients serve."""
+
+    @property
+    def action_owners(self) -> Owners:
+        """The actions the bridge's clients serve."""
+
+
+Handler = Callable[["BridgeView", Mapping[str, Any]], dict[str, Any]]
 
 
 def _str_field(args: Mapping[str, Any], name: str) -> str:
@@ -115,7 +154,7 @@ def _own_services() -> list[tuple[str, str]]:
     return sorted((name, TYPES[name]) for name in (*HANDLERS, *ASYNC_HANDLERS))
 
 
-def _all_services(bridge: Shared) -> list[tuple[str, str]]:
+def _all_services(bridge: BridgeView) -> list[tuple[str, str]]:
     """Services that have a server (the graph also lists names that only have clients).
 
     Servers are counted by service name, never looked up by node name: several nodes may
@@ -145,37 +184,37 @@ def _srv_type(name: str) -> str:
         raise RosapiError(str(exc)) from None
 
 
-def topics(bridge: Shared, args: Mapping[str, Any]) -> dict[str, Any]:
+def topics(bridge: BridgeView, args: Mapping[str, Any]) -> dict[str, Any]:
     """Every topic in the graph and its (first) type."""
     pairs = sorted(bridge.graph.topic_names_and_types())
     return {"topics": [n for n, _ in pairs], "types": [t[0] if t else "" for _, t in pairs]}
 
 
-def topics_for_type(bridge: Shared, args: Mapping[str, Any]) -> dict[str, Any]:
+def topics_for_type(bridge: BridgeView, args: Mapping[str, Any]) -> dict[str, Any]:
     """Topics whose type is the given one (either spelling)."""
     wanted = _msg_type(_str_field(args, "type"))
     pairs = sorted(bridge.graph.topic_names_and_types())
     return {"topics": [n for n, types in pairs if wanted in types]}
 
 
-def topic_type(bridge: Shared, args: Mapping[str, Any]) -> dict[str, Any]:
+def topic_type(bridge: BridgeView, args: Mapping[str, Any]) -> dict[str, Any]:
     """The type of one topic, "" if the graph does not know it."""
     types = bridge.graph.topic_types(_str_field(args, "topic"))
     return {"type": types[0] if types else ""}
 
 
-def services(bridge: Shared, args: Mapping[str, Any]) -> dict[str, Any]:
+def services(bridge: BridgeView, args: Mapping[str, Any]) -> dict[str, Any]:
     """Every service in the graph, plus the bridge's own rosapi services."""
     return {"services": [n for n, _ in _all_services(bridge)]}
 
 
-def services_for_type(bridge: Shared, args: Mapping[str, Any]) -> dict[str, Any]:
+def services_for_type(bridge: BridgeView, args: Mapping[str, Any]) -> dict[str, Any]:
     """Services whose type is the given one (either spelling)."""
     wanted = _srv_type(_str_field(args, "type"))
     return {"services": [n for n, t in _all_services(bridge) if t == wanted]}
 
 
-def service_type(bridge: Shared, args: Mapping[str, Any]) -> dict[str, Any]:
+def service_type(bridge: BridgeView, args: Mapping[str, Any]) -> dict[str, Any]:
     """The type of one service, "" if unknown."""
     name = _str_field(args, "service")
     for n, t in _all_services(bridge):
@@ -187,7 +226,7 @@ def service_type(bridge: Shared, args: Mapping[str, Any]) -> dict[str, Any]:
 _UNKNOWN = "_NODE_NAME_UNKNOWN_"
 
 
-def _node_names(bridge: Shared) -> list[tuple[str, str]]:
+def _node_names(bridge: BridgeView) -> list[tuple[str, str]]:
     names = bridge.graph.node_names()
     return sorted({(n, ns) for n, ns in names if n != _UNKNOWN})
 
@@ -196,12 +235,12 @@ def _endpoint_nodes(nodes: list[tuple[str, str]]) -> list[str]:
     return sorted({_full(n, ns) for n, ns in nodes if n != _UNKNOWN})
 
 
-def nodes(bridge: Shared, args: Mapping[str, Any]) -> dict[str, Any]:
+def nodes(bridge: BridgeView, args: Mapping[str, Any]) -> dict[str, Any]:
     """Every node, fully qualified."""
     return {"nodes": [_full(n, ns) for n, ns in _node_names(bridge)]}
 
 
-def service_node(bridge: Shared, args: Mapping[str, Any]) -> dict[str, Any]:
+def service_node(bridge: BridgeView, args: Mapping[str, Any]) -> dict[str, Any]:
     """The node serving a service, "" if unknown."""
     name = _str_field(args, "service")
     if name in HANDLERS or name in bridge.service_owners:
@@ -218,7 +257,7 @@ def service_node(bridge: Shared, args: Mapping[str, Any]) -> dict[str, Any]:
     return {"node": ""}
 
 
-def node_details(bridge: Shared, args: Mapping[str, Any]) -> dict[str, Any]:
+def node_details(bridge: BridgeView, args: Mapping[str, Any]) -> dict[str, Any]:
     """Topics a node subscribes to and publishes, and the services it offers."""
     full = _str_field(args, "node")
     name, ns = _split(full)
@@ -230,12 +269,12 @@ def node_details(bridge: Shared, args: Mapping[str, Any]) -> dict[str, Any]:
     return {"subscribing": sorted(subs), "publishing": sorted(pubs), "services": sorted(srvs)}
 
 
-def publishers(bridge: Shared, args: Mapping[str, Any]) -> dict[str, Any]:
+def publishers(bridge: BridgeView, args: Mapping[str, Any]) -> dict[str, Any]:
     """Nodes publishing on a topic."""
     return {"publishers": _endpoint_nodes(bridge.graph.topic_publishers(_topic_field(args)))}
 
 
-def publishers_qos(bridge: Shared, args: Mapping[str, Any]) -> dict[str, Any]:
+def publishers_qos(bridge: BridgeView, args: Mapping[str, Any]) -> dict[str, Any]:
     """Each publisher of a topic (its node) and the QoS it offers, with the keys and words
     rosbag2 records as a channel's ``offered_qos_profiles``; the graph reports no history
     ("unknown", depth 0), as rosbag2 records it too."""
@@ -243,12 +282,12 @@ def publishers_qos(bridge: Shared, args: Mapping[str, Any]) -> dict[str, Any]:
     return {"publishers": [_full(n, ns) for n, ns, _ in found], "qos": [q for _, _, q in found]}
 
 
-def subscribers(bridge: Shared, args: Mapping[str, Any]) -> dict[str, Any]:
+def subscribers(bridge: BridgeView, args: Mapping[str, Any]) -> dict[str, Any]:
     """Nodes subscribed to a topic."""
     return {"subscribers": _endpoint_nodes(bridge.graph.topic_subscribers(_topic_field(args)))}
 
 
-def action_servers(bridge: Shared, args: Mapping[str, Any]) -> dict[str, Any]:
+def action_servers(bridge: BridgeView, args: Mapping[str, Any]) -> dict[str, Any]:
     """Actions that have a goal service in the graph."""
     suffix = "/_action/send_goal"
     names = {n[: -len(suffix)] for n, _ in _all_services(bridge) if n.endswith(suffix)}
@@ -256,13 +295,13 @@ def action_servers(bridge: Shared, args: Mapping[str, Any]) -> dict[str, Any]:
     return {"action_servers": sorted(names)}
 
 
-def get_time(bridge: Shared, args: Mapping[str, Any]) -> dict[str, Any]:
+def get_time(bridge: BridgeView, args: Mapping[str, Any]) -> dict[str, Any]:
     """The bridge node's clock; ROS 1 key names are added for older clients."""
     sec, nanosec = bridge.graph.now()
     return {"time": {"sec": sec, "nanosec": nanosec, "secs": sec, "nsecs": nanosec}}
 
 
-def get_ros_version(bridge: Shared, args: Mapping[str, Any]) -> dict[str, Any]:
+def get_ros_version(bridge: BridgeView, args: Mapping[str, Any]) -> dict[str, Any]:
     """ROS 2, Jazzy."""
     return {"version": 2, "distro": DISTRO}
 
@@ -321,18 +360,18 @@ FIELDS: dict[str, tuple[str, ...]] = {
 
 # -- type definitions (message_details and friends) ----------------------------------------
 
-def message_details(bridge: Shared, args: Mapping[str, Any]) -> dict[str, Any]:
+def message_details(bridge: BridgeView, args: Mapping[str, Any]) -> dict[str, Any]:
     """Field names, types, array lengths and constants of a message type and its parts."""
     name = _str_field(args, "type")
     return {"typedefs": bridge.graph.typedefs(name, "msg")}
 
 
-def service_request_details(bridge: Shared, args: Mapping[str, Any]) -> dict[str, Any]:
+def service_request_details(bridge: BridgeView, args: Mapping[str, Any]) -> dict[str, Any]:
     """Typedefs of a service type's request."""
     return {"typedefs": bridge.graph.typedefs(_str_field(args, "type"), "srv", "Request")}
 
 
-def service_response_details(bridge: Shared, args: Mapping[str, Any]) -> dict[str, Any]:
+def service_response_details(bridge: BridgeView, args: Mapping[str, Any]) -> dict[str, Any]:
     """Typedefs of a service type's response."""
     return {"typedefs": bridge.graph.typedefs(_str_field(args, "type"), "srv", "Response")}
 
@@ -354,12 +393,12 @@ def _full_text(graph: Graph, type_name: str) -> str:
     return text
 
 
-def interfaces(bridge: Shared, args: Mapping[str, Any]) -> dict[str, Any]:
+def interfaces(bridge: BridgeView, args: Mapping[str, Any]) -> dict[str, Any]:
     """Every interface type installed with the bridge (what a client may ``load_types``)."""
     return {"interfaces": bridge.graph.installed_interfaces()}
 
 
-def topics_and_raw_types(bridge: Shared, args: Mapping[str, Any]) -> dict[str, Any]:
+def topics_and_raw_types(bridge: BridgeView, args: Mapping[str, Any]) -> dict[str, Any]:
     """Topics, their types, and each type's full definition text (with its dependencies)."""
     pairs = sorted(bridge.graph.topic_names_and_types())
     types = [t[0] if t else "" for _, t in pairs]
@@ -370,7 +409,7 @@ def topics_and_raw_types(bridge: Shared, args: Mapping[str, Any]) -> dict[str, A
     }
 
 
-def interface_definition(bridge: Shared, args: Mapping[str, Any]) -> dict[str, Any]:
+def interface_definition(bridge: BridgeView, args: Mapping[str, Any]) -> dict[str, Any]:
     """The full definition text of any installed message, service or action type.
 
     The type's own ``.msg``/``.srv``/``.action`` text, then every message type it
@@ -416,7 +455,7 @@ MAX_ASKED_NAMES = 10_000
 """The most names one ``/rosapi/may_*`` request may ask about."""
 
 
-def may_use(bridge: Shared, args: Mapping[str, Any]) -> dict[str, Any]:
+def may_use(bridge: BridgeView, args: Mapping[str, Any]) -> dict[str, Any]:
     """The names asked (``names``), of which the session's gate keeps the allowed ones."""
     names = args.get("names", [])
     if not isinstance(names, list) or not all(isinstance(n, str) for n in names):
@@ -435,7 +474,7 @@ for _service in MAY:
 # -- actions ---------------------------------------------------------------------------------
 
 
-def action_type(bridge: Shared, args: Mapping[str, Any]) -> dict[str, Any]:
+def action_type(bridge: BridgeView, args: Mapping[str, Any]) -> dict[str, Any]:
     """The type of one action (``pkg/action/Type``), "" if no server offers it."""
     name = _str_field(args, "action").rstrip("/")
     name = name if name.startswith("/") else "/" + name
@@ -449,17 +488,17 @@ def action_type(bridge: Shared, args: Mapping[str, Any]) -> dict[str, Any]:
     return {"type": ""}
 
 
-def action_goal_details(bridge: Shared, args: Mapping[str, Any]) -> dict[str, Any]:
+def action_goal_details(bridge: BridgeView, args: Mapping[str, Any]) -> dict[str, Any]:
     """Typedefs of an action type's goal."""
     return {"typedefs": bridge.graph.typedefs(_str_field(args, "type"), "action", "Goal")}
 
 
-def action_result_details(bridge: Shared, args: Mapping[str, Any]) -> dict[str, Any]:
+def action_result_details(bridge: BridgeView, args: Mapping[str, Any]) -> dict[str, Any]:
     """Typedefs of an action type's result."""
     return {"typedefs": bridge.graph.typedefs(_str_field(args, "type"), "action", "Result")}
 
 
-def action_feedback_details(bridge: Shared, args: Mapping[str, Any]) -> dict[str, Any]:
+def action_feedback_details(bridge: BridgeView, args: Mapping[str, Any]) -> dict[str, Any]:
     """Typedefs of an action type's feedback."""
     return {"typedefs": bridge.graph.typedefs(_str_field(args, "type"), "action", "Feedback")}
 
@@ -481,7 +520,7 @@ for _service, (_handler, _srv, _field) in _ACTION_CALLS.items():
 PARAM_TIMEOUT = 2.0
 """Seconds ``get_param_names`` waits for each listed node's parameter service."""
 
-AsyncHandler = Callable[["Shared", Mapping[str, Any]], Awaitable[dict[str, Any]]]
+AsyncHandler = Callable[["BridgeView", Mapping[str, Any]], Awaitable[dict[str, Any]]]
 
 
 def _param_name(args: Mapping[str, Any]) -> tuple[str, str, str]:
@@ -509,7 +548,7 @@ def _json_arg(args: Mapping[str, Any], name: str) -> Any:
         raise RosapiError(f"args.{name}: not valid JSON ({exc})") from None
 
 
-async def get_param_names(bridge: Shared, args: Mapping[str, Any]) -> dict[str, Any]:
+async def get_param_names(bridge: BridgeView, args: Mapping[str, Any]) -> dict[str, Any]:
     """Every parameter of every node that offers parameter services, as ``/node:param``
     (a node the graph lists no ``list_parameters`` service of is skipped at once)."""
     graph = bridge.graph
@@ -529,14 +568,14 @@ async def get_param_names(bridge: Shared, args: Mapping[str, Any]) -> dict[str, 
     return {"names": sorted(name for names in found for name in names)}
 
 
-async def _get_value(bridge: Shared, node: str, param: str) -> tuple[bool, Any]:
+async def _get_value(bridge: BridgeView, node: str, param: str) -> tuple[bool, Any]:
     try:
         return await bridge.graph.get_parameter(node, param)
     except (TimeoutError, LookupError):
         raise RosapiError(f"node {node} does not answer parameter requests") from None
 
 
-async def _set_value(bridge: Shared, node: str, param: str, value: Any) -> tuple[bool, str]:
+async def _set_value(bridge: BridgeView, node: str, param: str, value: Any) -> tuple[bool, str]:
     try:
         return await bridge.graph.set_parameter(node, param, value)
     except (TimeoutError, LookupError):
@@ -545,7 +584,7 @@ async def _set_value(bridge: Shared, node: str, param: str, value: Any) -> tuple
         raise RosapiError(str(exc)) from None
 
 
-async def get_param(bridge: Shared, args: Mapping[str, Any]) -> dict[str, Any]:
+async def get_param(bridge: BridgeView, args: Mapping[str, Any]) -> dict[str, Any]:
     """A parameter's value as JSON text (``default_value`` if it is not set)."""
     node, param, full = _param_name(args)
     default = args.get("default_value", "")
@@ -558,14 +597,14 @@ async def get_param(bridge: Shared, args: Mapping[str, Any]) -> dict[str, Any]:
     return {"value": json.dumps(value), "successful": True, "reason": ""}
 
 
-async def has_param(bridge: Shared, args: Mapping[str, Any]) -> dict[str, Any]:
+async def has_param(bridge: BridgeView, args: Mapping[str, Any]) -> dict[str, Any]:
     """Whether a parameter is set."""
     node, param, _ = _param_name(args)
     is_set, _value = await _get_value(bridge, node, param)
     return {"exists": is_set}
 
 
-async def set_param(bridge: Shared, args: Mapping[str, Any]) -> dict[str, Any]:
+async def set_param(bridge: BridgeView, args: Mapping[str, Any]) -> dict[str, Any]:
     """Set a parameter from JSON text; fails (result false) if the node refuses."""
     node, param, full = _param_name(args)
     ok, reason = await _set_value(bridge, node, param, _json_arg(args, "value"))
@@ -574,7 +613,7 @@ async def set_param(bridge: Shared, args: Mapping[str, Any]) -> dict[str, Any]:
     return {}
 
 
-async def delete_param(bridge: Shared, args: Mapping[str, Any]) -> dict[str, Any]:
+async def delete_param(bridge: BridgeView, args: Mapping[str, Any]) -> dict[str, Any]:
     """Unset (undeclare) a parameter; fails if the node does not allow it."""
     node, param, full = _param_name(args)
     ok, reason = await _set_value(bridge, node, param, None)

@@ -11,11 +11,9 @@ import asyncio
 import contextlib
 import json
 import os
+from collections.abc import Awaitable, Callable
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
-
-if TYPE_CHECKING:
-    from ..http.web import Web
+from typing import Any, Protocol
 
 __all__ = ["PEER_TIMEOUT", "serve_peer_socket"]
 
@@ -27,7 +25,18 @@ def _sock_path(directory: str, index: int) -> str:
     return os.path.join(directory, f"worker-{index}.sock")
 
 
-async def serve_peer_socket(web: Web, directory: str, index: int) -> asyncio.Server:
+class Snapshots(Protocol):
+    """A worker's status routes (:class:`~bridge_server.http.web.Web`): its own snapshot,
+    and where the other workers' are fetched from."""
+
+    peers: Callable[[], Awaitable[list[dict[str, Any]]]] | None
+
+    def local(self) -> dict[str, Any]:
+        """This process's snapshot."""
+        ...
+
+
+async def serve_peer_socket(web: Snapshots, directory: str, index: int) -> asyncio.Server:
     """Answer other workers' requests for this worker's snapshot; set ``web.peers``."""
     path = _sock_path(directory, index)
     with contextlib.suppress(FileNotFoundError):

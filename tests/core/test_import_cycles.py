@@ -1,6 +1,5 @@
 """No module imports another that imports it back: at run time in every package, and even
-counting the imports made only for type checking in roslibpy_lite and bridge_server (but for
-bridge_server's one known cycle)."""
+counting the imports made only for type checking in roslibpy_lite and bridge_server."""
 
 from __future__ import annotations
 
@@ -128,28 +127,12 @@ def test_the_type_level_graph_counts_type_checking_imports() -> None:
     assert "roslibpy_lite.api" not in _graph()["roslibpy_lite.bag.player"]
 
 
-KNOWN_TYPE_LEVEL_CYCLES: dict[str, list[list[str]]] = {
-    "bridge_server": [
-        ["bridge_server.security.gate", "bridge_server.session.config",
-         "bridge_server.session.host", "bridge_server.session.outbox",
-         "bridge_server.session.ownership", "bridge_server.session.resume",
-         "bridge_server.session.rosapi"],
-        ["bridge_server.foxglove.hub", "bridge_server.foxglove.session"],
-        ["bridge_server.http.snapshot", "bridge_server.http.web", "bridge_server.http.web_access",
-         "bridge_server.server", "bridge_server.workers.forward", "bridge_server.workers.peers"],
-    ],
-}
-"""The type-level cycles known today, to be cut (issue 40, item 3: sessions that take a small
-link and the shared state instead of the ``Bridge`` and the connection, which the session,
-security, http and foxglove modules name for their types). A new cycle, or this one grown,
-fails; when it shrinks, write the smaller one here."""
-
-
 @pytest.mark.parametrize("package", ["roslibpy_lite", "bridge_server"])
 def test_no_type_level_import_cycles(package: str) -> None:
     """Counting the imports made only for type checking, each package's modules import each
-    other in one direction only (each seam a small protocol, not a reach back), but for the
-    cycles listed as known."""
+    other in one direction only: each seam a small protocol (a session's link and shared
+    state, the gate's session, the status's bridge), never a reach back to ``Bridge`` or
+    ``Session``."""
     cycles = [c for c in _cycles(_graph(type_level=True))
               if any(m.split(".")[0] == package for m in c)]
-    assert cycles == KNOWN_TYPE_LEVEL_CYCLES.get(package, []), f"type-level import cycles: {cycles}"
+    assert not cycles, f"type-level import cycles: {cycles}"
