@@ -1,5 +1,11 @@
 """The websocket server: one :class:`~bridge_server.session.Session` per connection.
 
+Each connection is its session's link
+(:class:`~bridge_server.security.websockets_internals.WebSocketLink`, a
+:class:`~bridge_server.session.link.ClientLink`), and the :class:`Bridge` is what its
+sessions share (:class:`~bridge_server.session.host.Shared`): a session sees neither the
+websocket library nor the bridge whole.
+
 Frames: text frames carry JSON ops, binary frames CBOR-encoded ops. Inbound
 frames larger than ``max_message_size`` close the connection with code 1009
 ("message too big", websockets' own close reason names the limit).
