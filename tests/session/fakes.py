@@ -15,6 +15,7 @@ from contextlib import asynccontextmanager, nullcontext
 from typing import Any, cast
 
 from bridge_server.codec.encodings import EncodedMessage
+from bridge_server.foxglove.session import FoxgloveSession
 from bridge_server.interfaces import ConversionError, ServiceCallError, canonical_name
 from bridge_server.security.auth import Principal
 from bridge_server.server import Bridge, BridgeConfig, ServedGraph
@@ -22,7 +23,7 @@ from bridge_server.session.frames import Frame, Wire, joined
 from bridge_server.session.session import Session
 from roslibpy_lite.protocol.frames import decode_frame
 
-__all__ = ["FakeGraph", "FakeLink", "LinkEnded", "open_session"]
+__all__ = ["FakeGraph", "FakeLink", "LinkEnded", "open_foxglove", "open_session"]
 
 
 class LinkEnded(Exception):
@@ -304,6 +305,17 @@ class FakeGraph:
         assert answer is not None
         return answer(args)
 
+    # -- what the Foxglove hub lists ----------------------------------------------------------------
+
+    def topic_names_and_types(self) -> list[tuple[str, list[str]]]:
+        return [(t, [f.type_name]) for t, f in self.subscriptions.items() if f.type_name]
+
+    def service_names_and_types(self) -> list[tuple[str, list[str]]]:
+        return []
+
+    def server_count(self, service: str) -> int:
+        return 0
+
     # -- the ServedGraph's life (the bridge never starts it here) ------------------------------------
 
     def start(self) -> None:
@@ -314,6 +326,23 @@ class FakeGraph:
 
     def close(self) -> None:
         """Nothing to release."""
+
+
+@asynccontextmanager
+async def open_foxglove(link: FakeLink | None = None
+                        ) -> AsyncIterator[tuple[FoxgloveSession, FakeLink, FakeGraph]]:
+    """A Foxglove session running over ``link``, as :func:`open_session` a rosbridge one."""
+    graph = FakeGraph()
+    link = link or FakeLink()
+    bridge = Bridge(BridgeConfig(), cast(ServedGraph, graph))
+    session = FoxgloveSession(bridge, bridge.foxglove, link, 1)
+    running = asyncio.create_task(session.run())
+    try:
+        yield session, link, graph
+    finally:
+        link.hang_up()
+        await asyncio.wait_for(running, 5.0)
+        await bridge.foxglove.close()
 
 
 @asynccontextmanager
