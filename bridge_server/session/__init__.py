@@ -4,5 +4,7 @@ groups (:mod:`.topics`, :mod:`.services`, :mod:`.actions`) with the handle they 
 (:mod:`.calls`), the outbox (:mod:`.outbox`),
 who serves which name (:mod:`.ownership`), resumable sessions (:mod:`.resume`) and the
 ``/rosapi/*`` introspection services (:mod:`.rosapi`). ROS is reached only through the
-:class:`~bridge_server.graph.Graph`.
+:class:`~bridge_server.graph.Graph`, the client only through its link
+(:class:`~.link.ClientLink`, framed as in :mod:`.frames`), the rest of the server only
+through what the sessions share (:class:`~.host.Shared`); the settings are :mod:`.config`.
 """
