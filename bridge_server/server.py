@@ -1,7 +1,7 @@
 """The websocket server: one :class:`~bridge_server.session.Session` per connection.
 
 Each connection is its session's link
-(:class:`~bridge_server.security.websockets_internals.WebSocketLink`, a
+(:class:`~bridge_server.front.WebSocketLink`, a
 :class:`~bridge_server.session.link.ClientLink`), and the :class:`Bridge` is what its
 sessions share (:class:`~bridge_server.session.host.Shared`): a session sees neither the
 websocket library nor the bridge whole.

@@ -2,9 +2,10 @@
 
 One module per job: :mod:`.options` (the command line), :mod:`.credentials` (address and
 token of a request), :mod:`.handshake` (:class:`Security`: TLS, reload, the handshake),
-:mod:`.gate` (:class:`Gate`: per session), :mod:`.redaction` (tokens out of logs) and
-:mod:`.websockets_internals` (the inbound byte budget, the only code that relies on
-websockets' private internals). Who may see the plain-HTTP routes is
+:mod:`.gate` (:class:`Gate`: per session) and :mod:`.redaction` (tokens out of logs); the
+connection class it serves with (the inbound byte budget, the frame fast path, the
+sessions' link) is :mod:`bridge_server.front`, the only code that relies on websockets'
+private internals. Who may see the plain-HTTP routes is
 :class:`bridge_server.http.web.WebAccess`.
 
 One :class:`Security` per bridge holds the configuration (:class:`SecurityConfig`,
@@ -37,6 +38,7 @@ error text (:class:`RedactTokens` also scrubs other libraries' log lines).
 
 from __future__ import annotations
 
+from ..front import BridgeConnection, WebSocketLink, check_websockets_internals
 from .credentials import is_loopback
 from .gate import POLICY_VIOLATION, PRE_AUTH_FRAME_LIMIT, Gate
 from .handshake import Security
@@ -50,7 +52,6 @@ from .options import (
     user_name,
 )
 from .redaction import RedactTokens, install_log_redaction, redact
-from .websockets_internals import BridgeConnection, WebSocketLink, check_websockets_internals
 
 __all__ = [
     "POLICY_VIOLATION",

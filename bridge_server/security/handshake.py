@@ -15,12 +15,12 @@ from typing import Any
 from websockets.asyncio.server import ServerConnection
 from websockets.http11 import Request, Response
 
+from ..front import BridgeConnection, Inbound, check_websockets_internals
 from ..interfaces import BridgeError
 from .auth import AuthConfig, AuthFileError, FailureTracker, Principal, load_auth_file
 from .credentials import client_address, is_loopback, token_of
 from .gate import PRE_AUTH_FRAME_LIMIT, Gate, Guarded
 from .options import SecurityConfig
-from .websockets_internals import BridgeConnection, Inbound, check_websockets_internals
 
 __all__ = ["Security"]
 

@@ -3,7 +3,7 @@
 A :class:`~bridge_server.session.session.Session` (and a Foxglove one) reads frames from, and
 writes frames to, a :class:`ClientLink`; it never sees the websocket library. The bridge's
 link is its websocket connection
-(:class:`~bridge_server.security.websockets_internals.BridgeConnection`, the only code that
+(:class:`~bridge_server.front.WebSocketLink`, the only code that
 touches websockets' internals); tests drive a session over a link of their own
 (``tests/session/fakes.py``) with no socket at all.
 

@@ -48,6 +48,7 @@ try:
     from .. import eventloop, security
     from ..foxglove import SUBPROTOCOL as FOXGLOVE
     from ..foxglove import select_subprotocol
+    from ..front import BridgeConnection
     from ..http.relay_web import RelayWeb
     from ..http.web import Reply, address_of, handshake_headers, respond
     from ..http.web_access import WebAccess
@@ -57,7 +58,6 @@ try:
     from ..security.credentials import client_address
     from ..security.gate import POLICY_VIOLATION
     from ..security.options import MAX_MESSAGE_SIZE
-    from ..security.websockets_internals import BridgeConnection
     from ..server import REFUSALS, Bridge, BridgeConfig, websockets_pings
     from ..session.resume import ResumeConfig
     from ..session.session import SessionConfig

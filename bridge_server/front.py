@@ -1,5 +1,8 @@
-"""The only code that builds on websockets' private internals: the inbound byte budget and
-the frames handed to the session as they are read.
+"""The websocket front's connection: the only code that builds on websockets' private
+internals. A connection is its session's link (:class:`WebSocketLink`, a
+:class:`~bridge_server.session.link.ClientLink`: frames straight to the transport, one write
+for a batch, the keepalive), with the inbound byte budget and the frames handed to the
+session as they are read (:class:`BridgeConnection`).
 
 websockets reads frames into an ``Assembler`` with a frame queue; the bridge replaces both
 on every server connection (:class:`BridgeConnection`) so that the bytes waiting to be
@@ -55,20 +58,20 @@ try:  # websockets' own unmasking, in C where it was built with it
 except ImportError:  # pragma: no cover - a websockets without its C extension
     from websockets.utils import apply_mask
 
-from ..interfaces import BridgeError
-from ..session.frames import JOINED_BYTES, frame_parts, joined
+from .interfaces import BridgeError
+from .session.frames import JOINED_BYTES, frame_parts, joined
 
 log = logging.getLogger("bridge_server.security")
 
 if TYPE_CHECKING:
-    from ..session.frames import Frame as OutFrame
-    from .auth import Principal
-    from .options import SecurityConfig
+    from .security.auth import Principal
+    from .security.options import SecurityConfig
+    from .session.frames import Frame as OutFrame
 
 
 class ConnectionLimits(Protocol):
     """What a connection needs of the bridge's security: its limits, the bytes held by every
-    connection, and being told when it ends (:class:`~.handshake.Security`)."""
+    connection, and being told when it ends (:class:`~bridge_server.security.Security`)."""
 
     config: SecurityConfig
     inbound: Inbound
@@ -523,7 +526,7 @@ def check_websockets_internals() -> None:
     if problem is not None:
         raise BridgeError(
             f"websockets {version('websockets')} is not supported by the bridge: its inbound "
-            f"byte budget (bridge_server/security/websockets_internals.py) builds on "
+            f"byte budget (bridge_server/front.py) builds on "
             f"websockets' private Assembler internals, tested with "
             f"websockets{WEBSOCKETS_TESTED} ({problem}); install "
             f"'websockets{WEBSOCKETS_TESTED}'"
