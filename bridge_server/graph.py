@@ -30,6 +30,8 @@ from roslibpy_lite.protocol.goal_status import GoalStatus
 if TYPE_CHECKING:
     from msgs.dynamic import TypeStore
 
+    from .codec.encodings import Encoded
+
 __all__ = [
     "ACTIVE",
     "CANCEL_ANSWERS",
@@ -142,7 +144,7 @@ class Message(Protocol):
     def stamp_ns(self) -> int:
         """When the ROS side received it (nanoseconds since the epoch)."""
 
-    def encoded(self, encoding: str, name: str | None = None) -> str | bytes:
+    def encoded(self, encoding: str, name: str | None = None) -> Encoded:
         """The whole ``publish`` op in ``encoding`` (``name``: the topic as the client spelt
         it; see :data:`bridge_server.codec.encodings.ENCODINGS`)."""
 

@@ -20,9 +20,14 @@ from typing import Any
 
 from roslibpy_lite.protocol.ops import ENCODINGS as NAMES
 
-from .publish import encode_publish_cbor_obj, encode_publish_cbor_raw, encode_publish_json
+from .publish import cbor_raw_parts, encode_publish_cbor_obj, encode_publish_json
 
-__all__ = ["ENCODINGS", "EncodedMessage", "Encoding"]
+__all__ = ["ENCODINGS", "Encoded", "EncodedMessage", "Encoding"]
+
+Encoded = str | bytes | tuple[bytes, bytes]
+"""A whole ``publish`` op as an encoding makes it: text (JSON), bytes (CBOR), or bytes in two
+parts to be sent one after the other, a head and a payload the ROS side received and that is
+not copied (``cbor-raw``: :func:`~bridge_server.codec.publish.cbor_raw_parts`)."""
 
 
 class EncodedMessage:
@@ -39,15 +44,16 @@ class EncodedMessage:
         self.topic = topic
         self.data = data
         self.stamp_ns = stamp_ns
-        self._encoded: dict[str, str | bytes] = {}
+        self._encoded: dict[str, Encoded] = {}
         self.framed: dict[tuple[str, str | None], Any] | None = None
         """Its websocket frames by (encoding, topic spelling), made by the first client's
         outbox and shared by the others (:func:`bridge_server.session.outbox.wire`)."""
 
-    def encoded(self, encoding: str, name: str | None = None) -> str | bytes:
+    def encoded(self, encoding: str, name: str | None = None) -> Encoded:
         """The whole ``publish`` op in ``encoding`` (a key of :data:`ENCODINGS`): text for
-        JSON, bytes for the binary ones. ``name`` is the topic as the client spelt it
-        (``chatter`` for ``/chatter``); the message itself is still encoded once."""
+        JSON, bytes for the binary ones (a pair of them for ``cbor-raw``: see
+        :data:`Encoded`). ``name`` is the topic as the client spelt it (``chatter`` for
+        ``/chatter``); the message itself is still encoded once."""
         if name is None or name == self.topic:
             done = self._encoded.get(encoding)
             if done is None:
@@ -78,15 +84,14 @@ class Encoding:
     """What a subscribe's ``compression`` says to ask for it."""
     binary: bool
     """Whether its frames are binary (CBOR) rather than text; text may be fragmented."""
-    make: Callable[[EncodedMessage, str], str | bytes]
+    make: Callable[[EncodedMessage, str], Encoded]
     """The whole op for a message, under the topic name given."""
 
 
 ENCODINGS: dict[str, Encoding] = {e.name: e for e in (
     Encoding("none", False, lambda m, topic: encode_publish_json(topic, m.message_json())),
     Encoding("cbor", True, lambda m, topic: encode_publish_cbor_obj(topic, m.cbor_obj())),
-    Encoding("cbor-raw", True,
-             lambda m, topic: encode_publish_cbor_raw(topic, m.data, m.stamp_ns)),
+    Encoding("cbor-raw", True, lambda m, topic: cbor_raw_parts(topic, m.data, m.stamp_ns)),
 )}
 """Every encoding the bridge serves, by name."""
 

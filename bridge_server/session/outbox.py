@@ -193,16 +193,24 @@ def wire(sub: Subscription, inc: Incoming) -> Wire | None:
         if made is not None:
             return made
     encoded = inc.encoded(sub.compression, sub.wire)
+    pieces: tuple[bytes, ...]
     if isinstance(encoded, str):
         if len(encoded) > JOINED_BYTES:  # not kept twice (text and bytes): encoded per client
             return None
-        data = encoded.encode()
+        pieces = (encoded.encode(),)
         first = 0x81  # FIN, text
-    else:
-        data = encoded
+    else:  # a payload the encoding made in two parts (cbor-raw) is not joined here either
+        pieces = encoded if isinstance(encoded, tuple) else (encoded,)
         first = 0x82  # FIN, binary
-    head = header(first, len(data))
-    made = cache[key] = Wire((head + data,) if len(data) <= JOINED_BYTES else (head, data))
+    size = sum(map(len, pieces))
+    head = header(first, size)
+    if size <= JOINED_BYTES:
+        parts = (b"".join((head, *pieces)),)
+    elif len(pieces[0]) <= JOINED_BYTES:  # the encoding's own small head joins the frame's
+        parts = (head + pieces[0], *pieces[1:])
+    else:
+        parts = (head, *pieces)
+    made = cache[key] = Wire(parts)
     return made
 
 

@@ -10,7 +10,8 @@ import time
 from typing import Any
 
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
-from rclpy.serialization import deserialize_message
+from rclpy.serialization import deserialize_message, serialize_message
+from sensor_msgs.msg import Image
 from std_msgs.msg import Int32, Int32MultiArray, String, UInt8MultiArray
 
 from tests.bridge.support import (
@@ -234,6 +235,25 @@ async def test_compression_cbor_raw(ws_connect: Any, ros_node: Any, topic: str) 
     assert set(msg) == {"secs", "nsecs", "bytes"}
     assert msg["secs"] > 0 and 0 <= msg["nsecs"] < 1_000_000_000
     assert deserialize_message(msg["bytes"], String).data == "raw"
+
+
+async def test_compression_cbor_raw_camera_frame(ws_connect: Any, ros_node: Any,
+                                                 topic: str) -> None:
+    """A 640x480 rgb8 frame over cbor-raw (its envelope made apart from its 921 KB and written
+    in pieces) arrives as one CBOR op carrying the frame's CDR, whole."""
+    pub = ros_node.create_publisher(Image, topic, 10)
+    ws = await ws_connect()
+    await ws.send({"op": "subscribe", "topic": topic, "type": "sensor_msgs/msg/Image",
+                   "compression": "cbor-raw"})
+    await wait_subscribers(pub)
+    image = Image(height=480, width=640, encoding="rgb8", step=1920,
+                  data=bytes(range(256)) * 3600)
+    pub.publish(image)
+    op = await ws.expect(op="publish", topic=topic)
+    assert set(op["msg"]) == {"secs", "nsecs", "bytes"}
+    raw = op["msg"]["bytes"]
+    assert len(raw) == len(serialize_message(image))
+    assert deserialize_message(raw, Image) == image
 
 
 async def test_merged_subscriptions_deliver_once(ws_connect: Any, ros_node: Any, topic: str) -> None:

@@ -8,6 +8,7 @@ from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
 from typing import Any
 
+import cbor2
 import pytest
 from hypothesis import given
 from hypothesis import strategies as st
@@ -15,6 +16,7 @@ from websockets.asyncio.client import ClientConnection, connect
 from websockets.asyncio.server import ServerConnection, serve
 from websockets.frames import Frame, Opcode
 
+from bridge_server.codec.encodings import EncodedMessage
 from bridge_server.security import WebSocketLink
 from bridge_server.session.outbox import Frame as OutFrame
 from bridge_server.session.outbox import Outbox, Subscription, frame_bytes
@@ -213,3 +215,31 @@ async def test_a_message_is_framed_once_and_its_bytes_written_to_every_viewer() 
         for box, writer in ((box1, w1), (box2, w2)):
             box.close()
             await asyncio.wait_for(writer, 5.0)
+
+
+class _Received(EncodedMessage):
+    """A received message as both ROS sides give it: its CDR bytes, encoded by the bridge's
+    own encodings (cbor-raw needs neither JSON nor a CBOR object)."""
+
+    __slots__ = ()
+
+
+async def test_a_cbor_raw_camera_frame_is_written_without_copying_its_bytes() -> None:
+    """A cbor-raw camera frame goes to the socket as the frame's and the op's heads and then
+    the very bytes the ROS side received (neither CBOR nor websocket framing copies them),
+    and the client reads the op cbor2 makes of it."""
+    async with _parked_outbox(None) as (box, client, ws, writer):
+        calls = _record_writes(ws)
+        data = bytes(range(256)) * 3600  # a 640x480 rgb8 frame's size
+        frame = _Received("/camera", data, 1_700_000_000_123_456_789)
+        sub = Subscription(box, "/camera", "/camera")
+        sub.ids["i"] = ops.Subscribe(topic="/camera", compression="cbor-raw")
+        sub.configure(10)
+        box.push(sub, frame)  # written at once: parked
+        assert len(calls) == 1 and calls[0][-1] is data, "the payload not copied"
+        assert len(calls[0]) == 2, "the websocket and CBOR heads in one piece before it"
+        got = await asyncio.wait_for(client.recv(), 5.0)
+        assert got == cbor2.dumps({"op": "publish", "topic": "/camera", "msg": {
+            "secs": 1_700_000_000, "nsecs": 123_456_789, "bytes": data}})
+        box.close()
+        await asyncio.wait_for(writer, 5.0)
