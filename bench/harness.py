@@ -389,9 +389,14 @@ _FRAME_SEQ = re.compile(rb"(\d+) \d{6,}")
 in a publish frame's first bytes, whichever the encoding (JSON text, CBOR, CDR in cbor-raw)."""
 
 
+FRAME_SEQ_BYTES = 512
+"""A bench image frame's first bytes, where :func:`frame_seq` finds its number."""
+
+
 def frame_seq(frame: str | bytes) -> int | None:
-    """The sequence number of a bench image's publish frame (``None`` if it has none)."""
-    head = frame[:512]
+    """The sequence number of a bench image's publish frame (``None`` if it has none); only
+    its first :data:`FRAME_SEQ_BYTES` are read."""
+    head = frame[:FRAME_SEQ_BYTES]
     m = _FRAME_SEQ.search(head.encode() if isinstance(head, str) else head)
     return int(m.group(1)) if m else None
 

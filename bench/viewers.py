@@ -26,13 +26,14 @@ import re
 import struct
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 from urllib.parse import urlsplit
 
 from websockets.frames import Frame, Opcode
 
-__all__ = ["ViewerPool", "cpu_seconds"]
+__all__ = ["Viewer", "ViewerPool", "cpu_seconds", "open_viewer"]
 
 _SYNC = json.dumps({"op": "publish", "msg": {}})  # no topic: an error status comes back
 PREFIX = 24
@@ -50,9 +51,16 @@ def _client_frame(text: str) -> bytes:
 class Viewer(asyncio.Protocol):
     """One raw websocket connection that counts the data frames it receives."""
 
-    def __init__(self, request: bytes, decode: bool) -> None:
+    def __init__(self, request: bytes, decode: bool, prefix: int = PREFIX,
+                 on_frame: Callable[[bytes, int], None] | None = None) -> None:
+        """``prefix``: bytes of each frame looked at; ``on_frame(prefix, size)``, if given, is
+        called with them and the payload's size for every data frame after the sync (a
+        status too)."""
         self.request = request
         self.decode = decode
+        self.prefix_len = prefix
+        self.on_frame = on_frame
+        self.size = 0  # the current frame's payload size
         self.transport: asyncio.Transport | None = None
         self.opened: asyncio.Future[None] = asyncio.get_running_loop().create_future()
         self.synced: asyncio.Future[None] = asyncio.get_running_loop().create_future()
@@ -80,6 +88,13 @@ class Viewer(asyncio.Protocol):
             if not fut.done():
                 fut.set_result(None)
 
+    def close(self) -> None:
+        """Send a close frame and close the connection."""
+        if self.transport is not None and not self.transport.is_closing():
+            self.transport.write(Frame(Opcode.CLOSE, b"\x03\xe8").serialize(  # 1000
+                mask=True, extensions=[]))
+            self.transport.close()
+
     def send(self, text: str) -> None:
         """Send one text frame."""
         assert self.transport is not None
@@ -106,8 +121,8 @@ class Viewer(asyncio.Protocol):
                 take = min(self.left, n - pos)
                 if self.payload is not None:
                     self.payload += data[pos:pos + take]
-                elif len(self.prefix) < PREFIX:
-                    self.prefix += data[pos:pos + min(take, PREFIX - len(self.prefix))]
+                elif len(self.prefix) < self.prefix_len:
+                    self.prefix += data[pos:pos + min(take, self.prefix_len - len(self.prefix))]
                 pos += take
                 self.left -= take
                 if not self.left:
@@ -133,7 +148,7 @@ class Viewer(asyncio.Protocol):
             keep = self.decode or self.opcode >= 0x8 or not self.synced.done()
             self.payload = bytearray() if keep else None
             self.prefix.clear()
-            self.left = size
+            self.left = self.size = size
             if not size:
                 self._frame_done()
 
@@ -152,6 +167,8 @@ class Viewer(asyncio.Protocol):
             if b'"status"' in payload[:64]:
                 self.synced.set_result(None)
             return
+        if self.on_frame is not None:
+            self.on_frame(bytes(payload if payload is not None else self.prefix), self.size)
         if payload is not None:
             self.frames += 1
             self._check(bytes(payload), time.monotonic_ns())
@@ -175,7 +192,15 @@ class Viewer(asyncio.Protocol):
             self.latencies.append((now - stamp) / 1e6)
 
 
-async def _open(url: str, subscribe: str, decode: bool) -> Viewer:
+async def open_viewer(url: str, subscribe: str, prefix: int = PREFIX,
+                      on_frame: Callable[[bytes, int], None] | None = None) -> Viewer:
+    """One counting viewer in this process (see :class:`Viewer`), once the server has read
+    its ``subscribe`` (JSON text)."""
+    return await _open(url, subscribe, False, prefix, on_frame)
+
+
+async def _open(url: str, subscribe: str, decode: bool, prefix: int = PREFIX,
+                on_frame: Callable[[bytes, int], None] | None = None) -> Viewer:
     parts = urlsplit(url)
     key = base64.b64encode(os.urandom(16)).decode()
     path = parts.path or "/"
@@ -184,7 +209,7 @@ async def _open(url: str, subscribe: str, decode: bool) -> Viewer:
                "Sec-WebSocket-Version: 13\r\n\r\n").encode()
     loop = asyncio.get_running_loop()
     assert parts.hostname is not None and parts.port is not None, url
-    _, viewer = await loop.create_connection(lambda: Viewer(request, decode),
+    _, viewer = await loop.create_connection(lambda: Viewer(request, decode, prefix, on_frame),
                                              parts.hostname, parts.port)
     await asyncio.wait_for(viewer.opened, 30)
     viewer.send(subscribe)
@@ -214,10 +239,7 @@ async def _serve(url: str, count: int, subscribe: str) -> None:
                           "seqs": first.seqs,
                           "latencies_ms": first.latencies}), flush=True)
     for v in viewers:
-        if v.transport is not None:
-            v.transport.write(Frame(Opcode.CLOSE, b"\x03\xe8").serialize(  # 1000
-                mask=True, extensions=[]))
-            v.transport.close()
+        v.close()
 
 
 class ViewerPool:

@@ -7,8 +7,10 @@ import os
 
 import cbor2
 
-from bench.harness import RosSide, frame_seq
+from bench.harness import FRAME_SEQ_BYTES, Bridge, RosSide, frame_seq
 from bench.run import InOrder
+from bench.viewers import open_viewer
+from tests.helpers import async_wait_until
 
 STAMP = "12 743068554089"  # "<seq> <monotonic ns>", as bench/ros_side.py publishes
 
@@ -59,3 +61,42 @@ async def test_ros_side_counts_images_in_order() -> None:
     assert done["sent"] == got["received"] == len(got["in_order_at"]) == 30
     assert got["in_order_at"] == sorted(got["in_order_at"])
     assert got["in_order_at"][-1] <= done["t_end"] + 1.0
+
+
+async def test_the_image_client_reads_every_number_from_a_real_bridge() -> None:
+    """The image figures' client, a viewer that reads each frame's first bytes and skips the
+    rest, gets the number of every 640x480 frame a real bridge sends, in each encoding, and
+    the frame's size."""
+    domain = int(os.environ["ROS_DOMAIN_ID"])
+    topic = "/bench_test/counted_image"
+    bridge = await Bridge(domain).start()
+    streams: dict[str, InOrder] = {}
+    sizes: dict[str, int] = {}
+    viewers = []
+    try:
+        for compression in ("none", "cbor", "cbor-raw"):
+            stream = streams[compression] = InOrder()
+
+            def on_frame(prefix: bytes, size: int, stream: InOrder = stream,
+                         compression: str = compression) -> None:
+                stream.feed(frame_seq(prefix))
+                sizes[compression] = size
+
+            viewers.append(await open_viewer(bridge.url, json.dumps(
+                {"op": "subscribe", "topic": topic, "type": "sensor_msgs/msg/Image",
+                 "compression": compression, "queue_length": 5}), FRAME_SEQ_BYTES, on_frame))
+        pub = await RosSide(domain, "publish", "--kind", "image", "--topic", topic, "--count",
+                            "20", "--rate", "20", "--depth", "50", "--wait-subs", "1",
+                            "--settle", "0.3").start()
+        try:
+            await pub.event("done", 60)
+            await async_wait_until(lambda: all(s.unique == 20 for s in streams.values()), 20.0,
+                                   "every frame counted in every encoding")
+        finally:
+            await pub.close()
+    finally:
+        for viewer in viewers:
+            viewer.close()
+        await bridge.stop()
+    assert {c: s.frames for c, s in streams.items()} == dict.fromkeys(streams, 20)
+    assert sizes["cbor-raw"] > 640 * 480 * 3 and sizes["none"] > 640 * 480 * 4
