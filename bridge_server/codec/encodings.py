@@ -20,14 +20,15 @@ from typing import Any
 
 from roslibpy_lite.protocol.ops import ENCODINGS as NAMES
 
-from .publish import cbor_raw_parts, encode_publish_cbor_obj, encode_publish_json
+from .publish import cbor_obj_parts, cbor_raw_parts, encode_publish_json
 
 __all__ = ["ENCODINGS", "Encoded", "EncodedMessage", "Encoding"]
 
 Encoded = str | bytes | tuple[bytes, bytes]
-"""A whole ``publish`` op as an encoding makes it: text (JSON), bytes (CBOR), or bytes in two
-parts to be sent one after the other, a head and a payload the ROS side received and that is
-not copied (``cbor-raw``: :func:`~bridge_server.codec.publish.cbor_raw_parts`)."""
+"""A whole ``publish`` op as an encoding makes it: text (JSON), bytes, or bytes in two parts
+to be sent one after the other without joining them: a head and the payload (``cbor-raw``:
+the bytes the ROS side received, :func:`~bridge_server.codec.publish.cbor_raw_parts`;
+``cbor``: the message's CBOR, :func:`~bridge_server.codec.publish.cbor_obj_parts`)."""
 
 
 class EncodedMessage:
@@ -90,7 +91,7 @@ class Encoding:
 
 ENCODINGS: dict[str, Encoding] = {e.name: e for e in (
     Encoding("none", False, lambda m, topic: encode_publish_json(topic, m.message_json())),
-    Encoding("cbor", True, lambda m, topic: encode_publish_cbor_obj(topic, m.cbor_obj())),
+    Encoding("cbor", True, lambda m, topic: cbor_obj_parts(topic, m.cbor_obj())),
     Encoding("cbor-raw", True, lambda m, topic: cbor_raw_parts(topic, m.data, m.stamp_ns)),
 )}
 """Every encoding the bridge serves, by name."""

@@ -14,8 +14,8 @@ from typing import Any, Protocol
 
 import cbor2
 
-__all__ = ["CborConverter", "cbor_raw_parts", "encode_publish_cbor", "encode_publish_cbor_obj",
-           "encode_publish_cbor_raw", "encode_publish_json"]
+__all__ = ["CborConverter", "cbor_obj_parts", "cbor_raw_parts", "encode_publish_cbor",
+           "encode_publish_cbor_obj", "encode_publish_cbor_raw", "encode_publish_json"]
 
 _encode_str: Callable[[str], str] = json.encoder.encode_basestring
 _cbor_dumps: Callable[[Any], bytes] = cbor2.dumps
@@ -59,7 +59,14 @@ def encode_publish_cbor(topic: str, ros_msg: Any, conv: CborConverter) -> bytes:
 def encode_publish_cbor_obj(topic: str, obj: Any) -> bytes:
     """The CBOR bytes of a whole publish op around a message already made a CBOR-ready
     object (the envelope bytes are cached per topic)."""
-    return _cbor_prefix(topic) + _cbor_dumps(obj)
+    return b"".join(cbor_obj_parts(topic, obj))
+
+
+def cbor_obj_parts(topic: str, obj: Any) -> tuple[bytes, bytes]:
+    """:func:`encode_publish_cbor_obj`'s bytes in two parts, the envelope's (cached per
+    topic) and the message's, not joined (for a camera frame, the join was one more copy of
+    its 921 KB)."""
+    return _cbor_prefix(topic), _cbor_dumps(obj)
 
 
 _RAW_SECS = b"\xa3" + cbor2.dumps("secs")  # the msg map {secs, nsecs, bytes}, up to secs's value

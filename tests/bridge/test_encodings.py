@@ -32,8 +32,8 @@ class _Played(EncodedMessage):
 
 def test_every_encoding_a_client_may_ask_for_is_served_once_per_message() -> None:
     """Each name in ops.ENCODINGS makes the whole publish op (text for JSON, bytes for the
-    binary ones: cbor-raw's a head and the received bytes themselves), under the topic as the
-    client spelt it, and the message's own is made once and shared."""
+    binary ones, in two parts: cbor-raw's a head and the received bytes themselves), under the
+    topic as the client spelt it, and the message's own is made once and shared."""
     assert tuple(ENCODINGS) == ops.ENCODINGS
     for name, encoding in ENCODINGS.items():
         message = _Played()
@@ -41,8 +41,8 @@ def test_every_encoding_a_client_may_ask_for_is_served_once_per_message() -> Non
         assert message.encoded(name) is first, name  # kept: every viewer shares it
         assert isinstance(first, str) is not encoding.binary, name
         spelt = message.encoded(name, "chatter")
-        if isinstance(spelt, tuple):  # a head and the payload itself (cbor-raw)
-            assert spelt[1] is message.data, name
+        if isinstance(spelt, tuple):  # a head and a payload, not joined
+            assert name != "cbor-raw" or spelt[1] is message.data, name
             spelt = b"".join(spelt)
         op = cbor2.loads(spelt) if isinstance(spelt, bytes) else json.loads(spelt)
         assert op["op"] == "publish" and op["topic"] == "chatter", (name, op)

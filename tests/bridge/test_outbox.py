@@ -219,9 +219,12 @@ async def test_a_message_is_framed_once_and_its_bytes_written_to_every_viewer() 
 
 class _Received(EncodedMessage):
     """A received message as both ROS sides give it: its CDR bytes, encoded by the bridge's
-    own encodings (cbor-raw needs neither JSON nor a CBOR object)."""
+    own encodings (its CBOR object: the bytes under ``data``)."""
 
     __slots__ = ()
+
+    def cbor_obj(self) -> Any:
+        return {"data": self.data}
 
 
 async def test_a_cbor_raw_camera_frame_is_written_without_copying_its_bytes() -> None:
@@ -241,5 +244,26 @@ async def test_a_cbor_raw_camera_frame_is_written_without_copying_its_bytes() ->
         got = await asyncio.wait_for(client.recv(), 5.0)
         assert got == cbor2.dumps({"op": "publish", "topic": "/camera", "msg": {
             "secs": 1_700_000_000, "nsecs": 123_456_789, "bytes": data}})
+        box.close()
+        await asyncio.wait_for(writer, 5.0)
+
+
+async def test_a_cbor_camera_frame_is_written_without_joining_its_envelope() -> None:
+    """A big message over cbor goes to the socket as the frame's and the op's heads and then
+    the message's CBOR as the encoding made it (not copied into one buffer with the
+    envelope), and the client reads the op cbor2 makes of it."""
+    async with _parked_outbox(None) as (box, client, ws, writer):
+        calls = _record_writes(ws)
+        frame = _Received("/camera", bytes(range(256)) * 3600, 1_700_000_000_123_456_789)
+        sub = Subscription(box, "/camera", "/camera")
+        sub.ids["i"] = ops.Subscribe(topic="/camera", compression="cbor")
+        sub.configure(10)
+        box.push(sub, frame)  # written at once: parked
+        encoded = frame.encoded("cbor")
+        assert isinstance(encoded, tuple) and calls == [(calls[0][0], encoded[1])]
+        assert calls[0][-1] is encoded[1], "the message's CBOR not copied"
+        got = await asyncio.wait_for(client.recv(), 5.0)
+        assert got == cbor2.dumps({"op": "publish", "topic": "/camera",
+                                   "msg": {"data": frame.data}})
         box.close()
         await asyncio.wait_for(writer, 5.0)
