@@ -73,7 +73,14 @@ async def test_an_8_s_blackhole_loses_and_duplicates_nothing(
         proxy.restore()
         await async_wait_until(lambda: ros.state is ConnectionState.CONNECTED, 20, "a reconnect")
         await tick(2.0)
-        await async_wait_until(lambda: len(heard) >= sent, 20, f"{sent} messages on {up}")
+        try:
+            await async_wait_until(lambda: len(heard) >= sent, 20, f"{sent} messages on {up}")
+        except AssertionError as exc:  # say what is missing and what the bridge said
+            with lock:
+                missing = sorted(set(range(sent)) - set(heard))
+            raise AssertionError(
+                f"{exc}: ROS heard {len(heard)}, missing {missing[:40]}; the bridge's last "
+                "lines:\n" + "\n".join(bridge.lines[-30:])) from None
         got = [(await sub.get(timeout=10))["data"] for _ in range(published)]
         with pytest.raises(TimeoutError):  # and nothing more: no duplicate comes late
             await sub.get(timeout=0.5)
