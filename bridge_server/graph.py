@@ -27,6 +27,8 @@ from typing import TYPE_CHECKING, Any, Protocol
 
 from roslibpy_lite.protocol.goal_status import GoalStatus
 
+from .interfaces import ConversionError, ServiceCallError, args_mapping
+
 if TYPE_CHECKING:
     from msgs.dynamic import TypeStore
 
@@ -51,6 +53,7 @@ __all__ = [
     "Status",
     "TopicFeed",
     "parameter_value",
+    "service_request",
 ]
 
 
@@ -97,6 +100,22 @@ def parameter_value(value: Any) -> Any:
     if name == "byte_array_value":
         return b"".join(b if isinstance(b, bytes) else bytes((b,)) for b in found)
     return [*found] if name.endswith("_array_value") else found
+
+
+def service_request(conv: Converter, service: str, args: Mapping[str, Any] | list[Any] | None,
+                    check: Callable[[Any], str | None] | None = None) -> Any:
+    """The request message a :meth:`Graph.call_service` sends to ``service``: ``args`` (an
+    object, or a list zipped onto the request's fields) built with the request's ``conv``,
+    then ``check``-ed; :class:`~bridge_server.interfaces.ServiceCallError` names the field
+    that does not fit, or gives ``check``'s refusal."""
+    try:
+        request = conv.from_obj(args_mapping(args, conv.fields, "request"), "args")
+    except ConversionError as exc:
+        raise ServiceCallError(f"{service}: bad request: {exc}") from None
+    refusal = check(request) if check is not None else None  # e.g. an action's cancel_goal
+    if refusal is not None:
+        raise ServiceCallError(f"{service}: {refusal}")
+    return request
 
 
 class Converter(Protocol):

@@ -12,13 +12,21 @@ import json
 from collections.abc import Callable
 from typing import Any, Protocol
 
-import cbor2
-
 __all__ = ["CborConverter", "cbor_obj_parts", "cbor_raw_parts", "encode_publish_cbor",
            "encode_publish_cbor_obj", "encode_publish_cbor_raw", "encode_publish_json"]
 
 _encode_str: Callable[[str], str] = json.encoder.encode_basestring
-_cbor_dumps: Callable[[Any], bytes] = cbor2.dumps
+
+
+def _cbor_dumps(obj: Any) -> bytes:
+    """``cbor2.dumps``, imported at the first CBOR message (a client-only install, MockRos's,
+    has no cbor2 and asks for no CBOR); rebinds itself to it."""
+    global _cbor_dumps
+    import cbor2
+
+    _cbor_dumps = cbor2.dumps
+    return cbor2.dumps(obj)
+
 
 
 class CborConverter(Protocol):
@@ -40,7 +48,7 @@ def _cbor_prefix(topic: str) -> bytes:
     """CBOR of ``{"op": "publish", "topic": topic, "msg": `` (a 3-entry map up to the value)."""
     prefix = _cbor_prefixes.get(topic)
     if prefix is None:
-        prefix = b"\xa3" + b"".join(map(cbor2.dumps, ("op", "publish", "topic", topic, "msg")))
+        prefix = b"\xa3" + b"".join(map(_cbor_dumps, ("op", "publish", "topic", topic, "msg")))
         if len(_cbor_prefixes) > 4096:
             _cbor_prefixes.clear()
         _cbor_prefixes[topic] = prefix
@@ -69,9 +77,11 @@ def cbor_obj_parts(topic: str, obj: Any) -> tuple[bytes, bytes]:
     return _cbor_prefix(topic), _cbor_dumps(obj)
 
 
-_RAW_SECS = b"\xa3" + cbor2.dumps("secs")  # the msg map {secs, nsecs, bytes}, up to secs's value
-_RAW_NSECS = cbor2.dumps("nsecs")
-_RAW_BYTES = cbor2.dumps("bytes")
+# the msg map {secs, nsecs, bytes} (a 3-entry map, 0xa3), up to secs's value, and its other keys:
+# short text strings, their head 0x60 | length (RFC 8949; no cbor2 needed at import)
+_RAW_SECS = b"\xa3\x64secs"
+_RAW_NSECS = b"\x65nsecs"
+_RAW_BYTES = b"\x65bytes"
 _BYTE_STRING = 0x40  # CBOR's major type 2 (a byte string) in a head's first byte
 
 

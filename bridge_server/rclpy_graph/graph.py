@@ -13,7 +13,8 @@ import asyncio
 from collections.abc import Callable, Mapping
 from typing import Any
 
-from ..interfaces import ConversionError, ServiceCallError, args_mapping
+from ..graph import service_request
+from ..interfaces import ServiceCallError
 from . import convert, introspection
 from .actions import ServedAction, ServedGoal, SharedActionClient, check_rclpy_internals
 from .node import RosNode
@@ -139,14 +140,7 @@ class RclpyGraph(RosNode):
             if not types:
                 raise ServiceCallError(f"service {service} does not exist (not in the ROS graph)")
             srv_cls = self.resolve_service(types[0])
-        req_conv = convert.converter_for(srv_cls.Request)
-        try:
-            request = req_conv.from_obj(args_mapping(args, req_conv.fields, "request"), "args")
-        except ConversionError as exc:
-            raise ServiceCallError(f"{service}: bad request: {exc}") from None
-        refusal = check(request) if check is not None else None  # e.g. an action's cancel_goal
-        if refusal is not None:
-            raise ServiceCallError(f"{service}: {refusal}")
+        request = service_request(convert.converter_for(srv_cls.Request), service, args, check)
         client = self.client_for(service, srv_cls)
         if not client.service_is_ready():
             # Wait for a server to be discovered and matched: while the graph lists no

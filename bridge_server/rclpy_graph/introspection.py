@@ -20,6 +20,7 @@ from rcl_interfaces.srv import GetParameters, ListParameters, SetParameters
 
 from ..graph import parameter_value
 from ..interfaces import BridgeError, canonical_name
+from ..typedefs import typedefs_of
 from .types import resolve_action, resolve_message, resolve_service, type_name_of
 
 if TYPE_CHECKING:
@@ -46,79 +47,15 @@ machine can take seconds to match a node that has just started)."""
 
 # -- typedefs (rosapi message_details and friends) -----------------------------------------
 
-_SEQ = re.compile(r"sequence<([^,>]+)(?:,\s*(\d+))?>\Z")
-_ARR = re.compile(r"(.+)\[(\d+)\]\Z")
-_EXAMPLES = {"boolean": "False", "string": "", "wstring": "", "float": "0.0", "double": "0.0"}
-
-
-def _split_field_type(spec: str) -> tuple[str, int]:
-    """Base type and array length: ``sequence<double>`` -> (double, 0), ``double[36]`` ->
-    (double, 36), ``int32`` -> (int32, -1)."""
-    m = _SEQ.match(spec)
-    if m:
-        return m.group(1).strip(), 0
-    m = _ARR.match(spec)
-    if m:
-        return m.group(1), int(m.group(2))
-    return spec, -1
-
-
-def _full_type(base: str) -> str:
-    if "/" in base:
-        pkg, _, name = base.rpartition("/")
-        return f"{pkg.split('/')[0]}/msg/{name}"
-    if base.startswith(("string<", "wstring<")):
-        return base.split("<")[0]
-    return base
-
-
-def _typedef(cls: type[Any], name: str) -> tuple[dict[str, Any], list[type[Any]]]:
+def _constants(cls: type[Any]) -> dict[str, Any]:
     meta = type(cls)
-    constants = getattr(meta, f"_{meta.__name__}__constants", {}) or {}
-    fieldnames, fieldtypes, arraylens, examples = [], [], [], []
-    nested: list[type[Any]] = []
-    for field_name, spec in cls.get_fields_and_field_types().items():
-        base, arraylen = _split_field_type(spec)
-        full = _full_type(base)
-        fieldnames.append(field_name)
-        fieldtypes.append(full)
-        arraylens.append(arraylen)
-        if arraylen >= 0:
-            examples.append("[]")
-        elif "/" in full:
-            examples.append("{}")
-        else:
-            examples.append(_EXAMPLES.get(full, "0"))
-        if "/" in full:
-            nested.append(resolve_message(full))
-    return (
-        {
-            "type": name,
-            "fieldnames": fieldnames,
-            "fieldtypes": fieldtypes,
-            "fieldarraylen": arraylens,
-            "examples": examples,
-            "constnames": list(constants),
-            "constvalues": [str(v) for v in constants.values()],
-        },
-        nested,
-    )
+    return dict(getattr(meta, f"_{meta.__name__}__constants", {}) or {})
 
 
 def _typedefs(cls: type[Any], name: str) -> list[dict[str, Any]]:
     """The typedef of ``cls`` then those of every nested type, each once."""
-    out: list[dict[str, Any]] = []
-    seen: set[type[Any]] = set()
-    todo: list[tuple[type[Any], str]] = [(cls, name)]
-    while todo:
-        current, current_name = todo.pop(0)
-        if current in seen:
-            continue
-        seen.add(current)
-        typedef, nested = _typedef(current, current_name)
-        out.append(typedef)
-        todo.extend((n, type_name_of(n)) for n in nested if n not in seen)
-    return out
+    return typedefs_of(cls, name, constants=_constants, resolve=resolve_message,
+                       name_of=type_name_of)
 
 
 def typedefs(name: str, kind: str, part: str | None = None) -> list[dict[str, Any]]:

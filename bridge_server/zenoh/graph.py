@@ -55,11 +55,10 @@ from msgs.dynamic import LimitError, TypeStore
 from msgs.parser import DefinitionError
 from msgs.runtime import Message as WireMessage
 from msgs.runtime import UnknownTypeError as WireUnknownType
-from msgs.runtime import ValidationError
 
 from ..codec.cdr_json import JsonFromCdr, wire_encoder
 from ..codec.encodings import EncodedMessage
-from ..graph import GoalListener, Listener, RosCall, ServedGoal, Status
+from ..graph import GoalListener, Listener, RosCall, ServedGoal, Status, service_request
 from ..interfaces import (
     BridgeError,
     ConversionError,
@@ -67,9 +66,9 @@ from ..interfaces import (
     ReportedError,
     ServiceCallError,
     UnknownTypeError,
-    args_mapping,
     canonical_name,
 )
+from ..memory.graph import MemoryConverter
 from . import keys
 from .inbox import Faults, Inbox
 from .keys import (
@@ -145,47 +144,20 @@ class TypeRefused(UnknownTypeError):
     """A robot's type over one of the relay's :class:`TypeLimits` (its messages dropped)."""
 
 
-class RelayConverter:
+class RelayConverter(MemoryConverter):
     """:class:`~bridge_server.graph.Converter` of one ``msgs`` message class (the relay's
-    messages are ``msgs`` instances)."""
+    messages are ``msgs`` instances, as the in-memory graph's), reading CDR too."""
 
     def __init__(self, cls: type[WireMessage]) -> None:
-        self.cls = cls
+        super().__init__(cls)
         self.decode = cdr.decoder_for(cls)
         self.decode_cbor = cdr.decoder_for(cls, typed=cbor2.CBORTag)  # typed arrays, as the
         # bridge's CBOR sends them (RFC 8746)
         self.json_from_cdr: JsonFromCdr = wire_encoder(cls)
 
-    @property
-    def type_name(self) -> str:
-        """Canonical ``pkg/msg/Type``."""
-        return self.cls._type
-
-    @property
-    def fields(self) -> tuple[str, ...]:
-        """Field names in declaration order."""
-        return tuple(self.cls._fields_and_types)
-
-    def to_obj(self, msg: Any) -> dict[str, Any]:
-        """The message as a JSON-ready dict."""
-        return msg.to_json()  # type: ignore[no-any-return]
-
-    def to_json(self, msg: Any) -> str:
-        """The message as compact JSON text."""
-        return json.dumps(self.to_obj(msg), separators=(",", ":"), allow_nan=False,
-                          ensure_ascii=False)
-
     def to_cbor_obj(self, msg: Any) -> Any:
         """The message as a CBOR-ready dict (byte strings, numeric arrays typed)."""
         return self.decode_cbor(cdr.encode(msg))
-
-    def from_obj(self, obj: Any, path: str = "") -> Any:
-        """A new message from a decoded object; ``ConversionError`` naming the field."""
-        try:
-            return self.cls.from_json(obj)
-        except ValidationError as exc:
-            where = ".".join(p for p in (path, exc.path) if p)
-            raise ConversionError(where, exc.expected, detail=str(exc)) from None
 
     def text_of(self, data: bytes) -> str:
         """The message's JSON text from its CDR bytes."""
@@ -1187,14 +1159,8 @@ class ZenohGraph:
         if check is not None:
             type_name = srv_type or next(iter(self.service_types(service)), None)
             if type_name is not None:
-                conv = self.converter(self.resolve_service(type_name).Request)
-                try:
-                    request = conv.from_obj(args_mapping(args, conv.fields, "request"), "args")
-                except ConversionError as exc:
-                    raise ServiceCallError(f"{service}: bad request: {exc}") from None
-                refusal = check(request)
-                if refusal is not None:
-                    raise ServiceCallError(f"{service}: {refusal}")
+                service_request(self.converter(self.resolve_service(type_name).Request),
+                                service, args, check)
         request = CallRequest(type=srv_type, args=args, timeout=timeout,
                               discovery_wait=discovery_wait)
         try:

@@ -1,0 +1,1 @@
+"""Session-level tests: the Graph port and what runs on it without ROS."""
