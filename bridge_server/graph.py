@@ -4,12 +4,13 @@ The sessions (:mod:`bridge_server.session`), the status page (:mod:`bridge_serve
 and the ``/rosapi/*`` services hold a :class:`Graph` and never an rclpy object: what
 they do to ROS (subscribe, publish, call and serve services, send and serve action
 goals, ask the graph what is there, read type definitions) goes through these
-methods. Two Graphs take that place without the sessions knowing which:
+methods. Three Graphs take that place without the sessions knowing which:
 :class:`bridge_server.rclpy_graph.graph.RclpyGraph`, the Graph on rclpy (the bridge's node,
 :class:`~bridge_server.rclpy_graph.node.RosNode`, with its executor thread; the
-``rclpy_graph`` package is the only place that imports rclpy), and
+``rclpy_graph`` package is the only place that imports rclpy),
 :class:`bridge_server.zenoh.graph.ZenohGraph`, the relay's Graph on Zenoh, where there is
-no ROS.
+no ROS, and :class:`bridge_server.memory.graph.MemoryGraph`, one node of a whole ROS graph
+held in memory (tests, ``MockRos``).
 
 Types are opaque handles: :meth:`Graph.resolve_message` (and its ``srv``/``action``
 siblings) give whatever the Graph uses for a type, and the session only passes them
