@@ -262,8 +262,13 @@ CI saw a worker stuck that way. The watchdog is faulthandler's own thread, which
 
 
 async def _run(args: argparse.Namespace) -> int:
-    from .rclpy_graph.graph import RclpyGraph
-    from .server import Bridge, BridgeConfig
+    try:  # the sessions import without the bridge's extra (MockRos runs them); ROS does not
+        from .rclpy_graph.graph import RclpyGraph
+        from .server import Bridge, BridgeConfig
+    except ModuleNotFoundError as missing:
+        from ._requires import missing_dependency
+
+        missing_dependency(missing)
 
     config = BridgeConfig(
         host=args.host,

@@ -68,8 +68,6 @@ import logging
 from collections.abc import Mapping
 from typing import TYPE_CHECKING, Any, ClassVar
 
-import cbor2
-
 from roslibpy_lite.protocol import ops
 
 from ..graph import ACTIVE, CANCEL_ANSWERS, Status
@@ -450,6 +448,8 @@ class SessionActions:
         """Send ``action_feedback`` or ``action_result`` with ``msg`` as values (JSON or CBOR)."""
         session = self.session
         if goal.cbor:
+            import cbor2  # only for a client that asked for CBOR (MockRos may run without it)
+
             obj: dict[str, Any] = {"op": op, "id": goal.id, "action": goal.wire,
                                    "values": conv.to_cbor_obj(msg)}
             if status is not None:  # a goal that ran to a final status: result true, as

@@ -43,7 +43,7 @@ from typing import TYPE_CHECKING, Any, ClassVar
 
 from roslibpy_lite.protocol import ops
 
-from ..http.metrics import outcome
+from ..http.counters import outcome
 from ..interfaces import (
     BridgeError,
     ConversionError,

@@ -1,5 +1,6 @@
-"""The in-memory Graph runs in a client-only install: no rclpy, Zenoh, cbor2,
-prometheus_client or pybase64 is imported to build a graph, publish, serve and call."""
+"""The in-memory Graph and the session run in a client-only install: no rclpy, Zenoh, cbor2,
+prometheus_client or pybase64 is imported to build a graph, publish, serve and call, nor to
+import the session and what it counts in."""
 
 from __future__ import annotations
 
@@ -17,6 +18,7 @@ _PROGRAM = textwrap.dedent("""
     for name in sys.argv[1:]:
         sys.modules[name] = None  # importing it raises ImportError, as if not installed
     from bridge_server.memory.graph import MemoryRos
+    import bridge_server.session.session, bridge_server.http.counters
 
     async def main():
         ros = MemoryRos()
@@ -38,7 +40,8 @@ _PROGRAM = textwrap.dedent("""
 
 
 def test_memory_graph_needs_none_of_the_bridges_dependencies() -> None:
-    """Topics, services and typedefs work with each of ABSENT made unimportable."""
+    """Topics, services and typedefs work, and the session imports, with each of ABSENT made
+    unimportable."""
     out = subprocess.run([sys.executable, "-c", _PROGRAM, *ABSENT], cwd=ROOT, capture_output=True,
                          text=True, timeout=60)
     assert out.returncode == 0, out.stderr[-2000:]
