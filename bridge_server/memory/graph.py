@@ -34,6 +34,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import json
+import logging
 import secrets
 import time
 from collections.abc import Awaitable, Callable, Mapping
@@ -77,6 +78,8 @@ __all__ = [
     "MemoryServedGoal",
     "MemoryServedService",
 ]
+
+log = logging.getLogger("bridge_server.memory.graph")
 
 Handler = Callable[[Any], Awaitable[Any]]
 """How a server answers a request message: with its response message (or raises)."""
@@ -170,12 +173,16 @@ class MemoryFeed:
         return self.msg_cls._type if self.msg_cls is not None else None
 
     def deliver(self, msg: MemoryMessage, latched: bool) -> None:
-        """Hand ``msg`` to every listener, in order."""
+        """Hand ``msg`` to every listener, in order; one that raises is logged and the others
+        still get it (as the rclpy Graph's executor goes on)."""
         self.received += 1
         if latched:
             self._latched = msg
         for listener in list(self.listeners):
-            listener(msg)
+            try:
+                listener(msg)
+            except Exception:
+                log.exception("a listener of %s failed on a message", self.topic)
 
 
 class MemoryPublisher:

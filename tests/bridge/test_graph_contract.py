@@ -126,6 +126,25 @@ async def test_latched_message_reaches_a_later_subscription(side: Side, topic: s
     a.release_publisher(pub)
 
 
+async def test_a_failing_listener_keeps_no_other_from_the_message(side: Side, topic: str
+                                                                  ) -> None:
+    """A listener that raises is passed over: the next listener of the feed still gets it."""
+    a, b = await side.node(), await side.node()
+    pub = a.acquire_publisher(topic, a.resolve_message("std_msgs/msg/Int32"), True, 10)
+    pub.publish(_message(a, "std_msgs/msg/Int32", {"data": 5}))
+    await side.seen(lambda: b.topic_types(topic), "the topic's type")
+
+    def broken(msg: Any) -> None:
+        raise RuntimeError("a listener's bug")
+
+    got: asyncio.Queue[Any] = asyncio.Queue()
+    int32 = b.resolve_message("std_msgs/msg/Int32")
+    b.subscribe(topic, int32, broken)
+    b.subscribe(topic, int32, got.put_nowait)
+    assert json.loads((await asyncio.wait_for(got.get(), 10)).json_text())["msg"] == {"data": 5}
+    a.release_publisher(pub)
+
+
 async def test_subscribing_with_another_type_is_refused(side: Side, topic: str) -> None:
     """A node's subscription has one type: another type is a ValueError naming the first."""
     a = await side.node()
