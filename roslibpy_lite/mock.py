@@ -2,10 +2,12 @@
 
 No network and no ROS: MockRos is the same RosBase as the websocket
 :class:`~roslibpy_lite.client.Client` (:class:`~roslibpy_lite.ros.RosBase`)
-over an in-memory transport that plays the bridge's part
-(:class:`~roslibpy_lite.transports.memory.MemoryTransport`). So the API, the
-validation and the errors are the real client's, by construction. Code
-written against :class:`~roslibpy_lite.api.Ros` runs unchanged on it::
+over an in-memory transport (:class:`~roslibpy_lite.transports.memory.MemoryTransport`)
+to the bridge's own session code, run in memory over a ROS graph held in memory
+(:mod:`bridge_server.memory`). So the API and the client's validation are the
+real client's, and every answer, refusal and error is the bridge's, by
+construction. Code written against :class:`~roslibpy_lite.api.Ros` runs
+unchanged on it::
 
     from roslibpy_lite.mock import MockRos
 
@@ -79,9 +81,8 @@ class MockRos(RosBase):
             (0: publishing then raises Disconnected), as on the real client.
         validate: check dict messages at the call against the generated class
             of their type when there is one (default on), as the real client
-            does. The in-memory bridge checks them anyway, as the real bridge
-            does, and reports a misfit later, through the error hooks and the
-            next ``publish``.
+            does. The bridge's session checks them anyway, and reports a misfit
+            later, through the error hooks.
         strict: refuse dicts that leave fields out, as the real client's ``strict``.
     """
 
@@ -93,7 +94,8 @@ class MockRos(RosBase):
         self._bridge.open()
 
     def __repr__(self) -> str:
-        return f"<MockRos {self.state.value} topics={sorted(self._bridge.topics)}>"
+        topics = [name for name, _ in self._bridge.server.graph.topic_names_and_types()]
+        return f"<MockRos {self.state.value} topics={topics}>"
 
     # -- connection trouble ----------------------------------------------------------------------
 
@@ -111,8 +113,7 @@ class MockRos(RosBase):
 
     def published(self, topic: str) -> list[dict[str, Any]]:
         """Every message published on ``topic`` through this mock, oldest first (wire form)."""
-        entry = self._bridge.topics.get(topic)
-        return [dict(m) for m in entry.history] if entry else []
+        return [dict(m) for m in self._bridge.history.get(topic, [])]
 
     def inject(
         self,
@@ -129,9 +130,9 @@ class MockRos(RosBase):
         """
         self._host.check_open()
         if type is None:
-            known = self._bridge.topics.get(topic)
+            known = self._bridge.topic_type(topic)
             if known is not None:
-                type = known.type_name
+                type = known
             elif hasattr(msg, "_type"):
                 type = msg._type
             else:
@@ -142,6 +143,12 @@ class MockRos(RosBase):
         if wire is msg:
             check_dict(wire, self._topics.check_class(type_name, cls), what)
         self._bridge.inject(topic, type_name, wire, latch=latch)
+
+    def add_node(self, name: str, parameters: Mapping[str, Any] | None = None) -> None:
+        """Play another ROS node, ``name`` (``/ns/name``): listed in the graph, and serving
+        ``parameters`` (get, set, list) as an rclpy node does."""
+        self._host.check_open()
+        self._bridge.add_node(name, parameters)
 
     def subscribers(self, topic: str) -> int:
         """How many open subscriptions ``topic`` has."""

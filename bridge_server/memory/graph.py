@@ -212,6 +212,8 @@ class MemoryPublisher:
         sent = MemoryMessage(self.topic, msg, self.conv)
         if self.latch:
             self.last = sent
+        for tap in self.graph.ros.taps:
+            tap(self, sent)
         for feed in self.graph.ros.feeds(self.topic, self.conv.cls):
             feed.deliver(sent, self.latch)
 
@@ -460,6 +462,8 @@ class MemoryRos:
         self.nodes: list[MemoryGraph] = []
         self.servers: dict[str, list[_Server]] = {}
         self.actions: dict[str, list[MemoryServedAction]] = {}
+        self.taps: list[Callable[[MemoryPublisher, MemoryMessage], None]] = []
+        """Called with each message any node publishes (before it is delivered)."""
         self._changed: asyncio.Event | None = None
 
     def node(self, name: str, namespace: str = "/", *,
@@ -558,7 +562,9 @@ class MemoryGraph:
     :class:`~bridge_server.graph.Graph` port; see the module's text).
 
     ``parameters``: the node's parameters, served as an rclpy node serves them (``None``: the
-    node has no parameter services, as the bridge's own node). Methods run on the loop.
+    node has no parameter services, as the bridge's own node): these are declared (their type
+    is kept, they cannot be unset); others may be set and unset freely. Methods run on the
+    loop.
     """
 
     wire_types: dynamic.TypeStore = dynamic.DEFAULT
@@ -575,6 +581,7 @@ class MemoryGraph:
         self._converters: dict[type[Message], MemoryConverter] = {}
         self.parameters: dict[str, Any] | None = (
             None if parameters is None else dict(parameters))
+        self._declared = set(parameters or ())
         self.ros.nodes.append(self)
         if self.parameters is not None:
             self._serve_parameters()
@@ -609,8 +616,8 @@ class MemoryGraph:
         try:
             return {"msg": types.lookup_message, "srv": types.lookup_service,
                     "action": types.lookup_action}[kind](canonical)
-        except WireUnknownType as exc:
-            raise UnknownTypeError(name, f"msgs has no such type ({exc})") from None
+        except WireUnknownType:
+            raise UnknownTypeError(name, f"no installed package provides {canonical}") from None
 
     def resolve_message(self, name: str) -> Any:
         """The ``msgs`` class of message type ``name`` (both spellings)."""
@@ -907,16 +914,29 @@ class MemoryGraph:
         return cls.from_json({"values": [parameter_obj(params.get(n)) for n in request.names]})
 
     async def _set_parameters(self, request: Any) -> Any:
+        """Each parameter set as an rclpy node sets it: one the node was made with (declared)
+        keeps its type and cannot be unset (rclpy's refusals); others may be anything."""
         cls = self.resolve_service("rcl_interfaces/srv/SetParameters").Response
         params = self._params()
+        results = []
         for p in request.parameters:
             value = parameter_value(p.value)
-            if value is None:
-                params.pop(p.name, None)
+            old = params.get(p.name) if p.name in self._declared else None
+            old_type, new_type = _parameter_type(old), int(p.value.type)
+            if old is not None and value is None:
+                results.append({"successful": False,
+                                "reason": "Static parameter cannot be undeclared"})
+            elif old is not None and old_type != new_type:
+                results.append({"successful": False, "reason": (
+                    f"Wrong parameter type, expected 'Type.{_TYPE_NAMES[old_type]}' got "
+                    f"'Type.{_TYPE_NAMES[new_type]}'")})
             else:
-                params[p.name] = value
-        return cls.from_json({"results": [{"successful": True, "reason": ""}
-                                          for _ in request.parameters]})
+                if value is None:
+                    params.pop(p.name, None)
+                else:
+                    params[p.name] = value
+                results.append({"successful": True, "reason": ""})
+        return cls.from_json({"results": results})
 
     async def _parameter_call(self, node: str, part: str, args: Mapping[str, Any],
                               timeout: float) -> Any:
@@ -990,6 +1010,16 @@ def parameter_obj(value: Any) -> dict[str, Any]:
             return {"type": kind, field: [float(v) for v in value] if kind == 8 else value}
     raise ValueError("args.value: a ROS 2 parameter is a bool, int, float, string or a list "
                      f"of one of those, got {type(value).__name__}")
+
+
+def _parameter_type(value: Any) -> int:
+    """The ``ParameterType`` number of a plain value (0: not set)."""
+    return int(parameter_obj(value)["type"])
+
+
+_TYPE_NAMES = ("NOT_SET", "BOOL", "INTEGER", "DOUBLE", "STRING", "BYTE_ARRAY", "BOOL_ARRAY",
+               "INTEGER_ARRAY", "DOUBLE_ARRAY", "STRING_ARRAY")
+"""rclpy's ``Parameter.Type`` names, by number."""
 
 
 def _all(kind: type | tuple[type, ...]) -> Callable[[Any], bool]:

@@ -454,6 +454,15 @@ class Outbox:
                     return
         self.wake.set()
 
+    def write_queued(self) -> None:
+        """Write what is queued now, in this call, where the link takes it at once (the
+        in-memory link: MockRos delivers what a client's op sets off before its call returns);
+        the writer task finds the queues emptied."""
+        if not self.closed and self.link.writable():
+            frames = self._take()
+            if frames:
+                self.link.write(frames)
+
     async def writer(self) -> None:
         """Write what is queued until the outbox is closed (run as the client's task)."""
         link = self.link

@@ -401,6 +401,11 @@ class MockRos(_Front):
         """Deliver ``msg`` to the subscribers of ``topic`` as if the robot published it."""
         self._loop.call(f"inject {topic}", self._mock.inject, topic, msg, type, latch=latch)
 
+    def add_node(self, name: str, parameters: Mapping[str, Any] | None = None) -> None:
+        """Play another ROS node, ``name``, serving ``parameters``
+        (:meth:`roslibpy_lite.MockRos.add_node`)."""
+        self._loop.call(f"add_node {name}", self._mock.add_node, name, parameters)
+
     def published(self, topic: str) -> list[dict[str, Any]]:
         """Every message published on ``topic`` through this mock, oldest first."""
         return self._loop.call("published", self._mock.published, topic)  # type: ignore[no-any-return]

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import asyncio
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import pytest
 from mcap_ros2.writer import Writer as Ros2Writer
@@ -103,14 +103,45 @@ async def test_loop_starts_over_until_cancelled(bag: Path) -> None:
         assert when - second_round >= t / 4.0 - 1e-3
 
 
+class _Kept:
+    """A publisher the player closes that stays advertised (its ``close`` is kept for later):
+    ROS drops a latched message with its last publisher, so a subscriber that comes after the
+    play comes while the player's publishers are still there."""
+
+    def __init__(self, pub: Any) -> None:
+        self.pub = pub
+
+    async def publish(self, msg: Any) -> None:
+        await self.pub.publish(msg)
+
+    async def close(self) -> None:
+        """Kept open until the test closes ``pub``."""
+
+
+class _KeepingPublishers:
+    """The MockRos ``ros`` whose publishers the player cannot close (:class:`_Kept`)."""
+
+    def __init__(self, ros: MockRos) -> None:
+        self.ros = ros
+        self.kept: list[Any] = []
+
+    async def advertise(self, *args: Any, **kwargs: Any) -> _Kept:
+        pub = await self.ros.advertise(*args, **kwargs)
+        self.kept.append(pub)
+        return _Kept(pub)
+
+
 async def test_latch_keeps_the_last_message_for_a_late_subscriber(bag: Path) -> None:
     """Topics in ``latch`` are advertised latched: a subscriber that comes after the play
     still gets the topic's last message; an unlatched topic gives it nothing."""
     async with MockRos() as ros:
-        stats = await play(ros, bag, latch=["/b"], rate=10.0)
+        held = _KeepingPublishers(ros)
+        stats = await play(cast(Any, held), bag, latch=["/b"], rate=10.0)
         late_b = await ros.subscribe("/b", "std_msgs/msg/String")
         late_a = await ros.subscribe("/a", "std_msgs/msg/String")
         assert (await late_b.get(timeout=5))["data"] == "/b 0.45"
         await ros.drain()  # delivery in MockRos is done once this returns
         assert late_a.received == 0
+        for pub in held.kept:
+            await pub.close()
     assert stats.messages == 9

@@ -268,8 +268,9 @@ async def test_action_goal_feedback_cancel_and_result(side: Side, topic: str) ->
 
 
 async def test_node_parameters(side: Side) -> None:
-    """Another node's parameters are listed, read and set; a node that is not there is a
-    LookupError naming its parameter service."""
+    """Another node's parameters are listed, read and set, a value of another type refused
+    with rclpy's reason; a node that is not there is a LookupError naming its parameter
+    service."""
     a = await side.node()
     node = await side.parameter_node({"speed": 1.5, "name": "robot"})
     assert {"speed", "name"} <= set(await a.parameter_names(node, 10.0))
@@ -277,6 +278,9 @@ async def test_node_parameters(side: Side) -> None:
     assert await a.get_parameter(node, "missing") == (False, None)
     assert await a.set_parameter(node, "name", "rover") == (True, "")
     assert await a.get_parameter(node, "name") == (True, "rover")
+    assert await a.set_parameter(node, "speed", "fast") == (
+        False, "Wrong parameter type, expected 'Type.DOUBLE' got 'Type.STRING'")
+    assert await a.get_parameter(node, "speed") == (True, 1.5)
     if side.kind == "memory":  # rclpy waits PARAM_DISCOVERY (5 s) for a node that is not there
         with pytest.raises(LookupError) as gone:
             await a.get_parameter("/nobody", "x")

@@ -78,6 +78,7 @@ def test_blocking_graph_on_mock() -> None:
     """sync.MockRos's ``graph`` answers from what it holds, as the asyncio mock's."""
     with sync.MockRos() as ros:
         ros.advertise("/out", "std_msgs/msg/String")
+        ros.add_node("/n", {})
         ros.graph.set_param("/n:gain", 1)
         assert ros.graph.topics() == [GraphTopic("/out", "std_msgs/msg/String")]
         assert ros.graph.get_param("/n:gain") == 1

@@ -18,6 +18,7 @@ from roslibpy_lite import (
     ServiceError,
     StatusError,
     UsageError,
+    define_type,
 )
 
 MULT = "mult_msgs/srv/MultFloats"
@@ -47,10 +48,14 @@ async def test_dicts_are_validated_against_the_generated_class() -> None:
     assert ros.published("/n") == []
 
 
-async def test_unknown_types_pass_unchecked_and_validation_can_be_off() -> None:
-    """Types without a generated class are not validated; validate=False skips checks."""
+async def test_unknown_types_are_refused_and_validation_can_be_off() -> None:
+    """A type nobody defined is refused as the bridge refuses it; once defined
+    (define_type) it is checked; validate=False skips the client's checks."""
     ros = MockRos()
-    pub = ros.advertise("/u", "custom_pkg/msg/Thing")
+    with pytest.raises(StatusError, match="mock_test_pkg/msg/Thing"):
+        await ros.advertise("/u", "mock_test_pkg/msg/Thing")
+    define_type("mock_test_pkg/msg/Thing", "int32[] anything\n")
+    pub = ros.advertise("/u", "mock_test_pkg/msg/Thing")
     await pub.publish({"anything": [1, 2]})
     assert ros.published("/u") == [{"anything": [1, 2]}]
     loose = MockRos(validate=False)

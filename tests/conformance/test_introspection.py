@@ -16,7 +16,7 @@ import pytest
 
 from roslibpy_lite import MockRos, Ros, ServiceError, UsageError
 from roslibpy_lite.capabilities.introspection import GraphAction, GraphService, GraphTopic
-from roslibpy_lite.transports.memory_rosapi import MOCK_NODE
+from roslibpy_lite.transports.memory import MOCK_NODE
 from tests.conformance.test_actions import IMU, counting
 
 T = TypeVar("T")
@@ -94,8 +94,7 @@ async def param_node(ros: Ros, request: pytest.FixtureRequest) -> str:
     the bridge, the store's on MockRos."""
     if isinstance(ros, MockRos):
         name = "/mock_params"
-        await ros.graph.set_param(f"{name}:speed", 1.5)
-        await ros.graph.set_param(f"{name}:names", ["a", "b"])
+        ros.add_node(name, {"speed": 1.5, "names": ["a", "b"]})
         return name
     node = request.getfixturevalue("ros_node")
     node.declare_parameter("speed", 1.5)

@@ -42,6 +42,32 @@ with sync.connect(sys.argv[1]) as ros:
         print("cbor:", sub.get(timeout=15))
 """
 
+MOCK_SCRIPT = """
+import asyncio
+from roslibpy_lite import MockRos, GoalStatus
+
+async def count(goal, ctx):
+    ctx.publish_feedback({"elapsed": 0.5})
+    return {"samples": goal["seconds"] * 2}
+
+async def main():
+    async with MockRos() as ros:
+        sub = ros.subscribe("/chat", "std_msgs/msg/String")
+        await ros.advertise("/chat", "std_msgs/msg/String").publish({"data": "hi"})
+        print("topic:", (await sub.get(1))["data"])
+        ros.advertise_service("/mult", "mult_msgs/srv/MultFloats",
+                              lambda req: {"result": req["x"] * req["y"]})
+        answer = await ros.call_service("/mult", "mult_msgs/srv/MultFloats", {"x": 2.0, "y": 3.0})
+        print("service:", answer["result"])
+        await ros.advertise_action("/imu", "mult_msgs/action/IntegrateImu", count)
+        goal = await ros.send_goal("/imu", "mult_msgs/action/IntegrateImu", {"seconds": 2.0})
+        outcome = await goal.result(timeout=5)
+        print("action:", outcome.status is GoalStatus.SUCCEEDED, outcome.values["samples"])
+        print("graph:", [t.name for t in await ros.graph.topics()])
+
+asyncio.run(main())
+"""
+
 
 @dataclass
 class Venv:
@@ -131,6 +157,14 @@ def test_cli_and_scripts_work_against_the_bridge(venv: Venv, bridge: BridgeProce
     assert "Is ROS connected? True" in roslibpy_script.stdout
     imported = venv.run(venv.bin("python"), "-c", "import roslibpy_lite; print(roslibpy_lite.__file__)")
     assert str(venv.root) in imported.stdout  # the wheel's copy, not the repository's
+
+
+def test_mock_ros_runs_the_bridges_session_in_a_client_only_install(venv: Venv) -> None:
+    """MockRos (the bridge's own session over an in-memory graph) publishes, serves and calls
+    a service, runs an action goal and lists the graph with websockets alone installed."""
+    done = venv.run(venv.bin("python"), "-c", MOCK_SCRIPT)
+    assert done.stdout.splitlines() == [
+        "topic: hi", "service: 6.0", "action: True 4", "graph: ['/chat']"], done.stdout
 
 
 def test_bridge_without_its_extra_says_what_to_install(venv: Venv) -> None:

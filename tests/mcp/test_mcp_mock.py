@@ -120,7 +120,7 @@ async def test_collect_is_bounded_by_count_bytes_and_time_and_reports_progress()
         data = [m["message"]["data"] for m in by_count["messages"]]
         assert data == sorted(data) and set(data) <= {f"m{i}" * 20 for i in range(5)}
         assert reports == [(1.0, 3.0), (2.0, 3.0), (3.0, 3.0)]
-        by_bytes = await collect(max_bytes=150)
+        by_bytes = await collect(max_bytes=160)  # two entries of 75-79 bytes (their "t")
         assert (by_bytes["count"], by_bytes["stopped_by"]) == (2, "max_bytes")
         quiet = await client.call_tool("collect_topic", {"topic": "/chatter", "seconds": 0.2})
         assert json.loads(text(quiet))["stopped_by"] == "seconds"
