@@ -13,7 +13,6 @@ Nothing here needs rclpy, cbor2 or prometheus_client (a client-only install runs
 from __future__ import annotations
 
 import asyncio
-import contextlib
 import itertools
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
@@ -68,8 +67,7 @@ class MemoryConnection:
 
     async def ended(self) -> None:
         """Return once the session has released what the client owned."""
-        with contextlib.suppress(asyncio.CancelledError):
-            await asyncio.shield(self.task)
+        await asyncio.wait([self.task])
 
 
 class MemoryServer:
