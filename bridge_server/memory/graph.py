@@ -433,8 +433,8 @@ class MemoryServedAction:
         return _cancel_response(self, 0 if canceling or not any(uuid) else 3, canceling)
 
     async def _internal(self, request: Any) -> Any:
-        raise BridgeError(f"{self.name}: MemoryGraph answers only cancel_goal of an action's "
-                          "services through call_service")
+        raise ServiceCallError(f"{self.name}: the in-memory graph answers only cancel_goal of "
+                               "an action's services as a service (send goals as goals)")
 
     def destroy(self) -> None:
         """Remove the action server; open goals are aborted."""
