@@ -601,6 +601,9 @@ class MemoryGraph:
         with contextlib.suppress(ValueError):
             self.ros.nodes.remove(self)
 
+    def start(self) -> None:
+        """Nothing to start: the node serves from its making (a bridge may run on it)."""
+
     def trouble(self) -> str | None:
         """Nothing keeps an in-memory graph from serving."""
         return None

@@ -4,8 +4,8 @@ A :class:`~bridge_server.session.session.Session` (and a Foxglove one) reads fra
 writes frames to, a :class:`ClientLink`; it never sees the websocket library. The bridge's
 link is its websocket connection
 (:class:`~bridge_server.front.WebSocketLink`, the only code that
-touches websockets' internals); tests drive a session over a link of their own
-(``tests/session/fakes.py``) with no socket at all.
+touches websockets' internals); MockRos and the session tests drive one over
+:class:`~bridge_server.memory.link.MemoryLink` with no socket at all.
 
 Sending has two speeds. A link that writes ready frame bytes itself (``framing``) lets the
 outbox write a message's shared frame straight to its :attr:`ClientLink.transport` the moment

@@ -1,0 +1,145 @@
+"""A session on its ports in memory: the test's end of a
+:class:`~bridge_server.memory.link.MemoryLink`, and a robot node of a
+:class:`~bridge_server.memory.graph.MemoryRos` (no ROS, no socket).
+
+:func:`open_session` runs a real :class:`~bridge_server.session.session.Session` over a
+:class:`Client`'s link, sharing the state of a real (never started) ``Bridge`` whose Graph is
+the node ``rosbridge`` of an in-memory ROS graph; the :class:`Robot` is another node of it.
+The never-started ``Bridge`` (not a ``MemoryServer``) is what the sessions share: its resume
+store keeps a lost session (``MemoryServer`` keeps none), its Foxglove hub serves a Foxglove
+session, and its gate, security and settings are the ones a running bridge gives.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+from collections.abc import AsyncIterator, Callable, Mapping
+from contextlib import asynccontextmanager
+from typing import Any
+
+from bridge_server.foxglove.session import FoxgloveSession
+from bridge_server.graph import Message, RosCall
+from bridge_server.memory.graph import MemoryGraph, MemoryPublisher, MemoryRos
+from bridge_server.memory.link import MemoryLink
+from bridge_server.security.auth import Principal
+from bridge_server.server import Bridge, BridgeConfig
+from bridge_server.session.session import Session
+from roslibpy_lite.protocol.frames import decode_frame
+
+__all__ = ["Client", "Robot", "open_foxglove", "open_session"]
+
+
+class Client:
+    """A client's end of a :class:`MemoryLink`: :meth:`feed` hands the session a frame,
+    :meth:`next_op` awaits the next one it sent (decoded)."""
+
+    def __init__(self, headers: Mapping[str, str] | None = None,
+                 principal: Principal | None = None) -> None:
+        self.sent: asyncio.Queue[str | bytes] = asyncio.Queue()
+        self.link = MemoryLink(self.sent.put_nowait, headers=headers,
+                               address="192.0.2.7:40000")
+        self.link.principal = principal
+
+    def feed(self, frame: str | bytes | dict[str, Any]) -> None:
+        """The client sends ``frame`` (a dict is sent as JSON text)."""
+        self.link.receive(json.dumps(frame) if isinstance(frame, dict) else frame)
+
+    async def next_frame(self, timeout: float = 5.0) -> str | bytes:
+        """The next frame the session sent, as it was sent."""
+        return await asyncio.wait_for(self.sent.get(), timeout)
+
+    async def next_op(self, timeout: float = 5.0) -> Any:
+        """The next op the session sent, decoded (JSON text or CBOR)."""
+        return decode_frame(await self.next_frame(timeout))
+
+    def hang_up(self, by_client: bool = True) -> None:
+        """The connection ends: closed by the client, or lost (``by_client`` False)."""
+        self.link.drop(by_client=by_client)
+
+
+class Robot:
+    """Another node of the bridge's in-memory ROS graph: it hears topics, publishes and
+    serves."""
+
+    def __init__(self, ros: MemoryRos) -> None:
+        self.node = ros.node("robot")
+        self._pubs: dict[tuple[str, str], MemoryPublisher] = {}
+
+    def hear(self, topic: str, type_name: str) -> list[dict[str, Any]]:
+        """Subscribe to ``topic``: the list filled with each message heard, as a dict."""
+        heard: list[dict[str, Any]] = []
+
+        def listener(msg: Message) -> None:  # the op a client would get, its msg kept
+            heard.append(json.loads(msg.json_text())["msg"])
+
+        self.node.subscribe(topic, self.node.resolve_message(type_name), listener)
+        return heard
+
+    def publish(self, topic: str, type_name: str, msg: dict[str, Any]) -> None:
+        """Publish ``msg`` on ``topic``: every subscriber in the graph gets it now."""
+        pub = self._pubs.get((topic, type_name))
+        if pub is None:
+            cls = self.node.resolve_message(type_name)
+            pub = self._pubs[(topic, type_name)] = self.node.acquire_publisher(
+                topic, cls, False, 10)
+        pub.publish(pub.conv.from_obj(msg))
+
+    def serve(self, service: str, type_name: str,
+              answer: Callable[[dict[str, Any]], dict[str, Any]] | None) -> None:
+        """Serve ``service``: each request (as a dict) answered with ``answer``'s response,
+        or never (``answer`` None)."""
+        srv_cls = self.node.resolve_service(type_name)
+        request = self.node.converter(srv_cls.Request)
+        response = self.node.converter(srv_cls.Response)
+
+        def on_request(call: RosCall) -> None:
+            if answer is not None:
+                call.complete(response.from_obj(answer(request.to_obj(call.request))))
+
+        self.node.serve(service, srv_cls, on_request)
+
+
+def _bridge() -> tuple[Bridge, MemoryGraph, Robot]:
+    """A never-started bridge over the node ``rosbridge`` of a new in-memory graph, and the
+    graph's robot node."""
+    ros = MemoryRos()
+    graph = ros.node("rosbridge")
+    return Bridge(BridgeConfig(), graph), graph, Robot(ros)
+
+
+@asynccontextmanager
+async def open_foxglove(client: Client | None = None
+                        ) -> AsyncIterator[tuple[FoxgloveSession, Client, MemoryGraph]]:
+    """A Foxglove session running over ``client``'s link, as :func:`open_session` a rosbridge
+    one."""
+    bridge, graph, _robot = _bridge()
+    client = client or Client()
+    session = FoxgloveSession(bridge, bridge.foxglove, client.link, 1)
+    running = asyncio.create_task(session.run())
+    try:
+        yield session, client, graph
+    finally:
+        client.hang_up()
+        await asyncio.wait_for(running, 5.0)
+        await bridge.foxglove.close()
+        graph.close()
+
+
+@asynccontextmanager
+async def open_session(client: Client | None = None,
+                       ) -> AsyncIterator[tuple[Session, Client, Robot, Bridge]]:
+    """A session running over ``client``'s link (a new client by default), sharing a
+    never-started bridge's state; the link is hung up and the session ended on the way
+    out."""
+    bridge, graph, robot = _bridge()
+    client = client or Client()
+    session = Session(bridge, client.link, 1)
+    bridge.sessions.add(session)
+    running = asyncio.create_task(session.run())
+    try:
+        yield session, client, robot, bridge
+    finally:
+        client.hang_up()
+        await asyncio.wait_for(running, 5.0)
+        graph.close()
