@@ -28,7 +28,8 @@ key                                      what
 ``<robot>/@advertise/<relay>/<latch>/``  liveliness token of a relay's publisher
 ``<pkg>/msg/<Name>/<topic>``             (``latch`` is ``latched`` or ``volatile``)
 ``<robot>/@in/<topic>``                  a client's message to publish: CDR bytes,
-                                         attachment :class:`Meta` (type and latch)
+                                         attachment :class:`Meta` (type and latch); the
+                                         only key a relay puts under
 ``<robot>/@goal/<relay>/<action>``       queryable: a goal of relay ``relay``,
                                          :class:`GoalRequest` JSON in; the replies
                                          stream :class:`GoalEvent` JSON (accepted,
@@ -93,7 +94,12 @@ __all__ = [
     "PARAM",
     "PRESENCE",
     "REFUSED",
+    "RELAY_ANSWERS",
+    "RELAY_ASKS",
+    "RELAY_PUTS",
     "RELAY_SCOPED",
+    "RELAY_TOKENS",
+    "ROBOT_ANSWERS",
     "RUNNING",
     "SERVE",
     "SERVING",
@@ -154,8 +160,19 @@ PRESENCE = (ALIVE, CLAIM)
 """The chunks of a robot's own presence tokens: a robot declares them, relays follow them (a
 router's access rules let no relay announce a robot, nor block its name)."""
 
-RELAY_SCOPED = (DEMAND, ADVERTISE, RUNNING, CANCEL, SERVE, REFUSED, SERVING, EXECUTING, CALL,
-                GOAL)
+RELAY_TOKENS = (DEMAND, ADVERTISE, RUNNING, SERVE)
+"""The chunks of a relay's liveliness tokens (``<robot>/<chunk>/<relay>/...``)."""
+RELAY_ASKS = (CALL, GOAL, CANCEL)
+"""The chunks of a relay's queries that name it (``<robot>/<chunk>/<relay>/...``)."""
+RELAY_ANSWERS = (SERVING, EXECUTING)
+"""The chunks of a relay's queryables and their replies (``<robot>/<chunk>/<relay>/...``)."""
+ROBOT_ANSWERS = (GRAPH, LATCHED, PARAM)
+"""The chunks of a robot's queryables that any relay may ask and that name no relay."""
+RELAY_PUTS = (IN,)
+"""The only chunks a relay puts under: a client's message for the robot to publish (no
+relay puts topic data, a graph document or anything else under a robot's keys)."""
+
+RELAY_SCOPED = (*RELAY_TOKENS, *RELAY_ASKS, *RELAY_ANSWERS, REFUSED)
 """The control chunks whose next chunk names a relay (``<robot>/<chunk>/<relay>/...``): a
 router's access rules hold each relay to its own (its certificate's common name), so what
 the robot takes as a relay's id there is that relay's."""

@@ -13,9 +13,10 @@ Every link can be TLS, and a router can ask each side for a certificate
 (``--zenoh-mtls``): then a robot proves who it is by its certificate's common name, and
 the router lets it use only the keys under that name (:func:`robot_acl`), so no robot can
 publish, serve or answer as another. Relays, named by their certificates too
-(``--zenoh-relay``), may use every robot's keys, but where a key names a relay (its goals,
-cancels, calls and tokens) only their own name; which viewer may reach which robot is the
-relay's roles' business (``robots = [...]`` in a role).
+(``--zenoh-relay``), hear every robot's keys but send only what a relay's role needs (its
+requests, under its own name where a key names a relay; a client's message to publish under
+``@in/``): never a robot's topic data, graph, replies or presence. Which viewer may reach
+which robot is the relay's roles' business (``robots = [...]`` in a role).
 """
 
 from __future__ import annotations
@@ -81,10 +82,8 @@ def _under(prefix: str) -> list[str]:
 def robot_acl(robots: Sequence[str], relays: Sequence[str]) -> dict[str, Any]:
     """A router's access control: each robot (by its certificate's common name, which is its
     robot name) only on keys under its name; each relay (by its certificate's common name,
-    which is its relay id) on every robot's, but where a key names a relay
-    (:data:`keys.RELAY_SCOPED`: its goals, cancels, calls, tokens) only under its own name,
-    and robots' presence tokens (:data:`keys.PRESENCE`) followed, not declared; anyone else on
-    nothing."""
+    which is its relay id) hears every robot's keys but sends only what its role needs
+    (:func:`_relay_grants`); anyone else on nothing."""
     rules: list[dict[str, Any]] = []
     subjects: list[dict[str, Any]] = []
     policies: list[dict[str, Any]] = []
@@ -99,20 +98,44 @@ def robot_acl(robots: Sequence[str], relays: Sequence[str]) -> dict[str, Any]:
         subjects.append({"id": subject, "cert_common_names": names})
         policies.append({"rules": ids, "subjects": [subject]})
 
-    both = ["ingress", "egress"]
     for i, robot in enumerate(robots):
-        allow(f"robot{i}", [robot], ([robot, *_under(robot)], _MESSAGES, both))
-    shared = [c for c in _CONTROL if c not in keys.RELAY_SCOPED + keys.PRESENCE]
-    presence = [k for c in keys.PRESENCE for k in (f"*/{c}", f"*/{c}/**")]
+        allow(f"robot{i}", [robot], ([robot, *_under(robot)], _MESSAGES, ["ingress", "egress"]))
     for i, relay in enumerate(relays):
-        allow(f"relay{i}", [relay],
-              (["**", *(f"*/{c}" for c in shared), *(f"*/{c}/**" for c in shared),
-                *(f"*/{c}/{relay}/**" for c in keys.RELAY_SCOPED)], _MESSAGES, both),
-              # robots' presence: followed, never announced (no relay holds a robot's name)
-              (presence, ["declare_liveliness_subscriber", "liveliness_query"], ["ingress"]),
-              (presence, _MESSAGES, ["egress"]))
+        allow(f"relay{i}", [relay], *_relay_grants(relay))
     return {"enabled": True, "default_permission": "deny", "rules": rules,
             "subjects": subjects, "policies": policies}
+
+
+def _relay_grants(relay: str) -> list[tuple[list[str], list[str], list[str]]]:
+    """What relay ``relay`` may do on robots' keys, as (key expressions, messages, flows).
+
+    It hears everything of every robot (egress: topics, graph documents, replies, tokens,
+    the robot's queries of its clients' services). What it sends (ingress) is only what its
+    role needs: under its own name only (the chunk after :data:`keys.RELAY_TOKENS`,
+    :data:`keys.RELAY_ASKS`, :data:`keys.RELAY_ANSWERS`) its tokens, calls, goals and
+    cancels, and its clients' served names' queryables and their replies; the queries that
+    name no relay (:data:`keys.ROBOT_ANSWERS`: graph, latched messages, parameters; a
+    reliable topic's cache); its subscriptions; and puts under :data:`keys.RELAY_PUTS`
+    (``@in/``) alone: a client's message to publish travels as a put there, which the robot
+    publishes in ROS. Never topic data, a graph document, a reply or presence under a
+    robot's keys.
+    """
+    def scoped(chunks: tuple[str, ...]) -> list[str]:
+        return [f"*/{c}/{relay}/**" for c in chunks]
+
+    adv = f"**/{keys.ADV}/**"  # a reliable topic's cache and its tokens (zenoh.ext's keys)
+    everything = ["**", *(k for c in _CONTROL for k in (f"*/{c}", f"*/{c}/**")), adv]
+    asked = [*(k for c in keys.ROBOT_ANSWERS for k in (f"*/{c}", f"*/{c}/**")), adv,
+             *scoped(keys.RELAY_ASKS)]
+    hears = ["declare_subscriber", "declare_liveliness_subscriber", "liveliness_query"]
+    return [
+        (everything, _MESSAGES, ["egress"]),
+        (everything, hears, ["ingress"]),
+        ([f"*/{c}/**" for c in keys.RELAY_PUTS], ["put"], ["ingress"]),
+        (asked, ["query"], ["ingress"]),
+        (scoped(keys.RELAY_ANSWERS), ["declare_queryable", "reply"], ["ingress"]),
+        (scoped(keys.RELAY_TOKENS), ["liveliness_token"], ["ingress"]),
+    ]
 
 
 @dataclass

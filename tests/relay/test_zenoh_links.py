@@ -275,6 +275,41 @@ def test_a_relay_follows_robots_presence_and_cannot_announce_one(
             s.close()
 
 
+def test_a_relay_sends_no_robots_data_graph_or_replies(pki: Pki, router: tuple[Any, str]
+                                                       ) -> None:
+    """A relay's certificate may put a client's message under a robot's @in/ and answer its
+    own served names, but the router drops its puts of the robot's topic data and graph
+    document and its queryables for the robot's graph, latched messages, calls and
+    parameters: no relay can speak for a robot."""
+    _, endpoint = router
+    relay = _client(pki, endpoint, "relay")
+    robot1 = _client(pki, endpoint, "robot1")
+    try:
+        subs, got = _subscribe(robot1, "robot1/**", "robot1/@graph", "robot1/@in/**")
+        # Forged first, then the relay's own put under @in/: data on one link keeps its
+        # order, so when the last arrives the forged ones would have too.
+        _put_when_heard(relay, "robot1/camera")
+        relay.put("robot1/@graph", b"forged")
+        relay.put("robot1/@in/cmd", b"from a client")
+        assert got.get(timeout=DEADLINE) == "robot1/@in/cmd"
+        assert got.empty()
+        forged = [relay.declare_queryable(k, lambda q: q.reply(q.key_expr, b"forged"))
+                  for k in ("robot1/@graph", "robot1/@latched/camera",
+                            "robot1/@call/relay/svc", "robot1/@param/node")]
+        own = relay.declare_queryable("robot1/@serving/relay/svc",
+                                      lambda q: q.reply(q.key_expr, b"served"))
+        # the relay's own queryable answers robot1, so its declarations reached the router
+        assert _answered(robot1, "robot1/@serving/relay/svc") == [b"served"]
+        for key in ("robot1/@graph", "robot1/@latched/camera", "robot1/@call/relay/svc",
+                    "robot1/@param/node"):
+            assert [r for r in robot1.get(key, timeout=DEADLINE) if r.ok] == [], key
+        for entity in [*subs, *forged, own]:
+            entity.undeclare()
+    finally:
+        for s in (robot1, relay):
+            s.close()
+
+
 def test_a_relay_is_its_certificates_name(pki: Pki) -> None:
     """A relay with a certificate is its common name on Zenoh; one dialing with it refuses
     another --relay-id, naming both (the router would hold it to the certificate's)."""
