@@ -44,6 +44,7 @@ import contextlib
 import itertools
 import json
 import logging
+import math
 import random
 import secrets
 from collections.abc import Callable
@@ -176,6 +177,15 @@ CLAIM_WAIT = 1.0
 """Seconds the robot waits for the tokens of its name when it announces itself (and at
 most between one holding it leaving and trying again)."""
 
+RETURN_POLL = 0.25
+"""Seconds between two looks at the claims of its name by a robot back from an outage,
+for a lease after its link is back (the network tells it of them as a rule, but not
+always at once: a look at once may find none, and the claim's token may not come)."""
+
+CLAIM_RECHECK = 5.0
+"""Seconds between two looks, by a robot refused its name, at whether the holder left (it
+is told at once as a rule)."""
+
 DIAL_WARNING = 5.0
 """Seconds the robot dials without any router answering before it says so (and again
 after each as many)."""
@@ -266,6 +276,14 @@ class Exporter:
         self.name_refusals = 0
         """Robots refused this robot's name while it held it."""
         self._claim_changed = asyncio.Event()
+        self._listeners: list[Any] = []  # the uplink's and the name's, while the session is
+        self._away_until = 0.0
+        """Loop time until which another robot's claim that comes is one made while this
+        robot was away (its last uplink lost since it took its name: ``inf`` until the
+        uplink is back, then a lease more, the time the network takes to tell it the claims
+        it missed)."""
+        self._returned = asyncio.Event()
+        """Set when the robot, back from an outage, may have met another robot's claim."""
 
     # -- life ----------------------------------------------------------------------------------
 
@@ -301,19 +319,33 @@ class Exporter:
             if tls else "check that the router is up and reachable there")
 
     async def _joined(self, session: zenoh.Session) -> None:
-        """Hold the robot's name on the open ``session`` (:meth:`_claim`), offer the robot,
-        then keep its graph snapshot fresh."""
+        """Hold the robot's name on the open ``session`` (:meth:`_claim`), offer the robot
+        and keep its graph snapshot fresh while it holds the name; withdraw when it finds,
+        back from an outage, that another robot took the name meanwhile, and wait for it
+        again."""
+        here = self._on_loop
+        self.zid = str(session.zid())
+        self._listeners = [
+            session.info.declare_transport_events_listener(here(self._on_transport),
+                                                           history=True),
+            session.liveliness().declare_subscriber(f"{self.robot}/{keys.CLAIM}/*",
+                                                    here(self._on_claim)),
+        ]
+        claim = None
+        while True:
+            claim = await self._claim(session, claim)
+            self._entities = [claim]
+            self._serve(session)
+            claim = await self._hold(session)
+            self._withdraw(keep=claim)
+
+    def _serve(self, session: zenoh.Session) -> None:
+        """Offer the robot on ``session`` (its name held)."""
         r = self.robot
         here = self._on_loop
         live = session.liveliness()
-        self.zid = str(session.zid())
-        self._entities = [
-            session.info.declare_transport_events_listener(here(self._on_transport),
-                                                           history=True),
-            live.declare_subscriber(f"{r}/{keys.CLAIM}/*", here(self._on_claim)),
-        ]
-        self._entities.append(await self._claim(session))
         self.holding = True
+        self._away_until = 0.0
         self.snapshot = self._take_snapshot()
         self._snapshot_bytes = self.snapshot.encode()
         self._entities += [
@@ -332,95 +364,27 @@ class Exporter:
             live.declare_token(keys.alive_key(r, self.zid)),  # last: all above answers
         ]
         log.info("robot %s is on Zenoh (session %s)", self.robot, self.zid)
+
+    async def _hold(self, session: zenoh.Session) -> Any:
+        """Keep the graph snapshot fresh while the robot holds its name; return its claim
+        token when, back from an outage (its last uplink gone, then one back), it finds
+        another robot's claim: that robot took the name meanwhile, and the held claim wins."""
         while True:
-            await asyncio.sleep(self.snapshot_interval)
+            back = self._loop.time() < self._away_until < math.inf
+            with contextlib.suppress(TimeoutError):
+                async with asyncio.timeout(RETURN_POLL if back else self.snapshot_interval):
+                    await self._returned.wait()
+            if self._returned.is_set() or back:
+                self._returned.clear()
+                found = await tokens(session, f"{self.robot}/{keys.CLAIM}/*", CLAIM_WAIT)
+                if {keys.parse_alive(key)[1] for key in found} - {self.zid}:
+                    return self._entities[0]
             self._refresh_snapshot()
 
-    async def _claim(self, session: zenoh.Session) -> Any:
-        """Announce the robot's name (its ``@claim`` token) and hold it: the token of another
-        robot there already means that robot holds the name, and this one withdraws its
-        token, says why (an error, with both Zenoh ids) and, serving nothing on Zenoh, waits
-        for that robot to leave (a robot restarted before its old session's lease ended
-        waits for that lease). The token held, returned."""
-        live = session.liveliness()
-        told: set[str] = set()
-        while True:
-            self._claim_changed.clear()
-            token = live.declare_token(keys.claim_key(self.robot, self.zid))
-            found = await tokens(session, f"{self.robot}/{keys.CLAIM}/*", CLAIM_WAIT)
-            others = {keys.parse_alive(key)[1] for key in found} - {self.zid}
-            if not others:
-                if told:
-                    log.info("robot %s: the robot that held its name left; this robot "
-                             "(Zenoh id %s) takes it", self.robot, self.zid)
-                self.refused_by = set()
-                return token
-            token.undeclare()  # type: ignore[no-untyped-call]
-            self.refused_by = others
-            if others - told:
-                told |= others
-                log.error("robot %s: another robot holds this name on the Zenoh network "
-                          "(Zenoh id %s): this robot (Zenoh id %s) is refused and serves "
-                          "nothing on Zenoh until that one leaves (ROS is served meanwhile); "
-                          "stop the other robot, or give this one another --robot name",
-                          self.robot, ", ".join(sorted(others)), self.zid)
-            await self._claim_changed.wait()
-            # Two robots that announced the name at once each withdrew for the other: they
-            # try again at different times.
-            await asyncio.sleep(random.uniform(0, CLAIM_WAIT))
-
-    def _on_claim(self, sample: zenoh.Sample) -> None:
-        """Another session's token of the robot's name came or went: one gone may free the
-        name for a robot waiting for it; one come while this robot holds the name is a robot
-        refused (it withdraws when it sees this one's), said here too."""
-        zid = keys.parse_alive(str(sample.key_expr))[1]
-        if zid == self.zid:
-            return
-        if sample.kind != zenoh.SampleKind.PUT:
-            self._claim_changed.set()
-        elif self.holding:
-            self.name_refusals += 1
-            log.warning("robot %s: another robot (Zenoh id %s) announced this robot's name, "
-                        "which this robot (Zenoh id %s) holds: it is refused, this one goes on "
-                        "serving", self.robot, zid, self.zid)
-
-    def _on_transport(self, event: zenoh.TransportEvent) -> None:
-        """The robot's own log says when its uplink goes and comes back (its last router
-        gone, or the first back): the relays' clients are told by their relays."""
-        zid = str(event.transport.zid)
-        if event.kind == zenoh.SampleKind.PUT:
-            first = not self.uplinks
-            self.uplinks.add(zid)
-            if first:
-                self._uplink_since = self._loop.time()
-            if first and self.uplink_lost:
-                log.info("robot %s: its uplink to the Zenoh network is back (router %s)",
-                         self.robot, zid)
-        elif zid in self.uplinks:
-            self.uplinks.discard(zid)
-            if not self.uplinks:
-                self.uplink_lost += 1
-                log.warning("robot %s: its uplink to the Zenoh network is gone (router %s "
-                            "closed or silent for the lease): ROS is served meanwhile, relays' "
-                            "clients are told it went away, and it dials again", self.robot,
-                            zid)
-
-    def _on_loop(self, fn: Callable[[Any], None]) -> Callable[[Any], None]:
-        """A Zenoh callback that hands its argument to ``fn`` on the event loop."""
-        loop = self._loop
-
-        def cross(arg: Any) -> None:
-            with contextlib.suppress(RuntimeError):  # the loop closed while Zenoh called
-                loop.call_soon_threadsafe(fn, arg)
-
-        return cross
-
-    async def close(self) -> None:
-        """Leave Zenoh (the relays see the robot go) and release what the relays held."""
-        if self._runner is not None:
-            self._runner.cancel()
-            with contextlib.suppress(asyncio.CancelledError, BridgeError):
-                await self._runner
+    def _withdraw(self, keep: Any = None) -> None:
+        """Stop serving on Zenoh: release what the relays held and undeclare what the robot
+        declared (but ``keep``)."""
+        self.holding = False
         for task in list(self._tasks):
             task.cancel()
         for export in self.exports.values():
@@ -447,9 +411,126 @@ class Exporter:
             action.destroy()
         self._lingering.clear()
         for entity in self._entities:
+            if entity is not keep:
+                with contextlib.suppress(zenoh.ZError):
+                    entity.undeclare()
+        self._entities.clear()
+
+    async def _claim(self, session: zenoh.Session, token: Any = None) -> Any:
+        """Announce the robot's name (its ``@claim`` token; ``token``: one declared already)
+        and hold it: the token of another robot there already means that robot holds the
+        name, and this one withdraws its token, says why (an error, with both Zenoh ids)
+        and, serving nothing on Zenoh, waits for that robot to leave (a robot restarted
+        before its old session's lease ended waits for that lease). The token held,
+        returned."""
+        live = session.liveliness()
+        told: set[str] = set()
+        while True:
+            self._claim_changed.clear()
+            if token is None:
+                token = live.declare_token(keys.claim_key(self.robot, self.zid))
+            found = await tokens(session, f"{self.robot}/{keys.CLAIM}/*", CLAIM_WAIT)
+            others = {keys.parse_alive(key)[1] for key in found} - {self.zid}
+            if not others:
+                if told:
+                    log.info("robot %s: the robot that held its name left; this robot "
+                             "(Zenoh id %s) takes it", self.robot, self.zid)
+                self.refused_by = set()
+                return token
+            token.undeclare()
+            token = None
+            self.refused_by = others
+            if others - told:
+                told |= others
+                log.error("robot %s: another robot holds this name on the Zenoh network "
+                          "(Zenoh id %s): this robot (Zenoh id %s) is refused and serves "
+                          "nothing on Zenoh until that one leaves (ROS is served meanwhile); "
+                          "stop the other robot, or give this one another --robot name",
+                          self.robot, ", ".join(sorted(others)), self.zid)
+            await self._until_unclaimed(session)
+            # Two robots that announced the name at once each withdrew for the other: they
+            # try again at different times.
+            await asyncio.sleep(random.uniform(0, CLAIM_WAIT))
+
+    async def _until_unclaimed(self, session: zenoh.Session) -> None:
+        """Wait until no other robot's claim of the name is on the network: told by a
+        claim going (:meth:`_on_claim`), and asked again each ``CLAIM_RECHECK`` s besides
+        (Zenoh may not tell a waiting robot of a token that goes: seen once in some runs,
+        the waiting robot then waited for ever)."""
+        while True:
+            with contextlib.suppress(TimeoutError):
+                async with asyncio.timeout(CLAIM_RECHECK):
+                    await self._claim_changed.wait()
+            self._claim_changed.clear()
+            found = await tokens(session, f"{self.robot}/{keys.CLAIM}/*", CLAIM_WAIT)
+            if not {keys.parse_alive(key)[1] for key in found} - {self.zid}:
+                return
+
+    def _on_claim(self, sample: zenoh.Sample) -> None:
+        """Another session's token of the robot's name came or went: one gone may free the
+        name for a robot waiting for it; one come while this robot holds the name is a robot
+        refused (it withdraws when it sees this one's), said here too."""
+        zid = keys.parse_alive(str(sample.key_expr))[1]
+        if zid == self.zid:
+            return
+        if sample.kind != zenoh.SampleKind.PUT:
+            self._claim_changed.set()
+        elif self.holding and self._loop.time() < self._away_until:
+            self._returned.set()  # back from an outage: another took the name meanwhile?
+        elif self.holding:
+            self.name_refusals += 1
+            log.warning("robot %s: another robot (Zenoh id %s) announced this robot's name, "
+                        "which this robot (Zenoh id %s) holds: it is refused, this one goes on "
+                        "serving", self.robot, zid, self.zid)
+
+    def _on_transport(self, event: zenoh.TransportEvent) -> None:
+        """The robot's own log says when its uplink goes and comes back (its last router
+        gone, or the first back): the relays' clients are told by their relays. Back, a
+        robot that held its name looks whether another took it meanwhile (:meth:`_hold`)."""
+        zid = str(event.transport.zid)
+        if event.kind == zenoh.SampleKind.PUT:
+            first = not self.uplinks
+            self.uplinks.add(zid)
+            if first:
+                self._uplink_since = self._loop.time()
+            if first and self.uplink_lost:
+                log.info("robot %s: its uplink to the Zenoh network is back (router %s)",
+                         self.robot, zid)
+            if first and self._away_until == math.inf:
+                self._away_until = self._loop.time() + self.options.lease
+                self._returned.set()
+        elif zid in self.uplinks:
+            self.uplinks.discard(zid)
+            if not self.uplinks:
+                self.uplink_lost += 1
+                if self.holding:
+                    self._away_until = math.inf
+                log.warning("robot %s: its uplink to the Zenoh network is gone (router %s "
+                            "closed or silent for the lease): ROS is served meanwhile, relays' "
+                            "clients are told it went away, and it dials again", self.robot,
+                            zid)
+
+    def _on_loop(self, fn: Callable[[Any], None]) -> Callable[[Any], None]:
+        """A Zenoh callback that hands its argument to ``fn`` on the event loop."""
+        loop = self._loop
+
+        def cross(arg: Any) -> None:
+            with contextlib.suppress(RuntimeError):  # the loop closed while Zenoh called
+                loop.call_soon_threadsafe(fn, arg)
+
+        return cross
+
+    async def close(self) -> None:
+        """Leave Zenoh (the relays see the robot go) and release what the relays held."""
+        if self._runner is not None:
+            self._runner.cancel()
+            with contextlib.suppress(asyncio.CancelledError, BridgeError):
+                await self._runner
+        self._withdraw()
+        for entity in self._listeners:
             with contextlib.suppress(zenoh.ZError):
                 entity.undeclare()
-        self._entities.clear()
+        self._listeners.clear()
         if self.session is not None:
             session, self.session = self.session, None
             await self._loop.run_in_executor(None, session.close)

@@ -11,7 +11,7 @@ import asyncio
 import contextlib
 import queue
 import re
-from collections.abc import AsyncIterator
+from collections.abc import AsyncIterator, Awaitable, Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -169,6 +169,16 @@ async def until(predicate: Any, what: str, timeout: float = 15.0) -> Any:
     """Await ``predicate()`` being truthy (Zenoh and ROS discovery have no event here):
     :func:`tests.helpers.async_wait_until` with the relay tests' order and deadline."""
     return await async_wait_until(predicate, timeout, what)
+
+
+async def until_async(check: Callable[[], Awaitable[bool]], what: str, timeout: float = 15.0
+                      ) -> None:
+    """Await ``check()`` being true (it asks the network each time: a liveliness query, no
+    event to wait on), at most ``timeout`` s."""
+    deadline = asyncio.get_running_loop().time() + timeout
+    while not await check():
+        if asyncio.get_running_loop().time() > deadline:
+            raise AssertionError(f"timed out after {timeout} s waiting for {what}")
 
 
 @dataclass
