@@ -3,7 +3,9 @@
 Run it with ``python -m bridge_server --host 127.0.0.1 --port 9090`` (or the
 ``roslibpy-lite-bridge`` console script). Packages, by job:
 
-- :mod:`bridge_server.server`: the websocket server, one session per connection;
+- :mod:`bridge_server.front`: what faces the network: the websocket listener, one session
+  per connection (``front/server.py``), and the sessions' link over websockets with the
+  frame fast path (``front/websocket.py``);
 - :mod:`bridge_server.session`: what one client owns and how its ops run (the op
   groups, outbox, ownership, resume, the ``/rosapi/*`` services);
 - :mod:`bridge_server.rclpy_graph`: the ROS side on rclpy (the node, its executor

@@ -50,8 +50,8 @@ except ModuleNotFoundError as _missing:  # a client-only install: say which extr
     missing_dependency(_missing)
 
 if TYPE_CHECKING:
+    from .front.server import Bridge
     from .security.permissions import Role
-    from .server import Bridge
 
 __all__ = ["main", "parse_args"]
 
@@ -263,8 +263,8 @@ CI saw a worker stuck that way. The watchdog is faulthandler's own thread, which
 
 async def _run(args: argparse.Namespace) -> int:
     try:  # the sessions import without the bridge's extra (MockRos runs them); ROS does not
+        from .front.server import Bridge, BridgeConfig
         from .rclpy_graph.graph import RclpyGraph
-        from .server import Bridge, BridgeConfig
     except ModuleNotFoundError as missing:
         from ._requires import missing_dependency
 

@@ -1,7 +1,7 @@
 """A relay's plain-HTTP routes: its robots at a glance, and each robot's bridge status page.
 
 The relay (``roslibpy-lite-relay``) serves each robot's sessions with one
-:class:`~bridge_server.server.Bridge`; these routes show them, with the bridge's own page,
+:class:`~bridge_server.front.server.Bridge`; these routes show them, with the bridge's own page,
 snapshot and metrics code, on the relay's websocket port (a websocket upgrade on any path
 goes on to the robot's handshake):
 
@@ -60,7 +60,7 @@ from .web_access import WebAccess
 if TYPE_CHECKING:
     from websockets.http11 import Request
 
-    from ..server import Bridge
+    from ..front.server import Bridge
 
 __all__ = ["RelayFront", "RelayWeb"]
 

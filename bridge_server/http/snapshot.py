@@ -83,7 +83,7 @@ class Worker(Protocol):
 
 
 class Observed(Protocol):
-    """What the status reads of a bridge (:class:`~bridge_server.server.Bridge`)."""
+    """What the status reads of a bridge (:class:`~bridge_server.front.server.Bridge`)."""
 
     @property
     def metrics(self) -> BridgeMetrics:

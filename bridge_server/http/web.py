@@ -134,7 +134,7 @@ class Reply:
 
 
 class WebConfig(snapshot.Worker, Protocol):
-    """The settings the routes follow (:class:`~bridge_server.server.BridgeConfig`)."""
+    """The settings the routes follow (:class:`~bridge_server.front.server.BridgeConfig`)."""
 
     @property
     def host(self) -> str:
@@ -166,7 +166,7 @@ class Received(Protocol):
 
 
 class Served(snapshot.Observed, Protocol):
-    """What the routes read of a bridge (:class:`~bridge_server.server.Bridge`)."""
+    """What the routes read of a bridge (:class:`~bridge_server.front.server.Bridge`)."""
 
     @property
     def config(self) -> WebConfig:

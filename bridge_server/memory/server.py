@@ -2,7 +2,7 @@
 client on a :class:`~.link.MemoryLink`.
 
 :class:`MemoryServer` is what the sessions share (:class:`~bridge_server.session.host.Shared`),
-as the :class:`~bridge_server.server.Bridge` is, without a socket, a listener, a status page
+as the :class:`~bridge_server.front.server.Bridge` is, without a socket, a listener, a status page
 or ROS: :meth:`MemoryServer.connect` opens one client's session and returns its
 :class:`MemoryConnection`. :class:`~roslibpy_lite.mock.MockRos` runs on it, so what MockRos
 answers is what the bridge's sessions answer.

@@ -4,7 +4,7 @@ One module per job: :mod:`.options` (the command line), :mod:`.credentials` (add
 token of a request), :mod:`.handshake` (:class:`Security`: TLS, reload, the handshake),
 :mod:`.gate` (:class:`Gate`: per session) and :mod:`.redaction` (tokens out of logs); the
 connection class it serves with (the inbound byte budget, the frame fast path, the
-sessions' link) is :mod:`bridge_server.front`, the only code that relies on websockets'
+sessions' link) is :mod:`bridge_server.front.websocket`, the only code that relies on websockets'
 private internals. Who may see the plain-HTTP routes is
 :class:`bridge_server.http.web.WebAccess`.
 
@@ -38,7 +38,7 @@ error text (:class:`RedactTokens` also scrubs other libraries' log lines).
 
 from __future__ import annotations
 
-from ..front import BridgeConnection, WebSocketLink, check_websockets_internals
+from ..front.websocket import BridgeConnection, WebSocketLink, check_websockets_internals
 from .credentials import is_loopback
 from .gate import POLICY_VIOLATION, PRE_AUTH_FRAME_LIMIT, Gate
 from .handshake import Security

@@ -15,7 +15,7 @@ from typing import Any
 from websockets.asyncio.server import ServerConnection
 from websockets.http11 import Request, Response
 
-from ..front import BridgeConnection, Inbound, check_websockets_internals
+from ..front.websocket import BridgeConnection, Inbound, check_websockets_internals
 from ..interfaces import BridgeError
 from .auth import AuthConfig, AuthFileError, FailureTracker, Principal, load_auth_file
 from .credentials import client_address, is_loopback, token_of

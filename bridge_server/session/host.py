@@ -8,7 +8,7 @@ and the websocket: what each may touch is written down here, and a second server
 Zenoh) or a test (``tests/session``: a fake graph and a fake link, no ROS, no socket) gives
 them the same members. What every session shares (the graph, who serves which name, the
 action clients, the metrics, the gate factory, the resume store, the settings, the sessions)
-is :attr:`Host.shared`; the bridge (:class:`~bridge_server.server.Bridge`) is one.
+is :attr:`Host.shared`; the bridge (:class:`~bridge_server.front.server.Bridge`) is one.
 
 These protocols name only modules below the session (graph, security's gate, the outbox, the
 link, the resume store, ownership), never the session or its op groups, so nothing imports

@@ -3,7 +3,7 @@
 A :class:`~bridge_server.session.session.Session` (and a Foxglove one) reads frames from, and
 writes frames to, a :class:`ClientLink`; it never sees the websocket library. The bridge's
 link is its websocket connection
-(:class:`~bridge_server.front.WebSocketLink`, the only code that
+(:class:`~bridge_server.front.websocket.WebSocketLink`, the only code that
 touches websockets' internals); MockRos and the session tests drive one over
 :class:`~bridge_server.memory.link.MemoryLink` with no socket at all.
 

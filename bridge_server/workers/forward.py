@@ -40,7 +40,7 @@ from websockets.http11 import Request, Response
 
 from roslibpy_lite.protocol.ops import SESSION_HEADER
 
-from ..front import BridgeConnection, take_transport
+from ..front.websocket import BridgeConnection, take_transport
 from ..session.resume import CLAIM_WAIT, worker_of
 from .peers import PEER_TIMEOUT
 

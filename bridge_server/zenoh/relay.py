@@ -1,7 +1,7 @@
 """``roslibpy-lite-relay``: a rosbridge v2 server without ROS, serving robots on Zenoh.
 
 Clients connect to ``ws://relay:9090/<robot>`` (``wss://`` with ``--certfile``): the path
-names the robot. Each robot gets one :class:`~bridge_server.server.Bridge` (its sessions,
+names the robot. Each robot gets one :class:`~bridge_server.front.server.Bridge` (its sessions,
 owners, metrics, kept sessions) over one :class:`~.graph.ZenohGraph`, made when its first
 client comes and shared by the later ones; every robot's sessions are served on the one
 port with the bridge's own session, security and resume code. A path naming no robot that
@@ -48,7 +48,8 @@ try:
     from .. import eventloop, security
     from ..foxglove import SUBPROTOCOL as FOXGLOVE
     from ..foxglove import select_subprotocol
-    from ..front import BridgeConnection
+    from ..front.server import REFUSALS, Bridge, BridgeConfig, websockets_pings
+    from ..front.websocket import BridgeConnection
     from ..http.relay_web import RelayWeb
     from ..http.web import Reply, address_of, handshake_headers, respond
     from ..http.web_access import WebAccess
@@ -58,7 +59,6 @@ try:
     from ..security.credentials import client_address
     from ..security.gate import POLICY_VIOLATION
     from ..security.options import MAX_MESSAGE_SIZE
-    from ..server import REFUSALS, Bridge, BridgeConfig, websockets_pings
     from ..session.resume import ResumeConfig
     from ..session.session import SessionConfig
     from . import keys

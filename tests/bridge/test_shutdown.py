@@ -15,8 +15,8 @@ from collections.abc import AsyncIterator
 import pytest
 import websockets
 
+from bridge_server.front.server import Bridge, BridgeConfig
 from bridge_server.rclpy_graph.graph import RclpyGraph
-from bridge_server.server import Bridge, BridgeConfig
 from tests.helpers import async_wait_until
 
 

@@ -127,10 +127,10 @@ def test_the_checker_sees_every_kind_of_import() -> None:
         "bridge_server.session.topics": ["action_msgs.msg", "action_msgs.msg.GoalStatus",
                                          "rclpy.node", "rclpy.qos", "rclpy.qos.QoSProfile"]
     }
-    chain = {"bridge_server.http.web": {"bridge_server.server"},
-             "bridge_server.server": {"bridge_server.rclpy_graph.graph"}}
+    chain = {"bridge_server.http.web": {"bridge_server.front.server"},
+             "bridge_server.front.server": {"bridge_server.rclpy_graph.graph"}}
     assert _reaches_backend(chain) == {
-        "bridge_server.http.web": ["bridge_server.http.web", "bridge_server.server",
+        "bridge_server.http.web": ["bridge_server.http.web", "bridge_server.front.server",
                                    "bridge_server.rclpy_graph.graph"]
     }
 
@@ -167,7 +167,7 @@ def test_the_session_side_does_not_import_the_backend(side: str) -> None:
 
 OP_GROUPS = ("bridge_server.session.topics", "bridge_server.session.services",
              "bridge_server.session.actions", "bridge_server.session.rosapi")
-WHOLE = ("bridge_server.server", "bridge_server.session.session")
+WHOLE = ("bridge_server.front.server", "bridge_server.session.session")
 
 
 @pytest.mark.parametrize("group", OP_GROUPS)
@@ -179,7 +179,7 @@ def test_the_op_groups_hold_a_narrow_handle(group: str) -> None:
     assert not bad, f"{group} imports {bad}"
 
 
-RELAY_IMPORTS = ("bridge_server.zenoh.relay", "bridge_server.server",
+RELAY_IMPORTS = ("bridge_server.zenoh.relay", "bridge_server.front.server",
                  "bridge_server.session.session", "bridge_server.security",
                  "bridge_server.http.web", "bridge_server.codec.cdr_json")
 """What ``roslibpy-lite-relay`` runs: its entry module and the bridge's server, sessions,
@@ -208,5 +208,5 @@ def test_the_relay_runs_where_ros_is_not_installed() -> None:
         cwd=ROOT, capture_output=True, text=True, timeout=60, check=False)
     assert done.returncode == 0, done.stderr
     loaded = json.loads(done.stdout.strip().splitlines()[-1])
-    assert "bridge_server.zenoh.relay" in loaded and "bridge_server.server" in loaded
+    assert "bridge_server.zenoh.relay" in loaded and "bridge_server.front.server" in loaded
     assert not [m for m in loaded if m.startswith(BACKEND)], loaded

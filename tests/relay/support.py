@@ -16,10 +16,10 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from bridge_server.front.server import Bridge, BridgeConfig
 from bridge_server.rclpy_graph.graph import RclpyGraph
 from bridge_server.security import SecurityConfig
 from bridge_server.security.auth import hash_token, new_token
-from bridge_server.server import Bridge, BridgeConfig
 from bridge_server.zenoh.exporter import Exporter
 from bridge_server.zenoh.graph import TypeLimits
 from bridge_server.zenoh.link import ZenohOptions

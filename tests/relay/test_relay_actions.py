@@ -12,8 +12,8 @@ from typing import Any
 
 import pytest
 
+from bridge_server.front.server import BridgeConfig
 from bridge_server.security import SecurityConfig
-from bridge_server.server import BridgeConfig
 from bridge_server.zenoh.graph import ZenohGraph
 from bridge_server.zenoh.link import ZenohOptions
 from bridge_server.zenoh.relay import Relay

@@ -24,7 +24,7 @@ from std_msgs.msg import String
 from websockets.exceptions import ConnectionClosed, InvalidStatus
 
 import roslibpy_lite
-from bridge_server.server import BridgeConfig
+from bridge_server.front.server import BridgeConfig
 from bridge_server.zenoh.link import ZenohOptions
 from bridge_server.zenoh.relay import Relay
 from tests.helpers import WireClient, open_wire, ros_env

@@ -20,11 +20,11 @@ from std_msgs.msg import String
 from std_srvs.srv import SetBool
 
 import roslibpy_lite
+from bridge_server.front.server import Bridge, BridgeConfig
 from bridge_server.rclpy_graph.graph import RclpyGraph
 from bridge_server.security import SecurityConfig
 from bridge_server.security.auth import hash_token, new_token
 from bridge_server.security.permissions import Role
-from bridge_server.server import Bridge, BridgeConfig
 from bridge_server.zenoh.exporter import DEFAULT_POLICY, Exporter
 from bridge_server.zenoh.link import ZenohOptions
 from bridge_server.zenoh.relay import Relay

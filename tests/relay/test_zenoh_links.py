@@ -313,7 +313,7 @@ def test_a_relay_sends_no_robots_data_graph_or_replies(pki: Pki, router: tuple[A
 def test_a_relay_is_its_certificates_name(pki: Pki) -> None:
     """A relay with a certificate is its common name on Zenoh; one dialing with it refuses
     another --relay-id, naming both (the router would hold it to the certificate's)."""
-    from bridge_server.server import BridgeConfig
+    from bridge_server.front.server import BridgeConfig
     from bridge_server.zenoh.relay import Relay
 
     cert, key = (str(p) for p in pki.cert("relay"))

@@ -12,7 +12,7 @@ import asyncio
 
 from websockets.frames import Frame, Opcode
 
-from bridge_server.front import BudgetAssembler, Inbound
+from bridge_server.front.websocket import BudgetAssembler, Inbound
 
 FRAME = 700
 

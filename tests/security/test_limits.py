@@ -14,7 +14,7 @@ from websockets.exceptions import ConnectionClosed, InvalidStatus
 from websockets.frames import Frame, Opcode
 from websockets.typing import Origin
 
-from bridge_server.front import BudgetAssembler, Inbound
+from bridge_server.front.websocket import BudgetAssembler, Inbound
 from tests.bridge.action_support import FibServer, send_goal
 from tests.bridge.support import roundtrip
 from tests.helpers import open_wire

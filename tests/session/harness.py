@@ -19,11 +19,11 @@ from contextlib import asynccontextmanager
 from typing import Any
 
 from bridge_server.foxglove.session import FoxgloveSession
+from bridge_server.front.server import Bridge, BridgeConfig
 from bridge_server.graph import Message, RosCall
 from bridge_server.memory.graph import MemoryGraph, MemoryPublisher, MemoryRos
 from bridge_server.memory.link import MemoryLink
 from bridge_server.security.auth import Principal
-from bridge_server.server import Bridge, BridgeConfig
 from bridge_server.session.session import Session
 from roslibpy_lite.protocol.frames import decode_frame
 

@@ -17,9 +17,9 @@ from pathlib import Path
 import cbor2
 import pytest
 
+from bridge_server.front.server import Bridge
 from bridge_server.security.auth import Principal
 from bridge_server.security.permissions import Role
-from bridge_server.server import Bridge
 from bridge_server.session.resume import SentFrames
 from roslibpy_lite.protocol.ops import ACKS_HEADER
 from tests.helpers import async_wait_until

@@ -58,15 +58,15 @@ try:  # websockets' own unmasking, in C where it was built with it
 except ImportError:  # pragma: no cover - a websockets without its C extension
     from websockets.utils import apply_mask
 
-from .interfaces import BridgeError
-from .session.frames import JOINED_BYTES, frame_parts, joined
+from ..interfaces import BridgeError
+from ..session.frames import JOINED_BYTES, frame_parts, joined
 
 log = logging.getLogger("bridge_server.security")
 
 if TYPE_CHECKING:
-    from .security.auth import Principal
-    from .security.options import SecurityConfig
-    from .session.frames import Frame as OutFrame
+    from ..security.auth import Principal
+    from ..security.options import SecurityConfig
+    from ..session.frames import Frame as OutFrame
 
 
 class ConnectionLimits(Protocol):

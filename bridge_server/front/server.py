@@ -1,7 +1,7 @@
 """The websocket server: one :class:`~bridge_server.session.Session` per connection.
 
 Each connection is its session's link
-(:class:`~bridge_server.front.WebSocketLink`, a
+(:class:`~bridge_server.front.websocket.WebSocketLink`, a
 :class:`~bridge_server.session.link.ClientLink`), and the :class:`Bridge` is what its
 sessions share (:class:`~bridge_server.session.host.Shared`): a session sees neither the
 websocket library nor the bridge whole.
@@ -38,27 +38,27 @@ from roslibpy_lite.protocol import keepalive
 from roslibpy_lite.protocol.errors import RemoteProtocolError
 from roslibpy_lite.protocol.ops import RECEIVED_HEADER, SESSION_HEADER, parse_received
 
-from .foxglove import SUBPROTOCOL, FoxgloveSession, Hub, select_subprotocol
-from .graph import Graph
-from .http.metrics import BridgeMetrics
-from .http.web import Web
-from .http.web_access import WebAccess
-from .security import Security, SecurityConfig, WebSocketLink
-from .security.options import MAX_MESSAGE_SIZE
-from .session.actions import ActionClients, SessionActions
-from .session.link import LinkConfig
-from .session.ownership import Ownership
-from .session.resume import ResumeConfig, SentFrames, SessionStore
-from .session.session import Session, SessionConfig, wait_ended
-from .workers.forward import Forwarder
+from ..foxglove import SUBPROTOCOL, FoxgloveSession, Hub, select_subprotocol
+from ..graph import Graph
+from ..http.metrics import BridgeMetrics
+from ..http.web import Web
+from ..http.web_access import WebAccess
+from ..security import Security, SecurityConfig, WebSocketLink
+from ..security.options import MAX_MESSAGE_SIZE
+from ..session.actions import ActionClients, SessionActions
+from ..session.link import LinkConfig
+from ..session.ownership import Ownership
+from ..session.resume import ResumeConfig, SentFrames, SessionStore
+from ..session.session import Session, SessionConfig, wait_ended
+from ..workers.forward import Forwarder
 
 if TYPE_CHECKING:
     from collections.abc import Awaitable
 
     from websockets.http11 import Request, Response
 
-    from .session.host import Host
-    from .session.services import SessionServices
+    from ..session.host import Host
+    from ..session.services import SessionServices
 
 __all__ = ["Bridge", "BridgeConfig", "ServedGraph"]
 
