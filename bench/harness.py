@@ -206,6 +206,11 @@ class Bridge:
                 await self._drain
 
 
+EVENT_LINE_LIMIT = 64 << 20
+"""Longest event line a ROS side may print: an image subscriber's ``done`` lists every frame's
+arrival time (about 200 kB for 10 s at 2,000 frames a second, past asyncio's 64 KiB default)."""
+
+
 class RosSide:
     """A ``bench/ros_side.py`` process; its JSON event lines are read as they come."""
 
@@ -226,6 +231,7 @@ class RosSide:
             sys.executable, self.script, *self.args, cwd=ROOT, env=child_env(self.domain),
             stdin=asyncio.subprocess.PIPE, stdout=asyncio.subprocess.PIPE,
             stderr=asyncio.subprocess.STDOUT,
+            limit=EVENT_LINE_LIMIT,
         )
         self._reader = asyncio.create_task(self._read())
         return self
