@@ -319,12 +319,16 @@ def _decode_json(data: bytes, what: str) -> dict[str, Any]:
     return obj
 
 
+_COMPACT = json.JSONEncoder(separators=(",", ":"))
+"""The one encoder of every payload (``json.dumps`` with ``separators`` makes one per call)."""
+
+
 class _Payload:
     """A dataclass carried as compact JSON (a query's payload, a put's attachment)."""
 
     def encode(self) -> bytes:
         """As the payload's bytes."""
-        return json.dumps(asdict(cast(Any, self)), separators=(",", ":")).encode()
+        return _COMPACT.encode(asdict(cast(Any, self))).encode()
 
 
 @dataclass
@@ -339,6 +343,13 @@ class Meta(_Payload):
     stamp_ns: int = 0
     epoch: str = ""
     seq: int = 0
+
+    def encode(self) -> bytes:
+        """As the attachment's bytes: made for every message a robot puts, so from its fields
+        directly (``asdict`` copied each field deeply, a third of a robot's work per message)."""
+        return _COMPACT.encode({"type": self.type, "latched": self.latched,
+                                "stamp_ns": self.stamp_ns, "epoch": self.epoch,
+                                "seq": self.seq}).encode()
 
     @classmethod
     def decode(cls, data: bytes | None) -> Meta:
@@ -418,7 +429,7 @@ class GoalEvent:
     def encode(self) -> bytes:
         """As a reply's payload (only the fields that are set)."""
         obj = {k: v for k, v in asdict(self).items() if v or k == "event"}
-        return json.dumps(obj, separators=(",", ":")).encode()
+        return _COMPACT.encode(obj).encode()
 
     @classmethod
     def decode(cls, data: bytes) -> GoalEvent:
@@ -498,7 +509,7 @@ class ParamRequest(_Payload):
         obj["value"], binary = _to_text(self.value)
         if binary:
             obj["binary"] = True
-        return json.dumps(obj, separators=(",", ":")).encode()
+        return _COMPACT.encode(obj).encode()
 
     @classmethod
     def decode(cls, data: bytes) -> ParamRequest:
@@ -523,7 +534,7 @@ class ParamRequest(_Payload):
             is_set, value = result
             value, binary = _to_text(value)
             result = [is_set, value, True] if binary else [is_set, value]
-        return json.dumps(result, separators=(",", ":")).encode()
+        return _COMPACT.encode(result).encode()
 
     def read_answer(self, data: bytes) -> Any:
         """The Graph method's result from a reply's payload (:meth:`answer`'s);
