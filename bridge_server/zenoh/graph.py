@@ -221,6 +221,8 @@ class ZenohFeed:
         self._type: str | None = msg_cls._type if msg_cls is not None else None
         self._place = ("", 0)  # (epoch, seq) of the last message taken
         self._entities: list[Any] = []
+        # the converter of the type the last message named, with what it was resolved in
+        self._resolved: tuple[str, Any, Any, RelayConverter] | None = None
 
     @property
     def latched(self) -> ZenohMessage | None:
@@ -271,6 +273,20 @@ class ZenohFeed:
         if reply.ok is not None:
             self.on_sample(reply.ok)
 
+    def _converter(self, type_name: str) -> RelayConverter:
+        """The converter of ``type_name`` as the graph resolves it now: kept from the last
+        message while the robot's snapshot and the relay's types of it are the same objects
+        (both are replaced, never changed, when what resolves a name changes), so a message
+        costs no name parsing and lookups."""
+        graph = self.graph
+        kept = self._resolved
+        if (kept is not None and kept[0] == type_name and kept[1] is graph.snapshot
+                and kept[2] is graph.wire_types):
+            return kept[3]
+        conv = graph.converter(graph.resolve_message(type_name))
+        self._resolved = (type_name, graph.snapshot, graph.wire_types, conv)
+        return conv
+
     def on_sample(self, sample: zenoh.Sample) -> None:
         """One message the robot put (on the loop), its payload counted as received; one
         that cannot be read is dropped and counted as the robot's fault (logged once)."""
@@ -282,7 +298,7 @@ class ZenohFeed:
             meta = Meta.decode(sample.attachment.to_bytes() if sample.attachment else None)
             if not 0 <= meta.stamp_ns < STAMP_END:
                 raise BridgeError(f"its stamp {meta.stamp_ns} ns is out of range")
-            conv = graph.converter(graph.resolve_message(meta.type))
+            conv = self._converter(meta.type)
         except BridgeError as exc:
             graph.faults.add("type_refused" if isinstance(exc, TypeRefused) else "bad_messages",
                              f"messages of {self.topic} dropped: {exc}")
@@ -317,7 +333,8 @@ class ZenohPublisher:
         self.topic = topic
         self.latch = latch
         self.refs = 0
-        self.conv = graph.converter(msg_cls)
+        self._conv = graph.converter(msg_cls)
+        self._types = graph.wire_types  # what it was resolved in
         self.key = keys.key_of(graph.robot, topic, keys.IN)
         self.attachment = Meta(type=self.conv.type_name, latched=latch).encode()
         self.token = graph.session.liveliness().declare_token(
@@ -326,7 +343,17 @@ class ZenohPublisher:
     @property
     def type_name(self) -> str:
         """Canonical message type."""
-        return self.conv.type_name
+        return self._conv.type_name
+
+    @property
+    def conv(self) -> RelayConverter:
+        """The converter of the type as the robot defines it now (resolved again when the
+        robot's types started anew, see :meth:`ZenohGraph._redefined`)."""
+        graph = self.graph
+        if self._types is not graph.wire_types:
+            self._conv = graph.converter(graph.resolve_message(self._conv.type_name))
+            self._types = graph.wire_types
+        return self._conv
 
     def publish(self, msg: Any) -> None:
         """Send one message (a ``msgs`` instance, or its CDR bytes) to the robot."""
@@ -884,6 +911,19 @@ class ZenohGraph:
         old.close()
         log.info("robot %s has left: its %d types are released", self.robot, len(old))
 
+    def _redefined(self, name: str) -> TypeStore:
+        """The robot's definition of ``name`` is not the one its class was built from (it
+        came back with other software while clients held its types): a store keeps a name's
+        first class, so the robot's types start again in a new store, and what resolves a
+        name from now on (topics, publishers) reads the new layouts. Returns the new store."""
+        old, self.wire_types = self.wire_types, self._new_types()
+        self._built.clear()
+        self._converters.clear()
+        old.close()
+        log.warning("robot %s: its definition of %s changed; this relay reads its types anew "
+                    "from its new definitions", self.robot, name)
+        return self.wire_types
+
     def _load(self, name: str, kind: str) -> Any:
         """The class of ``name``: built from the robot's definition once per text (the same
         snapshot's text is a dict lookup), else the generated one."""
@@ -896,6 +936,8 @@ class ZenohGraph:
                         "action": types.lookup_action}[kind](canonical)
             built = self._built.get(canonical)
             if built is None or not (built[0] is text or built[0] == text):
+                if built is not None and not isinstance(built[1], Exception):
+                    types = self._redefined(canonical)
                 found: Any
                 try:
                     found = types.load(canonical, text)

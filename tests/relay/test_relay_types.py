@@ -128,6 +128,69 @@ async def test_two_robots_each_get_their_own_layout_of_one_type_name(ros_node: A
         await bridge.close()
 
 
+async def test_a_robot_that_redefines_a_type_is_read_with_its_new_definition(
+        topic: str, caplog: pytest.LogCaptureFixture) -> None:
+    """robot2 sends a new graph with another definition of the type its topic carries: the
+    next message is read in the new layout (the relay keeps a topic's converter between
+    messages, never across a new definition), and a client's publish to robot2 is encoded in
+    it, through the publisher it advertised before."""
+    new_text = "int32 mode\nstring renamed_field\n"
+    theirs: Any = TypeStore("robot2's first layout").load(STATUS, THEIRS)
+    renamed: Any = TypeStore("robot2's second layout").load(STATUS, new_text)
+    router = f"tcp/127.0.0.1:{free_port()}"
+    relay = await start_relay(listen=router)
+    snap = Snapshot(node="robot2_bridge", topics=[(topic, [STATUS])],
+                    definitions={STATUS: THEIRS})
+    ws = None
+    try:
+        async with played_robot(relay, router, "robot2", snap) as robot2:
+            graph: Any = relay.robots["robot2"].graph
+            ws = await open_wire(f"ws://127.0.0.1:{relay.port}/robot2")
+            await ws.send({"op": "subscribe", "topic": topic, "type": STATUS})
+            seq = iter(range(1, 10_000))
+            got = await _first(ws, lambda: robot2.put(
+                topic, cdr.encode(theirs(hijacked_field="first", mode=1)), STATUS, next(seq)),
+                topic)
+            assert got["msg"] == {"hijacked_field": "first", "mode": 1}
+            commands = topic + "_cmd"
+            heard: list[bytes] = []
+            listener = robot2.session.declare_subscriber(
+                keys.key_of("robot2", commands, keys.IN),
+                lambda sample: heard.append(sample.payload.to_bytes()))
+            await ws.send({"op": "advertise", "topic": commands, "type": STATUS})
+            while not heard:  # until the robot's subscriber matched the relay's puts
+                await ws.send({"op": "publish", "topic": commands,
+                               "msg": {"hijacked_field": "old", "mode": 4}})
+                await asyncio.sleep(0.1)
+            assert theirs.from_json(cdr.decode(heard[0], theirs)).mode == 4
+            robot2.put(topic, cdr.encode(theirs(hijacked_field="again", mode=2)), STATUS,
+                       next(seq))  # read with the converter kept from the first
+            while (await ws.expect(op="publish", topic=topic))["msg"]["mode"] != 2:
+                pass
+            second = Snapshot(node="robot2_bridge", topics=[(topic, [STATUS])],
+                              definitions={STATUS: new_text})
+            robot2.snapshot = second
+            robot2.session.put(f"robot2/{keys.GRAPH}", second.encode())
+            await until(lambda: graph.snapshot.definitions.get(STATUS) == new_text,
+                        "robot2's new graph")
+            robot2.put(topic, cdr.encode(renamed(mode=3, renamed_field="second")), STATUS,
+                       next(seq))
+            msg = (await ws.expect(op="publish", topic=topic))["msg"]
+            assert msg == {"mode": 3, "renamed_field": "second"}
+            heard.clear()
+            await ws.send({"op": "publish", "topic": commands,
+                           "msg": {"mode": 5, "renamed_field": "new"}})
+            await until(lambda: heard, "the publish in the new layout")
+            back = renamed.from_json(cdr.decode(heard[0], renamed))
+            assert (back.mode, back.renamed_field) == (5, "new")
+            assert f"robot robot2: its definition of {STATUS} changed" in caplog.text
+            listener.undeclare()
+    finally:
+        if ws is not None:
+            await ws.close()
+        await relay.close()
+
+
 def _big_definition(size: int) -> str:
     """flood_msgs/msg/Big: one int32 (8 bytes of CDR) under ``size`` bytes of short comment
     lines (what splitting a text costs most)."""
