@@ -177,3 +177,18 @@ async def test_a_robots_parameter_answers_are_read_or_refused_by_name(
     finally:
         await ws.close()
         queryable.undeclare()  # type: ignore[no-untyped-call]
+
+
+def test_a_messages_attachment_is_the_same_json_as_before() -> None:
+    """A ``Meta`` is made for every message a robot puts, from its fields (not ``asdict``):
+    the bytes are the compact JSON object a robot of the last release sent, field for field,
+    and decode back to the same ``Meta``."""
+    meta = Meta(type="sensor_msgs/msg/Imu", latched=True, stamp_ns=1_764_300_000_123_456_789,
+                epoch="e\u00e9\"1", seq=42)
+    data = meta.encode()
+    assert data == (b'{"type":"sensor_msgs/msg/Imu","latched":true,'
+                    b'"stamp_ns":1764300000123456789,"epoch":"e\\u00e9\\"1","seq":42}')
+    assert data == json.dumps({"type": meta.type, "latched": True, "stamp_ns": meta.stamp_ns,
+                               "epoch": meta.epoch, "seq": 42},
+                              separators=(",", ":")).encode()
+    assert Meta.decode(data) == meta
