@@ -14,7 +14,8 @@ reported by its miss listener with the count, and the relay tells the robot's cl
 The window is per topic: at most ``count`` messages and ``bytes`` payload bytes
 (:class:`ReplayWindow`, the robot's ``--relay-replay-count`` and ``--relay-replay-bytes``);
 its memory is in the robot's ``/metrics``. Best-effort and latched (transient local) topics
-are put plainly: latest wins, nothing is replayed.
+are put plainly: latest wins, nothing is replayed. So is a topic once one of its messages is
+larger than :data:`REPLAY_MAX_MESSAGE_BYTES` (a camera, a point cloud): see there why.
 
 While its link is down the robot cannot hear that a relay stopped watching (its demand
 tokens vanish with the link): a replayed topic is kept subscribed, and caching, until the
@@ -35,8 +36,8 @@ if TYPE_CHECKING:  # zenoh is imported when used: the bridge's options parse wit
     from prometheus_client.core import Metric
 
 __all__ = ["DEFAULT_REPLAY_BYTES", "DEFAULT_REPLAY_COUNT", "DEFAULT_REPLAY_TOTAL_BYTES",
-           "DEMAND_LINGER", "HEARTBEAT", "ReplayBudget", "ReplayPublisher", "ReplayWindow",
-           "recovering_subscriber", "window_metrics"]
+           "DEMAND_LINGER", "HEARTBEAT", "REPLAY_MAX_MESSAGE_BYTES", "ReplayBudget",
+           "ReplayPublisher", "ReplayWindow", "recovering_subscriber", "window_metrics"]
 
 log = logging.getLogger("bridge_server.zenoh.replay")
 
@@ -57,6 +58,16 @@ published since the last one: Zenoh's sporadic heartbeat (only after a publish) 
 into the void when the topic's last message and the heartbeat after it fall in an outage,
 and the relay then never learns of that message. It costs a few bytes a second per watched
 topic, and nothing while no relay subscribes (Zenoh drops a put nobody matches)."""
+
+REPLAY_MAX_MESSAGE_BYTES = 64 * 1024
+"""The largest message of a topic that is replayed; a topic with a larger one is put plainly
+from then on (latest wins), as a best-effort topic is. The heartbeat tells the relay the
+last number the robot sent while a big frame is still on its way (on a slow link, while the
+relay is busy), so the relay asks the robot's cache for it and it crosses the link twice:
+with replay a 10 Hz 640x480 camera cost the robot's uplink 2.0 times one viewer's at 10
+viewers and 2.7 at 50 (``python -m bench --scenario relay_uplink``), against 1.0 put
+plainly, on the very links relays are for. A small message is on its way for far less than
+the heartbeat's period, and a replayed frame would be stale video anyway."""
 
 DEMAND_LINGER = 5.0
 """Seconds a replayed topic that no relay watches any more stays subscribed once the
@@ -103,7 +114,8 @@ class ReplayPublisher:
     size of the largest message seen (:meth:`ReplayWindow.depth`), and what is left of the
     robot's ``budget``. A message larger than any before that would take the cache over
     either makes a new, shallower cache (what the old one held is dropped then, logged);
-    with no room left for one message the topic is put plainly from then on (logged).
+    with no room left for one message, or a message over :data:`REPLAY_MAX_MESSAGE_BYTES`,
+    the topic is put plainly from then on (logged).
     :attr:`held` and :attr:`held_bytes` mirror what the cache holds."""
 
     def __init__(self, session: zenoh.Session, key: str, window: ReplayWindow,
@@ -115,7 +127,8 @@ class ReplayPublisher:
         self.budget = budget
         self._reserved = 0
         self.plain = False
-        """No room in the budget: the topic is put plainly (not replayed)."""
+        """No room in the budget, or a message too large: the topic is put plainly (not
+        replayed)."""
         self.largest = 0
         self.resized = 0
         """How many times a larger message made a shallower cache."""
@@ -165,6 +178,13 @@ class ReplayPublisher:
         size = len(payload)
         if size > self.largest and not self.plain:
             self.largest = size
+            if size > REPLAY_MAX_MESSAGE_BYTES:
+                self.close()
+                self.plain = True
+                log.info("%s: a message of %d bytes, over %d: put plainly from now on (latest "
+                         "wins), not replayed", self.topic, size, REPLAY_MAX_MESSAGE_BYTES)
+                self.session.put(self.key, payload, attachment=attachment)
+                return
             depth = self._reserve(size)
             if depth == 0:
                 self.close()

@@ -375,6 +375,47 @@ def test_the_robots_windows_share_one_budget() -> None:
         session.close()  # type: ignore[no-untyped-call]
 
 
+def test_a_topic_of_big_messages_is_put_plainly() -> None:
+    """A topic whose message is over REPLAY_MAX_MESSAGE_BYTES is put plainly from then on
+    (latest wins): its cache goes and gives its room back, and it does not come back for
+    smaller messages after; a topic that starts big never caches (a real Zenoh session,
+    alone)."""
+    import zenoh
+
+    from bridge_server.zenoh.replay import (
+        REPLAY_MAX_MESSAGE_BYTES,
+        ReplayBudget,
+        ReplayPublisher,
+        ReplayWindow,
+    )
+
+    conf = zenoh.Config()
+    conf.insert_json5("scouting/multicast/enabled", "false")
+    conf.insert_json5("listen/endpoints", "[]")
+    session = zenoh.open(conf)
+    try:
+        window = ReplayWindow()
+        budget = ReplayBudget(window.total)
+        odom = ReplayPublisher(session, "r/odom", window, "/odom", budget)
+        for _ in range(3):
+            odom.put(b"o" * 1024, b"{}")
+        assert (odom.held, odom.plain) == (3, False) and budget.reserved > 0
+        odom.put(b"O" * (REPLAY_MAX_MESSAGE_BYTES + 1), b"{}")
+        assert (odom.held, odom.held_bytes, odom.plain, budget.reserved) == (0, 0, True, 0)
+        odom.put(b"o" * 1024, b"{}")
+        assert (odom.held, odom.plain) == (0, True)
+        camera = ReplayPublisher(session, "r/camera", window, "/camera", budget)
+        camera.put(b"c" * (640 * 480 * 3), b"{}")
+        assert (camera.held, camera.plain, budget.reserved) == (0, True, 0)
+        edge = ReplayPublisher(session, "r/edge", window, "/edge", budget)
+        edge.put(b"e" * REPLAY_MAX_MESSAGE_BYTES, b"{}")  # the largest that is replayed
+        assert (edge.held, edge.plain) == (1, False)
+        for pub in (odom, camera, edge):
+            pub.close()
+    finally:
+        session.close()  # type: ignore[no-untyped-call]
+
+
 async def test_a_replayed_topic_is_let_go_once_the_link_is_back_and_nobody_asks(
         ros_node: Any, topic: str) -> None:
     """The robot keeps a replayed topic subscribed, and caching, while its link is down
