@@ -129,6 +129,13 @@ FIGURES: dict[str, list[Figure]] = {
                          lambda r: r["relay_cpu_us_per_message"], "lower"),
                   Figure("relay_imu delivered %", lambda r: 100.0 * r["delivered_fraction"],
                          "higher")],
+    "relay_uplink": [Figure("relay_uplink robot uplink, 10 viewers of a relay: x one viewer's",
+                            lambda r: (_step(r["relay"], 10) or {}).get("x_one_viewer"),
+                            "lower")],
+    "relay_service": [Figure("relay_service through a relay p50 ms",
+                             lambda r: r["relay"]["p50_ms"], "lower"),
+                      Figure("relay_service through a relay p99 ms",
+                             lambda r: r["relay"]["p99_ms"], "lower")],
     "idle_cpu": [Figure("idle bridge CPU %", lambda r: r["connected_pct_of_core"], "lower")],
 }
 """The figures of each scenario the table shows (scenarios not here show none)."""
