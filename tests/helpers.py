@@ -57,6 +57,13 @@ def ros_image(width: int, height: int, encoding: str, data: bytes, frame_id: str
     return msg
 
 
+def threads_since(before: set[threading.Thread]) -> list[str]:
+    """The names of the threads alive now that were not in ``before`` (``set(threading.
+    enumerate())`` taken earlier). Compare sets, not ``threading.active_count()``: a thread
+    an earlier test of the same worker left to end on its own may end meanwhile."""
+    return sorted(t.name for t in set(threading.enumerate()) - before)
+
+
 def wait_until(predicate: Callable[[], Any], timeout: float = 10.0, what: str = "condition") -> Any:
     """Poll ``predicate`` until it is truthy (for ROS graph discovery, which has no event)."""
     deadline = time.monotonic() + timeout

@@ -18,7 +18,7 @@ import roslibpy_lite
 from roslibpy_lite import ConnectionState, NotConnected, ReplacedClientWarning, sync
 from tests.bridge.support import wait_subscribers
 from tests.client.support import fast_backoff
-from tests.helpers import BridgeProcess, wait_until
+from tests.helpers import BridgeProcess, threads_since, wait_until
 from tests.ops.support import scrape, value
 
 # rclpy's type support imports lark, which imports the deprecated sre_parse (warnings are errors).
@@ -115,7 +115,7 @@ def test_rerun_connect_leaves_one_client_on_the_bridge(
     again) warns, closes the earlier client with its thread and subscription, and leaves
     the bridge with one client and the process with no extra thread."""
     bridge = make_bridge()
-    threads = threading.active_count()
+    threads = set(threading.enumerate())
     ros = sync.connect(bridge.url)
     sub = ros.subscribe(topic, "std_msgs/msg/Int32")
     wait_until(lambda: _clients(bridge) == 1, 10, "the first client on the bridge")
@@ -128,14 +128,14 @@ def test_rerun_connect_leaves_one_client_on_the_bridge(
             assert earlier.state is ConnectionState.CLOSED and earlier_sub.closed
             assert [s.topic for s in ros.subscriptions()] == [topic]
         wait_until(lambda: _clients(bridge) == 1, 10, "one client on the bridge")
-        assert threading.active_count() == threads + 1  # the one loop thread
+        assert len(threads_since(threads)) == 1, threads_since(threads)  # the one loop thread
         with warnings.catch_warnings():
             warnings.simplefilter("error")
             with sync.connect(bridge.url, replace=False) as other:  # two on purpose
                 assert other.is_connected and ros.is_connected
     finally:
         ros.close()
-    assert threading.active_count() == threads
+    assert not threads_since(threads), threads_since(threads)
 
 
 async def test_connect_after_close_replaces_nothing(bridge: BridgeProcess) -> None:

@@ -13,7 +13,7 @@ import roslibpy.ros2
 
 import roslibpy_lite.compat as compat
 from roslibpy_lite import ConnectionClosed, NotAuthenticated
-from tests.helpers import BridgeProcess
+from tests.helpers import BridgeProcess, threads_since
 from tests.security.support import make_auth_file
 
 NOT_COVERED = {"set_default_transport"}
@@ -76,7 +76,7 @@ def test_action_client_signatures() -> None:
 
 def test_blocking_call_inside_a_callback_and_clean_terminate(bridge: BridgeProcess, topic: str) -> None:
     """A topic callback may make a blocking call; terminate stops every thread the Ros started."""
-    threads = threading.active_count()
+    threads = set(threading.enumerate())
     ros = compat.Ros(bridge.url)  # a URL works as the host, as in roslibpy
     ros.run()
     got: list[Any] = []
@@ -93,7 +93,7 @@ def test_blocking_call_inside_a_callback_and_clean_terminate(bridge: BridgeProce
     assert got == ["std_msgs/msg/String"]
     ros.terminate()
     assert not ros.is_connected
-    assert threading.active_count() == threads, [t.name for t in threading.enumerate()]
+    assert not threads_since(threads), threads_since(threads)
 
 
 def test_close_then_run_reconnects(bridge: BridgeProcess) -> None:

@@ -15,7 +15,7 @@ import psutil
 import pytest
 
 from roslibpy_lite import ConnectError, ConnectionClosed, ConnectionState, sync
-from tests.helpers import ROOT, BridgeProcess, ros_env, wait_until
+from tests.helpers import ROOT, BridgeProcess, ros_env, threads_since, wait_until
 from tests.sync.support import heard
 
 MULT = "mult_msgs/srv/MultFloats"
@@ -70,7 +70,7 @@ def test_close_leaves_no_thread_or_socket(bridge: BridgeProcess, topic: str) -> 
     threads, sockets = set(threading.enumerate()), _sockets()
 
     def new_threads() -> list[str]:
-        return sorted(t.name for t in set(threading.enumerate()) - threads)
+        return threads_since(threads)
 
     with sync.connect(bridge.url) as ros:
         ros.advertise_service(topic, MULT, lambda req: {"result": 1.0})
