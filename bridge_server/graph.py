@@ -24,7 +24,7 @@ Nothing here imports ROS; a test keeps it so.
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping
-from typing import TYPE_CHECKING, Any, Protocol
+from typing import TYPE_CHECKING, Any, Protocol, TypeVar
 
 from roslibpy_lite.protocol.goal_status import GoalStatus
 
@@ -53,8 +53,11 @@ __all__ = [
     "ServedService",
     "Status",
     "TopicFeed",
+    "acquire_shared",
     "parameter_value",
+    "release_shared",
     "service_request",
+    "shared_types",
 ]
 
 
@@ -101,6 +104,43 @@ def parameter_value(value: Any) -> Any:
     if name == "byte_array_value":
         return b"".join(b if isinstance(b, bytes) else bytes((b,)) for b in found)
     return [*found] if name.endswith("_array_value") else found
+
+
+class _Counted(Protocol):
+    refs: int
+
+
+_P = TypeVar("_P", bound=_Counted)
+
+PublisherKey = tuple[str, str, bool]
+"""What a Graph shares one publisher by: (topic, canonical type, latched)."""
+
+
+def acquire_shared(publishers: dict[PublisherKey, _P], key: PublisherKey,
+                      make: Callable[[], _P]) -> _P:
+    """The publisher of ``key`` in a Graph's ``publishers`` (made by ``make`` if there is none
+    yet), its reference count raised by one."""
+    pub = publishers.get(key)
+    if pub is None:
+        pub = publishers[key] = make()
+    pub.refs += 1
+    return pub
+
+
+def release_shared(publishers: dict[PublisherKey, _P], key: PublisherKey, pub: _P) -> bool:
+    """Lower ``pub``'s reference count; at its last reference it leaves ``publishers`` and
+    this returns ``True`` (the Graph then tears it down)."""
+    pub.refs -= 1
+    if pub.refs > 0:
+        return False
+    if publishers.get(key) is pub:
+        del publishers[key]
+    return True
+
+
+def shared_types(publishers: Mapping[PublisherKey, Any], topic: str) -> set[str]:
+    """The types of a Graph's own publishers on ``topic``."""
+    return {type_name for name, type_name, _ in publishers if name == topic}
 
 
 def service_request(conv: Converter, service: str, args: Mapping[str, Any] | list[Any] | None,

@@ -52,8 +52,11 @@ from ..graph import (
     RosCall,
     ServedGoal,
     Status,
+    acquire_shared,
     parameter_value,
+    release_shared,
     service_request,
+    shared_types,
 )
 from ..interfaces import (
     BridgeError,
@@ -453,6 +456,15 @@ def _cancel_response(action: MemoryServedAction, code: int,
         for g in goals]})
 
 
+def _discard(registry: dict[str, list[Any]], name: str, item: Any) -> None:
+    """Take ``item`` out of ``registry[name]`` (if it is there), and the name with its last."""
+    found = registry.get(name, [])
+    with contextlib.suppress(ValueError):
+        found.remove(item)
+    if not found:
+        registry.pop(name, None)
+
+
 class MemoryRos:
     """The whole ROS graph: every :class:`MemoryGraph` (node) made on it, and what they
     publish, subscribe, serve. ``changed`` is set (and made anew) whenever a service or an
@@ -505,11 +517,7 @@ class MemoryRos:
 
     def remove_server(self, server: _Server) -> None:
         """A service goes."""
-        found = self.servers.get(server.name, [])
-        with contextlib.suppress(ValueError):
-            found.remove(server)
-        if not found:
-            self.servers.pop(server.name, None)
+        _discard(self.servers, server.name, server)
 
     def add_action(self, action: MemoryServedAction) -> None:
         """An action server comes (with its services)."""
@@ -519,11 +527,7 @@ class MemoryRos:
 
     def remove_action(self, action: MemoryServedAction) -> None:
         """An action server goes (with its services)."""
-        found = self.actions.get(action.name, [])
-        with contextlib.suppress(ValueError):
-            found.remove(action)
-        if not found:
-            self.actions.pop(action.name, None)
+        _discard(self.actions, action.name, action)
         for server in action.servers:
             self.remove_server(server)
 
@@ -745,7 +749,7 @@ class MemoryGraph:
 
     def publisher_types(self, topic: str) -> set[str]:
         """Types of this node's own publishers on ``topic``."""
-        return {k[1] for k in self.publishers if k[0] == topic}
+        return shared_types(self.publishers, topic)
 
     def service_types(self, service: str) -> list[str]:
         """Types the graph lists for ``service``."""
@@ -809,20 +813,13 @@ class MemoryGraph:
     def acquire_publisher(self, topic: str, msg_cls: Any, latch: bool, depth: int
                           ) -> MemoryPublisher:
         """A shared publisher for (topic, type, latch), its reference count raised by one."""
-        key = (topic, msg_cls._type, latch)
-        pub = self.publishers.get(key)
-        if pub is None:
-            pub = self.publishers[key] = MemoryPublisher(self, topic, msg_cls, latch, depth)
-        pub.refs += 1
-        return pub
+        return acquire_shared(self.publishers, (topic, msg_cls._type, latch),
+                              lambda: MemoryPublisher(self, topic, msg_cls, latch, depth))
 
     def release_publisher(self, pub: Any) -> None:
         """Lower the reference count; the publisher goes with the last reference."""
         mine: MemoryPublisher = pub
-        mine.refs -= 1
-        key = (mine.topic, mine.type_name, mine.latch)
-        if mine.refs <= 0 and self.publishers.get(key) is mine:
-            del self.publishers[key]
+        release_shared(self.publishers, (mine.topic, mine.type_name, mine.latch), mine)
 
     # -- services -------------------------------------------------------------------------------
 

@@ -66,6 +66,7 @@ from rclpy.serialization import deserialize_message
 from msgs import dynamic
 
 from ..codec.encodings import EncodedMessage
+from ..graph import acquire_shared, release_shared, shared_types
 from . import convert
 from .reader import FailureLog, LoopReader, Reader, ReaderService, open_reader
 from .types import resolve_message, resolve_service
@@ -766,28 +767,21 @@ class RosNode:
     ) -> SharedPublisher:
         """A shared publisher for (topic, type, latch), its reference count raised by one."""
         key = (topic, convert.converter_for(msg_cls).type_name, latch)
-        pub = self.publishers.get(key)
-        if pub is None:
-            pub = self.publishers[key] = SharedPublisher(self, topic, msg_cls, latch, depth)
-        pub.refs += 1
-        return pub
+        return acquire_shared(self.publishers, key,
+                              lambda: SharedPublisher(self, topic, msg_cls, latch, depth))
 
     def release_publisher(self, pub: Publisher) -> None:
         """Lower the reference count; the ROS publisher goes with the last reference."""
         assert isinstance(pub, SharedPublisher)  # one of this node's
-        pub.refs -= 1
-        if pub.refs > 0:
+        if not release_shared(self.publishers, (pub.topic, pub.type_name, pub.latch), pub):
             return
-        key = (pub.topic, pub.type_name, pub.latch)
-        if self.publishers.get(key) is pub:
-            del self.publishers[key]
         if self.node is not None:
             with contextlib.suppress(Exception):
                 self.node.destroy_publisher(pub.pub)
 
     def publisher_types(self, topic: str) -> set[str]:
         """Types of this bridge's own publishers on ``topic``."""
-        return {k[1] for k in self.publishers if k[0] == topic}
+        return shared_types(self.publishers, topic)
 
     # -- services ------------------------------------------------------------------------------
 

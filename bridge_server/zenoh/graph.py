@@ -58,7 +58,17 @@ from msgs.runtime import UnknownTypeError as WireUnknownType
 
 from ..codec.cdr_json import JsonFromCdr, wire_encoder
 from ..codec.encodings import EncodedMessage
-from ..graph import GoalListener, Listener, RosCall, ServedGoal, Status, service_request
+from ..graph import (
+    GoalListener,
+    Listener,
+    RosCall,
+    ServedGoal,
+    Status,
+    acquire_shared,
+    release_shared,
+    service_request,
+    shared_types,
+)
 from ..interfaces import (
     BridgeError,
     ConversionError,
@@ -1064,7 +1074,7 @@ class ZenohGraph:
 
     def publisher_types(self, topic: str) -> set[str]:
         """Types of this relay's own publishers on ``topic``."""
-        return {t for name, t, _ in self.publishers if name == topic}
+        return shared_types(self.publishers, topic)
 
     def service_types(self, service: str) -> list[str]:
         """Types the robot lists for ``service``."""
@@ -1135,20 +1145,13 @@ class ZenohGraph:
     def acquire_publisher(self, topic: str, msg_cls: Any, latch: bool, depth: int
                           ) -> ZenohPublisher:
         """A shared publisher for (topic, type, latch), its reference count raised."""
-        key = (topic, msg_cls._type, latch)
-        pub = self.publishers.get(key)
-        if pub is None:
-            pub = self.publishers[key] = ZenohPublisher(self, topic, msg_cls, latch)
-        pub.refs += 1
-        return pub
+        return acquire_shared(self.publishers, (topic, msg_cls._type, latch),
+                              lambda: ZenohPublisher(self, topic, msg_cls, latch))
 
     def release_publisher(self, pub: Any) -> None:
         """Lower the reference count; the publisher goes with the last reference."""
         mine: ZenohPublisher = pub
-        mine.refs -= 1
-        key = (mine.topic, mine.type_name, mine.latch)
-        if mine.refs <= 0 and self.publishers.get(key) is mine:
-            del self.publishers[key]
+        if release_shared(self.publishers, (mine.topic, mine.type_name, mine.latch), mine):
             mine.close()
             self.release_types()
 
