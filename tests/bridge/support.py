@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import asyncio
+from collections.abc import Callable
 from typing import Any
 
 from tests.helpers import async_wait_until
@@ -24,24 +25,44 @@ class Inbox:
         return await asyncio.wait_for(self.queue.get(), timeout)
 
 
-async def publish_until_heard(
-    ws: Any, topic: str, msg: dict[str, Any], inbox: Inbox, timeout: float = 10.0
-) -> Any:
-    """Publish ``msg`` through ``ws`` until ``inbox`` gets a value; returns that value.
+_ANYTHING: Any = object()
 
-    A ROS subscription can see the bridge's publisher before the publisher sees
-    it (DDS matching is not symmetric), so one message sent at once may reach
-    nobody; repeating it until heard is the way to know the path is up.
+
+async def until_heard(
+    send: Callable[[], Any], inbox: Inbox, want: Any = _ANYTHING, timeout: float = 20.0
+) -> Any:
+    """Call ``send`` (a coroutine function or not) every 0.25 s until ``inbox`` yields ``want``
+    (or anything, when no ``want`` is given); returns the value heard.
+
+    A ROS subscription can see a new publisher before that publisher sees it (DDS
+    matching is not symmetric), and nothing says when discovery after a restart is
+    done, so one message sent at once may reach nobody; repeating it until heard is
+    the way to know the path is up.
     """
     loop = asyncio.get_running_loop()
     deadline = loop.time() + timeout
     while True:
-        await ws.send({"op": "publish", "topic": topic, "msg": msg})
+        result = send()
+        if asyncio.iscoroutine(result):
+            await result
         try:
-            return await inbox.get(0.25)
+            heard = await inbox.get(0.25)
+            while want is not _ANYTHING and heard != want:
+                heard = await inbox.get(0.25)
+            return heard
         except TimeoutError:
             if loop.time() >= deadline:
-                raise
+                raise AssertionError(f"never heard {'anything' if want is _ANYTHING else repr(want)}"
+                                     f" in {timeout} s") from None
+
+
+async def publish_until_heard(
+    ws: Any, topic: str, msg: dict[str, Any], inbox: Inbox, timeout: float = 10.0
+) -> Any:
+    """Publish ``msg`` through the wire client ``ws`` until ``inbox`` gets a value; returns it."""
+    return await until_heard(
+        lambda: ws.send({"op": "publish", "topic": topic, "msg": msg}), inbox, timeout=timeout
+    )
 
 
 async def ros_future(future: Any, timeout: float = 10.0) -> Any:

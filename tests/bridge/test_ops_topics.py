@@ -17,6 +17,7 @@ from std_msgs.msg import Int32, Int32MultiArray, String, UInt8MultiArray
 from tests.bridge.support import (
     Inbox,
     bridge_sees_topic,
+    publish_until_heard,
     roundtrip,
     wait_publishers,
     wait_subscribers,
@@ -35,8 +36,8 @@ async def test_advertise_publish_reaches_ros_subscriber(ws_connect: Any, ros_nod
     ws = await ws_connect()
     await ws.send({"op": "advertise", "topic": topic, "type": "std_msgs/String"})
     await wait_publishers(sub)
-    await ws.send({"op": "publish", "topic": topic, "msg": {"data": "hello"}})
-    msg = await inbox.get()
+    # The subscription seeing the publisher does not mean the publisher sees it yet.
+    msg = await publish_until_heard(ws, topic, {"data": "hello"}, inbox)
     assert msg.data == "hello"
 
 
@@ -50,10 +51,9 @@ async def test_publish_without_advertise_uses_graph_type(
     assert await bridge_sees_topic(ws, topic) == "std_msgs/msg/String"
     await ws.send({"op": "publish", "topic": topic, "msg": {"data": "auto"}})
     await wait_publishers(sub)
-    await ws.send({"op": "publish", "topic": topic, "msg": {"data": "auto2"}})
-    got = {(await inbox.get()).data}
-    while "auto2" not in got:
-        got.add((await inbox.get()).data)
+    heard = await publish_until_heard(ws, topic, {"data": "auto2"}, inbox)
+    while heard.data != "auto2":  # "auto" got through: the next one heard is "auto2"
+        heard = await inbox.get()
 
 
 def _bridge_knows(node: Any, topic: str) -> bool:

@@ -16,9 +16,8 @@ import pytest
 
 import roslibpy_lite
 from roslibpy_lite import ConnectError, ConnectionState, UsageError
-from tests.bridge.support import Inbox
+from tests.bridge.support import Inbox, until_heard
 from tests.client.support import fast_backoff
-from tests.client.test_reconnect import until_heard
 from tests.helpers import BridgeProcess
 
 with warnings.catch_warnings():

@@ -18,7 +18,7 @@ import pytest
 
 import roslibpy_lite
 from roslibpy_lite import Client, ConnectionState, Disconnected
-from tests.bridge.support import Inbox, ros_future, wait_publishers, wait_service
+from tests.bridge.support import Inbox, ros_future, until_heard, wait_publishers, wait_service
 from tests.client.support import fast_backoff
 from tests.helpers import BridgeProcess
 
@@ -55,22 +55,6 @@ async def restart(bridge: BridgeProcess, client: Client, *, graceful: bool = Fal
             await changes.next(30)
     await asyncio.to_thread(bridge.start)
     await client.wait_connected(30)
-
-
-async def until_heard(send: Callable[[], Any], inbox: Inbox, want: Any, timeout: float = 20.0) -> None:
-    """Call ``send`` until ``inbox`` yields ``want`` (discovery after a restart has no event)."""
-    deadline = asyncio.get_running_loop().time() + timeout
-    while True:
-        result = send()
-        if asyncio.iscoroutine(result):
-            await result
-        try:
-            while (await inbox.get(0.25)) != want:
-                pass
-            return
-        except TimeoutError:
-            if asyncio.get_running_loop().time() > deadline:
-                raise AssertionError(f"never heard {want!r}") from None
 
 
 async def test_subscription_resumes_after_bridge_restart(

@@ -10,7 +10,7 @@ from rclpy.event_handler import SubscriptionEventCallbacks
 from std_msgs.msg import String
 from std_srvs.srv import SetBool
 
-from tests.bridge.support import Inbox, wait_publishers, wait_service
+from tests.bridge.support import Inbox, publish_until_heard, wait_publishers, wait_service
 from tests.helpers import async_wait_until
 from tests.load.support import service_in_graph, wait_count
 
@@ -73,8 +73,9 @@ async def test_publisher_released_after_grace_kept_by_quick_readvertise(
     assert ros_node.count_publishers(kept) == 1
     assert sub.get_publisher_count() == 1
     assert 0 not in matched, f"the kept topic lost its publisher for a while: {matched}"
-    await second.send({"op": "publish", "topic": kept, "msg": {"data": "still here"}})
-    assert (await inbox.get()).data == "still here"
+    # The subscription seeing the publisher (above) does not prove the publisher sees it.
+    heard = await publish_until_heard(second, kept, {"data": "still here"}, inbox)
+    assert heard.data == "still here"
 
 
 async def test_served_service_goes_at_once_and_no_default_is_invented(

@@ -10,7 +10,7 @@ from rclpy.callback_groups import ReentrantCallbackGroup
 from std_msgs.msg import String
 from std_srvs.srv import SetBool
 
-from tests.bridge.support import Inbox, wait_publishers, wait_subscribers
+from tests.bridge.support import Inbox
 from tests.load.support import qos
 
 pytestmark = pytest.mark.asyncio
@@ -65,6 +65,22 @@ async def _until_answered(ws: Any, service: str, tries: int = 8) -> None:
     raise AssertionError(f"{service} never answered through the bridge: {reply}")
 
 
+async def _until_echoed(ws: Any, ping: str, pong: str, tries: int = 40) -> None:
+    """Publish on ``ping`` until its echo comes back on ``pong``: both DDS paths are matched.
+
+    Each side seeing the other is not enough: a ROS subscription can match the bridge's
+    publisher before that publisher matches it, and a message sent in between is lost.
+    """
+    for _ in range(tries):
+        await ws.send({"op": "publish", "topic": ping, "msg": {"data": "warm-up"}})
+        try:
+            await ws.expect(op="publish", topic=pong, timeout=0.25)
+            return
+        except AssertionError:
+            continue
+    raise AssertionError(f"nothing published on {ping} came back on {pong}")
+
+
 async def test_slow_call_does_not_block_other_traffic(ws_connect: Any, ros_node: Any, topic: str) -> None:
     """While a slow service call is pending, the same client's fast call and a publish->subscribe round trip complete."""
     slow, fast = f"{topic}/slow", f"{topic}/fast"
@@ -74,15 +90,14 @@ async def test_slow_call_does_not_block_other_traffic(ws_connect: Any, ros_node:
     _blocking_service(ros_node, slow, started, release)
     _fast_service(ros_node, fast)
     echo_pub = ros_node.create_publisher(String, pong, 10)
-    echo_sub = ros_node.create_subscription(
+    ros_node.create_subscription(  # the node keeps it
         String, ping, lambda m: echo_pub.publish(String(data=m.data)), 10,
         callback_group=ReentrantCallbackGroup(),
     )
     ws = await ws_connect()
     await ws.send({"op": "advertise", "topic": ping, "type": "std_msgs/msg/String"})
     await ws.send({"op": "subscribe", "topic": pong, "type": "std_msgs/msg/String"})
-    await wait_publishers(echo_sub)
-    await wait_subscribers(echo_pub)
+    await _until_echoed(ws, ping, pong)
     await _until_answered(ws, fast)
     await _until_answered(ws, slow)
     try:
@@ -92,7 +107,9 @@ async def test_slow_call_does_not_block_other_traffic(ws_connect: Any, ros_node:
         reply = await ws.expect(op="service_response", id="fast")
         assert reply["result"] is True and reply["values"] == {"success": True, "message": "fast"}
         await ws.send({"op": "publish", "topic": ping, "msg": {"data": "round trip"}})
-        echoed = await ws.expect(op="publish", topic=pong)
+        echoed = await ws.expect(
+            lambda op: op["msg"] != {"data": "warm-up"}, op="publish", topic=pong
+        )
         assert echoed["msg"] == {"data": "round trip"}
         pending = [op for op in ws.backlog if op.get("id") == "slow"]
         assert pending == [], "the slow call cannot have been answered yet"
