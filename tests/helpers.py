@@ -361,9 +361,17 @@ _ACTION_ANSWERS = ("_execute_goal_request", "_execute_cancel_request",
 
 def settle_executor(executor: Any) -> None:
     """Shut ``executor`` down after its spin loop ended, marking seen the handles that a
-    test destroyed under a running callback (rclpy prints each unseen one at exit)."""
+    test destroyed under a running callback (rclpy prints each unseen one at exit).
+
+    A multi-threaded executor's callbacks may still be running in its thread pool
+    (rclpy's ``shutdown`` leaves the pool alone): they are waited for first, so
+    that none fails later on a node destroyed under it, unseen.
+    """
     from rclpy._rclpy_pybind11 import InvalidHandle
 
+    pool = getattr(executor, "_executor", None)
+    if pool is not None:
+        pool.shutdown(wait=True)
     for future in list(getattr(executor, "_futures", [])):
         if isinstance(getattr(future, "_exception", None), InvalidHandle):
             future.exception()  # seen; any other exception is still printed
