@@ -18,7 +18,8 @@ It dials out to the routers and offers the robot under ``r1/`` as :mod:`.keys` d
 - a service a relay's client serves is served in ROS by the Graph's ``serve`` while its
   ``@serve`` token lives; each ROS call is a query to the relay, the reply answers it; the
   first relay's token keeps a name, and a later one (another relay's client) is refused
-  with a put under ``@refused`` that its relay passes to the client;
+  with a put under ``@refused`` that its relay passes to the client (put again while the
+  token lives: a put can reach a relay before the network routes it there);
 - so is an action a relay's client serves (``serve_action``): each ROS goal is a query to
   the relay whose replies stream the goal's feedback and its end; a ROS cancel is a query;
 - node parameters are queries run by the Graph's parameter methods;
@@ -186,6 +187,11 @@ CLAIM_RECHECK = 5.0
 """Seconds between two looks, by a robot refused its name, at whether the holder left (it
 is told at once as a rule)."""
 
+REFUSAL_REPEAT = (0.25, 4.0)
+"""Seconds before a refusal under ``@refused`` is put again while the refused token lives,
+first and at most (doubling): a put that came before the network routed it to the relay's
+subscriber reached nobody, and the relay would believe its client serves the name."""
+
 DIAL_WARNING = 5.0
 """Seconds the robot dials without any router answering before it says so (and again
 after each as many)."""
@@ -251,6 +257,8 @@ class Exporter:
         self.served: dict[str, _Served] = {}
         """Services relays' clients serve by name; actions by their goal service's name."""
         self._served_goals: dict[int, str] = {}  # id(ServedGoal) -> its id in its query
+        self.refusing: dict[str, asyncio.TimerHandle] = {}
+        """The next put of each refusal whose token lives, by the refusal's key."""
         self._lingering: dict[str, ServedAction] = {}
         self._served_goal_ids = itertools.count()
         self.snapshot = Snapshot()
@@ -407,6 +415,9 @@ class Exporter:
         for served in self.served.values():
             served.ros.destroy()
         self.served.clear()
+        for timer in self.refusing.values():
+            timer.cancel()
+        self.refusing.clear()
         for action in self._lingering.values():
             action.destroy()
         self._lingering.clear()
@@ -797,6 +808,10 @@ class Exporter:
         key = name + _GOAL_SERVICE if action else name
         served = self.served.get(key)
         what = "action" if action else "service"
+        kind: Kind = "action" if action else "srv"
+        repeat = self.refusing.pop(keys.refused_key(self.robot, relay, name, kind), None)
+        if repeat is not None:  # the refused token went, or comes again to be decided anew
+            repeat.cancel()
         if sample.kind != zenoh.SampleKind.PUT:
             if served is not None and served.relay == relay:
                 del self.served[key]
@@ -804,7 +819,6 @@ class Exporter:
                 self._refresh_snapshot()
                 log.info("%s %s is no longer served through relay %s", what, name, relay)
             return
-        kind: Kind = "action" if action else "srv"
         if served is not None:
             if served.relay != relay:  # the first keeps it: the second relay's client is told
                 self._refuse(relay, name, kind, f"{name} is already served by a client of "
@@ -846,9 +860,17 @@ class Exporter:
         (``why``): its session stops serving the name and tells the client, who would
         otherwise believe it serves and get no calls."""
         log.warning("relay %s's client serves %s, refused: %s", relay, name, why)
-        if self.session is not None:
-            with contextlib.suppress(zenoh.ZError):
-                self.session.put(keys.refused_key(self.robot, relay, name, kind), why.encode())
+        self._put_refusal(keys.refused_key(self.robot, relay, name, kind), why.encode(),
+                          REFUSAL_REPEAT[0])
+
+    def _put_refusal(self, key: str, why: bytes, wait: float) -> None:
+        """Put a refusal, and again after ``wait`` s (doubling) until its token goes."""
+        if self.session is None:
+            return
+        with contextlib.suppress(zenoh.ZError):
+            self.session.put(key, why)
+        self.refusing[key] = self._loop.call_later(
+            wait, self._put_refusal, key, why, min(2 * wait, REFUSAL_REPEAT[1]))
 
     def _unserve(self, key: str, served: _Served) -> None:
         """A relay's client stopped serving: a service leaves ROS at once; an action's goals

@@ -44,7 +44,8 @@ key                                      what
 ``<robot>/@refused/<relay>/<kind>/``     the robot's put to a relay whose ``@serve``
 ``<name>``                               token it does not take (another relay's client
                                          serves the name, or the robot cannot serve it):
-                                         why, as text (``kind``: ``srv`` or ``action``)
+                                         why, as text (``kind``: ``srv`` or ``action``);
+                                         put again while the token lives
 ``<robot>/@serving/<relay>/<service>``   the relay's queryable: a ROS call's request
                                          JSON in, the response JSON (or an error) out
 ``<robot>/@executing/<relay>/<action>``  the relay's queryable: a ROS goal of an action a

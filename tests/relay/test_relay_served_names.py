@@ -10,10 +10,12 @@ the other relay's token with a put under ``@refused``).
 from __future__ import annotations
 
 import asyncio
+import contextlib
 from collections.abc import AsyncIterator
 from typing import Any
 
 import pytest
+import zenoh
 from std_srvs.srv import SetBool
 
 import roslibpy_lite
@@ -141,6 +143,35 @@ async def test_a_token_the_robot_cannot_serve_is_refused_to_its_relay(
     finally:
         for entity in held:
             entity.undeclare()
+        session.close()  # type: ignore[no-untyped-call]
+
+
+async def test_a_refusal_is_put_again_until_the_refused_token_goes(
+        two_relays: tuple[Any, Relay, Relay, str], topic: str) -> None:
+    """A played relay listens under ``@refused`` only after the robot refused its token (as
+    when the network routes the robot's first put before the relay's subscriber): it still
+    hears why, and the robot stops repeating once the token goes. CI lost such a put once
+    in about 60 runs of the test above."""
+    exporter, _, _, router = two_relays
+    session = await open_session(ZenohOptions(connect=[router]))
+    refused_at = keys.refused_key(ROBOT, "played", topic)
+    token: Any = session.liveliness().declare_token(
+        keys.serve_key(ROBOT, "played", topic, "nopkg/srv/Nope"))
+    refusals: list[str] = []
+    subscriber: Any = None
+    try:
+        await until(lambda: refused_at in exporter.refusing, "the robot to refuse the token")
+        subscriber = session.declare_subscriber(
+            refused_at, lambda s: refusals.append(s.payload.to_string()))
+        why = (await until(lambda: refusals, "the refusal put again"))[0]
+        assert why.startswith(f"robot {ROBOT} cannot serve service {topic} (nopkg/srv/Nope): ")
+        token.undeclare()
+        await until(lambda: refused_at not in exporter.refusing, "the robot to stop repeating")
+    finally:
+        if subscriber is not None:
+            subscriber.undeclare()
+        with contextlib.suppress(zenoh.ZError):
+            token.undeclare()
         session.close()  # type: ignore[no-untyped-call]
 
 
