@@ -29,6 +29,7 @@ from pathlib import Path
 from typing import Any
 
 from ..exceptions import UsageError
+from ._bounds import ChunkBoundError, decompress, read_head
 from ._mcap import MESSAGE_ENCODING
 
 _RECORD = struct.Struct("<BQ")  # opcode, length
@@ -81,11 +82,15 @@ def _batches(path: Path, chunks: list[tuple[int, list[int]]], channels: frozense
     from mcap.records import Chunk
 
     with path.open("rb") as stream:
+        size = stream.seek(0, io.SEEK_END)
         for at, indexes in chunks:
             try:
+                read_head(stream, at, size)  # its sizes bounded before anything is unpacked
                 end = _last_record(stream, indexes) if indexes else None
                 stream.seek(at + 1 + 8, io.SEEK_SET)  # past the record's opcode and length
-                data = _decompress(Chunk.read(ReadDataStream(stream)), end)
+                data = _decompress(at, Chunk.read(ReadDataStream(stream)), end)
+            except ChunkBoundError as exc:
+                raise UsageError(f"{path}: {exc}") from None
             except Exception as exc:
                 raise UsageError(f"{path}: the chunk at byte {at} cannot be read: "
                                  f"{type(exc).__name__}: {exc}") from None
@@ -111,14 +116,13 @@ def _last_record(stream: Any, indexes: list[int]) -> int:
     return last
 
 
-def _decompress(chunk: Any, end: int | None = None) -> bytes:
-    """A chunk's records; with ``end`` (where the last record wanted starts), a zstd chunk
-    only up to the end of that record: what follows it is never decompressed."""
-    if chunk.compression == "zstd":
+def _decompress(at: int, chunk: Any, end: int | None = None) -> bytes:
+    """A chunk's records (never more than it says: :func:`._bounds.decompress`); with
+    ``end`` (where the last record wanted starts), a zstd chunk only up to the end of that
+    record: what follows it is never decompressed."""
+    if chunk.compression == "zstd" and end is not None and end <= chunk.uncompressed_size // 2:
         import zstandard
 
-        if end is None or end > chunk.uncompressed_size // 2:  # most of it: in one go
-            return zstandard.decompress(chunk.data, chunk.uncompressed_size)
         if end < 0:
             return b""
         reader = zstandard.ZstdDecompressor().stream_reader(chunk.data)
@@ -128,11 +132,7 @@ def _decompress(chunk: Any, end: int | None = None) -> bytes:
             raise ValueError(f"a record at {end} claims {length} bytes, past the chunk's "
                              f"{chunk.uncompressed_size}")
         return head + _read(reader, length)
-    if chunk.compression == "lz4":
-        import lz4.frame  # type: ignore[import-untyped]
-
-        return lz4.frame.decompress(chunk.data)  # type: ignore[no-any-return]
-    return chunk.data  # type: ignore[no-any-return]  # as mcap's reader takes it: stored
+    return decompress(at, chunk.compression, chunk.data, chunk.uncompressed_size)
 
 
 def _read(reader: Any, n: int) -> bytes:

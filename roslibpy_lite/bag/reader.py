@@ -12,6 +12,7 @@ from typing import TYPE_CHECKING, Any
 
 from ..exceptions import UsageError
 from ..messages import RawMessage
+from ._bounds import ChunkBoundError, check_chunks
 from ._mcap import MESSAGE_ENCODING, need_mcap
 
 if TYPE_CHECKING:
@@ -117,7 +118,13 @@ def _records(path: Path, topics: Iterable[str] | None, start_ns: int | None,
             summary = reader.get_summary()
         except McapError:
             summary = None
-        if summary is not None and summary.chunk_indexes:
+        indexed = summary.chunk_indexes if summary is not None else []
+        try:  # mcap's reader sizes its buffers from the chunks' heads: bound them first
+            check_chunks(stream, stream.seek(0, 2),
+                         [ci.chunk_start_offset for ci in indexed] if indexed else None)
+        except ChunkBoundError as exc:
+            raise UsageError(f"{path}: {exc}") from None
+        if summary is not None and indexed:
             # the time bounds are filtered here: their keyword names differ by mcap version
             for schema, channel, message in reader.iter_messages(topics=wanted,
                                                                  log_time_order=True):
