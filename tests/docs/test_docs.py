@@ -214,6 +214,7 @@ def test_every_option_a_page_names_exists() -> None:
     ours = set().union({"--help"}, *(_options(text) for text in _commands().values()))
     others = {
         "--no-deps": "pip wheel", "--now": "systemctl enable", "--network": "docker run",
+        "--cap-drop": "docker run", "--security-opt": "docker run",
         "--build-context": "docker build", "--execute": "jupyter nbconvert",
         "--strict": "mypy, mkdocs build", "--interfaces": "python -m msgs.generator",
         "--share": "python -m msgs.generator", "--output": "python -m msgs.generator",
