@@ -37,7 +37,7 @@ from ..exceptions import (
     RosTimeoutError,
     UsageError,
 )
-from . import action, bag, interface, mcp, node, service, topic
+from . import action, bag, interface, lifecycle, mcp, node, param, service, topic, topic_stats
 from .common import (
     DEFAULT_URL,
     EXIT_CODES,
@@ -150,12 +150,12 @@ def build_parser() -> argparse.ArgumentParser:
         parents=[common],
     )
     groups = root.add_subparsers(dest="group",
-                                 metavar="{topic,service,node,interface,action,bag,mcp}",
+                                 metavar="{topic,service,param,lifecycle,node,interface,action,bag,mcp}",
                                  parser_class=Parser)
     groups.required = True
 
     kit = Kit(common, fmt, wait, swait)
-    for noun in (topic, service, node, interface, action, bag, mcp):
+    for noun in (topic, service, param, lifecycle, node, interface, action, bag, mcp):
         noun.add_parsers(groups, kit)
     return root
 
@@ -163,6 +163,7 @@ def build_parser() -> argparse.ArgumentParser:
 _client_log = logging.getLogger("roslibpy_lite")
 
 _STREAMING = {topic.cmd_topic_echo, topic.cmd_topic_hz, topic.cmd_topic_pub,
+              topic_stats.cmd_topic_bw, topic_stats.cmd_topic_delay,
               bag.cmd_bag_record, bag.cmd_bag_play, mcp.cmd_mcp}
 
 

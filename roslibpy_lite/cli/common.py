@@ -238,6 +238,26 @@ class CliSession:
                                  f"unknown service {service} (no node serves it)",
                                  ("services", "services"))
 
+    async def node_call(self, node: str, service: str, type_: str,
+                        request: dict[str, Any] | None = None) -> dict[str, Any]:
+        """Call the node's own service ``<node>/<service>`` (of type ``type_``)."""
+        return await self.ros.call_service(f"{node}/{service}", type_, request or {},
+                                           timeout=self.timeout)
+
+    async def node(self, name: str, wait: float) -> str:
+        """The fully qualified name of node ``name`` (``/`` added in front, as ros2 does),
+        once the graph has it; polls up to ``wait`` s, then ``CliError(EXIT_NOT_FOUND)``."""
+        full = name if name.startswith("/") else "/" + name
+        deadline = time.monotonic() + wait
+        while True:
+            known = await self.ros.graph.node_names(timeout=self.timeout)
+            if full in known:
+                return full
+            if time.monotonic() >= deadline:
+                raise CliError(EXIT_NOT_FOUND, f"unknown node {full} (not in the ROS graph)"
+                                               + await self._did_you_mean(full, ("nodes", "nodes")))
+            await asyncio.sleep(0.1)  # graph discovery has no event to await here
+
     async def action_type(self, action: str, wait: float) -> str:
         """The type of the action ``action`` serves; polls up to ``wait`` s."""
         return await self.polled("action_type", {"action": action}, "type", wait,
@@ -265,6 +285,25 @@ def print_listing(out: Out, args: argparse.Namespace, pairs: list[tuple[str, str
     for name, type_ in pairs:
         out.line(f"{name} [{type_}]" if args.show_types else name)
     return EXIT_OK
+
+
+async def find_by_type(args: argparse.Namespace, out: Out, kind: str, type_: str) -> int:
+    """``topic find`` / ``service find``: the names of that type (``/rosapi/<kind>s_for_type``),
+    one a line, hidden ones only with ``--include-hidden-<kind>s``; ``-c``: how many."""
+    type_parts(type_, "msg" if kind == "topic" else "srv")
+
+    async def body(s: CliSession) -> int:
+        plural = kind + "s"
+        found = (await s.rosapi(f"{plural}_for_type", {"type": type_})).get(plural, [])
+        names = sorted(str(n) for n in found
+                       if getattr(args, f"include_hidden_{plural}") or not hidden(str(n)))
+        if getattr(args, f"count_{plural}"):
+            out.line(str(len(names)))
+            return EXIT_OK
+        for name in names:
+            out.line(name)
+        return EXIT_OK
+    return await with_session(args, body)
 
 
 async def with_session(args: argparse.Namespace, body: Callable[[CliSession], Awaitable[int]],
@@ -315,6 +354,15 @@ def lost(s: CliSession, what: str) -> CliError:
 # -- the parser's pieces ---------------------------------------------------------------------------
 
 
+def node_wait_parser() -> argparse.ArgumentParser:
+    """The ``--wait`` of commands that name a node (ros2's ``--timeout``: ours is the
+    bridge's)."""
+    p = Parser(add_help=False)
+    p.add_argument("--wait", type=float, default=1.0, metavar="SEC",
+                   help="seconds to wait for the node to appear in the ROS graph (default 1)")
+    return p
+
+
 class Parser(argparse.ArgumentParser):
     def error(self, message: str) -> NoReturn:
         raise CliError(EXIT_USAGE, f"{message} (see '{self.prog} --help')")
@@ -345,6 +393,15 @@ class Kit:
                                     parser_class=Parser)
         sub.required = True
         return sub
+
+    def finding(self, sub: Any, fn: Command, kind: str, example: str) -> None:
+        """Add ``find TYPE [-c] [--include-hidden-<kind>s]`` running ``fn``."""
+        p = self.leaf(sub, "find", fn, f"list the {kind}s of a type")
+        p.add_argument(f"{kind}_type", help=f"the {kind} type, e.g. {example}")
+        p.add_argument("-c", f"--count-{kind}s", action="store_true",
+                       help=f"print only how many {kind}s there are")
+        p.add_argument(f"--include-hidden-{kind}s", action="store_true",
+                       help=f"also hidden {kind}s (a part of the name starts with _)")
 
     def listing(self, sub: Any, fn: Command, help_: str, each: str, *, hidden: bool = False
                 ) -> None:

@@ -1,4 +1,4 @@
-"""``roslibpy-lite service list|type|call``."""
+"""``roslibpy-lite service list|type|find|call``."""
 
 from __future__ import annotations
 
@@ -22,6 +22,7 @@ from .common import (
     Out,
     check_values,
     cli_values,
+    find_by_type,
     local_class,
     print_listing,
     type_parts,
@@ -53,6 +54,11 @@ async def cmd_service_type(args: argparse.Namespace, out: Out) -> int:
     return await with_session(args, body)
 
 
+async def cmd_service_find(args: argparse.Namespace, out: Out) -> int:
+    """``service find TYPE [-c]``: the services of that type."""
+    return await find_by_type(args, out, "service", args.service_type)
+
+
 async def cmd_service_call(args: argparse.Namespace, out: Out) -> int:
     """``service call SERVICE TYPE [VALUES]``: print the response."""
     type_parts(args.type, "srv")
@@ -79,10 +85,11 @@ async def cmd_service_call(args: argparse.Namespace, out: Out) -> int:
 
 def add_parsers(groups: Any, kit: Kit) -> None:
     """Add ``service`` and its commands."""
-    ssub = kit.group(groups, "service", "services: list, type, call", "list,type,call")
+    ssub = kit.group(groups, "service", "services: list, type, find, call", "list,type,find,call")
     kit.listing(ssub, cmd_service_list, "list the services", "service", hidden=True)
     p = kit.leaf(ssub, "type", cmd_service_type, "print a service's type", kit.swait)
     p.add_argument("service")
+    kit.finding(ssub, cmd_service_find, "service", "rcl_interfaces/srv/ListParameters")
     p = kit.leaf(ssub, "call", cmd_service_call, "call a service and print the response", kit.fmt,
              kit.swait)
     p.add_argument("service")

@@ -1,4 +1,5 @@
-"""``roslibpy-lite topic list|type|info|echo|hz|pub``."""
+"""``roslibpy-lite topic list|type|find|info|echo|hz|pub`` (``bw`` and ``delay``:
+:mod:`.topic_stats`)."""
 
 from __future__ import annotations
 
@@ -13,6 +14,7 @@ from collections import deque
 from typing import Any
 
 from ..exceptions import RemoteError
+from . import topic_stats
 from .common import (
     EXIT_OK,
     EXIT_REMOTE,
@@ -23,6 +25,7 @@ from .common import (
     Out,
     check_values,
     cli_values,
+    find_by_type,
     for_display,
     local_class,
     lost,
@@ -46,6 +49,11 @@ async def cmd_topic_list(args: argparse.Namespace, out: Out) -> int:
 async def cmd_topic_type(args: argparse.Namespace, out: Out) -> int:
     """``topic type TOPIC``."""
     return await print_line(args, out, lambda s: s.topic_type(args.topic, args.wait))
+
+
+async def cmd_topic_find(args: argparse.Namespace, out: Out) -> int:
+    """``topic find TYPE [-c]``: the topics of that type."""
+    return await find_by_type(args, out, "topic", args.topic_type)
 
 
 async def cmd_topic_info(args: argparse.Namespace, out: Out) -> int:
@@ -283,11 +291,12 @@ async def cmd_topic_pub(args: argparse.Namespace, out: Out) -> int:
 
 def add_parsers(groups: Any, kit: Kit) -> None:
     """Add ``topic`` and its commands."""
-    tsub = kit.group(groups, "topic", "topics: list, type, info, echo, pub, hz",
-                     "list,type,info,echo,pub,hz")
+    tsub = kit.group(groups, "topic", "topics: list, type, find, info, echo, pub, hz, bw, delay",
+                     "list,type,find,info,echo,pub,hz,bw,delay")
     kit.listing(tsub, cmd_topic_list, "list the topics in the ROS graph", "topic", hidden=True)
     p = kit.leaf(tsub, "type", cmd_topic_type, "print a topic's type", kit.wait)
     p.add_argument("topic")
+    kit.finding(tsub, cmd_topic_find, "topic", "std_msgs/msg/String")
     p = kit.leaf(tsub, "info", cmd_topic_info, "a topic's type, publishers and subscribers",
              kit.fmt, kit.wait)
     p.add_argument("topic")
@@ -328,3 +337,4 @@ def add_parsers(groups: Any, kit: Kit) -> None:
     p.add_argument("--duration", type=float, help="stop after this many seconds")
     p.add_argument("--queue-length", type=int, default=0,
                    help="the bridge's queue for us (default 0: the bridge's --send-queue)")
+    topic_stats.add_parsers(tsub, kit)

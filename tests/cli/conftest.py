@@ -9,6 +9,7 @@ from dataclasses import dataclass
 import pytest
 
 from roslibpy_lite.cli import main
+from tests.cli.ros2_nodes import managed_node, param_node  # noqa: F401 - fixtures for tests here
 from tests.helpers import BridgeProcess
 
 
