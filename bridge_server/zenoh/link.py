@@ -15,8 +15,10 @@ the router lets it use only the keys under that name (:func:`robot_acl`), so no 
 publish, serve or answer as another. Relays, named by their certificates too
 (``--zenoh-relay``), hear every robot's keys but send only what a relay's role needs (its
 requests, under its own name where a key names a relay; a client's message to publish under
-``@in/``): never a robot's topic data, graph, replies or presence. Which viewer may reach
-which robot is the relay's roles' business (``robots = [...]`` in a role).
+``@in/``): never a robot's topic data, graph, replies or presence. A router asking for
+certificates always has these rules: one naming nobody refuses to start
+(:data:`UNNAMED_MTLS`). Which viewer may reach which robot is the relay's roles' business
+(``robots = [...]`` in a role).
 """
 
 from __future__ import annotations
@@ -41,8 +43,8 @@ if TYPE_CHECKING:
 
 log = logging.getLogger("bridge_server.zenoh.link")
 
-__all__ = ["ZenohOptions", "add_arguments", "answering", "ignore_replies", "open_session",
-           "options_from_args", "robot_acl", "tokens"]
+__all__ = ["UNNAMED_MTLS", "ZenohOptions", "add_arguments", "answering", "ignore_replies",
+           "open_session", "options_from_args", "robot_acl", "tokens"]
 
 _PROTOCOLS = ("tcp", "tls", "quic", "udp", "unixsock-stream")
 _ENDPOINT = re.compile(r"(?P<proto>[a-z-]+)/(?P<addr>[^#?]+)(?:[#?].*)?")
@@ -54,6 +56,15 @@ access rules name each."""
 _MESSAGES = ["put", "delete", "declare_subscriber", "query", "declare_queryable", "reply",
              "liveliness_token", "declare_liveliness_subscriber", "liveliness_query"]
 
+
+UNNAMED_MTLS = (
+    "--zenoh-mtls names nobody: give --zenoh-robot NAME for each robot (its certificate's "
+    "common name; it may then use the keys under that name only) and --zenoh-relay NAME for "
+    "each other relay that connects. Without them every certificate the CA signed could act "
+    "as any robot or relay (Zenoh's access rules match certificates by exact common name, "
+    "so the rules cannot be made from the certificates alone)")
+"""Why a router asking for certificates must name who may come in: it refuses to start
+rather than run without access rules."""
 
 _LOOPBACK = re.compile(r"(?:127(?:\.\d{1,3}){3}|localhost|\[?::1\]?)")
 
@@ -229,6 +240,8 @@ class ZenohOptions:
         if (self.robots or self.relays) and not self.mtls:
             raise BridgeError("--zenoh-robot/--zenoh-relay name certificates: they need "
                               "--zenoh-mtls")
+        if self.mtls and not (self.robots or self.relays):
+            raise BridgeError(UNNAMED_MTLS)
         for robot in self.robots:
             try:
                 keys.check_robot(robot)
@@ -268,7 +281,7 @@ class ZenohOptions:
         # both ways): a client with a certificate turns it on, a router when told to.
         if self.mtls or (not self.listen and self.tls_cert is not None):
             conf.insert_json5(f"{tls}/enable_mtls", "true")
-        if self.robots or self.relays:
+        if self.mtls:  # never without rules: config() refused mutual TLS naming nobody
             conf.insert_json5("access_control", json.dumps(robot_acl(self.robots, self.relays)))
         return conf
 
@@ -407,7 +420,8 @@ def add_arguments(p: argparse.ArgumentParser, listen: bool) -> None:
     if listen:
         g.add_argument("--zenoh-mtls", action="store_true",
                        help="ask whoever connects for a certificate signed by --zenoh-tls-ca "
-                       "(mutual TLS: a robot's certificate's common name is its robot name)")
+                       "(mutual TLS: a robot's certificate's common name is its robot name); "
+                       "needs --zenoh-robot or --zenoh-relay, which say who may come in")
         g.add_argument("--zenoh-robot", action="append", default=[], metavar="NAME",
                        help="with --zenoh-mtls: a robot let in by its certificate, on the keys "
                        "under its own name only (may be given several times)")
