@@ -23,8 +23,9 @@ goes on to the robot's handshake):
 ``GET /readyz``              Zenoh is joined and the port listens (else 503 and why)
 ``GET /robots/<robot>/``     the bridge's status page for that robot, and under it
                              ``status.json``, ``metrics``, ``readyz`` (the robot is on
-                             Zenoh), exactly as a bridge serves them; the relay's page
-                             links here
+                             Zenoh; with an auth file it needs a token, as the data
+                             routes), as a bridge serves them; the relay's page links
+                             here
 ``GET /<robot>/``            the same, for a robot not named like one of the relay's own
                              routes above (``metrics``, ``static``, ``robots``...)
 ===========================  ===========================================================
@@ -41,6 +42,9 @@ routes need a token (``Authorization: Bearer`` or ``?token=``) of a role with
 the relay's lists, and is refused (403) another robot's page. A robot the relay does not
 know of is 404. A robot no client has opened yet is opened (followed on Zenoh) only for a
 viewer whose token may see its pages: 401/403 before anything of the robot is touched.
+Without a token every robot name answers alike, whether a robot has it or not (issue 53):
+the page and its files (the same for every robot) are served, and everything else under
+``/robots/<robot>/`` (``readyz`` and ``healthz`` too) is 401, so no name can be found out.
 """
 
 from __future__ import annotations
@@ -121,7 +125,12 @@ class RelayWeb:
         """Robot ``name``'s bridge route ``rest`` (its page is at ``home``)."""
         if not slash:  # /robot1: the page's relative links need /robot1/
             return _redirect(home, query)
-        if name not in self.relay.robots:  # opened only for a viewer who may see its pages
+        if self.access.security.auth is not None:
+            # Without a token, every robot's routes answer alike, known or not (no name can
+            # be found out): the page's own files are the same for all, the rest is 401.
+            page = "/static/index.html" if not rest else "/" + rest
+            if page.startswith("/static/"):
+                return open_route(page, self._static, self.relay.trouble)
             _, refusal = viewer(WebAccess(self.access.security, robot=name), request, address,
                                 "/status.json")
             if refusal is not None:
