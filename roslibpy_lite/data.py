@@ -362,7 +362,8 @@ def _header_stamp_ns(msg: Any) -> int | None:
 
 def bag_to_dataframe(path: str | Path, topic: str,
                      fields: Iterable[str] | None = None) -> pandas.DataFrame:
-    """One topic of an MCAP file (ours, rosbag2's) as a DataFrame (see :func:`to_dataframe`;
+    """One topic of an MCAP file (ours, rosbag2's) or of a rosbag2 recording (its directory
+    or a bare ``.db3`` file; the rosbag2 extra) as a DataFrame (see :func:`to_dataframe`;
     a message without a header stamp is indexed by when it was recorded).
 
     Only the fields asked for are read, straight from each message's CDR bytes into
@@ -376,9 +377,9 @@ def bag_to_dataframe(path: str | Path, topic: str,
             the message's place among the topic's messages and the field.
     """
     from .bag import info, read
-    from .bag._mcap import need_mcap
+    from .bag._rosbag2 import need_reader
 
-    need_mcap()
+    need_reader(path)
     path = Path(path)
     chosen = list(fields) if fields is not None else None
     frame = _bag_columns(path, topic, chosen)

@@ -186,3 +186,32 @@ def check_chunks(stream: IO[bytes], file_size: int, offsets: Iterable[int] | Non
                 decompress(at, head.compression, stream.read(head.compressed_size),
                            head.uncompressed_size)
         at += _RECORD.size + length
+
+
+def decompress_message(data: bytes, file_size: int) -> bytes:
+    """One message of a recording compressed per message (rosbag2's ``message`` mode, zstd),
+    held to the bound of a chunk of a file of ``file_size`` bytes."""
+    import zstandard
+
+    limit = chunk_limit(file_size)
+    try:
+        stated = zstandard.frame_content_size(data)
+    except zstandard.ZstdError:
+        raise ChunkBoundError("a compressed message has no zstd frame header") from None
+    if stated > limit:
+        raise ChunkBoundError(f"a compressed message says it unpacks to {stated} bytes from "
+                              f"{len(data)}, past the limit of {limit} bytes for a "
+                              f"{file_size}-byte recording")
+    try:
+        if stated >= 0:
+            return bytes(zstandard.decompress(data, max_output_size=stated))
+        parts, got = [], 0
+        for part in zstandard.ZstdDecompressor().read_to_iter(data):
+            got += len(part)
+            if got > limit:
+                raise ChunkBoundError(f"a compressed message unpacks to more than the limit "
+                                      f"of {limit} bytes for a {file_size}-byte recording")
+            parts.append(part)
+        return b"".join(parts)
+    except zstandard.ZstdError as exc:
+        raise ChunkBoundError(f"a compressed message does not unpack: {exc}") from None

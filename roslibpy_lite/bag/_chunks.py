@@ -45,11 +45,16 @@ class TopicChunks:
 
     type_name: str
     definition: str
-    batches: Iterator[list[tuple[int, memoryview]]]
+    batches: Iterator[list[tuple[int, memoryview | bytes]]]
 
 
 def topic_chunks(path: Path, topic: str) -> TopicChunks | None:
-    """The topic's messages chunk by chunk, or None (see the module docstring)."""
+    """The topic's messages chunk by chunk, or None (see the module docstring); a rosbag2
+    recording's from :func:`._rosbag2.topic_chunks`."""
+    from . import _rosbag2
+
+    if _rosbag2.is_rosbag2(path):
+        return _rosbag2.topic_chunks(path, topic)
     from mcap.exceptions import McapError
     from mcap.reader import make_reader
 
@@ -77,7 +82,7 @@ def topic_chunks(path: Path, topic: str) -> TopicChunks | None:
 
 
 def _batches(path: Path, chunks: list[tuple[int, list[int]]], channels: frozenset[int]
-             ) -> Iterator[list[tuple[int, memoryview]]]:
+             ) -> Iterator[list[tuple[int, memoryview | bytes]]]:
     from mcap.data_stream import ReadDataStream
     from mcap.records import Chunk
 
@@ -148,9 +153,9 @@ def _read(reader: Any, n: int) -> bytes:
 
 
 def _messages(path: Path, at: int, data: memoryview, channels: frozenset[int]
-              ) -> list[tuple[int, memoryview]]:
+              ) -> list[tuple[int, memoryview | bytes]]:
     """``(log time, payload)`` of the messages of ``channels`` in one chunk's records."""
-    out: list[tuple[int, memoryview]] = []
+    out: list[tuple[int, memoryview | bytes]] = []
     append = out.append
     record, message = _RECORD.unpack_from, _MESSAGE.unpack_from
     end = len(data)

@@ -156,7 +156,15 @@ def _records(path: Path, topics: Iterable[str] | None, start_ns: int | None,
 def read(path: str | Path, topics: Iterable[str] | None = None, *,
          start_ns: int | None = None, end_ns: int | None = None) -> Iterator[BagMessage]:
     """The messages of a ROS 2 MCAP file in log-time order (only ``topics``, if given;
-    ``start_ns``/``end_ns`` bound the log time). ``msg.decode()`` gives typed messages."""
+    ``start_ns``/``end_ns`` bound the log time). ``msg.decode()`` gives typed messages.
+
+    A rosbag2 recording (its directory, or a bare ``.db3`` file) is read as well, with the
+    rosbag2 extra (publish time = log time, which is all a .db3 keeps)."""
+    from . import _rosbag2
+
+    if _rosbag2.is_rosbag2(Path(path)):
+        yield from _rosbag2.read(Path(path), topics, start_ns, end_ns)
+        return
     need_mcap()
     texts: dict[int, str] = {}
     for schema, channel, message in _records(Path(path), topics, start_ns, end_ns):
@@ -170,7 +178,12 @@ def read(path: str | Path, topics: Iterable[str] | None = None, *,
 
 
 def info(path: str | Path) -> BagInfo:
-    """Topics, types, counts, times and size of a file (from its summary, else by reading)."""
+    """Topics, types, counts, times and size of a file (from its summary, else by reading),
+    or of a rosbag2 recording (from its metadata; the rosbag2 extra)."""
+    from . import _rosbag2
+
+    if _rosbag2.is_rosbag2(Path(path)):
+        return _rosbag2.info(Path(path))
     need_mcap()
     from mcap.exceptions import McapError
 

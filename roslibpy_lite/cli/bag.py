@@ -1,4 +1,5 @@
-"""``roslibpy-lite bag record|info|play``: MCAP files through the bridge (roslibpy_lite.bag)."""
+"""``roslibpy-lite bag record|info|play``: MCAP files through the bridge (roslibpy_lite.bag);
+info and play read rosbag2 recordings too (a directory or a bare .db3 file)."""
 
 from __future__ import annotations
 
@@ -37,12 +38,14 @@ def _size(text: str) -> int:
         raise argparse.ArgumentTypeError(f"not a size: {text!r} (e.g. 500M, 2G)") from None
 
 
-def _need_mcap() -> None:
-    """Say that the extra is missing (and how to install it) before anything else."""
+def _need_mcap(path: str | None = None) -> None:
+    """Say that the extra is missing (and how to install it) before anything else: mcap's,
+    or for a rosbag2 recording at ``path``, rosbag2's."""
     from ..bag._mcap import need_mcap
+    from ..bag._rosbag2 import need_reader
 
     try:
-        need_mcap()
+        need_mcap() if path is None else need_reader(path)
     except UsageError as exc:
         raise CliError(EXIT_USAGE, str(exc)) from None
 
@@ -177,18 +180,19 @@ def _stop_signals() -> Iterator[asyncio.Event]:
 
 
 async def cmd_bag_info(args: argparse.Namespace, out: Out) -> int:
-    """``bag info FILE``: topics, types, counts, duration, size."""
+    """``bag info FILE``: topics, types, counts, duration, size (FILE: an MCAP file, a
+    rosbag2 directory or a .db3 file)."""
     from ..bag import info
     from ..bag._mcap import format_size
 
-    _need_mcap()
+    _need_mcap(args.file)
 
     try:
         about = info(args.file)
     except FileNotFoundError:
         raise CliError(EXIT_NOT_FOUND, f"no such file: {args.file}") from None
     except Exception as exc:
-        raise CliError(EXIT_ERROR, f"{args.file} is not a readable MCAP file: {exc}") from None
+        raise CliError(EXIT_ERROR, f"{args.file} is not a readable recording: {exc}") from None
     unfinished = "" if about.complete else " (no summary: a recording that did not finish)"
     out.line(f"File:      {about.path}{unfinished}")
     out.line(f"Size:      {format_size(about.size)}")
@@ -210,7 +214,7 @@ async def cmd_bag_play(args: argparse.Namespace, out: Out) -> int:
     """``bag play FILE``: publish through the bridge with the recorded timing."""
     from ..bag import play
 
-    _need_mcap()
+    _need_mcap(args.file)
 
     async def body(s: CliSession) -> int:
         stats = await play(s.ros, args.file, rate=args.rate, loop=args.loop,
@@ -225,7 +229,8 @@ async def cmd_bag_play(args: argparse.Namespace, out: Out) -> int:
 
 def add_parsers(groups: Any, kit: Kit) -> None:
     """Add ``bag`` and its commands."""
-    bsub = kit.group(groups, "bag", "MCAP files: record (through the bridge), info, play",
+    bsub = kit.group(groups, "bag", "MCAP files: record (through the bridge), info, play "
+                     "(MCAP files and rosbag2 recordings)",
                      "record,info,play")
     p = kit.leaf(bsub, "record", cmd_bag_record, "record topics to an MCAP file (Ctrl+C ends "
                  "it properly)")
@@ -240,9 +245,9 @@ def add_parsers(groups: Any, kit: Kit) -> None:
                    help="go on in a new file every SEC seconds")
     p.add_argument("-q", "--quiet", action="store_true", help="no live status line")
     p = kit.leaf(bsub, "info", cmd_bag_info, "topics, types, counts and times of a file")
-    p.add_argument("file")
+    p.add_argument("file", help="an MCAP file, a rosbag2 directory or a .db3 file")
     p = kit.leaf(bsub, "play", cmd_bag_play, "publish a file through the bridge")
-    p.add_argument("file")
+    p.add_argument("file", help="an MCAP file, a rosbag2 directory or a .db3 file")
     p.add_argument("--rate", type=float, default=1.0,
                    help="time scale (default 1; 2: twice as fast)")
     p.add_argument("--loop", action="store_true", help="start over at the end")
