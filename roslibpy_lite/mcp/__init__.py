@@ -20,7 +20,9 @@ except ImportError as exc:  # pragma: no cover - the extra is installed in the t
         "with its mcp extra, e.g. pip install './roslibpy_lite-<version>-py3-none-any.whl[mcp]'"
     ) from exc
 
+from .door import HttpDoor
 from .server import build_server, serve_http, serve_stdio
 from .tools import MAX_WAIT, Options, RobotTools
 
-__all__ = ["MAX_WAIT", "Options", "RobotTools", "build_server", "serve_http", "serve_stdio"]
+__all__ = ["MAX_WAIT", "HttpDoor", "Options", "RobotTools", "build_server", "serve_http",
+           "serve_stdio"]

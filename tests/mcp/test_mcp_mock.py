@@ -126,12 +126,8 @@ async def test_collect_is_bounded_by_count_bytes_and_time_and_reports_progress()
         assert json.loads(text(quiet))["stopped_by"] == "seconds"
 
 
-@pytest.mark.parametrize("mode", ["auto", "legacy"])
-async def test_confirm_asks_the_user_before_a_change_and_a_no_sends_nothing(mode: str) -> None:
-    """With confirm on, a service call is made only once the client's user accepts (MCP
-    elicitation naming the tool and its arguments; in the call's answer on 2026-07-28, as a
-    request to the client on the handshake era); declined, or a client that cannot answer,
-    nothing reaches the service; reading tools are not asked about."""
+async def _scaling_robot() -> tuple[MockRos, list[float]]:
+    """A MockRos serving /scale (mult_msgs/srv/MultFloats); the x of each request it got."""
     ros = MockRos()
     calls: list[float] = []
 
@@ -140,6 +136,16 @@ async def test_confirm_asks_the_user_before_a_change_and_a_no_sends_nothing(mode
         return {"result": req["x"] * req["y"]}
 
     await ros.advertise_service("/scale", "mult_msgs/srv/MultFloats", scale)
+    return ros, calls
+
+
+@pytest.mark.parametrize("mode", ["auto", "legacy"])
+async def test_confirm_asks_the_user_before_a_change_and_a_no_sends_nothing(mode: str) -> None:
+    """With confirm on, a service call is made only once the client's user accepts (MCP
+    elicitation naming the tool and its arguments; in the call's answer on 2026-07-28, as a
+    request to the client on the handshake era); declined, or a client that cannot answer,
+    nothing reaches the service; reading tools are not asked about."""
+    ros, calls = await _scaling_robot()
     asked: list[str] = []
     answers: list[Literal["accept", "decline"]] = ["accept", "decline"]
 
@@ -167,6 +173,28 @@ async def test_confirm_asks_the_user_before_a_change_and_a_no_sends_nothing(mode
         else:
             assert result.is_error and "could not be asked" in text(result)
     assert calls == [2.0]
+
+
+@pytest.mark.parametrize("mode", ["auto", "legacy"])
+@pytest.mark.parametrize("state", [None, "forged"])
+async def test_a_confirmation_sent_before_it_is_asked_confirms_nothing(
+    mode: str, state: str | None
+) -> None:
+    """A client that sends input_responses.confirm = accept on its first call (with no request
+    state, or one the server never issued) does not skip --confirm: the user is asked, and
+    with no one to answer nothing reaches the service."""
+    ros, calls = await _scaling_robot()
+    accept = types.ElicitResult(action="accept", content={"confirm": True})
+    async with Client(build_server(ros, Options(confirm=True)), mode=mode) as client:
+        try:
+            result = await client.call_tool("call__scale", {"request": {"x": 2.0, "y": 4.0}},
+                                            input_responses={"confirm": accept},
+                                            request_state=state)
+        except MCPError as exc:  # the SDK's client cannot answer the real question
+            assert "Elicitation not supported" in str(exc) or "requestState" in str(exc), exc
+        else:
+            assert result.is_error, text(result)
+    assert calls == []
 
 
 async def test_a_point_cloud_is_summarized_by_its_numbers() -> None:
