@@ -76,7 +76,8 @@ class RobotStatus:
         "its queue), messages_lost (past its replay window in a link outage), "
         "replies_dropped, graph_too_large, graph_superseded, bad_graph, "
         "bad_messages, type_refused (its type over --max-definition-bytes or "
-        "--max-types-per-robot), bad_replies, handling_failed.", label="kind"))
+        "--max-types-per-robot), not_holder (put by a robot refused the name), bad_replies, "
+        "handling_failed.", label="kind"))
 
     def to_json(self) -> dict[str, Any]:
         """The robot's entry in the relay's ``/status.json`` (keys are the field names)."""

@@ -667,7 +667,7 @@ class Exporter:
             return msg.data, last[1]
         export.seq += 1
         meta = Meta(type=export.feed.type_name or "", latched=export.feed.latched is msg,
-                    stamp_ns=msg.stamp_ns, epoch=export.epoch, seq=export.seq)
+                    stamp_ns=msg.stamp_ns, epoch=export.epoch, seq=export.seq, zid=self.zid)
         attachment = meta.encode()
         export.last = (msg, attachment)
         return msg.data, attachment

@@ -154,6 +154,10 @@ class TypeRefused(UnknownTypeError):
     """A robot's type over one of the relay's :class:`TypeLimits` (its messages dropped)."""
 
 
+class NotHolder(BridgeError):
+    """A message put by a Zenoh session that does not hold the robot's name (dropped)."""
+
+
 class RelayConverter(MemoryConverter):
     """:class:`~bridge_server.graph.Converter` of one ``msgs`` message class (the relay's
     messages are ``msgs`` instances, as the in-memory graph's), reading CDR too."""
@@ -308,10 +312,12 @@ class ZenohFeed:
             meta = Meta.decode(sample.attachment.to_bytes() if sample.attachment else None)
             if not 0 <= meta.stamp_ns < STAMP_END:
                 raise BridgeError(f"its stamp {meta.stamp_ns} ns is out of range")
+            graph.check_sender(meta.zid)
             conv = self._converter(meta.type)
         except BridgeError as exc:
-            graph.faults.add("type_refused" if isinstance(exc, TypeRefused) else "bad_messages",
-                             f"messages of {self.topic} dropped: {exc}")
+            kind = ("type_refused" if isinstance(exc, TypeRefused) else
+                    "not_holder" if isinstance(exc, NotHolder) else "bad_messages")
+            graph.faults.add(kind, f"messages of {self.topic} dropped: {exc}")
             return
         epoch, seq = self._place
         if meta.epoch == epoch and meta.seq <= seq:
@@ -844,6 +850,16 @@ class ZenohGraph:
             for listener in list(self.presence_listeners):
                 listener(True)
         self.release_types()
+
+    def check_sender(self, zid: str) -> None:
+        """``NotHolder`` unless the Zenoh session ``zid`` that put a message holds the robot's
+        name (while one does): what a robot refused the name puts is dropped."""
+        holder = self.claims.holder
+        if holder is not None and zid != holder:
+            raise NotHolder(
+                f"put by Zenoh session {zid or '(one that names none)'}, not by {holder}, "
+                f"which holds the name (a robot refused the name, or one older than this "
+                "relay that does not say its session)")
 
     def went(self, what: str) -> str:
         """Why a ``what`` (call, goal) in flight fails when the robot goes (its link's

@@ -10,7 +10,9 @@ and no ROS name can spell, so ``r1/**`` is all of ``r1``'s topics and nothing el
 key                                      what
 =======================================  ==============================================
 ``<robot>/<topic>``                      one put per ROS message: its CDR bytes as they
-                                         came; attachment :class:`Meta` (JSON)
+                                         came; attachment :class:`Meta` (JSON), naming
+                                         the session that put it (a relay takes only
+                                         the name's holder's)
 ``<robot>/@claim/<zid>``                 liveliness token of a robot announcing its name
                                          (``zid``: its Zenoh session's id), before anything
                                          else; one robot per name: a robot that finds
@@ -335,22 +337,29 @@ class _Payload:
 @dataclass
 class Meta(_Payload):
     """The attachment of a message's put: its type, whether the topic is latched (transient
-    local), the robot's receive time, and its place in the topic's stream (``epoch``: this
+    local), the robot's receive time, its place in the topic's stream (``epoch``: this
     stream, new each time the robot subscribes the topic anew; ``seq``: counted in it from 1)
-    so a relay that also asked for the latched message takes each message once."""
+    so a relay that also asked for the latched message takes each message once, and
+    ``zid``: the Zenoh id of the robot's session that put it, which is the id in its
+    ``@alive`` token; a relay drops what a session other than the name's holder put (a
+    robot refused the name, :class:`Claims`)."""
 
     type: str
     latched: bool = False
     stamp_ns: int = 0
     epoch: str = ""
     seq: int = 0
+    zid: str = ""
 
     def encode(self) -> bytes:
         """As the attachment's bytes: made for every message a robot puts, so from its fields
-        directly (``asdict`` copied each field deeply: 8 us a message, now 2)."""
-        return _COMPACT.encode({"type": self.type, "latched": self.latched,
-                                "stamp_ns": self.stamp_ns, "epoch": self.epoch,
-                                "seq": self.seq}).encode()
+        directly (``asdict`` copied each field deeply: 8 us a message, now 2); ``zid`` only
+        when set (the bytes are the last release's without it)."""
+        fields = {"type": self.type, "latched": self.latched, "stamp_ns": self.stamp_ns,
+                  "epoch": self.epoch, "seq": self.seq}
+        if self.zid:
+            fields["zid"] = self.zid
+        return _COMPACT.encode(fields).encode()
 
     @classmethod
     def decode(cls, data: bytes | None) -> Meta:
@@ -359,7 +368,7 @@ class Meta(_Payload):
             obj = json.loads(data or b"")
             return cls(type=str(obj["type"]), latched=bool(obj.get("latched")),
                        stamp_ns=int(obj.get("stamp_ns", 0)), epoch=str(obj.get("epoch", "")),
-                       seq=int(obj.get("seq", 0)))
+                       seq=int(obj.get("seq", 0)), zid=str(obj.get("zid", "")))
         except (ValueError, KeyError, TypeError) as exc:
             raise BridgeError(f"a message's attachment is not a Meta object ({exc})") from None
 
