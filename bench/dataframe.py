@@ -5,8 +5,10 @@ Run: ``python -m bench.dataframe [--seconds 20] [--imu-seconds 600] [--dir DIR] 
 Writes (or reuses, in ``--dir``) two MCAP files as our recorder writes them (zstd chunks of
 256 KiB, ROS 2 profile, CDR): ``imu.mcap``, ``--imu-seconds`` of a 200 Hz
 ``sensor_msgs/Imu`` (600 s: 120,000 rows, 5.5 MB), and ``mixed.mcap``, ``--seconds`` of the
-same IMU beside a 30 Hz 640x480 rgb8 camera. Each topic is loaded into a pandas DataFrame
-with and without a field list, by each reader in a fresh process:
+same IMU beside a 30 Hz 640x480 rgb8 camera; then ``imu_db3/``, the IMU's messages as a
+rosbag2 directory of one ``.db3`` file (SQLite3 storage, written by rosbags). Each topic
+is loaded into a pandas DataFrame with and without a field list, by each reader in a
+fresh process (mcap-ros2-support reads no .db3):
 
 - ``ours``: ``bag_to_dataframe(path, topic, fields)``, one call.
 - ``rosbags``: rosbags' ``AnyReader``, each message deserialized and its fields gathered
@@ -30,6 +32,7 @@ import json
 import os
 import platform
 import resource
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -44,7 +47,7 @@ FIELDS: dict[str, list[str]] = {
     IMU: ["angular_velocity.x", "angular_velocity.z"],
     CAMERA: ["header", "height", "width", "encoding", "step"],
 }
-CASES = [("imu", IMU), ("mixed", IMU), ("mixed", CAMERA)]
+CASES = [("imu", IMU), ("mixed", IMU), ("mixed", CAMERA), ("imu_db3", IMU)]
 """(file, topic) pairs, each read with its field list and without."""
 
 
@@ -97,6 +100,28 @@ def write_recording(path: Path, seconds: float, imu_hz: float = 200.0,
             counts[topic] += 1
         writer.finish()  # type: ignore[no-untyped-call]
     return counts
+
+
+def write_db3(folder: Path, mcap_path: Path) -> int:
+    """The messages of ``mcap_path`` as a rosbag2 directory of one .db3 file (as rosbag2's
+    SQLite3 storage lays it out), written by rosbags; how many."""
+    from rosbags.rosbag2 import Writer
+    from rosbags.typesys import Stores, get_typestore
+
+    from roslibpy_lite.bag import read
+
+    store = get_typestore(Stores.ROS2_JAZZY)
+    count = 0
+    with Writer(folder, version=9) as writer:
+        conns: dict[str, Any] = {}
+        for msg in read(mcap_path):
+            conn = conns.get(msg.topic)
+            if conn is None:
+                conn = conns[msg.topic] = writer.add_connection(msg.topic, msg.type_name,
+                                                                typestore=store)
+            writer.write(conn, msg.log_time_ns, msg.data)
+            count += 1
+    return count
 
 
 def _ours(path: str, topic: str, fields: list[str] | None) -> Any:
@@ -221,15 +246,22 @@ def main() -> None:
             result[f"{kind}_messages"] = counts
             result[f"{kind}_write_s"] = round(time.perf_counter() - t0, 1)
         result[f"{kind}_mb"] = round(path.stat().st_size / 2**20, 1)
+    db3 = folder / "imu_db3"
+    if not db3.exists():
+        result["imu_db3_messages"] = write_db3(db3, files["imu"][0])
+    result["imu_db3_mb"] = round((db3 / "imu_db3.db3").stat().st_size / 2**20, 1)
+    paths = {kind: spec[0] for kind, spec in files.items()} | {"imu_db3": db3}
     cases: dict[str, Any] = {}
     for kind, topic in CASES:
         for fields in (FIELDS[topic], None):
             label = f"{kind} {topic.removeprefix('/bench_')} " + (
                 f"{len(fields)} fields" if fields else "all fields")
             for reader in args.readers:
+                if kind == "imu_db3" and reader == "mcap_ros2":
+                    continue
                 out = subprocess.run(
                     [sys.executable, "-m", "bench.dataframe", "--child", reader,
-                     str(files[kind][0]), topic, json.dumps(fields)],
+                     str(paths[kind]), topic, json.dumps(fields)],
                     capture_output=True, text=True, check=False,
                     cwd=Path(__file__).resolve().parent.parent, env=dict(os.environ))
                 cases.setdefault(label, {})[reader] = (
@@ -237,9 +269,7 @@ def main() -> None:
                     else {"error": out.stderr.strip().splitlines()[-1:]})
     result["cases"] = cases
     if args.dir is None and not args.keep:
-        for path, _, _ in files.values():
-            path.unlink()
-        folder.rmdir()
+        shutil.rmtree(folder)
     print(json.dumps(result, indent=2))
     print(_side_by_side(cases, args.readers), file=sys.stderr)
 
@@ -250,8 +280,9 @@ def _side_by_side(cases: dict[str, Any], readers: list[str]) -> str:
     for label, by in cases.items():
         cells = []
         for r in readers:
-            got = by.get(r, {})
-            cells.append(f"{got['cpu_s']:>7.2f} ({got['seconds']:>6.2f})" if "cpu_s" in got
+            got = by.get(r)
+            cells.append(f"{'-':>16}" if got is None  # a reader that does not read the file
+                         else f"{got['cpu_s']:>7.2f} ({got['seconds']:>6.2f})" if "cpu_s" in got
                          else f"{'error':>16}")
         lines.append(f"{label:34} " + " ".join(cells))
     return "\n".join(lines)
