@@ -56,6 +56,8 @@ def _opened(path: Path) -> Iterator[Any]:
     need_reader(path)
     from rosbags.rosbag2 import Reader, ReaderError
 
+    if not path.exists():
+        raise FileNotFoundError(f"no such file: {path}")
     if path.is_dir() and not (path / "metadata.yaml").exists():
         raise UsageError(f"{path}: a directory without a metadata.yaml: not a rosbag2 "
                          "recording (an MCAP file is read by its own name)")
