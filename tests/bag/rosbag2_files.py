@@ -6,6 +6,7 @@ as yaml-cpp emits them: rosbag2 itself is not on the package index)."""
 
 from __future__ import annotations
 
+import json
 import shutil
 from pathlib import Path
 from typing import Any
@@ -53,9 +54,11 @@ def write_storage(folder: Path, entries: list[Entry], storage: str, *,
     return folder
 
 
-def write_split(folder: Path, entries: list[Entry], storage: str, parts: int) -> Path:
+def write_split(folder: Path, entries: list[Entry], storage: str, parts: int,
+                version: int = 9) -> Path:
     """A rosbag2 directory of ``entries`` split by time into ``parts`` files named as
-    rosbag2 names them (``<folder>_0.db3``...), with rosbag2's metadata.yaml."""
+    rosbag2 names them (``<folder>_0.db3``...), with rosbag2's metadata.yaml (``version``
+    9, as Jazzy writes it, or 8, as Iron did)."""
     folder.mkdir()
     suffix = ".db3" if storage == "sqlite3" else ".mcap"
     files: list[dict[str, Any]] = []
@@ -72,31 +75,30 @@ def write_split(folder: Path, entries: list[Entry], storage: str, parts: int) ->
     topics: dict[str, list[Any]] = {}
     for topic, type_name, _t, _d in entries:
         topics.setdefault(topic, [type_name, 0])[1] += 1
-    (folder / "metadata.yaml").write_text(metadata_yaml(storage, entries, topics, files))
+    (folder / "metadata.yaml").write_text(metadata_yaml(storage, entries, topics, files,
+                                                        version))
     return folder
 
 
 def metadata_yaml(storage: str, entries: list[Entry], topics: dict[str, list[Any]],
-                  files: list[dict[str, Any]]) -> str:
-    """``metadata.yaml`` as rosbag2 (Jazzy and later, version 9) writes it: the keys in
-    ``convert<BagMetadata>::encode``'s order, QoS profiles as a YAML list, 2-space blocks."""
+                  files: list[dict[str, Any]], version: int = 9) -> str:
+    """``metadata.yaml`` as rosbag2 writes it: the keys in ``convert<BagMetadata>::encode``'s
+    order, 2-space blocks as yaml-cpp emits them; QoS profiles a YAML list (version 9,
+    Jazzy on), or one double-quoted string of YAML with the policies as numbers (8)."""
     start = min(t for _, _, t, _ in entries)
-    lines = ["rosbag2_bagfile_information:", "  version: 9",
+    lines = ["rosbag2_bagfile_information:", f"  version: {version}",
              f"  storage_identifier: {storage}", "  duration:",
              f"    nanoseconds: {max(t for _, _, t, _ in entries) - start}",
              "  starting_time:", f"    nanoseconds_since_epoch: {start}",
              f"  message_count: {len(entries)}", "  topics_with_message_count:"]
     for name, (type_name, count) in topics.items():
         lines += ["    - topic_metadata:", f"        name: {name}", f"        type: {type_name}",
-                  "        serialization_format: cdr", "        offered_qos_profiles:"]
-        lead = "          - "
-        for key, value in qos_profile("volatile").items():
-            if isinstance(value, dict):
-                lines.append(f"{lead}{key}:")
-                lines += [f"              {k}: {v}" for k, v in value.items()]
-            else:
-                lines.append(f"{lead}{key}: {str(value).lower()}")
-            lead = "            "
+                  "        serialization_format: cdr"]
+        qos = _qos_lines(version)
+        if version >= 9:
+            lines += ["        offered_qos_profiles:", *(f"          {q}" for q in qos)]
+        else:
+            lines.append(f"        offered_qos_profiles: {json.dumps(chr(10).join(qos))}")
         lines += ["        type_description_hash: RIHS01_" + "0" * 64,
                   f"      message_count: {count}"]
     lines += ['  compression_format: ""', '  compression_mode: ""', "  relative_file_paths:"]
@@ -106,5 +108,23 @@ def metadata_yaml(storage: str, entries: list[Entry], topics: dict[str, list[Any
         lines += [f"    - path: {f['path']}", "      starting_time:",
                   f"        nanoseconds_since_epoch: {f['start']}", "      duration:",
                   f"        nanoseconds: {f['duration']}", f"      message_count: {f['count']}"]
-    lines += ["  custom_data: ~", "  ros_distro: jazzy"]
+    lines += ["  custom_data: ~", f"  ros_distro: {'jazzy' if version >= 9 else 'iron'}"]
     return "\n".join(lines) + "\n"
+
+
+_V8_NUMBERS = {"keep_last": 1, "reliable": 1, "volatile": 2, "automatic": 1}
+"""Before version 9, rosbag2 wrote the policies as rmw's enum values."""
+
+
+def _qos_lines(version: int) -> list[str]:
+    """One volatile profile as a block YAML list, as yaml-cpp emits it (unindented)."""
+    lines, lead = [], "- "
+    for key, value in qos_profile("volatile").items():
+        if isinstance(value, dict):
+            lines.append(f"{lead}{key}:")
+            lines += [f"    {k}: {v}" for k, v in value.items()]
+        else:
+            shown = _V8_NUMBERS.get(value, value) if version < 9 else value
+            lines.append(f"{lead}{key}: {str(shown).lower()}")
+        lead = "  "
+    return lines

@@ -70,7 +70,7 @@ def recordings(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
                                     latched=frozenset({"/note"})),
            "sqlite3-split": write_split(root / "run_split", entries, "sqlite3", 3),
            "mcap": write_storage(root / "run_mcap", entries, "mcap"),
-           "mcap-split": write_split(root / "run_mcap_split", entries, "mcap", 3),
+           "mcap-split": write_split(root / "run_mcap_split", entries, "mcap", 3, version=8),
            "sqlite3-per-message": write_storage(root / "run_zstd", entries, "sqlite3",
                                                 per_message=True)}
     out["db3"] = out["sqlite3"] / "run_sqlite3.db3"
@@ -98,7 +98,7 @@ def test_a_rosbag2_recording_reads_as_the_same_messages_and_info(
         recordings: dict[str, Path], layout: str) -> None:
     """read() gives the same (topic, type, log time, CDR bytes) in the same order as the
     MCAP file, topics filtered and time-bounded alike; info() the same topics, types,
-    counts and times; the messages decode."""
+    counts and times (and the QoS a split directory's metadata.yaml gives); they decode."""
     def rows(path: Path, **kw: Any) -> list[tuple[str, str, int, bytes]]:
         return [(m.topic, m.type_name, m.log_time_ns, m.data) for m in read(path, **kw)]
 
@@ -114,6 +114,8 @@ def test_a_rosbag2_recording_reads_as_the_same_messages_and_info(
     assert (got.messages, got.start_ns, got.end_ns) == (want.messages, want.start_ns,
                                                         want.end_ns)
     assert got.library.startswith("rosbag2") and got.size > 0
+    if layout.endswith("split"):  # the QoS of metadata.yaml: names (version 9), numbers (8)
+        assert all("durability: volatile" in t.qos for t in got.topics), got.topics
 
 
 def test_bag_info_prints_a_split_directory(recordings: dict[str, Path]) -> None:
