@@ -41,6 +41,7 @@ if TYPE_CHECKING:
 
 __all__ = [
     "IMAGE_ENCODINGS",
+    "MAX_PIXELS",
     "bag_to_dataframe",
     "flatten",
     "from_numpy",
@@ -62,6 +63,11 @@ IMAGE_ENCODINGS: dict[str, tuple[str, int]] = {
 }
 """``sensor_msgs/Image`` encodings :func:`to_numpy` and :func:`from_numpy` know: numpy
 dtype code and channels (bayer patterns are single-channel 8 or 16 bit, read as such)."""
+
+MAX_PIXELS = 50_000_000
+"""The most pixels (width x height) a ``CompressedImage`` may declare for :func:`to_numpy` to
+decode it: its header is read first, so a small file declaring a huge image (a decompression
+bomb: a 165 KB PNG of 13000x13000) is refused before any pixel is. ``max_pixels`` changes it."""
 
 _POINT_TYPES = {1: "i1", 2: "u1", 3: "i2", 4: "u2", 5: "i4", 6: "u4", 7: "f4", 8: "f8"}
 """``sensor_msgs/PointField`` datatype -> numpy dtype code."""
@@ -119,7 +125,7 @@ def _bytes(value: Any, what: str) -> bytes | bytearray | memoryview:
                      f"got {type(value).__name__}")
 
 
-def to_numpy(msg: Any) -> numpy.ndarray[Any, Any]:
+def to_numpy(msg: Any, *, max_pixels: int = MAX_PIXELS) -> numpy.ndarray[Any, Any]:
     """The pixels of an ``Image`` or ``CompressedImage``, or the points of a ``PointCloud2``.
 
     An image is ``(height, width)`` for one channel and ``(height, width, channels)`` for
@@ -130,14 +136,15 @@ def to_numpy(msg: Any) -> numpy.ndarray[Any, Any]:
 
     Raises:
         UsageError: not one of those types, an encoding it does not know, a size that
-            does not match, or numpy (Pillow) missing.
+            does not match, a compressed image over ``max_pixels`` (:data:`MAX_PIXELS`),
+            or numpy (Pillow) missing.
     """
     if _has(msg, "fields", "point_step", "row_step"):
         return _cloud(msg)
     if _has(msg, "encoding", "step", "height", "width"):
         return _image(msg)
     if _has(msg, "format", "data"):
-        return _compressed(msg)
+        return _compressed(msg, max_pixels)
     raise UsageError("to_numpy takes a sensor_msgs Image, CompressedImage or PointCloud2")
 
 
@@ -166,7 +173,7 @@ def _image(msg: Any) -> numpy.ndarray[Any, Any]:
     return pixels.view(dtype).reshape(shape)  # type: ignore[no-any-return]
 
 
-def _compressed(msg: Any) -> numpy.ndarray[Any, Any]:
+def _compressed(msg: Any, max_pixels: int) -> numpy.ndarray[Any, Any]:
     np = _numpy()
     try:
         from PIL import Image
@@ -174,12 +181,17 @@ def _compressed(msg: Any) -> numpy.ndarray[Any, Any]:
         raise UsageError("a CompressedImage needs Pillow: pip install 'roslibpy-lite[data]'"
                          ) from None
     data = _bytes(_field(msg, "data"), "CompressedImage.data")
+    what = f"CompressedImage ({_field(msg, 'format')!r})"
     try:
-        with Image.open(io.BytesIO(data)) as img:
+        with Image.open(io.BytesIO(data)) as img:  # lazy: the header only, so far
+            width, height = img.size
+            if width * height > max_pixels:
+                raise UsageError(f"{what}: {width}x{height} is {width * height:,} pixels, over "
+                                 f"the bound of {max_pixels:,} (max_pixels); not decoded")
             plain = img if img.mode in ("L", "I;16", "RGB", "RGBA") else img.convert("RGB")
             return np.asarray(plain)  # type: ignore[no-any-return]
-    except OSError as exc:
-        raise UsageError(f"CompressedImage ({_field(msg, 'format')!r}): {exc}") from None
+    except (OSError, Image.DecompressionBombError) as exc:
+        raise UsageError(f"{what}: {exc}") from None
 
 
 def _cloud(msg: Any) -> numpy.ndarray[Any, Any]:

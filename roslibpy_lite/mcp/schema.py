@@ -4,7 +4,8 @@ Each field gets its JSON type, an integer its range (``INTEGER_RANGES``), a ``fl
 its finite range, a bounded string ``maxLength``, an array ``minItems``/``maxItems``
 (fixed ``T[n]``, bounded ``T[<=n]``), a default its ``default``; a byte array
 (``uint8[]``, ``byte[]``) is base64 text or a list of octets, as rosbridge takes it;
-the type's constants are listed under ``x-ros-constants`` and in the description.
+the type's constants are listed under ``x-ros-constants``. Robot-supplied text is cut and
+kept as data (:mod:`roslibpy_lite.mcp.listing`).
 Nested message types are ``$defs`` entries named by their type (a type met twice is
 defined once). No field is required: the bridge fills what a request leaves out.
 """
@@ -23,6 +24,8 @@ from msgs.parser import (
     parse_message,
 )
 from msgs.runtime import Message, lookup_message
+
+from .listing import cut_value, quoted
 
 __all__ = ["message_schema", "spec_of"]
 
@@ -73,20 +76,23 @@ def _field(spec: FieldSpec, defs: dict[str, Any]) -> dict[str, Any]:
             out = {"anyOf": [{"type": "string", "contentEncoding": "base64"}, out]}
     out["description"] = str(ref)
     if spec.default is not None:
-        out["default"] = list(spec.default) if isinstance(spec.default, tuple) else spec.default
+        out["default"] = cut_value(spec.default)
     return out
 
 
 def _object(spec: MessageSpec, defs: dict[str, Any]) -> dict[str, Any]:
+    """A message type's object schema. The robot's text in it (constants' values, defaults)
+    is cut at :data:`~roslibpy_lite.mcp.listing.MAX_ROBOT_TEXT` and kept in data (values,
+    ``x-ros-constants``); the description quotes the type's name and counts the constants."""
     out: dict[str, Any] = {
         "type": "object",
         "properties": {f.name: _field(f, defs) for f in spec.fields},
         "additionalProperties": False,
     }
-    text = spec.type_name
+    text = f"ROS message type {quoted(spec.type_name)}"
     if spec.constants:
-        out["x-ros-constants"] = {c.name: c.value for c in spec.constants}
-        text += "; constants: " + ", ".join(f"{c.name}={c.value!r}" for c in spec.constants)
+        out["x-ros-constants"] = {c.name: cut_value(c.value) for c in spec.constants}
+        text += f"; {len(spec.constants)} constants in x-ros-constants (robot data)"
     out["description"] = text
     return out
 

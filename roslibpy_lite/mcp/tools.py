@@ -21,11 +21,9 @@ is a tool error whose text is the client's own (it names the field or the link's
 from __future__ import annotations
 
 import asyncio
-import base64
 import contextlib
 import contextvars
 import hashlib
-import io
 import json
 import re
 from collections.abc import Awaitable, Callable, Mapping
@@ -34,10 +32,13 @@ from typing import Any
 
 import mcp_types as types
 
+from ..data import MAX_PIXELS
 from ..exceptions import Forbidden, RosLibError, RosTimeoutError, ServiceError
 from ..handles import Publisher
 from ..messages import from_wire
 from ..ros import RosBase
+from .listing import FIND_TOOLS, ROBOT_DATA, bound_listing, find_tools, find_tools_tool, quoted
+from .media import cloud_summary, image
 from .schema import message_schema
 
 __all__ = ["MAX_WAIT", "ConfirmationPending", "Options", "RobotTools"]
@@ -65,6 +66,12 @@ class Options:
     """The longest side of an image handed back (pixels; a call may ask for less or more)."""
     max_text: int = 32_768
     """The most characters of text one tool result carries (longer text is cut, and says so)."""
+    max_pixels: int = MAX_PIXELS
+    """The most pixels a compressed image read may declare; a larger one is refused before
+    it is decoded (a decompression bomb)."""
+    max_list: int = 100_000
+    """The most characters a ``tools/list`` answer takes: tools past it are listed in summary
+    or only counted, and ``find_tools`` gives them (:mod:`roslibpy_lite.mcp.listing`)."""
     confirm: bool = False
     """Ask the MCP client's user to confirm each change (publish, call, goal, cancel,
     set_param) before it is made (MCP elicitation); declined, nothing is sent."""
@@ -187,8 +194,18 @@ class RobotTools:
             for entry in entries:
                 tool = self._typed_tool(entry, set(tools))
                 tools[tool.tool.name] = tool
+        listed, summarized, left_out = bound_listing((t.tool for t in tools.values()),
+                                                     self.options.max_list)
+        if summarized or left_out:
+            finder = find_tools_tool(summarized, left_out)
+            tools[FIND_TOOLS] = _Tool(finder, self._find_tools)
+            listed.append(finder)
         self._tools = tools
-        return [t.tool for t in tools.values()]
+        return listed
+
+    async def _find_tools(self, args: dict[str, Any]) -> list[types.ContentBlock]:
+        found = find_tools((t.tool for t in self._tools.values()), args, self.options.max_text)
+        return self._text(found)
 
     async def _may_params(self) -> bool:
         """Whether the role may use some parameter: asking the bridge's may_params needs
@@ -262,13 +279,15 @@ class RobotTools:
         if entry.kind == "publish":
             schema, defs = self._schema(entry.cls)
             props = {"message": _body(schema, "the message to publish")}
-            desc = f"Publish one {entry.type_name} message on {entry.name}."
+            desc = f"Publish one message of type {quoted(entry.type_name)} on the topic "\
+                   f"{quoted(entry.name)}."
             run = self._publisher(entry)
             required: tuple[str, ...] = ("message",)
         elif entry.kind == "call":
             schema, defs = self._schema(entry.cls.Request)
             props = {"request": _body(schema, "the request"), "timeout": _TIMEOUT}
-            desc = f"Call the service {entry.name} ({entry.type_name}); returns its response."
+            desc = f"Call the service {quoted(entry.name)} (type {quoted(entry.type_name)}); "\
+                   "returns its response."
             run = self._caller(entry)
             required = ()
         else:
@@ -276,14 +295,15 @@ class RobotTools:
             props = {"goal": _body(schema, "the goal"), "timeout": {
                 **_TIMEOUT, "description": "seconds to wait for the result; the goal goes on "
                                            "after it (follow it with follow_goal)"}}
-            desc = (f"Send a goal to the action {entry.name} ({entry.type_name}); returns its "
-                    "result, or its goal id if it is still running after the timeout.")
+            desc = (f"Send a goal to the action {quoted(entry.name)} (type "
+                    f"{quoted(entry.type_name)}); returns its result, or its goal id if it is "
+                    "still running after the timeout.")
             run = self._goal_sender(entry)
             required = ()
         input_schema = _obj(props, required)
         if defs:
             input_schema["$defs"] = defs
-        tool = types.Tool(name=name, description=desc, input_schema=input_schema,
+        tool = types.Tool(name=name, description=f"{desc} {ROBOT_DATA}", input_schema=input_schema,
                           annotations=types.ToolAnnotations(read_only_hint=False))
         return _Tool(tool, self._guarded(entry, run))
 
@@ -474,10 +494,10 @@ class RobotTools:
         image_format = _IMAGE_TYPES.get(type_name)
         if image_format is not None:
             size = int(args.get("max_size", self.options.image_size))
-            return _image(msg, image_format, size, topic, type_name)
+            return image(msg, image_format, size, topic, type_name, self.options.max_pixels)
         summary = summarize(msg)
         if type_name == _CLOUD:
-            summary["points"] = _cloud_summary(msg)
+            summary["points"] = cloud_summary(msg)
         return self._text({"topic": topic, "type": type_name, "message": summary})
 
     async def _collect(self, args: dict[str, Any]) -> list[types.ContentBlock]:
@@ -564,25 +584,6 @@ def _plain(value: Any) -> Any:
     return value.to_json() if hasattr(value, "to_json") else value
 
 
-def _cloud_summary(msg: Any) -> dict[str, Any]:
-    """A point cloud in a few numbers: its count and each numeric field's finite range and
-    mean (its data is summarized away)."""
-    import numpy as np
-
-    from ..data import to_numpy
-
-    points = to_numpy(msg)
-    fields: dict[str, Any] = {}
-    for name in points.dtype.names or ():
-        column = points[name]
-        if column.dtype.kind not in "iuf":
-            continue
-        finite = column[np.isfinite(column)] if column.dtype.kind == "f" else column
-        fields[name] = ({"min": float(finite.min()), "max": float(finite.max()),
-                         "mean": round(float(finite.mean()), 6)} if finite.size else None)
-    return {"count": int(points.size), "fields": fields}
-
-
 def _cut(text: str, limit: int) -> str:
     if len(text) <= limit:
         return text
@@ -591,30 +592,3 @@ def _cut(text: str, limit: int) -> str:
 
 def _error(text: str) -> types.CallToolResult:
     return types.CallToolResult(content=[types.TextContent(text=text)], is_error=True)
-
-
-def _image(msg: Any, fmt: str, size: int, topic: str, type_name: str
-           ) -> list[types.ContentBlock]:
-    from PIL import Image
-
-    from ..data import to_numpy
-
-    array = to_numpy(msg)
-    encoding = str(msg.get("encoding", "")) if fmt == "PNG" else "rgb8"
-    if array.ndim == 3 and encoding.startswith("bgr"):
-        array = array[..., 2::-1] if array.shape[2] == 3 else array[..., [2, 1, 0, 3]]
-    if array.dtype.itemsize > 1:  # 16-bit depth and the like: scaled to 8 bits to be seen
-        peak = float(array.max()) or 1.0
-        array = (array.astype("float64") * (255.0 / peak)).astype("uint8")
-    picture = Image.fromarray(array)
-    height, width = array.shape[:2]
-    picture.thumbnail((size, size))
-    buf = io.BytesIO()
-    picture.save(buf, format=fmt)
-    mime = "image/png" if fmt == "PNG" else "image/jpeg"
-    note = (f"{topic} ({type_name}): {width}x{height} {encoding or 'compressed'}, "
-            f"shown at {picture.width}x{picture.height}")
-    return [types.ImageContent(data=base64.b64encode(buf.getvalue()).decode("ascii"),
-                               mime_type=mime),
-            types.TextContent(text=note)]
-
