@@ -10,6 +10,10 @@ Examples::
     roslibpy-lite action send_goal /integrate_imu mult_msgs/action/IntegrateImu "{seconds: 2}" -f
     roslibpy-lite node list
     roslibpy-lite interface show sensor_msgs/msg/Imu
+    roslibpy-lite param get /controller speed_limit
+    roslibpy-lite param dump /controller
+    roslibpy-lite lifecycle set /map_server activate
+    roslibpy-lite topic bw /camera
 
 The bridge is ``--url`` (default ``$ROSLIBPY_LITE_URL``, else
 ``ws://127.0.0.1:9090``); a bridge that requires a token gets ``--token``
@@ -150,7 +154,8 @@ def build_parser() -> argparse.ArgumentParser:
         parents=[common],
     )
     groups = root.add_subparsers(dest="group",
-                                 metavar="{topic,service,param,lifecycle,node,interface,action,bag,mcp}",
+                                 metavar="{topic,service,param,lifecycle,node,interface,action,"
+                                         "bag,mcp}",
                                  parser_class=Parser)
     groups.required = True
 

@@ -3,7 +3,10 @@ with rclpy publishers and services on the ROS side."""
 
 from __future__ import annotations
 
+import json
 import re
+import subprocess
+import sys
 from collections.abc import Iterator
 from typing import Any
 
@@ -12,9 +15,10 @@ import pytest
 from tests.cli.conftest import Run, one_error_line
 from tests.cli.ros2_nodes import full_name
 from tests.cli.test_commands import until_ok
+from tests.helpers import ros_env
 
 BODY = "x" * 1000
-"""What the bandwidth test's publisher sends: 1009 bytes of CDR (header, length, text, NUL)."""
+"""What the bandwidth test's publisher sends: about 1 KB of CDR."""
 
 
 @pytest.fixture
@@ -51,7 +55,8 @@ def stamped_two_seconds_ago(ros_node: Any, topic: str) -> Iterator[None]:
 
 def test_topic_bw(cli: Run, big_talker: None, topic: str) -> None:
     """topic bw prints 'Subscribed to [TOPIC]', then ros2's lines: KB/s from N messages and the
-    message size as the robot serialized it (1009 bytes: 1.01 KB)."""
+    message size as the robot serialized it (1.01 KB); --json has the exact bytes, those a
+    raw rclpy subscription in another process gets (ros2 topic bw's measure)."""
     result = cli("topic", "bw", topic, "--count", "30", "--wait", "10")
     assert result.code == 0, result
     assert result.lines[0] == f"Subscribed to [{topic}]"
@@ -60,6 +65,33 @@ def test_topic_bw(cli: Run, big_talker: None, topic: str) -> None:
     assert 2.0 < float(rate[1]) < 60.0, result.out  # 20 Hz x 1.009 KB, a wide margin
     assert int(rate[2]) == 30  # the window (100) holds every message
     assert result.lines[-1] == "\tMessage size mean: 1.01 KB min: 1.01 KB max: 1.01 KB"
+    size = _raw_size_elsewhere(topic)
+    reports = cli("topic", "bw", topic, "--count", "3", "--json")
+    assert reports.code == 0, reports
+    last = json.loads(reports.lines[-1])
+    assert last["min"] == last["max"] == last["mean"] == size and last["messages"] == 3
+
+
+_RAW_SIZE = """
+import sys, rclpy
+from std_msgs.msg import String
+rclpy.init()
+node = rclpy.create_node("raw_size")
+sizes = []
+node.create_subscription(String, sys.argv[1], lambda data: sizes.append(len(data)), 10, raw=True)
+while not sizes:
+    rclpy.spin_once(node, timeout_sec=1.0)
+print(sizes[0])
+"""
+
+
+def _raw_size_elsewhere(topic: str) -> int:
+    """The size of a message on ``topic`` as ``ros2 topic bw`` counts it: what a raw rclpy
+    subscription in a process of its own gets (DDS pads the CDR to 4 bytes between
+    processes; a subscription in the publisher's process gets it unpadded)."""
+    done = subprocess.run([sys.executable, "-c", _RAW_SIZE, topic], env=ros_env(),
+                          capture_output=True, text=True, timeout=60, check=True)
+    return int(done.stdout.split()[-1])
 
 
 def test_topic_delay(cli: Run, stamped_two_seconds_ago: None, topic: str) -> None:
