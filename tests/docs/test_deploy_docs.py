@@ -121,12 +121,19 @@ def test_resume_docs_say_what_resume_covers_and_cannot() -> None:
 
 
 def test_the_mutation_command_names_what_exists() -> None:
-    """Each scripts/mutate.sh command on a page names a module and test files that exist."""
-    shown = [shlex.split(line.strip())[2:]
+    """Each scripts/mutate.sh command on a page names a module and test files that exist,
+    and so does each line of a module list it is given with --list."""
+    shown = [shlex.split(line.strip().partition("bash scripts/mutate.sh ")[2])
              for page in PAGES for block in _shell_blocks(page)
-             for line in block.splitlines() if line.strip().startswith("bash scripts/mutate.sh ")]
+             for line in block.splitlines() if "bash scripts/mutate.sh " in line]
     assert shown, "no page shows scripts/mutate.sh"
+    lists = [args[1] for args in shown if args[0] == "--list"]
+    assert lists, "no page shows scripts/mutate.sh --list"
+    shown = [args for args in shown if args[0] != "--list"] + [
+        shlex.split(line) for listed in lists for line in (ROOT / listed).read_text().splitlines()
+        if line.strip() and not line.startswith("#")]
     for module, *tests in shown:
+        module = module.partition("::")[0]
         assert (ROOT / module).is_file() and module.endswith(".py"), module
         files = [t.split("::")[0] for t in tests if t.startswith("tests/")]
         assert files and all((ROOT / f).is_file() for f in files), tests
