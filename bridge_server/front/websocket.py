@@ -41,13 +41,11 @@ import contextlib
 import logging
 import socket
 from collections.abc import Callable
-from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Protocol
 
-from websockets.asyncio.messages import Assembler, SimpleQueue
 from websockets.asyncio.server import ServerConnection
 from websockets.exceptions import ConnectionClosed
-from websockets.frames import BINARY, TEXT, Frame
+from websockets.frames import BINARY, TEXT, CloseCode, Frame
 from websockets.protocol import OPEN
 from websockets.streams import StreamReader
 
@@ -60,10 +58,12 @@ except ImportError:  # pragma: no cover - a websockets without its C extension
 
 from ..interfaces import BridgeError
 from ..session.frames import JOINED_BYTES, frame_parts, joined
+from .budget import BudgetAssembler, Inbound
 
 log = logging.getLogger("bridge_server.security")
 
 if TYPE_CHECKING:
+    from ..security.accounts import Accounts, Holder, KindBudget
     from ..security.auth import Principal
     from ..security.options import SecurityConfig
     from ..session.frames import Frame as OutFrame
@@ -75,6 +75,7 @@ class ConnectionLimits(Protocol):
 
     config: SecurityConfig
     inbound: Inbound
+    accounts: Accounts
 
     def release(self, connection: BridgeConnection) -> None:
         """A counted connection ended."""
@@ -89,76 +90,6 @@ __all__ = [
     "check_websockets_internals",
     "take_transport",
 ]
-
-
-class CountingQueue(SimpleQueue[Frame]):
-    """websockets' frame queue, counting the bytes it holds (per connection and in all)."""
-
-    def __init__(self, totals: Inbound) -> None:
-        super().__init__()
-        self.totals = totals
-        self.bytes = 0
-
-    def put(self, item: Frame) -> None:
-        n = len(item.data)
-        self.bytes += n
-        self.totals.bytes += n
-        super().put(item)
-
-    async def get(self, block: bool = True) -> Frame:
-        item = await super().get(block)
-        n = len(item.data)
-        self.bytes -= n
-        self.totals.bytes -= n
-        return item
-
-    def put_back(self, items: Any) -> None:
-        n = sum(len(i.data) for i in items)
-        self.bytes += n
-        self.totals.bytes += n
-        super().put_back(items)
-
-    def abort(self) -> None:
-        self.totals.bytes -= self.bytes
-        self.bytes = 0
-        self.totals = Inbound()  # what is read after the end is no longer counted in all
-        super().abort()
-
-
-@dataclass
-class Inbound:
-    bytes: int = 0
-
-
-class BudgetAssembler(Assembler):
-    """Pauses reading when a connection holds more than its byte budget (or all do)."""
-
-    def __init__(self, budget: int, total_budget: int, totals: Inbound, **kwargs: Any) -> None:
-        super().__init__(**kwargs)
-        self.frames = self.queue = CountingQueue(totals)
-        self.budget = budget
-        self.total_budget = total_budget
-        self.totals = totals
-
-    def maybe_pause(self) -> None:
-        if self.paused:
-            return
-        q = self.queue
-        if (
-            (self.high is not None and len(q) > self.high)
-            or (self.budget and q.bytes > self.budget)
-            or (self.total_budget and self.totals.bytes > self.total_budget)
-        ):
-            self.paused = True
-            self.pause()
-
-    def maybe_resume(self) -> None:
-        if not self.paused:
-            return
-        q = self.queue
-        if (self.low is None or len(q) <= self.low) and q.bytes <= self.budget // 4:
-            self.paused = False
-            self.resume()
 
 
 _CLOSED_ERRORS: tuple[type[BaseException], ...] = (ConnectionClosed,)
@@ -315,10 +246,51 @@ class BridgeConnection(WebSocketLink):
         else the socket's peer."""
         return self.forwarded_from or super().remote_address
 
+    holder: Holder | None = None
+    """This connection's share of the per-principal and per-address accounts (set when the
+    handshake admits it: :meth:`hold`)."""
+    _inflight: KindBudget | None = None
+    _buffered = 0  # the bytes of an incomplete frame in websockets' reader, charged
+
+    def hold(self, holder: Holder) -> None:
+        """Charge what this connection holds to ``holder`` from now on: its fragments
+        (through the session) and its in-flight bytes (the frames queued and those of an
+        incomplete message, in the queue and in websockets' reader)."""
+        self.holder = holder
+        self._inflight = holder.inflight()
+        assembler = self.recv_messages
+        if isinstance(assembler, BudgetAssembler):
+            assembler.queue.charges = self._inflight
+
     def data_received(self, data: bytes) -> None:
-        """websockets' hook for the bytes read: at a frame boundary, the whole final masked
-        text and binary frames they start with go to the frame handler, read here; the rest,
-        from the first frame not taken, to websockets (see the module's docstring)."""
+        """websockets' hook for the bytes read (:meth:`_read`); then what an incomplete
+        message holds is charged, and the connection closed (1009) if that passes its
+        principal's or its address's limit of in-flight bytes."""
+        self._read(data)
+        if self._inflight is not None:
+            self._charge_incomplete(self._inflight)
+
+    def _charge_incomplete(self, charges: KindBudget) -> None:
+        protocol = self.protocol
+        buffered = len(protocol.reader.buffer)
+        if buffered != self._buffered:
+            if buffered > self._buffered:
+                charges.force(buffered - self._buffered)
+            else:
+                charges.give_back(self._buffered - buffered)
+            self._buffered = buffered
+        if protocol.state is not OPEN or (not buffered and protocol.current_size is None):
+            return  # no incomplete message held
+        why = charges.over()
+        if why is not None:
+            log.warning("client from %s: closing (1009): %s", charges.holder.address, why)
+            protocol.fail(CloseCode.MESSAGE_TOO_BIG, why.encode()[:123].decode(errors="ignore"))
+            self.send_data()
+
+    def _read(self, data: bytes) -> None:
+        """At a frame boundary, the whole final masked text and binary frames ``data``
+        starts with go to the frame handler, read here; the rest, from the first frame not
+        taken, to websockets (see the module's docstring)."""
         handler = self.on_frame
         if handler is None or not self._at_frame_boundary():
             super().data_received(data)
@@ -409,6 +381,8 @@ class BridgeConnection(WebSocketLink):
         super().connection_made(transport)
         limit_unsent(transport, self.security.config.notsent_lowat)
         sec = self.security
+        if protocol_size := self.protocol.max_message_size:
+            sec.accounts.message_size = protocol_size  # the defaults are multiples of it
         self.recv_messages = BudgetAssembler(
             sec.config.inbound_budget,
             sec.config.inbound_budget_total,

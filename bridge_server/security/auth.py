@@ -41,12 +41,13 @@ import sys
 import time
 import tomllib
 from collections import OrderedDict
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 from ..interfaces import BridgeError
+from .accounts import CrossLimits, LimitsError, limits_from_table
 from .permissions import Role, RoleError
 
 __all__ = [
@@ -111,6 +112,22 @@ class AuthConfig:
 
     roles: dict[str, Role]
     principals: list[Principal]
+    limits: CrossLimits = field(default_factory=CrossLimits)
+    """The top-level ``[limits]``: what a principal, and an address, may hold over all
+    its connections (:mod:`.accounts`)."""
+    _role_of: dict[str, Role] = field(default_factory=dict, init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        self._role_of = {p.name: p.role for p in self.principals}
+
+    def limits_of(self, principal: str | None) -> tuple[Mapping[str, int], Mapping[str, int]]:
+        """What ``principal`` (a name) may hold, and what an address may: its role's
+        ``limits`` over the file's ``[limits.per_principal]``, and ``[limits.per_address]``."""
+        mine: Mapping[str, int] = self.limits.per_principal
+        role = self._role_of.get(principal) if principal is not None else None
+        if role is not None and role.limits:
+            mine = {**mine, **role.limits}
+        return mine, self.limits.per_address
 
     def verify(self, token: str) -> Principal | None:
         """The principal whose token this is, or ``None`` (compares with every principal)."""
@@ -161,9 +178,13 @@ def load_auth_file(path: str | Path) -> AuthConfig:
         raise AuthFileError(f"cannot read {path} as user {user_name()}: {exc.strerror}") from None
     except tomllib.TOMLDecodeError as exc:
         raise AuthFileError(f"{path}: not valid TOML: {exc}") from None
-    unknown = set(data) - {"roles", "principals"}
+    unknown = set(data) - {"roles", "principals", "limits"}
     if unknown:
         raise AuthFileError(f"{path}: unknown top-level key(s) {sorted(unknown)}")
+    try:
+        limits = limits_from_table(data.get("limits", {}), str(path))
+    except LimitsError as exc:
+        raise AuthFileError(str(exc)) from None
     roles: dict[str, Role] = {}
     for name, table in data.get("roles", {}).items():
         if not isinstance(table, dict):
@@ -184,7 +205,7 @@ def load_auth_file(path: str | Path) -> AuthConfig:
             )
         salt, digest = _parse_hash(table.get("token_hash"), where)
         principals.append(Principal(name, roles[role_name], salt, digest))
-    return AuthConfig(roles, principals)
+    return AuthConfig(roles, principals, limits)
 
 
 class FailureTracker:

@@ -256,6 +256,9 @@ class Gate:
             return
         if self.principal is None:
             self.principal, self.role, self.authenticated = principal, principal.role, True
+            holder = getattr(self.session.link, "holder", None)
+            if holder is not None:  # what it holds counts against the principal's limits now
+                holder.become(principal.name)
             self.session.link.limit_frames(None)  # frames up to --max-message-size again
             if self._timer is not None:
                 self._timer.cancel()

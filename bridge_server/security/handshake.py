@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import logging
 import ssl
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 from typing import Any
 
 from websockets.asyncio.server import ServerConnection
@@ -17,6 +17,7 @@ from websockets.http11 import Request, Response
 
 from ..front.websocket import BridgeConnection, Inbound, check_websockets_internals
 from ..interfaces import BridgeError
+from .accounts import Accounts
 from .auth import AuthConfig, AuthFileError, FailureTracker, Principal, load_auth_file
 from .credentials import client_address, is_loopback, token_of
 from .gate import PRE_AUTH_FRAME_LIMIT, Gate, Guarded
@@ -38,6 +39,7 @@ class Security:
         self.failures = FailureTracker()
         self._ssl: ssl.SSLContext | None = None  # the live server context (reloaded in place)
         self.inbound = Inbound()
+        self.accounts = Accounts(self._held_limits)  # per principal and per address
         self.clients = 0
         self.per_address: dict[str, int] = {}
         self.connection_class: type[BridgeConnection] = type(
@@ -183,7 +185,18 @@ class Security:
         self.per_address[address] = here + 1
         if isinstance(connection, BridgeConnection):
             connection.counted = address
+            holder = self.accounts.holder(address)
+            if connection.principal is not None:
+                holder.become(connection.principal.name)
+            connection.hold(holder)
         return None
+
+    def _held_limits(self, principal: str | None
+                     ) -> tuple[Mapping[str, int], Mapping[str, int]]:
+        """What ``principal``, and an address, may hold as the auth file says now."""
+        if self.auth is None:
+            return {}, {}
+        return self.auth.limits_of(principal)
 
     def _authenticate(
         self, connection: ServerConnection, request: Request, address: str
@@ -247,6 +260,8 @@ class Security:
         address, connection.counted = connection.counted, None
         if address is None:
             return
+        if connection.holder is not None:
+            connection.holder.close()
         self.clients -= 1
         left = self.per_address.get(address, 1) - 1
         if left > 0:

@@ -23,6 +23,9 @@ first owner keeps the name) and ``clients`` (see where other clients connect
 from, on the status page). ``all`` grants every capability. Deny wins over
 allow.
 
+``limits.fragment_bytes`` and ``limits.inflight_bytes`` bound what each principal of the
+role may hold over all its connections (:mod:`bridge_server.security.accounts`).
+
 On a relay, which serves many robots on one port, ``robots = ["robot1", "lab-*"]``
 limits a role to the robots whose names those globs match (a client of the role that
 names another robot in its URL is refused before the handshake); a role without it
@@ -42,6 +45,7 @@ from typing import Any
 
 from ..graph import PARAMETER_EVENTS
 from ..interfaces import BridgeError
+from .accounts import LimitsError, kinds_from_table
 
 __all__ = [
     "CAPABILITIES",
@@ -86,6 +90,9 @@ class Role:
     deny: dict[str, tuple[str, ...]] = field(default_factory=dict)
     robots: tuple[str, ...] | None = None
     """Globs of the robots a relay lets the role reach (``None``: every robot)."""
+    limits: dict[str, int] = field(default_factory=dict)
+    """What each principal of the role may hold over all its connections, per kind
+    (``limits.fragment_bytes``, ``limits.inflight_bytes``: :mod:`.accounts`)."""
     _cache: dict[tuple[str, str], bool] = field(default_factory=dict, repr=False)
 
     @classmethod
@@ -97,6 +104,11 @@ class Role:
                 if not isinstance(value, list) or not all(isinstance(v, str) for v in value):
                     raise RoleError(f"role {name}: robots must be a list of robot name patterns")
                 role.robots = tuple(value)
+            elif key == "limits":
+                try:
+                    role.limits = kinds_from_table(value, f"role {name}: limits")
+                except LimitsError as exc:
+                    raise RoleError(str(exc)) from None
             elif key == "deny":
                 if not isinstance(value, Mapping):
                     raise RoleError(f"role {name}: 'deny' must be a table of capabilities")

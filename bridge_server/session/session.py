@@ -117,10 +117,7 @@ class Session:
         self.sid = sid
         self.config: SessionConfig = shared.session_config
         self.loop = asyncio.get_running_loop()
-        # Reassembled fragments are held to the same bound as a single frame.
-        self.protocol = FrameProtocol(
-            max_partial=16, max_fragment_bytes=shared.link_config.max_message_size
-        )
+        self.protocol = self._reassembly()
         self.calls = Calls(self.loop)
         self.level = _LEVELS["warning"]
         self.acks = link.header(ACKS_HEADER) == "1"
@@ -154,6 +151,14 @@ class Session:
                 self._limits[op_cls] = getattr(capability, method)
             for name, method in getattr(capability, "RAW_OPS", {}).items():
                 self._raw_ops[name] = getattr(capability, method)
+
+    def _reassembly(self) -> FrameProtocol:
+        """The ``fragment`` op reassembly of the current link: held to the same bound as a
+        single frame, and charged to the link's principal and address (security/accounts.py)."""
+        holder = getattr(self.link, "holder", None)
+        return FrameProtocol(max_partial=16,
+                             max_fragment_bytes=self.shared.link_config.max_message_size,
+                             budget=None if holder is None else holder.fragments())
 
     @property
     def limits(self) -> SecurityConfig:
@@ -214,9 +219,8 @@ class Session:
         self.link = link
         self.peer = link.address
         # Fragments of an op cut off with the old connection cannot be completed now.
-        self.protocol = FrameProtocol(
-            max_partial=16, max_fragment_bytes=self.shared.link_config.max_message_size
-        )
+        self.protocol.close()
+        self.protocol = self._reassembly()
         missing = self.outbox.resume(link, client_received)
         log.info("client %d: session resumed (%d frames sent again)", self.sid,
                  len(self.outbox.control))
@@ -268,6 +272,7 @@ class Session:
         """Release what this client owned: each capability's, then the calls in flight."""
         if self._ack_timer is not None:
             self._ack_timer.cancel()
+        self.protocol.close()  # the pieces of incomplete fragmented ops
         self.gate.end()
         for capability in self.capabilities:
             await capability.close()

@@ -29,6 +29,7 @@ from collections import OrderedDict
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any, NoReturn
+from typing import Protocol as Interface
 
 from .errors import RemoteProtocolError
 from .ops import Fragment, Id, Op, encode, parse_op
@@ -36,6 +37,7 @@ from .ops import Fragment, Id, Op, encode, parse_op
 __all__ = [
     "PIECE_COST",
     "TYPED_ARRAY_TAGS",
+    "FragmentBudget",
     "Protocol",
     "decode_frame",
     "decode_typed_array",
@@ -169,6 +171,18 @@ data: a piece's own objects take about that much, so many one-character pieces a
 the bound as much as a few large ones (a piece of 128 characters or more counts its length)."""
 
 
+class FragmentBudget(Interface):
+    """Fragment memory shared with other connections (a server's per-principal and
+    per-address accounts): each held piece is taken from it, and given back when its op is
+    completed or dropped."""
+
+    def take(self, n: int) -> str | None:
+        """Take ``n`` bytes; or, if that would pass a limit, take nothing and say which."""
+
+    def give_back(self, n: int) -> None:
+        """Return ``n`` bytes taken before."""
+
+
 class Protocol:
     """One side of a rosbridge conversation, without I/O.
 
@@ -179,11 +193,16 @@ class Protocol:
         max_fragment_bytes: how many characters of fragment data may be held, for all the
             incomplete ops together (each piece counts at least :data:`PIECE_COST`); a piece
             that would take them past it is refused, and its op dropped.
+        budget: where held pieces are also charged, across connections (``None``: only
+            ``max_fragment_bytes`` bounds them); a piece it refuses is refused with its text,
+            and its op dropped. Call :meth:`close` when the connection ends.
     """
 
-    def __init__(self, *, max_partial: int = 64, max_fragment_bytes: int = 256 * 1024 * 1024):
+    def __init__(self, *, max_partial: int = 64, max_fragment_bytes: int = 256 * 1024 * 1024,
+                 budget: FragmentBudget | None = None):
         self.max_partial = max_partial
         self.max_fragment_bytes = max_fragment_bytes
+        self.budget = budget
         self._partial: OrderedDict[Id, _Partial] = OrderedDict()
         self._held = 0  # what the pieces of every incomplete op count, together
         self.evicted: list[tuple[Id, int, int]] = []
@@ -228,6 +247,8 @@ class Protocol:
         if self._held + cost > self.max_fragment_bytes:
             self._fail(frag, f"piece {frag.num} would take the fragments held for this "
                        f"connection past {self.max_fragment_bytes} bytes")
+        if self.budget is not None and (why := self.budget.take(cost)) is not None:
+            self._fail(frag, f"piece {frag.num} refused: {why}")
         partial.pieces[frag.num] = frag.data
         partial.size += cost
         self._held += cost
@@ -255,7 +276,15 @@ class Protocol:
         """Forget the pieces of ``frag_id``'s op (held: it is in ``_partial``)."""
         partial = self._partial.pop(frag_id)
         self._held -= partial.size
+        if self.budget is not None:
+            self.budget.give_back(partial.size)
         return partial
+
+    def close(self) -> None:
+        """Drop every incomplete op's pieces (the connection ended), giving their bytes back
+        to the budget."""
+        for frag_id in list(self._partial):
+            self._drop(frag_id)
 
     def _fail(self, frag: Fragment, why: str) -> NoReturn:
         """Drop ``frag``'s op and raise the error naming it."""

@@ -89,14 +89,21 @@ class AuthFile:
 
 def make_auth_file(tmp: Path) -> AuthFile:
     """Write the test auth file; tokens are made now and kept only in memory."""
-    auth = AuthFile(tmp / "auth.toml")
-    text = ROLES
     principals = [(r, r) for r in ("viewer", "tester", "admin", "nothing", "narrow", "server",
                                    "prober", "blind")]
     principals.append(("server_b", "server"))  # a second principal with the same role
+    return write_auth_file(tmp / "auth.toml", ROLES, principals, "_user")
+
+
+def write_auth_file(path: Path, text: str, principals: list[tuple[str, str]],
+                    suffix: str = "") -> AuthFile:
+    """Write ``text`` (roles, limits) and a principal ``name + suffix`` per ``(name, role)``,
+    each with a new token (kept in memory, under ``name``)."""
+    auth = AuthFile(path)
     for name, role in principals:
         token = auth.tokens[name] = new_token()
-        text += f'\n[principals.{name}_user]\nrole = "{role}"\ntoken_hash = "{hash_token(token)}"\n'
+        text += (f'\n[principals.{name}{suffix}]\nrole = "{role}"\n'
+                 f'token_hash = "{hash_token(token)}"\n')
     auth.path.write_text(text)
     return auth
 
