@@ -44,15 +44,13 @@ import logging
 import secrets
 import time
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass
 from typing import Any
 
 import cbor2
 import zenoh
 
 from msgs import cdr
-from msgs.dynamic import LimitError, TypeStore
-from msgs.parser import DefinitionError
+from msgs.dynamic import TypeStore
 from msgs.runtime import Message as WireMessage
 from msgs.runtime import UnknownTypeError as WireUnknownType
 
@@ -75,7 +73,6 @@ from ..interfaces import (
     Kind,
     ReportedError,
     ServiceCallError,
-    UnknownTypeError,
     canonical_name,
 )
 from ..memory.graph import MemoryConverter
@@ -93,6 +90,15 @@ from .keys import (
 )
 from .link import answering, ignore_replies
 from .replay import recovering_subscriber
+from .typestore import (
+    MAX_DEFINITION_BYTES,
+    MAX_TYPES_PER_ROBOT,
+    GraphReader,
+    RobotTypes,
+    TypeLimits,
+    TypeRefused,
+    let_go,
+)
 
 __all__ = ["MAX_DEFINITION_BYTES", "MAX_TYPES_PER_ROBOT", "RelayConverter", "TypeLimits",
            "TypeRefused", "ZenohActionClient", "ZenohFeed", "ZenohGraph", "ZenohMessage",
@@ -103,10 +109,6 @@ log = logging.getLogger("bridge_server.zenoh.graph")
 
 SNAPSHOT_WAIT = 5.0
 """Seconds a new robot's first graph snapshot is waited for."""
-
-GRAPH_INTERVAL = 0.25
-"""Seconds between two graph documents of a robot that the relay reads (at most four a
-second; one coming sooner waits for its turn, and a newer one replaces it)."""
 
 STAMP_END = 1 << 63
 """A message's stamp (ns since the epoch) is below this (an int64 for every encoding)."""
@@ -122,36 +124,8 @@ PARAM_WAIT = 5.0
 """Seconds a parameter query waits for the robot beyond the robot's own timeout."""
 
 
-MAX_DEFINITION_BYTES = 256 * 1024
-"""Largest definition text (UTF-8 bytes, a type with its dependencies) the relay builds a
-robot's type from (``--max-definition-bytes``). The largest of the standard types
-(``visualization_msgs/msg/MarkerArray`` with its dependencies) is under 20 KB; a robot's
-1.2 MB text made the relay spend 70 ms per sample before types were built once per text."""
-
-MAX_TYPES_PER_ROBOT = 1000
-"""Most messages, services and actions the relay builds from one robot's definitions
-(``--max-types-per-robot``); each costs about 30 KB of the relay's memory (3,000 types took
-100 MB), so a robot's types stay under ~30 MB. Types ``msgs`` generates are not counted."""
-
-
-@dataclass(frozen=True)
-class TypeLimits:
-    """What the relay takes of each robot's type definitions (see the constants)."""
-
-    definition_bytes: int = MAX_DEFINITION_BYTES
-    types: int = MAX_TYPES_PER_ROBOT
-
-
-_LIMIT_OPTIONS = {"max_definition_bytes": "--max-definition-bytes",
-                  "max_types": "--max-types-per-robot"}
-
-
 class Refused(BridgeError):
     """The robot answered a query with an error (the text is its reason)."""
-
-
-class TypeRefused(UnknownTypeError):
-    """A robot's type over one of the relay's :class:`TypeLimits` (its messages dropped)."""
 
 
 class NotHolder(BridgeError):
@@ -731,15 +705,15 @@ class ZenohGraph:
         self.robot = keys.check_robot(robot)
         self.relay = keys.check_relay(relay)
         self.type_limits = type_limits or TypeLimits()
-        self.wire_types = self._new_types()
+        self.types = RobotTypes(self.robot, self.type_limits)
         """The robot's own types (released when it left and nothing here uses them)."""
-        self._built: dict[str, tuple[str, Any]] = {}  # type -> (its text, class or refusal)
-        self._limits_said: set[str] = set()
         self.loop = asyncio.get_running_loop()
         self.inbox = Inbox(self.loop, self.robot)
         """What the robot's Zenoh callbacks hand to the loop, bounded (inbox.py)."""
         self.faults = self.inbox.faults
         """What the robot sent that was dropped, by kind."""
+        self.reader = GraphReader(self.loop, self.types, self.faults, self._took_snapshot)
+        """Its graph documents, read and their types built off the loop (typestore.py)."""
         self.snapshot = Snapshot()
         self.claims = keys.Claims()
         """The sessions announcing the robot's name: the first holds it (the one served)."""
@@ -757,10 +731,15 @@ class ZenohGraph:
         self.served_actions: dict[str, ZenohServedAction] = {}
         self.goal_ids = itertools.count()
         self._converters: dict[type[Any], RelayConverter] = {}
+        self._converters_of = self.types.store  # the store the converters' classes are of
         self._entities: list[Any] = []
         self._have_snapshot = asyncio.Event()
-        self._graph_next = 0.0  # loop time from which the next graph document is read
-        self._graph_waiting: zenoh.Sample | None = None  # one come too soon (the newest)
+
+    @property
+    def wire_types(self) -> TypeStore:
+        """The store of the robot's own types now (replaced, never changed, when the robot
+        redefines a type or its types are released)."""
+        return self.types.store
 
     @property
     def name(self) -> str:
@@ -815,6 +794,7 @@ class ZenohGraph:
             with contextlib.suppress(zenoh.ZError):
                 entity.undeclare()
         self._entities.clear()
+        self.reader.close()
 
     def trouble(self) -> str | None:
         """Why the robot is not served (``None``: it is)."""
@@ -888,30 +868,15 @@ class ZenohGraph:
         return self.went(what)
 
     def _on_graph(self, sample: zenoh.Sample) -> None:
-        """A graph document: read now, or, at most one each ``GRAPH_INTERVAL`` s, when its
-        turn comes (a newer one coming meanwhile replaces it)."""
-        now = self.loop.time()
-        if now < self._graph_next:
-            if self._graph_waiting is None:
-                self.loop.call_at(self._graph_next, self._graph_turn)
-            else:
-                self.faults.add("graph_superseded", "graph documents replaced by a newer one "
-                                f"before this relay read them (it reads one each "
-                                f"{GRAPH_INTERVAL:g} s at most)")
-            self._graph_waiting = sample
-            return
-        self._graph_next = now + GRAPH_INTERVAL
-        try:
-            self.snapshot = Snapshot.decode(sample.payload.to_bytes())
-        except (BridgeError, RecursionError) as exc:  # too deep for json: not one either
-            self.faults.add("bad_graph", f"a graph document dropped: {str(exc)[:200]}")
-            return
-        self._have_snapshot.set()
+        """A graph document: read off the loop when its turn comes (:class:`GraphReader`)."""
+        self.reader.offer(sample.payload.to_bytes())
 
-    def _graph_turn(self) -> None:
-        sample, self._graph_waiting = self._graph_waiting, None
-        if sample is not None:
-            self._on_graph(sample)
+    def _took_snapshot(self, snapshot: Snapshot) -> None:
+        """A graph document read, its types built (on the loop); the one before is freed
+        off the loop."""
+        old, self.snapshot = self.snapshot, snapshot
+        let_go(old)
+        self._have_snapshot.set()
 
     def _on_graph_reply(self, reply: zenoh.Reply) -> None:
         if reply.ok is not None:
@@ -919,92 +884,34 @@ class ZenohGraph:
 
     # -- types ---------------------------------------------------------------------------------
 
-    def _new_types(self) -> TypeStore:
-        limits = self.type_limits
-        return TypeStore(f"robot {self.robot}", max_types=limits.types,
-                         max_definition_bytes=limits.definition_bytes)
-
     def release_types(self) -> None:
         """Drop the robot's types once it has left and nothing of this relay's uses them (no
         subscription, publisher or served name; a class a session still holds keeps its
         own store alive until it lets go)."""
         if (self.alive or self.subscriptions or self.publishers or self.served
-                or self.served_actions or not (len(self.wire_types) or self._built)):
+                or self.served_actions or not (len(self.wire_types) or self.types.built)):
             return
-        old, self.wire_types = self.wire_types, self._new_types()
-        self._built.clear()
-        self._converters.clear()
-        old.close()
-        log.info("robot %s has left: its %d types are released", self.robot, len(old))
-
-    def _redefined(self, name: str) -> TypeStore:
-        """The robot's definition of ``name`` is not the one its class was built from (it
-        came back with other software while clients held its types): a store keeps a name's
-        first class, so the robot's types start again in a new store, and what resolves a
-        name from now on (topics, publishers) reads the new layouts. Returns the new store."""
-        old, self.wire_types = self.wire_types, self._new_types()
-        self._built.clear()
-        self._converters.clear()
-        old.close()
-        log.warning("robot %s: its definition of %s changed; this relay reads its types anew "
-                    "from its new definitions", self.robot, name)
-        return self.wire_types
-
-    def _load(self, name: str, kind: str) -> Any:
-        """The class of ``name``: built from the robot's definition once per text (the same
-        snapshot's text is a dict lookup), else the generated one."""
-        canonical = canonical_name(name, kind)  # type: ignore[arg-type]
-        text = self.snapshot.definitions.get(canonical)
-        types = self.wire_types
-        try:
-            if not text:
-                return {"msg": types.lookup_message, "srv": types.lookup_service,
-                        "action": types.lookup_action}[kind](canonical)
-            built = self._built.get(canonical)
-            if built is None or not (built[0] is text or built[0] == text):
-                if built is not None and not isinstance(built[1], Exception):
-                    types = self._redefined(canonical)
-                found: Any
-                try:
-                    found = types.load(canonical, text)
-                except LimitError as exc:
-                    found = self._refuse(exc)
-                except (WireUnknownType, DefinitionError) as exc:  # not parsed again either
-                    found = UnknownTypeError(name, f"robot {self.robot}'s definition of it "
-                                             f"does not build ({exc})")
-                built = self._built[canonical] = (text, found)
-            if isinstance(built[1], UnknownTypeError):  # a new one: raising one again grows it
-                raise type(built[1])(built[1].name, built[1].reason)
-            return built[1]
-        except WireUnknownType as exc:
-            raise UnknownTypeError(name, f"robot {self.robot} does not list it and msgs does "
-                                   f"not generate it ({exc})") from None
-
-    def _refuse(self, exc: LimitError) -> TypeRefused:
-        """The refusal of a type over a limit, said in the log once per limit and robot."""
-        option = _LIMIT_OPTIONS.get(exc.limit, exc.limit)
-        why = f"{exc.what} ({exc.got}) is over this relay's {option} ({exc.allowed})"
-        if exc.limit not in self._limits_said:
-            self._limits_said.add(exc.limit)
-            log.warning("robot %s: type %s refused: %s; its messages are dropped (counted, "
-                        "not logged again for this limit)", self.robot, exc.type_name, why)
-        return TypeRefused(exc.type_name, f"robot {self.robot}'s definition is refused: {why}")
+        count = self.types.release()
+        log.info("robot %s has left: its %d types are released", self.robot, count)
 
     def resolve_message(self, name: str) -> Any:
         """The ``msgs`` class of message type ``name`` (the robot's definition if it sent
         one, else the generated type)."""
-        return self._load(name, "msg")
+        return self.types.load(name, "msg", self.snapshot.definitions)
 
     def resolve_service(self, name: str) -> Any:
         """The ``msgs`` service type named ``name``."""
-        return self._load(name, "srv")
+        return self.types.load(name, "srv", self.snapshot.definitions)
 
     def resolve_action(self, name: str) -> Any:
         """The ``msgs`` action type named ``name`` (the robot's definition if it sent one)."""
-        return self._load(name, "action")
+        return self.types.load(name, "action", self.snapshot.definitions)
 
     def converter(self, cls: Any) -> RelayConverter:
-        """The converter of a ``msgs`` message class."""
+        """The converter of a ``msgs`` message class (those of a replaced store forgotten)."""
+        if self._converters_of is not self.types.store:
+            self._converters.clear()
+            self._converters_of = self.types.store
         conv = self._converters.get(cls)
         if conv is None:
             conv = self._converters[cls] = RelayConverter(cls)

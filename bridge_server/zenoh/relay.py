@@ -63,7 +63,8 @@ try:
     from ..session.session import SessionConfig
     from . import keys
     from . import link as zenoh_link
-    from .graph import MAX_DEFINITION_BYTES, MAX_TYPES_PER_ROBOT, TypeLimits, ZenohGraph
+    from .graph import ZenohGraph
+    from .typestore import MAX_DEFINITION_BYTES, MAX_FIELDS, MAX_TYPES_PER_ROBOT, TypeLimits
 except ModuleNotFoundError as _missing:  # an install without the relay extra
     from .._requires import missing_dependency
 
@@ -470,6 +471,9 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p.add_argument("--max-types-per-robot", type=int, default=MAX_TYPES_PER_ROBOT,
                    help="most messages, services and actions the relay builds from one "
                    f"robot's definitions (default {MAX_TYPES_PER_ROBOT})")
+    p.add_argument("--max-fields-per-type", type=int, default=MAX_FIELDS,
+                   help="most fields and constants of one message in a robot's definition "
+                   f"(default {MAX_FIELDS}); building a bigger one would stall every robot")
     p.add_argument("--log-level", default="INFO",
                    choices=("DEBUG", "INFO", "WARNING", "ERROR"),
                    help="logging level (default INFO)")
@@ -488,7 +492,8 @@ async def _run(args: argparse.Namespace) -> int:
         security=security.config_from_args(args),
     )
     relay = Relay(config, zenoh_link.options_from_args(args), args.relay_id,
-                  TypeLimits(args.max_definition_bytes, args.max_types_per_robot))
+                  TypeLimits(args.max_definition_bytes, args.max_types_per_robot,
+                             args.max_fields_per_type))
     stop = asyncio.Event()
     loop = asyncio.get_running_loop()
     for sig in (signal.SIGINT, signal.SIGTERM):
