@@ -8,7 +8,7 @@ from __future__ import annotations
 import asyncio
 import base64
 import os
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 
 import pytest
 
@@ -35,7 +35,7 @@ def _request(target: str, *headers: str) -> bytes:
     return "\r\n".join(lines).encode()
 
 
-PLACEMENTS = {
+PLACEMENTS: dict[str, tuple[str, Callable[[str], bytes], str]] = {
     # placement: (role whose token it is, the request, what the bridge logs once it is read)
     "fragment": ("viewer", lambda t: _request(f"/#token={t}"), r"> HTTP/1\.1 \d+"),
     "path": ("tester", lambda t: _request(f"/{t}"), r"> HTTP/1\.1 \d+"),
