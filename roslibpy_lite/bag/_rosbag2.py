@@ -85,9 +85,10 @@ def _mcap_files(reader: Any) -> list[Path] | None:
     return files if files and all(f.suffix == ".mcap" for f in files) else None
 
 
-def _definitions(path: Path, reader: Any) -> dict[str, str]:
-    """Each type's ``ros2msg`` text: the recording's, else msgs' own (a .db3 from before
-    rosbag2 stored definitions); a type neither has is refused by name."""
+def _definitions(path: Path, reader: Any, topics: set[str] | None) -> dict[str, str]:
+    """The ``ros2msg`` text of each type of ``topics`` (None: all): the recording's, else
+    msgs' own (a .db3 from before rosbag2 stored definitions); a type neither has is
+    refused by name."""
     from rosbags.interfaces import MessageDefinitionFormat
 
     found: dict[str, str] = {}
@@ -96,7 +97,7 @@ def _definitions(path: Path, reader: Any) -> dict[str, str]:
             if conn.msgdef.format == MessageDefinitionFormat.MSG and conn.msgdef.data:
                 found.setdefault(conn.msgtype, conn.msgdef.data)
     for conn in reader.connections:
-        if conn.msgtype not in found:
+        if conn.msgtype not in found and (topics is None or conn.topic in topics):
             from msgs.dynamic import full_text
 
             try:
@@ -154,7 +155,7 @@ def read(path: Path, topics: Iterable[str] | None, start_ns: int | None,
             yield from heapq.merge(*(read_mcap(f, wanted, start_ns=start_ns, end_ns=end_ns)
                                      for f in files), key=lambda m: m.log_time_ns)
             return
-        texts = _definitions(path, reader)
+        texts = _definitions(path, reader, wanted)
         unpack = _unpack(path, reader, _size(path))
         for conn, stamp, data in _stored(reader, wanted, start_ns, end_ns):
             if conn.ext.serialization_format == MESSAGE_ENCODING:
@@ -209,7 +210,7 @@ def topic_chunks(path: Path, topic: str) -> TopicChunks | None:
             (name, text), = kinds
             return TopicChunks(name, text, (batch for f in found if f is not None
                                             for batch in f.batches))
-        text = _definitions(path, reader)[conns[0].msgtype]
+        text = _definitions(path, reader, {topic})[conns[0].msgtype]
     return TopicChunks(conns[0].msgtype, text, _batches(path, topic))
 
 

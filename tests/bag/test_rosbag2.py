@@ -4,6 +4,9 @@ info and the same tables as an MCAP file of the same messages; played through Mo
 
 from __future__ import annotations
 
+import contextlib
+import shutil
+import sqlite3
 import subprocess
 import sys
 from pathlib import Path
@@ -172,3 +175,22 @@ def test_what_is_not_a_rosbag2_recording_or_lacks_the_extra_is_said(
     with pytest.raises(UsageError) as refused:
         info(recordings["db3"])
     assert str(refused.value) == _rosbag2.MISSING
+
+
+def test_a_db3_without_definitions_takes_them_from_msgs_or_names_the_type(
+        tmp_path: Path, recordings: dict[str, Path]) -> None:
+    """A .db3 from before rosbag2 stored message definitions (its message_definitions table
+    empty) reads with msgs' own definitions, the same table; a topic of a type msgs does
+    not know either is refused naming the topic and the type, and the others still read."""
+    old = tmp_path / "old.db3"
+    shutil.copy(recordings["db3"], old)
+    with contextlib.closing(sqlite3.connect(old)) as db, db:
+        db.execute("DELETE FROM message_definitions")
+    pd.testing.assert_frame_equal(bag_to_dataframe(old, "/imu"),
+                                  bag_to_dataframe(recordings["reference"], "/imu"))
+    with contextlib.closing(sqlite3.connect(old)) as db, db:
+        db.execute("UPDATE topics SET type = 'robot_x/msg/Secret' WHERE name = '/note'")
+    assert len(list(read(old, ["/imu"]))) == 600  # the other topics still read
+    with pytest.raises(UsageError, match=r"/note's type robot_x/msg/Secret has no ros2msg "
+                                         r"definition in the recording, and msgs does not"):
+        list(read(old, ["/note"]))
