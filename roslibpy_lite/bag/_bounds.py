@@ -18,6 +18,7 @@ from __future__ import annotations
 import struct
 from collections.abc import Iterable
 from dataclasses import dataclass
+from pathlib import Path
 from typing import IO
 
 MAX_CHUNK_BYTES = 1 << 30
@@ -215,3 +216,25 @@ def decompress_message(data: bytes, file_size: int) -> bytes:
         return b"".join(parts)
     except zstandard.ZstdError as exc:
         raise ChunkBoundError(f"a compressed message does not unpack: {exc}") from None
+
+
+def check_whole_file(path: Path) -> None:
+    """Refuse a zstd-compressed storage file (rosbag2's ``file`` compression mode) that
+    unpacks to more than :data:`MAX_CHUNK_RATIO` times its size (:data:`CHUNK_FLOOR` at
+    least), learnt by unpacking it as a stream, a MiB at a time, before anything writes
+    it out whole."""
+    import zstandard
+
+    size = path.stat().st_size
+    limit = max(CHUNK_FLOOR, MAX_CHUNK_RATIO * size)
+    got = 0
+    with path.open("rb") as raw, zstandard.ZstdDecompressor().stream_reader(raw) as stream:
+        try:
+            while part := stream.read(1 << 20):
+                got += len(part)
+                if got > limit:
+                    raise ChunkBoundError(
+                        f"{path} unpacks to more than {limit} bytes from {size}, past the "
+                        f"limit ({MAX_CHUNK_RATIO}x its size, at least {CHUNK_FLOOR})")
+        except zstandard.ZstdError as exc:
+            raise ChunkBoundError(f"{path} does not unpack as zstd: {exc}") from None

@@ -9,7 +9,9 @@ a path that is one of these lives here. The MCAP files of a directory (uncompres
 files) are read by this package's own MCAP path, file by file, chunk heads bounded as for
 any MCAP file; ``.db3`` files (and MCAP files rosbag2 compressed whole) through rosbags'
 storage readers. A directory's files are merged in log-time order. A recording compressed
-per message has each message unpacked with the same bound as an MCAP chunk.
+per message has each message unpacked with the same bound as an MCAP chunk; one compressed
+as whole files has each file unpacked as a stream first, held to the same ratio, before
+rosbags writes it out.
 """
 
 from __future__ import annotations
@@ -61,6 +63,11 @@ def _opened(path: Path) -> Iterator[Any]:
     if path.is_dir() and not (path / "metadata.yaml").exists():
         raise UsageError(f"{path}: a directory without a metadata.yaml: not a rosbag2 "
                          "recording (an MCAP file is read by its own name)")
+    try:  # rosbags unpacks whole compressed files into a temporary directory: bound them
+        for packed in sorted(path.glob("*.zstd")) if path.is_dir() else ():
+            _bounds.check_whole_file(packed)
+    except _bounds.ChunkBoundError as exc:
+        raise UsageError(str(exc)) from None
     try:
         reader = Reader(path)
         reader.open()

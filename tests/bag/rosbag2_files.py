@@ -29,17 +29,18 @@ def qos_profile(durability: str) -> dict[str, Any]:
 
 
 def write_storage(folder: Path, entries: list[Entry], storage: str, *,
-                  latched: frozenset[str] = frozenset(), per_message: bool = False) -> Path:
+                  latched: frozenset[str] = frozenset(), compression: str = "") -> Path:
     """A one-file rosbag2 directory of ``entries`` written by rosbags (its metadata.yaml
-    too): ``storage`` is ``sqlite3`` or ``mcap``; ``per_message``: zstd per message."""
+    too): ``storage`` is ``sqlite3`` or ``mcap``; ``compression`` rosbag2's zstd mode,
+    ``message`` or ``file`` (none by default)."""
     from rosbags.interfaces import Qos, QosDurability, QosHistory, QosLiveliness, QosReliability
     from rosbags.interfaces import QosTime as T
 
     store = get_typestore(Stores.ROS2_JAZZY)
     inf = T(**_INFINITE)
     writer = Writer(folder, version=9, storage_plugin=StoragePlugin[storage.upper()])
-    if per_message:
-        writer.set_compression(CompressionMode.MESSAGE, CompressionFormat.ZSTD)
+    if compression:
+        writer.set_compression(CompressionMode[compression.upper()], CompressionFormat.ZSTD)
     conns: dict[str, Any] = {}
     with writer:
         for topic, type_name, stamp, data in entries:

@@ -15,13 +15,14 @@ from typing import Any, cast
 import numpy as np
 import pandas as pd
 import pytest
+import zstandard
 
 import roslibpy_lite.data as data
 from msgs import cdr
 from msgs.sensor_msgs.msg import Imu, JointState
 from msgs.std_msgs.msg import String
 from roslibpy_lite import MockRos, UsageError
-from roslibpy_lite.bag import _rosbag2, info, play, read
+from roslibpy_lite.bag import _bounds, _rosbag2, info, play, read
 from roslibpy_lite.data import bag_to_dataframe
 from tests.bag.rosbag2_files import Entry, write_split, write_storage
 from tests.bag.test_play import _KeepingPublishers
@@ -57,7 +58,8 @@ def _entries() -> list[Entry]:
     return sorted(out, key=lambda e: e[2])
 
 
-LAYOUTS = ["sqlite3", "sqlite3-split", "mcap", "mcap-split", "db3", "sqlite3-per-message"]
+LAYOUTS = ["sqlite3", "sqlite3-split", "mcap", "mcap-split", "db3", "sqlite3-per-message",
+           "sqlite3-per-file"]
 
 
 @pytest.fixture(scope="module")
@@ -75,7 +77,9 @@ def recordings(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
            "mcap": write_storage(root / "run_mcap", entries, "mcap"),
            "mcap-split": write_split(root / "run_mcap_split", entries, "mcap", 3, version=8),
            "sqlite3-per-message": write_storage(root / "run_zstd", entries, "sqlite3",
-                                                per_message=True)}
+                                                compression="message"),
+           "sqlite3-per-file": write_storage(root / "run_file", entries, "sqlite3",
+                                             compression="file")}
     out["db3"] = out["sqlite3"] / "run_sqlite3.db3"
     return out
 
@@ -194,3 +198,22 @@ def test_a_db3_without_definitions_takes_them_from_msgs_or_names_the_type(
     with pytest.raises(UsageError, match=r"/note's type robot_x/msg/Secret has no ros2msg "
                                          r"definition in the recording, and msgs does not"):
         list(read(old, ["/note"]))
+
+
+def test_a_whole_compressed_file_that_unpacks_past_the_bound_is_refused_first(
+        tmp_path: Path, recordings: dict[str, Path]) -> None:
+    """A recording compressed as whole files whose .db3.zstd unpacks to 256 MiB from a few
+    KB (a zstd stream stating no size, as a file compressor writes it) is refused naming
+    the file, its size and the limit, before rosbags writes it out."""
+    bomb = tmp_path / "run_file"
+    shutil.copytree(recordings["sqlite3-per-file"], bomb)
+    packed = bomb / "run_file.db3.zstd"
+    with packed.open("wb") as out, zstandard.ZstdCompressor().stream_writer(out) as z:
+        for _ in range(256):
+            z.write(bytes(1 << 20))
+    size = packed.stat().st_size
+    assert size < 100_000
+    limit = _bounds.chunk_limit(size)
+    with pytest.raises(UsageError, match=rf"{packed} unpacks to more than {limit} bytes "
+                                         rf"from {size}"):
+        info(bomb)
