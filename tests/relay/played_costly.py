@@ -57,8 +57,11 @@ def main() -> None:
 
     session = zenoh.open(ZenohOptions(connect=[router]).config())
     graph = [Snapshot(node="costly").encode()]
-    queryable = session.declare_queryable(
-        f"{robot}/{keys.GRAPH}", lambda q: (q.reply(q.key_expr, graph[0]), q.drop()))
+    def answer(query: zenoh.Query) -> None:
+        query.reply(query.key_expr, graph[0])
+        query.drop()  # type: ignore[no-untyped-call]
+
+    queryable = session.declare_queryable(f"{robot}/{keys.GRAPH}", answer)
     token = session.liveliness().declare_token(f"{robot}/{keys.ALIVE}")
     session.put(f"{robot}/{keys.GRAPH}", graph[0])
     docs: list[bytes] = []

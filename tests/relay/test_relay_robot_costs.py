@@ -31,6 +31,7 @@ from tests.helpers import ROOT, ros_env
 from tests.relay.played_costly import BIG
 from tests.relay.procs import Proc, until_robot_served
 from tests.relay.support import free_port
+from tests.relay.test_relay_fairness import Played as FairnessPlayed
 
 pytestmark = pytest.mark.timeout(180)
 
@@ -43,35 +44,18 @@ WORST = 1.0
 """robot1's viewer's worst latency (seconds) while robot2 misbehaves, at most."""
 
 
-class Played:
+class Played(FairnessPlayed):
     """A robot of tests/relay/played_costly.py in its own process."""
 
-    def __init__(self, proc: asyncio.subprocess.Process) -> None:
-        self.proc = proc
-
     @classmethod
-    async def start(cls, router: str, robot: str, mode: str) -> Played:
+    async def start(cls, router: str, robot: str, mode: str, seconds: float = 0.0) -> Played:
+        """Start it and wait until it is ready (``seconds``: unused, it plays until told)."""
         proc = await asyncio.create_subprocess_exec(
             sys.executable, "-m", "tests.relay.played_costly", router, robot, mode, cwd=ROOT,
             env=ros_env(), stdin=asyncio.subprocess.PIPE, stdout=asyncio.subprocess.PIPE)
-        assert proc.stdout is not None
-        line = await asyncio.wait_for(proc.stdout.readline(), 60)
-        assert line.decode().strip() == "ready", line
-        return cls(proc)
-
-    def go(self) -> None:
-        assert self.proc.stdin is not None
-        self.proc.stdin.write(b"go\n")
-
-    async def stop(self) -> None:
-        if self.proc.returncode is None:
-            assert self.proc.stdin is not None
-            self.proc.stdin.close()
-            try:
-                await asyncio.wait_for(self.proc.wait(), 10)
-            except TimeoutError:
-                self.proc.kill()
-                await self.proc.wait()
+        played = cls(proc)
+        assert await played.line() == "ready"
+        return played
 
 
 @contextlib.asynccontextmanager
