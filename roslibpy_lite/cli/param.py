@@ -20,7 +20,7 @@ from typing import Any
 
 from msgs.rcl_interfaces.srv import SetParameters
 
-from ..exceptions import RemoteError
+from ..exceptions import RemoteError, RosTimeoutError
 from .common import (
     EXIT_NOT_FOUND,
     EXIT_OK,
@@ -112,7 +112,7 @@ async def cmd_param_list(args: argparse.Namespace, out: Out) -> int:
         for node in nodes:
             try:
                 names = await _names(s, node, args.param_prefixes)
-            except RemoteError as exc:
+            except (RemoteError, RosTimeoutError) as exc:  # a node gone meanwhile, say
                 if args.node_name:
                     raise
                 print(f"Exception while calling service of node '{node}': {exc}",
