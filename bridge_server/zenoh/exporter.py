@@ -1122,7 +1122,7 @@ class Exporter:
 
     def _answer_graph(self, query: zenoh.Query) -> None:
         with answering(query):
-            query.reply(query.key_expr, self._snapshot_bytes)
+            query.reply(query.key_expr, self._snapshot_bytes, attachment=self.zid.encode())
 
     def _refresh_snapshot(self) -> None:
         try:
@@ -1133,7 +1133,7 @@ class Exporter:
         data = snap.encode()
         if data != self._snapshot_bytes and self.session is not None:
             self.snapshot, self._snapshot_bytes = snap, data
-            self.session.put(f"{self.robot}/{keys.GRAPH}", data)
+            self.session.put(f"{self.robot}/{keys.GRAPH}", data, attachment=self.zid.encode())
 
     def _take_snapshot(self) -> Snapshot:
         g = self.graph

@@ -868,7 +868,15 @@ class ZenohGraph:
         return self.went(what)
 
     def _on_graph(self, sample: zenoh.Sample) -> None:
-        """A graph document: read off the loop when its turn comes (:class:`GraphReader`)."""
+        """A graph document: read off the loop when its turn comes (:class:`GraphReader`);
+        one another session than the name's holder put is dropped (its attachment names the
+        session, as a message's :class:`~.keys.Meta` does)."""
+        zid = sample.attachment.to_string() if sample.attachment is not None else ""
+        try:
+            self.check_sender(zid)
+        except NotHolder as exc:
+            self.faults.add("not_holder", f"a graph document dropped: {exc}")
+            return
         self.reader.offer(sample.payload.to_bytes())
 
     def _took_snapshot(self, snapshot: Snapshot) -> None:

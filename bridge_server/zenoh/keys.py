@@ -23,7 +23,8 @@ key                                      what
                                          the robot subscribes while one exists
 ``<robot>/@latched/<topic>``             queryable: the last message of a latched topic
 ``<robot>/@graph``                       :class:`Snapshot` JSON: put on change, and a
-                                         queryable answering the current one
+                                         queryable answering the current one; attachment
+                                         the Zenoh id of the session (as ``Meta.zid``)
 ``<robot>/@call/<relay>/<service>``      queryable: a service call of relay ``relay``,
                                          :class:`CallRequest` JSON in, the response dict
                                          (JSON) or an error

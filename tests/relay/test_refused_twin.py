@@ -4,8 +4,8 @@ robot1's viewer got were its.
 
 Real processes: the relay (the Zenoh router), robot1 and its twin played on raw Zenoh
 (tests/relay/played_twin.py), each saying its Zenoh session in every put as the exporter
-does. robot1's viewer gets only robot1's messages, and the relay counts the twin's as
-dropped (so they did reach it).
+does, in its graph documents too. robot1's viewer gets only robot1's messages and topics,
+and the relay counts the twin's as dropped (so they did reach it).
 """
 
 from __future__ import annotations
@@ -41,8 +41,9 @@ async def _played(router: str, role: str) -> asyncio.subprocess.Process:
 
 
 async def test_a_robot_refused_its_name_reaches_no_viewer() -> None:
-    """robot1 holds the name; its twin, refused (the relay logs it), puts on /steady too:
-    of the viewer's messages none is the twin's, and the relay counts them dropped."""
+    """robot1 holds the name; its twin, refused (the relay logs it), puts on /steady and
+    its graph document too: of the viewer's messages none is the twin's, the robot's
+    topics are the holder's, and the relay counts the twin's puts dropped."""
     router = f"tcp/127.0.0.1:{free_port()}"
     relay = Proc([sys.executable, "-m", "bridge_server.zenoh.relay", "--port", "0",
                   "--zenoh-listen", router], ros_env())
@@ -62,6 +63,10 @@ async def test_a_robot_refused_its_name_reaches_no_viewer() -> None:
             got.append((await viewer.expect(op="publish", topic="/steady",
                                             timeout=30))["msg"]["data"])
         assert not [text for text in got if not text.startswith("holder")], got
+        # the twin put its graph document twice a second meanwhile: not the robot's graph
+        await viewer.send({"op": "call_service", "service": "/rosapi/topics", "id": "t"})
+        topics = (await viewer.expect(op="service_response", id="t"))["values"]["topics"]
+        assert "/steady" in topics and "/twin_topic" not in topics, topics
         status: dict[str, Any] = json.loads((await aget(
             f"http://127.0.0.1:{port}/status.json"))[2])
         dropped = next(r["dropped"] for r in status["robots"] if r["name"] == "robot1")
