@@ -3,11 +3,23 @@
 from __future__ import annotations
 
 import argparse
+import asyncio
 import logging
 import sys
 from typing import Any
 
-from .common import EXIT_OK, EXIT_USAGE, CliError, CliSession, Kit, Out, with_session
+from .common import (
+    EXIT_CONNECT,
+    EXIT_OK,
+    EXIT_USAGE,
+    CliError,
+    CliSession,
+    Kit,
+    Out,
+    with_session,
+)
+
+_log = logging.getLogger("roslibpy_lite.mcp")
 
 
 def _first_line(path: str, flag: str) -> str:
@@ -62,8 +74,24 @@ def _log_to_stderr() -> None:
         logger.setLevel(logging.INFO)
 
 
+_UNREACHED = ("is the bridge running?", "answered HTTP 404")
+"""In a connection error's text: nothing answers yet, or the relay has no such robot yet."""
+
+
+def _token_source(args: argparse.Namespace, exc: CliError) -> CliError:
+    """``exc`` naming the token source this server used (its --token-file, not the
+    generic --token/$ROSLIBPY_LITE_TOKEN hint)."""
+    generic = "(set --token or $ROSLIBPY_LITE_TOKEN)"
+    if args.token_file is None or generic not in exc.message:
+        return exc
+    return CliError(exc.code, exc.message.replace(
+        generic, f"(the token read from --token-file {args.token_file})"))
+
+
 async def cmd_mcp(args: argparse.Namespace, out: Out) -> int:
-    """``mcp``: an MCP server over stdio (or streamable HTTP with ``--http``)."""
+    """``mcp``: an MCP server over stdio (or streamable HTTP with ``--http``). A robot not
+    reachable at start (its bridge not up, not on its relay yet) is waited for, up to
+    ``--start-wait`` seconds, with a line in the log at each try."""
     try:
         from ..mcp import Options, serve_http, serve_stdio
     except ImportError as exc:
@@ -74,14 +102,32 @@ async def cmd_mcp(args: argparse.Namespace, out: Out) -> int:
     _log_to_stderr()
     options = Options(read_only=args.read_only, timeout=args.call_timeout,
                       image_size=args.image_size, confirm=args.confirm)
+    started = False
 
     async def body(s: CliSession) -> int:
+        nonlocal started
+        started = True
         if door is not None:
             await serve_http(s.ros, options, door)
         else:
             await serve_stdio(s.ros, options)
         return EXIT_OK
-    return await with_session(args, body, reconnect=True)
+
+    loop = asyncio.get_running_loop()
+    until, delay = loop.time() + args.start_wait, 1.0
+    while True:
+        try:
+            return await with_session(args, body, reconnect=True)
+        except CliError as exc:
+            left = until - loop.time()
+            if (started or exc.code != EXIT_CONNECT or left <= 0
+                    or not any(u in exc.message for u in _UNREACHED)):
+                raise _token_source(args, exc) from None
+            wait = min(delay, left)
+            _log.warning("the robot is not reachable yet (%s); trying again in %.0f s "
+                         "(for %.0f s more: --start-wait)", exc.message, wait, left)
+            await asyncio.sleep(wait)
+            delay = min(delay * 2, 15.0)
 
 
 def add_parsers(groups: Any, kit: Kit) -> None:
@@ -103,6 +149,10 @@ def add_parsers(groups: Any, kit: Kit) -> None:
                         "120 (default 10)")
     p.add_argument("--image-size", type=int, default=512, metavar="PX",
                    help="the longer side of an image a topic read returns (default 512)")
+    p.add_argument("--start-wait", type=float, default=120.0, metavar="SEC",
+                   help="at start, wait up to SEC seconds for a robot not reachable yet (its "
+                        "bridge not up, not on its relay yet), saying so in the log at each "
+                        "try (default 120; 0: fail at once)")
     p.add_argument("--http", type=int, metavar="PORT",
                    help="serve streamable HTTP on PORT (at /mcp) instead of stdio")
     p.add_argument("--host", default="127.0.0.1",

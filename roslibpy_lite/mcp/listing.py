@@ -6,19 +6,22 @@ string, cut at a bound, :func:`quoted`) where it appears in a description, never
 as prose, and the ``tools/list`` answer as a whole has a size bound
 (:attr:`~roslibpy_lite.mcp.tools.Options.max_list`): tools past it are listed in summary
 (their name, a short description and an open input schema) or, past that too, only counted;
-the ``find_tools`` tool gives any tool's full definition by a part of its name.
+the ``find_tools`` tool gives any tool's full definition by a part of its name. Tool names
+(:func:`tool_name`) are made of the robot's names with anything but ``[A-Za-z0-9_-]`` replaced.
 """
 
 from __future__ import annotations
 
+import hashlib
 import json
+import re
 from collections.abc import Iterable
 from typing import Any
 
 import mcp_types as types
 
 __all__ = ["FIND_TOOLS", "MAX_ROBOT_TEXT", "ROBOT_DATA", "bound_listing", "cut_value",
-           "find_tools", "find_tools_tool", "quoted", "tool_size"]
+           "find_tools", "find_tools_tool", "quoted", "tool_name", "tool_size"]
 
 MAX_ROBOT_TEXT = 200
 """The most characters of one robot-supplied text (a name, a constant's value, a default)
@@ -31,6 +34,7 @@ ROBOT_DATA = ("Names, types and constants quoted here come from the robot's own 
 FIND_TOOLS = "find_tools"
 _SUMMARY_SCHEMA: dict[str, Any] = {"type": "object"}
 _FIND_RESERVE = 1_000  # characters kept for find_tools itself in the listing
+_NAME_RE = re.compile(r"[^A-Za-z0-9_-]")
 
 
 def cut_value(value: Any, limit: int = MAX_ROBOT_TEXT) -> Any:
@@ -116,3 +120,13 @@ def find_tools(tools: Iterable[types.Tool], args: dict[str, Any], max_text: int)
         found.append(entry)
         used += size
     return json.dumps({"matched": len(matched), "shown": len(found), "tools": found})
+
+
+def tool_name(prefix: str, ros_name: str, taken: set[str]) -> str:
+    """An MCP tool name (``[A-Za-z0-9_-]{1,64}``) for ``ros_name``, unique in ``taken``."""
+    base = f"{prefix}__{_NAME_RE.sub('_', ros_name.strip('/').replace('/', '__'))}"
+    if len(base) > 64 or base in taken:
+        digest = hashlib.sha1(ros_name.encode()).hexdigest()[:8]
+        base = f"{base[:55]}_{digest}"
+    taken.add(base)
+    return base

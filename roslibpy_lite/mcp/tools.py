@@ -23,9 +23,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import contextvars
-import hashlib
 import json
-import re
 from collections.abc import Awaitable, Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
@@ -37,7 +35,15 @@ from ..exceptions import Forbidden, RosLibError, RosTimeoutError, ServiceError
 from ..handles import Publisher
 from ..messages import from_wire
 from ..ros import RosBase
-from .listing import FIND_TOOLS, ROBOT_DATA, bound_listing, find_tools, find_tools_tool, quoted
+from .listing import (
+    FIND_TOOLS,
+    ROBOT_DATA,
+    bound_listing,
+    find_tools,
+    find_tools_tool,
+    quoted,
+    tool_name,
+)
 from .media import cloud_summary, image
 from .schema import message_schema
 
@@ -51,7 +57,6 @@ _CLOUD = "sensor_msgs/msg/PointCloud2"
 _ASK_AT_ONCE = 5000
 _SHORT_LIST = 32
 _SHORT_BYTES = 64
-_NAME_RE = re.compile(r"[^A-Za-z0-9_-]")
 
 
 @dataclass
@@ -110,22 +115,17 @@ class ConfirmationPending(Exception):
         super().__init__(question)
         self.question = question
 
+PARAM_TOOLS = ("get_param", "set_param", "list_params")
+"""The tools offered only to a role with ``params`` on some name."""
+GOAL_TOOLS = ("follow_goal", "cancel_goal")
+"""The tools offered only while the robot has an action or a goal this server sent runs."""
+
 MAX_COLLECT = 1000
 """The most messages one collect_topic call gathers."""
 
 _CAPABILITY = {"publish": "publish", "call": "call_service", "send_goal": "send_action_goal",
                "params": "params"}
 _TYPED = ("publish", "call", "send_goal")
-
-
-def tool_name(prefix: str, ros_name: str, taken: set[str]) -> str:
-    """An MCP tool name (``[A-Za-z0-9_-]{1,64}``) for ``ros_name``, unique in ``taken``."""
-    base = f"{prefix}__{_NAME_RE.sub('_', ros_name.strip('/').replace('/', '__'))}"
-    if len(base) > 64 or base in taken:
-        digest = hashlib.sha1(ros_name.encode()).hexdigest()[:8]
-        base = f"{base[:55]}_{digest}"
-    taken.add(base)
-    return base
 
 
 def _obj(properties: dict[str, Any], required: tuple[str, ...] = ()) -> dict[str, Any]:
@@ -181,7 +181,7 @@ class RobotTools:
         """The tools for the graph as it is now, held to the role (asked of the bridge)."""
         tools = dict(self._generic)
         if not await self._may_params():
-            for name in ("get_param", "set_param", "list_params"):
+            for name in PARAM_TOOLS:
                 tools.pop(name)
         if self.options.read_only:
             tools = {n: t for n, t in tools.items()
@@ -189,8 +189,8 @@ class RobotTools:
         else:
             entries = await self._typed_entries()
             if not any(e.kind == "send_goal" for e in entries) and not self._goals:
-                tools.pop("follow_goal")
-                tools.pop("cancel_goal")
+                for name in GOAL_TOOLS:
+                    tools.pop(name)
             for entry in entries:
                 tool = self._typed_tool(entry, set(tools))
                 tools[tool.tool.name] = tool
@@ -542,8 +542,12 @@ class RobotTools:
         return type_name
 
     async def _get_param(self, args: dict[str, Any]) -> list[types.ContentBlock]:
-        return self._text(await self.ros.graph.get_param(args["name"],
-                                                         timeout=self.options.timeout))
+        unset = object()  # no JSON value is this: the parameter is not set
+        value = await self.ros.graph.get_param(args["name"], unset, timeout=self.options.timeout)
+        if value is unset:
+            raise ValueError(f"no parameter {args['name']} (not declared on the node; see "
+                             "list_params)")
+        return self._text(value)
 
     async def _set_param(self, args: dict[str, Any]) -> list[types.ContentBlock]:
         await self.ros.graph.set_param(args["name"], args["value"], timeout=self.options.timeout)

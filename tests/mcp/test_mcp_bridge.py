@@ -16,7 +16,7 @@ from std_msgs.msg import String
 
 import roslibpy_lite
 from roslibpy_lite.mcp import build_server, tools
-from roslibpy_lite.mcp.tools import tool_name
+from roslibpy_lite.mcp.listing import tool_name
 from tests.helpers import BridgeProcess, async_wait_until
 from tests.mcp.support import (
     agent_auth,

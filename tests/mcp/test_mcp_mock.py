@@ -234,3 +234,15 @@ def test_without_the_extra_the_client_imports_and_mcp_says_what_to_install() -> 
                           text=True, timeout=60, env=ros_env(PYTHONPATH=str(ROOT)))
     assert done.returncode == 2, done.stderr
     assert "install roslibpy-lite with its mcp extra" in done.stderr
+
+
+async def test_a_missing_parameter_is_an_error_naming_it() -> None:
+    """get_param of a parameter the node does not have is a tool error naming it (not a
+    null value); one it has gives its value."""
+    ros = MockRos()
+    ros.add_node("/camera", {"gain": 2.5})
+    async with Client(build_server(ros)) as client:
+        result = await client.call_tool("get_param", {"name": "/camera:gain"})
+        assert not result.is_error and text(result) == "2.5", text(result)
+        result = await client.call_tool("get_param", {"name": "/camera:exposure"})
+        assert result.is_error and "no parameter /camera:exposure" in text(result)
