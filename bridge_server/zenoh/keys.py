@@ -582,8 +582,19 @@ _SNAPSHOT: dict[str, _Shape] = {
 }
 
 
+def _names_and_types(value: Any) -> bool:
+    """Whether ``value`` has the shape :data:`_NAMES_TYPES` (a fast path: a robot's topics
+    may be 90,000, checked on the relay's worker thread while its loop waits for Python's
+    lock; the general walk took 0.55 s of it per document, this ~0.1 s)."""
+    return type(value) is list and all(
+        type(item) is list and len(item) == 2 and type(item[0]) is str
+        and type(item[1]) is list and all(type(t) is str for t in item[1]) for item in value)
+
+
 def _check_shape(value: Any, shape: _Shape, where: str) -> None:
     """``ValueError`` naming the place in ``value`` that does not have ``shape``."""
+    if shape is _NAMES_TYPES and _names_and_types(value):
+        return  # else the walk below names the place that is wrong
     if isinstance(shape, type):
         ok = isinstance(value, shape)
     elif isinstance(shape, tuple):

@@ -30,9 +30,11 @@ import asyncio
 import concurrent.futures
 import gc
 import logging
+import queue
+import threading
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, ParamSpec, TypeVar
 
 from msgs.dynamic import LimitError, TypeStore, split
 from msgs.runtime import UnknownTypeError as WireUnknownType
@@ -46,6 +48,9 @@ __all__ = ["GRAPH_INTERVAL", "MAX_DEFINITION_BYTES", "MAX_FIELDS", "MAX_TYPES_PE
            "TypeRefused", "let_go", "prepare"]
 
 log = logging.getLogger("bridge_server.zenoh.graph")
+
+_P = ParamSpec("_P")
+_T = TypeVar("_T")
 
 GRAPH_INTERVAL = 0.5
 """Seconds between two graph documents of a robot that the relay reads (at most two a
@@ -90,14 +95,49 @@ class TypeRefused(UnknownTypeError):
     """A robot's type over one of the relay's :class:`TypeLimits` (its messages dropped)."""
 
 
-_worker: concurrent.futures.ThreadPoolExecutor | None = None
+class _Worker(concurrent.futures.Executor):
+    """One daemon thread running what is submitted, in order: a process that stops does not
+    wait for a robot's build, and what a job held is freed on the thread (:func:`let_go`)."""
+
+    def __init__(self) -> None:
+        self._jobs: queue.SimpleQueue[tuple[concurrent.futures.Future[Any],
+                                            Callable[..., Any], tuple[Any, ...]]] = (
+            queue.SimpleQueue())
+        self._thread: threading.Thread | None = None
+        self._lock = threading.Lock()
+
+    def submit(self, fn: Callable[_P, _T], /, *args: _P.args, **kwargs: _P.kwargs
+               ) -> concurrent.futures.Future[_T]:
+        """Run ``fn(*args)`` on the thread (no keyword arguments)."""
+        assert not kwargs, "the worker takes positional arguments only"
+        future: concurrent.futures.Future[_T] = concurrent.futures.Future()
+        with self._lock:
+            if self._thread is None:
+                self._thread = threading.Thread(target=self._run, name="robot-types",
+                                                daemon=True)
+                self._thread.start()
+        self._jobs.put((future, fn, args))
+        return future
+
+    def _run(self) -> None:
+        while True:
+            future, fn, args = self._jobs.get()
+            if future.set_running_or_notify_cancel():
+                try:
+                    future.set_result(fn(*args))
+                except BaseException as exc:  # handed to whoever waits for it
+                    future.set_exception(exc)
+            del future, fn, args  # what the job held goes here, not on the loop
 
 
-def _executor() -> concurrent.futures.ThreadPoolExecutor:
+_worker: _Worker | None = None
+
+
+def _executor() -> _Worker:
     """The one thread that reads every robot's graph documents and builds their types."""
     global _worker
     if _worker is None:
-        _worker = concurrent.futures.ThreadPoolExecutor(1, thread_name_prefix="robot-types")
+        _worker = _Worker()
     return _worker
 
 

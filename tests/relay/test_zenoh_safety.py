@@ -81,7 +81,7 @@ def test_links_beyond_this_machine_without_tls_are_refused(
     {"listen": ["unixsock-stream//tmp/zenoh.sock"]},
     {"connect": ["tls/relay.example.com:7447"], "tls_ca": "ca"},
     {"listen": ["tls/0.0.0.0:7447"], "mtls": True, "tls_ca": "ca", "tls_cert": "cert",
-     "tls_key": "key"},
+     "tls_key": "key", "robots": ["robot1"]},  # mutual TLS names who comes in (issue 53)
 ])
 def test_loopback_and_tls_links_need_no_option(fleet: Path, options: dict[str, Any]) -> None:
     """Loopback, a unix socket, a robot dialing TLS and a router asking for certificates are
