@@ -21,7 +21,7 @@ from typing import Any
 import mcp_types as types
 
 __all__ = ["FIND_TOOLS", "MAX_ROBOT_TEXT", "ROBOT_DATA", "bound_listing", "cut_value",
-           "find_tools", "find_tools_tool", "quoted", "tool_name", "tool_size"]
+           "find_tools", "find_tools_tool", "internal", "quoted", "tool_name", "tool_size"]
 
 MAX_ROBOT_TEXT = 200
 """The most characters of one robot-supplied text (a name, a constant's value, a default)
@@ -130,3 +130,15 @@ def tool_name(prefix: str, ros_name: str, taken: set[str]) -> str:
         base = f"{base[:55]}_{digest}"
     taken.add(base)
     return base
+
+
+def internal(name: str) -> bool:
+    """The bridge's own ``/rosapi`` services, hidden names and nodes' parameter services
+    (reached through get_param/set_param instead)."""
+    return (name.startswith("/rosapi/") or any(p.startswith("_") for p in name.split("/"))
+            or name.rsplit("/", 1)[-1] in _PARAMETER_SERVICES or name == "/parameter_events")
+
+
+_PARAMETER_SERVICES = frozenset({"describe_parameters", "get_parameter_types", "get_parameters",
+                                 "list_parameters", "set_parameters",
+                                 "set_parameters_atomically", "get_type_description"})

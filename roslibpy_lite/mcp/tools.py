@@ -41,10 +41,12 @@ from .listing import (
     bound_listing,
     find_tools,
     find_tools_tool,
+    internal,
     quoted,
     tool_name,
 )
 from .media import cloud_summary, image
+from .presence import GRAPH_TOOLS, Presence
 from .schema import message_schema
 
 __all__ = ["MAX_WAIT", "ConfirmationPending", "Options", "RobotTools"]
@@ -174,6 +176,7 @@ class RobotTools:
         self._goals: dict[str, Any] = {}
         self._schemas: dict[str, tuple[dict[str, Any], dict[str, Any]]] = {}
         self._generic = self._generic_tools()
+        self.presence = Presence(ros)
 
     # -- the list -------------------------------------------------------------------------------
 
@@ -227,7 +230,7 @@ class RobotTools:
             # a role that may not list, a bridge without action listing: no such tools
             with contextlib.suppress(Forbidden, ServiceError):
                 found += [(kind, x.name, x.type) for x in await listing(timeout=wait)]
-        found = [f for f in found if f[2] and not _internal(f[1])]
+        found = [f for f in found if f[2] and not internal(f[1])]
         allowed: set[tuple[str, str]] = set()
         for kind in _TYPED:
             names = [n for k, n, _ in found if k == kind]
@@ -334,14 +337,18 @@ class RobotTools:
                               f"be asked ({type(exc).__name__}: {exc}); nothing was sent")
             if not allowed:
                 return _error(f"{name}: not confirmed by the user; nothing was sent")
+        away = self.presence.away
         try:
             content = await tool.run(dict(arguments or {}))
         except TimeoutError:
-            return _error(f"{name}: no answer within the timeout")
+            return _error(f"{name}: no answer within the timeout", away())
         except RosLibError as exc:
-            return _error(f"{type(exc).__name__}: {exc}")
+            return _error(f"{type(exc).__name__}: {exc}", away())
         except (KeyError, TypeError, ValueError) as exc:
             return _error(f"{name}: bad arguments: {exc}")
+        stale = self.presence.stale() if name in GRAPH_TOOLS else None
+        if stale is not None:
+            content = [types.TextContent(text=stale), *content]
         return types.CallToolResult(content=content)
 
     def _wait(self, args: Mapping[str, Any]) -> float:
@@ -568,18 +575,6 @@ class RobotTools:
         return self._text(f"cancel of goal {handle.id} sent")
 
 
-def _internal(name: str) -> bool:
-    """The bridge's own ``/rosapi`` services, hidden names and nodes' parameter services
-    (reached through get_param/set_param instead)."""
-    return (name.startswith("/rosapi/") or any(p.startswith("_") for p in name.split("/"))
-            or name.rsplit("/", 1)[-1] in _PARAMETER_SERVICES or name == "/parameter_events")
-
-
-_PARAMETER_SERVICES = frozenset({"describe_parameters", "get_parameter_types", "get_parameters",
-                                 "list_parameters", "set_parameters",
-                                 "set_parameters_atomically", "get_type_description"})
-
-
 def _body(schema: dict[str, Any], what: str) -> dict[str, Any]:
     return {**schema, "description": f"{what}: {schema.get('description', '')}"}
 
@@ -594,5 +589,6 @@ def _cut(text: str, limit: int) -> str:
     return text[:limit] + f"\n... [cut: {len(text)} characters in all]"
 
 
-def _error(text: str) -> types.CallToolResult:
+def _error(text: str, away: str | None = None) -> types.CallToolResult:
+    text = text if away is None else f"{text}; {away}"
     return types.CallToolResult(content=[types.TextContent(text=text)], is_error=True)

@@ -4,13 +4,20 @@ log, not the end of the server."""
 
 from __future__ import annotations
 
+import json
+import re
 import subprocess
 import time
 from collections.abc import Callable
 from pathlib import Path
 
+from mcp import Client
+
+from roslibpy_lite import MockRos
+from roslibpy_lite.mcp import build_server
 from tests.helpers import ROOT, BridgeProcess, free_port, ros_env
 from tests.mcp.http_support import attempt, start_args
+from tests.mcp.support import text
 from tests.security.support import AuthFile
 
 
@@ -59,3 +66,30 @@ async def test_a_robot_not_up_at_start_is_waited_for(
     finally:
         proc.terminate()
         proc.wait(10)
+
+
+def _relay_says(ros: MockRos, level: str, text: str) -> None:
+    """A status op as a relay sends it to its clients, delivered to ``ros``."""
+    ros._bridge._deliver(json.dumps({"op": "status", "level": level, "msg": text}))
+
+
+async def test_a_robot_away_is_named_in_errors_and_graph_answers() -> None:
+    """After the relay's "robot went away" a read that times out says the robot is away (with
+    the relay's words and the age) and list_topics says its graph is the relay's last view;
+    after "is back" neither does."""
+    ros = MockRos()
+    await ros.advertise("/chatter", "std_msgs/msg/String")
+    async with Client(build_server(ros)) as client:
+        _relay_says(ros, "warning", "robot robot1 went away: its link to the Zenoh network "
+                                    "dropped")
+        result = await client.call_tool("read_topic", {"topic": "/chatter", "timeout": 0.2})
+        assert result.is_error, text(result)
+        assert re.search(r"no answer within the timeout; the robot is away \(\d+ s ago the "
+                         "relay said: robot robot1 went away", text(result)), text(result)
+        listing = await client.call_tool("list_topics", {})
+        assert "this graph is the relay's last view" in listing.content[0].text
+        assert "/chatter" in text(listing)
+        _relay_says(ros, "info", "robot robot1 is back: its topics flow again")
+        result = await client.call_tool("read_topic", {"topic": "/chatter", "timeout": 0.2})
+        assert "away" not in text(result)
+        assert "last view" not in text(await client.call_tool("list_topics", {}))
