@@ -197,6 +197,33 @@ async def test_a_confirmation_sent_before_it_is_asked_confirms_nothing(
     assert calls == []
 
 
+async def test_a_confirmation_answers_its_one_question_once() -> None:
+    """The user's answer to the question the server asked (with its sealed request state)
+    makes the change once: the state with other arguments is refused, and sent again it asks
+    anew and sends nothing."""
+    ros, calls = await _scaling_robot()
+    accept: types.InputResponses = {
+        "confirm": types.ElicitResult(action="accept", content={"confirm": True})}
+    request = {"request": {"x": 2.0, "y": 4.0}}
+    async with Client(build_server(ros, Options(confirm=True))) as client:
+        session = client.session
+        asked = await session.call_tool("call__scale", request, allow_input_required=True)
+        assert isinstance(asked, types.InputRequiredResult) and asked.request_state
+        with pytest.raises(MCPError, match="requestState"):
+            await session.call_tool("call__scale", {"request": {"x": 9.0, "y": 4.0}},
+                                    input_responses=accept, request_state=asked.request_state,
+                                    allow_input_required=True)
+        done = await session.call_tool("call__scale", request, input_responses=accept,
+                                       request_state=asked.request_state,
+                                       allow_input_required=True)
+        assert isinstance(done, types.CallToolResult) and not done.is_error, done
+        again = await session.call_tool("call__scale", request, input_responses=accept,
+                                        request_state=asked.request_state,
+                                        allow_input_required=True)
+        assert isinstance(again, types.InputRequiredResult), again
+    assert calls == [2.0]
+
+
 async def test_a_point_cloud_is_summarized_by_its_numbers() -> None:
     """read_topic on a PointCloud2 gives its point count and each field's finite range and
     mean (a NaN point left out), not its bytes."""
