@@ -394,8 +394,19 @@ class BridgeConnection(WebSocketLink):
         )
 
     def connection_lost(self, exc: Exception | None) -> None:
-        """websockets' hook: no longer count this connection against the client limits."""
+        """websockets' hook: no longer count this connection against the client limits.
+
+        The exception that ended websockets' parser (the end of the stream, mostly) keeps
+        its traceback, whose frame is the parser's, holding the last frame read (up to
+        ``--max-message-size``) in a reference cycle with the protocol: freed only when the
+        cyclic collector runs (measured: 4 connections that each sent a 15.9 MB frame and
+        dropped kept +61 to +91 MiB). The traceback is dropped here, so the frame goes with the
+        connection.
+        """
         super().connection_lost(exc)
+        parser_exc = self.protocol.parser_exc
+        if parser_exc is not None:
+            parser_exc.__traceback__ = None
         self.security.release(self)
 
 
