@@ -504,6 +504,8 @@ def check_websockets_internals() -> None:
             problem = "no process_event or Assembler.closed (the frames handed over as read)"
         elif not isinstance(getattr(ServerProtocol(), "max_message_size", None), int):
             problem = "no protocol.max_message_size (the pre-authentication frame limit)"
+        elif not all(hasattr(ServerProtocol(), a) for a in ("parser_exc", "current_size")):
+            problem = "no protocol.parser_exc or current_size (what a connection holds)"
         elif not _parser_waits_at_eof():
             problem = "the parser does not wait in StreamReader.at_eof between frames"
     except Exception as exc:
