@@ -37,7 +37,9 @@ try:
     from .session.resume import ResumeConfig
     from .session.session import DEFAULT_QUEUE_LENGTH, SessionConfig
     from .zenoh import link as zenoh_link
+    from .zenoh import robot_link
     from .zenoh.keys import check_robot
+    from .zenoh.priority import parse_overrides
     from .zenoh.replay import (
         DEFAULT_REPLAY_BYTES,
         DEFAULT_REPLAY_COUNT,
@@ -235,6 +237,17 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         help="with --zenoh-connect: payload bytes kept so at most, all reliable topics "
         "together (default %(default)s, 64 MiB; a topic with no room left is not replayed)",
     )
+    p.add_argument(
+        "--relay-priority",
+        action="append",
+        default=[],
+        metavar="TOPIC=LEVEL",
+        help="with --zenoh-connect: the Zenoh priority of TOPIC's messages on the robot's link "
+        "(LEVEL: real_time, interactive_high, interactive_low, data_high, data, data_low or "
+        "background, +express to send them unbatched; TOPIC * for every topic); by default "
+        "chosen from a topic's message size and QoS, small messages first (may be given "
+        "several times)",
+    )
     p.add_argument("--worker-index", type=int, default=None, help=argparse.SUPPRESS)
     p.add_argument("--worker-dir", default=None, help=argparse.SUPPRESS)
     p.add_argument(
@@ -245,6 +258,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     )
     security.add_arguments(p)
     zenoh_link.add_arguments(p, listen=False)
+    robot_link.add_arguments(p)
     return p.parse_args(argv)
 
 
@@ -325,10 +339,14 @@ async def _run(args: argparse.Namespace) -> int:
         except BridgeError:  # ROS already runs: stop it before saying so
             await bridge.close()
             raise
-        exporter = Exporter(bridge.graph, args.robot, zenoh_link.options_from_args(args),
+        exporter = Exporter(bridge.graph, args.robot, robot_link.robot_options(args),
                             graph_changed=bridge.graph_changed, policy=policy,
-                            replay=replay_window(args))
+                            replay=replay_window(args),
+                            priorities=parse_overrides(args.relay_priority))
         bridge.web.extra_metrics.append(exporter.metrics)
+        bridge.web.extra_status.append(exporter.status)
+        if not config.websocket:  # reached only through relays: ready when its uplink is
+            bridge.web.readiness = exporter.uplink.not_ready
         exporter.start()
         log.info("robot %s dialing out to Zenoh at %s", args.robot, ", ".join(args.zenoh_connect))
     # SIGHUP (systemctl reload): certificates and the auth file are read again.
@@ -409,8 +427,11 @@ def main(argv: list[str] | None = None) -> int:
     if refusal is None:
         try:
             replay_window(args)
+            parse_overrides(args.relay_priority)
         except ValueError as exc:
             refusal = str(exc)
+    if refusal is None and args.zenoh_connect:
+        refusal = robot_link.options_refusal(robot_link.robot_options(args))
     if refusal is None and args.relay_role is not None and not (
             args.zenoh_connect and args.auth_file):
         refusal = ("--relay-role names a role of --auth-file that relays are held to: it "

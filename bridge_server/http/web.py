@@ -201,6 +201,11 @@ class Web:
         self.extra_metrics: list[Callable[[Callable[[str], bool]], Iterable[Metric]]] = []
         """More families for ``/metrics``, each given whether the viewer may see a topic
         (a robot's replay windows)."""
+        self.extra_status: list[Callable[[], Mapping[str, Any]]] = []
+        """More sections of this process's ``/status.json`` (a robot's ``relay_uplink``)."""
+        self.readiness: Callable[[], str | None] | None = None
+        """Why the bridge is not ready besides ROS, if not its listener (``None``: ready);
+        a robot reached only through relays is ready when its uplink is."""
         self.serving: Callable[[], bool] = bridge.listening
         """Whether the websocket port takes connections (a front that serves this bridge's
         sessions on its own port, the relay, sets its own)."""
@@ -238,7 +243,10 @@ class Web:
 
     def local(self) -> dict[str, Any]:
         """This process's snapshot."""
-        return snapshot.take(self.bridge, self.meter.rates)
+        snap = snapshot.take(self.bridge, self.meter.rates)
+        for section in self.extra_status:
+            snap.update(section())
+        return snap
 
     async def whole(self) -> dict[str, Any]:
         """The merged snapshot of every worker."""
@@ -252,6 +260,8 @@ class Web:
         trouble = self.bridge.graph.trouble()
         if trouble is not None:
             return trouble
+        if self.readiness is not None:
+            return self.readiness()
         return None if self.serving() else "not listening"
 
     # -- routing -------------------------------------------------------------------------------

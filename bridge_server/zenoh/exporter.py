@@ -71,6 +71,7 @@ from ..interfaces import BridgeError, ConversionError, Kind, args_mapping
 from ..security.permissions import Role
 from ..session.actions import ACTION_LINGER, CLIENT_IDLE
 from . import keys
+from .bulk import BulkSender
 from .keys import (
     GOAL_WAIT,
     CallRequest,
@@ -82,7 +83,9 @@ from .keys import (
     Snapshot,
 )
 from .link import ZenohOptions, answering, ignore_replies, open_session, tokens
+from .priority import Priorities, TopicPriority
 from .replay import DEMAND_LINGER, ReplayBudget, ReplayPublisher, ReplayWindow, window_metrics
+from .uplink import Uplink, uplink_use
 
 if TYPE_CHECKING:
     from prometheus_client.core import Metric
@@ -192,7 +195,7 @@ REFUSAL_REPEAT = (0.25, 4.0)
 first and at most (doubling): a put that came before the network routed it to the relay's
 subscriber reached nobody, and the relay would believe its client serves the name."""
 
-DIAL_WARNING = 5.0
+DIAL_WARNING = 4.0
 """Seconds the robot dials without any router answering before it says so (and again
 after each as many)."""
 
@@ -220,8 +223,15 @@ class Exporter:
                  graph_changed: Callable[[], None] = lambda: None,
                  snapshot_interval: float = SNAPSHOT_INTERVAL,
                  policy: Callable[[], Role | None] = lambda: DEFAULT_POLICY,
-                 replay: ReplayWindow | None = None) -> None:
+                 replay: ReplayWindow | None = None,
+                 priorities: dict[str, TopicPriority] | None = None) -> None:
         self.graph = graph
+        self.priorities = Priorities(priorities)
+        """Each topic's Zenoh priority on the robot's link (``--relay-priority`` overrides)."""
+        self.uplink = Uplink(robot, options)
+        self.bulk: BulkSender | None = None
+        """Puts the big messages (:mod:`.bulk`), once the session is open."""
+        """Whether a router holds the robot's presence, and what it sends (:mod:`.uplink`)."""
         self.replay = replay or ReplayWindow()
         """How much of each reliable topic is kept for relays whose link dropped."""
         self.replay_budget = ReplayBudget(self.replay.total)
@@ -307,24 +317,13 @@ class Exporter:
             while not (await asyncio.wait({opening}, timeout=wait))[0]:
                 waited += wait
                 wait = min(wait * 2, 300.0)  # said again, ever less often
-                self._dialing(waited)
+                self.uplink.dialing(waited)
         except asyncio.CancelledError:
             opening.cancel()
             raise
         self.session = opening.result()
+        self.bulk = BulkSender(self.session)
         await self._joined(self.session)
-
-    def _dialing(self, waited: float) -> None:
-        """Say that no router has answered for ``waited`` s, and what to check."""
-        tls = any(e.startswith(("tls/", "quic/")) for e in self.options.connect)
-        log.warning(
-            "robot %s: no Zenoh router has answered at %s for %.0f s (ROS is served "
-            "meanwhile); %s", self.robot, ", ".join(self.options.connect), waited,
-            "if the router is up, it may refuse this robot's certificate: its log says why; "
-            "with --zenoh-mtls the robot's certificate must be signed by the router's CA, "
-            "allow client authentication (extendedKeyUsage=clientAuth) and have "
-            f"{self.robot} as its common name ('roslibpy-lite-relay certs' makes one)"
-            if tls else "check that the router is up and reachable there")
 
     async def _joined(self, session: zenoh.Session) -> None:
         """Hold the robot's name on the open ``session`` (:meth:`_claim`), offer the robot
@@ -333,6 +332,7 @@ class Exporter:
         again."""
         here = self._on_loop
         self.zid = str(session.zid())
+        self.uplink.watch(session, self.zid)
         self._listeners = [
             session.info.declare_transport_events_listener(here(self._on_transport),
                                                            history=True),
@@ -371,7 +371,7 @@ class Exporter:
                                     history=True),
             live.declare_token(keys.alive_key(r, self.zid)),  # last: all above answers
         ]
-        log.info("robot %s is on Zenoh (session %s)", self.robot, self.zid)
+        self.uplink.serving()  # said to be on Zenoh once a router holds its presence
 
     async def _hold(self, session: zenoh.Session) -> Any:
         """Keep the graph snapshot fresh while the robot holds its name; return its claim
@@ -504,9 +504,7 @@ class Exporter:
             self.uplinks.add(zid)
             if first:
                 self._uplink_since = self._loop.time()
-            if first and self.uplink_lost:
-                log.info("robot %s: its uplink to the Zenoh network is back (router %s)",
-                         self.robot, zid)
+            self.uplink.transport(zid, opened=True)
             if first and self._away_until == math.inf:
                 self._away_until = self._loop.time() + self.options.lease
                 self._returned.set()
@@ -516,10 +514,7 @@ class Exporter:
                 self.uplink_lost += 1
                 if self.holding:
                     self._away_until = math.inf
-                log.warning("robot %s: its uplink to the Zenoh network is gone (router %s "
-                            "closed or silent for the lease): ROS is served meanwhile, relays' "
-                            "clients are told it went away, and it dials again", self.robot,
-                            zid)
+            self.uplink.transport(zid, opened=False)
 
     def _on_loop(self, fn: Callable[[Any], None]) -> Callable[[Any], None]:
         """A Zenoh callback that hands its argument to ``fn`` on the event loop."""
@@ -537,6 +532,9 @@ class Exporter:
             self._runner.cancel()
             with contextlib.suppress(asyncio.CancelledError, BridgeError):
                 await self._runner
+        await self.uplink.close()
+        if self.bulk is not None:
+            self.bulk.close()
         self._withdraw()
         for entity in self._listeners:
             with contextlib.suppress(zenoh.ZError):
@@ -610,6 +608,7 @@ class Exporter:
     def _unwatched(self, topic: str) -> None:
         export = self.exports.pop(topic)
         self._unexport(export)
+        self.priorities.forget(topic)
         log.info("nobody watches %s through a relay now: unsubscribed", topic)
 
     def _unexport(self, export: _Export) -> None:
@@ -625,13 +624,20 @@ class Exporter:
             if self.session is None:
                 return
             payload, attachment = self._stamp(export, msg)
-            if self._replayed(export, msg):
+            qos = self.priorities.of(topic, len(payload), getattr(export.feed, "reliable", True))
+            self.uplink.sent(len(payload))
+            if qos.bulk and self.bulk is not None:  # a big topic: whole, latest wins (.bulk)
+                if export.replay is not None:  # and not replayed (.replay)
+                    export.replay.close()
+                    export.replay = None
+                self.bulk.put(key, payload, attachment, qos.kwargs)
+            elif self._replayed(export, msg):
                 if export.replay is None:
                     export.replay = ReplayPublisher(self.session, key, self.replay, topic,
                                                     self.replay_budget)
-                export.replay.put(payload, attachment)
+                export.replay.put(payload, attachment, qos)
             else:
-                self.session.put(key, payload, attachment=attachment)
+                self.session.put(key, payload, attachment=attachment, **qos.kwargs)
 
         try:
             feed = self.graph.subscribe(topic, None, listener)
@@ -648,7 +654,7 @@ class Exporter:
         (a best-effort or latched one's latest wins), with a window."""
         feed = export.feed
         return (self.replay.count > 0 and feed.latched is not msg
-                and bool(getattr(feed, "reliable", True))
+                and bool(getattr(export.feed, "reliable", True))
                 and not getattr(feed, "transient_local", False))
 
     def replay_windows(self) -> dict[str, tuple[int, int]]:
@@ -657,8 +663,14 @@ class Exporter:
                 for topic, e in self.exports.items() if e.replay is not None}
 
     def metrics(self, may_see: Callable[[str], bool]) -> list[Metric]:
-        """The robot's ``/metrics`` families of its replay windows (topics ``may_see``)."""
-        return window_metrics(self.replay_windows(), may_see)
+        """The robot's ``/metrics`` families of its replay windows (topics ``may_see``) and
+        of its uplink."""
+        return [*window_metrics(self.replay_windows(), may_see),
+                *self.uplink.metrics(*uplink_use(self))]
+
+    def status(self) -> dict[str, Any]:
+        """The robot's ``relay_uplink`` section of ``status.json`` (:meth:`.Uplink.status`)."""
+        return {"relay_uplink": self.uplink.status(*uplink_use(self))}
 
     def _stamp(self, export: _Export, msg: Message) -> tuple[bytes, bytes]:
         """The payload and attachment of ``msg``, numbered in its topic's stream."""

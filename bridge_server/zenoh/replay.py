@@ -31,6 +31,8 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
+from .priority import MEDIUM_MESSAGE, TopicPriority
+
 if TYPE_CHECKING:  # zenoh is imported when used: the bridge's options parse without it
     import zenoh
     from prometheus_client.core import Metric
@@ -59,7 +61,7 @@ into the void when the topic's last message and the heartbeat after it fall in a
 and the relay then never learns of that message. It costs a few bytes a second per watched
 topic, and nothing while no relay subscribes (Zenoh drops a put nobody matches)."""
 
-REPLAY_MAX_MESSAGE_BYTES = 64 * 1024
+REPLAY_MAX_MESSAGE_BYTES = MEDIUM_MESSAGE
 """The largest message of a topic that is replayed; a topic with a larger one is put plainly
 from then on (latest wins), as a best-effort topic is. The heartbeat tells the relay the
 last number the robot sent while a big frame is still on its way (on a slow link, while the
@@ -135,6 +137,8 @@ class ReplayPublisher:
         self._sizes: deque[int] = deque()
         self._held_bytes = 0
         self._pub: Any = None
+        self.qos = TopicPriority()
+        """The topic's priority on the link (:mod:`.priority`), that of its publisher."""
 
     @property
     def held(self) -> int:
@@ -156,7 +160,7 @@ class ReplayPublisher:
         self._held_bytes = 0
         self._pub = zenoh.ext.declare_advanced_publisher(
             self.session, self.key, reliability=zenoh.Reliability.RELIABLE,
-            cache=zenoh.ext.CacheConfig(depth),
+            cache=zenoh.ext.CacheConfig(depth), **self.qos.kwargs,
             sample_miss_detection=zenoh.ext.MissDetectionConfig(
                 heartbeat=HEARTBEAT, sporadic_heartbeat=None),
             publisher_detection=True)
@@ -173,9 +177,15 @@ class ReplayPublisher:
         self._reserved = depth * size
         return depth
 
-    def put(self, payload: bytes, attachment: bytes) -> None:
-        """Publish one message (kept in the cache, the oldest going past the window)."""
+    def put(self, payload: bytes, attachment: bytes, qos: TopicPriority | None = None
+            ) -> None:
+        """Publish one message (kept in the cache, the oldest going past the window) at
+        priority ``qos`` (the topic's; a change makes a new publisher, the cache dropped)."""
         size = len(payload)
+        if qos is not None and qos != self.qos:
+            self.qos = qos
+            if self._pub is not None:
+                self._declare(self._sizes.maxlen or 1)
         if size > self.largest and not self.plain:
             self.largest = size
             if size > REPLAY_MAX_MESSAGE_BYTES:
@@ -183,7 +193,7 @@ class ReplayPublisher:
                 self.plain = True
                 log.info("%s: a message of %d bytes, over %d: put plainly from now on (latest "
                          "wins), not replayed", self.topic, size, REPLAY_MAX_MESSAGE_BYTES)
-                self.session.put(self.key, payload, attachment=attachment)
+                self.session.put(self.key, payload, attachment=attachment, **self.qos.kwargs)
                 return
             depth = self._reserve(size)
             if depth == 0:
@@ -201,7 +211,7 @@ class ReplayPublisher:
                                 self.window.bytes, self.budget.total, len(self._sizes))
                 self._declare(depth)
         if self.plain:
-            self.session.put(self.key, payload, attachment=attachment)
+            self.session.put(self.key, payload, attachment=attachment, **self.qos.kwargs)
             return
         sizes = self._sizes
         if len(sizes) == sizes.maxlen:

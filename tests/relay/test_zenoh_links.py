@@ -429,8 +429,9 @@ async def test_the_command_lines_hold_a_robot_to_its_name(pki: Pki) -> None:
             robots.append(Proc([sys.executable, "-m", "bridge_server", "--no-websocket",
                                 "--robot", claimed, "--zenoh-connect", endpoint, *tls, cert,
                                 "--zenoh-tls-key", key], ros_env()))
-        for robot in robots:
-            robot.wait_for(re.compile(r"robot \S+ is on Zenoh"))
+        robots[0].wait_for(re.compile(r"robot robot1 is on Zenoh"))
+        # robot2, with robot1's certificate, is never acknowledged: it says so (an ERROR)
+        robots[1].wait_for(re.compile(r"robot robot2 is not admitted by the relay"))
         deadline = asyncio.get_running_loop().time() + DEADLINE
         while not await _robot_served(port, "robot1"):
             assert asyncio.get_running_loop().time() < deadline, "robot1 never served"
