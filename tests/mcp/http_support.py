@@ -55,7 +55,7 @@ def mcp_http(url: str, port: int, tmp: Path, *extra: str, host: str = "127.0.0.1
                                 stderr=err)
     server = McpHttp(proc, f"{scheme}://{host}:{port}/mcp", log)
     try:
-        deadline = time.monotonic() + 20
+        deadline = time.monotonic() + 60  # a python start and a connect on a loaded machine
         while True:
             with contextlib.suppress(OSError), socket.create_connection((host, port), 1):
                 break
