@@ -25,7 +25,7 @@ from msgs.parser import (
 )
 from msgs.runtime import Message, lookup_message
 
-from .listing import cut_value, quoted
+from .listing import MAX_ROBOT_TEXT, cut_value, quoted
 
 __all__ = ["message_schema", "spec_of"]
 
@@ -83,13 +83,19 @@ def _field(spec: FieldSpec, defs: dict[str, Any]) -> dict[str, Any]:
 def _object(spec: MessageSpec, defs: dict[str, Any]) -> dict[str, Any]:
     """A message type's object schema. The robot's text in it (constants' values, defaults)
     is cut at :data:`~roslibpy_lite.mcp.listing.MAX_ROBOT_TEXT` and kept in data (values,
-    ``x-ros-constants``); the description quotes the type's name and counts the constants."""
+    ``x-ros-constants``); the description quotes the type's name and counts the constants.
+    A field name over that bound leaves the type's fields out (an open object)."""
+    text = f"ROS message type {quoted(spec.type_name)}"
+    long = sum(len(f.name) > MAX_ROBOT_TEXT for f in spec.fields)
+    if long:  # a name is a schema's key, which cannot be cut: no schema of its fields
+        return {"type": "object", "description": f"{text}; {long} field names over "
+                f"{MAX_ROBOT_TEXT} characters, so its fields are left out here (describe_type "
+                "gives its definition)"}
     out: dict[str, Any] = {
         "type": "object",
         "properties": {f.name: _field(f, defs) for f in spec.fields},
         "additionalProperties": False,
     }
-    text = f"ROS message type {quoted(spec.type_name)}"
     if spec.constants:
         out["x-ros-constants"] = {c.name: cut_value(c.value) for c in spec.constants}
         text += f"; {len(spec.constants)} constants in x-ros-constants (robot data)"
