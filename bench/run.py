@@ -107,6 +107,7 @@ from bench.bag import record
 from bench.cloud import pointcloud
 from bench.compare import COMPARE_SCENARIOS, compare
 from bench.fanout import fanout
+from bench.fleet import fleet
 from bench.foxglove import foxglove
 from bench.harness import (
     CODE_ROOT,
@@ -161,6 +162,8 @@ TARGETS: dict[str, str] = {
     "record": "camera 30 Hz + IMU 200 Hz for 60 s recorded without a loss; recorder CPU",
     "action_ros_server": "reference: goal round trip p50/p99, feedback msg/s at >= 99 %",
     "action_client_served": "reference: goal round trip p50/p99, feedback msg/s at >= 99 %",
+    "fleet": "unwatched robot < 50 KB on a relay, no CPU; open p99 < 200 ms; back < 10 s "
+             "after a router restart; churn leaves relay RSS within 5 %",
 }
 
 
@@ -884,6 +887,7 @@ SCENARIOS: dict[str, Callable[[Ctx], Awaitable[dict[str, Any]]]] = {
     "relay_outage": relay_outage,
     "action_ros_server": action_ros_server,
     "action_client_served": action_client_served,
+    "fleet": fleet,
 }
 
 

@@ -1,0 +1,454 @@
+"""A fleet through the relay tier (``--scenario fleet``): many simulated robots, Zenoh
+routers in a mesh, relays behind HAProxy, many viewers; what each costs and how it recovers.
+
+At each size (robots, routers, relays, viewers; :data:`SIZES`, :data:`QUICK`, or
+``BENCH_FLEET_SIZES="robots x routers x relays x viewers,..."``):
+
+1. routers (``bench/zrouter.py``; the second and later dial the first: a mesh), relays
+   (``python -m bridge_server.zenoh.relay``, Zenoh clients of the routers in turn) and
+   HAProxy before the relays (:func:`bench.fleetproc.haproxy_config`);
+2. the robots (``bench/simrobot.py``, :data:`PER_PROCESS` a process; each dials one router):
+   relay and router RSS and CPU before and with them, nobody watching: **per unwatched robot**;
+3. one probe viewer per watched robot (``/pose``), through the balancer: **per watched
+   robot**, and how long opening a robot takes (the handshake: the relay opens the robot),
+   then the viewers (``bench/fleetview.py``; each 1-3 robots, 90 % ``/status`` at 1 Hz,
+   9 % ``/pose`` at 10 Hz, 1 % the camera): **per viewer**, and their open and first-message
+   times;
+4. a window: **delivered fraction and p99 latency** per robot; then one robot floods
+   (100 KB messages at 100 Hz to two viewers) and the same window again: the others'
+   fraction and p99 beside their own without the flood;
+5. a relay killed (SIGKILL): seconds until each viewer hears its robot again (through the
+   balancer, subscriptions restored); a router killed and restarted on its port: seconds
+   from the restart until each robot holds its name again and each viewer hears it;
+6. robots joining and leaving, one a second, each opened by a viewer: relay RSS and the
+   robots it still lists before and after.
+
+Robots, viewers, relays, routers and HAProxy share this machine's cores: at the larger
+sizes the viewers' and robots' own CPU is part of what limits the figures (printed
+beside them). Nothing here asserts anything about time.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import json
+import os
+import random
+import tempfile
+import time
+import urllib.request
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from bench.fleetproc import Balancer, Child, Usage, haproxy_config
+from bench.harness import Bridge, Ctx, percentile
+from bench.relay import RELAY_READY, _free_port
+
+__all__ = ["PER_PROCESS", "QUICK", "SIZES", "Size", "Tier", "fleet", "run_size"]
+
+PER_PROCESS = 250
+"""Simulated robots per process."""
+VIEWERS_PER_PROCESS = 1500
+"""Viewer connections per process."""
+
+
+@dataclass(frozen=True)
+class Size:
+    """One size of the fleet."""
+
+    robots: int
+    routers: int
+    relays: int
+    viewers: int
+
+    def __str__(self) -> str:
+        return f"{self.robots}x{self.routers}x{self.relays}x{self.viewers}"
+
+
+SIZES = (Size(10, 1, 1, 100), Size(100, 2, 2, 1000), Size(500, 2, 4, 1000),
+         Size(1000, 2, 4, 5000))
+QUICK = (Size(10, 1, 2, 100),)
+
+
+def sizes(ctx: Ctx) -> tuple[Size, ...]:
+    """The sizes to run: ``BENCH_FLEET_SIZES`` if set, else :data:`QUICK` or :data:`SIZES`."""
+    given = os.environ.get("BENCH_FLEET_SIZES")
+    if given:
+        try:
+            return tuple(Size(*(int(x) for x in s.split("x"))) for s in given.split(","))
+        except (TypeError, ValueError):
+            raise ValueError(f"BENCH_FLEET_SIZES={given!r}: expected robots x routers x relays "
+                             "x viewers, comma-separated, e.g. 100x2x2x1000") from None
+    return QUICK if ctx.quick else SIZES
+
+
+class Tier:
+    """Routers, relays, HAProxy and the robot processes of one size; stopped on exit."""
+
+    def __init__(self, ctx: Ctx, size: Size, folder: Path, prefix: str = "sim") -> None:
+        self.ctx, self.size, self.folder, self.prefix = ctx, size, folder, prefix
+        self.router_eps = [f"tcp/127.0.0.1:{_free_port()}" for _ in range(size.routers)]
+        self.routers: list[Child | None] = [None] * size.routers
+        self.relays: list[Bridge] = []
+        self.sims: list[Child] = []
+        self.viewers: list[Child] = []
+        self.balancer: Balancer | None = None
+        self.names = [f"{prefix}-{i}" for i in range(size.robots)]
+        self.usage = Usage(self._pids)
+
+    def _pids(self) -> dict[str, list[int]]:
+        def alive(ps: list[Any]) -> list[int]:
+            return [p.pid for p in ps if p is not None and p.proc is not None
+                    and p.proc.returncode is None]
+
+        return {"routers": alive(self.routers), "relays": alive(self.relays),
+                "robots": alive(self.sims), "viewers": alive(self.viewers)}
+
+    @property
+    def url(self) -> str:
+        """The balancer's websocket address."""
+        assert self.balancer is not None
+        return f"ws://127.0.0.1:{self.balancer.port}"
+
+    async def start_router(self, i: int) -> None:
+        """Router ``i`` (listening on its endpoint; the others dial router 0)."""
+        mesh = [] if i == 0 else ["--connect", self.router_eps[0]]
+        router = Child(["bench.zrouter", "--listen", self.router_eps[i], *mesh],
+                       self.ctx.domain, f"router{i}")
+        await router.start()
+        self.routers[i] = router
+        await _ready_line(router)
+
+    async def start(self) -> None:
+        """Routers, relays, the balancer (robots: :meth:`add_robots`)."""
+        for i in range(self.size.routers):
+            await self.start_router(i)
+        for i in range(self.size.relays):
+            relay = Bridge(self.ctx.domain, ["--zenoh-connect",
+                                             self.router_eps[i % self.size.routers]],
+                           self.ctx.bridge_root, module="bridge_server.zenoh.relay",
+                           ready=RELAY_READY)
+            self.relays.append(await relay.start(60))
+        port = _free_port()
+        self.balancer = await Balancer(haproxy_config(port, [r.port for r in self.relays]),
+                                       self.folder, port).start()
+
+    async def add_robots(self, names: list[str]) -> list[Child]:
+        """Robot processes for ``names`` (:data:`PER_PROCESS` each), dialing the routers in
+        turn; returned once every robot holds its name."""
+        made = []
+        for k in range(0, len(names), PER_PROCESS):
+            chunk = names[k:k + PER_PROCESS]
+            first = int(chunk[0].rsplit("-", 1)[1])
+            sim = Child(["bench.simrobot", "--connect",
+                         self.router_eps[len(self.sims) % self.size.routers],
+                         "--count", str(len(chunk)), "--first", str(first),
+                         "--prefix", chunk[0].rsplit("-", 1)[0]], self.ctx.domain,
+                        f"robots{len(self.sims)}")
+            await sim.start()
+            self.sims.append(sim)
+            made.append(sim)
+        for sim in made:
+            ready = await sim.event(600)
+            if ready.get("missing"):
+                raise RuntimeError(f"robots never held their names: {ready['missing'][:5]}")
+        return made
+
+    def sim_of(self, robot: str) -> Child:
+        """The process that runs ``robot`` (of :attr:`names`)."""
+        return self.sims[self.names.index(robot) // PER_PROCESS]
+
+    async def add_viewers(self, plan: list[tuple[list[str], str]], wait: float = 180.0
+                          ) -> list[Child]:
+        """Viewer processes for ``plan`` (each entry one viewer: its robots and topic);
+        returned once each connection heard its robot (or ``wait`` passed)."""
+        made = []
+        chunk: list[tuple[list[str], str]] = []
+        chunks = []
+        for entry in plan:
+            if sum(len(r) for r, _ in chunk) + len(entry[0]) > VIEWERS_PER_PROCESS:
+                chunks.append(chunk)
+                chunk = []
+            chunk.append(entry)
+        chunks.append(chunk)
+        for part in chunks:
+            view = Child(["bench.fleetview", self.url, json.dumps(part), "--wait", str(wait)],
+                         self.ctx.domain, f"viewers{len(self.viewers)}")
+            await view.start()
+            self.viewers.append(view)
+            made.append(view)
+        for view in made:
+            await view.event(wait + 120)
+        return made
+
+    async def stats(self, views: list[Child]) -> dict[str, Any]:
+        """Every viewer process's stats, merged."""
+        merged: dict[str, Any] = {"robots": {}, "open_s": [], "first_s": [], "back_s": [],
+                                  "silent": 0, "reconnects": 0}
+        for view in views:
+            s = await view.command({"cmd": "stats"})
+            for k in ("open_s", "first_s", "back_s"):
+                merged[k] += s[k]
+            merged["silent"] += s["silent"]
+            merged["reconnects"] += s["reconnects"]
+            for robot, r in s["robots"].items():
+                m = merged["robots"].setdefault(robot, {"got": 0, "missed": 0, "repeated": 0,
+                                                        "frames": 0, "latency_ms": [],
+                                                        "viewers": 0})
+                for k in ("got", "missed", "repeated", "frames", "viewers"):
+                    m[k] += r[k]
+                m["latency_ms"] += r["latency_ms"]
+        return merged
+
+    async def broadcast(self, views: list[Child], cmd: dict[str, Any]) -> None:
+        """Send ``cmd`` to each of ``views``."""
+        for view in views:
+            await view.command(cmd)
+
+    def relay_status(self) -> list[dict[str, Any]]:
+        """Each live relay's ``/status.json``."""
+        out = []
+        for relay in self.relays:
+            if relay.proc is not None and relay.proc.returncode is None:
+                with urllib.request.urlopen(f"http://127.0.0.1:{relay.port}/status.json",
+                                            timeout=30) as r:
+                    out.append(json.load(r))
+        return out
+
+    async def stop(self) -> None:
+        """Everything, viewers first."""
+        for child in [*self.viewers, *self.sims]:
+            with contextlib.suppress(Exception):
+                await child.stop()
+        if self.balancer is not None:
+            await self.balancer.stop()
+        for relay in self.relays:
+            with contextlib.suppress(Exception):
+                await relay.stop()
+        for router in self.routers:
+            if router is not None:
+                with contextlib.suppress(Exception):
+                    await router.stop()
+
+
+async def _ready_line(router: Child) -> None:
+    """Wait for the router's ``zenoh router ready`` line."""
+    deadline = time.monotonic() + 30
+    while not any("zenoh router ready" in line for line in router.lines):
+        if router.proc is None or router.proc.returncode is not None:
+            raise RuntimeError("router exited:\n" + "\n".join(router.lines))
+        if time.monotonic() > deadline:
+            raise RuntimeError("router not ready:\n" + "\n".join(router.lines))
+        await asyncio.sleep(0.05)
+
+
+def _q(values: list[float], scale: float = 1.0) -> dict[str, float | None]:
+    if not values:
+        return {"p50": None, "p99": None, "max": None}
+    return {"p50": round(percentile(values, 0.5) * scale, 3),
+            "p99": round(percentile(values, 0.99) * scale, 3), "max": round(max(values) * scale, 3)}
+
+
+def delivery(stats: dict[str, Any], skip: frozenset[str] = frozenset()) -> dict[str, Any]:
+    """Per robot (but ``skip``): fraction of numbered messages delivered, p99 latency (ms);
+    their worst and median across robots."""
+    fractions, p99s = [], []
+    repeated = 0
+    for robot, r in stats["robots"].items():
+        if robot in skip or r["got"] + r["missed"] == 0:
+            continue
+        fractions.append(r["got"] / (r["got"] + r["missed"]))
+        repeated += r["repeated"]
+        if r["latency_ms"]:
+            p99s.append(percentile(r["latency_ms"], 0.99))
+    return {"robots": len(fractions),
+            "delivered_min": round(min(fractions), 4) if fractions else None,
+            "delivered_median": round(percentile(fractions, 0.5), 4) if fractions else None,
+            "latency_p99_ms_median": round(percentile(p99s, 0.5), 1) if p99s else None,
+            "latency_p99_ms_worst": round(max(p99s), 1) if p99s else None,
+            "repeated": repeated}
+
+
+def viewer_plan(watched: list[str], n: int, seed: int = 49) -> list[tuple[list[str], str]]:
+    """``n`` viewers over the ``watched`` robots: each 1-3 of them; 90 % on ``/status``, 9 %
+    on ``/pose``, 1 % (at least one) on the first robot's camera."""
+    rng = random.Random(seed)
+    plan: list[tuple[list[str], str]] = []
+    for i in range(n):
+        if i % 100 == 0:
+            plan.append(([watched[0]], "/camera/image_raw"))
+            continue
+        k = min(len(watched), rng.choice((1, 2, 3)))
+        plan.append((rng.sample(watched, k), "/pose" if i % 10 == 1 else "/status"))
+    return plan
+
+
+async def window(tier: Tier, views: list[Child], seconds: float) -> dict[str, Any]:
+    """Reset the viewers' counts, wait ``seconds``, return their merged stats."""
+    await tier.broadcast(views, {"cmd": "reset"})
+    await asyncio.sleep(seconds)
+    return await tier.stats(views)
+
+
+def _per(after: dict[str, dict[str, float]], before: dict[str, dict[str, float]], n: int,
+         groups: tuple[str, ...] = ("relays", "routers")) -> dict[str, Any]:
+    """KiB of RSS and % of a core per unit, by group."""
+    return {g: {"kib": round((after[g]["rss_mib"] - before[g]["rss_mib"]) * 1024 / max(n, 1), 1),
+                "cpu_pct": round((after[g]["cpu_pct"] - before[g]["cpu_pct"]) / max(n, 1), 4)}
+            for g in groups}
+
+
+async def measured(tier: Tier, seconds: float) -> dict[str, dict[str, float]]:
+    """Usage over a window of ``seconds``."""
+    tier.usage.start()
+    await asyncio.sleep(seconds)
+    return tier.usage.since()
+
+
+async def run_size(ctx: Ctx, size: Size, folder: Path, churn_s: float) -> dict[str, Any]:
+    """Every measurement of the module's text at one size."""
+    tier = Tier(ctx, size, folder)
+    out: dict[str, Any] = {"size": str(size)}
+    win = 6.0 if ctx.quick else 10.0
+    try:
+        await tier.start()
+        base = await measured(tier, win)
+        await tier.add_robots(tier.names)
+        await asyncio.sleep(3)
+        idle = await measured(tier, win)
+        out["per_unwatched_robot"] = _per(idle, base, size.robots)
+        watched = tier.names[:max(1, min(size.robots, size.viewers // 10))]
+        probes = await tier.add_viewers([([r], "/pose") for r in watched])
+        one = await measured(tier, win)
+        out["per_watched_robot"] = _per(one, idle, len(watched))
+        pstats = await tier.stats(probes)
+        out["open_robot_s"] = _q(pstats["open_s"])
+        out["open_first_message_s"] = _q(pstats["first_s"])
+        views = await tier.add_viewers(viewer_plan(watched, size.viewers))
+        full = await measured(tier, win)
+        out["per_viewer"] = _per(full, one, size.viewers)
+        vstats = await tier.stats(views)
+        out["viewer_open_s"] = _q(vstats["open_s"])
+        out["viewer_first_message_s"] = _q(vstats["first_s"])
+        out["viewers_silent"] = vstats["silent"]
+        out["usage"] = full
+        everyone = [*probes, *views]
+        out["steady"] = delivery(await window(tier, everyone, win))
+        out["flood"] = await flood(tier, everyone, watched, win)
+        if size.relays > 1:
+            out["relay_kill"] = await relay_kill(tier, everyone)
+        out["router_restart"] = await router_restart(tier, everyone)
+        out["churn"] = await churn(tier, churn_s)
+    finally:
+        await tier.stop()
+    return out
+
+
+async def flood(tier: Tier, views: list[Child], watched: list[str], seconds: float
+                ) -> dict[str, Any]:
+    """One watched robot floods two viewers; the others' delivery against a window without."""
+    loud = watched[0]
+    before = delivery(await window(tier, views, seconds), frozenset({loud}))
+    flooders = await tier.add_viewers([([loud], "/flood")] * 2)
+    sim = tier.sim_of(loud)
+    await sim.command({"cmd": "flood", "robot": loud, "bytes": 100_000, "hz": 100})
+    during = delivery(await window(tier, views, seconds), frozenset({loud}))
+    got = (await tier.stats(flooders))["robots"].get(loud, {}).get("frames", 0)
+    await sim.command({"cmd": "flood", "robot": loud, "hz": 0})
+    for f in flooders:
+        await f.stop()
+        tier.viewers.remove(f)
+    return {"flooding_robot_frames_per_s": round(got / 2 / seconds, 1),
+            "others_without": before, "others_during": during}
+
+
+async def relay_kill(tier: Tier, views: list[Child], limit: float = 60.0) -> dict[str, Any]:
+    """The last relay SIGKILLed: seconds until each viewer connection hears its robot."""
+    t = time.time()
+    await tier.broadcast(views, {"cmd": "mark", "t": t})
+    tier.relays[-1].proc.kill()  # type: ignore[union-attr]
+    return await _until_back(tier, views, limit)
+
+
+async def _until_back(tier: Tier, views: list[Child], limit: float) -> dict[str, Any]:
+    deadline = time.monotonic() + limit
+    while True:
+        s = await tier.stats(views)
+        back = [b for b in s["back_s"] if b is not None]
+        if len(back) == len(s["back_s"]) or time.monotonic() > deadline:
+            return {"viewers_back_s": _q(back), "not_back": len(s["back_s"]) - len(back)}
+        await asyncio.sleep(1)
+
+
+async def router_restart(tier: Tier, views: list[Child], down: float = 2.0,
+                         limit: float = 60.0) -> dict[str, Any]:
+    """Router 0 SIGKILLed, restarted on its port ``down`` s later: seconds from the restart
+    until every robot holds its name again, and until each viewer hears its robot."""
+    router = tier.routers[0]
+    assert router is not None
+    router.kill()
+    await asyncio.sleep(down)
+    await tier.start_router(0)
+    t = time.time()
+    await tier.broadcast(views, {"cmd": "mark", "t": t})
+    robots_back = None
+    deadline = time.monotonic() + limit
+    while robots_back is None and time.monotonic() < deadline:
+        held = 0
+        for sim in tier.sims:
+            held += (await sim.command({"cmd": "stats"}))["holding"]
+        if held >= len(tier.names):
+            robots_back = round(time.time() - t, 2)
+        else:
+            await asyncio.sleep(0.5)
+    return {"robots_back_s": robots_back, **await _until_back(tier, views, limit)}
+
+
+async def churn(tier: Tier, seconds: float) -> dict[str, Any]:
+    """Robots joining and leaving one a second for ``seconds``, each opened by a viewer
+    (through the balancer): relay RSS and the robots the relays list, before and after."""
+    def listed() -> int:
+        return sum(len(s["robots"]) for s in tier.relay_status())
+
+    before = {"rss_mib": tier.usage.since()["relays"]["rss_mib"], "robots_listed": listed()}
+    sim = Child(["bench.simrobot", "--connect", tier.router_eps[-1], "--count", "0",
+                 "--prefix", "churn"], tier.ctx.domain, "churn")
+    await sim.start()
+    tier.sims.append(sim)
+    await sim.event(60)
+    from bench.fleetview import Conn
+
+    t_end = time.monotonic() + seconds
+    i = 0
+    while time.monotonic() < t_end:
+        name = f"churn-{i}"
+        await sim.command({"cmd": "join", "robot": name})
+        conn = Conn(tier.url, name, "/pose")
+        task = asyncio.create_task(conn.run())
+        with contextlib.suppress(TimeoutError):
+            await asyncio.wait_for(conn.heard.wait(), 30)
+        task.cancel()
+        await sim.command({"cmd": "leave", "robot": name})
+        i += 1
+        await asyncio.sleep(max(0.0, 1.0 - (time.monotonic() % 1.0)))
+    deadline = time.monotonic() + 60  # the last one's lease, two looks of the relays'
+    while listed() > before["robots_listed"] and time.monotonic() < deadline:  # forgetting
+        await asyncio.sleep(1)
+    after = {"rss_mib": tier.usage.since()["relays"]["rss_mib"], "robots_listed": listed()}
+    return {"robots": i, "before": before, "after": after,
+            "rss_growth_pct": round(100 * (after["rss_mib"] / before["rss_mib"] - 1), 1)}
+
+
+async def fleet(ctx: Ctx) -> dict[str, Any]:
+    """The ``fleet`` scenario (see the module's text)."""
+    churn_s = 30.0 if ctx.quick else 300.0
+    results = []
+    with tempfile.TemporaryDirectory(prefix="fleet-") as folder:
+        for size in sizes(ctx):
+            try:
+                results.append(await run_size(ctx, size, Path(folder), churn_s))
+            except Exception as exc:  # report it and go on with the next size
+                results.append({"size": str(size), "error": f"{type(exc).__name__}: {exc}"})
+    return {"sizes": results}

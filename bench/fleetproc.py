@@ -1,0 +1,212 @@
+"""The fleet benchmark's processes: JSON-speaking children, HAProxy, and what they cost.
+
+- :class:`Child`: a Python child (``bench.simrobot``, ``bench.fleetview``, ``bench.zrouter``)
+  that prints JSON lines and takes JSON commands on stdin; other lines are kept for errors.
+- :func:`haproxy_config` / :class:`Balancer`: HAProxy in TCP mode before the relays, with
+  the configuration ``deploy/haproxy/haproxy.cfg`` shows (the benchmark writes its own with
+  the relays' ephemeral ports).
+- :class:`Usage`: RSS and CPU of a set of processes over a window.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import json
+import shutil
+import sys
+import time
+from collections import deque
+from collections.abc import Callable, Iterable
+from pathlib import Path
+from typing import Any
+
+from bench.harness import ROOT, child_env
+
+__all__ = ["Balancer", "Child", "Usage", "haproxy_config"]
+
+
+class Child:
+    """A child process printing JSON lines (see the module's text)."""
+
+    def __init__(self, argv: list[str], domain: int, name: str) -> None:
+        self.argv = argv
+        self.domain = domain
+        self.name = name
+        self.proc: asyncio.subprocess.Process | None = None
+        self.events: asyncio.Queue[dict[str, Any]] = asyncio.Queue()
+        self.lines: deque[str] = deque(maxlen=50)
+        self._reader: asyncio.Task[None] | None = None
+
+    @property
+    def pid(self) -> int:
+        """The child's process id."""
+        assert self.proc is not None
+        return self.proc.pid
+
+    async def start(self) -> Child:
+        """Start the child (Python ``-m`` module argv)."""
+        self.proc = await asyncio.create_subprocess_exec(
+            sys.executable, "-m", *self.argv, cwd=ROOT, env=child_env(self.domain),
+            stdin=asyncio.subprocess.PIPE, stdout=asyncio.subprocess.PIPE,
+            stderr=asyncio.subprocess.STDOUT, limit=2**26)
+        self._reader = asyncio.create_task(self._read())
+        return self
+
+    async def _read(self) -> None:
+        assert self.proc is not None and self.proc.stdout is not None
+        while raw := await self.proc.stdout.readline():
+            line = raw.decode(errors="replace").rstrip()
+            try:
+                obj = json.loads(line)
+            except ValueError:
+                obj = None
+            if isinstance(obj, dict):
+                self.events.put_nowait(obj)
+            else:
+                self.lines.append(line)
+        self.events.put_nowait({"event": "exited", "output": "\n".join(self.lines)})
+
+    async def event(self, timeout: float = 120.0) -> dict[str, Any]:
+        """The next JSON line (``RuntimeError`` if the child exited or went silent)."""
+        try:
+            got = await asyncio.wait_for(self.events.get(), timeout)
+        except TimeoutError:
+            raise RuntimeError(f"{self.name}: no answer in {timeout:g} s:\n"
+                               + "\n".join(self.lines)) from None
+        if got.get("event") == "exited":
+            raise RuntimeError(f"{self.name} exited:\n{got['output']}")
+        return got
+
+    async def command(self, cmd: dict[str, Any], timeout: float = 120.0) -> dict[str, Any]:
+        """Send one command and return its answer."""
+        assert self.proc is not None and self.proc.stdin is not None
+        self.proc.stdin.write(json.dumps(cmd).encode() + b"\n")
+        await self.proc.stdin.drain()
+        return await self.event(timeout)
+
+    def kill(self) -> None:
+        """SIGKILL (a crash)."""
+        if self.proc is not None and self.proc.returncode is None:
+            self.proc.kill()
+
+    async def stop(self) -> None:
+        """Close stdin (the child ends), then SIGTERM, then SIGKILL."""
+        if self.proc is None:
+            return
+        if self.proc.stdin is not None and not self.proc.stdin.is_closing():
+            self.proc.stdin.close()
+        for step in (lambda p: None, lambda p: p.terminate(), lambda p: p.kill()):
+            if self.proc.returncode is not None:
+                break
+            with contextlib.suppress(ProcessLookupError):
+                step(self.proc)
+            with contextlib.suppress(TimeoutError):
+                await asyncio.wait_for(self.proc.wait(), 10)
+        if self._reader is not None:
+            self._reader.cancel()
+
+
+def haproxy_config(port: int, relays: Iterable[int], stats_port: int | None = None) -> str:
+    """HAProxy in TCP mode on ``port`` (at most 9,900 connections: two descriptors each,
+    within this machine's 20,000) before the relays on ``relays`` (loopback): the least
+    busy relay takes each new connection, a relay that does not answer its health check
+    (every 500 ms) is out within a second and its connections are cut, so its clients dial
+    again and land on another; long-lived websockets are not timed out."""
+    servers = "\n".join(f"    server relay{i} 127.0.0.1:{p} check inter 500ms fall 2 rise 2 "
+                        "on-marked-down shutdown-sessions" for i, p in enumerate(relays))
+    stats = (f"\nfrontend stats\n    mode http\n    bind 127.0.0.1:{stats_port}\n"
+             "    stats enable\n    stats uri /\n" if stats_port else "")
+    return f"""global
+    maxconn 9900
+
+defaults
+    mode tcp
+    timeout connect 2s
+    timeout client 1h
+    timeout server 1h
+    timeout tunnel 1h
+    retries 2
+    option redispatch
+
+frontend viewers
+    bind 127.0.0.1:{port}
+    default_backend relays
+
+backend relays
+    balance leastconn
+{servers}
+{stats}"""
+
+
+class Balancer:
+    """HAProxy (Debian's ``haproxy``) started in the foreground with a written config."""
+
+    def __init__(self, config: str, folder: Path, port: int) -> None:
+        self.path = folder / "haproxy.cfg"
+        self.path.write_text(config)
+        self.port = port
+        self.proc: asyncio.subprocess.Process | None = None
+
+    async def start(self, timeout: float = 20.0) -> Balancer:
+        """Start it and wait until its port accepts."""
+        exe = shutil.which("haproxy") or "/usr/sbin/haproxy"
+        if not Path(exe).exists():
+            raise RuntimeError("haproxy is not installed (apt-get install haproxy; "
+                               "scripts/setup.sh does it)")
+        self.proc = await asyncio.create_subprocess_exec(
+            exe, "-db", "-f", str(self.path), stdin=asyncio.subprocess.DEVNULL,
+            stdout=asyncio.subprocess.DEVNULL, stderr=asyncio.subprocess.DEVNULL)
+        deadline = time.monotonic() + timeout
+        while True:
+            try:
+                _, w = await asyncio.open_connection("127.0.0.1", self.port)
+                w.close()
+                return self
+            except OSError:
+                if self.proc.returncode is not None or time.monotonic() > deadline:
+                    raise RuntimeError(f"haproxy did not listen on {self.port}") from None
+                await asyncio.sleep(0.1)
+
+    async def stop(self) -> None:
+        """SIGTERM and wait."""
+        if self.proc is not None and self.proc.returncode is None:
+            self.proc.terminate()
+            await self.proc.wait()
+
+
+class Usage:
+    """RSS and CPU of named processes: :meth:`sample` now, :meth:`since` a window."""
+
+    def __init__(self, pids: Callable[[], dict[str, list[int]]]) -> None:
+        self.pids = pids
+        self._t0 = 0.0
+        self._cpu0: dict[str, float] = {}
+
+    def _read(self) -> tuple[dict[str, float], dict[str, float]]:
+        import psutil
+
+        rss: dict[str, float] = {}
+        cpu: dict[str, float] = {}
+        for group, pids in self.pids().items():
+            rss[group] = cpu[group] = 0.0
+            for pid in pids:
+                with contextlib.suppress(psutil.Error):
+                    p = psutil.Process(pid)
+                    t = p.cpu_times()
+                    rss[group] += p.memory_info().rss
+                    cpu[group] += t.user + t.system
+        return rss, cpu
+
+    def start(self) -> None:
+        """Begin a window."""
+        self._t0 = time.monotonic()
+        self._cpu0 = self._read()[1]
+
+    def since(self) -> dict[str, dict[str, float]]:
+        """Each group's RSS (MiB) now and CPU (% of one core) since :meth:`start`."""
+        rss, cpu = self._read()
+        wall = max(time.monotonic() - self._t0, 1e-9)
+        return {g: {"rss_mib": round(rss[g] / 2**20, 1),
+                    "cpu_pct": round(100 * (cpu[g] - self._cpu0.get(g, 0.0)) / wall, 1)}
+                for g in rss}
