@@ -69,5 +69,17 @@ if command -v apt-get >/dev/null 2>&1 \
   fi
 fi
 
+# HAProxy (a Debian package) for the fleet benchmark and its test: relays behind a real TCP
+# load balancer (bench/fleet.py, tests/bench/test_fleet.py, deploy/haproxy/).
+if command -v apt-get >/dev/null 2>&1 && ! command -v haproxy >/dev/null 2>&1 \
+    && [ ! -x /usr/sbin/haproxy ]; then
+  log "installing haproxy (apt-get)"
+  SUDO=""; [ "$(id -u)" = 0 ] || SUDO="sudo -n"
+  if ! { $SUDO apt-get update -qq && DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq \
+      --no-install-recommends haproxy; } > /tmp/apt-haproxy.log 2>&1; then
+    log "could not install haproxy (the fleet test will be skipped); see /tmp/apt-haproxy.log"
+  fi
+fi
+
 # DDS stays on loopback for everything started from here.
 export ROS_AUTOMATIC_DISCOVERY_RANGE="${ROS_AUTOMATIC_DISCOVERY_RANGE:-LOCALHOST}"
