@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import asyncio
 import logging
+from typing import Any
 
 import pytest
 
@@ -68,3 +69,20 @@ async def test_redefinitions_are_read_at_most_once_each_interval_and_the_newest_
     assert types.built[TYPE][0] == "int32 v39\n"  # built by the reader, off the loop
     assert types.load(TYPE, "msg", taken[-1].definitions)(v39=5).v39 == 5
     reader.close()
+
+
+def test_a_definition_of_many_types_is_built_in_pieces() -> None:
+    """A type whose definition chains 999 message types builds (50 at a time, each piece
+    after those it uses; as one module the generator's ordering overflowed Python's stack),
+    and every one of them is the robot's."""
+    from msgs.dynamic import DELIMITER
+
+    chain = "chain_msgs/C0 c\n" + "".join(
+        f"{DELIMITER}\nMSG: chain_msgs/msg/C{i}\n"
+        + (f"chain_msgs/C{i + 1} c\n" if i < 998 else "int32 x\n") for i in range(999))
+    types = RobotTypes("chained", TypeLimits())
+    top = types.load("chain_msgs/msg/Top", "msg", {"chain_msgs/msg/Top": chain})
+    assert len(types.store) == 1000
+    assert top._type == "chain_msgs/msg/Top"
+    last: Any = types.store.lookup("chain_msgs/msg/C998")
+    assert last(x=3).x == 3
