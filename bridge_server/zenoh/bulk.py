@@ -36,8 +36,9 @@ class BulkSender:
         self._pending: dict[str, tuple[bytes, bytes, dict[str, Any]]] = {}
         self._cond = threading.Condition()
         self._closed = False
-        self._thread = threading.Thread(target=self._run, name="zenoh-bulk", daemon=True)
-        self._thread.start()
+        self._thread: threading.Thread | None = None
+        """Started at the first big message: a robot that sends none (most of a fleet's
+        simulated robots in one process) costs no thread."""
 
     def put(self, key: str, payload: bytes, attachment: bytes, qos: dict[str, Any]) -> None:
         """Put ``payload`` under ``key`` soon (``qos``: its priority and express), or a newer
@@ -47,6 +48,9 @@ class BulkSender:
                 self.replaced += 1
             self._pending[key] = (payload, attachment, qos)
             self._cond.notify()
+        if self._thread is None:
+            self._thread = threading.Thread(target=self._run, name="zenoh-bulk", daemon=True)
+            self._thread.start()
 
     def _run(self) -> None:
         import zenoh
@@ -71,5 +75,6 @@ class BulkSender:
             self._closed = True
             self._pending.clear()
             self._cond.notify()
-        with contextlib.suppress(RuntimeError):
-            self._thread.join(timeout=1.0)
+        if self._thread is not None:
+            with contextlib.suppress(RuntimeError):
+                self._thread.join(timeout=1.0)

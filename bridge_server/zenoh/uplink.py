@@ -45,9 +45,10 @@ __all__ = ["ADMIT_WAIT", "DOWN_AFTER", "PROBE_PERIOD", "RATE_WINDOW", "Uplink",
 
 log = logging.getLogger("bridge_server.zenoh.exporter")  # the robot's one log for its link
 
-PROBE_PERIOD = 0.5
+PROBE_PERIOD = 1.0
 """Seconds between two probes of the robot's routers (each a liveliness query of a few
-bytes, answered by the router from its own tables)."""
+bytes, answered by the router from its own tables: one a second per robot), and how long a
+probe waits for its answer."""
 
 DOWN_AFTER = 2.0
 """Seconds without a router's answer after which the uplink counts as down (within the 3 s
