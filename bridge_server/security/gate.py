@@ -115,6 +115,7 @@ class Gate:
         if principal is not None:
             log.info("client %d authenticated as %s (role %s)", session.sid, principal.name,
                      principal.role.name)
+            self._charge_to(principal)  # (the handshake did, unless a relay's auth op did)
         elif not self.authenticated:
             self._timer = session.loop.call_later(
                 c.handshake_timeout or 10.0,
@@ -256,15 +257,20 @@ class Gate:
             return
         if self.principal is None:
             self.principal, self.role, self.authenticated = principal, principal.role, True
-            holder = getattr(self.session.link, "holder", None)
-            if holder is not None:  # what it holds counts against the principal's limits now
-                holder.become(principal.name)
+            self._charge_to(principal)
             self.session.link.limit_frames(None)  # frames up to --max-message-size again
             if self._timer is not None:
                 self._timer.cancel()
                 self._timer = None
             log.info("client %d authenticated as %s (role %s) by an auth op", self.session.sid,
                      principal.name, principal.role.name)
+
+    def _charge_to(self, principal: Principal) -> None:
+        """What the connection holds counts against ``principal``'s limits from now on
+        (:mod:`.accounts`)."""
+        holder = getattr(self.session.link, "holder", None)
+        if holder is not None:
+            holder.become(principal.name)
 
     # -- what the session asks -------------------------------------------------------------------
 

@@ -225,18 +225,23 @@ async def test_limits_come_from_the_auth_files_roles_and_limits_tables(
     limits_file: AuthFile,
 ) -> None:
     """A role's ``limits.fragment_bytes`` refuses a piece its principal alone would pass
-    (per-token), and ``[limits.per_address]`` a piece two principals from one address would
+    (per-token; whether the token came in the handshake or an auth op), and ``[limits.per_address]`` a piece two principals from one address would
     pass together (per-address); each error names its limit, and a principal with no
     limit holds what its address allows."""
     bridge = BridgeProcess(args=["--auth-file", str(limits_file.path)]).start()
     try:
         ann, bob, cid = [await wire(bridge.url, limits_file.tokens[n])
                          for n in ("ann", "bob", "cid")]
-        await cid.send({"op": "fragment", "id": "c", "data": " " * PART, "num": 0, "total": 2})
-        error = await cid.expect(op="status", level="error")
-        assert error["msg"] == ("fragment 'c': piece 0 refused: fragment memory of principal "
-                                "cid's connections would pass the per-token limit "
-                                f"(fragment_bytes {SMALL} bytes)")
+        by_op = await wire(bridge.url)  # cid again, proving it by an auth op
+        await by_op.send({"op": "auth", "mac": limits_file.tokens["cid"]})
+        for client in (cid, by_op):
+            await client.send({"op": "fragment", "id": "c", "data": " " * PART, "num": 0,
+                               "total": 2})
+            error = await client.expect(op="status", level="error")
+            assert error["msg"] == ("fragment 'c': piece 0 refused: fragment memory of "
+                                    "principal cid's connections would pass the per-token "
+                                    f"limit (fragment_bytes {SMALL} bytes)")
+        await by_op.close()
         await ann.send({"op": "fragment", "id": "a", "data": " " * PART, "num": 0, "total": 2})
         await roundtrip(ann)
         assert not _refused_errors(ann)  # no per-principal limit: the address's applies
