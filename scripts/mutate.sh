@@ -18,7 +18,8 @@
 # It works on a copy of the checkout's files (tracked and untracked, not ignored) in
 # $MUTATE_DIR (default: the system's temp directory), one folder per module, so the
 # checkout gets no mutants/ folder and no mutmut settings; run it again on the same module
-# and only changed functions are tested again. Afterwards, from that module's folder (the
+# and only changed functions are tested again (MUTATE_FRESH=1 tests every mutant again, as
+# after tests were added or changed). Afterwards, from that module's folder (the
 # run prints it): `python -m mutmut results` lists the survivors, `python -m mutmut show
 # NAME` shows one as a diff.
 #
@@ -109,8 +110,8 @@ mutate_one() {
         echo "process_isolation = forkserver"
     } >"$work/setup.cfg.new"
     mv "$work/setup.cfg.new" "$work/setup.cfg"
-    if ! cmp -s "$work/setup.cfg" "$work/mutants/setup.cfg"; then
-        rm -rf "$work/mutants"  # other tests or settings: no earlier result holds
+    if [ -n "${MUTATE_FRESH:-}" ] || ! cmp -s "$work/setup.cfg" "$work/mutants/setup.cfg"; then
+        rm -rf "$work/mutants"  # other tests or settings (or asked): no earlier result holds
     fi
     echo "[mutate] $spec against $* (in $work)"
     started=$SECONDS
