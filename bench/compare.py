@@ -30,6 +30,7 @@ import hashlib
 import json
 import math
 import os
+import re
 import statistics
 import subprocess
 import sys
@@ -265,9 +266,28 @@ def unmet(requirements: Sequence[str]) -> list[str]:
     return out
 
 
+REV_EXTRAS = ("bridge", "cbor", "cli", "mcap")
+"""The extras a REV's own venv is made with (Jazzy's bridge: one venv holds one ROS 2
+distribution, so ``bridge-kilted`` is not among them)."""
+
+
 def _all_requirements(deps: dict[str, Any]) -> list[str]:
-    return [*deps["dependencies"], *(r for extra in deps["optional-dependencies"].values()
-                                     for r in extra)]
+    """The dependencies and those of :data:`REV_EXTRAS`, an extra naming others of the
+    project's (``roslibpy-lite[bridge-base]``) followed."""
+    out: list[str] = list(deps["dependencies"])
+    todo, seen = list(REV_EXTRAS), set[str]()
+    while todo:
+        extra = todo.pop()
+        if extra in seen:
+            continue
+        seen.add(extra)
+        for req in deps["optional-dependencies"].get(extra, []):
+            own = re.match(r"roslibpy[-_]lite\[([\w,-]+)\]", req)
+            if own:
+                todo += own.group(1).split(",")
+            else:
+                out.append(req)
+    return out
 
 
 def cache_dir() -> Path:
@@ -339,7 +359,7 @@ def environment(sha: str, tree: Path, log: Callable[[str], None]) -> str:
         f"{', '.join(missing)}; making its venv {venv}")
     subprocess.run([sys.executable, "-m", "venv", "--clear", str(venv)], check=True)
     subprocess.run([str(python), "-m", "pip", "install", "-q", "--disable-pip-version-check",
-                    f"{tree}[bridge,cbor,cli,mcap]", "psutil"], check=True)
+                    f"{tree}[{','.join(REV_EXTRAS)}]", "psutil"], check=True)
     stamp.write_text(sha + "\n")
     return str(python)
 

@@ -11,7 +11,7 @@
 #                                        # $ROSLIBPY_LITE_CAFILE (SECURITY.md)
 #
 # Set-up on a fresh machine (venv, ROS 2 Jazzy wheels, interfaces) is done by
-# scripts/setup.sh, sourced first. DDS stays on loopback
+# scripts/setup.sh, sourced first; ROS_DISTRO=kilted runs it all on ROS 2 Kilted instead. DDS stays on loopback
 # (ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST, exported by setup.sh).
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 BRIDGE_ARGS=()
@@ -28,7 +28,9 @@ export ROS_AUTOMATIC_DISCOVERY_RANGE="${ROS_AUTOMATIC_DISCOVERY_RANGE:-LOCALHOST
 export PYTHONUNBUFFERED=1
 PORT="${PORT:-9090}"
 HOST=127.0.0.1
-PY="$ROOT/.venv/bin/python"
+# the venv setup.sh made for $ROS_DISTRO (.venv for Jazzy, .venv-kilted for Kilted)
+PY="$ROSLIBPY_LITE_VENV/bin/python"
+VREL="${ROSLIBPY_LITE_VENV#"$ROOT"/}"
 
 say() { printf '[demo] %s\n' "$*"; }
 
@@ -124,12 +126,12 @@ cat <<EOF
 [demo] ------------------------------------------------------------------------
 [demo] bridge on $URL; the IMU simulator and the sample program are running.
 [demo] From another terminal (cd $ROOT), call the service:
-[demo]   .venv/bin/roslibpy-lite service call /mult_floats mult_msgs/srv/MultFloats "{x: 2.5, y: 4.0}"$url_opt
+[demo]   $VREL/bin/roslibpy-lite service call /mult_floats mult_msgs/srv/MultFloats "{x: 2.5, y: 4.0}"$url_opt
 [demo] watch the counter:
-[demo]   .venv/bin/roslibpy-lite topic echo /example_counter --count 3$url_opt
+[demo]   $VREL/bin/roslibpy-lite topic echo /example_counter --count 3$url_opt
 [demo] send the IMU integrator a goal (Ctrl+C cancels it):
-[demo]   .venv/bin/roslibpy-lite action send_goal /integrate_imu mult_msgs/action/IntegrateImu "{seconds: 2.0}" --feedback$url_opt
-[demo] or from Python (.venv/bin/python):
+[demo]   $VREL/bin/roslibpy-lite action send_goal /integrate_imu mult_msgs/action/IntegrateImu "{seconds: 2.0}" --feedback$url_opt
+[demo] or from Python ($VREL/bin/python):
 [demo]   from roslibpy_lite import sync
 [demo]   with sync.connect("$URL") as ros:
 [demo]       goal = ros.send_goal("/integrate_imu", "mult_msgs/action/IntegrateImu", {"seconds": 2.0})

@@ -1,13 +1,49 @@
 #!/usr/bin/env bash
-# Set up (if needed) and run every check: ruff, mypy --strict, the whole test suite.
+# Set up (if needed) and run every check: ruff, mypy --strict, the whole test suite, on the
+# ROS 2 distribution that ROS_DISTRO names (jazzy, the default, or kilted: scripts/setup.sh).
+#
+#   bash scripts/test.sh                      # Jazzy, in .venv
+#   ROS_DISTRO=kilted bash scripts/test.sh    # Kilted, in .venv-kilted
+#
+# Under CI (CI=true) a Jazzy run is followed by the Kilted leg: the bridge's conformance,
+# stock-peer and relay tests (KILTED_LEG_TESTS) on Kilted's wheels; ROSLIBPY_LITE_KILTED_LEG=0
+# leaves it out, =1 runs it outside CI too. See docs/distributions.md.
 set -euo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+
+# What the Kilted leg runs: the bridge's rosbridge conformance, the stock peers (roslibpy,
+# roslib.js, Foxglove) against it, and the relay with a Kilted robot (a subset of tests/relay
+# that starts real robots; the relay's own units do not touch ROS). Measured on a loaded
+# 2-core machine: see docs/distributions.md.
+KILTED_LEG_TESTS=(
+  tests/conformance
+  tests/peers
+  tests/distro
+  tests/relay/test_relay.py
+  tests/relay/test_relay_actions.py
+  tests/relay/test_relay_types.py
+  tests/relay/test_relay_cbor.py
+)
+
+case "${CI:-}" in 1|true|yes) ci=1 ;; *) ci=0 ;; esac
+KILTED_LEG="${ROSLIBPY_LITE_KILTED_LEG:-$ci}"
+
 # shellcheck source=scripts/setup.sh
 . "$ROOT/scripts/setup.sh"
 cd "$ROOT"
 export ROS_AUTOMATIC_DISCOVERY_RANGE="${ROS_AUTOMATIC_DISCOVERY_RANGE:-LOCALHOST}"
 # One DDS domain per run, so concurrent runs on one machine do not meet.
 export ROS_DOMAIN_ID="${ROS_DOMAIN_ID:-$(( $$ % 100 + 1 ))}"
+WORKERS="${ROSLIBPY_LITE_TEST_WORKERS:-2}"
+
+if [ "${1:-}" = "--kilted-leg" ]; then
+  # (the leg itself: run by the Jazzy run below, in a process of its own, with Kilted's venv)
+  shift
+  echo "[test] Kilted leg: pytest ${KILTED_LEG_TESTS[*]} (ROS_DOMAIN_ID=$ROS_DOMAIN_ID)"
+  exec python -m pytest -n "$WORKERS" --dist loadfile "${KILTED_LEG_TESTS[@]}" "$@"
+fi
+
+echo "[test] ROS 2 $ROS_DISTRO ($VIRTUAL_ENV)"
 echo "[test] ruff"
 ruff check roslibpy_lite bridge_server msgs examples bench tests docs/_hooks
 echo "[test] mypy --strict"
@@ -20,6 +56,14 @@ NO_MKDOCS_2_WARNING=1 mkdocs build --strict --quiet --site-dir "$SITE"
 export ROSLIBPY_LITE_BUILT_SITE="$SITE"
 # Two workers (pytest-xdist), each with its own DDS domain (tests/conftest.py), a file's tests
 # on one worker: most of a test's time is waiting on another process, so two share the cores.
-WORKERS="${ROSLIBPY_LITE_TEST_WORKERS:-2}"
-echo "[test] pytest (ROS_DOMAIN_ID=$ROS_DOMAIN_ID, $WORKERS workers)"
-python -m pytest -n "$WORKERS" --dist loadfile "$@"
+echo "[test] pytest (ROS_DISTRO=$ROS_DISTRO, ROS_DOMAIN_ID=$ROS_DOMAIN_ID, $WORKERS workers)"
+rc=0
+python -m pytest -n "$WORKERS" --dist loadfile "$@" || rc=$?
+if [ "$ROS_DISTRO" = jazzy ] && [ "$KILTED_LEG" = 1 ]; then
+  # Its own process: setup.sh makes (or reuses) .venv-kilted and activates it there.
+  start=$SECONDS
+  echo "[test] Kilted leg: set-up (ROSLIBPY_LITE_KILTED_LEG=0 leaves it out)"
+  ROS_DISTRO=kilted bash "$ROOT/scripts/test.sh" --kilted-leg || rc=$?
+  echo "[test] Kilted leg: $(( SECONDS - start )) s in all"
+fi
+exit "$rc"

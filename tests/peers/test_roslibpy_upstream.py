@@ -21,8 +21,8 @@ import pytest
 
 from tests.helpers import BridgeProcess
 
-ROOT = Path(__file__).resolve().parents[2]
-UPSTREAM = ROOT / ".venv" / "peer-src" / "roslibpy-2.1.0" / "tests"
+# scripts/setup.sh unpacks them into the venv running the tests (.venv, or .venv-kilted)
+UPSTREAM = Path(sys.prefix) / "peer-src" / "roslibpy-2.1.0" / "tests"
 STEP_S = 0.5  # per Fibonacci number: test_cancel cancels after 2 s, while order 10 runs on
 
 
