@@ -32,6 +32,7 @@ try:
     from roslibpy_lite.protocol import keepalive
 
     from . import eventloop, security
+    from .codec import budget as decode_budget
     from .interfaces import BridgeError
     from .security.options import MAX_MESSAGE_SIZE
     from .session.resume import ResumeConfig
@@ -256,6 +257,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         choices=("DEBUG", "INFO", "WARNING", "ERROR"),
         help="logging level (default INFO)",
     )
+    decode_budget.add_arguments(p)
     security.add_arguments(p)
     zenoh_link.add_arguments(p, listen=False)
     robot_link.add_arguments(p)
@@ -428,6 +430,7 @@ def main(argv: list[str] | None = None) -> int:
         try:
             replay_window(args)
             parse_overrides(args.relay_priority)
+            decode_budget.apply(args)
         except ValueError as exc:
             refusal = str(exc)
     if refusal is None and args.zenoh_connect:

@@ -20,6 +20,18 @@ string its length and NUL), so a count of 2^32-1 in a few bytes fails at once
 ("claims N elements ...") rather than looping without consuming input. A bounded
 sequence's count is checked against its bound too.
 
+What the decoded form costs is bounded as well, by a :class:`Budget`: a message may cost at
+most ``max(floor, per_byte * its size)`` bytes of Python objects once decoded (16 times its
+size, at least 32 MiB, by default: :func:`set_budget` changes it for the process). Each
+sequence or array is charged before its elements are read, its count times what one
+element costs decoded (:func:`element_cost`: its slot in the list, and a message's dict,
+field names and values; an empty message 72 bytes, a ``geometry_msgs/Point`` 311); arrays
+that decode to one ``bytes`` (``uint8``/``char``) or typed array (numbers with ``typed``)
+cost nothing per element. A message over it raises :class:`BudgetError` naming the field,
+before the elements that would pass it are made: 8 MiB of one-byte structs (1.7 GB
+decoded) fail at their sequence's count, while a 4 MiB ``PointCloud2`` or a 1080p
+``Image`` (their data one ``bytes``) cost a few hundred bytes.
+
 :func:`encode` is the way back, from a typed message to the bytes rclpy's serializer
 gives (MockRos's ``cbor-raw`` and recordings made from it); it walks the fields
 rather than compiling, as it is not on a hot path.
@@ -38,12 +50,14 @@ import struct
 import sys
 import weakref
 from collections.abc import Callable
+from dataclasses import dataclass
 from typing import Any
 
 from .runtime import Message, lookup_message
 
-__all__ = ["TYPED_ARRAY_TAGS", "CdrError", "Typed", "decode", "decoder_for", "encode",
-           "min_size"]
+__all__ = ["DEFAULT_BUDGET", "TYPED_ARRAY_TAGS", "Budget", "BudgetError", "CdrError", "Typed",
+           "budget", "decode", "decoder_for", "element_cost", "encode", "min_size",
+           "set_budget"]
 
 _PRIMITIVES: dict[str, tuple[str, int]] = {  # rclpy's name -> (struct code, size)
     "boolean": ("?", 1),
@@ -89,9 +103,72 @@ class CdrError(ValueError):
         super().__init__(f"{lead}{type_name}: cannot {action} {field} {way} CDR: {why}")
 
 
+class BudgetError(CdrError):
+    """A message that would cost more decoded than its :class:`Budget` allows (valid CDR,
+    refused before the elements over the budget were made)."""
+
+
+@dataclass(frozen=True)
+class Budget:
+    """What one message may cost once decoded: at most ``max(floor, per_byte * size)``
+    bytes of Python objects (see the module text and :func:`element_cost`)."""
+
+    per_byte: int = 16
+    """Decoded bytes allowed per byte of the serialized message."""
+    floor: int = 32 * 1024 * 1024
+    """Decoded bytes allowed whatever the message's size (small messages)."""
+
+    def allowance(self, size: int) -> int:
+        """The decoded bytes a message of ``size`` bytes may cost."""
+        return max(self.floor, self.per_byte * size)
+
+    def describe(self, size: int) -> str:
+        """The budget of a message of ``size`` bytes, in words."""
+        return (f"{_mib(self.allowance(size))} for a message of {_mib(size)} "
+                f"({self.per_byte} times its size, at least {_mib(self.floor)})")
+
+
+DEFAULT_BUDGET = Budget()
+"""The budget every decoder applies unless :func:`set_budget` gave another."""
+_budget = DEFAULT_BUDGET
+_per_byte, _floor = _budget.per_byte, _budget.floor  # read per message: no attribute lookups
+
+
+def set_budget(new: Budget) -> None:
+    """Make ``new`` the budget of every message decoded from now on, in every thread (the
+    bridge and the relay set it from their options at start)."""
+    global _budget, _per_byte, _floor
+    if new.per_byte < 1 or new.floor < 0:
+        raise ValueError(f"a decode budget needs per_byte >= 1 and floor >= 0, not {new}")
+    _budget = new
+    _per_byte, _floor = new.per_byte, new.floor
+
+
+def budget() -> Budget:
+    """The budget messages are decoded within now."""
+    return _budget
+
+
+def _mib(n: int) -> str:
+    return f"{n / (1 << 20):.1f} MiB" if n >= 1 << 20 else f"{n} bytes"
+
+
+class _OverBudget(ValueError):
+    """Raised inside a decoder; :func:`_fail` makes it a :class:`BudgetError`."""
+
+
+def _over_budget(count: int, each: int, left: int, size: int) -> _OverBudget:
+    rest = "" if left >= _budget.allowance(size) else f", of which {_mib(max(left, 0))} were left"
+    return _OverBudget(
+        f"its {count} elements would cost about {_mib(count * each)} decoded "
+        f"({each} bytes each), over the decode budget of {_budget.describe(size)}{rest}")
+
+
 def _fail(type_name: str, field: str, exc: Exception) -> CdrError:
     if isinstance(exc, CdrError):  # from a nested message: the path starts here
-        return CdrError(type_name, f"{field}.{exc.path}" if exc.path else field, exc.why)
+        return type(exc)(type_name, f"{field}.{exc.path}" if exc.path else field, exc.why)
+    if isinstance(exc, _OverBudget):
+        return BudgetError(type_name, field, str(exc))
     why = "truncated" if isinstance(exc, struct.error | IndexError) else str(exc)
     return CdrError(type_name, field, why)
 
@@ -122,6 +199,61 @@ def min_size(spec: str, find: Callable[[str], type[Message]] | None = None,
         fields = (find or lookup_message)(base)._fields_and_types
         one = sum(min_size(f, find, _depth + 1) for f in fields.values()) if fields else 1
     return count * max(one, 1)
+
+
+# What objects take in the allocator's blocks (16-byte steps), not as sys.getsizeof says:
+_SLOT = 8  # a list's pointer to each element
+_LIST = 64  # an empty list
+_STR = 64  # a short str (its characters are in the bytes, counted there)
+_NUMBER = {"boolean": 0, "octet": 0, "char": 0, "uint8": 0,  # cached objects (int8: below)
+           "int64": 48, "uint64": 48}  # others (float, int): 32
+_INT = 32
+_INT8_CACHED = bytes(range(0, 0x81)) + bytes(range(0xFB, 0x100))  # int8 -5..128: CPython's
+# small ints; the others (-128..-6) are one int object each
+
+
+def _dict_size(n: int) -> int:
+    """What a dict of ``n`` keys takes, built key by key as the decoders build theirs."""
+    found = _DICT_SIZES.get(n)
+    if found is None:
+        made: dict[str, None] = {}
+        for i in range(n):
+            made[f"f{i}"] = None
+        found = _DICT_SIZES[n] = -(-sys.getsizeof(made) // 16) * 16
+    return found
+
+
+_DICT_SIZES: dict[int, int] = {}
+
+
+def element_cost(spec: str, find: Callable[[str], type[Message]] | None = None,
+                 _depth: int = 0) -> int:
+    """What one value of IDL type ``spec`` costs decoded, in bytes (an upper estimate, its
+    slot in a list aside), in the allocator's 16-byte blocks: a number its object (32, 48 for
+    a 64-bit integer, 0 for ``bool`` and ``uint8``, as CPython shares those), a string 64 (its
+    characters are in the message's bytes), a message its dict, its field names (as an
+    encoding repeats them) and its fields' values; a sequence inside it its list alone (its
+    elements are charged when their count is read). This, plus 8 for the slot, is what an
+    element of an array is charged against the :class:`Budget`."""
+    m = _TYPE.match(spec)
+    if m is None:
+        raise CdrError("?", "", f"unknown field type {spec!r}")
+    if m["seq"] is not None:
+        return _LIST
+    base, fixed = m["base"], m["fixed"]
+    if fixed is not None:
+        if base in _BYTES:
+            return 33 + int(fixed)
+        return _LIST + int(fixed) * (_SLOT + element_cost(base, find, _depth))
+    if base in _PRIMITIVES:
+        return _NUMBER.get(base, _INT)
+    if base.startswith(("string", "wstring")):
+        return _STR
+    if _depth > 32:  # ROS types do not nest this deep, and never in themselves
+        raise CdrError(base, "", "nested more than 32 levels deep")
+    fields = (find or lookup_message)(base)._fields_and_types
+    return _dict_size(len(fields)) + sum(len(name) + 4 + element_cost(f, find, _depth + 1)
+                                         for name, f in fields.items())
 
 
 def _claims(count: int, each: int, left: int) -> ValueError:
@@ -157,6 +289,7 @@ class _Gen:
             "unpack_from": struct.unpack_from, "array": array.array, "bytes": bytes,
             "LITTLE": _LITTLE, "CdrError": CdrError, "StructError": struct.error,
             "wide": _wide, "typed": typed, "claims": _claims, "over_bound": _over_bound,
+            "over_budget": _over_budget, "INT8_CACHED": _INT8_CACHED,
         }
         self.n = 0
 
@@ -192,7 +325,10 @@ class _Gen:
                 self.emit(depth, f"o += 4 + {n}")
         else:
             fn = self.nested(base)
-            self.emit(depth, f"{target}, o = {fn}(b, o)")
+            if self.ns[fn].charges:
+                self.emit(depth, f"{target}, o, r = {fn}(b, o, r)")
+            else:
+                self.emit(depth, f"{target}, o = {fn}(b, o)")
 
     def members(self, depth: int, fields: dict[str, str], out: str, prefix: str) -> None:
         """Decode ``fields`` into the dict ``out``: runs of same-size primitives with one
@@ -227,6 +363,13 @@ class _Gen:
             else:
                 self.field(depth, name, spec, f"{out}[{name!r}]")
             i += 1
+
+    def charge(self, depth: int, count: str, each: int, extra: str = "") -> None:
+        """Take ``count`` elements of ``each`` bytes (and ``extra``) from the budget left,
+        ``r``; past it, fail before they are made."""
+        self.emit(depth, f"r -= {count} * {each}{extra}")
+        self.emit(depth, f"if r < 0: raise over_budget({count}, {each}, "
+                         f"r + {count} * {each}{extra}, len(b))")
 
     def nested(self, type_name: str) -> str:
         name = "d_" + re.sub(r"\W", "_", type_name)
@@ -265,11 +408,17 @@ class _Gen:
                 self.emit(depth, f"{target} = typed({TYPED_ARRAY_TAGS[base]}, bytes(b[o:{end}]))")
             elif base in ("octet", "boolean"):
                 cast = "bool" if base == "boolean" else ""
+                self.charge(depth, count, _SLOT)
                 self.emit(depth, f"{target} = [{cast}(x) for x in bytes(b[o:{end}])]")
-            elif m["fixed"] is not None and int(count) <= 32:  # small: one unpack_from
-                code = _PRIMITIVES[base][0]
+            elif m["fixed"] is not None and int(count) <= 32:  # small: one unpack_from (its
+                code = _PRIMITIVES[base][0]  # cost is the type's, not the bytes')
                 self.emit(depth, f"{target} = list(unpack_from('<{count}{code}', b, o))")
             else:
+                if base == "int8":  # small ints are shared: the others are charged by count
+                    self.charge(depth, count, _SLOT, f" + {_INT} * len(bytes(b[o:{end}])"
+                                                     ".translate(None, INT8_CACHED))")
+                else:
+                    self.charge(depth, count, _SLOT + _NUMBER.get(base, _INT))
                 arr = self.var()
                 self.emit(depth, f"{arr} = array('{_ARRAY_CODES[base]}')")
                 self.emit(depth, f"{arr}.frombytes(b[o:{end}])")
@@ -280,6 +429,7 @@ class _Gen:
         each = min_size(base, self.find)  # checked once: the loop ends within the bytes
         self.emit(depth, f"if {count} * {each} > len(b) - o: "
                          f"raise claims({count}, {each}, len(b) - o)")
+        self.charge(depth, count, _SLOT + element_cost(base, self.find))
         items = self.var()
         self.emit(depth, f"{items} = []")
         self.emit(depth, f"for _ in range({count}):")
@@ -289,51 +439,73 @@ class _Gen:
         self.emit(depth, f"{target} = {items}")
 
 
-_Decoder = Callable[[Any, int], tuple[dict[str, Any], int]]
+_Decoder = Callable[..., Any]
+"""``fn(buffer, offset[, budget left]) -> (wire dict, offset after it[, budget left])``."""
 _DECODERS: weakref.WeakKeyDictionary[type[Message], dict[Typed | None, _Decoder]] = (
     weakref.WeakKeyDictionary())  # a class a relay released takes its decoders along
 
 
-def _decoder_with_offset(cls: type[Message], typed: Typed | None = None
-                         ) -> Callable[[Any, int], tuple[dict[str, Any], int]]:
-    """``fn(buffer, offset) -> (wire dict, offset after it)`` for ``cls`` (compiled once
-    per ``typed``)."""
+def _decoder_with_offset(cls: type[Message], typed: Typed | None = None) -> _Decoder:
+    """``fn(buffer, offset, budget left) -> (wire dict, offset after it, budget left)`` for
+    ``cls`` (compiled once per ``typed``) when ``fn.charges``; for a type that cannot take
+    from the budget (no sequences or large arrays) ``fn(buffer, offset) -> (wire dict,
+    offset after it)``."""
     mine = _DECODERS.setdefault(cls, {})
     found = mine.get(typed)
     if found is not None:
         return found
     gen = _Gen(typed, cls._lookup)
-    gen.emit(0, "def decode(b, o):")
-    gen.emit(1, "out = {}")
-    gen.emit(1, "field = ''")
-    gen.emit(1, "try:")
     gen.members(2, cls._fields_and_types, "out", "")
-    gen.emit(1, "except (CdrError, StructError, ValueError, IndexError) as exc:")
-    gen.emit(2, "raise fail(TYPE, field, exc) from None")
-    gen.emit(1, "return out, o")
+    charges = _charges(gen.lines)
+    budget = ", r" if charges else ""  # a type that cannot charge keeps the plain signature
+    gen.lines = [f"def decode(b, o{budget}):", "    out = {}", "    field = ''", "    try:",
+                 *gen.lines,
+                 "    except (CdrError, StructError, ValueError, IndexError) as exc:",
+                 "        raise fail(TYPE, field, exc) from None", f"    return out, o{budget}"]
     gen.ns["fail"] = _fail
     gen.ns["TYPE"] = cls._type
     exec(compile("\n".join(gen.lines), f"<cdr {cls._type}>", "exec"), gen.ns)
-    fn: Callable[[Any, int], tuple[dict[str, Any], int]] = gen.ns["decode"]
+    fn: _Decoder = gen.ns["decode"]
+    fn.charges = charges  # type: ignore[attr-defined]
     mine[typed] = fn
     return fn
+
+
+def _charges(lines: list[str]) -> bool:
+    """Whether generated code takes from the budget (itself, or through a nested decoder)."""
+    return any("r -= " in line or ", r)" in line for line in lines)
 
 
 def decoder_for(cls: type[Message], typed: Typed | None = None
                 ) -> Callable[[bytes | memoryview], dict[str, Any]]:
     """``fn(serialized) -> wire dict`` for messages of ``cls``; with ``typed``, numeric
-    arrays as typed arrays (see the module docstring)."""
+    arrays as typed arrays (see the module docstring). Within the :class:`Budget` in force
+    when it is called (:class:`BudgetError` past it)."""
     inner = _decoder_with_offset(cls, typed)
 
-    def decode_one(data: bytes | memoryview) -> dict[str, Any]:
+    def check(data: bytes | memoryview) -> None:
         if len(data) < 4:
             raise CdrError(cls._type, "", f"{len(data)} bytes are too few for CDR")
-        if data[1] != 1:  # 0x00 0x01: CDR little-endian; big-endian senders are rare
-            raise CdrError(cls._type, "", "only little-endian CDR is decoded "
-                           f"(encapsulation {bytes(data[:2]).hex()})")
-        return inner(data, 4)[0]
+        raise CdrError(cls._type, "", "only little-endian CDR is decoded "
+                       f"(encapsulation {bytes(data[:2]).hex()})")
 
-    return decode_one
+    if not inner.charges:  # type: ignore[attr-defined]
+        def decode_one(data: bytes | memoryview) -> dict[str, Any]:
+            if len(data) < 4 or data[1] != 1:  # 0x00 0x01: CDR little-endian
+                check(data)
+            out: dict[str, Any] = inner(data, 4)[0]
+            return out
+
+        return decode_one
+
+    def decode_within(data: bytes | memoryview) -> dict[str, Any]:
+        if len(data) < 4 or data[1] != 1:
+            check(data)
+        left = _per_byte * len(data)
+        out: dict[str, Any] = inner(data, 4, left if left > _floor else _floor)[0]
+        return out
+
+    return decode_within
 
 
 def decode(data: bytes | memoryview, cls: type[Message]) -> dict[str, Any]:

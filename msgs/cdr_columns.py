@@ -19,7 +19,9 @@ A message the bytes cannot hold (truncated, a count past its end, not little-end
 raises from the function (``struct.error``, ``IndexError``, ``ValueError``, ``CdrError``);
 the caller decodes that one message with :func:`msgs.cdr.decode` to name the field.
 As there, a count read from the bytes is checked against what the bytes left can hold
-before anything is read or allocated for it.
+before anything is read or allocated for it, and the arrays a row decodes are charged
+against the message's :class:`msgs.cdr.Budget` (an array stepped over costs nothing);
+past it the row raises (a ``ValueError``), and :func:`msgs.cdr.decode` names the field.
 """
 
 from __future__ import annotations
@@ -232,6 +234,9 @@ def row_decoder(cls: type[Message], wanted: Sequence[str]) -> RowDecoder:
     gen.flush()
     gen.emit(1, "if o > len(b): raise IndexError")
     gen.emit(1, f"return ({', '.join(gen.values)}{',' if len(gen.values) == 1 else ''})")
+    if cdr._charges(gen.lines):  # within the budget
+        gen.lines.insert(3, "    r = budget().allowance(len(b))")  # after 'o = 4'
+        gen.ns["budget"] = cdr.budget
     exec(compile("\n".join(gen.lines), f"<cdr rows {cls._type}>", "exec"), gen.ns)
     fn: RowDecoder = gen.ns["row"]
     if len(mine) > 64:  # the lists of fields one type was read with: a few

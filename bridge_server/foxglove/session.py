@@ -36,6 +36,7 @@ from typing import TYPE_CHECKING, Any
 from msgs import cdr
 from msgs.runtime import ValidationError
 
+from ..codec.budget import explain
 from ..interfaces import BridgeError, ConversionError, canonical_name
 from ..security.gate import POLICY_VIOLATION
 from ..security.names import InvalidNameError, check_name, full_name
@@ -47,6 +48,7 @@ from ..session.liveness import watch_link
 from ..session.outbox import Outbox, Subscription
 from . import wire
 from .hub import CLOCK, GraphState, message_class
+from .inbound import Inbound
 
 if TYPE_CHECKING:
     from ..graph import Message as RosMessage
@@ -83,7 +85,7 @@ class _ClientChannel:
     topic: str
     encoding: str
     publisher: Publisher
-    decode: Callable[[bytes], Any]
+    inbound: Inbound  # decodes and converts its messages, in order (large ones off the loop)
 
 
 class _Topics:
@@ -201,6 +203,8 @@ class FoxgloveSession:
         for sub, _ in list(self.subscriptions.values()):
             self._drop(sub)
         self.subscriptions.clear()
+        for ch in self.client_channels.values():
+            ch.inbound.close()
         grace = self.shared.publisher_grace
         for pub in self.topics.publishers.values():
             if grace > 0:
@@ -440,7 +444,13 @@ class FoxgloveSession:
             pub = self.topics.publishers[topic] = self.graph.acquire_publisher(topic, cls, False,
                                                                                10)
         self._publisher_refs[topic] = self._publisher_refs.get(topic, 0) + 1
-        self.client_channels[ch.id] = _ClientChannel(ch.id, topic, ch.encoding, pub, decode)
+        conv = pub.conv
+
+        def convert(payload: bytes) -> Any:
+            return conv.from_obj(decode(payload), "msg")
+
+        self.client_channels[ch.id] = _ClientChannel(ch.id, topic, ch.encoding, pub,
+                                                     Inbound(convert))
 
     def _unadvertise(self, op: wire.ClientUnadvertise) -> None:
         for channel_id in op.channel_ids:
@@ -448,6 +458,7 @@ class FoxgloveSession:
             if ch is None:
                 self.error(f"unadvertise: no client channel {channel_id} on this connection")
                 continue
+            ch.inbound.close()
             refs = self._publisher_refs[ch.topic] - 1
             self._publisher_refs[ch.topic] = refs
             if refs == 0:
@@ -460,16 +471,30 @@ class FoxgloveSession:
             self.error(f"message data: no client channel {op.channel_id} on this connection "
                        "(advertise it first)")
             return
-        pub = ch.publisher
-        try:
-            obj = ch.decode(op.payload)
-            msg = pub.conv.from_obj(obj, "msg")
-        except (cdr.CdrError, ValueError, ConversionError) as exc:
-            self.error(f"message data on {ch.topic} ({pub.type_name}, {ch.encoding}): "
-                       f"not published: {exc}")
-            return
-        pub.publish(msg)
-        self.shared.metrics.published(ch.topic, len(op.payload) + 5)
+        size = len(op.payload)
+
+        def done(msg: Any, exc: BaseException | None) -> None:
+            if exc is not None:
+                self._not_published(ch, exc)
+            elif self.client_channels.get(ch.id) is ch:  # not unadvertised meanwhile
+                ch.publisher.publish(msg)
+                self.shared.metrics.published(ch.topic, size + 5)
+
+        why = ch.inbound.submit(op.payload, done)
+        if why is not None:
+            self._not_published(ch, why)
+
+    def _not_published(self, ch: _ClientChannel, why: BaseException | str) -> None:
+        """Tell the client one of its messages on ``ch`` was not published, and why (a
+        message over the decode budget names its field and the budget)."""
+        if not isinstance(why, str | cdr.CdrError | ValueError | ConversionError):
+            log.error("session %d: converting a message of %s failed", self.sid, ch.topic,
+                      exc_info=why)
+            why = f"internal error ({type(why).__name__})"
+        elif not isinstance(why, str):
+            why = explain(why)
+        self.error(f"message data on {ch.topic} ({ch.publisher.type_name}, {ch.encoding}): "
+                   f"not published: {why}")
 
     # -- services ------------------------------------------------------------------------------
 

@@ -55,7 +55,7 @@ from msgs.runtime import Message as WireMessage
 from msgs.runtime import UnknownTypeError as WireUnknownType
 
 from ..codec.cdr_json import JsonFromCdr, wire_encoder
-from ..codec.encodings import EncodedMessage
+from ..codec.encodings import Encoded, EncodedMessage
 from ..graph import (
     GoalListener,
     Listener,
@@ -77,6 +77,7 @@ from ..interfaces import (
 )
 from ..memory.graph import MemoryConverter
 from . import keys
+from .decode import DECODED, TopicLane, wanted
 from .inbox import Faults, Inbox
 from .keys import (
     GOAL_WAIT,
@@ -159,7 +160,7 @@ class ZenohMessage(EncodedMessage):
     """One message the robot put, encoded for clients lazily and once per encoding; bytes
     that do not decode as the type the robot named are the robot's fault, counted once."""
 
-    __slots__ = ("_bad", "_msg_json", "conv", "faults")
+    __slots__ = ("_bad", "_msg_json", "_refused", "conv", "faults")
 
     def __init__(self, topic: str, data: bytes, conv: RelayConverter, stamp_ns: int,
                  faults: Faults) -> None:
@@ -168,9 +169,26 @@ class ZenohMessage(EncodedMessage):
         self.faults = faults
         self._bad = False
         self._msg_json: str | None = None
+        self._refused: str | None = None
+
+    def take_json(self, text: str) -> None:
+        """Its JSON text, made on a worker thread (:func:`.decode.prepare`)."""
+        self._msg_json = text
+
+    def take_encoded(self, encoding: str, done: Encoded) -> None:
+        """Its whole op in ``encoding``, made on a worker thread."""
+        self._encoded[encoding] = done
+
+    def refuse(self, why: str) -> None:
+        """It could not be decoded off the loop (``why``): counted once as the robot's fault;
+        its viewers that need it decoded do not get it (its raw viewers do)."""
+        self._refused = why
+        self._undecodable(ValueError(why))
 
     def message_json(self) -> str:
         """The message as JSON text."""
+        if self._refused is not None:
+            raise ReportedError(f"a message of {self.topic} does not decode")
         if self._msg_json is None:
             try:
                 self._msg_json = self.conv.text_of(self.data)
@@ -180,6 +198,8 @@ class ZenohMessage(EncodedMessage):
 
     def cbor_obj(self) -> Any:
         """The message as a CBOR-ready object."""
+        if self._refused is not None:
+            raise ReportedError(f"a message of {self.topic} does not decode")
         try:
             return self.conv.decode_cbor(self.data)
         except Exception as exc:
@@ -192,7 +212,7 @@ class ZenohMessage(EncodedMessage):
             self._bad = True
             self.faults.add("bad_messages", f"messages of {self.topic} that do not decode as "
                             f"{self.conv.type_name} dropped ({type(exc).__name__}: "
-                            f"{str(exc)[:200]})")
+                            f"{str(exc)[:400]})")
         return ReportedError(f"a message of {self.topic} does not decode")
 
 
@@ -211,6 +231,7 @@ class ZenohFeed:
         self._entities: list[Any] = []
         # the converter of the type the last message named, with what it was resolved in
         self._resolved: tuple[str, Any, Any, RelayConverter] | None = None
+        self._lane = TopicLane(self)  # large messages decoded off the loop, in order
 
     @property
     def latched(self) -> ZenohMessage | None:
@@ -243,6 +264,7 @@ class ZenohFeed:
             with contextlib.suppress(zenoh.ZError):
                 entity.undeclare()
         self._entities.clear()
+        self._lane.close()
 
     def on_miss(self, lost: int) -> None:
         """``lost`` messages in a row the robot published (while its link was down) and its
@@ -303,6 +325,18 @@ class ZenohFeed:
                            meta.stamp_ns or time.time_ns(), graph.faults)
         if meta.latched:
             self._latched = msg
+        if not self._lane.take(msg):  # a large one (or one behind it) goes off the loop first
+            self.fan_out(msg)
+
+    def decoded_encodings(self) -> set[str]:
+        """The encodings made from the decoded message that this topic's viewers ask for."""
+        return {w for w in map(wanted, self.listeners) if w in DECODED}
+
+    def fan_out(self, msg: ZenohMessage) -> None:
+        """Hand ``msg`` to every viewer of the topic (on the loop)."""
+        graph = self.graph
+        if graph.subscriptions.get(self.topic) is not self:
+            return
         failed: Exception | None = None
         for listener in list(self.listeners):
             try:

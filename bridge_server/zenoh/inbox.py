@@ -5,7 +5,9 @@ A :class:`Inbox` per robot stands between them, so that no robot can starve anot
 
 - **topic messages** (and latched replies) wait in a queue of at most ``SAMPLE_LIMIT``
   messages and ``SAMPLE_BYTES`` bytes; a robot that sends faster than the loop handles
-  loses its oldest ones (latest-only data: a viewer wants the newest), counted;
+  loses its oldest ones (latest-only data: a viewer wants the newest), counted; one message
+  over :data:`MESSAGE_BYTES` (the relay's ``--max-robot-message-bytes``) is dropped on
+  Zenoh's thread, never queued, counted and logged with its key;
 - **the graph document** waits in one slot: a newer one replaces the one not handled yet;
   one over ``GRAPH_BYTES`` is dropped on Zenoh's thread, never queued;
 - **everything else** (query replies, goal events, the robot's queries to the relay,
@@ -32,8 +34,8 @@ from collections import deque
 from collections.abc import Callable
 from typing import Any
 
-__all__ = ["BATCH", "GRAPH_BYTES", "RELIABLE_BYTES", "RELIABLE_LIMIT", "SAMPLE_BYTES",
-           "SAMPLE_LIMIT", "Faults", "Inbox"]
+__all__ = ["BATCH", "GRAPH_BYTES", "MESSAGE_BYTES", "RELIABLE_BYTES", "RELIABLE_LIMIT",
+           "SAMPLE_BYTES", "SAMPLE_LIMIT", "Faults", "Inbox", "set_message_bytes"]
 
 log = logging.getLogger("bridge_server.zenoh.graph")
 
@@ -42,6 +44,21 @@ SAMPLE_LIMIT = 1024
 
 SAMPLE_BYTES = 64 * 1024 * 1024
 """Payload bytes of one robot's topic messages waiting for the loop at most."""
+
+MESSAGE_BYTES = 32 * 1024 * 1024
+"""The largest message (topic message, or a reply or request) of a robot the relay takes by
+default: a 4K rgb8 camera frame is 24.9 MB. The relay's ``--max-robot-message-bytes``."""
+
+_message_bytes = MESSAGE_BYTES
+
+
+def set_message_bytes(limit: int) -> None:
+    """The largest message of the inboxes made from now on (the relay's option)."""
+    global _message_bytes
+    if limit < 1:
+        raise ValueError(f"--max-robot-message-bytes {limit}: expected 1 or more")
+    _message_bytes = limit
+
 
 RELIABLE_LIMIT = 4096
 """Replies, queries and liveliness changes of one robot waiting for the loop at most."""
@@ -113,8 +130,11 @@ class _Lane:
 class Inbox:
     """One robot's crossing from Zenoh's threads to the event loop (see the module text)."""
 
-    def __init__(self, loop: asyncio.AbstractEventLoop, robot: str) -> None:
+    def __init__(self, loop: asyncio.AbstractEventLoop, robot: str,
+                 max_message: int | None = None) -> None:
         self.loop = loop
+        self.max_message = _message_bytes if max_message is None else max_message
+        """The largest payload taken, in bytes (a larger one is dropped, counted)."""
         self.faults = Faults(robot)
         self.told: list[Callable[[str], None]] = []
         """Called on the loop with a warning for the robot's clients (reliable data lost)."""
@@ -132,6 +152,9 @@ class Inbox:
         bound."""
         def cross(sample: Any) -> None:
             size = _size(sample)
+            if size > self.max_message:
+                self._too_large(sample, size)
+                return
             dropped = 0
             lane = self._samples
             with self._lock:
@@ -155,6 +178,14 @@ class Inbox:
         order; past the bound dropped, counted, and the robot's clients told."""
         def cross(arg: Any) -> None:
             size = _size(arg)
+            if size > self.max_message:
+                self._too_large(arg, size)
+                with self._lock:
+                    self._lost += 1
+                    wake = self._schedule()
+                if wake:
+                    self._wake()
+                return
             lane = self._reliable
             with self._lock:
                 kept = not lane.full_with(size)
@@ -204,6 +235,15 @@ class Inbox:
                 self._wake()
 
         return cross
+
+    def _too_large(self, arg: Any, size: int) -> None:
+        """(Zenoh's thread.) A payload over :attr:`max_message`: counted and logged with its
+        key, never queued."""
+        where = getattr(arg, "key_expr", None) or getattr(getattr(arg, "ok", None), "key_expr",
+                                                          "(a reply)")
+        self.faults.add("message_too_large", f"a message of {size} bytes on {where}, over "
+                        f"the limit of {self.max_message} bytes a message "
+                        "(--max-robot-message-bytes), dropped")
 
     def _schedule(self) -> bool:
         """(Under the lock.) A drain will run: whether the loop must be woken for it."""

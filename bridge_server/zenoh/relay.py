@@ -46,6 +46,7 @@ try:
     from roslibpy_lite.protocol.ops import RELAY_HEADER, parse_op
 
     from .. import eventloop, security
+    from ..codec import budget as decode_budget
     from ..foxglove import SUBPROTOCOL as FOXGLOVE
     from ..foxglove import select_subprotocol
     from ..front.server import REFUSALS, Bridge, BridgeConfig, websockets_pings
@@ -61,6 +62,7 @@ try:
     from ..security.options import MAX_MESSAGE_SIZE
     from ..session.resume import ResumeConfig
     from ..session.session import SessionConfig
+    from . import inbox as zenoh_inbox
     from . import keys
     from . import link as zenoh_link
     from .graph import ZenohGraph
@@ -477,6 +479,11 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p.add_argument("--log-level", default="INFO",
                    choices=("DEBUG", "INFO", "WARNING", "ERROR"),
                    help="logging level (default INFO)")
+    p.add_argument("--max-robot-message-bytes", type=int, default=zenoh_inbox.MESSAGE_BYTES,
+                   help="largest message (or reply) the relay takes from a robot, in bytes "
+                   f"(default {zenoh_inbox.MESSAGE_BYTES >> 20} MiB); a larger one is dropped "
+                   "on arrival, counted and logged with its topic")
+    decode_budget.add_arguments(p)
     eventloop.add_argument(p, "relay")
     security.add_arguments(p)
     zenoh_link.add_arguments(p, listen=True)
@@ -532,6 +539,11 @@ def main(argv: list[str] | None = None) -> int:
         return certs(given[1:])
     args = parse_args(argv)
     refusal = security.exposure_refusal(args) or zenoh_link.options_from_args(args).refusal()
+    try:
+        decode_budget.apply(args)
+        zenoh_inbox.set_message_bytes(args.max_robot_message_bytes)
+    except ValueError as exc:
+        refusal = refusal or str(exc)
     if refusal is not None:
         print(f"roslibpy-lite-relay: refusing to start: {refusal}", file=sys.stderr)
         return 2

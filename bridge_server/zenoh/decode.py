@@ -1,0 +1,142 @@
+"""A robot's large messages decoded and encoded off the event loop, in order per topic.
+
+Every robot of a relay shares one event loop; a message is decoded from its CDR bytes and
+encoded for its viewers once (:class:`~bridge_server.zenoh.graph.ZenohMessage`). On the loop,
+a message of a million small structs stopped every other robot's viewers for seconds
+(issue 53: 4.99 s). Now a message of
+:data:`~bridge_server.codec.budget.OFF_LOOP_BYTES` (64 KiB) or more is decoded and
+encoded, in the encodings its topic's viewers asked for, on a worker thread
+(:func:`prepare`), in pieces the loop's thread can come between
+(:mod:`bridge_server.codec.chunked`); only then do its viewers get it, and the topic's
+later messages wait behind it (:class:`TopicLane`: at most :data:`WAITING` and
+:data:`WAITING_BYTES`, the oldest dropped and counted), so a large message delays its own
+topic and no other. A viewer that
+asked for the bytes as they came (``cbor-raw``, Foxglove) costs no decoding at all.
+
+What a message may cost decoded is bounded by :class:`msgs.cdr.Budget` (the relay's
+``--decode-budget-per-byte``, ``--decode-budget-floor``): one over it is dropped for the
+viewers that need it decoded, counted and logged as the robot's fault with the topic, the
+field and the budget; its raw viewers still get it.
+"""
+
+from __future__ import annotations
+
+import asyncio
+from collections import deque
+from collections.abc import Callable, Collection
+from typing import TYPE_CHECKING, Any
+
+import cbor2
+
+from msgs import cdr
+
+from ..codec.budget import OFF_LOOP_BYTES, explain, workers
+from ..codec.chunked import cbor_bytes, json_text
+from ..codec.publish import _cbor_prefix
+
+if TYPE_CHECKING:
+    from .graph import ZenohFeed, ZenohMessage
+
+__all__ = ["DECODED", "WAITING", "WAITING_BYTES", "TopicLane", "prepare", "wanted"]
+
+
+WAITING = 64
+"""Messages of one topic waiting behind one being prepared, at most (the oldest go)."""
+
+WAITING_BYTES = 64 * 1024 * 1024
+"""And their bytes at most (as a robot's inbox: :data:`~.inbox.SAMPLE_BYTES`)."""
+
+DECODED = ("none", "cbor")
+"""The encodings made from the decoded message (``cbor-raw`` is the bytes as they came)."""
+
+def wanted(listener: Callable[[Any], None]) -> str | None:
+    """The encoding a topic's listener encodes messages in: a rosbridge subscription's
+    ``compression``; ``None`` for one that frames the bytes as they came (Foxglove) or
+    that this module does not know (it encodes on the loop, as before)."""
+    owner = getattr(listener, "__self__", None)
+    if owner is None or getattr(owner, "encode", None) is not None:
+        return None
+    found = getattr(owner, "compression", None)
+    return found if isinstance(found, str) else None
+
+
+def prepare(msg: ZenohMessage, encodings: Collection[str]) -> str | None:
+    """(On a worker thread.) Decode ``msg`` once and make its ``encodings`` (of
+    :data:`DECODED`), kept on it for every viewer; what went wrong, or ``None``."""
+    try:
+        if "none" in encodings:
+            conv = msg.conv
+            values = conv.decode(msg.data)
+            try:
+                text = json_text(values)
+            except ValueError:  # a NaN or infinity: null, as rosbridge sends them
+                text = conv.to_json(conv.cls.from_json(values))
+            del values
+            msg.take_json(text)
+            msg.encoded("none")
+        if "cbor" in encodings:
+            obj = msg.conv.decode_cbor(msg.data)
+            msg.take_encoded("cbor", (_cbor_prefix(msg.topic), cbor_bytes(obj, cbor2.dumps)))
+    except cdr.CdrError as exc:
+        return explain(exc)
+    except Exception as exc:  # the robot's bytes, whatever they hold, must not stop the relay
+        return f"{type(exc).__name__}: {exc}"
+    return None
+
+
+class TopicLane:
+    """One topic's messages on their way to its viewers, in order: a large one prepared on a
+    worker thread first, the ones after it waiting for it (see the module text)."""
+
+    def __init__(self, feed: ZenohFeed) -> None:
+        self.feed = feed
+        self.waiting: deque[ZenohMessage] = deque()
+        self.bytes = 0  # of the messages waiting
+        self._task: asyncio.Task[None] | None = None
+
+    def take(self, msg: ZenohMessage) -> bool:
+        """Whether ``msg`` goes this way (a large one, or one behind it); if not, the caller
+        hands it to the viewers now."""
+        if self._task is None and (len(msg.data) < OFF_LOOP_BYTES
+                                   or not self.feed.decoded_encodings()):
+            return False
+        dropped = 0
+        while self.waiting and (len(self.waiting) >= WAITING
+                                or self.bytes + len(msg.data) > WAITING_BYTES):
+            self.bytes -= len(self.waiting.popleft().data)
+            dropped += 1
+        if dropped:
+            self.feed.graph.faults.add(
+                "messages_dropped", f"messages of {self.feed.topic} dropped, the oldest first, "
+                f"while a large one was decoded (at most {WAITING} and {WAITING_BYTES} bytes "
+                "wait)", dropped)
+        self.waiting.append(msg)
+        self.bytes += len(msg.data)
+        if self._task is None:
+            self._task = asyncio.get_running_loop().create_task(self._run())
+        return True
+
+    async def _run(self) -> None:
+        loop = asyncio.get_running_loop()
+        try:
+            while self.waiting:
+                msg = self.waiting.popleft()
+                self.bytes -= len(msg.data)
+                needs = self.feed.decoded_encodings()
+                failed = None
+                if needs and len(msg.data) >= OFF_LOOP_BYTES:
+                    failed = await loop.run_in_executor(workers(), prepare, msg, needs)
+                if failed is not None:  # its raw viewers still get it
+                    msg.refuse(failed)
+                self.feed.fan_out(msg)
+        finally:
+            if self._task is asyncio.current_task():
+                self._task = None
+
+    def close(self) -> None:
+        """The topic is no longer read: what waits is dropped."""
+        self.waiting.clear()
+        self.bytes = 0
+        if self._task is not None:
+            self._task.cancel()
+            self._task = None
