@@ -23,6 +23,8 @@
 # run prints it): `python -m mutmut results` lists the survivors, `python -m mutmut show
 # NAME` shows one as a diff.
 #
+# MUTATE_RERUN=1 tests again only the mutants the last run did not kill (after tests were
+# added for them; the killed ones stay killed as long as no test was taken away).
 # MUTATE_JOBS: mutants tested at once (default 2: the machine is often shared).
 # mutmut is installed into the venv on first use (it is not in the dev extra: libcst and
 # textual are large and partly compiled).
@@ -112,6 +114,24 @@ mutate_one() {
     mv "$work/setup.cfg.new" "$work/setup.cfg"
     if [ -n "${MUTATE_FRESH:-}" ] || ! cmp -s "$work/setup.cfg" "$work/mutants/setup.cfg"; then
         rm -rf "$work/mutants"  # other tests or settings (or asked): no earlier result holds
+    fi
+    if [ -n "${MUTATE_RERUN:-}" ] && [ -d "$work/mutants" ]; then
+        # Only what the last run did not kill, by name (mutmut tests a named mutant again).
+        mapfile -t pattern < <(cd "$work" && "$PYTHON" -m mutmut results --all true \
+            | "$PYTHON" -c '
+import fnmatch, sys
+dotted, globs = sys.argv[1], [g for g in sys.argv[2].split(",") if g]
+for line in sys.stdin:
+    name, _, status = line.strip().rpartition(": ")
+    if status in ("survived", "timeout", "suspicious") and name.startswith(dotted + ".") and (
+            not globs or any(fnmatch.fnmatch(name, f"{dotted}.{g}") for g in globs)):
+        print(name)
+' "$dotted" "$globs")
+        echo "[mutate] $spec: testing again the ${#pattern[@]} mutants its last run did not kill"
+        if [ "${#pattern[@]}" -eq 0 ]; then
+            printf '%s\t%s\t0s\n' "$spec" "$(count "$work" "$dotted" "$globs")" >>"$TABLE"
+            return 0
+        fi
     fi
     echo "[mutate] $spec against $* (in $work)"
     started=$SECONDS
