@@ -87,8 +87,11 @@ def sizes(ctx: Ctx) -> tuple[Size, ...]:
 class Tier:
     """Routers, relays, HAProxy and the robot processes of one size; stopped on exit."""
 
-    def __init__(self, ctx: Ctx, size: Size, folder: Path, prefix: str = "sim") -> None:
+    def __init__(self, ctx: Ctx, size: Size, folder: Path, prefix: str = "sim",
+                 relay_args: tuple[str, ...] = ()) -> None:
+        """``relay_args``: more command-line arguments of every relay."""
         self.ctx, self.size, self.folder, self.prefix = ctx, size, folder, prefix
+        self.relay_args = list(relay_args)
         self.router_eps = [f"tcp/127.0.0.1:{_free_port()}" for _ in range(size.routers)]
         self.routers: list[Child | None] = [None] * size.routers
         self.relays: list[Bridge] = []
@@ -127,7 +130,8 @@ class Tier:
             await self.start_router(i)
         for i in range(self.size.relays):
             relay = Bridge(self.ctx.domain, ["--zenoh-connect",
-                                             self.router_eps[i % self.size.routers]],
+                                             self.router_eps[i % self.size.routers],
+                                             *self.relay_args],
                            self.ctx.bridge_root, module="bridge_server.zenoh.relay",
                            ready=RELAY_READY)
             self.relays.append(await relay.start(60))
@@ -351,9 +355,9 @@ async def flood(tier: Tier, views: list[Child], watched: list[str], seconds: flo
     """One watched robot floods two viewers; the others' delivery against a window without."""
     loud = watched[0]
     before = delivery(await window(tier, views, seconds), frozenset({loud}))
-    flooders = await tier.add_viewers([([loud], "/flood")] * 2)
     sim = tier.sim_of(loud)
     await sim.command({"cmd": "flood", "robot": loud, "bytes": 100_000, "hz": 100})
+    flooders = await tier.add_viewers([([loud], "/flood")] * 2, wait=30)
     during = delivery(await window(tier, views, seconds), frozenset({loud}))
     got = (await tier.stats(flooders))["robots"].get(loud, {}).get("frames", 0)
     await sim.command({"cmd": "flood", "robot": loud, "hz": 0})
@@ -433,7 +437,7 @@ async def churn(tier: Tier, seconds: float) -> dict[str, Any]:
         await sim.command({"cmd": "leave", "robot": name})
         i += 1
         await asyncio.sleep(max(0.0, 1.0 - (time.monotonic() % 1.0)))
-    deadline = time.monotonic() + 60  # the last one's lease, two looks of the relays'
+    deadline = time.monotonic() + 90  # a viewer's kept session, two looks of the relays'
     while listed() > before["robots_listed"] and time.monotonic() < deadline:  # forgetting
         await asyncio.sleep(1)
     after = {"rss_mib": tier.usage.since()["relays"]["rss_mib"], "robots_listed": listed()}

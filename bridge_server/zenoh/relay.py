@@ -65,6 +65,7 @@ try:
     from . import inbox as zenoh_inbox
     from . import keys
     from . import link as zenoh_link
+    from .forget import Forgetter
     from .graph import ZenohGraph
     from .typestore import MAX_DEFINITION_BYTES, MAX_FIELDS, MAX_TYPES_PER_ROBOT, TypeLimits
 except ModuleNotFoundError as _missing:  # an install without the relay extra
@@ -110,6 +111,7 @@ class Relay:
         them)."""
         self._watch: Any = None
         self.web = RelayWeb(self, WebAccess(self.security))  # status page, /metrics
+        self.forgetter = Forgetter(self.robots)  # robots that left and nobody waits for
 
     @property
     def port(self) -> int:
@@ -133,6 +135,7 @@ class Relay:
 
         self._watch = self.session.liveliness().declare_subscriber(
             f"*/{keys.CLAIM}/*", cross, history=True)
+        self.forgetter.start()
 
     def _on_claim(self, sample: zenoh.Sample) -> None:
         """A robot's ``@claim`` token came or went: one coming while another robot holds its name is
@@ -382,6 +385,7 @@ class Relay:
 
     async def close(self) -> None:
         """Close every robot's sessions, leave Zenoh."""
+        self.forgetter.stop()
         if self._server is not None:
             self._server.close(close_connections=True)
         for bridge in list(self.robots.values()):
