@@ -2,7 +2,7 @@
 
 A relay that is the Zenoh router, a robot's bridge (``--no-websocket``) dialing it through a
 :class:`~bench.linkproxy.LinkProxy` (latency, bandwidth, blackhole), and an rclpy node on the
-robot publishing a counter (``/load/count``, reliable; ``/load/imu`` and ``/load/camera``,
+robot publishing a counter (``/outage/count``, reliable; ``/load/imu`` and ``/load/camera``,
 sensor-data QoS, when asked). What our client hears is timed as it arrives.
 """
 
@@ -18,7 +18,7 @@ from collections.abc import Iterator
 from bench.linkproxy import LinkProxy
 from tests.helpers import free_port, ros_env
 from tests.relay.procs import Proc, until_robot_served
-from tests.relay.test_relay_outage import ROBOT, Outage
+from tests.relay.test_relay_outage import ROBOT, TOPIC, Outage
 
 __all__ = ["CAMERA", "COUNT", "IMU", "ROBOT", "Loaded", "gaps", "load_tier", "p99"]
 
@@ -26,7 +26,8 @@ Loaded = Outage
 """The relay, the link, the robot's bridge and its counter's node (``sent()``: the last
 number it reported, once a second here)."""
 
-COUNT = "/load/count"
+COUNT = TOPIC
+"""The counter (the outage tests' topic, so their clients' helpers serve here too)."""
 IMU = "/load/imu"
 CAMERA = "/load/camera"
 READY = re.compile(r"relay listening on ws://127\.0\.0\.1:(\d+)")
@@ -43,7 +44,7 @@ PUBLISHER = textwrap.dedent("""
     hz, imu, camera = float(sys.argv[1]), sys.argv[2] == "1", sys.argv[3] == "1"
     rclpy.init()
     node = rclpy.create_node("load_publisher")
-    count = node.create_publisher(String, "/load/count", 10)  # reliable: replayed
+    count = node.create_publisher(String, sys.argv[4], 10)  # reliable: replayed
     n = [0]
 
     def tick():
@@ -88,9 +89,9 @@ def load_tier(*robot_options: str, hz: float = 10.0, imu: bool = False,
             procs[1].wait_for(re.compile(rf"robot {ROBOT} is on Zenoh"))
             # the camera in a process of its own: its frames do not delay the counter's timer
             for args in (("0", "0", "1"),) if camera else ():
-                procs.append(Proc([sys.executable, "-c", PUBLISHER, *args], ros_env()))
-            procs.append(Proc([sys.executable, "-c", PUBLISHER, str(hz), str(int(imu)), "0"],
-                              ros_env()))
+                procs.append(Proc([sys.executable, "-c", PUBLISHER, *args, COUNT], ros_env()))
+            procs.append(Proc([sys.executable, "-c", PUBLISHER, str(hz), str(int(imu)), "0",
+                               COUNT], ros_env()))
             for p in procs[2:]:
                 p.wait_for(re.compile("^publishing"))
             until_robot_served(port, ROBOT)
