@@ -6,8 +6,8 @@ a 3.4 MB graph document of 90,000 topics ten times a second gave another robot's
 2.3-2.55 s of latency (7.6 s on a loaded test machine), and a type redefined four times a
 second (two ~190 KB definitions) 4.2 s, each decoded or built on the loop. So:
 
-- a robot's graph documents are read at most once each :data:`GRAPH_INTERVAL` s; one that
-  comes sooner waits, and a newer one replaces it (counted ``graph_superseded``);
+- a robot's graph documents are read at most once each :data:`GRAPH_INTERVAL` s (1 s); one
+  that comes sooner waits, and a newer one replaces it (counted ``graph_superseded``);
 - each is decoded, and every type its definitions name is built, on a worker thread
   (:func:`prepare`): the loop only swaps the result in, so what resolves a type on the loop
   (a session's subscribe, a sample's type) finds it built and never parses;
@@ -54,9 +54,11 @@ log = logging.getLogger("bridge_server.zenoh.graph")
 _P = ParamSpec("_P")
 _T = TypeVar("_T")
 
-GRAPH_INTERVAL = 0.5
-"""Seconds between two graph documents of a robot that the relay reads (at most two a
-second; one coming sooner waits for its turn, and a newer one replaces it)."""
+GRAPH_INTERVAL = 1.0
+"""Seconds between two graph documents of a robot that the relay reads (at most one a
+second; one coming sooner waits for its turn, and a newer one replaces it). A robot's graph
+changes seldom; each 3.6 MB document read costs the other robots' loop turns (Python's lock
+while it is decoded and its objects are walked), so the fewer the better."""
 
 REDEFINE_INTERVAL = 2.0
 """Seconds between two graph documents of a robot that redefine a type the relay built (each

@@ -2,10 +2,10 @@
 
 A robot redefining its own type four times a second (two ~190 KB definitions in turn) kept
 another robot's viewer 4.2-4.4 s late; 3.4 MB graph documents of 90,000 topics, ten a
-second, gave it 2.3-2.55 s. Each robot's graph documents are now read at most twice a
-second and its type redefinitions at most once every few seconds (the newest waiting
-wins), decoded and built on a worker thread, and applied on the loop at once
-(bridge_server/zenoh/typestore.py).
+second, gave it 2.3-2.55 s. Each robot's graph documents are now read at most once a
+second and its type redefinitions at most once every two seconds (the newest waiting
+wins), decoded and built on a worker thread (big definitions 50 types at a time), and
+applied on the loop at once (bridge_server/zenoh/typestore.py).
 
 Real processes: the relay (the Zenoh router) and two robots played on raw Zenoh
 (tests/relay/played_costly.py): robot1 puts its send time at 20 Hz to a viewer, robot2
