@@ -9,7 +9,8 @@ goes on to the robot's handshake):
 ``GET /``                    the relay's page (``static/relay.html``): its robots, each
                              linking to its own page
 ``GET /status.json``         the relay and, per robot: present on Zenoh or not, clients,
-                             the topics its clients watch, messages and bytes each way
+                             the topics its clients watch, messages and bytes each way,
+                             and their ``rates`` per second over ``rate_window_s``
 ``GET /metrics``             every robot's bridge metrics (:mod:`.metrics`), each series
                              labelled ``robot``, ``roslibpy_relay_robot_present``,
                              ``roslibpy_relay_bytes_from_robot_total`` and
@@ -24,8 +25,9 @@ goes on to the robot's handshake):
 ``GET /robots/<robot>/``     the bridge's status page for that robot, and under it
                              ``status.json``, ``metrics``, ``readyz`` (the robot is on
                              Zenoh; with an auth file it needs a token, as the data
-                             routes), as a bridge serves them; the relay's page links
-                             here
+                             routes), as a bridge serves them (its ``status.json`` also
+                             names the ``robot`` and the ``relay`` serving it); the
+                             relay's page links here
 ``GET /<robot>/``            the same, for a robot not named like one of the relay's own
                              routes above (``metrics``, ``static``, ``robots``...)
 ===========================  ===========================================================
@@ -50,6 +52,7 @@ the page and its files (the same for every robot) are served, and everything els
 from __future__ import annotations
 
 import json
+import os
 import time
 from collections.abc import Awaitable, Mapping
 from typing import TYPE_CHECKING, Any, Protocol
@@ -57,6 +60,7 @@ from typing import TYPE_CHECKING, Any, Protocol
 from prometheus_client.core import CounterMetricFamily
 
 from . import metrics
+from .rates import RATE_WINDOW, Window
 from .relay_status import RobotStatus, robot_families, robot_status
 from .web import Reply, open_route, static_files, viewer, visible
 from .web_access import WebAccess
@@ -105,6 +109,8 @@ class RelayWeb:
         self.started = time.time()
         self._static = static_files()
         self.caps = metrics.new_caps()
+        self.rates = Window()
+        """The robots' counters as the relay's page asks for them: its rates per robot."""
 
     async def answer(self, request: Request, address: str) -> Reply | None:
         """The reply to a plain GET from ``address`` (``None``: no such route)."""
@@ -140,7 +146,19 @@ class RelayWeb:
             return Reply(404, f"no robot named {name!r} is connected to this relay's Zenoh "
                          "network\n".encode())
         inner = type(request)("/" + rest + (f"?{query}" if query else ""), request.headers)
-        return await bridge.web.answer(inner, address)
+        reply = await bridge.web.answer(inner, address)
+        if rest == "status.json" and reply is not None and reply.status == 200:
+            reply = self._named(reply, name)
+        return reply
+
+    def _named(self, reply: Reply, name: str) -> Reply:
+        """A robot's ``status.json`` as the relay serves it, naming the robot and the relay
+        (its page's title, and the relay's process apart from the robot's nodes)."""
+        data = json.loads(reply.body)
+        data["robot"] = name
+        data["relay"] = {"id": self.relay.relay_id, "pid": os.getpid(), "started": self.started}
+        return Reply(200, json.dumps(data, separators=(",", ":")).encode(), reply.content_type,
+                     reply.headers)
 
     async def _own(self, path: str, request: Request, address: str) -> Reply | None:
         if path == "/":
@@ -158,6 +176,8 @@ class RelayWeb:
         online = {name for name in await self.relay.on_network()
                   if self.access.may_reach(principal, name)}
         robots = self._robots(snaps, online)
+        self.rates.add(time.monotonic(), {r.name: tuple(float(getattr(r, f)) for f in _RATED)
+                                          for r in robots})
         if path == "/status.json":
             data = self._status(robots)
             data["names_refused"] = {name: entry for name, entry
@@ -207,8 +227,22 @@ class RelayWeb:
 
         return {"relay": self.relay.relay_id, "version": __version__, "started": self.started,
                 "now": time.time(), "ready": self.relay.trouble() is None,
-                "refused": dict(self.relay.refused),
-                "robots": [robot.to_json() for robot in robots]}
+                "refused": dict(self.relay.refused), "rate_window_s": RATE_WINDOW,
+                "robots": [self._with_rates(robot) for robot in robots]}
+
+    def _with_rates(self, robot: RobotStatus) -> dict[str, Any]:
+        """A robot's entry, with ``<counter>_per_s`` over :data:`RATE_WINDOW` in ``rates``
+        (sampled as viewers ask: none before a second reading)."""
+        per_s = self.rates.rates().get(robot.name, ())
+        entry = robot.to_json()
+        entry["rates"] = {f"{f}_per_s": round(r, 1) for f, r in zip(_RATED, per_s,
+                                                                      strict=False)}
+        return entry
+
+
+_RATED = ("messages_from_robot", "bytes_from_robot", "messages_to_clients", "bytes_to_clients",
+          "messages_from_clients", "bytes_from_clients")
+"""A robot's counters the relay's page gives a rate of."""
 
 
 def _redirect(to: str, query: str) -> Reply:

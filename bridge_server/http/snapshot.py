@@ -18,11 +18,11 @@ while a server offers it or the bridge's action client for it is kept;
 from __future__ import annotations
 
 import os
-import time
 from collections.abc import Collection, Iterable, Mapping
 from typing import TYPE_CHECKING, Any, Protocol
 
 from .metrics import add_timing
+from .rates import merge_history
 from .status import COUNTERS, BridgeStatus
 
 if TYPE_CHECKING:
@@ -33,7 +33,7 @@ if TYPE_CHECKING:
     from ..session.resume import SessionStore
     from .metrics import BridgeMetrics
 
-__all__ = ["Observed", "RateMeter", "Reporting", "merge", "take", "topic_totals"]
+__all__ = ["Observed", "Reporting", "merge", "take", "topic_totals"]
 
 
 class Subscribed(Protocol):
@@ -117,7 +117,6 @@ class Observed(Protocol):
     def forwarder(self) -> Forwarding | None:
         """With ``--workers``: the hand-over of resumes."""
 
-RATE_FIELDS = ("ros_received", "sent", "published")
 _GOAL_SERVICE = "/_action/send_goal"
 
 
@@ -150,34 +149,6 @@ def topic_totals(bridge: Observed) -> dict[str, dict[str, Any]]:
             t["sent_bytes"] = t.get("sent_bytes", 0) + sub.sent_bytes
             t["drops"] = t.get("drops", 0) + sub.dropped_total
     return topics
-
-
-class RateMeter:
-    """Messages per second per topic over the last tick (called about once a second)."""
-
-    def __init__(self) -> None:
-        self.rates: dict[str, dict[str, float]] = {}
-        self._last: dict[str, tuple[float, ...]] = {}
-        self._t = time.monotonic()
-
-    def tick(self, totals: Mapping[str, Mapping[str, Any]]) -> None:
-        """Take new totals; rates are the differences over the time since the last tick."""
-        now = time.monotonic()
-        dt = max(now - self._t, 1e-3)
-        self._t = now
-        rates: dict[str, dict[str, float]] = {}
-        last: dict[str, tuple[float, ...]] = {}
-        for name, t in totals.items():
-            values = tuple(float(t.get(f, 0)) for f in RATE_FIELDS)
-            last[name] = values
-            before = self._last.get(name)
-            if before is not None and any(values):
-                rates[name] = {
-                    f"{f}_per_s": round(max(v - b, 0.0) / dt, 1)
-                    for f, v, b in zip(RATE_FIELDS, values, before, strict=True)
-                }
-        self._last = last
-        self.rates = rates
 
 
 def take(bridge: Observed, rates: Mapping[str, Mapping[str, float]]) -> dict[str, Any]:
@@ -302,6 +273,9 @@ def merge(snaps: Iterable[Mapping[str, Any]]) -> dict[str, Any]:
                     acc[field] = max(acc.get(field, 0), v)
                 else:
                     acc[field] = acc.get(field, 0) + v
+    history = merge_history(s.get("history") for s in snaps)
+    if history is not None:
+        out["history"], out["rate_window_s"] = history, snaps[0].get("rate_window_s")
     out["workers"].sort(key=lambda w: w["index"])
     out["clients"].sort(key=lambda c: (c["worker"], c["sid"]))
     out["services"].sort(key=lambda sv: sv["name"])

@@ -44,7 +44,7 @@ from typing import TYPE_CHECKING, Any, Protocol
 from roslibpy_lite.protocol.ops import ACKS_HEADER, AUTH_HEADER, RECEIVED_HEADER, SESSION_HEADER
 
 from ..workers.peers import serve_peer_socket
-from . import metrics, snapshot
+from . import metrics, rates, snapshot
 
 if TYPE_CHECKING:
     from prometheus_client.core import Metric
@@ -191,7 +191,7 @@ class Web:
         self.bridge = bridge
         self.access = Access()
         self.caps = metrics.new_caps()
-        self.meter = snapshot.RateMeter()
+        self.meter = rates.RateMeter()
         self.peers: Callable[[], Awaitable[list[dict[str, Any]]]] | None = None
         """Set by the worker machinery: fetches the other workers' snapshots."""
         self._ticker: asyncio.Task[None] | None = None
@@ -244,6 +244,7 @@ class Web:
     def local(self) -> dict[str, Any]:
         """This process's snapshot."""
         snap = snapshot.take(self.bridge, self.meter.rates)
+        snap["rate_window_s"], snap["history"] = rates.RATE_WINDOW, self.meter.history()
         for section in self.extra_status:
             snap.update(section())
         return snap

@@ -84,6 +84,11 @@ def _browse(url: str, missing: Callable[[dict[str, Any]], list[str]],
         return seen
 
 
+def _per_s(cell: str) -> float:
+    """The messages per second of a rate cell (``20.0 msg/s``, maybe ``· 1.2 KB/s`` after)."""
+    return float(cell.split(" msg/s", 1)[0].replace(",", ""))
+
+
 def _missing(page: dict[str, Any], topic: str, gone: str, service: str, action: str,
              served_action: str, served_by: str) -> list[str]:
     """What of the test's clients, topics, services and actions ``page`` does not show (yet)."""
@@ -92,7 +97,7 @@ def _missing(page: dict[str, Any], topic: str, gone: str, service: str, action: 
     row = rows.get(topic, [])
     # name, type, subscribers, from ROS /s, to clients /s: about 20 /s
     if len(row) < 5 or row[1:3] != ["std_msgs/msg/String", "2"] or NO_VALUE in row[3:5] or not (
-            5.0 <= float(row[3]) <= 40.0 and float(row[4]) > 0):
+            5.0 <= _per_s(row[3]) <= 40.0 and _per_s(row[4]) > 0):
         missing.append(f"a live rate of about 20 /s for {topic}: {row}")
     if gone in rows:
         missing.append(f"{gone} left the topics table")

@@ -296,7 +296,7 @@ async def test_relay_page_in_a_browser(ros_node: Any, topic: str) -> None:
         seen = await asyncio.to_thread(_browse, f"http://127.0.0.1:{t.relay.port}/", topic)
         assert _robot(await _json(status), ROBOT)["bytes_from_robot"] == received
     assert seen["robot"][:4] == [ROBOT, "yes", "1", topic], seen
-    assert seen["robot"][5] == str(received), seen
+    assert seen["bytes_from_robot"] == str(received), seen
     assert seen["clients"] == "1" and topic in seen["client_row"], seen
     assert seen["robot_url"].endswith(f"/robots/{ROBOT}/"), seen
 
@@ -312,11 +312,14 @@ def _browse(url: str, topic: str) -> dict[str, Any]:
                ".map((tr) => Array.from(tr.cells).map((td) => td.innerText.trim()))[0] || null")
         robot = WebDriverWait(driver, 30, poll_frequency=0.1).until(
             lambda d: (r := d.execute_script(row)) and topic in r and r)
+        received = driver.execute_script(  # the exact count behind the shown "1.2 KB"
+            "return document.querySelector('#robots tr[data-robot] td:nth-child(5) .traffic')"
+            ".dataset.bytes")
         driver.find_element(By.LINK_TEXT, ROBOT).click()
         client = ("const r = document.querySelector('#clients tbody tr');"
                   "return [document.getElementById('client-count').innerText,"
                   " r ? r.innerText : '']")
         count, client_row = WebDriverWait(driver, 30, poll_frequency=0.1).until(
             lambda d: (c := d.execute_script(client)) and topic in c[1] and c)
-        return {"robot": robot, "clients": count, "client_row": client_row,
+        return {"robot": robot, "bytes_from_robot": received, "clients": count, "client_row": client_row,
                 "robot_url": driver.current_url}

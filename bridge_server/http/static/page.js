@@ -1,5 +1,6 @@
 // What the bridge's status page (app.js) and the relay's (relay.js) share: making elements,
-// showing durations, and polling their JSON once a second.
+// showing durations, counts, bytes and rates with their units, and polling their JSON
+// once a second.
 "use strict";
 window.statusPage = (function () {
   const POLL_MS = 1000;
@@ -19,6 +20,36 @@ window.statusPage = (function () {
     if (h) return h + "h " + m + "m";
     if (m) return m + "m " + s + "s";
     return s + "s";
+  }
+
+  const NUMBER = new Intl.NumberFormat("en-US");
+  const UNITS = ["B", "KB", "MB", "GB", "TB"];
+
+  // 191724964 -> "191,724,964"
+  function count(n) { return NUMBER.format(Math.round(Number(n) || 0)); }
+
+  // Bytes in decimal units: 191724964 -> "191.7 MB"
+  function bytes(n) {
+    let v = Number(n) || 0, i = 0;
+    while (v >= 1000 && i < UNITS.length - 1) { v /= 1000; i++; }
+    return (i ? v.toFixed(1) : String(Math.round(v))) + " " + UNITS[i];
+  }
+
+  // A rate with its unit ("10.0 msg/s", "1.2 MB/s"); "–" before one was measured.
+  function rate(v, unit) {
+    if (v === undefined || v === null) return "\u2013";
+    if (unit === "B") return bytes(v) + "/s";
+    return Number(v).toLocaleString("en-US", { minimumFractionDigits: 1,
+      maximumFractionDigits: 1 }) + " " + unit + "/s";
+  }
+
+  // A cell of a rate over its total below it: "10.0 msg/s" over "12,345 msg".
+  function rateOver(perS, total, unit) {
+    const div = el("div", undefined, "pair");
+    div.appendChild(el("span", rate(perS, unit), "now"));
+    div.appendChild(el("span", unit === "B" ? bytes(total) : count(total) + " " + unit,
+      "total"));
+    return div;
   }
 
   // Fetch url (with the page's ?token=) once a second, hand the JSON to render, and say in
@@ -42,5 +73,5 @@ window.statusPage = (function () {
     once();
   }
 
-  return { el, duration, poll };
+  return { el, duration, count, bytes, rate, rateOver, poll };
 })();
