@@ -457,8 +457,8 @@ def _bag_columns(path: Path, topic: str, chosen: list[str] | None) -> pandas.Dat
     """
     from msgs.cdr_columns import leaf_names, string_leaves
 
-    from .bag._chunks import topic_chunks
-    from .bag.reader import _message_class
+    from .bag._records import _message_class
+    from .bag.reader import topic_chunks
 
     found = topic_chunks(path, topic)
     if found is None:

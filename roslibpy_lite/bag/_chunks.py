@@ -24,13 +24,13 @@ import io
 import struct
 import sys
 from collections.abc import Iterator
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from ..exceptions import UsageError
 from ._bounds import ChunkBoundError, decompress, read_head
 from ._mcap import MESSAGE_ENCODING
+from ._records import TopicChunks
 
 _RECORD = struct.Struct("<BQ")  # opcode, length
 _MESSAGE = struct.Struct("<H4xQ")  # channel id, (sequence), log time
@@ -39,22 +39,9 @@ _MESSAGE_INDEX_OP = 0x07
 _MESSAGE_HEAD = 2 + 4 + 8 + 8
 
 
-@dataclass(frozen=True)
-class TopicChunks:
-    """A topic's schema and its payloads, one list per chunk, in file order."""
-
-    type_name: str
-    definition: str
-    batches: Iterator[list[tuple[int, memoryview | bytes]]]
-
-
 def topic_chunks(path: Path, topic: str) -> TopicChunks | None:
-    """The topic's messages chunk by chunk, or None (see the module docstring); a rosbag2
-    recording's from :func:`._rosbag2.topic_chunks`."""
-    from . import _rosbag2
-
-    if _rosbag2.is_rosbag2(path):
-        return _rosbag2.topic_chunks(path, topic)
+    """The topic's messages of an MCAP file chunk by chunk, or None (see the module
+    docstring); :func:`.reader.topic_chunks` also takes rosbag2 recordings."""
     from mcap.exceptions import McapError
     from mcap.reader import make_reader
 

@@ -24,9 +24,9 @@ from typing import Any
 
 from ..exceptions import UsageError
 from . import _bounds
-from ._chunks import TopicChunks
 from ._mcap import MESSAGE_ENCODING, need_mcap, qos_yaml
-from .reader import BagInfo, BagMessage, TopicInfo
+from ._mcapread import read_mcap
+from ._records import BagInfo, BagMessage, TopicChunks, TopicInfo
 
 MISSING = ("reading a rosbag2 recording needs the rosbag2 extra: "
            "pip install 'roslibpy-lite[rosbag2]'")
@@ -157,9 +157,7 @@ def read(path: Path, topics: Iterable[str] | None, start_ns: int | None,
     with _opened(path) as reader:
         files = _mcap_files(reader)
         if files is not None:
-            from .reader import read as read_mcap
-
-            yield from heapq.merge(*(read_mcap(f, wanted, start_ns=start_ns, end_ns=end_ns)
+            yield from heapq.merge(*(read_mcap(f, wanted, start_ns, end_ns)
                                      for f in files), key=lambda m: m.log_time_ns)
             return
         texts = _definitions(path, reader, wanted)
