@@ -367,7 +367,14 @@ def main(argv: list[str] | None = None) -> int:
                    "and its folder mode 750)")
     p.add_argument("--owner", help="the user the bridge runs as (e.g. roslibpy-bridge): the "
                    "file becomes theirs, a folder made here their group's")
+    p.add_argument("--token-file", type=Path,
+                   help="write the token to this new file, mode 600 (readable by you alone), "
+                   "instead of printing it; refused if the file exists")
     args = p.parse_args(argv)
+    if args.token_file is not None and args.token_file.exists():
+        print(f"error: --token-file {args.token_file}: exists already; remove it or name "
+              "another file (no principal was added)", file=sys.stderr)
+        return 1
     try:
         token = add_principal(args.auth_file, args.name, args.role, args.owner)
     except AuthFileError as exc:
@@ -376,11 +383,29 @@ def main(argv: list[str] | None = None) -> int:
     except OSError as exc:  # a folder or file this user may not write
         print(f"error: {args.auth_file}: {exc.strerror or exc}", file=sys.stderr)
         return 2
-    print(token)
+    if args.token_file is None:
+        print(token)
+        shown = "this token is shown only now"
+    else:
+        try:
+            write_token_file(args.token_file, token)
+        except OSError as exc:  # its folder is missing or not ours: take the principal out
+            remove_principal(args.auth_file, args.name)
+            print(f"error: --token-file {args.token_file}: {exc.strerror or exc} (no principal "
+                  "was added)", file=sys.stderr)
+            return 2
+        shown = f"its token is in {args.token_file} (mode 600)"
     print(f"principal {args.name} ({args.role}) added to {args.auth_file}; "
-          "this token is shown only now (a running bridge accepts it after SIGHUP)",
-          file=sys.stderr)
+          f"{shown} (a running bridge accepts it after SIGHUP)", file=sys.stderr)
     return 0
+
+
+def write_token_file(path: Path, token: str) -> None:
+    """Write ``token`` to the new file ``path``, mode 600 from its creation (never readable
+    by others, as ``add-principal ... > file`` under a umask of 022 leaves it)."""
+    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
+    with os.fdopen(fd, "w", encoding="utf-8") as f:
+        f.write(token + "\n")
 
 if __name__ == "__main__":
     sys.exit(main())
