@@ -52,6 +52,7 @@ from roslibpy_lite.protocol.frames import decode_frame
 from roslibpy_lite.protocol.ops import ACKS_HEADER, parse_op
 
 from ..interfaces import BridgeError
+from ..security.permissions import MAY
 from .actions import SessionActions
 from .calls import Calls
 from .client_status import ClientStatus, client_status
@@ -166,8 +167,14 @@ class Session:
         return self.shared.security.config
 
     def refuse(self, op: Any, why: str) -> None:
-        """Refuse ``op``: a status error, plus the failure shape a stock client waits for."""
-        self.error(f"{op.OP}: {why}", getattr(op, "id", None))
+        """Refuse ``op``: a status error, plus the failure shape a stock client waits for.
+
+        A question about the client's own role (``/rosapi/may_*``, which an MCP server asks
+        to know its tools) answered "no" is logged at DEBUG: it refused nothing the client
+        meant to do, and read as a refusal in the operator's log."""
+        own_role = isinstance(op, ops.CallService) and op.service in MAY
+        self.error(f"{op.OP}: {why}", getattr(op, "id", None),
+                   level=logging.DEBUG if own_role else logging.INFO)
         answer = op.refusal(why)
         if answer is not None:
             self.send_op(answer)
@@ -300,9 +307,11 @@ class Session:
             return
         self.send_op(ops.Status(level=level, msg=msg, id=id))
 
-    def error(self, msg: str, id: ops.Id | None = None, kind: str = "request") -> None:
-        """Report a failed request to the client (``status`` level error); count it by kind."""
-        log.info("session %d: %s", self.sid, msg)
+    def error(self, msg: str, id: ops.Id | None = None, kind: str = "request",
+              level: int = logging.INFO) -> None:
+        """Report a failed request to the client (``status`` level error); count it by kind.
+        The bridge's log has it at ``level``."""
+        log.log(level, "session %d: %s", self.sid, msg)
         self.errors_sent += 1
         self.shared.metrics.error(kind)
         self.status("error", msg, id)
