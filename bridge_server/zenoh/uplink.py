@@ -40,15 +40,17 @@ if TYPE_CHECKING:
     import zenoh
     from prometheus_client.core import Metric
 
-__all__ = ["ADMIT_WAIT", "DOWN_AFTER", "PROBE_PERIOD", "RATE_WINDOW", "Uplink",
+__all__ = ["ADMIT_WAIT", "CHECK_TICK", "DOWN_AFTER", "PROBE_PERIOD", "RATE_WINDOW", "Uplink",
            "certificate_name", "router_answers", "uplink_use"]
 
 log = logging.getLogger("bridge_server.zenoh.exporter")  # the robot's one log for its link
 
 PROBE_PERIOD = 1.0
 """Seconds between two probes of the robot's routers (each a liveliness query of a few
-bytes, answered by the router from its own tables: one a second per robot), and how long a
-probe waits for its answer."""
+bytes, answered by the router from its own tables: one a second per robot)."""
+
+CHECK_TICK = 0.25
+"""Seconds between two looks at a probe still waiting for its answer."""
 
 DOWN_AFTER = 2.0
 """Seconds without a router's answer after which the uplink counts as down (within the 3 s
@@ -209,10 +211,17 @@ class Uplink:
         pattern = f"{self.robot}/{keys.ALIVE}/*"
         while True:
             started = loop.time()
+            # A probe waits for its answer as long as the uplink may be silent: an answer
+            # late on a loaded machine still counts. Meanwhile it is looked at each tick.
+            probe = asyncio.ensure_future(router_answers(session, pattern, own, DOWN_AFTER))
             try:
-                answered = await router_answers(session, pattern, own, PROBE_PERIOD)
+                while not (await asyncio.wait({probe}, timeout=CHECK_TICK))[0]:
+                    self._check(loop.time())
+                answered = probe.result()
             except zenoh.ZError:  # the session is closing
                 return
+            finally:
+                probe.cancel()
             now = loop.time()
             self._sample(now)
             if answered:
@@ -222,13 +231,18 @@ class Uplink:
                     self.admitted, self.refusal = True, None
                     log.info("robot %s is on Zenoh (session %s): its router holds its presence",
                              self.robot, zid)
-            elif self.admitted and self.up and now - self._heard >= DOWN_AFTER:
-                self._went(f"no router answered for {now - self._heard:.1f} s")
-            elif (not self.admitted and self.refusal is None and self._serving_at is not None
-                  and self.routers and now - self._serving_at >= ADMIT_WAIT):
-                self.refusal = self.not_admitted_reason()
-                log.error("robot %s is not admitted by the relay: %s", self.robot, self.refusal)
+            self._check(now)
             await asyncio.sleep(max(0.0, PROBE_PERIOD - (loop.time() - started)))
+
+    def _check(self, now: float) -> None:
+        """The uplink down after :data:`DOWN_AFTER` s without an answer; a robot serving for
+        :data:`ADMIT_WAIT` s that no router answered is not admitted (said once)."""
+        if self.admitted and self.up and now - self._heard >= DOWN_AFTER:
+            self._went(f"no router answered for {now - self._heard:.1f} s")
+        elif (not self.admitted and self.refusal is None and self._serving_at is not None
+              and self.routers and now - self._serving_at >= ADMIT_WAIT):
+            self.refusal = self.not_admitted_reason()
+            log.error("robot %s is not admitted by the relay: %s", self.robot, self.refusal)
 
     def _came(self, how: str) -> None:
         if self.up:

@@ -29,11 +29,14 @@ from tests.relay.support import until
 
 pytestmark = pytest.mark.timeout(180)
 
-GAP_BOUND = 0.4
-"""Seconds: the issue's target is a p99 gap under 150 ms (measured 130-140 ms here); the
-bound leaves room for a loaded machine, and a link without priorities misses it by far
-(0.9 s and more). One rare late counter message (a replay recovery, a busy
-robot) makes a 10 s run's p99, so the bound is wider than the target."""
+IMU_BOUND = 0.25
+"""Seconds: the IMU's gap p99 (1,000 gaps in 10 s). The issue's target for both topics is
+150 ms; measured 70-170 ms with priorities (the machine at load 2 to 18), 460-500 ms with
+every topic at one priority."""
+
+COUNT_BOUND = 0.6
+"""Seconds: the counter's gap p99 (100 gaps: one late message makes it). Measured 130-140 ms
+at a light load and up to 550 ms at load 18 with priorities; 0.83-1.46 s at one priority."""
 
 
 async def _paces(*robot_options: str, seconds: float = 10.0) -> dict[str, list[float]]:
@@ -59,12 +62,12 @@ async def _paces(*robot_options: str, seconds: float = 10.0) -> dict[str, list[f
 
 
 async def test_a_counter_and_an_imu_keep_their_pace_beside_a_camera() -> None:
-    """Through 2 MB/s at 50 ms RTT beside a 10 Hz 640x480 camera, the 10 Hz counter's and
-    the 100 Hz IMU's gaps stay under GAP_BOUND at p99, every counter message arrives, and
+    """Through 2 MB/s at 50 ms RTT beside a 10 Hz 640x480 camera, the 100 Hz IMU's and the
+    10 Hz counter's gaps stay under their bounds at p99, every counter message arrives, and
     whole camera frames still do (the link carries about two a second)."""
     got = await _paces()
     count, imu = p99(gaps(got[COUNT])), p99(gaps(got[IMU]))
-    assert count < GAP_BOUND and imu < GAP_BOUND, (count, imu)
+    assert imu < IMU_BOUND and count < COUNT_BOUND, (count, imu)
     assert len(got[COUNT]) >= 95, len(got[COUNT])
     assert len(got[CAMERA]) >= 5, len(got[CAMERA])
 

@@ -109,11 +109,11 @@ async def test_the_robots_status_and_metrics_show_its_uplink() -> None:
             try:
                 down = await until(lambda: (u := uplink())["up"] is False and u,
                                    "the status to show the uplink down", LEASE + 7)
+                metrics = _get(base + "/metrics")[1]  # while the link is still cut
             finally:
                 t.link.restore()
             assert down["lost"] == 1 and down["since"] > up["since"], down
-            assert f'roslibpy_bridge_relay_uplink_up{{robot="{ROBOT}"}} 0.0' in _get(
-                base + "/metrics")[1]
+            assert f'roslibpy_bridge_relay_uplink_up{{robot="{ROBOT}"}} 0.0' in metrics
 
 
 async def test_readyz_without_a_websocket_follows_the_uplink() -> None:
