@@ -110,9 +110,10 @@ class Child:
 def haproxy_config(port: int, relays: Iterable[int], stats_port: int | None = None) -> str:
     """HAProxy in TCP mode on ``port`` (at most 9,900 connections: two descriptors each,
     within this machine's 20,000) before the relays on ``relays`` (loopback): the least
-    busy relay takes each new connection, a relay that does not answer its health check
-    (every 500 ms) is out within a second and its connections are cut, so its clients dial
-    again and land on another; long-lived websockets are not timed out."""
+    busy relay takes each new connection, a relay whose ``/readyz`` does not answer 200
+    (asked every 500 ms: it is down, or has not reached its router) is out within a second
+    and its connections are cut, so its clients dial again and land on another; long-lived
+    websockets are not timed out."""
     servers = "\n".join(f"    server relay{i} 127.0.0.1:{p} check inter 500ms fall 2 rise 2 "
                         "on-marked-down shutdown-sessions" for i, p in enumerate(relays))
     stats = (f"\nfrontend stats\n    mode http\n    bind 127.0.0.1:{stats_port}\n"
@@ -135,6 +136,8 @@ frontend viewers
 
 backend relays
     balance leastconn
+    option httpchk GET /readyz
+    http-check expect status 200
 {servers}
 {stats}"""
 

@@ -34,6 +34,8 @@ __all__ = ["Conn", "main"]
 
 RETRY = 0.5
 """Seconds between a closed connection and its next dial."""
+RAMP_BATCH = 50
+"""Connections dialed together, ``--ramp`` s apart."""
 LATENCY_KEEP = 2000
 """Latency samples kept per robot (every n-th beyond that)."""
 
@@ -153,8 +155,8 @@ async def _serve(args: argparse.Namespace) -> int:
     plan = json.loads(args.plan)
     conns = [Conn(args.url, robot, topic) for robots, topic in plan for robot in robots]
     tasks = []
-    for c in conns:  # a ramp, as viewers arrive: not every handshake in one instant
-        tasks.append(asyncio.create_task(c.run()))
+    for k in range(0, len(conns), RAMP_BATCH):  # a ramp, as viewers arrive, not all at once
+        tasks += [asyncio.create_task(c.run()) for c in conns[k:k + RAMP_BATCH]]
         await asyncio.sleep(args.ramp)
     with contextlib.suppress(TimeoutError):
         async with asyncio.timeout(args.wait):
@@ -186,7 +188,8 @@ def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="python -m bench.fleetview", description=__doc__)
     p.add_argument("url", help="the balancer's (or a relay's) ws://HOST:PORT")
     p.add_argument("plan", help='JSON list of [robots, topic], e.g. [[["sim-1"], "/pose"]]')
-    p.add_argument("--ramp", type=float, default=0.002, help="seconds between two dials")
+    p.add_argument("--ramp", type=float, default=0.05,
+                   help=f"seconds between two batches of {RAMP_BATCH} dials")
     p.add_argument("--wait", type=float, default=120.0,
                    help="seconds to wait for every connection's first message")
     return asyncio.run(_serve(p.parse_args(argv)))

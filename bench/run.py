@@ -76,6 +76,11 @@ Scenarios (targets; rosbridge_suite's figures in brackets):
 - ``action_ros_server`` / ``action_client_served`` (``bench/actions.py``): goal
   round trip p50/p99 and feedback throughput, to an rclpy action server and to a
   client-served action driven by an rclpy action client.
+- ``fleet`` (``bench/fleet.py``): simulated robots (``bench/simrobot.py``: the bridge's own
+  exporter over an in-memory graph), Zenoh routers in a mesh, relays behind HAProxy, many
+  viewers: cost per unwatched robot, watched robot and viewer, open wait, delivery, flood
+  isolation, recovery after a relay kill and a router restart, join/leave churn
+  (``BENCH_FLEET_SIZES`` picks the sizes; docs/guides/sizing.md has the figures).
 
 ``--profile`` runs py-spy on the bridge during ``ros_to_client`` and
 ``image`` and adds the top functions (self and inclusive samples) to their results.
