@@ -15,7 +15,7 @@ from bridge_server.security import gate as gate_module
 from bridge_server.security.auth import Principal
 from bridge_server.security.gate import POLICY_VIOLATION, PRE_AUTH_FRAME_LIMIT, Gate
 from bridge_server.security.options import SecurityConfig
-from bridge_server.security.permissions import Role
+from bridge_server.security.permissions import Role, filter_rosapi
 from roslibpy_lite.protocol.ops import parse_op
 
 pytestmark = pytest.mark.timeout(30)
@@ -378,3 +378,40 @@ async def test_rosapi_answers_and_args_are_filtered_by_the_role() -> None:
     assert not p_gate.check(parse_op({"op": "call_service", "service": "/rosapi/get_param",
                                       "args": ["/n:q", ""]}))
     assert [w for _, w in p_session.refused] == ["forbidden: role p may not params on /n:q"]
+
+
+# -- the role's own checks (permissions.py) ---------------------------------------------------
+
+
+def test_a_deny_of_every_name_takes_the_capability_away() -> None:
+    """has(): a deny pattern made only of ``*`` takes the capability (asked for some name)
+    away; a narrower deny, or a deny of another capability, does not."""
+    def role(deny: dict[str, list[str]]) -> Role:
+        return Role.from_table("r", {"publish": ["*"], "subscribe": ["*"], "deny": deny})
+
+    assert not role({"publish": ["*"]}).has("publish")
+    assert not role({"publish": ["**"]}).has("publish")
+    assert role({"publish": ["/a*"]}).has("publish")
+    assert role({"publish": ["X*"]}).has("publish")
+    assert role({"subscribe": ["*"]}).has("publish")
+    assert not Role.from_table("r", {"subscribe": ["*"]}).has("publish")
+
+
+def test_a_rosapi_list_keeps_a_parallel_column_it_cannot_line_up() -> None:
+    """A column of another length than the names (or no list) is left as it is; one of the
+    same length is filtered row by row."""
+    shown = filter_rosapi(VIEWER, "/rosapi/topics",
+                                      {"topics": ["/hidden", "/seen"], "types": ["a"]})
+    assert shown == {"topics": ["/seen"], "types": ["a"]}
+    shown = filter_rosapi(VIEWER, "/rosapi/topics",
+                                      {"topics": ["/hidden", "/seen"], "types": None})
+    assert shown == {"topics": ["/seen"], "types": None}
+
+
+@pytest.mark.parametrize(("node", "shown"), [("/hidden", ""), ("/seen/node", "/seen/node"),
+                                             ("", "")])
+def test_a_lookup_naming_a_node_the_role_may_not_see_is_blanked(node: str, shown: str) -> None:
+    """rosapi's service_node answer keeps a node the role sees, and blanks one it may not
+    see to "" (as for an unknown service)."""
+    assert filter_rosapi(VIEWER, "/rosapi/service_node", {"node": node}) == {
+        "node": shown}
