@@ -346,6 +346,8 @@ async def run_size(ctx: Ctx, size: Size, folder: Path, churn_s: float) -> dict[s
             out["relay_kill"] = await relay_kill(tier, everyone)
         out["router_restart"] = await router_restart(tier, everyone)
         out["churn"] = await churn(tier, churn_s)
+    except Exception as exc:  # what was measured before it stays in the report
+        out["error"] = f"{type(exc).__name__}: {str(exc)[:2000]}"
     finally:
         await tier.stop()
     return out
@@ -452,8 +454,5 @@ async def fleet(ctx: Ctx) -> dict[str, Any]:
     results = []
     with tempfile.TemporaryDirectory(prefix="fleet-") as folder:
         for size in sizes(ctx):
-            try:
-                results.append(await run_size(ctx, size, Path(folder), churn_s))
-            except Exception as exc:  # report it and go on with the next size
-                results.append({"size": str(size), "error": f"{type(exc).__name__}: {exc}"})
+            results.append(await run_size(ctx, size, Path(folder), churn_s))
     return {"sizes": results}
