@@ -415,3 +415,78 @@ def test_a_lookup_naming_a_node_the_role_may_not_see_is_blanked(node: str, shown
     see to "" (as for an unknown service)."""
     assert filter_rosapi(VIEWER, "/rosapi/service_node", {"node": node}) == {
         "node": shown}
+
+
+def test_a_roles_table_is_read_and_each_mistake_named() -> None:
+    """Capabilities given twice add up (``all`` and one of its own); ``limits`` is read;
+    each malformed entry is refused naming the role and the key."""
+    role = Role.from_table("r", {"all": ["/a"], "publish": ["/b"],
+                                 "limits": {"fragment_bytes": 1000}})
+    assert role.allow["publish"] == ("/a", "/b") and role.allow["subscribe"] == ("/a",)
+    assert role.limits == {"fragment_bytes": 1000}
+    from bridge_server.security.permissions import CAPABILITIES, RoleError
+
+    mistakes: list[tuple[dict[str, Any], str]] = [
+        ({"limits": {"fragment_bytes": -1}}, "role r: limits.fragment_bytes must be a whole "
+                                             "number of bytes >= 0 (0: no limit), got -1"),
+        ({"deny": ["/x"]}, "role r: 'deny' must be a table of capabilities"),
+        ({"deny": {"publish": "/x"}}, "role r: deny.publish must be a list of name patterns"),
+        ({"publish": ["/x", 1]}, "role r: publish must be a list of name patterns"),
+        ({"fly": ["/x"]}, f"role r: unknown capability 'fly' (known: all, "
+                          f"{', '.join(CAPABILITIES)})"),
+    ]
+    for table, message in mistakes:
+        with pytest.raises(RoleError) as info:
+            Role.from_table("r", table)
+        assert str(info.value) == message
+
+
+@pytest.mark.parametrize(("capability", "name", "needs"), [
+    ("call_service", "/a/_action/send_goal", ("send_action_goal", "/a")),
+    ("call_service", "/a/_action/status", ("call_service", "/a/_action/status")),
+    ("subscribe", "/a/_action/feedback", ("send_action_goal", "/a")),
+    ("subscribe", "/a/_action/get_result", ("subscribe", "/a/_action/get_result")),
+    ("publish", "/a/_action/status", ("serve_action", "/a")),
+    ("publish", "/a/_action/send_goal", ("publish", "/a/_action/send_goal")),
+    ("call_service", "/a/_action/b/_action/send_goal", ("send_action_goal", "/a/_action/b")),
+    ("call_service", "/_action/send_goal", ("call_service", "/_action/send_goal")),
+    ("call_service", "/node/get_parameters", ("params", "/node:*")),
+    ("call_service", "get_parameters", ("call_service", "get_parameters")),
+    ("subscribe", "/parameter_events", ("params", "*:*")),
+    ("publish", "/parameter_events", ("params", "*:*")),
+    ("call_service", "/parameter_events", ("call_service", "/parameter_events")),
+])
+def test_what_a_name_of_another_capabilitys_internals_needs(
+        capability: str, name: str, needs: tuple[str, str]) -> None:
+    """An action's services and topics, a node's parameter services and /parameter_events
+    need what governs them; anything else what it names."""
+    from bridge_server.security.permissions import hidden_requirement
+
+    assert hidden_requirement(capability, name) == needs
+
+
+@pytest.mark.parametrize(("service", "args", "needs"), [
+    ("/rosapi/get_param", {}, ("params", "*")),
+    ("/rosapi/get_param", {"name": "n:p"}, ("params", "/n:p")),
+    ("/rosapi/get_param_names", {}, ("params", "*")),
+    ("/rosapi/topics", {}, ("introspection", "*")),
+    ("/rosapi/topic_type", {"topic": "chatter"}, ("introspection", "/chatter")),
+    ("/rosapi/node_details", {"node": "/talker"}, ("introspection", "/talker")),
+])
+def test_what_a_rosapi_call_needs(service: str, args: dict[str, Any],
+                                  needs: tuple[str, str]) -> None:
+    """Parameter services need params on the parameter (any, without a name); lookups of one
+    name introspection on it; lists introspection on some name."""
+    from bridge_server.security.permissions import rosapi_requirement
+
+    assert rosapi_requirement(service, args) == needs
+
+
+def test_a_control_character_in_a_rosapi_name_is_refused_saying_so() -> None:
+    """A NUL in a rosapi name is refused quoting it: ROS names never hold one."""
+    from bridge_server.security.permissions import UnsafeNameError, rosapi_requirement
+
+    with pytest.raises(UnsafeNameError) as info:
+        rosapi_requirement("/rosapi/topic_type", {"topic": "/a\x00"})
+    assert str(info.value) == ("/rosapi/topic_type: topic '/a\\x00' contains a control "
+                               "character (such as NUL); ROS names never do")
