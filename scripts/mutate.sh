@@ -23,8 +23,9 @@
 # run prints it): `python -m mutmut results` lists the survivors, `python -m mutmut show
 # NAME` shows one as a diff.
 #
-# MUTATE_RERUN=1 tests again only the mutants the last run did not kill (after tests were
-# added for them; the killed ones stay killed as long as no test was taken away).
+# MUTATE_RERUN=1 tests again only the mutants that survived the last run (after tests were
+# added to the files it ran; killed ones stay killed as long as no test was taken away,
+# time-outs are counted apart).
 # MUTATE_JOBS: mutants tested at once (default 2: the machine is often shared).
 # mutmut is installed into the venv on first use (it is not in the dev extra: libcst and
 # textual are large and partly compiled).
@@ -123,11 +124,11 @@ import fnmatch, sys
 dotted, globs = sys.argv[1], [g for g in sys.argv[2].split(",") if g]
 for line in sys.stdin:
     name, _, status = line.strip().rpartition(": ")
-    if status in ("survived", "timeout", "suspicious") and name.startswith(dotted + ".") and (
+    if status in ("survived", "suspicious") and name.startswith(dotted + ".") and (
             not globs or any(fnmatch.fnmatch(name, f"{dotted}.{g}") for g in globs)):
         print(name)
 ' "$dotted" "$globs")
-        echo "[mutate] $spec: testing again the ${#pattern[@]} mutants its last run did not kill"
+        echo "[mutate] $spec: testing again the ${#pattern[@]} mutants that survived its last run"
         if [ "${#pattern[@]}" -eq 0 ]; then
             printf '%s\t%s\t0s\n' "$spec" "$(count "$work" "$dotted" "$globs")" >>"$TABLE"
             return 0
