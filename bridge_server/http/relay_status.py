@@ -11,13 +11,14 @@ builds those families from the fields, so a new exported field is one typed fiel
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Iterable, Iterator, Mapping
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from dataclasses import dataclass
 from typing import Any, Literal
 
 from prometheus_client.core import CounterMetricFamily, GaugeMetricFamily, Metric
 
-__all__ = ["RobotMetric", "RobotStatus", "robot_families", "robot_metric", "robot_status"]
+__all__ = ["RobotMetric", "RobotStatus", "robot_families", "robot_metric", "robot_status",
+           "robots_refused", "robots_refused_family"]
 
 PREFIX = "roslibpy_relay_"
 _METRIC = "metric"
@@ -135,3 +136,25 @@ def robot_families(robots: Iterable[RobotStatus]) -> Iterator[Metric]:
                 for kind, n in sorted(value.items()):
                     family.add_metric([robot.name, kind], n)
         yield family
+
+
+def robots_refused(snapshot: Mapping[str, Any], may_see: Callable[[str], bool]
+                   ) -> dict[str, Any]:
+    """The ``robots_refused`` entry of the relay's ``/status.json``: refusals of robots by
+    the relay's router, counted by reason (every viewer), and the last of each robot name
+    ``may_see`` lets this viewer see (reason, why with what to fix, peer, count, last)."""
+    return {"counts": dict(snapshot.get("counts", {})),
+            "robots": {name: entry for name, entry in snapshot.get("robots", {}).items()
+                       if may_see(name)}}
+
+
+def robots_refused_family(snapshot: Mapping[str, Any]) -> Metric:
+    """``roslibpy_relay_robots_refused_total`` by reason (the relay's ``/metrics``)."""
+    family = CounterMetricFamily(
+        PREFIX + "robots_refused",
+        "Robots the relay's router did not admit, by reason (not_named: its certificate's "
+        "name is not in --zenoh-robot; other_name: its certificate is for another robot; "
+        "no_certificate; unknown_ca; key_usage; tls_refused).", labels=["reason"])
+    for reason, n in sorted(snapshot.get("counts", {}).items()):
+        family.add_metric([reason], n)
+    return family

@@ -61,7 +61,13 @@ from prometheus_client.core import CounterMetricFamily
 
 from . import metrics
 from .rates import RATE_WINDOW, Window
-from .relay_status import RobotStatus, robot_families, robot_status
+from .relay_status import (
+    RobotStatus,
+    robot_families,
+    robot_status,
+    robots_refused,
+    robots_refused_family,
+)
 from .web import Reply, open_route, static_files, viewer, visible
 from .web_access import WebAccess
 
@@ -98,6 +104,9 @@ class RelayFront(Protocol):
 
     def trouble(self) -> str | None:
         """Why the relay does not serve (``None``: it does)."""
+
+    def robots_refused(self) -> dict[str, Any]:
+        """Robots the relay's router refused (``counts`` by reason, ``robots`` by name)."""
 
 
 class RelayWeb:
@@ -183,6 +192,8 @@ class RelayWeb:
             data["names_refused"] = {name: entry for name, entry
                                      in sorted(self.relay.names_refused.items())
                                      if self.access.may_reach(principal, name)}
+            data["robots_refused"] = robots_refused(
+                self.relay.robots_refused(), lambda name: self.access.may_reach(principal, name))
             return Reply(200, json.dumps(data, separators=(",", ":")).encode(),
                          "application/json", nocache)
         refused = CounterMetricFamily(
@@ -201,7 +212,8 @@ class RelayWeb:
                 names.add_metric([name], entry["count"])
         body = metrics.render_labelled(
             ((name, snap, self.relay.robots[name].web.caps) for name, snap in snaps.items()),
-            "robot", [*robot_families(robots), refused, names])
+            "robot", [*robot_families(robots), refused, names,
+                      robots_refused_family(self.relay.robots_refused())])
         return Reply(200, body, metrics.CONTENT_TYPE, nocache)
 
     def _present(self, name: str, online: set[str]) -> bool:

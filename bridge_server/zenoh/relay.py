@@ -67,6 +67,7 @@ try:
     from . import link as zenoh_link
     from .forget import Forgetter
     from .graph import ZenohGraph
+    from .refusals import RobotRefusals, reading_zenoh_log
     from .typestore import MAX_DEFINITION_BYTES, MAX_FIELDS, MAX_TYPES_PER_ROBOT, TypeLimits
 except ModuleNotFoundError as _missing:  # an install without the relay extra
     from .._requires import missing_dependency
@@ -92,7 +93,8 @@ class Relay:
     """The relay: one websocket port, one Zenoh session, one Bridge per robot served."""
 
     def __init__(self, config: BridgeConfig, options: zenoh_link.ZenohOptions,
-                 relay_id: str | None = None, type_limits: TypeLimits | None = None) -> None:
+                 relay_id: str | None = None, type_limits: TypeLimits | None = None,
+                 robot_refusals: RobotRefusals | None = None) -> None:
         self.config = config
         self.options = options
         self.type_limits = type_limits or TypeLimits()  # of each robot's own types
@@ -110,6 +112,10 @@ class Relay:
         (``holder``, ``refused``: Zenoh ids with their addresses where this relay knows
         them)."""
         self._watch: Any = None
+        self.robot_refusals = robot_refusals or RobotRefusals(options.robots, options.relays,
+                                                              options.listen)
+        """Robots this relay's router did not admit (it is their router with mTLS)."""
+        self._links: Any = None
         self.web = RelayWeb(self, WebAccess(self.security))  # status page, /metrics
         self.forgetter = Forgetter(self.robots)  # robots that left and nobody waits for
 
@@ -135,6 +141,9 @@ class Relay:
 
         self._watch = self.session.liveliness().declare_subscriber(
             f"*/{keys.CLAIM}/*", cross, history=True)
+        if self.options.listen and self.options.mtls:  # the robots' router: who it refuses
+            self._links = self.session.info.declare_link_events_listener(
+                self.robot_refusals.on_link, history=True)
         self.forgetter.start()
 
     def _on_claim(self, sample: zenoh.Sample) -> None:
@@ -231,6 +240,15 @@ class Relay:
                                         first)
         return {keys.parse_alive(key)[0] for key in found}
 
+    def unknown(self, name: str) -> str:
+        """What a client asking for robot ``name``, which is not on Zenoh, is told: that this
+        relay refused it and why, if it did."""
+        return self.robot_refusals.why(name) or _unknown(name)
+
+    def robots_refused(self) -> dict[str, Any]:
+        """Robots this relay's router refused: counts by reason, the last of each name."""
+        return self.robot_refusals.snapshot()
+
     def _serving(self) -> bool:
         return self._server is not None and self._server.is_serving()
 
@@ -281,7 +299,7 @@ class Relay:
         bridge = await self.robot(name)
         if bridge is None:
             log.info("refused a client asking for robot %s: not on Zenoh", name)
-            return self._refuse(connection, "unknown_robot", 404, _unknown(name))
+            return self._refuse(connection, "unknown_robot", 404, self.unknown(name))
         connection.robot_bridge = bridge  # type: ignore[attr-defined]
         answer: Response | None = await bridge.admit(connection, request, secured=True)
         return answer
@@ -353,7 +371,7 @@ class Relay:
                         ws.limit_frames(None)  # frames up to --max-message-size again
                     return bridge
                 self._count("unknown_robot")
-                why = _unknown(name)
+                why = self.unknown(name)
         if why:
             with contextlib.suppress(ConnectionClosed):
                 await ws.close(POLICY_VIOLATION, why[:120])
@@ -391,10 +409,11 @@ class Relay:
         for bridge in list(self.robots.values()):
             await bridge.close()
         self.robots.clear()
-        if self._watch is not None:
-            with contextlib.suppress(Exception):  # the session closed first
-                self._watch.undeclare()
-            self._watch = None
+        for watch in (self._watch, self._links):
+            if watch is not None:
+                with contextlib.suppress(Exception):  # the session closed first
+                    watch.undeclare()
+        self._watch = self._links = None
         if self.session is not None:
             session, self.session = self.session, None
             await asyncio.get_running_loop().run_in_executor(None, session.close)
@@ -494,7 +513,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     return p.parse_args(argv)
 
 
-async def _run(args: argparse.Namespace) -> int:
+async def _run(args: argparse.Namespace, robot_refusals: RobotRefusals | None = None) -> int:
     config = BridgeConfig(
         host=args.host, port=args.port, max_message_size=args.max_message_size,
         node_name="relay",
@@ -504,7 +523,7 @@ async def _run(args: argparse.Namespace) -> int:
     )
     relay = Relay(config, zenoh_link.options_from_args(args), args.relay_id,
                   TypeLimits(args.max_definition_bytes, args.max_types_per_robot,
-                             args.max_fields_per_type))
+                             args.max_fields_per_type), robot_refusals)
     stop = asyncio.Event()
     loop = asyncio.get_running_loop()
     for sig in (signal.SIGINT, signal.SIGTERM):
@@ -551,6 +570,8 @@ def main(argv: list[str] | None = None) -> int:
     if refusal is not None:
         print(f"roslibpy-lite-relay: refusing to start: {refusal}", file=sys.stderr)
         return 2
+    robot_refusals = (reading_zenoh_log(args.zenoh_robot, args.zenoh_relay, args.zenoh_listen)
+                      if args.zenoh_listen and args.zenoh_mtls else None)  # robots' router
     logging.basicConfig(level=getattr(logging, args.log_level), stream=sys.stderr,
                         format="%(asctime)s %(levelname)s %(name)s: %(message)s")
     security.install_log_redaction()
@@ -560,7 +581,7 @@ def main(argv: list[str] | None = None) -> int:
         security.check_readable(security.config_from_args(args))
         zenoh_link.options_from_args(args).config()  # a bad option named before anything
         with asyncio.Runner(loop_factory=eventloop.event_loop_factory(args.event_loop)) as runner:
-            return runner.run(_run(args))
+            return runner.run(_run(args, robot_refusals))
     except (OSError, BridgeError) as exc:
         log.error("cannot start: %s", exc)
         return 1
