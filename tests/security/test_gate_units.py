@@ -6,6 +6,7 @@ process, so that mutation testing (scripts/mutate.sh) sees every check (issue 54
 from __future__ import annotations
 
 import asyncio
+import logging
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -490,3 +491,62 @@ def test_a_control_character_in_a_rosapi_name_is_refused_saying_so() -> None:
         rosapi_requirement("/rosapi/topic_type", {"topic": "/a\x00"})
     assert str(info.value) == ("/rosapi/topic_type: topic '/a\\x00' contains a control "
                                "character (such as NUL); ROS names never do")
+
+
+async def test_what_the_gate_logs_and_whom_it_refuses(clock: Clock,
+                                                      caplog: pytest.LogCaptureFixture) -> None:
+    """The gate logs who authenticated (at the handshake or by an auth op), a session over
+    the op rate, each close with its reason and an auth op for another principal; each
+    refusal is handed the op refused."""
+    caplog.set_level(logging.INFO, "bridge_server")
+    gate, session, _ = _gate(rate=1, burst=1)
+    assert gate.admit_frame() and not gate.admit_frame()
+    gate.close("enough")
+    op = parse_op({"op": "subscribe", "topic": "/hidden"})
+    gate.check(op)
+    bad = parse_op({"op": "call_service", "service": "/a b"})
+    gate.check(bad)
+    assert [o for o, _ in session.refused] == [op, bad]
+    assert session.refused[1][1].startswith("invalid service name '/a b'")
+    late, _, verifier = _gate(None, auth=True)
+    verifier.answer = ALICE
+    late.check(parse_op({"op": "auth", "mac": "t"}))
+    verifier.answer = BOB
+    late.check(parse_op({"op": "auth", "mac": "t"}))
+    assert caplog.messages == ["client 7 authenticated as alice (role viewer)",
+                               "session 7: over the op rate",
+                               "session 7: closing: enough",
+                               "client 7 authenticated as alice (role viewer) by an auth op",
+                               "session 7: auth op for another principal refused",
+                               "session 7: closing: this connection is authenticated as alice "
+                               "already; open a new connection to use another token"]
+    await _closed(session)
+
+
+async def test_warned_again_only_past_half_the_burst(clock: Clock) -> None:
+    """With a burst of 1 the first overflow warns; with a burst of 4, recovering to exactly
+    half of it keeps the warning given."""
+    one, session, _ = _gate(rate=1, burst=1)
+    assert one.admit_frame() and not one.admit_frame()
+    assert len(session.statuses) == 1
+    four, session, _ = _gate(rate=1, burst=4)
+    assert [four.admit_frame() for _ in range(5)] == [True] * 4 + [False]
+    clock.now += 4  # -1 + 4 = 3 tokens: 2 left after the next frame, exactly half
+    assert [four.admit_frame() for _ in range(4)] == [True] * 3 + [False]
+    assert len(session.statuses) == 1
+
+
+async def test_the_handshake_close_says_how_to_give_a_token() -> None:
+    """The handshake timer's reason names every way to give a token."""
+    _, session, _ = _gate(None, auth=True, handshake=0.01)
+    assert (await _closed(session))[1] == (
+        "authentication required: send a token (Authorization: Bearer, ?token= or an auth "
+        "op) within the handshake timeout")
+
+
+def test_rosapi_args_given_as_a_list_are_read_by_the_services_fields() -> None:
+    """Extra list items past the service's fields are ignored; a service without known
+    fields reads none."""
+    assert gate_module._rosapi_args("/rosapi/get_param", ["/n:p", "d", "extra"]) == {
+        "name": "/n:p", "default_value": "d"}
+    assert gate_module._rosapi_args("/rosapi/unknown", ["a"]) == {}
