@@ -220,6 +220,7 @@ def test_every_option_a_page_names_exists() -> None:
         "--share": "python -m msgs.generator", "--output": "python -m msgs.generator",
         "--command": "python -m examples.multi_robot", "--seconds": "python -m bench.dataframe",
         "--imu-seconds": "python -m bench.dataframe",
+        "--list": "bash scripts/mutate.sh",
     }
     pages = [*sorted(DOCS.rglob("*.md")), ROOT / "README.md", ROOT / "SECURITY.md",
              ROOT / "bench" / "README.md"]
