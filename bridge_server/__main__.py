@@ -27,6 +27,7 @@ from collections.abc import Callable
 from typing import TYPE_CHECKING
 
 from ._exit import ends_process
+from .allocator import tune_allocator
 
 try:
     from roslibpy_lite.protocol import keepalive
@@ -416,6 +417,7 @@ def main(argv: list[str] | None = None) -> int:
 
         return healthcheck((sys.argv[1:] if argv is None else argv)[1:], parse_args)
     args = parse_args(argv)
+    tune_allocator()
     refusal = security.exposure_refusal(args)
     if refusal is None and args.zenoh_connect and args.robot is None:
         refusal = "--zenoh-connect needs --robot NAME (the robot's name on Zenoh)"

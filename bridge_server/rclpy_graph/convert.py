@@ -31,8 +31,9 @@ API
 ``serialize(ros_msg) -> bytes`` / ``deserialize(data, msg_cls)``
     CDR via ``rclpy.serialization`` (for cbor-raw and tests).
 ``tune_allocator() -> bool``
-    Call once at bridge start-up (glibc): keeps large frame buffers on the
-    heap instead of page-faulting fresh mmaps for every message.
+    :func:`bridge_server.allocator.tune_allocator`, which the bridge and the relay
+    call at start-up (glibc's mmap threshold fixed: buffers up to 8 MiB reused from
+    the heap, larger ones given back when freed).
 ``now_ns``
     Module attribute, a zero-argument callable giving the time used for
     ``builtin_interfaces/Time`` fields given as the string ``"now"``
@@ -97,6 +98,7 @@ import cbor2
 import numpy
 from rosidl_parser import definition as idl
 
+from bridge_server.allocator import tune_allocator
 from bridge_server.codec import cdr_json
 from bridge_server.codec.publish import (
     encode_publish_cbor,
@@ -925,38 +927,6 @@ def converter_for(msg_cls: type[Any]) -> Converter:
 # --------------------------------------------------------------------------------------------
 # Whole-op encoders
 
-
-
-_M_TRIM_THRESHOLD: Final = -1
-_M_MMAP_THRESHOLD: Final = -3
-
-
-def tune_allocator(mmap_threshold: int = 32 * 1024 * 1024) -> bool:
-    """Keep large message buffers on the heap instead of fresh ``mmap`` s (glibc only).
-
-    By default glibc serves every allocation above ~128 KiB-1 MiB with a new
-    ``mmap`` and returns it on free, so each camera frame's buffers (base64
-    text, CBOR output, byte copies) are page-faulted in again: measured here
-    that makes a 640x480 rgb8 CBOR publish ~15x and a JSON one ~2-3x slower.
-    Call this once at bridge start-up; it raises the mmap threshold to
-    ``mmap_threshold`` and the heap trim threshold to twice that, so freed
-    buffers are reused. Returns False where it cannot apply (not glibc).
-    """
-    import ctypes
-    import ctypes.util
-
-    if not sys.platform.startswith("linux"):
-        return False
-    try:
-        libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6")
-        mallopt = libc.mallopt
-    except (OSError, AttributeError):
-        return False
-    mallopt.argtypes = [ctypes.c_int, ctypes.c_int]
-    mallopt.restype = ctypes.c_int
-    ok: bool = mallopt(_M_MMAP_THRESHOLD, mmap_threshold) == 1
-    trim_ok: bool = mallopt(_M_TRIM_THRESHOLD, 2 * mmap_threshold) == 1
-    return ok and trim_ok
 
 
 def serialize(ros_msg: Any) -> bytes:

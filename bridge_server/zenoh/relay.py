@@ -34,6 +34,7 @@ import sys
 from typing import TYPE_CHECKING, Any
 
 from .._exit import ends_process
+from ..allocator import tune_allocator
 
 try:
     from websockets.asyncio.server import Server, ServerConnection, serve
@@ -561,6 +562,7 @@ def main(argv: list[str] | None = None) -> int:
 
         return certs(given[1:])
     args = parse_args(argv)
+    tune_allocator()
     refusal = security.exposure_refusal(args) or zenoh_link.options_from_args(args).refusal()
     try:
         decode_budget.apply(args)
