@@ -24,7 +24,7 @@ from __future__ import annotations
 import asyncio
 from collections import deque
 from collections.abc import Callable, Collection
-from typing import TYPE_CHECKING, Any
+from typing import Any, Protocol
 
 import cbor2
 
@@ -34,8 +34,31 @@ from ..codec.budget import OFF_LOOP_BYTES, explain, workers
 from ..codec.chunked import cbor_bytes, json_text
 from ..codec.publish import _cbor_prefix
 
-if TYPE_CHECKING:
-    from .graph import ZenohFeed, ZenohMessage
+
+class ZenohMessage(Protocol):
+    """What this module needs of a robot's message (the relay's ``graph.ZenohMessage``;
+    named here as a protocol so that this module does not import the graph back)."""
+
+    topic: str
+    data: bytes
+
+    @property
+    def conv(self) -> Any: ...
+    def take_json(self, text: str) -> None: ...
+    def encoded(self, encoding: str, name: str | None = ...) -> object: ...
+    def take_encoded(self, encoding: str, value: Any) -> None: ...
+    def refuse(self, why: str) -> None: ...
+
+
+class ZenohFeed(Protocol):
+    """What a :class:`TopicLane` needs of its topic's feed (the relay's ``graph.ZenohFeed``)."""
+
+    topic: str
+
+    @property
+    def graph(self) -> Any: ...
+    def decoded_encodings(self) -> Collection[str]: ...
+    def fan_out(self, msg: Any) -> None: ...
 
 __all__ = ["DECODED", "WAITING", "WAITING_BYTES", "TopicLane", "prepare", "wanted"]
 
