@@ -23,7 +23,7 @@ from bridge_server.zenoh.link import ZenohOptions  # noqa: E402
 from tests.helpers import free_port  # noqa: E402
 from tests.relay.support import wait_matched  # noqa: E402
 
-DEADLINE = 10.0
+DEADLINE = 30.0
 
 
 @dataclass
