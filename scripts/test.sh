@@ -22,7 +22,6 @@ KILTED_LEG_TESTS=(
   tests/distro
   tests/relay/test_relay.py
   tests/relay/test_relay_actions.py
-  tests/relay/test_relay_cbor.py
 )
 
 case "${CI:-}" in 1|true|yes) ci=1 ;; *) ci=0 ;; esac
