@@ -19,13 +19,12 @@ from __future__ import annotations
 
 import struct
 import sys
-import threading
 import time
 
 from bridge_server.zenoh import keys
 from bridge_server.zenoh.keys import Meta, Snapshot
 from bridge_server.zenoh.link import ZenohOptions
-from tests.relay.played_robot import STRING, _cdr_string
+from tests.relay.played_robot import STRING, _cdr_string, stdin_closed
 
 BOMB = "bomb_msgs/msg/Bomb"
 SEPARATOR = "=" * 80
@@ -68,13 +67,7 @@ def main() -> None:
     session.put(f"{robot}/{keys.GRAPH}", graph)
     print("ready", flush=True)
     if mode == "clock":
-        stop = threading.Event()
-
-        def until_stdin_closes() -> None:
-            sys.stdin.read()
-            stop.set()
-
-        threading.Thread(target=until_stdin_closes, daemon=True).start()
+        stop = stdin_closed()
         key = keys.key_of(robot, "/steady")
         n = 0
         while not stop.wait(0.05):

@@ -35,6 +35,19 @@ def _cdr_string(text: str) -> bytes:
     return b"\x00\x01\x00\x00" + len(data).to_bytes(4, "little") + data
 
 
+def stdin_closed() -> threading.Event:
+    """An event set once the test closes this process's standard input (its way to say
+    stop), read by a daemon thread."""
+    stop = threading.Event()
+
+    def until_stdin_closes() -> None:
+        sys.stdin.read()
+        stop.set()
+
+    threading.Thread(target=until_stdin_closes, daemon=True).start()
+    return stop
+
+
 def main() -> None:
     router, robot, mode = sys.argv[1:4]
     seconds = float(sys.argv[4]) if len(sys.argv) > 4 else 3.0
@@ -50,13 +63,7 @@ def main() -> None:
     sys.stdin.readline()
     n = 0
     if mode == "steady":
-        stop = threading.Event()
-
-        def until_stdin_closes() -> None:
-            sys.stdin.read()
-            stop.set()
-
-        threading.Thread(target=until_stdin_closes, daemon=True).start()
+        stop = stdin_closed()
         key = keys.key_of(robot, "/steady")
         while not stop.wait(0.05):
             n += 1

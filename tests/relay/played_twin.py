@@ -18,7 +18,7 @@ import threading
 from bridge_server.zenoh import keys
 from bridge_server.zenoh.keys import Meta, Snapshot
 from bridge_server.zenoh.link import ZenohOptions
-from tests.relay.played_robot import STRING, _cdr_string
+from tests.relay.played_robot import STRING, _cdr_string, stdin_closed
 
 TOPICS = {"holder": "/steady", "twin": "/twin_topic"}
 """The topic each one's graph document lists."""
@@ -50,13 +50,7 @@ def main() -> None:
               live.declare_token(keys.alive_key(robot, zid))]
     session.put(f"{robot}/{keys.GRAPH}", graph, attachment=said)
     print("ready", flush=True)
-    stop = threading.Event()
-
-    def until_stdin_closes() -> None:
-        sys.stdin.read()
-        stop.set()
-
-    threading.Thread(target=until_stdin_closes, daemon=True).start()
+    stop = stdin_closed()
     key = keys.key_of(robot, "/steady")
     n = 0
     while not stop.wait(0.05):
