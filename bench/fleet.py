@@ -44,7 +44,8 @@ from typing import Any
 
 from bench.fleetproc import Balancer, Child, Usage, haproxy_config
 from bench.harness import Bridge, Ctx, percentile
-from bench.relay import RELAY_READY, _free_port
+from bench.ports import free_port
+from bench.relay import RELAY_READY
 
 __all__ = ["PER_PROCESS", "QUICK", "SIZES", "Size", "Tier", "fleet", "run_size"]
 
@@ -92,7 +93,7 @@ class Tier:
         """``relay_args``: more command-line arguments of every relay."""
         self.ctx, self.size, self.folder, self.prefix = ctx, size, folder, prefix
         self.relay_args = list(relay_args)
-        self.router_eps = [f"tcp/127.0.0.1:{_free_port()}" for _ in range(size.routers)]
+        self.router_eps = [f"tcp/127.0.0.1:{free_port()}" for _ in range(size.routers)]
         self.routers: list[Child | None] = [None] * size.routers
         self.relays: list[Bridge] = []
         self.sims: list[Child] = []
@@ -135,7 +136,7 @@ class Tier:
                            self.ctx.bridge_root, module="bridge_server.zenoh.relay",
                            ready=RELAY_READY)
             self.relays.append(await relay.start(60))
-        port = _free_port()
+        port = free_port()
         self.balancer = await Balancer(haproxy_config(port, [r.port for r in self.relays]),
                                        self.folder, port).start()
 

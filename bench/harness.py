@@ -25,6 +25,8 @@ from typing import Any
 
 from websockets.asyncio.client import ClientConnection, connect
 
+from bench.ports import free_port
+
 ROOT = Path(__file__).resolve().parent.parent
 """The checkout this harness comes from (its scenarios and ROS-side programs run from here)."""
 CODE_ROOT = Path(os.environ.get("BENCH_CODE_ROOT") or ROOT).resolve()
@@ -155,9 +157,7 @@ class Bridge:
 
     async def _start_rs(self, timeout: float) -> Bridge:
         """Start rosbridge_server_rs on a free port; ready once the port accepts."""
-        with socket.socket() as s:
-            s.bind(("127.0.0.1", 0))
-            self.port = s.getsockname()[1]
+        self.port = free_port()
         self.proc = await asyncio.create_subprocess_exec(
             "bash", str(RS_PEER), str(self.port), cwd=ROOT, env=child_env(self.domain),
             stdin=asyncio.subprocess.DEVNULL, stdout=asyncio.subprocess.PIPE,

@@ -28,13 +28,13 @@ import contextlib
 import json
 import os
 import re
-import socket
 import statistics
 import time
 from typing import Any
 
 from bench.harness import READY, Bridge, Ctx, percentile, send_op, ws_open
 from bench.linkproxy import LinkProxy
+from bench.ports import free_port
 
 __all__ = ["relay_dead_link", "relay_imu", "relay_outage", "relay_service", "relay_uplink"]
 
@@ -44,12 +44,6 @@ RATE_HZ = 10
 FRAME_BYTES = 640 * 480 * 3
 RELAY_READY = re.compile(r"relay listening on wss?://([\d.]+):(\d+)")
 ROBOT_READY = re.compile(r"robot \S+ dialing out to Zenoh")
-
-
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 async def _watch(ctx: Ctx, url: str, n: int, link: LinkProxy, pids: dict[str, int],
@@ -100,7 +94,7 @@ async def _watch(ctx: Ctx, url: str, n: int, link: LinkProxy, pids: dict[str, in
 
 
 async def _through_relay(ctx: Ctx, counts: tuple[int, ...], seconds: float) -> list[dict[str, Any]]:
-    router_port = _free_port()
+    router_port = free_port()
     relay = Bridge(ctx.domain, ["--zenoh-listen", f"tcp/127.0.0.1:{router_port}"],
                    ctx.bridge_root, module="bridge_server.zenoh.relay", ready=RELAY_READY)
     await relay.start()
@@ -163,7 +157,7 @@ async def _tier(ctx: Ctx, relays: int = 1, robot_listens: bool = False
                 ) -> Any:
     """``relays`` relays (the first the Zenoh router, the others its clients) and a robot
     dialing out to the first; yields (the relays, the robot's bridge)."""
-    router = f"tcp/127.0.0.1:{_free_port()}"
+    router = f"tcp/127.0.0.1:{free_port()}"
     started: list[Bridge] = []
     try:
         for i in range(relays):
@@ -311,7 +305,7 @@ async def relay_dead_link(ctx: Ctx) -> dict[str, Any]:
     results: dict[str, Any] = {}
     for lease in (3.0, 10.0):
         lease_args = ["--zenoh-lease", f"{lease:g}"]
-        zport = _free_port()
+        zport = free_port()
         relay = Bridge(ctx.domain, ["--zenoh-listen", f"tcp/127.0.0.1:{zport}", *lease_args],
                        ctx.bridge_root, module="bridge_server.zenoh.relay", ready=RELAY_READY)
         await relay.start()
@@ -377,7 +371,7 @@ async def relay_outage(ctx: Ctx) -> dict[str, Any]:
     message published during the outage being delivered, and the robot's RSS and replay
     window bytes during the outage (sampled each 0.5 s)."""
     outages = (5.0, 15.0) if ctx.quick else (5.0, 15.0, 60.0)
-    zport, mport = _free_port(), _free_port()
+    zport, mport = free_port(), free_port()
     relay = Bridge(ctx.domain, ["--zenoh-listen", f"tcp/127.0.0.1:{zport}"], ctx.bridge_root,
                    module="bridge_server.zenoh.relay", ready=RELAY_READY)
     await relay.start()

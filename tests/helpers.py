@@ -12,7 +12,6 @@ import os
 import re
 import shutil
 import signal
-import socket
 import subprocess
 import sys
 import tempfile
@@ -25,6 +24,8 @@ from typing import Any
 
 from websockets.asyncio.client import ClientConnection
 from websockets.asyncio.client import connect as ws_connect
+
+from bench.ports import free_port as _free_port
 
 ROOT = Path(__file__).resolve().parent.parent
 READY = re.compile(r"bridge_server listening on wss?://([\d.]+):(\d+)")
@@ -40,12 +41,11 @@ def ros_env(**extra: str) -> dict[str, str]:
 
 
 def free_port() -> int:
-    """A TCP port nobody listens on now on 127.0.0.1 (for a program that reports no bound
-    port, or a test that must know it first; the same number is free on a namespace's own
-    address too)."""
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
+    """A TCP port nobody listens on now on 127.0.0.1, and that the kernel will not give a
+    ``port=0`` listener or a connection meanwhile (for a program that reports no bound port,
+    or a test that must know it first; the same number is free on a namespace's own address
+    too): :func:`bench.ports.free_port`."""
+    return _free_port()
 
 
 def ros_image(width: int, height: int, encoding: str, data: bytes, frame_id: str = "") -> Any:

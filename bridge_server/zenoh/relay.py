@@ -127,9 +127,14 @@ class Relay:
         return int(next(iter(self._server.sockets)).getsockname()[1])
 
     async def start(self) -> None:
-        """Listen, then join Zenoh (until a router answers, clients are answered 503)."""
+        """Listen, then join Zenoh (until a router answers, clients are answered 503); what
+        opened is closed again if joining fails."""
         await self.listen()
-        await self.join()
+        try:
+            await self.join()
+        except BaseException:
+            await self.close()
+            raise
 
     async def join(self) -> None:
         """Join the Zenoh network (a client of routers waits here until one answers)."""
@@ -410,6 +415,9 @@ class Relay:
         for bridge in list(self.robots.values()):
             await bridge.close()
         self.robots.clear()
+        if self._server is not None:  # its port is free when this returns (at most ~1 s)
+            with contextlib.suppress(TimeoutError):
+                await asyncio.wait_for(self._server.wait_closed(), 1.0)
         for watch in (self._watch, self._links):
             if watch is not None:
                 with contextlib.suppress(Exception):  # the session closed first

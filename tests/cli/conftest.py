@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import socket
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -10,7 +9,7 @@ import pytest
 
 from roslibpy_lite.cli import main
 from tests.cli.ros2_nodes import managed_node, param_node  # noqa: F401 - fixtures for tests here
-from tests.helpers import BridgeProcess
+from tests.helpers import BridgeProcess, free_port
 
 
 @dataclass
@@ -44,10 +43,8 @@ def cli(bridge: BridgeProcess, capsys: pytest.CaptureFixture[str]) -> Run:
 
 
 def closed_port() -> int:
-    """A port nothing listens on."""
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
+    """A port nothing listens on (nor will: :func:`tests.helpers.free_port`)."""
+    return free_port()
 
 
 def one_error_line(result: Result, code: int, *fragments: str) -> None:

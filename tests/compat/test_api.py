@@ -13,7 +13,7 @@ import roslibpy.ros2
 
 import roslibpy_lite.compat as compat
 from roslibpy_lite import ConnectionClosed, NotAuthenticated
-from tests.helpers import BridgeProcess, threads_since
+from tests.helpers import BridgeProcess, free_port, threads_since
 from tests.security.support import make_auth_file
 
 NOT_COVERED = {"set_default_transport"}
@@ -156,11 +156,7 @@ def test_operations_after_terminate_raise_connection_closed() -> None:
 def test_wrong_port_says_where_and_what_to_check() -> None:
     """run() against a port nobody serves fails naming the URL and what to check, not only
     'Failed to connect to ROS'."""
-    import socket
-
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        port = s.getsockname()[1]
+    port = free_port()
     ros = compat.Ros(host="127.0.0.1", port=port)
     try:
         with pytest.raises(compat.RosTimeoutError) as info:

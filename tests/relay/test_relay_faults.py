@@ -314,3 +314,20 @@ async def test_the_relay_leaves_pings_to_its_sessions_keepalive() -> None:
             assert connection.ping_interval == expected
         finally:
             await wire.close()
+
+
+async def test_a_relay_that_cannot_join_zenoh_closes_what_it_opened() -> None:
+    """A relay whose Zenoh listen address is taken fails to start naming the address, and its
+    websocket port (opened first) is closed again, not left bound in the process (in CI it
+    was, and the next test failed on its ResourceWarning)."""
+    import socket
+
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        address = f"127.0.0.1:{taken.getsockname()[1]}"
+        relay = Relay(BridgeConfig(port=0, node_name="relay"),
+                      ZenohOptions(listen=[f"tcp/{address}"]))
+        with pytest.raises(Exception, match=re.escape(address)):
+            await relay.start()
+    assert relay._server is not None and not relay._server.sockets
