@@ -1,6 +1,6 @@
 """Simulated robots for the fleet benchmark and its test: the real robot side, no ROS.
 
-Each :class:`SimRobot` is a ROS graph in memory (:class:`~bridge_server.memory.graph.MemoryRos`)
+Each :class:`SimRobot` is a ROS graph in memory (:class:`~rosbridge_core.memory.graph.MemoryRos`)
 shaped like a small mobile robot's: 30 nodes, 100 topics, 20 services (15 of them the
 parameter services of 5 nodes with parameters), one action (``/navigate``, the
 ``test_msgs/action/Fibonacci`` type). Its relay side is the bridge's own
@@ -34,12 +34,12 @@ import time
 from dataclasses import dataclass, field
 from typing import Any
 
-from bridge_server.graph import Status
-from bridge_server.memory.graph import MemoryGraph, MemoryPublisher, MemoryRos
 from bridge_server.zenoh.exporter import Exporter
 from bridge_server.zenoh.link import ZenohOptions
 from bridge_server.zenoh.robot_link import RobotOptions
 from msgs import dynamic
+from rosbridge_core.graph import Status
+from rosbridge_core.memory.graph import MemoryGraph, MemoryPublisher, MemoryRos
 
 __all__ = ["CAMERA", "POSE", "STREAMS", "Fleet", "SimRobot", "Stream", "main"]
 

@@ -26,36 +26,37 @@ import sys
 from collections.abc import Callable
 from typing import TYPE_CHECKING
 
-from ._exit import ends_process
-from .allocator import tune_allocator
+from bridge_server._exit import ends_process
+from bridge_server.allocator import tune_allocator
 
 try:
-    from roslibpy_lite.protocol import keepalive
-
-    from . import eventloop, security
-    from .codec import budget as decode_budget
-    from .interfaces import BridgeError
-    from .security.options import MAX_MESSAGE_SIZE
-    from .session.resume import ResumeConfig
-    from .session.session import DEFAULT_QUEUE_LENGTH, SessionConfig
-    from .zenoh import link as zenoh_link
-    from .zenoh import robot_link
-    from .zenoh.keys import check_robot
-    from .zenoh.priority import parse_overrides
-    from .zenoh.replay import (
+    from bridge_server import eventloop
+    from bridge_server.front.handshake import Security
+    from bridge_server.zenoh import link as zenoh_link
+    from bridge_server.zenoh import robot_link
+    from bridge_server.zenoh.keys import check_robot
+    from bridge_server.zenoh.priority import parse_overrides
+    from bridge_server.zenoh.replay import (
         DEFAULT_REPLAY_BYTES,
         DEFAULT_REPLAY_COUNT,
         DEFAULT_REPLAY_TOTAL_BYTES,
         ReplayWindow,
     )
+    from rosbridge_core import security
+    from rosbridge_core.codec import budget as decode_budget
+    from rosbridge_core.interfaces import BridgeError
+    from rosbridge_core.protocol import keepalive
+    from rosbridge_core.security.options import MAX_MESSAGE_SIZE
+    from rosbridge_core.session.resume import ResumeConfig
+    from rosbridge_core.session.session import DEFAULT_QUEUE_LENGTH, SessionConfig
 except ModuleNotFoundError as _missing:  # a client-only install: say which extra to add
-    from ._requires import missing_dependency
+    from bridge_server._requires import missing_dependency
 
     missing_dependency(_missing)
 
 if TYPE_CHECKING:
-    from .front.server import Bridge
-    from .security.permissions import Role
+    from bridge_server.front.server import Bridge
+    from rosbridge_core.security.permissions import Role
 
 __all__ = ["main", "parse_args"]
 
@@ -280,10 +281,10 @@ CI saw a worker stuck that way. The watchdog is faulthandler's own thread, which
 
 async def _run(args: argparse.Namespace) -> int:
     try:  # the sessions import without the bridge's extra (MockRos runs them); ROS does not
-        from .front.server import Bridge, BridgeConfig
-        from .rclpy_graph.graph import RclpyGraph
+        from bridge_server.front.server import Bridge, BridgeConfig
+        from bridge_server.rclpy_graph.graph import RclpyGraph
     except ModuleNotFoundError as missing:
-        from ._requires import missing_dependency
+        from bridge_server._requires import missing_dependency
 
         missing_dependency(missing)
 
@@ -321,7 +322,7 @@ async def _run(args: argparse.Namespace) -> int:
     for sig in (signal.SIGINT, signal.SIGTERM):
         loop.add_signal_handler(sig, stop.set)
     if args.worker_index is not None:
-        from .workers.supervisor import watch_supervisor
+        from bridge_server.workers.supervisor import watch_supervisor
 
         config.node_name = f"{config.node_name}_w{args.worker_index}"
         watch_supervisor(stop)  # a worker stops with its supervisor, even a killed one
@@ -335,7 +336,7 @@ async def _run(args: argparse.Namespace) -> int:
         raise
     exporter = None
     if args.zenoh_connect:  # the robot dials out to Zenoh routers (bridge_server/zenoh/)
-        from .zenoh.exporter import Exporter
+        from bridge_server.zenoh.exporter import Exporter
 
         try:
             policy = relay_policy(bridge, args.relay_role)
@@ -386,7 +387,7 @@ def relay_policy(bridge: Bridge, role: str | None) -> Callable[[], Role | None]:
     """The robot's relay policy: ``role`` of the bridge's auth file, looked up at each
     request (SIGHUP reads the file again), or the exporter's default without one.
     ``BridgeError`` at start if the file has no such role."""
-    from .zenoh.exporter import DEFAULT_POLICY
+    from bridge_server.zenoh.exporter import DEFAULT_POLICY
 
     if role is None:
         return lambda: DEFAULT_POLICY
@@ -409,11 +410,11 @@ def main(argv: list[str] | None = None) -> int:
     with one it returns the status."""
     command = (sys.argv[1:] if argv is None else argv)[:1]
     if command in (["add-principal"], ["remove-principal"]):
-        from .security.auth import main as principals
+        from rosbridge_core.security.auth import main as principals
 
         return principals(sys.argv[1:] if argv is None else argv)
     if command == ["healthcheck"]:
-        from .healthcheck import main as healthcheck
+        from bridge_server.healthcheck import main as healthcheck
 
         return healthcheck((sys.argv[1:] if argv is None else argv)[1:], parse_args)
     args = parse_args(argv)
@@ -457,9 +458,9 @@ def main(argv: list[str] | None = None) -> int:
         checked = security.config_from_args(args)
         security.check_readable(checked)  # names the file and user
         # A file that is no certificate (or auth file) is named before ROS starts.
-        security.Security(checked).ssl_context()
+        Security(checked).ssl_context()
         if args.workers > 1 and args.worker_index is None:
-            from .workers.supervisor import Supervisor
+            from bridge_server.workers.supervisor import Supervisor
 
             argv = sys.argv[1:] if argv is None else argv
             return Supervisor(argv, args.workers, args.host, args.port, args.metrics_port).run()

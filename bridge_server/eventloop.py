@@ -6,7 +6,7 @@ import argparse
 import asyncio
 from collections.abc import Callable
 
-from .interfaces import BridgeError
+from rosbridge_core.interfaces import BridgeError
 
 __all__ = ["EVENT_LOOPS", "add_argument", "event_loop_factory", "loop_name"]
 

@@ -12,7 +12,7 @@ Needs only ``websockets``; no ROS installation::
 :class:`~roslibpy_lite.api.Ros` (the front, ``RosBase``) over another transport.
 
 Importing the package alone loads none of the client: the names below are loaded at their
-first use, so the bridge can use the protocol core (:mod:`roslibpy_lite.protocol`) without
+first use, so the bridge can use the protocol core (:mod:`rosbridge_core.protocol`) without
 the client's modules. A test keeps it so (``tests/core/test_protocol_core.py``).
 """
 

@@ -77,6 +77,8 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Protocol, Self, cast
 
 from msgs.runtime import Action, Message, UnknownTypeError, lookup_action
+from rosbridge_core.protocol import ops
+from rosbridge_core.protocol.goal_status import GoalStatus
 
 from ._aio import is_async_callable, running_loop
 from .exceptions import (
@@ -89,8 +91,6 @@ from .exceptions import (
 )
 from .handles import Backend, _BridgeHandle
 from .messages import _check_type_string, _packages, canonical_type, check_dict, from_wire, to_wire
-from .protocol import ops
-from .protocol.goal_status import GoalStatus
 
 if TYPE_CHECKING:
     from collections.abc import Coroutine

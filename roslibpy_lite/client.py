@@ -23,8 +23,8 @@ completes the waiting call's future; a ``status`` error naming one of our
 requests fails that request. One writer task drains a send queue, so the
 order of our ops is kept; ``publish`` waits only when more than
 ``max_pending`` frames are waiting (backpressure). All parsing and
-serialising goes through :mod:`roslibpy_lite.protocol.ops` /
-:mod:`roslibpy_lite.protocol.frames` (JSON, CBOR with RFC 8746 typed arrays,
+serialising goes through :mod:`rosbridge_core.protocol.ops` /
+:mod:`rosbridge_core.protocol.frames` (JSON, CBOR with RFC 8746 typed arrays,
 fragments). The socket side lives in :mod:`roslibpy_lite.transports.websocket`, the API in
 :mod:`roslibpy_lite.ros`.
 

@@ -37,7 +37,7 @@ them errors)::
                                      fills in defaults); once per type and field set
 
 The root and the protocol errors are declared in the protocol core
-(:mod:`roslibpy_lite.protocol.errors`, which the bridge uses without the client) and
+(:mod:`rosbridge_core.protocol.errors`, which the bridge uses without the client) and
 belong to this tree as they are.
 
 Remote failures (the other side said no) are kept apart from local misuse
@@ -47,7 +47,12 @@ the operating system are translated into this tree at the client's edge only.
 
 from __future__ import annotations
 
-from .protocol.errors import LocalProtocolError, ProtocolError, RemoteProtocolError, RosLibError
+from rosbridge_core.protocol.errors import (
+    LocalProtocolError,
+    ProtocolError,
+    RemoteProtocolError,
+    RosLibError,
+)
 
 __all__ = [
     "ConnectError",

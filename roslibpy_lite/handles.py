@@ -43,6 +43,7 @@ from collections.abc import Awaitable, Callable, Coroutine, Generator, Mapping
 from typing import TYPE_CHECKING, Any, Generic, NamedTuple, Protocol, Self, TypeVar, cast
 
 from msgs.runtime import Message, Service, ValidationError
+from rosbridge_core.protocol import ops
 
 from ._aio import is_async_callable, running_loop
 from ._api_types import MessageCallback, ServiceHandler
@@ -56,7 +57,6 @@ from .exceptions import (
 )
 from .jupyter import in_cell, write_in_cell
 from .messages import Completeness, RawMessage, check_dict, from_wire, to_wire, warn_user
-from .protocol import ops
 
 if TYPE_CHECKING:
     from types import TracebackType

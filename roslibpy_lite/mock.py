@@ -4,7 +4,7 @@ No network and no ROS: MockRos is the same RosBase as the websocket
 :class:`~roslibpy_lite.client.Client` (:class:`~roslibpy_lite.ros.RosBase`)
 over an in-memory transport (:class:`~roslibpy_lite.transports.memory.MemoryTransport`)
 to the bridge's own session code, run in memory over a ROS graph held in memory
-(:mod:`bridge_server.memory`). So the API and the client's validation are the
+(:mod:`rosbridge_core.memory`). So the API and the client's validation are the
 real client's, and every answer, refusal and error is the bridge's, by
 construction. Code written against :class:`~roslibpy_lite.api.Ros` runs
 unchanged on it::

@@ -39,6 +39,8 @@ import logging
 from collections.abc import Callable, Coroutine, Mapping
 from typing import TYPE_CHECKING, Any, Literal, Self, overload
 
+from rosbridge_core.protocol import ops
+
 from ._aio import running_loop
 from ._api_types import ConnectionState, ErrorCallback, MessageCallback, StateCallback
 from .capabilities import Tracked
@@ -57,7 +59,6 @@ from .exceptions import (
     status_error,
 )
 from .messages import Completeness
-from .protocol import ops
 from .state import StateHub, StateWatcher, add_callback
 
 if TYPE_CHECKING:

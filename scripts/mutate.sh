@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Mutation testing of modules against the tests meant to catch their faults (not run in CI):
-#   bash scripts/mutate.sh bridge_server/security/names.py tests/security/test_probes.py::test_check_name_refuses_invalid_names
+#   bash scripts/mutate.sh rosbridge_core/security/names.py tests/security/test_probes.py::test_check_name_refuses_invalid_names
 #   bash scripts/mutate.sh --list scripts/mutate-modules.txt
 # MODULE is a .py file of the checkout, optionally MODULE::GLOB[,GLOB...] to mutate only
 # the functions whose names match (e.g. bridge_server/zenoh/relay.py::*admit*); TESTS are

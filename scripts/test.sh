@@ -57,9 +57,9 @@ elif [ "$ci" = 1 ] && [ ! -x "$ROOT/.venv-kilted/bin/python" ]; then
   DISTRO_TESTS=(--ignore=tests/distro)
 fi
 echo "[test] ruff"
-ruff check roslibpy_lite bridge_server msgs examples bench tests docs/_hooks
+ruff check roslibpy_lite rosbridge_core bridge_server msgs examples bench tests docs/_hooks
 echo "[test] mypy --strict"
-mypy roslibpy_lite bridge_server msgs examples bench tests
+mypy roslibpy_lite rosbridge_core bridge_server msgs examples bench tests
 echo "[test] mkdocs build --strict"
 SITE="$(mktemp -d)"
 trap 'rm -rf "$SITE"' EXIT

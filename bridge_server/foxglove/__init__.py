@@ -5,7 +5,7 @@ A client that offers the subprotocol in its handshake (Foxglove, Lichtblick, the
 a rosbridge session as before. :mod:`.wire` is the protocol's frames without I/O,
 :mod:`.hub` what the Foxglove sessions of a bridge share (channels, services, watches),
 :mod:`.session` one client. They reach ROS only through the
-:class:`~bridge_server.graph.Graph`.
+:class:`~rosbridge_core.graph.Graph`.
 """
 
 from __future__ import annotations
@@ -13,9 +13,9 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Any
 
-from .hub import Hub
-from .session import FoxgloveSession
-from .wire import SUBPROTOCOL
+from bridge_server.foxglove.hub import Hub
+from bridge_server.foxglove.session import FoxgloveSession
+from bridge_server.foxglove.wire import SUBPROTOCOL
 
 __all__ = ["SUBPROTOCOL", "FoxgloveSession", "Hub", "select_subprotocol"]
 

@@ -1,7 +1,7 @@
 """What the Foxglove sessions of one bridge share: the channels, the services, the watches.
 
 One :class:`Hub` per bridge follows the ROS graph (through the bridge's
-:class:`~bridge_server.graph.Graph`, never rclpy) while Foxglove clients are connected:
+:class:`~rosbridge_core.graph.Graph`, never rclpy) while Foxglove clients are connected:
 every :data:`REFRESH_S` seconds it lists topics and services, gives each a stable id
 (kept while its topic and type stay the same, as the spec allows clients to cache
 schemas by id), and tells every session what appeared and what went. Types whose
@@ -23,18 +23,17 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, Generic, Protocol, TypeVar
 
+from bridge_server.foxglove.wire import Channel
 from msgs import cdr, dynamic
 from msgs.runtime import Message as MsgsMessage
 from msgs.runtime import Service as MsgsService
 from msgs.runtime import lookup
-
-from ..graph import PARAMETER_EVENTS, parameter_value
-from ..interfaces import BridgeError
-from .wire import Channel
+from rosbridge_core.graph import PARAMETER_EVENTS, parameter_value
+from rosbridge_core.interfaces import BridgeError
 
 if TYPE_CHECKING:
-    from ..graph import Graph, Listener, TopicFeed
-    from ..graph import Message as RosMessage
+    from rosbridge_core.graph import Graph, Listener, TopicFeed
+    from rosbridge_core.graph import Message as RosMessage
 
 __all__ = ["CLOCK", "REFRESH_S", "GraphState", "Hub", "ServiceEntry", "Viewer", "foxglove_schema",
            "message_class", "service_class"]

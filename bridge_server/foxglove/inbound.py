@@ -3,7 +3,7 @@
 A client's ``cdr`` message is decoded (:mod:`msgs.cdr`, within its
 :class:`~msgs.cdr.Budget`) and converted for ROS before it is published. On the event loop,
 a 16 MiB message of empty structs stopped every other client for 28.8 s (issue 53). Now a
-message of :data:`~bridge_server.codec.budget.OFF_LOOP_BYTES` or more is decoded and
+message of :data:`~rosbridge_core.codec.budget.OFF_LOOP_BYTES` or more is decoded and
 converted on a worker thread; the channel's later messages wait behind it (at most
 :data:`WAITING`, past that refused with an error), and each is published on the loop in
 the order it came. A small message on a channel with nothing waiting is handled at once,
@@ -17,7 +17,7 @@ from collections import deque
 from collections.abc import Callable
 from typing import Any
 
-from ..codec.budget import OFF_LOOP_BYTES, workers
+from rosbridge_core.codec.budget import OFF_LOOP_BYTES, workers
 
 __all__ = ["WAITING", "Inbound"]
 

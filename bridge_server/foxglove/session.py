@@ -1,13 +1,13 @@
 """One Foxglove client of the bridge: its frame loop and what it owns.
 
-A :class:`FoxgloveSession` is what :class:`~bridge_server.session.session.Session` is
+A :class:`FoxgloveSession` is what :class:`~rosbridge_core.session.session.Session` is
 for rosbridge clients, for clients that offered ``foxglove.websocket.v1`` in the
 handshake, on the same port. It goes through the same parts: the bridge's
-:class:`~bridge_server.graph.Graph` (never rclpy), an
-:class:`~bridge_server.session.outbox.Outbox` (a queue per subscription bounded by
+:class:`~rosbridge_core.graph.Graph` (never rclpy), an
+:class:`~rosbridge_core.session.outbox.Outbox` (a queue per subscription bounded by
 :data:`QUEUE_BYTES` that drops the oldest, so a slow client gets the newest frames, not a
 backlog), the
-per-connection limits, and the :class:`~bridge_server.security.Gate` (token from the
+per-connection limits, and the :class:`~rosbridge_core.security.Gate` (token from the
 handshake, op rate, and the role's say on each name). Every refusal or bad frame is
 answered with a ``status`` error naming what was wrong; the connection stays up.
 
@@ -33,30 +33,29 @@ from collections.abc import Callable, Coroutine
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
+from bridge_server.foxglove import wire
+from bridge_server.foxglove.hub import CLOCK, GraphState, message_class
+from bridge_server.foxglove.inbound import Inbound
 from msgs import cdr
 from msgs.runtime import ValidationError
-
-from ..codec.budget import explain
-from ..interfaces import BridgeError, ConversionError, canonical_name
-from ..security.gate import POLICY_VIOLATION
-from ..security.names import InvalidNameError, check_name, full_name
-from ..security.permissions import LISTING, PARAMETER_LISTING
-from ..session.calls import Calls
-from ..session.client_status import ClientStatus, client_status
-from ..session.limits import over_cap
-from ..session.liveness import watch_link
-from ..session.outbox import Outbox, Subscription
-from . import wire
-from .hub import CLOCK, GraphState, message_class
-from .inbound import Inbound
+from rosbridge_core.codec.budget import explain
+from rosbridge_core.interfaces import BridgeError, ConversionError, canonical_name
+from rosbridge_core.security.gate import POLICY_VIOLATION
+from rosbridge_core.security.names import InvalidNameError, check_name, full_name
+from rosbridge_core.security.permissions import LISTING, PARAMETER_LISTING
+from rosbridge_core.session.calls import Calls
+from rosbridge_core.session.client_status import ClientStatus, client_status
+from rosbridge_core.session.limits import over_cap
+from rosbridge_core.session.liveness import watch_link
+from rosbridge_core.session.outbox import Outbox, Subscription
 
 if TYPE_CHECKING:
-    from ..graph import Message as RosMessage
-    from ..graph import Publisher
-    from ..security.options import SecurityConfig
-    from ..session.host import Shared
-    from ..session.link import ClientLink
-    from .hub import Hub, ServiceEntry
+    from bridge_server.foxglove.hub import Hub, ServiceEntry
+    from rosbridge_core.graph import Message as RosMessage
+    from rosbridge_core.graph import Publisher
+    from rosbridge_core.security.options import SecurityConfig
+    from rosbridge_core.session.host import Shared
+    from rosbridge_core.session.link import ClientLink
 
 __all__ = ["ENCODINGS", "OVERSIZE_GRACE", "QUEUE_BYTES", "FoxgloveSession"]
 

@@ -19,8 +19,8 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
-from roslibpy_lite.protocol.errors import RemoteProtocolError
-from roslibpy_lite.protocol.frames import decode_frame
+from rosbridge_core.protocol.errors import RemoteProtocolError
+from rosbridge_core.protocol.frames import decode_frame
 
 __all__ = [
     "SUBPROTOCOL",
@@ -329,7 +329,7 @@ _PARSERS: dict[str, Any] = {
 
 def parse_json(data: str | bytes) -> Any:
     """JSON text (a frame, or a payload in the ``json`` encoding) as a value, read as
-    rosbridge frames are (:func:`roslibpy_lite.protocol.decode_frame`); what is wrong (where
+    rosbridge frames are (:func:`rosbridge_core.protocol.decode_frame`); what is wrong (where
     it is malformed, nested too deeply, not UTF-8) is a :class:`WireError` in rosbridge's
     words."""
     try:

@@ -1,6 +1,6 @@
 """The inbound byte budget: what a connection has received and not yet handled, counted per
 connection, in all, and (through the connection's :class:`Charges`, its
-:class:`~bridge_server.security.accounts.Holder`'s) per principal and per address.
+:class:`~rosbridge_core.security.accounts.Holder`'s) per principal and per address.
 
 websockets reads frames into an ``Assembler`` with a frame queue; the bridge replaces both on
 every server connection (:class:`~bridge_server.front.websocket.BridgeConnection`):
@@ -24,7 +24,7 @@ __all__ = ["BudgetAssembler", "Charges", "CountingQueue", "Inbound"]
 
 class Charges(Protocol):
     """Where a connection's in-flight bytes are charged across connections
-    (:meth:`bridge_server.security.accounts.Holder.inflight`)."""
+    (:meth:`rosbridge_core.security.accounts.Holder.inflight`)."""
 
     def force(self, n: int) -> None:
         """Charge ``n`` bytes held already."""

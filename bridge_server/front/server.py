@@ -1,9 +1,9 @@
-"""The websocket server: one :class:`~bridge_server.session.Session` per connection.
+"""The websocket server: one :class:`~rosbridge_core.session.Session` per connection.
 
 Each connection is its session's link
 (:class:`~bridge_server.front.websocket.WebSocketLink`, a
-:class:`~bridge_server.session.link.ClientLink`), and the :class:`Bridge` is what its
-sessions share (:class:`~bridge_server.session.host.Shared`): a session sees neither the
+:class:`~rosbridge_core.session.link.ClientLink`), and the :class:`Bridge` is what its
+sessions share (:class:`~rosbridge_core.session.host.Shared`): a session sees neither the
 websocket library nor the bridge whole.
 
 Frames: text frames carry JSON ops, binary frames CBOR-encoded ops. Inbound
@@ -34,31 +34,32 @@ from typing import TYPE_CHECKING, Any, Protocol
 from websockets.asyncio.server import Server, ServerConnection, serve
 from websockets.datastructures import MultipleValuesError
 
-from roslibpy_lite.protocol import keepalive
-from roslibpy_lite.protocol.errors import RemoteProtocolError
-from roslibpy_lite.protocol.ops import RECEIVED_HEADER, SESSION_HEADER, parse_received
-
-from ..foxglove import SUBPROTOCOL, FoxgloveSession, Hub, select_subprotocol
-from ..graph import Graph
-from ..http.metrics import BridgeMetrics
-from ..http.web import Web
-from ..http.web_access import WebAccess
-from ..security import Security, SecurityConfig, WebSocketLink
-from ..security.options import MAX_MESSAGE_SIZE
-from ..session.actions import ActionClients, SessionActions
-from ..session.link import LinkConfig
-from ..session.ownership import Ownership
-from ..session.resume import ResumeConfig, SentFrames, SessionStore
-from ..session.session import Session, SessionConfig, wait_ended
-from ..workers.forward import Forwarder
+from bridge_server.foxglove import SUBPROTOCOL, FoxgloveSession, Hub, select_subprotocol
+from bridge_server.front.handshake import Security
+from bridge_server.front.websocket import WebSocketLink
+from bridge_server.http.metrics import BridgeMetrics
+from bridge_server.http.web import Web
+from bridge_server.http.web_access import WebAccess
+from bridge_server.workers.forward import Forwarder
+from rosbridge_core.graph import Graph
+from rosbridge_core.protocol import keepalive
+from rosbridge_core.protocol.errors import RemoteProtocolError
+from rosbridge_core.protocol.ops import RECEIVED_HEADER, SESSION_HEADER, parse_received
+from rosbridge_core.security import SecurityConfig
+from rosbridge_core.security.options import MAX_MESSAGE_SIZE
+from rosbridge_core.session.actions import ActionClients, SessionActions
+from rosbridge_core.session.link import LinkConfig
+from rosbridge_core.session.ownership import Ownership
+from rosbridge_core.session.resume import ResumeConfig, SentFrames, SessionStore
+from rosbridge_core.session.session import Session, SessionConfig, wait_ended
 
 if TYPE_CHECKING:
     from collections.abc import Awaitable
 
     from websockets.http11 import Request, Response
 
-    from ..session.host import Host
-    from ..session.services import SessionServices
+    from rosbridge_core.session.host import Host
+    from rosbridge_core.session.services import SessionServices
 
 __all__ = ["Bridge", "BridgeConfig", "ServedGraph"]
 

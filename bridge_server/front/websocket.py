@@ -1,6 +1,6 @@
 """The websocket front's connection: the only code that builds on websockets' private
 internals. A connection is its session's link (:class:`WebSocketLink`, a
-:class:`~bridge_server.session.link.ClientLink`: frames straight to the transport, one write
+:class:`~rosbridge_core.session.link.ClientLink`: frames straight to the transport, one write
 for a batch, the keepalive), with the inbound byte budget and the frames handed to the
 session as they are read (:class:`BridgeConnection`).
 
@@ -49,29 +49,29 @@ from websockets.frames import BINARY, TEXT, CloseCode, Frame
 from websockets.protocol import OPEN
 from websockets.streams import StreamReader
 
-from roslibpy_lite.protocol import keepalive
+from rosbridge_core.protocol import keepalive
 
 try:  # websockets' own unmasking, in C where it was built with it
     from websockets.speedups import apply_mask
 except ImportError:  # pragma: no cover - a websockets without its C extension
     from websockets.utils import apply_mask
 
-from ..interfaces import BridgeError
-from ..session.frames import JOINED_BYTES, frame_parts, joined
-from .budget import BudgetAssembler, Inbound
+from bridge_server.front.budget import BudgetAssembler, Inbound
+from rosbridge_core.interfaces import BridgeError
+from rosbridge_core.session.frames import JOINED_BYTES, frame_parts, joined
 
 log = logging.getLogger("bridge_server.security")
 
 if TYPE_CHECKING:
-    from ..security.accounts import Accounts, Holder, KindBudget
-    from ..security.auth import Principal
-    from ..security.options import SecurityConfig
-    from ..session.frames import Frame as OutFrame
+    from rosbridge_core.security.accounts import Accounts, Holder, KindBudget
+    from rosbridge_core.security.auth import Principal
+    from rosbridge_core.security.options import SecurityConfig
+    from rosbridge_core.session.frames import Frame as OutFrame
 
 
 class ConnectionLimits(Protocol):
     """What a connection needs of the bridge's security: its limits, the bytes held by every
-    connection, and being told when it ends (:class:`~bridge_server.security.Security`)."""
+    connection, and being told when it ends (:class:`~rosbridge_core.security.Security`)."""
 
     config: SecurityConfig
     inbound: Inbound
@@ -97,7 +97,7 @@ _CLOSED_ERRORS: tuple[type[BaseException], ...] = (ConnectionClosed,)
 
 class WebSocketLink(ServerConnection):
     """A websockets server connection as a session's
-    :class:`~bridge_server.session.link.ClientLink`: frames straight to the transport, one
+    :class:`~rosbridge_core.session.link.ClientLink`: frames straight to the transport, one
     write for a batch (:meth:`write`), the keepalive (:meth:`watch`)."""
 
     principal: Principal | None = None
@@ -119,7 +119,7 @@ class WebSocketLink(ServerConnection):
             self._max_size = protocol.max_message_size
         protocol.max_message_size = self._max_size if size is None else size
 
-    # -- the link port (bridge_server.session.link.ClientLink) ---------------------------------
+    # -- the link port (rosbridge_core.session.link.ClientLink) ---------------------------------
 
     closed_errors = _CLOSED_ERRORS
 
@@ -184,7 +184,7 @@ class WebSocketLink(ServerConnection):
         checks, flow control (``write_limit``) and closing rules apply as for ``send``; the
         outbox otherwise only when :meth:`writable`. Without an extension
         (``--compression deflate``) the frames are made here
-        (:func:`~bridge_server.session.frames.frame_parts`), with one websockets makes them.
+        (:func:`~rosbridge_core.session.frames.frame_parts`), with one websockets makes them.
         """
         if not frames:
             return
@@ -220,7 +220,7 @@ class WebSocketLink(ServerConnection):
     def watch(self, interval: float, timeout: float, dead: Callable[[float], None]
               ) -> asyncio.Task[bool] | None:
         """The keepalive where TCP tells when the peer was last heard
-        (:func:`roslibpy_lite.protocol.keepalive.watch`); ``None`` elsewhere, or with
+        (:func:`rosbridge_core.protocol.keepalive.watch`); ``None`` elsewhere, or with
         ``interval`` 0."""
         transport = self.transport
         if not interval or transport is None or not keepalive.supported_here():

@@ -79,7 +79,8 @@ from prometheus_client.core import (
 )
 from prometheus_client.exposition import CONTENT_TYPE_LATEST, generate_latest
 
-from .counters import (
+from bridge_server.http.status import COUNTERS
+from rosbridge_core.counters import (
     LABEL_LIMIT,
     LATENCY_BUCKETS,
     OTHER,
@@ -87,7 +88,6 @@ from .counters import (
     LabelCap,
     outcome,
 )
-from .status import COUNTERS
 
 __all__ = [
     "CLIENT_LIMIT",

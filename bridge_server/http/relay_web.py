@@ -59,22 +59,22 @@ from typing import TYPE_CHECKING, Any, Protocol
 
 from prometheus_client.core import CounterMetricFamily
 
-from . import metrics
-from .rates import RATE_WINDOW, Window
-from .relay_status import (
+from bridge_server.http import metrics
+from bridge_server.http.rates import RATE_WINDOW, Window
+from bridge_server.http.relay_status import (
     RobotStatus,
     robot_families,
     robot_status,
     robots_refused,
     robots_refused_family,
 )
-from .web import Reply, open_route, static_files, viewer, visible
-from .web_access import WebAccess
+from bridge_server.http.web import Reply, open_route, static_files, viewer, visible
+from bridge_server.http.web_access import WebAccess
 
 if TYPE_CHECKING:
     from websockets.http11 import Request
 
-    from ..front.server import Bridge
+    from bridge_server.front.server import Bridge
 
 __all__ = ["RelayFront", "RelayWeb"]
 

@@ -21,17 +21,17 @@ import os
 from collections.abc import Collection, Iterable, Mapping
 from typing import TYPE_CHECKING, Any, Protocol
 
-from .metrics import add_timing
-from .rates import merge_history
-from .status import COUNTERS, BridgeStatus
+from bridge_server.http.metrics import add_timing
+from bridge_server.http.rates import merge_history
+from bridge_server.http.status import COUNTERS, BridgeStatus
 
 if TYPE_CHECKING:
-    from ..graph import Graph
-    from ..session.client_status import ClientStatus
-    from ..session.outbox import Subscription
-    from ..session.ownership import Ownership
-    from ..session.resume import SessionStore
-    from .metrics import BridgeMetrics
+    from bridge_server.http.metrics import BridgeMetrics
+    from rosbridge_core.graph import Graph
+    from rosbridge_core.session.client_status import ClientStatus
+    from rosbridge_core.session.outbox import Subscription
+    from rosbridge_core.session.ownership import Ownership
+    from rosbridge_core.session.resume import SessionStore
 
 __all__ = ["Observed", "Reporting", "merge", "take", "topic_totals"]
 

@@ -13,7 +13,7 @@ the field alone
 
 and ``tests/ops/test_status_fields.py`` checks that the metrics tables of the docs name it.
 The clients' entries are the sessions' own
-:class:`~bridge_server.session.client_status.ClientStatus`.
+:class:`~rosbridge_core.session.client_status.ClientStatus`.
 """
 
 from __future__ import annotations
@@ -22,7 +22,7 @@ import dataclasses
 from dataclasses import dataclass, field
 from typing import Any
 
-from ..session.client_status import ClientStatus
+from rosbridge_core.session.client_status import ClientStatus
 
 __all__ = ["COUNTERS", "BridgeStatus", "Counter", "counter"]
 

@@ -41,17 +41,16 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Protocol
 
-from roslibpy_lite.protocol.ops import ACKS_HEADER, AUTH_HEADER, RECEIVED_HEADER, SESSION_HEADER
-
-from ..workers.peers import serve_peer_socket
-from . import metrics, rates, snapshot
+from bridge_server.http import metrics, rates, snapshot
+from bridge_server.workers.peers import serve_peer_socket
+from rosbridge_core.protocol.ops import ACKS_HEADER, AUTH_HEADER, RECEIVED_HEADER, SESSION_HEADER
 
 if TYPE_CHECKING:
     from prometheus_client.core import Metric
     from websockets.asyncio.server import ServerConnection
     from websockets.http11 import Request, Response
 
-    from ..security.auth import AuthConfig
+    from rosbridge_core.security.auth import AuthConfig
 
 __all__ = ["Access", "Denied", "Reply", "Served", "Web", "address_of", "handshake_headers",
            "open_route", "respond", "static_files", "viewer", "visible"]

@@ -9,14 +9,14 @@ from __future__ import annotations
 import logging
 from typing import TYPE_CHECKING, Any
 
-from ..security.auth import Principal
-from ..security.credentials import token_of
-from .web import Access, Denied
+from bridge_server.http.web import Access, Denied
+from rosbridge_core.security.auth import Principal
+from rosbridge_core.security.credentials import token_of
 
 if TYPE_CHECKING:
     from websockets.http11 import Request
 
-    from ..security import Security
+    from bridge_server.front.handshake import Security
 
 __all__ = ["WebAccess"]
 

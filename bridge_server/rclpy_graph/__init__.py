@@ -1,6 +1,6 @@
 """The ROS side of the bridge on rclpy: the only package that imports ROS (a test keeps it so).
 
-- :mod:`.graph`: :class:`~.graph.RclpyGraph`, the :class:`~bridge_server.graph.Graph`
+- :mod:`.graph`: :class:`~.graph.RclpyGraph`, the :class:`~rosbridge_core.graph.Graph`
   the sessions hold;
 - :mod:`.node`: the rclpy node, its executor thread, shared publishers,
   subscriptions, service clients and servers;
@@ -9,6 +9,6 @@
 - :mod:`.introspection`: rosapi typedefs, interface definitions, node parameters;
 - :mod:`.convert`: message conversion (rclpy objects to and from rosbridge JSON/CBOR;
   JSON straight from CDR bytes and the ``publish`` envelopes are
-  :mod:`bridge_server.codec`'s, which needs no ROS);
+  :mod:`rosbridge_core.codec`'s, which needs no ROS);
 - :mod:`.types`: type names resolved to rclpy classes.
 """

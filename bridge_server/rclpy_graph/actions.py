@@ -30,13 +30,13 @@ from typing import TYPE_CHECKING, Any
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from unique_identifier_msgs.msg import UUID
 
-from ..graph import ACTIVE, GoalListener, Status
-from ..interfaces import BridgeError
-from . import convert
-from .node import SERVICE_DEPTH, _qos
+from bridge_server.rclpy_graph import convert
+from bridge_server.rclpy_graph.node import SERVICE_DEPTH, _qos
+from rosbridge_core.graph import ACTIVE, GoalListener, Status
+from rosbridge_core.interfaces import BridgeError
 
 if TYPE_CHECKING:
-    from .node import RosNode
+    from bridge_server.rclpy_graph.node import RosNode
 
 __all__ = [
     "ACTIVE",

@@ -99,17 +99,17 @@ import numpy
 from rosidl_parser import definition as idl
 
 from bridge_server.allocator import tune_allocator
-from bridge_server.codec import cdr_json
-from bridge_server.codec.publish import (
+from bridge_server.rclpy_graph.types import type_name_of
+from msgs._primitives import FLOAT32_MAX, SIZED_INTEGER_RANGES
+from rosbridge_core.codec import cdr_json
+from rosbridge_core.codec.publish import (
     encode_publish_cbor,
     encode_publish_cbor_raw,
     encode_publish_json,
 )
-from bridge_server.interfaces import MISSING as _MISSING
-from bridge_server.interfaces import ConversionError, args_mapping
-from bridge_server.interfaces import describe as _describe
-from bridge_server.rclpy_graph.types import type_name_of
-from msgs._primitives import FLOAT32_MAX, SIZED_INTEGER_RANGES
+from rosbridge_core.interfaces import MISSING as _MISSING
+from rosbridge_core.interfaces import ConversionError, args_mapping
+from rosbridge_core.interfaces import describe as _describe
 
 __all__ = [
     "ConversionError",
@@ -654,7 +654,7 @@ class Converter:
         self.fields: tuple[str, ...] = tuple(names)
         self.json_from_cdr: cdr_json.JsonFromCdr | None = None
         """CDR bytes -> the same text as :meth:`to_json` gives, without deserializing
-        (:mod:`bridge_server.codec.cdr_json`); ``None`` when msgs does not have the type's
+        (:mod:`rosbridge_core.codec.cdr_json`); ``None`` when msgs does not have the type's
         layout."""
 
     def to_json(self, ros_msg: Any) -> str:

@@ -1,4 +1,4 @@
-"""The :class:`~bridge_server.graph.Graph` on rclpy: the bridge's node with what the
+"""The :class:`~rosbridge_core.graph.Graph` on rclpy: the bridge's node with what the
 sessions ask of the ROS side that is not about the node's own entities.
 
 :class:`RclpyGraph` is :class:`~.node.RosNode` (the node, its executor thread, shared
@@ -13,18 +13,23 @@ import asyncio
 from collections.abc import Callable, Mapping
 from typing import Any
 
-from ..graph import service_request
-from ..interfaces import ServiceCallError
-from . import convert, introspection
-from .actions import ServedAction, ServedGoal, SharedActionClient, check_rclpy_internals
-from .node import RosNode
-from .types import installed_interfaces, resolve_action
+from bridge_server.rclpy_graph import convert, introspection
+from bridge_server.rclpy_graph.actions import (
+    ServedAction,
+    ServedGoal,
+    SharedActionClient,
+    check_rclpy_internals,
+)
+from bridge_server.rclpy_graph.node import RosNode
+from bridge_server.rclpy_graph.types import installed_interfaces, resolve_action
+from rosbridge_core.graph import service_request
+from rosbridge_core.interfaces import ServiceCallError
 
 __all__ = ["RclpyGraph"]
 
 
 class RclpyGraph(RosNode):
-    """The ROS side of the bridge on rclpy (all of :class:`~bridge_server.graph.Graph`)."""
+    """The ROS side of the bridge on rclpy (all of :class:`~rosbridge_core.graph.Graph`)."""
 
     def start(self) -> None:
         """Check rclpy's internals the actions use (a clear error now, not a crash at the
@@ -124,7 +129,7 @@ class RclpyGraph(RosNode):
 
         ``srv_type`` None: the type the graph lists, waited for up to ``discovery_wait`` s.
         ``check`` may refuse the converted request (its text is the refusal).
-        :class:`~bridge_server.interfaces.ServiceCallError` says why there was no answer.
+        :class:`~rosbridge_core.interfaces.ServiceCallError` says why there was no answer.
         """
         loop = self.loop
         deadline = loop.time() + timeout

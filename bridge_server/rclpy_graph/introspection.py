@@ -1,9 +1,9 @@
 """What the bridge tells about ROS types and nodes, from rclpy: rosapi typedefs, full
 interface definitions, node parameters.
 
-The ``/rosapi/*`` services (:mod:`bridge_server.session.rosapi`) ask for these through
-the :class:`~bridge_server.graph.Graph`; :class:`~.node.RosNode` answers with the
-functions here. Errors are :class:`~bridge_server.interfaces.BridgeError`s whose text
+The ``/rosapi/*`` services (:mod:`rosbridge_core.session.rosapi`) ask for these through
+the :class:`~rosbridge_core.graph.Graph`; :class:`~.node.RosNode` answers with the
+functions here. Errors are :class:`~rosbridge_core.interfaces.BridgeError`s whose text
 says what was wrong (a rosapi caller gets it as the call's failure).
 """
 
@@ -18,13 +18,18 @@ from typing import TYPE_CHECKING, Any
 from rcl_interfaces.msg import Parameter, ParameterValue
 from rcl_interfaces.srv import GetParameters, ListParameters, SetParameters
 
-from ..graph import parameter_value
-from ..interfaces import BridgeError, canonical_name
-from ..typedefs import typedefs_of
-from .types import resolve_action, resolve_message, resolve_service, type_name_of
+from bridge_server.rclpy_graph.types import (
+    resolve_action,
+    resolve_message,
+    resolve_service,
+    type_name_of,
+)
+from rosbridge_core.graph import parameter_value
+from rosbridge_core.interfaces import BridgeError, canonical_name
+from rosbridge_core.typedefs import typedefs_of
 
 if TYPE_CHECKING:
-    from .node import RosNode
+    from bridge_server.rclpy_graph.node import RosNode
 
 __all__ = [
     "PARAM_CALL_TIMEOUT",

@@ -63,16 +63,21 @@ from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message
 
+from bridge_server.rclpy_graph import convert
+from bridge_server.rclpy_graph.reader import (
+    FailureLog,
+    LoopReader,
+    Reader,
+    ReaderService,
+    open_reader,
+)
+from bridge_server.rclpy_graph.types import resolve_message, resolve_service
 from msgs import dynamic
-
-from ..codec.encodings import EncodedMessage
-from ..graph import acquire_shared, release_shared, shared_types
-from . import convert
-from .reader import FailureLog, LoopReader, Reader, ReaderService, open_reader
-from .types import resolve_message, resolve_service
+from rosbridge_core.codec.encodings import EncodedMessage
+from rosbridge_core.graph import acquire_shared, release_shared, shared_types
 
 if TYPE_CHECKING:
-    from ..graph import Publisher, TopicFeed
+    from rosbridge_core.graph import Publisher, TopicFeed
 
 __all__ = [
     "Incoming",
@@ -130,7 +135,7 @@ class Incoming(EncodedMessage):
     It arrives serialized (CDR, ``data``): ``cbor-raw`` subscribers get those bytes as they
     came, and the message is deserialized only to build the JSON or the CBOR encoding, each
     at most once (a topic with only cbor-raw subscribers is never deserialized). The JSON
-    text is made from the bytes directly where it can be (:mod:`bridge_server.codec.cdr_json`).
+    text is made from the bytes directly where it can be (:mod:`rosbridge_core.codec.cdr_json`).
     """
 
     __slots__ = ("_msg_json", "conv")

@@ -1,6 +1,6 @@
 """ROS interface types on rclpy: type names resolved to rclpy classes.
 
-Type names and the error roots are ROS-free and live in :mod:`bridge_server.interfaces`
+Type names and the error roots are ROS-free and live in :mod:`rosbridge_core.interfaces`
 (re-exported here); this module adds what needs the installed ROS packages.
 
 API
@@ -28,7 +28,7 @@ under ``$AMENT_PREFIX_PATH`` and the interpreter prefix), so a client can
 never make the bridge import an arbitrary Python module. Successful lookups
 are cached; the cache is thread safe (a race only costs a second import).
 
-Errors are :mod:`bridge_server.interfaces`' (``TypeNameError``, ``UnknownTypeError``).
+Errors are :mod:`rosbridge_core.interfaces`' (``TypeNameError``, ``UnknownTypeError``).
 """
 
 from __future__ import annotations
@@ -39,7 +39,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from ..interfaces import (
+from rosbridge_core.interfaces import (
     KINDS,
     TYPE_RE,
     BridgeError,

@@ -1,7 +1,7 @@
 """With ``--workers``: a session resume reaches its session whichever worker takes the reconnect.
 
 A kept session lives in the worker that opened it, and its token names that worker
-(:func:`bridge_server.session.resume.worker_of`); the kernel hands a reconnect to any
+(:func:`rosbridge_core.session.resume.worker_of`); the kernel hands a reconnect to any
 worker. So each worker also serves websockets on a unix socket, ``D/forward-<i>.sock``,
 with the same handler and the same admission checks as its port. A worker whose port
 receives a resume naming another worker answers nothing itself (:meth:`Forwarder.
@@ -38,11 +38,10 @@ from websockets.asyncio.server import Server, ServerConnection, unix_serve
 from websockets.datastructures import Headers
 from websockets.http11 import Request, Response
 
-from roslibpy_lite.protocol.ops import SESSION_HEADER
-
-from ..front.websocket import BridgeConnection, take_transport
-from ..session.resume import CLAIM_WAIT, worker_of
-from .peers import PEER_TIMEOUT
+from bridge_server.front.websocket import BridgeConnection, take_transport
+from bridge_server.workers.peers import PEER_TIMEOUT
+from rosbridge_core.protocol.ops import SESSION_HEADER
+from rosbridge_core.session.resume import CLAIM_WAIT, worker_of
 
 __all__ = ["ANSWER_WAIT", "FORWARDED_HEADER", "Forwarder", "forward_path"]
 
@@ -54,7 +53,7 @@ forwarded listener."""
 
 ANSWER_WAIT = CLAIM_WAIT + 2 * PEER_TIMEOUT
 """Seconds a forwarded resume waits for the owner's answer (which may wait
-:data:`~bridge_server.session.resume.CLAIM_WAIT` for the session's old link) before it is
+:data:`~rosbridge_core.session.resume.CLAIM_WAIT` for the session's old link) before it is
 served where it landed."""
 
 Admit = Callable[[ServerConnection, Request], Awaitable[Response | None]]

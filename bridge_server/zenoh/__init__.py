@@ -3,7 +3,7 @@
 - :mod:`.keys`: the wire contract (keys and payloads) between the two sides;
 - :mod:`.link`: the Zenoh session from command-line options (endpoints, TLS);
 - :mod:`.exporter`: the robot's side, its bridge's Graph offered on Zenoh;
-- :mod:`.graph`: the relay's side, a :class:`~bridge_server.graph.Graph` of one robot
+- :mod:`.graph`: the relay's side, a :class:`~rosbridge_core.graph.Graph` of one robot
   read from Zenoh;
 - :mod:`.relay`: ``roslibpy-lite-relay``, the bridge's sessions served over those Graphs.
 

@@ -39,12 +39,12 @@ try:
     from cryptography.hazmat.primitives.asymmetric import ec
     from cryptography.x509.oid import ExtendedKeyUsageOID, NameOID
 except ModuleNotFoundError as _missing:  # an install without the relay or bridge extra
-    from .._requires import missing_dependency
+    from bridge_server._requires import missing_dependency
 
     missing_dependency(_missing, "relay")
 
-from ..interfaces import BridgeError
-from . import keys
+from bridge_server.zenoh import keys
+from rosbridge_core.interfaces import BridgeError
 
 __all__ = ["Fleet", "main"]
 

@@ -4,10 +4,10 @@ Every robot of a relay shares one event loop; a message is decoded from its CDR 
 encoded for its viewers once (:class:`~bridge_server.zenoh.graph.ZenohMessage`). On the loop,
 a message of a million small structs stopped every other robot's viewers for seconds
 (issue 53: 4.99 s). Now a message of
-:data:`~bridge_server.codec.budget.OFF_LOOP_BYTES` (64 KiB) or more is decoded and
+:data:`~rosbridge_core.codec.budget.OFF_LOOP_BYTES` (64 KiB) or more is decoded and
 encoded, in the encodings its topic's viewers asked for, on a worker thread
 (:func:`prepare`), in pieces the loop's thread can come between
-(:mod:`bridge_server.codec.chunked`); only then do its viewers get it, and the topic's
+(:mod:`rosbridge_core.codec.chunked`); only then do its viewers get it, and the topic's
 later messages wait behind it (:class:`TopicLane`: at most :data:`WAITING` and
 :data:`WAITING_BYTES`, the oldest dropped and counted), so a large message delays its own
 topic and no other. A viewer that
@@ -29,10 +29,9 @@ from typing import Any, Protocol
 import cbor2
 
 from msgs import cdr
-
-from ..codec.budget import OFF_LOOP_BYTES, explain, workers
-from ..codec.chunked import cbor_bytes, json_text
-from ..codec.publish import _cbor_prefix
+from rosbridge_core.codec.budget import OFF_LOOP_BYTES, explain, workers
+from rosbridge_core.codec.chunked import cbor_bytes, json_text
+from rosbridge_core.codec.publish import _cbor_prefix
 
 
 class ZenohMessage(Protocol):

@@ -1,4 +1,4 @@
-"""The robot's side of the relay tier: its bridge's :class:`~bridge_server.graph.Graph` on Zenoh.
+"""The robot's side of the relay tier: its bridge's :class:`~rosbridge_core.graph.Graph` on Zenoh.
 
 ``roslibpy-lite-bridge --zenoh-connect tcp/router:7447 --robot r1`` runs one
 :class:`Exporter` beside (or, with ``--no-websocket``, instead of) the websocket listener.
@@ -54,7 +54,30 @@ from typing import TYPE_CHECKING, Any
 
 import zenoh
 
-from ..graph import (
+from bridge_server.zenoh import keys
+from bridge_server.zenoh.bulk import BulkSender
+from bridge_server.zenoh.keys import (
+    GOAL_WAIT,
+    CallRequest,
+    Execute,
+    GoalEvent,
+    GoalRequest,
+    Meta,
+    ParamRequest,
+    Snapshot,
+)
+from bridge_server.zenoh.link import ZenohOptions, answering, ignore_replies, open_session, tokens
+from bridge_server.zenoh.priority import Priorities, TopicPriority
+from bridge_server.zenoh.replay import (
+    DEMAND_LINGER,
+    ReplayBudget,
+    ReplayPublisher,
+    ReplayWindow,
+    window_metrics,
+)
+from bridge_server.zenoh.robot_graph import GraphSnapshots
+from bridge_server.zenoh.uplink import Uplink, uplink_use
+from rosbridge_core.graph import (
     ActionClient,
     Graph,
     Message,
@@ -67,26 +90,9 @@ from ..graph import (
     Status,
     TopicFeed,
 )
-from ..interfaces import BridgeError, ConversionError, Kind, args_mapping
-from ..security.permissions import Role
-from ..session.actions import ACTION_LINGER, CLIENT_IDLE
-from . import keys
-from .bulk import BulkSender
-from .keys import (
-    GOAL_WAIT,
-    CallRequest,
-    Execute,
-    GoalEvent,
-    GoalRequest,
-    Meta,
-    ParamRequest,
-    Snapshot,
-)
-from .link import ZenohOptions, answering, ignore_replies, open_session, tokens
-from .priority import Priorities, TopicPriority
-from .replay import DEMAND_LINGER, ReplayBudget, ReplayPublisher, ReplayWindow, window_metrics
-from .robot_graph import GraphSnapshots
-from .uplink import Uplink, uplink_use
+from rosbridge_core.interfaces import BridgeError, ConversionError, Kind, args_mapping
+from rosbridge_core.security.permissions import Role
+from rosbridge_core.session.actions import ACTION_LINGER, CLIENT_IDLE
 
 if TYPE_CHECKING:
     from prometheus_client.core import Metric
@@ -129,7 +135,7 @@ class _Export:
 
 class _RobotGoal:
     """A relay's goal on the robot: what the Graph's action client reports goes back as
-    replies to the goal's query (the :class:`~bridge_server.graph.GoalListener`)."""
+    replies to the goal's query (the :class:`~rosbridge_core.graph.GoalListener`)."""
 
     def __init__(self, exporter: Exporter, query: zenoh.Query, key: tuple[str, str],
                  action: str, client: ActionClient) -> None:

@@ -21,7 +21,7 @@ import logging
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
-    from ..front.server import Bridge
+    from bridge_server.front.server import Bridge
 
 __all__ = ["FORGET_AFTER", "Forgetter"]
 

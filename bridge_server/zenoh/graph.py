@@ -1,4 +1,4 @@
-"""The relay's side: a :class:`~bridge_server.graph.Graph` of one robot, read from Zenoh.
+"""The relay's side: a :class:`~rosbridge_core.graph.Graph` of one robot, read from Zenoh.
 
 A relay holds one :class:`ZenohGraph` per robot its clients ask for, shared by their
 sessions, over one Zenoh session. What the sessions ask of ROS becomes the keys of
@@ -9,7 +9,7 @@ sessions, over one Zenoh session. What the sessions ask of ROS becomes the keys 
   the link is back, in order; what the window no longer held is counted and told to the
   robot's clients: :mod:`.replay`) plus a demand token (so the robot subscribes in ROS),
   and each message is built from the CDR bytes the robot put: JSON
-  straight from CDR (:mod:`bridge_server.codec.cdr_json`), CBOR from ``msgs.cdr``'s
+  straight from CDR (:mod:`rosbridge_core.codec.cdr_json`), CBOR from ``msgs.cdr``'s
   decoding, ``cbor-raw`` the bytes as they came, each at most once per message;
 - a shared publisher is a publisher token (the robot makes the ROS publisher) and one put
   of CDR bytes (``msgs.cdr``) per message;
@@ -49,14 +49,37 @@ from typing import Any
 import cbor2
 import zenoh
 
+from bridge_server.zenoh import keys
+from bridge_server.zenoh.decode import DECODED, TopicLane, wanted
+from bridge_server.zenoh.inbox import Faults, Inbox
+from bridge_server.zenoh.keys import (
+    GOAL_WAIT,
+    CallRequest,
+    Execute,
+    GoalEvent,
+    GoalRequest,
+    Meta,
+    ParamRequest,
+    Snapshot,
+)
+from bridge_server.zenoh.link import answering, ignore_replies
+from bridge_server.zenoh.replay import recovering_subscriber
+from bridge_server.zenoh.typestore import (
+    MAX_DEFINITION_BYTES,
+    MAX_TYPES_PER_ROBOT,
+    GraphReader,
+    RobotTypes,
+    TypeLimits,
+    TypeRefused,
+    let_go,
+)
 from msgs import cdr
 from msgs.dynamic import TypeStore
 from msgs.runtime import Message as WireMessage
 from msgs.runtime import UnknownTypeError as WireUnknownType
-
-from ..codec.cdr_json import JsonFromCdr, wire_encoder
-from ..codec.encodings import Encoded, EncodedMessage
-from ..graph import (
+from rosbridge_core.codec.cdr_json import JsonFromCdr, wire_encoder
+from rosbridge_core.codec.encodings import Encoded, EncodedMessage
+from rosbridge_core.graph import (
     GoalListener,
     Listener,
     RosCall,
@@ -67,7 +90,7 @@ from ..graph import (
     service_request,
     shared_types,
 )
-from ..interfaces import (
+from rosbridge_core.interfaces import (
     BridgeError,
     ConversionError,
     Kind,
@@ -75,31 +98,7 @@ from ..interfaces import (
     ServiceCallError,
     canonical_name,
 )
-from ..memory.graph import MemoryConverter
-from . import keys
-from .decode import DECODED, TopicLane, wanted
-from .inbox import Faults, Inbox
-from .keys import (
-    GOAL_WAIT,
-    CallRequest,
-    Execute,
-    GoalEvent,
-    GoalRequest,
-    Meta,
-    ParamRequest,
-    Snapshot,
-)
-from .link import answering, ignore_replies
-from .replay import recovering_subscriber
-from .typestore import (
-    MAX_DEFINITION_BYTES,
-    MAX_TYPES_PER_ROBOT,
-    GraphReader,
-    RobotTypes,
-    TypeLimits,
-    TypeRefused,
-    let_go,
-)
+from rosbridge_core.memory.graph import MemoryConverter
 
 __all__ = ["MAX_DEFINITION_BYTES", "MAX_TYPES_PER_ROBOT", "RelayConverter", "TypeLimits",
            "TypeRefused", "ZenohActionClient", "ZenohFeed", "ZenohGraph", "ZenohMessage",
@@ -134,7 +133,7 @@ class NotHolder(BridgeError):
 
 
 class RelayConverter(MemoryConverter):
-    """:class:`~bridge_server.graph.Converter` of one ``msgs`` message class (the relay's
+    """:class:`~rosbridge_core.graph.Converter` of one ``msgs`` message class (the relay's
     messages are ``msgs`` instances, as the in-memory graph's), reading CDR too."""
 
     def __init__(self, cls: type[WireMessage]) -> None:

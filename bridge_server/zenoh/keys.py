@@ -77,8 +77,8 @@ import re
 from dataclasses import asdict, dataclass, field
 from typing import Any, ClassVar, cast
 
-from ..interfaces import BridgeError, Kind, canonical_name
-from ..security.names import check_name
+from rosbridge_core.interfaces import BridgeError, Kind, canonical_name
+from rosbridge_core.security.names import check_name
 
 __all__ = [
     "ADV",
@@ -187,7 +187,7 @@ _HEX = re.compile(r"(?:[0-9a-f]{2})*\Z")
 
 def check_robot(robot: str) -> str:
     """``robot`` if it is a usable robot name (one key chunk: letters, digits, ``_ . -``,
-    not starting with ``@``); :class:`~bridge_server.interfaces.BridgeError` naming it if
+    not starting with ``@``); :class:`~rosbridge_core.interfaces.BridgeError` naming it if
     not."""
     if not isinstance(robot, str) or not _CHUNK.match(robot) or len(robot) > 64:
         raise BridgeError(f"invalid robot name {robot!r}: one word of letters, digits, '_', "

@@ -35,8 +35,8 @@ from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
-from ..interfaces import BridgeError
-from . import keys
+from bridge_server.zenoh import keys
+from rosbridge_core.interfaces import BridgeError
 
 if TYPE_CHECKING:
     import zenoh

@@ -33,7 +33,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
-from . import keys
+from bridge_server.zenoh import keys
 
 if TYPE_CHECKING:
     import zenoh
@@ -311,7 +311,7 @@ def reading_zenoh_log(robots: Sequence[str], relays: Sequence[str], listen: Sequ
     (:data:`ZENOH_LOG` unless ``RUST_LOG`` is set) from the session's opening on."""
     import os
 
-    from .zenoh_logpipe import filter_zenoh_log
+    from bridge_server.zenoh.zenoh_logpipe import filter_zenoh_log
 
     refusals = RobotRefusals(robots, relays, listen)
     os.environ.setdefault("RUST_LOG", ZENOH_LOG)

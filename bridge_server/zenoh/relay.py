@@ -33,45 +33,50 @@ import signal
 import sys
 from typing import TYPE_CHECKING, Any
 
-from .._exit import ends_process
-from ..allocator import tune_allocator
+from bridge_server._exit import ends_process
+from bridge_server.allocator import tune_allocator
 
 try:
     from websockets.asyncio.server import Server, ServerConnection, serve
     from websockets.datastructures import MultipleValuesError
     from websockets.exceptions import ConnectionClosed
 
-    from roslibpy_lite.protocol import ops
-    from roslibpy_lite.protocol.errors import ProtocolError
-    from roslibpy_lite.protocol.frames import decode_frame
-    from roslibpy_lite.protocol.ops import RELAY_HEADER, parse_op
-
-    from .. import eventloop, security
-    from ..codec import budget as decode_budget
-    from ..foxglove import SUBPROTOCOL as FOXGLOVE
-    from ..foxglove import select_subprotocol
-    from ..front.server import REFUSALS, Bridge, BridgeConfig, websockets_pings
-    from ..front.websocket import BridgeConnection
-    from ..http.relay_web import RelayWeb
-    from ..http.web import Reply, address_of, handshake_headers, respond
-    from ..http.web_access import WebAccess
-    from ..interfaces import BridgeError
-    from ..security import Security
-    from ..security.auth import Principal
-    from ..security.credentials import client_address
-    from ..security.gate import POLICY_VIOLATION
-    from ..security.options import MAX_MESSAGE_SIZE
-    from ..session.resume import ResumeConfig
-    from ..session.session import SessionConfig
-    from . import inbox as zenoh_inbox
-    from . import keys
-    from . import link as zenoh_link
-    from .forget import Forgetter
-    from .graph import ZenohGraph
-    from .refusals import RobotRefusals, reading_zenoh_log
-    from .typestore import MAX_DEFINITION_BYTES, MAX_FIELDS, MAX_TYPES_PER_ROBOT, TypeLimits
+    from bridge_server import eventloop
+    from bridge_server.foxglove import SUBPROTOCOL as FOXGLOVE
+    from bridge_server.foxglove import select_subprotocol
+    from bridge_server.front.handshake import Security
+    from bridge_server.front.server import REFUSALS, Bridge, BridgeConfig, websockets_pings
+    from bridge_server.front.websocket import BridgeConnection
+    from bridge_server.http.relay_web import RelayWeb
+    from bridge_server.http.web import Reply, address_of, handshake_headers, respond
+    from bridge_server.http.web_access import WebAccess
+    from bridge_server.zenoh import inbox as zenoh_inbox
+    from bridge_server.zenoh import keys
+    from bridge_server.zenoh import link as zenoh_link
+    from bridge_server.zenoh.forget import Forgetter
+    from bridge_server.zenoh.graph import ZenohGraph
+    from bridge_server.zenoh.refusals import RobotRefusals, reading_zenoh_log
+    from bridge_server.zenoh.typestore import (
+        MAX_DEFINITION_BYTES,
+        MAX_FIELDS,
+        MAX_TYPES_PER_ROBOT,
+        TypeLimits,
+    )
+    from rosbridge_core import security
+    from rosbridge_core.codec import budget as decode_budget
+    from rosbridge_core.interfaces import BridgeError
+    from rosbridge_core.protocol import ops
+    from rosbridge_core.protocol.errors import ProtocolError
+    from rosbridge_core.protocol.frames import decode_frame
+    from rosbridge_core.protocol.ops import RELAY_HEADER, parse_op
+    from rosbridge_core.security.auth import Principal
+    from rosbridge_core.security.credentials import client_address
+    from rosbridge_core.security.gate import POLICY_VIOLATION
+    from rosbridge_core.security.options import MAX_MESSAGE_SIZE
+    from rosbridge_core.session.resume import ResumeConfig
+    from rosbridge_core.session.session import SessionConfig
 except ModuleNotFoundError as _missing:  # an install without the relay extra
-    from .._requires import missing_dependency
+    from bridge_server._requires import missing_dependency
 
     missing_dependency(_missing, "relay")
 
@@ -79,8 +84,8 @@ if TYPE_CHECKING:
     import zenoh
     from websockets.http11 import Request, Response
 
-    from ..foxglove.session import FoxgloveSession
-    from ..session.session import Session
+    from bridge_server.foxglove.session import FoxgloveSession
+    from rosbridge_core.session.session import Session
 
 __all__ = ["Relay", "main", "parse_args"]
 
@@ -433,7 +438,7 @@ def _relay_id(options: zenoh_link.ZenohOptions, given: str | None) -> str:
     name, else a random one. A relay that dials a router with a certificate is that
     certificate's name there (the router's access rules hold it to the keys naming it):
     another ``given`` is refused, naming both."""
-    from .certs import common_name
+    from bridge_server.zenoh.certs import common_name
 
     name = common_name(options.tls_cert) if options.tls_cert else None
     if given and name and options.connect and not options.listen and given != name:
@@ -566,7 +571,7 @@ def main(argv: list[str] | None = None) -> int:
     (``roslibpy-lite-relay certs ...``: :mod:`bridge_server.zenoh.certs`)."""
     given = sys.argv[1:] if argv is None else argv
     if given[:1] == ["certs"]:
-        from .certs import main as certs
+        from bridge_server.zenoh.certs import main as certs
 
         return certs(given[1:])
     args = parse_args(argv)

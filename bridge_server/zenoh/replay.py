@@ -31,7 +31,7 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
-from .priority import MEDIUM_MESSAGE, TopicPriority
+from bridge_server.zenoh.priority import MEDIUM_MESSAGE, TopicPriority
 
 if TYPE_CHECKING:  # zenoh is imported when used: the bridge's options parse without it
     import zenoh

@@ -10,9 +10,9 @@ from __future__ import annotations
 import logging
 from typing import Any
 
-from ..graph import Graph
-from ..interfaces import BridgeError
-from .keys import Snapshot
+from bridge_server.zenoh.keys import Snapshot
+from rosbridge_core.graph import Graph
+from rosbridge_core.interfaces import BridgeError
 
 __all__ = ["GraphSnapshots"]
 

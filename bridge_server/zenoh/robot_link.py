@@ -23,8 +23,8 @@ import json
 from dataclasses import dataclass, fields
 from typing import TYPE_CHECKING
 
-from ..interfaces import BridgeError
-from .link import ZenohOptions, options_from_args
+from bridge_server.zenoh.link import ZenohOptions, options_from_args
+from rosbridge_core.interfaces import BridgeError
 
 if TYPE_CHECKING:
     import zenoh

@@ -37,13 +37,12 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any, ParamSpec, TypeVar
 
+from bridge_server.zenoh.inbox import Faults
+from bridge_server.zenoh.keys import Snapshot
 from msgs.dynamic import DELIMITER, LimitError, TypeStore, split
 from msgs.parser import PRIMITIVE_TYPES
 from msgs.runtime import UnknownTypeError as WireUnknownType
-
-from ..interfaces import BridgeError, UnknownTypeError, canonical_name
-from .inbox import Faults
-from .keys import Snapshot
+from rosbridge_core.interfaces import BridgeError, UnknownTypeError, canonical_name
 
 __all__ = ["GRAPH_INTERVAL", "MAX_DEFINITION_BYTES", "MAX_FIELDS", "MAX_TYPES_PER_ROBOT",
            "REDEFINE_INTERVAL", "GraphReader", "Prepared", "RobotTypes", "TypeLimits",

@@ -33,8 +33,8 @@ from collections import deque
 from collections.abc import Callable, Mapping
 from typing import TYPE_CHECKING, Any, Protocol
 
-from . import keys
-from .link import ZenohOptions
+from bridge_server.zenoh import keys
+from bridge_server.zenoh.link import ZenohOptions
 
 if TYPE_CHECKING:
     import zenoh

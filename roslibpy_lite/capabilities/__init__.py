@@ -30,10 +30,11 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Protocol
 
 if TYPE_CHECKING:
+    from rosbridge_core.protocol import ops
+
     from .._api_types import ConnectionState
     from ..exceptions import ConnectionClosed, RosLibError
     from ..messages import Completeness
-    from ..protocol import ops
     from ..transports.base import Transport
 
 __all__ = ["Host", "ServingHost", "TopicsHost", "Tracked"]

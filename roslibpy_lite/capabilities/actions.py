@@ -13,6 +13,7 @@ from collections.abc import Coroutine, Mapping
 from typing import Any
 
 from msgs.runtime import Action, Message
+from rosbridge_core.protocol import ops
 
 from .._api_types import DEFAULT_CALL_TIMEOUT, ConnectionState
 from ..actions import (
@@ -28,7 +29,6 @@ from ..actions import (
 )
 from ..exceptions import ConnectionClosed, Disconnected, UsageError
 from ..messages import check_dict, check_name, to_wire
-from ..protocol import ops
 from . import ServingHost, Tracked
 
 __all__ = ["Actions"]

@@ -11,6 +11,8 @@ import logging
 from collections.abc import Mapping
 from typing import TYPE_CHECKING, Any
 
+from rosbridge_core.protocol import ops
+
 from .._api_types import ConnectionState, ServiceHandler
 from ..exceptions import RosTimeoutError, ServiceError, UsageError
 from ..handles import ServiceCall, ServiceServer
@@ -23,7 +25,6 @@ from ..messages import (
     service_type,
     to_wire,
 )
-from ..protocol import ops
 from . import ServingHost, Tracked
 
 if TYPE_CHECKING:

@@ -17,6 +17,7 @@ from typing import TYPE_CHECKING, Any
 
 from msgs.cdr import CdrError, decoder_for, encode
 from msgs.runtime import ValidationError
+from rosbridge_core.protocol import ops
 
 from .._api_types import ConnectionState
 from ..exceptions import (
@@ -40,7 +41,6 @@ from ..messages import (
     name_hint,
     warn_user,
 )
-from ..protocol import ops
 from . import TopicsHost, Tracked
 
 log = logging.getLogger("roslibpy_lite.client")

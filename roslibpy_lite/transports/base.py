@@ -1,6 +1,6 @@
 """The seam between the client and a transport: ops go down, ops and events come up.
 
-A transport never interprets the API: it moves :mod:`roslibpy_lite.protocol.ops`
+A transport never interprets the API: it moves :mod:`rosbridge_core.protocol.ops`
 values. The client calls :meth:`Transport.encode` to check and freeze an op
 (a frame: the JSON text for a socket, a private copy in memory), then
 :meth:`Transport.write` to send it while connected; frames encoded while
@@ -13,11 +13,14 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any, Protocol
 
-from ..protocol.ops import ACKS_HEADER  # re-exported: where transports have always found it
+from rosbridge_core.protocol.ops import (
+    ACKS_HEADER,  # re-exported: where transports have always found it
+)
 
 if TYPE_CHECKING:
+    from rosbridge_core.protocol import ops
+
     from ..exceptions import ConnectionClosed
-    from ..protocol import ops
 
 __all__ = ["ACKS_HEADER", "Link", "Transport"]
 

@@ -2,10 +2,10 @@
 :class:`~roslibpy_lite.mock.MockRos` runs on.
 
 :class:`MemoryTransport` carries the client's ops as frames (their JSON text) to a real
-rosbridge session of the bridge (:class:`bridge_server.session.session.Session`) over an
+rosbridge session of the bridge (:class:`rosbridge_core.session.session.Session`) over an
 in-memory link, and the session's frames back to the client
-(:class:`bridge_server.memory.server.MemoryServer`); the session's ROS side is a whole ROS
-graph in memory (:class:`bridge_server.memory.graph.MemoryGraph`). So every answer, refusal
+(:class:`rosbridge_core.memory.server.MemoryServer`); the session's ROS side is a whole ROS
+graph in memory (:class:`rosbridge_core.memory.graph.MemoryGraph`). So every answer, refusal
 and error text is the bridge's own, and MockRos follows every op the bridge learns.
 
 What a client's op sets off at once (the session's verdict, a message to the subscriptions
@@ -23,17 +23,17 @@ import json
 from collections.abc import Mapping
 from typing import TYPE_CHECKING, Any
 
-from bridge_server.interfaces import BridgeError
-from bridge_server.memory.graph import MemoryGraph, MemoryRos
-from bridge_server.memory.server import MemoryConnection, MemoryServer
+from rosbridge_core.interfaces import BridgeError
+from rosbridge_core.memory.graph import MemoryGraph, MemoryRos
+from rosbridge_core.memory.server import MemoryConnection, MemoryServer
+from rosbridge_core.protocol import ops
+from rosbridge_core.protocol.errors import ProtocolError
+from rosbridge_core.protocol.frames import Protocol as FrameProtocol
 
 from ..exceptions import InvalidMessageError, UsageError
-from ..protocol import ops
-from ..protocol.errors import ProtocolError
-from ..protocol.frames import Protocol as FrameProtocol
 
 if TYPE_CHECKING:
-    from bridge_server.memory.graph import MemoryMessage, MemoryPublisher
+    from rosbridge_core.memory.graph import MemoryMessage, MemoryPublisher
 
     from .base import Link
 

@@ -17,7 +17,7 @@ from __future__ import annotations
 from collections import deque
 from collections.abc import Mapping
 
-from ..protocol.ops import RECEIVED_HEADER, SESSION_HEADER, parse_received
+from rosbridge_core.protocol.ops import RECEIVED_HEADER, SESSION_HEADER, parse_received
 
 __all__ = ["ACK_INTERVAL", "ClientSession"]
 

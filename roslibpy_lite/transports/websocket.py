@@ -24,6 +24,10 @@ from websockets.asyncio.client import connect as ws_connect
 from websockets.exceptions import ConnectionClosed as WsConnectionClosed
 from websockets.exceptions import InvalidHandshake, InvalidMessage, InvalidStatus, InvalidURI
 
+from rosbridge_core.protocol import keepalive, ops
+from rosbridge_core.protocol.frames import Protocol
+from rosbridge_core.protocol.ops import ACKS_HEADER, AUTH_HEADER, RELAY_HEADER, SESSION_HEADER
+
 from .._backoff import Backoff
 from ..exceptions import (
     ConnectError,
@@ -35,9 +39,6 @@ from ..exceptions import (
     TLSError,
     UsageError,
 )
-from ..protocol import keepalive, ops
-from ..protocol.frames import Protocol
-from ..protocol.ops import ACKS_HEADER, AUTH_HEADER, RELAY_HEADER, SESSION_HEADER
 from .resumable import ACK_INTERVAL, ClientSession
 
 if TYPE_CHECKING:

@@ -1,11 +1,11 @@
-"""A client's request tasks (:class:`bridge_server.session.calls.Calls`): counted while they
+"""A client's request tasks (:class:`rosbridge_core.session.calls.Calls`): counted while they
 run, gone when they end, and all cancelled and awaited when the client leaves."""
 
 from __future__ import annotations
 
 import asyncio
 
-from bridge_server.session.calls import Calls
+from rosbridge_core.session.calls import Calls
 
 
 async def test_a_task_is_counted_while_it_runs() -> None:

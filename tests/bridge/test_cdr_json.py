@@ -1,4 +1,4 @@
-"""JSON straight from CDR (bridge_server.codec.cdr_json) gives the converter's text exactly, for
+"""JSON straight from CDR (rosbridge_core.codec.cdr_json) gives the converter's text exactly, for
 every type msgs generates, and leaves what it cannot render the same way to the converter."""
 
 from __future__ import annotations
@@ -12,10 +12,10 @@ import pytest
 from hypothesis import strategies as st
 from rclpy.serialization import serialize_message
 
-from bridge_server.codec import cdr_json
 from bridge_server.rclpy_graph import convert
 from bridge_server.rclpy_graph.node import Incoming
 from msgs.runtime import Message
+from rosbridge_core.codec import cdr_json
 from tests.msgs.test_cdr import (
     _message,
     _message_types,

@@ -1,4 +1,4 @@
-"""The relay's piecewise encoders of large messages (bridge_server/codec/chunked.py) give,
+"""The relay's piecewise encoders of large messages (rosbridge_core/codec/chunked.py) give,
 byte for byte, what the one-call encoders give: JSON as cdr_json's (``bytes`` as base64),
 CBOR as ``cbor2.dumps``, on decoded real messages and on nested shapes."""
 
@@ -10,10 +10,10 @@ from typing import Any
 import cbor2
 import pytest
 
-from bridge_server.codec import cdr_json
-from bridge_server.codec.chunked import PIECE, cbor_bytes, json_text
 from msgs import cdr
 from msgs.runtime import lookup_message
+from rosbridge_core.codec import cdr_json
+from rosbridge_core.codec.chunked import PIECE, cbor_bytes, json_text
 
 
 def _decoded(type_name: str, values: dict[str, Any], typed: bool) -> Any:

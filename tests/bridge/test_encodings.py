@@ -8,8 +8,8 @@ from typing import Any
 
 import cbor2
 
-from bridge_server.codec.encodings import ENCODINGS, EncodedMessage
-from roslibpy_lite.protocol import ops
+from rosbridge_core.codec.encodings import ENCODINGS, EncodedMessage
+from rosbridge_core.protocol import ops
 
 
 class _Played(EncodedMessage):

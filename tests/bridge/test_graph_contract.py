@@ -17,9 +17,9 @@ from typing import Any
 
 import pytest
 
-from bridge_server.graph import Graph, Status
-from bridge_server.interfaces import ServiceCallError
-from bridge_server.memory.graph import MemoryGraph, MemoryRos
+from rosbridge_core.graph import Graph, Status
+from rosbridge_core.interfaces import ServiceCallError
+from rosbridge_core.memory.graph import MemoryGraph, MemoryRos
 from tests.helpers import async_wait_until
 
 _names = itertools.count()

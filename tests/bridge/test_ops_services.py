@@ -12,7 +12,7 @@ from mult_msgs.srv import MultFloats
 from rclpy.callback_groups import ReentrantCallbackGroup
 from std_srvs.srv import SetBool
 
-from roslibpy_lite.protocol.frames import split_fragments
+from rosbridge_core.protocol.frames import split_fragments
 from tests.bridge.support import ros_future, roundtrip, serve_set_bool, wait_service
 from tests.helpers import async_wait_until
 

@@ -16,11 +16,11 @@ from websockets.asyncio.client import ClientConnection, connect
 from websockets.asyncio.server import ServerConnection, serve
 from websockets.frames import Frame, Opcode
 
-from bridge_server.codec.encodings import EncodedMessage
-from bridge_server.security import WebSocketLink
-from bridge_server.session.outbox import Frame as OutFrame
-from bridge_server.session.outbox import Outbox, Subscription, frame_bytes
-from roslibpy_lite.protocol import ops
+from bridge_server.front.websocket import WebSocketLink
+from rosbridge_core.codec.encodings import EncodedMessage
+from rosbridge_core.protocol import ops
+from rosbridge_core.session.outbox import Frame as OutFrame
+from rosbridge_core.session.outbox import Outbox, Subscription, frame_bytes
 from tests.helpers import async_wait_until
 
 

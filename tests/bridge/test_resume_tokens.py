@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from bridge_server.session.resume import ResumeConfig, SessionStore, worker_of
+from rosbridge_core.session.resume import ResumeConfig, SessionStore, worker_of
 
 
 def test_a_workers_token_names_it_and_keeps_its_random_part() -> None:

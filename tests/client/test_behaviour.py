@@ -14,6 +14,7 @@ import pytest
 
 from msgs.sensor_msgs.msg import Imu
 from msgs.std_msgs.msg import Header
+from rosbridge_core.protocol import ops
 from roslibpy_lite import (
     DuplicateCallbackWarning,
     InvalidMessageError,
@@ -24,7 +25,6 @@ from roslibpy_lite import (
     RosTimeoutError,
     sync,
 )
-from roslibpy_lite.protocol import ops
 
 INT = "std_msgs/msg/Int32"
 TWIST = "geometry_msgs/msg/Twist"

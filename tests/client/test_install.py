@@ -10,7 +10,7 @@ ROOT = Path(__file__).resolve().parents[2]
 
 FOOTPRINT = """
 import sys
-import roslibpy_lite, roslibpy_lite.client, roslibpy_lite.mock, roslibpy_lite.protocol
+import roslibpy_lite, roslibpy_lite.client, roslibpy_lite.mock, rosbridge_core.protocol
 import roslibpy_lite.sync, roslibpy_lite.compat
 bad = sorted(m for m in sys.modules if m.split(".")[0] in ("rclpy", "cbor2", "rosidl_runtime_py"))
 print(",".join(bad))

@@ -11,8 +11,8 @@ import cbor2
 import pytest
 
 from msgs.std_msgs.msg import Float32MultiArray, String
+from rosbridge_core.protocol.frames import split_fragments
 from roslibpy_lite import Client, RosTimeoutError, StatusError
-from roslibpy_lite.protocol.frames import split_fragments
 
 
 def _pub(topic: str, msg: dict[str, Any]) -> str:

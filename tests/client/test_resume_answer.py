@@ -10,9 +10,9 @@ import asyncio
 import pytest
 
 import roslibpy_lite
+from rosbridge_core.protocol.ops import RECEIVED_HEADER, SESSION_HEADER
 from roslibpy_lite import ConnectionState
 from roslibpy_lite.exceptions import RemoteProtocolError
-from roslibpy_lite.protocol.ops import RECEIVED_HEADER, SESSION_HEADER
 from roslibpy_lite.transports.resumable import ClientSession
 from roslibpy_lite.transports.websocket import WebSocketTransport
 from tests.client.support import ScriptedPeer, fast_backoff

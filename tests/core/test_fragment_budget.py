@@ -7,9 +7,9 @@ from __future__ import annotations
 
 import pytest
 
-from roslibpy_lite.protocol.errors import RemoteProtocolError
-from roslibpy_lite.protocol.frames import PIECE_COST, Protocol
-from roslibpy_lite.protocol.ops import Fragment
+from rosbridge_core.protocol.errors import RemoteProtocolError
+from rosbridge_core.protocol.frames import PIECE_COST, Protocol
+from rosbridge_core.protocol.ops import Fragment
 
 
 class Budget:

@@ -1,5 +1,5 @@
 """The protocol core's fragment limits, at their edges (issue 54: mutation testing of
-roslibpy_lite/protocol/frames.py left these unchecked): what an evicted op records, what a
+rosbridge_core/protocol/frames.py left these unchecked): what an evicted op records, what a
 bad reassembled op's error names, where split_fragments cuts, and what a shared budget is
 charged and given back."""
 
@@ -7,9 +7,9 @@ from __future__ import annotations
 
 import pytest
 
-from roslibpy_lite.protocol.errors import RemoteProtocolError
-from roslibpy_lite.protocol.frames import PIECE_COST, Protocol, decode_frame, split_fragments
-from roslibpy_lite.protocol.ops import Fragment, Publish, encode, parse_op
+from rosbridge_core.protocol.errors import RemoteProtocolError
+from rosbridge_core.protocol.frames import PIECE_COST, Protocol, decode_frame, split_fragments
+from rosbridge_core.protocol.ops import Fragment, Publish, encode, parse_op
 
 
 def _piece(text: str) -> Fragment:

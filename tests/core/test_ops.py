@@ -7,8 +7,7 @@ from typing import Any, ClassVar
 
 import pytest
 
-from roslibpy_lite.exceptions import RemoteProtocolError
-from roslibpy_lite.protocol.ops import (
+from rosbridge_core.protocol.ops import (
     Advertise,
     AdvertiseService,
     CallService,
@@ -22,6 +21,7 @@ from roslibpy_lite.protocol.ops import (
     parse_op,
     to_obj,
 )
+from roslibpy_lite.exceptions import RemoteProtocolError
 
 
 def test_publish_parses_into_a_value() -> None:
@@ -132,7 +132,7 @@ def test_every_op_declares_its_facts_on_its_class() -> None:
     from dataclasses import dataclass, fields
     from typing import get_args
 
-    from roslibpy_lite.protocol import ops
+    from rosbridge_core.protocol import ops
 
     for cls in get_args(ops.Op):
         names = {f.name for f in fields(cls)}
@@ -152,7 +152,7 @@ def test_every_op_declares_its_facts_on_its_class() -> None:
 def test_a_refused_call_or_goal_gets_the_answer_a_stock_peer_waits_for() -> None:
     """A refused call_service is answered by a failed service_response, a refused goal with
     an id by an aborted action_result; other ops by the status error alone."""
-    from roslibpy_lite.protocol import ops
+    from rosbridge_core.protocol import ops
 
     call = ops.CallService("/s", id="c1").refusal("forbidden")
     assert call == ops.ServiceResponse("/s", False, "call_service: forbidden", "c1")

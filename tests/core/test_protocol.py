@@ -11,15 +11,15 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from roslibpy_lite.exceptions import RemoteProtocolError
-from roslibpy_lite.protocol.frames import (
+from rosbridge_core.protocol.frames import (
     PIECE_COST,
     Protocol,
     decode_frame,
     decode_typed_array,
     split_fragments,
 )
-from roslibpy_lite.protocol.ops import Fragment, Publish, encode, parse_op
+from rosbridge_core.protocol.ops import Fragment, Publish, encode, parse_op
+from roslibpy_lite.exceptions import RemoteProtocolError
 
 
 def test_text_frame_gives_an_op() -> None:

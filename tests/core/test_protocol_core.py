@@ -1,4 +1,4 @@
-"""The protocol core (roslibpy_lite.protocol) stands alone: it, and the bridge that uses it,
+"""The protocol core (rosbridge_core.protocol) stands alone: it, and the bridge that uses it,
 load no other module of the client; the client's public names load at their first use."""
 
 from __future__ import annotations
@@ -11,7 +11,7 @@ from pathlib import Path
 from tests.core.test_import_cycles import _graph
 
 ROOT = Path(__file__).resolve().parents[2]
-CORE = "roslibpy_lite.protocol"
+CORE = "rosbridge_core.protocol"
 
 LOADED = """
 import importlib, pkgutil, sys
@@ -52,7 +52,7 @@ def test_the_core_names_nothing_else_of_the_client_even_for_type_checking() -> N
 def test_the_bridge_loads_only_the_core_of_the_client() -> None:
     """Importing bridge_server, its session and every other module of it loads no client
     module beyond the protocol core."""
-    assert _client_modules_loaded("bridge_server.session.session") == []
+    assert _client_modules_loaded("rosbridge_core.session.session") == []
     assert _client_modules_loaded("bridge_server", walk=True) == []
 
 

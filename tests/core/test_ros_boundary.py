@@ -19,10 +19,10 @@ import pytest
 from tests.core.test_import_cycles import ROOT, _module_name, _runtime_imports
 
 BACKEND = "bridge_server.rclpy_graph"
-ROS_FREE = ("roslibpy_lite", "msgs", "bridge_server")
+ROS_FREE = ("roslibpy_lite", "msgs", "rosbridge_core", "bridge_server")
 """Packages whose modules (the backend's aside) must not import ROS."""
-SESSION_SIDE = ("bridge_server.session", "bridge_server.http", "bridge_server.security",
-                "bridge_server.graph", "bridge_server.interfaces", "bridge_server.codec",
+SESSION_SIDE = ("rosbridge_core.session", "bridge_server.http", "rosbridge_core.security",
+                "rosbridge_core.graph", "rosbridge_core.interfaces", "rosbridge_core.codec",
                 "bridge_server.zenoh")
 """What a relay without ROS runs: it must not reach the backend."""
 
@@ -120,12 +120,12 @@ def test_the_checker_sees_every_kind_of_import() -> None:
         "def f():\n    from action_msgs.msg import GoalStatus\n"
         "from ..rclpy_graph import convert\n"
     )
-    found = _imports(source, "bridge_server.session.topics", False)
+    found = _imports(source, "bridge_server.http.example", False)
     assert {"rclpy.node", "rclpy.qos", "action_msgs.msg", "bridge_server.rclpy_graph.convert"} <= found
     ros = {"rclpy", "action_msgs"}
-    assert _ros_importers({"bridge_server.session.topics": found}, ros) == {
-        "bridge_server.session.topics": ["action_msgs.msg", "action_msgs.msg.GoalStatus",
-                                         "rclpy.node", "rclpy.qos", "rclpy.qos.QoSProfile"]
+    assert _ros_importers({"bridge_server.http.example": found}, ros) == {
+        "bridge_server.http.example": ["action_msgs.msg", "action_msgs.msg.GoalStatus",
+                                       "rclpy.node", "rclpy.qos", "rclpy.qos.QoSProfile"]
     }
     chain = {"bridge_server.http.web": {"bridge_server.front.server"},
              "bridge_server.front.server": {"bridge_server.rclpy_graph.graph"}}
@@ -142,7 +142,7 @@ def test_the_ros_packages_are_known() -> None:
 
 
 def test_only_the_rclpy_backend_imports_ros() -> None:
-    """Nothing in roslibpy_lite, msgs or bridge_server outside rclpy_graph/ imports rclpy
+    """Nothing in roslibpy_lite, msgs, rosbridge_core or bridge_server outside rclpy_graph/ imports rclpy
     or any other ROS package."""
     bad = _ros_importers(_all_imports(), _ros_packages())
     assert not bad, f"ROS imported outside {BACKEND}: {bad}"
@@ -165,9 +165,9 @@ def test_the_session_side_does_not_import_the_backend(side: str) -> None:
     assert not chains, f"{side} reaches {BACKEND} at run time: {chains}"
 
 
-OP_GROUPS = ("bridge_server.session.topics", "bridge_server.session.services",
-             "bridge_server.session.actions", "bridge_server.session.rosapi")
-WHOLE = ("bridge_server.front.server", "bridge_server.session.session")
+OP_GROUPS = ("rosbridge_core.session.topics", "rosbridge_core.session.services",
+             "rosbridge_core.session.actions", "rosbridge_core.session.rosapi")
+WHOLE = ("bridge_server.front.server", "rosbridge_core.session.session")
 
 
 @pytest.mark.parametrize("group", OP_GROUPS)
@@ -180,8 +180,8 @@ def test_the_op_groups_hold_a_narrow_handle(group: str) -> None:
 
 
 RELAY_IMPORTS = ("bridge_server.zenoh.relay", "bridge_server.front.server",
-                 "bridge_server.session.session", "bridge_server.security",
-                 "bridge_server.http.web", "bridge_server.codec.cdr_json")
+                 "rosbridge_core.session.session", "rosbridge_core.security",
+                 "bridge_server.http.web", "rosbridge_core.codec.cdr_json")
 """What ``roslibpy-lite-relay`` runs: its entry module and the bridge's server, sessions,
 security and HTTP code."""
 

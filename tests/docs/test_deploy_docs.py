@@ -11,8 +11,8 @@ from pathlib import Path
 import pytest
 
 from bridge_server.__main__ import parse_args
-from bridge_server.security import exposure_refusal, is_loopback
 from bridge_server.zenoh.link import options_from_args
+from rosbridge_core.security import exposure_refusal, is_loopback
 from tests.helpers import ROOT
 
 PAGES = [ROOT / "README.md", ROOT / "SECURITY.md", *sorted((ROOT / "docs").rglob("*.md"))]

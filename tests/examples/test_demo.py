@@ -149,7 +149,7 @@ def test_demo_runs_secured(tmp_path: Path) -> None:
     $ROSLIBPY_LITE_TOKEN/$ROSLIBPY_LITE_CAFILE and the CLI calls its service."""
     import trustme
 
-    from bridge_server.security.auth import add_principal
+    from rosbridge_core.security.auth import add_principal
 
     ca = trustme.CA()
     ca.issue_cert("127.0.0.1").private_key_and_cert_chain_pem.write_to_path(

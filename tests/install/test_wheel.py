@@ -21,7 +21,7 @@ import pytest
 
 from tests.helpers import ROOT, BridgeProcess
 
-SOURCES = ["pyproject.toml", "README.md", "roslibpy_lite", "bridge_server", "msgs"]
+SOURCES = ["pyproject.toml", "README.md", "roslibpy_lite", "rosbridge_core", "bridge_server", "msgs"]
 
 SYNC_SCRIPT = """
 import sys

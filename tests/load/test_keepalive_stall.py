@@ -16,8 +16,8 @@ from websockets.typing import Subprotocol
 
 import roslibpy_lite
 from bench.linkproxy import LinkProxy
+from rosbridge_core.protocol import keepalive
 from roslibpy_lite.api import ConnectionState
-from roslibpy_lite.protocol import keepalive
 from tests.bridge.support import roundtrip
 from tests.helpers import BridgeProcess, WireClient
 

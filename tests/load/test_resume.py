@@ -109,7 +109,7 @@ async def test_a_kept_session_ends_after_session_keep(make_bridge: Any, ros_node
     from websockets.asyncio.client import connect as ws_connect
 
     from bridge_server.http.metrics import PREFIX
-    from roslibpy_lite.protocol.ops import RECEIVED_HEADER, SESSION_HEADER
+    from rosbridge_core.protocol.ops import RECEIVED_HEADER, SESSION_HEADER
     from tests.helpers import WireClient
     from tests.ops.support import scrape, status
 

@@ -13,7 +13,7 @@ from websockets.asyncio.client import connect as ws_connect
 from websockets.exceptions import InvalidStatus
 
 from bridge_server.http.metrics import PREFIX
-from roslibpy_lite.protocol.ops import RECEIVED_HEADER, SESSION_HEADER
+from rosbridge_core.protocol.ops import RECEIVED_HEADER, SESSION_HEADER
 from tests.bridge.support import wait_subscribers
 from tests.helpers import WireClient, async_wait_until
 from tests.ops.support import scrape, status

@@ -13,7 +13,7 @@ from std_msgs.msg import Int32
 from websockets.asyncio.client import ClientConnection
 from websockets.asyncio.client import connect as ws_connect
 
-from roslibpy_lite.protocol.ops import RECEIVED_HEADER, SESSION_HEADER
+from rosbridge_core.protocol.ops import RECEIVED_HEADER, SESSION_HEADER
 from tests.bridge.support import wait_subscribers
 from tests.helpers import BridgeProcess, WireClient, async_wait_until
 from tests.ops.support import aget

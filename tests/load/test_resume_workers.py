@@ -21,8 +21,8 @@ from websockets.asyncio.client import connect as ws_connect
 
 import roslibpy_lite
 from bench.linkproxy import LinkProxy
+from rosbridge_core.protocol.ops import RECEIVED_HEADER, SESSION_HEADER
 from roslibpy_lite.api import ConnectionState
-from roslibpy_lite.protocol.ops import RECEIVED_HEADER, SESSION_HEADER
 from roslibpy_lite.transports.websocket import WebSocketTransport
 from tests.bridge.support import wait_subscribers
 from tests.helpers import BridgeProcess, async_wait_until

@@ -13,7 +13,7 @@ from typing import Any
 from mcp import Client, StdioServerParameters
 from std_srvs.srv import SetBool
 
-from bridge_server.security.auth import hash_token, new_token
+from rosbridge_core.security.auth import hash_token, new_token
 from tests.helpers import ROOT, ros_env
 
 

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from bridge_server.security.auth import EXAMPLE_ROLES
+from rosbridge_core.security.auth import EXAMPLE_ROLES
 from roslibpy_lite.mcp.tools import PARAM_TOOLS
 from tests.helpers import BridgeProcess
 from tests.mcp.support import mcp_stdio, tool_names

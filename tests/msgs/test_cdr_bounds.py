@@ -17,10 +17,10 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from bridge_server.codec import cdr_json
 from msgs import cdr, dynamic
 from msgs.runtime import Message, lookup_message
 from msgs.test_msgs.msg import UnboundedSequences
+from rosbridge_core.codec import cdr_json
 from tests.msgs.test_cdr import _message
 
 PER_BYTE = 256

@@ -12,9 +12,9 @@ from collections.abc import Iterator
 import cbor2
 import pytest
 
-from bridge_server.codec import cdr_json
 from msgs import cdr, cdr_columns
 from msgs.runtime import Message, lookup_message
+from rosbridge_core.codec import cdr_json
 from tests.msgs.test_cdr_bounds import _struct
 
 MIB = 2**20

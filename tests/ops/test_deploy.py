@@ -93,7 +93,7 @@ def test_dockerfile_structure_and_command_match_the_entry_point() -> None:
     parser and pass its exposure rule: every address, but with tokens and TLS, whose files
     come from the mounted /etc/roslibpy-lite/ the header documents."""
     from bridge_server.__main__ import parse_args
-    from bridge_server.security import exposure_refusal
+    from rosbridge_core.security import exposure_refusal
 
     text = DOCKERFILE.read_text()
     steps = _instructions(text)
@@ -170,7 +170,7 @@ def _docker_files(tmp: Path) -> dict[str, str]:
     """What an operator mounts at /etc/roslibpy-lite/: a token file and a certificate."""
     import trustme
 
-    from bridge_server.security.auth import add_principal
+    from rosbridge_core.security.auth import add_principal
 
     add_principal(tmp / "auth.toml", "dashboard", "viewer")
     cert = trustme.CA().issue_cert("127.0.0.1")
@@ -220,7 +220,7 @@ def _unit_command(tmp: Path, port: int, with_log_dirs: bool = True) -> tuple[lis
     HOME a system user without a home directory has under ProtectHome (nothing writable)."""
     import trustme
 
-    from bridge_server.security.auth import add_principal
+    from rosbridge_core.security.auth import add_principal
 
     service = _unit_sections(UNIT.read_text())["Service"]
     argv = service["ExecStart"][0].split()

@@ -17,7 +17,7 @@ from prometheus_client.parser import text_string_to_metric_families
 from bridge_server.http import metrics, snapshot
 from bridge_server.http.relay_status import EXPORTED, RobotStatus, robot_families, robot_status
 from bridge_server.http.status import COUNTERS, BridgeStatus
-from bridge_server.session.client_status import ClientStatus, SubscriptionStatus
+from rosbridge_core.session.client_status import ClientStatus, SubscriptionStatus
 from tests.helpers import ROOT
 
 P = "roslibpy_bridge_"

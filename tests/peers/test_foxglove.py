@@ -932,7 +932,7 @@ class _ReloadedRoles:
     table the test writes) for principal ``dora``, role ``all`` for ``root``."""
 
     def __init__(self, directory: Path, watcher: str) -> None:
-        from bridge_server.security.auth import hash_token, new_token
+        from rosbridge_core.security.auth import hash_token, new_token
 
         self.tokens = {"dora": new_token(), "root": new_token()}
         self.path = directory / "auth.toml"

@@ -18,12 +18,12 @@ from typing import Any
 
 from bridge_server.front.server import Bridge, BridgeConfig
 from bridge_server.rclpy_graph.graph import RclpyGraph
-from bridge_server.security import SecurityConfig
-from bridge_server.security.auth import hash_token, new_token
 from bridge_server.zenoh.exporter import Exporter
 from bridge_server.zenoh.graph import TypeLimits
 from bridge_server.zenoh.link import ZenohOptions
 from bridge_server.zenoh.relay import Relay
+from rosbridge_core.security import SecurityConfig
+from rosbridge_core.security.auth import hash_token, new_token
 from tests.helpers import async_wait_until
 from tests.helpers import free_port as free_port  # where the relay tests have found it
 

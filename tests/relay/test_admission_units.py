@@ -22,12 +22,12 @@ from websockets.server import ServerProtocol
 from bridge_server.foxglove import SUBPROTOCOL as FOXGLOVE
 from bridge_server.front.server import BridgeConfig
 from bridge_server.http.web import Reply
-from bridge_server.security.auth import Principal
-from bridge_server.security.gate import POLICY_VIOLATION
-from bridge_server.security.options import SecurityConfig
-from bridge_server.security.permissions import Role
 from bridge_server.zenoh.link import ZenohOptions
 from bridge_server.zenoh.relay import Relay
+from rosbridge_core.security.auth import Principal
+from rosbridge_core.security.gate import POLICY_VIOLATION
+from rosbridge_core.security.options import SecurityConfig
+from rosbridge_core.security.permissions import Role
 
 pytestmark = pytest.mark.timeout(30)
 

@@ -14,7 +14,7 @@ from collections.abc import Callable
 
 import pytest
 
-from roslibpy_lite.protocol import ops
+from rosbridge_core.protocol import ops
 from tests.relay.link_load import load_tier
 from tests.relay.support import until
 from tests.relay.test_relay_outage import clients

@@ -201,7 +201,7 @@ def _typed(value: Any) -> list[Any]:
     """The values of an RFC 8746 typed array (a CBOR tag: anything else fails)."""
     import cbor2
 
-    from roslibpy_lite.protocol.frames import decode_typed_array
+    from rosbridge_core.protocol.frames import decode_typed_array
 
     assert isinstance(value, cbor2.CBORTag), value
     return decode_typed_array(value.tag, value.value)

@@ -13,10 +13,10 @@ from typing import Any
 import pytest
 
 from bridge_server.front.server import BridgeConfig
-from bridge_server.security import SecurityConfig
 from bridge_server.zenoh.graph import ZenohGraph
 from bridge_server.zenoh.link import ZenohOptions
 from bridge_server.zenoh.relay import Relay
+from rosbridge_core.security import SecurityConfig
 from tests.bridge.action_support import FIB, FibServer, RosCaller, fib
 from tests.helpers import open_wire
 from tests.relay.support import (

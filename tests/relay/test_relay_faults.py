@@ -181,7 +181,7 @@ async def test_tokens_never_reach_a_relays_log_or_its_answers(tmp_path: Path) ->
     in any answer a client got."""
     from websockets.asyncio.client import connect
 
-    from bridge_server.security.auth import hash_token, new_token
+    from rosbridge_core.security.auth import hash_token, new_token
 
     good = new_token()
     auth = tmp_path / "auth.toml"
@@ -300,7 +300,7 @@ async def test_the_relay_leaves_pings_to_its_sessions_keepalive() -> None:
     """Like the bridge, the relay turns websockets' own ping timeout off where its sessions
     watch their links (keepalive.py pings a silent client first; a pong late behind a big
     frame, or after a stall of the relay's own, drops nobody)."""
-    from roslibpy_lite.protocol import keepalive
+    from rosbridge_core.protocol import keepalive
 
     async with tier() as t:
         wire = await open_wire(t.url())

@@ -28,7 +28,7 @@ import pytest
 
 import roslibpy_lite
 from bench.linkproxy import LinkProxy
-from roslibpy_lite.protocol import ops
+from rosbridge_core.protocol import ops
 from tests.helpers import ros_env
 from tests.peers.peer import NODE_DIR, PeerProcess, foxglove_peer
 from tests.relay.procs import Proc, until_robot_served

@@ -22,12 +22,12 @@ from std_srvs.srv import SetBool
 import roslibpy_lite
 from bridge_server.front.server import Bridge, BridgeConfig
 from bridge_server.rclpy_graph.graph import RclpyGraph
-from bridge_server.security import SecurityConfig
-from bridge_server.security.auth import hash_token, new_token
-from bridge_server.security.permissions import Role
 from bridge_server.zenoh.exporter import DEFAULT_POLICY, Exporter
 from bridge_server.zenoh.link import ZenohOptions
 from bridge_server.zenoh.relay import Relay
+from rosbridge_core.security import SecurityConfig
+from rosbridge_core.security.auth import hash_token, new_token
+from rosbridge_core.security.permissions import Role
 from roslibpy_lite.exceptions import RemoteError, StatusError
 from tests.helpers import ROOT, ros_env
 from tests.relay.support import ROBOT, free_port, robot_reachable, until

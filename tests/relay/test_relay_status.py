@@ -17,8 +17,8 @@ import pytest
 from std_msgs.msg import String
 from websockets.exceptions import InvalidStatus
 
-from bridge_server.security.auth import new_token
 from bridge_server.zenoh.relay import Relay
+from rosbridge_core.security.auth import new_token
 from tests.helpers import CHROMEDRIVER, CHROMIUM, WireClient, headless_chromium, open_wire
 from tests.ops.support import aget
 from tests.relay.support import (

@@ -13,8 +13,8 @@ from pathlib import Path
 
 import pytest
 
-from bridge_server.security.auth import FailureTracker, new_token
 from bridge_server.zenoh.relay import Relay
+from rosbridge_core.security.auth import FailureTracker, new_token
 from tests.ops.support import aget
 from tests.relay.support import ROBOT1_VIEWER, relay_with_auth
 

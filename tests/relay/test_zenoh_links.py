@@ -18,8 +18,8 @@ import pytest
 zenoh = pytest.importorskip("zenoh")
 trustme = pytest.importorskip("trustme")
 
-from bridge_server.interfaces import BridgeError  # noqa: E402
 from bridge_server.zenoh.link import ZenohOptions  # noqa: E402
+from rosbridge_core.interfaces import BridgeError  # noqa: E402
 from tests.helpers import free_port  # noqa: E402
 from tests.relay.support import wait_matched  # noqa: E402
 

@@ -20,8 +20,8 @@ import pytest
 from cryptography import x509
 from cryptography.x509.oid import ExtendedKeyUsageOID, NameOID
 
-from bridge_server.interfaces import BridgeError
 from bridge_server.zenoh.link import ZenohOptions
+from rosbridge_core.interfaces import BridgeError
 from tests.helpers import ROOT, ros_env
 from tests.relay.procs import Proc
 from tests.relay.support import free_port

@@ -10,7 +10,7 @@ from typing import Any
 
 from websockets.asyncio.client import connect
 
-from bridge_server.security.auth import EXAMPLE_ROLES, hash_token, new_token
+from rosbridge_core.security.auth import EXAMPLE_ROLES, hash_token, new_token
 from tests.helpers import BridgeProcess, WireClient
 
 ROLES = EXAMPLE_ROLES + """

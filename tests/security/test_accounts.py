@@ -1,5 +1,5 @@
 """The accounts of what a principal's, and an address's, connections hold together
-(bridge_server/security/accounts.py), and their limits in the auth file."""
+(rosbridge_core/security/accounts.py), and their limits in the auth file."""
 
 from __future__ import annotations
 
@@ -7,13 +7,13 @@ from pathlib import Path
 
 import pytest
 
-from bridge_server.security.accounts import (
+from rosbridge_core.security.accounts import (
     DEFAULT_MESSAGES,
     FRAGMENT_BYTES,
     INFLIGHT_BYTES,
     Accounts,
 )
-from bridge_server.security.auth import AuthFileError, hash_token, load_auth_file
+from rosbridge_core.security.auth import AuthFileError, hash_token, load_auth_file
 
 MiB = 2**20
 

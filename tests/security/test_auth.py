@@ -13,8 +13,9 @@ import pytest
 from websockets.asyncio.client import connect
 from websockets.exceptions import ConnectionClosed, InvalidStatus
 
-from bridge_server.security import Security, SecurityConfig, redact
-from bridge_server.security.auth import AuthFileError, FailureTracker, load_auth_file, new_token
+from bridge_server.front.handshake import Security
+from rosbridge_core.security import SecurityConfig, redact
+from rosbridge_core.security.auth import AuthFileError, FailureTracker, load_auth_file, new_token
 from tests.bridge.support import roundtrip
 from tests.helpers import ROOT, BridgeProcess, ros_env
 from tests.ops.support import aget
@@ -200,7 +201,7 @@ def test_add_principal_prints_a_token_once_and_stores_a_hash(tmp_path: Path) -> 
     assert principal is not None and principal.name == "alice" and principal.role.name == "viewer"
     assert config.verify(token + "x") is None
     again = subprocess.run(
-        [sys.executable, "-m", "bridge_server.security.auth", "alice", "--role", "viewer",
+        [sys.executable, "-m", "rosbridge_core.security.auth", "alice", "--role", "viewer",
          "--auth-file", str(path)],
         cwd=ROOT, env=ros_env(), capture_output=True, text=True, timeout=60,
     )
@@ -362,7 +363,7 @@ async def test_locked_out_address_gets_no_guess_on_open_connections(
 
 def test_add_principal_refuses_a_name_toml_cannot_hold(tmp_path: Path) -> None:
     """A non-ASCII principal name is refused before anything is written; the file stays usable."""
-    from bridge_server.security.auth import add_principal
+    from rosbridge_core.security.auth import add_principal
 
     path = tmp_path / "auth.toml"
     add_principal(path, "alice", "viewer")
@@ -374,7 +375,7 @@ def test_add_principal_refuses_a_name_toml_cannot_hold(tmp_path: Path) -> None:
 
 def test_failures_long_past_are_forgotten() -> None:
     """A failure long after the last one starts the count afresh instead of extending a lock-out."""
-    from bridge_server.security import auth as auth_module
+    from rosbridge_core.security import auth as auth_module
 
     now = [1000.0]
     tracker = FailureTracker(free=2, max_lockout=60, clock=lambda: now[0])

@@ -14,7 +14,7 @@ import threading
 from pathlib import Path
 from typing import Any
 
-from bridge_server.security.auth import hash_token, load_auth_file, new_token
+from rosbridge_core.security.auth import hash_token, load_auth_file, new_token
 from tests.bridge.action_support import FibServer, bridge_sees_action, send_goal
 from tests.helpers import ROOT, WireClient
 from tests.security.support import wire

@@ -22,7 +22,8 @@ from websockets.asyncio.client import ClientConnection, connect
 from websockets.asyncio.server import ServerConnection, serve
 from websockets.exceptions import ConnectionClosed
 
-from bridge_server.security import Security, SecurityConfig
+from bridge_server.front.handshake import Security
+from rosbridge_core.security import SecurityConfig
 
 
 class Seen(list[tuple[str, str | bytes]]):

@@ -1,4 +1,4 @@
-"""The gate (bridge_server/security/gate.py) on its own, with a session, link and verifier
+"""The gate (rosbridge_core/security/gate.py) on its own, with a session, link and verifier
 played here: the op rate and its burst, the frame size before authentication, the auth op,
 the handshake timer, each refusal's text, take-over and rosapi filtering. In the test
 process, so that mutation testing (scripts/mutate.sh) sees every check (issue 54)."""
@@ -12,12 +12,12 @@ from typing import Any
 
 import pytest
 
-from bridge_server.security import gate as gate_module
-from bridge_server.security.auth import Principal
-from bridge_server.security.gate import POLICY_VIOLATION, PRE_AUTH_FRAME_LIMIT, Gate
-from bridge_server.security.options import SecurityConfig
-from bridge_server.security.permissions import Role, filter_rosapi
-from roslibpy_lite.protocol.ops import parse_op
+from rosbridge_core.protocol.ops import parse_op
+from rosbridge_core.security import gate as gate_module
+from rosbridge_core.security.auth import Principal
+from rosbridge_core.security.gate import POLICY_VIOLATION, PRE_AUTH_FRAME_LIMIT, Gate
+from rosbridge_core.security.options import SecurityConfig
+from rosbridge_core.security.permissions import Role, filter_rosapi
 
 pytestmark = pytest.mark.timeout(30)
 
@@ -425,7 +425,7 @@ def test_a_roles_table_is_read_and_each_mistake_named() -> None:
                                  "limits": {"fragment_bytes": 1000}})
     assert role.allow["publish"] == ("/a", "/b") and role.allow["subscribe"] == ("/a",)
     assert role.limits == {"fragment_bytes": 1000}
-    from bridge_server.security.permissions import CAPABILITIES, RoleError
+    from rosbridge_core.security.permissions import CAPABILITIES, RoleError
 
     mistakes: list[tuple[dict[str, Any], str]] = [
         ({"limits": {"fragment_bytes": -1}}, "role r: limits.fragment_bytes must be a whole "
@@ -461,7 +461,7 @@ def test_what_a_name_of_another_capabilitys_internals_needs(
         capability: str, name: str, needs: tuple[str, str]) -> None:
     """An action's services and topics, a node's parameter services and /parameter_events
     need what governs them; anything else what it names."""
-    from bridge_server.security.permissions import hidden_requirement
+    from rosbridge_core.security.permissions import hidden_requirement
 
     assert hidden_requirement(capability, name) == needs
 
@@ -478,14 +478,14 @@ def test_what_a_rosapi_call_needs(service: str, args: dict[str, Any],
                                   needs: tuple[str, str]) -> None:
     """Parameter services need params on the parameter (any, without a name); lookups of one
     name introspection on it; lists introspection on some name."""
-    from bridge_server.security.permissions import rosapi_requirement
+    from rosbridge_core.security.permissions import rosapi_requirement
 
     assert rosapi_requirement(service, args) == needs
 
 
 def test_a_control_character_in_a_rosapi_name_is_refused_saying_so() -> None:
     """A NUL in a rosapi name is refused quoting it: ROS names never hold one."""
-    from bridge_server.security.permissions import UnsafeNameError, rosapi_requirement
+    from rosbridge_core.security.permissions import UnsafeNameError, rosapi_requirement
 
     with pytest.raises(UnsafeNameError) as info:
         rosapi_requirement("/rosapi/topic_type", {"topic": "/a\x00"})

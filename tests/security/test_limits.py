@@ -143,8 +143,8 @@ async def test_inbound_byte_budget_pauses_and_resumes_reading() -> None:
 
 async def test_websockets_internals_are_checked_at_start_up(monkeypatch: pytest.MonkeyPatch) -> None:
     """The budget's websockets internals pass the start-up check; if they change, it says so."""
+    from bridge_server.front.websocket import check_websockets_internals
     from bridge_server.rclpy_graph.types import BridgeError
-    from bridge_server.security import check_websockets_internals
 
     check_websockets_internals()
     monkeypatch.setattr(BudgetAssembler, "maybe_pause", lambda self: None)
@@ -159,8 +159,8 @@ async def test_the_frame_boundary_websockets_parser_waits_at_is_checked_at_start
     bridge looks before reading frames itself), the start-up check says so."""
     from websockets.streams import StreamReader
 
+    from bridge_server.front.websocket import check_websockets_internals
     from bridge_server.rclpy_graph.types import BridgeError
-    from bridge_server.security import check_websockets_internals
 
     def at_eof(self: StreamReader) -> Any:
         while not self.buffer and not self.eof:

@@ -12,7 +12,7 @@ from collections.abc import Callable, Iterator
 
 import pytest
 
-from bridge_server.security import redact
+from rosbridge_core.security import redact
 from tests.helpers import BridgeProcess
 from tests.security.support import AuthFile
 from tests.security.test_log_secrets import assert_nowhere

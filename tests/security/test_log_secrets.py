@@ -14,8 +14,8 @@ import pytest
 from websockets.asyncio.client import connect
 from websockets.exceptions import InvalidStatus
 
-from bridge_server.security import redact
-from roslibpy_lite.protocol.ops import RECEIVED_HEADER, SESSION_HEADER
+from rosbridge_core.protocol.ops import RECEIVED_HEADER, SESSION_HEADER
+from rosbridge_core.security import redact
 from tests.bridge.support import roundtrip
 from tests.helpers import BridgeProcess, WireClient, free_port, ros_env
 from tests.relay.procs import Proc

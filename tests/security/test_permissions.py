@@ -12,7 +12,7 @@ import pytest
 from std_msgs.msg import String
 from std_srvs.srv import SetBool
 
-from bridge_server.security.permissions import MAY, Role, RoleError
+from rosbridge_core.security.permissions import MAY, Role, RoleError
 from tests.bridge.support import Inbox, publish_until_heard, roundtrip, wait_publishers
 from tests.helpers import BridgeProcess
 from tests.security.support import bridge_entities
@@ -118,7 +118,7 @@ async def test_forbidden_ops_in_fragments_cbor_and_rosapi_params(
     the node, whose parameter keeps its value."""
     import cbor2
 
-    from roslibpy_lite.protocol.frames import split_fragments
+    from rosbridge_core.protocol.frames import split_fragments
 
     ros_node.declare_parameter("speed", 1.0)
     node = ros_node.get_fully_qualified_name()
@@ -256,8 +256,8 @@ _SEEN_HIDDEN: dict[str, dict[str, Any]] = {
 
 def test_every_rosapi_answer_naming_things_is_filtered() -> None:
     """Each rosapi list (and service_node) keeps only names the role's introspection matches."""
-    from bridge_server.security.permissions import filter_rosapi
-    from bridge_server.session import rosapi
+    from rosbridge_core.security.permissions import filter_rosapi
+    from rosbridge_core.session import rosapi
 
     role = Role.from_table("r", {"introspection": ["/seen*"], "params": ["/seen*"]})
     for service, answer in _SEEN_HIDDEN.items():
@@ -281,7 +281,7 @@ def test_every_rosapi_answer_naming_things_is_filtered() -> None:
 def test_may_answers_what_the_gate_lets_through() -> None:
     """/rosapi/may_* keep the names the role may use with that capability, as the gate checks
     them (an action's internals and a node's parameter services by what governs them)."""
-    from bridge_server.security.permissions import filter_rosapi
+    from rosbridge_core.security.permissions import filter_rosapi
 
     role = Role.from_table("r", {"publish": ["/cmd*"], "call_service": ["*"],
                                  "send_action_goal": ["/fib"], "params": ["/n:*"]})
@@ -294,7 +294,7 @@ def test_may_answers_what_the_gate_lets_through() -> None:
                     "send_action_goal": ["/fib"],
                     "params": ["/n:x"]}
     # asking needs the capability on some name (a role without it is refused at once)
-    from bridge_server.security.permissions import rosapi_requirement
+    from rosbridge_core.security.permissions import rosapi_requirement
     assert rosapi_requirement("/rosapi/may_publish", asked) == ("publish", "*")
 
 

@@ -7,7 +7,7 @@ from typing import Any
 
 import pytest
 
-from bridge_server.security.names import InvalidNameError, check_name
+from rosbridge_core.security.names import InvalidNameError, check_name
 from tests.bridge.support import roundtrip
 from tests.helpers import BridgeProcess
 

@@ -268,7 +268,7 @@ async def test_sighup_narrowing_ends_live_subscriptions(tmp_path: Path, ros_node
 
 async def test_client_text_cannot_forge_a_log_line(bridge: BridgeProcess, ws_connect: Any) -> None:
     """A newline in a client's type name stays inside one escaped log line."""
-    fake = "2001-01-01 00:00:00,000 INFO bridge_server.security: client 1 authenticated as admin"
+    fake = "2001-01-01 00:00:00,000 INFO rosbridge_core.security: client 1 authenticated as admin"
     ws = await ws_connect()
     start = len(bridge.lines)
     await ws.send({"op": "subscribe", "topic": "/forge_probe", "id": "f",

@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 from websockets.exceptions import ConnectionClosed, InvalidStatus
 
-from bridge_server.security.auth import (
+from rosbridge_core.security.auth import (
     AuthFileError,
     add_principal,
     load_auth_file,

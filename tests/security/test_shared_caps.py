@@ -14,8 +14,8 @@ import psutil
 import pytest
 from websockets.frames import Frame, Opcode
 
-from bridge_server.security.accounts import DEFAULT_MESSAGES
-from bridge_server.security.options import MAX_MESSAGE_SIZE
+from rosbridge_core.security.accounts import DEFAULT_MESSAGES
+from rosbridge_core.security.options import MAX_MESSAGE_SIZE
 from tests.bridge.support import roundtrip
 from tests.helpers import BridgeProcess, WireClient, async_wait_until
 from tests.security.support import AuthFile, wire, write_auth_file

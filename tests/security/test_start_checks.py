@@ -15,8 +15,8 @@ from pathlib import Path
 
 import pytest
 
-from bridge_server.security import exposure_refusal
-from bridge_server.security.auth import AuthFileError, add_principal, load_auth_file
+from rosbridge_core.security import exposure_refusal
+from rosbridge_core.security.auth import AuthFileError, add_principal, load_auth_file
 from tests.helpers import ROOT, BridgeProcess, ros_env
 from tests.security.support import AuthFile, Certs
 
@@ -126,7 +126,7 @@ def test_add_principal_makes_the_missing_folder_owned_for_the_bridge(tmp_path: P
 
 def test_add_principal_keeps_the_owner_when_it_adds_and_removes(tmp_path: Path) -> None:
     """Adding another principal or removing one leaves the file its owner's."""
-    from bridge_server.security.auth import remove_principal
+    from rosbridge_core.security.auth import remove_principal
 
     path = tmp_path / "auth.toml"
     nobody = pwd.getpwnam("nobody")

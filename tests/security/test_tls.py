@@ -73,7 +73,8 @@ async def test_workers_serve_wss(make_bridge: Any, certs: Certs, auth: AuthFile)
 
 def test_tls_context_requires_tls_1_2_and_client_certificates(certs: Certs) -> None:
     """The server context refuses TLS below 1.2, and --client-ca makes a certificate required."""
-    from bridge_server.security import Security, SecurityConfig
+    from bridge_server.front.handshake import Security
+    from rosbridge_core.security import SecurityConfig
 
     plain = Security(SecurityConfig(certfile=str(certs.server))).ssl_context()
     mutual = Security(SecurityConfig(certfile=str(certs.server),

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from bridge_server.security.auth import load_auth_file, main
+from rosbridge_core.security.auth import load_auth_file, main
 
 
 @pytest.fixture

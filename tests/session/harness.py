@@ -1,8 +1,8 @@
 """A session on its ports in memory: the test's end of a
-:class:`~bridge_server.memory.link.MemoryLink`, and a robot node of a
-:class:`~bridge_server.memory.graph.MemoryRos` (no ROS, no socket).
+:class:`~rosbridge_core.memory.link.MemoryLink`, and a robot node of a
+:class:`~rosbridge_core.memory.graph.MemoryRos` (no ROS, no socket).
 
-:func:`open_session` runs a real :class:`~bridge_server.session.session.Session` over a
+:func:`open_session` runs a real :class:`~rosbridge_core.session.session.Session` over a
 :class:`Client`'s link, sharing the state of a real (never started) ``Bridge`` whose Graph is
 the node ``rosbridge`` of an in-memory ROS graph; the :class:`Robot` is another node of it.
 The never-started ``Bridge`` (not a ``MemoryServer``) is what the sessions share: its resume
@@ -20,12 +20,12 @@ from typing import Any
 
 from bridge_server.foxglove.session import FoxgloveSession
 from bridge_server.front.server import Bridge, BridgeConfig
-from bridge_server.graph import Message, RosCall
-from bridge_server.memory.graph import MemoryGraph, MemoryPublisher, MemoryRos
-from bridge_server.memory.link import MemoryLink
-from bridge_server.security.auth import Principal
-from bridge_server.session.session import Session
-from roslibpy_lite.protocol.frames import decode_frame
+from rosbridge_core.graph import Message, RosCall
+from rosbridge_core.memory.graph import MemoryGraph, MemoryPublisher, MemoryRos
+from rosbridge_core.memory.link import MemoryLink
+from rosbridge_core.protocol.frames import decode_frame
+from rosbridge_core.security.auth import Principal
+from rosbridge_core.session.session import Session
 
 __all__ = ["Client", "Robot", "open_foxglove", "open_session"]
 

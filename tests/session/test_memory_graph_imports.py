@@ -17,8 +17,8 @@ _PROGRAM = textwrap.dedent("""
     import asyncio, sys
     for name in sys.argv[1:]:
         sys.modules[name] = None  # importing it raises ImportError, as if not installed
-    from bridge_server.memory.graph import MemoryRos
-    import bridge_server.session.session, bridge_server.http.counters
+    from rosbridge_core.memory.graph import MemoryRos
+    import rosbridge_core.session.session, rosbridge_core.counters
 
     async def main():
         ros = MemoryRos()

@@ -7,7 +7,7 @@ import asyncio
 import json
 from typing import Any
 
-from bridge_server.memory.server import MemoryServer
+from rosbridge_core.memory.server import MemoryServer
 
 
 def _ops(frames: list[str | bytes]) -> list[dict[str, Any]]:

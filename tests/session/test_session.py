@@ -1,7 +1,7 @@
 """A rosbridge session on its ports alone, in memory: no ROS, no socket.
 
-Each test runs the real :class:`~bridge_server.session.session.Session` (its frame loop,
-gate, op groups and outbox) over a :class:`~bridge_server.memory.link.MemoryLink`, sharing a
+Each test runs the real :class:`~rosbridge_core.session.session.Session` (its frame loop,
+gate, op groups and outbox) over a :class:`~rosbridge_core.memory.link.MemoryLink`, sharing a
 real, never-started ``Bridge``'s state over an in-memory ROS graph whose other node, the
 :class:`~tests.session.harness.Robot`, hears, publishes and serves.
 """
@@ -18,10 +18,10 @@ import cbor2
 import pytest
 
 from bridge_server.front.server import Bridge
-from bridge_server.security.auth import Principal
-from bridge_server.security.permissions import Role
-from bridge_server.session.resume import SentFrames
-from roslibpy_lite.protocol.ops import ACKS_HEADER
+from rosbridge_core.protocol.ops import ACKS_HEADER
+from rosbridge_core.security.auth import Principal
+from rosbridge_core.security.permissions import Role
+from rosbridge_core.session.resume import SentFrames
 from tests.helpers import async_wait_until
 from tests.session.harness import Client, open_session
 

@@ -1,2 +1,0 @@
-"""A whole ROS graph in memory (:mod:`.graph`): the :class:`~bridge_server.graph.Graph` port
-with no rclpy, no Zenoh and no sockets, for session tests and MockRos."""
