@@ -79,6 +79,7 @@ from msgs.runtime import Message as WireMessage
 from msgs.runtime import UnknownTypeError as WireUnknownType
 from rosbridge_core.codec.cdr_json import JsonFromCdr, wire_encoder
 from rosbridge_core.codec.encodings import Encoded, EncodedMessage
+from rosbridge_core.codec.msgs_types import MsgsConverter
 from rosbridge_core.graph import (
     GoalListener,
     Listener,
@@ -98,7 +99,6 @@ from rosbridge_core.interfaces import (
     ServiceCallError,
     canonical_name,
 )
-from rosbridge_core.memory.graph import MemoryConverter
 
 __all__ = ["MAX_DEFINITION_BYTES", "MAX_TYPES_PER_ROBOT", "RelayConverter", "TypeLimits",
            "TypeRefused", "ZenohActionClient", "ZenohFeed", "ZenohGraph", "ZenohMessage",
@@ -132,7 +132,7 @@ class NotHolder(BridgeError):
     """A message put by a Zenoh session that does not hold the robot's name (dropped)."""
 
 
-class RelayConverter(MemoryConverter):
+class RelayConverter(MsgsConverter):
     """:class:`~rosbridge_core.graph.Converter` of one ``msgs`` message class (the relay's
     messages are ``msgs`` instances, as the in-memory graph's), reading CDR too."""
 

@@ -25,7 +25,7 @@ an action the others call, each introspects the whole graph.
   ``get_parameters`` and ``set_parameters`` from that dict (``rcl_interfaces`` types), as an
   rclpy node does; the Graph's parameter methods call them.
 
-Nothing here imports rclpy, cbor2 (only :meth:`MemoryConverter.to_cbor_obj` does, when a
+Nothing here imports rclpy, cbor2 (only :meth:`MsgsConverter.to_cbor_obj` does, when a
 client asks for CBOR), prometheus_client or pybase64: a client-only install runs it.
 """
 
@@ -33,7 +33,6 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import json
 import logging
 import secrets
 import time
@@ -41,9 +40,10 @@ from collections.abc import Awaitable, Callable, Mapping
 from typing import Any
 
 from msgs import cdr, dynamic
-from msgs.runtime import Action, Message, Service, ValidationError
+from msgs.runtime import Action, Message, Service
 from msgs.runtime import UnknownTypeError as WireUnknownType
 from rosbridge_core.codec.encodings import EncodedMessage
+from rosbridge_core.codec.msgs_types import MsgsConverter
 from rosbridge_core.graph import (
     ACTIVE,
     GoalListener,
@@ -59,7 +59,6 @@ from rosbridge_core.graph import (
 )
 from rosbridge_core.interfaces import (
     BridgeError,
-    ConversionError,
     ServiceCallError,
     UnknownTypeError,
     canonical_name,
@@ -68,7 +67,6 @@ from rosbridge_core.interfaces import (
 
 __all__ = [
     "MemoryActionClient",
-    "MemoryConverter",
     "MemoryFeed",
     "MemoryGraph",
     "MemoryMessage",
@@ -90,56 +88,12 @@ _ACTION_SERVICES = {"send_goal": "_SendGoal", "cancel_goal": None, "get_result":
 _CANCEL_TYPE = "action_msgs/srv/CancelGoal"
 
 
-class MemoryConverter:
-    """:class:`~rosbridge_core.graph.Converter` of one ``msgs`` message class."""
-
-    def __init__(self, cls: type[Message]) -> None:
-        self.cls = cls
-        self._cbor: Callable[[bytes], dict[str, Any]] | None = None
-
-    @property
-    def type_name(self) -> str:
-        """Canonical ``pkg/msg/Type``."""
-        return self.cls._type
-
-    @property
-    def fields(self) -> tuple[str, ...]:
-        """Field names in declaration order."""
-        return tuple(self.cls._fields_and_types)
-
-    def to_obj(self, msg: Any) -> dict[str, Any]:
-        """The message as a JSON-ready dict (a NaN or infinity as null, as rosbridge)."""
-        return msg.to_json()  # type: ignore[no-any-return]
-
-    def to_json(self, msg: Any) -> str:
-        """The message as compact JSON text."""
-        return json.dumps(self.to_obj(msg), separators=(",", ":"), allow_nan=False,
-                          ensure_ascii=False)
-
-    def to_cbor_obj(self, msg: Any) -> Any:
-        """The message as a CBOR-ready dict (byte strings, numeric arrays typed, RFC 8746)."""
-        if self._cbor is None:
-            import cbor2  # only a client asking for CBOR needs it
-
-            self._cbor = cdr.decoder_for(self.cls, typed=cbor2.CBORTag)
-        return self._cbor(cdr.encode(msg))
-
-    def from_obj(self, obj: Any, path: str = "") -> Any:
-        """A new message from a decoded object; ``ConversionError`` naming the field."""
-        try:
-            return self.cls.from_json(obj)
-        except ValidationError as exc:
-            where = ".".join(p for p in (path, exc.path) if p)
-            raise ConversionError(where, exc.expected,
-                                  detail=f"expected {exc.expected}, {exc.problem}") from None
-
-
 class MemoryMessage(EncodedMessage):
     """One message published in memory, encoded for clients lazily and once per encoding."""
 
     __slots__ = ("conv", "msg")
 
-    def __init__(self, topic: str, msg: Message, conv: MemoryConverter) -> None:
+    def __init__(self, topic: str, msg: Message, conv: MsgsConverter) -> None:
         super().__init__(topic, cdr.encode(msg), time.time_ns())
         self.msg = msg
         self.conv = conv
@@ -581,7 +535,7 @@ class MemoryGraph:
         self.loop = asyncio.get_running_loop()
         self.subscriptions: dict[str, MemoryFeed] = {}
         self.publishers: dict[tuple[str, str, bool], MemoryPublisher] = {}
-        self._converters: dict[type[Message], MemoryConverter] = {}
+        self._converters: dict[type[Message], MsgsConverter] = {}
         self.parameters: dict[str, Any] | None = (
             None if parameters is None else dict(parameters))
         self._declared = set(parameters or ())
@@ -637,11 +591,11 @@ class MemoryGraph:
         """The ``msgs`` action type named ``name``."""
         return self._load(name, "action")
 
-    def converter(self, cls: Any) -> MemoryConverter:
+    def converter(self, cls: Any) -> MsgsConverter:
         """The converter of a ``msgs`` message class."""
         conv = self._converters.get(cls)
         if conv is None:
-            conv = self._converters[cls] = MemoryConverter(cls)
+            conv = self._converters[cls] = MsgsConverter(cls)
         return conv
 
     def typedefs(self, name: str, kind: str, part: str | None = None) -> list[dict[str, Any]]:
