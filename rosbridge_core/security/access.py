@@ -108,6 +108,7 @@ class Access:
         return (f"too many failed authentication attempts from {address}; retry in {wait:.0f} s",
                 str(max(1, round(wait))))
 
-    def gate(self, session: Guarded) -> Gate:
-        """The gate for a new session."""
-        return Gate(self, session, session.link.principal)
+    def gate(self, session: Guarded, rosapi: Mapping[str, tuple[str, ...]] | None = None
+             ) -> Gate:
+        """The gate for a new session (``rosapi``: as :class:`~.gate.Gate` takes it)."""
+        return Gate(self, session, session.link.principal, rosapi)

@@ -28,12 +28,10 @@ from rosbridge_core.security.permissions import (
     rosapi_requirement,
     sees,
 )
-from rosbridge_core.session import rosapi
 
 if TYPE_CHECKING:
     from rosbridge_core.security.auth import AuthConfig
     from rosbridge_core.security.options import SecurityConfig
-    from rosbridge_core.session.link import ClientLink
 
 __all__ = ["POLICY_VIOLATION", "PRE_AUTH_FRAME_LIMIT", "Gate", "GateFactory", "Guarded",
            "Verifier"]
@@ -47,12 +45,31 @@ POLICY_VIOLATION = 1008
 """Close code for a failed ``auth`` op, ops before authentication and op floods."""
 
 
+class GuardedLink(Protocol):
+    """What a gate needs of its session's link (:class:`rosbridge_core.session.link.ClientLink`)."""
+
+    principal: Principal | None
+
+    @property
+    def remote_address(self) -> Any:
+        """Where the client is (its address is the key of the per-address limits)."""
+
+    def limit_frames(self, size: int | None) -> None:
+        """Refuse frames over ``size`` bytes from now on (``None``: the configured limit)."""
+
+    async def close(self, code: int = 1000, reason: str = "") -> None:
+        """Close the connection with ``code`` and ``reason``."""
+
+
 class Guarded(Protocol):
     """The session a gate guards (a rosbridge or a Foxglove one)."""
 
     sid: int
     loop: asyncio.AbstractEventLoop
-    link: ClientLink
+
+    @property
+    def link(self) -> GuardedLink:
+        """Its client's connection."""
 
     @property
     def closed(self) -> bool:
@@ -87,17 +104,21 @@ class GateFactory(Protocol):
     def config(self) -> SecurityConfig:
         """The per-connection limits as configured now."""
 
-    def gate(self, session: Guarded) -> Gate:
-        """The gate for a new session."""
+    def gate(self, session: Guarded, rosapi: Mapping[str, tuple[str, ...]] | None = None
+             ) -> Gate:
+        """The gate for a new session (``rosapi``: as :class:`Gate` takes it)."""
         ...
 
 
 class Gate:
     """What one session may do: consulted for every frame and every op."""
 
-    def __init__(self, security: Verifier, session: Guarded,
-                 principal: Principal | None) -> None:
+    def __init__(self, security: Verifier, session: Guarded, principal: Principal | None,
+                 rosapi: Mapping[str, tuple[str, ...]] | None = None) -> None:
+        """``rosapi``: the session's own ``/rosapi/*`` services, each with its request fields
+        in order (a call of one is governed by what it names, not by the service's name)."""
         self.security = security
+        self.rosapi: Mapping[str, tuple[str, ...]] = rosapi or {}
         self.session = session
         self.principal = principal
         self.role: Role | None = principal.role if principal is not None else None
@@ -195,9 +216,9 @@ class Gate:
         capability, name = need
         try:
             check_name(name, _WHAT[capability])
-            if isinstance(op, ops.CallService) and (name in rosapi.HANDLERS
-                                                    or name in rosapi.ASYNC_HANDLERS):
-                governing = rosapi_requirement(name, _rosapi_args(name, op.args))
+            fields = self.rosapi.get(name) if isinstance(op, ops.CallService) else None
+            if fields is not None:
+                governing = rosapi_requirement(name, _rosapi_args(fields, op.args))
             else:
                 governing = hidden_requirement(capability, name)
         except (InvalidNameError, UnsafeNameError) as exc:
@@ -311,9 +332,10 @@ _WHAT = {
 }
 
 
-def _rosapi_args(service: str, args: Mapping[str, Any] | list[Any] | None) -> Mapping[str, Any]:
+def _rosapi_args(fields: tuple[str, ...], args: Mapping[str, Any] | list[Any] | None
+                 ) -> Mapping[str, Any]:
     if isinstance(args, Mapping):
         return args
     if isinstance(args, list):
-        return dict(zip(rosapi.FIELDS.get(service, ()), args, strict=False))
+        return dict(zip(fields, args, strict=False))
     return {}

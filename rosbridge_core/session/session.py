@@ -52,6 +52,7 @@ from rosbridge_core.protocol.frames import Protocol as FrameProtocol
 from rosbridge_core.protocol.frames import decode_frame
 from rosbridge_core.protocol.ops import ACKS_HEADER, parse_op
 from rosbridge_core.security.permissions import MAY
+from rosbridge_core.session import rosapi
 from rosbridge_core.session.actions import SessionActions
 from rosbridge_core.session.calls import Calls
 from rosbridge_core.session.client_status import ClientStatus, client_status
@@ -74,6 +75,11 @@ __all__ = ["DEFAULT_QUEUE_LENGTH", "Capability", "Session", "SessionConfig"]
 log = logging.getLogger("bridge_server.session")
 
 _LEVELS = {"none": 0, "error": 1, "warning": 2, "info": 3}
+
+ROSAPI_REQUESTS: dict[str, tuple[str, ...]] = {
+    name: rosapi.FIELDS.get(name, ()) for name in (*rosapi.HANDLERS, *rosapi.ASYNC_HANDLERS)}
+"""The session's own ``/rosapi/*`` services with their request fields in order: what its
+gate governs by the names a call asks about (security/gate.py)."""
 
 _ENDING: set[asyncio.Task[None]] = set()
 """Clean-ups of kept sessions that were not resumed in time."""
@@ -134,7 +140,8 @@ class Session:
         self.resume_from = 0  # frames the resuming client had received (its handshake said)
         self._acked_received = 0
         self._ack_timer: asyncio.TimerHandle | None = None
-        self.gate = shared.security.gate(self)  # auth, rate, names, permissions (security/gate.py)
+        # auth, rate, names, permissions (security/gate.py)
+        self.gate = shared.security.gate(self, ROSAPI_REQUESTS)
         self.topics = SessionTopics(self)
         self.services = SessionServices(self)
         self.actions = SessionActions(self)

@@ -18,6 +18,7 @@ from rosbridge_core.security.auth import Principal
 from rosbridge_core.security.gate import POLICY_VIOLATION, PRE_AUTH_FRAME_LIMIT, Gate
 from rosbridge_core.security.options import SecurityConfig
 from rosbridge_core.security.permissions import Role, filter_rosapi
+from rosbridge_core.session.session import ROSAPI_REQUESTS
 
 pytestmark = pytest.mark.timeout(30)
 
@@ -114,7 +115,7 @@ def _gate(principal: Principal | None = ALICE, *, auth: bool = False, rate: floa
     config = SecurityConfig(max_op_rate=rate, op_burst=burst, handshake_timeout=handshake)
     verifier = Verifier(config, auth=object() if auth else None)
     session = Session(asyncio.get_running_loop())
-    return Gate(verifier, session, principal), session, verifier  # type: ignore[arg-type]
+    return Gate(verifier, session, principal, ROSAPI_REQUESTS), session, verifier  # type: ignore[arg-type]
 
 
 async def _closed(session: Session) -> tuple[int, str]:
@@ -368,10 +369,10 @@ async def test_rosapi_answers_and_args_are_filtered_by_the_role() -> None:
     assert gate.filter_rosapi("/rosapi/topics", {"topics": ["/seen", "/hidden"],
                                                  "types": ["a", "b"]}) == {
         "topics": ["/seen"], "types": ["a"]}
-    assert gate_module._rosapi_args("/rosapi/get_param", ["/n:p", "d"]) == {
+    assert gate_module._rosapi_args(ROSAPI_REQUESTS["/rosapi/get_param"], ["/n:p", "d"]) == {
         "name": "/n:p", "default_value": "d"}
-    assert gate_module._rosapi_args("/rosapi/get_param", {"name": "/n:q"}) == {"name": "/n:q"}
-    assert gate_module._rosapi_args("/rosapi/get_param", None) == {}
+    assert gate_module._rosapi_args(ROSAPI_REQUESTS["/rosapi/get_param"], {"name": "/n:q"}) == {"name": "/n:q"}
+    assert gate_module._rosapi_args(ROSAPI_REQUESTS["/rosapi/get_param"], None) == {}
     params = Role.from_table("p", {"params": ["/n:p"]})
     p_gate, p_session, _ = _gate(Principal("p", params, b"s", b"d"))
     assert p_gate.check(parse_op({"op": "call_service", "service": "/rosapi/get_param",
@@ -547,6 +548,6 @@ async def test_the_handshake_close_says_how_to_give_a_token() -> None:
 def test_rosapi_args_given_as_a_list_are_read_by_the_services_fields() -> None:
     """Extra list items past the service's fields are ignored; a service without known
     fields reads none."""
-    assert gate_module._rosapi_args("/rosapi/get_param", ["/n:p", "d", "extra"]) == {
+    assert gate_module._rosapi_args(ROSAPI_REQUESTS["/rosapi/get_param"], ["/n:p", "d", "extra"]) == {
         "name": "/n:p", "default_value": "d"}
-    assert gate_module._rosapi_args("/rosapi/unknown", ["a"]) == {}
+    assert gate_module._rosapi_args((), ["a"]) == {}
