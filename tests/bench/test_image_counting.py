@@ -8,7 +8,7 @@ import os
 import cbor2
 
 from bench.harness import FRAME_SEQ_BYTES, Bridge, RosSide, frame_seq
-from bench.run import InOrder
+from bench.counting import InOrder
 from bench.viewers import open_viewer
 from tests.helpers import async_wait_until
 

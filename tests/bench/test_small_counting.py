@@ -9,7 +9,7 @@ import os
 import pytest
 
 from bench.harness import Bridge, RosSide
-from bench.run import SINK_PREFIX, Sink
+from bench.counting import SINK_PREFIX, Sink
 from bench.viewers import open_viewer
 from tests.helpers import async_wait_until
 

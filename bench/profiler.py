@@ -1,0 +1,72 @@
+"""py-spy on a bridge for a while, reduced to its top functions (``python -m bench --profile``:
+the ``ros_to_client`` and ``image`` scenarios add them to their results)."""
+
+from __future__ import annotations
+
+import asyncio
+import os
+import shutil
+import tempfile
+from collections import Counter
+from pathlib import Path
+from typing import Any
+
+
+class Profiler:
+    """py-spy on the bridge for a while, reduced to the top functions."""
+
+    def __init__(self, pid: int, seconds: float) -> None:
+        self.pid = pid
+        self.seconds = seconds
+        self.out = Path(tempfile.mkdtemp(prefix="bench-pyspy-")) / "stacks.txt"
+        self.proc: asyncio.subprocess.Process | None = None
+
+    async def start(self) -> None:
+        """Start sampling (nothing happens if py-spy is not installed)."""
+        exe = shutil.which("py-spy")
+        if exe is None:
+            return
+        self.proc = await asyncio.create_subprocess_exec(
+            exe, "record", "--pid", str(self.pid), "--duration", str(max(1, round(self.seconds))),
+            "--rate", "250", "--format", "raw", "--output", str(self.out), "--nonblocking",
+            stdout=asyncio.subprocess.DEVNULL, stderr=asyncio.subprocess.DEVNULL,
+        )
+
+    async def result(self, top: int = 15) -> dict[str, Any]:
+        """Wait for py-spy and summarise: top functions by self and by inclusive samples."""
+        if self.proc is None:
+            return {"error": "py-spy not installed"}
+        try:
+            await asyncio.wait_for(self.proc.wait(), self.seconds + 20)
+        except TimeoutError:
+            self.proc.kill()
+            await self.proc.wait()
+        if not self.out.exists():
+            return {"error": "py-spy wrote nothing (permissions?)"}
+        own: Counter[str] = Counter()
+        incl: Counter[str] = Counter()
+        total = 0
+        for line in self.out.read_text().splitlines():
+            stack, _, n = line.rpartition(" ")
+            if not stack or not n.isdigit():
+                continue
+            count = int(n)
+            total += count
+            frames = [_short(f) for f in stack.split(";")]
+            own[frames[-1]] += count
+            for f in set(frames):
+                incl[f] += count
+        shutil.rmtree(self.out.parent, ignore_errors=True)
+
+        def pct(c: Counter[str]) -> list[tuple[str, float]]:
+            return [(f, round(100.0 * n / total, 1)) for f, n in c.most_common(top)] if total else []
+
+        return {"samples": total, "self_pct": pct(own), "inclusive_pct": pct(incl)}
+
+
+def _short(frame: str) -> str:
+    """``func (path/to/file.py:123)`` -> ``func (file.py:123)``."""
+    name, sep, where = frame.partition(" (")
+    if not sep:
+        return frame
+    return f"{name} ({os.path.basename(where.rstrip(')'))})"
