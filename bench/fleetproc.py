@@ -23,7 +23,11 @@ from typing import Any
 
 from bench.harness import ROOT, child_env
 
-__all__ = ["Balancer", "Child", "Usage", "haproxy_config"]
+__all__ = ["CHECK_TIMEOUT", "Balancer", "Child", "Usage", "haproxy_config"]
+
+CHECK_TIMEOUT = "3s"
+"""How long HAProxy waits for a relay's ``/readyz`` answer (its default, the check interval,
+marked a relay whose event loop stalled half a second as down)."""
 
 
 class Child:
@@ -110,12 +114,17 @@ class Child:
 def haproxy_config(port: int, relays: Iterable[int], stats_port: int | None = None) -> str:
     """HAProxy in TCP mode on ``port`` (at most 9,900 connections: two descriptors each,
     within this machine's 20,000) before the relays on ``relays`` (loopback): the least
-    busy relay takes each new connection, a relay whose ``/readyz`` does not answer 200
-    (asked every 500 ms: it is down, or has not reached its router) is out within a second
-    and its connections are cut, so its clients dial again and land on another; long-lived
-    websockets are not timed out."""
-    servers = "\n".join(f"    server relay{i} 127.0.0.1:{p} check inter 500ms fall 2 rise 2 "
-                        "on-marked-down shutdown-sessions" for i, p in enumerate(relays))
+    busy relay takes each new connection; a relay whose ``/readyz`` does not answer 200
+    within :data:`CHECK_TIMEOUT` three times in a row (asked every second: it is down, or
+    has not reached its router) gets no new connections. Its open connections are not cut:
+    a relay that died closes them itself (its clients dial again and land on another), and
+    one that is only busy (opening many robots at once, a thousand viewers arriving) keeps
+    serving them; cutting those (``on-marked-down shutdown-sessions``, with a 500 ms check)
+    turned a one-second stall into every viewer dialing again at once, which stalled the
+    relay longer: at 100 robots and 1,000 viewers the relay ended with no viewer at all.
+    Long-lived websockets are not timed out."""
+    servers = "\n".join(f"    server relay{i} 127.0.0.1:{p} check inter 1s fall 3 rise 2"
+                         for i, p in enumerate(relays))
     stats = (f"\nfrontend stats\n    mode http\n    bind 127.0.0.1:{stats_port}\n"
              "    stats enable\n    stats uri /\n" if stats_port else "")
     return f"""global
@@ -124,6 +133,7 @@ def haproxy_config(port: int, relays: Iterable[int], stats_port: int | None = No
 defaults
     mode tcp
     timeout connect 2s
+    timeout check {CHECK_TIMEOUT}
     timeout client 1h
     timeout server 1h
     timeout tunnel 1h

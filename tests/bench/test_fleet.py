@@ -16,6 +16,7 @@ import asyncio
 import os
 import random
 import shutil
+import signal
 import time
 from pathlib import Path
 
@@ -74,6 +75,33 @@ async def test_fleet_small(tmp_path: Path) -> None:
         assert s["reconnects"] > 0, "no viewer was on the killed relay"
 
         await churn_leaves_nothing(tier)
+    finally:
+        await tier.stop()
+
+
+async def test_busy_relay_keeps_its_viewers(tmp_path: Path) -> None:
+    """A relay whose loop stalls 2.5 s (SIGSTOP) is not taken for dead by HAProxy: its
+    viewer's connection stays open and hears its robot again after the stall."""
+    tier = Tier(Ctx(duration=1.0, quick=True, domain=int(os.environ["ROS_DOMAIN_ID"]),
+                    profile=False), Size(1, 1, 1, 0), tmp_path)
+    try:
+        await tier.start()
+        await tier.add_robots(tier.names)
+        conn = Conn(tier.url, tier.names[0], "/pose")
+        task = asyncio.create_task(conn.run())
+        await asyncio.wait_for(conn.heard.wait(), 60)
+        relay = tier.relays[0].proc
+        assert relay is not None
+        relay.send_signal(signal.SIGSTOP)
+        await asyncio.sleep(2.5)  # the stall itself: longer than the old check's 1-1.5 s
+        relay.send_signal(signal.SIGCONT)
+        got = conn.got
+        deadline = time.monotonic() + 30
+        while conn.got <= got + 5 and time.monotonic() < deadline:
+            await asyncio.sleep(0.2)
+        task.cancel()
+        assert conn.got > got + 5, "the viewer heard nothing after the stall"
+        assert conn.reconnects == 0, "the balancer cut a busy relay's viewer"
     finally:
         await tier.stop()
 
