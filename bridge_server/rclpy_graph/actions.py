@@ -31,7 +31,7 @@ from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from unique_identifier_msgs.msg import UUID
 
 from bridge_server.rclpy_graph import convert
-from bridge_server.rclpy_graph.node import SERVICE_DEPTH, _qos
+from bridge_server.rclpy_graph.qos import SERVICE_DEPTH, qos_profile
 from rosbridge_core.graph import ACTIVE, GoalListener, Status
 from rosbridge_core.interfaces import BridgeError
 
@@ -104,7 +104,7 @@ def check_rclpy_internals() -> None:
 
 
 def _action_qos() -> dict[str, Any]:
-    services = _qos(True, False, SERVICE_DEPTH)
+    services = qos_profile(True, False, SERVICE_DEPTH)
     return {
         "goal_service_qos_profile": services,
         "result_service_qos_profile": services,
@@ -161,7 +161,7 @@ class SharedActionClient(_ActionEnd):
     def _create(self) -> None:
         self.client = _ActionClient(
             self.ros.node, self.action_cls, self.name,
-            feedback_sub_qos_profile=_qos(True, False, FEEDBACK_DEPTH), **_action_qos(),
+            feedback_sub_qos_profile=qos_profile(True, False, FEEDBACK_DEPTH), **_action_qos(),
             callback_group=_own_group(),
         )
 
@@ -427,7 +427,7 @@ class ServedAction(_ActionEnd):
             goal_callback=self._goal_callback,
             handle_accepted_callback=self._accepted,
             cancel_callback=self._cancel_callback,
-            feedback_pub_qos_profile=_qos(True, False, FEEDBACK_DEPTH),
+            feedback_pub_qos_profile=qos_profile(True, False, FEEDBACK_DEPTH),
             result_timeout=RESULT_TIMEOUT,
             **_action_qos(),
         )

@@ -146,35 +146,28 @@ class RclpyGraph(RosNode):
                 raise ServiceCallError(f"service {service} does not exist (not in the ROS graph)")
             srv_cls = self.resolve_service(types[0])
         request = service_request(convert.converter_for(srv_cls.Request), service, args, check)
-        client = self.client_for(service, srv_cls)
-        if not client.service_is_ready():
-            # Wait for a server to be discovered and matched: while the graph lists no
-            # server, at most twice discovery_wait (a server that was just started can take
-            # ~3 s to show on a loaded machine); once it does, up to the call's timeout.
-            unlisted_wait = 2 * discovery_wait
-            unlisted_by = loop.time() + unlisted_wait
-            delay = 0.002
-            while not _ready(client):
-                if loop.time() >= unlisted_by and self.server_count(service) == 0:
-                    self.drop_client(service, srv_cls)  # so the graph forgets the name
-                    raise ServiceCallError(
-                        f"service {service} does not exist (not in the ROS graph after "
-                        f"{unlisted_wait:g} s)"
-                    )
-                if _ready(client) is None:  # another call dropped the cached client
-                    client = self.client_for(service, srv_cls)
-                if loop.time() >= deadline:
-                    self.drop_client(service, srv_cls)  # so the graph forgets the name
-                    if self.server_count(service) == 0:
-                        raise ServiceCallError(
-                            f"service {service} does not exist (no server appeared within "
-                            f"{timeout} s)"
-                        )
-                    raise ServiceCallError(
-                        f"service {service} did not become available in {timeout} s"
-                    )
-                await asyncio.sleep(delay)
-                delay = min(delay * 2, 0.05)
+        # Wait for a server to be discovered and matched: while the graph lists no server, at
+        # most twice discovery_wait (a server that was just started can take ~3 s to show on
+        # a loaded machine); once it does, up to the call's timeout.
+        unlisted_wait = 2 * discovery_wait
+        try:
+            client = await self.wait_for_server(service, srv_cls, deadline,
+                                                loop.time() + unlisted_wait)
+        except LookupError:
+            self.drop_client(service, srv_cls)  # so the graph forgets the name
+            raise ServiceCallError(
+                f"service {service} does not exist (not in the ROS graph after "
+                f"{unlisted_wait:g} s)"
+            ) from None
+        except TimeoutError:
+            self.drop_client(service, srv_cls)  # so the graph forgets the name
+            if self.server_count(service) == 0:
+                raise ServiceCallError(
+                    f"service {service} does not exist (no server appeared within {timeout} s)"
+                ) from None
+            raise ServiceCallError(
+                f"service {service} did not become available in {timeout} s"
+            ) from None
         await self.settled(client)  # a newly matched server may not hear back yet
         # A timer that fails the future is cheaper than asyncio.wait_for (no extra task).
         future = self.call(client, request)
@@ -253,14 +246,6 @@ class _Expired(Exception):
 def _expire(future: asyncio.Future[Any]) -> None:
     if not future.done():
         future.set_exception(_Expired())
-
-
-def _ready(client: Any) -> bool | None:
-    """Whether ``client`` has a matched server; None once the client was destroyed."""
-    try:
-        return bool(client.service_is_ready())
-    except Exception:  # rclpy's InvalidHandle: dropped by another call in the meantime
-        return None
 
 
 def _duration(value: Any) -> dict[str, int]:

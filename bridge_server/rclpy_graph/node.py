@@ -1,4 +1,4 @@
-"""The ROS side of the bridge (rclpy is imported only here, in ros_*, convert and types).
+"""The ROS side of the bridge (rclpy is imported only in this package).
 
 One rclpy node lives in its own context; an executor spins it in a thread of
 its own. The topics the bridge subscribes to are not the executor's
@@ -12,47 +12,25 @@ The loop never waits on the executor. The other way, :meth:`RosNode.in_executor`
 runs work on the executor thread (a guard condition), for rclpy APIs that are
 not thread safe (actions: :mod:`bridge_server.rclpy_graph.actions`).
 
-Sharing
--------
-* :class:`SharedSubscription`: one ROS subscription per topic for every
-  client, taking messages serialized. Each message becomes one
-  :class:`Incoming`: ``cbor-raw`` subscribers get its CDR bytes as they came; it
-  is deserialized only to build its JSON or CBOR encoding, each at most once;
-  every subscribed session is handed the same ``str``/``bytes``.
-* :class:`SharedPublisher`: one rclpy publisher per (topic, type, latch),
-  reference counted across sessions.
-* Service clients are cached per (service, type).
+:class:`RosNode` holds the node's life cycle, the hand-offs and the shared entities;
+their parts live beside it:
 
-QoS
----
-A shared subscription follows the publishers it sees
-(``get_publishers_info_by_topic``): best effort if any publisher is best
-effort (a reliable reader would not match it), transient local if every
-publisher is transient local (a transient-local reader does not match a
-volatile writer). :meth:`RosNode.refresh` re-checks this periodically and
-replaces a subscription whose profile no longer fits, and resolves the type of
-subscriptions made before any publisher existed ("late publishers"). The last
-message of a transient-local topic is kept and handed to each client that
-subscribes later.
+* :mod:`.topics`: shared subscriptions and publishers, and the message they hand out
+  (:class:`~.topics.Incoming`), with the QoS a subscription follows;
+* :mod:`.calls`: calling ROS services (cached clients, waiting for a server, the first
+  requests on a newly matched client), the base :class:`~.calls.ServiceCalls`;
+* :mod:`.served`: services a client serves in ROS (:class:`~.served.ServedService`);
+* :mod:`.qos`: the QoS profiles they all use.
 
-Served services
----------------
-A client-served service is a real ROS service whose response is deferred: it is
-sent from the loop when the client answers, fails, times out or goes away (see
-:class:`PendingRosCall`). With the loop reader the middleware wakes the loop for each
-request, which takes it itself and answers it on the loop (:class:`ServedService`,
-:class:`LoopRosCall`); otherwise it is an rclpy service whose callback returns at once, so the
-executor is never blocked.
+Service clients are cached per (service, type).
 """
 
 from __future__ import annotations
 
 import asyncio
 import contextlib
-import importlib
 import logging
 import threading
-import warnings
 from collections import deque
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
@@ -60,26 +38,25 @@ from typing import TYPE_CHECKING, Any
 import rclpy
 from rclpy.context import Context
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
-from rclpy.serialization import deserialize_message
 
 from bridge_server.rclpy_graph import convert
-from bridge_server.rclpy_graph.reader import (
-    FailureLog,
-    LoopReader,
-    Reader,
-    ReaderService,
-    open_reader,
+from bridge_server.rclpy_graph.calls import ServiceCalls
+from bridge_server.rclpy_graph.reader import FailureLog, Reader, open_reader
+from bridge_server.rclpy_graph.served import LoopRosCall, PendingRosCall, ServedService
+from bridge_server.rclpy_graph.topics import (
+    Incoming,
+    Listener,
+    SharedPublisher,
+    SharedSubscription,
 )
 from bridge_server.rclpy_graph.types import resolve_message, resolve_service
 from msgs import dynamic
-from rosbridge_core.codec.encodings import EncodedMessage
 from rosbridge_core.graph import acquire_shared, release_shared, shared_types
 
 if TYPE_CHECKING:
     from rosbridge_core.graph import Publisher, TopicFeed
 
-__all__ = [
+__all__ = [  # the shared entities are re-exported where they were always imported from
     "Incoming",
     "LoopRosCall",
     "PendingRosCall",
@@ -91,435 +68,10 @@ __all__ = [
 
 log = logging.getLogger("bridge_server.rclpy_graph.node")
 
-Listener = Callable[["Incoming"], None]
 
-SUBSCRIPTION_DEPTH = 1000
-"""History depth of the bridge's shared ROS subscriptions for ordinary messages.
-
-History holds only samples the executor has not taken yet, so a deep one costs
-nothing while the bridge keeps up; it bridges the moments when Fast DDS holds a
-reliable stream back to repair a lost sample (under load, a depth of 100 lost
-messages that way)."""
-
-BULK_SUBSCRIPTION_DEPTH = 50
-"""History depth for bulk types (a numeric or byte sequence: images, point clouds,
-maps), where a deep history could hold gigabytes while the bridge lags."""
-
-SERVICE_DEPTH = 1000
-"""History depth of the bridge's service clients and servers: the ROS default of 10 loses
-requests and responses when more than 10 calls are in flight."""
-
-REPLAY_MEMORY = 1000
-"""Source timestamps a subscription remembers of the messages it took, so that one made
-to replace it (its publishers turned out transient local) skips the history it already
-handed out when the writers replay it."""
-
-RESEND_S = 0.1
-"""Seconds a read-only request on a newly matched client waits for its answer before it is
-sent again (see call_when_ready): a server drops an answer when it has not matched our
-response reader within 100 ms of the request."""
-
-SETTLE_S = 1.2
-"""Seconds a newly matched service client waits before its first request (see settled).
-
-The server drops its answer if it has not matched our response reader within 100 ms of the
-request (rmw_fastrtps: the response writer's max blocking time). Discovery normally takes
-milliseconds, but one lost discovery sample is repaired only on Fast DDS's next discovery
-heartbeat (1 s, answered after 100 ms): 0.5 s did not cover that, and CI lost first answers
-that way. Paid once per service and type for the bridge's life (clients are kept)."""
-
-
-class Incoming(EncodedMessage):
-    """One ROS message received on a topic, encoded lazily and once per encoding.
-
-    It arrives serialized (CDR, ``data``): ``cbor-raw`` subscribers get those bytes as they
-    came, and the message is deserialized only to build the JSON or the CBOR encoding, each
-    at most once (a topic with only cbor-raw subscribers is never deserialized). The JSON
-    text is made from the bytes directly where it can be (:mod:`rosbridge_core.codec.cdr_json`).
-    """
-
-    __slots__ = ("_msg_json", "conv")
-
-    def __init__(self, topic: str, data: bytes, conv: convert.Converter, stamp_ns: int) -> None:
-        super().__init__(topic, data, stamp_ns)
-        self.conv = conv
-        self._msg_json: str | None = None
-
-    @property
-    def msg(self) -> Any:
-        """The rclpy message, deserialized from :attr:`data` (anew on each use: the JSON and
-        CBOR encodings are each built once and kept, the object is not, so a queued
-        message costs its bytes and its encodings, not a third copy)."""
-        return deserialize_message(self.data, self.conv.msg_cls)
-
-    def message_json(self) -> str:
-        """The message as JSON text, straight from its CDR bytes where it can be."""
-        msg_json = self._msg_json
-        if msg_json is None:
-            fast = self.conv.json_from_cdr
-            if fast is not None:
-                msg_json = fast(self.data)  # None: a NaN, or bytes it cannot decode
-            if msg_json is None:
-                msg_json = self.conv.to_json(self.msg)
-            self._msg_json = msg_json
-        return msg_json
-
-    def cbor_obj(self) -> Any:
-        """The message as a CBOR-ready object."""
-        return self.conv.to_cbor_obj(self.msg)
-
-
-def _qos(reliable: bool, transient_local: bool, depth: int) -> Any:
-    return QoSProfile(  # type: ignore[no-untyped-call]
-        history=HistoryPolicy.KEEP_LAST,
-        depth=depth,
-        reliability=ReliabilityPolicy.RELIABLE if reliable else ReliabilityPolicy.BEST_EFFORT,
-        durability=(
-            DurabilityPolicy.TRANSIENT_LOCAL if transient_local else DurabilityPolicy.VOLATILE
-        ),
-    )
-
-
-def _is_bulky(msg_cls: type[Any], depth: int = 0) -> bool:
-    """Whether a message type carries a numeric/byte sequence (or array of > 1024 items)."""
-    from rosidl_parser.definition import AbstractSequence, Array, BasicType, NamespacedType
-
-    if depth > 8:
-        return False
-    for slot in getattr(msg_cls, "SLOT_TYPES", ()):
-        if isinstance(slot, AbstractSequence | Array):
-            if isinstance(slot.value_type, BasicType) and (
-                not isinstance(slot, Array) or slot.size > 1024
-            ):
-                return True
-        elif isinstance(slot, NamespacedType):
-            module = importlib.import_module(".".join(slot.namespaces))
-            if _is_bulky(getattr(module, slot.name), depth + 1):
-                return True
-    return False
-
-
-class SharedSubscription:
-    """The bridge's one ROS subscription to a topic, shared by every listening session.
-
-    ``msg_cls`` is ``None`` while the type is not known yet (subscribed without
-    a type before any publisher appeared); :meth:`RosNode.refresh` fills it in.
-    """
-
-    def __init__(self, ros: RosNode, topic: str, msg_cls: type[Any] | None) -> None:
-        self.ros = ros
-        self.topic = topic
-        self.msg_cls = msg_cls
-        self.conv: convert.Converter | None = None
-        self.listeners: list[Listener] = []
-        self.latched: Incoming | None = None
-        self.reliable = True
-        self.transient_local = False
-        self._sub: Any = None
-        self._warned = False
-        self.received = 0
-        # source timestamps of the latest messages taken (on the reader's thread), for a
-        # re-subscription that replays the writers' history
-        self._taken: deque[int] = deque(maxlen=REPLAY_MEMORY)
-
-    @property
-    def type_name(self) -> str | None:
-        """Canonical type of the topic, once known."""
-        return self.conv.type_name if self.conv is not None else None
-
-    def _wanted_qos(self) -> tuple[bool, bool]:
-        infos = self.ros.node.get_publishers_info_by_topic(self.topic)
-        if not infos:
-            return self.reliable, self.transient_local
-        reliable = all(i.qos_profile.reliability != ReliabilityPolicy.BEST_EFFORT for i in infos)
-        transient = all(
-            i.qos_profile.durability == DurabilityPolicy.TRANSIENT_LOCAL for i in infos
-        )
-        return reliable, transient
-
-    def _create(self) -> None:
-        assert self.msg_cls is not None
-        self.conv = convert.converter_for(self.msg_cls)
-        self.reliable, self.transient_local = self._wanted_qos()
-        depth = BULK_SUBSCRIPTION_DEPTH if _is_bulky(self.msg_cls) else SUBSCRIPTION_DEPTH
-        qos = _qos(self.reliable, self.transient_local, depth)
-        topic = self.topic
-        msg_cls = self.msg_cls
-        # a subscription made to replace another (the publishers' QoS changed) and that is
-        # transient local gets the writers' history again: what the old one took already is
-        # not handed out twice (known by source timestamp); what it never saw still is
-        taken_before = frozenset(self._taken) if self.transient_local else frozenset()
-        remember = self._taken.append
-
-        def take(handle: Any, limit: int) -> tuple[list[bytes], int]:
-            # up to ``limit`` of what is queued (delivered at once, in one hand-off), and
-            # how many were taken (replays skipped included)
-            batch: list[bytes] = []
-            take_message = handle.take_message
-            for took in range(limit):
-                taken = take_message(msg_cls, True)  # raw: Incoming deserializes when needed
-                if taken is None:
-                    return batch, took
-                source = taken[1]["source_timestamp"]
-                remember(source)
-                if source not in taken_before:
-                    batch.append(taken[0])
-            return batch, limit
-
-        reader = self.ros.reader
-        assert reader is not None, "the ROS side is not started"
-        self._sub = reader.subscribe(msg_cls, topic, qos, take, self._deliver_batch)
-        log.debug(
-            "subscribed to %s (%s, %s, %s)",
-            topic,
-            self.conv.type_name,
-            "reliable" if self.reliable else "best effort",
-            "transient local" if self.transient_local else "volatile",
-        )
-
-    def _destroy(self) -> None:
-        if self._sub is not None:
-            sub, self._sub = self._sub, None
-            if self.ros.reader is not None:
-                self.ros.reader.unsubscribe(sub)
-
-    def _deliver_batch(self, msgs: list[bytes], stamp_ns: int) -> None:
-        conv = self.conv
-        if conv is None or self.ros.subscriptions.get(self.topic) is not self:
-            return  # the subscription was removed meanwhile
-        topic = self.topic
-        listeners = self.listeners
-        for msg in msgs:
-            self.received += 1
-            inc = Incoming(topic, msg, conv, stamp_ns)
-            if self.transient_local:
-                self.latched = inc
-            for listener in listeners:
-                try:
-                    listener(inc)
-                except Exception:
-                    log.exception("listener failed on %s", topic)
-
-    def refresh(self) -> None:
-        """Resolve a pending type, or replace the subscription if the publishers' QoS changed."""
-        if self.msg_cls is None:
-            types = self.ros.topic_types(self.topic)
-            if not types:
-                return
-            try:
-                self.msg_cls = resolve_message(types[0])
-            except Exception as exc:
-                if not self._warned:
-                    self._warned = True
-                    log.warning("cannot subscribe to %s: %s", self.topic, exc)
-                return
-            self._create()
-            return
-        if self._sub is None:
-            return
-        reliable, transient = self._wanted_qos()
-        if (reliable, transient) != (self.reliable, self.transient_local):
-            log.info("QoS of %s changed: re-subscribing", self.topic)
-            self._destroy()
-            self._create()
-
-
-class SharedPublisher:
-    """A ROS publisher shared (reference counted) by the sessions that advertised it.
-
-    A latched one keeps only its last message (transient local, depth 1), whatever queue
-    size the client asked for: a late subscriber, ROS node or bridge client, gets the
-    last value, not the writer's history (``queue_size`` of the rosbridge op is the depth
-    of an ordinary publisher).
-    """
-
-    def __init__(self, ros: RosNode, topic: str, msg_cls: type[Any], latch: bool, depth: int):
-        self.ros = ros
-        self.topic = topic
-        self.msg_cls = msg_cls
-        self.conv = convert.converter_for(msg_cls)
-        self.latch = latch
-        self.refs = 0
-        depth = 1 if latch else max(depth, 1)
-        self.pub = ros.node.create_publisher(msg_cls, topic, _qos(True, latch, depth))
-
-    @property
-    def type_name(self) -> str:
-        """Canonical message type."""
-        return self.conv.type_name
-
-    def publish(self, msg: Any) -> None:
-        """Publish one message (callable from the loop thread; rcl publish is thread safe)."""
-        self.pub.publish(msg)
-
-
-class PendingRosCall:
-    """A ROS caller waiting for a client-served service's answer.
-
-    The rclpy callback returns this object at once; rclpy then hands it with
-    the request header to the service's ``send_response``, which the bridge
-    intercepts. Whichever of (header, answer) arrives second sends the real
-    response, from whichever thread that is.
-    """
-
-    def __init__(self, served: ServedService, request: Any) -> None:
-        self.served = served
-        self.request = request
-        self._lock = threading.Lock()
-        self._header: Any = None
-        self._response: Any = None
-        self.done = False
-
-    def _attach(self, header: Any) -> None:
-        with self._lock:
-            self._header = header
-            response = self._response
-        if response is not None:
-            self.served._send(response, header)
-
-    def complete(self, response: Any | None = None) -> bool:
-        """Answer the ROS caller (``None``: a default response). False if already answered."""
-        if self.done:
-            return False
-        self.done = True
-        if response is None:
-            response = self.served.srv_cls.Response()
-        with self._lock:
-            self._response = response
-            header = self._header
-        if header is not None:
-            self.served._send(response, header)
-        return True
-
-
-class LoopRosCall:
-    """A ROS caller of a service the loop reader serves: taken on the loop with its header,
-    answered on the loop, so unlike :class:`PendingRosCall` it needs no lock."""
-
-    __slots__ = ("done", "header", "request", "served")
-
-    def __init__(self, served: ServedService, request: Any, header: Any) -> None:
-        self.served = served
-        self.request = request
-        self.header = header
-        self.done = False
-
-    def complete(self, response: Any | None = None) -> bool:
-        """Answer the ROS caller (``None``: a default response). False if already answered."""
-        if self.done:
-            return False
-        self.done = True
-        served = self.served
-        served._send(response if response is not None else served.srv_cls.Response(),
-                     self.header)
-        return True
-
-
-UNMATCHED_CALLER = "client will not receive response"
-"""rmw_fastrtps's words when it drops an answer: the service's reply writer has not matched
-the caller's reply reader within its ``max_blocking_time`` (100 ms); rclpy says so with a
-RuntimeWarning, not an exception."""
-
-ANSWER_RETRIES = (0.1, 0.2, 0.4, 0.8, 1.6, 3.2)
-"""Seconds before each new attempt to answer a ROS caller whose reply reader the bridge has
-not matched yet (6.3 s in all; each attempt may wait 100 ms in rmw_fastrtps).
-
-A caller's ``wait_for_service`` is true once the caller's side has matched the service's
-two topics, which says nothing of the bridge's side (it is true even while the bridge is
-stopped with SIGSTOP); a caller that calls at once can get its answer sent before the
-bridge's discovery has seen the caller's reply reader, and on a loaded machine that takes
-more than the 100 ms rmw_fastrtps waits: the answer was lost and the caller waited for
-ever (issue 43, test_served_service_comes_back_after_bridge_restart)."""
-
-_SENDING = threading.Lock()
-"""Held while an answer is sent with the warnings caught (catch_warnings is process-wide)."""
-
-
-class ServedService:
-    """A ROS service whose requests are answered by a websocket client.
-
-    With the loop reader (:class:`~bridge_server.rclpy_graph.reader.LoopReader`) the middleware
-    wakes the loop for each request, which takes it with its header and answers it on the
-    loop: no executor round, no thread between the caller and the client. Otherwise the
-    service is rclpy's, served by the executor's thread as :class:`PendingRosCall` says.
-    """
-
-    def __init__(
-        self,
-        ros: RosNode,
-        name: str,
-        srv_cls: type[Any],
-        on_request: Callable[[PendingRosCall | LoopRosCall], None],
-    ) -> None:
-        self.ros = ros
-        self.name = name
-        self.srv_cls = srv_cls
-        self.request_conv = convert.converter_for(srv_cls.Request)
-        self.response_conv = convert.converter_for(srv_cls.Response)
-        self.on_request = on_request
-        qos = _qos(True, False, SERVICE_DEPTH)
-        reader = ros.reader
-        self._served: ReaderService | None = None
-        if isinstance(reader, LoopReader):
-            self._served = reader.serve(srv_cls, name, qos, self._on_loop_request)
-            self._real_send: Callable[[Any, Any], None] = self._served.respond
-            return
-        post = ros.post
-
-        def callback(request: Any, _response: Any) -> Any:
-            pending = PendingRosCall(self, request)
-            post(self.on_request, pending)
-            return pending
-
-        self.srv: Any = ros.node.create_service(srv_cls, name, callback, qos_profile=qos)
-        self._real_send = self.srv.send_response
-
-        def send_response(response: Any, header: Any) -> None:
-            if isinstance(response, PendingRosCall):
-                response._attach(header)
-            else:
-                self._real_send(response, header)
-
-        self.srv.send_response = send_response
-
-    def _on_loop_request(self, request: Any, header: Any) -> None:
-        self.on_request(LoopRosCall(self, request, header))
-
-    def _send(self, response: Any, header: Any, attempt: int = 0) -> None:
-        """Answer a ROS caller; again later while its reply reader is not matched here yet
-        (see :data:`ANSWER_RETRIES`), from the loop."""
-        with _SENDING, warnings.catch_warnings(record=True) as warned:
-            warnings.simplefilter("always", RuntimeWarning)
-            try:
-                self._real_send(response, header)
-            except Exception as exc:  # destroyed meanwhile, or the caller went away
-                log.debug("could not answer a ROS caller of %s: %s", self.name, exc)
-                return
-        if not any(UNMATCHED_CALLER in str(w.message) for w in warned):
-            return
-        if attempt < len(ANSWER_RETRIES):
-            loop = self.ros.loop
-            with contextlib.suppress(RuntimeError):  # the loop closed while shutting down
-                loop.call_soon_threadsafe(loop.call_later, ANSWER_RETRIES[attempt], self._send,
-                                          response, header, attempt + 1)
-            return
-        log.warning("could not answer a ROS caller of %s: its reply reader never matched "
-                    "the bridge's reply writer (%d tries over %.1f s; incompatible QoS?)",
-                    self.name, attempt + 1, sum(ANSWER_RETRIES))
-
-    def destroy(self) -> None:
-        """Remove the ROS service."""
-        if self._served is not None:
-            reader = self.ros.reader
-            if isinstance(reader, LoopReader):
-                reader.unserve(self._served)
-            return
-        with contextlib.suppress(Exception):
-            self.ros.node.destroy_service(self.srv)
-
-
-class RosNode:
-    """The bridge's rclpy node, its executor thread and the shared ROS entities.
+class RosNode(ServiceCalls):
+    """The bridge's rclpy node, its executor thread and the shared ROS entities (its service
+    calls are :class:`~.calls.ServiceCalls`'s).
 
     All public methods are called from the asyncio loop thread.
     """
@@ -790,132 +342,6 @@ class RosNode:
 
     # -- services ------------------------------------------------------------------------------
 
-    def client_for(self, service: str, srv_cls: type[Any]) -> Any:
-        """A cached rclpy client for ``service`` of ``srv_cls``."""
-        key = (service, srv_cls)
-        client = self._clients.get(key)
-        if client is None:
-            client = self._clients[key] = self.node.create_client(
-                srv_cls, service, qos_profile=_qos(True, False, SERVICE_DEPTH)
-            )
-            _inline_done_callbacks(client)
-        return client
-
-    async def settled(self, client: Any) -> None:
-        """Return once ``client`` has had a matched server for :data:`SETTLE_S` seconds.
-
-        DDS matches each direction of a service on its own: the bridge can see a server as
-        ready (our request writer and response reader matched) before the server has
-        matched our response reader, and a request sent in that window is executed but its
-        answer lost (rmw_fastrtps: "failed to send response"). Nothing on our side shows the
-        server's half, so the first requests on a newly matched client wait a moment; later
-        calls on the same client do not wait at all.
-        """
-        now = self.loop.time()
-        since = getattr(client, "_bridge_ready_at", None)
-        if since is None:
-            since = now
-            client._bridge_ready_at = since
-        wait = since + SETTLE_S - now
-        if wait > 0:
-            await asyncio.sleep(wait)
-
-    async def call_when_ready(
-        self,
-        service: str,
-        srv_cls: type[Any],
-        request: Any,
-        timeout: float,
-        discovery_wait: float | None = None,
-        *,
-        read_only: bool = False,
-    ) -> Any:
-        """Call ``service`` once a server is matched; ``TimeoutError`` after ``timeout`` s.
-
-        With ``discovery_wait``, a service the ROS graph still does not list after that
-        many seconds fails then (``LookupError``), not after the whole timeout.
-        ``read_only`` (a request that may run twice, such as listing or reading parameters):
-        a newly matched client sends at once and again after :data:`RESEND_S` (backing off)
-        until an answer comes, instead of waiting :data:`SETTLE_S` before its first request.
-        """
-        loop = self.loop
-        deadline = loop.time() + timeout
-        unlisted_by = loop.time() + (discovery_wait if discovery_wait is not None else timeout)
-        client = self.client_for(service, srv_cls)
-        delay = 0.002
-        while not client.service_is_ready():
-            if loop.time() >= unlisted_by and self.server_count(service) == 0:
-                raise LookupError(f"service {service} does not exist (not in the ROS graph)")
-            if loop.time() >= deadline:
-                raise TimeoutError(f"service {service} is not available")
-            await asyncio.sleep(delay)
-            delay = min(delay * 2, 0.05)
-        if read_only and getattr(client, "_bridge_ready_at", None) is None:
-            return await self._resent(client, request, deadline, service)
-        await self.settled(client)
-        future = self.call(client, request)
-        timer = loop.call_at(deadline, _fail_timeout, future)
-        try:
-            return await future
-        finally:
-            timer.cancel()
-
-    async def _resent(self, client: Any, request: Any, deadline: float, service: str) -> Any:
-        """The answer to a read-only ``request`` on a client not settled yet: sent again
-        after RESEND_S, then twice as long each time up to 1 s (an answer the server sent
-        before it matched our reader is lost) until one comes; the client counts as settled
-        from then on."""
-        loop = self.loop
-        every = RESEND_S
-        while True:
-            future = self.call(client, request)
-            wait = min(every, deadline - loop.time())
-            every = min(every * 2, 1.0)  # a server that is slow, not deaf: ask less often
-            try:
-                response = await asyncio.wait_for(asyncio.shield(future), max(wait, 0.0))
-            except TimeoutError:
-                future.cancel()  # forgets the request: a late answer to it is dropped
-                if loop.time() >= deadline:
-                    raise TimeoutError(f"service {service} did not answer") from None
-                continue
-            client._bridge_ready_at = loop.time() - SETTLE_S  # answered: settled
-            return response
-
-    def drop_client(self, service: str, srv_cls: type[Any]) -> None:
-        """Destroy the cached client (after a call found no server)."""
-        client = self._clients.pop((service, srv_cls), None)
-        if client is not None:
-            with contextlib.suppress(Exception):
-                self.node.destroy_client(client)
-
-    def server_count(self, service: str) -> int:
-        """How many servers of ``service`` the graph knows."""
-        return int(self.node.count_services(service))
-
-    def call(self, client: Any, request: Any) -> asyncio.Future[Any]:
-        """Send ``request`` now; the returned asyncio future gets the response.
-
-        Cancelling the returned future (or failing it, e.g. on a timeout) forgets the
-        pending request.
-        """
-        loop = self.loop
-        result: asyncio.Future[Any] = loop.create_future()
-        rfuture = client.call_async(request)
-
-        def done(f: Any) -> None:
-            exc = f.exception()
-            self.post(_settle, result, exc, None if exc is not None else f.result())
-
-        rfuture.add_done_callback(done)
-
-        def forget(f: asyncio.Future[Any]) -> None:
-            if f.cancelled() or f.exception() is not None:
-                with contextlib.suppress(Exception):
-                    client.remove_pending_request(rfuture)
-
-        result.add_done_callback(forget)
-        return result
-
     def serve(
         self, name: str, srv_cls: type[Any],
         on_request: Callable[[PendingRosCall | LoopRosCall], None],
@@ -934,49 +360,3 @@ class RosNode:
     def resolve_service(name: str) -> type[Any]:
         """The service class for a type string (both spellings)."""
         return resolve_service(name)
-
-
-class _InlineFuture:
-    """What the executor gets for a pending request: completing it runs the done callbacks
-    right there, instead of scheduling each as an executor task (two more wait-set rounds
-    per call)."""
-
-    __slots__ = ("_future",)
-
-    def __init__(self, future: Any) -> None:
-        self._future = future
-
-    def _set_executor(self, executor: Any) -> None:
-        pass
-
-    def set_result(self, result: Any) -> None:
-        self._future.set_result(result)
-
-    def set_exception(self, exc: BaseException) -> None:
-        self._future.set_exception(exc)
-
-    def __getattr__(self, name: str) -> Any:
-        return getattr(self._future, name)
-
-
-def _inline_done_callbacks(client: Any) -> None:
-    get = client.get_pending_request
-
-    def get_pending_request(sequence_number: int) -> Any:
-        return _InlineFuture(get(sequence_number))
-
-    client.get_pending_request = get_pending_request
-
-
-def _fail_timeout(fut: asyncio.Future[Any]) -> None:
-    if not fut.done():
-        fut.set_exception(TimeoutError("the service did not answer in time"))
-
-
-def _settle(fut: asyncio.Future[Any], exc: BaseException | None, value: Any) -> None:
-    if fut.done():
-        return
-    if exc is not None:
-        fut.set_exception(exc)
-    else:
-        fut.set_result(value)

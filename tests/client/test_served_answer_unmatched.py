@@ -28,7 +28,7 @@ with warnings.catch_warnings():
 from mult_msgs.srv import MultFloats as RosMultFloats
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
-from bridge_server.rclpy_graph.node import ANSWER_RETRIES
+from bridge_server.rclpy_graph.served import ANSWER_RETRIES
 
 
 @pytest.mark.parametrize("reader", ["auto", "thread"])
