@@ -376,7 +376,10 @@ async def tokens(session: zenoh.Session, key: str, timeout: float, first: bool =
         with contextlib.suppress(RuntimeError):
             loop.call_soon_threadsafe(ended)
 
-    session.liveliness().get(key, zenoh.handlers.Callback(reply, end), timeout=timeout)
+    # called on Zenoh's thread (both only hand to the loop): a callable's default is a new
+    # Python thread per query
+    session.liveliness().get(key, zenoh.handlers.Callback(reply, end, indirect=False),
+                             timeout=timeout)
     await done
     return found
 

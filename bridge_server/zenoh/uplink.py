@@ -90,7 +90,10 @@ async def router_answers(session: zenoh.Session, key: str, own: str, timeout: fl
         with contextlib.suppress(RuntimeError):
             loop.call_soon_threadsafe(settle, False)
 
-    session.liveliness().get(key, zenoh.handlers.Callback(reply, end), timeout=timeout)
+    # called on Zenoh's thread (both only hand to the loop): a callable's default is a new
+    # Python thread per query
+    session.liveliness().get(key, zenoh.handlers.Callback(reply, end, indirect=False),
+                             timeout=timeout)
     return await done
 
 
