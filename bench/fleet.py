@@ -9,7 +9,9 @@ At each size (robots, routers, relays, viewers; :data:`SIZES`, :data:`QUICK`, or
    HAProxy before the relays (:func:`bench.fleetproc.haproxy_config`);
 2. the robots (``bench/simrobot.py``, :data:`PER_PROCESS` a process; each dials one router):
    relay and router RSS and CPU before and with them, nobody watching: **per unwatched robot**;
-3. one probe viewer per watched robot (``/pose``), through the balancer: **per watched
+3. up to :data:`OPEN_ONE` idle robots opened one after another by one viewer: **opening
+   one robot** (p50, p99), nothing else opening meanwhile (:func:`open_one_by_one`); then
+   one probe viewer per watched robot (``/pose``), through the balancer: **per watched
    robot**, and how long opening a robot takes (the handshake: the relay opens the robot),
    then the viewers (``bench/fleetview.py``; each 1-3 robots, 90 % ``/status`` at 1 Hz,
    10 % ``/pose`` at 10 Hz, one in 500 (at most 3) a camera): **per viewer**, and their open and first-message
@@ -49,6 +51,8 @@ from bench.relay import RELAY_READY
 
 __all__ = ["PER_PROCESS", "QUICK", "SIZES", "Size", "Tier", "fleet", "run_size"]
 
+OPEN_ONE = 20
+"""Robots opened one at a time (:func:`open_one_by_one`) at each size."""
 PER_PROCESS = 250
 """Simulated robots per process."""
 VIEWERS_PER_PROCESS = 1500
@@ -325,6 +329,7 @@ async def run_size(ctx: Ctx, size: Size, folder: Path, churn_s: float) -> dict[s
         await asyncio.sleep(3)
         idle = await measured(tier, win)
         out["per_unwatched_robot"] = _per(idle, base, size.robots)
+        out["open_one"] = await open_one_by_one(tier, tier.names[-min(OPEN_ONE, size.robots):])
         watched = tier.names[:max(1, min(size.robots, size.viewers // 10))]
         probes = await tier.add_viewers([([r], "/pose") for r in watched])
         one = await measured(tier, win)
@@ -352,6 +357,29 @@ async def run_size(ctx: Ctx, size: Size, folder: Path, churn_s: float) -> dict[s
     finally:
         await tier.stop()
     return out
+
+
+async def open_one_by_one(tier: Tier, robots: list[str]) -> dict[str, Any]:
+    """Each of ``robots`` opened through the balancer by one viewer, one after another, while
+    nothing else opens a robot (the fleet's other robots idle): seconds to open it (the
+    handshake: the relay finds the robot, fetches its graph and builds its types) and to its
+    first ``/pose`` message. This is the target's figure; the probes' and viewers' open
+    times measure many robots opened at once, each waiting for the others."""
+    from bench.fleetview import Conn
+
+    opens, firsts = [], []
+    for name in robots:
+        conn = Conn(tier.url, name, "/pose")
+        task = asyncio.create_task(conn.run())
+        with contextlib.suppress(TimeoutError):
+            await asyncio.wait_for(conn.heard.wait(), 30)
+        task.cancel()
+        with contextlib.suppress(asyncio.CancelledError):
+            await task
+        opens += [conn.open_s] if conn.open_s is not None else []
+        firsts += [conn.first_s] if conn.first_s is not None else []
+    return {"robots": len(robots), "opened": len(opens), "open_s": _q(opens),
+            "first_message_s": _q(firsts)}
 
 
 async def flood(tier: Tier, views: list[Child], watched: list[str], seconds: float
