@@ -25,6 +25,12 @@ an action the others call, each introspects the whole graph.
   ``get_parameters`` and ``set_parameters`` from that dict (``rcl_interfaces`` types), as an
   rclpy node does; the Graph's parameter methods call them.
 
+This module holds the graph (:class:`MemoryRos`) and the node (:class:`MemoryGraph`: its life,
+introspection, topics, service calls); the parts live beside it and are re-exported here:
+:mod:`.typesource` (types), :mod:`.topics` (feeds, publishers, messages), :mod:`.services`
+(served services), :mod:`.actions` (action clients, served actions, goals) and
+:mod:`.parameters` (a node's parameter services, the parameter calls).
+
 Nothing here imports rclpy, cbor2 (only :meth:`MsgsConverter.to_cbor_obj` does, when a
 client asks for CBOR), prometheus_client or pybase64: a client-only install runs it.
 """
@@ -33,37 +39,32 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import logging
-import secrets
 import time
-from collections.abc import Awaitable, Callable, Mapping
+from collections.abc import Callable, Mapping
 from typing import Any
 
-from msgs import cdr, dynamic
-from msgs.runtime import Action, Message, Service
-from msgs.runtime import UnknownTypeError as WireUnknownType
-from rosbridge_core.codec.encodings import EncodedMessage
+from msgs.runtime import Message
 from rosbridge_core.codec.msgs_types import MsgsConverter
 from rosbridge_core.graph import (
-    ACTIVE,
-    GoalListener,
     Listener,
     RosCall,
     ServedGoal,
-    Status,
     acquire_shared,
-    parameter_value,
     release_shared,
     service_request,
     shared_types,
 )
-from rosbridge_core.interfaces import (
-    BridgeError,
-    ServiceCallError,
-    UnknownTypeError,
-    canonical_name,
-    parse_type_name,
+from rosbridge_core.interfaces import ServiceCallError
+from rosbridge_core.memory.actions import (
+    MemoryActionClient,
+    MemorySentGoal,
+    MemoryServedAction,
+    MemoryServedGoal,
 )
+from rosbridge_core.memory.parameters import ParameterCalls, ServedParameters
+from rosbridge_core.memory.services import MemoryRosCall, MemoryServedService, ServiceServer
+from rosbridge_core.memory.topics import MemoryFeed, MemoryMessage, MemoryPublisher
+from rosbridge_core.memory.typesource import MsgsTypes
 
 __all__ = [
     "MemoryActionClient",
@@ -78,335 +79,6 @@ __all__ = [
     "MemoryServedGoal",
     "MemoryServedService",
 ]
-
-log = logging.getLogger("bridge_server.memory.graph")
-
-Handler = Callable[[Any], Awaitable[Any]]
-"""How a server answers a request message: with its response message (or raises)."""
-
-_ACTION_SERVICES = {"send_goal": "_SendGoal", "cancel_goal": None, "get_result": "_GetResult"}
-_CANCEL_TYPE = "action_msgs/srv/CancelGoal"
-
-
-class MemoryMessage(EncodedMessage):
-    """One message published in memory, encoded for clients lazily and once per encoding."""
-
-    __slots__ = ("conv", "msg")
-
-    def __init__(self, topic: str, msg: Message, conv: MsgsConverter) -> None:
-        super().__init__(topic, cdr.encode(msg), time.time_ns())
-        self.msg = msg
-        self.conv = conv
-
-    def message_json(self) -> str:
-        """The message as JSON text."""
-        return self.conv.to_json(self.msg)
-
-    def cbor_obj(self) -> Any:
-        """The message as a CBOR-ready object."""
-        return self.conv.to_cbor_obj(self.msg)
-
-
-class MemoryFeed:
-    """A node's one subscription to a topic, shared by its listeners."""
-
-    def __init__(self, graph: MemoryGraph, topic: str, msg_cls: type[Message] | None) -> None:
-        self.graph = graph
-        self.topic = topic
-        self.msg_cls = msg_cls
-        self.received = 0
-        self.listeners: list[Listener] = []
-        self._latched: MemoryMessage | None = None
-
-    @property
-    def latched(self) -> MemoryMessage | None:
-        """The last message of a latched topic, for a late subscriber."""
-        return self._latched
-
-    @property
-    def type_name(self) -> str | None:
-        """Canonical type of the topic, once known."""
-        return self.msg_cls._type if self.msg_cls is not None else None
-
-    def deliver(self, msg: MemoryMessage, latched: bool) -> None:
-        """Hand ``msg`` to every listener, in order; one that raises is logged and the others
-        still get it (as the rclpy Graph's executor goes on)."""
-        self.received += 1
-        if latched:
-            self._latched = msg
-        for listener in list(self.listeners):
-            try:
-                listener(msg)
-            except Exception:
-                log.exception("a listener of %s failed on a message", self.topic)
-
-
-class MemoryPublisher:
-    """A node's publisher of (topic, type, latch), shared by reference count."""
-
-    def __init__(self, graph: MemoryGraph, topic: str, msg_cls: type[Message], latch: bool,
-                 depth: int) -> None:
-        self.graph = graph
-        self.topic = topic
-        self.latch = latch
-        self.depth = depth
-        self.refs = 0
-        self.conv = graph.converter(msg_cls)
-        self.last: MemoryMessage | None = None
-        """The last message, kept for late subscribers when latched."""
-
-    @property
-    def type_name(self) -> str:
-        """Canonical message type."""
-        return self.conv.type_name
-
-    def publish(self, msg: Any) -> None:
-        """Publish one message (a ``msgs`` instance, or its CDR bytes) to every subscription
-        of the topic and type in the graph, before returning."""
-        if isinstance(msg, bytes | bytearray):
-            msg = self.conv.cls.from_json(cdr.decode(bytes(msg), self.conv.cls))
-        sent = MemoryMessage(self.topic, msg, self.conv)
-        if self.latch:
-            self.last = sent
-        for tap in self.graph.ros.taps:
-            tap(self, sent)
-        for feed in self.graph.ros.feeds(self.topic, self.conv.cls):
-            feed.deliver(sent, self.latch)
-
-
-class _Server:
-    """A service in the graph: its node, type and how it answers."""
-
-    def __init__(self, node: MemoryGraph, name: str, type_name: str, handler: Handler) -> None:
-        self.node = node
-        self.name = name
-        self.type_name = type_name
-        self.handler = handler
-
-
-class MemoryRosCall:
-    """A caller waiting for a service a session serves."""
-
-    def __init__(self, served: MemoryServedService, request: Any,
-                 answer: asyncio.Future[Any]) -> None:
-        self.served = served
-        self.request = request
-        self._answer = answer
-
-    def complete(self, response: Any | None = None) -> bool:
-        """Answer the caller (``None``: a default response); False if already answered."""
-        if self._answer.done():
-            return False
-        self._answer.set_result(response if response is not None
-                                else self.served.srv_cls.Response())
-        return True
-
-
-class MemoryServedService:
-    """A service of the graph whose calls go to ``on_request``."""
-
-    def __init__(self, graph: MemoryGraph, name: str, srv_cls: type[Service],
-                 on_request: Callable[[RosCall], None]) -> None:
-        self.graph = graph
-        self.name = name
-        self.srv_cls = srv_cls
-        self.request_conv = graph.converter(srv_cls.Request)
-        self.response_conv = graph.converter(srv_cls.Response)
-        self.on_request = on_request
-        self.server = _Server(graph, name, srv_cls._type, self._answer)
-
-    async def _answer(self, request: Any) -> Any:
-        answer: asyncio.Future[Any] = self.graph.loop.create_future()
-        self.on_request(MemoryRosCall(self, request, answer))
-        return await answer
-
-    def destroy(self) -> None:
-        """Remove the service from the graph (a call in flight stays unanswered)."""
-        self.graph.ros.remove_server(self.server)
-
-
-class _Handle:
-    """A goal's id as the sessions read it (``handle.goal_id.uuid``)."""
-
-    def __init__(self, uuid: bytes) -> None:
-        self.goal_id = self
-        self.uuid = uuid
-
-
-class MemorySentGoal:
-    """A goal sent through a :class:`MemoryActionClient`."""
-
-    def __init__(self, shared: MemoryActionClient, listener: GoalListener,
-                 feedback: bool) -> None:
-        self.shared = shared
-        self.listener = listener
-        self.feedback = feedback
-        self.handle: _Handle | None = None
-        self.served: MemoryServedGoal | None = None
-        self.cancel_wanted = False
-
-    def cancel(self) -> None:
-        """Ask the server to cancel the goal (before or after it was accepted)."""
-        self.cancel_wanted = True
-        served = self.served
-        if served is not None and served.status in ACTIVE:
-            self.listener.on_cancel_answer(served.served.cancel(served))
-
-
-class MemoryActionClient:
-    """A client of one action (of one type) in the graph."""
-
-    def __init__(self, graph: MemoryGraph, name: str, action_cls: type[Action]) -> None:
-        self.graph = graph
-        self.name = name
-        self.action_cls = action_cls
-        self.feedback_conv = graph.converter(action_cls.Feedback)
-        self.result_conv = graph.converter(action_cls.Result)
-
-    def _server(self) -> MemoryServedAction | None:
-        return next((a for a in self.graph.ros.actions.get(self.name, [])
-                     if a.action_cls is self.action_cls and a.alive), None)
-
-    def matched(self) -> bool:
-        """Whether a server of the action and its type is in the graph."""
-        return self._server() is not None
-
-    def ready(self) -> bool:
-        """As :meth:`matched`: a goal sent now reaches it."""
-        return self.matched()
-
-    def send(self, goal: Any, listener: GoalListener, feedback: bool) -> MemorySentGoal:
-        """Send ``goal``; it is accepted (or fails: no server) on the loop's next turn."""
-        sent = MemorySentGoal(self, listener, feedback)
-        self.graph.loop.call_soon(self._deliver, sent, goal)
-        return sent
-
-    def _deliver(self, sent: MemorySentGoal, goal: Any) -> None:
-        server = self._server()
-        if server is None:
-            sent.listener.on_failed(f"action {self.name} has no action server in the graph")
-            return
-        server.take(goal, sent)
-
-    def destroy(self) -> None:
-        """Nothing to remove: each goal holds its own way back."""
-
-
-class MemoryServedGoal:
-    """A goal of an action a session serves."""
-
-    def __init__(self, served: MemoryServedAction, request: Any, uuid: bytes,
-                 sent: MemorySentGoal | None) -> None:
-        self.served = served
-        self.request = request
-        self.uuid = uuid
-        self.sent = sent
-        self.stamp_ns = time.time_ns()
-        self.status = Status.EXECUTING
-        self.result: asyncio.Future[tuple[int, Any]] = served.graph.loop.create_future()
-
-    def feedback(self, msg: Any) -> None:
-        """One feedback message to the goal's client (if it asked for feedback)."""
-        sent = self.sent
-        if self.status in ACTIVE and sent is not None and sent.feedback:
-            sent.listener.on_feedback(msg)
-
-    def finish(self, status: int, result: Any | None = None) -> bool:
-        """End the goal with ``status`` (``None`` result: default values); False if it had
-        ended."""
-        if self.status not in ACTIVE:
-            return False
-        self.status = Status(status)
-        result = result if result is not None else self.served.action_cls.Result()
-        self.served.goals.pop(self.uuid, None)
-        self.result.set_result((int(status), result))
-        if self.sent is not None:
-            self.sent.listener.on_result(int(status), result)
-        return True
-
-
-class MemoryServedAction:
-    """An action of the graph whose goals and cancel requests go to the callbacks; every
-    goal is accepted while it is served, every cancel request too."""
-
-    def __init__(self, graph: MemoryGraph, name: str, action_cls: type[Action],
-                 on_goal: Callable[[ServedGoal], None],
-                 on_cancel: Callable[[ServedGoal], None]) -> None:
-        self.graph = graph
-        self.name = name
-        self.action_cls = action_cls
-        self.goal_conv = graph.converter(action_cls.Goal)
-        self.feedback_conv = graph.converter(action_cls.Feedback)
-        self.result_conv = graph.converter(action_cls.Result)
-        self.on_goal = on_goal
-        self.on_cancel = on_cancel
-        self.alive = True
-        self.goals: dict[bytes, MemoryServedGoal] = {}
-        base = f"{name}/_action/"
-        self.servers = [
-            _Server(graph, base + "cancel_goal", _CANCEL_TYPE, self._cancel_service),
-            *(_Server(graph, base + part, action_cls._type + suffix, self._internal)
-              for part, suffix in _ACTION_SERVICES.items() if suffix is not None),
-        ]
-
-    def take(self, goal: Any, sent: MemorySentGoal | None) -> MemoryServedGoal:
-        """A goal accepted: handed to ``on_goal`` (a cancel asked before it came follows)."""
-        uuid = secrets.token_bytes(16)
-        served = self.goals[uuid] = MemoryServedGoal(self, goal, uuid, sent)
-        if sent is not None:
-            sent.served = served
-            sent.handle = _Handle(uuid)
-            sent.listener.on_accepted()
-        self.on_goal(served)
-        if sent is not None and sent.cancel_wanted:
-            sent.cancel()
-        return served
-
-    def cancel(self, goal: MemoryServedGoal) -> int:
-        """A cancel request for ``goal``: ``CancelGoal`` return code (0: canceling)."""
-        if goal.status not in ACTIVE:
-            return 3
-        if goal.status != Status.CANCELING:
-            goal.status = Status.CANCELING
-            self.on_cancel(goal)
-        return 0
-
-    async def _cancel_service(self, request: Any) -> Any:
-        """``<action>/_action/cancel_goal``: action_msgs' policy by goal id and stamp."""
-        info = request.goal_info
-        uuid = bytes(info.goal_id.uuid)
-        stamp = info.stamp.sec * 1_000_000_000 + info.stamp.nanosec
-        if any(uuid):
-            picked = [g for g in [self.goals.get(uuid)] if g is not None]
-            if not picked:
-                return _cancel_response(self, 2, [])
-        else:
-            picked = [g for g in self.goals.values() if not stamp or g.stamp_ns <= stamp]
-        canceling = [g for g in picked if self.cancel(g) == 0]
-        for g in canceling:
-            if g.sent is not None:
-                g.sent.listener.on_cancel_answer(0)
-        return _cancel_response(self, 0 if canceling or not any(uuid) else 3, canceling)
-
-    async def _internal(self, request: Any) -> Any:
-        raise ServiceCallError(f"{self.name}: the in-memory graph answers only cancel_goal of "
-                               "an action's services as a service (send goals as goals)")
-
-    def destroy(self) -> None:
-        """Remove the action server; open goals are aborted."""
-        self.alive = False
-        for goal in list(self.goals.values()):
-            goal.finish(Status.ABORTED)
-        self.graph.ros.remove_action(self)
-
-
-def _cancel_response(action: MemoryServedAction, code: int,
-                     goals: list[MemoryServedGoal]) -> Any:
-    cls = action.graph.resolve_service(_CANCEL_TYPE).Response
-    return cls.from_json({"return_code": code, "goals_canceling": [
-        {"goal_id": {"uuid": list(g.uuid)},
-         "stamp": {"sec": g.stamp_ns // 1_000_000_000, "nanosec": g.stamp_ns % 1_000_000_000}}
-        for g in goals]})
 
 
 def _discard(registry: dict[str, list[Any]], name: str, item: Any) -> None:
@@ -425,7 +97,7 @@ class MemoryRos:
 
     def __init__(self) -> None:
         self.nodes: list[MemoryGraph] = []
-        self.servers: dict[str, list[_Server]] = {}
+        self.servers: dict[str, list[ServiceServer]] = {}
         self.actions: dict[str, list[MemoryServedAction]] = {}
         self.taps: list[Callable[[MemoryPublisher, MemoryMessage], None]] = []
         """Called with each message any node publishes (before it is delivered)."""
@@ -463,12 +135,12 @@ class MemoryRos:
 
     # -- entities --------------------------------------------------------------------------------
 
-    def add_server(self, server: _Server) -> None:
+    def add_server(self, server: ServiceServer) -> None:
         """A service comes into the graph."""
         self.servers.setdefault(server.name, []).append(server)
         self._change()
 
-    def remove_server(self, server: _Server) -> None:
+    def remove_server(self, server: ServiceServer) -> None:
         """A service goes."""
         _discard(self.servers, server.name, server)
 
@@ -514,7 +186,7 @@ class MemoryRos:
         return sorted(found)
 
 
-class MemoryGraph:
+class MemoryGraph(MsgsTypes, ParameterCalls):
     """One node of a :class:`MemoryRos` as the sessions see it (the
     :class:`~rosbridge_core.graph.Graph` port; see the module's text).
 
@@ -523,9 +195,6 @@ class MemoryGraph:
     is kept, they cannot be unset); others may be set and unset freely. Methods run on the
     loop.
     """
-
-    wire_types: dynamic.TypeStore = dynamic.DEFAULT
-    """The ``msgs`` classes of the graph's types."""
 
     def __init__(self, ros: MemoryRos | None = None, name: str = "roslibpy_lite_bridge",
                  namespace: str = "/", *, parameters: Mapping[str, Any] | None = None) -> None:
@@ -541,7 +210,7 @@ class MemoryGraph:
         self._declared = set(parameters or ())
         self.ros.nodes.append(self)
         if self.parameters is not None:
-            self._serve_parameters()
+            ServedParameters(self, self.parameters, self._declared).serve()
 
     def close(self) -> None:
         """The node leaves the graph with everything it had."""
@@ -567,75 +236,6 @@ class MemoryGraph:
 
     def refresh(self) -> None:
         """Nothing to refresh: subscriptions learn their type when it is published."""
-
-    # -- types ----------------------------------------------------------------------------------
-
-    def _load(self, name: str, kind: str) -> Any:
-        canonical = canonical_name(name, kind)  # type: ignore[arg-type]
-        types = self.wire_types
-        try:
-            return {"msg": types.lookup_message, "srv": types.lookup_service,
-                    "action": types.lookup_action}[kind](canonical)
-        except WireUnknownType:
-            raise UnknownTypeError(name, f"no installed package provides {canonical}") from None
-
-    def resolve_message(self, name: str) -> Any:
-        """The ``msgs`` class of message type ``name`` (both spellings)."""
-        return self._load(name, "msg")
-
-    def resolve_service(self, name: str) -> Any:
-        """The ``msgs`` service type named ``name``."""
-        return self._load(name, "srv")
-
-    def resolve_action(self, name: str) -> Any:
-        """The ``msgs`` action type named ``name``."""
-        return self._load(name, "action")
-
-    def converter(self, cls: Any) -> MsgsConverter:
-        """The converter of a ``msgs`` message class."""
-        conv = self._converters.get(cls)
-        if conv is None:
-            conv = self._converters[cls] = MsgsConverter(cls)
-        return conv
-
-    def typedefs(self, name: str, kind: str, part: str | None = None) -> list[dict[str, Any]]:
-        """rosapi typedefs of a type (``part`` of a service or action) and its nested types."""
-        from rosbridge_core.typedefs import msgs_typedefs
-
-        cls = self._load(name, kind)
-        canonical = canonical_name(name, kind)  # type: ignore[arg-type]
-        if kind != "msg":
-            cls, canonical = getattr(cls, part or ""), f"{canonical}_{part}"
-        return msgs_typedefs(cls, canonical)
-
-    def installed_interfaces(self) -> list[str]:
-        """Every type ``msgs`` generates."""
-        from msgs.runtime import available_types
-
-        return available_types()
-
-    def interface_definition(self, name: str) -> dict[str, Any]:
-        """The full definition text of a type ``msgs`` has (the ``ros2msg`` layout)."""
-        try:
-            tn = next(t for t in (_parsed(name, k) for k in ("msg", "srv", "action"))
-                      if t is not None and _has(self.wire_types, str(t)))
-        except StopIteration:
-            raise BridgeError(f"type: {name} is not installed on the robot (msgs has no "
-                              "such type)") from None
-        cls = self._load(str(tn), tn.kind)
-        if tn.kind == "msg":
-            return {"type": str(tn), "definition": dynamic.full_text(cls)}
-        parts = ((cls.Request, cls.Response) if tn.kind == "srv"
-                 else (cls.Goal, cls.Result, cls.Feedback))
-        text = cls._definition.rstrip("\n") + "\n"
-        seen = {p._type for p in parts}
-        for part in parts:
-            for dep in dynamic.full_text(part).split(dynamic.DELIMITER + "\n")[1:]:
-                head = dep.split("\n", 1)[0]
-                if head not in seen:
-                    seen.add(head)
-                    text += dynamic.DELIMITER + "\n" + dep
-        return {"type": str(tn), "definition": text}
 
     # -- introspection ---------------------------------------------------------------------------
 
@@ -809,7 +409,7 @@ class MemoryGraph:
         if deadline is None:
             deadline = loop.time() + timeout
 
-        def server() -> _Server | None:
+        def server() -> ServiceServer | None:
             return next((s for s in ros.servers.get(service, [])
                          if s.type_name == srv_cls._type), None)
 
@@ -842,94 +442,6 @@ class MemoryGraph:
         self.ros.add_server(served.server)
         return served
 
-    # -- parameters -----------------------------------------------------------------------------
-
-    def _serve_parameters(self) -> None:
-        base = self.namespace.rstrip("/") + "/" + self.name
-        for part, handler in (("list_parameters", self._list_parameters),
-                              ("get_parameters", self._get_parameters),
-                              ("set_parameters", self._set_parameters)):
-            kind = "".join(w.capitalize() for w in part.split("_"))
-            self.ros.add_server(_Server(self, f"{base}/{part}", f"rcl_interfaces/srv/{kind}",
-                                        handler))
-
-    def _params(self) -> dict[str, Any]:
-        assert self.parameters is not None
-        return self.parameters
-
-    async def _list_parameters(self, request: Any) -> Any:
-        cls = self.resolve_service("rcl_interfaces/srv/ListParameters").Response
-        return cls.from_json({"result": {"names": sorted(self._params())}})
-
-    async def _get_parameters(self, request: Any) -> Any:
-        cls = self.resolve_service("rcl_interfaces/srv/GetParameters").Response
-        params = self._params()
-        return cls.from_json({"values": [parameter_obj(params.get(n)) for n in request.names]})
-
-    async def _set_parameters(self, request: Any) -> Any:
-        """Each parameter set as an rclpy node sets it: one the node was made with (declared)
-        keeps its type and cannot be unset (rclpy's refusals); others may be anything."""
-        cls = self.resolve_service("rcl_interfaces/srv/SetParameters").Response
-        params = self._params()
-        results = []
-        for p in request.parameters:
-            value = parameter_value(p.value)
-            old = params.get(p.name) if p.name in self._declared else None
-            old_type, new_type = _parameter_type(old), int(p.value.type)
-            if old is not None and value is None:
-                results.append({"successful": False,
-                                "reason": "Static parameter cannot be undeclared"})
-            elif old is not None and old_type != new_type:
-                results.append({"successful": False, "reason": (
-                    f"Wrong parameter type, expected 'Type.{_TYPE_NAMES[old_type]}' got "
-                    f"'Type.{_TYPE_NAMES[new_type]}'")})
-            else:
-                if value is None:
-                    params.pop(p.name, None)
-                else:
-                    params[p.name] = value
-                results.append({"successful": True, "reason": ""})
-        return cls.from_json({"results": results})
-
-    async def _parameter_call(self, node: str, part: str, args: Mapping[str, Any],
-                              timeout: float) -> Any:
-        """The answer of ``node``'s parameter service ``part`` (as an rclpy node's):
-        ``LookupError`` if the node has none, ``TimeoutError`` if it does not answer."""
-        service = f"{node}/{part}"
-        kind = "".join(w.capitalize() for w in part.split("_"))
-        srv_cls = self.resolve_service(f"rcl_interfaces/srv/{kind}")
-        try:
-            return await self._request(service, srv_cls, srv_cls.Request.from_json(args),
-                                       timeout, timeout / 2)
-        except ServiceCallError as exc:
-            if self.server_count(service):
-                raise TimeoutError(f"service {service} did not answer") from exc
-            raise LookupError(f"service {service} does not exist (not in the ROS graph)"
-                              ) from None
-
-    async def parameter_names(self, node: str, timeout: float) -> list[str]:
-        """Names of ``node``'s parameters (any failure raises)."""
-        answer = await self._parameter_call(node, "list_parameters", {}, timeout)
-        return list(answer.result.names)
-
-    async def get_parameter(self, node: str, name: str) -> tuple[bool, Any]:
-        """(is set, value) of one parameter of ``node``."""
-        answer = await self._parameter_call(node, "get_parameters", {"names": [name]},
-                                            PARAM_WAIT)
-        values = answer.values
-        if not values or values[0].type == 0:
-            return False, None
-        return True, parameter_value(values[0])
-
-    async def set_parameter(self, node: str, name: str, value: Any) -> tuple[bool, str]:
-        """Set (``None``: unset) one parameter of ``node``: (accepted, reason); ``ValueError``
-        for a value a parameter cannot hold."""
-        param = {"name": name, "value": parameter_obj(value)}
-        answer = await self._parameter_call(node, "set_parameters", {"parameters": [param]},
-                                            PARAM_WAIT)
-        result = answer.results[0]
-        return bool(result.successful), str(result.reason)
-
     # -- actions --------------------------------------------------------------------------------
 
     def action_client(self, name: str, action_cls: Any) -> MemoryActionClient:
@@ -945,63 +457,3 @@ class MemoryGraph:
         served = MemoryServedAction(self, name, action_cls, on_goal, on_cancel)
         self.ros.add_action(served)
         return served
-
-
-PARAM_WAIT = 5.0
-"""Seconds a parameter get or set waits for the node's parameter service."""
-
-
-def parameter_obj(value: Any) -> dict[str, Any]:
-    """A plain value as a ``rcl_interfaces/msg/ParameterValue`` object (``None``: not set;
-    ``bytes``: a byte array); ``ValueError`` for what a parameter cannot hold."""
-    if value is None:
-        return {"type": 0}
-    for kind, field, test in _PARAMETER_KINDS:
-        if test(value):
-            if kind == 5:
-                return {"type": 5, field: list(value)}
-            return {"type": kind, field: [float(v) for v in value] if kind == 8 else value}
-    raise ValueError("args.value: a ROS 2 parameter is a bool, int, float, string or a list "
-                     f"of one of those, got {type(value).__name__}")
-
-
-def _parameter_type(value: Any) -> int:
-    """The ``ParameterType`` number of a plain value (0: not set)."""
-    return int(parameter_obj(value)["type"])
-
-
-_TYPE_NAMES = ("NOT_SET", "BOOL", "INTEGER", "DOUBLE", "STRING", "BYTE_ARRAY", "BOOL_ARRAY",
-               "INTEGER_ARRAY", "DOUBLE_ARRAY", "STRING_ARRAY")
-"""rclpy's ``Parameter.Type`` names, by number."""
-
-
-def _all(kind: type | tuple[type, ...]) -> Callable[[Any], bool]:
-    return lambda v: isinstance(v, list) and all(isinstance(x, kind) for x in v)
-
-
-_PARAMETER_KINDS: tuple[tuple[int, str, Callable[[Any], bool]], ...] = (
-    (1, "bool_value", lambda v: isinstance(v, bool)),
-    (2, "integer_value", lambda v: isinstance(v, int)),
-    (3, "double_value", lambda v: isinstance(v, float)),
-    (4, "string_value", lambda v: isinstance(v, str)),
-    (5, "byte_array_value", lambda v: isinstance(v, bytes | bytearray)),
-    (6, "bool_array_value", _all(bool)),
-    (7, "integer_array_value", _all(int)),
-    (8, "double_array_value", _all((int, float))),
-    (9, "string_array_value", _all(str)),
-)
-
-
-def _parsed(name: str, kind: str) -> Any:
-    try:
-        return parse_type_name(name, kind)  # type: ignore[arg-type]
-    except BridgeError:
-        return None
-
-
-def _has(types: dynamic.TypeStore, name: str) -> bool:
-    try:
-        types.lookup(name)
-    except WireUnknownType:
-        return False
-    return True
