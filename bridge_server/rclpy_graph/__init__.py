@@ -13,5 +13,7 @@
 - :mod:`.convert`: message conversion (rclpy objects to and from rosbridge JSON/CBOR;
   JSON straight from CDR bytes and the ``publish`` envelopes are
   :mod:`rosbridge_core.codec`'s, which needs no ROS);
+- :mod:`.fields` and :mod:`.validate`: the converter's field model and its inbound
+  validators;
 - :mod:`.types`: type names resolved to rclpy classes.
 """

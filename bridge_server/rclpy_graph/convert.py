@@ -3,6 +3,8 @@
 ``converter_for(cls)`` walks a message class's ``SLOT_TYPES`` a single time
 and generates specialised Python functions (with ``exec``) for the three hot
 paths. The result is cached per class, so every later call is one dict lookup.
+Each field is classified once (:mod:`.fields`); what a client sends is checked by the
+validators of :mod:`.validate`.
 
 API
 ---
@@ -85,22 +87,21 @@ the whole payload).
 from __future__ import annotations
 
 import array
-import binascii
-import importlib
 import json
 import sys
 import threading
 import time
 from collections.abc import Callable, Mapping
-from typing import Any, Final, Protocol
+from typing import Any, Final
 
 import cbor2
 import numpy
-from rosidl_parser import definition as idl
 
 from bridge_server.allocator import tune_allocator
+from bridge_server.rclpy_graph.fields import INT_RANGES, Field, FromObj
 from bridge_server.rclpy_graph.types import type_name_of
-from msgs._primitives import FLOAT32_MAX, SIZED_INTEGER_RANGES
+from bridge_server.rclpy_graph.validate import array_checker, scalar_checker
+from msgs._primitives import FLOAT32_MAX
 from rosbridge_core.codec import cdr_json
 from rosbridge_core.codec.publish import (
     encode_publish_cbor,
@@ -109,7 +110,6 @@ from rosbridge_core.codec.publish import (
 )
 from rosbridge_core.interfaces import MISSING as _MISSING
 from rosbridge_core.interfaces import ConversionError, args_mapping
-from rosbridge_core.interfaces import describe as _describe
 
 __all__ = [
     "ConversionError",
@@ -130,29 +130,6 @@ now_ns: Callable[[], int] = time.time_ns
 
 _LITTLE: Final = sys.byteorder == "little"
 
-_INT_RANGES: Final = SIZED_INTEGER_RANGES
-# IDL names of the non-explicit integer types map onto explicit ones.
-_INT_ALIASES: Final = {
-    "short": "int16",
-    "unsigned short": "uint16",
-    "long": "int32",
-    "unsigned long": "uint32",
-    "long long": "int64",
-    "unsigned long long": "uint64",
-}
-_FLOAT_NAMES: Final = {"float": "float32", "double": "float64", "long double": "float64"}
-_TYPECODES: Final = {
-    "int8": "b",
-    "uint8": "B",
-    "int16": "h",
-    "uint16": "H",
-    "int32": "i",
-    "uint32": "I",
-    "int64": "q",
-    "uint64": "Q",
-    "float32": "f",
-    "float64": "d",
-}
 _CBOR_TAGS: Final = {
     "uint16": 69,
     "uint32": 70,
@@ -169,384 +146,8 @@ _json_encode: Callable[[Any], str] = json.JSONEncoder(
     separators=(",", ":"), allow_nan=False, check_circular=False, ensure_ascii=False
 ).encode
 _encode_str: Callable[[str], str] = json.encoder.encode_basestring
-_a2b = binascii.a2b_base64
 _Tag = cbor2.CBORTag
 _cbor_dumps: Callable[[Any], bytes] = cbor2.dumps
-
-
-# --------------------------------------------------------------------------------------------
-# Field model
-
-
-class _Field:
-    """One message field, classified once from its rosidl slot type."""
-
-    __slots__ = (
-        "bound",
-        "container",
-        "elem",
-        "elem_name",
-        "name",
-        "size",
-        "sub",
-        "subclass",
-        "wide",
-    )
-
-    def __init__(self, name: str, slot_type: Any, owner: type[Any]) -> None:
-        self.name = name
-        self.container: str | None = None  # None, "array", "bseq", "useq"
-        self.size = 0  # fixed size or maximum size
-        t = slot_type
-        if isinstance(t, idl.Array):
-            self.container, self.size, t = "array", t.size, t.value_type
-        elif isinstance(t, idl.BoundedSequence):
-            self.container, self.size, t = "bseq", t.maximum_size, t.value_type
-        elif isinstance(t, idl.UnboundedSequence):
-            self.container, t = "useq", t.value_type
-        self.bound: int | None = None
-        self.wide = False
-        self.subclass: type[Any] | None = None
-        self.sub: Converter | None = None
-        if isinstance(t, idl.BasicType):
-            tn = t.typename
-            if tn == "boolean":
-                self.elem, self.elem_name = "bool", "bool"
-            elif tn == "octet":
-                self.elem, self.elem_name = "octet", "byte"
-            elif tn in ("char", "wchar"):
-                self.elem, self.elem_name = "char", tn
-            elif tn in _FLOAT_NAMES:
-                self.elem = self.elem_name = _FLOAT_NAMES[tn]
-            else:
-                self.elem = self.elem_name = _INT_ALIASES.get(tn, tn)
-                if self.elem not in _INT_RANGES:
-                    raise TypeError(f"unsupported basic type {tn!r} for field {name!r}")
-        elif isinstance(t, idl.AbstractString | idl.AbstractWString):
-            self.elem = "string"
-            self.wide = isinstance(t, idl.AbstractWString)
-            self.bound = getattr(t, "maximum_size", None)
-            self.elem_name = f"string<={self.bound}" if self.bound is not None else "string"
-            if isinstance(t, idl.AbstractWString):
-                self.elem_name = "w" + self.elem_name
-        elif isinstance(t, idl.NamespacedType):
-            self.subclass = _nested_class(t, owner)
-            self.elem = "msg"
-            self.elem_name = "/".join([*t.namespaces, t.name])
-        else:
-            raise TypeError(f"unsupported slot type {t!r} for field {name!r}")
-
-    def expected(self) -> str:
-        """Human name of the expected JSON value."""
-        if self.container is None:
-            return self.elem_name if self.elem != "msg" else f"object of type {self.elem_name}"
-        item = self.elem_name if self.elem != "msg" else f"{self.elem_name} objects"
-        if self.elem == "uint8":
-            item = "uint8 (base64 string or array of ints)"
-        elif self.elem == "octet":
-            item = "byte (base64 string or array of ints)"
-        if self.container == "array":
-            return f"array of {self.size} {item}"
-        if self.container == "bseq":
-            return f"array of at most {self.size} {item}"
-        return f"array of {item}"
-
-
-def _nested_class(t: Any, owner: type[Any]) -> type[Any]:
-    """The rclpy class of a nested field type.
-
-    Action parts such as ``Fibonacci_Goal`` are not attributes of the
-    ``pkg.action`` package, only of the private module that also defines the
-    owning class, so look there second.
-    """
-    module = importlib.import_module(".".join(t.namespaces))
-    found = getattr(module, t.name, None)
-    if found is None:
-        found = getattr(sys.modules[owner.__module__], t.name, None)
-    if not isinstance(found, type):
-        raise TypeError(f"cannot find the class of nested type {'/'.join([*t.namespaces, t.name])}")
-    return found
-
-
-# --------------------------------------------------------------------------------------------
-# Inbound scalar validators: (value, path) -> stored value, or raise ConversionError
-
-
-def _int_checker(name: str) -> Callable[[Any, str], int]:
-    lo, hi = _INT_RANGES[name]
-
-    def check(v: Any, path: str) -> int:
-        t = type(v)
-        if t is int or (isinstance(v, int) and t is not bool):
-            if lo <= v <= hi:
-                return int(v)
-            raise ConversionError(path, name, v, f"value {v} out of range for {name} [{lo}, {hi}]")
-        if t is float and v.is_integer():
-            iv = int(v)
-            if lo <= iv <= hi:
-                return iv
-            raise ConversionError(
-                path, name, v, f"value {v!r} out of range for {name} [{lo}, {hi}]"
-            )
-        raise ConversionError(path, name, v)
-
-    return check
-
-
-def _float_checker(name: str) -> Callable[[Any, str], float]:
-    f32 = name == "float32"
-
-    def check(v: Any, path: str) -> float:
-        t = type(v)
-        f: float
-        if t is float:
-            f = v
-        elif v is None:
-            return float("nan")
-        elif (t is int or isinstance(v, int | float)) and t is not bool:
-            try:
-                f = float(v)
-            except OverflowError:
-                raise ConversionError(
-                    path, name, v, f"value {_describe(v)} out of range for {name}"
-                ) from None
-        else:
-            raise ConversionError(path, name, v)
-        if f32 and abs(f) > FLOAT32_MAX and f not in (float("inf"), float("-inf")):
-            raise ConversionError(path, name, v, f"value {f!r} out of range for float32")
-        return f
-
-    return check
-
-
-def _bool_check(v: Any, path: str) -> bool:
-    if v is True or v is False:
-        return v
-    raise ConversionError(path, "bool", v)
-
-
-def _octet_check(v: Any, path: str) -> bytes:
-    if type(v) is int and 0 <= v <= 255:
-        return bytes((v,))
-    if isinstance(v, bytes) and len(v) == 1:
-        return v
-    if type(v) is float and v.is_integer() and 0 <= v <= 255:
-        return bytes((int(v),))
-    raise ConversionError(path, "byte (integer 0..255)", v)
-
-
-def _char_check(v: Any, path: str) -> str:
-    if type(v) is str and len(v) == 1:
-        return v
-    if type(v) is int and 0 <= v <= 255:
-        return chr(v)
-    raise ConversionError(path, "char (string of one character)", v)
-
-
-def _string_checker(bound: int | None, expected: str, wide: bool) -> Callable[[Any, str], str]:
-    """Strings; ``string<=N`` counts UTF-8 bytes, ``wstring<=N`` counts characters."""
-
-    def check(v: Any, path: str) -> str:
-        if not isinstance(v, str):
-            raise ConversionError(path, expected, v)
-        s = str(v)
-        if bound is None or len(s) <= (bound if wide else bound // 4):
-            return s
-        size = len(s) if wide else len(s.encode("utf-8"))
-        if size > bound:
-            unit = "characters" if wide else "bytes"
-            raise ConversionError(
-                path, expected, v, f"string of {size} {unit} exceeds the bound {expected}"
-            )
-        return s
-
-    return check
-
-
-def _scalar_checker(f: _Field) -> Callable[[Any, str], Any]:
-    e = f.elem
-    if e == "bool":
-        return _bool_check
-    if e == "octet":
-        return _octet_check
-    if e == "char":
-        return _char_check
-    if e == "string":
-        return _string_checker(f.bound, f.elem_name, f.wide)
-    if e in ("float32", "float64"):
-        return _float_checker(e)
-    return _int_checker(e)
-
-
-# --------------------------------------------------------------------------------------------
-# Inbound array validators
-
-
-def _elem_path(path: str, i: int) -> str:
-    return f"{path}[{i}]"
-
-
-def _check_len(f: _Field, n: int, path: str, v: object) -> None:
-    """Fixed arrays need exactly ``size`` items, bounded sequences at most ``size``."""
-    if (f.container == "array" and n != f.size) or (f.container == "bseq" and n > f.size):
-        raise ConversionError(path, f.expected(), v, f"expected {f.expected()}, got {n} items")
-
-
-def _decode_binary(f: _Field, v: Any, path: str) -> bytes:
-    """uint8/byte arrays: base64 text, list of ints, or bytes -> bytes."""
-    t = type(v)
-    if t is str:
-        try:
-            data = _a2b(v, strict_mode=True)
-        except (binascii.Error, ValueError):
-            try:
-                data = _a2b("".join(v.split()), strict_mode=True)
-            except (binascii.Error, ValueError) as exc:
-                raise ConversionError(
-                    path, f.expected(), v, f"expected {f.expected()}, got invalid base64 ({exc})"
-                ) from None
-    elif t is list or t is tuple:
-        try:
-            data = bytes(v)
-            ok = not data or set(map(type, v)) == {int}
-        except (TypeError, ValueError):
-            ok = False
-        if not ok:
-            for i, x in enumerate(v):
-                if type(x) is not int or not 0 <= x <= 255:
-                    raise ConversionError(
-                        _elem_path(path, i), f"{f.elem_name} (integer 0..255)", x
-                    )
-            data = bytes(v)  # pragma: no cover - unreachable: some item was bad
-    elif isinstance(v, bytes | bytearray | memoryview):
-        data = bytes(v)
-    else:
-        raise ConversionError(path, f.expected(), v)
-    _check_len(f, len(data), path, v)
-    return data
-
-
-def _array_checker(f: _Field) -> Callable[[Any, str], Any]:
-    """Validator for an array field: (value, path_of_field) -> stored value."""
-    e = f.elem
-    fixed = f.container == "array"
-    expected = f.expected()
-
-    if e == "uint8":
-        if fixed:
-
-            def conv_u8_fixed(v: Any, path: str) -> Any:
-                return numpy.frombuffer(_decode_binary(f, v, path), dtype=numpy.uint8).copy()
-
-            return conv_u8_fixed
-
-        def conv_u8(v: Any, path: str) -> Any:
-            return array.array("B", _decode_binary(f, v, path))
-
-        return conv_u8
-
-    if e == "octet":
-
-        def conv_octet(v: Any, path: str) -> Any:
-            data = _decode_binary(f, v, path)
-            return [data[i : i + 1] for i in range(len(data))]
-
-        return conv_octet
-
-    def as_list(v: Any, path: str) -> list[Any]:
-        t = type(v)
-        if t is list:
-            lst: list[Any] = v
-        elif t is tuple:
-            lst = list(v)
-        else:
-            raise ConversionError(path, expected, v)
-        _check_len(f, len(lst), path, v)
-        return lst
-
-    if e in _INT_RANGES:
-        code = _TYPECODES[e]
-        check = _int_checker(e)
-        dtype = numpy.dtype(code)
-
-        def conv_int(v: Any, path: str) -> Any:
-            lst = as_list(v, path)
-            arr = None
-            if set(map(type, lst)) <= {int}:
-                try:
-                    arr = array.array(code, lst)
-                except OverflowError:
-                    arr = None
-            if arr is None:
-                arr = array.array(code, [check(x, _elem_path(path, i)) for i, x in enumerate(lst)])
-            if fixed:
-                return numpy.frombuffer(arr, dtype=dtype).copy()
-            return arr
-
-        return conv_int
-
-    if e in ("float32", "float64"):
-        code = _TYPECODES[e]
-        fcheck = _float_checker(e)
-        dtype = numpy.dtype(code)
-        f32 = e == "float32"
-
-        def conv_float(v: Any, path: str) -> Any:
-            lst = as_list(v, path)
-            arr = None
-            if set(map(type, lst)) <= {float, int}:
-                try:
-                    arr = array.array(code, lst)
-                except (OverflowError, TypeError):
-                    arr = None
-                if arr is not None and f32:
-                    s = sum(arr)
-                    if s - s != 0.0:  # some item is inf or nan: check the source values
-                        arr = None
-            if arr is None:
-                arr = array.array(code, [fcheck(x, _elem_path(path, i)) for i, x in enumerate(lst)])
-            if fixed:
-                return numpy.frombuffer(arr, dtype=dtype).copy()
-            return arr
-
-        return conv_float
-
-    if e == "bool":
-
-        def conv_bool(v: Any, path: str) -> Any:
-            lst = as_list(v, path)
-            if set(map(type, lst)) <= {bool}:
-                return lst if lst is not v else list(lst)
-            for i, x in enumerate(lst):
-                _bool_check(x, _elem_path(path, i))
-            raise AssertionError("unreachable")  # pragma: no cover
-
-        return conv_bool
-
-    if e in ("string", "char"):
-        scheck = _scalar_checker(f)
-        simple = e == "string" and f.bound is None
-
-        def conv_str(v: Any, path: str) -> Any:
-            lst = as_list(v, path)
-            if simple and set(map(type, lst)) <= {str}:
-                return lst if lst is not v else list(lst)
-            return [scheck(x, _elem_path(path, i)) for i, x in enumerate(lst)]
-
-        return conv_str
-
-    if e == "msg":
-
-        def conv_msg(v: Any, path: str) -> Any:
-            lst = as_list(v, path)
-            sub = f.sub
-            assert sub is not None
-            fo = sub.from_obj
-            return [fo(x, f"{path}[{i}]") for i, x in enumerate(lst)]
-
-        return conv_msg
-
-    raise TypeError(f"unsupported array element {e!r}")  # pragma: no cover
 
 
 # --------------------------------------------------------------------------------------------
@@ -625,13 +226,6 @@ def _unknown(o: Mapping[str, Any], fields: frozenset[str], prefix: str, type_nam
 # The converter
 
 
-class FromObj(Protocol):
-    """Signature of :attr:`Converter.from_obj`."""
-
-    def __call__(self, obj: Any, path: str = "") -> Any:
-        """Build a new message from ``obj``; error paths are prefixed with ``path``."""
-
-
 class Converter:
     """Compiled conversions for one rclpy message class. Get one with :func:`converter_for`."""
 
@@ -649,7 +243,7 @@ class Converter:
         self.type_name = type_name_of(msg_cls)
         names = list(msg_cls.get_fields_and_field_types().keys())
         self._fields = [
-            _Field(n, st, msg_cls) for n, st in zip(names, msg_cls.SLOT_TYPES, strict=True)
+            Field(n, st, msg_cls) for n, st in zip(names, msg_cls.SLOT_TYPES, strict=True)
         ]
         self.fields: tuple[str, ...] = tuple(names)
         self.json_from_cdr: cdr_json.JsonFromCdr | None = None
@@ -748,13 +342,13 @@ class Converter:
         self._source = code
 
     @staticmethod
-    def _text_parts(f: _Field, a: str, i: int, ns: dict[str, Any]) -> list[tuple[bool, str]]:
+    def _text_parts(f: Field, a: str, i: int, ns: dict[str, Any]) -> list[tuple[bool, str]]:
         """(is_literal, text) pieces whose concatenation is the JSON text of field value ``a``."""
         e = f.elem
         if f.container is None:
             if e == "bool":
                 return [(False, f'("true" if {a} else "false")')]
-            if e in _INT_RANGES:
+            if e in INT_RANGES:
                 return [(False, f"int_text({a})")]
             if e in ("float32", "float64"):
                 return [(False, f"(float_repr(x) if type(x := {a}) is float and x - x == 0.0 "
@@ -782,7 +376,7 @@ class Converter:
         return [(False, f"json_encode({a})")]  # bool, string, char arrays (lists)
 
     @staticmethod
-    def _out_exprs(f: _Field, a: str, i: int, ns: dict[str, Any]) -> tuple[str, str]:
+    def _out_exprs(f: Field, a: str, i: int, ns: dict[str, Any]) -> tuple[str, str]:
         """(JSON expression, CBOR expression) reading attribute expression ``a``."""
         e = f.elem
         if f.container is None:
@@ -818,7 +412,7 @@ class Converter:
         return f"list({a})", f"list({a})"
 
     @staticmethod
-    def _default_expr(f: _Field, i: int, ns: dict[str, Any], proto: Any) -> str:
+    def _default_expr(f: Field, i: int, ns: dict[str, Any], proto: Any) -> str:
         """Expression giving a fresh default value for field ``f`` (like the constructor)."""
         d = getattr(proto, "_" + f.name)
         ns[f"D{i}"] = d
@@ -835,7 +429,7 @@ class Converter:
         return f"D{i}[:]"  # array.array or list of immutable items
 
     @staticmethod
-    def _in_lines(f: _Field, i: int, ns: dict[str, Any], proto: Any) -> list[str]:
+    def _in_lines(f: Field, i: int, ns: dict[str, Any], proto: Any) -> list[str]:
         name = f.name
         key = repr(name)
         slot = f"m._{name}"
@@ -853,9 +447,9 @@ class Converter:
             lines.append(f"        {slot} = s{i}(v, pp + {key})")
             return lines
         if f.container is None:
-            ns[f"v{i}"] = _scalar_checker(f)
-            if e in _INT_RANGES:
-                lo, hi = _INT_RANGES[e]
+            ns[f"v{i}"] = scalar_checker(f)
+            if e in INT_RANGES:
+                lo, hi = INT_RANGES[e]
                 cond = f"type(v) is int and {lo} <= v <= {hi}"
             elif e == "float64":
                 cond = "type(v) is float"
@@ -877,7 +471,7 @@ class Converter:
             else:
                 lines.append(f"        {slot} = v{i}(v, pp + {key})")
             return lines
-        ns[f"v{i}"] = _array_checker(f)
+        ns[f"v{i}"] = array_checker(f)
         lines.append(f"        {slot} = v{i}(v, pp + {key})")
         return lines
 

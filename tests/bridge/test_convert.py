@@ -33,6 +33,7 @@ from bridge_server.rclpy_graph.convert import (
     serialize,
 )
 from bridge_server.rclpy_graph.types import BridgeError
+from bridge_server.rclpy_graph.validate import string_checker
 
 # rclpy's type-support import pulls in lark, which imports the deprecated sre_* modules;
 # warnings are errors in this suite, so load it once here with that one warning silenced.
@@ -295,11 +296,11 @@ def test_bounded_string_limits_count_utf8_bytes() -> None:
 
 def test_bounded_wstring_limit_counts_characters() -> None:
     """wstring<=N bounds count characters, string<=N bounds count UTF-8 bytes."""
-    wcheck = convert_mod._string_checker(3, "wstring<=3", True)
+    wcheck = string_checker(3, "wstring<=3", True)
     assert wcheck("ééé", "w") == "ééé"
     with pytest.raises(ConversionError, match="4 characters exceeds the bound wstring<=3"):
         wcheck("abcd", "w")
-    check = convert_mod._string_checker(3, "string<=3", False)
+    check = string_checker(3, "string<=3", False)
     with pytest.raises(ConversionError, match="4 bytes exceeds the bound string<=3"):
         check("éé", "s")
 
