@@ -183,7 +183,7 @@ class SharedSubscription:
         """Canonical type of the topic, once known."""
         return self.conv.type_name if self.conv is not None else None
 
-    def _wantedqos_profile(self) -> tuple[bool, bool]:
+    def _wanted_qos(self) -> tuple[bool, bool]:
         infos = self.ros.node.get_publishers_info_by_topic(self.topic)
         if not infos:
             return self.reliable, self.transient_local
@@ -196,7 +196,7 @@ class SharedSubscription:
     def _create(self) -> None:
         assert self.msg_cls is not None
         self.conv = convert.converter_for(self.msg_cls)
-        self.reliable, self.transient_local = self._wantedqos_profile()
+        self.reliable, self.transient_local = self._wanted_qos()
         depth = BULK_SUBSCRIPTION_DEPTH if _is_bulky(self.msg_cls) else SUBSCRIPTION_DEPTH
         qos = qos_profile(self.reliable, self.transient_local, depth)
         topic = self.topic
@@ -273,7 +273,7 @@ class SharedSubscription:
             return
         if self._sub is None:
             return
-        reliable, transient = self._wantedqos_profile()
+        reliable, transient = self._wanted_qos()
         if (reliable, transient) != (self.reliable, self.transient_local):
             log.info("QoS of %s changed: re-subscribing", self.topic)
             self._destroy()
