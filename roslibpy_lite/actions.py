@@ -89,7 +89,7 @@ from .exceptions import (
     RosTimeoutError,
     UsageError,
 )
-from .handles import Backend, _BridgeHandle
+from .handles.base import Backend, _BridgeHandle
 from .messages import _check_type_string, _packages, canonical_type, check_dict, from_wire, to_wire
 
 if TYPE_CHECKING:

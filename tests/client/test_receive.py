@@ -139,9 +139,9 @@ async def test_a_failing_callback_is_logged_once_per_burst_then_paused(
         client: Client, caplog: pytest.LogCaptureFixture, monkeypatch: pytest.MonkeyPatch) -> None:
     """Outside Jupyter a callback raising on every message logs one traceback, then one line
     with the count; after PAUSE_AFTER in a row it is paused, and resume_callbacks() runs it."""
-    from roslibpy_lite import handles
+    from roslibpy_lite.handles.subscription import callbacks
 
-    monkeypatch.setattr(handles, "PAUSE_AFTER", 30)
+    monkeypatch.setattr(callbacks, "PAUSE_AFTER", 30)
     calls: list[int] = []
 
     def cb(msg: dict[str, Any]) -> None:
