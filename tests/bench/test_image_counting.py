@@ -7,8 +7,8 @@ import os
 
 import cbor2
 
-from bench.harness import FRAME_SEQ_BYTES, Bridge, RosSide, frame_seq
 from bench.counting import InOrder
+from bench.harness import FRAME_SEQ_BYTES, Bridge, RosSide, frame_seq
 from bench.viewers import open_viewer
 from tests.helpers import async_wait_until
 

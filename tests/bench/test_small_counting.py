@@ -8,8 +8,8 @@ import os
 
 import pytest
 
-from bench.harness import Bridge, RosSide
 from bench.counting import SINK_PREFIX, Sink
+from bench.harness import Bridge, RosSide
 from bench.viewers import open_viewer
 from tests.helpers import async_wait_until
 
