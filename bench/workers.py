@@ -1,7 +1,7 @@
 """What the hop costs a session resumed on the wrong worker (``--scenario workers_resume``).
 
 With ``--workers 2`` a resume that the kernel hands to the worker that does not keep the
-session is forwarded to the one that does (``bridge_server/workers/forward.py``): one more
+session is forwarded to the one that does (``bridge_server/front/forward.py``): one more
 process and a unix socket on the way, and over wss:// the forwarding worker ends TLS. Here a
 raw client opens a resumable session, then drops its link and resumes again and again; after
 each resume it times sequential call_service round trips to an rclpy SetBool service, and

@@ -16,3 +16,7 @@ It imports ``msgs`` and itself only, never the client (``roslibpy_lite``) or the
 The websocket front, the rclpy Graph, the relay and the status pages are the server's
 (``bridge_server``); the user API is the client's (``roslibpy_lite``).
 """
+
+__version__ = "0.1.0"
+"""The version of the one distribution (roslibpy-lite) these packages ship in: pyproject.toml
+reads it from here, the client re-exports it, the bridge's status pages show it."""

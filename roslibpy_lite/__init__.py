@@ -61,7 +61,7 @@ if TYPE_CHECKING:  # at run time each name is loaded at its first use (__getattr
     from .ros import RosBase, RosFront
     from .state import StateWatcher
 
-__version__ = "0.1.0"
+from rosbridge_core import __version__ as __version__
 
 __all__ = [
     "ActionError",

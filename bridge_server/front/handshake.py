@@ -17,7 +17,7 @@ from websockets.http11 import Request, Response
 
 from bridge_server.front.websocket import BridgeConnection, Inbound, check_websockets_internals
 from rosbridge_core.interfaces import BridgeError
-from rosbridge_core.security.access import Access
+from rosbridge_core.security.authority import Authority
 from rosbridge_core.security.credentials import client_address, is_loopback, token_of
 from rosbridge_core.security.gate import PRE_AUTH_FRAME_LIMIT, Gate
 from rosbridge_core.security.options import SecurityConfig
@@ -27,9 +27,9 @@ __all__ = ["Security"]
 log = logging.getLogger("bridge_server.security")
 
 
-class Security(Access):
+class Security(Authority):
     """The bridge's security configuration, and the state it keeps across connections: what
-    its sessions share (:class:`~rosbridge_core.security.access.Access`), and TLS, the
+    its sessions share (:class:`~rosbridge_core.security.authority.Authority`), and TLS, the
     handshake's checks and the connection counts."""
 
     def __init__(self, config: SecurityConfig) -> None:

@@ -35,12 +35,12 @@ from websockets.asyncio.server import Server, ServerConnection, serve
 from websockets.datastructures import MultipleValuesError
 
 from bridge_server.foxglove import SUBPROTOCOL, FoxgloveSession, Hub, select_subprotocol
+from bridge_server.front.forward import Forwarder
 from bridge_server.front.handshake import Security
 from bridge_server.front.websocket import WebSocketLink
 from bridge_server.http.metrics import BridgeMetrics
 from bridge_server.http.web import Web
 from bridge_server.http.web_access import WebAccess
-from bridge_server.workers.forward import Forwarder
 from rosbridge_core.graph import Graph
 from rosbridge_core.protocol import keepalive
 from rosbridge_core.protocol.errors import RemoteProtocolError

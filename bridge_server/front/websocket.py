@@ -238,7 +238,7 @@ class BridgeConnection(WebSocketLink):
     counted: str | None = None
     forwarded_from: tuple[str, int] | None = None
     """The client's address, for a connection another worker forwarded (see
-    :mod:`bridge_server.workers.forward`): set only by the forwarded listener."""
+    :mod:`bridge_server.front.forward`): set only by the forwarded listener."""
 
     @property
     def remote_address(self) -> Any:

@@ -48,7 +48,7 @@ of an error is ``protocol`` (a frame that does not decode), ``request`` (a
 request the bridge refused, answered with a status error) or ``internal``.
 ``client`` is ``<worker>-<session id>``.
 
-A relay (:mod:`bridge_server.http.relay_web`) exports every robot's families at once with
+A relay (:mod:`bridge_server.zenoh.relay_web`) exports every robot's families at once with
 :func:`render_labelled`: each series carries one more label, ``robot``.
 
 Bounded labels

@@ -153,7 +153,7 @@ def topic_totals(bridge: Observed) -> dict[str, dict[str, Any]]:
 
 def take(bridge: Observed, rates: Mapping[str, Mapping[str, float]]) -> dict[str, Any]:
     """This process's snapshot (see the module docstring)."""
-    from roslibpy_lite import __version__
+    from rosbridge_core import __version__
 
     rec = bridge.metrics
     worker = bridge.config.worker_index

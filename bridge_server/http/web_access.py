@@ -16,7 +16,7 @@ from rosbridge_core.security.credentials import token_of
 if TYPE_CHECKING:
     from websockets.http11 import Request
 
-    from bridge_server.front.handshake import Security
+    from rosbridge_core.security.authority import Authority
 
 __all__ = ["WebAccess"]
 
@@ -32,7 +32,7 @@ class WebAccess(Access):
     The page's own static files and ``/healthz``/``/readyz`` stay open.
     """
 
-    def __init__(self, security: Security, robot: str | None = None) -> None:
+    def __init__(self, security: Authority, robot: str | None = None) -> None:
         """``robot``: the routes are one robot's on a relay (a role limited to other robots
         may not see them)."""
         self.security = security

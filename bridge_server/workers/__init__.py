@@ -3,7 +3,8 @@
 - :mod:`.supervisor`: the supervisor process (no rclpy) that reserves the port, starts,
   watches and restarts the workers, and relays their logs;
 - :mod:`.peers`: how workers see each other (each serves its snapshot on a unix socket,
-  and reads the others' for the status page and ``/metrics``);
-- :mod:`.forward`: a session resume that reaches another worker is forwarded to the
-  worker that holds the session.
+  and reads the others' for the status page and ``/metrics``).
+
+A session resume that reaches another worker is forwarded to the worker that holds the
+session by the front (:mod:`bridge_server.front.forward`).
 """

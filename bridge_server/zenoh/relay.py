@@ -13,7 +13,7 @@ on one router serve the same robots: each robot's messages cross its uplink once
 the number of relays and viewers.
 
 Plain GETs on the same port show the relay's robots and each robot's bridge status page
-and metrics (:mod:`bridge_server.http.relay_web`).
+and metrics (:mod:`bridge_server.zenoh.relay_web`).
 
 It listens at once; until its Zenoh router answers (``--zenoh-connect`` to a router that is
 not up yet) a client is refused with 503 naming why (``Retry-After: 1``) and ``/readyz``
@@ -47,7 +47,6 @@ try:
     from bridge_server.front.handshake import Security
     from bridge_server.front.server import REFUSALS, Bridge, BridgeConfig, websockets_pings
     from bridge_server.front.websocket import BridgeConnection
-    from bridge_server.http.relay_web import RelayWeb
     from bridge_server.http.web import Reply, address_of, handshake_headers, respond
     from bridge_server.http.web_access import WebAccess
     from bridge_server.zenoh import inbox as zenoh_inbox
@@ -56,6 +55,7 @@ try:
     from bridge_server.zenoh.forget import Forgetter
     from bridge_server.zenoh.graph import ZenohGraph
     from bridge_server.zenoh.refusals import RobotRefusals, reading_zenoh_log
+    from bridge_server.zenoh.relay_web import RelayWeb
     from bridge_server.zenoh.typestore import (
         MAX_DEFINITION_BYTES,
         MAX_FIELDS,

@@ -21,7 +21,7 @@ from typing import TYPE_CHECKING
 from rosbridge_core.counters import BridgeMetrics
 from rosbridge_core.memory.graph import MemoryGraph, MemoryRos
 from rosbridge_core.memory.link import MemoryLink
-from rosbridge_core.security.access import Access
+from rosbridge_core.security.authority import Authority
 from rosbridge_core.security.options import SecurityConfig
 from rosbridge_core.session.actions import ActionClients, SessionActions
 from rosbridge_core.session.config import SessionConfig
@@ -88,7 +88,7 @@ class MemoryServer:
         self.service_owners: Ownership[SessionServices] = Ownership("service")
         self.action_owners: Ownership[SessionActions] = Ownership("action")
         self.action_clients = ActionClients()
-        self.security = Access(security or SecurityConfig())
+        self.security = Authority(security or SecurityConfig())
         self.resumable: SessionStore[Session] = SessionStore(ResumeConfig(session_keep=0.0))
         self.session_config = config
         self.link_config = LinkConfig(max_message_size, 0.0, 0.0)

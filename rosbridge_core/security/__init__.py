@@ -2,8 +2,8 @@
 
 One module per job: :mod:`.options` (the command line, :class:`SecurityConfig`),
 :mod:`.auth` (the auth file, principals, tokens), :mod:`.permissions` (what a role may
-do), :mod:`.accounts` (what a principal and an address may hold), :mod:`.access`
-(:class:`Access`: what every session of one bridge shares: the auth file, the lock-out,
+do), :mod:`.accounts` (what a principal and an address may hold), :mod:`.authority`
+(:class:`Authority`: what every session of one bridge shares: the auth file, the lock-out,
 the ``auth`` op's check, a gate per session), :mod:`.gate` (:class:`Gate`: per session,
 consulted before each frame and each op: the ``auth`` op, the op rate, name validity, the
 role's permissions and the caps on subscriptions, publishers and services),
@@ -14,7 +14,7 @@ The websocket front builds on it: :class:`bridge_server.front.handshake.Security
 TLS, the handshake's checks (origin, client limits, a token in a header or the query) and
 SIGHUP's reload of the certificates; :mod:`bridge_server.front.websocket` the inbound byte
 budget per connection. The in-memory server (:mod:`rosbridge_core.memory.server`) uses
-:class:`Access` alone.
+:class:`Authority` alone.
 
 Refusals answer the offender and nobody else: a ``status`` error naming the op, the name
 and the role for a forbidden op, and a close with code 1008 (policy violation) and a
@@ -24,7 +24,7 @@ text (:class:`RedactTokens` also scrubs other libraries' log lines).
 
 from __future__ import annotations
 
-from rosbridge_core.security.access import Access
+from rosbridge_core.security.authority import Authority
 from rosbridge_core.security.credentials import is_loopback
 from rosbridge_core.security.gate import POLICY_VIOLATION, PRE_AUTH_FRAME_LIMIT, Gate
 from rosbridge_core.security.options import (
@@ -41,7 +41,7 @@ from rosbridge_core.security.redaction import RedactTokens, install_log_redactio
 __all__ = [
     "POLICY_VIOLATION",
     "PRE_AUTH_FRAME_LIMIT",
-    "Access",
+    "Authority",
     "Gate",
     "RedactTokens",
     "SecurityConfig",

@@ -87,7 +87,7 @@ class Guarded(Protocol):
 
 
 class Verifier(Protocol):
-    """What a gate needs of the bridge's security (:class:`~.access.Access`)."""
+    """What a gate needs of the bridge's security (:class:`~.authority.Authority`)."""
 
     auth: AuthConfig | None
     config: SecurityConfig
@@ -98,7 +98,7 @@ class Verifier(Protocol):
 
 
 class GateFactory(Protocol):
-    """Where a session gets its gate (:class:`~.access.Access`)."""
+    """Where a session gets its gate (:class:`~.authority.Authority`)."""
 
     @property
     def config(self) -> SecurityConfig:

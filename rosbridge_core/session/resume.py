@@ -22,7 +22,7 @@ random bits, is never logged.
 
 With ``--workers`` a session lives in the worker that opened it, and its token starts with
 that worker's index (``w1.`` and the random part): a worker that a resume reaches for
-another worker's token hands the connection over to it (:mod:`bridge_server.workers.forward`).
+another worker's token hands the connection over to it (:mod:`bridge_server.front.forward`).
 """
 
 from __future__ import annotations

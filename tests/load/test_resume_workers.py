@@ -1,6 +1,6 @@
 """Sessions that survive a dropped link with --workers 2: the kernel hands each reconnect to
 either worker, and the one that does not keep the session forwards it to the one that does
-(bridge_server/workers/forward.py), over ws:// and over wss:// with a token."""
+(bridge_server/front/forward.py), over ws:// and over wss:// with a token."""
 
 from __future__ import annotations
 

@@ -1,6 +1,6 @@
 """The bridge's typed status (bridge_server/http/status.py) is the one place a status field is
 declared: /status.json's keys, the workers' merge and /metrics all follow its fields, and so
-do a relay's per-robot entries and families (bridge_server/http/relay_status.py), with no
+do a relay's per-robot entries and families (bridge_server/zenoh/relay_status.py), with no
 bridge running (the live output is checked by test_status_json.py, test_metrics.py and
 tests/relay/test_relay_status.py)."""
 
@@ -15,8 +15,8 @@ from prometheus_client.exposition import generate_latest
 from prometheus_client.parser import text_string_to_metric_families
 
 from bridge_server.http import metrics, snapshot
-from bridge_server.http.relay_status import EXPORTED, RobotStatus, robot_families, robot_status
 from bridge_server.http.status import COUNTERS, BridgeStatus
+from bridge_server.zenoh.relay_status import EXPORTED, RobotStatus, robot_families, robot_status
 from rosbridge_core.session.client_status import ClientStatus, SubscriptionStatus
 from tests.helpers import ROOT
 

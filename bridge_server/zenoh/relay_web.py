@@ -61,15 +61,15 @@ from prometheus_client.core import CounterMetricFamily
 
 from bridge_server.http import metrics
 from bridge_server.http.rates import RATE_WINDOW, Window
-from bridge_server.http.relay_status import (
+from bridge_server.http.web import Reply, open_route, static_files, viewer, visible
+from bridge_server.http.web_access import WebAccess
+from bridge_server.zenoh.relay_status import (
     RobotStatus,
     robot_families,
     robot_status,
     robots_refused,
     robots_refused_family,
 )
-from bridge_server.http.web import Reply, open_route, static_files, viewer, visible
-from bridge_server.http.web_access import WebAccess
 
 if TYPE_CHECKING:
     from websockets.http11 import Request
@@ -235,7 +235,7 @@ class RelayWeb:
         return robots
 
     def _status(self, robots: list[RobotStatus]) -> dict[str, Any]:
-        from roslibpy_lite import __version__
+        from rosbridge_core import __version__
 
         return {"relay": self.relay.relay_id, "version": __version__, "started": self.started,
                 "now": time.time(), "ready": self.relay.trouble() is None,

@@ -2,7 +2,7 @@
 its principals, the failed-attempt lock-out, what each principal and address may hold, the
 ``auth`` op's check and a gate per session.
 
-:class:`Access` is all of it that a session over any link uses (the in-memory server's, and
+:class:`Authority` is all of it that a session over any link uses (the in-memory server's, and
 MockRos's); the websocket front's :class:`bridge_server.front.handshake.Security` adds TLS,
 the handshake's checks and the connection counts on top.
 """
@@ -23,12 +23,12 @@ from rosbridge_core.security.auth import (
 from rosbridge_core.security.gate import Gate, Guarded
 from rosbridge_core.security.options import SecurityConfig
 
-__all__ = ["Access"]
+__all__ = ["Authority"]
 
 log = logging.getLogger("bridge_server.security")
 
 
-class Access:
+class Authority:
     """The security configuration a bridge's sessions share, and the state kept across them."""
 
     def __init__(self, config: SecurityConfig) -> None:
