@@ -4,7 +4,8 @@ A client that offers the subprotocol in its handshake (Foxglove, Lichtblick, the
 ``@foxglove/ws-protocol`` client) gets a :class:`FoxgloveSession`; every other client gets
 a rosbridge session as before. :mod:`.wire` is the protocol's frames without I/O,
 :mod:`.hub` what the Foxglove sessions of a bridge share (channels, services, watches),
-:mod:`.session` one client. They reach ROS only through the
+:mod:`.session` one client (built of :mod:`.base`, :mod:`.channels` and :mod:`.parameters`),
+:mod:`.inbound` the ordered decoding of what a client publishes. They reach ROS only through the
 :class:`~rosbridge_core.graph.Graph`.
 """
 

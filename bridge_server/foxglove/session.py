@@ -17,134 +17,57 @@ shared payload are joined only into the socket write). What a client publishes o
 service request is decoded from CDR (or JSON) with the pure-Python classes of
 :mod:`msgs` (:func:`~bridge_server.foxglove.hub.message_class`), checked by the same
 converter as rosbridge's publishes, and only then reaches ROS.
+
+The session is built of parts along its jobs: :mod:`.base` (its state and the frames that
+tell the client something), :mod:`.channels` (subscriptions and client publishing) and
+:mod:`.parameters`; this module runs the frame loop, answers service calls and the
+connection graph, and re-checks grants.
 """
 
 from __future__ import annotations
 
 import asyncio
-import base64
-import binascii
 import contextlib
 import json
-import logging
-import math
-import time
-from collections.abc import Callable, Coroutine
-from dataclasses import dataclass
+from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
 from bridge_server.foxglove import wire
-from bridge_server.foxglove.hub import CLOCK, GraphState, message_class
-from bridge_server.foxglove.inbound import Inbound
+from bridge_server.foxglove.base import ENCODINGS, log
+from bridge_server.foxglove.channels import QUEUE_BYTES, ChannelOps
+from bridge_server.foxglove.hub import CLOCK
+from bridge_server.foxglove.parameters import ParameterOps
 from msgs import cdr
 from msgs.runtime import ValidationError
-from rosbridge_core.codec.budget import explain
-from rosbridge_core.interfaces import BridgeError, ConversionError, canonical_name
+from rosbridge_core.interfaces import BridgeError
 from rosbridge_core.security.gate import POLICY_VIOLATION
-from rosbridge_core.security.names import InvalidNameError, check_name, full_name
 from rosbridge_core.security.permissions import LISTING, PARAMETER_LISTING
-from rosbridge_core.session.calls import Calls
 from rosbridge_core.session.client_status import ClientStatus, client_status
-from rosbridge_core.session.limits import over_cap
 from rosbridge_core.session.liveness import watch_link
-from rosbridge_core.session.outbox import Outbox, Subscription
 
 if TYPE_CHECKING:
-    from bridge_server.foxglove.hub import Hub, ServiceEntry
-    from rosbridge_core.graph import Message as RosMessage
-    from rosbridge_core.graph import Publisher
-    from rosbridge_core.security.options import SecurityConfig
+    from bridge_server.foxglove.hub import GraphState, Hub, ServiceEntry
     from rosbridge_core.session.host import Shared
     from rosbridge_core.session.link import ClientLink
 
 __all__ = ["ENCODINGS", "OVERSIZE_GRACE", "QUEUE_BYTES", "FoxgloveSession"]
 
-log = logging.getLogger("bridge_server.foxglove")
-
-QUEUE_BYTES = 8 * 1024 * 1024
-"""Bytes of messages a subscription holds for a slow client (at most the bridge's default
-queue length of them; nine 640x480 rgb8 frames, about foxglove_bridge's 10 MB send buffer
-limit per connection); when full, the oldest goes first."""
-
-ENCODINGS = ("cdr", "json")
-"""Encodings a client may publish and call services in."""
-
 OVERSIZE_GRACE = 1024 * 1024
 """Bytes past ``--max-message-size`` a Foxglove frame may have and still be answered
 with a ``status`` error (and dropped) rather than a close (1009)."""
 
-_LEVELS = {"info": wire.STATUS_INFO, "warning": wire.STATUS_WARNING, "error": wire.STATUS_ERROR}
 
-
-@dataclass
-class _ClientChannel:
-    """A channel the client publishes on."""
-
-    id: int
-    topic: str
-    encoding: str
-    publisher: Publisher
-    inbound: Inbound  # decodes and converts its messages, in order (large ones off the loop)
-
-
-class _Topics:
-    """A client's subscriptions and publishers by topic (what the bridge's per-topic
-    counts read of every session kind)."""
-
-    def __init__(self) -> None:
-        self.subs: dict[str, Subscription] = {}
-        self.publishers: dict[str, Publisher] = {}
-
-
-class FoxgloveSession:
+class FoxgloveSession(ChannelOps, ParameterOps):
     """One Foxglove client (see the module's text)."""
 
-    protocol_name = "foxglove"
+    hub: Hub[FoxgloveSession]
 
     def __init__(self, shared: Shared, hub: Hub[FoxgloveSession], link: ClientLink, sid: int
                  ) -> None:
         """Client ``sid``'s session over ``link``, sharing ``shared`` with the other sessions
         of its server and ``hub`` with the other Foxglove ones."""
-        self.shared = shared
-        self.hub = hub
-        self.graph = shared.graph
-        self.link = link
-        self.sid = sid
-        self.loop = asyncio.get_running_loop()
-        self.config = shared.session_config
-        self.peer = link.address
-        self.connected_at = time.time()
-        self.calls = Calls(self.loop)
-        self.outbox = Outbox(
-            link, sid, self.config.control_limit, shared.security.config.max_queued_messages,
-            self.config.drop_report_interval, lambda text: self.status("warning", text),
-        )
-        self.topics = _Topics()
-        self.subscriptions: dict[int, tuple[Subscription, wire.Channel]] = {}
-        self.client_channels: dict[int, _ClientChannel] = {}
-        self._publisher_refs: dict[str, int] = {}
-        self._listeners: dict[Subscription, Callable[[RosMessage], None]] = {}
-        self.parameter_names: set[str] | None = None  # None: not following; empty: all
-        self.graph_seen: GraphState | None = None  # what it was told; None: not following
-        self.shown_channels: set[int] = set()  # the ids of the channels it was told of
-        self.shown_services: set[int] = set()
-        self.uses_time = False
+        super().__init__(shared, hub, link, sid)
         self.gate = shared.security.gate(self)
-
-    @property
-    def limits(self) -> SecurityConfig:
-        """The bridge's per-connection limits (as configured now)."""
-        return self.shared.security.config
-
-    @property
-    def wants_graph(self) -> bool:
-        """Whether the client follows the connection graph."""
-        return self.graph_seen is not None
-
-    @property
-    def closed(self) -> bool:
-        """Whether the connection has ended."""
-        return self.outbox.closed
 
     # -- running -------------------------------------------------------------------------------
 
@@ -222,36 +145,6 @@ class FoxgloveSession:
             publishes=self.topics.publishers, serves=(), calls_in_flight=len(self.calls),
             parked=False)
 
-    def spawn(self, coro: Coroutine[Any, Any, None]) -> None:
-        """Run ``coro`` as a task of this client's, cancelled when it leaves."""
-        self.calls.spawn(coro)
-
-    # -- sending -------------------------------------------------------------------------------
-
-    def send_text(self, frame: str | bytes) -> None:
-        """Queue one control frame (JSON text or a binary op)."""
-        self.outbox.send_text(frame)
-
-    def status(self, level: str, msg: str, id: Any = None, *, always: bool = True) -> None:
-        """A ``status`` op (``level``: info, warning or error, as the gate says them)."""
-        self.send_text(wire.json_frame("status", level=_LEVELS.get(level, wire.STATUS_ERROR),
-                                       message=msg))
-
-    def error(self, msg: str, kind: str = "request") -> None:
-        """Tell the client of a refused or failed request; count it by kind."""
-        log.info("foxglove client %d: %s", self.sid, msg)
-        self.shared.metrics.error(kind)
-        self.status("error", msg)
-
-    def refuse(self, op: Any, why: str) -> None:
-        """The gate's refusal of ``op`` (see :meth:`Gate.deny`)."""
-        self.error(f"{getattr(op, 'OP', type(op).__name__)}: {why}")
-
-    def send_time(self, stamp_ns: int) -> None:
-        """The ``time`` op, to a client told of the ``time`` capability."""
-        if self.uses_time:
-            self.send_text(wire.time_frame(stamp_ns))
-
     def graph_changed(self, added: list[wire.Channel], removed: list[wire.Channel],
                       s_added: list[ServiceEntry], s_removed: list[ServiceEntry]) -> None:
         """Channels and services came or went: subscriptions to those gone end, and the
@@ -293,17 +186,6 @@ class FoxgloveSession:
         if update is not None:
             self.send_text(wire.json_frame("connectionGraphUpdate", **update))
 
-    def parameters_changed(self, changed: list[tuple[str, Any]]) -> None:
-        """Parameters changed in ROS: tell the client of those it follows."""
-        names = self.parameter_names
-        if names is None:
-            return
-        shown = [(n, v) for n, v in changed if (not names or n in names)
-                 and self.gate.forbids("params", ":".join(_split(n))) is None]
-        if shown:
-            self.send_text(wire.json_frame("parameterValues",
-                                           parameters=[_parameter(n, v) for n, v in shown]))
-
     # -- receiving -----------------------------------------------------------------------------
 
     def handle_frame(self, frame: str | bytes) -> None:
@@ -329,171 +211,6 @@ class FoxgloveSession:
             log.exception("foxglove client %d: %s failed", self.sid, type(op).__name__)
             self.error(f"{type(op).__name__}: internal error (the bridge log has the details)",
                        "internal")
-
-    # -- subscriptions -------------------------------------------------------------------------
-
-    def _subscribe(self, op: wire.Subscribe) -> None:
-        for sub_id, channel_id in op.subscriptions:
-            channel = self.hub.by_id.get(channel_id)
-            if sub_id in self.subscriptions:
-                self.error(f"subscribe: subscription id {sub_id} is in use on this connection")
-            elif channel is None:
-                self.error(f"subscribe: no channel {channel_id} (unknown, or no longer "
-                           "advertised)")
-            elif channel.topic in self.topics.subs:
-                self.error(f"subscribe: channel {channel_id} ({channel.topic}) is subscribed "
-                           "on this connection already")
-            elif (why := self.gate.forbids("subscribe", channel.topic)) is not None:
-                self.error(f"subscribe: {channel.topic}: forbidden: {why}")
-            elif (why := over_cap(self.topics.subs, channel.topic,
-                                  self.limits.max_subscriptions, "subscriptions")) is not None:
-                self.error(f"subscribe: {channel.topic}: {why}")
-            else:
-                self._add_subscription(sub_id, channel)
-
-    def _add_subscription(self, sub_id: int, channel: wire.Channel) -> None:
-        topic = channel.topic
-        cls = self.graph.resolve_message(channel.schema_name)
-        sub = Subscription(self.outbox, topic, topic)
-        header = wire.message_data_header
-        hub = self.hub
-        cap = min(self.config.default_queue_length, self.limits.max_queue_length or 1 << 30)
-
-        def frame(inc: RosMessage) -> tuple[bytes, bytes]:
-            stamp = hub.clock_ns if self.uses_time and hub.clock_ns is not None else inc.stamp_ns
-            return header(sub_id, stamp), inc.data  # the payload is not copied per client
-
-        def on_message(inc: RosMessage) -> None:
-            # newest wins within QUEUE_BYTES: 9 camera frames, or the default count of small ones
-            sub.maxlen = max(1, min(cap, QUEUE_BYTES // (len(inc.data) + 1)))
-            sub.on_message(inc)
-
-        sub.encode = frame
-        self._listeners[sub] = on_message
-        try:
-            sub.shared = self.graph.subscribe(topic, cls, on_message)
-        except ValueError as exc:
-            del self._listeners[sub]
-            self.error(f"subscribe: {exc}")
-            return
-        self.subscriptions[sub_id] = (sub, channel)
-        self.topics.subs[topic] = sub
-        self.shared.graph_changed()
-        latched = sub.shared.latched
-        if latched is not None:
-            self.outbox.push(sub, latched)
-
-    def _unsubscribe(self, op: wire.Unsubscribe) -> None:
-        for sub_id in op.subscription_ids:
-            found = self.subscriptions.pop(sub_id, None)
-            if found is None:
-                self.error(f"unsubscribe: no subscription {sub_id} on this connection")
-                continue
-            self._drop(found[0])
-
-    def _drop(self, sub: Subscription) -> None:
-        self.topics.subs.pop(sub.topic, None)
-        sub.close()
-        metrics = self.shared.metrics
-        metrics.retire_subscription(sub.topic, sub.sent, sub.sent_bytes, sub.dropped_total)
-        if sub.shared is not None:
-            shared, sub.shared = sub.shared, None
-            self.graph.unsubscribe(shared, self._listeners.pop(sub))
-            if self.graph.subscriptions.get(shared.topic) is not shared:
-                metrics.retire_ros_subscription(shared.topic, shared.received)
-
-    # -- client publishing ---------------------------------------------------------------------
-
-    def _advertise(self, op: wire.ClientAdvertise) -> None:
-        for ch in op.channels:
-            try:
-                self._add_client_channel(ch)
-            except BridgeError as exc:
-                self.error(f"advertise: channel {ch.id} ({ch.topic}): {exc}")
-
-    def _add_client_channel(self, ch: wire.ClientChannel) -> None:
-        topic = full_name(ch.topic)
-        if ch.id in self.client_channels:
-            raise BridgeError(f"channel id {ch.id} is advertised on this connection already")
-        if ch.encoding not in ENCODINGS:
-            raise BridgeError(f"encoding {ch.encoding!r} is not one of "
-                              f"{', '.join(ENCODINGS)}")
-        try:
-            check_name(topic, "topic")
-        except InvalidNameError as exc:
-            raise BridgeError(str(exc)) from None
-        why = self.gate.forbids("publish", topic)
-        if why is not None:
-            raise BridgeError(f"forbidden: {why}")
-        why = over_cap(self.topics.publishers, topic, self.limits.max_publishers, "publishers")
-        if why is not None:
-            raise BridgeError(why)
-        type_name = canonical_name(ch.schema_name, "msg")
-        cls = self.graph.resolve_message(type_name)
-        others = [t for t in [*self.graph.topic_types(topic), *self.graph.publisher_types(topic)]
-                  if t != type_name]
-        if others:
-            raise BridgeError(f"topic {topic} has type {others[0]}, not {type_name}")
-        if ch.encoding == "cdr":
-            decode: Callable[[bytes], Any] = cdr.decoder_for(message_class(self.graph, type_name))
-        else:
-            decode = wire.parse_json
-        pub = self.topics.publishers.get(topic)
-        if pub is None:
-            pub = self.topics.publishers[topic] = self.graph.acquire_publisher(topic, cls, False,
-                                                                               10)
-        self._publisher_refs[topic] = self._publisher_refs.get(topic, 0) + 1
-        conv = pub.conv
-
-        def convert(payload: bytes) -> Any:
-            return conv.from_obj(decode(payload), "msg")
-
-        self.client_channels[ch.id] = _ClientChannel(ch.id, topic, ch.encoding, pub,
-                                                     Inbound(convert))
-
-    def _unadvertise(self, op: wire.ClientUnadvertise) -> None:
-        for channel_id in op.channel_ids:
-            ch = self.client_channels.pop(channel_id, None)
-            if ch is None:
-                self.error(f"unadvertise: no client channel {channel_id} on this connection")
-                continue
-            ch.inbound.close()
-            refs = self._publisher_refs[ch.topic] - 1
-            self._publisher_refs[ch.topic] = refs
-            if refs == 0:
-                del self._publisher_refs[ch.topic]
-                self.graph.release_publisher(self.topics.publishers.pop(ch.topic))
-
-    def _publish(self, op: wire.ClientMessage) -> None:
-        ch = self.client_channels.get(op.channel_id)
-        if ch is None:
-            self.error(f"message data: no client channel {op.channel_id} on this connection "
-                       "(advertise it first)")
-            return
-        size = len(op.payload)
-
-        def done(msg: Any, exc: BaseException | None) -> None:
-            if exc is not None:
-                self._not_published(ch, exc)
-            elif self.client_channels.get(ch.id) is ch:  # not unadvertised meanwhile
-                ch.publisher.publish(msg)
-                self.shared.metrics.published(ch.topic, size + 5)
-
-        why = ch.inbound.submit(op.payload, done)
-        if why is not None:
-            self._not_published(ch, why)
-
-    def _not_published(self, ch: _ClientChannel, why: BaseException | str) -> None:
-        """Tell the client one of its messages on ``ch`` was not published, and why (a
-        message over the decode budget names its field and the budget)."""
-        if not isinstance(why, str | cdr.CdrError | ValueError | ConversionError):
-            log.error("session %d: converting a message of %s failed", self.sid, ch.topic,
-                      exc_info=why)
-            why = f"internal error ({type(why).__name__})"
-        elif not isinstance(why, str):
-            why = explain(why)
-        self.error(f"message data on {ch.topic} ({ch.publisher.type_name}, {ch.encoding}): "
-                   f"not published: {why}")
 
     # -- services ------------------------------------------------------------------------------
 
@@ -542,106 +259,6 @@ class FoxgloveSession:
         self.send_text(wire.json_frame("serviceCallFailure", serviceId=op.service_id,
                                        callId=op.call_id, message=why))
 
-    # -- parameters ----------------------------------------------------------------------------
-
-    def _get_parameters(self, op: wire.GetParameters) -> None:
-        for name in op.names:
-            _split(name)  # a name that is not /node.param is refused now
-        if op.names or self.gate.allowed(op, *PARAMETER_LISTING):
-            self.spawn(self._answer_parameters(list(op.names), op.id))
-        elif op.id is not None:  # refused (the client was told): no values for the id
-            self.send_text(wire.json_frame("parameterValues", parameters=[], id=op.id))
-
-    async def _answer_parameters(self, names: list[str], request_id: str | None) -> None:
-        if not names:
-            names = await self._all_parameter_names()
-        found: list[dict[str, Any]] = []
-        for name, value in zip(names, await asyncio.gather(
-                *(self._get_one(n) for n in names)), strict=True):
-            if value is not _MISSING:
-                found.append(_parameter(name, value))
-        self.send_text(wire.json_frame("parameterValues", parameters=found, id=request_id))
-
-    async def _all_parameter_names(self) -> list[str]:
-        nodes = [f"{ns.rstrip('/')}/{n}" for n, ns in self.graph.node_names()]
-
-        async def of(node: str) -> list[str]:
-            try:
-                names = await self.graph.parameter_names(node, 2.0)
-            except Exception:  # a node without parameter services, or gone
-                return []
-            return [f"{node}.{p}" for p in names
-                    if self.gate.forbids("params", f"{node}:{p}") is None]
-
-        return [name for names in await asyncio.gather(*(of(n) for n in nodes))
-                for name in names]
-
-    async def _get_one(self, name: str) -> Any:
-        node, param = _split(name)
-        why = self.gate.forbids("params", f"{node}:{param}")
-        if why is not None:
-            self.error(f"getParameters: {name}: forbidden: {why}")
-            return _MISSING
-        try:
-            is_set, value = await self.graph.get_parameter(node, param)
-        except (TimeoutError, LookupError, BridgeError) as exc:
-            self.error(f"getParameters: {name}: node {node} did not answer ({exc or 'timeout'})")
-            return _MISSING
-        return value if is_set else _MISSING
-
-    def _set_parameters(self, op: wire.SetParameters) -> None:
-        for name, _, _ in op.parameters:
-            _split(name)
-        self.spawn(self._run_set(op))
-
-    async def _run_set(self, op: wire.SetParameters) -> None:
-        done: list[str] = []
-        for name, raw, kind in op.parameters:
-            node, param = _split(name)
-            why = self.gate.forbids("params", f"{node}:{param}")
-            if why is not None:
-                self.error(f"setParameters: {name}: forbidden: {why}")
-                continue
-            try:
-                value = _from_wire(raw, kind)
-                ok, reason = await self.graph.set_parameter(node, param, value)
-            except (ValueError, TypeError) as exc:
-                self.error(f"setParameters: {name}: {exc}")
-                continue
-            except (TimeoutError, LookupError, BridgeError) as exc:
-                self.error(f"setParameters: {name}: node {node} did not answer "
-                           f"({exc or 'timeout'})")
-                continue
-            if not ok:
-                self.error(f"setParameters: {name}: the node refused: {reason or 'no reason'}")
-                continue
-            done.append(name)
-        if op.id is not None:
-            await self._answer_parameters(done, op.id) if done else self.send_text(
-                wire.json_frame("parameterValues", parameters=[], id=op.id))
-
-    def _follow_parameters(self, op: wire.SubscribeParameterUpdates) -> None:
-        if not self.gate.allowed(op, *PARAMETER_LISTING):
-            return
-        current = self.parameter_names
-        if not op.names:
-            self.parameter_names = set()
-        elif current is None:
-            self.parameter_names = set(op.names)
-        elif current:
-            current.update(op.names)
-        self.hub.update_watches()
-
-    def _unfollow_parameters(self, op: wire.UnsubscribeParameterUpdates) -> None:
-        current = self.parameter_names
-        if not op.names or current is None:
-            self.parameter_names = None
-        else:
-            current.difference_update(op.names)
-            if not current:
-                self.parameter_names = None
-        self.hub.update_watches()
-
     # -- connection graph, assets ----------------------------------------------------------------
 
     def _follow_graph(self, op: wire.SubscribeConnectionGraph) -> None:
@@ -655,16 +272,16 @@ class FoxgloveSession:
         self.error(f"fetchAsset {op.uri}: this server has no assets (no 'assets' capability)")
 
     _HANDLERS: dict[type[Any], Callable[[FoxgloveSession, Any], None]] = {
-        wire.Subscribe: _subscribe,
-        wire.Unsubscribe: _unsubscribe,
-        wire.ClientAdvertise: _advertise,
-        wire.ClientUnadvertise: _unadvertise,
-        wire.ClientMessage: _publish,
+        wire.Subscribe: ChannelOps._subscribe,
+        wire.Unsubscribe: ChannelOps._unsubscribe,
+        wire.ClientAdvertise: ChannelOps._advertise,
+        wire.ClientUnadvertise: ChannelOps._unadvertise,
+        wire.ClientMessage: ChannelOps._publish,
         wire.ServiceCall: _call,
-        wire.GetParameters: _get_parameters,
-        wire.SetParameters: _set_parameters,
-        wire.SubscribeParameterUpdates: _follow_parameters,
-        wire.UnsubscribeParameterUpdates: _unfollow_parameters,
+        wire.GetParameters: ParameterOps._get_parameters,
+        wire.SetParameters: ParameterOps._set_parameters,
+        wire.SubscribeParameterUpdates: ParameterOps._follow_parameters,
+        wire.UnsubscribeParameterUpdates: ParameterOps._unfollow_parameters,
         wire.SubscribeConnectionGraph: _follow_graph,
         wire.UnsubscribeConnectionGraph: _unfollow_graph,
         wire.FetchAsset: _fetch_asset,
@@ -703,59 +320,3 @@ class FoxgloveSession:
                 self.error(f"connection graph updates ended: {why}")
                 ended += 1
         return ended
-
-
-_MISSING = object()
-
-
-def _split(name: str) -> tuple[str, str]:
-    """``/node.param`` as (``/node``, ``param``): node names have no dots, parameters may."""
-    node, dot, param = name.partition(".")
-    if not dot or not node or not param:
-        raise BridgeError(f"parameter {name!r}: expected '/node_name.parameter_name'")
-    return full_name(node), param
-
-
-def _parameter(name: str, value: Any) -> dict[str, Any]:
-    """One entry of ``parameterValues`` from a Graph parameter value, as the spec has it: a
-    byte array as base64 text typed ``byte_array``, a double typed ``float64``, a non-empty
-    double array typed ``float64_array`` (an empty one cannot be told from other empty
-    arrays), ``None`` (unset) with no value. JSON has no NaN or infinity: a double that is
-    one is its text (``"nan"``, ``"inf"``, ``"-inf"``) and the value is not typed as a
-    number, in an array too."""
-    if isinstance(value, bytes | bytearray):
-        return {"name": name, "value": base64.b64encode(value).decode(), "type": "byte_array"}
-    if isinstance(value, float):
-        if not math.isfinite(value):
-            return {"name": name, "value": str(value)}
-        return {"name": name, "value": value, "type": "float64"}
-    if isinstance(value, list) and value and all(isinstance(v, float) for v in value):
-        if not all(math.isfinite(v) for v in value):
-            return {"name": name, "value": [v if math.isfinite(v) else str(v) for v in value]}
-        return {"name": name, "value": value, "type": "float64_array"}
-    if value is None:
-        return {"name": name}
-    return {"name": name, "value": value}
-
-
-def _from_wire(value: Any, kind: str | None) -> Any:
-    """A ``setParameters`` value as the Graph takes it."""
-    if value is None:
-        return None
-    if kind == "byte_array":
-        if not isinstance(value, str):
-            raise ValueError("a byte_array value must be a base64 string")
-        try:
-            return base64.b64decode(value, validate=True)
-        except binascii.Error as exc:
-            raise ValueError(f"a byte_array value is not base64: {exc}") from None
-    if kind == "float64":
-        if isinstance(value, bool) or not isinstance(value, int | float):
-            raise ValueError(f"a float64 value must be a number, got {type(value).__name__}")
-        return float(value)
-    if kind == "float64_array":
-        if not isinstance(value, list) or not all(
-                isinstance(v, int | float) and not isinstance(v, bool) for v in value):
-            raise ValueError("a float64_array value must be a list of numbers")
-        return [float(v) for v in value]
-    return value
