@@ -317,10 +317,13 @@ async def measured(tier: Tier, seconds: float) -> dict[str, dict[str, float]]:
     return tier.usage.since()
 
 
-async def run_size(ctx: Ctx, size: Size, folder: Path, churn_s: float) -> dict[str, Any]:
-    """Every measurement of the module's text at one size."""
+async def run_size(ctx: Ctx, size: Size, folder: Path, churn_s: float,
+                   out: dict[str, Any] | None = None) -> dict[str, Any]:
+    """Every measurement of the module's text at one size, each put in ``out`` (returned)
+    as it is made, so a caller that stops a size midway keeps what it measured."""
     tier = Tier(ctx, size, folder)
-    out: dict[str, Any] = {"size": str(size)}
+    out = {} if out is None else out
+    out["size"] = str(size)
     win = 6.0 if ctx.quick else 10.0
     try:
         await tier.start()
