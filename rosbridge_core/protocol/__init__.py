@@ -5,7 +5,8 @@ other module of the client, so the bridge (``bridge_server``) and the relay use 
 loading the client. A test keeps it so (``tests/core/test_protocol_core.py``).
 
 - :mod:`~rosbridge_core.protocol.ops`: every op as a frozen dataclass, parsed and serialized
-  in one place, and the handshake headers;
+  in one place (the kinds its fields may hold: :mod:`~rosbridge_core.protocol.kinds`), and
+  the handshake headers (:mod:`~rosbridge_core.protocol.headers`, re-exported by ``ops``);
 - :mod:`~rosbridge_core.protocol.frames`: websocket frames in (JSON text, CBOR binary with
   RFC 8746 typed arrays), ``fragment`` ops reassembled and made (:class:`Protocol`);
 - :mod:`~rosbridge_core.protocol.keepalive`: how a link notices its peer went silent;

@@ -7,7 +7,9 @@ fields the op needs and their kinds, and raises
 field and what was expected; fields an op does not know are ignored (stock
 clients send a few extras). ``null`` for an optional field means "absent".
 
-The module does no I/O and needs nothing beyond the standard library.
+The kinds a field may hold live in :mod:`.kinds`; the handshake headers of our extensions
+(:data:`ACKS_HEADER` and the others, :func:`parse_received`) in :mod:`.headers`, re-exported
+here. The module does no I/O and needs nothing beyond the standard library.
 """
 
 from __future__ import annotations
@@ -15,20 +17,48 @@ from __future__ import annotations
 import base64
 import json
 import math
-from collections.abc import Callable, Mapping
-from dataclasses import MISSING, dataclass, fields
+from collections.abc import Mapping
+from dataclasses import dataclass, fields
 from typing import (
     Annotated,
     Any,
     ClassVar,
-    NamedTuple,
     TypeAlias,
     get_args,
-    get_type_hints,
 )
 
 from .errors import LocalProtocolError, RemoteProtocolError
 from .goal_status import GoalStatus
+from .headers import (
+    ACKS_HEADER,
+    AUTH_HEADER,
+    RECEIVED_HEADER,
+    RELAY_HEADER,
+    SESSION_HEADER,
+    parse_received,
+)
+from .kinds import (
+    _ANY,
+    _ARGS,
+    _BOOL,
+    _COUNT,
+    _ID,
+    _INT,
+    _MS,
+    _NAME,
+    _OBJECT,
+    _SECONDS,
+    _SIZE,
+    _STR,
+    _VALUES,
+    _describe,
+    _is_int,
+    _Kind,
+    _kind_of,
+    _Rules,
+    _rules_of,
+    _same,
+)
 
 __all__ = [
     "ACKS_HEADER",
@@ -70,62 +100,6 @@ __all__ = [
 Id: TypeAlias = str | int
 """An interaction id: the peer chooses it, every reply about it echoes it."""
 
-ACKS_HEADER = "X-Rosbridge-Acks"
-"""Handshake header of our extension: a client that sends it with ``1`` asks the bridge to
-confirm each accepted advertise/subscribe/advertise_service/advertise_action with a
-``status`` ``info`` naming the request's id (``ok: <op> <name>``); a bridge that will do so
-answers the handshake with the same header. Stock servers ignore it, and are then never waited for.
-"""
-
-AUTH_HEADER = "X-Rosbridge-Auth"
-"""Handshake response header of our bridge: ``required`` when it requires a token and this
-connection brought none (it must then send an ``auth`` op first). A client that has no token
-to send can fail at once, saying so, instead of failing at its first op."""
-
-RELAY_HEADER = "X-Rosbridge-Relay"
-"""Handshake response header of our relay (``roslibpy-lite-relay``): the robot the path
-named (empty when it named none). Its refusals say the robot is not connected, or the role may
-not reach it, so a client can say "relay" and, for an offline robot, fail at once (or wait for
-it when asked) instead of retrying a bare 404."""
-
-SESSION_HEADER = "X-Rosbridge-Session"
-"""Handshake header of our extension for sessions that survive a dropped link. A client
-sends ``new`` (or the token of the session it had); a bridge that keeps sessions answers
-with the token of this connection's session. Stock servers ignore it."""
-
-RECEIVED_HEADER = "X-Rosbridge-Received"
-"""Handshake header that goes with a session token, both ways: how many frames the sender
-has received in that session. When the bridge answers it, the session was resumed, and each
-side sends again what the other has not received."""
-
-
-def parse_received(value: str | None, limit: int | None) -> int:
-    """The frame count of a :data:`RECEIVED_HEADER` value: ASCII decimal digits only, at most
-    ``limit`` (what the other side has sent in the session: no one receives more; ``None``:
-    the form alone is checked).
-
-    Raises :class:`~roslibpy_lite.exceptions.RemoteProtocolError` with one line naming the
-    header and what is wrong with the value (missing, empty, not ASCII digits, too large).
-    """
-    if value is None:
-        raise RemoteProtocolError(f"{RECEIVED_HEADER} is missing: a resumed session needs "
-                                  "the count of frames received")
-    shown = ascii(value if len(value) <= 24 else value[:24] + "...")
-    if not value:
-        raise RemoteProtocolError(f"{RECEIVED_HEADER} is empty: expected the count of frames "
-                                  "received (ASCII decimal digits)")
-    if not (value.isascii() and value.isdigit()):
-        raise RemoteProtocolError(f"{RECEIVED_HEADER} {shown} is not a count of frames "
-                                  "(ASCII decimal digits only)")
-    if limit is None:
-        return int(value)
-    digits = value.lstrip("0") or "0"  # int() is not asked to read thousands of digits
-    count = int(digits) if len(digits) <= len(str(limit)) else limit + 1
-    if count > limit:
-        raise RemoteProtocolError(f"{RECEIVED_HEADER} {shown} is more than this session has "
-                                  f"sent ({limit} frames)")
-    return count
-
 ENCODINGS = ("none", "cbor", "cbor-raw")
 """The encodings a subscribe's ``compression`` may ask our bridge for: JSON text, CBOR, and
 CBOR around the message's CDR bytes (the bridge's codecs: ``rosbridge_core.codec.encodings``)."""
@@ -134,57 +108,13 @@ COMPRESSIONS = (*ENCODINGS, "png")
 bridge with plain JSON and a warning)."""
 
 
-# --- the ops' fields and what they may hold -------------------------------------------
+# --- the ops (their fields' kinds: .kinds) ---------------------------------------------
 
-class _Kind(NamedTuple):
-    """What a field of an op may hold: its description in errors, a check, a normaliser.
-    Each field names its kind in its annotation (``Annotated[str, _NAME]``); a field with
-    no default is required."""
-
-    expected: str
-    check: Callable[[Any], bool]
-    normalise: Callable[[Any], Any]
-
-
-def _same(value: Any) -> Any:
-    return value
-
-
-def _is_int(value: Any) -> bool:
-    return isinstance(value, int) and not isinstance(value, bool)
-
-
-def _is_number(value: Any) -> bool:
-    return (isinstance(value, int | float)) and not isinstance(value, bool)
-
-
-def _as_ms(value: Any) -> int:
-    return int(value)
-
-
-_STR = _Kind("a string", lambda v: isinstance(v, str), _same)
-_NAME = _Kind("a non-empty string", lambda v: isinstance(v, str) and v != "", _same)
-_ID = _Kind("a string or an integer", lambda v: isinstance(v, str) or _is_int(v), _same)
-_BOOL = _Kind("true or false", lambda v: isinstance(v, bool), _same)
-_INT = _Kind("an integer", _is_int, _same)
-_COUNT = _Kind("an integer >= 0", lambda v: _is_int(v) and v >= 0, _same)
-_SIZE = _Kind("an integer > 0", lambda v: _is_int(v) and v > 0, _same)
-_MS = _Kind("a number of milliseconds >= 0", lambda v: _is_number(v) and v >= 0, _as_ms)
-_SECONDS = _Kind(
-    "a number of seconds > 0",
-    lambda v: _is_number(v) and v > 0 and math.isfinite(v),
-    float,
-)
-_OBJECT = _Kind("an object", lambda v: isinstance(v, Mapping), _same)
-_ARGS = _Kind("an object or a list", lambda v: isinstance(v, Mapping | list), _same)
-_VALUES = _Kind("an object or a string", lambda v: isinstance(v, Mapping | str), _same)
 _COMPRESSION = _Kind(
     "one of " + ", ".join(COMPRESSIONS),
     lambda v: v in COMPRESSIONS,
     _same,
 )
-
-_ANY = _Kind("anything", lambda v: True, _same)
 
 
 class _OpFacts:
@@ -521,21 +451,6 @@ Op: TypeAlias = (
 
 # --- parsing -------------------------------------------------------------------
 
-# op name -> (class, {field: (kind, required)}), read from the classes' annotations
-_Rules: TypeAlias = dict[str, tuple[_Kind, bool]]
-
-
-def _rules_of(cls: type[Any]) -> _Rules:
-    hints = get_type_hints(cls, include_extras=True)
-    rules: _Rules = {}
-    for f in fields(cls):
-        kinds = [m for m in getattr(hints[f.name], "__metadata__", ()) if isinstance(m, _Kind)]
-        if len(kinds) != 1:
-            raise TypeError(f"{cls.__name__}.{f.name}: annotate it with its kind, once")
-        rules[f.name] = (kinds[0], f.default is MISSING and f.default_factory is MISSING)
-    return rules
-
-
 _RULES: dict[str, tuple[type[Any], _Rules]] = {
     cls.OP: (cls, _rules_of(cls)) for cls in get_args(Op)
 }
@@ -590,29 +505,6 @@ def parse_op(obj: Any) -> Op:
             id=op_id,
         )
     return op
-
-
-def _kind_of(value: Any) -> str:
-    if value is None:
-        return "null"
-    if isinstance(value, bool):
-        return "a boolean"
-    if isinstance(value, int | float):
-        return "a number"
-    if isinstance(value, str):
-        return "a string"
-    if isinstance(value, list):
-        return "a list"
-    if isinstance(value, Mapping):
-        return "an object"
-    return type(value).__name__
-
-
-def _describe(value: Any) -> str:
-    if isinstance(value, str | int | float | bool):
-        text = json.dumps(value)
-        return f"{_kind_of(value)} {text if len(text) <= 40 else text[:37] + '...'}"
-    return _kind_of(value)
 
 
 # --- serializing -----------------------------------------------------------------
