@@ -132,7 +132,7 @@ def test_every_op_declares_its_facts_on_its_class() -> None:
     from dataclasses import dataclass, fields
     from typing import get_args
 
-    from rosbridge_core.protocol import ops
+    from rosbridge_core.protocol import kinds, ops
 
     for cls in get_args(ops.Op):
         names = {f.name for f in fields(cls)}
@@ -146,7 +146,7 @@ def test_every_op_declares_its_facts_on_its_class() -> None:
         topic: str
 
     with pytest.raises(TypeError, match=r"Sloppy\.topic: annotate it with its kind"):
-        ops._rules_of(Sloppy)
+        kinds._rules_of(Sloppy)
 
 
 def test_a_refused_call_or_goal_gets_the_answer_a_stock_peer_waits_for() -> None:
