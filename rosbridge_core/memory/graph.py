@@ -193,7 +193,8 @@ class MemoryGraph(MsgsTypes, ParameterCalls):
     ``parameters``: the node's parameters, served as an rclpy node serves them (``None``: the
     node has no parameter services, as the bridge's own node): these are declared (their type
     is kept, they cannot be unset); others may be set and unset freely. Methods run on the
-    loop.
+    loop. The types come from :class:`~.typesource.MsgsTypes`, the parameter methods from
+    :class:`~.parameters.ParameterCalls`.
     """
 
     def __init__(self, ros: MemoryRos | None = None, name: str = "roslibpy_lite_bridge",
