@@ -53,6 +53,9 @@ __all__ = ["PER_PROCESS", "QUICK", "SIZES", "Size", "Tier", "fleet", "run_size"]
 
 OPEN_ONE = 20
 """Robots opened one at a time (:func:`open_one_by_one`) at each size."""
+JOIN_WAIT = 900
+"""Seconds a robot process waits for all its robots to hold their names (250 robots on
+this loaded machine took more than the robots' own 120 s)."""
 PER_PROCESS = 250
 """Simulated robots per process."""
 VIEWERS_PER_PROCESS = 1500
@@ -154,15 +157,17 @@ class Tier:
             sim = Child(["bench.simrobot", "--connect",
                          self.router_eps[len(self.sims) % self.size.routers],
                          "--count", str(len(chunk)), "--first", str(first),
-                         "--prefix", chunk[0].rsplit("-", 1)[0]], self.ctx.domain,
+                         "--prefix", chunk[0].rsplit("-", 1)[0], "--wait", str(JOIN_WAIT)],
+                        self.ctx.domain,
                         f"robots{len(self.sims)}")
             await sim.start()
             self.sims.append(sim)
             made.append(sim)
         for sim in made:
-            ready = await sim.event(600)
+            ready = await sim.event(JOIN_WAIT + 60)
             if ready.get("missing"):
-                raise RuntimeError(f"robots never held their names: {ready['missing'][:5]}")
+                raise RuntimeError(f"{len(ready['missing'])} robots never held their names "
+                                   f"in {JOIN_WAIT} s: {ready['missing'][:5]}")
         return made
 
     def sim_of(self, robot: str) -> Child:
@@ -328,7 +333,9 @@ async def run_size(ctx: Ctx, size: Size, folder: Path, churn_s: float,
     try:
         await tier.start()
         base = await measured(tier, win)
+        t0 = time.monotonic()
         await tier.add_robots(tier.names)
+        out["robots_join_s"] = round(time.monotonic() - t0, 1)  # until all hold their names
         await asyncio.sleep(3)
         idle = await measured(tier, win)
         out["per_unwatched_robot"] = _per(idle, base, size.robots)
