@@ -32,6 +32,7 @@ from bridge_server.allocator import tune_allocator
 try:
     from bridge_server import eventloop
     from bridge_server.front.handshake import Security
+    from bridge_server.front.server import WRITE_LIMIT
     from bridge_server.zenoh import link as zenoh_link
     from bridge_server.zenoh import robot_link
     from bridge_server.zenoh.keys import check_robot
@@ -46,6 +47,7 @@ try:
     from rosbridge_core.codec import budget as decode_budget
     from rosbridge_core.interfaces import BridgeError
     from rosbridge_core.protocol import keepalive
+    from rosbridge_core.protocol.constants import DEFAULT_PORT
     from rosbridge_core.security.options import MAX_MESSAGE_SIZE
     from rosbridge_core.session.resume import ResumeConfig
     from rosbridge_core.session.session import DEFAULT_QUEUE_LENGTH, SessionConfig
@@ -72,7 +74,8 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         "(an auth file's principals), healthcheck (exit 0 once the running bridge is ready)",
     )
     p.add_argument("--host", default="127.0.0.1", help="address to bind (default 127.0.0.1)")
-    p.add_argument("--port", type=int, default=9090, help="port (default 9090; 0: any free port)")
+    p.add_argument("--port", type=int, default=DEFAULT_PORT,
+                   help=f"port (default {DEFAULT_PORT}; 0: any free port)")
     p.add_argument(
         "--max-message-size",
         type=int,
@@ -139,8 +142,8 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p.add_argument(
         "--write-limit",
         type=int,
-        default=256 * 1024,
-        help="socket write buffer high-water mark per client in bytes (default 256 KiB)",
+        default=WRITE_LIMIT,
+        help=f"socket write buffer high-water mark per client in bytes (default {WRITE_LIMIT})",
     )
     p.add_argument(
         "--publisher-grace",

@@ -78,6 +78,8 @@ import weakref
 from collections.abc import Callable, Coroutine, Generator, Sequence
 from typing import TYPE_CHECKING, Any, TypedDict, TypeVar, Unpack
 
+from rosbridge_core.protocol.constants import MAX_CLIENT_FRAME
+
 from . import jupyter
 from ._aio import running_loop
 from ._api_types import ConnectionState
@@ -178,7 +180,7 @@ class Client(RosBase):
         open_timeout: float = 10.0,
         offline_buffer: int = 100,
         max_pending: int = 1024,
-        max_size: int | None = 256 * 1024 * 1024,
+        max_size: int | None = MAX_CLIENT_FRAME,
         ping_interval: float | None = 2.0,
         ping_timeout: float | None = 3.0,
         ws_compression: str | None = None,

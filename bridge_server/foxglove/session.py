@@ -40,7 +40,7 @@ from bridge_server.foxglove.parameters import ParameterOps
 from msgs import cdr
 from msgs.runtime import ValidationError
 from rosbridge_core.interfaces import BridgeError
-from rosbridge_core.security.gate import POLICY_VIOLATION
+from rosbridge_core.protocol.constants import POLICY_VIOLATION
 from rosbridge_core.security.permissions import LISTING, PARAMETER_LISTING
 from rosbridge_core.session.client_status import ClientStatus, client_status
 from rosbridge_core.session.liveness import watch_link

@@ -43,6 +43,7 @@ from bridge_server.http.web import Web
 from bridge_server.http.web_access import WebAccess
 from rosbridge_core.graph import Graph
 from rosbridge_core.protocol import keepalive
+from rosbridge_core.protocol.constants import DEFAULT_PORT
 from rosbridge_core.protocol.errors import RemoteProtocolError
 from rosbridge_core.protocol.ops import RECEIVED_HEADER, SESSION_HEADER, parse_received
 from rosbridge_core.security import SecurityConfig
@@ -66,14 +67,18 @@ __all__ = ["Bridge", "BridgeConfig", "ServedGraph"]
 log = logging.getLogger("bridge_server")
 
 
+WRITE_LIMIT = 256 * 1024
+"""A client's socket write buffer's high-water mark by default (``--write-limit``)."""
+
+
 @dataclass
 class BridgeConfig:
     """Everything the command line can set."""
 
     host: str = "127.0.0.1"
-    port: int = 9090
+    port: int = DEFAULT_PORT
     max_message_size: int = MAX_MESSAGE_SIZE
-    write_limit: int = 256 * 1024
+    write_limit: int = WRITE_LIMIT
     compression: bool = False
     publisher_grace: float = 2.0
     node_name: str = field(default_factory=lambda: default_node_name())  # see default_node_name

@@ -58,6 +58,7 @@ except ImportError:  # pragma: no cover - a websockets without its C extension
 
 from bridge_server.front.budget import BudgetAssembler, Inbound
 from rosbridge_core.interfaces import BridgeError
+from rosbridge_core.protocol.constants import INTERNAL_ERROR
 from rosbridge_core.session.frames import JOINED_BYTES, frame_parts, joined
 
 log = logging.getLogger("bridge_server.security")
@@ -349,7 +350,7 @@ class BridgeConnection(WebSocketLink):
         except Exception:
             log.exception("a frame handler failed; closing the connection")
             self.on_frame = None
-            self.loop.create_task(self.close(1011, "internal error"))
+            self.loop.create_task(self.close(INTERNAL_ERROR, "internal error"))
             return False
         return True
 

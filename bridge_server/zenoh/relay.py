@@ -66,12 +66,12 @@ try:
     from rosbridge_core.codec import budget as decode_budget
     from rosbridge_core.interfaces import BridgeError
     from rosbridge_core.protocol import ops
+    from rosbridge_core.protocol.constants import DEFAULT_PORT, POLICY_VIOLATION
     from rosbridge_core.protocol.errors import ProtocolError
     from rosbridge_core.protocol.frames import decode_frame
     from rosbridge_core.protocol.ops import RELAY_HEADER, parse_op
     from rosbridge_core.security.auth import Principal
     from rosbridge_core.security.credentials import client_address
-    from rosbridge_core.security.gate import POLICY_VIOLATION
     from rosbridge_core.security.options import MAX_MESSAGE_SIZE
     from rosbridge_core.session.resume import ResumeConfig
     from rosbridge_core.session.session import SessionConfig
@@ -489,7 +489,8 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         "certificates of its relays and robots)",
     )
     p.add_argument("--host", default="127.0.0.1", help="address to bind (default 127.0.0.1)")
-    p.add_argument("--port", type=int, default=9090, help="port (default 9090; 0: any free port)")
+    p.add_argument("--port", type=int, default=DEFAULT_PORT,
+                   help=f"port (default {DEFAULT_PORT}; 0: any free port)")
     p.add_argument("--relay-id", default=None,
                    help="this relay's name on Zenoh (default: its certificate's common name "
                    "with --zenoh-tls-cert, else random; it names its tokens, goals and calls, "

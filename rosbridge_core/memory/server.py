@@ -21,6 +21,7 @@ from typing import TYPE_CHECKING
 from rosbridge_core.counters import BridgeMetrics
 from rosbridge_core.memory.graph import MemoryGraph, MemoryRos
 from rosbridge_core.memory.link import MemoryLink
+from rosbridge_core.protocol.constants import MAX_MESSAGE_SIZE
 from rosbridge_core.security.authority import Authority
 from rosbridge_core.security.options import SecurityConfig
 from rosbridge_core.session.actions import ActionClients, SessionActions
@@ -80,7 +81,7 @@ class MemoryServer:
     def __init__(self, graph: MemoryGraph | None = None, *,
                  config: SessionConfig = MEMORY_SESSIONS,
                  security: SecurityConfig | None = None,
-                 max_message_size: int = 16 * 1024 * 1024) -> None:
+                 max_message_size: int = MAX_MESSAGE_SIZE) -> None:
         self.node = graph if graph is not None else MemoryGraph(MemoryRos(), "rosbridge")
         """The server's node of the in-memory graph."""
         self.graph: Graph = self.node

@@ -31,6 +31,7 @@ from dataclasses import dataclass, field
 from typing import Any, NoReturn
 from typing import Protocol as Interface
 
+from .constants import MAX_CLIENT_FRAME
 from .errors import RemoteProtocolError
 from .ops import Fragment, Id, Op, encode, parse_op
 
@@ -198,7 +199,7 @@ class Protocol:
             and its op dropped. Call :meth:`close` when the connection ends.
     """
 
-    def __init__(self, *, max_partial: int = 64, max_fragment_bytes: int = 256 * 1024 * 1024,
+    def __init__(self, *, max_partial: int = 64, max_fragment_bytes: int = MAX_CLIENT_FRAME,
                  budget: FragmentBudget | None = None):
         self.max_partial = max_partial
         self.max_fragment_bytes = max_fragment_bytes

@@ -16,6 +16,7 @@ from collections.abc import Mapping
 from typing import TYPE_CHECKING, Any, Protocol
 
 from rosbridge_core.protocol import ops
+from rosbridge_core.protocol.constants import POLICY_VIOLATION
 from rosbridge_core.security.auth import Principal
 from rosbridge_core.security.credentials import client_address
 from rosbridge_core.security.names import InvalidNameError, check_name
@@ -41,8 +42,6 @@ log = logging.getLogger("bridge_server.security")
 PRE_AUTH_FRAME_LIMIT = 16 * 1024
 """Largest frame read from a connection that has not authenticated yet."""
 
-POLICY_VIOLATION = 1008
-"""Close code for a failed ``auth`` op, ops before authentication and op floods."""
 
 
 class GuardedLink(Protocol):

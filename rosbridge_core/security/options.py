@@ -8,6 +8,7 @@ import os
 from dataclasses import dataclass
 
 from rosbridge_core.interfaces import BridgeError
+from rosbridge_core.protocol.constants import MAX_MESSAGE_SIZE
 from rosbridge_core.security.credentials import is_loopback
 
 __all__ = [
@@ -21,7 +22,6 @@ __all__ = [
     "user_name",
 ]
 
-MAX_MESSAGE_SIZE = 16 * 1024 * 1024
 """The largest inbound frame in bytes by default (``--max-message-size``, of the bridge and
 the relay): a larger one closes the connection (1009), and the pieces of a client's
 incomplete ops are held to it all together."""

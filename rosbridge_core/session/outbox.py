@@ -59,6 +59,7 @@ from typing import TYPE_CHECKING
 
 from rosbridge_core.interfaces import ReportedError
 from rosbridge_core.protocol import ops
+from rosbridge_core.protocol.constants import INTERNAL_ERROR
 from rosbridge_core.protocol.frames import split_fragments
 from rosbridge_core.session.frames import (
     JOINED_BYTES,
@@ -452,7 +453,7 @@ class Outbox:
                     log.exception("session %d: a write failed; closing the connection", self.sid)
                     self.closed = True
                     self.idle = False
-                    self.loop.create_task(link.close(1011, "internal error"))
+                    self.loop.create_task(link.close(INTERNAL_ERROR, "internal error"))
                 else:
                     # what is queued after it in this turn wakes the writer; with nothing
                     # more, the writer stays parked and the next message (in a later turn)
@@ -491,7 +492,7 @@ class Outbox:
             pass
         except Exception:
             log.exception("session %d: the writer failed; closing the connection", self.sid)
-            await link.close(1011, "internal error")
+            await link.close(INTERNAL_ERROR, "internal error")
 
     def _take(self) -> list[Frame]:
         """The frames to write next (:meth:`_collect`), kept in a resumable session until the

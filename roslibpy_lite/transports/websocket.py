@@ -25,6 +25,7 @@ from websockets.exceptions import ConnectionClosed as WsConnectionClosed
 from websockets.exceptions import InvalidHandshake, InvalidMessage, InvalidStatus, InvalidURI
 
 from rosbridge_core.protocol import keepalive, ops
+from rosbridge_core.protocol.constants import DEFAULT_PORT, MAX_CLIENT_FRAME, POLICY_VIOLATION
 from rosbridge_core.protocol.frames import Protocol
 from rosbridge_core.protocol.ops import ACKS_HEADER, AUTH_HEADER, RELAY_HEADER, SESSION_HEADER
 
@@ -59,7 +60,7 @@ class WebSocketTransport:
         reconnect: bool = True,
         backoff: Backoff | None = None,
         open_timeout: float = 10.0,
-        max_size: int | None = 256 * 1024 * 1024,
+        max_size: int | None = MAX_CLIENT_FRAME,
         ping_interval: float | None = keepalive.DEFAULT_INTERVAL,
         ping_timeout: float | None = keepalive.DEFAULT_TIMEOUT,
         ws_compression: str | None = None,
@@ -591,7 +592,7 @@ def shown_url(url: str) -> str:
     return f"{base}?{'&'.join(pairs)}{hash_mark}{fragment}"
 
 
-ROSBRIDGE_PORT = 9090
+ROSBRIDGE_PORT = DEFAULT_PORT
 """The port rosbridge servers listen on unless told otherwise."""
 
 
@@ -639,7 +640,7 @@ async def _plain_to_tls(url: str, exc: BaseException) -> ConnectError | None:
 
 def _closed_by_policy(url: str, ws: ClientConnection) -> ConnectionClosed | None:
     """The bridge closed with 1008 (policy violation): reconnecting would be refused again."""
-    if ws.close_code != 1008:
+    if ws.close_code != POLICY_VIOLATION:
         return None
     reason = ws.close_reason or "no reason given"
     if "authentication" in reason:
