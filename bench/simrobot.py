@@ -51,10 +51,11 @@ FLOOD = "/flood"
 NODES = 30
 TOPICS = 100
 PARAM_NODES = 5
-SNAPSHOT_INTERVAL = 30.0
+SNAPSHOT_INTERVAL = 300.0
 """Seconds between the exporter's graph snapshots of a simulated robot (the bridge's 1 s
 looks for graph changes; a simulated graph does not change, and 1,000 robots each walking
-their graph every second would measure the simulator)."""
+their graph every second would measure the simulator: at 30 s, taking the in-memory graph's
+snapshot was 60 % of a 250-robot process's loop while 1,000 robots joined)."""
 
 
 @dataclass(frozen=True)
