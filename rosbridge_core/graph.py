@@ -78,11 +78,46 @@ CANCEL_ANSWERS = {
 PARAMETER_EVENTS = "/parameter_events"
 """The topic on which every node reports changes to its parameters."""
 
-_PARAMETER_FIELDS = {
-    1: "bool_value", 2: "integer_value", 3: "double_value", 4: "string_value",
-    5: "byte_array_value", 6: "bool_array_value", 7: "integer_array_value",
-    8: "double_array_value", 9: "string_array_value",
-}
+def _all(kind: type | tuple[type, ...]) -> Callable[[Any], bool]:
+    return lambda v: isinstance(v, list) and all(isinstance(x, kind) for x in v)
+
+
+PARAMETER_KINDS: tuple[tuple[int, str, Callable[[Any], bool]], ...] = (
+    (1, "bool_value", lambda v: isinstance(v, bool)),
+    (2, "integer_value", lambda v: isinstance(v, int)),
+    (3, "double_value", lambda v: isinstance(v, float)),
+    (4, "string_value", lambda v: isinstance(v, str)),
+    (5, "byte_array_value", lambda v: isinstance(v, bytes | bytearray)),
+    (6, "bool_array_value", _all(bool)),
+    (7, "integer_array_value", _all(int)),
+    (8, "double_array_value", _all((int, float))),
+    (9, "string_array_value", _all(str)),
+)
+"""``rcl_interfaces/msg/ParameterType`` numbers, each with the ``ParameterValue`` field that
+holds it and what plain value it takes (in the order a value is tried: a ``bool`` is no
+integer here, a list of ints an integer array)."""
+
+PARAMETER_TYPE_NAMES = ("NOT_SET", "BOOL", "INTEGER", "DOUBLE", "STRING", "BYTE_ARRAY",
+                        "BOOL_ARRAY", "INTEGER_ARRAY", "DOUBLE_ARRAY", "STRING_ARRAY")
+"""rclpy's ``Parameter.Type`` names, by number."""
+
+_PARAMETER_FIELDS = {kind: field for kind, field, _ in PARAMETER_KINDS}
+
+
+def parameter_obj(value: Any) -> dict[str, Any]:
+    """A plain value (as :func:`parameter_value` gives it) as a
+    ``rcl_interfaces/msg/ParameterValue`` object: its ``type`` and the one field that holds
+    it (``None``: not set; ``bytes``: a byte array, as a list of ints; a double array's ints
+    as floats). ``ValueError`` for what a parameter cannot hold."""
+    if value is None:
+        return {"type": 0}
+    for kind, field, test in PARAMETER_KINDS:
+        if test(value):
+            if kind == 5:
+                return {"type": 5, field: list(value)}
+            return {"type": kind, field: [float(v) for v in value] if kind == 8 else value}
+    raise ValueError("args.value: a ROS 2 parameter is a bool, int, float, string or a list "
+                     f"of one of those, got {type(value).__name__}")
 
 
 def parameter_value(value: Any) -> Any:

@@ -24,7 +24,7 @@ from bridge_server.rclpy_graph.types import (
     resolve_service,
     type_name_of,
 )
-from rosbridge_core.graph import parameter_value
+from rosbridge_core.graph import parameter_obj, parameter_value
 from rosbridge_core.interfaces import BridgeError, canonical_name
 from rosbridge_core.typedefs import typedefs_of
 
@@ -188,30 +188,11 @@ async def set_parameter(ros: RosNode, node: str, name: str, value: Any) -> tuple
 
 
 def _to_parameter_value(value: Any) -> Any:
-    pv = ParameterValue()
-    if value is None:
-        pv.type = 0
-    elif isinstance(value, bool):
-        pv.type, pv.bool_value = 1, value
-    elif isinstance(value, int):
-        pv.type, pv.integer_value = 2, value
-    elif isinstance(value, float):
-        pv.type, pv.double_value = 3, value
-    elif isinstance(value, str):
-        pv.type, pv.string_value = 4, value
-    elif isinstance(value, bytes | bytearray):
-        pv.type, pv.byte_array_value = 5, [bytes((b,)) for b in value]
-    elif isinstance(value, list) and all(isinstance(v, bool) for v in value):
-        pv.type, pv.bool_array_value = 6, value
-    elif isinstance(value, list) and all(isinstance(v, int) for v in value):
-        pv.type, pv.integer_array_value = 7, value
-    elif isinstance(value, list) and all(isinstance(v, int | float) for v in value):
-        pv.type, pv.double_array_value = 8, [float(v) for v in value]
-    elif isinstance(value, list) and all(isinstance(v, str) for v in value):
-        pv.type, pv.string_array_value = 9, value
-    else:
-        raise ValueError(
-            "args.value: a ROS 2 parameter is a bool, int, float, string or a list of one of "
-            f"those, got {type(value).__name__}"
-        )
+    """A plain value as rclpy's ``ParameterValue`` (the fields as
+    :func:`~rosbridge_core.graph.parameter_obj` chooses them; a byte array's items as
+    1-byte ``bytes``, rclpy's own)."""
+    obj = parameter_obj(value)
+    pv = ParameterValue(type=obj.pop("type"))
+    for field, found in obj.items():
+        setattr(pv, field, [bytes((b,)) for b in found] if field == "byte_array_value" else found)
     return pv

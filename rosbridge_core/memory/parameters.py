@@ -4,10 +4,10 @@ methods, which call a node's services through the graph (:class:`ParameterCalls`
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping
+from collections.abc import Mapping
 from typing import Any, Protocol
 
-from rosbridge_core.graph import parameter_value
+from rosbridge_core.graph import PARAMETER_TYPE_NAMES, parameter_obj, parameter_value
 from rosbridge_core.interfaces import ServiceCallError
 from rosbridge_core.memory.services import Handler, Named, ServiceServer
 
@@ -86,8 +86,8 @@ class ServedParameters:
                                 "reason": "Static parameter cannot be undeclared"})
             elif old is not None and old_type != new_type:
                 results.append({"successful": False, "reason": (
-                    f"Wrong parameter type, expected 'Type.{_TYPE_NAMES[old_type]}' got "
-                    f"'Type.{_TYPE_NAMES[new_type]}'")})
+                    f"Wrong parameter type, expected 'Type.{PARAMETER_TYPE_NAMES[old_type]}' got "
+                    f"'Type.{PARAMETER_TYPE_NAMES[new_type]}'")})
             else:
                 if value is None:
                     params.pop(p.name, None)
@@ -145,42 +145,6 @@ PARAM_WAIT = 5.0
 """Seconds a parameter get or set waits for the node's parameter service."""
 
 
-def parameter_obj(value: Any) -> dict[str, Any]:
-    """A plain value as a ``rcl_interfaces/msg/ParameterValue`` object (``None``: not set;
-    ``bytes``: a byte array); ``ValueError`` for what a parameter cannot hold."""
-    if value is None:
-        return {"type": 0}
-    for kind, field, test in _PARAMETER_KINDS:
-        if test(value):
-            if kind == 5:
-                return {"type": 5, field: list(value)}
-            return {"type": kind, field: [float(v) for v in value] if kind == 8 else value}
-    raise ValueError("args.value: a ROS 2 parameter is a bool, int, float, string or a list "
-                     f"of one of those, got {type(value).__name__}")
-
-
 def _parameter_type(value: Any) -> int:
     """The ``ParameterType`` number of a plain value (0: not set)."""
     return int(parameter_obj(value)["type"])
-
-
-_TYPE_NAMES = ("NOT_SET", "BOOL", "INTEGER", "DOUBLE", "STRING", "BYTE_ARRAY", "BOOL_ARRAY",
-               "INTEGER_ARRAY", "DOUBLE_ARRAY", "STRING_ARRAY")
-"""rclpy's ``Parameter.Type`` names, by number."""
-
-
-def _all(kind: type | tuple[type, ...]) -> Callable[[Any], bool]:
-    return lambda v: isinstance(v, list) and all(isinstance(x, kind) for x in v)
-
-
-_PARAMETER_KINDS: tuple[tuple[int, str, Callable[[Any], bool]], ...] = (
-    (1, "bool_value", lambda v: isinstance(v, bool)),
-    (2, "integer_value", lambda v: isinstance(v, int)),
-    (3, "double_value", lambda v: isinstance(v, float)),
-    (4, "string_value", lambda v: isinstance(v, str)),
-    (5, "byte_array_value", lambda v: isinstance(v, bytes | bytearray)),
-    (6, "bool_array_value", _all(bool)),
-    (7, "integer_array_value", _all(int)),
-    (8, "double_array_value", _all((int, float))),
-    (9, "string_array_value", _all(str)),
-)
