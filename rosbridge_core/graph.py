@@ -1,4 +1,6 @@
-"""The ROS side as the session layer sees it: one protocol, :class:`Graph`.
+"""The ROS side as the session layer sees it: :class:`Graph`, made of one small port per
+capability (:class:`TypesPort`, :class:`IntrospectionPort`, :class:`TopicsPort`,
+:class:`ServicesPort`, :class:`ParametersPort`, :class:`ActionsPort`).
 
 The sessions (:mod:`rosbridge_core.session`), the status page (:mod:`bridge_server.http`)
 and the ``/rosapi/*`` services hold a :class:`Graph` and never an rclpy object: what
@@ -37,21 +39,30 @@ __all__ = [
     "ACTIVE",
     "CANCEL_ANSWERS",
     "PARAMETER_EVENTS",
+    "PARAMETER_KINDS",
+    "PARAMETER_TYPE_NAMES",
     "ActionClient",
+    "ActionsPort",
     "Converter",
     "GoalListener",
     "Graph",
+    "IntrospectionPort",
     "Listener",
     "Message",
+    "ParametersPort",
     "Publisher",
     "RosCall",
     "SentGoal",
     "ServedAction",
     "ServedGoal",
     "ServedService",
+    "ServicesPort",
     "Status",
     "TopicFeed",
+    "TopicsPort",
+    "TypesPort",
     "acquire_shared",
+    "parameter_obj",
     "parameter_value",
     "release_shared",
     "service_request",
@@ -414,25 +425,9 @@ class ServedAction(Protocol):
         """Remove the action server."""
 
 
-class Graph(Protocol):
-    """The ROS side of the bridge (see the module's text)."""
-
-    @property
-    def name(self) -> str:
-        """The bridge's node name."""
-
-    @property
-    def subscriptions(self) -> Mapping[str, TopicFeed]:
-        """The shared subscriptions by topic."""
-
-    @property
-    def publishers(self) -> Mapping[tuple[str, str, bool], Publisher]:
-        """The shared publishers by (topic, type, latch)."""
-
-    def trouble(self) -> str | None:
-        """Why the ROS side is not serving (``None``: it is)."""
-
-    # -- types ---------------------------------------------------------------------------------
+class TypesPort(Protocol):
+    """The Graph's port for types: type names resolved, converters, typedefs and
+    definitions."""
 
     @property
     def wire_types(self) -> TypeStore:
@@ -463,7 +458,10 @@ class Graph(Protocol):
         """``{"type", "definition"}``: the full definition text of a type, its dependencies'
         after it (the ``ros2msg`` layout); ``BridgeError`` naming what is wrong."""
 
-    # -- introspection -------------------------------------------------------------------------
+
+class IntrospectionPort(Protocol):
+    """The Graph's port for introspection: what the ROS graph holds (topics, services,
+    nodes, their endpoints, the clock)."""
 
     def topic_names_and_types(self) -> list[tuple[str, list[str]]]:
         """Every topic in the graph with its types."""
@@ -515,7 +513,17 @@ class Graph(Protocol):
     def now(self) -> tuple[int, int]:
         """The ROS clock's time as (sec, nanosec)."""
 
-    # -- topics --------------------------------------------------------------------------------
+
+class TopicsPort(Protocol):
+    """The Graph's port for topics: shared subscriptions and publishers."""
+
+    @property
+    def subscriptions(self) -> Mapping[str, TopicFeed]:
+        """The shared subscriptions by topic."""
+
+    @property
+    def publishers(self) -> Mapping[tuple[str, str, bool], Publisher]:
+        """The shared publishers by (topic, type, latch)."""
 
     def subscribe(self, topic: str, msg_cls: Any, listener: Listener) -> TopicFeed:
         """Add ``listener`` to the topic's shared subscription (``msg_cls`` None: learn the
@@ -530,7 +538,9 @@ class Graph(Protocol):
     def release_publisher(self, pub: Publisher) -> None:
         """Lower the reference count; the publisher goes with the last reference."""
 
-    # -- services ------------------------------------------------------------------------------
+
+class ServicesPort(Protocol):
+    """The Graph's port for services: calling them and serving them."""
 
     async def call_service(
         self, service: str, srv_type: str | None, args: Mapping[str, Any] | list[Any] | None,
@@ -558,7 +568,9 @@ class Graph(Protocol):
         robot keeps another relay's client); the service is then destroyed by the caller.
         ROS itself refuses nothing: the rclpy graph never calls it."""
 
-    # -- parameters ----------------------------------------------------------------------------
+
+class ParametersPort(Protocol):
+    """The Graph's port for parameters: a node's names, values and setting them."""
 
     async def parameter_names(self, node: str, timeout: float) -> list[str]:
         """Names of ``node``'s parameters (any failure raises)."""
@@ -573,7 +585,9 @@ class Graph(Protocol):
         reason); ``ValueError`` for a value a parameter cannot hold,
         ``TimeoutError``/``LookupError`` as above."""
 
-    # -- actions -------------------------------------------------------------------------------
+
+class ActionsPort(Protocol):
+    """The Graph's port for actions: sending goals and serving actions."""
 
     def action_client(self, name: str, action_cls: Any) -> ActionClient:
         """A new client of action ``name``."""
@@ -585,3 +599,17 @@ class Graph(Protocol):
     ) -> ServedAction:
         """Serve action ``name`` in ROS; goals and cancel requests go to the callbacks;
         ``on_refused`` as for :meth:`serve`."""
+
+
+class Graph(TypesPort, IntrospectionPort, TopicsPort, ServicesPort, ParametersPort,
+            ActionsPort, Protocol):
+    """The ROS side of the bridge (see the module's text): every port. A session needs
+    them all; code that needs fewer names only the ports it uses (rosapi's listings
+    :class:`IntrospectionPort` and :class:`TypesPort`, ...)."""
+
+    @property
+    def name(self) -> str:
+        """The bridge's node name."""
+
+    def trouble(self) -> str | None:
+        """Why the ROS side is not serving (``None``: it is)."""

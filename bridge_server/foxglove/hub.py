@@ -32,7 +32,7 @@ from rosbridge_core.graph import PARAMETER_EVENTS, parameter_value
 from rosbridge_core.interfaces import BridgeError
 
 if TYPE_CHECKING:
-    from rosbridge_core.graph import Graph, Listener, TopicFeed
+    from rosbridge_core.graph import Graph, Listener, TopicFeed, TypesPort
     from rosbridge_core.graph import Message as RosMessage
 
 __all__ = ["CLOCK", "REFRESH_S", "GraphState", "Hub", "ServiceEntry", "Viewer", "foxglove_schema",
@@ -48,20 +48,20 @@ CLOCK = "/clock"
 _CLOCK = struct.Struct("<iI")  # builtin_interfaces/Time after the 4-byte CDR header
 
 
-def message_class(graph: Graph, type_name: str) -> type[MsgsMessage]:
+def message_class(graph: TypesPort, type_name: str) -> type[MsgsMessage]:
     """The pure-Python class of a message type (generated, or built from the ROS side's
     definition text), for CDR decoding and encoding without rclpy."""
     found: type[MsgsMessage] = _loaded(graph, type_name, MsgsMessage)
     return found
 
 
-def service_class(graph: Graph, type_name: str) -> type[MsgsService]:
+def service_class(graph: TypesPort, type_name: str) -> type[MsgsService]:
     """The pure-Python class of a service type (``.Request``, ``.Response``)."""
     found: type[MsgsService] = _loaded(graph, type_name, MsgsService)
     return found
 
 
-def _loaded(graph: Graph, type_name: str, kind: Any) -> Any:
+def _loaded(graph: TypesPort, type_name: str, kind: Any) -> Any:
     """The class from the graph's own store (a relay's robot has its own types)."""
     types = graph.wire_types
     found: Any = None

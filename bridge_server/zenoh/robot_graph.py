@@ -8,10 +8,10 @@ not change) and the interfaces installed on the robot (read once: the ament inde
 from __future__ import annotations
 
 import logging
-from typing import Any
+from typing import Any, Protocol
 
 from bridge_server.zenoh.keys import Snapshot
-from rosbridge_core.graph import Graph
+from rosbridge_core.graph import IntrospectionPort, TypesPort
 from rosbridge_core.interfaces import BridgeError
 
 __all__ = ["GraphSnapshots"]
@@ -19,10 +19,18 @@ __all__ = ["GraphSnapshots"]
 log = logging.getLogger("bridge_server.zenoh.exporter")
 
 
+class SnapshotSource(IntrospectionPort, TypesPort, Protocol):
+    """What a snapshot reads of the robot's Graph: its name, introspection and types."""
+
+    @property
+    def name(self) -> str:
+        """The robot bridge's node name."""
+
+
 class GraphSnapshots:
     """Takes snapshots of ``graph`` for the robot's exporter."""
 
-    def __init__(self, graph: Graph) -> None:
+    def __init__(self, graph: SnapshotSource) -> None:
         self.graph = graph
         self._definitions: dict[str, str] = {}
         self._typedefs: dict[str, list[dict[str, Any]]] = {}

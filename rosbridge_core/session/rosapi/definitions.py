@@ -11,7 +11,7 @@ from rosbridge_core.interfaces import BridgeError
 from rosbridge_core.session.rosapi.common import FIELDS, HANDLERS, TYPES, BridgeView, str_field
 
 if TYPE_CHECKING:
-    from rosbridge_core.graph import Graph
+    from rosbridge_core.graph import TypesPort
 
 __all__: list[str] = []
 
@@ -32,11 +32,11 @@ def service_response_details(bridge: BridgeView, args: Mapping[str, Any]) -> dic
     return {"typedefs": bridge.graph.typedefs(str_field(args, "type"), "srv", "Response")}
 
 
-_full_texts: weakref.WeakKeyDictionary[Graph, dict[str, str]] = weakref.WeakKeyDictionary()
+_full_texts: weakref.WeakKeyDictionary[TypesPort, dict[str, str]] = weakref.WeakKeyDictionary()
 """Per graph: a relay's robots may each define a name their own way."""
 
 
-def _full_text(graph: Graph, type_name: str) -> str:
+def _full_text(graph: TypesPort, type_name: str) -> str:
     """A topic type's definition with its dependencies' ("" if not installed; cached)."""
     texts = _full_texts.setdefault(graph, {})
     text = texts.get(type_name)
