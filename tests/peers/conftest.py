@@ -16,7 +16,7 @@ from tests.peers.peer import PeerPool, PeerProcess
 
 # rclpy's type support imports lark, which imports the deprecated sre_parse; with
 # warnings as errors that would fail the first rclpy node made here. Import it once,
-# quietly (the same work-around as tests/bridge/test_convert.py; see the report to the lead).
+# quietly (the same work-around as tests/bridge/convert_support.py; see the report to the lead).
 with warnings.catch_warnings():
     warnings.filterwarnings("ignore", "module 'sre_.*' is deprecated", DeprecationWarning)
     importlib.import_module("rosidl_generator_py")
