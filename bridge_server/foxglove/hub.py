@@ -28,8 +28,8 @@ from msgs import cdr, dynamic
 from msgs.runtime import Message as MsgsMessage
 from msgs.runtime import Service as MsgsService
 from msgs.runtime import lookup
-from rosbridge_core.graph import PARAMETER_EVENTS, parameter_value
 from rosbridge_core.interfaces import BridgeError
+from rosbridge_core.parameters import PARAMETER_EVENTS, parameter_value
 
 if TYPE_CHECKING:
     from rosbridge_core.graph import Graph, Listener, TopicFeed, TypesPort

@@ -24,8 +24,8 @@ from bridge_server.rclpy_graph.types import (
     resolve_service,
     type_name_of,
 )
-from rosbridge_core.graph import parameter_obj, parameter_value
 from rosbridge_core.interfaces import BridgeError, canonical_name
+from rosbridge_core.parameters import parameter_obj, parameter_value
 from rosbridge_core.typedefs import typedefs_of
 
 if TYPE_CHECKING:
@@ -189,7 +189,7 @@ async def set_parameter(ros: RosNode, node: str, name: str, value: Any) -> tuple
 
 def _to_parameter_value(value: Any) -> Any:
     """A plain value as rclpy's ``ParameterValue`` (the fields as
-    :func:`~rosbridge_core.graph.parameter_obj` chooses them; a byte array's items as
+    :func:`~rosbridge_core.parameters.parameter_obj` chooses them; a byte array's items as
     1-byte ``bytes``, rclpy's own)."""
     obj = parameter_obj(value)
     pv = ParameterValue(type=obj.pop("type"))

@@ -7,9 +7,9 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any, Protocol
 
-from rosbridge_core.graph import PARAMETER_TYPE_NAMES, parameter_obj, parameter_value
 from rosbridge_core.interfaces import ServiceCallError
 from rosbridge_core.memory.services import Handler, Named, ServiceServer
+from rosbridge_core.parameters import PARAMETER_TYPE_NAMES, parameter_obj, parameter_value
 
 __all__ = ["PARAM_WAIT", "ParameterCalls", "ServedParameters", "parameter_obj"]
 

@@ -43,8 +43,8 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
-from rosbridge_core.graph import PARAMETER_EVENTS
 from rosbridge_core.interfaces import BridgeError
+from rosbridge_core.parameters import PARAMETER_EVENTS
 from rosbridge_core.security.accounts import LimitsError, kinds_from_table
 
 __all__ = [
