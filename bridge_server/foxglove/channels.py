@@ -19,7 +19,8 @@ from bridge_server.foxglove.inbound import Inbound
 from msgs import cdr
 from rosbridge_core.codec.budget import explain
 from rosbridge_core.interfaces import BridgeError, ConversionError, canonical_name
-from rosbridge_core.security.names import InvalidNameError, check_name, full_name
+from rosbridge_core.protocol.names import absolute_name
+from rosbridge_core.security.names import InvalidNameError, check_name
 from rosbridge_core.session.limits import over_cap
 from rosbridge_core.session.outbox import Subscription
 
@@ -120,7 +121,7 @@ class ChannelOps(SessionBase):
                 self.error(f"advertise: channel {ch.id} ({ch.topic}): {exc}")
 
     def _add_client_channel(self, ch: wire.ClientChannel) -> None:
-        topic = full_name(ch.topic)
+        topic = absolute_name(ch.topic)
         if ch.id in self.client_channels:
             raise BridgeError(f"channel id {ch.id} is advertised on this connection already")
         if ch.encoding not in ENCODINGS:

@@ -14,7 +14,7 @@ from typing import Any
 from bridge_server.foxglove import wire
 from bridge_server.foxglove.base import SessionBase
 from rosbridge_core.interfaces import BridgeError
-from rosbridge_core.security.names import full_name
+from rosbridge_core.protocol.names import absolute_name
 from rosbridge_core.security.permissions import PARAMETER_LISTING
 
 __all__ = ["ParameterOps", "from_wire", "parameter_entry", "split_name"]
@@ -143,7 +143,7 @@ def split_name(name: str) -> tuple[str, str]:
     node, dot, param = name.partition(".")
     if not dot or not node or not param:
         raise BridgeError(f"parameter {name!r}: expected '/node_name.parameter_name'")
-    return full_name(node), param
+    return absolute_name(node), param
 
 
 def parameter_entry(name: str, value: Any) -> dict[str, Any]:

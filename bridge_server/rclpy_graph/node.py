@@ -52,6 +52,7 @@ from bridge_server.rclpy_graph.topics import (
 from bridge_server.rclpy_graph.types import resolve_message, resolve_service
 from msgs import dynamic
 from rosbridge_core.graph import acquire_shared, release_shared, shared_types
+from rosbridge_core.protocol.names import node_path
 
 if TYPE_CHECKING:
     from rosbridge_core.graph import Publisher, TopicFeed
@@ -261,7 +262,7 @@ class RosNode(ServiceCalls):
             except Exception:  # the node left between the two graph queries
                 continue
             if any(s == service for s, _ in served):
-                named.append("the ROS node " + namespace.rstrip("/") + "/" + name)
+                named.append("the ROS node " + node_path(namespace, name))
         return (named or ["another ROS node"])[:others]
 
     def now(self) -> tuple[int, int]:

@@ -13,6 +13,7 @@ from typing import Any, Protocol
 from bridge_server.zenoh.keys import Snapshot
 from rosbridge_core.graph import IntrospectionPort, TypesPort
 from rosbridge_core.interfaces import BridgeError
+from rosbridge_core.protocol.names import node_path
 
 __all__ = ["GraphSnapshots"]
 
@@ -49,7 +50,7 @@ class GraphSnapshots:
                 serves = g.node_services(name, ns)
             except Exception:  # it left meanwhile
                 continue
-            nodes[ns.rstrip("/") + "/" + name] = {
+            nodes[node_path(ns, name)] = {
                 "name": name, "namespace": ns, "subscribes": sorted(subs),
                 "publishes": sorted(pubs), "serves": sorted(serves)}
         for type_name in {t for _, ts in topics for t in ts}:

@@ -65,6 +65,7 @@ from rosbridge_core.memory.parameters import ParameterCalls, ServedParameters
 from rosbridge_core.memory.services import MemoryRosCall, MemoryServedService, ServiceServer
 from rosbridge_core.memory.topics import MemoryFeed, MemoryMessage, MemoryPublisher
 from rosbridge_core.memory.typesource import MsgsTypes
+from rosbridge_core.protocol.names import node_path
 
 __all__ = [
     "MemoryActionClient",
@@ -315,7 +316,7 @@ class MemoryGraph(MsgsTypes, ParameterCalls):
 
     def other_servers(self, service: str) -> list[str]:
         """Servers of ``service`` on other nodes, as "the ROS node /name"."""
-        return ["the ROS node " + s.node.namespace.rstrip("/") + "/" + s.node.name
+        return ["the ROS node " + node_path(s.node.namespace, s.node.name)
                 for s in self.ros.servers.get(service, []) if s.node is not self]
 
     def server_types(self, service: str) -> list[str]:

@@ -10,6 +10,7 @@ from typing import Any, Protocol
 from rosbridge_core.interfaces import ServiceCallError
 from rosbridge_core.memory.services import Handler, Named, ServiceServer
 from rosbridge_core.parameters import PARAMETER_TYPE_NAMES, parameter_obj, parameter_value
+from rosbridge_core.protocol.names import node_path
 
 __all__ = ["PARAM_WAIT", "ParameterCalls", "ServedParameters", "parameter_obj"]
 
@@ -53,7 +54,7 @@ class ServedParameters:
     def serve(self) -> None:
         """Put the three services into the graph, under the node's name."""
         node = self.node
-        base = node.namespace.rstrip("/") + "/" + node.name
+        base = node_path(node.namespace, node.name)
         parts: tuple[tuple[str, Handler], ...] = (
             ("list_parameters", self._list_parameters), ("get_parameters", self._get_parameters),
             ("set_parameters", self._set_parameters))

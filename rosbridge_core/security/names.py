@@ -14,7 +14,7 @@ import re
 
 from rosbridge_core.interfaces import BridgeError
 
-__all__ = ["MAX_NAME_LENGTH", "InvalidNameError", "check_name", "full_name"]
+__all__ = ["MAX_NAME_LENGTH", "InvalidNameError", "check_name", ]
 
 MAX_NAME_LENGTH = 247
 """RMW's topic name limit (255) less the DDS prefix ``rt/`` and friends."""
@@ -62,7 +62,3 @@ def check_name(name: str, what: str = "topic") -> None:
     if len(_valid) < 100_000:
         _valid.add(name)
 
-
-def full_name(name: str) -> str:
-    """``name`` with a leading ``/`` (clients may send ``chatter`` for ``/chatter``)."""
-    return name if name.startswith("/") else "/" + name

@@ -45,6 +45,7 @@ from typing import Any
 
 from rosbridge_core.interfaces import BridgeError
 from rosbridge_core.parameters import PARAMETER_EVENTS
+from rosbridge_core.protocol.names import absolute_name
 from rosbridge_core.security.accounts import LimitsError, kinds_from_table
 
 __all__ = [
@@ -160,9 +161,6 @@ def _matches(patterns: tuple[str, ...], name: str) -> bool:
     return any(fnmatch.fnmatchcase(name, p) for p in patterns)
 
 
-def _abs(name: str) -> str:
-    return name if name.startswith("/") else "/" + name
-
 
 # op class -> (capability, function giving the name it acts on)
 def requirement(op: Any) -> tuple[str, str] | None:
@@ -173,7 +171,7 @@ def requirement(op: Any) -> tuple[str, str] | None:
     capability = op.NEEDS
     if capability is None:
         return None
-    return capability, _abs(op.target())
+    return capability, absolute_name(op.target())
 
 
 # -- names that belong to another capability --------------------------------------------------
@@ -278,14 +276,14 @@ def rosapi_requirement(service: str, args: Mapping[str, Any]) -> tuple[str, str]
         name = args.get("name")
         if isinstance(name, str):
             node, _, param = name.partition(":")
-            return "params", f"{_abs(node)}:{param}"
+            return "params", f"{absolute_name(node)}:{param}"
         return "params", "*"
     if service == "/rosapi/get_param_names":
         return PARAMETER_LISTING
     for key in _NAME_ARGS:
         value = args.get(key)
         if isinstance(value, str):
-            return LISTING[0], _abs(value)
+            return LISTING[0], absolute_name(value)
     return LISTING
 
 

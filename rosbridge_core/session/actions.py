@@ -19,7 +19,7 @@ import itertools
 from typing import TYPE_CHECKING, ClassVar
 
 from rosbridge_core.protocol import ops
-from rosbridge_core.security.names import full_name
+from rosbridge_core.protocol.names import absolute_name
 from rosbridge_core.session.goals import CLIENT_IDLE, ActionClients, ClientGoal, GoalSending
 from rosbridge_core.session.limits import over_cap
 from rosbridge_core.session.served_actions import ACTION_LINGER, ActionServing, ClientAction
@@ -52,12 +52,12 @@ class SessionActions(GoalSending, ActionServing):
     def goal_limit(self, op: ops.SendActionGoal) -> str | None:
         """Why one more goal in flight would pass the connection's limits (goals are keyed
         by goal id, so every new goal counts)."""
-        return over_cap(self.goals, full_name(op.action), self.session.limits.max_goals,
+        return over_cap(self.goals, absolute_name(op.action), self.session.limits.max_goals,
                         "goals in flight")
 
     def serve_limit(self, op: ops.AdvertiseAction) -> str | None:
         """Why serving one more action (each an rclpy action server) would pass the limits."""
-        return over_cap(self.served, full_name(op.action), self.session.limits.max_services,
+        return over_cap(self.served, absolute_name(op.action), self.session.limits.max_services,
                         "served actions")
 
     def __init__(self, session: Host) -> None:

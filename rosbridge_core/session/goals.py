@@ -53,7 +53,7 @@ from typing import TYPE_CHECKING, Any
 from rosbridge_core.graph import CANCEL_ANSWERS, Status
 from rosbridge_core.interfaces import BridgeError, ConversionError, args_mapping, canonical_name
 from rosbridge_core.protocol import ops
-from rosbridge_core.security.names import full_name
+from rosbridge_core.protocol.names import absolute_name
 
 if TYPE_CHECKING:
     from rosbridge_core.graph import ActionClient, Converter, SentGoal, ServedAction
@@ -220,7 +220,7 @@ class GoalSending:
 
     def send_goal(self, op: ops.SendActionGoal) -> None:
         """Start a goal: convert it, then wait for a server and send it (a task)."""
-        name = full_name(op.action)
+        name = absolute_name(op.action)
         id: ops.Id = op.id if op.id is not None else (
             f"send_action_goal:{op.action}:{next(self._goal_ids)}"
         )
@@ -316,7 +316,7 @@ class GoalSending:
         goal = self.goals.get(str(op.id))
         if goal is None:
             self.session.error(
-                f"cancel_action_goal: no goal {op.id!r} of {full_name(op.action)} is in flight "
+                f"cancel_action_goal: no goal {op.id!r} of {absolute_name(op.action)} is in flight "
                 "on this connection",
                 op.id,
             )

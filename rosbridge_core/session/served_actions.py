@@ -28,7 +28,7 @@ from typing import TYPE_CHECKING, Any
 from rosbridge_core.graph import ACTIVE, Status
 from rosbridge_core.interfaces import ConversionError, canonical_name
 from rosbridge_core.protocol import ops
-from rosbridge_core.security.names import full_name
+from rosbridge_core.protocol.names import absolute_name
 from rosbridge_core.session.goals import GOAL_SUFFIX
 
 if TYPE_CHECKING:
@@ -68,7 +68,7 @@ class ActionServing:
     def advertise(self, op: ops.AdvertiseAction) -> None:
         """Serve an action from this client (an rclpy action server in the bridge)."""
         session = self.session
-        name = full_name(op.action)
+        name = absolute_name(op.action)
         action_cls = session.graph.resolve_action(op.type)
         type_name = canonical_name(op.type, "action")
         mine = self.served.get(name)
@@ -158,14 +158,15 @@ class ActionServing:
 
     def _find(self, op: ops.ActionFeedback | ops.ActionResultOp) -> tuple[ClientAction, str] | None:
         gid = str(op.id)
-        served = self.served.get(full_name(op.action))
+        served = self.served.get(absolute_name(op.action))
         if served is not None and gid in served.goals:
             return served, gid
         for s in self.served.values():
             if gid in s.goals:
                 return s, gid
         self.session.error(
-            f"{op.OP}: no goal {op.id!r} of {full_name(op.action)} is waiting on this client", op.id
+            f"{op.OP}: no goal {op.id!r} of {absolute_name(op.action)} is waiting on this "
+            "client", op.id
         )
         return None
 
@@ -220,7 +221,7 @@ class ActionServing:
 
     def unadvertise(self, op: ops.UnadvertiseAction) -> None:
         """Stop serving an action; its goals are aborted at once."""
-        self._owners.unadvertise(self, op, full_name(op.action))
+        self._owners.unadvertise(self, op, absolute_name(op.action))
 
     def drop_served(self, name: str, why: str) -> None:
         """Another client took the action over: forget it here."""

@@ -50,7 +50,7 @@ from rosbridge_core.interfaces import (
     canonical_name,
 )
 from rosbridge_core.protocol import ops
-from rosbridge_core.security.names import full_name
+from rosbridge_core.protocol.names import absolute_name
 from rosbridge_core.session import rosapi
 from rosbridge_core.session.limits import over_cap
 
@@ -120,7 +120,7 @@ class SessionServices:
 
     def serve_limit(self, op: ops.AdvertiseService) -> str | None:
         """Why serving one more service would pass the connection's limits."""
-        return over_cap(self.served, full_name(op.service), self.session.limits.max_services,
+        return over_cap(self.served, absolute_name(op.service), self.session.limits.max_services,
                         "served services")
 
     def __init__(self, session: Host) -> None:
@@ -145,7 +145,7 @@ class SessionServices:
 
     async def _call(self, op: ops.CallService) -> None:
         """Call a ROS service (or a rosapi one) and answer with ``service_response``."""
-        service = full_name(op.service)
+        service = absolute_name(op.service)
         wire = op.service  # answer with the name as the client spelled it
         session = self.session
         timeout = op.timeout if op.timeout is not None else session.config.call_timeout
@@ -198,7 +198,7 @@ class SessionServices:
         session = self.session
         if started is not None:  # a call_service: count it for /metrics
             session.shared.metrics.service_call(
-                full_name(service), outcome(result, values), time.perf_counter() - started
+                absolute_name(service), outcome(result, values), time.perf_counter() - started
             )
         if not result:
             log.info("session %d: call to %s failed: %s", session.sid, service, values)
@@ -209,7 +209,7 @@ class SessionServices:
 
     def advertise_service(self, op: ops.AdvertiseService) -> None:
         """Serve a ROS service from this client."""
-        name = full_name(op.service)
+        name = absolute_name(op.service)
         srv_cls = self.graph.resolve_service(op.type)
         type_name = canonical_name(op.type, "srv")
         if name in rosapi.HANDLERS or name in rosapi.ASYNC_HANDLERS:
@@ -292,7 +292,7 @@ class SessionServices:
     def service_response(self, op: ops.ServiceResponse) -> None:
         """The client answers a ROS caller of a service it serves (or another client's call)."""
         session = self.session
-        name = full_name(op.service)
+        name = absolute_name(op.service)
         rid = None if op.id is None else str(op.id)
         served = self.served.get(name)
         if served is None or rid is None or (rid not in served.pending
@@ -345,7 +345,7 @@ class SessionServices:
         if (obj.get("result") is not True or type(values) is not dict
                 or type(rid) is not str or type(service) is not str):
             return False
-        served = self.served.get(service if service[:1] == "/" else "/" + service)
+        served = self.served.get(absolute_name(service))
         if served is None or served.ros is None:
             return False
         entry = served.pending.pop(rid, None)
@@ -399,7 +399,7 @@ class SessionServices:
 
     def unadvertise_service(self, op: ops.UnadvertiseService) -> None:
         """Stop serving a service; it leaves ROS at once (waiting ROS callers are not answered)."""
-        self._owners.unadvertise(self, op, full_name(op.service))
+        self._owners.unadvertise(self, op, absolute_name(op.service))
 
     def remove_served(self, served: ClientService, why: str) -> None:
         """Stop serving ``served``: pending direct calls fail, the ROS service goes."""

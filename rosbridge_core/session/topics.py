@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING, Any, ClassVar
 
 from rosbridge_core.interfaces import ConversionError, canonical_name
 from rosbridge_core.protocol import ops
-from rosbridge_core.security.names import full_name
+from rosbridge_core.protocol.names import absolute_name
 from rosbridge_core.session.limits import over_cap
 from rosbridge_core.session.outbox import Subscription
 
@@ -49,7 +49,7 @@ class SessionTopics:
     def subscribe_limit(self, op: ops.Subscribe) -> str | None:
         """Why this subscription would pass the connection's limits (``None``: it would not)."""
         limits = self.session.limits
-        topic = full_name(op.topic)
+        topic = absolute_name(op.topic)
         sub = self.subs.get(topic)
         ids = limits.max_subscription_ids
         if sub is not None and ids and op.id not in sub.ids and len(sub.ids) >= ids:
@@ -59,8 +59,8 @@ class SessionTopics:
 
     def publisher_limit(self, op: ops.Advertise | ops.Publish) -> str | None:
         """Why a publisher for this op would pass the connection's limits."""
-        return over_cap(self.publishers, full_name(op.topic), self.session.limits.max_publishers,
-                        "publishers")
+        return over_cap(self.publishers, absolute_name(op.topic),
+                        self.session.limits.max_publishers, "publishers")
 
     def __init__(self, session: Host) -> None:
         self.session = session
@@ -72,7 +72,7 @@ class SessionTopics:
 
     def advertise(self, op: ops.Advertise) -> None:
         """Create (or share) a ROS publisher for the topic."""
-        topic = full_name(op.topic)
+        topic = absolute_name(op.topic)
         cls = self.graph.resolve_message(op.type)
         type_name = canonical_name(op.type, "msg")
         current = self.publishers.get(topic)
@@ -100,7 +100,7 @@ class SessionTopics:
 
     def unadvertise(self, op: ops.Unadvertise) -> None:
         """Release this client's publisher for the topic."""
-        topic = full_name(op.topic)
+        topic = absolute_name(op.topic)
         pub = self.publishers.pop(topic, None)
         if pub is None:
             self.session.error(
@@ -111,7 +111,7 @@ class SessionTopics:
 
     def publish(self, op: ops.Publish) -> None:
         """Convert the message and publish it (auto-advertising a topic the graph knows)."""
-        topic = full_name(op.topic)
+        topic = absolute_name(op.topic)
         pub = self.publishers.get(topic)
         if pub is None:
             types = self.graph.topic_types(topic)
@@ -139,7 +139,7 @@ class SessionTopics:
     def subscribe(self, op: ops.Subscribe) -> None:
         """Add this id to the client's subscription of the topic."""
         session = self.session
-        topic = full_name(op.topic)
+        topic = absolute_name(op.topic)
         if op.compression == "png":
             # Stock clients still offer png; they all read plain JSON publish ops too.
             session.status(
@@ -201,7 +201,7 @@ class SessionTopics:
 
     def unsubscribe(self, op: ops.Unsubscribe) -> None:
         """Remove one id (or, without id, every id) of the client's subscription."""
-        topic = full_name(op.topic)
+        topic = absolute_name(op.topic)
         sub = self.subs.get(topic)
         if sub is None:
             self.session.status("warning", f"unsubscribe: not subscribed to {topic}", op.id)

@@ -18,6 +18,7 @@ from dataclasses import dataclass
 from typing import Any, NoReturn, TextIO
 
 from msgs.runtime import Message, UnknownTypeError, ValidationError, lookup
+from rosbridge_core.protocol.names import absolute_name
 
 from ..client import Client, connect
 from ..exceptions import (
@@ -247,7 +248,7 @@ class CliSession:
     async def node(self, name: str, wait: float) -> str:
         """The fully qualified name of node ``name`` (``/`` added in front, as ros2 does),
         once the graph has it; polls up to ``wait`` s, then ``CliError(EXIT_NOT_FOUND)``."""
-        full = name if name.startswith("/") else "/" + name
+        full = absolute_name(name)
         deadline = time.monotonic() + wait
         while True:
             known = await self.ros.graph.node_names(timeout=self.timeout)

@@ -6,6 +6,8 @@ import argparse
 import json
 from typing import Any
 
+from rosbridge_core.protocol.names import absolute_name
+
 from .common import (
     EXIT_NOT_FOUND,
     EXIT_OK,
@@ -32,7 +34,7 @@ async def cmd_node_list(args: argparse.Namespace, out: Out) -> int:
 async def cmd_node_info(args: argparse.Namespace, out: Out) -> int:
     """``node info NODE``: what a node publishes, subscribes to and serves."""
     async def body(s: CliSession) -> int:
-        name = args.node if args.node.startswith("/") else "/" + args.node
+        name = absolute_name(args.node)
         if name not in await s.ros.graph.node_names(timeout=s.timeout):
             raise CliError(EXIT_NOT_FOUND, f"unknown node {name}")
         node = await s.ros.graph.node(name, timeout=s.timeout)

@@ -10,6 +10,7 @@ from typing import Any
 
 from bridge_server.zenoh.keys import Snapshot
 from rosbridge_core.graph import shared_types
+from rosbridge_core.protocol.names import node_path
 
 __all__ = ["SnapshotIntrospection"]
 
@@ -41,7 +42,7 @@ class SnapshotIntrospection:
         return self.snapshot.own_node
 
     def _node(self, name: str, namespace: str) -> dict[str, Any]:
-        node = self.snapshot.nodes.get(namespace.rstrip("/") + "/" + name)
+        node = self.snapshot.nodes.get(node_path(namespace, name))
         if node is None:
             raise LookupError(f"robot {self.robot} has no node {namespace}/{name}")
         return node
@@ -98,7 +99,7 @@ class SnapshotIntrospection:
         found = []
         for n in self._servers(service):
             if (n["name"], n["namespace"]) != own:
-                found.append("the ROS node " + n["namespace"].rstrip("/") + "/" + n["name"])
+                found.append("the ROS node " + node_path(n["namespace"], n["name"]))
             elif relay is not None and relay != self.relay:
                 found.append(f"a client of relay {relay}")
         return found

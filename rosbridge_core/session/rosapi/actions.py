@@ -5,6 +5,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
+from rosbridge_core.protocol.names import absolute_name
 from rosbridge_core.session.rosapi.common import (
     FIELDS,
     HANDLERS,
@@ -21,7 +22,7 @@ __all__: list[str] = []
 def action_type(bridge: BridgeView, args: Mapping[str, Any]) -> dict[str, Any]:
     """The type of one action (``pkg/action/Type``), "" if no server offers it."""
     name = str_field(args, "action").rstrip("/")
-    name = name if name.startswith("/") else "/" + name
+    name = absolute_name(name)
     owner = bridge.action_owners.get(name)  # served by one of our clients
     if owner is not None and name in owner.served:
         return {"type": owner.served[name].type_name}

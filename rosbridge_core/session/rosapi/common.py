@@ -8,6 +8,7 @@ from collections.abc import Awaitable, Callable, Iterator, Mapping
 from typing import TYPE_CHECKING, Any, Protocol
 
 from rosbridge_core.interfaces import BridgeError, canonical_name
+from rosbridge_core.protocol.names import absolute_name
 from rosbridge_core.security.names import InvalidNameError, check_name
 
 if TYPE_CHECKING:
@@ -90,7 +91,7 @@ def str_field(args: Mapping[str, Any], name: str) -> str:
 def topic_field(args: Mapping[str, Any]) -> str:
     """``args.topic`` as a full, valid topic name (relative names are made absolute)."""
     topic = str_field(args, "topic")
-    topic = topic if topic.startswith("/") else "/" + topic
+    topic = absolute_name(topic)
     try:
         check_name(topic)
     except InvalidNameError as exc:
@@ -104,7 +105,7 @@ def qualified(name: str, namespace: str) -> str:
 
 
 def split_node(full: str) -> tuple[str, str]:
-    full = full if full.startswith("/") else "/" + full
+    full = absolute_name(full)
     ns, _, name = full.rpartition("/")
     return name, ns or "/"
 

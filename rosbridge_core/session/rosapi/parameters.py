@@ -9,6 +9,7 @@ import json
 from collections.abc import Mapping
 from typing import Any
 
+from rosbridge_core.protocol.names import absolute_name
 from rosbridge_core.security.names import InvalidNameError, check_name
 from rosbridge_core.session.rosapi.common import (
     ASYNC_HANDLERS,
@@ -32,7 +33,7 @@ def _param_name(args: Mapping[str, Any]) -> tuple[str, str, str]:
     node, sep, param = full.partition(":")
     if not sep or not node or not param:
         raise RosapiError(f"args.name: expected 'node_name:param_name', got {full!r}")
-    node = node if node.startswith("/") else "/" + node
+    node = absolute_name(node)
     try:  # before rclpy sees it: a bad node name is the caller's mistake, not ours
         check_name(node, "node")
     except InvalidNameError as exc:
