@@ -8,7 +8,7 @@ from urllib.parse import parse_qs, urlsplit
 
 from websockets.http11 import Request
 
-__all__ = ["client_address", "is_loopback", "token_of"]
+__all__ = ["UNKNOWN_ADDRESS", "client_address", "is_loopback", "token_of"]
 
 
 class Addressed(Protocol):
@@ -19,9 +19,20 @@ class Addressed(Protocol):
         """The peer's address as the socket gives it."""
 
 
+UNKNOWN_ADDRESS = "unknown"
+"""The address of a connection whose socket closed before anyone asked (uvloop raises
+for its peer then, where asyncio answers from its cache): counted, limited and logged
+under this one name."""
+
+
 def client_address(connection: Addressed) -> str:
-    """The IP address a connection comes from (the key of per-address limits)."""
-    addr = connection.remote_address
+    """The IP address a connection comes from (the key of per-address limits);
+    :data:`UNKNOWN_ADDRESS` once its socket has closed (a client gone before its handshake
+    was read: nothing to log a traceback about)."""
+    try:
+        addr = connection.remote_address
+    except (OSError, AttributeError):  # uvloop: the socket is gone (None.getpeername)
+        return UNKNOWN_ADDRESS
     if isinstance(addr, tuple) and addr:
         return str(addr[0])
     return str(addr)
