@@ -1,7 +1,7 @@
 """The stock clients against our bridge, with rclpy on the ROS side: roslib 2.1.0 (npm,
 unchanged, in Node) and roslibpy 2.1.0 (PyPI, unchanged), each in a child process.
 
-Each test runs every scenario (``tests/peers/scenarios.py``) against both clients (the
+Each test runs every scenario (``tests/peers/scenarios/``) against both clients (the
 ``kind`` parameter: ``roslibjs``, ``roslibpy``), or against the one that has the feature
 (``ROSLIB_ONLY``, ``ROSLIBPY_ONLY``). The Node driver is ``tests/peers/node/peer.mjs``;
 its npm packages are pinned by ``package-lock.json`` and installed by ``scripts/setup.sh``.
