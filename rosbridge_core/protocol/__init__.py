@@ -8,14 +8,14 @@ loading the client. A test keeps it so (``tests/core/test_protocol_core.py``).
   in one place (the kinds its fields may hold: :mod:`~rosbridge_core.protocol.kinds`), and
   the handshake headers (:mod:`~rosbridge_core.protocol.headers`, re-exported by ``ops``);
 - :mod:`~rosbridge_core.protocol.frames`: websocket frames in (JSON text, CBOR binary with
-  RFC 8746 typed arrays), ``fragment`` ops reassembled and made (:class:`Protocol`);
+  RFC 8746 typed arrays), ``fragment`` ops reassembled and made (:class:`Conversation`);
 - :mod:`~rosbridge_core.protocol.keepalive`: how a link notices its peer went silent;
 - :mod:`~rosbridge_core.protocol.errors`: the root of every roslibpy_lite error and the
   protocol errors (the client's other errors grow from it in :mod:`roslibpy_lite.exceptions`);
 - :mod:`~rosbridge_core.protocol.goal_status`: :class:`GoalStatus`, a goal's status numbers.
 
 The frame API is re-exported here, where it has always been found
-(``rosbridge_core.protocol.Protocol``, ``rosbridge_core.protocol.decode_frame``).
+(``rosbridge_core.protocol.Conversation``, ``rosbridge_core.protocol.decode_frame``).
 """
 
 from __future__ import annotations

@@ -3,7 +3,7 @@
 Frames in, ops out; ops in, text out. Nothing here touches a socket or an
 event loop, so it is tested with plain values::
 
-    proto = Protocol()
+    proto = Conversation()
     op = proto.receive('{"op": "publish", "topic": "/a", "msg": {"data": 1}}')
     assert op == Publish(topic="/a", msg={"data": 1})
 
@@ -28,8 +28,7 @@ import sys
 from collections import OrderedDict
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any, NoReturn
-from typing import Protocol as Interface
+from typing import Any, NoReturn, Protocol
 
 from .constants import MAX_CLIENT_FRAME
 from .errors import RemoteProtocolError
@@ -38,8 +37,8 @@ from .ops import Fragment, Id, Op, encode, parse_op
 __all__ = [
     "PIECE_COST",
     "TYPED_ARRAY_TAGS",
+    "Conversation",
     "FragmentBudget",
-    "Protocol",
     "decode_frame",
     "decode_typed_array",
     "split_fragments",
@@ -172,7 +171,7 @@ data: a piece's own objects take about that much, so many one-character pieces a
 the bound as much as a few large ones (a piece of 128 characters or more counts its length)."""
 
 
-class FragmentBudget(Interface):
+class FragmentBudget(Protocol):
     """Fragment memory shared with other connections (a server's per-principal and
     per-address accounts): each held piece is taken from it, and given back when its op is
     completed or dropped."""
@@ -184,7 +183,7 @@ class FragmentBudget(Interface):
         """Return ``n`` bytes taken before."""
 
 
-class Protocol:
+class Conversation:
     """One side of a rosbridge conversation, without I/O.
 
     Args:

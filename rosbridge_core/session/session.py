@@ -48,7 +48,7 @@ from typing import TYPE_CHECKING, Any, ClassVar, Protocol
 from rosbridge_core.interfaces import BridgeError
 from rosbridge_core.protocol import ops
 from rosbridge_core.protocol.errors import ProtocolError
-from rosbridge_core.protocol.frames import Protocol as FrameProtocol
+from rosbridge_core.protocol.frames import Conversation as FrameProtocol
 from rosbridge_core.protocol.frames import decode_frame
 from rosbridge_core.protocol.ops import ACKS_HEADER, parse_op
 from rosbridge_core.security.permissions import MAY

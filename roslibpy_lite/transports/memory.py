@@ -28,7 +28,7 @@ from rosbridge_core.memory.graph import MemoryGraph, MemoryRos
 from rosbridge_core.memory.server import MemoryConnection, MemoryServer
 from rosbridge_core.protocol import ops
 from rosbridge_core.protocol.errors import ProtocolError
-from rosbridge_core.protocol.frames import Protocol as FrameProtocol
+from rosbridge_core.protocol.frames import Conversation as FrameProtocol
 
 from ..exceptions import InvalidMessageError, UsageError
 

@@ -26,7 +26,7 @@ from websockets.exceptions import InvalidHandshake, InvalidURI
 
 from rosbridge_core.protocol import keepalive, ops
 from rosbridge_core.protocol.constants import DEFAULT_PORT, MAX_CLIENT_FRAME
-from rosbridge_core.protocol.frames import Protocol
+from rosbridge_core.protocol.frames import Conversation
 from rosbridge_core.protocol.ops import ACKS_HEADER, AUTH_HEADER, SESSION_HEADER
 
 from .._backoff import Backoff
@@ -120,7 +120,7 @@ class WebSocketTransport:
         self.session: ClientSession | None = ClientSession(resume_frames) if resume else None
         self._ack_timer: asyncio.TimerHandle | None = None
         self._ack_frame: str | None = None
-        self._protocol = Protocol()
+        self._protocol = Conversation()
         self._ws: ClientConnection | None = None
         self._outbox: deque[str] = deque()
         self._out_wake: asyncio.Future[None] | None = None
@@ -308,7 +308,7 @@ class WebSocketTransport:
         """Serve one open connection until it closes."""
         assert self._link is not None
         self._ws = ws
-        self._protocol = Protocol()
+        self._protocol = Conversation()
         self._link.link_up()
         if self._first is not None and not self._first.done():
             self._first.set_result(None)

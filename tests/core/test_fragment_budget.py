@@ -8,7 +8,7 @@ from __future__ import annotations
 import pytest
 
 from rosbridge_core.protocol.errors import RemoteProtocolError
-from rosbridge_core.protocol.frames import PIECE_COST, Protocol
+from rosbridge_core.protocol.frames import PIECE_COST, Conversation
 from rosbridge_core.protocol.ops import Fragment
 
 
@@ -41,7 +41,7 @@ def test_two_connections_share_one_budget_and_a_refused_piece_drops_its_op() -> 
     refused naming the fragment, the piece and the budget's reason, and its op's pieces are
     given back while the other connection's stay charged."""
     budget = Budget(3 * PIECE_COST)
-    first, second = Protocol(budget=budget), Protocol(budget=budget)
+    first, second = Conversation(budget=budget), Conversation(budget=budget)
     assert first.receive_fragment(piece("a", 0, 3, "x")) is None
     assert second.receive_fragment(piece("b", 0, 3, "y")) is None
     assert second.receive_fragment(piece("b", 1, 3, "y")) is None
@@ -58,7 +58,7 @@ def test_completed_and_closed_ops_give_their_bytes_back() -> None:
     """An op whose pieces are all in gives back what they took; close() gives back what the
     incomplete ops of a connection that ended took."""
     budget = Budget(10 * PIECE_COST)
-    proto = Protocol(budget=budget)
+    proto = Conversation(budget=budget)
     text = '{"op": "set_level", "level": "info"}'
     assert proto.receive_fragment(piece("whole", 0, 2, text[:10])) is None
     assert proto.receive_fragment(piece("whole", 1, 2, text[10:])) is not None

@@ -8,7 +8,7 @@ from __future__ import annotations
 import pytest
 
 from rosbridge_core.protocol.errors import RemoteProtocolError
-from rosbridge_core.protocol.frames import PIECE_COST, Protocol, decode_frame, split_fragments
+from rosbridge_core.protocol.frames import PIECE_COST, Conversation, decode_frame, split_fragments
 from rosbridge_core.protocol.ops import Fragment, Publish, encode, parse_op
 
 
@@ -42,7 +42,7 @@ class Budget:
 def test_the_default_holds_64_incomplete_ops_and_records_the_evicted() -> None:
     """64 incomplete ops wait by default; the 65th evicts the oldest, recorded as (id, pieces
     received, total) for the sender to be told."""
-    proto = Protocol()
+    proto = Conversation()
     for i in range(64):
         proto.receive_fragment(Fragment(f"f{i}", "x", 0, 3))
     proto.receive_fragment(Fragment("f0", "y", 1, 3))  # f0 now has 2 of its 3 pieces
@@ -54,7 +54,7 @@ def test_the_default_holds_64_incomplete_ops_and_records_the_evicted() -> None:
 def test_a_bad_reassembled_op_is_named_by_its_own_op_and_id_when_it_has_them() -> None:
     """Invalid JSON reassembled: the error is the fragment's (op "fragment", the fragment's
     id); a valid op missing a field: the error names that op and its own id."""
-    proto = Protocol()
+    proto = Conversation()
     proto.receive_fragment(Fragment("f1", "{not", 0, 2))
     with pytest.raises(RemoteProtocolError) as garbage:
         proto.receive_fragment(Fragment("f1", " json", 1, 2))
@@ -74,7 +74,7 @@ def test_a_bad_reassembled_op_is_named_by_its_own_op_and_id_when_it_has_them() -
 def test_a_fragment_may_not_carry_a_fragment() -> None:
     """A reassembled fragment op is refused, naming the outer fragment's id."""
     nested = encode(Fragment("inner", "{}", 0, 2))
-    proto = Protocol()
+    proto = Conversation()
     with pytest.raises(RemoteProtocolError) as info:
         proto.receive_fragment(Fragment("outer", nested, 0, 1))
     assert info.value.message == "fragment 'outer': a fragment may not carry a fragment"
@@ -110,7 +110,7 @@ def test_each_piece_is_taken_from_the_shared_budget_and_given_back() -> None:
     op = Publish("/a", {"data": "x" * 300})
     pieces = split_fragments(encode(op), 200, "b")
     budget = Budget(10_000)
-    proto = Protocol(budget=budget)
+    proto = Conversation(budget=budget)
     assert [proto.receive(p) for p in pieces][-1] == op
     costs = [max(len(_piece(p).data), PIECE_COST) for p in pieces]
     assert budget.calls == [*(("take", c) for c in costs), ("give_back", sum(costs))]
@@ -121,7 +121,7 @@ def test_a_piece_the_budget_refuses_is_refused_with_its_reason() -> None:
     """A piece the shared budget refuses fails naming the piece and the budget's reason,
     and the op's pieces held so far are given back."""
     budget = Budget(PIECE_COST)
-    proto = Protocol(budget=budget)
+    proto = Conversation(budget=budget)
     proto.receive_fragment(Fragment("f", "x", 0, 3))
     with pytest.raises(RemoteProtocolError) as info:
         proto.receive_fragment(Fragment("f", "y", 1, 3))
@@ -134,7 +134,7 @@ def test_a_piece_the_budget_refuses_is_refused_with_its_reason() -> None:
 def test_closing_gives_every_held_piece_back() -> None:
     """close() drops the incomplete ops and gives their bytes back to the budget."""
     budget = Budget(10_000)
-    proto = Protocol(budget=budget)
+    proto = Conversation(budget=budget)
     proto.receive_fragment(Fragment("a", "x" * 500, 0, 2))
     proto.receive_fragment(Fragment("b", "x", 0, 2))
     assert budget.taken == 500 + PIECE_COST

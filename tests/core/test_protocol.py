@@ -13,7 +13,7 @@ from hypothesis import strategies as st
 
 from rosbridge_core.protocol.frames import (
     PIECE_COST,
-    Protocol,
+    Conversation,
     decode_frame,
     decode_typed_array,
     split_fragments,
@@ -24,13 +24,13 @@ from roslibpy_lite.exceptions import RemoteProtocolError
 
 def test_text_frame_gives_an_op() -> None:
     """A JSON text frame becomes the op it holds."""
-    assert Protocol().receive('{"op":"publish","topic":"/a","msg":{}}') == Publish("/a", {})
+    assert Conversation().receive('{"op":"publish","topic":"/a","msg":{}}') == Publish("/a", {})
 
 
 def test_malformed_json_says_where() -> None:
     """Malformed JSON is reported with line and column."""
     with pytest.raises(RemoteProtocolError, match="malformed JSON at line 1 column 2"):
-        Protocol().receive("{oops")
+        Conversation().receive("{oops")
 
 
 def test_cbor_frame_with_typed_arrays_and_bytes() -> None:
@@ -43,7 +43,7 @@ def test_cbor_frame_with_typed_arrays_and_bytes() -> None:
         "data": b"\x00\x01\xff",
     }
     frame = cbor2.dumps({"op": "publish", "topic": "/img", "msg": msg})
-    op = Protocol().receive(frame)
+    op = Conversation().receive(frame)
     assert op == Publish("/img", {"f64": [1.5, -2.0], "f32": [0.5], "i16": [-3, 4],
                                   "u32": [7], "data": b"\x00\x01\xff"})
 
@@ -71,7 +71,7 @@ def test_fragments_reassemble_in_any_order() -> None:
     text = encode(op)
     pieces = split_fragments(text, 30, "big-1")
     assert len(pieces) == -(-len(text) // 30) > 1
-    proto = Protocol()
+    proto = Conversation()
     results = [proto.receive(p) for p in reversed(pieces)]
     assert all(r is None for r in results[:-1]) and results[-1] == op
     assert proto.pending_fragments == 0
@@ -84,7 +84,7 @@ def test_small_text_is_not_fragmented() -> None:
 
 def test_fragment_total_must_not_change() -> None:
     """A fragment whose total disagrees with earlier pieces of the same id is refused."""
-    proto = Protocol()
+    proto = Conversation()
     proto.receive_fragment(Fragment("f", "{", 0, 3))
     with pytest.raises(RemoteProtocolError, match="total changed from 3 to 2"):
         proto.receive_fragment(Fragment("f", "}", 1, 2))
@@ -92,7 +92,7 @@ def test_fragment_total_must_not_change() -> None:
 
 def test_reassembled_garbage_names_the_fragment_id() -> None:
     """Pieces that join into invalid JSON fail with the fragment id."""
-    proto = Protocol()
+    proto = Conversation()
     proto.receive_fragment(Fragment("f9", "{not", 0, 2))
     with pytest.raises(RemoteProtocolError, match="fragment 'f9': reassembled op is invalid") as info:
         proto.receive_fragment(Fragment("f9", " json", 1, 2))
@@ -101,7 +101,7 @@ def test_reassembled_garbage_names_the_fragment_id() -> None:
 
 def test_partial_fragments_are_bounded() -> None:
     """At most max_partial incomplete ops wait; the oldest is dropped beyond that."""
-    proto = Protocol(max_partial=2)
+    proto = Conversation(max_partial=2)
     for i in range(5):
         proto.receive_fragment(Fragment(f"f{i}", "x", 0, 2))
     assert proto.pending_fragments == 2
@@ -109,7 +109,7 @@ def test_partial_fragments_are_bounded() -> None:
 
 def test_reassembled_size_is_bounded() -> None:
     """A fragmented op may not grow past max_fragment_bytes."""
-    proto = Protocol(max_fragment_bytes=10)
+    proto = Conversation(max_fragment_bytes=10)
     with pytest.raises(RemoteProtocolError, match="past 10 bytes"):
         proto.receive_fragment(Fragment("f", "x" * 11, 0, 2))
     assert proto.pending_fragments == 0 and proto.held_fragment_bytes == 0
@@ -118,7 +118,7 @@ def test_reassembled_size_is_bounded() -> None:
 def test_a_piece_sent_twice_is_refused_naming_the_id_and_the_piece() -> None:
     """A repeated piece number is an error naming the fragment id and the number; the op's
     pieces are dropped, so nothing sent again is held without being counted."""
-    proto = Protocol(max_fragment_bytes=10_000)
+    proto = Conversation(max_fragment_bytes=10_000)
     proto.receive_fragment(Fragment("f", "x", 0, 3))
     with pytest.raises(RemoteProtocolError, match="fragment 'f': piece 0 of 3 was sent twice") \
             as info:
@@ -131,7 +131,7 @@ def test_every_piece_held_counts_whatever_the_ids_and_numbers() -> None:
     """The bound covers all incomplete ops together, each piece counted (tiny ones at least
     PIECE_COST): pieces sent small then again large, under many ids, never hold more."""
     limit = 64 * 1024
-    proto = Protocol(max_partial=16, max_fragment_bytes=limit)
+    proto = Conversation(max_partial=16, max_fragment_bytes=limit)
     refused = 0
     for i in range(200):
         for data in ("x", "y" * 4000):  # the attack of issue 39: small, then the same num big
@@ -151,7 +151,7 @@ def test_fragments_within_the_bound_still_reassemble() -> None:
     op = Publish("/a", {"data": "x" * 5000})
     text = encode(op)
     pieces = split_fragments(text, PIECE_COST, "big")
-    proto = Protocol(max_fragment_bytes=len(pieces) * PIECE_COST)
+    proto = Conversation(max_fragment_bytes=len(pieces) * PIECE_COST)
     results = [proto.receive(p) for p in pieces]
     assert results[-1] == op and proto.held_fragment_bytes == 0
 
@@ -174,7 +174,7 @@ _op_like = st.fixed_dictionaries(
                  _op_like.map(cbor2.dumps)))
 def test_any_frame_gives_an_op_or_a_protocol_error(frame: Any) -> None:
     """Fuzz: whatever arrives, the core returns an op (or None for a fragment) or raises RemoteProtocolError."""
-    proto = Protocol()
+    proto = Conversation()
     try:
         result = proto.receive(frame)
     except RemoteProtocolError as exc:
