@@ -48,8 +48,7 @@ from typing import TYPE_CHECKING, Any, ClassVar, Protocol
 from rosbridge_core.interfaces import BridgeError
 from rosbridge_core.protocol import ops
 from rosbridge_core.protocol.errors import ProtocolError
-from rosbridge_core.protocol.frames import Conversation as FrameProtocol
-from rosbridge_core.protocol.frames import decode_frame
+from rosbridge_core.protocol.frames import Conversation, decode_frame
 from rosbridge_core.protocol.ops import ACKS_HEADER, parse_op
 from rosbridge_core.security.permissions import MAY
 from rosbridge_core.session import rosapi
@@ -159,11 +158,11 @@ class Session:
             for name, method in getattr(capability, "RAW_OPS", {}).items():
                 self._raw_ops[name] = getattr(capability, method)
 
-    def _reassembly(self) -> FrameProtocol:
+    def _reassembly(self) -> Conversation:
         """The ``fragment`` op reassembly of the current link: held to the same bound as a
         single frame, and charged to the link's principal and address (security/accounts.py)."""
         holder = getattr(self.link, "holder", None)
-        return FrameProtocol(max_partial=16,
+        return Conversation(max_partial=16,
                              max_fragment_bytes=self.shared.link_config.max_message_size,
                              budget=None if holder is None else holder.fragments())
 

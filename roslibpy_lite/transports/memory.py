@@ -28,7 +28,7 @@ from rosbridge_core.memory.graph import MemoryGraph, MemoryRos
 from rosbridge_core.memory.server import MemoryConnection, MemoryServer
 from rosbridge_core.protocol import ops
 from rosbridge_core.protocol.errors import ProtocolError
-from rosbridge_core.protocol.frames import Conversation as FrameProtocol
+from rosbridge_core.protocol.frames import Conversation
 
 from ..exceptions import InvalidMessageError, UsageError
 
@@ -60,7 +60,7 @@ class MemoryTransport:
         self.server.ros.taps.append(self._record)
         self._published = False  # the frame being sent published a message in the graph
         self._robot_pubs: dict[tuple[str, str, bool], MemoryPublisher] = {}
-        self._frames = FrameProtocol()
+        self._frames = Conversation()
         self._conn: MemoryConnection | None = None
         self._link: Link | None = None
 
@@ -80,7 +80,7 @@ class MemoryTransport:
     def open(self) -> None:
         """Play a (re)connect: a new session, on which the client restores its handles."""
         assert self._link is not None
-        self._frames = FrameProtocol()  # fragments cut off with the old link are not completed
+        self._frames = Conversation()  # fragments cut off with the old link are not completed
         self._conn = self.server.connect(self._deliver, headers={ops.ACKS_HEADER: "1"},
                                          on_close=self._closed)
         self._link.link_up()
