@@ -38,6 +38,7 @@ from collections.abc import Callable, Mapping
 from typing import TYPE_CHECKING, Any, Literal, Self, overload
 
 from rosbridge_core.protocol import ops
+from rosbridge_core.protocol.constants import ADVERTISE_QUEUE_SIZE
 
 from ._api_types import ConnectionState, ErrorCallback, MessageCallback, StateCallback
 from ._host import _Host
@@ -185,18 +186,21 @@ class RosBase:
 
     @overload
     def advertise(
-        self, topic: str, type: str, *, latch: bool = False, queue_size: int = 100,
+        self, topic: str, type: str, *, latch: bool = False,
+        queue_size: int = ADVERTISE_QUEUE_SIZE,
         strict: bool | None = None,
     ) -> Publisher[dict[str, Any]]: ...
 
     @overload
     def advertise(
-        self, topic: str, type: type[M], *, latch: bool = False, queue_size: int = 100,
+        self, topic: str, type: type[M], *, latch: bool = False,
+        queue_size: int = ADVERTISE_QUEUE_SIZE,
         strict: bool | None = None,
     ) -> Publisher[M]: ...
 
     def advertise(
-        self, topic: str, type: str | type[Message], *, latch: bool = False, queue_size: int = 100,
+        self, topic: str, type: str | type[Message], *, latch: bool = False,
+        queue_size: int = ADVERTISE_QUEUE_SIZE,
         strict: bool | None = None,
     ) -> Publisher[Any]:
         """Announce a publisher on ``topic``.

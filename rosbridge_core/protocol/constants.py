@@ -6,13 +6,14 @@
   reconnect;
 - :data:`MAX_MESSAGE_SIZE`: the largest frame a server reads by default;
 - :data:`MAX_CLIENT_FRAME`: the largest frame (or reassembled ``fragment`` message) a
-  client accepts by default.
+  client accepts by default;
+- :data:`ADVERTISE_QUEUE_SIZE`: an ``advertise`` op's ``queue_size`` when it names none.
 """
 
 from __future__ import annotations
 
-__all__ = ["DEFAULT_PORT", "INTERNAL_ERROR", "MAX_CLIENT_FRAME", "MAX_MESSAGE_SIZE",
-           "POLICY_VIOLATION"]
+__all__ = ["ADVERTISE_QUEUE_SIZE", "DEFAULT_PORT", "INTERNAL_ERROR", "MAX_CLIENT_FRAME",
+           "MAX_MESSAGE_SIZE", "POLICY_VIOLATION"]
 
 DEFAULT_PORT = 9090
 """rosbridge's port (``ws://robot:9090``)."""
@@ -30,3 +31,7 @@ MAX_MESSAGE_SIZE = 16 * 1024 * 1024
 MAX_CLIENT_FRAME = 256 * 1024 * 1024
 """Largest frame, or message reassembled from ``fragment`` ops, a client takes by default
 (256 MiB: a point cloud or a 4K image with room to spare)."""
+
+ADVERTISE_QUEUE_SIZE = 100
+"""An ``advertise`` op's ``queue_size`` when it names none (rosbridge's default): the
+publisher's ROS history depth."""

@@ -27,6 +27,7 @@ from typing import (
     get_args,
 )
 
+from .constants import ADVERTISE_QUEUE_SIZE
 from .errors import LocalProtocolError, RemoteProtocolError
 from .goal_status import GoalStatus
 from .headers import (
@@ -154,7 +155,7 @@ class Advertise(_OpFacts):
     type: Annotated[str, _NAME]
     id: Annotated[Id | None, _ID] = None
     latch: Annotated[bool, _BOOL] = False
-    queue_size: Annotated[int, _COUNT] = 100
+    queue_size: Annotated[int, _COUNT] = ADVERTISE_QUEUE_SIZE
 
 
 @dataclass(frozen=True, slots=True)

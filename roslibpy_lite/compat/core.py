@@ -18,6 +18,8 @@ from collections import UserDict
 from collections.abc import Callable, Mapping
 from typing import TYPE_CHECKING, Any, Protocol
 
+from rosbridge_core.protocol.constants import ADVERTISE_QUEUE_SIZE
+
 from ..actions import ActionError
 from ..exceptions import RosTimeoutError
 
@@ -242,7 +244,7 @@ class Topic:
         compression: str | None = None,
         latch: bool = False,
         throttle_rate: int = 0,
-        queue_size: int = 100,
+        queue_size: int = ADVERTISE_QUEUE_SIZE,
         queue_length: int = 0,
         reconnect_on_close: bool = True,
     ) -> None:

@@ -57,6 +57,8 @@ import warnings
 from collections.abc import Callable, Mapping, Sequence
 from typing import TYPE_CHECKING, Any, Self, Unpack, overload
 
+from rosbridge_core.protocol.constants import ADVERTISE_QUEUE_SIZE
+
 from .. import MockRos as _AioMockRos
 from .. import connect as _aio_connect
 from .._aio import is_async_callable
@@ -148,18 +150,21 @@ class _Front:
 
     @overload
     def advertise(
-        self, topic: str, type: str, *, latch: bool = False, queue_size: int = 100,
+        self, topic: str, type: str, *, latch: bool = False,
+        queue_size: int = ADVERTISE_QUEUE_SIZE,
         strict: bool | None = None,
     ) -> Publisher[dict[str, Any]]: ...
 
     @overload
     def advertise(
-        self, topic: str, type: type[M], *, latch: bool = False, queue_size: int = 100,
+        self, topic: str, type: type[M], *, latch: bool = False,
+        queue_size: int = ADVERTISE_QUEUE_SIZE,
         strict: bool | None = None,
     ) -> Publisher[M]: ...
 
     def advertise(
-        self, topic: str, type: str | type[Message], *, latch: bool = False, queue_size: int = 100,
+        self, topic: str, type: str | type[Message], *, latch: bool = False,
+        queue_size: int = ADVERTISE_QUEUE_SIZE,
         strict: bool | None = None,
     ) -> Publisher[Any]:
         """Announce a publisher on ``topic`` (see :meth:`roslibpy_lite.api.Ros.advertise`)."""
