@@ -75,13 +75,16 @@ class MemoryServer:
     """What the sessions of an in-memory server share (see the module's text).
 
     ``graph``: the server's node (a new graph of its own when not given); ``config``: the
-    sessions' settings; ``security``: the limits and auth of the bridge's command line.
+    sessions' settings; ``security``: the limits and auth of the bridge's command line;
+    ``resume``: how long a session whose link was lost is kept for a resume (by default
+    none is kept).
     """
 
     def __init__(self, graph: MemoryGraph | None = None, *,
                  config: SessionConfig = MEMORY_SESSIONS,
                  security: SecurityConfig | None = None,
-                 max_message_size: int = MAX_MESSAGE_SIZE) -> None:
+                 max_message_size: int = MAX_MESSAGE_SIZE,
+                 resume: ResumeConfig | None = None) -> None:
         self.node = graph if graph is not None else MemoryGraph(MemoryRos(), "rosbridge")
         """The server's node of the in-memory graph."""
         self.graph: Graph = self.node
@@ -90,7 +93,8 @@ class MemoryServer:
         self.action_owners: Ownership[SessionActions] = Ownership("action")
         self.action_clients = ActionClients()
         self.security = Authority(security or SecurityConfig())
-        self.resumable: SessionStore[Session] = SessionStore(ResumeConfig(session_keep=0.0))
+        self.resumable: SessionStore[Session] = SessionStore(
+            resume or ResumeConfig(session_keep=0.0))
         self.session_config = config
         self.link_config = LinkConfig(max_message_size, 0.0, 0.0)
         self.publisher_grace = 0.0
@@ -128,7 +132,7 @@ class MemoryServer:
             self.sessions.discard(session)
 
     def session_ended(self, session: Host) -> None:
-        """A session kept for a resume ended (none is kept in memory)."""
+        """A session kept for a resume ended."""
         if isinstance(session, Session):
             self.sessions.discard(session)
 

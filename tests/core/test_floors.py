@@ -72,6 +72,11 @@ def _read_imports() -> dict[str, frozenset[str]]:
             for name, path in _modules(PACKAGES).items()}
 
 
+def _imports_of(folders: tuple[str, ...]) -> dict[str, set[str]]:
+    return {name: _imports(path.read_text(), name, path.name == "__init__.py")
+            for name, path in _modules(folders).items()}
+
+
 def _all_imports() -> dict[str, set[str]]:
     return {name: set(targets) for name, targets in _read_imports().items()}
 
@@ -83,6 +88,18 @@ def test_no_import_runs_up_a_floor_or_across_the_towers() -> None:
     assert {"msgs", "rosbridge_core.protocol", "roslibpy_lite", "bridge_server.zenoh",
             "bench"} <= set(floors)
     assert stray_imports(_all_imports(), floors) == []
+
+
+def test_the_session_tests_stand_on_the_core_alone() -> None:
+    """tests/session runs the core's session over the core's memory Graph and link: it
+    imports nothing of the server or the client (a test of theirs belongs in their folder)."""
+    floors = floors_of(PAGE.read_text())
+    session_tests = {name: imports for name, imports in _imports_of(("tests/session",)).items()}
+    assert session_tests, "no tests in tests/session"
+    bad = sorted(f"{module} -> {target}" for module, targets in session_tests.items()
+                 for target in targets
+                 if (floor := floor_of(target, floors)) is not None and floor.tower)
+    assert bad == []
 
 
 def test_one_stray_import_is_found() -> None:

@@ -1,13 +1,13 @@
 """A session on its ports in memory: the test's end of a
 :class:`~rosbridge_core.memory.link.MemoryLink`, and a robot node of a
-:class:`~rosbridge_core.memory.graph.MemoryRos` (no ROS, no socket).
+:class:`~rosbridge_core.memory.graph.MemoryRos` (no ROS, no socket, nothing of the server's
+packages).
 
 :func:`open_session` runs a real :class:`~rosbridge_core.session.session.Session` over a
-:class:`Client`'s link, sharing the state of a real (never started) ``Bridge`` whose Graph is
-the node ``rosbridge`` of an in-memory ROS graph; the :class:`Robot` is another node of it.
-The never-started ``Bridge`` (not a ``MemoryServer``) is what the sessions share: its resume
-store keeps a lost session (``MemoryServer`` keeps none), its Foxglove hub serves a Foxglove
-session, and its gate, security and settings are the ones a running bridge gives.
+:class:`Client`'s link, sharing the state of a
+:class:`~rosbridge_core.memory.server.MemoryServer` (with the bridge's session settings and a
+resume store that keeps a lost session) whose Graph is the node ``rosbridge`` of an
+in-memory ROS graph; the :class:`Robot` is another node of it.
 """
 
 from __future__ import annotations
@@ -18,16 +18,16 @@ from collections.abc import AsyncIterator, Callable, Mapping
 from contextlib import asynccontextmanager
 from typing import Any
 
-from bridge_server.foxglove.session import FoxgloveSession
-from bridge_server.front.server import Bridge, BridgeConfig
 from rosbridge_core.graph import Message, RosCall
-from rosbridge_core.memory.graph import MemoryGraph, MemoryPublisher, MemoryRos
+from rosbridge_core.memory.graph import MemoryPublisher, MemoryRos
 from rosbridge_core.memory.link import MemoryLink
+from rosbridge_core.memory.server import MemoryServer
 from rosbridge_core.protocol.frames import decode_frame
 from rosbridge_core.security.auth import Principal
-from rosbridge_core.session.session import Session
+from rosbridge_core.session.resume import ResumeConfig
+from rosbridge_core.session.session import Session, SessionConfig
 
-__all__ = ["Client", "Robot", "open_foxglove", "open_session"]
+__all__ = ["Client", "Robot", "open_session"]
 
 
 class Client:
@@ -100,46 +100,23 @@ class Robot:
         self.node.serve(service, srv_cls, on_request)
 
 
-def _bridge() -> tuple[Bridge, MemoryGraph, Robot]:
-    """A never-started bridge over the node ``rosbridge`` of a new in-memory graph, and the
-    graph's robot node."""
-    ros = MemoryRos()
-    graph = ros.node("rosbridge")
-    return Bridge(BridgeConfig(), graph), graph, Robot(ros)
-
-
-@asynccontextmanager
-async def open_foxglove(client: Client | None = None
-                        ) -> AsyncIterator[tuple[FoxgloveSession, Client, MemoryGraph]]:
-    """A Foxglove session running over ``client``'s link, as :func:`open_session` a rosbridge
-    one."""
-    bridge, graph, _robot = _bridge()
-    client = client or Client()
-    session = FoxgloveSession(bridge, bridge.foxglove, client.link, 1)
-    running = asyncio.create_task(session.run())
-    try:
-        yield session, client, graph
-    finally:
-        client.hang_up()
-        await asyncio.wait_for(running, 5.0)
-        await bridge.foxglove.close()
-        graph.close()
-
-
 @asynccontextmanager
 async def open_session(client: Client | None = None,
-                       ) -> AsyncIterator[tuple[Session, Client, Robot, Bridge]]:
-    """A session running over ``client``'s link (a new client by default), sharing a
-    never-started bridge's state; the link is hung up and the session ended on the way
-    out."""
-    bridge, graph, robot = _bridge()
+                       ) -> AsyncIterator[tuple[Session, Client, Robot, MemoryServer]]:
+    """A session running over ``client``'s link (a new client by default), sharing the state
+    of a :class:`MemoryServer` with the bridge's session settings and resume store, over
+    the node ``rosbridge`` of a new in-memory graph; the link is hung up and the session
+    ended on the way out."""
+    ros = MemoryRos()
+    server = MemoryServer(ros.node("rosbridge"), config=SessionConfig(), resume=ResumeConfig())
+    robot = Robot(ros)
     client = client or Client()
-    session = Session(bridge, client.link, 1)
-    bridge.sessions.add(session)
+    session = Session(server, client.link, 1)
+    server.sessions.add(session)
     running = asyncio.create_task(session.run())
     try:
-        yield session, client, robot, bridge
+        yield session, client, robot, server
     finally:
         client.hang_up()
         await asyncio.wait_for(running, 5.0)
-        graph.close()
+        await server.close()

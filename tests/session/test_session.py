@@ -2,8 +2,8 @@
 
 Each test runs the real :class:`~rosbridge_core.session.session.Session` (its frame loop,
 gate, op groups and outbox) over a :class:`~rosbridge_core.memory.link.MemoryLink`, sharing a
-real, never-started ``Bridge``'s state over an in-memory ROS graph whose other node, the
-:class:`~tests.session.harness.Robot`, hears, publishes and serves.
+:class:`~rosbridge_core.memory.server.MemoryServer`'s state over an in-memory ROS graph whose
+other node, the :class:`~tests.session.harness.Robot`, hears, publishes and serves.
 """
 
 from __future__ import annotations
@@ -17,7 +17,7 @@ from pathlib import Path
 import cbor2
 import pytest
 
-from bridge_server.front.server import Bridge
+from rosbridge_core.memory.server import MemoryServer
 from rosbridge_core.protocol.ops import ACKS_HEADER
 from rosbridge_core.security.auth import Principal
 from rosbridge_core.security.permissions import Role
@@ -38,7 +38,7 @@ async def test_advertise_and_publish_reach_the_graphs_publisher() -> None:
         link.feed({"op": "set_level", "level": "bogus", "id": "sync"})
         op = await link.next_op()
         assert op["op"] == "status" and op["id"] == "sync", op  # nothing before it
-        assert ("/chatter", "std_msgs/msg/String", False) in bridge.ros.publishers
+        assert ("/chatter", "std_msgs/msg/String", False) in bridge.node.publishers
         assert heard == [{"data": "hello"}]
 
 
@@ -164,7 +164,7 @@ async def test_a_lost_link_parks_the_session_and_a_new_link_resumes_it() -> None
         await asyncio.wait_for(resumed, 5.0)
 
 
-async def _until_parked(bridge: Bridge, token: str) -> None:
+async def _until_parked(bridge: MemoryServer, token: str) -> None:
     await async_wait_until(lambda: token in bridge.resumable.parked, 5.0, "the session parked")
 
 
