@@ -165,7 +165,7 @@ class Message(Protocol):
 
     framed: dict[tuple[str, str | None], Any] | None
     """Its websocket frames by (encoding, topic spelling), made by the first client's
-    outbox and shared by the others (:func:`rosbridge_core.session.outbox.wire`)."""
+    outbox and shared by the others (:func:`rosbridge_core.session.outbox.shared_frame`)."""
 
     @property
     def topic(self) -> str:

@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING, Any
 from bridge_server.foxglove import wire
 from bridge_server.foxglove.inbound import Inbound
 from rosbridge_core.session.calls import Calls
-from rosbridge_core.session.outbox import Outbox, Subscription
+from rosbridge_core.session.outbox import Outbox, TopicQueue
 
 if TYPE_CHECKING:
     from bridge_server.foxglove.hub import GraphState, Hub
@@ -51,7 +51,7 @@ class SessionTopics:
     counts read of every session kind)."""
 
     def __init__(self) -> None:
-        self.subs: dict[str, Subscription] = {}
+        self.subs: dict[str, TopicQueue] = {}
         self.publishers: dict[str, Publisher] = {}
 
 
@@ -85,10 +85,10 @@ class SessionBase:
             self.config.drop_report_interval, lambda text: self.status("warning", text),
         )
         self.topics = SessionTopics()
-        self.subscriptions: dict[int, tuple[Subscription, wire.Channel]] = {}
+        self.subscriptions: dict[int, tuple[TopicQueue, wire.Channel]] = {}
         self.client_channels: dict[int, ClientChannel] = {}
         self._publisher_refs: dict[str, int] = {}
-        self._listeners: dict[Subscription, Callable[[RosMessage], None]] = {}
+        self._listeners: dict[TopicQueue, Callable[[RosMessage], None]] = {}
         self.parameter_names: set[str] | None = None  # None: not following; empty: all
         self.graph_seen: GraphState | None = None  # what it was told; None: not following
         self.shown_channels: set[int] = set()  # the ids of the channels it was told of

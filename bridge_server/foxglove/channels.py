@@ -22,7 +22,7 @@ from rosbridge_core.interfaces import BridgeError, ConversionError, canonical_na
 from rosbridge_core.protocol.names import absolute_name
 from rosbridge_core.security.names import InvalidNameError, check_name
 from rosbridge_core.session.limits import over_cap
-from rosbridge_core.session.outbox import Subscription
+from rosbridge_core.session.outbox import TopicQueue
 
 if TYPE_CHECKING:
     from rosbridge_core.graph import Message as RosMessage
@@ -63,7 +63,7 @@ class ChannelOps(SessionBase):
     def _add_subscription(self, sub_id: int, channel: wire.Channel) -> None:
         topic = channel.topic
         cls = self.graph.resolve_message(channel.schema_name)
-        sub = Subscription(self.outbox, topic, topic)
+        sub = TopicQueue(self.outbox, topic, topic)
         header = wire.message_data_header
         hub = self.hub
         cap = min(self.config.default_queue_length, self.limits.max_queue_length or 1 << 30)
@@ -100,7 +100,7 @@ class ChannelOps(SessionBase):
                 continue
             self._drop(found[0])
 
-    def _drop(self, sub: Subscription) -> None:
+    def _drop(self, sub: TopicQueue) -> None:
         self.topics.subs.pop(sub.topic, None)
         sub.close()
         metrics = self.shared.metrics

@@ -29,7 +29,7 @@ if TYPE_CHECKING:
     from bridge_server.http.metrics import BridgeMetrics
     from rosbridge_core.graph import Graph
     from rosbridge_core.session.client_status import ClientStatus
-    from rosbridge_core.session.outbox import Subscription
+    from rosbridge_core.session.outbox import TopicQueue
     from rosbridge_core.session.ownership import Ownership
     from rosbridge_core.session.resume import SessionStore
 
@@ -40,7 +40,7 @@ class Subscribed(Protocol):
     """A session's topics, as far as the status goes."""
 
     @property
-    def subs(self) -> Mapping[str, Subscription]:
+    def subs(self) -> Mapping[str, TopicQueue]:
         """Its subscriptions, by topic."""
 
 

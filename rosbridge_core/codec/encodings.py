@@ -47,7 +47,7 @@ class EncodedMessage:
         self._encoded: dict[str, Encoded] = {}
         self.framed: dict[tuple[str, str | None], Any] | None = None
         """Its websocket frames by (encoding, topic spelling), made by the first client's
-        outbox and shared by the others (:func:`rosbridge_core.session.outbox.wire`)."""
+        outbox and shared by the others (:func:`rosbridge_core.session.outbox.shared_frame`)."""
 
     def encoded(self, encoding: str, name: str | None = None) -> Encoded:
         """The whole ``publish`` op in ``encoding`` (a key of :data:`ENCODINGS`): text for

@@ -18,13 +18,13 @@ __all__ = ["ClientStatus", "SubscriptionStatus", "client_status"]
 
 
 # What client_status reads of a session's subscriptions and outbox (outbox.py's
-# Subscription and Outbox), as protocols: this module imports nothing of the sessions'.
+# TopicQueue and Outbox), as protocols: this module imports nothing of the sessions'.
 class _Typed(Protocol):
     @property
     def type_name(self) -> str | None: ...
 
 
-class _Subscription(Protocol):
+class _TopicQueue(Protocol):
     @property
     def topic(self) -> str: ...
     @property
@@ -107,7 +107,7 @@ def _json_dict(items: Iterable[tuple[str, Any]]) -> dict[str, Any]:
 
 
 def client_status(*, sid: int, worker: int, protocol: str, address: str, connected_at: float,
-                  subs: Iterable[_Subscription], outbox: _Outbox, publishes: Iterable[str],
+                  subs: Iterable[_TopicQueue], outbox: _Outbox, publishes: Iterable[str],
                   serves: Iterable[str], calls_in_flight: int, parked: bool) -> ClientStatus:
     """A session's status from its subscriptions, its outbox and what it publishes and
     serves (what every session kind holds)."""

@@ -22,7 +22,7 @@ class Wire:
     """A whole websocket frame as it goes on the socket: its header and payload joined, or
     for a big frame the header and then the payload, the encoding's own bytes (not copied).
     Shared by every client that gets the message in one encoding and spelling
-    (:func:`~rosbridge_core.session.outbox.wire`).
+    (:func:`~rosbridge_core.session.outbox.shared_frame`).
     """
 
     __slots__ = ("parts", "size")

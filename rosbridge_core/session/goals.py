@@ -130,7 +130,7 @@ class ClientGoal:
         self.owner = owner
         self.id = id
         self.name = name
-        self.wire = op.action
+        self.spelled = op.action
         self.type_name = type_name
         self.feedback = bool(op.feedback)
         self.cbor = op.compression == "cbor"
@@ -360,7 +360,7 @@ class GoalSending:
         self.finish(goal, "canceled" if status == Status.CANCELED else "failed")
         log.info("session %d: goal %s on %s failed: %s", self.session.sid, goal.id, goal.name, why)
         self.session.send_op(
-            ops.ActionResultOp(id=goal.id, action=goal.wire, values=f"{goal.name}: {why}",
+            ops.ActionResultOp(id=goal.id, action=goal.spelled, values=f"{goal.name}: {why}",
                              result=False, status=status)
         )
 
@@ -371,14 +371,14 @@ class GoalSending:
         if goal.cbor:
             import cbor2  # only for a client that asked for CBOR (MockRos may run without it)
 
-            obj: dict[str, Any] = {"op": op, "id": goal.id, "action": goal.wire,
+            obj: dict[str, Any] = {"op": op, "id": goal.id, "action": goal.spelled,
                                    "values": conv.to_cbor_obj(msg)}
             if status is not None:  # a goal that ran to a final status: result true, as
                 obj["status"] = status  # rosbridge sends it (false: it never ran, see fail)
                 obj["result"] = status in _RAN
             session.send_text(cbor2.dumps(obj))
             return
-        head = json.dumps({"op": op, "id": goal.id, "action": goal.wire})[:-1]
+        head = json.dumps({"op": op, "id": goal.id, "action": goal.spelled})[:-1]
         tail = "}"
         if status is not None:
             ok = "true" if status in _RAN else "false"

@@ -27,7 +27,7 @@ A message costs a viewer one write
 A message is encoded once per encoding, and framed once per encoding and topic
 spelling: its websocket frame, header included, is kept on the message
 (``framed``) and the same bytes go to every client that gets it that way
-(:func:`wire`). When nothing of a client's is waiting and its socket takes
+(:func:`shared_frame`). When nothing of a client's is waiting and its socket takes
 data, :meth:`Outbox.push` writes those bytes at once, without queueing them:
 a viewer of a topic costs the server a socket write and a few checks. A
 subscription with a ``fragment_size`` or another protocol's framing
@@ -38,7 +38,7 @@ frames unframed (to send them again) and takes the queue; with an extension
 Merged subscriptions
 --------------------
 Several subscribe ops of one client to one topic (different ids) share one
-:class:`Subscription`, and each message is sent once. The merged options are:
+:class:`TopicQueue`, and each message is sent once. The merged options are:
 the least ``throttle_rate``, the largest ``queue_length``, the least
 ``fragment_size``, and the ``compression`` of the latest subscribe.
 ``throttle_rate`` keeps the newest message of a burst and sends it when the
@@ -84,11 +84,11 @@ __all__ = [
     "JOINED_BYTES",
     "Frame",
     "Outbox",
-    "Subscription",
+    "TopicQueue",
     "Wire",
     "frame_bytes",
     "frame_parts",
-    "wire",
+    "shared_frame",
 ]
 
 log = logging.getLogger("bridge_server.session")
@@ -104,13 +104,13 @@ BATCH_BYTES = 256 * 1024
 
 
 
-class Subscription:
+class TopicQueue:
     """One client's (merged) subscription to one topic: its options and its queue."""
 
-    def __init__(self, outbox: Outbox, topic: str, wire: str) -> None:
+    def __init__(self, outbox: Outbox, topic: str, spelled: str) -> None:
         self.outbox = outbox
         self.topic = topic
-        self.wire = None if wire == topic else wire  # the client's spelling, if different
+        self.spelled = None if spelled == topic else spelled  # the client's spelling, if different
         self.ids: dict[ops.Id | None, ops.Subscribe] = {}
         self.shared: _Shared | None = None
         self.queue: deque[Incoming] = deque()
@@ -129,7 +129,7 @@ class Subscription:
         self.report_timer: asyncio.TimerHandle | None = None
         self.active = True
         self.encode: Callable[[Incoming], Frame] | None = None  # a frame of its own
-        self.key: tuple[str, str | None] = (self.compression, self.wire)  # see wire()
+        self.key: tuple[str, str | None] = (self.compression, self.spelled)  # see shared_frame()
 
     def configure(self, default_len: int, max_len: int = 0, min_fragment: int = 0) -> None:
         """Merge the options of every id: least throttle, largest queue, least fragment size
@@ -141,7 +141,7 @@ class Subscription:
         sizes = [s.fragment_size for s in subs if s.fragment_size]
         self.fragment_size = max(min(sizes), min_fragment) if sizes else None
         self.compression = subs[-1].compression
-        self.key = (self.compression, self.wire)
+        self.key = (self.compression, self.spelled)
         while len(self.queue) > self.maxlen:
             self.queue.popleft()
             self.outbox.queued -= 1
@@ -186,7 +186,7 @@ def _size(frame: Frame) -> int:
     return len(frame) if not isinstance(frame, tuple) else len(frame[0]) + len(frame[1])
 
 
-def wire(sub: Subscription, inc: Incoming) -> Wire | None:
+def shared_frame(sub: TopicQueue, inc: Incoming) -> Wire | None:
     """The message's frame for ``sub`` as it goes on the socket, made once per encoding and
     topic spelling and kept on the message for every other client (``None`` when ``sub``
     frames per client: fragments, another protocol's framing)."""
@@ -200,7 +200,7 @@ def wire(sub: Subscription, inc: Incoming) -> Wire | None:
         made: Wire | None = cache.get(key)
         if made is not None:
             return made
-    encoded = inc.encoded(sub.compression, sub.wire)
+    encoded = inc.encoded(sub.compression, sub.spelled)
     pieces: tuple[bytes, ...]
     if isinstance(encoded, str):
         if len(encoded) > JOINED_BYTES:  # not kept twice (text and bytes): encoded per client
@@ -282,7 +282,7 @@ class Outbox:
         self.drop_report_interval = drop_report_interval
         self.warn = warn
         self.control: deque[str | bytes] = deque()
-        self.order: deque[Subscription] = deque()
+        self.order: deque[TopicQueue] = deque()
         self.queued = 0  # messages in all of this client's subscription queues
         self.control_dropped = 0
         self.closed = False
@@ -324,7 +324,7 @@ class Outbox:
         control.append(text)
         self._kick()
 
-    def push(self, sub: Subscription, inc: Incoming) -> None:
+    def push(self, sub: TopicQueue, inc: Incoming) -> None:
         """Write one message of ``sub`` at once when nothing of this client's waits and its
         socket takes data (the first in this turn of the loop); else queue it, dropping the
         subscription's oldest when full (or when the client's queues hold ``max_queued``
@@ -344,7 +344,7 @@ class Outbox:
             framed = cache.get(sub.key) if cache is not None and sub.encode is None else None
             if framed is None or sub.fragment_size is not None:
                 try:
-                    framed = wire(sub, inc)
+                    framed = shared_frame(sub, inc)
                     if framed is None:
                         parts = tuple(frame_parts(self._frames(sub, inc)))
                         size = sum(map(len, parts))
@@ -412,7 +412,7 @@ class Outbox:
         self.closed = True
         self.wake.set()
 
-    def _note_drop(self, sub: Subscription) -> None:
+    def _note_drop(self, sub: TopicQueue) -> None:
         if sub.report_timer is not None:
             return  # a report is already scheduled
         wait = sub.last_report + self.drop_report_interval - time.monotonic()
@@ -421,7 +421,7 @@ class Outbox:
         else:
             self._report_drops(sub)
 
-    def _report_drops(self, sub: Subscription) -> None:
+    def _report_drops(self, sub: TopicQueue) -> None:
         sub.report_timer = None
         n, sub.dropped = sub.dropped, 0
         if n == 0 or not sub.active:
@@ -525,7 +525,7 @@ class Outbox:
             inc = sub.queue.popleft()
             self.queued -= 1
             try:
-                shared = wire(sub, inc) if framed else None
+                shared = shared_frame(sub, inc) if framed else None
                 encoded = [shared] if shared is not None else self._frames(sub, inc)
             except ReportedError:  # counted and logged where it came from (a relay's robot)
                 continue
@@ -540,10 +540,10 @@ class Outbox:
             sub.sent_bytes += size - before
         return frames
 
-    def _frames(self, sub: Subscription, inc: Incoming) -> list[Frame]:
+    def _frames(self, sub: TopicQueue, inc: Incoming) -> list[Frame]:
         if sub.encode is not None:  # another protocol's framing (bridge_server.foxglove)
             return [sub.encode(inc)]
-        encoded = inc.encoded(sub.compression, sub.wire)
+        encoded = inc.encoded(sub.compression, sub.spelled)
         size = sub.fragment_size
         if size is not None and isinstance(encoded, str) and len(encoded) > size:
             return list(split_fragments(encoded, size, f"{sub.topic}:{next(self.frag_ids)}"))

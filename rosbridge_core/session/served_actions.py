@@ -47,9 +47,9 @@ ACTION_LINGER = 1.0
 class ClientAction:
     """An action this client serves, and the ROS goals it is carrying out."""
 
-    def __init__(self, name: str, wire: str, type_name: str) -> None:
+    def __init__(self, name: str, spelled: str, type_name: str) -> None:
         self.name = name
-        self.wire = wire
+        self.spelled = spelled
         self.type_name = type_name
         self.ros: ServedAction | None = None
         self.goals: dict[str, tuple[ServedGoal, asyncio.TimerHandle | None]] = {}
@@ -112,7 +112,7 @@ class ActionServing:
         if self.served.get(served.name) is not served or session.closed:
             goal.finish(Status.ABORTED)
             return
-        gid = f"action_goal:{served.wire}:{next(self._goal_ids)}"
+        gid = f"action_goal:{served.spelled}:{next(self._goal_ids)}"
         try:
             args = goal.served.goal_conv.to_obj(goal.request)
         except Exception:
@@ -126,14 +126,14 @@ class ActionServing:
         served.goals[gid] = (goal, timer)
         served.ids[id(goal)] = gid
         session.send_op(
-            ops.SendActionGoal(action=served.wire, action_type=served.type_name, args=args,
+            ops.SendActionGoal(action=served.spelled, action_type=served.type_name, args=args,
                                id=gid, feedback=True)
         )
 
     def _on_ros_cancel(self, served: ClientAction, goal: ServedGoal) -> None:
         gid = served.ids.get(id(goal))
         if gid is not None and gid in served.goals:
-            self.session.send_op(ops.CancelActionGoal(id=gid, action=served.wire))
+            self.session.send_op(ops.CancelActionGoal(id=gid, action=served.spelled))
 
     def _served_expired(self, served: ClientAction, gid: str, timeout: float) -> None:
         entry = self._pop_goal(served, gid)
@@ -142,7 +142,7 @@ class ActionServing:
         log.error("session %d: goal %s not finished within %s s; aborting it",
                   self.session.sid, gid, timeout)
         entry.finish(Status.ABORTED)
-        self.session.send_op(ops.CancelActionGoal(id=gid, action=served.wire))
+        self.session.send_op(ops.CancelActionGoal(id=gid, action=served.spelled))
         self.session.status("error", f"goal {gid} timed out after {timeout} s and was aborted",
                             gid)
 

@@ -75,9 +75,9 @@ class ClientService:
     (their timeouts differ).
     """
 
-    def __init__(self, name: str, type_name: str, wire: str | None = None) -> None:
+    def __init__(self, name: str, type_name: str, spelled: str | None = None) -> None:
         self.name = name
-        self.wire = wire or name  # the name as the client spelled it
+        self.spelled = spelled or name  # the name as the client spelled it
         self.type_name = type_name
         self.ros: ServedService | None = None
         self.pending: dict[str, tuple[RosCall, float]] = {}
@@ -146,7 +146,7 @@ class SessionServices:
     async def _call(self, op: ops.CallService) -> None:
         """Call a ROS service (or a rosapi one) and answer with ``service_response``."""
         service = absolute_name(op.service)
-        wire = op.service  # answer with the name as the client spelled it
+        spelled = op.service  # answer with the name as the client spelled it
         session = self.session
         timeout = op.timeout if op.timeout is not None else session.config.call_timeout
         values: Mapping[str, Any]
@@ -162,7 +162,7 @@ class SessionServices:
                 values = session.gate.filter_rosapi(service, values)
             elif (owner := self._owners.get(service)) is not None:
                 result, direct = await owner.call_direct(service, op, timeout)
-                self._respond(wire, op.id, result, direct, op.fragment_size, t0)
+                self._respond(spelled, op.id, result, direct, op.fragment_size, t0)
                 return
             else:
                 values = await self.graph.call_service(
@@ -170,21 +170,21 @@ class SessionServices:
                     lambda request: session.actions.cancel_refusal(service, request),
                 )
         except (_CallFailed, ServiceCallError) as exc:
-            self._respond(wire, op.id, False, str(exc), op.fragment_size, t0)
+            self._respond(spelled, op.id, False, str(exc), op.fragment_size, t0)
             return
         except (BridgeError, rosapi.RosapiError) as exc:
-            self._respond(wire, op.id, False, f"{service}: {exc}", op.fragment_size, t0)
+            self._respond(spelled, op.id, False, f"{service}: {exc}", op.fragment_size, t0)
             return
         except UnicodeError:  # a lone surrogate ("\ud800") in a string reached rclpy
             why = f"{service}: a string in args is not valid Unicode text (a lone surrogate?)"
-            self._respond(wire, op.id, False, why, op.fragment_size, t0)
+            self._respond(spelled, op.id, False, why, op.fragment_size, t0)
             return
         except Exception as exc:  # answered, never left as an unretrieved task exception
             log.exception("session %d: call to %s failed", session.sid, service)
             why = f"{service}: internal error: {type(exc).__name__}"
-            self._respond(wire, op.id, False, why, op.fragment_size, t0)
+            self._respond(spelled, op.id, False, why, op.fragment_size, t0)
             return
-        self._respond(wire, op.id, True, values, op.fragment_size, t0)
+        self._respond(spelled, op.id, True, values, op.fragment_size, t0)
 
     def _respond(
         self,
@@ -251,7 +251,7 @@ class SessionServices:
             return
         rid = f"service_request:{served.name}:{next(self._request_ids)}"
         try:  # the op's text in one step, the request by its compiled converter
-            text = _encode_call_json(served.wire, pending.served.request_conv.to_json(
+            text = _encode_call_json(served.spelled, pending.served.request_conv.to_json(
                 pending.request), rid)
         except Exception:
             log.exception("cannot convert a request to %s", served.name)
@@ -389,7 +389,7 @@ class SessionServices:
         future: asyncio.Future[tuple[bool, Any]] = session.loop.create_future()
         timer = session.loop.call_later(timeout, self._direct_timeout, served, rid, timeout)
         served.direct[rid] = (_DirectCall(future), timer)
-        session.send_op(ops.CallService(service=served.wire, args=args, id=rid))
+        session.send_op(ops.CallService(service=served.spelled, args=args, id=rid))
         try:
             return await future
         finally:

@@ -1,7 +1,7 @@
 """Topic ops of one client: advertise, unadvertise, publish, subscribe, unsubscribe.
 
 Several subscribe ops of one client to one topic (different ids) are merged
-into one :class:`~rosbridge_core.session.outbox.Subscription` (see
+into one :class:`~rosbridge_core.session.outbox.TopicQueue` (see
 :mod:`rosbridge_core.session.outbox` for the merged options and the queues);
 ``compression: png`` (legacy) falls back to plain JSON with a warning.
 Publishers are shared between clients per topic, type and latching
@@ -18,7 +18,7 @@ from rosbridge_core.interfaces import ConversionError, canonical_name
 from rosbridge_core.protocol import ops
 from rosbridge_core.protocol.names import absolute_name
 from rosbridge_core.session.limits import over_cap
-from rosbridge_core.session.outbox import Subscription
+from rosbridge_core.session.outbox import TopicQueue
 
 if TYPE_CHECKING:
     from rosbridge_core.graph import Publisher
@@ -66,7 +66,7 @@ class SessionTopics:
         self.session = session
         self.graph = session.graph
         self.publishers: dict[str, Publisher] = {}
-        self.subs: dict[str, Subscription] = {}
+        self.subs: dict[str, TopicQueue] = {}
 
     # -- publishing ----------------------------------------------------------------------------
 
@@ -168,7 +168,7 @@ class SessionTopics:
                 return
         sub = self.subs.get(topic)
         if sub is None:
-            sub = Subscription(session.outbox, topic, op.topic)
+            sub = TopicQueue(session.outbox, topic, op.topic)
             sub.ids[op.id] = op
             self._configure(sub)
             try:
@@ -221,7 +221,7 @@ class SessionTopics:
         del self.subs[topic]
         self._drop_sub(sub)
 
-    def _configure(self, sub: Subscription) -> None:
+    def _configure(self, sub: TopicQueue) -> None:
         """Apply the merged options of a subscription's ids, within the bridge's limits."""
         limits = self.session.limits
         sub.configure(self.session.config.default_queue_length, limits.max_queue_length,
@@ -240,7 +240,7 @@ class SessionTopics:
                 "warning", f"subscribe to {topic}: fragment_size {size} is under this "
                 f"bridge's floor; using {limits.min_fragment_size} bytes", op.id)
 
-    def _drop_sub(self, sub: Subscription) -> None:
+    def _drop_sub(self, sub: TopicQueue) -> None:
         sub.close()
         metrics = self.session.shared.metrics
         metrics.retire_subscription(sub.topic, sub.sent, sub.sent_bytes, sub.dropped_total)

@@ -20,7 +20,7 @@ from bridge_server.front.websocket import WebSocketLink
 from rosbridge_core.codec.encodings import EncodedMessage
 from rosbridge_core.protocol import ops
 from rosbridge_core.session.outbox import Frame as OutFrame
-from rosbridge_core.session.outbox import Outbox, Subscription, frame_bytes
+from rosbridge_core.session.outbox import Outbox, TopicQueue, frame_bytes
 from tests.helpers import async_wait_until
 
 
@@ -78,7 +78,7 @@ async def test_an_idle_writer_writes_at_once_and_batches_what_follows(
             real_write(data)
 
         transport.write = counting_write
-        sub = Subscription(box, "/t", "/t")
+        sub = TopicQueue(box, "/t", "/t")
         box.push(sub, _Text("first"))  # type: ignore[arg-type]
         assert len(writes) == 1, "an idle writer's first message waits for no turn"
         box.push(sub, _Text("second"))  # type: ignore[arg-type]
@@ -195,8 +195,8 @@ async def test_a_message_is_framed_once_and_its_bytes_written_to_every_viewer() 
             _parked_outbox(None) as (box2, client2, ws2, w2):
         calls1, calls2 = _record_writes(ws1), _record_writes(ws2)
         small = _Text("a small message")
-        box1.push(Subscription(box1, "/t", "/t"), small)  # type: ignore[arg-type]
-        box2.push(Subscription(box2, "/t", "/t"), small)  # type: ignore[arg-type]
+        box1.push(TopicQueue(box1, "/t", "/t"), small)  # type: ignore[arg-type]
+        box2.push(TopicQueue(box2, "/t", "/t"), small)  # type: ignore[arg-type]
         assert len(calls1) == len(calls2) == 1
         assert calls1[0][0] is calls2[0][0], "one frame's bytes for both clients"
         assert small.framed is not None and len(small.framed) == 1
@@ -206,7 +206,7 @@ async def test_a_message_is_framed_once_and_its_bytes_written_to_every_viewer() 
         payload = bytes(range(256)) * 1024  # 256 KiB, a frame of the 64-bit length form
         big = _Raw("unused", payload)
         for box in (box1, box2):
-            sub = Subscription(box, "/img", "/img")
+            sub = TopicQueue(box, "/img", "/img")
             sub.ids["i"] = ops.Subscribe(topic="/img", compression="cbor-raw")
             sub.configure(10)
             box.push(sub, big)  # type: ignore[arg-type]  # written at once: both parked
@@ -235,7 +235,7 @@ async def test_a_cbor_raw_camera_frame_is_written_without_copying_its_bytes() ->
         calls = _record_writes(ws)
         data = bytes(range(256)) * 3600  # a 640x480 rgb8 frame's size
         frame = _Received("/camera", data, 1_700_000_000_123_456_789)
-        sub = Subscription(box, "/camera", "/camera")
+        sub = TopicQueue(box, "/camera", "/camera")
         sub.ids["i"] = ops.Subscribe(topic="/camera", compression="cbor-raw")
         sub.configure(10)
         box.push(sub, frame)  # written at once: parked
@@ -255,7 +255,7 @@ async def test_a_cbor_camera_frame_is_written_without_joining_its_envelope() -> 
     async with _parked_outbox(None) as (box, client, ws, writer):
         calls = _record_writes(ws)
         frame = _Received("/camera", bytes(range(256)) * 3600, 1_700_000_000_123_456_789)
-        sub = Subscription(box, "/camera", "/camera")
+        sub = TopicQueue(box, "/camera", "/camera")
         sub.ids["i"] = ops.Subscribe(topic="/camera", compression="cbor")
         sub.configure(10)
         box.push(sub, frame)  # written at once: parked
