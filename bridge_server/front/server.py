@@ -59,7 +59,7 @@ if TYPE_CHECKING:
 
     from websockets.http11 import Request, Response
 
-    from rosbridge_core.session.host import Host
+    from rosbridge_core.session.host import SessionView
     from rosbridge_core.session.services import SessionServices
 
 __all__ = ["Bridge", "BridgeConfig", "ServedGraph"]
@@ -297,7 +297,7 @@ class Bridge:
             session.resume_from = received
         return None
 
-    def session_ended(self, session: Host) -> None:
+    def session_ended(self, session: SessionView) -> None:
         """A session kept for a resume ended without one."""
         if isinstance(session, Session):
             self.sessions.discard(session)

@@ -34,7 +34,7 @@ from rosbridge_core.session.session import Session
 
 if TYPE_CHECKING:
     from rosbridge_core.graph import Graph
-    from rosbridge_core.session.host import Host
+    from rosbridge_core.session.host import SessionView
 
 __all__ = ["MEMORY_SESSIONS", "MemoryConnection", "MemoryServer"]
 
@@ -131,7 +131,7 @@ class MemoryServer:
         finally:
             self.sessions.discard(session)
 
-    def session_ended(self, session: Host) -> None:
+    def session_ended(self, session: SessionView) -> None:
         """A session kept for a resume ended."""
         if isinstance(session, Session):
             self.sessions.discard(session)

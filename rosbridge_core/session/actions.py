@@ -26,7 +26,7 @@ from rosbridge_core.session.served_actions import ACTION_LINGER, ActionServing, 
 
 if TYPE_CHECKING:
     from rosbridge_core.security import Gate
-    from rosbridge_core.session.host import Host
+    from rosbridge_core.session.host import SessionView
 
 __all__ = ["ACTION_LINGER", "CLIENT_IDLE", "ActionClients", "SessionActions"]
 
@@ -60,7 +60,7 @@ class SessionActions(GoalSending, ActionServing):
         return over_cap(self.served, absolute_name(op.action), self.session.limits.max_services,
                         "served actions")
 
-    def __init__(self, session: Host) -> None:
+    def __init__(self, session: SessionView) -> None:
         self.session = session
         self.goals: dict[str, ClientGoal] = {}
         self.served: dict[str, ClientAction] = {}

@@ -57,7 +57,7 @@ from rosbridge_core.protocol.names import absolute_name
 
 if TYPE_CHECKING:
     from rosbridge_core.graph import ActionClient, Converter, SentGoal, ServedAction
-    from rosbridge_core.session.host import Host
+    from rosbridge_core.session.host import SessionView
     from rosbridge_core.session.ownership import Ownership
 
 __all__ = ["CLIENT_IDLE", "GOAL_SUFFIX", "ActionClients", "ClientGoal", "GoalSending"]
@@ -87,7 +87,7 @@ class ActionClients:
         self._used: dict[tuple[str, type[Any]], float] = {}
         self._sweeper: asyncio.TimerHandle | None = None
 
-    def get(self, session: Host, name: str, action_cls: type[Any]) -> ActionClient:
+    def get(self, session: SessionView, name: str, action_cls: type[Any]) -> ActionClient:
         """The shared client for ``name`` of ``action_cls`` (created on first use)."""
         key = (name, action_cls)
         client = self.clients.get(key)
@@ -96,14 +96,14 @@ class ActionClients:
         self.touch(session, client)
         return client
 
-    def touch(self, session: Host, client: ActionClient) -> None:
+    def touch(self, session: SessionView, client: ActionClient) -> None:
         """``client`` is in use now."""
         loop = session.loop
         self._used[(client.name, client.action_cls)] = loop.time()
         if self._sweeper is None:
             self._sweeper = loop.call_later(CLIENT_IDLE, self._sweep, session)
 
-    def _sweep(self, session: Host) -> None:
+    def _sweep(self, session: SessionView) -> None:
         self._sweeper = None
         now = session.loop.time()
         busy = {id(g.sent.shared) for s in session.shared.sessions
@@ -211,7 +211,7 @@ class GoalSending:
     """The goals one client sends (the sending half of
     :class:`~rosbridge_core.session.actions.SessionActions`)."""
 
-    session: Host
+    session: SessionView
     goals: dict[str, ClientGoal]
     _owners: Ownership[Any]
     _goal_ids: itertools.count[int]

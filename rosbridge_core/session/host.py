@@ -1,14 +1,14 @@
 """What a session and its op groups (topics, services, actions) may use of each other and
 of what every session shares.
 
-The op groups hold a :class:`Host`, not the :class:`~rosbridge_core.session.session.Session`
-whole (as the client's capabilities hold ``roslibpy_lite.capabilities.Host``), and a session
+The op groups hold a :class:`SessionView`, not the :class:`~rosbridge_core.session.session.Session`
+whole (as the client's capabilities hold ``roslibpy_lite.capabilities.SessionView``), and a session
 holds a :class:`Shared` and its :class:`~rosbridge_core.session.link.ClientLink`, not the bridge
 and the websocket: what each may touch is written down here, and a second server (a relay on
 Zenoh) or a test (``tests/session``: a fake graph and a fake link, no ROS, no socket) gives
 them the same members. What every session shares (the graph, who serves which name, the
 action clients, the metrics, the gate factory, the resume store, the settings, the sessions)
-is :attr:`Host.shared`; the bridge (:class:`~bridge_server.front.server.Bridge`) is one.
+is :attr:`SessionView.shared`; the bridge (:class:`~bridge_server.front.server.Bridge`) is one.
 
 These protocols name only modules below the session (graph, security's gate, the outbox, the
 link, the resume store, ownership), never the session or its op groups, so nothing imports
@@ -34,7 +34,7 @@ if TYPE_CHECKING:
     from rosbridge_core.session.ownership import Ownership
     from rosbridge_core.session.resume import SessionStore
 
-__all__ = ["ActionClientPool", "GoalKeeper", "Host", "Shared"]
+__all__ = ["ActionClientPool", "GoalKeeper", "SessionView", "Shared"]
 
 
 class ActionClientPool(Protocol):
@@ -45,10 +45,10 @@ class ActionClientPool(Protocol):
     lingering: dict[str, ServedAction]
     """Actions no client serves any more that still answer their callers."""
 
-    def touch(self, session: Host, client: ActionClient) -> None:
+    def touch(self, session: SessionView, client: ActionClient) -> None:
         """``client`` is in use now."""
 
-    def get(self, session: Host, name: str, action_cls: type[Any]) -> ActionClient:
+    def get(self, session: SessionView, name: str, action_cls: type[Any]) -> ActionClient:
         """The shared client for ``name`` of ``action_cls`` (created on first use)."""
         ...
 
@@ -95,17 +95,17 @@ class Shared(Protocol):
         """The links' settings: the largest frame, the keepalive."""
 
     @property
-    def sessions(self) -> Collection[Host]:
+    def sessions(self) -> Collection[SessionView]:
         """The live sessions."""
 
-    def session_ended(self, session: Host) -> None:
+    def session_ended(self, session: SessionView) -> None:
         """A session kept for a resume ended without one: no longer among :attr:`sessions`."""
 
     def graph_changed(self) -> None:
         """The session changed the ROS graph (a subscription whose type is to be learned)."""
 
 
-class Host(Protocol):
+class SessionView(Protocol):
     """One client's session as its op groups see it."""
 
     sid: int

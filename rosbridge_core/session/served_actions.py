@@ -33,7 +33,7 @@ from rosbridge_core.session.goals import GOAL_SUFFIX
 
 if TYPE_CHECKING:
     from rosbridge_core.graph import ServedAction, ServedGoal
-    from rosbridge_core.session.host import Host
+    from rosbridge_core.session.host import SessionView
     from rosbridge_core.session.ownership import Ownership
 
 __all__ = ["ACTION_LINGER", "ActionServing", "ClientAction"]
@@ -60,7 +60,7 @@ class ActionServing:
     """The actions one client serves (the serving half of
     :class:`~rosbridge_core.session.actions.SessionActions`)."""
 
-    session: Host
+    session: SessionView
     served: dict[str, ClientAction]
     _owners: Ownership[Any]
     _goal_ids: itertools.count[int]

@@ -57,7 +57,7 @@ from rosbridge_core.session.limits import over_cap
 if TYPE_CHECKING:
     from rosbridge_core.graph import RosCall, ServedService
     from rosbridge_core.security import Gate
-    from rosbridge_core.session.host import Host
+    from rosbridge_core.session.host import SessionView
 
 __all__ = ["ClientService", "SessionServices"]
 
@@ -123,7 +123,7 @@ class SessionServices:
         return over_cap(self.served, absolute_name(op.service), self.session.limits.max_services,
                         "served services")
 
-    def __init__(self, session: Host) -> None:
+    def __init__(self, session: SessionView) -> None:
         self.session = session
         self.graph = session.graph
         self.served: dict[str, ClientService] = {}

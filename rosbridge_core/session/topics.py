@@ -23,7 +23,7 @@ from rosbridge_core.session.outbox import TopicQueue
 if TYPE_CHECKING:
     from rosbridge_core.graph import Publisher
     from rosbridge_core.security import Gate
-    from rosbridge_core.session.host import Host
+    from rosbridge_core.session.host import SessionView
 
 __all__ = ["SessionTopics"]
 
@@ -62,7 +62,7 @@ class SessionTopics:
         return over_cap(self.publishers, absolute_name(op.topic),
                         self.session.limits.max_publishers, "publishers")
 
-    def __init__(self, session: Host) -> None:
+    def __init__(self, session: SessionView) -> None:
         self.session = session
         self.graph = session.graph
         self.publishers: dict[str, Publisher] = {}

@@ -172,7 +172,7 @@ WHOLE = ("bridge_server.front.server", "rosbridge_core.session.session")
 
 @pytest.mark.parametrize("group", OP_GROUPS)
 def test_the_op_groups_hold_a_narrow_handle(group: str) -> None:
-    """An op group gets a Host (session/host.py), never the Session class or the bridge:
+    """An op group gets a SessionView (session/host.py), never the Session class or the bridge:
     it imports neither (for type checking neither)."""
     found = _all_imports()[group]
     bad = sorted(t for t in found if t in WHOLE or t.startswith(tuple(w + "." for w in WHOLE)))
