@@ -38,8 +38,8 @@ from bridge_server.zenoh.exporter import Exporter
 from bridge_server.zenoh.link import ZenohOptions
 from bridge_server.zenoh.robot_link import RobotOptions
 from msgs import dynamic
-from rosbridge_core.graph import Status
 from rosbridge_core.memory.graph import MemoryGraph, MemoryPublisher, MemoryRos
+from rosbridge_core.protocol.goal_status import GoalStatus
 
 __all__ = ["CAMERA", "POSE", "STREAMS", "Fleet", "SimRobot", "Stream", "main"]
 
@@ -92,7 +92,7 @@ def _answer(call: Any) -> None:
 
 
 def _cancel(goal: Any) -> None:
-    goal.finish(Status.CANCELED)
+    goal.finish(GoalStatus.CANCELED)
 
 
 class _Live:
@@ -149,7 +149,7 @@ class SimRobot:
         seq = [0, 1]
         while len(seq) < order:
             seq.append(seq[-1] + seq[-2])
-        goal.finish(Status.SUCCEEDED, goal.served.action_cls.Result(sequence=seq[:order]))
+        goal.finish(GoalStatus.SUCCEEDED, goal.served.action_cls.Result(sequence=seq[:order]))
 
     def start(self) -> None:
         """Dial out (the exporter's own start)."""

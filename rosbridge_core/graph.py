@@ -54,7 +54,6 @@ __all__ = [
     "ServedGoal",
     "ServedService",
     "ServicesPort",
-    "Status",
     "TopicFeed",
     "TopicsPort",
     "TypesPort",
@@ -65,13 +64,7 @@ __all__ = [
 ]
 
 
-Status = GoalStatus
-"""``action_msgs/msg/GoalStatus`` numbers: the protocol core's
-:class:`~rosbridge_core.protocol.goal_status.GoalStatus` (an ``IntEnum``, so rclpy takes its
-members as the numbers they are)."""
-
-
-ACTIVE = frozenset({Status.ACCEPTED, Status.EXECUTING, Status.CANCELING})
+ACTIVE = frozenset({GoalStatus.ACCEPTED, GoalStatus.EXECUTING, GoalStatus.CANCELING})
 """Statuses of a goal that is not finished."""
 
 CANCEL_ANSWERS = {
@@ -268,7 +261,7 @@ class GoalListener(Protocol):
         """The server's answer to a cancel request (0: canceling)."""
 
     def on_result(self, status: int, result: Any) -> None:
-        """The goal ended with ``status`` (a :class:`Status`) and its result message."""
+        """The goal ended with ``status`` (a :class:`GoalStatus`) and its result message."""
 
     def on_failed(self, why: str) -> None:
         """The goal could not be sent, for the reason ``why`` names (a Graph that reaches

@@ -32,8 +32,9 @@ from unique_identifier_msgs.msg import UUID
 
 from bridge_server.rclpy_graph import convert
 from bridge_server.rclpy_graph.qos import SERVICE_DEPTH, qos_profile
-from rosbridge_core.graph import ACTIVE, GoalListener, Status
+from rosbridge_core.graph import ACTIVE, GoalListener
 from rosbridge_core.interfaces import BridgeError
+from rosbridge_core.protocol.goal_status import GoalStatus
 
 if TYPE_CHECKING:
     from bridge_server.rclpy_graph.node import RosNode
@@ -41,11 +42,11 @@ if TYPE_CHECKING:
 __all__ = [
     "ACTIVE",
     "GoalListener",
+    "GoalStatus",
     "SentGoal",
     "ServedAction",
     "ServedGoal",
     "SharedActionClient",
-    "Status",
 ]
 
 log = logging.getLogger("bridge_server.rclpy_graph.actions")
@@ -219,7 +220,7 @@ class SharedActionClient(_ActionEnd):
         post = self.ros.post
         if sent.cancel_wanted:  # canceled before it left the bridge
             sent.finished = True
-            post(sent.listener.on_result, Status.CANCELED, None)
+            post(sent.listener.on_result, GoalStatus.CANCELED, None)
             return
         listener = sent.listener
         callback: Callable[[Any], None] | None = None
@@ -234,7 +235,7 @@ class SharedActionClient(_ActionEnd):
         except Exception as exc:
             log.warning("sending a goal to %s failed: %s", self.name, exc)
             sent.finished = True
-            post(listener.on_result, Status.ABORTED, None)
+            post(listener.on_result, GoalStatus.ABORTED, None)
             return
         self._inline(future)
         future.add_done_callback(lambda f: self._answered(sent, f))
@@ -257,7 +258,7 @@ class SharedActionClient(_ActionEnd):
     def _result(self, sent: SentGoal, future: Any) -> None:
         sent.finished = True
         if future.exception() is not None:
-            self.ros.post(sent.listener.on_result, Status.ABORTED, None)
+            self.ros.post(sent.listener.on_result, GoalStatus.ABORTED, None)
             return
         response = future.result()
         if sent.callback is not None:
@@ -444,7 +445,7 @@ class ServedAction(_ActionEnd):
             handle._update_state(_rclpy.GoalEvent.EXECUTE)
         if not self.alive:
             goal.done = True
-            self._finish(goal, Status.ABORTED, None)
+            self._finish(goal, GoalStatus.ABORTED, None)
             return
         self.ros.post(self.on_goal, goal)
 
@@ -460,9 +461,9 @@ class ServedAction(_ActionEnd):
         if not handle.is_active:
             return
         try:
-            if status == Status.SUCCEEDED:
+            if status == GoalStatus.SUCCEEDED:
                 handle.succeed()
-            elif status == Status.CANCELED:
+            elif status == GoalStatus.CANCELED:
                 if not handle.is_cancel_requested:
                     handle._update_state(_rclpy.GoalEvent.CANCEL_GOAL)
                 handle.canceled()
@@ -489,7 +490,7 @@ class ServedAction(_ActionEnd):
     def _destroy(self) -> None:
         for goal in list(self._goals.values()):
             goal.done = True
-            self._finish(goal, Status.ABORTED, None)
+            self._finish(goal, GoalStatus.ABORTED, None)
         # The result responses just scheduled go out first (executor tasks run before
         # the next hand-off), then the server goes.
         self.ros.in_executor(self._destroy_server)

@@ -12,9 +12,10 @@ from collections.abc import Callable, Mapping
 from typing import Any, Protocol
 
 from msgs.runtime import Action
-from rosbridge_core.graph import ACTIVE, GoalListener, ServedGoal, Status
+from rosbridge_core.graph import ACTIVE, GoalListener, ServedGoal
 from rosbridge_core.interfaces import ServiceCallError
 from rosbridge_core.memory.services import ServiceServer, ServingNode
+from rosbridge_core.protocol.goal_status import GoalStatus
 
 __all__ = ["MemoryActionClient", "MemorySentGoal", "MemoryServedAction", "MemoryServedGoal"]
 
@@ -117,7 +118,7 @@ class MemoryServedGoal:
         self.uuid = uuid
         self.sent = sent
         self.stamp_ns = time.time_ns()
-        self.status = Status.EXECUTING
+        self.status = GoalStatus.EXECUTING
         self.result: asyncio.Future[tuple[int, Any]] = served.graph.loop.create_future()
 
     def feedback(self, msg: Any) -> None:
@@ -131,7 +132,7 @@ class MemoryServedGoal:
         ended."""
         if self.status not in ACTIVE:
             return False
-        self.status = Status(status)
+        self.status = GoalStatus(status)
         result = result if result is not None else self.served.action_cls.Result()
         self.served.goals.pop(self.uuid, None)
         self.result.set_result((int(status), result))
@@ -181,8 +182,8 @@ class MemoryServedAction:
         """A cancel request for ``goal``: ``CancelGoal`` return code (0: canceling)."""
         if goal.status not in ACTIVE:
             return 3
-        if goal.status != Status.CANCELING:
-            goal.status = Status.CANCELING
+        if goal.status != GoalStatus.CANCELING:
+            goal.status = GoalStatus.CANCELING
             self.on_cancel(goal)
         return 0
 
@@ -211,7 +212,7 @@ class MemoryServedAction:
         """Remove the action server; open goals are aborted."""
         self.alive = False
         for goal in list(self.goals.values()):
-            goal.finish(Status.ABORTED)
+            goal.finish(GoalStatus.ABORTED)
         self.graph.ros.remove_action(self)
 
 

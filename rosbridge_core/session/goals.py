@@ -50,9 +50,10 @@ import json
 import logging
 from typing import TYPE_CHECKING, Any
 
-from rosbridge_core.graph import CANCEL_ANSWERS, Status
+from rosbridge_core.graph import CANCEL_ANSWERS
 from rosbridge_core.interfaces import BridgeError, ConversionError, args_mapping, canonical_name
 from rosbridge_core.protocol import ops
+from rosbridge_core.protocol.goal_status import GoalStatus
 from rosbridge_core.protocol.names import absolute_name
 
 if TYPE_CHECKING:
@@ -70,8 +71,8 @@ CLIENT_IDLE = 30.0
 GOAL_SUFFIX = "/_action/send_goal"
 """An action's goal service, after its name."""
 _CANCEL_SUFFIX = "/_action/cancel_goal"
-_OUTCOMES: dict[int, str] = {Status.SUCCEEDED: "succeeded", Status.CANCELED: "canceled",
-             Status.ABORTED: "aborted"}
+_OUTCOMES: dict[int, str] = {GoalStatus.SUCCEEDED: "succeeded", GoalStatus.CANCELED: "canceled",
+             GoalStatus.ABORTED: "aborted"}
 
 
 class ActionClients:
@@ -198,7 +199,7 @@ class ClientGoal:
         if not self._live():
             return
         if result is None or self.sent is None:
-            if status == Status.CANCELED:
+            if status == GoalStatus.CANCELED:
                 self.owner.fail(self, "the goal was canceled before it was sent", status)
             else:
                 self.owner.fail(self, "the action server did not answer the goal")
@@ -251,7 +252,7 @@ class GoalSending:
         self.session.error(text, id)
         self.session.send_op(
             ops.ActionResultOp(id=id, action=op.action, values=text, result=False,
-                             status=Status.ABORTED)
+                             status=GoalStatus.ABORTED)
         )
 
     async def _start(self, goal: ClientGoal, action_cls: type[Any], goal_msg: Any) -> None:
@@ -264,7 +265,7 @@ class GoalSending:
         finally:
             goal.task = None
         if goal.cancel_wanted:
-            self.fail(goal, "the goal was canceled before it was sent", Status.CANCELED)
+            self.fail(goal, "the goal was canceled before it was sent", GoalStatus.CANCELED)
             return
         goal.sent = client.send(goal_msg, goal, goal.feedback)
         wait = self.session.config.call_timeout
@@ -326,7 +327,7 @@ class GoalSending:
             goal.sent.cancel()
         elif goal.task is not None:  # still waiting for an action server
             goal.task.cancel()
-            self.fail(goal, "the goal was canceled before it was sent", Status.CANCELED)
+            self.fail(goal, "the goal was canceled before it was sent", GoalStatus.CANCELED)
 
     def _expired(self, goal: ClientGoal, timeout: float) -> None:
         goal.timer = None
@@ -353,11 +354,11 @@ class GoalSending:
             goal.timer = None
         goal._answered()
 
-    def fail(self, goal: ClientGoal, why: str, status: int = Status.ABORTED) -> None:
+    def fail(self, goal: ClientGoal, why: str, status: int = GoalStatus.ABORTED) -> None:
         """End a goal that did not run to a result: ``result: false`` with a text."""
         if self.goals.get(str(goal.id)) is not goal:
             return
-        self.finish(goal, "canceled" if status == Status.CANCELED else "failed")
+        self.finish(goal, "canceled" if status == GoalStatus.CANCELED else "failed")
         log.info("session %d: goal %s on %s failed: %s", self.session.sid, goal.id, goal.name, why)
         self.session.send_op(
             ops.ActionResultOp(id=goal.id, action=goal.spelled, values=f"{goal.name}: {why}",
@@ -416,5 +417,5 @@ class GoalSending:
                 f"this connection did not send it ({grant})")
 
 
-_RAN = (Status.SUCCEEDED, Status.CANCELED, Status.ABORTED)
+_RAN = (GoalStatus.SUCCEEDED, GoalStatus.CANCELED, GoalStatus.ABORTED)
 """Final statuses of a goal that ran: its action_result says result true, as rosbridge does."""

@@ -25,9 +25,10 @@ import logging
 from collections.abc import Mapping
 from typing import TYPE_CHECKING, Any
 
-from rosbridge_core.graph import ACTIVE, Status
+from rosbridge_core.graph import ACTIVE
 from rosbridge_core.interfaces import ConversionError, canonical_name
 from rosbridge_core.protocol import ops
+from rosbridge_core.protocol.goal_status import GoalStatus
 from rosbridge_core.protocol.names import absolute_name
 from rosbridge_core.session.goals import GOAL_SUFFIX
 
@@ -110,14 +111,14 @@ class ActionServing:
     def _on_ros_goal(self, served: ClientAction, goal: ServedGoal) -> None:
         session = self.session
         if self.served.get(served.name) is not served or session.closed:
-            goal.finish(Status.ABORTED)
+            goal.finish(GoalStatus.ABORTED)
             return
         gid = f"action_goal:{served.spelled}:{next(self._goal_ids)}"
         try:
             args = goal.served.goal_conv.to_obj(goal.request)
         except Exception:
             log.exception("cannot convert a goal of %s", served.name)
-            goal.finish(Status.ABORTED)
+            goal.finish(GoalStatus.ABORTED)
             return
         timer = None
         timeout = session.config.goal_timeout
@@ -141,7 +142,7 @@ class ActionServing:
             return
         log.error("session %d: goal %s not finished within %s s; aborting it",
                   self.session.sid, gid, timeout)
-        entry.finish(Status.ABORTED)
+        entry.finish(GoalStatus.ABORTED)
         self.session.send_op(ops.CancelActionGoal(id=gid, action=served.spelled))
         self.session.status("error", f"goal {gid} timed out after {timeout} s and was aborted",
                             gid)
@@ -194,17 +195,17 @@ class ActionServing:
         assert goal is not None
         status = op.status
         if status is None:
-            status = Status.SUCCEEDED if op.result else Status.ABORTED
-        elif status in ACTIVE or status not in (Status.SUCCEEDED, Status.CANCELED,
-                                                Status.ABORTED):
+            status = GoalStatus.SUCCEEDED if op.result else GoalStatus.ABORTED
+        elif status in ACTIVE or status not in (GoalStatus.SUCCEEDED, GoalStatus.CANCELED,
+                                                GoalStatus.ABORTED):
             self.session.error(
                 f"action_result for {served.name}: status {status} is not a final status "
                 "(4 succeeded, 5 canceled, 6 aborted); the goal was aborted",
                 op.id,
             )
-            status = Status.ABORTED
-        elif not op.result and status == Status.SUCCEEDED:
-            status = Status.ABORTED
+            status = GoalStatus.ABORTED
+        elif not op.result and status == GoalStatus.SUCCEEDED:
+            status = GoalStatus.ABORTED
         result = None
         if isinstance(op.values, Mapping):
             try:
@@ -213,8 +214,8 @@ class ActionServing:
                 self.session.error(
                     f"action_result for {served.name}: {exc}; the goal was aborted", op.id
                 )
-                status, result = Status.ABORTED, None
-        elif op.values is not None and status != Status.SUCCEEDED:
+                status, result = GoalStatus.ABORTED, None
+        elif op.values is not None and status != GoalStatus.SUCCEEDED:
             log.info("session %d: goal %s ended (status %d): %s", self.session.sid, gid, status,
                      op.values)
         goal.finish(status, result)
@@ -237,7 +238,7 @@ class ActionServing:
             goal = self._pop_goal(served, gid)
             if goal is not None:
                 log.error("goal %s aborted: %s", gid, why)
-                goal.finish(Status.ABORTED)
+                goal.finish(GoalStatus.ABORTED)
         ros = served.ros
         served.ros = None
         if ros is not None:

@@ -17,9 +17,10 @@ from typing import Any
 
 import pytest
 
-from rosbridge_core.graph import Graph, Status
+from rosbridge_core.graph import Graph
 from rosbridge_core.interfaces import ServiceCallError
 from rosbridge_core.memory.graph import MemoryGraph, MemoryRos
+from rosbridge_core.protocol.goal_status import GoalStatus
 from tests.helpers import async_wait_until
 
 _names = itertools.count()
@@ -244,11 +245,11 @@ async def test_action_goal_feedback_cancel_and_result(side: Side, topic: str) ->
     await side.seen(lambda: finished.events == ["accepted"], "the acceptance")
     goal.feedback(served.feedback_conv.from_obj({"sequence": [0, 1]}))
     await side.seen(lambda: len(finished.events) == 2, "the feedback")
-    assert goal.finish(Status.SUCCEEDED, served.result_conv.from_obj({"sequence": [0, 1, 1]}))
-    assert not goal.finish(Status.ABORTED)
+    assert goal.finish(GoalStatus.SUCCEEDED, served.result_conv.from_obj({"sequence": [0, 1, 1]}))
+    assert not goal.finish(GoalStatus.ABORTED)
     await asyncio.wait_for(finished.done.wait(), 10)
     assert finished.events == ["accepted", ("feedback", [0, 1]),
-                               ("result", Status.SUCCEEDED, [0, 1, 1])]
+                               ("result", GoalStatus.SUCCEEDED, [0, 1, 1])]
     assert bytes(sent.handle.goal_id.uuid)
 
     stopped = _Goal()
@@ -257,9 +258,9 @@ async def test_action_goal_feedback_cancel_and_result(side: Side, topic: str) ->
     await side.seen(lambda: sent.handle is not None, "the acceptance")
     sent.cancel()
     assert await asyncio.wait_for(canceled.get(), 10) is goal
-    goal.finish(Status.CANCELED)
+    goal.finish(GoalStatus.CANCELED)
     await asyncio.wait_for(stopped.done.wait(), 10)
-    assert stopped.events == ["accepted", ("cancel", 0), ("result", Status.CANCELED, [])]
+    assert stopped.events == ["accepted", ("cancel", 0), ("result", GoalStatus.CANCELED, [])]
     assert await side.seen(lambda: b.server_types(topic + "/_action/send_goal"),
                            "the action's send_goal server") == [
         "test_msgs/action/Fibonacci_SendGoal"]

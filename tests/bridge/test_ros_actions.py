@@ -10,8 +10,9 @@ from typing import Any
 import pytest
 
 from bridge_server.rclpy_graph import actions as ros_actions
-from bridge_server.rclpy_graph.actions import SharedActionClient, Status
+from bridge_server.rclpy_graph.actions import SharedActionClient
 from bridge_server.rclpy_graph.node import RosNode
+from rosbridge_core.protocol.goal_status import GoalStatus
 from tests.bridge.action_support import FibServer, fib
 from tests.helpers import async_wait_until
 
@@ -85,7 +86,7 @@ async def test_a_new_server_is_probed_and_goals_leave_nothing_behind(
         for order, listener in enumerate(listeners):
             assert listener.accepted and listener.outcome is not None
             status, result = listener.outcome
-            assert status == Status.SUCCEEDED
+            assert status == GoalStatus.SUCCEEDED
             assert list(result.sequence) == fib(order % 5 + 1)
 
         client = shared.client

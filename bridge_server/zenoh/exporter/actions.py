@@ -17,8 +17,9 @@ from bridge_server.zenoh.exporter.base import log
 from bridge_server.zenoh.exporter.policy import RelayPolicy
 from bridge_server.zenoh.keys import GoalEvent, GoalRequest
 from bridge_server.zenoh.link import answering
-from rosbridge_core.graph import ActionClient, SentGoal, Status
+from rosbridge_core.graph import ActionClient, SentGoal
 from rosbridge_core.interfaces import BridgeError, args_mapping
+from rosbridge_core.protocol.goal_status import GoalStatus
 
 __all__ = ["RelayGoals", "RobotGoal"]
 
@@ -121,7 +122,8 @@ class RelayGoals(RelayPolicy):
         if key in self._early_cancels:  # canceled, or its relay went, while it waited
             self._early_cancels.discard(key)
             with answering(query):
-                query.reply(query.key_expr, GoalEvent("result", status=Status.CANCELED).encode())
+                query.reply(query.key_expr,
+                            GoalEvent("result", status=GoalStatus.CANCELED).encode())
             return
         running = RobotGoal(self, query, key, action, client)
         self.goals[key] = running

@@ -23,8 +23,9 @@ from bridge_server.zenoh.exporter.graph import GraphOffer
 from bridge_server.zenoh.exporter.policy import RelayPolicy
 from bridge_server.zenoh.keys import GOAL_WAIT, Execute, GoalEvent
 from bridge_server.zenoh.link import ignore_replies
-from rosbridge_core.graph import RosCall, ServedAction, ServedGoal, ServedService, Status
+from rosbridge_core.graph import RosCall, ServedAction, ServedGoal, ServedService
 from rosbridge_core.interfaces import BridgeError, ConversionError, Kind
+from rosbridge_core.protocol.goal_status import GoalStatus
 from rosbridge_core.session.actions import ACTION_LINGER
 
 __all__ = ["REFUSAL_REPEAT", "SERVED_CALL_WAIT", "ServedNames"]
@@ -133,7 +134,7 @@ class ServedNames(RelayPolicy, GraphOffer):
             ros.destroy()
             return
         for goal in list(served.goals.values()):
-            goal.finish(Status.ABORTED)
+            goal.finish(GoalStatus.ABORTED)
         served.goals.clear()
         action: ServedAction = ros  # type: ignore[assignment]
         action.alive = False
@@ -179,7 +180,7 @@ class ServedNames(RelayPolicy, GraphOffer):
         """A ROS goal of a relay-served action: one query to the relay, its replies the
         goal's feedback and end; a query that ends without a result aborts the goal."""
         if self.session is None:
-            goal.finish(Status.ABORTED)
+            goal.finish(GoalStatus.ABORTED)
             return
         gid = f"{self.epoch}{next(self._served_goal_ids)}"
         self._served_goals[id(goal)] = gid
@@ -203,13 +204,13 @@ class ServedNames(RelayPolicy, GraphOffer):
             except BridgeError as exc:  # ConversionError too
                 log.warning("relay %s's goal %s of %s: %s; the goal is aborted", relay, gid,
                             action, exc)
-                goal.finish(Status.ABORTED)
+                goal.finish(GoalStatus.ABORTED)
 
         def ended(_: Any = None) -> None:
             self._served_goals.pop(id(goal), None)
             if served is not None:
                 served.goals.pop(id(goal), None)
-            if goal.finish(Status.ABORTED):
+            if goal.finish(GoalStatus.ABORTED):
                 log.warning("relay %s ended goal %s of %s without a result: aborted", relay,
                             gid, action)
 

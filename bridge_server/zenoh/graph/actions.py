@@ -19,8 +19,9 @@ from bridge_server.zenoh.graph.robot import Robot
 from bridge_server.zenoh.graph.services import ServedHere
 from bridge_server.zenoh.keys import GOAL_WAIT, Execute, GoalEvent, GoalRequest
 from bridge_server.zenoh.link import answering, ignore_replies
-from rosbridge_core.graph import GoalListener, ServedGoal, Status
+from rosbridge_core.graph import GoalListener, ServedGoal
 from rosbridge_core.interfaces import BridgeError, ConversionError
+from rosbridge_core.protocol.goal_status import GoalStatus
 
 log = logging.getLogger("bridge_server.zenoh.graph")
 
@@ -254,7 +255,7 @@ class ZenohServedAction(ServedHere):
             request = None
         goal = ZenohServedGoal(self, req.id, request, query)
         if request is None or not self.alive:
-            goal.finish(Status.ABORTED)
+            goal.finish(GoalStatus.ABORTED)
             return
         self.goals[req.id] = goal
         self.on_goal(goal)
@@ -263,7 +264,7 @@ class ZenohServedAction(ServedHere):
         """The robot's action server goes (with the token); open goals are aborted."""
         self.alive = False
         for goal in list(self.goals.values()):
-            goal.finish(Status.ABORTED)
+            goal.finish(GoalStatus.ABORTED)
         if self.graph.served_actions.get(self.name) is self:
             del self.graph.served_actions[self.name]
         self._undeclare()
