@@ -66,15 +66,15 @@ def stray_imports(imports: dict[str, set[str]], floors: dict[str, Floor]) -> lis
     return bad
 
 
-@functools.cache
-def _read_imports() -> dict[str, frozenset[str]]:
-    return {name: frozenset( _imports(path.read_text(), name, path.name == "__init__.py"))
-            for name, path in _modules(PACKAGES).items()}
-
-
 def _imports_of(folders: tuple[str, ...]) -> dict[str, set[str]]:
+    """Every module of ``folders`` with what it imports (any kind of import)."""
     return {name: _imports(path.read_text(), name, path.name == "__init__.py")
             for name, path in _modules(folders).items()}
+
+
+@functools.cache
+def _read_imports() -> dict[str, frozenset[str]]:
+    return {name: frozenset(found) for name, found in _imports_of(PACKAGES).items()}
 
 
 def _all_imports() -> dict[str, set[str]]:
@@ -94,7 +94,7 @@ def test_the_session_tests_stand_on_the_core_alone() -> None:
     """tests/session runs the core's session over the core's memory Graph and link: it
     imports nothing of the server or the client (a test of theirs belongs in their folder)."""
     floors = floors_of(PAGE.read_text())
-    session_tests = {name: imports for name, imports in _imports_of(("tests/session",)).items()}
+    session_tests = _imports_of(("tests/session",))
     assert session_tests, "no tests in tests/session"
     bad = sorted(f"{module} -> {target}" for module, targets in session_tests.items()
                  for target in targets
