@@ -32,6 +32,7 @@ from tests.relay.support import (
 pytestmark = pytest.mark.timeout(90)
 
 _action: Any = importlib.import_module("rclpy.action")  # untyped API, used as Any
+RCLError: Any = importlib.import_module("rclpy._rclpy_pybind11").RCLError
 
 
 async def _relay_lists(t: Tier, action: str) -> None:
@@ -319,8 +320,15 @@ async def test_the_robot_destroys_an_action_client_no_goal_uses(ros_node: Any, t
             name, ns = t.robot.graph.own_node()
 
             def robot_clients() -> list[str]:  # an earlier test's robot had the same node name
-                return [n for n, _ in _action.get_action_client_names_and_types_by_node(
-                    ros_node, name, ns)]
+                # rcl refuses a node this test's node has not discovered yet ("error not
+                # set"): until it has, the robot has no action client this node can see
+                if (name, ns) not in ros_node.get_node_names_and_namespaces():
+                    return []
+                try:
+                    return [n for n, _ in _action.get_action_client_names_and_types_by_node(
+                        ros_node, name, ns)]
+                except RCLError:  # discovered, then gone between the two graph queries
+                    return []
 
             ws = await open_wire(t.url())
             try:
