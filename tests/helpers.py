@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import itertools
 import json
 import os
 import re
@@ -228,26 +229,35 @@ class BridgeProcess:
         self._reap()
 
 
-class WireClient:
-    """A raw websocket peer for wire-level tests: send JSON ops, await matching ops."""
+class OpPeer:
+    """A client's end that sends ops and awaits matching ones, over whatever carries its
+    frames: :class:`WireClient` over a websocket, ``tests.session.harness.Client`` over a
+    memory link. A subclass gives :meth:`send_raw`, :meth:`next_frame` and :meth:`close`."""
 
-    def __init__(self, ws: ClientConnection) -> None:
-        self.ws = ws
+    def __init__(self) -> None:
         self.backlog: list[Any] = []
-
-    async def send(self, op: dict[str, Any]) -> None:
-        """Send one op as a JSON text frame."""
-        await self.ws.send(json.dumps(op))
 
     async def send_raw(self, data: str | bytes) -> None:
         """Send one frame exactly as given (for malformed input)."""
-        await self.ws.send(data)
+        raise NotImplementedError
+
+    async def next_frame(self, timeout: float = 10.0) -> str | bytes:
+        """The next frame received, as it came (TimeoutError after ``timeout`` s)."""
+        raise NotImplementedError
+
+    async def close(self) -> None:
+        """Close the connection."""
+        raise NotImplementedError
+
+    async def send(self, op: dict[str, Any]) -> None:
+        """Send one op as a JSON text frame."""
+        await self.send_raw(json.dumps(op))
 
     async def recv(self, timeout: float = 10.0) -> Any:
         """The next op, decoded (JSON text, or CBOR for binary frames)."""
         if self.backlog:
             return self.backlog.pop(0)
-        return self._decode(await asyncio.wait_for(self.ws.recv(), timeout))
+        return self._decode(await self.next_frame(timeout))
 
     @staticmethod
     def _decode(frame: str | bytes) -> Any:
@@ -283,7 +293,7 @@ class WireClient:
                     f"no op matching {fields} arrived in {timeout} s; got {self.backlog[-5:]}"
                 )
             try:
-                frame = await asyncio.wait_for(self.ws.recv(), left)
+                frame = await self.next_frame(left)
             except TimeoutError:
                 continue
             op = self._decode(frame)
@@ -291,9 +301,65 @@ class WireClient:
                 return op
             self.backlog.append(op)
 
+
+class WireClient(OpPeer):
+    """A raw websocket peer for wire-level tests: send JSON ops, await matching ops."""
+
+    def __init__(self, ws: ClientConnection) -> None:
+        super().__init__()
+        self.ws = ws
+
+    async def send_raw(self, data: str | bytes) -> None:
+        """Send one frame exactly as given (for malformed input)."""
+        await self.ws.send(data)
+
+    async def next_frame(self, timeout: float = 10.0) -> str | bytes:
+        """The next frame received, as it came."""
+        return await asyncio.wait_for(self.ws.recv(), timeout)
+
     async def close(self) -> None:
         """Close the connection."""
         await self.ws.close()
+
+
+async def roundtrip(ws: OpPeer, id: str = "sync") -> None:
+    """Send a cheap request and await its answer: everything sent before it has been handled."""
+    await ws.send({"op": "call_service", "service": "/rosapi/get_ros_version", "id": id})
+    await ws.expect(op="service_response", id=id)
+
+
+_rosapi_ids = itertools.count()
+
+
+async def rosapi(ws: OpPeer, service: str, args: Any = None) -> dict[str, Any]:
+    """Call the bridge's ``service`` (``/rosapi/...``) with ``args`` over ``ws``: its values,
+    the call asserted to have succeeded."""
+    rid = f"rosapi{next(_rosapi_ids)}"
+    op: dict[str, Any] = {"op": "call_service", "service": service, "id": rid}
+    if args is not None:
+        op["args"] = args
+    await ws.send(op)
+    reply = await ws.expect(op="service_response", id=rid)
+    assert reply["result"] is True, reply
+    assert reply["service"] == service
+    values: dict[str, Any] = reply["values"]
+    return values
+
+
+async def rosapi_until(
+    ws: OpPeer, service: str, args: Any, ok: Callable[[dict[str, Any]], Any],
+    timeout: float = 10.0,
+) -> dict[str, Any]:
+    """Call ``service`` (:func:`rosapi`) until its answer satisfies ``ok`` (a ROS graph takes
+    a moment to settle: discovery has no event); the answer."""
+    deadline = time.monotonic() + timeout
+    while True:
+        values = await rosapi(ws, service, args)
+        if ok(values):
+            return values
+        if time.monotonic() > deadline:
+            raise AssertionError(f"{service} never satisfied the check; last answer {values}")
+        await asyncio.sleep(0.02)
 
 
 async def open_wire(url: str) -> WireClient:

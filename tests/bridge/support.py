@@ -104,12 +104,6 @@ async def wait_service(client: Any, timeout: float = 10.0) -> None:
     await async_wait_until(client.service_is_ready, timeout, f"service {client.srv_name}")
 
 
-async def roundtrip(ws: Any, id: str = "sync") -> None:
-    """Send a cheap request and await its answer: everything sent before it has been handled."""
-    await ws.send({"op": "call_service", "service": "/rosapi/get_ros_version", "id": id})
-    await ws.expect(op="service_response", id=id)
-
-
 async def bridge_sees_topic(ws: Any, topic: str, timeout: float = 10.0) -> str:
     """Poll ``/rosapi/topic_type`` until the bridge's graph lists ``topic``; returns its type."""
     n = 0

@@ -20,7 +20,7 @@ from tests.bridge.action_support import (
     fib,
     send_goal,
 )
-from tests.bridge.support import roundtrip
+from tests.helpers import roundtrip
 
 SUCCEEDED, CANCELED, ABORTED = 4, 5, 6
 

@@ -15,8 +15,8 @@ import pytest
 from websockets.asyncio.client import connect
 from websockets.exceptions import ConnectionClosed
 
-from tests.bridge.support import ros_future, roundtrip, serve_set_bool
-from tests.helpers import ROOT, ros_env
+from tests.bridge.support import ros_future, serve_set_bool
+from tests.helpers import ROOT, ros_env, roundtrip
 
 
 def test_help_lists_options() -> None:

@@ -18,11 +18,10 @@ from tests.bridge.support import (
     Inbox,
     bridge_sees_topic,
     publish_until_heard,
-    roundtrip,
     wait_publishers,
     wait_subscribers,
 )
-from tests.helpers import async_wait_until
+from tests.helpers import async_wait_until, roundtrip
 
 
 def _latched() -> QoSProfile:

@@ -9,8 +9,7 @@ import pytest
 from std_srvs.srv import SetBool
 from test_msgs.action import Fibonacci
 
-from tests.bridge.support import roundtrip
-from tests.helpers import BridgeProcess, WireClient, open_wire
+from tests.helpers import BridgeProcess, WireClient, open_wire, roundtrip
 from tests.security.support import make_auth_file, wire
 
 

@@ -18,8 +18,7 @@ import roslibpy_lite
 from bench.linkproxy import LinkProxy
 from rosbridge_core.protocol import keepalive
 from roslibpy_lite.api import ConnectionState
-from tests.bridge.support import roundtrip
-from tests.helpers import BridgeProcess, WireClient
+from tests.helpers import BridgeProcess, WireClient, roundtrip
 
 STALL = 8.0
 """Seconds the bridge is stopped: longer than its keepalive's interval + timeout."""

@@ -7,7 +7,8 @@ from typing import Any
 import pytest
 from std_msgs.msg import String
 
-from tests.bridge.support import roundtrip, wait_subscribers
+from tests.bridge.support import wait_subscribers
+from tests.helpers import roundtrip
 from tests.load.support import qos
 
 pytestmark = pytest.mark.asyncio

@@ -13,8 +13,8 @@ import pytest
 from sensor_msgs.msg import Image
 from std_msgs.msg import String
 
-from tests.bridge.support import roundtrip, wait_subscribers
-from tests.helpers import ros_image
+from tests.bridge.support import wait_subscribers
+from tests.helpers import ros_image, roundtrip
 from tests.load.support import StalledClient, qos
 
 pytestmark = pytest.mark.asyncio

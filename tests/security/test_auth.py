@@ -16,8 +16,7 @@ from websockets.exceptions import ConnectionClosed, InvalidStatus
 from bridge_server.front.handshake import Security
 from rosbridge_core.security import SecurityConfig, redact
 from rosbridge_core.security.auth import AuthFileError, FailureTracker, load_auth_file, new_token
-from tests.bridge.support import roundtrip
-from tests.helpers import ROOT, BridgeProcess, ros_env
+from tests.helpers import ROOT, BridgeProcess, ros_env, roundtrip
 from tests.ops.support import aget
 from tests.security.support import AuthFile, wire
 

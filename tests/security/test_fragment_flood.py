@@ -8,8 +8,7 @@ from collections.abc import Iterator
 import psutil
 import pytest
 
-from tests.bridge.support import roundtrip
-from tests.helpers import BridgeProcess
+from tests.helpers import BridgeProcess, roundtrip
 from tests.security.support import AuthFile, wire
 
 LIMIT = 1 << 20

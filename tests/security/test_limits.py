@@ -16,8 +16,7 @@ from websockets.typing import Origin
 
 from bridge_server.front.websocket import BudgetAssembler, Inbound
 from tests.bridge.action_support import FibServer, send_goal
-from tests.bridge.support import roundtrip
-from tests.helpers import open_wire
+from tests.helpers import open_wire, roundtrip
 
 
 async def _refused(url: str, **kwargs: Any) -> tuple[int, str]:

@@ -16,8 +16,7 @@ from websockets.exceptions import InvalidStatus
 
 from rosbridge_core.protocol.ops import RECEIVED_HEADER, SESSION_HEADER
 from rosbridge_core.security import redact
-from tests.bridge.support import roundtrip
-from tests.helpers import BridgeProcess, WireClient, free_port, ros_env
+from tests.helpers import BridgeProcess, WireClient, free_port, ros_env, roundtrip
 from tests.relay.procs import Proc
 from tests.security.support import AuthFile, wire
 

@@ -13,8 +13,8 @@ from std_msgs.msg import String
 from std_srvs.srv import SetBool
 
 from rosbridge_core.security.permissions import MAY, Role, RoleError
-from tests.bridge.support import Inbox, publish_until_heard, roundtrip, wait_publishers
-from tests.helpers import BridgeProcess
+from tests.bridge.support import Inbox, publish_until_heard, wait_publishers
+from tests.helpers import BridgeProcess, roundtrip
 from tests.security.support import bridge_entities
 
 Connect = Callable[..., Any]

@@ -8,8 +8,7 @@ from typing import Any
 import pytest
 
 from rosbridge_core.security.names import InvalidNameError, check_name
-from tests.bridge.support import roundtrip
-from tests.helpers import BridgeProcess
+from tests.helpers import BridgeProcess, roundtrip
 
 
 def _with_surrogate(op: dict[str, Any]) -> str:

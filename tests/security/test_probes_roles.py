@@ -18,8 +18,8 @@ from std_msgs.msg import String
 from std_srvs.srv import SetBool
 from websockets.exceptions import ConnectionClosed
 
-from tests.bridge.support import roundtrip, wait_subscribers
-from tests.helpers import BridgeProcess, async_wait_until, open_wire
+from tests.bridge.support import wait_subscribers
+from tests.helpers import BridgeProcess, async_wait_until, open_wire, roundtrip
 from tests.ops.support import aget
 from tests.security.support import AuthFile, WatcherAuth, bridge_entities, wire
 

@@ -18,8 +18,7 @@ from rosbridge_core.security.auth import (
     load_auth_file,
     remove_principal,
 )
-from tests.bridge.support import roundtrip
-from tests.helpers import ROOT, BridgeProcess, WireClient, ros_env
+from tests.helpers import ROOT, BridgeProcess, WireClient, ros_env, roundtrip
 from tests.security.support import ROLES, wire
 
 TWIST = "geometry_msgs/msg/Twist"

@@ -16,8 +16,7 @@ from websockets.frames import Frame, Opcode
 
 from rosbridge_core.security.accounts import DEFAULT_MESSAGES
 from rosbridge_core.security.options import MAX_MESSAGE_SIZE
-from tests.bridge.support import roundtrip
-from tests.helpers import BridgeProcess, WireClient, async_wait_until
+from tests.helpers import BridgeProcess, WireClient, async_wait_until, roundtrip
 from tests.security.support import AuthFile, wire, write_auth_file
 
 CONNECTIONS = 30

@@ -8,8 +8,7 @@ from typing import Any
 import pytest
 from websockets.exceptions import ConnectionClosed, InvalidHandshake
 
-from tests.bridge.support import roundtrip
-from tests.helpers import BridgeProcess
+from tests.helpers import BridgeProcess, roundtrip
 from tests.security.support import AuthFile, Certs, wire
 
 

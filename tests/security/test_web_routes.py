@@ -8,8 +8,7 @@ from typing import Any
 import pytest
 from websockets.exceptions import InvalidStatus
 
-from tests.bridge.support import roundtrip
-from tests.helpers import BridgeProcess
+from tests.helpers import BridgeProcess, roundtrip
 from tests.ops.support import aget
 from tests.security.support import AuthFile, wire
 
