@@ -328,6 +328,43 @@ async def roundtrip(ws: OpPeer, id: str = "sync") -> None:
     await ws.expect(op="service_response", id=id)
 
 
+async def sender_and_bystander(connect: Callable[[], Any]) -> tuple[OpPeer, OpPeer]:
+    """Two peers from ``connect`` (a ``ws_connect`` fixture): the one that will send bad
+    input, and a bystander whose session is up."""
+    ws = await connect()
+    other = await connect()
+    await roundtrip(other, "before")
+    return ws, other
+
+
+async def still_working(ws: OpPeer, other: OpPeer, topic: str) -> None:
+    """The sender's connection and a bystander's both still work (a publish/subscribe round
+    trip on ``topic``_probe), and the bystander was sent no status."""
+    await roundtrip(ws, "after")
+    await roundtrip(other, "after-other")
+    probe = topic + "_probe"
+    await other.send({"op": "subscribe", "topic": probe, "type": "std_msgs/String"})
+    await ws.send({"op": "advertise", "topic": probe, "type": "std_msgs/String"})
+    await roundtrip(other, "subscribed")
+    for n in range(200):  # over ROS: until the bridge's publisher and subscription have matched
+        await ws.send({"op": "publish", "topic": probe, "msg": {"data": f"ok{n}"}})
+        try:
+            op = await other.expect(op="publish", topic=probe, timeout=0.2)
+            break
+        except AssertionError:
+            continue
+    else:
+        raise AssertionError("publish/subscribe did not work after the bad input")
+    assert op["msg"]["data"].startswith("ok")
+    assert [o for o in other.backlog if o.get("op") == "status"] == []
+
+
+async def error_text(ws: OpPeer, **fields: Any) -> str:
+    """The text of the next error status whose fields equal ``fields``."""
+    status = await ws.expect(op="status", level="error", **fields)
+    return str(status["msg"])
+
+
 _rosapi_ids = itertools.count()
 
 

@@ -7,12 +7,12 @@ from typing import Any
 import pytest
 
 from tests.bridge.action_support import FIB, FibServer, RosCaller, bridge_sees_action, send_goal
-from tests.bridge.test_bad_input import _error, _pair, _still_working
+from tests.helpers import error_text, sender_and_bystander, still_working
 
 
 async def _failed_goal(ws: Any, id: str) -> tuple[str, dict[str, Any]]:
     """The status error and the failed action_result a refused goal gets."""
-    msg = await _error(ws, id=id)
+    msg = await error_text(ws, id=id)
     result = await ws.expect(op="action_result", id=id)
     assert result["result"] is False and result["status"] == 6
     return msg, result
@@ -29,35 +29,35 @@ async def _failed_goal(ws: Any, id: str) -> tuple[str, dict[str, Any]]:
 )
 async def test_unknown_action_type(ws_connect: Any, topic: str, action_type: str, named: str) -> None:
     """An action type that is malformed or not installed is named in the error and the result."""
-    ws, other = await _pair(ws_connect)
+    ws, other = await sender_and_bystander(ws_connect)
     await ws.send({"op": "send_action_goal", "action": topic, "action_type": action_type,
                    "args": {}, "id": "u1"})
     msg, result = await _failed_goal(ws, "u1")
     assert named in msg and topic in msg
     assert named in result["values"]
-    await _still_working(ws, other, topic)
+    await still_working(ws, other, topic)
 
 
 async def test_no_such_action_server(ws_connect: Any, topic: str) -> None:
     """A goal to an action nobody serves fails with "does not exist", naming the action."""
-    ws, other = await _pair(ws_connect)
+    ws, other = await sender_and_bystander(ws_connect)
     await send_goal(ws, topic, {"order": 3}, "n1")
     msg, result = await _failed_goal(ws, "n1")
     assert topic in msg and "does not exist" in msg
     assert "does not exist" in result["values"]
-    await _still_working(ws, other, topic)
+    await still_working(ws, other, topic)
 
 
 async def test_action_type_differs_from_graph(ws_connect: Any, ros_node: Any, topic: str) -> None:
     """A goal whose type differs from the served action's names both types."""
     server = FibServer(ros_node, topic)
-    ws, other = await _pair(ws_connect)
+    ws, other = await sender_and_bystander(ws_connect)
     await bridge_sees_action(ws, topic)
     await ws.send({"op": "send_action_goal", "action": topic, "id": "x1",
                    "action_type": "mult_msgs/action/IntegrateImu", "args": {"seconds": 1.0}})
     msg, _ = await _failed_goal(ws, "x1")
     assert "test_msgs/action/Fibonacci" in msg and "mult_msgs/action/IntegrateImu" in msg
-    await _still_working(ws, other, topic)
+    await still_working(ws, other, topic)
     server.destroy()
 
 
@@ -72,76 +72,76 @@ async def test_action_type_differs_from_graph(ws_connect: Any, ros_node: Any, to
 )
 async def test_goal_does_not_fit_the_type(ws_connect: Any, topic: str, args: Any, named: str) -> None:
     """A goal that does not fit the type names the field path (or the count of list args)."""
-    ws, other = await _pair(ws_connect)
+    ws, other = await sender_and_bystander(ws_connect)
     await send_goal(ws, topic, args, "f1")
     msg, result = await _failed_goal(ws, "f1")
     assert named in msg and FIB in msg
     assert named in result["values"]
-    await _still_working(ws, other, topic)
+    await still_working(ws, other, topic)
 
 
 async def test_args_of_the_wrong_kind(ws_connect: Any, topic: str) -> None:
     """args that is neither an object nor a list is refused, naming the field."""
-    ws, other = await _pair(ws_connect)
+    ws, other = await sender_and_bystander(ws_connect)
     await send_goal(ws, topic, "order=3", "k1")
-    msg = await _error(ws, id="k1")
+    msg = await error_text(ws, id="k1")
     assert "'args'" in msg and "an object or a list" in msg
-    await _still_working(ws, other, topic)
+    await still_working(ws, other, topic)
 
 
 @pytest.mark.parametrize("op", ["cancel_action_goal", "action_feedback", "action_result"])
 async def test_unknown_goal_id(ws_connect: Any, topic: str, op: str) -> None:
     """cancel, feedback or result for a goal id nobody knows is an error naming the id."""
-    ws, other = await _pair(ws_connect)
+    ws, other = await sender_and_bystander(ws_connect)
     frame: dict[str, Any] = {"op": op, "id": "ghost", "action": topic}
     if op == "action_feedback":
         frame["values"] = {"sequence": [1]}
     if op == "action_result":
         frame.update(values={"sequence": [1]}, result=True, status=4)
     await ws.send(frame)
-    msg = await _error(ws, id="ghost")
+    msg = await error_text(ws, id="ghost")
     assert op in msg and "'ghost'" in msg and topic in msg
-    await _still_working(ws, other, topic)
+    await still_working(ws, other, topic)
 
 
 async def test_duplicate_goal_id(ws_connect: Any, ros_node: Any, topic: str) -> None:
     """A second goal with the id of one still in flight is refused; the first goes on."""
     server = FibServer(ros_node, topic, slow=True)
-    ws, other = await _pair(ws_connect)
+    ws, other = await sender_and_bystander(ws_connect)
     await bridge_sees_action(ws, topic)
     await send_goal(ws, topic, {"order": 1}, "dup", feedback=True)
     await ws.expect(op="action_feedback", id="dup")
     await send_goal(ws, topic, {"order": 1}, "dup")
-    msg = await _error(ws, id="dup")
+    msg = await error_text(ws, id="dup")
     assert "already in flight" in msg
     await ws.send({"op": "cancel_action_goal", "id": "dup", "action": topic})
     result = await ws.expect(op="action_result", id="dup")
     assert result["status"] == 5
-    await _still_working(ws, other, topic)
+    await still_working(ws, other, topic)
     server.destroy()
 
 
 async def test_advertise_unknown_action_type(ws_connect: Any, topic: str) -> None:
     """advertise_action with a type that is not installed names the type."""
-    ws, other = await _pair(ws_connect)
+    ws, other = await sender_and_bystander(ws_connect)
     await ws.send({"op": "advertise_action", "action": topic, "type": "test_msgs/Nope", "id": "a1"})
-    msg = await _error(ws, id="a1")
+    msg = await error_text(ws, id="a1")
     assert "advertise_action" in msg and "test_msgs/Nope" in msg
-    await _still_working(ws, other, topic)
+    await still_working(ws, other, topic)
 
 
 async def test_unadvertise_not_served(ws_connect: Any, topic: str) -> None:
     """unadvertise_action of an action this client does not serve is an error naming it."""
-    ws, other = await _pair(ws_connect)
+    ws, other = await sender_and_bystander(ws_connect)
     await ws.send({"op": "unadvertise_action", "action": topic, "id": "ua"})
-    msg = await _error(ws, id="ua")
+    msg = await error_text(ws, id="ua")
     assert "unadvertise_action" in msg and topic in msg
-    await _still_working(ws, other, topic)
+    await still_working(ws, other, topic)
 
 
 async def test_served_feedback_that_does_not_fit(ws_connect: Any, ros_node: Any, topic: str) -> None:
     """Feedback that does not fit the type names the field; the goal goes on and can succeed."""
-    ws, other = await _pair(ws_connect)
+    ws, other = await sender_and_bystander(ws_connect)
     await ws.send({"op": "advertise_action", "action": topic, "type": FIB})
     caller = RosCaller(ros_node, topic)
     await caller.ready()
@@ -149,12 +149,12 @@ async def test_served_feedback_that_does_not_fit(ws_connect: Any, ros_node: Any,
     goal = await ws.expect(op="send_action_goal")
     await ws.send({"op": "action_feedback", "id": goal["id"], "action": topic,
                    "values": {"sequence": [0.5]}})
-    msg = await _error(ws, id=goal["id"])
+    msg = await error_text(ws, id=goal["id"])
     assert "values.sequence[0]" in msg and "int32" in msg
     await ws.send({"op": "action_result", "id": goal["id"], "action": topic,
                    "values": {"sequence": [0, 1, 1]}, "result": True})
     assert (await caller.result(handle)).status == 4
-    await _still_working(ws, other, topic)
+    await still_working(ws, other, topic)
     caller.destroy()
 
 
@@ -162,7 +162,7 @@ async def test_served_result_with_a_status_that_is_not_final(
     ws_connect: Any, ros_node: Any, topic: str
 ) -> None:
     """A result whose status is not final (2 executing) is an error, and the goal is aborted."""
-    ws, other = await _pair(ws_connect)
+    ws, other = await sender_and_bystander(ws_connect)
     await ws.send({"op": "advertise_action", "action": topic, "type": FIB})
     caller = RosCaller(ros_node, topic)
     await caller.ready()
@@ -170,17 +170,17 @@ async def test_served_result_with_a_status_that_is_not_final(
     goal = await ws.expect(op="send_action_goal")
     await ws.send({"op": "action_result", "id": goal["id"], "action": topic,
                    "values": {"sequence": []}, "result": True, "status": 2})
-    msg = await _error(ws, id=goal["id"])
+    msg = await error_text(ws, id=goal["id"])
     assert "status 2" in msg and "aborted" in msg
     assert (await caller.result(handle)).status == 6
-    await _still_working(ws, other, topic)
+    await still_working(ws, other, topic)
     caller.destroy()
 
 
 @pytest.mark.parametrize("op", ["send_action_goal", "advertise_action"])
 async def test_invalid_action_name(ws_connect: Any, topic: str, op: str) -> None:
     """An action name ROS cannot carry is refused with an error naming it."""
-    ws, other = await _pair(ws_connect)
+    ws, other = await sender_and_bystander(ws_connect)
     bad = topic + "/bad name!"
     frame: dict[str, Any] = {"op": op, "action": bad, "id": "bad"}
     if op == "send_action_goal":
@@ -188,9 +188,9 @@ async def test_invalid_action_name(ws_connect: Any, topic: str, op: str) -> None
     else:
         frame["type"] = FIB
     await ws.send(frame)
-    msg = await _error(ws, id="bad")
+    msg = await error_text(ws, id="bad")
     assert "bad name!" in msg and "action" in msg
     if op == "send_action_goal":
         result = await ws.expect(op="action_result", id="bad")
         assert result["result"] is False
-    await _still_working(ws, other, topic)
+    await still_working(ws, other, topic)
