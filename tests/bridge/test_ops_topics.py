@@ -1,18 +1,20 @@
-"""Topic ops on the wire: advertise, publish, subscribe, unsubscribe and their options."""
+"""Topic ops over rclpy: what needs a real ROS graph (rclpy publishers and subscribers on
+the other side, DDS matching and QoS, latching, CDR from rclpy, a socket that fills). The
+session's own topic behaviour (type spellings, throttling, fragments, CBOR, merged
+subscriptions, unsubscribing, png, relative names) is tested in memory in
+tests/session/test_topics.py."""
 
 from __future__ import annotations
 
 import asyncio
 import contextlib
-import json
-import struct
 import time
 from typing import Any
 
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message, serialize_message
 from sensor_msgs.msg import Image
-from std_msgs.msg import Int32, Int32MultiArray, String, UInt8MultiArray
+from std_msgs.msg import Int32, String
 
 from tests.bridge.support import (
     Inbox,
@@ -94,48 +96,6 @@ async def test_late_publisher_is_heard(ws_connect: Any, ros_node: Any, topic: st
     assert op["msg"] == {"data": "finally"}
 
 
-async def test_both_type_spellings(ws_connect: Any, topic: str) -> None:
-    """``std_msgs/String`` and ``std_msgs/msg/String`` name the same type on advertise and subscribe."""
-    ws = await ws_connect()
-    await ws.send({"op": "advertise", "topic": topic, "type": "std_msgs/String"})
-    await ws.send({"op": "subscribe", "topic": topic, "type": "std_msgs/msg/String"})
-    await roundtrip(ws)
-    other = await ws_connect()
-    await other.send({"op": "subscribe", "topic": topic, "type": "std_msgs/String"})
-    await roundtrip(other)
-    n = 0
-    while True:  # discovery between the bridge's own publisher and subscription takes a moment
-        n += 1
-        await ws.send({"op": "publish", "topic": topic, "msg": {"data": f"m{n}"}})
-        try:
-            op = await ws.expect(op="publish", topic=topic, timeout=0.3)
-            break
-        except AssertionError:
-            assert n < 30, "the bridge never heard its own publisher"
-    assert op["msg"]["data"].startswith("m")
-    op2 = await other.expect(op="publish", topic=topic)
-    assert op2["msg"]["data"].startswith("m")
-    statuses = [o for o in ws.backlog + other.backlog if o.get("op") == "status"]
-    assert statuses == []
-
-
-async def test_throttle_rate_keeps_latest(ws_connect: Any, ros_node: Any, topic: str) -> None:
-    """With throttle_rate, a burst is thinned out and its last message still arrives."""
-    pub = ros_node.create_publisher(String, topic, 100)
-    ws = await ws_connect()
-    await ws.send(
-        {"op": "subscribe", "topic": topic, "type": "std_msgs/String", "throttle_rate": 2000}
-    )
-    await wait_subscribers(pub)
-    for i in range(20):
-        pub.publish(String(data=str(i)))
-    seen: list[Any] = []
-    while not seen or seen[-1] != "19":
-        seen.append((await ws.expect(op="publish", topic=topic))["msg"]["data"])
-    assert len(seen) < 20
-    assert seen[0] == "0"
-
-
 async def test_queue_length_drops_oldest_for_slow_reader(
     ws_connect: Any, ros_node: Any, topic: str
 ) -> None:
@@ -163,61 +123,6 @@ async def test_queue_length_drops_oldest_for_slow_reader(
     assert len(received) < count
     warning = await ws.expect(op="status", level="warning")
     assert topic in warning["msg"] and "dropped" in warning["msg"]
-
-
-async def test_fragment_size_splits_outgoing(ws_connect: Any, ros_node: Any, topic: str) -> None:
-    """With fragment_size, a large publish arrives as fragment ops that reassemble into it; a
-    size under the bridge's floor (1,024 bytes) is raised to it, with a warning saying so."""
-    pub = ros_node.create_publisher(String, topic, 10)
-    ws = await ws_connect()
-    await ws.send({"op": "subscribe", "topic": topic, "type": "std_msgs/String",
-                   "fragment_size": 16, "id": "s"})
-    warning = await ws.expect(op="status", id="s")
-    assert warning["level"] == "warning" and "fragment_size 16" in warning["msg"]
-    assert "1024" in warning["msg"]
-    await wait_subscribers(pub)
-    data = "abcdefghij" * 500
-    pub.publish(String(data=data))
-    first = await ws.expect(op="fragment")
-    pieces = {first["num"]: first["data"]}
-    assert first["total"] == -(-len(json.dumps({"op": "publish", "topic": topic,
-                                                "msg": {"data": data}})) // 1024)
-    while len(pieces) < first["total"]:
-        frag = await ws.expect(op="fragment", id=first["id"])
-        assert len(frag["data"]) <= 1024
-        pieces[frag["num"]] = frag["data"]
-    text = "".join(pieces[i] for i in range(first["total"]))
-    assert json.loads(text) == {"op": "publish", "topic": topic, "msg": {"data": data}}
-
-
-async def test_compression_cbor(ws_connect: Any, ros_node: Any, topic: str) -> None:
-    """compression=cbor sends a binary CBOR publish op; int32[] is a typed array (tag 78)."""
-    pub = ros_node.create_publisher(Int32MultiArray, topic, 10)
-    ws = await ws_connect()
-    await ws.send(
-        {"op": "subscribe", "topic": topic, "type": "std_msgs/Int32MultiArray",
-         "compression": "cbor"}
-    )
-    await wait_subscribers(pub)
-    pub.publish(Int32MultiArray(data=[1, -2, 300000]))
-    op = await ws.expect(op="publish", topic=topic)
-    data = op["msg"]["data"]
-    assert data.tag == 78
-    assert list(struct.unpack("<3i", data.value)) == [1, -2, 300000]
-
-
-async def test_compression_cbor_uint8_as_bytes(ws_connect: Any, ros_node: Any, topic: str) -> None:
-    """compression=cbor carries uint8[] as a CBOR byte string."""
-    pub = ros_node.create_publisher(UInt8MultiArray, topic, 10)
-    ws = await ws_connect()
-    await ws.send(
-        {"op": "subscribe", "topic": topic, "type": "std_msgs/msg/UInt8MultiArray",
-         "compression": "cbor"}
-    )
-    await wait_subscribers(pub)
-    pub.publish(UInt8MultiArray(data=b"\x00\x01\xff"))
-    op = await ws.expect(op="publish", topic=topic)
-    assert op["msg"]["data"] == b"\x00\x01\xff"
 
 
 async def test_compression_cbor_raw(ws_connect: Any, ros_node: Any, topic: str) -> None:
@@ -253,39 +158,6 @@ async def test_compression_cbor_raw_camera_frame(ws_connect: Any, ros_node: Any,
     raw = op["msg"]["bytes"]
     assert len(raw) == len(serialize_message(image))
     assert deserialize_message(raw, Image) == image
-
-
-async def test_merged_subscriptions_deliver_once(ws_connect: Any, ros_node: Any, topic: str) -> None:
-    """Several ids on one topic merge: each message arrives once; each id unsubscribes alone."""
-    pub = ros_node.create_publisher(String, topic, 10)
-    ws = await ws_connect()
-    for sid in ("a", "b", "c"):
-        await ws.send({"op": "subscribe", "topic": topic, "type": "std_msgs/String", "id": sid})
-    await wait_subscribers(pub)
-    pub.publish(String(data="one"))
-    pub.publish(String(data="two"))
-    assert (await ws.expect(op="publish"))["msg"]["data"] == "one"
-    assert (await ws.expect(op="publish"))["msg"]["data"] == "two"
-    await ws.send({"op": "unsubscribe", "topic": topic, "id": "a"})
-    await ws.send({"op": "unsubscribe", "topic": topic, "id": "b"})
-    await roundtrip(ws)
-    pub.publish(String(data="three"))
-    assert (await ws.expect(op="publish"))["msg"]["data"] == "three"
-    await ws.send({"op": "unsubscribe", "topic": topic, "id": "c"})
-    await async_wait_until(lambda: pub.get_subscription_count() == 0, what="subscription gone")
-
-
-async def test_unsubscribe_without_id_removes_all(ws_connect: Any, ros_node: Any, topic: str) -> None:
-    """An unsubscribe without id ends every subscription of that client to the topic."""
-    pub = ros_node.create_publisher(String, topic, 10)
-    ws = await ws_connect()
-    await ws.send({"op": "subscribe", "topic": topic, "type": "std_msgs/String", "id": 1})
-    await ws.send({"op": "subscribe", "topic": topic, "type": "std_msgs/String", "id": 2})
-    await wait_subscribers(pub)
-    await ws.send({"op": "unsubscribe", "topic": topic})
-    await async_wait_until(lambda: pub.get_subscription_count() == 0, what="subscription gone")
-    await roundtrip(ws)
-    assert [o for o in ws.backlog if o.get("op") == "status"] == []
 
 
 async def test_one_ros_subscription_shared_by_clients(
@@ -431,32 +303,3 @@ async def test_a_re_subscription_to_a_latched_topic_hands_out_nothing_twice(
     with contextlib.suppress(AssertionError):  # and nothing more comes: no late duplicates
         got.append((await ws.expect(op="publish", topic=topic, timeout=0.5))["msg"]["data"])
     assert sorted(got) == list(range(sent)), got
-
-
-async def test_png_compression_falls_back_to_json(ws_connect: Any, ros_node: Any, topic: str) -> None:
-    """compression=png (legacy, offered by stock clients) subscribes with plain JSON and a warning."""
-    pub = ros_node.create_publisher(String, topic, 10)
-    ws = await ws_connect()
-    await ws.send({"op": "subscribe", "topic": topic, "type": "std_msgs/String",
-                   "compression": "png", "id": "png"})
-    note = await ws.expect(op="status", level="warning", id="png")
-    assert "png" in note["msg"]
-    await wait_subscribers(pub)
-    pub.publish(String(data="plain"))
-    op = await ws.expect(op="publish", topic=topic)
-    assert op["msg"] == {"data": "plain"}
-
-
-async def test_relative_names_are_echoed(ws_connect: Any, ros_node: Any, topic: str) -> None:
-    """A name without the leading slash means the absolute one, and replies use the client's spelling."""
-    pub = ros_node.create_publisher(String, topic, 10)
-    ws = await ws_connect()
-    relative = topic.lstrip("/")
-    await ws.send({"op": "subscribe", "topic": relative, "type": "std_msgs/String"})
-    await wait_subscribers(pub)
-    pub.publish(String(data="rel"))
-    op = await ws.expect(op="publish")
-    assert op == {"op": "publish", "topic": relative, "msg": {"data": "rel"}}
-    await ws.send({"op": "call_service", "service": "rosapi/get_ros_version", "id": "r"})
-    reply = await ws.expect(op="service_response", id="r")
-    assert reply["service"] == "rosapi/get_ros_version" and reply["result"] is True
