@@ -11,7 +11,7 @@ loop's thread takes the lock back between pieces (``sys.getswitchinterval``, 5 m
 Their output is, byte for byte, what one call gives: :func:`json_text` that of
 :func:`rosbridge_core.codec.cdr_json.wire_encoder` (``bytes`` as base64 strings), and
 :func:`cbor_bytes` that of ``cbor2.dumps`` (definite lengths, no value sharing), which
-``tests/bridge/test_chunked_codec.py`` checks on real types. Used by
+``tests/core/test_chunked_codec.py`` checks on real types. Used by
 :mod:`bridge_server.zenoh.decode` for messages of
 :data:`~rosbridge_core.codec.budget.OFF_LOOP_BYTES` and more; small messages keep the
 one-call encoders.
