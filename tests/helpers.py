@@ -7,9 +7,11 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import inspect
 import itertools
 import json
 import os
+import queue
 import re
 import shutil
 import signal
@@ -19,9 +21,9 @@ import tempfile
 import threading
 import time
 import traceback
-from collections.abc import Callable, Iterator
+from collections.abc import Awaitable, Callable, Iterator
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 from websockets.asyncio.client import ClientConnection
 from websockets.asyncio.client import connect as ws_connect
@@ -89,6 +91,51 @@ async def async_wait_until(
         if time.monotonic() > deadline:
             raise AssertionError(f"timed out after {timeout} s waiting for {what}")
         await asyncio.sleep(0.02)
+
+
+T = TypeVar("T")
+
+
+async def send_until_heard(
+    send: Callable[[], Any], listen: Callable[[float], Awaitable[T]], what: str,
+    attempt: float = 0.25, timeout: float = 20.0,
+) -> T:
+    """Call ``send`` (a coroutine function or not), then ``listen`` for at most ``attempt``
+    seconds, until ``listen`` returns what it heard (it raises TimeoutError or
+    AssertionError when nothing came): that is returned. AssertionError naming ``what``
+    after ``timeout`` s.
+
+    A ROS subscription can see a new publisher before that publisher sees it (DDS
+    matching is not symmetric), and nothing says when discovery is done, so one message
+    sent at once may reach nobody; sending again until heard is the way to know the path
+    is up. In memory the first is heard.
+    """
+    deadline = time.monotonic() + timeout
+    while True:
+        sent = send()
+        if inspect.isawaitable(sent):
+            await sent
+        try:
+            return await listen(attempt)
+        except (TimeoutError, AssertionError):
+            if time.monotonic() >= deadline:
+                raise AssertionError(f"never heard {what} in {timeout} s") from None
+
+
+def send_until_heard_sync(
+    send: Callable[[], Any], listen: Callable[[float], T], what: str,
+    attempt: float = 0.25, timeout: float = 20.0,
+) -> T:
+    """The blocking twin of :func:`send_until_heard` (``listen`` may also raise
+    :class:`queue.Empty`)."""
+    deadline = time.monotonic() + timeout
+    while True:
+        send()
+        try:
+            return listen(attempt)
+        except (TimeoutError, AssertionError, queue.Empty):
+            if time.monotonic() >= deadline:
+                raise AssertionError(f"never heard {what} in {timeout} s") from None
 
 
 def marked_blocks(path: Path, tag: str) -> list[tuple[str, str]]:
@@ -346,15 +393,10 @@ async def still_working(ws: OpPeer, other: OpPeer, topic: str) -> None:
     await other.send({"op": "subscribe", "topic": probe, "type": "std_msgs/String"})
     await ws.send({"op": "advertise", "topic": probe, "type": "std_msgs/String"})
     await roundtrip(other, "subscribed")
-    for n in range(200):  # over ROS: until the bridge's publisher and subscription have matched
-        await ws.send({"op": "publish", "topic": probe, "msg": {"data": f"ok{n}"}})
-        try:
-            op = await other.expect(op="publish", topic=probe, timeout=0.2)
-            break
-        except AssertionError:
-            continue
-    else:
-        raise AssertionError("publish/subscribe did not work after the bad input")
+    op = await send_until_heard(
+        lambda: ws.send({"op": "publish", "topic": probe, "msg": {"data": "ok"}}),
+        lambda wait: other.expect(op="publish", topic=probe, timeout=wait),
+        "publish/subscribe working after the bad input", attempt=0.2, timeout=40)
     assert op["msg"]["data"].startswith("ok")
     assert [o for o in other.backlog if o.get("op") == "status"] == []
 

@@ -6,7 +6,7 @@ import asyncio
 from collections.abc import Callable
 from typing import Any
 
-from tests.helpers import async_wait_until
+from tests.helpers import async_wait_until, rosapi_until, send_until_heard
 
 
 class Inbox:
@@ -32,28 +32,17 @@ async def until_heard(
     send: Callable[[], Any], inbox: Inbox, want: Any = _ANYTHING, timeout: float = 20.0
 ) -> Any:
     """Call ``send`` (a coroutine function or not) every 0.25 s until ``inbox`` yields ``want``
-    (or anything, when no ``want`` is given); returns the value heard.
+    (or anything, when no ``want`` is given); returns the value heard
+    (:func:`~tests.helpers.send_until_heard`, whose text says why)."""
 
-    A ROS subscription can see a new publisher before that publisher sees it (DDS
-    matching is not symmetric), and nothing says when discovery after a restart is
-    done, so one message sent at once may reach nobody; repeating it until heard is
-    the way to know the path is up.
-    """
-    loop = asyncio.get_running_loop()
-    deadline = loop.time() + timeout
-    while True:
-        result = send()
-        if asyncio.iscoroutine(result):
-            await result
-        try:
-            heard = await inbox.get(0.25)
-            while want is not _ANYTHING and heard != want:
-                heard = await inbox.get(0.25)
-            return heard
-        except TimeoutError:
-            if loop.time() >= deadline:
-                raise AssertionError(f"never heard {'anything' if want is _ANYTHING else repr(want)}"
-                                     f" in {timeout} s") from None
+    async def listen(wait: float) -> Any:
+        heard = await inbox.get(wait)
+        while want is not _ANYTHING and heard != want:
+            heard = await inbox.get(wait)
+        return heard
+
+    return await send_until_heard(
+        send, listen, "anything" if want is _ANYTHING else repr(want), timeout=timeout)
 
 
 async def publish_until_heard(
@@ -106,27 +95,9 @@ async def wait_service(client: Any, timeout: float = 10.0) -> None:
 
 async def bridge_sees_topic(ws: Any, topic: str, timeout: float = 10.0) -> str:
     """Poll ``/rosapi/topic_type`` until the bridge's graph lists ``topic``; returns its type."""
-    n = 0
-
-    async def known() -> str:
-        nonlocal n
-        n += 1
-        rid = f"tt{n}"
-        await ws.send(
-            {"op": "call_service", "service": "/rosapi/topic_type", "args": {"topic": topic},
-             "id": rid}
-        )
-        reply = await ws.expect(op="service_response", id=rid)
-        return str(reply["values"]["type"])
-
-    deadline = asyncio.get_running_loop().time() + timeout
-    while True:
-        found = await known()
-        if found:
-            return found
-        if asyncio.get_running_loop().time() > deadline:
-            raise AssertionError(f"the bridge never saw {topic}")
-        await asyncio.sleep(0.02)
+    found = await rosapi_until(ws, "/rosapi/topic_type", {"topic": topic},
+                               lambda v: v["type"], timeout)
+    return str(found["type"])
 
 
 async def serve_set_bool(ws: Any, ros_node: Any, name: str) -> Any:

@@ -2,30 +2,18 @@
 
 from __future__ import annotations
 
-import asyncio
 from typing import Any
 
 import pytest
 from std_srvs.srv import SetBool
 from test_msgs.action import Fibonacci
 
-from tests.helpers import BridgeProcess, WireClient, open_wire, roundtrip
+from tests.helpers import BridgeProcess, WireClient, open_wire, rosapi, rosapi_until, roundtrip
 from tests.security.support import make_auth_file, wire
 
 
-async def _rosapi(ws: WireClient, service: str, args: dict[str, Any] | None = None) -> Any:
-    await ws.send({"op": "call_service", "service": service, "args": args or {}, "id": service})
-    reply = await ws.expect(op="service_response", id=service)
-    assert reply["result"] is True, reply
-    return reply["values"]
-
-
 async def _until_listed(ws: WireClient, service: str, key: str, name: str) -> None:
-    for _ in range(200):
-        if name in (await _rosapi(ws, service))[key]:
-            return
-        await asyncio.sleep(0.05)
-    raise AssertionError(f"{name} never listed by {service}")
+    await rosapi_until(ws, service, None, lambda values: name in values[key], timeout=10)
 
 
 @pytest.mark.parametrize("same_name", [False, True])
@@ -57,7 +45,7 @@ async def test_two_bridges_see_the_whole_graph(
             await _until_listed(ws, "/rosapi/services", "services", served)
             await _until_listed(ws, "/rosapi/action_servers", "action_servers", action)
             for name in (service, served):
-                values = await _rosapi(ws, "/rosapi/service_type", {"service": name})
+                values = await rosapi(ws, "/rosapi/service_type", {"service": name})
                 assert values == {"type": "std_srvs/srv/SetBool"}
         # A call through the secured bridge reaches the service a client of the other serves.
         await b.send({"op": "call_service", "service": served, "type": "std_srvs/srv/SetBool",

@@ -2,13 +2,14 @@
 
 from __future__ import annotations
 
+import itertools
 from typing import Any
 
 import pytest
 from std_msgs.msg import String
 
 from tests.bridge.support import wait_subscribers
-from tests.helpers import roundtrip
+from tests.helpers import roundtrip, send_until_heard
 from tests.load.support import qos
 
 pytestmark = pytest.mark.asyncio
@@ -52,16 +53,14 @@ async def test_best_effort_publisher_is_heard(ws_connect: Any, ros_node: Any, to
     await _publish_until_heard(ws, pub, topic)
 
 
-async def _publish_until_heard(ws: Any, pub: Any, topic: str, tries: int = 100) -> dict[str, Any]:
+async def _publish_until_heard(ws: Any, pub: Any, topic: str) -> dict[str, Any]:
     """Publish numbered messages (best effort may lose some) until the client hears one."""
-    for i in range(tries):
-        pub.publish(String(data=f"m{i}"))
-        try:
-            op: dict[str, Any] = await ws.expect(op="publish", topic=topic, timeout=0.2)
-            return op
-        except AssertionError:
-            continue
-    raise AssertionError(f"the client never heard {topic} ({tries} messages published)")
+    numbers = itertools.count()
+    op: dict[str, Any] = await send_until_heard(
+        lambda: pub.publish(String(data=f"m{next(numbers)}")),
+        lambda wait: ws.expect(op="publish", topic=topic, timeout=wait),
+        f"a message on {topic}", attempt=0.2, timeout=20)
+    return op
 
 
 @pytest.mark.parametrize("kind", ["best_effort", "transient_local"])

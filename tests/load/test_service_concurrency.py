@@ -11,6 +11,7 @@ from std_msgs.msg import String
 from std_srvs.srv import SetBool
 
 from tests.bridge.support import Inbox
+from tests.helpers import send_until_heard
 from tests.load.support import qos
 
 pytestmark = pytest.mark.asyncio
@@ -65,20 +66,16 @@ async def _until_answered(ws: Any, service: str, tries: int = 8) -> None:
     raise AssertionError(f"{service} never answered through the bridge: {reply}")
 
 
-async def _until_echoed(ws: Any, ping: str, pong: str, tries: int = 40) -> None:
+async def _until_echoed(ws: Any, ping: str, pong: str) -> None:
     """Publish on ``ping`` until its echo comes back on ``pong``: both DDS paths are matched.
 
     Each side seeing the other is not enough: a ROS subscription can match the bridge's
     publisher before that publisher matches it, and a message sent in between is lost.
     """
-    for _ in range(tries):
-        await ws.send({"op": "publish", "topic": ping, "msg": {"data": "warm-up"}})
-        try:
-            await ws.expect(op="publish", topic=pong, timeout=0.25)
-            return
-        except AssertionError:
-            continue
-    raise AssertionError(f"nothing published on {ping} came back on {pong}")
+    await send_until_heard(
+        lambda: ws.send({"op": "publish", "topic": ping, "msg": {"data": "warm-up"}}),
+        lambda wait: ws.expect(op="publish", topic=pong, timeout=wait),
+        f"the echo of {ping} on {pong}", timeout=10)
 
 
 async def test_slow_call_does_not_block_other_traffic(ws_connect: Any, ros_node: Any, topic: str) -> None:

@@ -8,7 +8,6 @@ test rewrites and reloads.
 from __future__ import annotations
 
 import json
-import time
 from pathlib import Path
 from typing import Any
 
@@ -17,6 +16,7 @@ from msgs import dynamic
 from tests.helpers import BridgeProcess
 from tests.peers import scenarios
 from tests.peers.peer import PeerProcess, foxglove_peer
+from tests.peers.scenarios.support import until_message_event
 
 DEADLINE = scenarios.DEADLINE
 
@@ -43,15 +43,7 @@ def _wait_error(peer: PeerProcess, part: str) -> str:
 
 def _publish_until_seen(peer: PeerProcess, pub: Any, topic: str, msg: Any) -> dict[str, Any]:
     """Publish from rclpy until the client has a message on ``topic`` (DDS matching)."""
-    deadline = time.monotonic() + DEADLINE
-    while time.monotonic() < deadline:
-        pub.publish(msg)
-        try:
-            return peer.wait_event(lambda e: e.get("event") == "message" and e["topic"] == topic,
-                                   scenarios.ATTEMPT, f"message on {topic}")
-        except AssertionError:
-            continue
-    raise AssertionError(f"no message on {topic}\n{peer.diagnostics()}")
+    return until_message_event(peer, lambda: pub.publish(msg), topic)
 
 
 def _serving_on(peer: PeerProcess, ros_node: Any, topic: str) -> None:

@@ -10,6 +10,7 @@ import threading
 import time
 from typing import Any
 
+from tests.helpers import send_until_heard_sync
 from tests.peers.peer import PeerError, PeerProcess
 
 #: How long one attempt waits for a message before publishing the next one
@@ -46,31 +47,39 @@ def _publish_until_received(
     peer: PeerProcess, topic: str, type_name: str, msg: dict[str, Any], inbox: queue.Queue[Any]
 ) -> Any:
     """Publish ``msg`` through the peer until the rclpy subscription's inbox gets one."""
-    for _ in range(int(DEADLINE / ATTEMPT)):
+
+    def publish() -> None:
         _refusal(peer, topic)
         peer.request("publish", topic=topic, type=type_name, msg=msg)
-        try:
-            return inbox.get(timeout=ATTEMPT)
-        except queue.Empty:
-            continue
-    raise AssertionError(
-        f"rclpy never received what {peer.name} published on {topic}\n{peer.diagnostics()}"
-    )
+
+    try:
+        return send_until_heard_sync(publish, lambda wait: inbox.get(timeout=wait),
+                                     f"{peer.name}'s message on {topic}", ATTEMPT, DEADLINE)
+    except AssertionError as e:
+        raise AssertionError(f"rclpy {e}\n{peer.diagnostics()}") from None
 
 
 def _ros_publish_until_delivered(peer: PeerProcess, pub: Any, topic: str, msg: Any) -> Any:
     """Publish ``msg`` from rclpy until the peer prints a message event for ``topic``."""
-    for _ in range(int(DEADLINE / ATTEMPT)):
+
+    def publish() -> None:
         _refusal(peer, topic)
         pub.publish(msg)
-        try:
-            return peer.wait_event(
+
+    return until_message_event(peer, publish, topic)["msg"]
+
+
+def until_message_event(peer: PeerProcess, send: Any, topic: str) -> dict[str, Any]:
+    """Call ``send`` until the peer prints a message event for ``topic``: that event."""
+    try:
+        event: dict[str, Any] = send_until_heard_sync(
+            send, lambda wait: peer.wait_event(
                 lambda e: e.get("event") == "message" and e.get("topic") == topic,
-                ATTEMPT, f"message on {topic}",
-            )["msg"]
-        except AssertionError:
-            continue
-    raise AssertionError(f"{peer.name} never got a message on {topic}\n{peer.diagnostics()}")
+                wait, f"message on {topic}"),
+            f"a message on {topic} at {peer.name}", ATTEMPT, DEADLINE)
+    except AssertionError as e:
+        raise AssertionError(f"{e}\n{peer.diagnostics()}") from None
+    return event
 
 
 def _call_new_service(peer: PeerProcess, service: str, args: dict[str, Any]) -> Any:
