@@ -40,7 +40,7 @@ os.environ.setdefault(
     "FASTRTPS_DEFAULT_PROFILES_FILE", os.path.join(os.path.dirname(__file__), "dds_profile.xml")
 )
 
-from tests.helpers import BridgeProcess, WireClient, open_wire, settle_executor, spin_executor
+from tests.helpers import BridgeProcess, WireClient, open_wire, spun_node
 
 if TYPE_CHECKING:
     from roslibpy_lite import Client
@@ -223,23 +223,10 @@ def ros_node(ros_runtime: _RosRuntime, request: pytest.FixtureRequest) -> Iterat
     Callbacks in a ReentrantCallbackGroup may run concurrently (a slow service
     does not block the node's other callbacks).
     """
-    from rclpy.executors import MultiThreadedExecutor
-
     name = "test_" + re.sub(r"\W", "_", request.node.name)[:40] + f"_{next(_names)}"
-    node = ros_runtime.rclpy.create_node(name, context=ros_runtime.context)
-    executor = MultiThreadedExecutor(num_threads=4, context=ros_runtime.context)
-    executor.add_node(node)
-    stop = threading.Event()
-    errors: list[str] = []
-    thread = threading.Thread(target=spin_executor, args=(executor, stop, errors), daemon=True,
-                              name=f"spin-{name}")
-    thread.start()
-    yield node
-    stop.set()
-    thread.join(10)
-    settle_executor(executor)
-    with stack_dump_if_stuck(NODE_DESTROY_LIMIT):
-        node.destroy_node()
+    with spun_node(ros_runtime.rclpy, ros_runtime.context, name,
+                   lambda: stack_dump_if_stuck(NODE_DESTROY_LIMIT)) as (node, errors):
+        yield node
     if errors:
         pytest.fail("this test's rclpy executor raised:\n" + errors[0])
 

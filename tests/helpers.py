@@ -504,6 +504,34 @@ _ACTION_ANSWERS = ("_execute_goal_request", "_execute_cancel_request",
                    "_execute_get_result_request", "_send_result_response")
 
 
+@contextlib.contextmanager
+def spun_node(
+    rclpy: Any, context: Any, name: str,
+    destroying: Callable[[], contextlib.AbstractContextManager[Any]] = contextlib.nullcontext,
+) -> Iterator[tuple[Any, list[str]]]:
+    """An rclpy node ``name`` in ``context``, spun by its own 4-thread executor on a thread of
+    its own, and the list of what the executor's rounds raised; on the way out the spinning
+    stops, the executor settles and the node is destroyed (inside ``destroying()``)."""
+    from rclpy.executors import MultiThreadedExecutor
+
+    node = rclpy.create_node(name, context=context)
+    executor = MultiThreadedExecutor(num_threads=4, context=context)
+    executor.add_node(node)
+    stop = threading.Event()
+    errors: list[str] = []
+    thread = threading.Thread(target=spin_executor, args=(executor, stop, errors), daemon=True,
+                              name=f"spin-{name}")
+    thread.start()
+    try:
+        yield node, errors
+    finally:
+        stop.set()
+        thread.join(10)
+        settle_executor(executor)
+        with destroying():
+            node.destroy_node()
+
+
 def settle_executor(executor: Any) -> None:
     """Shut ``executor`` down after its spin loop ended, marking seen the handles that a
     test destroyed under a running callback (rclpy prints each unseen one at exit).

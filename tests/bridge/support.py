@@ -100,6 +100,18 @@ async def bridge_sees_topic(ws: Any, topic: str, timeout: float = 10.0) -> str:
     return str(found["type"])
 
 
+def serve_mult(ros_node: Any, name: str) -> Any:
+    """An rclpy ``mult_msgs/srv/MultFloats`` server named ``name`` on ``ros_node`` (it
+    answers x * y)."""
+    from mult_msgs.srv import MultFloats
+
+    def handle(request: Any, response: Any) -> Any:
+        response.result = request.x * request.y
+        return response
+
+    return ros_node.create_service(MultFloats, name, handle)
+
+
 async def serve_set_bool(ws: Any, ros_node: Any, name: str) -> Any:
     """Have the client ``ws`` serve ``std_srvs/SetBool`` as ``name``; an rclpy client of it
     that sees it."""

@@ -15,21 +15,13 @@ from mult_msgs.srv import MultFloats
 from rclpy.callback_groups import ReentrantCallbackGroup
 from std_srvs.srv import SetBool
 
-from tests.bridge.support import ros_future, serve_set_bool, wait_service
+from tests.bridge.support import ros_future, serve_mult, serve_set_bool, wait_service
 from tests.helpers import async_wait_until
-
-
-def _mult(ros_node: Any, name: str) -> Any:
-    def handle(req: Any, resp: Any) -> Any:
-        resp.result = req.x * req.y
-        return resp
-
-    return ros_node.create_service(MultFloats, name, handle)
 
 
 async def test_call_service_args_object_with_type(ws_connect: Any, ros_node: Any, topic: str) -> None:
     """call_service with an args object and a type reaches an rclpy service and returns its answer."""
-    _mult(ros_node, topic)
+    serve_mult(ros_node, topic)
     ws = await ws_connect()
     await ws.send({"op": "call_service", "service": topic, "type": "mult_msgs/srv/MultFloats",
                    "args": {"x": 3.0, "y": 4.5}, "id": "c1", "timeout": 30})

@@ -4,10 +4,12 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
 import pytest
 
 from roslibpy_lite.cli import main
+from tests.bridge.support import serve_mult
 from tests.cli.ros2_nodes import managed_node, param_node  # noqa: F401 - fixtures for tests here
 from tests.helpers import BridgeProcess, free_port
 
@@ -27,6 +29,13 @@ class Result:
 
 
 Run = Callable[..., Result]
+
+
+@pytest.fixture
+def multiplier(ros_node: Any, topic: str) -> str:
+    """An rclpy mult_msgs/srv/MultFloats server named ``topic``; returns the service name."""
+    serve_mult(ros_node, topic)
+    return topic
 
 
 @pytest.fixture

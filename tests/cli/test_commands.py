@@ -40,19 +40,6 @@ def talker(ros_node: Any, topic: str) -> Iterator[list[str]]:
     ros_node.destroy_publisher(pub)
 
 
-@pytest.fixture
-def multiplier(ros_node: Any, topic: str) -> str:
-    """An rclpy mult_msgs/srv/MultFloats server named ``topic``; returns the service name."""
-    from mult_msgs.srv import MultFloats
-
-    def handle(request: Any, response: Any) -> Any:
-        response.result = request.x * request.y
-        return response
-
-    ros_node.create_service(MultFloats, topic, handle)
-    return topic
-
-
 def until_ok(cli: Run, *argv: str, check: Any = None, timeout: float = 15) -> Result:
     """Run the CLI until it succeeds (and ``check(result)`` holds): the graph needs discovery."""
     last: list[Result] = []

@@ -8,8 +8,6 @@ import threading
 from pathlib import Path
 from typing import Any
 
-import pytest
-
 from roslibpy_lite.cli import EXIT_CONNECT
 from tests.cli.conftest import closed_port
 from tests.examples.support import Program
@@ -22,19 +20,6 @@ def run(*argv: str) -> subprocess.CompletedProcess[str]:
     """Run the console script to completion."""
     return subprocess.run([CLI, *argv], cwd=ROOT, env=ros_env(), capture_output=True, text=True,
                           timeout=60)
-
-
-@pytest.fixture
-def multiplier(ros_node: Any, topic: str) -> str:
-    """An rclpy MultFloats server named ``topic``."""
-    from mult_msgs.srv import MultFloats
-
-    def handle(request: Any, response: Any) -> Any:
-        response.result = request.x * request.y
-        return response
-
-    ros_node.create_service(MultFloats, topic, handle)
-    return topic
 
 
 def test_service_call_from_the_shell(bridge: BridgeProcess, multiplier: str) -> None:

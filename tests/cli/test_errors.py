@@ -21,20 +21,6 @@ from tests.cli.conftest import Result, Run, closed_port, one_error_line
 from tests.cli.test_commands import until_ok
 from tests.helpers import BridgeProcess, wait_until
 
-
-@pytest.fixture
-def multiplier(ros_node: Any, topic: str) -> str:
-    """An rclpy /mult-like MultFloats server named ``topic``."""
-    from mult_msgs.srv import MultFloats
-
-    def handle(request: Any, response: Any) -> Any:
-        response.result = request.x * request.y
-        return response
-
-    ros_node.create_service(MultFloats, topic, handle)
-    return topic
-
-
 # -- the bridge cannot be reached ----------------------------------------------------------------
 
 

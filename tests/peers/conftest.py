@@ -4,14 +4,13 @@ from __future__ import annotations
 
 import importlib
 import re
-import threading
 import warnings
 from collections.abc import Callable, Iterator
 from typing import Any
 
 import pytest
 
-from tests.helpers import BridgeProcess, settle_executor, spin_executor
+from tests.helpers import BridgeProcess, spun_node
 from tests.peers.peer import PeerPool, PeerProcess
 
 # rclpy's type support imports lark, which imports the deprecated sre_parse; with
@@ -58,25 +57,12 @@ def module_node(ros_runtime: Any, request: pytest.FixtureRequest) -> Iterator[An
     processes, no bridge involved); destroying publishers, subscriptions and
     services does not. So the peer tests keep one node and clean up entities.
     """
-    from rclpy.executors import MultiThreadedExecutor
-
     name = "peers_" + re.sub(r"\W", "_", request.module.__name__.rsplit(".", 1)[-1])
-    node = ros_runtime.rclpy.create_node(name, context=ros_runtime.context)
-    executor = MultiThreadedExecutor(num_threads=4, context=ros_runtime.context)
-    executor.add_node(node)
-    stop = threading.Event()
     # Nothing may stop the spinning that every later test of the module needs; what a
     # round raises fails the test during which it happened (see ros_node).
-    errors: list[str] = []
-    thread = threading.Thread(target=spin_executor, args=(executor, stop, errors), daemon=True,
-                              name=f"spin-{name}")
-    thread.start()
-    node.spin_errors = errors
-    yield node
-    stop.set()
-    thread.join(10)
-    settle_executor(executor)
-    node.destroy_node()
+    with spun_node(ros_runtime.rclpy, ros_runtime.context, name) as (node, errors):
+        node.spin_errors = errors
+        yield node
 
 
 @pytest.fixture
