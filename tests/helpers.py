@@ -441,9 +441,10 @@ async def rosapi_until(
         await asyncio.sleep(0.02)
 
 
-async def open_wire(url: str) -> WireClient:
-    """Connect a :class:`WireClient` to ``url``."""
-    ws = await ws_connect(url, max_size=None, open_timeout=10)
+async def open_wire(url: str, **options: Any) -> WireClient:
+    """Connect a :class:`WireClient` to ``url`` (no message size limit, 10 s to open;
+    ``options`` go to :func:`websockets.asyncio.client.connect`)."""
+    ws = await ws_connect(url, **{"max_size": None, "open_timeout": 10, **options})
     return WireClient(ws)
 
 

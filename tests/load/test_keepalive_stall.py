@@ -18,7 +18,7 @@ import roslibpy_lite
 from bench.linkproxy import LinkProxy
 from rosbridge_core.protocol import keepalive
 from roslibpy_lite.api import ConnectionState
-from tests.helpers import BridgeProcess, WireClient, roundtrip
+from tests.helpers import BridgeProcess, open_wire, roundtrip
 
 STALL = 8.0
 """Seconds the bridge is stopped: longer than its keepalive's interval + timeout."""
@@ -48,7 +48,7 @@ async def test_a_stall_of_the_bridge_drops_only_the_client_that_does_not_answer(
     pid = bridge.proc.pid
     with LinkProxy(("127.0.0.1", bridge.port)) as proxy:
         start = len(bridge.lines)
-        raw = WireClient(await ws_connect(bridge.url, ping_interval=None, open_timeout=10))
+        raw = await open_wire(bridge.url, ping_interval=None, max_size=2**20)
         raw_sid = await _sid(bridge, start)
         start = len(bridge.lines)
         async with roslibpy_lite.connect(bridge.url, ping_interval=None) as ros:

@@ -8,10 +8,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from websockets.asyncio.client import connect
-
 from rosbridge_core.security.auth import EXAMPLE_ROLES, hash_token, new_token
-from tests.helpers import BridgeProcess, WireClient
+from tests.helpers import BridgeProcess, WireClient, open_wire
 
 ROLES = EXAMPLE_ROLES + """
 [roles.tester]
@@ -120,9 +118,7 @@ async def wire(
     extra = dict(headers or {})
     if token is not None:
         extra["Authorization"] = f"Bearer {token}"
-    ws = await connect(url, additional_headers=extra, ssl=ssl_context, max_size=None,
-                       open_timeout=10, **kwargs)
-    return WireClient(ws)
+    return await open_wire(url, additional_headers=extra, ssl=ssl_context, **kwargs)
 
 
 async def bridge_entities(ros_node: Any, bridge: BridgeProcess, admin: WireClient,

@@ -16,7 +16,7 @@ from websockets.exceptions import InvalidStatus
 
 from rosbridge_core.protocol.ops import RECEIVED_HEADER, SESSION_HEADER
 from rosbridge_core.security import redact
-from tests.helpers import BridgeProcess, WireClient, free_port, ros_env, roundtrip
+from tests.helpers import BridgeProcess, WireClient, free_port, open_wire, ros_env, roundtrip
 from tests.relay.procs import Proc
 from tests.security.support import AuthFile, wire
 
@@ -49,7 +49,7 @@ async def test_query_tokens_in_any_spelling_never_reach_the_log(
     start = len(debug_bridge.lines)
     for url in (f"{debug_bridge.url}/?%74oken={encoded}",
                 f"{debug_bridge.url}/?robot=r1&token={later}"):
-        client = WireClient(await connect(url, open_timeout=10))
+        client = await open_wire(url, max_size=2**20)
         await roundtrip(client)
         await client.close()
     log = "\n".join(debug_bridge.lines[start:])
