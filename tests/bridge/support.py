@@ -33,7 +33,7 @@ async def until_heard(
 ) -> Any:
     """Call ``send`` (a coroutine function or not) every 0.25 s until ``inbox`` yields ``want``
     (or anything, when no ``want`` is given); returns the value heard
-    (:func:`~tests.helpers.send_until_heard`, whose text says why)."""
+    (:func:`~tests.op_peer.send_until_heard`, whose text says why)."""
 
     async def listen(wait: float) -> Any:
         heard = await inbox.get(wait)

@@ -26,7 +26,7 @@ from rosbridge_core.protocol.frames import decode_frame
 from rosbridge_core.security.auth import Principal
 from rosbridge_core.session.resume import ResumeConfig
 from rosbridge_core.session.session import Session, SessionConfig
-from tests.helpers import OpPeer
+from tests.op_peer import OpPeer
 
 __all__ = ["Bench", "Client", "Robot", "open_session"]
 
@@ -34,7 +34,7 @@ __all__ = ["Bench", "Client", "Robot", "open_session"]
 class Client(OpPeer):
     """A client's end of a :class:`MemoryLink`: :meth:`feed` hands the session a frame,
     :meth:`next_op` awaits the next one it sent (decoded); as an
-    :class:`~tests.helpers.OpPeer` it sends ops and awaits matching ones as a websocket
+    :class:`~tests.op_peer.OpPeer` it sends ops and awaits matching ones as a websocket
     peer of the bridge does."""
 
     def __init__(self, headers: Mapping[str, str] | None = None,

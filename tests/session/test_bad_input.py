@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from tests.helpers import error_text, sender_and_bystander, still_working
+from tests.op_peer import error_text, sender_and_bystander, still_working
 from tests.session.harness import Robot
 
 

@@ -12,7 +12,7 @@ import time
 from typing import Any
 
 from rosbridge_core.memory.graph import MemoryRos
-from tests.helpers import rosapi, roundtrip
+from tests.op_peer import rosapi, roundtrip
 from tests.session.harness import Bench, Robot
 
 BRIDGE = "/rosbridge"

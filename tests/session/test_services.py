@@ -14,7 +14,7 @@ import json
 from typing import Any
 
 from rosbridge_core.protocol.frames import split_fragments
-from tests.helpers import roundtrip
+from tests.op_peer import roundtrip
 from tests.session.harness import Robot
 
 

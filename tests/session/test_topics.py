@@ -3,7 +3,7 @@ what needs rclpy): type spellings, throttling, fragments, CBOR, merged subscript
 unsubscribing, the legacy png compression and relative names.
 
 The publisher on the ROS side is the bench's robot node; a subscribe is in place once a
-:func:`~tests.helpers.roundtrip` after it is answered (no waiting for DDS matching).
+:func:`~tests.op_peer.roundtrip` after it is answered (no waiting for DDS matching).
 """
 
 from __future__ import annotations
@@ -12,7 +12,7 @@ import json
 import struct
 from typing import Any
 
-from tests.helpers import OpPeer, rosapi, roundtrip
+from tests.op_peer import OpPeer, rosapi, roundtrip
 from tests.session.harness import Robot
 
 
