@@ -259,7 +259,8 @@ class Fleet:
 
     async def command(self, cmd: dict[str, Any]) -> dict[str, Any]:
         """One command: ``join``/``leave`` ``robot``; ``flood`` ``robot`` with ``bytes`` at
-        ``hz`` (0: stop); ``stats`` (this process's RSS and CPU, what each robot published)."""
+        ``hz`` (0: stop); ``stats`` (this process's RSS and CPU, how many robots hold their names
+        and since when each has (its uplink's wall-clock ``since``), what each published)."""
         op = cmd.get("cmd")
         if op == "join":
             await self.add(str(cmd["robot"]))
@@ -283,6 +284,8 @@ class Fleet:
                     "cpu_s": cpu.user + cpu.system, "robots": len(self.robots),
                     "holding": sum(r.exporter.uplink.not_ready() is None
                                    for r in self.robots.values()),
+                    "up_since": [r.exporter.uplink.since for r in self.robots.values()
+                                 if r.exporter.uplink.not_ready() is None],
                     "published": {n: r.published for n, r in self.robots.items()
                                   if r.published}}
         return {"event": "error", "error": f"unknown command {op!r}: expected join, leave, "
@@ -328,7 +331,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--wait", type=float, default=120.0,
                    help="seconds to wait for every robot to hold its name")
     args = p.parse_args(argv)
-    logging.basicConfig(level=logging.WARNING, format="%(name)s: %(message)s")
+    logging.basicConfig(level=logging.WARNING,
+                        format="%(asctime)s %(levelname)s %(name)s: %(message)s")
     return asyncio.run(_serve(args))
 
 
