@@ -27,6 +27,7 @@ from pathlib import Path
 from typing import Any
 
 from bench.harness import CODE_ROOT, Bridge, Ctx, child_env
+from bench.profiler import Profiler
 
 __all__ = ["record"]
 
@@ -34,8 +35,9 @@ CAMERA, IMU = "/bench_camera", "/bench_imu"
 
 
 async def _recording(ctx: Ctx, bridge: Bridge, streams: dict[str, tuple[str, float]],
-                     seconds: float) -> dict[str, Any]:
-    """Record ``streams`` (topic -> (kind, rate)) for ``seconds`` with the CLI; the figures."""
+                     seconds: float, profile: bool = False) -> dict[str, Any]:
+    """Record ``streams`` (topic -> (kind, rate)) for ``seconds`` with the CLI; the figures
+    (with ``profile``, py-spy's on the recorder beside them)."""
     import psutil
 
     from roslibpy_lite.bag import read
@@ -58,12 +60,14 @@ async def _recording(ctx: Ctx, bridge: Bridge, streams: dict[str, tuple[str, flo
         cpu0 = me.cpu_times()
         bridge0 = them.cpu_times()
         t0 = time.monotonic()
+        prof = await Profiler.maybe(profile, recorder.pid, seconds)
         done = [await pub.event("done", timeout=seconds + 60) for pub in publishers]
         await asyncio.sleep(1.0)  # the last messages in flight through the bridge
         cpu1, bridge1 = me.cpu_times(), them.cpu_times()
         wall = time.monotonic() - t0
         recorder.send_signal(signal.SIGINT)
         out, err = await asyncio.wait_for(recorder.communicate(), 60)
+        samples = await prof.result() if prof is not None else None
     finally:
         for pub in publishers:
             await pub.close()
@@ -97,6 +101,7 @@ async def _recording(ctx: Ctx, bridge: Bridge, streams: dict[str, tuple[str, flo
         "recorder_exit": recorder.returncode,
         "recorder_said": (out.decode().strip().splitlines() or [""])[-1][:200],
         **({"recorder_stderr": err.decode()[-500:]} if recorder.returncode else {}),
+        **({"recorder_profile": samples} if samples is not None else {}),
     }
 
 
@@ -111,7 +116,7 @@ async def record(ctx: Ctx) -> dict[str, Any]:
     try:
         seconds = 10.0 if ctx.quick else 60.0
         camera_imu = await _recording(
-            ctx, bridge, {CAMERA: ("image", 30.0), IMU: ("imu", 200.0)}, seconds)
+            ctx, bridge, {CAMERA: ("image", 30.0), IMU: ("imu", 200.0)}, seconds, ctx.profile)
         ladder: list[dict[str, Any]] = []
         best = 0.0
         for rate in (30.0, 60.0, 120.0, 240.0, 480.0):

@@ -1,5 +1,6 @@
 """py-spy on a bridge for a while, reduced to its top functions (``python -m bench --profile``:
-the ``ros_to_client`` and ``image`` scenarios add them to their results)."""
+the ``ros_to_client``, ``image``, ``service`` and ``client_service`` scenarios add the bridge's
+to their results, ``record`` the recorder's)."""
 
 from __future__ import annotations
 
@@ -21,6 +22,15 @@ class Profiler:
         self.out = Path(tempfile.mkdtemp(prefix="bench-pyspy-")) / "stacks.txt"
         self.proc: asyncio.subprocess.Process | None = None
 
+    @classmethod
+    async def maybe(cls, wanted: bool, pid: int, seconds: float) -> Profiler | None:
+        """A started profiler of ``pid`` for ``seconds`` when ``wanted`` (``--profile``)."""
+        if not wanted:
+            return None
+        prof = cls(pid, seconds)
+        await prof.start()
+        return prof
+
     async def start(self) -> None:
         """Start sampling (nothing happens if py-spy is not installed)."""
         exe = shutil.which("py-spy")
@@ -32,7 +42,7 @@ class Profiler:
             stdout=asyncio.subprocess.DEVNULL, stderr=asyncio.subprocess.DEVNULL,
         )
 
-    async def result(self, top: int = 15) -> dict[str, Any]:
+    async def result(self, top: int = 30) -> dict[str, Any]:
         """Wait for py-spy and summarise: top functions by self and by inclusive samples."""
         if self.proc is None:
             return {"error": "py-spy not installed"}

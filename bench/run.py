@@ -86,9 +86,10 @@ Scenarios (targets; rosbridge_suite's figures in brackets):
   isolation, recovery after a relay kill and a router restart, join/leave churn
   (``BENCH_FLEET_SIZES`` picks the sizes; docs/guides/sizing.md has the figures).
 
-``--profile`` runs py-spy on the bridge during ``ros_to_client`` and
-``image`` and adds the top functions (self and inclusive samples) to their results
-(``bench/profiler.py``). Frames are counted without decoding them (``bench/counting.py``).
+``--profile`` runs py-spy on the bridge during ``ros_to_client``, ``image``, ``service`` and
+``client_service``, and on the recorder during ``record``'s camera and IMU, and adds the top
+functions (self and inclusive samples) to their results (``bench/profiler.py``). Frames are
+counted without decoding them (``bench/counting.py``).
 """
 
 from __future__ import annotations
@@ -302,7 +303,8 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                    help="seconds per measurement step (default 3, --quick 1.5)")
     p.add_argument("--quick", action="store_true", help="short steps, fewer rates (~2 minutes)")
     p.add_argument("--profile", action="store_true",
-                   help="py-spy the bridge during ros_to_client and image")
+                   help="py-spy the bridge during ros_to_client, image, service and "
+                        "client_service, the recorder during record")
     p.add_argument("--domain", type=int, default=int(os.environ.get("BENCH_ROS_DOMAIN_ID", "42")),
                    help="ROS_DOMAIN_ID for the bridge and ROS side (default $BENCH_ROS_DOMAIN_ID, else 42)")
     p.add_argument("--ros-executor", choices=("events", "single"), default="events",

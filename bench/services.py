@@ -11,6 +11,7 @@ from collections import Counter
 from typing import Any
 
 from bench.harness import Ctx, close_clients, percentile, send_op, ws_open
+from bench.profiler import Profiler
 
 
 async def service(ctx: Ctx) -> dict[str, Any]:
@@ -57,6 +58,7 @@ async def service(ctx: Ctx) -> dict[str, Any]:
                 raise RuntimeError(f"service never answered: {reply}")
         for _ in range(50):
             await call()
+        prof = await Profiler.maybe(ctx.profile, bridge.pid, ctx.duration + 2)
         n_seq = 300 if ctx.quick else 1000
         lat: list[float] = []
         failures = 0
@@ -79,6 +81,7 @@ async def service(ctx: Ctx) -> dict[str, Any]:
 
         await asyncio.gather(*(worker() for _ in range(in_flight)))
         elapsed = time.monotonic() - t0
+        profile = await prof.result() if prof is not None else None
     finally:
         await ws.close()
         rtask.cancel()
@@ -95,6 +98,7 @@ async def service(ctx: Ctx) -> dict[str, Any]:
         "calls_per_s": round(done / elapsed),
         "failures": failures,
         "failure_reasons": dict(errors),
+        **({"profile": profile} if profile is not None else {}),
     }
 
 
@@ -131,9 +135,11 @@ async def client_service(ctx: Ctx) -> dict[str, Any]:
                                "--duration", str(ctx.duration), "--match-timeout", "20").start()
         await caller.event("matched", 30)
         cpu0, served0 = proc.cpu_times(), served[0]
+        prof = await Profiler.maybe(ctx.profile, bridge.pid, 2 * ctx.duration)
         done = await caller.event("done", 120 + ctx.duration)
         cpu1, calls = proc.cpu_times(), served[0] - served0
         await caller.close()
+        profile = await prof.result() if prof is not None else None
     finally:
         await close_clients([ws], [stask])
         await bridge.stop()
@@ -143,4 +149,5 @@ async def client_service(ctx: Ctx) -> dict[str, Any]:
             "p99_ms": q.get("p99"), "in_flight": done["in_flight"],
             "calls_per_s": round(done["calls_per_s"]), "failures": done["failed"],
             "unanswered": done["unanswered"], "served_by_client": served[0],
-            "bridge_cpu_us_per_call": round(1e6 * busy / calls, 1) if calls else None}
+            "bridge_cpu_us_per_call": round(1e6 * busy / calls, 1) if calls else None,
+            **({"profile": profile} if profile is not None else {})}
