@@ -150,7 +150,7 @@ class Subscription(_Callbacks[T], _Reading[T]):
                     except Exception as exc:
                         self._callback_failed(cb, exc)
                         continue
-                    if inspect.isawaitable(result):
+                    if result is not None and inspect.isawaitable(result):
                         # A sync-looking callable returned an awaitable: run it anyway.
                         self._run_stray(cb, result)
                     elif self._failing:
