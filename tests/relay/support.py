@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import itertools
 import queue
 import re
 from collections.abc import AsyncIterator, Awaitable, Callable
@@ -16,7 +17,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from bridge_server.front.server import Bridge, BridgeConfig
+from bridge_server.front.server import Bridge, BridgeConfig, default_node_name
 from bridge_server.rclpy_graph.graph import RclpyGraph
 from bridge_server.zenoh.exporter import Exporter
 from bridge_server.zenoh.graph import TypeLimits
@@ -74,12 +75,18 @@ async def start_relay(router: str | None = None, listen: str | None = None,
     return relay
 
 
+_ROBOT_BRIDGES = itertools.count(1)
+
+
 async def start_robot(router: str, robot: str = ROBOT, ca: str | None = None,
                       websocket: bool = False) -> tuple[Bridge, Exporter]:
     """The robot's bridge (rclpy; a listener on an ephemeral port only with ``websocket``)
     and its exporter, dialing out to ``router`` (``ca``: the CA of a tls/ router's
     certificate)."""
-    config = BridgeConfig(websocket=websocket, port=0, refresh_interval=0.1)
+    # A node name of its own: graph queries by node name (a test's look for the robot's
+    # action clients) must not find another bridge of this process still in the graph.
+    config = BridgeConfig(websocket=websocket, port=0, refresh_interval=0.1,
+                          node_name=f"{default_node_name()}_robot{next(_ROBOT_BRIDGES)}")
     graph = RclpyGraph(asyncio.get_running_loop(), name=config.node_name)
     bridge = Bridge(config, graph)
     await bridge.start()
