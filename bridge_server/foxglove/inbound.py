@@ -12,12 +12,11 @@ as before.
 
 from __future__ import annotations
 
-import asyncio
-from collections import deque
 from collections.abc import Callable
 from typing import Any
 
-from rosbridge_core.codec.budget import OFF_LOOP_BYTES, workers
+from rosbridge_core.codec.budget import OFF_LOOP_BYTES
+from rosbridge_core.codec.lane import LaneFull, OrderedLane, off_loop
 
 __all__ = ["WAITING", "Inbound"]
 
@@ -31,53 +30,46 @@ Done = Callable[[Any, BaseException | None], None]
 class Inbound:
     """One client channel's messages on their way to ROS (see the module text):
     ``convert(payload)`` is the decode and conversion, run on a worker thread for a large
-    payload."""
+    payload; the order is kept by an :class:`~rosbridge_core.codec.lane.OrderedLane`."""
 
     def __init__(self, convert: Callable[[bytes], Any]) -> None:
         self.convert = convert
-        self.waiting: deque[tuple[bytes, Done]] = deque()
-        self._task: asyncio.Task[None] | None = None
+        self.lane: OrderedLane[tuple[bytes, Done]] = OrderedLane(
+            self._handle, max_waiting=WAITING)
 
     def submit(self, payload: bytes, done: Done) -> str | None:
         """Convert ``payload`` and hand the result to ``done`` in order (now, for a small one
         with nothing waiting); why it was refused, or ``None``."""
-        if self._task is None and len(payload) < OFF_LOOP_BYTES:
-            try:
-                msg = self.convert(payload)
-            except Exception as exc:
-                done(None, exc)
-            else:
-                done(msg, None)
+        if not self.lane.busy and len(payload) < OFF_LOOP_BYTES:
+            self._convert_now(payload, done)
             return None
-        if len(self.waiting) >= WAITING:
-            return (f"{len(self.waiting)} large messages of this channel wait to be decoded "
-                    f"(at most {WAITING}): this one is dropped")
-        self.waiting.append((payload, done))
-        if self._task is None:
-            self._task = asyncio.get_running_loop().create_task(self._run())
+        try:
+            self.lane.push((payload, done))
+        except LaneFull:
+            return (f"{len(self.lane.waiting)} large messages of this channel wait to be "
+                    f"decoded (at most {WAITING}): this one is dropped")
         return None
 
-    async def _run(self) -> None:
-        loop = asyncio.get_running_loop()
+    def _convert_now(self, payload: bytes, done: Done) -> None:
         try:
-            while self.waiting:
-                payload, done = self.waiting.popleft()
-                try:
-                    if len(payload) < OFF_LOOP_BYTES:
-                        msg = self.convert(payload)
-                    else:
-                        msg = await loop.run_in_executor(workers(), self.convert, payload)
-                except Exception as exc:
-                    done(None, exc)
-                else:
-                    done(msg, None)
-        finally:
-            if self._task is asyncio.current_task():
-                self._task = None
+            msg = self.convert(payload)
+        except Exception as exc:
+            done(None, exc)
+        else:
+            done(msg, None)
+
+    async def _handle(self, item: tuple[bytes, Done]) -> None:
+        payload, done = item
+        if len(payload) < OFF_LOOP_BYTES:
+            self._convert_now(payload, done)
+            return
+        try:
+            msg = await off_loop(self.convert, payload)
+        except Exception as exc:
+            done(None, exc)
+        else:
+            done(msg, None)
 
     def close(self) -> None:
         """The channel is gone: what waits is dropped."""
-        self.waiting.clear()
-        if self._task is not None:
-            self._task.cancel()
-            self._task = None
+        self.lane.close()

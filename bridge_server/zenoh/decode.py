@@ -21,16 +21,15 @@ field and the budget; its raw viewers still get it.
 
 from __future__ import annotations
 
-import asyncio
-from collections import deque
 from collections.abc import Callable, Collection
 from typing import Any, Protocol
 
 import cbor2
 
 from msgs import cdr
-from rosbridge_core.codec.budget import OFF_LOOP_BYTES, explain, workers
+from rosbridge_core.codec.budget import OFF_LOOP_BYTES, explain
 from rosbridge_core.codec.chunked import cbor_bytes, json_text
+from rosbridge_core.codec.lane import OrderedLane, off_loop
 from rosbridge_core.codec.publish import _cbor_prefix
 
 
@@ -108,57 +107,38 @@ def prepare(msg: ZenohMessage, encodings: Collection[str]) -> str | None:
 
 class TopicLane:
     """One topic's messages on their way to its viewers, in order: a large one prepared on a
-    worker thread first, the ones after it waiting for it (see the module text)."""
+    worker thread first, the ones after it waiting for it (see the module text; the order
+    and the bounds are an :class:`~rosbridge_core.codec.lane.OrderedLane`'s)."""
 
     def __init__(self, feed: ZenohFeed) -> None:
         self.feed = feed
-        self.waiting: deque[ZenohMessage] = deque()
-        self.bytes = 0  # of the messages waiting
-        self._task: asyncio.Task[None] | None = None
+        self.lane: OrderedLane[ZenohMessage] = OrderedLane(
+            self._handle, max_waiting=WAITING, max_bytes=WAITING_BYTES,
+            size=lambda msg: len(msg.data), drop_oldest=True)
 
     def take(self, msg: ZenohMessage) -> bool:
         """Whether ``msg`` goes this way (a large one, or one behind it); if not, the caller
         hands it to the viewers now."""
-        if self._task is None and (len(msg.data) < OFF_LOOP_BYTES
+        if not self.lane.busy and (len(msg.data) < OFF_LOOP_BYTES
                                    or not self.feed.decoded_encodings()):
             return False
-        dropped = 0
-        while self.waiting and (len(self.waiting) >= WAITING
-                                or self.bytes + len(msg.data) > WAITING_BYTES):
-            self.bytes -= len(self.waiting.popleft().data)
-            dropped += 1
+        dropped = self.lane.push(msg)
         if dropped:
             self.feed.graph.faults.add(
                 "messages_dropped", f"messages of {self.feed.topic} dropped, the oldest first, "
                 f"while a large one was decoded (at most {WAITING} and {WAITING_BYTES} bytes "
                 "wait)", dropped)
-        self.waiting.append(msg)
-        self.bytes += len(msg.data)
-        if self._task is None:
-            self._task = asyncio.get_running_loop().create_task(self._run())
         return True
 
-    async def _run(self) -> None:
-        loop = asyncio.get_running_loop()
-        try:
-            while self.waiting:
-                msg = self.waiting.popleft()
-                self.bytes -= len(msg.data)
-                needs = self.feed.decoded_encodings()
-                failed = None
-                if needs and len(msg.data) >= OFF_LOOP_BYTES:
-                    failed = await loop.run_in_executor(workers(), prepare, msg, needs)
-                if failed is not None:  # its raw viewers still get it
-                    msg.refuse(failed)
-                self.feed.fan_out(msg)
-        finally:
-            if self._task is asyncio.current_task():
-                self._task = None
+    async def _handle(self, msg: ZenohMessage) -> None:
+        needs = self.feed.decoded_encodings()
+        failed = None
+        if needs and len(msg.data) >= OFF_LOOP_BYTES:
+            failed = await off_loop(lambda m: prepare(m, needs), msg)
+        if failed is not None:  # its raw viewers still get it
+            msg.refuse(failed)
+        self.feed.fan_out(msg)
 
     def close(self) -> None:
         """The topic is no longer read: what waits is dropped."""
-        self.waiting.clear()
-        self.bytes = 0
-        if self._task is not None:
-            self._task.cancel()
-            self._task = None
+        self.lane.close()

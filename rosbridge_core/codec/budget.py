@@ -7,7 +7,8 @@ would pass it, naming the field and the budget, and nothing over it is made.
 
 A message of :data:`OFF_LOOP_BYTES` or more is decoded (and encoded) on one of
 :func:`workers`' threads rather than on the event loop, in order per topic
-(:mod:`bridge_server.zenoh.decode`, :mod:`bridge_server.foxglove.inbound`).
+(:class:`~rosbridge_core.codec.lane.OrderedLane`, for :mod:`bridge_server.zenoh.decode` and
+:mod:`bridge_server.foxglove.inbound`).
 """
 
 from __future__ import annotations
