@@ -116,6 +116,11 @@ class RclpyGraph(RosNode):
             except Exception:  # the node went away meanwhile
                 continue
             found += [t for s, types in served if s == service for t in types if t not in found]
+        if not found and node.count_services(service):
+            # A server's endpoint reaches the graph before its node's name does (seconds before
+            # on a busy machine): until then its types are the graph's own for the name.
+            found = [t for s, types in node.get_service_names_and_types() if s == service
+                     for t in types]
         return found
 
     # -- services ------------------------------------------------------------------------------
