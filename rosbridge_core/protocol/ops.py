@@ -521,13 +521,19 @@ def op_name(op: Op) -> str:
     return op.OP
 
 
+_FIELD_NAMES: dict[type[Any], tuple[str, ...]] = {
+    cls: tuple(rules) for cls, rules in _RULES.values()}
+"""Each op class's field names in order (dataclasses.fields() cost 0.4 us an op)."""
+
+
 def to_obj(op: Op) -> dict[str, Any]:
     """The JSON object for ``op``: ``op`` first, then its fields, absent ones left out."""
     obj: dict[str, Any] = {"op": op.OP}
-    for f in fields(op):
-        value = getattr(op, f.name)
+    names = _FIELD_NAMES.get(type(op))
+    for name in names if names is not None else (f.name for f in fields(op)):
+        value = getattr(op, name)
         if value is not None:
-            obj[f.name] = value
+            obj[name] = value
     return obj
 
 
@@ -543,10 +549,9 @@ def encode(op: Op) -> str:
     """
     obj = to_obj(op)
     try:
-        return json.dumps(obj, separators=(",", ":"), allow_nan=False, default=_base64)
+        return _JSON.encode(obj)
     except ValueError:
-        return json.dumps(_finite(obj), separators=(",", ":"), allow_nan=False,
-                          default=_base64)
+        return _JSON.encode(_finite(obj))
     except TypeError as exc:
         raise LocalProtocolError(f"{op.OP}: cannot encode as JSON: {exc}", op=op.OP) from None
 
@@ -558,6 +563,10 @@ def _base64(value: Any) -> Any:
         plain = value.item()  # a numpy scalar: its Python value (numpy is not imported)
         return plain if not isinstance(plain, float) or math.isfinite(plain) else None
     raise TypeError(f"Object of type {type(value).__name__} is not JSON serializable")
+
+
+_JSON = json.JSONEncoder(separators=(",", ":"), allow_nan=False, default=_base64)
+"""The encoder of :func:`encode`, made once (json.dumps with options makes one a call: 1 us)."""
 
 
 def _finite(value: Any) -> Any:
