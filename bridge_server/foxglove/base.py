@@ -11,7 +11,7 @@ from collections.abc import Callable, Coroutine
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
-from bridge_server.foxglove import wire
+from bridge_server.foxglove import ops
 from bridge_server.foxglove.inbound import Inbound
 from rosbridge_core.session.calls import Calls
 from rosbridge_core.session.outbox import Outbox, TopicQueue
@@ -32,7 +32,7 @@ log = logging.getLogger("bridge_server.foxglove")
 ENCODINGS = ("cdr", "json")
 """Encodings a client may publish and call services in."""
 
-_LEVELS = {"info": wire.STATUS_INFO, "warning": wire.STATUS_WARNING, "error": wire.STATUS_ERROR}
+_LEVELS = {"info": ops.STATUS_INFO, "warning": ops.STATUS_WARNING, "error": ops.STATUS_ERROR}
 
 
 @dataclass
@@ -85,7 +85,7 @@ class SessionBase:
             self.config.drop_report_interval, lambda text: self.status("warning", text),
         )
         self.topics = SessionTopics()
-        self.subscriptions: dict[int, tuple[TopicQueue, wire.Channel]] = {}
+        self.subscriptions: dict[int, tuple[TopicQueue, ops.Channel]] = {}
         self.client_channels: dict[int, ClientChannel] = {}
         self._publisher_refs: dict[str, int] = {}
         self._listeners: dict[TopicQueue, Callable[[RosMessage], None]] = {}
@@ -118,7 +118,7 @@ class SessionBase:
 
     def status(self, level: str, msg: str, id: Any = None, *, always: bool = True) -> None:
         """A ``status`` op (``level``: info, warning or error, as the gate says them)."""
-        self.send_text(wire.json_frame("status", level=_LEVELS.get(level, wire.STATUS_ERROR),
+        self.send_text(ops.json_frame("status", level=_LEVELS.get(level, ops.STATUS_ERROR),
                                        message=msg))
 
     def error(self, msg: str, kind: str = "request") -> None:
@@ -134,7 +134,7 @@ class SessionBase:
     def send_time(self, stamp_ns: int) -> None:
         """The ``time`` op, to a client told of the ``time`` capability."""
         if self.uses_time:
-            self.send_text(wire.time_frame(stamp_ns))
+            self.send_text(ops.time_frame(stamp_ns))
 
     def spawn(self, coro: Coroutine[Any, Any, None]) -> None:
         """Run ``coro`` as a task of this client's, cancelled when it leaves."""

@@ -12,7 +12,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
-from bridge_server.foxglove import wire
+from bridge_server.foxglove import ops
 from bridge_server.foxglove.base import ENCODINGS, ClientChannel, SessionBase, log
 from bridge_server.foxglove.hub import message_class
 from bridge_server.foxglove.inbound import Inbound
@@ -41,7 +41,7 @@ class ChannelOps(SessionBase):
 
     # -- subscriptions -------------------------------------------------------------------------
 
-    def _subscribe(self, op: wire.Subscribe) -> None:
+    def _subscribe(self, op: ops.Subscribe) -> None:
         for sub_id, channel_id in op.subscriptions:
             channel = self.hub.by_id.get(channel_id)
             if sub_id in self.subscriptions:
@@ -60,11 +60,11 @@ class ChannelOps(SessionBase):
             else:
                 self._add_subscription(sub_id, channel)
 
-    def _add_subscription(self, sub_id: int, channel: wire.Channel) -> None:
+    def _add_subscription(self, sub_id: int, channel: ops.Channel) -> None:
         topic = channel.topic
         cls = self.graph.resolve_message(channel.schema_name)
         sub = TopicQueue(self.outbox, topic, topic)
-        header = wire.message_data_header
+        header = ops.message_data_header
         hub = self.hub
         cap = min(self.config.default_queue_length, self.limits.max_queue_length or 1 << 30)
 
@@ -92,7 +92,7 @@ class ChannelOps(SessionBase):
         if latched is not None:
             self.outbox.push(sub, latched)
 
-    def _unsubscribe(self, op: wire.Unsubscribe) -> None:
+    def _unsubscribe(self, op: ops.Unsubscribe) -> None:
         for sub_id in op.subscription_ids:
             found = self.subscriptions.pop(sub_id, None)
             if found is None:
@@ -113,14 +113,14 @@ class ChannelOps(SessionBase):
 
     # -- client publishing ---------------------------------------------------------------------
 
-    def _advertise(self, op: wire.ClientAdvertise) -> None:
+    def _advertise(self, op: ops.ClientAdvertise) -> None:
         for ch in op.channels:
             try:
                 self._add_client_channel(ch)
             except BridgeError as exc:
                 self.error(f"advertise: channel {ch.id} ({ch.topic}): {exc}")
 
-    def _add_client_channel(self, ch: wire.ClientChannel) -> None:
+    def _add_client_channel(self, ch: ops.ClientChannel) -> None:
         topic = absolute_name(ch.topic)
         if ch.id in self.client_channels:
             raise BridgeError(f"channel id {ch.id} is advertised on this connection already")
@@ -146,7 +146,7 @@ class ChannelOps(SessionBase):
         if ch.encoding == "cdr":
             decode: Callable[[bytes], Any] = cdr.decoder_for(message_class(self.graph, type_name))
         else:
-            decode = wire.parse_json
+            decode = ops.parse_json
         pub = self.topics.publishers.get(topic)
         if pub is None:
             pub = self.topics.publishers[topic] = self.graph.acquire_publisher(topic, cls, False,
@@ -160,7 +160,7 @@ class ChannelOps(SessionBase):
         self.client_channels[ch.id] = ClientChannel(ch.id, topic, ch.encoding, pub,
                                                      Inbound(convert))
 
-    def _unadvertise(self, op: wire.ClientUnadvertise) -> None:
+    def _unadvertise(self, op: ops.ClientUnadvertise) -> None:
         for channel_id in op.channel_ids:
             ch = self.client_channels.pop(channel_id, None)
             if ch is None:
@@ -173,7 +173,7 @@ class ChannelOps(SessionBase):
                 del self._publisher_refs[ch.topic]
                 self.graph.release_publisher(self.topics.publishers.pop(ch.topic))
 
-    def _publish(self, op: wire.ClientMessage) -> None:
+    def _publish(self, op: ops.ClientMessage) -> None:
         ch = self.client_channels.get(op.channel_id)
         if ch is None:
             self.error(f"message data: no client channel {op.channel_id} on this connection "

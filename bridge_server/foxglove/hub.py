@@ -23,7 +23,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, Generic, Protocol, TypeVar
 
-from bridge_server.foxglove.wire import Channel
+from bridge_server.foxglove.ops import Channel
 from msgs import cdr, dynamic
 from msgs.runtime import Message as MsgsMessage
 from msgs.runtime import Service as MsgsService

@@ -11,7 +11,7 @@ import binascii
 import math
 from typing import Any
 
-from bridge_server.foxglove import wire
+from bridge_server.foxglove import ops
 from bridge_server.foxglove.base import SessionBase
 from rosbridge_core.interfaces import BridgeError
 from rosbridge_core.protocol.names import absolute_name
@@ -31,18 +31,18 @@ class ParameterOps(SessionBase):
         shown = [(n, v) for n, v in changed if (not names or n in names)
                  and self.gate.forbids("params", ":".join(split_name(n))) is None]
         if shown:
-            self.send_text(wire.json_frame("parameterValues",
+            self.send_text(ops.json_frame("parameterValues",
                                            parameters=[parameter_entry(n, v) for n, v in shown]))
 
     # -- parameters ----------------------------------------------------------------------------
 
-    def _get_parameters(self, op: wire.GetParameters) -> None:
+    def _get_parameters(self, op: ops.GetParameters) -> None:
         for name in op.names:
             split_name(name)  # a name that is not /node.param is refused now
         if op.names or self.gate.allowed(op, *PARAMETER_LISTING):
             self.spawn(self._answer_parameters(list(op.names), op.id))
         elif op.id is not None:  # refused (the client was told): no values for the id
-            self.send_text(wire.json_frame("parameterValues", parameters=[], id=op.id))
+            self.send_text(ops.json_frame("parameterValues", parameters=[], id=op.id))
 
     async def _answer_parameters(self, names: list[str], request_id: str | None) -> None:
         if not names:
@@ -52,7 +52,7 @@ class ParameterOps(SessionBase):
                 *(self._get_one(n) for n in names)), strict=True):
             if value is not _MISSING:
                 found.append(parameter_entry(name, value))
-        self.send_text(wire.json_frame("parameterValues", parameters=found, id=request_id))
+        self.send_text(ops.json_frame("parameterValues", parameters=found, id=request_id))
 
     async def _all_parameter_names(self) -> list[str]:
         nodes = [f"{ns.rstrip('/')}/{n}" for n, ns in self.graph.node_names()]
@@ -81,12 +81,12 @@ class ParameterOps(SessionBase):
             return _MISSING
         return value if is_set else _MISSING
 
-    def _set_parameters(self, op: wire.SetParameters) -> None:
+    def _set_parameters(self, op: ops.SetParameters) -> None:
         for name, _, _ in op.parameters:
             split_name(name)
         self.spawn(self._run_set(op))
 
-    async def _run_set(self, op: wire.SetParameters) -> None:
+    async def _run_set(self, op: ops.SetParameters) -> None:
         done: list[str] = []
         for name, raw, kind in op.parameters:
             node, param = split_name(name)
@@ -110,9 +110,9 @@ class ParameterOps(SessionBase):
             done.append(name)
         if op.id is not None:
             await self._answer_parameters(done, op.id) if done else self.send_text(
-                wire.json_frame("parameterValues", parameters=[], id=op.id))
+                ops.json_frame("parameterValues", parameters=[], id=op.id))
 
-    def _follow_parameters(self, op: wire.SubscribeParameterUpdates) -> None:
+    def _follow_parameters(self, op: ops.SubscribeParameterUpdates) -> None:
         if not self.gate.allowed(op, *PARAMETER_LISTING):
             return
         current = self.parameter_names
@@ -124,7 +124,7 @@ class ParameterOps(SessionBase):
             current.update(op.names)
         self.hub.update_watches()
 
-    def _unfollow_parameters(self, op: wire.UnsubscribeParameterUpdates) -> None:
+    def _unfollow_parameters(self, op: ops.UnsubscribeParameterUpdates) -> None:
         current = self.parameter_names
         if not op.names or current is None:
             self.parameter_names = None

@@ -32,7 +32,7 @@ import json
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
-from bridge_server.foxglove import wire
+from bridge_server.foxglove import ops
 from bridge_server.foxglove.base import ENCODINGS, log
 from bridge_server.foxglove.channels import QUEUE_BYTES, ChannelOps
 from bridge_server.foxglove.hub import CLOCK
@@ -110,7 +110,7 @@ class FoxgloveSession(ChannelOps, ParameterOps):
         if CLOCK in hub.channels and self.gate.forbids("subscribe", CLOCK) is None:
             self.uses_time = True
             capabilities.append("time")
-        self.send_text(wire.json_frame(
+        self.send_text(ops.json_frame(
             "serverInfo", name=f"roslibpy-lite bridge ({self.graph.name})",
             capabilities=capabilities, supportedEncodings=list(ENCODINGS),
             metadata={"ROS_DISTRO": "jazzy", "protocols": "rosbridge v2, foxglove.websocket.v1"},
@@ -145,7 +145,7 @@ class FoxgloveSession(ChannelOps, ParameterOps):
             publishes=self.topics.publishers, serves=(), calls_in_flight=len(self.calls),
             parked=False)
 
-    def graph_changed(self, added: list[wire.Channel], removed: list[wire.Channel],
+    def graph_changed(self, added: list[ops.Channel], removed: list[ops.Channel],
                       s_added: list[ServiceEntry], s_removed: list[ServiceEntry]) -> None:
         """Channels and services came or went: subscriptions to those gone end, and the
         client's lists follow (:meth:`show_lists`)."""
@@ -165,13 +165,13 @@ class FoxgloveSession(ChannelOps, ParameterOps):
         services = {e.id: e for e in self.hub.services.values()
                     if gate.forbids("call_service", e.name) is None}
         if gone := sorted(self.shown_channels - channels.keys()):
-            self.send_text(wire.json_frame("unadvertise", channelIds=gone))
+            self.send_text(ops.json_frame("unadvertise", channelIds=gone))
         if gone := sorted(self.shown_services - services.keys()):
-            self.send_text(wire.json_frame("unadvertiseServices", serviceIds=gone))
+            self.send_text(ops.json_frame("unadvertiseServices", serviceIds=gone))
         if new := [c.to_json() for i, c in channels.items() if i not in self.shown_channels]:
-            self.send_text(wire.json_frame("advertise", channels=new))
+            self.send_text(ops.json_frame("advertise", channels=new))
         if new := [e.to_json() for i, e in services.items() if i not in self.shown_services]:
-            self.send_text(wire.json_frame("advertiseServices", services=new))
+            self.send_text(ops.json_frame("advertiseServices", services=new))
         self.shown_channels, self.shown_services = set(channels), set(services)
 
     def show_graph(self, state: GraphState) -> None:
@@ -184,7 +184,7 @@ class FoxgloveSession(ChannelOps, ParameterOps):
         update = seen.update_since(self.graph_seen)
         self.graph_seen = seen
         if update is not None:
-            self.send_text(wire.json_frame("connectionGraphUpdate", **update))
+            self.send_text(ops.json_frame("connectionGraphUpdate", **update))
 
     # -- receiving -----------------------------------------------------------------------------
 
@@ -198,8 +198,8 @@ class FoxgloveSession(ChannelOps, ParameterOps):
                        "bytes (--max-message-size); it was dropped", "protocol")
             return
         try:
-            op = wire.parse_text(frame) if isinstance(frame, str) else wire.parse_binary(frame)
-        except wire.WireError as exc:
+            op = ops.parse_text(frame) if isinstance(frame, str) else ops.parse_binary(frame)
+        except ops.OpError as exc:
             self.error(str(exc), "protocol")
             return
         handler = self._HANDLERS[type(op)]
@@ -214,7 +214,7 @@ class FoxgloveSession(ChannelOps, ParameterOps):
 
     # -- services ------------------------------------------------------------------------------
 
-    def _call(self, op: wire.ServiceCall) -> None:
+    def _call(self, op: ops.ServiceCall) -> None:
         entry = self.hub.services_by_id.get(op.service_id)
         why: str | None = None
         if entry is None:
@@ -231,14 +231,14 @@ class FoxgloveSession(ChannelOps, ParameterOps):
             return
         try:
             args = (cdr.decode(op.payload, entry.srv.Request) if op.encoding == "cdr"
-                    else wire.parse_json(op.payload))
+                    else ops.parse_json(op.payload))
         except (cdr.CdrError, ValueError) as exc:
             self._call_failed(op, f"the request does not decode as {entry.type_name} "
                               f"({op.encoding}): {exc}")
             return
         self.spawn(self._run_call(op, entry, args))
 
-    async def _run_call(self, op: wire.ServiceCall, entry: ServiceEntry, args: Any) -> None:
+    async def _run_call(self, op: ops.ServiceCall, entry: ServiceEntry, args: Any) -> None:
         try:
             values = await self.graph.call_service(
                 entry.name, entry.type_name, args, self.config.call_timeout,
@@ -250,41 +250,41 @@ class FoxgloveSession(ChannelOps, ParameterOps):
         except (BridgeError, ValidationError, ValueError) as exc:
             self._call_failed(op, str(exc))
             return
-        self.send_text(wire.service_response_frame(op.service_id, op.call_id, op.encoding,
+        self.send_text(ops.service_response_frame(op.service_id, op.call_id, op.encoding,
                                                    payload))
 
-    def _call_failed(self, op: wire.ServiceCall, why: str) -> None:
+    def _call_failed(self, op: ops.ServiceCall, why: str) -> None:
         log.info("foxglove client %d: service call %d failed: %s", self.sid, op.call_id, why)
         self.shared.metrics.error("request")
-        self.send_text(wire.json_frame("serviceCallFailure", serviceId=op.service_id,
+        self.send_text(ops.json_frame("serviceCallFailure", serviceId=op.service_id,
                                        callId=op.call_id, message=why))
 
     # -- connection graph, assets ----------------------------------------------------------------
 
-    def _follow_graph(self, op: wire.SubscribeConnectionGraph) -> None:
+    def _follow_graph(self, op: ops.SubscribeConnectionGraph) -> None:
         if self.gate.allowed(op, *LISTING):
             self.hub.follow_graph(self)
 
-    def _unfollow_graph(self, op: wire.UnsubscribeConnectionGraph) -> None:
+    def _unfollow_graph(self, op: ops.UnsubscribeConnectionGraph) -> None:
         self.graph_seen = None
 
-    def _fetch_asset(self, op: wire.FetchAsset) -> None:
+    def _fetch_asset(self, op: ops.FetchAsset) -> None:
         self.error(f"fetchAsset {op.uri}: this server has no assets (no 'assets' capability)")
 
     _HANDLERS: dict[type[Any], Callable[[FoxgloveSession, Any], None]] = {
-        wire.Subscribe: ChannelOps._subscribe,
-        wire.Unsubscribe: ChannelOps._unsubscribe,
-        wire.ClientAdvertise: ChannelOps._advertise,
-        wire.ClientUnadvertise: ChannelOps._unadvertise,
-        wire.ClientMessage: ChannelOps._publish,
-        wire.ServiceCall: _call,
-        wire.GetParameters: ParameterOps._get_parameters,
-        wire.SetParameters: ParameterOps._set_parameters,
-        wire.SubscribeParameterUpdates: ParameterOps._follow_parameters,
-        wire.UnsubscribeParameterUpdates: ParameterOps._unfollow_parameters,
-        wire.SubscribeConnectionGraph: _follow_graph,
-        wire.UnsubscribeConnectionGraph: _unfollow_graph,
-        wire.FetchAsset: _fetch_asset,
+        ops.Subscribe: ChannelOps._subscribe,
+        ops.Unsubscribe: ChannelOps._unsubscribe,
+        ops.ClientAdvertise: ChannelOps._advertise,
+        ops.ClientUnadvertise: ChannelOps._unadvertise,
+        ops.ClientMessage: ChannelOps._publish,
+        ops.ServiceCall: _call,
+        ops.GetParameters: ParameterOps._get_parameters,
+        ops.SetParameters: ParameterOps._set_parameters,
+        ops.SubscribeParameterUpdates: ParameterOps._follow_parameters,
+        ops.UnsubscribeParameterUpdates: ParameterOps._unfollow_parameters,
+        ops.SubscribeConnectionGraph: _follow_graph,
+        ops.UnsubscribeConnectionGraph: _unfollow_graph,
+        ops.FetchAsset: _fetch_asset,
     }
 
     # -- grants --------------------------------------------------------------------------------
@@ -304,7 +304,7 @@ class FoxgloveSession(ChannelOps, ParameterOps):
         for channel_id, ch in list(self.client_channels.items()):
             why = self.gate.forbids("publish", ch.topic)
             if why is not None:
-                self._unadvertise(wire.ClientUnadvertise((channel_id,)))
+                self._unadvertise(ops.ClientUnadvertise((channel_id,)))
                 self.error(f"client channel {channel_id} to {ch.topic} ended: {why}")
                 ended += 1
         self.show_lists()

@@ -1,9 +1,9 @@
-"""The Foxglove WebSocket protocol's frames as values, without I/O (``foxglove.websocket.v1``).
+"""The Foxglove WebSocket protocol's ops as values, without I/O (``foxglove.websocket.v1``).
 
 What a client sends is parsed in one place (:func:`parse_text` for JSON ops,
 :func:`parse_binary` for the binary ones) into frozen dataclasses; what the server
 sends is made in one place (the ``*_frame`` functions). Anything else raises
-:class:`WireError`, whose text names the op and the field that is wrong, for the
+:class:`OpError`, whose text names the op and the field that is wrong, for the
 session to answer with a ``status`` error. No sockets, no event loop, no ROS.
 
 The layout follows the protocol's published specification (foxglove/ws-protocol,
@@ -32,6 +32,7 @@ __all__ = [
     "ClientUnadvertise",
     "FetchAsset",
     "GetParameters",
+    "OpError",
     "ServiceCall",
     "SetParameters",
     "Subscribe",
@@ -40,7 +41,6 @@ __all__ = [
     "Unsubscribe",
     "UnsubscribeConnectionGraph",
     "UnsubscribeParameterUpdates",
-    "WireError",
     "json_frame",
     "message_data_header",
     "parse_binary",
@@ -71,7 +71,7 @@ _CALL_HEAD = struct.Struct("<BIII")
 _U32_MAX = 0xFFFFFFFF
 
 
-class WireError(ValueError):
+class OpError(ValueError):
     """A frame that is not a valid Foxglove client message (the text says what is wrong)."""
 
 
@@ -214,31 +214,31 @@ ClientOp = (Subscribe | Unsubscribe | ClientAdvertise | ClientUnadvertise | GetP
 
 def _field(obj: Mapping[str, Any], key: str, where: str) -> Any:
     if key not in obj:
-        raise WireError(f"{where}: '{key}' is missing")
+        raise OpError(f"{where}: '{key}' is missing")
     return obj[key]
 
 
 def _uint(value: Any, where: str) -> int:
     if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value <= _U32_MAX:
-        raise WireError(f"{where}: expected an integer from 0 to {_U32_MAX}, got {value!r:.40}")
+        raise OpError(f"{where}: expected an integer from 0 to {_U32_MAX}, got {value!r:.40}")
     return value
 
 
 def _text(value: Any, where: str) -> str:
     if not isinstance(value, str):
-        raise WireError(f"{where}: expected a string, got {type(value).__name__}")
+        raise OpError(f"{where}: expected a string, got {type(value).__name__}")
     return value
 
 
 def _list(value: Any, where: str) -> Sequence[Any]:
     if not isinstance(value, list):
-        raise WireError(f"{where}: expected a list, got {type(value).__name__}")
+        raise OpError(f"{where}: expected a list, got {type(value).__name__}")
     return value
 
 
 def _object(value: Any, where: str) -> Mapping[str, Any]:
     if not isinstance(value, dict):
-        raise WireError(f"{where}: expected an object, got {type(value).__name__}")
+        raise OpError(f"{where}: expected an object, got {type(value).__name__}")
     return value
 
 
@@ -298,7 +298,7 @@ def _set_parameters(obj: Mapping[str, Any]) -> SetParameters:
         p = _object(p, where)
         kind = p.get("type")
         if kind is not None and kind not in ("byte_array", "float64", "float64_array"):
-            raise WireError(f"{where}.type: expected byte_array, float64 or float64_array, "
+            raise OpError(f"{where}.type: expected byte_array, float64 or float64_array, "
                             f"got {kind!r:.40}")
         out.append((_text(_field(p, "name", where), f"{where}.name"), p.get("value"), kind))
     return SetParameters(tuple(out), _optional_id(obj, "setParameters"))
@@ -330,55 +330,55 @@ _PARSERS: dict[str, Any] = {
 def parse_json(data: str | bytes) -> Any:
     """JSON text (a frame, or a payload in the ``json`` encoding) as a value, read as
     rosbridge frames are (:func:`rosbridge_core.protocol.decode_frame`); what is wrong (where
-    it is malformed, nested too deeply, not UTF-8) is a :class:`WireError` in rosbridge's
+    it is malformed, nested too deeply, not UTF-8) is a :class:`OpError` in rosbridge's
     words."""
     try:
         return decode_frame(data if isinstance(data, str) else data.decode())
     except UnicodeDecodeError as exc:
-        raise WireError(f"the JSON text is not UTF-8 ({exc.reason} at byte {exc.start})"
+        raise OpError(f"the JSON text is not UTF-8 ({exc.reason} at byte {exc.start})"
                         ) from None
     except RemoteProtocolError as exc:
-        raise WireError(exc.message) from None
+        raise OpError(exc.message) from None
 
 
 def parse_text(text: str) -> ClientOp:
-    """One JSON frame from a client as its op; :class:`WireError` says what is wrong."""
+    """One JSON frame from a client as its op; :class:`OpError` says what is wrong."""
     obj = parse_json(text)
     if not isinstance(obj, dict):
-        raise WireError(f"a JSON frame must be an object with an 'op', got {type(obj).__name__}")
+        raise OpError(f"a JSON frame must be an object with an 'op', got {type(obj).__name__}")
     op = obj.get("op")
     parser = _PARSERS.get(op) if isinstance(op, str) else None
     if parser is None:
-        raise WireError(f"unknown op {op!r:.60}; a client may send "
+        raise OpError(f"unknown op {op!r:.60}; a client may send "
                         + ", ".join(sorted(_PARSERS)))
     result: ClientOp = parser(obj)
     return result
 
 
 def parse_binary(data: bytes) -> ClientMessage | ServiceCall:
-    """One binary frame from a client; :class:`WireError` says what is wrong."""
+    """One binary frame from a client; :class:`OpError` says what is wrong."""
     if not data:
-        raise WireError("an empty binary frame (expected an opcode byte)")
+        raise OpError("an empty binary frame (expected an opcode byte)")
     opcode = data[0]
     if opcode == CLIENT_MESSAGE_DATA:
         if len(data) < 5:
-            raise WireError(f"client message data: {len(data)} bytes, too short for the "
+            raise OpError(f"client message data: {len(data)} bytes, too short for the "
                             "channel id (5 bytes at least)")
         return ClientMessage(_U32.unpack_from(data, 1)[0], bytes(data[5:]))
     if opcode == SERVICE_CALL_REQUEST:
         if len(data) < 13:
-            raise WireError(f"service call request: {len(data)} bytes, too short for its "
+            raise OpError(f"service call request: {len(data)} bytes, too short for its "
                             "header (13 bytes at least)")
         _, service_id, call_id, size = _CALL_HEAD.unpack_from(data, 0)
         if 13 + size > len(data):
-            raise WireError(f"service call request: the encoding's length ({size}) runs past "
+            raise OpError(f"service call request: the encoding's length ({size}) runs past "
                             f"the frame ({len(data)} bytes)")
         try:
             encoding = bytes(data[13:13 + size]).decode()
         except UnicodeDecodeError:
-            raise WireError("service call request: the encoding is not UTF-8 text") from None
+            raise OpError("service call request: the encoding is not UTF-8 text") from None
         return ServiceCall(service_id, call_id, encoding, bytes(data[13 + size:]))
-    raise WireError(f"unknown binary opcode 0x{opcode:02x} (a client may send 0x01 client "
+    raise OpError(f"unknown binary opcode 0x{opcode:02x} (a client may send 0x01 client "
                     "message data and 0x02 service call request)")
 
 

@@ -1,4 +1,4 @@
-"""The Foxglove protocol's frames without a socket (bridge_server.foxglove.wire): what each
+"""The Foxglove protocol's frames without a socket (bridge_server.foxglove.ops): what each
 client frame parses to, and the error text for frames that are wrong."""
 
 from __future__ import annotations
@@ -14,15 +14,15 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from bridge_server.foxglove import wire
+from bridge_server.foxglove import ops
 from bridge_server.foxglove.hub import GraphState, foxglove_schema
 
 
 def test_subscribe_parses_pairs() -> None:
     """subscribe lists (subscription id, channel id) pairs."""
-    op = wire.parse_text('{"op":"subscribe","subscriptions":[{"id":0,"channelId":3},'
+    op = ops.parse_text('{"op":"subscribe","subscriptions":[{"id":0,"channelId":3},'
                          '{"id":1,"channelId":5}]}')
-    assert op == wire.Subscribe(((0, 3), (1, 5)))
+    assert op == ops.Subscribe(((0, 3), (1, 5)))
 
 
 @pytest.mark.parametrize(("text", "error"), [
@@ -42,17 +42,17 @@ def test_subscribe_parses_pairs() -> None:
     ('{"op":"getParameters","parameterNames":"x"}', "getParameters.parameterNames: expected a list"),
 ])
 def test_bad_text_names_the_field(text: str, error: str) -> None:
-    """A malformed JSON op raises WireError naming the op and the field."""
-    with pytest.raises(wire.WireError, match=error.replace("[", r"\[").replace("]", r"\]")):
-        wire.parse_text(text)
+    """A malformed JSON op raises OpError naming the op and the field."""
+    with pytest.raises(ops.OpError, match=error.replace("[", r"\[").replace("]", r"\]")):
+        ops.parse_text(text)
 
 
 def test_binary_client_frames() -> None:
     """Client message data and service call requests (little-endian ids)."""
-    assert wire.parse_binary(b"\x01" + struct.pack("<I", 7) + b"abc") == wire.ClientMessage(
+    assert ops.parse_binary(b"\x01" + struct.pack("<I", 7) + b"abc") == ops.ClientMessage(
         7, b"abc")
     call = b"\x02" + struct.pack("<III", 4, 9, 3) + b"cdr" + b"\x00\x01\x00\x00"
-    assert wire.parse_binary(call) == wire.ServiceCall(4, 9, "cdr", b"\x00\x01\x00\x00")
+    assert ops.parse_binary(call) == ops.ServiceCall(4, 9, "cdr", b"\x00\x01\x00\x00")
 
 
 @pytest.mark.parametrize(("data", "error"), [
@@ -63,18 +63,18 @@ def test_binary_client_frames() -> None:
     (b"\x02" + struct.pack("<III", 1, 2, 1) + b"\xff", "not UTF-8"),
 ])
 def test_bad_binary(data: bytes, error: str) -> None:
-    """Bad binary frames raise WireError saying what is wrong."""
-    with pytest.raises(wire.WireError, match=error):
-        wire.parse_binary(data)
+    """Bad binary frames raise OpError saying what is wrong."""
+    with pytest.raises(ops.OpError, match=error):
+        ops.parse_binary(data)
 
 
 def test_server_frames() -> None:
     """Message data, time and service responses are laid out as the spec's tables say."""
-    assert wire.message_data_header(5, 2**40) == b"\x01" + struct.pack("<IQ", 5, 2**40)
-    assert wire.time_frame(123) == b"\x02" + struct.pack("<Q", 123)
-    assert wire.service_response_frame(1, 2, "cdr", b"xy") == (
+    assert ops.message_data_header(5, 2**40) == b"\x01" + struct.pack("<IQ", 5, 2**40)
+    assert ops.time_frame(123) == b"\x02" + struct.pack("<Q", 123)
+    assert ops.service_response_frame(1, 2, "cdr", b"xy") == (
         b"\x03" + struct.pack("<III", 1, 2, 3) + b"cdrxy")
-    assert wire.json_frame("status", level=2, message="m", id=None) == (
+    assert ops.json_frame("status", level=2, message="m", id=None) == (
         '{"op":"status","level":2,"message":"m"}')
 
 
@@ -109,12 +109,12 @@ def test_graph_seen_by_a_role_keeps_only_its_names() -> None:
 
 
 def test_json_payloads_are_read_as_rosbridge_reads_frames() -> None:
-    """A json-encoded payload nested too deeply or not UTF-8 is a WireError saying so."""
-    assert wire.parse_json(b'{"data": "hi"}') == {"data": "hi"}
-    with pytest.raises(wire.WireError, match=r"^malformed JSON: nested too deeply$"):
-        wire.parse_json(b"[" * 5000 + b"]" * 5000)
-    with pytest.raises(wire.WireError, match="not UTF-8"):
-        wire.parse_json(b"\"\xff\"")
+    """A json-encoded payload nested too deeply or not UTF-8 is a OpError saying so."""
+    assert ops.parse_json(b'{"data": "hi"}') == {"data": "hi"}
+    with pytest.raises(ops.OpError, match=r"^malformed JSON: nested too deeply$"):
+        ops.parse_json(b"[" * 5000 + b"]" * 5000)
+    with pytest.raises(ops.OpError, match="not UTF-8"):
+        ops.parse_json(b"\"\xff\"")
 
 
 _JSON = st.recursive(
@@ -142,17 +142,17 @@ def _frame(op: str) -> st.SearchStrategy[str]:
 
 @given(st.text(max_size=80) | st.sampled_from(sorted(_KEYS)).flatmap(_frame))
 def test_any_text_is_an_op_or_a_wire_error(text: str) -> None:
-    """Whatever text a client sends parses to an op or raises WireError, nothing else."""
+    """Whatever text a client sends parses to an op or raises OpError, nothing else."""
     try:
-        op = wire.parse_text(text)
-    except wire.WireError as exc:
+        op = ops.parse_text(text)
+    except ops.OpError as exc:
         assert str(exc)
     else:
         assert _typed(op, type(op)), op
 
 
 def _typed(value: Any, hint: Any) -> bool:
-    """Whether ``value`` is of the type ``hint`` (the wire ops' annotations), all the way in."""
+    """Whether ``value`` is of the type ``hint`` (the ops' annotations), all the way in."""
     origin, args = typing.get_origin(hint), typing.get_args(hint)
     if hint is Any:
         return True
@@ -175,10 +175,10 @@ def _typed(value: Any, hint: Any) -> bool:
 
 @given(st.binary(max_size=40))
 def test_any_bytes_are_an_op_or_a_wire_error(data: bytes) -> None:
-    """Whatever binary frame a client sends parses to an op or raises WireError."""
+    """Whatever binary frame a client sends parses to an op or raises OpError."""
     try:
-        op = wire.parse_binary(data)
-    except wire.WireError as exc:
+        op = ops.parse_binary(data)
+    except ops.OpError as exc:
         assert str(exc)
     else:
-        assert isinstance(op, wire.ClientMessage | wire.ServiceCall)
+        assert isinstance(op, ops.ClientMessage | ops.ServiceCall)
