@@ -40,7 +40,7 @@ try:  # SIMD base64 (the bridge extra installs it): 0.05 ms for a 640x480 rgb8 f
 except ImportError:  # pragma: no cover - the bridge extra always has it
     _simd_b64 = None
 
-__all__ = ["JsonFromCdr", "b64_text", "encoder_for", "wire_encoder"]
+__all__ = ["JsonFromCdr", "b64_text", "encoder_for", "msgs_encoder"]
 
 JsonFromCdr = Callable[[bytes], "str | None"]
 
@@ -89,12 +89,12 @@ def _segments(fields: list[str], byte_fields: set[str]) -> list[tuple[str, ...]]
     return out
 
 
-def _same_layout(rclpy_cls: type[Any], wire_cls: type[Any], depth: int = 0) -> bool:
+def _same_layout(rclpy_cls: type[Any], msgs_cls: type[Any], depth: int = 0) -> bool:
     """Whether the installed type and msgs' have the same fields, in order, recursively."""
     if depth > 16:
         return False
     theirs = list(rclpy_cls.get_fields_and_field_types().items())
-    ours = list(wire_cls._fields_and_types.items())
+    ours = list(msgs_cls._fields_and_types.items())
     if theirs != ours:
         return False
     for slot in rclpy_cls.SLOT_TYPES:
@@ -117,22 +117,22 @@ def encoder_for(rclpy_cls: type[Any], type_name: str) -> JsonFromCdr | None:
     """``fn(cdr_bytes) -> JSON text or None`` for ``rclpy_cls``, or ``None`` if msgs does not
     generate that type with the installed layout (see the module docstring)."""
     try:
-        wire_cls = lookup_message(type_name)
+        msgs_cls = lookup_message(type_name)
     except Exception:
         return None
-    if not _same_layout(rclpy_cls, wire_cls):
+    if not _same_layout(rclpy_cls, msgs_cls):
         return None
-    return wire_encoder(wire_cls)
+    return msgs_encoder(msgs_cls)
 
 
-def wire_encoder(wire_cls: type[Message]) -> JsonFromCdr:
+def msgs_encoder(msgs_cls: type[Message]) -> JsonFromCdr:
     """``fn(cdr_bytes) -> JSON text or None`` for a ``msgs`` message class (generated, or
     built from a robot's definitions by :mod:`msgs.dynamic`): what a relay without ROS
     encodes with; ``None`` where the text would differ from rosbridge's (see the module
     docstring)."""
-    decode = cdr.decoder_for(wire_cls)
+    decode = cdr.decoder_for(msgs_cls)
     encode = _encode
-    layout = wire_cls._fields_and_types
+    layout = msgs_cls._fields_and_types
     byte_fields = {name for name, idl in layout.items() if _is_byte_array(idl)}
     if not byte_fields:
 

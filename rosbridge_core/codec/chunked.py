@@ -9,7 +9,7 @@ a time (up to :data:`PIECE` items of a list, each a scalar or a small struct), s
 loop's thread takes the lock back between pieces (``sys.getswitchinterval``, 5 ms).
 
 Their output is, byte for byte, what one call gives: :func:`json_text` that of
-:func:`rosbridge_core.codec.cdr_json.wire_encoder` (``bytes`` as base64 strings), and
+:func:`rosbridge_core.codec.cdr_json.msgs_encoder` (``bytes`` as base64 strings), and
 :func:`cbor_bytes` that of ``cbor2.dumps`` (definite lengths, no value sharing), which
 ``tests/core/test_chunked_codec.py`` checks on real types. Used by
 :mod:`bridge_server.zenoh.decode` for messages of

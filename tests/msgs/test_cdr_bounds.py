@@ -77,7 +77,7 @@ def assert_bounded(cls: type[Message], data: bytes) -> None:
     """``data`` decodes as ``cls`` (to a dict, with typed arrays for CBOR, and to JSON text)
     or fails with CdrError, in memory within PER_BYTE times its size."""
     decoders = [cdr.decoder_for(cls), cdr.decoder_for(cls, typed=cbor2.CBORTag)]  # compiled
-    to_json = cdr_json.wire_encoder(cls)  # before measuring
+    to_json = cdr_json.msgs_encoder(cls)  # before measuring
     limit = PER_BYTE * len(data) + SLACK
     with bounded(limit) as peak:
         for decode in decoders:

@@ -96,7 +96,7 @@ def test_real_sensor_messages_pass() -> None:
         cls, data = type(msg), cdr.encode(msg)
         assert len(cdr.decode(data, cls)) == len(cls._fields_and_types)
         cdr.decoder_for(cls, typed=cbor2.CBORTag)(data)
-        assert cdr_json.wire_encoder(cls)(data) is not None
+        assert cdr_json.msgs_encoder(cls)(data) is not None
         names = [name for name, _ in cdr_columns.leaf_names(cls)]
         assert len(cdr_columns.row_decoder(cls, names)(data)) == len(names)
 
@@ -129,7 +129,7 @@ def test_the_budget_is_configurable_and_kept_by_every_entry_point(budget: None) 
         cdr.decode(data, cls)
     with pytest.raises(cdr.BudgetError):
         cdr.decoder_for(cls, typed=cbor2.CBORTag)(data)
-    assert cdr_json.wire_encoder(cls)(data) is None
+    assert cdr_json.msgs_encoder(cls)(data) is None
     with pytest.raises(ValueError, match="over the decode budget"):
         cdr_columns.row_decoder(cls, ["f0"])(data)
     cdr.set_budget(cdr.DEFAULT_BUDGET)

@@ -10,7 +10,7 @@ import cbor2
 
 from msgs import cdr
 from msgs.runtime import Message as WireMessage
-from rosbridge_core.codec.cdr_json import JsonFromCdr, wire_encoder
+from rosbridge_core.codec.cdr_json import JsonFromCdr, msgs_encoder
 from rosbridge_core.codec.msgs_types import MsgsConverter
 
 __all__ = ["RelayConverter"]
@@ -25,7 +25,7 @@ class RelayConverter(MsgsConverter):
         self.decode = cdr.decoder_for(cls)
         self.decode_cbor = cdr.decoder_for(cls, typed=cbor2.CBORTag)  # typed arrays, as the
         # bridge's CBOR sends them (RFC 8746)
-        self.json_from_cdr: JsonFromCdr = wire_encoder(cls)
+        self.json_from_cdr: JsonFromCdr = msgs_encoder(cls)
 
     def to_cbor_obj(self, msg: Any) -> Any:
         """The message as a CBOR-ready dict (byte strings, numeric arrays typed)."""
