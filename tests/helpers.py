@@ -23,7 +23,7 @@ from pathlib import Path
 from typing import Any
 
 from bench.ports import free_port as _free_port
-from tests.op_peer import (  # noqa: F401 - re-exported: the suite imports them from here
+from tests.op_peer import (
     OpPeer,
     WireClient,
     error_text,
@@ -36,6 +36,40 @@ from tests.op_peer import (  # noqa: F401 - re-exported: the suite imports them 
     sender_and_bystander,
     still_working,
 )
+
+__all__ = [  # the peers of tests.op_peer re-exported: the suite imports them from here
+    "CHROMEDRIVER",
+    "CHROMIUM",
+    "READY",
+    "ROOT",
+    "BridgeProcess",
+    "OpPeer",
+    "WireClient",
+    "action_server_answers",
+    "async_wait_until",
+    "error_text",
+    "free_port",
+    "headless_chromium",
+    "marked_blocks",
+    "open_wire",
+    "peak_rss",
+    "rclpy_action_race",
+    "ros_env",
+    "ros_image",
+    "rosapi",
+    "rosapi_until",
+    "roundtrip",
+    "run_snippet",
+    "send_until_heard",
+    "send_until_heard_sync",
+    "sender_and_bystander",
+    "settle_executor",
+    "spin_executor",
+    "spun_node",
+    "still_working",
+    "threads_since",
+    "wait_until",
+]
 
 ROOT = Path(__file__).resolve().parent.parent
 READY = re.compile(r"bridge_server listening on wss?://([\d.]+):(\d+)")

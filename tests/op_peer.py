@@ -21,8 +21,20 @@ from websockets.asyncio.client import ClientConnection
 from websockets.asyncio.client import connect as ws_connect
 
 __all__ = [
-    "OpPeer", "WireClient", "error_text", "open_wire", "rosapi", "rosapi_until", "roundtrip",
-    "send_until_heard", "send_until_heard_sync", "sender_and_bystander", "still_working",
+    "FIB",
+    "OpPeer",
+    "WireClient",
+    "error_text",
+    "fib",
+    "open_wire",
+    "rosapi",
+    "rosapi_until",
+    "roundtrip",
+    "send_goal",
+    "send_until_heard",
+    "send_until_heard_sync",
+    "sender_and_bystander",
+    "still_working",
 ]
 
 
@@ -241,3 +253,21 @@ async def open_wire(url: str, **options: Any) -> WireClient:
     ``options`` go to :func:`websockets.asyncio.client.connect`)."""
     ws = await ws_connect(url, **{"max_size": None, "open_timeout": 10, **options})
     return WireClient(ws)
+
+
+FIB = "test_msgs/action/Fibonacci"
+"""The action type the action tests send goals of."""
+
+
+def fib(order: int) -> list[int]:
+    """The Fibonacci sequence test_msgs' examples compute for ``order``."""
+    sequence = [0, 1]
+    for i in range(1, order):
+        sequence.append(sequence[i] + sequence[i - 1])
+    return sequence
+
+
+async def send_goal(ws: OpPeer, name: str, args: Any, id: str, **extra: Any) -> None:
+    """Send a Fibonacci goal over ``ws``."""
+    await ws.send({"op": "send_action_goal", "action": name, "action_type": FIB, "args": args,
+                   "id": id, **extra})

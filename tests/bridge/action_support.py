@@ -13,12 +13,14 @@ from test_msgs.action import Fibonacci
 
 from tests.bridge.support import ros_future
 from tests.helpers import action_server_answers, async_wait_until
+from tests.op_peer import FIB as FIB
+from tests.op_peer import fib as fib
+from tests.op_peer import send_goal as send_goal
 
 _action: Any = importlib.import_module("rclpy.action")
 _groups: Any = importlib.import_module("rclpy.callback_groups")
 _ids = itertools.count()
 
-FIB = "test_msgs/action/Fibonacci"
 LONG = 15.0
 """Seconds a "long" goal runs unless canceled (tests end it much sooner)."""
 
@@ -102,14 +104,6 @@ def _deep_services() -> Any:
     return QoSProfile(depth=1000)  # type: ignore[no-untyped-call]
 
 
-def fib(order: int) -> list[int]:
-    """The Fibonacci sequence test_msgs' examples compute for ``order``."""
-    sequence = [0, 1]
-    for i in range(1, order):
-        sequence.append(sequence[i] + sequence[i - 1])
-    return sequence
-
-
 async def bridge_sees_action(ws: Any, name: str, timeout: float = 20.0,
                              gone: bool = False) -> None:
     """Poll ``/rosapi/action_servers`` until the bridge's graph lists ``name`` (with
@@ -125,12 +119,6 @@ async def bridge_sees_action(ws: Any, name: str, timeout: float = 20.0,
             raise AssertionError(f"the bridge {'still lists' if gone else 'never listed'} "
                                  f"the action {name}")
         await asyncio.sleep(0.02)
-
-
-async def send_goal(ws: Any, name: str, args: Any, id: str, **extra: Any) -> None:
-    """Send a Fibonacci goal over the wire."""
-    await ws.send({"op": "send_action_goal", "action": name, "action_type": FIB, "args": args,
-                   "id": id, **extra})
 
 
 class RosCaller:

@@ -1,4 +1,7 @@
-"""Actions through the bridge, both ways, with raw websocket clients and rclpy peers."""
+"""Actions through the bridge, both ways, with raw websocket clients and rclpy peers: what
+needs rclpy's action servers and clients (and its converter for every action type). A goal
+canceled before any server, an action between two clients and the rosapi action services
+are tested in memory in tests/session/test_actions.py."""
 
 from __future__ import annotations
 
@@ -133,16 +136,6 @@ async def test_cancel_before_acceptance(ws_connect: Any, ros_node: Any, topic: s
     assert result["status"] == CANCELED
     assert server.cancel_requests.is_set()
     server.destroy()
-
-
-async def test_cancel_while_waiting_for_a_server(ws_connect: Any, topic: str) -> None:
-    """A goal canceled while the bridge still waits for an action server ends canceled at once."""
-    ws = await ws_connect()
-    await send_goal(ws, topic, {"order": 1}, "w1")
-    await ws.send({"op": "cancel_action_goal", "id": "w1", "action": topic})
-    result = await ws.expect(op="action_result", id="w1")
-    assert result["status"] == CANCELED and result["result"] is False
-    assert "canceled before it was sent" in result["values"]
 
 
 def _wait_goal(server: FibServer) -> None:
@@ -379,24 +372,6 @@ async def test_served_many_goals(ws_connect: Any, ros_node: Any, topic: str) -> 
     caller.destroy()
 
 
-async def test_client_to_client_action(ws_connect: Any, topic: str) -> None:
-    """A goal one client sends reaches an action another client serves, and back."""
-    server_ws = await ws_connect()
-    await server_ws.send({"op": "advertise_action", "action": topic, "type": FIB})
-    ws = await ws_connect()
-    await bridge_sees_action(ws, topic)
-    await send_goal(ws, topic, {"order": 3}, "cc", feedback=True)
-    goal = await server_ws.expect(op="send_action_goal")
-    await server_ws.send({"op": "action_feedback", "id": goal["id"], "action": topic,
-                          "values": {"sequence": [0, 1]}})
-    feedback = await ws.expect(op="action_feedback", id="cc")
-    assert feedback["values"] == {"sequence": [0, 1]}
-    await server_ws.send({"op": "action_result", "id": goal["id"], "action": topic,
-                          "values": {"sequence": fib(3)}, "result": True})
-    result = await ws.expect(op="action_result", id="cc")
-    assert result["status"] == SUCCEEDED and result["values"] == {"sequence": fib(3)}
-
-
 async def test_first_owner_keeps_the_action(ws_connect: Any, ros_node: Any, topic: str) -> None:
     """A second client cannot take a served action from a live owner; after unadvertise it can."""
     first, caller = await _serving(ws_connect, ros_node, topic)
@@ -490,46 +465,3 @@ def _plain(value: Any) -> Any:
         return list(value)
     return value
 
-
-# -- introspection ---------------------------------------------------------------------------
-
-
-async def _rosapi(ws: Any, service: str, args: Any = None) -> dict[str, Any]:
-    rid = f"{service}:{id(args)}"
-    await ws.send({"op": "call_service", "service": service, "args": args or {}, "id": rid})
-    reply = await ws.expect(op="service_response", id=rid)
-    assert reply["result"] is True, reply
-    values: dict[str, Any] = reply["values"]
-    return values
-
-
-async def test_rosapi_action_calls(ws_connect: Any, ros_node: Any, topic: str) -> None:
-    """action_servers lists ROS- and client-served actions; action_type and *_details answer."""
-    server = FibServer(ros_node, topic)
-    ws = await ws_connect()
-    served = topic + "_served"
-    await ws.send({"op": "advertise_action", "action": served, "type": "mult_msgs/IntegrateImu"})
-    await bridge_sees_action(ws, topic)
-    await bridge_sees_action(ws, served)
-    assert await _rosapi(ws, "/rosapi/action_type", {"action": topic}) == {"type": FIB}
-    assert await _rosapi(ws, "/rosapi/action_type", [served]) == {
-        "type": "mult_msgs/action/IntegrateImu"}
-    assert await _rosapi(ws, "/rosapi/action_type", {"action": topic + "_none"}) == {"type": ""}
-    goal = await _rosapi(ws, "/rosapi/action_goal_details", {"type": "mult_msgs/IntegrateImu"})
-    assert goal["typedefs"][0]["type"] == "mult_msgs/action/IntegrateImu_Goal"
-    assert goal["typedefs"][0]["fieldnames"] == ["seconds"]
-    result = await _rosapi(ws, "/rosapi/action_result_details", {"type": FIB})
-    assert result["typedefs"][0]["fieldnames"] == ["sequence"]
-    assert result["typedefs"][0]["fieldarraylen"] == [0]
-    feedback = await _rosapi(ws, "/rosapi/action_feedback_details",
-                             {"type": "mult_msgs/action/IntegrateImu"})
-    assert [t["type"] for t in feedback["typedefs"]] == [
-        "mult_msgs/action/IntegrateImu_Feedback", "geometry_msgs/msg/Vector3"]
-    assert feedback["typedefs"][0]["fieldnames"] == ["sum", "elapsed"]
-    services = await _rosapi(ws, "/rosapi/services")
-    assert "/rosapi/action_goal_details" in services["services"]
-    await ws.send({"op": "call_service", "service": "/rosapi/action_goal_details",
-                   "args": {"type": "test_msgs/action/Nope"}, "id": "bad"})
-    reply = await ws.expect(op="service_response", id="bad")
-    assert reply["result"] is False and "test_msgs/action/Nope" in reply["values"]
-    server.destroy()
