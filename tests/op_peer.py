@@ -24,6 +24,7 @@ __all__ = [
     "FIB",
     "OpPeer",
     "WireClient",
+    "ask_until",
     "error_text",
     "fib",
     "open_wire",
@@ -65,6 +66,23 @@ async def send_until_heard(
         except (TimeoutError, AssertionError):
             if time.monotonic() >= deadline:
                 raise AssertionError(f"never heard {what} in {timeout} s") from None
+
+
+async def ask_until(
+    ask: Callable[[], Awaitable[T]], ok: Callable[[T], Any], what: str,
+    timeout: float = 15.0, every: float = 0.05,
+) -> T:
+    """Await ``ask()`` every ``every`` s until its answer satisfies ``ok``: that answer
+    (a ROS graph settles with no event). AssertionError naming ``what`` and the last answer
+    after ``timeout`` s."""
+    deadline = time.monotonic() + timeout
+    while True:
+        answer = await ask()
+        if ok(answer):
+            return answer
+        if time.monotonic() > deadline:
+            raise AssertionError(f"{what} never satisfied the check; last answer {answer}")
+        await asyncio.sleep(every)
 
 
 def send_until_heard_sync(
@@ -238,14 +256,7 @@ async def rosapi_until(
 ) -> dict[str, Any]:
     """Call ``service`` (:func:`rosapi`) until its answer satisfies ``ok`` (a ROS graph takes
     a moment to settle: discovery has no event); the answer."""
-    deadline = time.monotonic() + timeout
-    while True:
-        values = await rosapi(ws, service, args)
-        if ok(values):
-            return values
-        if time.monotonic() > deadline:
-            raise AssertionError(f"{service} never satisfied the check; last answer {values}")
-        await asyncio.sleep(0.02)
+    return await ask_until(lambda: rosapi(ws, service, args), ok, service, timeout, 0.02)
 
 
 async def open_wire(url: str, **options: Any) -> WireClient:

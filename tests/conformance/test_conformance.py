@@ -24,20 +24,15 @@ from roslibpy_lite import (
     Subscription,
     UsageError,
 )
+from tests.op_peer import send_until_heard
 
 MULT = "mult_msgs/srv/MultFloats"
 
 
 async def heard(pub: Publisher[Any], sub: Subscription[Any], msg: Any, timeout: float = 15.0) -> Any:
     """Publish ``msg`` until ``sub`` hears it (ROS discovery has no event); returns what arrived."""
-    deadline = asyncio.get_running_loop().time() + timeout
-    while True:
-        await pub.publish(msg)
-        try:
-            return await sub.get(0.25)
-        except RosTimeoutError:
-            if asyncio.get_running_loop().time() > deadline:
-                raise
+    return await send_until_heard(lambda: pub.publish(msg), sub.get, f"{msg} on {sub.topic}",
+                                  timeout=timeout)
 
 
 async def after_warm_up(sub: Subscription[Any], value: Any, timeout: float = 10.0) -> Any:

@@ -8,7 +8,6 @@ event): :func:`until` asks again, with a deadline.
 
 from __future__ import annotations
 
-import asyncio
 from collections.abc import Awaitable, Callable
 from typing import Any, TypeVar
 
@@ -18,6 +17,7 @@ from roslibpy_lite import MockRos, Ros, ServiceError, UsageError
 from roslibpy_lite.capabilities.introspection import GraphAction, GraphService, GraphTopic
 from roslibpy_lite.transports.memory import MOCK_NODE
 from tests.conformance.test_actions import IMU, counting
+from tests.op_peer import ask_until
 
 T = TypeVar("T")
 
@@ -25,14 +25,7 @@ T = TypeVar("T")
 async def until(ask: Callable[[], Awaitable[T]], ok: Callable[[T], bool],
                 timeout: float = 15.0) -> T:
     """Ask until the answer is ``ok`` (the ROS graph settles with no event), with a deadline."""
-    deadline = asyncio.get_running_loop().time() + timeout
-    while True:
-        answer = await ask()
-        if ok(answer):
-            return answer
-        if asyncio.get_running_loop().time() > deadline:
-            raise AssertionError(f"the graph never showed it; last answer {answer}")
-        await asyncio.sleep(0.05)
+    return await ask_until(ask, ok, "the graph", timeout)
 
 
 async def test_topics_services_actions_with_types(ros: Ros, topic: str) -> None:

@@ -20,7 +20,7 @@ from typing import TYPE_CHECKING, Any
 import pytest
 
 from roslibpy_lite.exceptions import RosTimeoutError, ServiceError
-from tests.helpers import ROOT, ros_env
+from tests.helpers import ROOT, ros_env, send_until_heard
 from tests.relay.procs import Proc
 
 if TYPE_CHECKING:
@@ -86,17 +86,10 @@ def bridge_command(python: str, *args: str) -> list[str]:
 async def heard(client: Client, topic: str, data: str, timeout: float = 30.0) -> Any:
     """Publish ``data`` on ``topic/in`` until an answer comes on ``topic/out`` (DDS discovery
     across the two processes has no event to await)."""
-    loop = asyncio.get_running_loop()
-    deadline = loop.time() + timeout
     async with client.advertise(f"{topic}/in", "std_msgs/msg/String") as pub, \
             client.subscribe(f"{topic}/out", "std_msgs/msg/String") as sub:
-        while True:
-            await pub.publish({"data": data})
-            try:
-                return await sub.get(0.5)
-            except RosTimeoutError:
-                if loop.time() > deadline:
-                    raise
+        return await send_until_heard(lambda: pub.publish({"data": data}), sub.get,
+                                      f"an answer on {topic}/out", attempt=0.5, timeout=timeout)
 
 
 async def answered(client: Client, service: str, timeout: float = 30.0) -> Any:

@@ -2,11 +2,11 @@
 
 from __future__ import annotations
 
-import time
 from collections.abc import Callable
 from typing import Any
 
-from roslibpy_lite import RosTimeoutError, sync
+from roslibpy_lite import sync
+from tests.helpers import send_until_heard_sync
 
 
 def heard(
@@ -14,17 +14,15 @@ def heard(
     wanted: Callable[[Any], bool] = lambda msg: True, timeout: float = 15.0,
 ) -> Any:
     """Publish ``msg`` until ``sub`` hears a ``wanted`` message (ROS discovery has no event)."""
-    deadline = time.monotonic() + timeout
-    while True:
-        pub.publish(msg)
-        try:
-            got = sub.get(0.25)
-        except RosTimeoutError:
-            got = None
-        if got is not None and wanted(got):
-            return got
-        if time.monotonic() > deadline:
-            raise RosTimeoutError(f"{sub.topic}: never heard {msg}")
+
+    def listen(wait: float) -> Any:
+        got = sub.get(wait)
+        if got is None or not wanted(got):
+            raise TimeoutError
+        return got
+
+    return send_until_heard_sync(lambda: pub.publish(msg), listen,
+                                 f"{msg} on {sub.topic}", timeout=timeout)
 
 
 def skip_repeats(sub: sync.Subscription[Any], value: Any) -> Any:
