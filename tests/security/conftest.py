@@ -32,6 +32,15 @@ def auth_bridge(auth: AuthFile) -> Iterator[BridgeProcess]:
 
 
 @pytest.fixture(scope="module")
+def debug_bridge(auth: AuthFile) -> Iterator[BridgeProcess]:
+    """A bridge requiring tokens, logging at DEBUG (websockets' request lines and headers),
+    shared by a test module."""
+    proc = BridgeProcess(args=["--auth-file", str(auth.path), "--log-level", "DEBUG"]).start()
+    yield proc
+    proc.stop()
+
+
+@pytest.fixture(scope="module")
 def tls_bridge(certs: Certs, auth: AuthFile) -> Iterator[BridgeProcess]:
     """A bridge serving wss:// and requiring tokens, shared by a test module."""
     proc = BridgeProcess(args=["--certfile", str(certs.server), "--auth-file", str(auth.path)])

@@ -8,7 +8,7 @@ from __future__ import annotations
 import asyncio
 import base64
 import os
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 
 import pytest
 
@@ -16,14 +16,6 @@ from rosbridge_core.security import redact
 from tests.helpers import BridgeProcess
 from tests.security.support import AuthFile
 from tests.security.test_log_secrets import assert_nowhere
-
-
-@pytest.fixture(scope="module")
-def debug_bridge(auth: AuthFile) -> Iterator[BridgeProcess]:
-    """A bridge requiring tokens, logging at DEBUG (websockets' request lines and headers)."""
-    proc = BridgeProcess(args=["--auth-file", str(auth.path), "--log-level", "DEBUG"]).start()
-    yield proc
-    proc.stop()
 
 
 def _request(target: str, *headers: str) -> bytes:

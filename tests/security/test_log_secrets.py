@@ -8,7 +8,6 @@ import asyncio
 import logging
 import re
 import sys
-from collections.abc import Iterator
 
 import pytest
 from websockets.asyncio.client import connect
@@ -30,14 +29,6 @@ def assert_nowhere(secret: str, text: str) -> None:
     """No 8-character piece of ``secret`` is in ``text``."""
     leaked = [p for p in pieces(secret) if p in text]
     assert not leaked, f"{len(leaked)} pieces of a secret in the log, e.g. {leaked[0]!r}"
-
-
-@pytest.fixture(scope="module")
-def debug_bridge(auth: AuthFile) -> Iterator[BridgeProcess]:
-    """A bridge requiring tokens, logging at DEBUG (websockets' request lines and headers)."""
-    proc = BridgeProcess(args=["--auth-file", str(auth.path), "--log-level", "DEBUG"]).start()
-    yield proc
-    proc.stop()
 
 
 async def test_query_tokens_in_any_spelling_never_reach_the_log(
