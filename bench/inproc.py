@@ -11,9 +11,9 @@ the process's CPU time only, so they resolve a few percent on a loaded machine:
   the raw subscription) and on into the MCAP recorder's writer, as ``roslibpy-lite bag
   record`` takes each message (the socket and websockets' framing aside);
 - ``recorder_image_us``: the same with a 640x480 rgb8 frame (921,654 bytes);
-- ``image_json_us`` and ``image_cbor_us``: the bridge's encodings of one such Image received as
-  CDR (``Incoming.message_json``, ``Incoming.cbor_obj``), made once per message whatever the
-  number of subscribers;
+- ``image_json_us`` and ``image_cbor_us``: the bridge's ``publish`` op of one such Image
+  received as CDR, as JSON text and as CBOR (``Incoming.encoded``: the message's encoding and
+  its envelope), made once per message whatever the number of subscribers;
 - ``mock_call_us``: a client-served ``std_srvs/SetBool`` called through ``MockRos``: the client,
   the bridge's session and the in-memory graph, everything of ``client_service`` but rclpy and
   the sockets;
@@ -122,7 +122,7 @@ async def _recorder(rounds: int, size: int, count: int) -> tuple[float, float]:
 
 
 def _image_encodings(rounds: int) -> dict[str, tuple[float, float]]:
-    """CPU (us) and Python calls of the bridge's JSON and CBOR encodings of one 640x480 Image
+    """CPU (us) and Python calls of the bridge's JSON and CBOR publish ops of one 640x480 Image
     from its CDR."""
     from rclpy.serialization import serialize_message
     from sensor_msgs.msg import Image
@@ -142,8 +142,8 @@ def _image_encodings(rounds: int) -> dict[str, tuple[float, float]]:
     data = serialize_message(msg)
     conv = convert.converter_for(Image)
     cases: dict[str, Callable[[], Any]] = {
-        "image_json_us": lambda: incoming("/i", data, conv, 0).message_json(),
-        "image_cbor_us": lambda: incoming("/i", data, conv, 0).cbor_obj()}
+        "image_json_us": lambda: incoming("/i", data, conv, 0).encoded("none"),
+        "image_cbor_us": lambda: incoming("/i", data, conv, 0).encoded("cbor")}
     out: dict[str, tuple[float, float]] = {}
     for case, op in cases.items():
         us = _least(rounds, 20, op)
