@@ -452,38 +452,50 @@ async def router_restart(tier: Tier, views: list[Child], down: float = 2.0,
     return {"robots_back_s": robots_back, **await _until_back(tier, views, limit)}
 
 
-async def churn(tier: Tier, seconds: float) -> dict[str, Any]:
-    """Robots joining and leaving one a second for ``seconds``, each opened by a viewer
-    (through the balancer): relay RSS and the robots the relays list, before and after."""
+async def churn(tier: Tier, seconds: float, prefix: str = "churn") -> dict[str, Any]:
+    """Robots joining and leaving, one more a second for ``seconds`` (each its own life: it
+    joins, a viewer opens it through the balancer and hears it, it leaves; lives overlap),
+    named ``PREFIX-<n>``: relay RSS and the robots the relays list, before and after the
+    relays forgot those that left."""
     def listed() -> int:
         return sum(len(s["robots"]) for s in tier.relay_status())
 
     before = {"rss_mib": tier.usage.since()["relays"]["rss_mib"], "robots_listed": listed()}
     sim = Child(["bench.simrobot", "--connect", tier.router_eps[-1], "--count", "0",
-                 "--prefix", "churn"], tier.ctx.domain, "churn")
+                 "--prefix", prefix], tier.ctx.domain, prefix)
     await sim.start()
     tier.sims.append(sim)
     await sim.event(60)
     from bench.fleetview import Conn
 
-    t_end = time.monotonic() + seconds
-    i = 0
-    while time.monotonic() < t_end:
-        name = f"churn-{i}"
-        await sim.command({"cmd": "join", "robot": name})
-        conn = Conn(tier.url, name, "/pose")
+    lock = asyncio.Lock()  # one command at a time: each answer is the next line
+
+    async def ask(cmd: dict[str, Any]) -> None:
+        async with lock:
+            await sim.command(cmd)
+
+    async def life(name: str) -> bool:
+        await ask({"cmd": "join", "robot": name, "wait": 0})
+        conn = Conn(tier.url, name, "/pose")  # dials again until the relays know the robot
         task = asyncio.create_task(conn.run())
         with contextlib.suppress(TimeoutError):
             await asyncio.wait_for(conn.heard.wait(), 30)
         task.cancel()
-        await sim.command({"cmd": "leave", "robot": name})
-        i += 1
-        await asyncio.sleep(max(0.0, 1.0 - (time.monotonic() % 1.0)))
+        await ask({"cmd": "leave", "robot": name})
+        return conn.heard.is_set()
+
+    lives: list[asyncio.Task[bool]] = []
+    start = time.monotonic()
+    while time.monotonic() - start < seconds:
+        lives.append(asyncio.create_task(life(f"{prefix}-{len(lives)}")))
+        await asyncio.sleep(max(0.0, start + len(lives) - time.monotonic()))
+    heard = sum(await asyncio.gather(*lives))
     deadline = time.monotonic() + 90  # a viewer's kept session, two looks of the relays'
     while listed() > before["robots_listed"] and time.monotonic() < deadline:  # forgetting
         await asyncio.sleep(1)
     after = {"rss_mib": tier.usage.since()["relays"]["rss_mib"], "robots_listed": listed()}
-    return {"robots": i, "before": before, "after": after,
+    return {"robots": len(lives), "heard": heard, "seconds": round(time.monotonic() - start),
+            "before": before, "after": after,
             "rss_growth_pct": round(100 * (after["rss_mib"] / before["rss_mib"] - 1), 1)}
 
 
