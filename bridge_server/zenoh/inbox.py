@@ -34,8 +34,10 @@ from collections import deque
 from collections.abc import Callable
 from typing import Any
 
+import zenoh
+
 __all__ = ["BATCH", "GRAPH_BYTES", "MESSAGE_BYTES", "RELIABLE_BYTES", "RELIABLE_LIMIT",
-           "SAMPLE_BYTES", "SAMPLE_LIMIT", "Faults", "Inbox", "set_message_bytes"]
+           "SAMPLE_BYTES", "SAMPLE_LIMIT", "Faults", "Inbox", "direct", "set_message_bytes"]
 
 log = logging.getLogger("bridge_server.zenoh.graph")
 
@@ -73,6 +75,16 @@ BATCH = 64
 """Items of one robot handled in one turn of the loop."""
 
 Handler = Callable[[Any], None]
+
+
+def direct(fn: Handler, end: Callable[[], None] | None = None) -> zenoh.handlers.Callback[Any]:
+    """``fn`` (and a query's ``end``) called on Zenoh's own thread: for callbacks that only
+    hand to the loop (an :class:`Inbox`'s). A plain Python callable's default is a new Python
+    thread per subscriber, queryable or query, started and ended with each (issue 49: the
+    relay's RSS grew with every robot opened and forgotten)."""
+    if end is None:
+        return zenoh.handlers.Callback(fn, indirect=False)
+    return zenoh.handlers.Callback(fn, end, indirect=False)
 
 
 class Faults:

@@ -17,6 +17,7 @@ import zenoh
 from bridge_server.zenoh import keys
 from bridge_server.zenoh.graph.robot import Robot
 from bridge_server.zenoh.graph.services import ServedHere
+from bridge_server.zenoh.inbox import direct
 from bridge_server.zenoh.keys import GOAL_WAIT, Execute, GoalEvent, GoalRequest
 from bridge_server.zenoh.link import answering, ignore_replies
 from rosbridge_core.graph import GoalListener, ServedGoal
@@ -65,7 +66,7 @@ class ZenohSentGoal:
             graph = self.shared.graph
             with contextlib.suppress(zenoh.ZError):  # the relay is closing: the robot cancels
                 graph.session.get(f"{graph.robot}/{keys.CANCEL}/{graph.relay}/{self.id}",
-                                  ignore_replies, timeout=SERVER_WAIT)
+                                  direct(ignore_replies), timeout=SERVER_WAIT)
 
     def on_reply(self, reply: zenoh.Reply) -> None:
         """One of the robot's replies (on the loop)."""
@@ -169,8 +170,7 @@ class ZenohActionClient:
             sent.token = graph.session.liveliness().declare_token(
                 f"{graph.robot}/{keys.RUNNING}/{graph.relay}/{sent.id}")
             graph.session.get(keys.key_of(graph.robot, self.name, f"{keys.GOAL}/{graph.relay}"),
-                              zenoh.handlers.Callback(graph.on_loop(sent.on_reply),
-                                                      graph.inbox.end(sent.on_end)),
+                              direct(graph.on_loop(sent.on_reply), graph.inbox.end(sent.on_end)),
                               payload=request.encode(), timeout=GOAL_WAIT,
                               consolidation=zenoh.ConsolidationMode.NONE)
         except zenoh.ZError:  # the relay's Zenoh session closed: the goal ends unsent

@@ -14,6 +14,7 @@ import zenoh
 
 from bridge_server.zenoh import keys
 from bridge_server.zenoh.graph.robot import Robot
+from bridge_server.zenoh.inbox import direct
 from bridge_server.zenoh.keys import CallRequest, ParamRequest
 from rosbridge_core.graph import service_request
 from rosbridge_core.interfaces import BridgeError, ServiceCallError
@@ -50,8 +51,7 @@ async def ask(graph: Robot, key: str, payload: bytes, timeout: float, what: str)
             future.set_exception(Refused(f"{what}: {graph.went('call')}"))
 
     try:
-        graph.session.get(key, zenoh.handlers.Callback(graph.on_loop(answer),
-                                                       graph.inbox.end(ended)),
+        graph.session.get(key, direct(graph.on_loop(answer), graph.inbox.end(ended)),
                           payload=payload, timeout=timeout)
     except zenoh.ZError as exc:  # the relay is closing
         raise Refused(f"{what}: this relay's Zenoh session is closed ({exc})") from None

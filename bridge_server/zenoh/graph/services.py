@@ -14,6 +14,7 @@ import zenoh
 
 from bridge_server.zenoh import keys
 from bridge_server.zenoh.graph.robot import Robot
+from bridge_server.zenoh.inbox import direct
 from rosbridge_core.graph import RosCall
 from rosbridge_core.interfaces import ConversionError, Kind
 
@@ -63,10 +64,10 @@ class ServedHere:
         self._entities = [
             graph.session.declare_queryable(
                 keys.key_of(graph.robot, self.name, f"{where}/{graph.relay}"),
-                graph.on_loop(self._on_query)),
+                direct(graph.on_loop(self._on_query))),
             graph.session.declare_subscriber(
                 keys.refused_key(graph.robot, graph.relay, self.name, kind),
-                graph.on_loop(self._on_refused)),
+                direct(graph.on_loop(self._on_refused))),
             graph.session.liveliness().declare_token(
                 keys.serve_key(graph.robot, graph.relay, self.name, type_name, kind)),
         ]

@@ -16,7 +16,7 @@ from bridge_server.zenoh import keys
 from bridge_server.zenoh.decode import DECODED, TopicLane, wanted
 from bridge_server.zenoh.graph.converter import RelayConverter
 from bridge_server.zenoh.graph.robot import NotHolder, Robot
-from bridge_server.zenoh.inbox import Faults
+from bridge_server.zenoh.inbox import Faults, direct
 from bridge_server.zenoh.keys import Meta
 from bridge_server.zenoh.replay import recovering_subscriber
 from bridge_server.zenoh.typestore import TypeRefused
@@ -128,12 +128,12 @@ class ZenohFeed:
         here = g.inbox.sample  # latest-only: past the robot's bound its oldest go
         self._entities = [
             *recovering_subscriber(session, keys.key_of(g.robot, self.topic),
-                                   here(self.on_sample), g.on_loop(self.on_miss)),
+                                   direct(here(self.on_sample)), g.on_loop(self.on_miss)),
             session.liveliness().declare_token(
                 keys.key_of(g.robot, self.topic, f"{keys.DEMAND}/{g.relay}")),
         ]
         session.get(keys.key_of(g.robot, self.topic, keys.LATCHED),
-                    zenoh.handlers.Callback(here(self.on_reply)))
+                    direct(here(self.on_reply)))
 
     def close(self) -> None:
         """Stop listening; the robot unsubscribes once no relay wants the topic."""

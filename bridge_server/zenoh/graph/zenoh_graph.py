@@ -23,7 +23,7 @@ from bridge_server.zenoh.graph.queries import RobotQueries
 from bridge_server.zenoh.graph.robot import NotHolder
 from bridge_server.zenoh.graph.services import ZenohServedService
 from bridge_server.zenoh.graph.topics import ZenohFeed, ZenohPublisher
-from bridge_server.zenoh.inbox import Inbox
+from bridge_server.zenoh.inbox import Inbox, direct
 from bridge_server.zenoh.keys import Snapshot
 from bridge_server.zenoh.typestore import GraphReader, RobotTypes, TypeLimits, let_go
 from msgs.dynamic import TypeStore
@@ -107,12 +107,12 @@ class ZenohGraph(SnapshotIntrospection, RobotQueries):
         r = self.robot
         self._entities = [
             self.session.liveliness().declare_subscriber(
-                f"{r}/{keys.ALIVE}/**", self.on_loop(self._on_alive), history=True),
+                f"{r}/{keys.ALIVE}/**", direct(self.on_loop(self._on_alive)), history=True),
             self.session.declare_subscriber(f"{r}/{keys.GRAPH}",
-                                            self.inbox.graph(self._on_graph)),
+                                            direct(self.inbox.graph(self._on_graph))),
         ]
         self.session.get(f"{r}/{keys.GRAPH}",
-                         zenoh.handlers.Callback(self.inbox.graph(self._on_graph_reply)))
+                         direct(self.inbox.graph(self._on_graph_reply)))
 
     async def ready(self, timeout: float = SNAPSHOT_WAIT) -> bool:
         """Whether the robot's first graph snapshot came within ``timeout`` s."""
