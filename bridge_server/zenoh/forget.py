@@ -9,7 +9,11 @@ on every relay that had served it, some 400 KB each (``bench/fleet.py``'s churn)
 :class:`Forgetter` looks at the relay's robots every :data:`FORGET_AFTER` seconds: one that
 is away from Zenoh (its graph's ``trouble()``) with no client session left (a session kept
 for a resume counts) at two looks in a row is closed and dropped. A robot that comes back
-later is opened again by the next client that asks, as any robot is. A robot that is away
+later is opened again by the next client that asks, as any robot is. A look that forgot
+robots ends with a full garbage collection: a closed robot is reference cycles (its bridge,
+graph, feeds and callbacks) that hold Zenoh's native memory, which the collector's own
+thresholds left for rounds (issue 49: the relay's RSS +8 MiB per 30 robots churned, flat
+with a collection after each look). A robot that is away
 while its clients wait for it is kept: their subscriptions resume when it is back.
 """
 
@@ -17,6 +21,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import gc
 import logging
 from typing import TYPE_CHECKING
 
@@ -55,7 +60,8 @@ class Forgetter:
     async def sweep(self) -> None:
         """One look: forget the robots idle at the last look and still idle now."""
         idle = {name for name, bridge in self.robots.items() if _idle(bridge)}
-        for name in idle & self._idle:
+        gone = idle & self._idle
+        for name in gone:
             bridge = self.robots.pop(name)
             self.forgotten += 1
             log.info("robot %s left and nobody waits for it: forgotten", name)
@@ -63,7 +69,10 @@ class Forgetter:
                 await bridge.close()
             except Exception:  # one robot's close must not stop the others'
                 log.exception("closing the bridge of robot %s failed", name)
+            del bridge
         self._idle = idle - self._idle
+        if gone:  # a closed robot is cycles holding Zenoh's native memory (issue 49)
+            gc.collect()
 
     def stop(self) -> None:
         """Stop looking."""

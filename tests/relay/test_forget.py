@@ -45,3 +45,30 @@ async def test_gone_and_unwatched_robots_are_forgotten_at_the_second_look() -> N
     assert "back" in robots  # away again: one look more first
     await forgetter.sweep()
     assert set(robots) == {"here", "waited"}
+
+
+async def test_a_forgotten_robot_in_reference_cycles_is_freed_at_the_look() -> None:
+    """A forgotten robot's bridge in a reference cycle (as a real one is) is freed by the look
+    that forgot it, with the collector's own thresholds off (issue 49)."""
+    import gc
+    import weakref
+
+    class Held:
+        """Stands for the native memory a closed robot's objects hold."""
+
+    bridge = _bridge(False)
+    bridge.held = Held()
+    bridge.me = bridge  # a cycle
+    held = weakref.ref(bridge.held)
+    robots: dict[str, Any] = {"gone": bridge}
+    del bridge
+    forgetter = Forgetter(robots)
+    was = gc.isenabled()
+    gc.disable()
+    try:
+        await forgetter.sweep()
+        await forgetter.sweep()
+    finally:
+        if was:
+            gc.enable()
+    assert robots == {} and held() is None, "the forgotten robot's cycle was kept"
