@@ -80,8 +80,8 @@ Handler = Callable[[Any], None]
 def direct(fn: Handler, end: Callable[[], None] | None = None) -> zenoh.handlers.Callback[Any]:
     """``fn`` (and a query's ``end``) called on Zenoh's own thread: for callbacks that only
     hand to the loop (an :class:`Inbox`'s). A plain Python callable's default is a new Python
-    thread per subscriber, queryable or query, started and ended with each (issue 49: the
-    relay's RSS grew with every robot opened and forgotten)."""
+    thread per subscriber, queryable or query, started and ended with each (issue 49: ten
+    a robot the relay opened)."""
     if end is None:
         return zenoh.handlers.Callback(fn, indirect=False)
     return zenoh.handlers.Callback(fn, end, indirect=False)

@@ -47,7 +47,8 @@ def test_direct_callbacks_start_no_thread_per_subscriber(session: zenoh.Session)
 
 
 def test_direct_query_calls_back_and_ends(session: zenoh.Session) -> None:
-    """A query's callback and its end given to ``direct`` are both called, the end after."""
+    """A query's callback and its end given to ``direct`` are both called, the end after
+    (fails with ``direct`` dropping ``end``)."""
     got: list[str] = []
     ended = threading.Event()
     queryable = session.declare_queryable(
