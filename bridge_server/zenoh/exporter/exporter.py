@@ -9,7 +9,6 @@ import asyncio
 import contextlib
 import itertools
 import math
-import random
 import secrets
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
@@ -200,7 +199,7 @@ class Exporter(TopicExports, Publishing, ServiceCalls, ServedNames, RelayGoals, 
             now = self._loop.time()
             back = now < self._away_until < math.inf
             with contextlib.suppress(TimeoutError):
-                async with asyncio.timeout(random.uniform(0.5, 1.5) * RETURN_POLL if back
+                async with asyncio.timeout(RETURN_POLL if back
                                            else max(0.0, look - now)):
                     await self._returned.wait()
             if self._returned.is_set() or back:
