@@ -364,7 +364,13 @@ async def test_a_robot_nodes_parameters_through_the_relay(ros_node: Any) -> None
             await until(lambda: node in [ns.rstrip("/") + "/" + n for n, ns in
                                          t.relay.robots[ROBOT].graph.node_names()],
                         "the relay to list the node")
-            reply = await call("get_param_names", {})
+            # the node's name can reach the robot's graph before its parameter services do:
+            # until they have, the robot lists none of its parameters
+            for _ in range(200):
+                reply = await call("get_param_names", {})
+                if f"{node}:gain" in reply["values"]["names"]:
+                    break
+                await asyncio.sleep(0.1)
             assert f"{node}:gain" in reply["values"]["names"], reply
             reply = await call("get_param", {"name": f"{node}:gain"})
             assert reply["values"]["value"] == "1.5", reply
