@@ -25,7 +25,8 @@ async def test_call_service_args_object_with_type(ws_connect: Any, ros_node: Any
     ws = await ws_connect()
     await ws.send({"op": "call_service", "service": topic, "type": "mult_msgs/srv/MultFloats",
                    "args": {"x": 3.0, "y": 4.5}, "id": "c1", "timeout": 30})
-    reply = await ws.expect(op="service_response", id="c1")
+    # as long as the call may take (the service's discovery, a fresh bridge's first call)
+    reply = await ws.expect(op="service_response", id="c1", timeout=30)
     assert reply == {"op": "service_response", "service": topic, "result": True,
                      "values": {"result": 13.5}, "id": "c1"}
 
