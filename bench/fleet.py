@@ -35,6 +35,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import json
+import math
 import os
 import random
 import tempfile
@@ -60,6 +61,11 @@ PER_PROCESS = 250
 """Simulated robots per process."""
 VIEWERS_PER_PROCESS = 1500
 """Viewer connections per process."""
+BALANCER_CONNECTIONS = 9000
+"""Viewer connections per HAProxy: each takes two of its descriptors, and a process here may
+open at most 20,000 (``ulimit -Hn``, which this machine does not let even root raise). A
+size with more viewer connections gets more balancers before the same relays, each viewer
+process dialing one of them (as a site gives two balancers one name by DNS)."""
 
 
 @dataclass(frozen=True)
@@ -105,7 +111,7 @@ class Tier:
         self.relays: list[Bridge] = []
         self.sims: list[Child] = []
         self.viewers: list[Child] = []
-        self.balancer: Balancer | None = None
+        self.balancers: list[Balancer] = []
         self.names = [f"{prefix}-{i}" for i in range(size.robots)]
         self.usage = Usage(self._pids)
 
@@ -119,9 +125,13 @@ class Tier:
 
     @property
     def url(self) -> str:
-        """The balancer's websocket address."""
-        assert self.balancer is not None
-        return f"ws://127.0.0.1:{self.balancer.port}"
+        """The first balancer's websocket address."""
+        return self.url_of(0)
+
+    def url_of(self, i: int) -> str:
+        """The websocket address of balancer ``i`` (modulo their number)."""
+        assert self.balancers
+        return f"ws://127.0.0.1:{self.balancers[i % len(self.balancers)].port}"
 
     async def start_router(self, i: int) -> None:
         """Router ``i`` (listening on its endpoint; the others dial router 0)."""
@@ -133,7 +143,9 @@ class Tier:
         await _ready_line(router)
 
     async def start(self) -> None:
-        """Routers, relays, the balancer (robots: :meth:`add_robots`)."""
+        """Routers, relays, the balancers (robots: :meth:`add_robots`): one per
+        :data:`BALANCER_CONNECTIONS` viewer connections the size may open (each viewer
+        watches two robots on average, and a tenth of the viewers' count of probes)."""
         for i in range(self.size.routers):
             await self.start_router(i)
         for i in range(self.size.relays):
@@ -143,9 +155,13 @@ class Tier:
                            self.ctx.bridge_root, module="bridge_server.zenoh.relay",
                            ready=RELAY_READY)
             self.relays.append(await relay.start(60))
-        port = free_port()
-        self.balancer = await Balancer(haproxy_config(port, [r.port for r in self.relays]),
-                                       self.folder, port).start()
+        connections = 2 * self.size.viewers + self.size.viewers // 10
+        for i in range(max(1, math.ceil(connections / BALANCER_CONNECTIONS))):
+            port = free_port()
+            folder = self.folder / f"balancer{i}"
+            folder.mkdir(exist_ok=True)
+            self.balancers.append(await Balancer(
+                haproxy_config(port, [r.port for r in self.relays]), folder, port).start())
 
     async def add_robots(self, names: list[str]) -> list[Child]:
         """Robot processes for ``names`` (:data:`PER_PROCESS` each), dialing the routers in
@@ -188,7 +204,8 @@ class Tier:
             chunk.append(entry)
         chunks.append(chunk)
         for part in chunks:
-            view = Child(["bench.fleetview", self.url, json.dumps(part), "--wait", str(wait)],
+            view = Child(["bench.fleetview", self.url_of(len(self.viewers)), json.dumps(part),
+                          "--wait", str(wait)],
                          self.ctx.domain, f"viewers{len(self.viewers)}")
             await view.start()
             self.viewers.append(view)
@@ -236,8 +253,8 @@ class Tier:
         for child in [*self.viewers, *self.sims]:
             with contextlib.suppress(Exception):
                 await child.stop()
-        if self.balancer is not None:
-            await self.balancer.stop()
+        for balancer in self.balancers:
+            await balancer.stop()
         for relay in self.relays:
             with contextlib.suppress(Exception):
                 await relay.stop()
