@@ -47,10 +47,15 @@ One module per job, as :mod:`rosbridge_core.session` has: :mod:`.exporter` (the
 
 from bridge_server.zenoh.exporter.exporter import DIAL_WARNING, SNAPSHOT_INTERVAL, Exporter
 from bridge_server.zenoh.exporter.policy import DEFAULT_POLICY
-from bridge_server.zenoh.exporter.presence import CLAIM_RECHECK, CLAIM_WAIT, RETURN_POLL
+from bridge_server.zenoh.exporter.presence import (
+    CLAIM_RECHECK,
+    CLAIM_WAIT,
+    RETURN_LEASES,
+    RETURN_POLL,
+)
 from bridge_server.zenoh.exporter.publishing import UNHELD_PUBLISHER_WAIT
 from bridge_server.zenoh.exporter.served import REFUSAL_REPEAT, SERVED_CALL_WAIT
 
 __all__ = ["CLAIM_RECHECK", "CLAIM_WAIT", "DEFAULT_POLICY", "DIAL_WARNING", "REFUSAL_REPEAT",
-           "RETURN_POLL", "SERVED_CALL_WAIT", "SNAPSHOT_INTERVAL", "UNHELD_PUBLISHER_WAIT",
-           "Exporter"]
+           "RETURN_LEASES", "RETURN_POLL", "SERVED_CALL_WAIT", "SNAPSHOT_INTERVAL",
+           "UNHELD_PUBLISHER_WAIT", "Exporter"]

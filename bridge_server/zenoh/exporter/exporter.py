@@ -190,19 +190,26 @@ class Exporter(TopicExports, Publishing, ServiceCalls, ServedNames, RelayGoals, 
         """Keep the graph snapshot fresh while the robot holds its name; return its claim
         token when, back from an outage (its last uplink gone, then one back), it finds
         another robot's claim: that robot took the name meanwhile, and the held claim wins.
-        The looks at the claims (each :data:`RETURN_POLL` s back from an outage) do not look
-        at the graph more often than every ``snapshot_interval`` s: 250 simulated robots
-        back from a router's restart spent half their process's loop taking snapshots at
-        each look, and held their names again 7.6 s after the router was back."""
+        Back from an outage it looks at once, then after :data:`RETURN_POLL` s, each wait
+        twice the one before, and at the end of its time away (:data:`RETURN_LEASES`
+        leases). The looks do not look at the graph more often than every
+        ``snapshot_interval`` s: 250 simulated robots back from a router's restart spent
+        half their process's loop taking snapshots at each look, and held their names again
+        7.6 s after the router was back."""
         look = self._loop.time() + self.snapshot_interval  # the graph's next look
+        away, gap = 0.0, RETURN_POLL  # the outage the looks are for; the next wait
         while True:
             now = self._loop.time()
             back = now < self._away_until < math.inf
+            if back and away != self._away_until:  # back from another outage
+                away, gap = self._away_until, RETURN_POLL
             with contextlib.suppress(TimeoutError):
-                async with asyncio.timeout(RETURN_POLL if back
+                async with asyncio.timeout(min(gap, self._away_until - now) if back
                                            else max(0.0, look - now)):
                     await self._returned.wait()
             if self._returned.is_set() or back:
+                if not self._returned.is_set():
+                    gap *= 2
                 self._returned.clear()
                 found = await tokens(session, f"{self.robot}/{keys.CLAIM}/*", CLAIM_WAIT)
                 if {keys.parse_alive(key)[1] for key in found} - {self.zid}:
