@@ -345,7 +345,9 @@ class SessionServices:
         if (obj.get("result") is not True or type(values) is not dict
                 or type(rid) is not str or type(service) is not str):
             return False
-        served = self.served.get(absolute_name(service))
+        served = self.served.get(service)  # keyed by absolute name, as clients mostly spell it
+        if served is None:
+            served = self.served.get(absolute_name(service))
         if served is None or served.ros is None:
             return False
         entry = served.pending.pop(rid, None)
