@@ -498,7 +498,9 @@ class Outbox:
         """The frames to write next (:meth:`_collect`), kept in a resumable session until the
         client confirms them, after a ``session_ack`` to send first."""
         sent = self.sent
-        frames = self._collect(sent is None and self.framing and self.link.raw_ok())
+        # framed only matters to topic messages: a batch of replies alone does not ask the link
+        framed = sent is None and self.framing and self.link.raw_ok() if self.order else False
+        frames = self._collect(framed)
         if sent is not None:  # kept until the client confirms them
             for frame in frames:
                 sent.add(joined(frame))
