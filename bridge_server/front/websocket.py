@@ -268,8 +268,12 @@ class BridgeConnection(WebSocketLink):
         message holds is charged, and the connection closed (1009) if that passes its
         principal's or its address's limit of in-flight bytes."""
         self._read(data)
-        if self._inflight is not None:
-            self._charge_incomplete(self._inflight)
+        charges = self._inflight
+        if charges is not None:
+            protocol = self.protocol
+            # nothing to charge or give back when no incomplete message is, or was, held
+            if protocol.reader.buffer or self._buffered or protocol.current_size is not None:
+                self._charge_incomplete(charges)
 
     def _charge_incomplete(self, charges: KindBudget) -> None:
         protocol = self.protocol
