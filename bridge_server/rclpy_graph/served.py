@@ -195,7 +195,7 @@ class ServedService:
             except Exception as exc:  # destroyed meanwhile, or the caller went away
                 log.debug("could not answer a ROS caller of %s: %s", self.name, exc)
                 return
-        if not any(UNMATCHED_CALLER in str(w.message) for w in warned):
+        if not warned or not any(UNMATCHED_CALLER in str(w.message) for w in warned):
             return
         if attempt < len(ANSWER_RETRIES):
             loop = self.ros.loop
