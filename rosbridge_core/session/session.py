@@ -325,11 +325,11 @@ class Session:
 
     def handle_frame(self, frame: str | bytes) -> None:
         """Decode one frame and carry out the op it completes; errors go back as ``status``."""
-        self.frame_len = len(frame)
+        self.frame_len = size = len(frame)
         if self.token is not None:  # confirm it soon (the client keeps it until then)
             self._count_received()
         gate = self.gate
-        if not gate.admit_frame(len(frame)):
+        if not gate.admit_frame(size):
             return
         try:
             obj = decode_frame(frame)
@@ -383,8 +383,9 @@ class Session:
                    op_id: Any) -> bool:
         """``handler(arg)`` for the op ``name``; what it raises goes back to the client as an
         error (an internal one logged). False only when a raw handler did not take the op."""
-        if not isinstance(op_id, str | int) or isinstance(op_id, bool):
-            op_id = None  # the id as parse_op reads it
+        if type(op_id) is not str and (not isinstance(op_id, str | int)
+                                       or isinstance(op_id, bool)):
+            op_id = None  # the id as parse_op reads it (a str, the usual, checked first)
         try:
             return handler(arg) is not False
         except BridgeError as exc:
