@@ -34,6 +34,7 @@ Who may serve a name another client (or an rclpy node) serves is decided by
 from __future__ import annotations
 
 import asyncio
+import functools
 import itertools
 import json
 import logging
@@ -229,8 +230,8 @@ class SessionServices:
         ):
             return
         served = ClientService(name, type_name, op.service)
-        served.ros = graph.serve(name, srv_cls,
-                                 lambda pending: self._on_ros_request(served, pending),
+        # each ROS request reaches _on_ros_request through a partial: no frame of its own
+        served.ros = graph.serve(name, srv_cls, functools.partial(self._on_ros_request, served),
                                  lambda why: self._refused(served, op, why))
         self.served[name] = served
         self._owners.take(name, self)
