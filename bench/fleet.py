@@ -2,7 +2,7 @@
 routers in a mesh, relays behind HAProxy, many viewers; what each costs and how it recovers.
 
 At each size (robots, routers, relays, viewers; :data:`SIZES`, :data:`QUICK`, or
-``BENCH_FLEET_SIZES="robots x routers x relays x viewers,..."``):
+``BENCH_FLEET_SIZES="robots x routers x relays x viewers [x watched],..."``):
 
 1. routers (``bench/zrouter.py``; the second and later dial the first: a mesh), relays
    (``python -m bridge_server.zenoh.relay``, Zenoh clients of the routers in turn) and
@@ -76,13 +76,23 @@ class Size:
     routers: int
     relays: int
     viewers: int
+    watched: int = 0
+    """Robots the viewers watch (0: a tenth of the viewers, at most all robots). Each watched
+    robot's messages reach every relay that has a viewer of it, so on this 2-core machine
+    5,000 viewers fit only over fewer robots than 500 (``1000x2x2x5000x100``)."""
 
     def __str__(self) -> str:
-        return f"{self.robots}x{self.routers}x{self.relays}x{self.viewers}"
+        tail = f"x{self.watched}" if self.watched else ""
+        return f"{self.robots}x{self.routers}x{self.relays}x{self.viewers}{tail}"
+
+    @property
+    def watched_robots(self) -> int:
+        """How many robots the viewers watch (see :attr:`watched`)."""
+        return max(1, min(self.robots, self.watched or self.viewers // 10))
 
 
 SIZES = (Size(10, 1, 1, 100), Size(100, 2, 2, 1000), Size(500, 2, 4, 1000),
-         Size(1000, 2, 4, 5000))
+         Size(1000, 2, 2, 5000, 100))
 QUICK = (Size(10, 1, 2, 100),)
 
 
@@ -94,7 +104,8 @@ def sizes(ctx: Ctx) -> tuple[Size, ...]:
             return tuple(Size(*(int(x) for x in s.split("x"))) for s in given.split(","))
         except (TypeError, ValueError):
             raise ValueError(f"BENCH_FLEET_SIZES={given!r}: expected robots x routers x relays "
-                             "x viewers, comma-separated, e.g. 100x2x2x1000") from None
+                             "x viewers [x watched], comma-separated, e.g. 100x2x2x1000"
+                             ) from None
     return QUICK if ctx.quick else SIZES
 
 
@@ -155,7 +166,7 @@ class Tier:
                            self.ctx.bridge_root, module="bridge_server.zenoh.relay",
                            ready=RELAY_READY)
             self.relays.append(await relay.start(60))
-        connections = 2 * self.size.viewers + self.size.viewers // 10
+        connections = 2 * self.size.viewers + self.size.watched_robots
         for i in range(max(1, math.ceil(connections / BALANCER_CONNECTIONS))):
             port = free_port()
             folder = self.folder / f"balancer{i}"
@@ -357,7 +368,7 @@ async def run_size(ctx: Ctx, size: Size, folder: Path, churn_s: float,
         idle = await measured(tier, win)
         out["per_unwatched_robot"] = _per(idle, base, size.robots)
         out["open_one"] = await open_one_by_one(tier, tier.names[-min(OPEN_ONE, size.robots):])
-        watched = tier.names[:max(1, min(size.robots, size.viewers // 10))]
+        watched = tier.names[:size.watched_robots]
         probes = await tier.add_viewers([([r], "/pose") for r in watched])
         one = await measured(tier, win)
         out["per_watched_robot"] = _per(one, idle, len(watched))
