@@ -152,6 +152,33 @@ async def test_a_lone_message_written_at_once_leaves_the_writer_parked() -> None
         await asyncio.wait_for(writer, 5.0)
 
 
+async def test_replies_alone_ask_the_link_once_whether_to_frame() -> None:
+    """Whether frames may be written framed (``raw_ok``) matters to a topic message's shared
+    frame: a reply written at once asks once (the link's write); a message queued behind one
+    twice more (taken framed by the writer, then written)."""
+    async with _parked_outbox(None) as (box, client, ws, writer):
+        assert isinstance(ws, WebSocketLink)
+        asked = [0]
+        real_raw_ok = ws.raw_ok
+
+        def counting_raw_ok() -> bool:
+            asked[0] += 1
+            return real_raw_ok()
+
+        ws.raw_ok = counting_raw_ok  # type: ignore[method-assign]
+        box.send_text("a reply")
+        assert await asyncio.wait_for(client.recv(), 5.0) == "a reply"
+        assert asked[0] == 1, "a reply alone: only the write asks"
+        await async_wait_until(lambda: box.idle, 5.0, "parked again")
+        box.send_text("another reply")
+        box.push(TopicQueue(box, "/t", "/t"), _Text("a message"))  # type: ignore[arg-type]
+        got = [await asyncio.wait_for(client.recv(), 5.0) for _ in range(2)]
+        assert got == ["another reply", "a message"]
+        assert asked[0] == 4, "the reply's write, then the message's take and write"
+        box.close()
+        await asyncio.wait_for(writer, 5.0)
+
+
 class _Raw(_Text):
     """Stands for an Incoming with a cbor-raw encoding too (the bytes it hands out are kept,
     as an Incoming keeps its encodings)."""
