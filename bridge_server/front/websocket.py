@@ -298,7 +298,7 @@ class BridgeConnection(WebSocketLink):
         taken, to websockets (see the module's docstring)."""
         handler = self.on_frame
         if handler is None or not self._at_frame_boundary():
-            super().data_received(data)
+            self._to_websockets(data)
             return
         protocol = self.protocol
         limit = protocol.max_message_size
@@ -333,7 +333,17 @@ class BridgeConnection(WebSocketLink):
                     or protocol.state is not OPEN:
                 break
         if start < end:
-            super().data_received(data[start:] if start else data)
+            self._to_websockets(data[start:] if start else data)
+
+    def _to_websockets(self, data: bytes) -> None:
+        """Give ``data`` to websockets' parser, which may then wait anywhere in a frame."""
+        self._waiting_parser = None
+        super().data_received(data)
+
+    _waiting_parser: Any = None
+    """websockets' parser, seen waiting for a frame's first byte and given no byte since (it
+    moves only when fed, and failing the connection replaces it): its chain of generators is
+    not walked again for each read while the frames read are all taken here."""
 
     def _at_frame_boundary(self) -> bool:
         """Whether the next byte read starts a frame that :meth:`data_received` may read itself:
@@ -345,7 +355,12 @@ class BridgeConnection(WebSocketLink):
                 or protocol.reader.buffer or self.recv_messages.frames.queue
                 or self.recv_messages.closed):
             return False
-        return _innermost(protocol.parser) is _AT_EOF
+        parser = protocol.parser
+        if parser is not self._waiting_parser:
+            if _innermost(parser) is not _AT_EOF:
+                return False
+            self._waiting_parser = parser
+        return True
 
     def _hand(self, handler: Callable[[str | bytes], None], data: str | bytes) -> bool:
         """``handler(data)``; False if it raised (logged, the connection closed with 1011)."""

@@ -206,6 +206,26 @@ async def test_bytes_in_the_middle_of_a_frame_are_never_read_as_a_frame() -> Non
     assert seen == [("direct", "first"), ("direct", payload), ("direct", "last")]
 
 
+async def test_a_read_ending_after_a_frames_header_leaves_its_payload_to_websockets() -> None:
+    """A read that ends right after a frame's header and mask leaves websockets' parser
+    inside that frame with nothing buffered: the next read, a whole frame to look at, is still
+    that frame's payload (the parser seen waiting for a frame before that read is not taken
+    to wait there still)."""
+    seen = Seen()
+    inner = _client_frame(b"inner")
+    outer = _client_frame(inner, head=0x82)
+    cut = len(outer) - len(inner)  # the header and mask
+    async with _server(seen) as (url, _), connect(url, compression=None) as ws:
+        ws.transport.write(_client_frame(b"first") + outer[:cut])
+        await seen.until(1)
+        await asyncio.sleep(0.1)  # the two reads apart
+        ws.transport.write(outer[cut:])
+        await seen.until(2)
+        await ws.send("last")
+        await seen.until(3)
+    assert seen == [("direct", "first"), ("direct", inner), ("direct", "last")]
+
+
 async def test_a_ping_between_messages_is_answered_and_keeps_them_in_order() -> None:
     """A ping read between two messages goes to websockets, which answers it; the messages
     around it arrive in order, the one after it too."""
