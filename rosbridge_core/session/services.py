@@ -79,6 +79,7 @@ class ClientService:
     def __init__(self, name: str, type_name: str, spelled: str | None = None) -> None:
         self.name = name
         self.spelled = spelled or name  # the name as the client spelled it
+        self.call_head = _call_head(self.spelled)  # each ROS request's op starts with it
         self.type_name = type_name
         self.ros: ServedService | None = None
         self.pending: dict[str, tuple[RosCall, float]] = {}
@@ -252,8 +253,8 @@ class SessionServices:
             return
         rid = f"service_request:{served.name}:{next(self._request_ids)}"
         try:  # the op's text in one step, the request by its compiled converter
-            text = _encode_call_json(served.spelled, pending.served.request_conv.to_json(
-                pending.request), rid)
+            text = "".join((served.call_head, pending.served.request_conv.to_json(
+                pending.request), ',"id":', _encode_str(rid), "}"))
         except Exception:
             log.exception("cannot convert a request to %s", served.name)
             return
@@ -452,8 +453,8 @@ class _CallFailed(Exception):
 _encode_str: Callable[[str], str] = json.encoder.encode_basestring
 
 
-def _encode_call_json(service: str, args_json: str, id: str) -> str:
-    """The JSON text of a server-to-client ``call_service`` op (a ROS caller reached a
-    service the client serves) around already encoded ``args``."""
-    return "".join(('{"op":"call_service","service":', _encode_str(service), ',"args":',
-                    args_json, ',"id":', _encode_str(id), "}"))
+def _call_head(service: str) -> str:
+    """The start of the JSON text of a server-to-client ``call_service`` op (a ROS caller
+    reached a service the client serves), up to its ``args``: the request's JSON text, then
+    ``,"id":``, the id and ``}`` follow (:meth:`SessionServices._on_ros_request`)."""
+    return '{"op":"call_service","service":' + _encode_str(service) + ',"args":'
