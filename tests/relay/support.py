@@ -12,7 +12,7 @@ import contextlib
 import itertools
 import queue
 import re
-from collections.abc import AsyncIterator, Awaitable, Callable
+from collections.abc import AsyncIterator, Awaitable, Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -170,6 +170,21 @@ async def relay_serving(robots: tuple[str, ...], security: SecurityConfig | None
         for bridge, exporter in started:
             await exporter.close()
             await bridge.close()
+
+
+@contextlib.contextmanager
+def lone_session() -> Iterator[Any]:
+    """A real Zenoh session alone (no scouting, no endpoints), closed after."""
+    import zenoh
+
+    conf = zenoh.Config()
+    conf.insert_json5("scouting/multicast/enabled", "false")
+    conf.insert_json5("listen/endpoints", "[]")
+    session = zenoh.open(conf)
+    try:
+        yield session
+    finally:
+        session.close()  # type: ignore[no-untyped-call]
 
 
 async def until(predicate: Any, what: str, timeout: float = 15.0) -> Any:

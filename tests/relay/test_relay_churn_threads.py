@@ -16,6 +16,7 @@ import pytest
 import zenoh
 
 from bridge_server.zenoh.inbox import direct
+from tests.relay.support import lone_session
 
 
 def _threads() -> int:
@@ -24,13 +25,8 @@ def _threads() -> int:
 
 @pytest.fixture
 def session() -> Iterator[zenoh.Session]:
-    conf = zenoh.Config()
-    conf.insert_json5("mode", '"peer"')
-    conf.insert_json5("listen/endpoints", "[]")
-    conf.insert_json5("scouting/multicast/enabled", "false")
-    s = zenoh.open(conf)
-    yield s
-    s.close()  # type: ignore[no-untyped-call]
+    with lone_session() as s:
+        yield s
 
 
 def test_direct_callbacks_start_no_thread_per_subscriber(session: zenoh.Session) -> None:

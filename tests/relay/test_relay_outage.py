@@ -32,7 +32,7 @@ from rosbridge_core.protocol import ops
 from tests.helpers import ros_env
 from tests.peers.peer import NODE_DIR, PeerProcess, foxglove_peer
 from tests.relay.procs import Proc, until_robot_served
-from tests.relay.support import free_port, until
+from tests.relay.support import free_port, lone_session, until
 
 pytestmark = pytest.mark.timeout(120)
 
@@ -343,15 +343,9 @@ def test_the_robots_windows_share_one_budget() -> None:
     """Windows reserve their depth times their largest message from the robot's total: a
     topic with no room left is put plainly (not replayed), and a closed window's room goes
     to the next (a real Zenoh session, alone: no scouting, no endpoints)."""
-    import zenoh
-
     from bridge_server.zenoh.replay import ReplayBudget, ReplayPublisher, ReplayWindow
 
-    conf = zenoh.Config()
-    conf.insert_json5("scouting/multicast/enabled", "false")
-    conf.insert_json5("listen/endpoints", "[]")
-    session = zenoh.open(conf)
-    try:
+    with lone_session() as session:
         window = ReplayWindow(count=300, bytes=1000, total=100)
         budget = ReplayBudget(window.total)
         a = ReplayPublisher(session, "r/a", window, "/a", budget)
@@ -371,8 +365,6 @@ def test_the_robots_windows_share_one_budget() -> None:
         assert (c.held, c.held_bytes, c.resized, budget.reserved) == (1, 40, 1, 80)
         c.close()
         b.close()
-    finally:
-        session.close()  # type: ignore[no-untyped-call]
 
 
 def test_a_topic_of_big_messages_is_put_plainly() -> None:
@@ -380,8 +372,6 @@ def test_a_topic_of_big_messages_is_put_plainly() -> None:
     (latest wins): its cache goes and gives its room back, and it does not come back for
     smaller messages after; a topic that starts big never caches (a real Zenoh session,
     alone)."""
-    import zenoh
-
     from bridge_server.zenoh.replay import (
         REPLAY_MAX_MESSAGE_BYTES,
         ReplayBudget,
@@ -389,11 +379,7 @@ def test_a_topic_of_big_messages_is_put_plainly() -> None:
         ReplayWindow,
     )
 
-    conf = zenoh.Config()
-    conf.insert_json5("scouting/multicast/enabled", "false")
-    conf.insert_json5("listen/endpoints", "[]")
-    session = zenoh.open(conf)
-    try:
+    with lone_session() as session:
         window = ReplayWindow()
         budget = ReplayBudget(window.total)
         odom = ReplayPublisher(session, "r/odom", window, "/odom", budget)
@@ -412,8 +398,6 @@ def test_a_topic_of_big_messages_is_put_plainly() -> None:
         assert (edge.held, edge.plain) == (1, False)
         for pub in (odom, camera, edge):
             pub.close()
-    finally:
-        session.close()  # type: ignore[no-untyped-call]
 
 
 async def test_a_replayed_topic_is_let_go_once_the_link_is_back_and_nobody_asks(

@@ -18,7 +18,7 @@ from bridge_server.zenoh.graph.converter import RelayConverter
 from bridge_server.zenoh.graph.robot import NotHolder, Robot
 from bridge_server.zenoh.inbox import Faults, direct
 from bridge_server.zenoh.keys import Meta
-from bridge_server.zenoh.replay import recovering_subscriber
+from bridge_server.zenoh.replay import recovering_subscriber, undeclare_aside
 from bridge_server.zenoh.typestore import TypeRefused
 from msgs import cdr
 from rosbridge_core.codec.encodings import Encoded, EncodedMessage
@@ -136,10 +136,10 @@ class ZenohFeed:
                     direct(here(self.on_reply)))
 
     def close(self) -> None:
-        """Stop listening; the robot unsubscribes once no relay wants the topic."""
-        for entity in self._entities:
-            with contextlib.suppress(zenoh.ZError):
-                entity.undeclare()
+        """Stop listening (off the loop: :func:`.undeclare_aside`; a sample that comes
+        meanwhile is dropped, the feed no longer the topic's); the robot unsubscribes once
+        no relay wants the topic."""
+        undeclare_aside(self._entities)
         self._entities.clear()
         self._lane.close()
 
