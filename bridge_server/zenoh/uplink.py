@@ -34,7 +34,7 @@ from collections.abc import Callable, Mapping
 from typing import TYPE_CHECKING, Any, Protocol
 
 from bridge_server.zenoh import keys
-from bridge_server.zenoh.link import ZenohOptions
+from bridge_server.zenoh.link import ZenohOptions, declared
 
 if TYPE_CHECKING:
     import zenoh
@@ -68,7 +68,6 @@ async def router_answers(session: zenoh.Session, key: str, own: str, timeout: fl
     """Whether a router answers a liveliness query of ``key`` within ``timeout`` s: a token
     of another session, or ``own`` (this session's token, which the session also answers
     itself) a second time."""
-    import zenoh
 
     loop = asyncio.get_running_loop()
     done: asyncio.Future[bool] = loop.create_future()
@@ -90,10 +89,7 @@ async def router_answers(session: zenoh.Session, key: str, own: str, timeout: fl
         with contextlib.suppress(RuntimeError):
             loop.call_soon_threadsafe(settle, False)
 
-    # called on Zenoh's thread (both only hand to the loop): a callable's default is a new
-    # Python thread per query
-    session.liveliness().get(key, zenoh.handlers.Callback(reply, end, indirect=False),
-                             timeout=timeout)
+    session.liveliness().get(key, declared(reply, end), timeout=timeout)
     return await done
 
 

@@ -1,27 +1,30 @@
-"""Zenoh calls the robot side back on its own threads, not on a Python thread per callback.
+"""Zenoh calls the robot side back with samples and queries on its own threads, not on a
+Python thread per callback.
 
 zenoh-python runs a callable handler on a new Python thread of its own ("pyo3-closure") by
 default: one per declared subscriber or queryable and one per query's reply handler. The
-robot side's query callbacks only hand their answer to the event loop, so they are called
-on Zenoh's thread (``indirect=False``): each simulated robot's uplink probe started a
-Python thread a second (100 robots: 100 thread starts a second), and each robot a relay
-opened one more for its liveliness look-up.
+robot side's sample and query callbacks only hand their argument to the event loop, so they
+are called on Zenoh's thread (``indirect=False``). What Zenoh hears as declarations cannot
+be (:func:`bridge_server.zenoh.link.declared`): those keep a Python thread each.
 """
 
 from __future__ import annotations
 
+import asyncio
 import threading
 from collections.abc import Iterator
 from typing import Any
 
 import pytest
+import zenoh
 
 from bench.ports import free_port
 from bench.simrobot import Fleet, SimRobot
+from bridge_server.zenoh import keys, link, uplink
+from bridge_server.zenoh.exporter.base import ExporterBase
 from bridge_server.zenoh.keys import Snapshot
-from bridge_server.zenoh.link import ZenohOptions, open_session, tokens
+from bridge_server.zenoh.link import ZenohOptions, open_session
 from bridge_server.zenoh.robot_link import RobotOptions
-from bridge_server.zenoh.uplink import router_answers
 from msgs import dynamic
 
 pytestmark = pytest.mark.timeout(120)
@@ -42,21 +45,21 @@ def callback_threads(monkeypatch: pytest.MonkeyPatch) -> Iterator[list[str]]:
     yield started
 
 
-async def test_queries_start_no_thread(callback_threads: list[str]) -> None:
-    """The uplink's probe and the token look-up start no Python thread per query."""
-    router = await open_session(ZenohOptions(listen=[f"tcp/127.0.0.1:{free_port()}"]))
-    try:
-        for _ in range(3):
-            await router_answers(router, "nobody/@alive/*", "", 0.2)
-            await tokens(router, "nobody/@alive/*", 0.2)
-    finally:
-        router.close()  # type: ignore[no-untyped-call]
-    assert callback_threads == []
+async def test_samples_and_queries_start_no_thread(callback_threads: list[str],
+                                                   monkeypatch: pytest.MonkeyPatch) -> None:
+    """Three simulated robots (the exporter's queryables and data subscriber) asked for their
+    graph and sent samples start no callback thread; what Zenoh hears as declarations (the
+    robot's liveliness subscribers, transport events and liveliness queries) does, on
+    purpose (``tests/relay/test_declared_callbacks.py``): here those get Zenoh's thread, so
+    that every thread counted would be one of a queryable's or a data subscriber's."""
+    def on_zenohs(fn: Any, end: Any = None) -> Any:
+        if end is None:
+            return zenoh.handlers.Callback(fn, indirect=False)
+        return zenoh.handlers.Callback(fn, end, indirect=False)
 
-
-async def test_robot_side_starts_no_callback_thread(callback_threads: list[str]) -> None:
-    """Three simulated robots (the exporter's claims, queryables, liveliness subscribers
-    and probes) holding their names start no callback thread."""
+    monkeypatch.setattr(uplink, "declared", on_zenohs)
+    monkeypatch.setattr(link, "declared", on_zenohs)
+    monkeypatch.setattr(ExporterBase, "_told", lambda self, fn: on_zenohs(self._cross(fn)))
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     router = await open_session(ZenohOptions(listen=[endpoint]))
     robots: list[Any] = [SimRobot(f"threads-{i}", RobotOptions(connect=[endpoint]))
@@ -66,11 +69,21 @@ async def test_robot_side_starts_no_callback_thread(callback_threads: list[str])
             robot.start()
         fleet = Fleet(RobotOptions(connect=[endpoint]), {r.name: r for r in robots})
         assert await fleet.until_holding([r.name for r in robots], 60) == []
+        for robot in robots:
+            for _ in range(3):
+                key = f"{robot.name}/{keys.GRAPH}"  # answered on the loop: asked off it
+                answers = await asyncio.to_thread(_asked, router, key)
+                assert [r for r in answers if r.ok is not None]
+                router.put(f"{robot.name}/{keys.IN}/nobody", b"")
     finally:
         for robot in robots:
             await robot.close()
         router.close()  # type: ignore[no-untyped-call]
     assert callback_threads == []
+
+
+def _asked(session: Any, key: str) -> list[Any]:
+    return list(session.get(key, timeout=5.0))
 
 
 async def test_unchanged_graph_is_not_encoded_again(monkeypatch: pytest.MonkeyPatch) -> None:
