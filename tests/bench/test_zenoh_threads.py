@@ -16,12 +16,12 @@ from collections.abc import Iterator
 from typing import Any
 
 import pytest
-import zenoh
 
 from bench.ports import free_port
 from bench.simrobot import Fleet, SimRobot
 from bridge_server.zenoh import keys, link, uplink
 from bridge_server.zenoh.exporter.base import ExporterBase
+from bridge_server.zenoh.inbox import direct
 from bridge_server.zenoh.keys import Snapshot
 from bridge_server.zenoh.link import ZenohOptions, open_session
 from bridge_server.zenoh.robot_link import RobotOptions
@@ -52,14 +52,9 @@ async def test_samples_and_queries_start_no_thread(callback_threads: list[str],
     robot's liveliness subscribers, transport events and liveliness queries) does, on
     purpose (``tests/relay/test_declared_callbacks.py``): here those get Zenoh's thread, so
     that every thread counted would be one of a queryable's or a data subscriber's."""
-    def on_zenohs(fn: Any, end: Any = None) -> Any:
-        if end is None:
-            return zenoh.handlers.Callback(fn, indirect=False)
-        return zenoh.handlers.Callback(fn, end, indirect=False)
-
-    monkeypatch.setattr(uplink, "declared", on_zenohs)
-    monkeypatch.setattr(link, "declared", on_zenohs)
-    monkeypatch.setattr(ExporterBase, "_told", lambda self, fn: on_zenohs(self._cross(fn)))
+    monkeypatch.setattr(uplink, "declared", direct)
+    monkeypatch.setattr(link, "declared", direct)
+    monkeypatch.setattr(ExporterBase, "_told", lambda self, fn: direct(self._cross(fn)))
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     router = await open_session(ZenohOptions(listen=[endpoint]))
     robots: list[Any] = [SimRobot(f"threads-{i}", RobotOptions(connect=[endpoint]))
