@@ -429,7 +429,10 @@ class Relay:
                     watch.undeclare()
         self._watch = self._links = None
         if self.session is not None:
+            from bridge_server.zenoh.replay import settle_aside
+
             session, self.session = self.session, None
+            await asyncio.get_running_loop().run_in_executor(None, settle_aside)
             await asyncio.get_running_loop().run_in_executor(None, session.close)
 
 

@@ -28,7 +28,7 @@ import logging
 import queue
 import threading
 from collections import deque
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
@@ -39,9 +39,9 @@ if TYPE_CHECKING:  # zenoh is imported when used: the bridge's options parse wit
     from prometheus_client.core import Metric
 
 __all__ = ["DEFAULT_REPLAY_BYTES", "DEFAULT_REPLAY_COUNT", "DEFAULT_REPLAY_TOTAL_BYTES",
-           "DEMAND_LINGER", "HEARTBEAT", "REPLAY_MAX_MESSAGE_BYTES", "ReplayBudget",
-           "ReplayPublisher", "ReplayWindow", "recovering_subscriber", "undeclare_aside",
-           "window_metrics"]
+           "DEMAND_LINGER", "HEARTBEAT", "REPLAY_MAX_MESSAGE_BYTES", "SETTLE_WAIT",
+           "ReplayBudget", "ReplayPublisher", "ReplayWindow", "recovering_subscriber",
+           "settle_aside", "undeclare_aside", "window_metrics"]
 
 log = logging.getLogger("bridge_server.zenoh.replay")
 
@@ -156,7 +156,8 @@ class ReplayPublisher:
         import zenoh.ext
 
         if self._pub is not None:
-            undeclare_aside([self._pub])
+            gone, self._pub = [self._pub], None
+            undeclare_aside(gone)
         self._sizes = deque(maxlen=depth)
         self._held_bytes = 0
         self._pub = zenoh.ext.declare_advanced_publisher(
@@ -224,8 +225,8 @@ class ReplayPublisher:
     def close(self) -> None:
         """Undeclare it (its cache goes; off the loop: :func:`undeclare_aside`)."""
         if self._pub is not None:
-            undeclare_aside([self._pub])
-            self._pub = None
+            gone, self._pub = [self._pub], None
+            undeclare_aside(gone)
         self._sizes.clear()
         self._held_bytes = 0
         self.budget.reserved -= self._reserved
@@ -237,47 +238,85 @@ def recovering_subscriber(session: zenoh.Session, key: str, on_sample: Callable[
     """An advanced subscriber of ``key`` that asks a robot's cache for the messages it
     missed and hands every message to ``on_sample`` once and in order (a plain put too, as
     it comes); ``on_miss`` hears how many in a row the cache no longer had. Returns what to
-    undeclare (the subscriber and its miss listener)."""
+    undeclare (the subscriber and its miss listener), with :func:`undeclare_aside`.
+
+    Both are given their callbacks as ``(callback, None)``, not as a bare callable: Zenoh
+    keeps an entity whose handler is a bare callable "in the background", and an advanced
+    subscriber in the background leaves its heartbeat subscriber and its state (with
+    ``on_sample``) behind when undeclared, for the session's life: some 1.7 KB, and a query
+    to the robot's cache at its heartbeats, at each topic a relay stopped watching. The miss
+    listener's ``on_miss`` runs on Zenoh's thread (:func:`.inbox.direct`): a bare callable
+    would be a Python thread of its own for each."""
     import zenoh.ext
 
+    from bridge_server.zenoh.inbox import direct
+
     sub = zenoh.ext.declare_advanced_subscriber(
-        session, key, on_sample,
+        session, key, (on_sample, None),
         recovery=zenoh.ext.RecoveryConfig(periodic_queries=None, heartbeat=True))
-    missed = sub.sample_miss_listener(lambda miss: on_miss(int(miss.nb)))
+    missed = sub.sample_miss_listener((direct(lambda miss: on_miss(int(miss.nb))), None))
     return [missed, sub]
 
 
-_going: queue.SimpleQueue[Any] | None = None
+_going: queue.SimpleQueue[list[Any] | threading.Event] | None = None
 _going_lock = threading.Lock()
 
+SETTLE_WAIT = 30.0
+"""Seconds :func:`settle_aside` waits at most (an undeclaration may wait 10 s for its tasks)."""
 
-def undeclare_aside(entities: Iterable[Any]) -> None:
+
+def undeclare_aside(entities: list[Any]) -> None:
     """Undeclare ``entities`` (Zenoh entities; an advanced publisher or subscriber among
-    them) in order on a thread of their own, not the caller's (the event loop). An advanced
-    entity's undeclaration waits for its tasks to end, and Zenoh's threads that would end
+    them) in order on a thread of their own, not the caller's (the event loop); ``entities``
+    is emptied, and the caller must hold no other reference to them. Before their session
+    closes, :func:`settle_aside` (Zenoh may panic undeclaring an entity of a closed session).
+
+    They are undeclared by dropping them there, not by their ``undeclare()``: an advanced
+    entity's ``undeclare()`` drops its cache, its heartbeat and its liveliness parts holding
+    the interpreter's lock, and those wait for the session's lock, which Zenoh's threads may
+    hold while waiting for the interpreter's (a callback): a deadlock. Dropping them lets
+    go of the interpreter's lock first. So an entity given here must not be in the
+    background (declared with a bare callable as its handler: dropping would leave it
+    declared); give its callback as ``(callback, None)``. And off the loop: the
+    undeclaration waits for the entity's tasks to end, and Zenoh's threads that would end
     them may be waiting for the loop meanwhile (a callback handing a sample to it): 250
     simulated robots in one process, 5,000 viewers watching, stalled their loop 10 s at each
     topic a relay stopped watching (Zenoh's "Failed to terminate the task" each time), one
     after another, and answered nothing for minutes."""
+    batch = entities.copy()
+    entities.clear()
+    _aside().put(batch)
+
+
+def settle_aside(timeout: float = SETTLE_WAIT) -> bool:
+    """Wait (blocking: on a thread of the executor) until what :func:`undeclare_aside` was
+    given before is undeclared; whether it was within ``timeout`` s."""
+    done = threading.Event()
+    _aside().put(done)
+    return done.wait(timeout)
+
+
+def _aside() -> queue.SimpleQueue[list[Any] | threading.Event]:
     global _going
     with _going_lock:
         if _going is None:
             _going = queue.SimpleQueue()
-            threading.Thread(target=_undeclare_each, args=(_going,), name="zenoh-undeclare",
+            threading.Thread(target=_drop_each, args=(_going,), name="zenoh-undeclare",
                              daemon=True).start()
-        going = _going
-    for entity in entities:
-        going.put(entity)
+        return _going
 
 
-def _undeclare_each(going: queue.SimpleQueue[Any]) -> None:
-    """The thread of :func:`undeclare_aside`."""
+def _drop_each(going: queue.SimpleQueue[list[Any] | threading.Event]) -> None:
+    """The thread of :func:`undeclare_aside`: it pops each entity from its batch, so that
+    its own is the last reference, and lets go of it."""
     while True:
-        entity = going.get()
-        try:
-            entity.undeclare()
-        except Exception as exc:  # undeclared already, its session closed: nothing to do
-            log.debug("undeclare of %r: %s", entity, exc)
+        batch = going.get()
+        if isinstance(batch, threading.Event):
+            batch.set()
+            continue
+        while batch:
+            entity = batch.pop(0)
+            del entity  # the last reference: Zenoh undeclares it, the interpreter's lock free
 
 
 def window_metrics(windows: Mapping[str, tuple[int, int]], may_see: Callable[[str], bool]

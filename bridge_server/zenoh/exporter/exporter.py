@@ -29,7 +29,13 @@ from bridge_server.zenoh.exporter.topics import TopicExports
 from bridge_server.zenoh.keys import Snapshot
 from bridge_server.zenoh.link import ZenohOptions, open_session, tokens
 from bridge_server.zenoh.priority import Priorities, TopicPriority
-from bridge_server.zenoh.replay import DEMAND_LINGER, ReplayBudget, ReplayWindow, window_metrics
+from bridge_server.zenoh.replay import (
+    DEMAND_LINGER,
+    ReplayBudget,
+    ReplayWindow,
+    settle_aside,
+    window_metrics,
+)
 from bridge_server.zenoh.robot_graph import GraphSnapshots
 from bridge_server.zenoh.uplink import Uplink, uplink_use
 from rosbridge_core.graph import Graph
@@ -272,6 +278,7 @@ class Exporter(TopicExports, Publishing, ServiceCalls, ServedNames, RelayGoals, 
         self._listeners.clear()
         if self.session is not None:
             session, self.session = self.session, None
+            await self._loop.run_in_executor(None, settle_aside)
             await self._loop.run_in_executor(None, session.close)
 
     # -- what the robot tells of its link ----------------------------------------------------------

@@ -140,7 +140,6 @@ class ZenohFeed:
         meanwhile is dropped, the feed no longer the topic's); the robot unsubscribes once
         no relay wants the topic."""
         undeclare_aside(self._entities)
-        self._entities.clear()
         self._lane.close()
 
     def on_miss(self, lost: int) -> None:
