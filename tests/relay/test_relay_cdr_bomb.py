@@ -62,7 +62,13 @@ async def test_a_robots_cdr_bombs_cost_the_relay_no_memory(ros_node: Any, topic:
         viewer = await open_wire(f"ws://127.0.0.1:{port}/robot2")
         attacked = await open_wire(f"ws://127.0.0.1:{port}/robot1")
         await viewer.send({"op": "subscribe", "topic": beat_topic, "type": "std_msgs/msg/Int32"})
-        await viewer.expect(op="publish", topic=beat_topic, timeout=30)
+        try:
+            await viewer.expect(op="publish", topic=beat_topic, timeout=30)
+        except AssertionError as exc:  # say what the relay and the robots saw
+            ups = {r.robot: (r.uplink.up, r.uplink.lost) for _, r in robots}
+            raise AssertionError(f"{exc}\nrobots' uplinks (up, times lost): {ups}\nthe "
+                                 "relay's log:\n" + "\n".join(list(relay.lines)[-40:])
+                                 ) from None
         await attacked.send({"op": "subscribe", "topic": bomb_topic,
                              "type": "test_msgs/msg/UnboundedSequences"})
         good = UnboundedSequences(int32_values=[1])
