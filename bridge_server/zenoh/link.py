@@ -31,7 +31,7 @@ import logging
 import os
 import re
 import threading
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
@@ -348,24 +348,6 @@ async def open_session(options: ZenohOptions) -> zenoh.Session:
     return await opened
 
 
-def declared(fn: Callable[..., None], end: Callable[[], None] | None = None) -> Any:
-    """A Zenoh callback for what Zenoh hears as declarations (liveliness tokens, their
-    queries' replies, transport events): called on a Python thread of its own, never on
-    Zenoh's. Zenoh calls these holding its session's lock, and a Python callback there waits
-    for the interpreter's lock, while a Python thread that holds it may wait for the
-    session's (an undeclaration holds both in that order): the two wait for ever. Seen with
-    them on Zenoh's thread (``indirect=False``), a 250-robot simulator process whose topics
-    were unwatched stopped for good (gdb: an advanced publisher's undeclaration in
-    ``close_queryable`` waiting for the session's lock, Zenoh's receive threads in
-    ``send_declare`` waiting for the interpreter's). Samples, queries and their replies may
-    take Zenoh's thread (:func:`.inbox.direct`)."""
-    import zenoh
-
-    if end is None:
-        return zenoh.handlers.Callback(fn)
-    return zenoh.handlers.Callback(fn, end)
-
-
 async def tokens(session: zenoh.Session, key: str, timeout: float, first: bool = False
                  ) -> set[str]:
     """The keys of the liveliness tokens matching ``key`` on the network now (with
@@ -393,7 +375,9 @@ async def tokens(session: zenoh.Session, key: str, timeout: float, first: bool =
         with contextlib.suppress(RuntimeError):
             loop.call_soon_threadsafe(ended)
 
-    session.liveliness().get(key, declared(reply, end), timeout=timeout)
+    from bridge_server.zenoh.inbox import direct
+
+    session.liveliness().get(key, direct(reply, end), timeout=timeout)
     await done
     return found
 

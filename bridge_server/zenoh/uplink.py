@@ -34,7 +34,7 @@ from collections.abc import Callable, Mapping
 from typing import TYPE_CHECKING, Any, Protocol
 
 from bridge_server.zenoh import keys
-from bridge_server.zenoh.link import ZenohOptions, declared
+from bridge_server.zenoh.link import ZenohOptions
 
 if TYPE_CHECKING:
     import zenoh
@@ -89,7 +89,9 @@ async def router_answers(session: zenoh.Session, key: str, own: str, timeout: fl
         with contextlib.suppress(RuntimeError):
             loop.call_soon_threadsafe(settle, False)
 
-    session.liveliness().get(key, declared(reply, end), timeout=timeout)
+    from bridge_server.zenoh.inbox import direct
+
+    session.liveliness().get(key, direct(reply, end), timeout=timeout)
     return await done
 
 

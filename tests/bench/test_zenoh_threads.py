@@ -1,11 +1,10 @@
-"""Zenoh calls the robot side back with samples and queries on its own threads, not on a
-Python thread per callback.
+"""Zenoh calls the robot side back on its own threads, not on a Python thread per callback.
 
 zenoh-python runs a callable handler on a new Python thread of its own ("pyo3-closure") by
 default: one per declared subscriber or queryable and one per query's reply handler. The
-robot side's sample and query callbacks only hand their argument to the event loop, so they
-are called on Zenoh's thread (``indirect=False``). What Zenoh hears as declarations cannot
-be (:func:`bridge_server.zenoh.link.declared`): those keep a Python thread each.
+robot side's callbacks only hand their argument to the event loop, so they are called on
+Zenoh's thread (``indirect=False``; :func:`bridge_server.zenoh.inbox.direct` says why that is
+safe for what Zenoh hears as declarations too).
 """
 
 from __future__ import annotations
@@ -19,9 +18,7 @@ import pytest
 
 from bench.ports import free_port
 from bench.simrobot import Fleet, SimRobot
-from bridge_server.zenoh import keys, link, uplink
-from bridge_server.zenoh.exporter.base import ExporterBase
-from bridge_server.zenoh.inbox import direct
+from bridge_server.zenoh import keys
 from bridge_server.zenoh.keys import Snapshot
 from bridge_server.zenoh.link import ZenohOptions, open_session
 from bridge_server.zenoh.robot_link import RobotOptions
@@ -45,16 +42,10 @@ def callback_threads(monkeypatch: pytest.MonkeyPatch) -> Iterator[list[str]]:
     yield started
 
 
-async def test_samples_and_queries_start_no_thread(callback_threads: list[str],
-                                                   monkeypatch: pytest.MonkeyPatch) -> None:
-    """Three simulated robots (the exporter's queryables and data subscriber) asked for their
-    graph and sent samples start no callback thread; what Zenoh hears as declarations (the
-    robot's liveliness subscribers, transport events and liveliness queries) does, on
-    purpose (``tests/relay/test_declared_callbacks.py``): here those get Zenoh's thread, so
-    that every thread counted would be one of a queryable's or a data subscriber's."""
-    monkeypatch.setattr(uplink, "declared", direct)
-    monkeypatch.setattr(link, "declared", direct)
-    monkeypatch.setattr(ExporterBase, "_told", lambda self, fn: direct(self._cross(fn)))
+async def test_a_robot_starts_no_callback_thread(callback_threads: list[str]) -> None:
+    """Three simulated robots joining (their liveliness subscribers, transport events, claim
+    looks and uplink probes), asked for their graph (queryables) and sent samples (a data
+    subscriber) start no callback thread."""
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     router = await open_session(ZenohOptions(listen=[endpoint]))
     robots: list[Any] = [SimRobot(f"threads-{i}", RobotOptions(connect=[endpoint]))

@@ -20,7 +20,7 @@ from typing import Any
 
 import zenoh
 
-from bridge_server.zenoh.link import ZenohOptions, declared
+from bridge_server.zenoh.link import ZenohOptions
 from bridge_server.zenoh.uplink import Uplink
 from rosbridge_core.graph import Graph, ServedAction, ServedGoal, ServedService
 
@@ -68,14 +68,10 @@ class ExporterBase:
 
     def _on_loop(self, fn: Callable[[Any], None]) -> Callable[[Any], None]:
         """A Zenoh callback that hands its argument to ``fn`` on the event loop, called on
-        Zenoh's thread (for samples and queries: a callable's default is a Python thread of
-        its own per subscriber or queryable, 13 a robot, 1,306 for 100)."""
+        Zenoh's thread (:func:`.inbox.direct` says why that is safe; a callable's default is
+        a Python thread of its own per subscriber, queryable or query: 13 a robot, 1,306 for
+        100)."""
         return zenoh.handlers.Callback(self._cross(fn), indirect=False)
-
-    def _told(self, fn: Callable[[Any], None]) -> Callable[[Any], None]:
-        """The same for what Zenoh hears as declarations (liveliness tokens, transport
-        events): on a Python thread of its own (:func:`.link.declared` says why)."""
-        return declared(self._cross(fn))  # type: ignore[no-any-return]
 
     def _cross(self, fn: Callable[[Any], None]) -> Callable[[Any], None]:
         loop = self._loop

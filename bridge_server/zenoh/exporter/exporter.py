@@ -152,10 +152,10 @@ class Exporter(TopicExports, Publishing, ServiceCalls, ServedNames, RelayGoals, 
         self.zid = str(session.zid())
         self.uplink.watch(session, self.zid)
         self._listeners = [
-            session.info.declare_transport_events_listener(self._told(self._on_transport),
+            session.info.declare_transport_events_listener(self._on_loop(self._on_transport),
                                                            history=True),
             session.liveliness().declare_subscriber(f"{self.robot}/{keys.CLAIM}/*",
-                                                    self._told(self._on_claim)),
+                                                    self._on_loop(self._on_claim)),
         ]
         claim = None
         while True:
@@ -174,7 +174,6 @@ class Exporter(TopicExports, Publishing, ServiceCalls, ServedNames, RelayGoals, 
         self._away_until = 0.0
         self.snapshot = self._take_snapshot()
         self._snapshot_bytes = self.snapshot.encode()
-        told = self._told  # liveliness: on a thread of its own (.link.declared)
         self._entities += [
             session.declare_queryable(f"{r}/{keys.GRAPH}", here(self._answer_graph)),
             session.declare_queryable(f"{r}/{keys.LATCHED}/**", here(self._answer_latched)),
@@ -182,11 +181,11 @@ class Exporter(TopicExports, Publishing, ServiceCalls, ServedNames, RelayGoals, 
             session.declare_queryable(f"{r}/{keys.GOAL}/**", here(self._answer_goal)),
             session.declare_queryable(f"{r}/{keys.CANCEL}/**", here(self._answer_cancel)),
             session.declare_queryable(f"{r}/{keys.PARAM}/**", here(self._answer_param)),
-            live.declare_subscriber(f"{r}/{keys.RUNNING}/**", told(self._on_running)),
-            live.declare_subscriber(f"{r}/{keys.SERVE}/**", told(self._on_serve), history=True),
+            live.declare_subscriber(f"{r}/{keys.RUNNING}/**", here(self._on_running)),
+            live.declare_subscriber(f"{r}/{keys.SERVE}/**", here(self._on_serve), history=True),
             session.declare_subscriber(f"{r}/{keys.IN}/**", here(self._on_in)),
-            live.declare_subscriber(f"{r}/{keys.DEMAND}/**", told(self._on_demand), history=True),
-            live.declare_subscriber(f"{r}/{keys.ADVERTISE}/**", told(self._on_advertise),
+            live.declare_subscriber(f"{r}/{keys.DEMAND}/**", here(self._on_demand), history=True),
+            live.declare_subscriber(f"{r}/{keys.ADVERTISE}/**", here(self._on_advertise),
                                     history=True),
             live.declare_token(keys.alive_key(r, self.zid)),  # last: all above answers
         ]

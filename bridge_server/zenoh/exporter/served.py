@@ -173,7 +173,7 @@ class ServedNames(RelayPolicy, GraphOffer):
                             "is not answered", relay, service, exc)
 
         self.session.get(keys.key_of(self.robot, service, f"{keys.SERVING}/{relay}"),
-                         zenoh.handlers.Callback(self._on_loop(answer)), payload=payload,
+                         self._on_loop(answer), payload=payload,
                          timeout=SERVED_CALL_WAIT)
 
     def _execute(self, action: str, relay: str, goal: ServedGoal) -> None:
@@ -215,8 +215,9 @@ class ServedNames(RelayPolicy, GraphOffer):
                             gid, action)
 
         self.session.get(keys.key_of(self.robot, action, f"{keys.EXECUTING}/{relay}"),
-                         zenoh.handlers.Callback(self._on_loop(answer),
-                                                 lambda: self._on_loop(ended)(None)),
+                         zenoh.handlers.Callback(self._cross(answer),
+                                                 lambda: self._cross(ended)(None),
+                                                 indirect=False),
                          payload=Execute(gid, goal=conv.goal_conv.to_obj(goal.request)).encode(),
                          timeout=GOAL_WAIT, consolidation=zenoh.ConsolidationMode.NONE)
 

@@ -25,7 +25,6 @@ from bridge_server.zenoh.graph.services import ZenohServedService
 from bridge_server.zenoh.graph.topics import ZenohFeed, ZenohPublisher
 from bridge_server.zenoh.inbox import Inbox, direct
 from bridge_server.zenoh.keys import Snapshot
-from bridge_server.zenoh.link import declared
 from bridge_server.zenoh.typestore import GraphReader, RobotTypes, TypeLimits, let_go
 from msgs.dynamic import TypeStore
 from msgs.runtime import UnknownTypeError as WireUnknownType
@@ -108,7 +107,7 @@ class ZenohGraph(SnapshotIntrospection, RobotQueries):
         r = self.robot
         self._entities = [
             self.session.liveliness().declare_subscriber(
-                f"{r}/{keys.ALIVE}/**", declared(self.on_loop(self._on_alive)), history=True),
+                f"{r}/{keys.ALIVE}/**", direct(self.on_loop(self._on_alive)), history=True),
             self.session.declare_subscriber(f"{r}/{keys.GRAPH}",
                                             direct(self.inbox.graph(self._on_graph))),
         ]
