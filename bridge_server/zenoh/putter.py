@@ -17,9 +17,9 @@ publisher is closed after its last message). What waits for that thread is bound
 A message given to the thread while it has nothing else to do lets go of Python's lock at
 once (``time.sleep(0)``). Otherwise the woken thread waits for the lock until the loop, or
 the robot's ROS thread, next lets go of it, which can take up to the interpreter's 5 ms
-switch interval. Through a relay, a 100 Hz IMU's latency p50 was 5.0-8.7 ms without the
-yield and 3.6-5.5 ms with it, against 3.4-5.7 ms putting from the loop (``python -m bench
---scenario relay_imu``, three rounds each).
+switch interval. A 100 Hz IMU's latency p50 through a relay (``python -m bench --scenario
+relay_imu --quick``, three rounds each, on two busy cores) was 5.0-8.7 ms from the thread
+without the yield and 4.2-5.3 ms with it, against 2.5-7.0 ms putting from the loop.
 """
 
 from __future__ import annotations
