@@ -167,8 +167,9 @@ class TopicExports(RelayPolicy):
 
     def replay_windows(self) -> dict[str, tuple[int, int]]:
         """What each replayed topic's window holds now: (messages, payload bytes)."""
-        return {topic: (e.replay.held, e.replay.held_bytes)
-                for topic, e in self.exports.items() if e.replay is not None}
+        # each window read once: the putting thread may close it meanwhile
+        return {topic: (w.held, w.held_bytes) for topic, e in self.exports.items()
+                if (w := e.replay) is not None}
 
     def _stamp(self, export: _Export, msg: Message) -> tuple[bytes, bytes]:
         """The payload and attachment of ``msg``, numbered in its topic's stream."""
