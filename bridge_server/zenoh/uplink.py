@@ -120,6 +120,10 @@ class _Robot(Protocol):
     uplink: Uplink
 
     @property
+    def putter(self) -> Any:
+        """Its :class:`~.putter.Putter`."""
+
+    @property
     def replay_budget(self) -> Any:
         """Its :class:`~.replay.ReplayBudget`."""
 
@@ -127,16 +131,17 @@ class _Robot(Protocol):
         """Its replay windows' messages and bytes, by topic."""
 
 
-def uplink_use(robot: _Robot) -> tuple[dict[str, int], dict[str, int]]:
-    """The replay windows' use of ``robot`` and its refusals by kind, for its uplink's
-    status and metrics."""
+def uplink_use(robot: _Robot) -> tuple[dict[str, int], dict[str, int], dict[str, int]]:
+    """The replay windows' use of ``robot``, its refusals by kind and what waits for its
+    putting thread (:mod:`.putter`), for its uplink's status and metrics."""
     windows = robot.replay_windows().values()
     budget = robot.replay_budget
     return ({"topics": len(windows), "messages": sum(n for n, _ in windows),
              "bytes": sum(b for _, b in windows), "reserved": budget.reserved,
              "total": budget.total},
             {"policy": sum(robot.policy_refused.values()), "name": robot.name_refusals,
-             "admission": int(robot.uplink.refusal is not None)})
+             "admission": int(robot.uplink.refusal is not None)},
+            {"waiting_bytes": robot.putter.waiting, "dropped": robot.putter.dropped})
 
 
 class Uplink:
@@ -323,9 +328,11 @@ class Uplink:
             return self.refusal or "not admitted by a relay yet"
         return None
 
-    def status(self, replay: Mapping[str, Any], refusals: Mapping[str, int]) -> dict[str, Any]:
+    def status(self, replay: Mapping[str, Any], refusals: Mapping[str, int],
+               putting: Mapping[str, int]) -> dict[str, Any]:
         """The robot's ``relay_uplink`` section of ``status.json`` (``replay``: its replay
-        windows' use; ``refusals``: its counts of refused requests, by kind)."""
+        windows' use; ``refusals``: its counts of refused requests, by kind; ``putting``:
+        the bytes waiting to be put and the messages dropped for want of room there)."""
         per_s, bytes_per_s = self.rates()
         return {
             "robot": self.robot, "routers": list(self.options.connect),
@@ -333,9 +340,11 @@ class Uplink:
             "lost": self.lost, "admitted": self.admitted, "refusal": self.refusal,
             "messages": self.messages, "bytes": self.bytes,
             "messages_per_s": round(per_s, 2), "bytes_per_s": round(bytes_per_s, 1),
-            "rate_window_s": RATE_WINDOW, "replay": dict(replay), "refusals": dict(refusals)}
+            "rate_window_s": RATE_WINDOW, "replay": dict(replay), "refusals": dict(refusals),
+            "putting": dict(putting)}
 
-    def metrics(self, replay: Mapping[str, Any], refusals: Mapping[str, int]) -> list[Metric]:
+    def metrics(self, replay: Mapping[str, Any], refusals: Mapping[str, int],
+                putting: Mapping[str, int]) -> list[Metric]:
         """The robot's ``/metrics`` families of its uplink (the same as :meth:`status`)."""
         from prometheus_client.core import CounterMetricFamily, GaugeMetricFamily
 
@@ -360,9 +369,17 @@ class Uplink:
                                    "replay windows reserve, of --relay-replay-total-bytes.",
                                    labels=labels)
         window.add_metric([self.robot], float(replay.get("reserved", 0)))
+        waiting = GaugeMetricFamily("roslibpy_bridge_relay_put_waiting_bytes", "Payload bytes "
+                                    "waiting for the robot's putting thread.", labels=labels)
+        waiting.add_metric([self.robot], float(putting.get("waiting_bytes", 0)))
+        dropped = CounterMetricFamily("roslibpy_bridge_relay_put_dropped_messages", "Messages "
+                                      "dropped before the robot's link: the bytes waiting "
+                                      "for its putting thread were at their bound, or they "
+                                      "waited too long.", labels=labels)
+        dropped.add_metric([self.robot], putting.get("dropped", 0))
         refused = CounterMetricFamily("roslibpy_bridge_relay_refusals", "Requests of relays the "
                                       "robot refused, and refusals of the robot, by kind.",
                                       labels=["robot", "kind"])
         for kind, n in sorted(refusals.items()):
             refused.add_metric([self.robot, kind], n)
-        return [up, since, lost, sent, sent_bytes, window, refused]
+        return [up, since, lost, sent, sent_bytes, window, waiting, dropped, refused]

@@ -102,9 +102,12 @@ async def test_the_robots_status_and_metrics_show_its_uplink() -> None:
             assert up["messages"] > 0 and up["bytes"] > 640 * 480 * 3, up
             assert up["replay"]["topics"] == 1 and up["replay"]["messages"] > 0, up
             assert up["refusals"] == {"policy": 0, "name": 0, "admission": 0}
+            assert up["putting"]["dropped"] == 0 and up["putting"]["waiting_bytes"] >= 0, up
             metrics = _get(base + "/metrics")[1]
             assert f'roslibpy_bridge_relay_uplink_up{{robot="{ROBOT}"}} 1.0' in metrics
             assert f'roslibpy_bridge_relay_sent_messages_total{{robot="{ROBOT}"}}' in metrics
+            assert f'roslibpy_bridge_relay_put_dropped_messages_total{{robot="{ROBOT}"}} 0.0' \
+                in metrics
             t.link.blackhole()
             try:
                 down = await until(lambda: (u := uplink())["up"] is False and u,

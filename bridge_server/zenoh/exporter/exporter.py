@@ -29,6 +29,7 @@ from bridge_server.zenoh.exporter.topics import TopicExports
 from bridge_server.zenoh.keys import Snapshot
 from bridge_server.zenoh.link import ZenohOptions, open_session, tokens
 from bridge_server.zenoh.priority import Priorities, TopicPriority
+from bridge_server.zenoh.putter import Putter
 from bridge_server.zenoh.replay import (
     DEMAND_LINGER,
     ReplayBudget,
@@ -75,6 +76,7 @@ class Exporter(TopicExports, Publishing, ServiceCalls, ServedNames, RelayGoals, 
         self.priorities = Priorities(priorities)
         self.uplink = Uplink(robot, options)
         self.bulk = None
+        self.putter = Putter()
         self.replay = replay or ReplayWindow()
         self.replay_budget = ReplayBudget(self.replay.total)
         self.demand_linger = DEMAND_LINGER
@@ -268,9 +270,10 @@ class Exporter(TopicExports, Publishing, ServiceCalls, ServedNames, RelayGoals, 
             with contextlib.suppress(asyncio.CancelledError, BridgeError):
                 await self._runner
         await self.uplink.close()
+        self._withdraw()
+        await self._loop.run_in_executor(None, self.putter.close)
         if self.bulk is not None:
             self.bulk.close()
-        self._withdraw()
         for entity in self._listeners:
             with contextlib.suppress(zenoh.ZError):
                 entity.undeclare()

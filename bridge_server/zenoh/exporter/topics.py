@@ -3,13 +3,16 @@ for it exists (an unwatched robot sends nothing); each message is put once, as t
 bytes that came, however many relays and viewers watch it; a reliable topic's through an
 advanced publisher that keeps a bounded window of its last messages for relays whose link
 dropped (:mod:`~bridge_server.zenoh.replay`: nothing lost in an outage within the window);
-a big one's whole, the latest winning (:mod:`~bridge_server.zenoh.bulk`)."""
+a big one's whole, the latest winning (:mod:`~bridge_server.zenoh.bulk`). The loop only
+numbers a message and hands it on: it is put by the robot's putting thread
+(:mod:`~bridge_server.zenoh.putter`), which may wait for the link where the loop must not."""
 
 from __future__ import annotations
 
 import secrets
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from functools import partial
 
 import zenoh
 
@@ -19,7 +22,8 @@ from bridge_server.zenoh.exporter.base import log
 from bridge_server.zenoh.exporter.policy import RelayPolicy
 from bridge_server.zenoh.keys import Meta
 from bridge_server.zenoh.link import answering
-from bridge_server.zenoh.priority import Priorities
+from bridge_server.zenoh.priority import Priorities, TopicPriority
+from bridge_server.zenoh.putter import Putter
 from bridge_server.zenoh.replay import ReplayBudget, ReplayPublisher, ReplayWindow
 from rosbridge_core.graph import Message, TopicFeed
 from rosbridge_core.interfaces import BridgeError
@@ -39,7 +43,10 @@ class _Export:
     """This stream of the topic: a topic watched anew starts again at seq 1, in a new epoch."""
     last: tuple[Message, bytes] | None = None
     replay: ReplayPublisher | None = None
-    """The topic's advanced publisher with its window (made at its first reliable message)."""
+    """The topic's advanced publisher with its window (made at its first reliable message;
+    made, used and closed on the putting thread only)."""
+    windowed: bool = False
+    """It has a replay window, or one is being made (the loop's view of :attr:`replay`)."""
     lingering: bool = False
     """No relay watches it, and it stays a while (:data:`~.replay.DEMAND_LINGER`)."""
 
@@ -52,6 +59,8 @@ class TopicExports(RelayPolicy):
     """Each topic's Zenoh priority on the robot's link (``--relay-priority`` overrides)."""
     bulk: BulkSender | None
     """Puts the big messages (:mod:`.bulk`), once the session is open."""
+    putter: Putter
+    """Puts every message of a watched topic, off the loop (:mod:`.putter`)."""
     replay: ReplayWindow
     """How much of each reliable topic is kept for relays whose link dropped."""
     replay_budget: ReplayBudget
@@ -75,7 +84,7 @@ class TopicExports(RelayPolicy):
         elif export is not None:
             export.relays.discard(relay)
             if not export.relays:
-                if export.replay is None:
+                if not export.windowed:
                     self._unwatched(topic)
                 elif not export.lingering:  # its relays may be cut off: keep its window
                     export.lingering = True
@@ -102,9 +111,9 @@ class TopicExports(RelayPolicy):
 
     def _unexport(self, export: _Export) -> None:
         self.graph.unsubscribe(export.feed, export.listener)
-        if export.replay is not None:
-            export.replay.close()
-            export.replay = None
+        if export.windowed:  # after its last message, on the putting thread
+            export.windowed = False
+            self.putter.submit(partial(_close_window, export))
 
     def _export(self, topic: str) -> _Export | None:
         key = f"{self.robot}/{topic[1:]}"
@@ -114,19 +123,11 @@ class TopicExports(RelayPolicy):
                 return
             payload, attachment = self._stamp(export, msg)
             qos = self.priorities.of(topic, len(payload), getattr(export.feed, "reliable", True))
-            self.uplink.sent(len(payload))
-            if qos.bulk and self.bulk is not None:  # a big topic: whole, latest wins (.bulk)
-                if export.replay is not None:  # and not replayed (.replay)
-                    export.replay.close()
-                    export.replay = None
-                self.bulk.put(key, payload, attachment, qos.kwargs)
-            elif self._replayed(export, msg):
-                if export.replay is None:
-                    export.replay = ReplayPublisher(self.session, key, self.replay, topic,
-                                                    self.replay_budget)
-                export.replay.put(payload, attachment, qos)
-            else:
-                self.session.put(key, payload, attachment=attachment, **qos.kwargs)
+            replayed = not qos.bulk and self._replayed(export, msg)
+            export.windowed = replayed or (export.windowed and not qos.bulk)
+            if self.putter.submit(partial(self._put, export, key, topic, payload, attachment,
+                                          qos, replayed), len(payload)):
+                self.uplink.sent(len(payload))
 
         try:
             feed = self.graph.subscribe(topic, None, listener)
@@ -138,6 +139,24 @@ class TopicExports(RelayPolicy):
         log.info("a relay watches %s: subscribed", topic)
         return export
 
+    def _put(self, export: _Export, key: str, topic: str, payload: bytes, attachment: bytes,
+             qos: TopicPriority, replayed: bool) -> None:
+        """Put one message of ``export`` (on the putting thread: it may wait for the link),
+        through its window if ``replayed``."""
+        session = self.session
+        if session is None:
+            return
+        if qos.bulk and self.bulk is not None:  # a big topic: whole, latest wins (.bulk)
+            _close_window(export)  # and not replayed (.replay)
+            self.bulk.put(key, payload, attachment, qos.kwargs)
+        elif replayed:
+            if export.replay is None:
+                export.replay = ReplayPublisher(session, key, self.replay, topic,
+                                                self.replay_budget)
+            export.replay.put(payload, attachment, qos)
+        else:
+            session.put(key, payload, attachment=attachment, **qos.kwargs)
+
     def _replayed(self, export: _Export, msg: Message) -> bool:
         """Whether ``msg`` goes through the topic's window: a reliable, volatile topic's
         (a best-effort or latched one's latest wins), with a window."""
@@ -148,8 +167,9 @@ class TopicExports(RelayPolicy):
 
     def replay_windows(self) -> dict[str, tuple[int, int]]:
         """What each replayed topic's window holds now: (messages, payload bytes)."""
-        return {topic: (e.replay.held, e.replay.held_bytes)
-                for topic, e in self.exports.items() if e.replay is not None}
+        # each window read once: the putting thread may close it meanwhile
+        return {topic: (w.held, w.held_bytes) for topic, e in self.exports.items()
+                if (w := e.replay) is not None}
 
     def _stamp(self, export: _Export, msg: Message) -> tuple[bytes, bytes]:
         """The payload and attachment of ``msg``, numbered in its topic's stream."""
@@ -171,3 +191,10 @@ class TopicExports(RelayPolicy):
             if export is not None and latched is not None:
                 payload, attachment = self._stamp(export, latched)
                 query.reply(query.key_expr, payload, attachment=attachment)
+
+
+def _close_window(export: _Export) -> None:
+    """Close ``export``'s replay window, if it has one (on the putting thread)."""
+    if export.replay is not None:
+        export.replay.close()
+        export.replay = None
