@@ -45,7 +45,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from bench.fleetproc import Balancer, Child, Usage, haproxy_config
+from bench.fleetproc import Balancer, Child, Usage, haproxy_config, node_viewers
 from bench.harness import Bridge, Ctx, percentile
 from bench.ports import free_port
 from bench.relay import RELAY_READY
@@ -60,7 +60,12 @@ this loaded machine took more than the robots' own 120 s)."""
 PER_PROCESS = 250
 """Simulated robots per process."""
 VIEWERS_PER_PROCESS = 1500
-"""Viewer connections per process."""
+"""Viewer connections per Python process (``bench/fleetview.py``)."""
+NODE_VIEWERS_PER_PROCESS = 4000
+"""Viewer connections per Node process (``bench/fleetview.mjs``, used when Node and its
+``ws`` package are here, unless ``BENCH_FLEET_VIEWERS=python``): some 5 µs of a core a
+message where Python's websocket client takes some 40, so 10,000 connections leave the
+machine to the tier they measure."""
 BALANCER_CONNECTIONS = 9000
 """Viewer connections per HAProxy: each takes two of its descriptors, and a process here may
 open at most 20,000 (``ulimit -Hn``, which this machine does not let even root raise). A
@@ -159,14 +164,17 @@ class Tier:
         watches two robots on average, and a tenth of the viewers' count of probes)."""
         for i in range(self.size.routers):
             await self.start_router(i)
+        connections = 2 * self.size.viewers + self.size.watched_robots
+        # a relay serves --max-clients connections (1,000 by default) and refuses the rest
+        # (503): room for twice its share, so that a killed relay's viewers fit on the others
+        share = max(1000, 2 * math.ceil(connections / self.size.relays))
         for i in range(self.size.relays):
             relay = Bridge(self.ctx.domain, ["--zenoh-connect",
                                              self.router_eps[i % self.size.routers],
-                                             *self.relay_args],
+                                             "--max-clients", str(share), *self.relay_args],
                            self.ctx.bridge_root, module="bridge_server.zenoh.relay",
                            ready=RELAY_READY)
             self.relays.append(await relay.start(60))
-        connections = 2 * self.size.viewers + self.size.watched_robots
         for i in range(max(1, math.ceil(connections / BALANCER_CONNECTIONS))):
             port = free_port()
             folder = self.folder / f"balancer{i}"
@@ -208,14 +216,17 @@ class Tier:
         made = []
         chunk: list[tuple[list[str], str]] = []
         chunks = []
+        node = os.environ.get("BENCH_FLEET_VIEWERS", "node") == "node" and node_viewers()
+        program = "bench/fleetview.mjs" if node else "bench.fleetview"
+        per_process = NODE_VIEWERS_PER_PROCESS if node else VIEWERS_PER_PROCESS
         for entry in plan:
-            if sum(len(r) for r, _ in chunk) + len(entry[0]) > VIEWERS_PER_PROCESS:
+            if sum(len(r) for r, _ in chunk) + len(entry[0]) > per_process:
                 chunks.append(chunk)
                 chunk = []
             chunk.append(entry)
         chunks.append(chunk)
         for part in chunks:
-            view = Child(["bench.fleetview", self.url_of(len(self.viewers)), json.dumps(part),
+            view = Child([program, self.url_of(len(self.viewers)), json.dumps(part),
                           "--wait", str(wait)],
                          self.ctx.domain, f"viewers{len(self.viewers)}")
             await view.start()

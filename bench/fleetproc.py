@@ -1,7 +1,8 @@
 """The fleet benchmark's processes: JSON-speaking children, HAProxy, and what they cost.
 
 - :class:`Child`: a Python child (``bench.simrobot``, ``bench.fleetview``, ``bench.zrouter``)
-  that prints JSON lines and takes JSON commands on stdin; other lines are kept for errors.
+  or a Node one (``bench/fleetview.mjs``) that prints JSON lines and takes JSON commands on
+  stdin; other lines are kept for errors.
 - :func:`haproxy_config` / :class:`Balancer`: HAProxy in TCP mode before the relays, with
   the configuration ``deploy/haproxy/haproxy.cfg`` shows (the benchmark writes its own with
   the relays' ephemeral ports).
@@ -23,15 +24,27 @@ from typing import Any
 
 from bench.harness import ROOT, child_env
 
-__all__ = ["CHECK_TIMEOUT", "Balancer", "Child", "Usage", "haproxy_config"]
+__all__ = ["CHECK_TIMEOUT", "NODE_MODULES", "Balancer", "Child", "Usage", "haproxy_config",
+           "node_viewers"]
 
 CHECK_TIMEOUT = "3s"
 """How long HAProxy waits for a relay's ``/readyz`` answer (its default, the check interval,
 marked a relay whose event loop stalled half a second as down)."""
 
 
+NODE_MODULES = ROOT / "tests" / "peers" / "node" / "node_modules"
+"""Where ``scripts/setup.sh`` installs the stock roslib client, and with it ``ws``."""
+
+
+def node_viewers() -> bool:
+    """Whether Node and its ``ws`` package are here, for ``bench/fleetview.mjs``."""
+    return shutil.which("node") is not None and (NODE_MODULES / "ws").is_dir()
+
+
 class Child:
-    """A child process printing JSON lines (see the module's text)."""
+    """A child process printing JSON lines (see the module's text): ``argv`` a Python
+    module and its arguments, or a ``.mjs`` script's path (from the checkout's root) and
+    its arguments, run by Node."""
 
     def __init__(self, argv: list[str], domain: int, name: str) -> None:
         self.argv = argv
@@ -49,9 +62,15 @@ class Child:
         return self.proc.pid
 
     async def start(self) -> Child:
-        """Start the child (Python ``-m`` module argv)."""
+        """Start the child (a Python module, or a Node script)."""
+        env = child_env(self.domain)
+        if self.argv[0].endswith(".mjs"):
+            command = ["node", *self.argv]
+            env["NODE_PATH"] = str(NODE_MODULES)
+        else:
+            command = [sys.executable, "-m", *self.argv]
         self.proc = await asyncio.create_subprocess_exec(
-            sys.executable, "-m", *self.argv, cwd=ROOT, env=child_env(self.domain),
+            *command, cwd=ROOT, env=env,
             stdin=asyncio.subprocess.PIPE, stdout=asyncio.subprocess.PIPE,
             stderr=asyncio.subprocess.STDOUT, limit=2**26)
         self._reader = asyncio.create_task(self._read())
