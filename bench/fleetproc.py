@@ -96,10 +96,23 @@ class Child:
             got = await asyncio.wait_for(self.events.get(), timeout)
         except TimeoutError:
             raise RuntimeError(f"{self.name}: no answer in {timeout:g} s:\n"
-                               + "\n".join(self.lines)) from None
+                               + "\n".join(self.lines) + await self._stacks()) from None
         if got.get("event") == "exited":
             raise RuntimeError(f"{self.name} exited:\n{got['output']}")
         return got
+
+    async def _stacks(self) -> str:
+        """Where a Python child's threads are (``py-spy dump``, if installed), to say why it
+        went silent: a stalled loop and what holds it."""
+        beside = Path(sys.executable).with_name("py-spy")  # the venv's, off the PATH
+        spy = shutil.which("py-spy") or (str(beside) if beside.exists() else None)
+        if spy is None or self.proc is None or self.argv[0].endswith(".mjs"):
+            return ""
+        dump = await asyncio.create_subprocess_exec(
+            spy, "dump", "--pid", str(self.proc.pid), stdout=asyncio.subprocess.PIPE,
+            stderr=asyncio.subprocess.STDOUT)
+        out, _ = await dump.communicate()
+        return "\npy-spy dump:\n" + out.decode(errors="replace")
 
     async def command(self, cmd: dict[str, Any], timeout: float = 120.0) -> dict[str, Any]:
         """Send one command and return its answer."""
