@@ -38,6 +38,17 @@ return {updates: Number(document.body.dataset.updates || 0),
         scale: window.devicePixelRatio};
 """
 
+_FLAT = """
+const svg = document.getElementById('rates-plot');
+const line = svg.querySelector('.to-clients').cloneNode();
+line.setAttribute('points', `64,8 ${svg.clientWidth - 8},8`);
+svg.appendChild(line);
+"""
+"""Draws a copy of the "to clients" line flat along the plot's top, where a steady rate
+lies when it is the scale's top (10 msg/s on a scale to 10): the page's renders redraw
+only the first such line. At 1.5 px there a steady 10 Hz line was pale (anti-aliased over
+two rows) and the screenshot found none of its colour, one run in several."""
+
 
 def _browse(url: str, topic: str) -> dict[str, Any]:
     """The page's first render, then its topic row read four times a second apart, and the
@@ -54,6 +65,10 @@ def _browse(url: str, topic: str) -> dict[str, Any]:
         first: dict[str, Any] = WebDriverWait(driver, 30, poll_frequency=0.05).until(after(0))
         image = shot(driver, "glance_bridge_1280")
         first["blue"] = coloured_pixels(image, first["plot"], TO_CLIENTS_BLUE, first["scale"])
+        # A steady rate at the scale's top is a flat line along it: it must show full.
+        driver.execute_script(_FLAT)
+        flat = shot(driver, "glance_bridge_flat_line")
+        first["blue_flat"] = coloured_pixels(flat, first["plot"], TO_CLIENTS_BLUE, first["scale"])
         rows = []
         for _ in range(4):
             n = driver.execute_script(_READ, topic)["updates"]
@@ -98,6 +113,7 @@ async def test_bridge_page_reads_at_a_glance(make_bridge: Any, ros_node: Any, to
         await reader.close()
     # The first render already plots the server's seconds, drawn in the screenshot.
     assert seen["points"] >= HISTORY_AT_LOAD, seen
+    assert seen["blue_flat"] > 500, seen  # a steady rate at the scale's top, drawn full
     assert seen["blue"] > 10, seen  # a line of some seconds; one point draws none
     # Axes and scale: messages per second up the side, minutes ago along the bottom.
     assert seen["y_labels"][0] == "0 msg/s" and all("msg/s" in y for y in seen["y_labels"]), seen
