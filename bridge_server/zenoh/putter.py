@@ -25,7 +25,8 @@ once (``time.sleep(0)``). Otherwise the woken thread waits for the lock until th
 the robot's ROS thread, next lets go of it, which can take up to the interpreter's 5 ms
 switch interval. A 100 Hz IMU's latency p50 through a relay (``python -m bench --scenario
 relay_imu --quick``, three rounds each, on two busy cores) was 5.0-8.7 ms from the thread
-without the yield and 4.2-5.3 ms with it, against 2.5-7.0 ms putting from the loop.
+without the yield and 4.2-5.3 ms with it, against 2.5-7.0 ms putting from the loop; on a
+quiet machine 1.11-1.17 ms with it, against 1.05-1.35 ms from the loop.
 """
 
 from __future__ import annotations
@@ -45,12 +46,13 @@ PUT_QUEUE_BYTES = 16 * 1024 * 1024
 """Payload bytes that may wait for a robot's putting thread: some seconds of everything a
 robot streams, while a recovery's replies hold one of its topics."""
 
-PUT_MAX_AGE = 5.0
+PUT_MAX_AGE = 10.0
 """Seconds a message may wait for the putting thread: one that waited longer is dropped
-when its turn comes. As long as Zenoh lets a put wait for a full link before it closes the
-link (its ``wait_before_close``, 5 s), so only a thread held by something else (a recovery's
-replies holding a topic's window) drops: its messages are stale by then, and a relay would
-hear them long after the ones its peers heard."""
+when its turn comes. Twice as long as Zenoh lets a put wait for room on a full link before
+it closes the link (its ``wait_before_close``, 5 s): the messages behind a put that waits
+for the link are put once the link is closed (into the replay window, for the relays when
+they are back), and only a thread held by something else (a recovery's replies holding a
+topic's window) drops them, stale by then."""
 
 SLOW_PUT = 2.0
 """Seconds one put may hold the thread before the robot's log says so."""
