@@ -63,9 +63,9 @@ VIEWERS_PER_PROCESS = 1500
 """Viewer connections per Python process (``bench/fleetview.py``)."""
 NODE_VIEWERS_PER_PROCESS = 4000
 """Viewer connections per Node process (``bench/fleetview.mjs``, used when Node and its
-``ws`` package are here, unless ``BENCH_FLEET_VIEWERS=python``): some 5 µs of a core a
-message where Python's websocket client takes some 40, so 10,000 connections leave the
-machine to the tier they measure."""
+``ws`` package are here, unless ``BENCH_FLEET_VIEWERS=python``): some 10,000 connections
+took 32 % of a core in Node, 66 % in Python while hearing far fewer messages, so that the
+viewers leave the machine to the tier they measure."""
 BALANCER_CONNECTIONS = 9000
 """Viewer connections per HAProxy: each takes two of its descriptors, and a process here may
 open at most 20,000 (``ulimit -Hn``, which this machine does not let even root raise). A
