@@ -61,10 +61,15 @@ class Child:
         assert self.proc is not None
         return self.proc.pid
 
+    @property
+    def node(self) -> bool:
+        """Whether it is a Node script (else a Python module)."""
+        return self.argv[0].endswith(".mjs")
+
     async def start(self) -> Child:
         """Start the child (a Python module, or a Node script)."""
         env = child_env(self.domain)
-        if self.argv[0].endswith(".mjs"):
+        if self.node:
             command = ["node", *self.argv]
             env["NODE_PATH"] = str(NODE_MODULES)
         else:
@@ -106,7 +111,7 @@ class Child:
         went silent: a stalled loop and what holds it."""
         beside = Path(sys.executable).with_name("py-spy")  # the venv's, off the PATH
         spy = shutil.which("py-spy") or (str(beside) if beside.exists() else None)
-        if spy is None or self.proc is None or self.argv[0].endswith(".mjs"):
+        if spy is None or self.proc is None or self.node:
             return ""
         dump = await asyncio.create_subprocess_exec(
             spy, "dump", "--pid", str(self.proc.pid), stdout=asyncio.subprocess.PIPE,

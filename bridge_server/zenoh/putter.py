@@ -147,8 +147,9 @@ class Putter:
         """Say so when one put held the thread over :data:`SLOW_PUT` s (at most once in
         :data:`SLOW_PUT_REPEAT` s): the robot's link, or a recovery answered from the
         topic's window, keeps the robot's messages waiting."""
-        if took > SLOW_PUT and self._clock() - self._said_slow > SLOW_PUT_REPEAT:
-            self._said_slow = self._clock()
+        now = self._clock()
+        if took > SLOW_PUT and now - self._said_slow > SLOW_PUT_REPEAT:
+            self._said_slow = now
             log.warning("a put to the robot's link took %.1f s: the link is congested, or "
                         "a relay's recovery holds the topic's window", took)
 

@@ -25,7 +25,7 @@ import textwrap
 import threading
 import time
 import urllib.request
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from typing import Any
 
@@ -177,17 +177,24 @@ def _putting(port: int) -> dict[str, int]:
         return json.loads(r.read())["relay_uplink"]["putting"]  # type: ignore[no-any-return]
 
 
-def test_the_putter_keeps_order_bounds_what_waits_and_finishes_at_close() -> None:
-    """Puts run in the order given, after the one the link holds; what waits is bounded in
-    bytes (a message over the bound dropped and counted, a close never); closing lets the
-    thread finish what it was given."""
-    putter = Putter(limit=10)
+def _held_first() -> tuple[threading.Event, list[str], Callable[[], None]]:
+    """A first put that holds the thread (as the link does) until the event is set, the
+    list each put appends its name to, and that put."""
     held, done = threading.Event(), []
 
     def first() -> None:
         held.wait(30)
         done.append("first")
 
+    return held, done, first
+
+
+def test_the_putter_keeps_order_bounds_what_waits_and_finishes_at_close() -> None:
+    """Puts run in the order given, after the one the link holds; what waits is bounded in
+    bytes (a message over the bound dropped and counted, a close never); closing lets the
+    thread finish what it was given."""
+    putter = Putter(limit=10)
+    held, done, first = _held_first()
     assert putter.submit(first, 4)
     assert putter.submit(lambda: done.append("second"), 4)
     assert not putter.submit(lambda: done.append("dropped"), 4)  # 12 bytes would wait
@@ -221,12 +228,7 @@ def test_a_message_that_waited_too_long_is_dropped_when_its_turn_comes() -> None
     counted, not put; a close (no bytes) still runs; a message given later is put."""
     now = [0.0]
     putter = Putter(max_age=5.0, clock=lambda: now[0])
-    held, done = threading.Event(), []
-
-    def first() -> None:
-        held.wait(30)
-        done.append("first")
-
+    held, done, first = _held_first()
     assert putter.submit(first, 4)
     assert putter.submit(lambda: done.append("stale"), 4)
     assert putter.submit(lambda: done.append("close"))
