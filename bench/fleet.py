@@ -25,6 +25,10 @@ At each size (robots, routers, relays, viewers; :data:`SIZES`, :data:`QUICK`, or
 6. robots joining and leaving, one a second, each opened by a viewer: relay RSS and the
    robots it still lists before and after.
 
+With ``--profile``, py-spy on the first relay during step 4's first window, and on it and the
+first robot process for the first seconds after the router's restart (their top functions
+in the result).
+
 Robots, viewers, relays, routers and HAProxy share this machine's cores: at the larger
 sizes the viewers' and robots' own CPU is part of what limits the figures (printed
 beside them). Nothing here asserts anything about time.
@@ -48,6 +52,7 @@ from typing import Any
 from bench.fleetproc import Balancer, Child, Usage, haproxy_config, node_viewers
 from bench.harness import Bridge, Ctx, percentile
 from bench.ports import free_port
+from bench.profiler import Profiler
 from bench.relay import RELAY_READY
 
 __all__ = ["PER_PROCESS", "QUICK", "SIZES", "Size", "Tier", "fleet", "run_size"]
@@ -59,6 +64,8 @@ JOIN_WAIT = 900
 this loaded machine took more than the robots' own 120 s)."""
 PER_PROCESS = 250
 """Simulated robots per process."""
+RESTART_PROFILE_S = 15.0
+"""Seconds of py-spy after a router's restart (``--profile``)."""
 VIEWERS_PER_PROCESS = 1500
 """Viewer connections per Python process (``bench/fleetview.py``)."""
 NODE_VIEWERS_PER_PROCESS = 4000
@@ -395,11 +402,14 @@ async def run_size(ctx: Ctx, size: Size, folder: Path, churn_s: float,
         out["viewers_silent"] = vstats["silent"]
         out["usage"] = full
         everyone = [*probes, *views]
+        spy = await Profiler.maybe(ctx.profile, tier.relays[0].pid, win)
         out["steady"] = delivery(await window(tier, everyone, win))
+        if spy is not None:
+            out["profile_relay_steady"] = await spy.result(20)
         out["flood"] = await flood(tier, everyone, watched, win)
         if size.relays > 1:
             out["relay_kill"] = await relay_kill(tier, everyone)
-        out["router_restart"] = await router_restart(tier, everyone)
+        out["router_restart"] = await router_restart(tier, everyone, profile=ctx.profile)
         out["churn"] = await churn(tier, churn_s)
     except Exception as exc:  # what was measured before it stays in the report
         out["error"] = f"{type(exc).__name__}: {str(exc)[:2000]}"
@@ -468,15 +478,19 @@ async def _until_back(tier: Tier, views: list[Child], limit: float) -> dict[str,
 
 
 async def router_restart(tier: Tier, views: list[Child], down: float = 2.0,
-                         limit: float = 60.0) -> dict[str, Any]:
+                         limit: float = 60.0, profile: bool = False) -> dict[str, Any]:
     """Router 0 SIGKILLed, restarted on its port ``down`` s later: seconds from the restart
-    until every robot holds its name again, and until each viewer hears its robot."""
+    until every robot holds its name again, and until each viewer hears its robot. With
+    ``profile`` (``--profile``), py-spy on the first relay and the first robot process for
+    the first :data:`RESTART_PROFILE_S` seconds after the restart."""
     router = tier.routers[0]
     assert router is not None
     router.kill()
     await asyncio.sleep(down)
     await tier.start_router(0)
     t = time.time()
+    spies = {name: await Profiler.maybe(profile, pid, RESTART_PROFILE_S)
+             for name, pid in (("relay", tier.relays[0].pid), ("robots", tier.sims[0].pid))}
     await tier.broadcast(views, {"cmd": "mark", "t": t})
     robots_back = None
     deadline = time.monotonic() + limit
@@ -488,7 +502,10 @@ async def router_restart(tier: Tier, views: list[Child], down: float = 2.0,
             robots_back = round(time.time() - t, 2)
         else:
             await asyncio.sleep(0.5)
-    return {"robots_back_s": robots_back, **await _until_back(tier, views, limit)}
+    back = await _until_back(tier, views, limit)
+    profiles = {f"profile_{name}": await spy.result(20) for name, spy in spies.items()
+                if spy is not None}
+    return {"robots_back_s": robots_back, **back, **profiles}
 
 
 async def churn(tier: Tier, seconds: float, prefix: str = "churn") -> dict[str, Any]:

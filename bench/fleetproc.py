@@ -23,6 +23,7 @@ from pathlib import Path
 from typing import Any
 
 from bench.harness import ROOT, child_env
+from bench.profiler import py_spy
 
 __all__ = ["CHECK_TIMEOUT", "NODE_MODULES", "Balancer", "Child", "Usage", "haproxy_config",
            "node_viewers"]
@@ -109,8 +110,7 @@ class Child:
     async def _stacks(self) -> str:
         """Where a Python child's threads are (``py-spy dump``, if installed), to say why it
         went silent: a stalled loop and what holds it."""
-        beside = Path(sys.executable).with_name("py-spy")  # the venv's, off the PATH
-        spy = shutil.which("py-spy") or (str(beside) if beside.exists() else None)
+        spy = py_spy()
         if spy is None or self.proc is None or self.node:
             return ""
         dump = await asyncio.create_subprocess_exec(

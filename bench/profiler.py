@@ -7,10 +7,18 @@ from __future__ import annotations
 import asyncio
 import os
 import shutil
+import sys
 import tempfile
 from collections import Counter
 from pathlib import Path
 from typing import Any
+
+
+def py_spy() -> str | None:
+    """py-spy's path: on the PATH, or beside this Python (the venv's, when the benchmark runs
+    as ``.venv/bin/python -m bench`` with the venv not on the PATH); None if not installed."""
+    beside = Path(sys.executable).with_name("py-spy")
+    return shutil.which("py-spy") or (str(beside) if beside.exists() else None)
 
 
 class Profiler:
@@ -33,7 +41,7 @@ class Profiler:
 
     async def start(self) -> None:
         """Start sampling (nothing happens if py-spy is not installed)."""
-        exe = shutil.which("py-spy")
+        exe = py_spy()
         if exe is None:
             return
         self.proc = await asyncio.create_subprocess_exec(

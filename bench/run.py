@@ -87,8 +87,9 @@ Scenarios (targets; rosbridge_suite's figures in brackets):
   (``BENCH_FLEET_SIZES`` picks the sizes; docs/guides/sizing.md has the figures).
 
 ``--profile`` runs py-spy on the bridge during ``ros_to_client``, ``image``, ``service`` and
-``client_service``, and on the recorder during ``record``'s camera and IMU, and adds the top
-functions (self and inclusive samples) to their results (``bench/profiler.py``). Frames are
+``client_service``, on the recorder during ``record``'s camera and IMU, and in ``fleet`` on
+the first relay during the steady window and on it and the first robot process after the
+router's restart, and adds the top functions (self and inclusive samples) to their results (``bench/profiler.py``). Frames are
 counted without decoding them (``bench/counting.py``).
 """
 
