@@ -412,7 +412,9 @@ async def run_size(ctx: Ctx, size: Size, folder: Path, churn_s: float,
         out["router_restart"] = await router_restart(tier, everyone, profile=ctx.profile)
         out["churn"] = await churn(tier, churn_s)
     except Exception as exc:  # what was measured before it stays in the report
-        out["error"] = f"{type(exc).__name__}: {str(exc)[:2000]}"
+        text = str(exc)  # its head says what failed, its tail how a child ended
+        text = text if len(text) <= 6000 else f"{text[:1500]} [...] {text[-4500:]}"
+        out["error"] = f"{type(exc).__name__}: {text}"
     finally:
         await tier.stop()
     return out
