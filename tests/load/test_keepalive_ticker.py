@@ -1,6 +1,7 @@
 """Many watched links cost their loop one timer, not a sleeping task each (issue 49: with
-5,000 connections a relay spent a sixth of its CPU waking its keepalives), and the socket
-the keepalive borrows from uvloop's transport is the transport's still when the watch ends."""
+5,000 connections a relay spent a sixth of its CPU waking its keepalives), the socket the
+keepalive borrows from uvloop's transport is the transport's still when the watch ends, and
+the bridge's keepalive pings without a task a ping."""
 
 from __future__ import annotations
 
@@ -13,6 +14,7 @@ import uvloop
 from websockets.asyncio.client import connect as ws_connect
 from websockets.asyncio.server import ServerConnection, serve
 
+from bridge_server.front.websocket import WebSocketLink
 from rosbridge_core.protocol import keepalive
 
 LINKS = 200
@@ -104,3 +106,29 @@ def test_the_borrowed_socket_stays_the_transports() -> None:
                     assert await asyncio.wait_for(ws.recv(), 5) == f"still here {i}"
 
     uvloop.run(main())
+
+
+async def test_the_bridge_s_ping_is_written_at_once_and_its_pong_resolves_it() -> None:
+    """The bridge's keepalive pings with :meth:`WebSocketLink.ping_now`: a future its pong
+    resolves (websockets' ``ping`` is a coroutine, a task a ping), which the client's pong
+    resolves with the round trip; a second ping waits for none of the first."""
+    got: asyncio.Queue[tuple[bool, float, float]] = asyncio.Queue()
+
+    async def handler(conn: ServerConnection) -> None:
+        ws = cast(WebSocketLink, conn)
+        first, second = ws.ping_now(), ws.ping_now()
+        if not (asyncio.isfuture(first) and asyncio.isfuture(second)):
+            await got.put((False, -1.0, -1.0))
+            return
+        rtt1, rtt2 = await asyncio.wait_for(asyncio.gather(first, second), 5)
+        await got.put((True, rtt1, rtt2))
+        await ws.wait_closed()
+
+    async with serve(handler, "127.0.0.1", 0, create_connection=WebSocketLink) as server:
+        port = next(iter(server.sockets)).getsockname()[1]
+        async with ws_connect(f"ws://127.0.0.1:{port}", ping_interval=None) as client:
+            reader = asyncio.create_task(client.wait_closed())  # reads, so it answers pings
+            written_at_once, rtt1, rtt2 = await asyncio.wait_for(got.get(), 10)
+            reader.cancel()
+    assert written_at_once, "a ping went through a coroutine (a task a ping)"
+    assert 0 <= rtt1 < 5 and 0 <= rtt2 < 5
