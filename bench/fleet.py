@@ -406,6 +406,7 @@ async def run_size(ctx: Ctx, size: Size, folder: Path, churn_s: float,
         out["steady"] = delivery(await window(tier, everyone, win))
         if spy is not None:
             out["profile_relay_steady"] = await spy.result(20)
+        out["relay_status_read"] = await status_read(tier)
         out["flood"] = await flood(tier, everyone, watched, win)
         if size.relays > 1:
             out["relay_kill"] = await relay_kill(tier, everyone)
@@ -418,6 +419,23 @@ async def run_size(ctx: Ctx, size: Size, folder: Path, churn_s: float,
     finally:
         await tier.stop()
     return out
+
+
+async def status_read(tier: Tier) -> dict[str, Any]:
+    """Seconds to read the first relay's ``/status.json`` with every viewer connected (what an
+    operator's page waits for), and its size."""
+    relay = tier.relays[0]
+    t0 = time.monotonic()
+    try:
+        body = await asyncio.to_thread(_get, f"http://127.0.0.1:{relay.port}/status.json", 60)
+    except OSError as exc:
+        return {"error": f"{type(exc).__name__}: {exc}", "s": round(time.monotonic() - t0, 2)}
+    return {"s": round(time.monotonic() - t0, 3), "kib": round(len(body) / 1024, 1)}
+
+
+def _get(url: str, timeout: float) -> bytes:
+    with urllib.request.urlopen(url, timeout=timeout) as r:
+        return bytes(r.read())
 
 
 async def open_one_by_one(tier: Tier, robots: list[str]) -> dict[str, Any]:
