@@ -122,8 +122,14 @@ class Child:
     async def command(self, cmd: dict[str, Any], timeout: float = 120.0) -> dict[str, Any]:
         """Send one command and return its answer."""
         assert self.proc is not None and self.proc.stdin is not None
-        self.proc.stdin.write(json.dumps(cmd).encode() + b"\n")
-        await self.proc.stdin.drain()
+        try:
+            self.proc.stdin.write(json.dumps(cmd).encode() + b"\n")
+            await self.proc.stdin.drain()
+        except (ConnectionResetError, BrokenPipeError):  # it ended: say which, and how
+            with contextlib.suppress(TimeoutError):
+                await asyncio.wait_for(self.proc.wait(), 5)
+            raise RuntimeError(f"{self.name} gone (exit code {self.proc.returncode}):\n"
+                               + "\n".join(self.lines)) from None
         return await self.event(timeout)
 
     def kill(self) -> None:
