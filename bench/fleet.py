@@ -25,9 +25,9 @@ At each size (robots, routers, relays, viewers; :data:`SIZES`, :data:`QUICK`, or
 6. robots joining and leaving, one a second, each opened by a viewer: relay RSS and the
    robots it still lists before and after.
 
-With ``--profile``, py-spy on the first relay during step 4's first window, and on it and the
-first robot process for the first seconds after the router's restart (their top functions
-in the result).
+With ``--profile``, py-spy on the first relay during step 4's first window and while its status
+page is read, and on it and the first robot process for the first seconds after the router's
+restart (their top functions in the result).
 
 Robots, viewers, relays, routers and HAProxy share this machine's cores: at the larger
 sizes the viewers' and robots' own CPU is part of what limits the figures (printed
@@ -64,6 +64,8 @@ JOIN_WAIT = 900
 this loaded machine took more than the robots' own 120 s)."""
 PER_PROCESS = 250
 """Simulated robots per process."""
+STATUS_PROFILE_S = 20.0
+"""Seconds of py-spy on the first relay from the start of a read of its status page."""
 RESTART_PROFILE_S = 15.0
 """Seconds of py-spy after a router's restart (``--profile``)."""
 VIEWERS_PER_PROCESS = 1500
@@ -406,7 +408,10 @@ async def run_size(ctx: Ctx, size: Size, folder: Path, churn_s: float,
         out["steady"] = delivery(await window(tier, everyone, win))
         if spy is not None:
             out["profile_relay_steady"] = await spy.result(20)
+        spy = await Profiler.maybe(ctx.profile, tier.relays[0].pid, STATUS_PROFILE_S)
         out["relay_status_read"] = await status_read(tier)
+        if spy is not None:
+            out["profile_relay_status_read"] = await spy.result(20)
         out["flood"] = await flood(tier, everyone, watched, win)
         if size.relays > 1:
             out["relay_kill"] = await relay_kill(tier, everyone)

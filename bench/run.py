@@ -88,9 +88,10 @@ Scenarios (targets; rosbridge_suite's figures in brackets):
 
 ``--profile`` runs py-spy on the bridge during ``ros_to_client``, ``image``, ``service`` and
 ``client_service``, on the recorder during ``record``'s camera and IMU, and in ``fleet`` on
-the first relay during the steady window and on it and the first robot process after the
-router's restart, and adds the top functions (self and inclusive samples) to their results (``bench/profiler.py``). Frames are
-counted without decoding them (``bench/counting.py``).
+the first relay (its steady window, a read of its status page) and on it and the first robot
+process after the router's restart, and adds the top functions (self and inclusive samples)
+to their results (``bench/profiler.py``). Frames are counted without decoding them
+(``bench/counting.py``).
 """
 
 from __future__ import annotations
