@@ -248,18 +248,19 @@ class Tier:
     async def stats(self, views: list[Child]) -> dict[str, Any]:
         """Every viewer process's stats, merged."""
         merged: dict[str, Any] = {"robots": {}, "open_s": [], "first_s": [], "back_s": [],
-                                  "silent": 0, "reconnects": 0}
+                                  "silent": 0, "reconnects": 0, "odd": None}
         for view in views:
             s = await view.command({"cmd": "stats"})
             for k in ("open_s", "first_s", "back_s"):
                 merged[k] += s[k]
             merged["silent"] += s["silent"]
             merged["reconnects"] += s["reconnects"]
+            merged["odd"] = merged["odd"] or s.get("odd")
             for robot, r in s["robots"].items():
                 m = merged["robots"].setdefault(robot, {"got": 0, "missed": 0, "repeated": 0,
-                                                        "frames": 0, "latency_ms": [],
-                                                        "viewers": 0})
-                for k in ("got", "missed", "repeated", "frames", "viewers"):
+                                                        "frames": 0, "malformed": 0,
+                                                        "latency_ms": [], "viewers": 0})
+                for k in ("got", "missed", "repeated", "frames", "malformed", "viewers"):
                     m[k] += r[k]
                 m["latency_ms"] += r["latency_ms"]
         return merged
@@ -315,10 +316,12 @@ def _q(values: list[float], scale: float = 1.0) -> dict[str, float | None]:
 
 def delivery(stats: dict[str, Any], skip: frozenset[str] = frozenset()) -> dict[str, Any]:
     """Per robot (but ``skip``): fraction of numbered messages delivered, p99 latency (ms);
-    their worst and median across robots."""
+    their worst and median across robots; messages heard again (``repeated``) or unreadable
+    (``malformed``, with the first as ``odd``), and the viewers' reconnections so far."""
     fractions, p99s = [], []
-    repeated = 0
+    repeated = malformed = 0
     for robot, r in stats["robots"].items():
+        malformed += r.get("malformed", 0) if robot not in skip else 0
         if robot in skip or r["got"] + r["missed"] == 0:
             continue
         fractions.append(r["got"] / (r["got"] + r["missed"]))
@@ -330,7 +333,8 @@ def delivery(stats: dict[str, Any], skip: frozenset[str] = frozenset()) -> dict[
             "delivered_median": round(percentile(fractions, 0.5), 4) if fractions else None,
             "latency_p99_ms_median": round(percentile(p99s, 0.5), 1) if p99s else None,
             "latency_p99_ms_worst": round(max(p99s), 1) if p99s else None,
-            "repeated": repeated}
+            "repeated": repeated, "malformed": malformed, "odd": stats.get("odd"),
+            "reconnects": stats.get("reconnects")}
 
 
 def viewer_plan(watched: list[str], n: int, seed: int = 49) -> list[tuple[list[str], str]]:

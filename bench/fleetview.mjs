@@ -17,6 +17,8 @@ const RETRY = 0.5; // seconds between a closed connection and its next dial (RET
 const RAMP_BATCH = 50; // connections dialed together, --ramp s apart
 const LATENCY_KEEP = 2000; // latency samples kept per connection (and per robot in stats)
 
+let odd = null; // the first message a viewer could not read (with its robot and topic)
+
 const monotonic = () => performance.now() / 1000;
 const wallMs = () => performance.timeOrigin + performance.now();
 
@@ -29,7 +31,7 @@ class Conn {
     this.openS = null;
     this.firstS = null;
     this.lastSeq = null;
-    this.got = this.missed = this.repeated = this.frames = 0;
+    this.got = this.missed = this.repeated = this.frames = this.malformed = 0;
     this.latencyMs = [];
     this.mark = null;
     this.backS = null;
@@ -63,6 +65,15 @@ class Conn {
   }
 
   on(data, isBinary, t0) {
+    try {
+      this.read(data, isBinary, t0);
+    } catch (err) { // counted, one kept: a message the relay should not have sent
+      this.malformed += 1;
+      odd ??= `${this.robot} ${this.topic}: ${err}: ${data.toString().slice(0, 400)}`;
+    }
+  }
+
+  read(data, isBinary, t0) {
     const now = monotonic();
     if (isBinary || !this.counted) { // cbor-raw: counted, not decoded
       this.frames += 1;
@@ -105,7 +116,7 @@ class Conn {
   }
 
   reset() {
-    this.got = this.missed = this.repeated = this.frames = 0;
+    this.got = this.missed = this.repeated = this.frames = this.malformed = 0;
     this.latencyMs = [];
   }
 }
@@ -123,13 +134,14 @@ function stats(conns) {
   const robots = {};
   for (const c of conns) {
     const r = robots[c.robot] ??= {
-      got: 0, missed: 0, repeated: 0, frames: 0, latency_ms: [], viewers: 0,
+      got: 0, missed: 0, repeated: 0, frames: 0, malformed: 0, latency_ms: [], viewers: 0,
     };
     r.viewers += 1;
     r.got += c.got;
     r.missed += c.missed;
     r.repeated += c.repeated;
     r.frames += c.frames;
+    r.malformed += c.malformed;
     r.latency_ms.push(...c.latencyMs);
   }
   for (const r of Object.values(robots)) {
@@ -142,6 +154,7 @@ function stats(conns) {
     back_s: conns.filter((c) => c.mark !== null).map((c) => c.backS),
     silent: conns.filter((c) => c.firstS === null).length,
     reconnects: conns.reduce((n, c) => n + c.reconnects, 0),
+    odd,
   };
 }
 

@@ -39,6 +39,10 @@ RAMP_BATCH = 50
 LATENCY_KEEP = 2000
 """Latency samples kept per robot (every n-th beyond that)."""
 
+odd: str | None = None
+"""The first message a viewer could not read (with its robot and topic), counted as
+``malformed``: a message the relay should not have sent."""
+
 
 class Conn:
     """One viewer's connection to one robot (see the module's text)."""
@@ -50,7 +54,7 @@ class Conn:
         self.open_s: float | None = None
         self.first_s: float | None = None
         self.last_seq: int | None = None
-        self.got = self.missed = self.repeated = self.frames = 0
+        self.got = self.missed = self.repeated = self.frames = self.malformed = 0
         self.latency_ms: list[float] = []
         self.mark: float | None = None
         self.back_s: float | None = None
@@ -79,7 +83,12 @@ class Conn:
                         self.open_s = time.monotonic() - t0
                     await ws.send(self.subscribe_op())
                     async for data in ws:
-                        self._on(data, t0)
+                        try:
+                            self._on(data, t0)
+                        except (KeyError, TypeError, ValueError) as exc:  # counted, one kept
+                            self.malformed += 1
+                            global odd
+                            odd = odd or f"{self.robot} {self.topic}: {exc!r}: {data[:400]!r}"
             except (OSError, websockets.WebSocketException, TimeoutError):
                 pass
             self.reconnects += 1
@@ -125,7 +134,7 @@ class Conn:
 
     def reset(self) -> None:
         """Start a new measurement window (the sequence carries on)."""
-        self.got = self.missed = self.repeated = self.frames = 0
+        self.got = self.missed = self.repeated = self.frames = self.malformed = 0
         self.latency_ms = []
 
 
@@ -134,9 +143,9 @@ def stats(conns: list[Conn]) -> dict[str, Any]:
     robots: dict[str, dict[str, Any]] = {}
     for c in conns:
         r = robots.setdefault(c.robot, {"got": 0, "missed": 0, "repeated": 0, "frames": 0,
-                                        "latency_ms": [], "viewers": 0})
+                                        "malformed": 0, "latency_ms": [], "viewers": 0})
         r["viewers"] += 1
-        for k in ("got", "missed", "repeated", "frames"):
+        for k in ("got", "missed", "repeated", "frames", "malformed"):
             r[k] += getattr(c, k)
         r["latency_ms"] += c.latency_ms
     for r in robots.values():  # at most LATENCY_KEEP samples a robot go back
@@ -148,7 +157,7 @@ def stats(conns: list[Conn]) -> dict[str, Any]:
             "first_s": [c.first_s for c in conns if c.first_s is not None],
             "back_s": [c.back_s for c in conns if c.mark is not None],
             "silent": sum(c.first_s is None for c in conns),
-            "reconnects": sum(c.reconnects for c in conns)}
+            "reconnects": sum(c.reconnects for c in conns), "odd": odd}
 
 
 async def _serve(args: argparse.Namespace) -> int:
