@@ -64,6 +64,10 @@ JOIN_WAIT = 900
 this loaded machine took more than the robots' own 120 s)."""
 PER_PROCESS = 250
 """Simulated robots per process."""
+RELAY_LINES = {"connected": "connected from", "disconnected": ") disconnected",
+               "keepalive_dropped": "no sign of it"}
+"""Lines counted in the relays' logs (reported with each window): clients connected and
+gone, and those the keepalive dropped as silent."""
 STATUS_PROFILE_S = 20.0
 """Seconds of py-spy on the first relay from the start of a read of its status page."""
 RESTART_PROFILE_S = 15.0
@@ -183,6 +187,7 @@ class Tier:
                                              "--max-clients", str(share), *self.relay_args],
                            self.ctx.bridge_root, module="bridge_server.zenoh.relay",
                            ready=RELAY_READY)
+            relay.counting = dict(RELAY_LINES)
             self.relays.append(await relay.start(60))
         for i in range(max(1, math.ceil(connections / BALANCER_CONNECTIONS))):
             port = free_port()
@@ -269,6 +274,10 @@ class Tier:
         """Send ``cmd`` to each of ``views``."""
         for view in views:
             await view.command(cmd)
+
+    def relay_lines(self) -> dict[str, int]:
+        """:data:`RELAY_LINES` counted in every relay's log so far."""
+        return {label: sum(r.counted[label] for r in self.relays) for label in RELAY_LINES}
 
     def relay_status(self) -> list[dict[str, Any]]:
         """Each live relay's ``/status.json``."""
@@ -409,7 +418,10 @@ async def run_size(ctx: Ctx, size: Size, folder: Path, churn_s: float,
         out["usage"] = full
         everyone = [*probes, *views]
         spy = await Profiler.maybe(ctx.profile, tier.relays[0].pid, win)
+        lines = tier.relay_lines()
         out["steady"] = delivery(await window(tier, everyone, win))
+        out["relay_lines"] = {"until_steady": lines, "in_steady": {
+            k: v - lines[k] for k, v in tier.relay_lines().items()}}
         if spy is not None:
             out["profile_relay_steady"] = await spy.result(20)
         spy = await Profiler.maybe(ctx.profile, tier.relays[0].pid, STATUS_PROFILE_S)

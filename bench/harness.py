@@ -17,7 +17,7 @@ import socket
 import ssl
 import struct
 import sys
-from collections import deque
+from collections import Counter, deque
 from collections.abc import Awaitable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -112,6 +112,10 @@ class Bridge:
         self.proc: asyncio.subprocess.Process | None = None
         self.port = 0
         self.lines: deque[str] = deque(maxlen=200)
+        self.counting: dict[str, str] = {}
+        """What to count in its output: a label and the text of the lines it counts."""
+        self.counted: Counter[str] = Counter()
+        """Lines of its output so far with each label's text in them (:attr:`counting`)."""
         self._drain: asyncio.Task[None] | None = None
 
     @property
@@ -187,7 +191,11 @@ class Bridge:
             raw = await self.proc.stdout.readline()
             if not raw:
                 return
-            self.lines.append(raw.decode(errors="replace").rstrip())
+            line = raw.decode(errors="replace").rstrip()
+            self.lines.append(line)
+            for label, text in self.counting.items():
+                if text in line:
+                    self.counted[label] += 1
 
     async def stop(self) -> None:
         """SIGTERM, then kill if it lingers."""
