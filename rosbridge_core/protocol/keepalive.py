@@ -221,23 +221,28 @@ class _Ticker:
     ``period / SLICES`` s, so each link is looked at once a period and no turn of the loop
     looks at them all."""
 
-    _of: weakref.WeakKeyDictionary[asyncio.AbstractEventLoop, dict[float, _Ticker]] = (
-        weakref.WeakKeyDictionary())
+    _of: weakref.WeakValueDictionary[tuple[int, float], _Ticker] = (
+        weakref.WeakValueDictionary())
+    """The tickers by loop and period, weakly: a ticker lives while its loop runs its task or
+    a watch waits on it, so a loop dropped with watches still pending (a cycle with its
+    tasks) is collected with its ticker."""
 
     def __init__(self, loop: asyncio.AbstractEventLoop, period: float) -> None:
-        self.loop, self.period = loop, period
+        self.loop = weakref.ref(loop)
+        self.period = period
         self.slots: list[dict[_Watched, None]] = [{} for _ in range(SLICES)]
         self.count = 0
         self.dealt = 0
-        self.task: asyncio.Task[None] | None = None
+        self.running = False
+        """Its task runs (kept by its loop's timer: a ticker never holds its loop)."""
 
     @classmethod
     def of(cls, loop: asyncio.AbstractEventLoop, period: float) -> _Ticker:
         """``loop``'s ticker of ``period`` (made when first asked for)."""
-        tickers = cls._of.setdefault(loop, {})
-        ticker = tickers.get(period)
-        if ticker is None:
-            ticker = tickers[period] = cls(loop, period)
+        key = (id(loop), period)
+        ticker = cls._of.get(key)
+        if ticker is None or ticker.loop() is not loop:  # none, or a dead loop's of that id
+            ticker = cls._of[key] = cls(loop, period)
         return ticker
 
     def add(self, link: _Watched) -> None:
@@ -246,8 +251,9 @@ class _Ticker:
         self.dealt += 1
         self.slots[link.slot][link] = None
         self.count += 1
-        if self.task is None:
-            self.task = self.loop.create_task(self._run(), name=f"keepalive-{self.period:g}s")
+        if not self.running:  # it ends once it watches nothing
+            self.running = True
+            asyncio.get_running_loop().create_task(self._run(), name=f"keepalive-{self.period:g}s")
 
     def discard(self, link: _Watched) -> None:
         """Look at ``link`` no more."""
@@ -255,12 +261,13 @@ class _Ticker:
             self.count -= 1
 
     async def _run(self) -> None:
+        loop = asyncio.get_running_loop()
         step = self.period / SLICES
         slot = 0
         try:
             while self.count:
                 await asyncio.sleep(step)
-                now = self.loop.time()
+                now = loop.time()
                 for link in list(self.slots[slot]):
                     try:
                         over = link.look(now)
@@ -272,7 +279,7 @@ class _Ticker:
                         self.discard(link)
                 slot = (slot + 1) % SLICES
         finally:
-            self.task = None
+            self.running = False
 
 
 def _retrieve(waiter: Any, pong: Callable[[], None]) -> None:

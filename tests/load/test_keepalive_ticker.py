@@ -6,7 +6,9 @@ the bridge's keepalive pings without a task a ping."""
 from __future__ import annotations
 
 import asyncio
+import gc
 import math
+import weakref
 from collections import Counter
 from typing import Any, cast
 
@@ -132,3 +134,34 @@ async def test_the_bridge_s_ping_is_written_at_once_and_its_pong_resolves_it() -
             reader.cancel()
     assert written_at_once, "a ping went through a coroutine (a task a ping)"
     assert 0 <= rtt1 < 5 and 0 <= rtt2 < 5
+
+
+def test_a_finished_loop_is_not_kept_by_its_ticker(monkeypatch: Any) -> None:
+    """The tickers are kept per loop, weakly: a loop that watched a link and was closed,
+    however it ended (its tasks cancelled, or left pending), can be collected."""
+    monkeypatch.setattr(keepalive, "tcp_state", lambda sock: (0.0, 0, 0))
+
+    async def watched_a_while() -> None:
+        loop = asyncio.get_running_loop()
+        watching.append(asyncio.create_task(keepalive.watch(
+            cast(asyncio.Transport, _Transport()), loop.create_future, lambda s: None,
+            INTERVAL, 1.0)))
+        await asyncio.sleep(0.3)  # the ticker looked at it
+
+    refs = []
+    watching: list[asyncio.Task[bool]] = []
+    for cancel_pending in (True, False):
+        loop = asyncio.new_event_loop()
+        refs.append(weakref.ref(loop))
+        loop.run_until_complete(watched_a_while())
+        if cancel_pending:  # as asyncio.run ends
+            pending = asyncio.all_tasks(loop)
+            for task in pending:
+                task.cancel()
+            loop.run_until_complete(asyncio.gather(*pending, return_exceptions=True))
+            del pending, task
+        loop.close()
+        del loop
+        watching.clear()
+    gc.collect()
+    assert [r() is None for r in refs] == [True, True]
