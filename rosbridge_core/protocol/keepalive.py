@@ -133,7 +133,7 @@ async def watch(
 def _borrow(sock: Any) -> Any:
     """What ``tcp_state`` reads for the transport's socket ``sock``: a socket object of the
     transport's own descriptor, made once (uvloop's stand-in makes one at every
-    ``getsockopt``: a tenth of a relay's keepalive with 5,000 connections), to be detached,
+    ``getsockopt``: a seventh of a relay's keepalive with 5,000 connections), to be detached,
     never closed; ``sock`` itself where it has no descriptor to lend."""
     if sock is None or isinstance(sock, socket.socket):
         return sock
