@@ -38,6 +38,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import http.client
 import json
 import math
 import os
@@ -449,7 +450,7 @@ async def status_read(tier: Tier) -> dict[str, Any]:
     t0 = time.monotonic()
     try:
         body = await asyncio.to_thread(_get, f"http://127.0.0.1:{relay.port}/status.json", 60)
-    except OSError as exc:
+    except (OSError, http.client.HTTPException) as exc:  # a timeout, a page cut short
         return {"error": f"{type(exc).__name__}: {exc}", "s": round(time.monotonic() - t0, 2)}
     return {"s": round(time.monotonic() - t0, 3), "kib": round(len(body) / 1024, 1)}
 
