@@ -285,9 +285,7 @@ class Tier:
         out = []
         for relay in self.relays:
             if relay.proc is not None and relay.proc.returncode is None:
-                with urllib.request.urlopen(f"http://127.0.0.1:{relay.port}/status.json",
-                                            timeout=30) as r:
-                    out.append(json.load(r))
+                out.append(json.loads(_get(f"http://127.0.0.1:{relay.port}/status.json", 30)))
         return out
 
     async def stop(self) -> None:
