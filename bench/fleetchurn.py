@@ -18,7 +18,8 @@ import tempfile
 from pathlib import Path
 from typing import Any
 
-from bench.fleet import Size, Tier, churn
+from bench.fleet import churn
+from bench.fleettier import Size, Tier
 from bench.harness import Ctx
 
 __all__ = ["proc_memory", "rounds"]

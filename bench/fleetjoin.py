@@ -16,8 +16,8 @@ import time
 from pathlib import Path
 from typing import Any
 
-from bench.fleet import Size, Tier
 from bench.fleetchurn import proc_memory
+from bench.fleettier import Size, Tier
 from bench.harness import Ctx
 
 __all__ = ["ANSWER_WAIT", "rounds"]

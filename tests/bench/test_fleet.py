@@ -3,7 +3,8 @@
 30 simulated robots (``bench/simrobot.py``: the bridge's own exporter over an in-memory
 graph), one Zenoh router, two relays behind HAProxy, 150 viewers each watching 1-3 of 15
 robots through the balancer (``bench/fleetview.mjs`` in Node where setup installed it, else
-``bench/fleetview.py``), all real processes (``bench/fleet.py``'s :class:`~bench.fleet.Tier`). Asserted: every viewer hears its robots; one robot flooding
+``bench/fleetview.py``), all real processes (:class:`~bench.fleettier.Tier`). Asserted: every
+viewer hears its robots; one robot flooding
 (100 KB at 100 Hz) costs the other robots' viewers no more than 10 % of their messages; a
 relay killed, its viewers are back through the balancer with their subscriptions; robots that
 join, are watched and leave leave nothing behind on the relays (the robots they list, their
@@ -22,7 +23,8 @@ from pathlib import Path
 
 import pytest
 
-from bench.fleet import Size, Tier, delivery, window
+from bench.fleet import delivery, window
+from bench.fleettier import Size, Tier
 from bench.fleetview import Conn
 from bench.harness import Ctx
 
