@@ -28,6 +28,11 @@ started and stopped by :class:`~bench.fleettier.Tier`:
 6. robots joining and leaving, one a second, each opened by a viewer: relay RSS and the
    robots it still lists before and after.
 
+After the first window and at the end, the balancers' own counts (from HAProxy's
+statistics page, :meth:`~bench.fleettier.Tier.balancer_counts`): connections taken, passed
+to each relay, passed to none, and how often and how long their health checks held each
+relay down; beside them, the clients the relays' logs counted (``relay_lines``).
+
 With ``--profile``, py-spy on the first relay during step 4's first window and while its status
 page is read, and on it and the first robot process for the first seconds after the router's
 restart (their top functions in the result).
@@ -169,6 +174,7 @@ async def run_size(ctx: Ctx, size: Size, folder: Path, churn_s: float,
         out["steady"] = delivery(await window(tier, everyone, win))
         out["relay_lines"] = {"until_steady": lines, "in_steady": {
             k: v - lines[k] for k, v in tier.relay_lines().items()}}
+        out["balancers"] = {"until_steady": await asyncio.to_thread(tier.balancer_counts)}
         if spy is not None:
             out["profile_relay_steady"] = await spy.result(20)
         spy = await Profiler.maybe(ctx.profile, tier.relays[0].pid, STATUS_PROFILE_S)
@@ -185,6 +191,9 @@ async def run_size(ctx: Ctx, size: Size, folder: Path, churn_s: float,
         text = text if len(text) <= 6000 else f"{text[:1500]} [...] {text[-4500:]}"
         out["error"] = f"{type(exc).__name__}: {text}"
     finally:
+        if "balancers" in out:  # what they did in all: the killed relay's viewers, the churn
+            with contextlib.suppress(OSError, http.client.HTTPException):
+                out["balancers"]["in_all"] = await asyncio.to_thread(tier.balancer_counts)
         await tier.stop()
     return out
 

@@ -13,10 +13,14 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import csv
+import io
 import json
 import shutil
 import sys
+import tempfile
 import time
+import urllib.request
 from collections import deque
 from collections.abc import Callable, Iterable
 from pathlib import Path
@@ -108,16 +112,25 @@ class Child:
         return got
 
     async def _stacks(self) -> str:
-        """Where a Python child's threads are (``py-spy dump``, if installed), to say why it
-        went silent: a stalled loop and what holds it."""
-        spy = py_spy()
-        if spy is None or self.proc is None or self.node:
+        """Where a Python child's threads are, to say why it went silent: ``py-spy dump
+        --native`` (if installed: a loop stalled, or waiting for the interpreter's lock under
+        a Python frame that looks idle), and every thread's native stack by ``gdb`` (if
+        installed: Zenoh's threads, which have no Python frames) written to a file named
+        here."""
+        if self.proc is None or self.node:
             return ""
-        dump = await asyncio.create_subprocess_exec(
-            spy, "dump", "--pid", str(self.proc.pid), stdout=asyncio.subprocess.PIPE,
-            stderr=asyncio.subprocess.STDOUT)
-        out, _ = await dump.communicate()
-        return "\npy-spy dump:\n" + out.decode(errors="replace")
+        pid = str(self.proc.pid)
+        said = ""
+        spy = py_spy()
+        if spy is not None:
+            said += "\npy-spy dump:\n" + await _output(spy, "dump", "--native", "--pid", pid)
+        gdb = shutil.which("gdb")
+        if gdb is not None:
+            path = Path(tempfile.gettempdir()) / f"bench-{self.name}-{pid}-threads.txt"
+            path.write_text(await _output(gdb, "-p", pid, "-batch", "-ex",
+                                          "thread apply all bt"))
+            said += f"\nevery thread's stack (gdb): {path}"
+        return said
 
     async def command(self, cmd: dict[str, Any], timeout: float = 120.0) -> dict[str, Any]:
         """Send one command and return its answer."""
@@ -152,6 +165,14 @@ class Child:
                 await asyncio.wait_for(self.proc.wait(), 10)
         if self._reader is not None:
             self._reader.cancel()
+
+
+async def _output(*argv: str) -> str:
+    """What ``argv`` printed (standard output and error), as text."""
+    proc = await asyncio.create_subprocess_exec(*argv, stdout=asyncio.subprocess.PIPE,
+                                                stderr=asyncio.subprocess.STDOUT)
+    out, _ = await proc.communicate()
+    return out.decode(errors="replace")
 
 
 def haproxy_config(port: int, relays: Iterable[int], stats_port: int | None = None) -> str:
@@ -198,11 +219,38 @@ backend relays
 class Balancer:
     """HAProxy (Debian's ``haproxy``) started in the foreground with a written config."""
 
-    def __init__(self, config: str, folder: Path, port: int) -> None:
+    def __init__(self, config: str, folder: Path, port: int, stats_port: int | None = None
+                 ) -> None:
+        """``stats_port``: the port of its statistics page, if ``config`` has one
+        (:func:`haproxy_config`'s ``stats_port``), for :meth:`counts`."""
         self.path = folder / "haproxy.cfg"
         self.path.write_text(config)
         self.port = port
+        self.stats_port = stats_port
         self.proc: asyncio.subprocess.Process | None = None
+
+    def counts(self, timeout: float = 10.0) -> dict[str, Any]:
+        """What it did with the connections it took (from its statistics page, CSV): how many
+        it took (``sessions``), how many it passed to each relay (by its name in the config,
+        ``relay0``...) with the relay's health (``status``: ``UP`` or ``DOWN``;
+        ``went_down``: times its checks marked it down; ``down_s``: seconds it was down), and
+        how many reached no relay
+        (``to_no_relay``: taken while every relay was down, or refused by all it tried: the
+        backend's connection errors). A connection one relay refused and the balancer then
+        passed to another counts for both relays."""
+        assert self.stats_port is not None, "started without a statistics page"
+        url = f"http://127.0.0.1:{self.stats_port}/;csv"
+        with urllib.request.urlopen(url, timeout=timeout) as r:
+            text = r.read().decode()
+        rows = list(csv.DictReader(io.StringIO(text.lstrip("# "))))
+        front = next(r for r in rows if r["svname"] == "FRONTEND" and r["pxname"] == "viewers")
+        relays = {r["svname"]: {"sessions": int(r["stot"] or 0), "status": r["status"],
+                                "went_down": int(r["chkdown"] or 0),
+                                "down_s": int(r["downtime"] or 0)}
+                  for r in rows if r["pxname"] == "relays" and r["svname"] != "BACKEND"}
+        back = next(r for r in rows if r["svname"] == "BACKEND" and r["pxname"] == "relays")
+        return {"sessions": int(front["stot"] or 0), "relays": relays,
+                "to_no_relay": int(back["econ"] or 0)}
 
     async def start(self, timeout: float = 20.0) -> Balancer:
         """Start it and wait until its port accepts."""

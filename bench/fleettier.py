@@ -151,11 +151,12 @@ class Tier:
             relay.counting = dict(RELAY_LINES)
             self.relays.append(await relay.start(60))
         for i in range(max(1, math.ceil(connections / BALANCER_CONNECTIONS))):
-            port = free_port()
+            port, stats_port = free_port(), free_port()
             folder = self.folder / f"balancer{i}"
             folder.mkdir(exist_ok=True)
             self.balancers.append(await Balancer(
-                haproxy_config(port, [r.port for r in self.relays]), folder, port).start())
+                haproxy_config(port, [r.port for r in self.relays], stats_port), folder, port,
+                stats_port).start())
 
     async def add_robots(self, names: list[str]) -> list[Child]:
         """Robot processes for ``names`` (:data:`PER_PROCESS` each), dialing the routers in
@@ -239,6 +240,23 @@ class Tier:
     def relay_lines(self) -> dict[str, int]:
         """:data:`RELAY_LINES` counted in every relay's log so far."""
         return {label: sum(r.counted[label] for r in self.relays) for label in RELAY_LINES}
+
+    def balancer_counts(self) -> dict[str, Any]:
+        """The balancers' :meth:`~bench.fleetproc.Balancer.counts`, summed: connections
+        taken, passed to each relay, and passed to none; each relay's times marked down and
+        seconds down (the most any balancer saw)."""
+        total: dict[str, Any] = {"sessions": 0, "to_no_relay": 0, "relays": {}}
+        for balancer in self.balancers:
+            c = balancer.counts()
+            total["sessions"] += c["sessions"]
+            total["to_no_relay"] += c["to_no_relay"]
+            for name, r in c["relays"].items():
+                t = total["relays"].setdefault(name, {"sessions": 0, "went_down": 0,
+                                                      "down_s": 0, "status": r["status"]})
+                t["sessions"] += r["sessions"]
+                t["went_down"] = max(t["went_down"], r["went_down"])
+                t["down_s"] = max(t["down_s"], r["down_s"])
+        return total
 
     def relay_status(self) -> list[dict[str, Any]]:
         """Each live relay's ``/status.json``."""

@@ -75,6 +75,7 @@ async def test_fleet_small(tmp_path: Path) -> None:
             await asyncio.sleep(1)
         assert sum(b is None for b in s["back_s"]) == 0, "viewers not back after a relay died"
         assert s["reconnects"] > 0, "no viewer was on the killed relay"
+        await balancer_saw_the_kill(tier, sum(len(robots) for robots, _ in plan))
 
         await churn_leaves_nothing(tier)
     finally:
@@ -106,6 +107,22 @@ async def test_busy_relay_keeps_its_viewers(tmp_path: Path) -> None:
         assert conn.reconnects == 0, "the balancer cut a busy relay's viewer"
     finally:
         await tier.stop()
+
+
+async def balancer_saw_the_kill(tier: Tier, connections: int) -> None:
+    """The balancer's counts (read from HAProxy's statistics page): it took at least the
+    viewers' connections and passed each to a relay (those the dead relay refused to the
+    other), and its health check marked the killed relay down once, the other never."""
+    deadline = time.monotonic() + 30  # three failed checks, one a second
+    while (counts := await asyncio.to_thread(tier.balancer_counts))["relays"]["relay1"][
+            "status"] != "DOWN" and time.monotonic() < deadline:
+        await asyncio.sleep(0.5)
+    relays = counts["relays"]
+    assert counts["sessions"] >= connections, counts
+    assert counts["to_no_relay"] == 0, counts  # each redial the dead relay refused went on
+    assert relays["relay0"]["sessions"] > 0 and relays["relay1"]["sessions"] > 0, counts
+    assert (relays["relay1"]["status"], relays["relay1"]["went_down"]) == ("DOWN", 1), counts
+    assert (relays["relay0"]["status"], relays["relay0"]["went_down"]) == ("UP", 0), counts
 
 
 async def churn_leaves_nothing(tier: Tier) -> None:
