@@ -13,7 +13,10 @@ import { performance } from "node:perf_hooks";
 
 const WebSocket = createRequire(import.meta.url)("ws"); // a require honours NODE_PATH
 
-const RETRY = 0.5; // seconds between a closed connection and its next dial (RETRY in .py)
+// A closed connection dials again after roslibpy-lite's client's delays (as bench/fleetview.py,
+// with roslibpy_lite.Backoff's defaults): 0.1 s doubling to 5 s while dials fail, each less a
+// random share of up to half, from 0.1 s again once one opens.
+const BACKOFF = { initial: 0.1, maximum: 5.0, factor: 2.0, jitter: 0.5 };
 const RAMP_BATCH = 50; // connections dialed together, --ramp s apart
 const LATENCY_KEEP = 2000; // latency samples kept per connection (and per robot in stats)
 
@@ -38,6 +41,14 @@ class Conn {
     this.reconnects = 0;
     this.heard = false;
     this.onHeard = () => {}; // told once, at the first message
+    this.attempts = 0; // dials failed since the last that opened
+  }
+
+  nextDelay() { // seconds before the next dial; counts the attempt
+    const { initial, maximum, factor, jitter } = BACKOFF;
+    const base = Math.min(maximum, initial * factor ** Math.min(this.attempts, 64));
+    this.attempts += 1;
+    return base * (1 - jitter * Math.random());
   }
 
   subscribeOp() {
@@ -54,13 +65,14 @@ class Conn {
     });
     ws.on("open", () => {
       if (this.openS === null) this.openS = monotonic() - t0;
+      this.attempts = 0;
       ws.send(this.subscribeOp());
     });
     ws.on("message", (data, isBinary) => this.on(data, isBinary, t0));
     ws.on("error", () => {}); // "close" follows
     ws.on("close", () => {
       this.reconnects += 1;
-      setTimeout(() => this.run(), RETRY * (0.5 + Math.random()) * 1000);
+      setTimeout(() => this.run(), this.nextDelay() * 1000);
     });
   }
 

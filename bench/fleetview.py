@@ -3,9 +3,12 @@
 A viewer is one rosbridge websocket connection per robot it watches (``ws://HOST/ROBOT``),
 subscribed to one topic of :mod:`bench.simrobot`: ``/status`` (1 Hz, JSON text with its
 number and time), ``/pose`` (10 Hz: ``x`` is its number, the stamp its time) or the camera
-(``cbor-raw``, counted only; so is ``/flood``). A connection that closes (its relay killed) dials the same
-address again (the balancer) every :data:`RETRY` s and subscribes again, as a client that
-restores its subscriptions does.
+(``cbor-raw``, counted only; so is ``/flood``). A connection that closes (its relay killed)
+dials the same address again (the balancer) and subscribes again, as a client that restores
+its subscriptions does, after the delays of roslibpy-lite's own client
+(:class:`roslibpy_lite.Backoff`: 0.1 s, doubling to 5 s while dials fail, from 0.1 s again
+once one opens). A fixed half-second made the viewers of a fleet whose balancer had no relay
+to offer dial a million times in ten minutes, on the cores the tier they measure runs on.
 
 Per connection it keeps: seconds to open (the websocket handshake: the relay has opened
 the robot), seconds to the first message, the numbers got, missed (gaps) and repeated, the
@@ -30,10 +33,10 @@ from typing import Any
 import websockets
 from websockets.asyncio.client import connect
 
+from roslibpy_lite import Backoff
+
 __all__ = ["Conn", "main"]
 
-RETRY = 0.5
-"""Seconds between a closed connection and its next dial."""
 RAMP_BATCH = 50
 """Connections dialed together, ``--ramp`` s apart."""
 LATENCY_KEEP = 2000
@@ -74,6 +77,7 @@ class Conn:
 
     async def run(self) -> None:
         """Connect, subscribe, count; dial again when closed, for ever."""
+        backoff = Backoff()
         while True:
             t0 = time.monotonic()
             try:
@@ -81,6 +85,7 @@ class Conn:
                                    ping_interval=None, compression=None) as ws:
                     if self.open_s is None:
                         self.open_s = time.monotonic() - t0
+                    backoff.reset()
                     await ws.send(self.subscribe_op())
                     async for data in ws:
                         try:
@@ -92,7 +97,7 @@ class Conn:
             except (OSError, websockets.WebSocketException, TimeoutError):
                 pass
             self.reconnects += 1
-            await asyncio.sleep(RETRY * (0.5 + random.random()))
+            await asyncio.sleep(backoff.next())
 
     def _on(self, data: str | bytes, t0: float) -> None:
         now = time.monotonic()
