@@ -14,11 +14,12 @@ started and stopped by :class:`~bench.fleettier.Tier`:
    relay and router RSS and CPU before and with them, nobody watching: **per unwatched robot**;
 3. up to :data:`OPEN_ONE` idle robots opened one after another by one viewer: **opening
    one robot** (p50, p99), nothing else opening meanwhile (:func:`open_one_by_one`); then
-   one probe viewer per watched robot (``/pose``), through the balancer: **per watched
-   robot**, and how long opening a robot takes (the handshake: the relay opens the robot),
-   then the viewers (``bench/fleetview.py``; each 1-3 robots, 90 % ``/status`` at 1 Hz,
-   10 % ``/pose`` at 10 Hz, one in 500 (at most 3) a camera): **per viewer**, and their open and first-message
-   times;
+   one probe viewer per watched robot (``/pose``; the watched robots spread over the robot
+   processes, :meth:`~bench.fleettier.Size.watched_names`), through the balancer: **per
+   watched robot**, and how long opening a robot takes (the handshake: the relay opens the
+   robot), then the viewers (``bench/fleetview.py``; each 1-3 robots, 90 % ``/status`` at
+   1 Hz, 10 % ``/pose`` at 10 Hz, one in 500 (at most 3) a camera): **per viewer**, and
+   their open and first-message times;
 4. a window: **delivered fraction and p99 latency** per robot; then one robot floods
    (100 KB messages at 100 Hz to two viewers) and the same window again: the others'
    fraction and p99 beside their own without the flood;
@@ -153,7 +154,7 @@ async def run_size(ctx: Ctx, size: Size, folder: Path, churn_s: float,
         idle = await measured(tier, win)
         out["per_unwatched_robot"] = _per(idle, base, size.robots)
         out["open_one"] = await open_one_by_one(tier, tier.names[-min(OPEN_ONE, size.robots):])
-        watched = tier.names[:size.watched_robots]
+        watched = size.watched_names(tier.names)
         probes = await tier.add_viewers([([r], "/pose") for r in watched])
         one = await measured(tier, win)
         out["per_watched_robot"] = _per(one, idle, len(watched))
