@@ -78,12 +78,17 @@ def _q(values: list[float], scale: float = 1.0) -> dict[str, float | None]:
 
 def delivery(stats: dict[str, Any], skip: frozenset[str] = frozenset()) -> dict[str, Any]:
     """Per robot (but ``skip``): fraction of numbered messages delivered, p99 latency (ms);
-    their worst and median across robots; messages heard again (``repeated``) or unreadable
-    (``malformed``, with the first as ``odd``), and the viewers' reconnections so far."""
+    their worst and median across robots; the robots none of whose viewers heard anything
+    (``silent_robots``, the first of them by name); messages heard again (``repeated``) or
+    unreadable (``malformed``, with the first as ``odd``), and the viewers' reconnections so
+    far."""
     fractions, p99s = [], []
+    silent: list[str] = []
     repeated = malformed = 0
     for robot, r in stats["robots"].items():
         malformed += r.get("malformed", 0) if robot not in skip else 0
+        if robot not in skip and r["got"] + r["missed"] + r["frames"] == 0:
+            silent.append(robot)
         if robot in skip or r["got"] + r["missed"] == 0:
             continue
         fractions.append(r["got"] / (r["got"] + r["missed"]))
@@ -96,6 +101,7 @@ def delivery(stats: dict[str, Any], skip: frozenset[str] = frozenset()) -> dict[
             "latency_p99_ms_median": round(percentile(p99s, 0.5), 1) if p99s else None,
             "latency_p99_ms_worst": round(max(p99s), 1) if p99s else None,
             "repeated": repeated, "malformed": malformed, "odd": stats.get("odd"),
+            "silent_robots": len(silent), "silent_first": sorted(silent)[:5],
             "reconnects": stats.get("reconnects")}
 
 
@@ -273,9 +279,10 @@ async def _until_back(tier: Tier, views: list[Child], limit: float) -> dict[str,
 async def router_restart(tier: Tier, views: list[Child], down: float = 2.0,
                          limit: float = 60.0, profile: bool = False) -> dict[str, Any]:
     """Router 0 SIGKILLed, restarted on its port ``down`` s later: seconds from the restart
-    until every robot holds its name again, and until each viewer hears its robot. With
-    ``profile`` (``--profile``), py-spy on the first relay and the first robot process for
-    the first :data:`RESTART_PROFILE_S` seconds after the restart."""
+    until every robot holds its name again (and how many each robot process held at the
+    last look), and until each viewer hears its robot. With ``profile`` (``--profile``),
+    py-spy on the first relay and the first robot process for the first
+    :data:`RESTART_PROFILE_S` seconds after the restart."""
     router = tier.routers[0]
     assert router is not None
     router.kill()
@@ -287,18 +294,17 @@ async def router_restart(tier: Tier, views: list[Child], down: float = 2.0,
     await tier.broadcast(views, {"cmd": "mark", "t": t})
     robots_back = None
     deadline = time.monotonic() + limit
+    held: list[int] = []
     while robots_back is None and time.monotonic() < deadline:
-        held = 0
-        for sim in tier.sims:
-            held += (await sim.command({"cmd": "stats"}))["holding"]
-        if held >= len(tier.names):
+        held = [(await sim.command({"cmd": "stats"}))["holding"] for sim in tier.sims]
+        if sum(held) >= len(tier.names):
             robots_back = round(time.time() - t, 2)
         else:
             await asyncio.sleep(0.5)
     back = await _until_back(tier, views, limit)
     profiles = {f"profile_{name}": await spy.result(20) for name, spy in spies.items()
                 if spy is not None}
-    return {"robots_back_s": robots_back, **back, **profiles}
+    return {"robots_back_s": robots_back, "holding_by_process": held, **back, **profiles}
 
 
 async def churn(tier: Tier, seconds: float, prefix: str = "churn") -> dict[str, Any]:
