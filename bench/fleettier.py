@@ -187,7 +187,8 @@ class Tier:
             ready = await sim.event(JOIN_WAIT + 60)
             if ready.get("missing"):
                 raise RuntimeError(f"{len(ready['missing'])} robots never held their names "
-                                   f"in {JOIN_WAIT} s: {ready['missing'][:5]}")
+                                   f"in {JOIN_WAIT} s: {ready['missing'][:5]}; {sim.name} "
+                                   "said last:\n" + "\n".join(sim.lines))
         return made
 
     def sim_of(self, robot: str) -> Child:
