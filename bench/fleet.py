@@ -65,6 +65,8 @@ OPEN_ONE = 20
 """Robots opened one at a time (:func:`open_one_by_one`) at each size."""
 STATUS_PROFILE_S = 20.0
 """Seconds of py-spy on the first relay from the start of a read of its status page."""
+CHURN_CONTROL_S = 60.0
+"""Seconds, at most the churn's own, that the relays' RSS is watched without churn first."""
 RESTART_PROFILE_S = 15.0
 """Seconds of py-spy after a router's restart (``--profile``)."""
 
@@ -311,11 +313,18 @@ async def churn(tier: Tier, seconds: float, prefix: str = "churn") -> dict[str, 
     """Robots joining and leaving, one more a second for ``seconds`` (each its own life: it
     joins, a viewer opens it through the balancer and hears it, it leaves; lives overlap),
     named ``PREFIX-<n>``: relay RSS and the robots the relays list, before and after the
-    relays forgot those that left."""
+    relays forgot those that left; and, for comparison, how much the relays' RSS moved in
+    the :data:`CHURN_CONTROL_S` s (at most ``seconds``) just before, without churn."""
     def listed() -> int:
         return sum(len(s["robots"]) for s in tier.relay_status())
 
+    # the same time without churn first: what the relays' memory does on its own then (the
+    # step before, a router's restart, may leave it moving)
+    quiet = min(seconds, CHURN_CONTROL_S)
+    rss0 = tier.usage.since()["relays"]["rss_mib"]
+    await asyncio.sleep(quiet)
     before = {"rss_mib": tier.usage.since()["relays"]["rss_mib"], "robots_listed": listed()}
+    drift = round(100 * (before["rss_mib"] / rss0 - 1), 1)
     sim = Child(["bench.simrobot", "--connect", tier.router_eps[-1], "--count", "0",
                  "--prefix", prefix], tier.ctx.domain, prefix)
     await sim.start()
@@ -351,6 +360,7 @@ async def churn(tier: Tier, seconds: float, prefix: str = "churn") -> dict[str, 
     after = {"rss_mib": tier.usage.since()["relays"]["rss_mib"], "robots_listed": listed()}
     return {"robots": len(lives), "heard": heard, "seconds": round(time.monotonic() - start),
             "before": before, "after": after,
+            "rss_drift_pct_without_churn": {"seconds": quiet, "pct": drift},
             "rss_growth_pct": round(100 * (after["rss_mib"] / before["rss_mib"] - 1), 1)}
 
 

@@ -1,7 +1,7 @@
 """Robots joining, then viewers opening and closing them in rounds (``python -m
 bench.fleetjoin``): how long the simulated robots take to hold their names, each robot
 process's threads, and whether every robot process still answers after each round (issue
-49: the stalls of ``docs/guides/sizing.md``). One router, HAProxy before the relays. Prints
+49: the stalls of ``docs/guides/sizing-log.md``). One router, HAProxy before the relays. Prints
 one JSON line per step. Nothing here asserts anything.
 """
 
