@@ -259,6 +259,8 @@ class ZenohOptions:
         conf.insert_json5("scouting/gossip/enabled", "false" if not self.listen else "true")
         conf.insert_json5("connect/endpoints", json.dumps(self.connect))
         conf.insert_json5("listen/endpoints", json.dumps(self.listen))
+        if self.listen:
+            conf.insert_json5("transport/unicast/max_sessions", json.dumps(ROUTER_SESSIONS))
         # Robots and relays meet over networks: Zenoh's shared memory between processes of
         # one machine (its default for payloads over ~3 KB) would bypass the link and its
         # TLS, so the link carries everything here too.
@@ -285,6 +287,12 @@ class ZenohOptions:
             conf.insert_json5("access_control", json.dumps(robot_acl(self.robots, self.relays)))
         return conf
 
+
+ROUTER_SESSIONS = 10_000
+"""Sessions a router of ours takes at once (robots, relays and other routers; Zenoh's
+``transport/unicast/max_sessions``). Zenoh's own default, 1,000, refused the 1,001st robot
+of a fleet on one router with nothing in the router's log and only "close (reason INVALID)"
+in the robot's. A robot's session costs its router about 130 KiB: 10,000 are some 1.3 GB."""
 
 ZENOH_LOG = "error,zenoh_link_tls=warn"
 """What of Zenoh's own log (written by Zenoh to stderr) a process shows unless ``RUST_LOG``

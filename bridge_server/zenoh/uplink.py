@@ -301,7 +301,9 @@ class Uplink:
             "with --zenoh-mtls the robot's certificate must be signed by the router's CA, "
             "allow client authentication (extendedKeyUsage=clientAuth) and have "
             f"{self.robot} as its common name ('roslibpy-lite-relay certs' makes one)"
-            if tls else "check that the router is up and reachable there")
+            if tls else "check that the router is up and reachable there, and that it takes "
+            "another session (Zenoh's transport/unicast/max_sessions: 1,000 unless set; "
+            "its refusal is Zenoh's 'close message (reason INVALID)' in this log)")
 
     # -- what it shows -----------------------------------------------------------------------
 

@@ -442,3 +442,29 @@ async def test_the_command_lines_hold_a_robot_to_its_name(pki: Pki) -> None:
     finally:
         for p in (*robots, relay):
             p.stop()
+
+
+def test_our_router_takes_as_many_sessions_as_it_says(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A router from ``ZenohOptions`` takes ``ROUTER_SESSIONS`` sessions, not Zenoh's 1,000
+    (the 1,001st robot of a fleet on one router was refused): with the bound set to 3 here,
+    three clients get in and the fourth is refused (seen to fail without the setting: the
+    fourth got in under Zenoh's default)."""
+    from bridge_server.zenoh import link
+
+    monkeypatch.setattr(link, "ROUTER_SESSIONS", 3)
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    router = zenoh.open(ZenohOptions(listen=[endpoint]).config())
+    sessions = []
+    try:
+        for _ in range(3):
+            sessions.append(zenoh.open(ZenohOptions(connect=[endpoint]).config()))
+            assert _reaches_router(sessions[-1])
+        config = ZenohOptions(connect=[endpoint]).config()
+        config.insert_json5("connect/timeout_ms", "3000")
+        config.insert_json5("connect/exit_on_failure", "true")
+        with pytest.raises(zenoh.ZError):
+            sessions.append(zenoh.open(config))
+    finally:
+        for s in sessions:
+            s.close()
+        router.close()
