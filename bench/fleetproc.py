@@ -234,10 +234,9 @@ class Balancer:
         it took (``sessions``), how many it passed to each relay (by its name in the config,
         ``relay0``...) with the relay's health (``status``: ``UP`` or ``DOWN``;
         ``went_down``: times its checks marked it down; ``down_s``: seconds it was down), and
-        how many reached no relay
-        (``to_no_relay``: taken while every relay was down, or refused by all it tried: the
-        backend's connection errors). A connection one relay refused and the balancer then
-        passed to another counts for both relays."""
+        how many reached no relay (``to_no_relay``: taken while every relay was down, or
+        refused by all it tried: the backend's connection errors). A connection one relay
+        refused and the balancer then passed to another counts for both relays."""
         assert self.stats_port is not None, "started without a statistics page"
         url = f"http://127.0.0.1:{self.stats_port}/;csv"
         with urllib.request.urlopen(url, timeout=timeout) as r:

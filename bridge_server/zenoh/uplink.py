@@ -296,14 +296,14 @@ class Uplink:
             return
         log.warning(
             "robot %s: no Zenoh router has answered at %s for %.0f s (ROS is served "
-            "meanwhile); %s", self.robot, where, waited,
+            "meanwhile); %s; a router may also be full (Zenoh's transport/unicast/"
+            "max_sessions, 1,000 unless set: its refusal is Zenoh's 'close message (reason "
+            "INVALID)' in this log)", self.robot, where, waited,
             "if the router is up, it may refuse this robot's certificate: its log says why; "
             "with --zenoh-mtls the robot's certificate must be signed by the router's CA, "
             "allow client authentication (extendedKeyUsage=clientAuth) and have "
             f"{self.robot} as its common name ('roslibpy-lite-relay certs' makes one)"
-            if tls else "check that the router is up and reachable there, and that it takes "
-            "another session (Zenoh's transport/unicast/max_sessions: 1,000 unless set; "
-            "its refusal is Zenoh's 'close message (reason INVALID)' in this log)")
+            if tls else "check that the router is up and reachable there")
 
     # -- what it shows -----------------------------------------------------------------------
 
