@@ -162,6 +162,20 @@ def _ip(*args: str) -> None:
     subprocess.run(["ip", *args], check=True, capture_output=True, text=True)
 
 
+def _free_subnet(first: int) -> str:
+    """``10.213.N`` for the first ``N`` from ``first`` that no interface here has: a veth
+    another run left behind with the same address would take the robot's traffic (it did,
+    with pids 200 apart), and the robot would reach no router."""
+    used = subprocess.run(["ip", "-br", "addr"], check=True, capture_output=True,
+                          text=True).stdout
+    for k in range(200):
+        subnet = f"10.213.{(first + k) % 200}"
+        if f" {subnet}." not in used:
+            return subnet
+    raise RuntimeError("every 10.213.N/30 here is taken: old test namespaces left behind "
+                       "('ip netns list')")
+
+
 @pytest.fixture(scope="module")
 def robot_netns() -> Iterator[Namespace]:
     """A namespace with only loopback and a /30 veth link to this namespace."""
@@ -169,8 +183,8 @@ def robot_netns() -> Iterator[Namespace]:
         pytest.skip("network namespaces need root and iproute2 ('ip')")
     tag = f"{os.getpid() % 10000}"
     host_end, robot_end = f"rlh{tag}", f"rlr{tag}"
-    ns = Namespace(f"rlnat{tag}", f"10.213.{os.getpid() % 200}.1",
-                   f"10.213.{os.getpid() % 200}.2", host_end)
+    subnet = _free_subnet(os.getpid() % 200)
+    ns = Namespace(f"rlnat{tag}", f"{subnet}.1", f"{subnet}.2", host_end)
     _ip("netns", "add", ns.name)
     try:
         _ip("link", "add", host_end, "type", "veth", "peer", "name", robot_end)

@@ -228,8 +228,15 @@ def test_a_message_that_waited_too_long_is_dropped_when_its_turn_comes() -> None
     counted, not put; a close (no bytes) still runs; a message given later is put."""
     now = [0.0]
     putter = Putter(max_age=5.0, clock=lambda: now[0])
-    held, done, first = _held_first()
+    held, done, holding = _held_first()
+    taken = threading.Event()
+
+    def first() -> None:
+        taken.set()
+        holding()
+
     assert putter.submit(first, 4)
+    assert taken.wait(30)  # the thread took it at time 0 (else it would count it stale too)
     assert putter.submit(lambda: done.append("stale"), 4)
     assert putter.submit(lambda: done.append("close"))
     now[0] = 5.5  # the thread was held past the bound
