@@ -54,8 +54,8 @@ import time
 from pathlib import Path
 from typing import Any
 
-from bench.fleetproc import Child
-from bench.fleettier import Size, Tier, get, sizes
+from bench.fleetproc import Child, get
+from bench.fleettier import Size, Tier, sizes
 from bench.harness import Ctx, percentile
 from bench.profiler import Profiler
 

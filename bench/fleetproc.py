@@ -29,7 +29,7 @@ from typing import Any
 from bench.harness import ROOT, child_env
 from bench.profiler import py_spy
 
-__all__ = ["CHECK_TIMEOUT", "NODE_MODULES", "Balancer", "Child", "Usage", "haproxy_config",
+__all__ = ["CHECK_TIMEOUT", "NODE_MODULES", "Balancer", "Child", "Usage", "get", "haproxy_config",
            "node_viewers"]
 
 CHECK_TIMEOUT = "3s"
@@ -167,6 +167,12 @@ class Child:
             self._reader.cancel()
 
 
+def get(url: str, timeout: float) -> bytes:
+    """The body at ``url`` (``OSError`` or ``http.client.HTTPException`` if it fails)."""
+    with urllib.request.urlopen(url, timeout=timeout) as r:
+        return bytes(r.read())
+
+
 async def _output(*argv: str) -> str:
     """What ``argv`` printed (standard output and error), as text."""
     proc = await asyncio.create_subprocess_exec(*argv, stdout=asyncio.subprocess.PIPE,
@@ -238,9 +244,7 @@ class Balancer:
         refused by all it tried: the backend's connection errors). A connection one relay
         refused and the balancer then passed to another counts for both relays."""
         assert self.stats_port is not None, "started without a statistics page"
-        url = f"http://127.0.0.1:{self.stats_port}/;csv"
-        with urllib.request.urlopen(url, timeout=timeout) as r:
-            text = r.read().decode()
+        text = get(f"http://127.0.0.1:{self.stats_port}/;csv", timeout).decode()
         rows = list(csv.DictReader(io.StringIO(text.lstrip("# "))))
         front = next(r for r in rows if r["svname"] == "FRONTEND" and r["pxname"] == "viewers")
         relays = {r["svname"]: {"sessions": int(r["stot"] or 0), "status": r["status"],

@@ -11,18 +11,17 @@ import json
 import math
 import os
 import time
-import urllib.request
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from bench.fleetproc import Balancer, Child, Usage, haproxy_config, node_viewers
+from bench.fleetproc import Balancer, Child, Usage, get, haproxy_config, node_viewers
 from bench.harness import Bridge, Ctx
 from bench.ports import free_port
 from bench.relay import RELAY_READY
 
 __all__ = ["BALANCER_CONNECTIONS", "JOIN_WAIT", "PER_PROCESS", "QUICK", "RELAY_LINES", "SIZES",
-           "Size", "Tier", "get", "sizes"]
+           "Size", "Tier", "sizes"]
 
 JOIN_WAIT = 900
 """Seconds a robot process waits for all its robots to hold their names (250 robots on
@@ -301,9 +300,3 @@ async def _ready_line(router: Child) -> None:
         if time.monotonic() > deadline:
             raise RuntimeError("router not ready:\n" + "\n".join(router.lines))
         await asyncio.sleep(0.05)
-
-
-def get(url: str, timeout: float) -> bytes:
-    """The body at ``url`` (``OSError`` or ``http.client.HTTPException`` if it fails)."""
-    with urllib.request.urlopen(url, timeout=timeout) as r:
-        return bytes(r.read())
