@@ -101,6 +101,7 @@ __all__ = [
     "IN",
     "LATCHED",
     "PARAM",
+    "PLACE",
     "PRESENCE",
     "REFUSED",
     "RELAY_ANSWERS",
@@ -140,6 +141,13 @@ ALIVE = "@alive"
 CLAIM = "@claim"
 DEMAND = "@demand"
 LATCHED = "@latched"
+PLACE = "place"
+"""The ``@latched`` query's parameter (``<robot>/@latched/<topic>?place``) of a relay that
+starts watching a topic: the robot answers a replayed topic (one with a window) with an
+empty reply whose attachment (:class:`Meta`) numbers the last message it put, and the
+relay's viewers take nothing up to there. Without it the robot's window would reach them:
+a relay's new advanced subscriber that hears the topic's heartbeat before a message asks
+the robot for everything the window holds."""
 GRAPH = "@graph"
 CALL = "@call"
 ADVERTISE = "@advertise"

@@ -20,7 +20,7 @@ from bridge_server.zenoh import keys
 from bridge_server.zenoh.bulk import BulkSender
 from bridge_server.zenoh.exporter.base import log
 from bridge_server.zenoh.exporter.policy import RelayPolicy
-from bridge_server.zenoh.keys import Meta
+from bridge_server.zenoh.keys import PLACE, Meta
 from bridge_server.zenoh.link import answering
 from bridge_server.zenoh.priority import Priorities, TopicPriority
 from bridge_server.zenoh.putter import Putter
@@ -184,13 +184,23 @@ class TopicExports(RelayPolicy):
         return msg.data, attachment
 
     def _answer_latched(self, query: zenoh.Query) -> None:
+        """A relay that starts watching a topic asks for its latched message, and with
+        :data:`PLACE` for where a replayed topic's stream is now: an empty reply whose
+        attachment numbers the last message put (its viewers take nothing up to there from
+        the window); a topic neither latched nor replayed has no answer."""
         with answering(query):
             topic = keys.name_of(str(query.key_expr), 2)
             export = self.exports.get(topic)
-            latched = export.feed.latched if export is not None else None
-            if export is not None and latched is not None:
+            if export is None:
+                return
+            latched = export.feed.latched
+            if latched is not None:
                 payload, attachment = self._stamp(export, latched)
                 query.reply(query.key_expr, payload, attachment=attachment)
+            elif export.windowed and PLACE in query.parameters:
+                meta = Meta(type=export.feed.type_name or "", epoch=export.epoch,
+                            seq=export.seq, zid=self.zid)
+                query.reply(query.key_expr, b"", attachment=meta.encode())
 
 
 def _close_window(export: _Export) -> None:

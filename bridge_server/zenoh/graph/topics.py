@@ -8,6 +8,7 @@ from __future__ import annotations
 import contextlib
 import logging
 import time
+from collections import deque
 from typing import Any
 
 import zenoh
@@ -16,7 +17,7 @@ from bridge_server.zenoh import keys
 from bridge_server.zenoh.decode import DECODED, TopicLane, wanted
 from bridge_server.zenoh.graph.converter import RelayConverter
 from bridge_server.zenoh.graph.robot import NotHolder, Robot
-from bridge_server.zenoh.inbox import Faults, direct
+from bridge_server.zenoh.inbox import SAMPLE_LIMIT, Faults, direct
 from bridge_server.zenoh.keys import Meta
 from bridge_server.zenoh.replay import recovering_subscriber, undeclare_aside
 from bridge_server.zenoh.typestore import TypeRefused
@@ -93,6 +94,16 @@ class ZenohMessage(EncodedMessage):
         return ReportedError(f"a message of {self.topic} does not decode")
 
 
+PLACE_WAIT = 5.0
+"""Seconds a new subscription to a robot's topic waits at most for the robot to say where
+the topic's stream is (:data:`keys.PLACE`), holding what it hears meanwhile; then (an older
+robot does not say) it hands on what it holds."""
+
+HOLD_BYTES = 16 * 1024 * 1024
+"""Payload bytes a new subscription holds at most while it waits (the oldest go first, as
+in the robot's inbox; at most :data:`SAMPLE_LIMIT` messages)."""
+
+
 class ZenohFeed:
     """The relay's one subscription to a robot's topic, shared by its sessions."""
 
@@ -105,6 +116,9 @@ class ZenohFeed:
         self._latched: ZenohMessage | None = None
         self._type: str | None = msg_cls._type if msg_cls is not None else None
         self._place = ("", 0)  # (epoch, seq) of the last message taken
+        # what is heard until the robot says where the stream is (None: said, or given up)
+        self._held: deque[zenoh.Sample] | None = deque()
+        self._held_bytes = 0
         self._entities: list[Any] = []
         # the converter of the type the last message named, with what it was resolved in
         self._resolved: tuple[str, Any, Any, RelayConverter] | None = None
@@ -120,9 +134,15 @@ class ZenohFeed:
         """Canonical type of the topic, once known."""
         return self._type
 
+    @property
+    def placed(self) -> bool:
+        """Whether what the feed hears goes to its viewers: once the robot said where the
+        topic's stream is, or did not within :data:`PLACE_WAIT` s."""
+        return self._held is None
+
     def open(self) -> None:
         """Listen, then tell the robot (so nothing it puts is missed), then ask for the
-        latched message."""
+        latched message and the topic's place, holding what is heard until the answer."""
         g = self.graph
         session = g.session
         here = g.inbox.sample  # latest-only: past the robot's bound its oldest go
@@ -132,8 +152,9 @@ class ZenohFeed:
             session.liveliness().declare_token(
                 keys.key_of(g.robot, self.topic, f"{keys.DEMAND}/{g.relay}")),
         ]
-        session.get(keys.key_of(g.robot, self.topic, keys.LATCHED),
-                    direct(here(self.on_reply)))
+        session.get(f"{keys.key_of(g.robot, self.topic, keys.LATCHED)}?{keys.PLACE}",
+                    direct(g.on_loop(self.on_reply), g.inbox.end(self._placed)),
+                    timeout=PLACE_WAIT)
 
     def close(self) -> None:
         """Stop listening (off the loop: :func:`.undeclare_aside`; a sample that comes
@@ -141,6 +162,7 @@ class ZenohFeed:
         no relay wants the topic."""
         undeclare_aside(self._entities)
         self._lane.close()
+        self._held = None
 
     def on_miss(self, lost: int) -> None:
         """``lost`` messages in a row the robot published (while its link was down) and its
@@ -155,9 +177,47 @@ class ZenohFeed:
             tell(text)
 
     def on_reply(self, reply: zenoh.Reply) -> None:
-        """The robot's latched message, asked for at :meth:`open`."""
-        if reply.ok is not None:
-            self.on_sample(reply.ok)
+        """The robot's answer to :meth:`open`'s query (on the loop): the latched message, or
+        an empty reply (no message is empty CDR) whose attachment numbers the last message
+        of a replayed topic: nothing up to it is taken, though the new Zenoh subscription
+        may ask the robot's window for it."""
+        sample = reply.ok
+        if sample is None:
+            return
+        if len(sample.payload):
+            self.on_sample(sample)
+            return
+        if self._held is None:  # closed
+            return
+        try:
+            meta = Meta.decode(sample.attachment.to_bytes() if sample.attachment else None)
+            self.graph.check_sender(meta.zid)
+        except BridgeError as exc:
+            self.graph.faults.add("bad_messages", f"the place of {self.topic} ignored: {exc}")
+            return
+        if self._place == ("", 0):
+            self._place = (meta.epoch, meta.seq)
+
+    def _placed(self) -> None:
+        """:meth:`open`'s query ended (on the loop, after its replies): what was held goes
+        on, in order, and what comes next goes straight on."""
+        held, self._held = self._held, None
+        for sample in held or ():
+            if self.graph.subscriptions.get(self.topic) is self:
+                self._take(sample)
+
+    def _hold(self, held: deque[zenoh.Sample], sample: zenoh.Sample) -> None:
+        """Keep ``sample`` until the feed is placed, the oldest dropped past the bound."""
+        held.append(sample)
+        self._held_bytes += len(sample.payload)
+        dropped = 0
+        while len(held) > SAMPLE_LIMIT or self._held_bytes > HOLD_BYTES:
+            self._held_bytes -= len(held.popleft().payload)
+            dropped += 1
+        if dropped:
+            self.graph.faults.add("messages_dropped", f"messages of {self.topic} dropped, the "
+                                  "oldest first, while the robot had not said where the "
+                                  "topic's stream is", dropped)
 
     def _converter(self, type_name: str) -> RelayConverter:
         """The converter of ``type_name`` as the graph resolves it now: kept from the last
@@ -180,6 +240,14 @@ class ZenohFeed:
         graph.received_bytes += len(sample.payload)
         if graph.subscriptions.get(self.topic) is not self:
             return
+        if self._held is not None:
+            self._hold(self._held, sample)
+        else:
+            self._take(sample)
+
+    def _take(self, sample: zenoh.Sample) -> None:
+        """Hand ``sample`` on, unless it was taken already or is from before the place."""
+        graph = self.graph
         try:
             meta = Meta.decode(sample.attachment.to_bytes() if sample.attachment else None)
             if not 0 <= meta.stamp_ns < STAMP_END:
@@ -193,7 +261,8 @@ class ZenohFeed:
             return
         epoch, seq = self._place
         if meta.epoch == epoch and meta.seq <= seq:
-            return  # had it already (the latched reply and the put of the same message)
+            return  # had it already (the latched reply and the put of the same message), or
+            # it is from before the place the robot said (its window, not this feed's)
         self._place = (meta.epoch, meta.seq)
         self._type = conv.type_name
         self.received += 1
