@@ -315,8 +315,8 @@ async def churn(tier: Tier, seconds: float, prefix: str = "churn") -> dict[str, 
     named ``PREFIX-<n>``: relay RSS and the robots the relays list, before and after the
     relays forgot those that left; and, for comparison, how much the relays' RSS moved in
     the :data:`CHURN_CONTROL_S` s (at most ``seconds``) just before, without churn."""
-    def listed() -> int:
-        return sum(len(s["robots"]) for s in tier.relay_status())
+    def listed() -> int:  # the robots the relays list, and those they are letting go of
+        return sum(len(s["robots"]) + s.get("forgetting", 0) for s in tier.relay_status())
 
     # the same time without churn first: what the relays' memory does on its own then (the
     # step before, a router's restart, may leave it moving)

@@ -44,7 +44,9 @@ class Forgetter:
         """The relay's robots by name (the relay's own dict, changed in place)."""
         self.interval = interval
         self.forgotten = 0
-        """Robots forgotten so far."""
+        """Robots forgotten so far (closed, and their memory collected)."""
+        self.closing = 0
+        """Robots being forgotten now: no longer listed, not yet closed and collected."""
         self._idle: set[str] = set()
         self._task: asyncio.Task[None] | None = None
 
@@ -61,18 +63,22 @@ class Forgetter:
         """One look: forget the robots idle at the last look and still idle now."""
         idle = {name for name, bridge in self.robots.items() if _idle(bridge)}
         gone = idle & self._idle
-        for name in gone:
-            bridge = self.robots.pop(name)
-            self.forgotten += 1
+        self._idle = idle - self._idle
+        if not gone:
+            return
+        closing = [(name, self.robots.pop(name)) for name in gone]
+        self.closing = len(closing)
+        while closing:
+            name, bridge = closing.pop()
             log.info("robot %s left and nobody waits for it: forgotten", name)
             try:
                 await bridge.close()
             except Exception:  # one robot's close must not stop the others'
                 log.exception("closing the bridge of robot %s failed", name)
             del bridge
-        self._idle = idle - self._idle
-        if gone:  # a closed robot is cycles holding Zenoh's native memory (issue 49)
-            gc.collect()
+        gc.collect()  # a closed robot is cycles holding Zenoh's native memory (issue 49)
+        self.forgotten += self.closing
+        self.closing = 0
 
     def stop(self) -> None:
         """Stop looking."""

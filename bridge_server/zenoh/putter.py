@@ -16,9 +16,10 @@ counted, :attr:`Putter.dropped`, as Zenoh drops a message that finds its link's 
 and in age (:data:`PUT_MAX_AGE`: a message that waited longer is dropped when its turn
 comes, and counted the same way). Without the age bound, a thread held a long time puts
 all it was given at once when let go: stale messages that the relays back first hear and
-the others, back later, never do (seen once in a router's restart in a run of the whole
-suite, ``tests/relay/test_nat.py``: some 500 messages 25 s stale; what held the thread
-there was not traced). A put that holds the thread over :data:`SLOW_PUT` s is logged.
+the others, back later, never do. (Some 500 messages 25 s stale that a restarted relay's
+client heard in ``tests/relay/test_nat.py`` were first put down to this; they were the
+robot's replay window, which a relay's new subscription asked for: :data:`.keys.PLACE`.)
+A put that holds the thread over :data:`SLOW_PUT` s is logged.
 
 A message given to the thread while it has nothing else to do lets go of Python's lock at
 once (``time.sleep(0)``). Otherwise the woken thread waits for the lock until the loop, or

@@ -241,6 +241,8 @@ class RelayWeb:
         return {"relay": self.relay.relay_id, "version": __version__, "started": self.started,
                 "now": time.time(), "ready": self.relay.trouble() is None,
                 "refused": dict(self.relay.refused), "rate_window_s": RATE_WINDOW,
+                "forgotten": self.relay.forgetter.forgotten,
+                "forgetting": self.relay.forgetter.closing,
                 "robots": [_with_rates(robot, rates) for robot in robots]}
 
 

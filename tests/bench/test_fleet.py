@@ -128,8 +128,10 @@ async def balancer_saw_the_kill(tier: Tier, connections: int) -> None:
 async def churn_leaves_nothing(tier: Tier) -> None:
     """Robots that join, are opened by a viewer through the balancer and leave: the relay
     lists none of them once they are gone, and its memory stays within a bound."""
-    def listed() -> set[str]:
-        return {r["name"] for s in tier.relay_status() for r in s["robots"]}
+    def listed() -> set[str]:  # and a relay letting robots go counts as listing them still
+        pages = tier.relay_status()
+        return {r["name"] for s in pages for r in s["robots"]} | {
+            f"({s['relay']} letting {s['forgetting']} go)" for s in pages if s["forgetting"]}
 
     before = listed()
     rss0 = tier.usage.since()["relays"]["rss_mib"]
@@ -152,5 +154,7 @@ async def churn_leaves_nothing(tier: Tier) -> None:
     while (left := listed() - before) and time.monotonic() < deadline:
         await asyncio.sleep(1)
     assert not left, f"robots that left are still on the relay: {sorted(left)}"
+    forgotten = sum(s["forgotten"] for s in tier.relay_status())
+    assert forgotten >= CHURN, f"the relays say they let go of {forgotten} robots of {CHURN}"
     growth = tier.usage.since()["relays"]["rss_mib"] - rss0
     assert growth < 40, f"the relay grew {growth:.1f} MiB over {CHURN} robots that left"
