@@ -75,6 +75,7 @@ if TYPE_CHECKING:
     from websockets.http11 import Request
 
     from bridge_server.front.server import Bridge
+    from bridge_server.zenoh.forget import Forgetter
 
 __all__ = ["RelayFront", "RelayWeb"]
 
@@ -95,6 +96,8 @@ class RelayFront(Protocol):
     names_refused: dict[str, dict[str, Any]]
     """Robots refused a name another robot held, by name (``count``, ``holder``,
     ``refused``)."""
+    forgetter: Forgetter
+    """Lets go of the robots that left (``forgotten``, ``closing``)."""
 
     def robot(self, name: str) -> Awaitable[Bridge | None]:
         """Robot ``name``'s Bridge, opened on first use; ``None``: not on Zenoh."""

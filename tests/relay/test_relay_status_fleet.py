@@ -19,6 +19,7 @@ from websockets.http11 import Request
 from bridge_server.front.handshake import Security
 from bridge_server.http.rates import Window
 from bridge_server.http.web_access import WebAccess
+from bridge_server.zenoh.forget import Forgetter
 from bridge_server.zenoh.relay_web import RelayWeb
 from rosbridge_core.security.options import SecurityConfig
 
@@ -32,6 +33,7 @@ class _Fleet:
     robots: dict[str, Any] = {}
     refused: dict[str, int] = {}
     names_refused: dict[str, dict[str, Any]] = {}
+    forgetter = Forgetter(robots)
 
     async def robot(self, name: str) -> None:
         """No robot is opened here."""
