@@ -16,6 +16,7 @@ import contextlib
 import csv
 import io
 import json
+import os
 import shutil
 import sys
 import tempfile
@@ -30,7 +31,7 @@ from bench.harness import ROOT, child_env
 from bench.profiler import py_spy
 
 __all__ = ["CHECK_TIMEOUT", "NODE_MODULES", "Balancer", "Child", "Usage", "get", "haproxy_config",
-           "node_viewers"]
+           "json_lines", "node_viewers"]
 
 CHECK_TIMEOUT = "3s"
 """How long HAProxy waits for a relay's ``/readyz`` answer (its default, the check interval,
@@ -46,6 +47,25 @@ def node_viewers() -> bool:
     return shutil.which("node") is not None and (NODE_MODULES / "ws").is_dir()
 
 
+def json_lines() -> Callable[[dict[str, Any]], None]:
+    """(In a Python child, at its start.) What writes its JSON lines: standard output as it
+    was, while descriptor 1 itself goes to standard error from then on, as :class:`Child`
+    reads them apart. Zenoh writes its log to descriptor 1 from its own threads, and a line
+    longer than a pipe takes in one write (4 KiB: the ``stats`` of a process of 250 robots)
+    can be cut by one of Zenoh's in the middle: its reader then no longer knows it for an
+    answer. After a router's restart, when 250 sessions log at once, a robot process whose
+    loop was turning (``gdb``) went on "not answering" for minutes."""
+    sys.stdout.flush()
+    out = os.fdopen(os.dup(1), "w", buffering=1, encoding="utf-8")
+    os.dup2(2, 1)
+
+    def say(obj: dict[str, Any]) -> None:
+        out.write(json.dumps(obj) + "\n")
+        out.flush()
+
+    return say
+
+
 class Child:
     """A child process printing JSON lines (see the module's text): ``argv`` a Python
     module and its arguments, or a ``.mjs`` script's path (from the checkout's root) and
@@ -59,6 +79,7 @@ class Child:
         self.events: asyncio.Queue[dict[str, Any]] = asyncio.Queue()
         self.lines: deque[str] = deque(maxlen=50)
         self._reader: asyncio.Task[None] | None = None
+        self._said: asyncio.Task[None] | None = None
 
     @property
     def pid(self) -> int:
@@ -82,9 +103,17 @@ class Child:
         self.proc = await asyncio.create_subprocess_exec(
             *command, cwd=ROOT, env=env,
             stdin=asyncio.subprocess.PIPE, stdout=asyncio.subprocess.PIPE,
-            stderr=asyncio.subprocess.STDOUT, limit=2**26)
+            stderr=asyncio.subprocess.PIPE, limit=2**26)
         self._reader = asyncio.create_task(self._read())
+        self._said = asyncio.create_task(self._read_log())
         return self
+
+    async def _read_log(self) -> None:
+        """Its standard error (its log, and Zenoh's in a Python child: :func:`json_lines`),
+        kept for errors."""
+        assert self.proc is not None and self.proc.stderr is not None
+        while raw := await self.proc.stderr.readline():
+            self.lines.append(raw.decode(errors="replace").rstrip())
 
     async def _read(self) -> None:
         assert self.proc is not None and self.proc.stdout is not None
@@ -163,8 +192,9 @@ class Child:
                 step(self.proc)
             with contextlib.suppress(TimeoutError):
                 await asyncio.wait_for(self.proc.wait(), 10)
-        if self._reader is not None:
-            self._reader.cancel()
+        for task in (self._reader, self._said):
+            if task is not None:
+                task.cancel()
 
 
 def get(url: str, timeout: float) -> bytes:

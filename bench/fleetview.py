@@ -33,6 +33,7 @@ from typing import Any
 import websockets
 from websockets.asyncio.client import connect
 
+from bench.fleetproc import json_lines
 from roslibpy_lite import Backoff
 
 __all__ = ["Conn", "main"]
@@ -166,6 +167,7 @@ def stats(conns: list[Conn]) -> dict[str, Any]:
 
 
 async def _serve(args: argparse.Namespace) -> int:
+    say = json_lines()
     plan = json.loads(args.plan)
     conns = [Conn(args.url, robot, topic) for robots, topic in plan for robot in robots]
     tasks = []
@@ -175,8 +177,8 @@ async def _serve(args: argparse.Namespace) -> int:
     with contextlib.suppress(TimeoutError):
         async with asyncio.timeout(args.wait):
             await asyncio.gather(*(c.heard.wait() for c in conns))
-    print(json.dumps({"event": "ready", "connections": len(conns),
-                      "silent": sum(not c.heard.is_set() for c in conns)}), flush=True)
+    say({"event": "ready", "connections": len(conns),
+         "silent": sum(not c.heard.is_set() for c in conns)})
     loop = asyncio.get_running_loop()
     reader = asyncio.StreamReader()
     await loop.connect_read_pipe(lambda: asyncio.StreamReaderProtocol(reader), sys.stdin)
@@ -185,13 +187,13 @@ async def _serve(args: argparse.Namespace) -> int:
         if cmd["cmd"] == "reset":
             for c in conns:
                 c.reset()
-            print(json.dumps({"event": "reset"}), flush=True)
+            say({"event": "reset"})
         elif cmd["cmd"] == "mark":
             for c in conns:
                 c.mark, c.back_s = float(cmd["t"]), None
-            print(json.dumps({"event": "marked"}), flush=True)
+            say({"event": "marked"})
         else:
-            print(json.dumps(stats(conns)), flush=True)
+            say(stats(conns))
     for t in tasks:
         t.cancel()
     return 0

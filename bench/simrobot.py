@@ -34,6 +34,7 @@ import time
 from dataclasses import dataclass, field
 from typing import Any
 
+from bench.fleetproc import json_lines
 from bridge_server.zenoh.exporter import Exporter
 from bridge_server.zenoh.link import ZenohOptions
 from bridge_server.zenoh.robot_link import RobotOptions
@@ -293,6 +294,7 @@ class Fleet:
 
 
 async def _serve(args: argparse.Namespace) -> int:
+    say = json_lines()
     options = RobotOptions(connect=list(args.connect), lease=args.lease)
     fleet = Fleet(options)
     names = [f"{args.prefix}-{i}" for i in range(args.first, args.first + args.count)]
@@ -300,7 +302,7 @@ async def _serve(args: argparse.Namespace) -> int:
         await fleet.add(name)
     ticker = asyncio.create_task(fleet.run())
     missing = await fleet.until_holding(names, args.wait)
-    print(json.dumps({"event": "ready", "robots": len(names), "missing": missing}), flush=True)
+    say({"event": "ready", "robots": len(names), "missing": missing})
     loop = asyncio.get_running_loop()
     reader = asyncio.StreamReader()
     await loop.connect_read_pipe(lambda: asyncio.StreamReaderProtocol(reader), sys.stdin)
@@ -310,7 +312,7 @@ async def _serve(args: argparse.Namespace) -> int:
                 answer = await fleet.command(json.loads(line))
             except (ValueError, KeyError, TypeError) as exc:
                 answer = {"event": "error", "error": f"bad command {line[:100]!r}: {exc}"}
-            print(json.dumps(answer), flush=True)
+            say(answer)
     finally:
         ticker.cancel()
         for name in list(fleet.robots):
