@@ -50,9 +50,10 @@ def node_viewers() -> bool:
 def json_lines() -> Callable[[dict[str, Any]], None]:
     """(In a Python child, at its start.) What writes its JSON lines: standard output as it
     was, while descriptor 1 itself goes to standard error from then on, as :class:`Child`
-    reads them apart. Zenoh writes its log to descriptor 1 from its own threads, and a line
+    reads them apart. Zenoh writes its log to descriptor 1 from its own threads, and Python
+    logs from other threads than the loop's (the putting threads, Zenoh's callbacks); a line
     longer than a pipe takes in one write (4 KiB: the ``stats`` of a process of 250 robots)
-    can be cut by one of Zenoh's in the middle: its reader then no longer knows it for an
+    can be cut by one of theirs in the middle, and its reader then no longer knows it for an
     answer. After a router's restart, when 250 sessions log at once, a robot process whose
     loop was turning (``gdb``) went on "not answering" for minutes."""
     sys.stdout.flush()

@@ -295,7 +295,8 @@ of a fleet on one router with nothing in the router's log and only "close (reaso
 in the robot's. A robot's session costs its router about 130 KiB: 10,000 are some 1.3 GB."""
 
 ZENOH_LOG = "error,zenoh_link_tls=warn"
-"""What of Zenoh's own log (written by Zenoh to stderr) a process shows unless ``RUST_LOG``
+"""What of Zenoh's own log (written by Zenoh to standard output, descriptor 1: see
+:mod:`.zenoh_logpipe`) a process shows unless ``RUST_LOG``
 says otherwise: errors, and why a TLS link was refused (a certificate from another CA, or
 without the key usage its side needs), which nothing else tells."""
 
