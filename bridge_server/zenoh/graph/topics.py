@@ -123,8 +123,6 @@ class ZenohFeed:
         # the converter of the type the last message named, with what it was resolved in
         self._resolved: tuple[str, Any, Any, RelayConverter] | None = None
         self._lane = TopicLane(self)  # large messages decoded off the loop, in order
-        self.key = keys.key_of(graph.robot, topic)
-        """The topic's key: what the robot puts its messages under."""
 
     @property
     def latched(self) -> ZenohMessage | None:
@@ -149,8 +147,8 @@ class ZenohFeed:
         session = g.session
         here = g.inbox.sample  # latest-only: past the robot's bound its oldest go
         self._entities = [
-            *recovering_subscriber(session, self.key, direct(here(self.on_put)),
-                                   g.on_loop(self.on_miss)),
+            *recovering_subscriber(session, keys.key_of(g.robot, self.topic),
+                                   direct(here(self.on_sample)), g.on_loop(self.on_miss)),
             session.liveliness().declare_token(
                 keys.key_of(g.robot, self.topic, f"{keys.DEMAND}/{g.relay}")),
         ]
@@ -234,20 +232,6 @@ class ZenohFeed:
         conv = graph.converter(graph.resolve_message(type_name))
         self._resolved = (type_name, graph.snapshot, graph.wire_types, conv)
         return conv
-
-    def on_put(self, sample: zenoh.Sample) -> None:
-        """What the topic's subscription hears (on the loop): a message under the topic's
-        key goes on; one under another key is dropped and counted as the robot's fault,
-        naming both (once, in one of 5,000 viewers' subscriptions to a robot's ``/pose``,
-        the robot's ``/status`` message reached a viewer as ``/pose``, its cause not found:
-        a viewer never gets another topic's message under a topic's name)."""
-        key = str(sample.key_expr)
-        if key != self.key:
-            self.graph.received_bytes += len(sample.payload)
-            self.graph.faults.add("bad_messages", f"a message under {key} came through the "
-                                  f"subscription of {self.key}: dropped")
-            return
-        self.on_sample(sample)
 
     def on_sample(self, sample: zenoh.Sample) -> None:
         """One message the robot put (on the loop), its payload counted as received; one
