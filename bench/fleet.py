@@ -27,7 +27,10 @@ started and stopped by :class:`~bench.fleettier.Tier`:
    balancer, subscriptions restored); a router killed and restarted on its port: seconds
    from the restart until each robot holds its name again and each viewer hears it;
 6. robots joining and leaving, one a second, each opened by a viewer: relay RSS and the
-   robots it still lists before and after.
+   robots it still lists before and after; then the same again (``churn_again``): the
+   first round raises the relays' RSS to what the robots open at once need (Python and
+   the C allocator keep freed memory for reuse), and a second shows whether robots that
+   left leave anything behind beyond that.
 
 After the first window and at the end, the balancers' own counts (from HAProxy's
 statistics page, :meth:`~bench.fleettier.Tier.balancer_counts`): connections taken, passed
@@ -195,6 +198,7 @@ async def run_size(ctx: Ctx, size: Size, folder: Path, churn_s: float,
             out["relay_kill"] = await relay_kill(tier, everyone)
         out["router_restart"] = await router_restart(tier, everyone, profile=ctx.profile)
         out["churn"] = await churn(tier, churn_s)
+        out["churn_again"] = await churn(tier, churn_s, prefix="churn2")
     except Exception as exc:  # what was measured before it stays in the report
         text = str(exc)  # its head says what failed, its tail how a child ended
         text = text if len(text) <= 6000 else f"{text[:1500]} [...] {text[-4500:]}"
