@@ -40,6 +40,7 @@ os.environ.setdefault(
     "FASTRTPS_DEFAULT_PROFILES_FILE", os.path.join(os.path.dirname(__file__), "dds_profile.xml")
 )
 
+from rosbridge_core.codec import budget
 from tests.helpers import BridgeProcess, WireClient, open_wire, spun_node
 
 if TYPE_CHECKING:
@@ -157,6 +158,7 @@ def pytest_unconfigure(config: pytest.Config) -> None:
         assert watcher.stdin is not None
         watcher.stdin.close()  # it ends at end of input
         watcher.wait(10)
+    budget.close_workers()  # the decoding pool of relays served in this process
     left = [t for t in threading.enumerate()
             if t is not threading.main_thread() and not t.daemon and t.is_alive()]
     for t in left:

@@ -20,7 +20,7 @@ import threading
 from msgs import cdr
 
 __all__ = ["OFF_LOOP_BYTES", "WORKERS", "add_arguments", "apply", "budget_from_args",
-           "explain", "workers"]
+           "close_workers", "explain", "workers"]
 
 OFF_LOOP_BYTES = 64 * 1024
 """Messages of this many bytes or more are decoded and encoded on a worker thread: below it
@@ -42,6 +42,17 @@ def workers() -> concurrent.futures.ThreadPoolExecutor:
         if _pool is None:
             _pool = concurrent.futures.ThreadPoolExecutor(WORKERS, "decode")
         return _pool
+
+
+def close_workers() -> None:
+    """End the pool's threads, once what they were given is done (a process that served
+    relays in-process and ends without the interpreter's exit: a test session); the next
+    large message makes a new pool."""
+    global _pool
+    with _pool_lock:
+        pool, _pool = _pool, None
+    if pool is not None:
+        pool.shutdown(wait=True)
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:

@@ -89,6 +89,31 @@ async def test_each_message_reaches_a_client_once(played: tuple[Any, zenoh.Sessi
         await ws.close()
 
 
+async def test_a_latched_message_larger_than_the_replies_bound_reaches_a_late_viewer(
+        played: tuple[Any, zenoh.Session]) -> None:
+    """A latched message of 20 MiB (a large map: under the relay's 32 MiB for a message,
+    over the 16 MiB its queue of replies and requests holds) is the robot's answer to the
+    relay's late subscription, and reaches the viewer whole."""
+    relay, robot = played
+    text = "m" * (20 * 1024 * 1024)
+    latched = cdr.encode(String(data=text))
+    meta = Meta(type="std_msgs/msg/String", latched=True, stamp_ns=1, epoch="l", seq=1)
+
+    def answer(query: zenoh.Query) -> None:
+        query.reply(query.key_expr, latched, attachment=meta.encode())
+        query.drop()  # type: ignore[no-untyped-call]
+
+    queryable = robot.declare_queryable(f"{ROBOT}/{keys.LATCHED}/**", answer)
+    ws = await open_wire(f"ws://127.0.0.1:{relay.port}/{ROBOT}")
+    try:
+        await ws.send({"op": "subscribe", "topic": "/chatter"})
+        op = await ws.expect(op="publish", topic="/chatter", timeout=30)
+        assert len(op["msg"]["data"]) == len(text)
+    finally:
+        await ws.close()
+        queryable.undeclare()  # type: ignore[no-untyped-call]
+
+
 async def test_a_message_without_its_type_is_dropped_and_said(
         played: tuple[Any, zenoh.Session], caplog: pytest.LogCaptureFixture) -> None:
     """A put whose attachment is not a Meta object is not delivered; the relay's log says why

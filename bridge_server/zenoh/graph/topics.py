@@ -152,9 +152,15 @@ class ZenohFeed:
             session.liveliness().declare_token(
                 keys.key_of(g.robot, self.topic, f"{keys.DEMAND}/{g.relay}")),
         ]
+        place = g.on_loop(self.on_reply)  # in order before the query's end, never dropped
+        message = here(self.on_reply)  # a latched message, bounded as any message (32 MiB)
+
+        def reply(r: zenoh.Reply) -> None:
+            ok = r.ok
+            (place if ok is not None and not len(ok.payload) else message)(r)
+
         session.get(f"{keys.key_of(g.robot, self.topic, keys.LATCHED)}?{keys.PLACE}",
-                    direct(g.on_loop(self.on_reply), g.inbox.end(self._placed)),
-                    timeout=PLACE_WAIT)
+                    direct(reply, g.inbox.end(self._placed)), timeout=PLACE_WAIT)
 
     def close(self) -> None:
         """Stop listening (off the loop: :func:`.undeclare_aside`; a sample that comes
