@@ -4,6 +4,7 @@ plain Zenoh session of this test, with no ROS at all, puts what an exporter woul
 from __future__ import annotations
 
 import json
+import threading
 from collections.abc import AsyncIterator
 from typing import Any
 
@@ -92,8 +93,10 @@ async def test_each_message_reaches_a_client_once(played: tuple[Any, zenoh.Sessi
 async def test_a_latched_message_larger_than_the_replies_bound_reaches_a_late_viewer(
         played: tuple[Any, zenoh.Session]) -> None:
     """A latched message of 20 MiB (a large map: under the relay's 32 MiB for a message,
-    over the 16 MiB its queue of replies and requests holds) is the robot's answer to the
-    relay's late subscription, and reaches the viewer whole."""
+    over the 16 MiB its queue of replies and requests holds, and over what a new
+    subscription holds until the robot's answer ends) is the robot's answer to the relay's
+    late subscription, and reaches the viewer whole. The robot ends its answer a moment
+    after the message, so the relay holds the message first."""
     relay, robot = played
     text = "m" * (20 * 1024 * 1024)
     latched = cdr.encode(String(data=text))
@@ -101,7 +104,7 @@ async def test_a_latched_message_larger_than_the_replies_bound_reaches_a_late_vi
 
     def answer(query: zenoh.Query) -> None:
         query.reply(query.key_expr, latched, attachment=meta.encode())
-        query.drop()  # type: ignore[no-untyped-call]
+        threading.Timer(0.5, query.drop).start()  # a robot slow to end its answer
 
     queryable = robot.declare_queryable(f"{ROBOT}/{keys.LATCHED}/**", answer)
     ws = await open_wire(f"ws://127.0.0.1:{relay.port}/{ROBOT}")

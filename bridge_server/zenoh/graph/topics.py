@@ -101,7 +101,7 @@ robot does not say) it hands on what it holds."""
 
 HOLD_BYTES = 16 * 1024 * 1024
 """Payload bytes a new subscription holds at most while it waits (the oldest go first, as
-in the robot's inbox; at most :data:`SAMPLE_LIMIT` messages)."""
+in the robot's inbox, the newest always kept; at most :data:`SAMPLE_LIMIT` messages)."""
 
 
 class ZenohFeed:
@@ -213,11 +213,12 @@ class ZenohFeed:
                 self._take(sample)
 
     def _hold(self, held: deque[zenoh.Sample], sample: zenoh.Sample) -> None:
-        """Keep ``sample`` until the feed is placed, the oldest dropped past the bound."""
+        """Keep ``sample`` until the feed is placed, the oldest dropped past the bound (the
+        newest always kept: a latched map larger than the bound, alone)."""
         held.append(sample)
         self._held_bytes += len(sample.payload)
         dropped = 0
-        while len(held) > SAMPLE_LIMIT or self._held_bytes > HOLD_BYTES:
+        while len(held) > 1 and (len(held) > SAMPLE_LIMIT or self._held_bytes > HOLD_BYTES):
             self._held_bytes -= len(held.popleft().payload)
             dropped += 1
         if dropped:
