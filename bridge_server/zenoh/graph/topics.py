@@ -152,7 +152,7 @@ class ZenohFeed:
             session.liveliness().declare_token(
                 keys.key_of(g.robot, self.topic, f"{keys.DEMAND}/{g.relay}")),
         ]
-        place = g.on_loop(self.on_reply)  # in order before the query's end, never dropped
+        place = g.on_loop(self.on_place)  # in order before the query's end, never dropped
         message = here(self.on_reply)  # a latched message, bounded as any message (32 MiB)
 
         def reply(r: zenoh.Reply) -> None:
@@ -183,17 +183,17 @@ class ZenohFeed:
             tell(text)
 
     def on_reply(self, reply: zenoh.Reply) -> None:
-        """The robot's answer to :meth:`open`'s query (on the loop): the latched message, or
-        an empty reply (no message is empty CDR) whose attachment numbers the last message
-        of a replayed topic: nothing up to it is taken, though the new Zenoh subscription
-        may ask the robot's window for it."""
+        """The robot's latched message, asked for at :meth:`open` (on the loop)."""
+        if reply.ok is not None:
+            self.on_sample(reply.ok)
+
+    def on_place(self, reply: zenoh.Reply) -> None:
+        """The robot's other answer to :meth:`open`'s query (on the loop): an empty reply (no
+        message is empty CDR) whose attachment numbers the last message of a replayed topic:
+        nothing up to it is taken, though the new Zenoh subscription may ask the robot's
+        window for it."""
         sample = reply.ok
-        if sample is None:
-            return
-        if len(sample.payload):
-            self.on_sample(sample)
-            return
-        if self._held is None:  # closed
+        if sample is None or self._held is None:  # closed
             return
         try:
             meta = Meta.decode(sample.attachment.to_bytes() if sample.attachment else None)
